@@ -1,0 +1,94 @@
+"""Ray casting through Intel Embree (embreex).
+
+One EmbreeScene holds every world-space triangle (primID = index into
+``geometry.Triangles``).  embreex fixes tnear at 0, so callers offset ray
+origins with ``offset_origin``; shadow rays get a shortened tfar.
+
+``run()`` releases the GIL for the whole batch, so queries from several
+threads run in parallel; this module records the wall time spent inside
+embreex per thread so the benchmark can report Embree's share.
+"""
+import os
+import sys
+import threading
+import time
+
+import numpy as np
+
+
+def _import_embreex():
+    # Blender 3.4 links its own libembree3 globally; without DEEPBIND the
+    # embreex extension binds to it and crashes building a scene.
+    old = sys.getdlopenflags()
+    try:
+        sys.setdlopenflags(os.RTLD_NOW | os.RTLD_DEEPBIND)
+        from embreex import mesh_construction, rtcore_scene
+    finally:
+        sys.setdlopenflags(old)
+    return mesh_construction, rtcore_scene
+
+
+OFFSET_SCALE = 1e-5
+
+
+class Accel:
+    def __init__(self, triangles):
+        self.triangles = triangles
+        self.empty = len(triangles) == 0
+        self._lock = threading.Lock()
+        self._totals = {"seconds": 0.0, "rays": 0}
+        if not self.empty:
+            mc, rs = _import_embreex()
+            self.scene = rs.EmbreeScene()
+            mc.TriangleMesh(self.scene, triangles.corners_float32())
+            # The first run() commits the BVH; do it now, single-threaded.
+            self.scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32))
+
+    # -- timing ---------------------------------------------------------------
+    def _account(self, seconds, rays):
+        with self._lock:
+            self._totals["seconds"] += seconds
+            self._totals["rays"] += rays
+
+    def totals(self):
+        with self._lock:
+            return dict(self._totals)
+
+    # -- queries --------------------------------------------------------------
+    def intersect(self, origins, directions, tmax):
+        """Closest hits.  Returns (t, prim, u, v); prim = -1 and t = inf on miss."""
+        n = len(origins)
+        if self.empty or n == 0:
+            return (np.full(n, np.inf), np.full(n, -1, np.int64),
+                    np.zeros(n), np.zeros(n))
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        tfar = np.minimum(tmax, 1e37).astype(np.float32)
+        t0 = time.perf_counter()
+        res = self.scene.run(o, d, dists=tfar, query="INTERSECT", output=1)
+        self._account(time.perf_counter() - t0, n)
+        prim = res["primID"].astype(np.int64)
+        hit = prim >= 0
+        t = np.where(hit, res["tfar"].astype(np.float64), np.inf)
+        return t, prim, res["u"].astype(np.float64), res["v"].astype(np.float64)
+
+    def occluded(self, origins, directions, tmax):
+        """True where something lies between the origin and tmax."""
+        n = len(origins)
+        if self.empty or n == 0:
+            return np.zeros(n, dtype=bool)
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        tfar = np.ascontiguousarray(np.maximum(tmax, 0.0), dtype=np.float32)
+        t0 = time.perf_counter()
+        res = self.scene.run(o, d, dists=tfar, query="OCCLUDED")
+        self._account(time.perf_counter() - t0, n)
+        return res == 0
+
+    def offset_origin(self, p, ng, direction):
+        """Move p off its surface to the side ``direction`` leaves through."""
+        side = np.where(np.einsum("ij,ij->i", ng, direction) < 0, -1.0, 1.0)
+        # Embree sees float32 vertices: the surface it hits can sit a few ulps
+        # of the coordinate magnitude away from our float64 point.
+        eps = OFFSET_SCALE * (1.0 + np.abs(p).max(axis=1))
+        return p + ng * (eps * side)[:, None]

@@ -1,0 +1,79 @@
+"""Per-pixel accumulation of samples: radiance (with second moments for
+variance estimates), alpha, and first-hit depth, normal and albedo."""
+import threading
+
+import numpy as np
+
+
+class Tile:
+    """Sums for a contiguous range of pixels [lo, hi), filled by one batch."""
+
+    def __init__(self, lo, hi):
+        self.lo, self.hi = lo, hi
+        n = hi - lo
+        self.rgb = np.zeros((n, 3))
+        self.rgb2 = np.zeros((n, 3))
+        self.alpha = np.zeros(n)
+        self.count = np.zeros(n)
+        self.depth = np.zeros(n)
+        self.normal = np.zeros((n, 3))
+        self.albedo = np.zeros((n, 3))
+
+    def _bin(self, pix, w):
+        return np.bincount(pix - self.lo, weights=w, minlength=self.hi - self.lo)
+
+    def add_radiance(self, pix, L):
+        for c in range(3):
+            self.rgb[:, c] += self._bin(pix, L[:, c])
+            self.rgb2[:, c] += self._bin(pix, L[:, c] * L[:, c])
+
+    def add_camera(self, pix, alpha, depth, normal, albedo):
+        self.count += np.bincount(pix - self.lo, minlength=self.hi - self.lo)
+        self.alpha += self._bin(pix, alpha)
+        self.depth += self._bin(pix, depth)
+        for c in range(3):
+            self.normal[:, c] += self._bin(pix, normal[:, c])
+            self.albedo[:, c] += self._bin(pix, albedo[:, c])
+
+
+class Film:
+    def __init__(self, width, height):
+        self.width, self.height = width, height
+        n = width * height
+        self.rgb = np.zeros((n, 3))
+        self.rgb2 = np.zeros((n, 3))
+        self.alpha = np.zeros(n)
+        self.count = np.zeros(n)
+        self.depth = np.zeros(n)
+        self.normal = np.zeros((n, 3))
+        self.albedo = np.zeros((n, 3))
+        self._lock = threading.Lock()
+
+    def merge(self, tile):
+        s = slice(tile.lo, tile.hi)
+        with self._lock:
+            for name in ("rgb", "rgb2", "alpha", "count", "depth", "normal", "albedo"):
+                getattr(self, name)[s] += getattr(tile, name)
+
+    def _mean(self, arr):
+        c = np.maximum(self.count, 1.0)
+        return arr / (c if arr.ndim == 1 else c[:, None])
+
+    def image(self):
+        """(H, W, 4) float32 RGBA, row 0 at the top."""
+        out = np.empty((self.height * self.width, 4), np.float32)
+        out[:, :3] = self._mean(self.rgb)
+        out[:, 3] = self._mean(self.alpha)
+        return out.reshape(self.height, self.width, 4)
+
+    def variance(self):
+        """(H, W, 3) variance of the pixel mean, from the per-sample moments."""
+        c = np.maximum(self.count, 2.0)[:, None]
+        mean = self.rgb / c
+        var = np.maximum(self.rgb2 / c - mean * mean, 0.0) * c / (c - 1.0)
+        return (var / c).reshape(self.height, self.width, 3)
+
+    def aov(self, name):
+        arr = self._mean(getattr(self, name))
+        shape = (self.height, self.width) + arr.shape[1:]
+        return arr.reshape(shape).astype(np.float32)

@@ -1,0 +1,415 @@
+"""Emitters: sampling for next-event estimation, and the pdf/radiance that
+BSDF-sampled rays need when they hit one.
+
+Units follow Cycles (scene/light.cpp, kernel/light/*.h):
+* point/spot: radiance P / (pi * 4 pi r^2); a sphere of radius r, or with
+  soft falloff a disk of radius r facing the shading point; r = 0 is a delta
+  light of intensity P / (4 pi);
+* spot: times smoothstep((cos - cos_half) / ((1 - cos_half) * blend));
+* sun: radiance E / (pi sin^2(angle / 2)) over its cone; angle 0 is a delta
+  light of irradiance E;
+* area: radiance P / (pi A) (normalize on) or P / pi, one-sided along -Z;
+* emissive triangles: the material's emission, two-sided.
+
+Every emitter is one entry of a selection distribution (uniform or by power);
+emissive triangles are grouped per material, a triangle picked by area.
+``select``/``sample`` give NEE samples; ``intersect`` and ``sun_hits`` give
+what a BSDF ray sees.  Returned pdfs are solid-angle pdfs *without* the
+selection probability; ``selection_pdf`` supplies that.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from .sampling import (Distribution1D, concentric_disk, sin_sq_to_one_minus_cos,
+                       uniform_cone, uniform_cone_pdf, uniform_triangle)
+from .scene import AreaLight, PointLight, SpotLight, SunLight
+from .vec import dot, frame, luminance, normalize, to_world
+
+POINT, SUN, AREA, MESH = 0, 1, 2, 3
+
+
+@dataclass
+class LightSample:
+    wi: np.ndarray        # (N, 3) unit direction towards the light
+    dist: np.ndarray      # (N,) distance to the sampled point (inf for suns)
+    Le: np.ndarray        # (N, 3) radiance (or intensity/d^2 for delta lights)
+    pdf: np.ndarray       # (N,) solid-angle pdf, 0 = no sample
+    delta: np.ndarray     # (N,) bool
+    on_surface: np.ndarray  # (N,) bool: the point lies on a triangle (shorten the shadow ray)
+
+
+def smoothstep(x):
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+class LightSet:
+    def __init__(self, scene, triangles, materials, strategy="power"):
+        self.strategy = strategy
+        self.points = _PointLights([l for l in scene.lights if isinstance(l, PointLight)])
+        self.suns = _SunLights([l for l in scene.lights if isinstance(l, SunLight)])
+        self.areas = _AreaLights([l for l in scene.lights if isinstance(l, AreaLight)])
+        self.meshes = _MeshLights(triangles, materials)
+        radius = _scene_radius(triangles)
+        # Emitter index -> (type, index within type).
+        kinds, locals_, power = [], [], []
+        for group, kind in ((self.points, POINT), (self.suns, SUN), (self.areas, AREA), (self.meshes, MESH)):
+            kinds += [kind] * group.count
+            locals_ += list(range(group.count))
+            power += list(group.power(radius))
+        self.kind = np.array(kinds, np.int64)
+        self.local = np.array(locals_, np.int64)
+        self.count = len(kinds)
+        self.mesh_emitter = np.full(max(1, len(materials.emission)), -1, np.int64)
+        for j, mat in enumerate(self.meshes.material):
+            self.mesh_emitter[mat] = self.count - self.meshes.count + j
+        if self.count:
+            weights = np.ones(self.count) if strategy == "uniform" else np.array(power)
+            self.dist = Distribution1D(weights)
+
+    # -- selection ----------------------------------------------------------
+    def select(self, u):
+        return self.dist.sample(u)
+
+    def selection_pdf(self, emitter):
+        if self.strategy == "all":
+            return np.ones(len(emitter))
+        return self.dist.pmf[emitter]
+
+    # -- NEE ----------------------------------------------------------------
+    def sample(self, emitter, p, u1, u2, u3):
+        """Sample a point on each ray's emitter as seen from p."""
+        n = len(p)
+        out = LightSample(np.zeros((n, 3)), np.full(n, np.inf), np.zeros((n, 3)),
+                          np.zeros(n), np.zeros(n, bool), np.zeros(n, bool))
+        kind = self.kind[emitter]
+        local = self.local[emitter]
+        for k, group in ((POINT, self.points), (SUN, self.suns), (AREA, self.areas), (MESH, self.meshes)):
+            idx = np.nonzero(kind == k)[0]
+            if len(idx):
+                group.sample(out, idx, local[idx], p[idx], u1[idx], u2[idx], u3[idx])
+        return out
+
+    # -- what BSDF rays see -------------------------------------------------
+    def intersect(self, o, d, tmax):
+        """Closest analytic emitter (point/spot/area) before tmax.
+
+        Returns t (inf = none), emitter index, Le and solid-angle pdf of
+        sampling that point from o."""
+        n = len(o)
+        t = np.array(tmax, dtype=np.float64, copy=True)
+        hit_t = np.full(n, np.inf)
+        emitter = np.full(n, -1, np.int64)
+        Le = np.zeros((n, 3))
+        pdf = np.zeros(n)
+        base = 0
+        for group in (self.points, None, self.areas):
+            if group is None:
+                base += self.suns.count
+                continue
+            for j in range(group.count):
+                th, le, pw = group.intersect(j, o, d)
+                closer = th < t
+                if closer.any():
+                    t[closer] = th[closer]
+                    hit_t[closer] = th[closer]
+                    emitter[closer] = base + j
+                    Le[closer] = le[closer]
+                    pdf[closer] = pw[closer]
+            base += group.count
+        return hit_t, emitter, Le, pdf
+
+    def sun_hits(self, d):
+        """Radiance of sun disks along escaping directions, with MIS pdfs.
+
+        Returns a list of (mask, emitter, Le, pdf) per sun with angle > 0."""
+        hits = []
+        base = self.points.count
+        for j in range(self.suns.count):
+            res = self.suns.hit(j, d)
+            if res is not None:
+                mask, Le, pdf = res
+                hits.append((mask, base + j, Le, pdf))
+        return hits
+
+    def triangle_pdf(self, prim, o, p_hit, ng):
+        """Solid-angle pdf of NEE picking this emissive triangle's point from o."""
+        return self.meshes.pdf(prim, o, p_hit, ng)
+
+    def emitter_of_triangle(self, material):
+        return self.mesh_emitter[material]
+
+
+def _scene_radius(triangles):
+    if len(triangles) == 0:
+        return 1.0
+    lo = triangles.p0.min(axis=0)
+    hi = triangles.p0.max(axis=0)
+    return max(1.0, 0.5 * float(np.linalg.norm(hi - lo)))
+
+
+# ----------------------------------------------------------------------------
+
+class _PointLights:
+    """Point and spot lights (sphere, soft-falloff disk, or delta)."""
+
+    def __init__(self, lights):
+        self.count = len(lights)
+        self.pos = np.array([l.position for l in lights], float).reshape(-1, 3)
+        self.radius = np.array([max(0.0, l.radius) for l in lights], float)
+        self.sphere = np.array([not l.soft_falloff for l in lights], bool)
+        pw = np.array([l.power for l in lights], float).reshape(-1, 3)
+        area = 4.0 * np.pi * self.radius ** 2
+        # Cycles: eval_fac = 1 / (pi * area); area 0 counts as 4 (delta).
+        self.L = pw / (np.pi * np.where(area > 0, area, 4.0))[:, None]
+        self.power_rgb = pw
+        spot = [isinstance(l, SpotLight) for l in lights]
+        self.spot = np.array(spot, bool)
+        self.dir = np.array([_unit(l.direction) if s else (0, 0, -1) for l, s in zip(lights, spot)],
+                            float).reshape(-1, 3)
+        half = np.array([0.5 * l.spot_size if s else np.pi for l, s in zip(lights, spot)], float)
+        self.cos_half = np.cos(half)
+        blend = np.array([l.spot_blend if s else 0.0 for l, s in zip(lights, spot)], float)
+        with np.errstate(divide="ignore"):
+            self.smooth = 1.0 / ((1.0 - self.cos_half) * blend)
+
+    def power(self, radius):
+        return luminance(self.power_rgb) if self.count else []
+
+    def _spot_factor(self, j, to_p):
+        """Spot attenuation for unit directions from the light towards points."""
+        cos = to_p @ self.dir[j] if np.ndim(j) == 0 else dot(to_p, self.dir[j])
+        x = (cos - self.cos_half[j]) * self.smooth[j]
+        x = np.where(np.isnan(x), 0.0, x)
+        return np.where(self.spot[j], smoothstep(x), 1.0)
+
+    def sample(self, out, idx, j, p, u1, u2, u3):
+        c = self.pos[j]
+        r = self.radius[j]
+        dvec = p - c
+        d2 = dot(dvec, dvec)
+        dist = np.sqrt(d2)
+        light_n = dvec / np.maximum(dist, 1e-30)[:, None]
+        wi = -light_n
+        t = dist.copy()
+        pdf = np.ones(len(idx))
+        delta = r <= 0
+        Le = self.L[j] / np.where(delta, np.maximum(d2, 1e-30), 1.0)[:, None]
+
+        sph = self.sphere[j] & ~delta
+        inside = sph & (d2 <= r * r)
+        s = np.nonzero(sph & ~inside)[0]
+        if len(s):
+            omc = sin_sq_to_one_minus_cos(r[s] ** 2 / d2[s])
+            local, pdf[s] = uniform_cone(u1[s], u2[s], 1.0 - omc)
+            tt, bb = frame(-light_n[s])
+            wi[s] = to_world(local, tt, bb, -light_n[s])
+            cos_t = local[:, 2]
+            t[s] = dist[s] * cos_t - np.sqrt(np.maximum(0.0, r[s] ** 2 - d2[s] * (1.0 - cos_t ** 2)))
+        dsk = np.nonzero(~self.sphere[j] & ~delta)[0]
+        if len(dsk):
+            x, y = concentric_disk(u1[dsk], u2[dsk])
+            tt, bb = frame(light_n[dsk])
+            q = c[dsk] + (x[:, None] * tt + y[:, None] * bb) * r[dsk, None]
+            v = q - p[dsk]
+            t[dsk] = np.linalg.norm(v, axis=1)
+            wi[dsk] = v / np.maximum(t[dsk], 1e-30)[:, None]
+            cos_l = np.abs(dot(light_n[dsk], -wi[dsk]))
+            pdf[dsk] = t[dsk] ** 2 / (np.pi * r[dsk] ** 2 * np.maximum(cos_l, 1e-30))
+        pdf[inside] = 0.0
+        Le *= self._spot_factor(j, -wi)[:, None]
+        out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, Le
+        out.pdf[idx], out.delta[idx] = pdf, delta
+
+    def intersect(self, j, o, d):
+        """t, Le and solid-angle pdf where rays hit light j (sphere or disk)."""
+        n = len(o)
+        r = self.radius[j]
+        t = np.full(n, np.inf)
+        pdf = np.zeros(n)
+        if r <= 0:
+            return t, np.zeros((n, 3)), pdf
+        c = self.pos[j]
+        oc = o - c
+        d2 = dot(oc, oc)
+        if self.sphere[j]:
+            b = dot(oc, d)
+            disc = b * b - (d2 - r * r)
+            ok = (disc >= 0) & (d2 > r * r)
+            th = -b - np.sqrt(np.maximum(disc, 0.0))
+            ok &= th > 0
+            t[ok] = th[ok]
+            pdf[ok] = uniform_cone_pdf(sin_sq_to_one_minus_cos(r * r / d2[ok]))
+        else:
+            light_n = oc / np.sqrt(np.maximum(d2, 1e-30))[:, None]
+            denom = dot(d, light_n)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                th = -dot(oc, light_n) / denom
+            q = o + d * th[:, None]
+            ok = (denom < 0) & (th > 0) & (np.sum((q - c) ** 2, axis=1) <= r * r)
+            t[ok] = th[ok]
+            pdf[ok] = th[ok] ** 2 / (np.pi * r * r * np.abs(denom[ok]))
+        Le = np.tile(self.L[j], (n, 1)) * self._spot_factor(j, -d)[:, None]
+        return t, Le, pdf
+
+
+class _SunLights:
+    def __init__(self, lights):
+        self.count = len(lights)
+        self.dir = np.array([_unit(l.direction) for l in lights], float).reshape(-1, 3)
+        self.E = np.array([l.strength for l in lights], float).reshape(-1, 3)
+        half = np.array([0.5 * l.angle for l in lights], float)
+        self.one_minus_cos = 2.0 * np.sin(0.5 * half) ** 2
+        self.delta = half <= 0
+        sin2 = np.sin(half) ** 2
+        self.L = self.E / np.where(self.delta, 1.0, np.pi * sin2)[:, None]
+
+    def power(self, radius):
+        return luminance(self.E) * np.pi * radius ** 2 if self.count else []
+
+    def sample(self, out, idx, j, p, u1, u2, u3):
+        axis = -self.dir[j]
+        wi = axis.copy()
+        pdf = np.ones(len(idx))
+        s = np.nonzero(~self.delta[j])[0]
+        if len(s):
+            local, pdf[s] = uniform_cone(u1[s], u2[s], 1.0 - self.one_minus_cos[j[s]])
+            tt, bb = frame(axis[s])
+            wi[s] = to_world(local, tt, bb, axis[s])
+        out.wi[idx], out.dist[idx], out.Le[idx] = wi, np.inf, self.L[j]
+        out.pdf[idx], out.delta[idx] = pdf, self.delta[j]
+
+    def hit(self, j, d):
+        if self.delta[j]:
+            return None
+        omc = self.one_minus_cos[j]
+        mask = 1.0 - (d @ -self.dir[j]) <= omc
+        return mask, self.L[j], uniform_cone_pdf(omc)
+
+
+class _AreaLights:
+    def __init__(self, lights):
+        self.count = len(lights)
+        u, v, c, n, area, ell = [], [], [], [], [], []
+        for l in lights:
+            m = np.asarray(l.matrix, float)
+            sy = l.size_x if l.shape in ("SQUARE", "DISK") else l.size_y
+            u.append(m[:3, 0] * l.size_x)
+            v.append(m[:3, 1] * sy)
+            c.append(m[:3, 3])
+            n.append(_unit(-m[:3, 2]))
+            ellipse = l.shape in ("DISK", "ELLIPSE")
+            a = np.linalg.norm(u[-1]) * np.linalg.norm(v[-1]) * (np.pi / 4 if ellipse else 1.0)
+            area.append(a)
+            ell.append(ellipse)
+        self.u = np.array(u, float).reshape(-1, 3)
+        self.v = np.array(v, float).reshape(-1, 3)
+        self.c = np.array(c, float).reshape(-1, 3)
+        self.n = np.array(n, float).reshape(-1, 3)
+        self.area = np.array(area, float)
+        self.ellipse = np.array(ell, bool)
+        pw = np.array([l.power for l in lights], float).reshape(-1, 3)
+        norm = np.array([l.normalize for l in lights], bool)
+        self.power_rgb = pw
+        inv_area = np.where(norm & (self.area > 0), 1.0 / np.maximum(self.area, 1e-300), 1.0)
+        self.L = pw * (inv_area / np.pi)[:, None]
+        # Projections onto the light's axes: local coords in [-0.5, 0.5].
+        self.du = self.u / np.maximum(np.sum(self.u ** 2, axis=1), 1e-300)[:, None]
+        self.dv = self.v / np.maximum(np.sum(self.v ** 2, axis=1), 1e-300)[:, None]
+
+    def power(self, radius):
+        return luminance(self.L) * np.pi * self.area if self.count else []
+
+    def sample(self, out, idx, j, p, u1, u2, u3):
+        x, y = u1 - 0.5, u2 - 0.5
+        e = self.ellipse[j]
+        if e.any():
+            dx, dy = concentric_disk(u1[e], u2[e])
+            x[e], y[e] = 0.5 * dx, 0.5 * dy
+        q = self.c[j] + x[:, None] * self.u[j] + y[:, None] * self.v[j]
+        v = q - p
+        t = np.linalg.norm(v, axis=1)
+        wi = v / np.maximum(t, 1e-30)[:, None]
+        cos_l = dot(-wi, self.n[j])
+        ok = (cos_l > 1e-12) & (t > 0) & (self.area[j] > 0)
+        pdf = np.where(ok, t * t / (np.maximum(cos_l, 1e-12) * np.maximum(self.area[j], 1e-300)), 0.0)
+        out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, self.L[j]
+        out.pdf[idx] = pdf
+
+    def intersect(self, j, o, d):
+        n = len(o)
+        t = np.full(n, np.inf)
+        pdf = np.zeros(n)
+        normal = self.n[j]
+        denom = d @ normal
+        front = denom < -1e-12  # emits along its normal: seen from the front only
+        with np.errstate(divide="ignore", invalid="ignore"):
+            th = ((self.c[j] - o) @ normal) / denom
+        q = o + d * th[:, None] - self.c[j]
+        a = q @ self.du[j]
+        b = q @ self.dv[j]
+        if self.ellipse[j]:
+            inside = 4.0 * (a * a + b * b) <= 1.0
+        else:
+            inside = (np.abs(a) <= 0.5) & (np.abs(b) <= 0.5)
+        ok = front & (th > 0) & inside & (self.area[j] > 0)
+        t[ok] = th[ok]
+        pdf[ok] = th[ok] ** 2 / (-denom[ok] * self.area[j])
+        return t, np.tile(self.L[j], (n, 1)), pdf
+
+
+class _MeshLights:
+    """Emissive triangles, one emitter per emissive material."""
+
+    def __init__(self, triangles, materials):
+        emissive = materials.emissive
+        self.tris = triangles
+        mats = np.unique(triangles.material[emissive[triangles.material]]) if len(triangles) else []
+        self.material = np.array(mats, np.int64)
+        self.count = len(self.material)
+        self.L = materials.emission[self.material].reshape(-1, 3)
+        self.members, self.dists, self.total_area = [], [], []
+        for m in self.material:
+            members = np.nonzero(triangles.material == m)[0]
+            self.members.append(members)
+            self.dists.append(Distribution1D(triangles.area[members]))
+            self.total_area.append(triangles.area[members].sum())
+        self.total_area = np.array(self.total_area, float)
+        self.group_area = np.zeros(max(1, len(materials.emission)))
+        self.group_area[self.material] = self.total_area
+
+    def power(self, radius):
+        # Two-sided Lambertian emitter: flux = pi * L * A per side.
+        return luminance(self.L) * 2.0 * np.pi * self.total_area if self.count else []
+
+    def sample(self, out, idx, j, p, u1, u2, u3):
+        tri = np.empty(len(idx), np.int64)
+        for g in np.unique(j):
+            sel = np.nonzero(j == g)[0]
+            k, _ = self.dists[g].sample(u3[sel])
+            tri[sel] = self.members[g][k]
+        b1, b2 = uniform_triangle(u1, u2)
+        tr = self.tris
+        q = tr.p0[tri] + b1[:, None] * tr.e1[tri] + b2[:, None] * tr.e2[tri]
+        v = q - p
+        t = np.linalg.norm(v, axis=1)
+        wi = v / np.maximum(t, 1e-30)[:, None]
+        cos_l = np.abs(dot(wi, tr.ng[tri]))
+        ok = (cos_l > 1e-12) & (t > 0)
+        pdf = np.where(ok, t * t / (np.maximum(cos_l, 1e-12) * self.total_area[j]), 0.0)
+        out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, self.L[j]
+        out.pdf[idx], out.on_surface[idx] = pdf, True
+
+    def pdf(self, prim, o, p_hit, ng):
+        v = p_hit - o
+        t2 = dot(v, v)
+        cos_l = np.abs(dot(v, ng)) / np.sqrt(np.maximum(t2, 1e-300))
+        area = self.group_area[self.tris.material[prim]]
+        ok = (cos_l > 1e-12) & (area > 0)
+        return np.where(ok, t2 / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
+
+
+def _unit(v):
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v)
