@@ -180,7 +180,8 @@ class _PointLights:
     def _spot_factor(self, j, to_p):
         """Spot attenuation for unit directions from the light towards points."""
         cos = to_p @ self.dir[j] if np.ndim(j) == 0 else dot(to_p, self.dir[j])
-        x = (cos - self.cos_half[j]) * self.smooth[j]
+        with np.errstate(invalid="ignore"):
+            x = (cos - self.cos_half[j]) * self.smooth[j]  # inf * 0 at a hard edge
         x = np.where(np.isnan(x), 0.0, x)
         return np.where(self.spot[j], smoothstep(x), 1.0)
 
