@@ -85,10 +85,16 @@ class Accel:
         self._account(time.perf_counter() - t0, n)
         return res == 0
 
-    def offset_origin(self, p, ng, direction):
+    @staticmethod
+    def offset_scale(p):
+        """How far to move a point off its surface.  Embree sees float32
+        vertices: the surface it hits can sit a few ulps of the coordinate
+        magnitude away from our float64 point."""
+        return OFFSET_SCALE * (1.0 + np.abs(p).max(axis=1))
+
+    def offset_origin(self, p, ng, direction, eps=None):
         """Move p off its surface to the side ``direction`` leaves through."""
-        side = np.where(np.einsum("ij,ij->i", ng, direction) < 0, -1.0, 1.0)
-        # Embree sees float32 vertices: the surface it hits can sit a few ulps
-        # of the coordinate magnitude away from our float64 point.
-        eps = OFFSET_SCALE * (1.0 + np.abs(p).max(axis=1))
-        return p + ng * (eps * side)[:, None]
+        if eps is None:
+            eps = self.offset_scale(p)
+        side = np.where(np.einsum("ij,ij->i", ng, direction) < 0, -eps, eps)
+        return p + ng * side[:, None]

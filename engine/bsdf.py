@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .sampling import cosine_hemisphere, INV_PI
-from .vec import luminance
+from .vec import count, luminance, subset
 
 NONE, DIFFUSE, MIRROR, GLOSSY = -1, 0, 1, 2
 KIND_IDS = {"diffuse": DIFFUSE, "mirror": MIRROR, "glossy": GLOSSY}
@@ -156,12 +156,12 @@ def eval_pdf(lobes, wo, wi, sel=None):
     upper = (wo[:, 2] > COS_EPS) & (wi[:, 2] > COS_EPS)
     for k in range(lobes.kind.shape[1]):
         kind = lobes.kind[:, k]
-        d = np.nonzero((kind == DIFFUSE) & upper)[0]
-        if len(d):
+        d = subset((kind == DIFFUSE) & upper)
+        if count(d, n):
             f[d] += lobes.color[d, k] * INV_PI
             pdf[d] += sel[d, k] * wi[d, 2] * INV_PI
-        g = np.nonzero((kind == GLOSSY) & upper)[0]
-        if len(g):
+        g = subset((kind == GLOSSY) & upper)
+        if count(g, n):
             fg, pg = ggx_eval(wo[g], wi[g], lobes.color[g, k], lobes.alpha[g, k], lobes.schlick[g, k])
             f[g] += fg
             pdf[g] += sel[g, k] * pg
@@ -183,11 +183,11 @@ def sample(lobes, wo, u_lobe, u1, u2):
     wi = np.zeros((n, 3))
     wi[:, 2] = 1.0
 
-    d = kind == DIFFUSE
-    if d.any():
+    d = subset(kind == DIFFUSE)
+    if count(d, n):
         wi[d] = cosine_hemisphere(u1[d], u2[d])[0]
-    g = kind == GLOSSY
-    if g.any():
+    g = subset(kind == GLOSSY)
+    if count(g, n):
         h = ggx_sample_vndf(wo[g], lobes.alpha[rows[g], chosen[g]], u1[g], u2[g])
         wi[g] = 2.0 * np.einsum("ij,ij->i", wo[g], h)[:, None] * h - wo[g]
     m = kind == MIRROR

@@ -18,14 +18,26 @@ class Tile:
         self.depth = np.zeros(n)
         self.normal = np.zeros((n, 3))
         self.albedo = np.zeros((n, 3))
+        self._pending = []
 
     def _bin(self, pix, w):
         return np.bincount(pix - self.lo, weights=w, minlength=self.hi - self.lo)
 
     def add_radiance(self, pix, L):
-        for c in range(3):
-            self.rgb[:, c] += self._bin(pix, L[:, c])
-            self.rgb2[:, c] += self._bin(pix, L[:, c] * L[:, c])
+        """Queue finished paths; ``flush`` bins them all at once."""
+        self._pending.append((pix, L))
+
+    def flush(self):
+        if not self._pending:
+            return
+        pix = np.concatenate([p for p, _ in self._pending]) - self.lo
+        L = np.concatenate([l for _, l in self._pending])
+        self._pending = []
+        # One bincount per moment over (pixel, channel) pairs.
+        idx = (pix[:, None] * 3 + np.arange(3)).ravel()
+        n = 3 * (self.hi - self.lo)
+        self.rgb += np.bincount(idx, weights=L.ravel(), minlength=n).reshape(-1, 3)
+        self.rgb2 += np.bincount(idx, weights=(L * L).ravel(), minlength=n).reshape(-1, 3)
 
     def add_camera(self, pix, alpha, depth, normal, albedo):
         self.count += np.bincount(pix - self.lo, minlength=self.hi - self.lo)
@@ -50,6 +62,7 @@ class Film:
         self._lock = threading.Lock()
 
     def merge(self, tile):
+        tile.flush()
         s = slice(tile.lo, tile.hi)
         with self._lock:
             for name in ("rgb", "rgb2", "alpha", "count", "depth", "normal", "albedo"):

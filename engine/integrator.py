@@ -70,6 +70,7 @@ class Hit:
     wo: np.ndarray
     mat: np.ndarray
     prim: np.ndarray
+    eps: np.ndarray  # ray-origin offset for this point
 
 
 def trace_batch(ctx, pix, rng, tile):
@@ -195,7 +196,7 @@ def _interaction(ctx, paths, i, t, prim, bu, bv):
         ns = np.where((dot(ns, -d) <= 1e-6)[:, None], ng, ns)
     else:
         ns = ng
-    return Hit(p, ng, ns, -d, tr.material[prim], prim)
+    return Hit(p, ng, ns, -d, tr.material[prim], prim, ctx.accel.offset_scale(p))
 
 
 def _emission_hit(ctx, paths, i, hit, em, Le):
@@ -252,10 +253,11 @@ def _shade_light(ctx, paths, hs, hit, lobes, tt, bb, wo_l, e, p_sel, u):
     live = np.nonzero(np.any(contrib > 0, axis=1))[0]
     if len(live) == 0:
         return
-    origin = ctx.accel.offset_origin(hit.p[live], hit.ng[live], ls.wi[live])
+    eps = hit.eps[live]
+    origin = ctx.accel.offset_origin(hit.p[live], hit.ng[live], ls.wi[live], eps)
     dist = ls.dist[live]
     # Points on triangles would block their own shadow ray: stop short.
-    shorten = np.where(ls.on_surface[live], 1e-4 * (1.0 + np.abs(hit.p[live]).max(axis=1)), 0.0)
+    shorten = np.where(ls.on_surface[live], 10.0 * eps, 0.0)
     tmax = np.where(np.isfinite(dist), dist * (1.0 - 1e-6) - shorten, 1e37)
     blocked = ctx.accel.occluded(origin, ls.wi[live], tmax)
     free = live[~blocked]
@@ -277,7 +279,7 @@ def _scatter(ctx, paths, hs, hit, lobes, tt, bb, wo_l, depth, rng):
         beta = beta / np.where(survive, np.maximum(q, 1e-30), 1.0)[:, None]
         ok &= survive
     paths.beta[hs] = beta
-    paths.o[hs] = ctx.accel.offset_origin(hit.p, hit.ng, wi)
+    paths.o[hs] = ctx.accel.offset_origin(hit.p, hit.ng, wi, hit.eps)
     paths.d[hs] = wi
     paths.tmax[hs] = np.inf
     paths.prev_pdf[hs] = pdf

@@ -24,7 +24,7 @@ import numpy as np
 from .sampling import (Distribution1D, concentric_disk, sin_sq_to_one_minus_cos,
                        uniform_cone, uniform_cone_pdf, uniform_triangle)
 from .scene import AreaLight, PointLight, SpotLight, SunLight
-from .vec import dot, frame, luminance, normalize, to_world
+from .vec import count, dot, frame, luminance, subset, to_world
 
 POINT, SUN, AREA, MESH = 0, 1, 2, 3
 
@@ -86,8 +86,8 @@ class LightSet:
         kind = self.kind[emitter]
         local = self.local[emitter]
         for k, group in ((POINT, self.points), (SUN, self.suns), (AREA, self.areas), (MESH, self.meshes)):
-            idx = np.nonzero(kind == k)[0]
-            if len(idx):
+            idx = subset(kind == k)
+            if count(idx, n):
                 group.sample(out, idx, local[idx], p[idx], u1[idx], u2[idx], u3[idx])
         return out
 
@@ -194,7 +194,7 @@ class _PointLights:
         light_n = dvec / np.maximum(dist, 1e-30)[:, None]
         wi = -light_n
         t = dist.copy()
-        pdf = np.ones(len(idx))
+        pdf = np.ones(len(p))
         delta = r <= 0
         Le = self.L[j] / np.where(delta, np.maximum(d2, 1e-30), 1.0)[:, None]
 
@@ -272,7 +272,7 @@ class _SunLights:
     def sample(self, out, idx, j, p, u1, u2, u3):
         axis = -self.dir[j]
         wi = axis.copy()
-        pdf = np.ones(len(idx))
+        pdf = np.ones(len(p))
         s = np.nonzero(~self.delta[j])[0]
         if len(s):
             local, pdf[s] = uniform_cone(u1[s], u2[s], 1.0 - self.one_minus_cos[j[s]])
@@ -385,7 +385,7 @@ class _MeshLights:
         return luminance(self.L) * 2.0 * np.pi * self.total_area if self.count else []
 
     def sample(self, out, idx, j, p, u1, u2, u3):
-        tri = np.empty(len(idx), np.int64)
+        tri = np.empty(len(p), np.int64)
         for g in np.unique(j):
             sel = np.nonzero(j == g)[0]
             k, _ = self.dists[g].sample(u3[sel])

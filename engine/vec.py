@@ -48,3 +48,15 @@ def transform_points(m, p):
 
 def transform_vectors(m, v):
     return v @ m[:3, :3].T
+
+
+def subset(mask):
+    """Index for the True entries of mask: a slice when all are True, so the
+    common single-material or single-light case works on views, not copies."""
+    if mask.all():
+        return slice(None)
+    return np.nonzero(mask)[0]
+
+
+def count(index, n):
+    return n if isinstance(index, slice) else len(index)
