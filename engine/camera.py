@@ -27,7 +27,7 @@ class PixelFilter:
     """
 
     def __init__(self, kind="BLACKMAN_HARRIS", width=1.5):
-        width = max(float(width), 1e-3)
+        width = max(float(width), 1e-6)
         if kind == "BOX":
             support = width
             func = lambda v: np.ones_like(v)

@@ -72,11 +72,12 @@ class Film:
         c = np.maximum(self.count, 1.0)
         return arr / (c if arr.ndim == 1 else c[:, None])
 
-    def image(self):
-        """(H, W, 4) float32 RGBA, row 0 at the top."""
+    def image(self, transparent=True):
+        """(H, W, 4) float32 RGBA, row 0 at the top.  Alpha is the coverage
+        with a transparent film, else 1 (as Cycles)."""
         out = np.empty((self.height * self.width, 4), np.float32)
         out[:, :3] = self._mean(self.rgb)
-        out[:, 3] = self._mean(self.alpha)
+        out[:, 3] = self._mean(self.alpha) if transparent else 1.0
         return out.reshape(self.height, self.width, 4)
 
     def variance(self):

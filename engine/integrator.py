@@ -7,8 +7,9 @@ removed by compaction after every bounce, so every NumPy operation works on
 live lanes only.  ``trace_batch`` runs one batch of camera samples for a
 contiguous range of pixels and returns a ``film.Tile``.
 
-Conventions (Cycles): max_bounces = 8 means light sampling at path vertices
-0..7; vertex 8 only collects emission.  A constant world is not light
+Conventions (Cycles, measured against it): max_bounces = N means light
+sampling at path vertices 0..N (vertex 0 = the first hit), and vertex N + 1
+only collects emission, so N = 0 is direct lighting.  A constant world is not light
 sampled (BSDF sampling only, as Cycles does); delta lights cannot be hit by
 BSDF rays, so they are always light sampled, in every strategy.
 """
@@ -81,7 +82,7 @@ def trace_batch(ctx, pix, rng, tile):
     paths = Paths(pix, o, d, tmax, np.ones((n, 3)), np.zeros((n, 3)),
                   np.ones(n), np.ones(n, bool))
     s = ctx.settings
-    for depth in range(s.max_bounces + 1):
+    for depth in range(s.max_bounces + 2):
         if len(paths.pix) == 0:
             break
         paths = _bounce(ctx, paths, depth, rng, tile)
@@ -100,7 +101,8 @@ def _finish(ctx, paths, tile):
 def _bounce(ctx, paths, depth, rng, tile):
     s = ctx.settings
     t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax)
-    lt, emitter, lLe, lpdf = ctx.lights.intersect(paths.o, paths.d, np.minimum(t, paths.tmax))
+    lt, emitter, lLe, lpdf = ctx.lights.intersect(paths.o, paths.d, np.minimum(t, paths.tmax),
+                                                  camera=depth == 0)
     hit_light = lt < np.inf
     hit_surf = (prim >= 0) & ~hit_light
     if depth == 0:
@@ -123,7 +125,7 @@ def _bounce(ctx, paths, depth, rng, tile):
         _emission_hit(ctx, paths, hs[em], hit, em, emission[em])
 
     done = np.ones(len(paths.pix), bool)
-    if depth == s.max_bounces or len(hs) == 0:
+    if depth == s.max_bounces + 1 or len(hs) == 0:
         _finish(ctx, paths, tile)
         return paths.take(np.zeros(len(paths.pix), bool))
 
@@ -182,8 +184,16 @@ def _escaped(ctx, paths, i, depth):
 def _interaction(ctx, paths, i, t, prim, bu, bv):
     tr = ctx.triangles
     d = paths.d[i]
-    p = tr.p0[prim] + bu[:, None] * tr.e1[prim] + bv[:, None] * tr.e2[prim]
+    o = paths.o[i]
     ng = tr.ng[prim]
+    # Embree's t and barycentrics are float32; re-intersect the triangle's
+    # plane in float64 so hit points (and shadow rays) sit on the surface
+    # even on large triangles.
+    cos = dot(d, ng)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t64 = dot(tr.p0[prim] - o, ng) / cos
+    t = np.where(np.isfinite(t64) & (np.abs(cos) > 1e-6), t64, t)
+    p = o + d * t[:, None]
     back = dot(ng, d) > 0
     ng = np.where(back[:, None], -ng, ng)
     if tr.ns is not None:

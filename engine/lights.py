@@ -92,11 +92,12 @@ class LightSet:
         return out
 
     # -- what BSDF rays see -------------------------------------------------
-    def intersect(self, o, d, tmax):
+    def intersect(self, o, d, tmax, camera=False):
         """Closest analytic emitter (point/spot/area) before tmax.
 
-        Returns t (inf = none), emitter index, Le and solid-angle pdf of
-        sampling that point from o."""
+        camera: the rays are camera rays, which see only lights with
+        ``visible_camera``.  Returns t (inf = none), emitter index, Le and the
+        solid-angle pdf of sampling that point from o."""
         n = len(o)
         t = np.array(tmax, dtype=np.float64, copy=True)
         hit_t = np.full(n, np.inf)
@@ -109,6 +110,8 @@ class LightSet:
                 base += self.suns.count
                 continue
             for j in range(group.count):
+                if camera and not group.visible_camera[j]:
+                    continue
                 th, le, pw = group.intersect(j, o, d)
                 closer = th < t
                 if closer.any():
@@ -159,6 +162,7 @@ class _PointLights:
         self.pos = np.array([l.position for l in lights], float).reshape(-1, 3)
         self.radius = np.array([max(0.0, l.radius) for l in lights], float)
         self.sphere = np.array([not l.soft_falloff for l in lights], bool)
+        self.visible_camera = [l.visible_camera for l in lights]
         pw = np.array([l.power for l in lights], float).reshape(-1, 3)
         area = 4.0 * np.pi * self.radius ** 2
         # Cycles: eval_fac = 1 / (pi * area); area 0 counts as 4 (delta).
@@ -310,6 +314,7 @@ class _AreaLights:
         self.n = np.array(n, float).reshape(-1, 3)
         self.area = np.array(area, float)
         self.ellipse = np.array(ell, bool)
+        self.visible_camera = [l.visible_camera for l in lights]
         pw = np.array([l.power for l in lights], float).reshape(-1, 3)
         norm = np.array([l.normalize for l in lights], bool)
         self.power_rgb = pw

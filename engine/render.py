@@ -11,6 +11,7 @@ whatever the resolution.
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FuturesTimeout
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -88,16 +89,54 @@ def render(scene, settings=None, progress=None):
             spp = min(spp_pass, settings.samples - pass_index * spp_pass)
             jobs = [pool.submit(_run_batch, ctx, film, lo, hi, spp, settings.seed, pass_index)
                     for lo, hi in batches]
-            for job in jobs:
-                job.result()
+            cancelled = _wait(jobs, progress)
             stats.update(_stats(ctx, film, stats, spp, t_trace, settings))
+            if cancelled:
+                # Part of a pass was traced: pixels carry unequal counts, each
+                # mean is still unbiased.  Report the fewest samples any pixel has.
+                stats["samples"] = int(film.count.min())
             if progress is not None and hasattr(progress, "on_pass"):
-                progress.on_pass(film.image(), stats["samples"], dict(stats))
-            if _should_stop(progress, stats, settings):
+                progress.on_pass(film.image(settings.transparent), stats["samples"], dict(stats))
+            if cancelled or _should_stop(progress, stats, settings):
                 break
-    return RenderResult(film.image(), film.aov("depth"),
+    return RenderResult(film.image(settings.transparent), film.aov("depth"),
                         film.aov("normal"), film.aov("albedo"), film.variance().astype(np.float32),
                         stats["samples"], stats, warnings_for(ctx))
+
+
+def _wait(jobs, progress, poll=0.2):
+    """Wait for a pass's batches, asking ``should_stop`` about every ``poll``
+    seconds so a cancel lands within a fraction of a second, not a whole
+    pass.  Returns True if the pass was cut short."""
+    last_check = time.perf_counter()
+    for job in jobs:
+        while True:
+            try:
+                job.result(timeout=poll)
+                done = True
+            except FuturesTimeout:
+                done = False
+            now = time.perf_counter()
+            if now - last_check >= poll:
+                last_check = now
+                if _stop_requested(progress):
+                    _cancel(jobs)
+                    return True
+            if done:
+                break
+    return False
+
+
+def _cancel(jobs):
+    for job in jobs:
+        job.cancel()
+    for job in jobs:
+        if not job.cancelled():
+            job.result()
+
+
+def _stop_requested(progress):
+    return progress is not None and hasattr(progress, "should_stop") and bool(progress.should_stop())
 
 
 def _run_batch(ctx, film, lo, hi, spp, seed, pass_index):
@@ -129,6 +168,4 @@ def _stats(ctx, film, stats, spp, t_trace, settings):
 def _should_stop(progress, stats, settings):
     if settings.time_limit > 0 and stats["seconds"] >= settings.time_limit:
         return True
-    if progress is not None and hasattr(progress, "should_stop"):
-        return bool(progress.should_stop())
-    return False
+    return _stop_requested(progress)

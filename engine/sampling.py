@@ -98,7 +98,9 @@ class Distribution1D:
             total = w.sum()
         self.pmf = w / total
         self.cdf = np.cumsum(self.pmf)
-        self.cdf[-1] = 1.0
+        # The CDF is exactly 1 from the last non-zero entry on: a rounded sum
+        # just below 1 would let u in [sum, 1) pick a trailing zero entry.
+        self.cdf[np.nonzero(self.pmf)[0][-1]:] = 1.0
         self.total = total
 
     def __len__(self):

@@ -105,6 +105,9 @@ DEFAULT_MATERIAL = Material("default", (Lobe("diffuse", (0.8, 0.8, 0.8)),))
 class PointLight:
     """Blender point light.  ``power`` = colour * watts.
 
+    Every light has ``visible_camera`` (Blender's Object > Visibility > Camera
+    ray, False by default for lights): whether camera rays see its shape.
+
     soft_falloff=False: a sphere of radius ``radius`` with radiance
     P / (4 pi^2 r^2).  soft_falloff=True (Blender 4.0+ default): Cycles' disk of
     radius ``radius`` that always faces the shading point, same radiance.
@@ -114,6 +117,7 @@ class PointLight:
     radius: float = 0.1
     soft_falloff: bool = False
     name: str = "point"
+    visible_camera: bool = False
 
 
 @dataclass
@@ -135,6 +139,7 @@ class SunLight:
     strength: RGB
     angle: float = 0.0
     name: str = "sun"
+    visible_camera: bool = False
 
 
 AREA_SHAPES = ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE")
@@ -156,6 +161,7 @@ class AreaLight:
     size_y: float = 1.0
     normalize: bool = True
     name: str = "area"
+    visible_camera: bool = False
 
 
 Light = Union[PointLight, SpotLight, SunLight, AreaLight]
@@ -211,8 +217,9 @@ class RenderSettings:
     """How to render.
 
     samples: samples per pixel in total; samples_per_pass: how many are
-    added between two progress callbacks.  max_bounces follows Cycles: 8
-    means light sampling at path vertices 0..7.  light_selection: 'uniform',
+    added between two progress callbacks.  max_bounces follows Cycles: the
+    number of indirect bounces, so 0 is direct lighting only (light sampling
+    at the first hit, emission found by its BSDF sample).  light_selection: 'uniform',
     'power' or 'all'.  strategy: 'mis', 'light' (NEE only) or 'bsdf'.
     clamp: 0 disables clamping of a sample's radiance.  max_paths bounds the
     number of paths in flight (memory); threads 0 = every core.

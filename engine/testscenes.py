@@ -86,7 +86,8 @@ def cornell_box(width=256, height=256, light_power=25.0):
     ]
     light_m = np.eye(4)
     light_m[:3, 3] = (0.0, 0.0, 1.99)
-    lights = [AreaLight(light_m, (light_power, 0.8 * light_power, 0.6 * light_power), "SQUARE", 0.5)]
+    lights = [AreaLight(light_m, (light_power, 0.8 * light_power, 0.6 * light_power), "SQUARE", 0.5,
+                        visible_camera=True)]
     camera = Camera(look_at((0, -3.4, 1.0), (0, 0, 1.0)), lens=50.0, sensor_width=36.0,
                     resolution=(width, height), clip_start=0.1)
     return Scene(meshes, instances, [WHITE, RED, GREEN], lights, World((0.0, 0.0, 0.0)), camera)

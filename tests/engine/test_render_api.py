@@ -1,0 +1,133 @@
+"""The render API: progress, cancel, time limit, bounded batches, film
+options; plus analytic checks of the sun and spot lights."""
+import numpy as np
+import pytest
+
+from engine.render import _batches, render
+from engine.scene import (Lobe, Material, RenderSettings, SpotLight, SunLight, World)
+from engine.testscenes import cornell_box
+
+from stats import sidak_z
+from test_integrator import analytic_scene, big_plane, pixel_centres
+
+
+class Recorder:
+    def __init__(self, stop_after=None):
+        self.calls = []
+        self.stop_after = stop_after
+
+    def on_pass(self, image, samples, stats):
+        assert image.dtype == np.float32 and image.shape[2] == 4
+        assert np.isfinite(image).all()
+        self.calls.append((samples, stats["rays_per_second"], stats["seconds_left"]))
+
+    def should_stop(self):
+        return self.stop_after is not None and len(self.calls) >= self.stop_after
+
+
+def test_progress_after_every_pass():
+    rec = Recorder()
+    r = render(cornell_box(32, 32), RenderSettings(samples=10, samples_per_pass=4), rec)
+    assert [c[0] for c in rec.calls] == [4, 8, 10]
+    assert all(c[1] > 0 for c in rec.calls)
+    assert rec.calls[-1][2] == 0.0
+    assert r.samples == 10
+
+
+def test_cancel_keeps_partial_image():
+    rec = Recorder(stop_after=2)
+    r = render(cornell_box(32, 32), RenderSettings(samples=100, samples_per_pass=2), rec)
+    assert r.samples == 4 and len(rec.calls) == 2
+    assert r.image[..., :3].mean() > 0.01
+
+
+def test_time_limit_stops_early():
+    r = render(cornell_box(32, 32), RenderSettings(samples=100000, samples_per_pass=1, time_limit=0.3))
+    assert 1 <= r.samples < 100000
+    assert r.stats["seconds"] < 5.0
+
+
+def test_batches_bound_paths_in_flight():
+    s = RenderSettings(max_paths=1 << 16)
+    for npix, spp in ((3840 * 2160, 1), (512 * 512, 16), (7, 3)):
+        batches = _batches(npix, spp, s, threads=2)
+        assert batches[0][0] == 0 and batches[-1][1] == npix
+        assert all(b[0] == a[1] for a, b in zip(batches, batches[1:]))
+        assert max(hi - lo for lo, hi in batches) * spp <= max(s.max_paths // 2, spp)
+
+
+def test_transparent_film_alpha():
+    scene = cornell_box(24, 24)
+    scene.camera.lens = 20.0  # wide enough to see past the box into the world
+    scene.world = World((1.0, 1.0, 1.0))
+    opaque = render(scene, RenderSettings(samples=4, samples_per_pass=4)).image
+    clear = render(scene, RenderSettings(samples=4, samples_per_pass=4, transparent=True)).image
+    corner = (slice(0, 2), slice(0, 2))  # outside the box opening: the world
+    assert np.allclose(opaque[corner][..., :3], 1.0) and np.allclose(clear[corner][..., :3], 0.0)
+    assert np.allclose(clear[corner][..., 3], 0.0) and np.allclose(clear[12, 12, 3], 1.0)
+    assert np.all(opaque[..., 3] == 1.0)  # no transparent film: alpha is 1 (Cycles)
+
+
+def test_clamp_limits_every_sample():
+    r = render(cornell_box(24, 24), RenderSettings(samples=8, samples_per_pass=8, clamp=0.05))
+    assert r.image[..., :3].max() <= 0.05 + 1e-6
+
+
+def test_sun_irradiance():
+    """A sun of irradiance E at elevation 60 deg: L_o = rho E cos(30 deg) / pi."""
+    E = 3.0
+    for angle in (0.0, np.radians(5.0)):
+        d = np.array([0.0, np.sin(np.radians(30)), -np.cos(np.radians(30))])
+        scene, rho = analytic_scene(SunLight(d, (E, E, E), angle))
+        r = render(scene, RenderSettings(samples=64, samples_per_pass=64, seed=1))
+        img = r.image[..., 0].astype(np.float64)
+        expected = rho * E * np.cos(np.radians(30)) / np.pi
+        if angle == 0:
+            np.testing.assert_allclose(img, expected, rtol=1e-6)  # float32 film
+        else:
+            se = np.sqrt(r.variance[..., 0].astype(np.float64).sum()) / img.size
+            assert abs(img.mean() - expected) < sidak_z(0.01, 1) * se + 1e-12
+
+
+def test_spot_cone_and_blend():
+    """Inside the cone a spot is a point light; outside it is dark; in the
+    blend band Cycles' smoothstep applies."""
+    P, h = 40.0, 1.0
+    size, blend = np.radians(60), 0.5
+    spot = SpotLight((0, 0, h), (P, P, P), radius=0.0, direction=(0, 0, -1), spot_size=size, spot_blend=blend)
+    scene, rho = analytic_scene(spot)
+    r = render(scene, RenderSettings(samples=4, samples_per_pass=4, filter_type="BOX", filter_width=1e-6))
+    x, y = pixel_centres(40, 4.0)
+    D2 = x * x + y * y + h * h
+    cos = h / np.sqrt(D2)
+    cos_half = np.cos(size / 2)
+    t = np.clip((cos - cos_half) / ((1 - cos_half) * blend), 0, 1)
+    expected = rho / np.pi * P / (4 * np.pi) * cos / D2 * t * t * (3 - 2 * t)
+    np.testing.assert_allclose(r.image[..., 0], expected, rtol=2e-5, atol=1e-7)
+    assert (expected == 0).any() and ((t > 0) & (t < 1)).any()
+
+
+def test_cancel_within_a_pass():
+    """should_stop is polled while batches run: a long pass stops early."""
+    import time
+
+    class StopSoon:
+        def __init__(self):
+            self.t0 = time.perf_counter()
+
+        def should_stop(self):
+            return time.perf_counter() - self.t0 > 0.3
+
+    scene = cornell_box(256, 256)
+    t0 = time.perf_counter()
+    r = render(scene, RenderSettings(samples=64, samples_per_pass=64, max_paths=1 << 14), StopSoon())
+    assert time.perf_counter() - t0 < 3.0
+    assert r.samples < 64 and np.isfinite(r.image).all()
+
+
+def test_max_bounces_zero_is_direct_light():
+    """Cycles: max_bounces 0 still has direct light; 1 adds one indirect bounce."""
+    scene = cornell_box(16, 16)
+    means = [render(scene, RenderSettings(samples=16, samples_per_pass=16, max_bounces=b)).image[..., :3].mean()
+             for b in (0, 1)]
+    assert 0 < means[0] < means[1]
