@@ -1,0 +1,81 @@
+"""Finds the Ember renderer and its native dependencies.
+
+The add-on runs in three layouts:
+
+* from the repository (tests, command line): the renderer is the top-level
+  package ``engine`` next to ``addon``;
+* installed from the legacy zip: the add-on is the package ``ember`` with the
+  renderer vendored as ``ember.vendor.engine`` and the wheels Blender lacks
+  unpacked in ``ember/vendor/site``;
+* installed as an extension (4.2+): ``bl_ext.<repo>.ember`` with the renderer
+  vendored the same way and the wheels installed by Blender.
+
+The vendored copy is named ``vendor.engine`` because ``engine.py`` in this
+package is the RenderEngine.  Nothing is imported at add-on registration: a
+missing wheel must not stop Blender from starting, only show an error when a
+render starts.
+"""
+import importlib
+import os
+import sys
+
+_HERE = os.path.dirname(os.path.abspath(__file__))
+_VENDOR = os.path.join(_HERE, 'vendor')
+_SITE = os.path.join(_VENDOR, 'site')
+
+_modules = {}
+
+
+def _add_bundled_site():
+    """Make the wheels unpacked into the legacy zip importable."""
+    if os.path.isdir(_SITE) and _SITE not in sys.path:
+        sys.path.append(_SITE)
+
+
+def _import_embreex():
+    """Import embreex so that it binds to its own Embree library.
+
+    Blender 3.4 links its own libembree3 with global symbols; without
+    RTLD_DEEPBIND embreex resolves against it and building a scene crashes.
+    The flag is harmless in newer Blender and is restored right away
+    (OpenImageIO must not be loaded with it).
+    """
+    if 'embreex' in sys.modules or not hasattr(sys, 'setdlopenflags'):
+        return
+    old = sys.getdlopenflags()
+    sys.setdlopenflags(os.RTLD_NOW | os.RTLD_DEEPBIND)
+    try:
+        for module in ('embreex', 'embreex.rtcore_scene', 'embreex.mesh_construction'):
+            importlib.import_module(module)
+    finally:
+        sys.setdlopenflags(old)
+
+
+def _package_name():
+    """The name of the renderer package in this layout."""
+    if os.path.isfile(os.path.join(_VENDOR, 'engine', '__init__.py')):
+        return __package__ + '.vendor.engine'
+    return 'engine'
+
+
+def load(name):
+    """Import ``engine.<name>`` (e.g. 'scene', 'render') from the right place."""
+    if name not in _modules:
+        _add_bundled_site()
+        if name == 'render':
+            try:
+                _import_embreex()
+            except ImportError as err:
+                raise ImportError(
+                    f"Ember needs the 'embreex' package ({err}); install the Ember "
+                    "extension zip, or pip install embreex into Blender's Python") from err
+        _modules[name] = importlib.import_module(_package_name() + '.' + name)
+    return _modules[name]
+
+
+def scene_module():
+    return load('scene')
+
+
+def render_function():
+    return load('render').render

@@ -1,0 +1,118 @@
+"""The Ember RenderEngine: export, render progressively, write the result.
+
+Blender calls ``render`` once per view layer (and per frame of an animation)
+with an evaluated depsgraph.  All bpy reads happen in ``export`` before the
+renderer starts; the renderer only calls back with finished passes.
+Exceptions never escape: Blender would print them and keep a black image, so
+they are reported with ``self.report({'ERROR'}, ...)`` and recorded in
+``RENDER_LOG`` (which tests and the benchmark read).
+"""
+import time
+import traceback
+
+import bpy
+
+from . import backend, output
+from .export import camera as camera_export
+from .export import scene as scene_export
+
+# Facts about recent render() calls (one per view layer and frame): layer,
+# error, warnings, timings.  Kept short; the last entry is the latest render.
+RENDER_LOG = []
+MAX_LOG = 32
+
+
+class EmberRenderEngine(bpy.types.RenderEngine):
+    bl_idname = 'EMBER'
+    bl_label = "Ember"
+    bl_use_preview = True
+    bl_use_postprocess = True
+    # Keep Blender's shader nodes: Ember reads Cycles/EEVEE material trees.
+    bl_use_shading_nodes_custom = False
+    # The viewport shows EEVEE's material preview in Ember's place.
+    bl_use_eevee_viewport = True
+
+    def __init__(self, *args, **kwargs):
+        # Blender 4.4+ passes arguments here; older versions pass none.
+        super().__init__(*args, **kwargs)
+
+    def update_render_passes(self, scene=None, renderlayer=None):
+        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", 'COLOR')
+        if renderlayer.use_pass_z:
+            self.register_pass(scene, renderlayer, "Depth", 1, "Z", 'VALUE')
+        if renderlayer.use_pass_normal:
+            self.register_pass(scene, renderlayer, "Normal", 3, "XYZ", 'VECTOR')
+
+    def render(self, depsgraph):
+        info = {'layer': depsgraph.view_layer.name, 'frame': depsgraph.scene.frame_current,
+                'error': None, 'warnings': [], 'started': time.perf_counter(),
+                'preview': self.is_preview, 'passes': 0}
+        RENDER_LOG.append(info)
+        del RENDER_LOG[:-MAX_LOG]
+        try:
+            self._render(depsgraph, info)
+        except Exception as err:  # noqa: BLE001 - every failure must reach the user
+            message = _message(err)
+            info['error'] = message
+            info['traceback'] = traceback.format_exc()
+            print(info['traceback'])
+            self.report({'ERROR'}, "Ember: " + message)
+        info['seconds'] = time.perf_counter() - info['started']
+
+    def _render(self, depsgraph, info):
+        scene = depsgraph.scene
+        self.update_stats("", "Ember: exporting scene")
+        exported = scene_export.export_scene(depsgraph, self.camera_override)
+        info.update(export_seconds=exported.seconds, triangles=exported.triangles,
+                    warnings=list(exported.warnings))
+        if not self.is_preview:
+            for warning in exported.warnings:
+                self.report({'WARNING'}, "Ember: " + warning)
+        settings = scene_export.render_settings(scene, self.is_preview)
+        _, _, width, height = camera_export.border_window(scene.render)
+        render = backend.render_function()
+        if self.test_break():
+            return
+        writer = output.ResultWriter(self, width, height, depsgraph.view_layer.name)
+        progress = output.Progress(self, writer, settings.samples, info)
+        try:
+            exported.scene.validate()
+            result = render(exported.scene, settings, progress)
+            # A stopped render returns its partial image: write it either way.
+            writer.write(result.image, _extra_passes(result))
+        finally:
+            writer.finish()
+        info.update(samples=getattr(result, 'samples', progress.samples_done),
+                    cancelled=progress.cancelled, stats=dict(getattr(result, 'stats', {}) or {}))
+        for warning in getattr(result, 'warnings', None) or ():
+            info['warnings'].append(warning)
+            if not self.is_preview:
+                self.report({'WARNING'}, "Ember: " + warning)
+        if writer.nonfinite:
+            message = f"Ember: {writer.nonfinite} non-finite pixel values were replaced by 0"
+            info['warnings'].append(message)
+            self.report({'WARNING'}, message)
+
+
+def _extra_passes(result):
+    return {'Depth': getattr(result, 'depth', None), 'Normal': getattr(result, 'normal', None)}
+
+
+def _message(err):
+    text = str(err).strip() or type(err).__name__
+    if isinstance(err, (scene_export.ExportError, ValueError)):
+        return text
+    return f"{type(err).__name__}: {text}"
+
+
+classes = (EmberRenderEngine,)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

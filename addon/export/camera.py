@@ -1,0 +1,90 @@
+"""The scene camera and render resolution -> engine.scene.Camera.
+
+The frame size follows Blender's own arithmetic (integer percentage scaling,
+border window truncated to whole pixels) so that Ember's pixels line up with
+Cycles' exactly.
+"""
+import numpy as np
+
+
+def frame_size(render):
+    """Full frame in pixels: resolution times percentage, as Blender rounds it."""
+    pct = render.resolution_percentage
+    return render.resolution_x * pct // 100, render.resolution_y * pct // 100
+
+
+def border_window(render):
+    """(x, y, width, height) in pixels of the rendered window, y from the bottom.
+
+    Blender truncates border * size to whole pixels (in single precision);
+    without a border, or with a degenerate one, the window is the full frame.
+    """
+    width, height = frame_size(render)
+    if not render.use_border:
+        return 0, 0, width, height
+    fx = np.float32(width)
+    fy = np.float32(height)
+    xmin = int(np.float32(render.border_min_x) * fx)
+    xmax = int(np.float32(render.border_max_x) * fx)
+    ymin = int(np.float32(render.border_min_y) * fy)
+    ymax = int(np.float32(render.border_max_y) * fy)
+    if xmax - xmin < 1 or ymax - ymin < 1:
+        return 0, 0, width, height
+    return xmin, ymin, xmax - xmin, ymax - ymin
+
+
+def _without_scale(matrix):
+    """Camera-to-world with unit axes: Blender ignores the camera's scale."""
+    out = np.array(matrix, dtype=np.float64)
+    for axis in range(3):
+        length = np.linalg.norm(out[:3, axis])
+        if length == 0.0:
+            raise ValueError("The camera has a zero scale")
+        out[:3, axis] /= length
+    return out
+
+
+def focus_distance(cam_obj, matrix):
+    """Distance to the focal plane, as Cycles measures it (along the view axis)."""
+    dof = cam_obj.data.dof
+    target = dof.focus_object
+    if target is None:
+        return float(dof.focus_distance)
+    view = -matrix[:3, 2]
+    offset = np.array(target.matrix_world.translation) - matrix[:3, 3]
+    return float(abs(np.dot(view, offset)))
+
+
+def camera_from_blender(cam_obj, render):
+    """Returns (engine Camera, warnings)."""
+    from .. import backend
+    scene = backend.scene_module()
+    warnings = []
+    data = cam_obj.data
+    matrix = _without_scale(cam_obj.matrix_world)
+    kind = data.type
+    if kind not in ('PERSP', 'ORTHO'):
+        warnings.append(f"Camera '{cam_obj.name}': {kind.lower()} cameras are not supported, "
+                        "rendered as perspective")
+        kind = 'PERSP'
+    width, height = frame_size(render)
+    x, y, w, h = border_window(render)
+    border = None
+    if (x, y, w, h) != (0, 0, width, height):
+        border = (x / width, (x + w) / width, y / height, (y + h) / height)
+    fstop = float(data.dof.aperture_fstop) if data.dof.use_dof else 0.0
+    aperture = 0.0
+    if fstop > 0.0:
+        # Cycles: aperture radius = focal length / (2 f-stop); 1/(2 f) for ortho.
+        aperture = (data.lens * 1e-3 if kind == 'PERSP' else 1.0) / (2.0 * max(fstop, 1e-5))
+    camera = scene.Camera(
+        matrix=matrix, kind=kind, lens=float(data.lens),
+        sensor_width=float(data.sensor_width), sensor_height=float(data.sensor_height),
+        sensor_fit=data.sensor_fit, shift_x=float(data.shift_x), shift_y=float(data.shift_y),
+        ortho_scale=float(data.ortho_scale), clip_start=float(data.clip_start),
+        clip_end=float(data.clip_end), focus_distance=focus_distance(cam_obj, matrix),
+        fstop=fstop, aperture_radius=aperture, resolution=(width, height),
+        pixel_aspect=(float(render.pixel_aspect_x), float(render.pixel_aspect_y)),
+        border=border,
+    )
+    return camera, warnings

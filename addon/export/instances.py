@@ -1,0 +1,78 @@
+"""The depsgraph's object instances -> shared meshes plus placements.
+
+``depsgraph.object_instances`` yields every visible object once, and every
+copy made by collection instances, particle systems and geometry nodes.
+Copies of the same geometry share one evaluated data block, so geometry is
+keyed by that block's pointer and exported once (objects with modifiers get a
+data block of their own, so they are never merged by mistake).
+"""
+import numpy as np
+
+from . import mesh as mesh_export
+
+
+class InstanceCollector:
+    """Accumulates meshes and instances while walking the depsgraph."""
+
+    def __init__(self, material_index):
+        # material_index(obj) -> list of scene material indices per slot
+        self.material_index = material_index
+        self.meshes = []
+        self.instances = []
+        self.mesh_of_key = {}
+        self.skipped_types = set()
+
+    def add(self, inst):
+        obj = inst.object  # for instances: the instanced (possibly temporary) object
+        if not inst.is_instance and not inst.show_self:
+            return  # e.g. a particle emitter with "Show Emitter" off
+        if obj.type not in mesh_export.MESHABLE_TYPES:
+            if obj.type in ('CURVES', 'POINTCLOUD', 'VOLUME', 'GPENCIL', 'GREASEPENCIL'):
+                self.skipped_types.add(obj.type)
+            return
+        mesh_id = self._mesh_id(obj)
+        if mesh_id is None:
+            return
+        self.instances.append(_scene().Instance(
+            mesh=mesh_id,
+            matrix=np.array(inst.matrix_world, dtype=np.float64),
+            materials=self.material_index(obj),
+            name=obj.name,
+        ))
+
+    def _mesh_id(self, obj):
+        """Index of the object's geometry in self.meshes, exporting it once."""
+        if obj.type == 'MESH':
+            key = obj.data.as_pointer()
+        else:
+            # A curve's mesh depends on the object's own modifiers, not only
+            # on its data block: share it only between copies of the object.
+            key = ('object', obj.name_full)
+        if key not in self.mesh_of_key:
+            mesh = mesh_export.mesh_from_object(obj, _geometry_name(obj))
+            if mesh is None:
+                self.mesh_of_key[key] = None
+            else:
+                self.mesh_of_key[key] = len(self.meshes)
+                self.meshes.append(mesh)
+        return self.mesh_of_key[key]
+
+
+def _geometry_name(obj):
+    data = obj.data
+    return data.name if data is not None else obj.name
+
+
+def collect_instances(depsgraph, material_index):
+    """Walk every object instance; returns (meshes, instances, warnings)."""
+    collector = InstanceCollector(material_index)
+    for inst in depsgraph.object_instances:
+        collector.add(inst)
+    warnings = [f"Ember skips {kind.lower()} objects (not supported yet)"
+                for kind in sorted(collector.skipped_types)]
+    return collector.meshes, collector.instances, warnings
+
+
+def _scene():
+    from .. import backend
+    return backend.scene_module()

@@ -1,0 +1,77 @@
+"""A Blender depsgraph -> one engine.scene.Scene plus warnings for the user."""
+import time
+from dataclasses import dataclass, field
+
+from . import camera as camera_export
+from . import instances as instance_export
+from . import light as light_export
+from . import material as material_export
+from . import world as world_export
+
+
+class ExportError(Exception):
+    """The scene cannot be rendered; the message is meant for the user."""
+
+
+@dataclass
+class Export:
+    scene: object                  # engine.scene.Scene
+    warnings: list = field(default_factory=list)
+    seconds: float = 0.0
+    triangles: int = 0             # instanced triangles (what the renderer traces)
+
+
+def scene_camera(depsgraph, camera_override=None):
+    """The evaluated camera object to render from."""
+    scene = depsgraph.scene
+    camera = camera_override or scene.camera
+    if camera is None:
+        raise ExportError("The scene has no active camera")
+    if camera.type != 'CAMERA':
+        raise ExportError(f"The active camera '{camera.name}' is not a camera object")
+    return camera.evaluated_get(depsgraph)
+
+
+def export_scene(depsgraph, camera_override=None):
+    """Everything the renderer needs, read from an evaluated depsgraph."""
+    from .. import backend
+    start = time.perf_counter()
+    engine_scene = backend.scene_module()
+    scene = depsgraph.scene
+    override = getattr(depsgraph.view_layer, 'material_override', None)
+    materials = material_export.MaterialTable(override)
+    meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots)
+    lights, light_warnings = light_export.collect_lights(depsgraph)
+    world, world_warning = world_export.world_from_blender(scene.world)
+    try:
+        camera, camera_warnings = camera_export.camera_from_blender(
+            scene_camera(depsgraph, camera_override), scene.render)
+    except ValueError as err:
+        raise ExportError(str(err)) from err
+    result = engine_scene.Scene(
+        meshes=meshes, instances=instances, materials=materials.materials,
+        lights=lights, world=world, camera=camera)
+    warnings = materials.warnings + warnings + light_warnings + camera_warnings
+    if world_warning:
+        warnings.append(world_warning)
+    triangles = sum(len(meshes[inst.mesh].triangles) for inst in instances)
+    return Export(result, warnings, time.perf_counter() - start, triangles)
+
+
+def render_settings(scene, is_preview=False):
+    """engine.scene.RenderSettings from the scene's Ember and Blender settings."""
+    from .. import backend
+    settings = scene.ember
+    return backend.scene_module().RenderSettings(
+        samples=settings.preview_samples if is_preview else settings.samples,
+        max_bounces=settings.max_bounces,
+        seed=settings.seed,
+        light_selection=settings.light_selection.lower(),
+        strategy=settings.strategy.lower(),
+        clamp=settings.clamp,
+        filter_type=settings.filter_type,
+        filter_width=settings.filter_width,
+        transparent=bool(scene.render.film_transparent),
+        threads=settings.threads,
+        time_limit=0.0 if is_preview else settings.time_limit,
+    )

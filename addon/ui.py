@@ -1,0 +1,155 @@
+"""Ember's panels in Render Properties, and Blender's own panels shown for Ember.
+
+Ember's options sit where Cycles keeps its own: Sampling (samples, time limit,
+seed, lights, strategy), Light Paths (bounces, clamping) and Film (pixel
+filter, transparency).  Blender's generic panels (output, colour management,
+camera, light, world, material...) are opted in through ``COMPAT_ENGINES``.
+"""
+import bpy
+
+ENGINE_ID = 'EMBER'
+
+# Panels that Blender marks 'BLENDER_RENDER' are generic; these EEVEE ones are
+# what makes materials, worlds and lights editable without Cycles' own panels.
+# Names differ between versions, so missing ones are skipped.
+EXTRA_PANELS = (
+    'EEVEE_MATERIAL_PT_context_material',
+    'EEVEE_MATERIAL_PT_surface',
+    'EEVEE_WORLD_PT_surface',
+    'DATA_PT_EEVEE_light',
+    'DATA_PT_EEVEE_light_distance',
+    'DATA_PT_camera_dof',
+    'DATA_PT_camera_dof_aperture',
+    'MATERIAL_PT_preview',
+)
+
+# Generic panels that show settings Ember ignores; hiding them avoids promising
+# features that are not there.
+EXCLUDED_PANELS = (
+    'VIEWLAYER_PT_layer_passes',
+    'RENDER_PT_freestyle',
+)
+
+
+class EmberPanel:
+    bl_space_type = 'PROPERTIES'
+    bl_region_type = 'WINDOW'
+    bl_context = 'render'
+    COMPAT_ENGINES = {ENGINE_ID}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+
+class RENDER_PT_ember_sampling(EmberPanel, bpy.types.Panel):
+    bl_label = "Sampling"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        settings = context.scene.ember
+        col = layout.column()
+        col.prop(settings, "samples", text="Samples")
+        col.prop(settings, "preview_samples", text="Preview")
+        col.prop(settings, "time_limit")
+        col.prop(settings, "seed")
+
+
+class RENDER_PT_ember_sampling_lights(EmberPanel, bpy.types.Panel):
+    bl_label = "Lights"
+    bl_parent_id = 'RENDER_PT_ember_sampling'
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.prop(context.scene.ember, "light_selection")
+
+
+class RENDER_PT_ember_sampling_advanced(EmberPanel, bpy.types.Panel):
+    bl_label = "Advanced"
+    bl_parent_id = 'RENDER_PT_ember_sampling'
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.prop(context.scene.ember, "strategy")
+        layout.prop(context.scene.ember, "threads")
+
+
+class RENDER_PT_ember_light_paths(EmberPanel, bpy.types.Panel):
+    bl_label = "Light Paths"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.prop(context.scene.ember, "max_bounces", text="Total Bounces")
+
+
+class RENDER_PT_ember_light_paths_clamping(EmberPanel, bpy.types.Panel):
+    bl_label = "Clamping"
+    bl_parent_id = 'RENDER_PT_ember_light_paths'
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.prop(context.scene.ember, "clamp", text="Samples")
+
+
+class RENDER_PT_ember_film(EmberPanel, bpy.types.Panel):
+    bl_label = "Film"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.prop(context.scene.ember, "filter_type")
+        layout.prop(context.scene.ember, "filter_width")
+        layout.prop(context.scene.render, "film_transparent", text="Transparent")
+
+
+classes = (
+    RENDER_PT_ember_sampling,
+    RENDER_PT_ember_sampling_lights,
+    RENDER_PT_ember_sampling_advanced,
+    RENDER_PT_ember_light_paths,
+    RENDER_PT_ember_light_paths_clamping,
+    RENDER_PT_ember_film,
+)
+
+
+def compatible_panels():
+    """Blender's panels that should also show when Ember is the engine."""
+    panels = []
+    for panel in bpy.types.Panel.__subclasses__():
+        engines = getattr(panel, 'COMPAT_ENGINES', None)
+        if not isinstance(engines, set) or panel.__name__ in EXCLUDED_PANELS:
+            continue
+        if 'BLENDER_RENDER' in engines or panel.__name__ in EXTRA_PANELS:
+            panels.append(panel)
+    return panels
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    for panel in compatible_panels():
+        panel.COMPAT_ENGINES.add(ENGINE_ID)
+
+
+def unregister():
+    for panel in bpy.types.Panel.__subclasses__():
+        engines = getattr(panel, 'COMPAT_ENGINES', None)
+        if isinstance(engines, set) and panel not in classes:
+            engines.discard(ENGINE_ID)
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,530 @@
+"""Export: Blender data -> engine.scene, checked against Blender's own numbers."""
+import math
+
+import bpy
+import numpy as np
+import pytest
+from mathutils import Vector
+
+from addon.export import camera as camera_export
+from addon.export import material as material_export
+from addon.export import scene as scene_export
+
+from ember_testlib import SCENES_DIR, open_scene, require
+
+
+def export():
+    return scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
+
+
+def instances_of(exported, mesh_name):
+    scene = exported.scene
+    return [inst for inst in scene.instances if scene.meshes[inst.mesh].name == mesh_name]
+
+
+def evaluated_triangles(obj):
+    mesh = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    mesh.calc_loop_triangles()
+    return len(mesh.loop_triangles), len(mesh.vertices)
+
+
+# ----------------------------------------------------------------------------
+# registration and settings
+
+def test_engine_is_registered_with_blender_flags(factory_scene):
+    from addon.engine import EmberRenderEngine
+    assert EmberRenderEngine in bpy.types.RenderEngine.__subclasses__()
+    assert factory_scene.render.engine == 'EMBER'
+    assert EmberRenderEngine.bl_label == "Ember"
+    assert EmberRenderEngine.bl_use_preview and EmberRenderEngine.bl_use_postprocess
+    assert not EmberRenderEngine.bl_use_shading_nodes_custom
+
+
+def test_blender_panels_show_for_ember(factory_scene):
+    panels = {p.__name__: p for p in bpy.types.Panel.__subclasses__()}
+    for name in ('RENDER_PT_format', 'RENDER_PT_output', 'RENDER_PT_color_management',
+                 'DATA_PT_lens', 'DATA_PT_camera_dof', 'EEVEE_MATERIAL_PT_surface',
+                 'EEVEE_WORLD_PT_surface', 'RENDER_PT_ember_sampling', 'RENDER_PT_ember_film'):
+        assert 'EMBER' in panels[name].COMPAT_ENGINES, name
+
+
+def test_render_settings_follow_scene(factory_scene):
+    ember = factory_scene.ember
+    ember.samples, ember.seed, ember.max_bounces, ember.clamp = 7, 3, 4, 2.5
+    ember.light_selection, ember.strategy, ember.filter_type = 'ALL', 'BSDF', 'BOX'
+    ember.filter_width, ember.time_limit = 0.5, 12.0
+    factory_scene.render.film_transparent = True
+    settings = scene_export.render_settings(factory_scene)
+    assert (settings.samples, settings.seed, settings.max_bounces, settings.clamp) == (7, 3, 4, 2.5)
+    assert (settings.light_selection, settings.strategy, settings.filter_type) == ('all', 'bsdf', 'BOX')
+    assert settings.filter_width == pytest.approx(0.5) and settings.time_limit == 12.0
+    assert settings.transparent
+    assert scene_export.render_settings(factory_scene, is_preview=True).samples == ember.preview_samples
+
+
+# ----------------------------------------------------------------------------
+# meshes
+
+def test_modifiers_are_applied(factory_scene):
+    cube = bpy.data.objects['Cube']
+    subsurf = cube.modifiers.new("Subsurf", 'SUBSURF')
+    subsurf.levels = subsurf.render_levels = 2
+    array = cube.modifiers.new("Array", 'ARRAY')
+    array.count = 3
+    tris, verts = evaluated_triangles(cube)
+    assert tris == 3 * 6 * 16 * 2
+    mesh = export().scene.meshes[instances_of(export(), 'Cube')[0].mesh]
+    assert mesh.triangles.shape == (tris, 3) and mesh.positions.shape == (verts, 3)
+    assert mesh.triangles.dtype == np.int32 and mesh.positions.dtype == np.float32
+    assert mesh.triangles.max() == verts - 1
+
+
+def test_positions_and_triangles_match_blender(factory_scene):
+    cube = bpy.data.objects['Cube']
+    exported = export()
+    mesh = exported.scene.meshes[instances_of(exported, 'Cube')[0].mesh]
+    blender = np.array([v.co[:] for v in cube.data.vertices], dtype=np.float32)
+    np.testing.assert_array_equal(mesh.positions, blender)
+    cube.data.calc_loop_triangles()
+    np.testing.assert_array_equal(mesh.triangles, [t.vertices[:] for t in cube.data.loop_triangles])
+
+
+def test_flat_mesh_has_no_shading_normals(factory_scene):
+    exported = export()
+    assert exported.scene.meshes[instances_of(exported, 'Cube')[0].mesh].normals is None
+
+
+def test_smooth_normals_are_vertex_normals(empty_scene):
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8)
+    sphere = bpy.context.object
+    sphere.data.name = 'SmoothSphere'
+    bpy.ops.object.shade_smooth()
+    exported = export()
+    mesh = exported.scene.meshes[instances_of(exported, 'SmoothSphere')[0].mesh]
+    assert mesh.normals.shape == (len(mesh.triangles), 3, 3)
+    expected = np.array([v.normal[:] for v in sphere.data.vertices])[mesh.triangles]
+    np.testing.assert_allclose(mesh.normals, expected, atol=1e-5)
+    # Smooth normals on a sphere point away from the centre.
+    np.testing.assert_allclose(np.einsum('tci,tci->tc', mesh.normals, mesh.positions[mesh.triangles])
+                               / np.linalg.norm(mesh.positions[mesh.triangles], axis=2), 1.0, atol=0.02)
+
+
+def test_custom_normals_are_exported(empty_scene):
+    bpy.ops.mesh.primitive_plane_add()
+    plane = bpy.context.object
+    plane.data.name = 'NormalPlane'
+    if hasattr(plane.data, 'use_auto_smooth'):
+        plane.data.use_auto_smooth = True  # before 4.1 custom normals need it
+    tilted = Vector((0.3, 0.0, 1.0)).normalized()
+    plane.data.normals_split_custom_set([tilted[:]] * len(plane.data.loops))
+    exported = export()
+    mesh = exported.scene.meshes[instances_of(exported, 'NormalPlane')[0].mesh]
+    np.testing.assert_allclose(mesh.normals.reshape(-1, 3), [tilted[:]] * 6, atol=1e-3)
+
+
+def test_uvs_per_corner(factory_scene):
+    cube = bpy.data.objects['Cube']
+    exported = export()
+    mesh = exported.scene.meshes[instances_of(exported, 'Cube')[0].mesh]
+    cube.data.calc_loop_triangles()
+    uv = cube.data.uv_layers.active.data
+    expected = [[uv[i].uv[:] for i in t.loops] for t in cube.data.loop_triangles]
+    np.testing.assert_allclose(mesh.uvs, expected)
+
+
+def test_material_slots(factory_scene):
+    cube = bpy.data.objects['Cube']
+    red = material_export_helper("Red", (1.0, 0.0, 0.0))
+    cube.data.materials.append(red)
+    for polygon in cube.data.polygons[:2]:
+        polygon.material_index = 1
+    exported = export()
+    inst = instances_of(exported, 'Cube')[0]
+    mesh = exported.scene.meshes[inst.mesh]
+    cube.data.calc_loop_triangles()
+    expected = [t.material_index for t in cube.data.loop_triangles]
+    np.testing.assert_array_equal(mesh.material_slots, expected)
+    assert sorted(set(expected)) == [0, 1]
+    names = [exported.scene.materials[i].name for i in inst.materials]
+    assert names == ['Material', 'Red']
+    assert exported.scene.materials[inst.materials[1]].lobes[0].color == pytest.approx((1, 0, 0))
+
+
+def test_empty_slot_uses_default_material(factory_scene):
+    cube = bpy.data.objects['Cube']
+    cube.data.materials.clear()
+    cube.data.materials.append(None)
+    inst = instances_of(export(), 'Cube')[0]
+    assert list(inst.materials) == [-1]
+
+
+def material_export_helper(name, color):
+    material = bpy.data.materials.new(name)
+    material.use_nodes = True
+    principled = material.node_tree.nodes['Principled BSDF']
+    output = material.node_tree.nodes['Material Output']
+    diffuse = material.node_tree.nodes.new('ShaderNodeBsdfDiffuse')
+    diffuse.inputs['Color'].default_value = (*color, 1.0)
+    material.node_tree.nodes.remove(principled)
+    material.node_tree.links.new(diffuse.outputs[0], output.inputs['Surface'])
+    return material
+
+
+# ----------------------------------------------------------------------------
+# instances
+
+def test_shared_mesh_is_exported_once(factory_scene):
+    cube = bpy.data.objects['Cube']
+    for i in range(4):
+        copy = cube.copy()  # linked duplicate: same mesh data
+        copy.location = (3.0 * (i + 1), 0.0, 0.0)
+        factory_scene.collection.objects.link(copy)
+    modified = cube.copy()
+    modified.modifiers.new("Bevel", 'BEVEL')
+    factory_scene.collection.objects.link(modified)
+    exported = export()
+    assert len(exported.scene.instances) == 6
+    assert len(exported.scene.meshes) == 2  # the shared cube and the bevelled one
+    assert sorted(len(m.triangles) for m in exported.scene.meshes)[0] == 12
+
+
+def test_collection_instances_have_blender_transforms(empty_scene):
+    bpy.ops.mesh.primitive_cube_add()
+    source = bpy.context.object
+    source.data.name = 'SrcCube'
+    collection = bpy.data.collections.new("Src")
+    for owner in list(source.users_collection):
+        owner.objects.unlink(source)
+    collection.objects.link(source)
+    matrices = []
+    for i in range(5):
+        empty = bpy.data.objects.new(f"Inst{i}", None)
+        empty.instance_type = 'COLLECTION'
+        empty.instance_collection = collection
+        empty.location = (i, 2.0 * i, -i)
+        empty.rotation_euler = (0.1 * i, 0.2, 0.3 * i)
+        empty.scale = (1.0 + i, 1.0, 0.5)
+        empty_scene.collection.objects.link(empty)
+        matrices.append(empty)
+    bpy.context.view_layer.update()
+    exported = export()
+    cubes = instances_of(exported, 'SrcCube')
+    assert len(cubes) == 5 and len(exported.scene.meshes) == 1
+    got = sorted((inst.matrix for inst in cubes), key=lambda m: m[0, 3])
+    for empty, matrix in zip(matrices, got):
+        np.testing.assert_allclose(matrix, np.array(empty.matrix_world), atol=1e-6)
+
+
+def test_geometry_nodes_instances(empty_scene):
+    import importlib.util
+    import os
+    spec = importlib.util.spec_from_file_location('build_scenes', os.path.join(SCENES_DIR, 'build_scenes.py'))
+    build_scenes = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build_scenes)
+    bpy.ops.mesh.primitive_ico_sphere_add(location=(0, 0, -50))
+    ball = bpy.context.object
+    ball.data.name = 'Icosphere'
+    grid = build_scenes._geometry_nodes_instancer(empty_scene, ball)
+    bpy.context.view_layer.update()
+    exported = export()
+    balls = instances_of(exported, 'Icosphere')
+    assert len(balls) == 1 + 9  # the source object itself plus nine copies
+    # The source object and the nine copies: geometry nodes hand the copies
+    # their own evaluated mesh, shared by all nine.
+    assert len(exported.scene.meshes) == 2
+    copies = [inst for inst in balls if inst.matrix[2, 3] > -40]
+    assert len({inst.mesh for inst in copies}) == 1
+    positions = sorted(tuple(np.round(inst.matrix[:3, 3], 5)) for inst in balls if inst.matrix[2, 3] > -40)
+    # Object Info's default 'Original' space: copies sit at the grid points.
+    expected = sorted(tuple(np.round(np.array(grid.matrix_world @ v.co)[:3], 5))
+                      for v in grid.data.vertices)
+    np.testing.assert_allclose(positions, expected, atol=1e-5)
+
+
+def test_particle_instances(empty_scene):
+    bpy.ops.mesh.primitive_cube_add(size=0.1, location=(0, 0, -50))
+    bpy.context.object.data.name = 'PCube'
+    bpy.ops.mesh.primitive_plane_add(size=2)
+    emitter = bpy.context.object
+    emitter.data.name = 'Emitter'
+    emitter.modifiers.new("P", 'PARTICLE_SYSTEM')
+    settings = emitter.particle_systems[0].settings
+    settings.type = 'HAIR'
+    settings.count = 25
+    settings.render_type = 'OBJECT'
+    settings.instance_object = bpy.data.objects['Cube']
+    bpy.context.view_layer.update()
+    exported = export()
+    assert len(instances_of(exported, 'PCube')) == 1 + 25
+    assert len(instances_of(exported, 'Emitter')) == 1  # emitter shown by default
+    emitter.show_instancer_for_render = False
+    emitter.show_instancer_for_viewport = False
+    bpy.context.view_layer.update()
+    assert len(instances_of(export(), 'Emitter')) == 0
+
+
+def test_blend_scene_instances(registered_addon):
+    open_scene('instances_lights')
+    exported = export()
+    counts = {}
+    for inst in exported.scene.instances:
+        counts[exported.scene.meshes[inst.mesh].name] = counts.get(exported.scene.meshes[inst.mesh].name, 0) + 1
+    assert counts['Pillar'] == 3 and counts['Ball'] == 9 and counts['Chip'] == 12
+    assert len({m.name for m in exported.scene.meshes}) == len(exported.scene.meshes)
+    assert exported.triangles == sum(len(exported.scene.meshes[i.mesh].triangles) for i in exported.scene.instances)
+
+
+def test_hidden_objects_are_not_exported(factory_scene):
+    cube = bpy.data.objects['Cube']
+    cube.hide_viewport = True
+    bpy.context.view_layer.update()
+    assert instances_of(export(), 'Cube') == []
+
+
+# ----------------------------------------------------------------------------
+# lights and world
+
+def add_light(scene, kind, **settings):
+    data = bpy.data.lights.new(kind, kind)
+    for key, value in settings.items():
+        setattr(data, key, value)
+    obj = bpy.data.objects.new(kind, data)
+    scene.collection.objects.link(obj)
+    return obj
+
+
+def test_every_light_type(empty_scene):
+    point = add_light(empty_scene, 'POINT', energy=100.0, color=(1.0, 0.5, 0.25), shadow_soft_size=0.3)
+    point.location = (1, 2, 3)
+    spot = add_light(empty_scene, 'SPOT', energy=50.0, spot_size=0.7, spot_blend=0.4)
+    spot.rotation_euler = (math.pi / 2, 0, 0)  # -Z rotated to +Y
+    sun = add_light(empty_scene, 'SUN', energy=3.0, angle=0.1)
+    sun.rotation_euler = (0, math.pi / 2, 0)   # -Z rotated to -X
+    area = add_light(empty_scene, 'AREA', energy=20.0, shape='ELLIPSE', size=2.0, size_y=0.5)
+    area.scale = (2.0, 1.0, 1.0)
+    bpy.context.view_layer.update()
+    lights = {light.name: light for light in export().scene.lights}
+    p = lights['POINT']
+    assert p.position == pytest.approx((1, 2, 3)) and p.power == pytest.approx((100, 50, 25))
+    assert p.radius == pytest.approx(0.3)
+    # 3.x point lights are what 4.x calls soft falloff.
+    assert p.soft_falloff == getattr(point.data, 'use_soft_falloff', True)
+    s = lights['SPOT']
+    assert s.direction == pytest.approx((0, 1, 0), abs=1e-6)
+    assert (s.spot_size, s.spot_blend) == pytest.approx((0.7, 0.4))
+    u = lights['SUN']
+    assert u.direction == pytest.approx((-1, 0, 0), abs=1e-6) and u.strength == pytest.approx((3, 3, 3))
+    assert u.angle == pytest.approx(0.1)
+    a = lights['AREA']
+    assert a.shape == 'ELLIPSE' and (a.size_x, a.size_y) == pytest.approx((2.0, 0.5))
+    np.testing.assert_allclose(a.matrix, np.array(area.matrix_world))
+    # Blender 4.0 scales 3.x area light energy by pi/4 when opening old files.
+    legacy = math.pi / 4 if bpy.app.version < (4, 0, 0) else 1.0
+    assert a.power == pytest.approx((20 * legacy,) * 3)
+
+
+def test_light_exposure(empty_scene):
+    light = add_light(empty_scene, 'POINT', energy=10.0)
+    if not hasattr(light.data, 'exposure'):
+        pytest.skip("light exposure exists from Blender 4.0 on")
+    light.data.exposure = 2.0
+    assert export().scene.lights[0].power == pytest.approx((40, 40, 40))
+
+
+def test_black_light_is_dropped(empty_scene):
+    add_light(empty_scene, 'POINT', energy=0.0)
+    assert export().scene.lights == []
+
+
+def test_world_background_color_times_strength(factory_scene):
+    background = factory_scene.world.node_tree.nodes['Background']
+    background.inputs['Color'].default_value = (0.2, 0.4, 0.6, 1.0)
+    background.inputs['Strength'].default_value = 2.5
+    assert export().scene.world.color == pytest.approx((0.5, 1.0, 1.5))
+
+
+def test_world_without_nodes_and_without_world(factory_scene):
+    world = factory_scene.world
+    world.use_nodes = False
+    world.color = (0.1, 0.2, 0.3)
+    if world.use_nodes:  # 5.0 always uses nodes
+        world.node_tree.nodes['Background'].inputs['Color'].default_value = (0.1, 0.2, 0.3, 1)
+    assert export().scene.world.color == pytest.approx((0.1, 0.2, 0.3))
+    factory_scene.world = None
+    assert export().scene.world.color == (0.0, 0.0, 0.0)
+
+
+def test_world_texture_falls_back_with_warning(factory_scene):
+    tree = factory_scene.world.node_tree
+    sky = tree.nodes.new('ShaderNodeTexSky')
+    tree.links.new(sky.outputs[0], tree.nodes['Background'].inputs['Color'])
+    exported = export()
+    assert any("World" in w for w in exported.warnings)
+    assert np.isfinite(exported.scene.world.color).all()
+
+
+# ----------------------------------------------------------------------------
+# materials
+
+def new_material(name):
+    material = bpy.data.materials.new(name)
+    material.use_nodes = True
+    return material, material.node_tree
+
+
+def test_principled_translation(factory_scene):
+    material, tree = new_material("Gold")
+    p = tree.nodes['Principled BSDF']
+    p.inputs['Base Color'].default_value = (1.0, 0.8, 0.2, 1.0)
+    p.inputs['Metallic'].default_value = 0.25
+    p.inputs['Roughness'].default_value = 0.3
+    emission = 'Emission Color' if 'Emission Color' in p.inputs else 'Emission'
+    p.inputs[emission].default_value = (1.0, 0.5, 0.0, 1.0)
+    p.inputs['Emission Strength'].default_value = 2.0
+    translated, warning = material_export.translate(material)
+    assert warning is None
+    diffuse, glossy = translated.lobes
+    assert diffuse.kind == 'diffuse' and diffuse.color == pytest.approx((0.75, 0.6, 0.15))
+    assert glossy.kind == 'glossy' and glossy.fresnel == 'schlick' and glossy.roughness == pytest.approx(0.3)
+    f0 = 0.04
+    assert glossy.color == pytest.approx(tuple(0.75 * f0 + 0.25 * c for c in (1.0, 0.8, 0.2)), rel=1e-4)
+    assert translated.emission == pytest.approx((2.0, 1.0, 0.0))
+
+
+def test_diffuse_glossy_emission_and_mix(factory_scene):
+    material, tree = new_material("Mix")
+    tree.nodes.remove(tree.nodes['Principled BSDF'])
+    diffuse = tree.nodes.new('ShaderNodeBsdfDiffuse')
+    diffuse.inputs['Color'].default_value = (0.5, 0.5, 0.5, 1)
+    glossy = tree.nodes.new('ShaderNodeBsdfGlossy')
+    glossy.inputs['Color'].default_value = (1, 1, 1, 1)
+    glossy.inputs['Roughness'].default_value = 0.2
+    emission = tree.nodes.new('ShaderNodeEmission')
+    emission.inputs['Strength'].default_value = 3.0
+    mix = tree.nodes.new('ShaderNodeMixShader')
+    mix.inputs['Fac'].default_value = 0.25
+    add = tree.nodes.new('ShaderNodeAddShader')
+    tree.links.new(diffuse.outputs[0], mix.inputs[1])
+    tree.links.new(glossy.outputs[0], mix.inputs[2])
+    tree.links.new(mix.outputs[0], add.inputs[0])
+    tree.links.new(emission.outputs[0], add.inputs[1])
+    tree.links.new(add.outputs[0], tree.nodes['Material Output'].inputs['Surface'])
+    translated, warning = material_export.translate(material)
+    assert warning is None
+    kinds = [(lobe.kind, lobe.color, lobe.roughness) for lobe in translated.lobes]
+    assert kinds[0][0] == 'diffuse' and kinds[0][1] == pytest.approx((0.375,) * 3)
+    assert kinds[1][0] == 'glossy' and kinds[1][1] == pytest.approx((0.25,) * 3)
+    assert kinds[1][2] == pytest.approx(0.2)
+    assert translated.emission == pytest.approx((3.0, 3.0, 3.0))
+
+
+def test_unsupported_nodes_fall_back_with_one_warning(factory_scene):
+    material, tree = new_material("Weird")
+    glass = tree.nodes.new('ShaderNodeBsdfGlass')
+    glass.inputs['Color'].default_value = (0.2, 0.9, 0.3, 1.0)
+    noise = tree.nodes.new('ShaderNodeTexNoise')
+    mix = tree.nodes.new('ShaderNodeMixShader')
+    tree.links.new(noise.outputs['Fac'], mix.inputs['Fac'])
+    tree.links.new(glass.outputs[0], mix.inputs[1])
+    tree.links.new(tree.nodes['Principled BSDF'].outputs[0], mix.inputs[2])
+    tree.links.new(mix.outputs[0], tree.nodes['Material Output'].inputs['Surface'])
+    bpy.data.objects['Cube'].data.materials[0] = material
+    exported = export()
+    warnings = [w for w in exported.warnings if "'Weird'" in w]
+    assert len(warnings) == 1
+    assert glass.name in warnings[0] and 'Fac' in warnings[0]
+    lobes = exported.scene.materials[0].lobes
+    assert lobes[0].kind == 'diffuse' and lobes[0].color == pytest.approx((0.1, 0.45, 0.15))
+
+
+def test_principled_layers_not_rendered_are_named(factory_scene):
+    material, tree = new_material("Glassy")
+    principled = tree.nodes['Principled BSDF']
+    name = 'Transmission Weight' if 'Transmission Weight' in principled.inputs else 'Transmission'
+    principled.inputs[name].default_value = 1.0
+    translated, warning = material_export.translate(material)
+    assert warning is not None and 'Transmission' in warning and principled.name in warning
+    assert [lobe.kind for lobe in translated.lobes] == ['diffuse', 'glossy']
+
+
+def test_no_surface_is_black(factory_scene):
+    material, tree = new_material("Empty")
+    tree.links.clear()
+    translated, warning = material_export.translate(material)
+    assert translated.lobes == () and translated.emission == (0.0, 0.0, 0.0) and warning is None
+
+
+# ----------------------------------------------------------------------------
+# camera
+
+def test_camera_fields(factory_scene):
+    cam = factory_scene.camera
+    cam.scale = (2.0, 3.0, 0.5)  # ignored by Blender's camera
+    data = cam.data
+    data.lens, data.sensor_width, data.sensor_height, data.sensor_fit = 35.0, 30.0, 20.0, 'VERTICAL'
+    data.shift_x, data.shift_y, data.clip_start, data.clip_end = 0.1, -0.2, 0.5, 80.0
+    data.dof.use_dof, data.dof.aperture_fstop = True, 2.0
+    target = bpy.data.objects['Cube']
+    data.dof.focus_object = target
+    render = factory_scene.render
+    render.resolution_x, render.resolution_y, render.resolution_percentage = 640, 480, 50
+    render.pixel_aspect_x, render.pixel_aspect_y = 2.0, 1.0
+    bpy.context.view_layer.update()
+    camera = export().scene.camera
+    assert camera.resolution == (320, 240) and camera.pixel_aspect == (2.0, 1.0)
+    assert (camera.lens, camera.sensor_width, camera.sensor_height, camera.sensor_fit) == (35.0, 30.0, 20.0, 'VERTICAL')
+    assert (camera.shift_x, camera.shift_y) == pytest.approx((0.1, -0.2))
+    assert (camera.clip_start, camera.clip_end) == pytest.approx((0.5, 80.0))
+    rotation = np.array(cam.matrix_world.to_quaternion().to_matrix())
+    np.testing.assert_allclose(camera.matrix[:3, :3], rotation, atol=1e-6)
+    np.testing.assert_allclose(camera.matrix[:3, 3], cam.matrix_world.translation, atol=1e-6)
+    view = -rotation[:, 2]
+    expected = abs(np.dot(view, np.array(target.location) - np.array(cam.location)))
+    assert camera.focus_distance == pytest.approx(expected, rel=1e-6)
+    assert camera.fstop == 2.0 and camera.aperture_radius == pytest.approx(0.035 / 4.0)
+
+
+@pytest.mark.parametrize("size,border", [
+    ((100, 80), (0.1, 0.55, 0.25, 0.9)),
+    ((333, 217), (0.123, 0.777, 0.301, 0.699)),
+    ((64, 64), (0.0, 1.0, 0.0, 1.0)),
+])
+def test_border_window_matches_blender(factory_scene, size, border):
+    render = factory_scene.render
+    render.resolution_x, render.resolution_y = size
+    render.resolution_percentage = 100
+    render.use_border = True
+    render.border_min_x, render.border_max_x, render.border_min_y, render.border_max_y = border
+    x, y, w, h = camera_export.border_window(render)
+    # Blender truncates in single precision (render_init_from_main).
+    f32 = np.float32
+    assert x == int(f32(render.border_min_x) * f32(size[0]))
+    assert w == int(f32(render.border_max_x) * f32(size[0])) - x
+    assert y == int(f32(render.border_min_y) * f32(size[1]))
+    assert h == int(f32(render.border_max_y) * f32(size[1])) - y
+    camera = export().scene.camera
+    if (w, h) == size:
+        assert camera.border is None
+    else:
+        xmin, xmax, ymin, ymax = camera.border
+        assert (round(xmin * size[0]), round(xmax * size[0])) == (x, x + w)
+        assert (round(ymin * size[1]), round(ymax * size[1])) == (y, y + h)
+
+
+def test_no_camera_is_a_clear_error(factory_scene):
+    factory_scene.camera = None
+    with pytest.raises(scene_export.ExportError, match="no active camera"):
+        export()
+
+
+def test_exported_blend_scenes_validate(registered_addon):
+    from addon import backend
+    try:
+        backend.load('validate')
+    except ImportError as err:
+        require(False, f"engine.validate is missing: {err}")
+    for name in ('cornell', 'veach_mis', 'instances_lights'):
+        open_scene(name)
+        exported = export()
+        exported.scene.validate()
+        assert exported.warnings == [], exported.warnings

@@ -1,0 +1,104 @@
+"""Render blend_scenes/ with Ember: real pixels, and agreement with Cycles.
+
+Agreement is a statistical test, not a tolerance: images are cut into pixel
+blocks; Ember's block means come with a standard error measured from its own
+passes (the difference of successive progressive images gives independent
+per-pass estimates), Cycles' from renders with different seeds.  Welch's t on
+every block and channel, Sidak-corrected to a family-wise alpha of 1%, must not
+reject.  The relative mean error per scene is printed (pytest -s shows it).
+"""
+import numpy as np
+import pytest
+
+import ember_stats as stats
+from ember_testlib import (open_scene, per_pass_estimates, render_array, setup_cycles, setup_ember,
+                           small_resolution)
+
+EMBER_SPP = 64        # one sample per pass -> 64 independent batches
+CYCLES_SEEDS = 8      # independent Cycles renders ...
+CYCLES_SPP = 16       # ... of this many samples each
+BLOCK = 8             # pixels per block side
+SCENES = {
+    # name: (width, height, max bounces)
+    'cornell': (48, 48, 4),
+    'veach_mis': (64, 48, 3),
+    'instances_lights': (64, 48, 3),
+}
+
+
+def ember_render(name, tmp_path, taps):
+    scene = open_scene(name)
+    width, height, bounces = SCENES[name]
+    small_resolution(scene, width, height)
+    setup_ember(scene, EMBER_SPP, seed=1, max_bounces=bounces)
+    image = render_array(scene, tmp_path, "ember_" + name)
+    return scene, image, taps[-1].images
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_ember_renders_real_pixels(name, tmp_path, tapped_engine):
+    _, image, passes = ember_render(name, tmp_path, tapped_engine)
+    from addon import engine as ember_engine
+    assert ember_engine.RENDER_LOG[-1]['error'] is None
+    assert len(passes) >= 2, "the engine must display progressive passes"
+    rgb = image[..., :3]
+    assert np.isfinite(image).all(), "NaN or inf pixels"
+    assert (image[..., 3] == 1.0).all()
+    luminance = rgb @ np.array([0.2126, 0.7152, 0.0722])
+    assert 0.02 < luminance.mean() < 20.0, luminance.mean()
+    h, w = luminance.shape
+    for quadrant in (luminance[:h // 2, :w // 2], luminance[:h // 2, w // 2:],
+                     luminance[h // 2:, :w // 2], luminance[h // 2:, w // 2:]):
+        assert quadrant.mean() > 1e-3, "a whole quadrant is black"
+    if name == 'cornell':
+        middle = rgb[h // 3: 2 * h // 3]
+        left, right = middle[:, 1:w // 8].mean(axis=(0, 1)), middle[:, -w // 8:-1].mean(axis=(0, 1))
+        assert left[0] > 2 * left[1], f"left wall should be red: {left}"
+        assert right[1] > 1.5 * right[0], f"right wall should be green: {right}"
+        # Lights are invisible to camera rays by default (Blender's object
+        # visibility); the ceiling is lit only indirectly, the floor directly.
+        floor = luminance[7 * h // 8:, 3 * w // 8:5 * w // 8].mean()
+        ceiling = luminance[:h // 8, 3 * w // 8:5 * w // 8].mean()
+        assert floor > 1.5 * ceiling, f"floor {floor} should outshine the ceiling {ceiling}"
+    if name == 'veach_mis':
+        plates = luminance[h // 2:]
+        assert plates.max() > 10 * np.median(plates), "no glossy highlights on the plates"
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_agrees_with_cycles(name, tmp_path, tapped_engine):
+    scene, _, passes = ember_render(name, tmp_path, tapped_engine)
+    ember_batches = per_pass_estimates(passes)[..., :3]
+    width, height, bounces = SCENES[name]
+    cycles_images = []
+    for seed in range(CYCLES_SEEDS):
+        setup_cycles(scene, CYCLES_SPP, seed, bounces)
+        cycles_images.append(render_array(scene, tmp_path, f"cycles_{name}_{seed}")[..., :3])
+    ember_blocks = stats.block_means(ember_batches, BLOCK)
+    cycles_blocks = stats.block_means(np.array(cycles_images, dtype=np.float64), BLOCK)
+    failures, details = stats.failing_blocks(ember_blocks, cycles_blocks)
+    print(f"\n{name}: relative mean error vs Cycles {details['relative_mean_error']:.4f}, "
+          f"mean |block error| {details['relative_abs_error']:.4f}, max |t| {details['max_abs_t']:.2f} "
+          f"over {details['blocks']} block-channels (reject below p={details['level']:.2e})")
+    assert len(failures) == 0, (
+        f"{len(failures)} blocks differ from Cycles (block, y, x, channel): {failures[:10].tolist()}; {details}")
+
+
+def test_cancel_with_the_real_engine(factory_scene, monkeypatch, tmp_path, tapped_engine):
+    """Esc (test_break) between passes stops the engine and keeps its image."""
+    from addon import engine as ember_engine
+    from addon import output
+    calls = []
+
+    def esc_after_three_passes(engine):
+        calls.append(True)
+        return len(calls) >= 3
+    monkeypatch.setattr(output, 'break_requested', esc_after_three_passes)
+    small_resolution(factory_scene, 32, 24)
+    setup_ember(factory_scene, 500, seed=0, max_bounces=2)
+    image = render_array(factory_scene, tmp_path, "cancelled")
+    log = ember_engine.RENDER_LOG[-1]
+    assert log['cancelled'] and log['error'] is None
+    assert log['samples'] == tapped_engine[-1].images[-1][0] < 500
+    np.testing.assert_allclose(image, tapped_engine[-1].images[-1][1].astype(np.float32), atol=1e-6)
+    assert image[..., :3].mean() > 0.01, "the partial image was lost"
