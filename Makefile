@@ -2,26 +2,41 @@
 PY := .venv/bin/python
 export PYTHONPATH := $(CURDIR)
 
-.PHONY: setup render test test-engine bench clean
+.PHONY: setup render render-engine test test-engine test-addon bench bench-export zip clean
 
 setup:
 	./scripts/setup.sh
 
+# Main job: the bundled Cornell box, rendered by Ember through the bpy module,
+# to out/cornell.png and out/cornell.exr.
 render: setup
-	$(PY) -P tools/render_blend.py blend_scenes/cornell_box.blend -o out/cornell_box
+	$(PY) -P tools/render_blend.py blend_scenes/cornell.blend -o out/cornell
 
+# The engine alone, on its own copy of the Cornell box (no Blender).
 render-engine: setup
 	$(PY) -m engine --scene cornell --size 512 512 --samples 64 -o out/engine_cornell
 
-test:
-	EMBER_WITH_BLENDER=1 ./scripts/setup.sh
-	$(PY) -m pytest tests -q -rfE --durations=15
+# Everything: engine and add-on tests, Cycles comparisons, Blender 3.4 binary
+# and bpy 4.2 runs.  Installs what it needs first (apt for Debian's Blender).
+test: setup
+	sh tools/setup_test_env.sh
+	$(PY) -m pytest tests -q -rfEs -p no:cacheprovider --durations=10
 
 test-engine: setup
 	$(PY) -m pytest tests/engine -q
 
+test-addon: setup
+	sh tools/setup_test_env.sh
+	$(PY) -m pytest tests/addon -q
+
 bench: setup
 	$(PY) -m tools.bench_engine
 
+bench-export: setup
+	$(PY) -P tools/bench_export.py
+
+zip: setup
+	$(PY) tools/build_zip.py
+
 clean:
-	rm -rf out .pytest_cache
+	rm -rf out dist build .pytest_cache

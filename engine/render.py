@@ -67,8 +67,10 @@ def warnings_for(ctx):
 
 
 def _batches(npix, spp, settings, threads):
+    """Contiguous pixel ranges: at most max_paths / threads paths each, and at
+    least one per thread so small frames keep every core busy."""
     per_thread = max(1024, settings.max_paths // threads)
-    pixels = max(1, per_thread // spp)
+    pixels = max(1, min(per_thread // spp, -(-npix // threads)))
     return [(lo, min(npix, lo + pixels)) for lo in range(0, npix, pixels)]
 
 
