@@ -174,6 +174,8 @@ def sample(lobes, wo, u_lobe, u1, u2):
     A sample with weight 0 is an absorbed path.  For delta samples pdf is the
     lobe's selection probability (only its being > 0 matters downstream).
     """
+    if lobes.kind.shape[1] == 1:
+        return _sample_single(lobes, wo, u1, u2)
     n = len(wo)
     sel = selection(lobes, wo)
     cdf = np.cumsum(sel, axis=1)
@@ -204,4 +206,39 @@ def sample(lobes, wo, u_lobe, u1, u2):
         ok = (wo[m, 2] > COS_EPS) & (ps > 0)
         weight[m] = np.where(ok[:, None], col / np.where(ps > 0, ps, 1.0)[:, None], 0.0)
         pdf[m] = ps
+    return wi, weight, pdf, m
+
+
+def _sample_single(lobes, wo, u1, u2):
+    """``sample`` for one-lobe materials: the weight in closed form, without
+    evaluating the BSDF again (diffuse: colour; GGX: F G2 / G1(wo))."""
+    n = len(wo)
+    kind, color = lobes.kind[:, 0], lobes.color[:, 0]
+    wi = np.zeros((n, 3))
+    wi[:, 2] = 1.0
+    weight = np.zeros((n, 3))
+    pdf = np.zeros(n)
+    up = wo[:, 2] > COS_EPS
+    d = subset((kind == DIFFUSE) & up)
+    if count(d, n):
+        wi[d], pdf[d] = cosine_hemisphere(u1[d], u2[d])
+        weight[d] = np.where((pdf[d] > 0)[:, None], color[d], 0.0)
+    g = subset((kind == GLOSSY) & up)
+    if count(g, n):
+        wo_g, alpha = wo[g], lobes.alpha[g, 0]
+        h = ggx_sample_vndf(wo_g, alpha, u1[g], u2[g])
+        cos_oh = np.einsum("ij,ij->i", wo_g, h)
+        wi_g = 2.0 * cos_oh[:, None] * h - wo_g
+        ok = wi_g[:, 2] > COS_EPS
+        lam_o = ggx_lambda(wo_g[:, 2], alpha)
+        g1 = 1.0 / (1.0 + lam_o)
+        g2 = 1.0 / (1.0 + lam_o + ggx_lambda(wi_g[:, 2], alpha))
+        wi[g] = wi_g
+        pdf[g] = np.where(ok, ggx_d(h[:, 2], alpha) * g1 / (4.0 * wo_g[:, 2]), 0.0)
+        weight[g] = _fresnel(color[g], lobes.schlick[g, 0], cos_oh) * np.where(ok, g2 / g1, 0.0)[:, None]
+    m = (kind == MIRROR) & up
+    if m.any():
+        wi[m] = wo[m] * np.array([-1.0, -1.0, 1.0])
+        weight[m] = _fresnel(color[m], lobes.schlick[m, 0], wo[m, 2])
+        pdf[m] = 1.0
     return wi, weight, pdf, m

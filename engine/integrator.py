@@ -117,27 +117,33 @@ def _bounce(ctx, paths, depth, rng, tile):
     if miss.any():
         _escaped(ctx, paths, np.nonzero(miss)[0], depth)
 
-    hs = np.nonzero(hit_surf)[0]
-    hit = _interaction(ctx, paths, hs, t[hs], prim[hs], bu[hs], bv[hs])
+    # Compact to the paths that hit a surface: everything below works on
+    # dense arrays, with no index indirection.
+    if not hit_surf.all():
+        _finish(ctx, paths.take(~hit_surf), tile)
+        paths = paths.take(hit_surf)
+        t, prim, bu, bv = t[hit_surf], prim[hit_surf], bu[hit_surf], bv[hit_surf]
+    if len(paths.pix) == 0:
+        return paths
+    hit = _interaction(ctx, paths, t, prim, bu, bv)
     emission = ctx.materials.emission[hit.mat]
     em = np.nonzero(np.any(emission > 0, axis=1))[0]
     if len(em):
-        _emission_hit(ctx, paths, hs[em], hit, em, emission[em])
+        _emission_hit(ctx, paths, em, hit, emission[em])
 
-    done = np.ones(len(paths.pix), bool)
-    if depth == s.max_bounces + 1 or len(hs) == 0:
+    if depth == s.max_bounces + 1:
         _finish(ctx, paths, tile)
         return paths.take(np.zeros(len(paths.pix), bool))
 
     lobes = ctx.materials.gather(hit.mat)
     tt, bb = frame(hit.ns)
     wo_l = to_local(hit.wo, tt, bb, hit.ns)
-    _next_event(ctx, paths, hs, hit, lobes, tt, bb, wo_l, rng)
-    alive = _scatter(ctx, paths, hs, hit, lobes, tt, bb, wo_l, depth, rng)
-    done[hs[alive]] = False
-    if done.any():
-        _finish(ctx, paths.take(done), tile)
-    return paths.take(~done)
+    _next_event(ctx, paths, hit, lobes, tt, bb, wo_l, rng)
+    alive = _scatter(ctx, paths, hit, lobes, tt, bb, wo_l, depth, rng)
+    if alive.all():
+        return paths
+    _finish(ctx, paths.take(~alive), tile)
+    return paths.take(alive)
 
 
 def _camera_aovs(ctx, paths, t, prim, hit_light, hit_surf, tile):
@@ -181,10 +187,10 @@ def _escaped(ctx, paths, i, depth):
             paths.L[j] += paths.beta[j] * Le * w[:, None]
 
 
-def _interaction(ctx, paths, i, t, prim, bu, bv):
+def _interaction(ctx, paths, t, prim, bu, bv):
     tr = ctx.triangles
-    d = paths.d[i]
-    o = paths.o[i]
+    d = paths.d
+    o = paths.o
     ng = tr.ng[prim]
     # Embree's t and barycentrics are float32; re-intersect the triangle's
     # plane in float64 so hit points (and shadow rays) sit on the surface
@@ -209,15 +215,15 @@ def _interaction(ctx, paths, i, t, prim, bu, bv):
     return Hit(p, ng, ns, -d, tr.material[prim], prim, ctx.accel.offset_scale(p))
 
 
-def _emission_hit(ctx, paths, i, hit, em, Le):
+def _emission_hit(ctx, paths, em, hit, Le):
     s = ctx.settings
     if s.strategy == "mis":
         emitter = ctx.lights.emitter_of_triangle(hit.mat[em])
-        pdf = ctx.lights.triangle_pdf(hit.prim[em], paths.o[i], hit.p[em], hit.ng[em])
-        w = _mis_hit(ctx, paths, i, emitter, pdf)
+        pdf = ctx.lights.triangle_pdf(hit.prim[em], paths.o[em], hit.p[em], hit.ng[em])
+        w = _mis_hit(ctx, paths, em, emitter, pdf)
     else:
-        w = _mis_hit(ctx, paths, i, None, None)
-    paths.L[i] += paths.beta[i] * Le * w[:, None]
+        w = _mis_hit(ctx, paths, em, None, None)
+    paths.L[em] += paths.beta[em] * Le * w[:, None]
 
 
 def _nee_emitters(ctx):
@@ -229,23 +235,23 @@ def _nee_emitters(ctx):
     return "select", None
 
 
-def _next_event(ctx, paths, hs, hit, lobes, tt, bb, wo_l, rng):
+def _next_event(ctx, paths, hit, lobes, tt, bb, wo_l, rng):
     lt = ctx.lights
-    if lt.count == 0 or len(hs) == 0:
+    n = len(paths.pix)
+    if lt.count == 0 or n == 0:
         return
     mode, emitters = _nee_emitters(ctx)
     if mode == "select":
-        u = rng.random((len(hs), 4))
+        u = rng.random((n, 4))
         e, p_sel = lt.select(u[:, 0])
-        _shade_light(ctx, paths, hs, hit, lobes, tt, bb, wo_l, e, p_sel, u[:, 1:])
+        _shade_light(ctx, paths, hit, lobes, tt, bb, wo_l, e, p_sel, u[:, 1:])
         return
     for e in emitters:
-        u = rng.random((len(hs), 3))
-        _shade_light(ctx, paths, hs, hit, lobes, tt, bb, wo_l,
-                     np.full(len(hs), e), np.ones(len(hs)), u)
+        u = rng.random((n, 3))
+        _shade_light(ctx, paths, hit, lobes, tt, bb, wo_l, np.full(n, e), np.ones(n), u)
 
 
-def _shade_light(ctx, paths, hs, hit, lobes, tt, bb, wo_l, e, p_sel, u):
+def _shade_light(ctx, paths, hit, lobes, tt, bb, wo_l, e, p_sel, u):
     s = ctx.settings
     ls = ctx.lights.sample(e, hit.p, u[:, 0], u[:, 1], u[:, 2])
     wi_l = to_local(ls.wi, tt, bb, hit.ns)
@@ -256,10 +262,10 @@ def _shade_light(ctx, paths, hs, hit, lobes, tt, bb, wo_l, e, p_sel, u):
     if s.strategy == "mis":
         w = np.where(ls.delta, 1.0, power_heuristic(p_light, pdf_b))
     else:
-        w = np.ones(len(hs))
+        w = np.ones(len(p_light))
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         scale = np.where(ok, cos * w / np.where(ok, p_light, 1.0), 0.0)
-    contrib = paths.beta[hs] * f * ls.Le * scale[:, None]
+    contrib = paths.beta * f * ls.Le * scale[:, None]
     live = np.nonzero(np.any(contrib > 0, axis=1))[0]
     if len(live) == 0:
         return
@@ -271,27 +277,27 @@ def _shade_light(ctx, paths, hs, hit, lobes, tt, bb, wo_l, e, p_sel, u):
     tmax = np.where(np.isfinite(dist), dist * (1.0 - 1e-6) - shorten, 1e37)
     blocked = ctx.accel.occluded(origin, ls.wi[live], tmax)
     free = live[~blocked]
-    paths.L[hs[free]] += contrib[free]
+    paths.L[free] += contrib[free]
 
 
-def _scatter(ctx, paths, hs, hit, lobes, tt, bb, wo_l, depth, rng):
-    """Sample the BSDF, update the path state in place; returns which of hs live on."""
+def _scatter(ctx, paths, hit, lobes, tt, bb, wo_l, depth, rng):
+    """Sample the BSDF and update the path state in place; returns which paths live on."""
     s = ctx.settings
-    u = rng.random((len(hs), 4))
+    u = rng.random((len(paths.pix), 4))
     wi_l, weight, pdf, delta = bsdf.sample(lobes, wo_l, u[:, 0], u[:, 1], u[:, 2])
     wi = to_world(wi_l, tt, bb, hit.ns)
     # Reflection only: a direction below the geometric surface would leak.
     ok = (dot(wi, hit.ng) > 0) & np.all(np.isfinite(weight), axis=1) & np.any(weight > 0, axis=1)
-    beta = paths.beta[hs] * weight
+    beta = paths.beta * weight
     if depth >= s.rr_depth:
         q = np.minimum(beta.max(axis=1), 0.95)
         survive = u[:, 3] < q
         beta = beta / np.where(survive, np.maximum(q, 1e-30), 1.0)[:, None]
         ok &= survive
-    paths.beta[hs] = beta
-    paths.o[hs] = ctx.accel.offset_origin(hit.p, hit.ng, wi, hit.eps)
-    paths.d[hs] = wi
-    paths.tmax[hs] = np.inf
-    paths.prev_pdf[hs] = pdf
-    paths.prev_delta[hs] = delta
+    paths.beta = beta
+    paths.o = ctx.accel.offset_origin(hit.p, hit.ng, wi, hit.eps)
+    paths.d = wi
+    paths.tmax = np.full(len(wi), np.inf)
+    paths.prev_pdf = pdf
+    paths.prev_delta = delta
     return ok

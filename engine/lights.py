@@ -328,18 +328,21 @@ class _AreaLights:
         return luminance(self.L) * np.pi * self.area if self.count else []
 
     def sample(self, out, idx, j, p, u1, u2, u3):
+        j = _uniform_index(j)
         x, y = u1 - 0.5, u2 - 0.5
         e = self.ellipse[j]
-        if e.any():
+        if np.any(e):
+            e = np.broadcast_to(e, x.shape)
             dx, dy = concentric_disk(u1[e], u2[e])
             x[e], y[e] = 0.5 * dx, 0.5 * dy
         q = self.c[j] + x[:, None] * self.u[j] + y[:, None] * self.v[j]
         v = q - p
         t = np.linalg.norm(v, axis=1)
         wi = v / np.maximum(t, 1e-30)[:, None]
-        cos_l = dot(-wi, self.n[j])
-        ok = (cos_l > 1e-12) & (t > 0) & (self.area[j] > 0)
-        pdf = np.where(ok, t * t / (np.maximum(cos_l, 1e-12) * np.maximum(self.area[j], 1e-300)), 0.0)
+        cos_l = -(wi @ self.n[j]) if np.ndim(j) == 0 else -dot(wi, self.n[j])
+        area = self.area[j]
+        ok = (cos_l > 1e-12) & (t > 0) & (area > 0)
+        pdf = np.where(ok, t * t / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, self.L[j]
         out.pdf[idx] = pdf
 
@@ -414,6 +417,14 @@ class _MeshLights:
         area = self.group_area[self.tris.material[prim]]
         ok = (cos_l > 1e-12) & (area > 0)
         return np.where(ok, t2 / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
+
+
+def _uniform_index(j):
+    """j itself, or its single value when every ray picked the same light, so
+    per-light parameters broadcast instead of being gathered per ray."""
+    if len(j) and j[0] == j[-1] and (j == j[0]).all():
+        return int(j[0])
+    return j
 
 
 def _unit(v):
