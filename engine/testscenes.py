@@ -93,4 +93,24 @@ def cornell_box(width=256, height=256, light_power=25.0):
     return Scene(meshes, instances, [WHITE, RED, GREEN], lights, World((0.0, 0.0, 0.0)), camera)
 
 
-SCENES = {"cornell": cornell_box}
+def cornell_spheres(width=256, height=256, grid=10, segments=96, rings=48):
+    """The Cornell box with a grid x grid carpet of instanced smooth spheres
+    (about 0.9 M triangles with the defaults): Embree has real work here."""
+    scene = cornell_box(width, height)
+    sphere = uv_sphere(1.0, segments, rings, smooth=True)
+    scene.meshes = list(scene.meshes) + [sphere]
+    glossy = Material("glossy", (Lobe("glossy", (0.8, 0.8, 0.8), 0.3),))
+    scene.materials = list(scene.materials) + [glossy]
+    mesh_id, mat_id = len(scene.meshes) - 1, len(scene.materials) - 1
+    r = 0.8 / grid
+    instances = list(scene.instances)
+    for i in range(grid):
+        for k in range(grid):
+            x = -0.9 + 1.8 * (i + 0.5) / grid
+            y = -0.9 + 1.8 * (k + 0.5) / grid
+            instances.append(Instance(mesh_id, translate_rotate_z((x, y, r), 0.0, r), [mat_id]))
+    scene.instances = instances
+    return scene
+
+
+SCENES = {"cornell": cornell_box, "cornell-spheres": cornell_spheres}

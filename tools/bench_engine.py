@@ -1,4 +1,5 @@
-"""Engine benchmark: Cornell box at 512x512, 8 bounces.
+"""Engine benchmark: Cornell box (or --scene cornell-spheres, ~0.9 M
+instanced triangles) at 512x512, 8 bounces.
 
     make bench          (or: python -m tools.bench_engine [--samples N])
 
@@ -21,7 +22,7 @@ import numpy as np
 from engine.accel import Accel
 from engine.render import render
 from engine.scene import RenderSettings
-from engine.testscenes import cornell_box
+from engine.testscenes import SCENES
 
 
 class RecordingAccel(Accel):
@@ -71,7 +72,7 @@ def replay(accel, threads):
 def memory_probe(size, max_paths):
     """Peak RSS (MiB) of a fresh process rendering 1 spp at size x size."""
     code = ("import resource; from engine.render import render; from engine.scene import RenderSettings;"
-            "from engine.testscenes import cornell_box;"
+            "from engine.testscenes import SCENES;"
             f"render(cornell_box({size},{size}), RenderSettings(samples=1, max_paths={max_paths}));"
             "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -84,6 +85,7 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--max-paths", type=int, default=1 << 18)
     ap.add_argument("--skip-memory", action="store_true")
+    ap.add_argument("--scene", default="cornell", choices=sorted(SCENES))
     args = ap.parse_args(argv)
 
     import engine.render as render_mod
@@ -97,7 +99,7 @@ def main(argv=None):
 
     render_mod.Accel = Tracked
     try:
-        scene = cornell_box(512, 512)
+        scene = SCENES[args.scene](512, 512)
         threads = args.threads or os.cpu_count()
         settings = RenderSettings(samples=args.samples, samples_per_pass=args.samples, max_bounces=8,
                                   threads=threads, max_paths=args.max_paths)
@@ -109,7 +111,8 @@ def main(argv=None):
     s = result.stats
     share = s["embree_seconds"] / (threads * s["seconds"])
     raw = replay(made[0], threads)
-    print(f"Cornell box 512x512, {args.samples} spp, 8 bounces, {threads} threads, max_paths {args.max_paths}")
+    print(f"{args.scene} ({len(made[0].triangles):,} triangles) 512x512, {args.samples} spp, 8 bounces, "
+          f"{threads} threads, max_paths {args.max_paths}")
     print(f"  wall {wall:.2f} s (tracing {s['seconds']:.2f} s, prepare {s['prepare_seconds']:.3f} s)")
     print(f"  paths/s          {s['paths_per_second'] / 1e6:8.3f} M")
     print(f"  rays/s           {s['rays_per_second'] / 1e6:8.3f} M  ({s['rays'] / 1e6:.1f} M rays)")
