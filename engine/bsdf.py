@@ -62,7 +62,9 @@ class MaterialTable:
         self.emissive = np.any(self.emission > 0, axis=1)
         self.names = [m.name for m in materials]
 
-    def gather(self, mat):
+    def gather(self, mat, uv=None):
+        """Per-ray lobe parameters for material ids ``mat`` at texture
+        coordinates ``uv`` ((N, 2); unused until materials carry textures)."""
         return Lobes(self.kind[mat], self.color[mat], self.alpha[mat], self.schlick[mat])
 
 
@@ -179,7 +181,10 @@ def sample(lobes, wo, u_lobe, u1, u2):
     n = len(wo)
     sel = selection(lobes, wo)
     cdf = np.cumsum(sel, axis=1)
-    chosen = np.minimum((u_lobe[:, None] >= cdf).sum(axis=1), sel.shape[1] - 1)
+    # u_lobe past a rounded CDF that ends an ulp below 1 belongs to the last
+    # lobe with a selection probability, not to an unused slot after it.
+    last = sel.shape[1] - 1 - np.argmax(sel[:, ::-1] > 0, axis=1)
+    chosen = np.minimum((u_lobe[:, None] >= cdf).sum(axis=1), last)
     rows = np.arange(n)
     kind = np.where(cdf[:, -1] > 0, lobes.kind[rows, chosen], NONE)
     wi = np.zeros((n, 3))

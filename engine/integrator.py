@@ -72,6 +72,7 @@ class Hit:
     mat: np.ndarray
     prim: np.ndarray
     eps: np.ndarray  # ray-origin offset for this point
+    uv: np.ndarray   # (N, 2) interpolated texture coordinates (0 without UVs)
 
 
 def trace_batch(ctx, pix, rng, tile):
@@ -135,7 +136,7 @@ def _bounce(ctx, paths, depth, rng, tile):
         _finish(ctx, paths, tile)
         return paths.take(np.zeros(len(paths.pix), bool))
 
-    lobes = ctx.materials.gather(hit.mat)
+    lobes = ctx.materials.gather(hit.mat, hit.uv)
     tt, bb = frame(hit.ns)
     wo_l = to_local(hit.wo, tt, bb, hit.ns)
     _next_event(ctx, paths, hit, lobes, tt, bb, wo_l, rng)
@@ -212,7 +213,12 @@ def _interaction(ctx, paths, t, prim, bu, bv):
         ns = np.where((dot(ns, -d) <= 1e-6)[:, None], ng, ns)
     else:
         ns = ng
-    return Hit(p, ng, ns, -d, tr.material[prim], prim, ctx.accel.offset_scale(p))
+    if tr.uv is not None:
+        c = tr.uv[prim]
+        uv = (1.0 - bu - bv)[:, None] * c[:, 0] + bu[:, None] * c[:, 1] + bv[:, None] * c[:, 2]
+    else:
+        uv = np.zeros((len(p), 2))
+    return Hit(p, ng, ns, -d, tr.material[prim], prim, ctx.accel.offset_scale(p), uv)
 
 
 def _emission_hit(ctx, paths, em, hit, Le):

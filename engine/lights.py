@@ -207,7 +207,7 @@ class _PointLights:
         s = np.nonzero(sph & ~inside)[0]
         if len(s):
             omc = sin_sq_to_one_minus_cos(r[s] ** 2 / d2[s])
-            local, pdf[s] = uniform_cone(u1[s], u2[s], 1.0 - omc)
+            local, pdf[s] = uniform_cone(u1[s], u2[s], omc)
             tt, bb = frame(-light_n[s])
             wi[s] = to_world(local, tt, bb, -light_n[s])
             cos_t = local[:, 2]
@@ -279,7 +279,7 @@ class _SunLights:
         pdf = np.ones(len(p))
         s = np.nonzero(~self.delta[j])[0]
         if len(s):
-            local, pdf[s] = uniform_cone(u1[s], u2[s], 1.0 - self.one_minus_cos[j[s]])
+            local, pdf[s] = uniform_cone(u1[s], u2[s], self.one_minus_cos[j[s]])
             tt, bb = frame(axis[s])
             wi[s] = to_world(local, tt, bb, axis[s])
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, np.inf, self.L[j]
@@ -289,7 +289,9 @@ class _SunLights:
         if self.delta[j]:
             return None
         omc = self.one_minus_cos[j]
-        mask = 1.0 - (d @ -self.dir[j]) <= omc
+        # 1 - cos(angle to the axis) as |d - axis|^2 / 2: no cancellation for tiny suns.
+        diff = d + self.dir[j]
+        mask = 0.5 * np.einsum("ij,ij->i", diff, diff) <= omc
         return mask, self.L[j], uniform_cone_pdf(omc)
 
 

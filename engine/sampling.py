@@ -46,12 +46,12 @@ def uniform_sphere(u1, u2):
     return d, np.full(len(z), 1.0 / (4 * np.pi))
 
 
-def uniform_cone(u1, u2, cos_max):
-    """Uniform direction in the cone cos(theta) >= cos_max about +Z.
+def uniform_cone(u1, u2, one_minus_cos_max):
+    """Uniform direction in the cone cos(theta) >= 1 - one_minus_cos_max about +Z.
 
-    Written in terms of 1 - cos so that tiny cones (a sun of half a degree, a
-    far sphere light) keep their precision."""
-    one_minus_cos_max = 1.0 - cos_max
+    Takes and works with 1 - cos so that tiny cones (a sun of half a degree, a
+    far sphere light) keep their precision: callers compute it without
+    cancellation (``sin_sq_to_one_minus_cos``, 2 sin^2(theta / 2))."""
     one_minus_cos = u1 * one_minus_cos_max
     cos_t = 1.0 - one_minus_cos
     sin_t = np.sqrt(np.maximum(0.0, one_minus_cos * (2.0 - one_minus_cos)))
