@@ -49,16 +49,20 @@ class Tile:
 
 
 class Film:
+    """Per-pixel sums.  Radiance and its second moment stay float64 (they sum
+    thousands of samples of any magnitude); coverage, counts and the first-hit
+    AOVs are float32, which halves their memory on large frames."""
+
     def __init__(self, width, height):
         self.width, self.height = width, height
         n = width * height
         self.rgb = np.zeros((n, 3))
         self.rgb2 = np.zeros((n, 3))
-        self.alpha = np.zeros(n)
-        self.count = np.zeros(n)
-        self.depth = np.zeros(n)
-        self.normal = np.zeros((n, 3))
-        self.albedo = np.zeros((n, 3))
+        self.alpha = np.zeros(n, np.float32)
+        self.count = np.zeros(n, np.float32)
+        self.depth = np.zeros(n, np.float32)
+        self.normal = np.zeros((n, 3), np.float32)
+        self.albedo = np.zeros((n, 3), np.float32)
         self._lock = threading.Lock()
 
     def merge(self, tile):
@@ -81,11 +85,14 @@ class Film:
         return out.reshape(self.height, self.width, 4)
 
     def variance(self):
-        """(H, W, 3) variance of the pixel mean, from the per-sample moments."""
-        c = np.maximum(self.count, 2.0)[:, None]
+        """(H, W, 3) float32 variance of the pixel mean, from the per-sample moments."""
+        c = np.maximum(self.count.astype(np.float64), 2.0)[:, None]
         mean = self.rgb / c
-        var = np.maximum(self.rgb2 / c - mean * mean, 0.0) * c / (c - 1.0)
-        return (var / c).reshape(self.height, self.width, 3)
+        var = self.rgb2 / c
+        var -= mean * mean
+        np.maximum(var, 0.0, out=var)
+        var /= c - 1.0  # unbiased sample variance / c = variance of the mean
+        return var.astype(np.float32).reshape(self.height, self.width, 3)
 
     def aov(self, name):
         arr = self._mean(getattr(self, name))

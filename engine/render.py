@@ -102,7 +102,7 @@ def render(scene, settings=None, progress=None):
             if cancelled or _should_stop(progress, stats, settings):
                 break
     return RenderResult(film.image(settings.transparent), film.aov("depth"),
-                        film.aov("normal"), film.aov("albedo"), film.variance().astype(np.float32),
+                        film.aov("normal"), film.aov("albedo"), film.variance(),
                         stats["samples"], stats, warnings_for(ctx))
 
 

@@ -72,7 +72,7 @@ def replay(accel, threads):
 def memory_probe(size, max_paths):
     """Peak RSS (MiB) of a fresh process rendering 1 spp at size x size."""
     code = ("import resource; from engine.render import render; from engine.scene import RenderSettings;"
-            "from engine.testscenes import SCENES;"
+            "from engine.testscenes import cornell_box;"
             f"render(cornell_box({size},{size}), RenderSettings(samples=1, max_paths={max_paths}));"
             "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
