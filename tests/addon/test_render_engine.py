@@ -14,6 +14,7 @@ import pytest
 
 from addon import backend, output
 from addon import engine as ember_engine
+from ember_testlib import load_exr
 
 
 @dataclass
@@ -105,17 +106,6 @@ def render_pixels(scene, tmp_path, name="out"):
     path = os.path.join(str(tmp_path), name + ".exr")
     bpy.data.images['Render Result'].save_render(path)
     return load_exr(path)
-
-
-def load_exr(path):
-    image = bpy.data.images.load(path)
-    try:
-        width, height = image.size
-        pixels = np.empty(width * height * 4, np.float32)
-        image.pixels.foreach_get(pixels)
-    finally:
-        bpy.data.images.remove(image)
-    return pixels.reshape(height, width, 4)[::-1]
 
 
 def test_final_image_orientation_and_values(small, scripted, tmp_path):
