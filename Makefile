@@ -2,7 +2,7 @@
 PY := .venv/bin/python
 export PYTHONPATH := $(CURDIR)
 
-.PHONY: setup render render-engine test test-engine test-addon bench bench-export zip clean
+.PHONY: setup render render-engine test test-engine test-addon bench bench-export zip install-blender clean
 
 setup:
 	./scripts/setup.sh
@@ -37,6 +37,11 @@ bench-export: setup
 
 zip: setup
 	$(PY) tools/build_zip.py
+
+# Build and install into a real Blender: make install-blender BLENDER=/path/to/blender
+BLENDER ?= blender
+install-blender: setup
+	$(PY) tools/install_addon.py --blender $(BLENDER)
 
 clean:
 	rm -rf out dist build .pytest_cache

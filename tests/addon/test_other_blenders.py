@@ -172,3 +172,22 @@ def test_legacy_zip_renders_with_blender_34_binary(tmp_path, legacy_zip, needs_e
     difference = np.abs(image - expected).max() / max(float(np.abs(expected).max()), 1e-6)
     print("Blender 3.4 binary vs bpy 5.0, largest relative pixel difference:", difference)
     assert difference < 1e-5
+
+
+def test_one_command_install_into_blender_34(tmp_path, legacy_zip, needs_engine):
+    """tools/install_addon.py installs and enables Ember in the real binary:
+    afterwards `blender -b scene -E EMBER -f 1` renders without --addons."""
+    version = blender_version()
+    require(version is not None and version.startswith('Blender 3.4'),
+            f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
+    env = {'BLENDER_USER_CONFIG': str(tmp_path / 'config'), 'BLENDER_USER_SCRIPTS': str(tmp_path / 'scripts')}
+    code, out = run([sys.executable, os.path.join(ROOT, 'tools', 'install_addon.py'), '--blender', BLENDER], env=env)
+    assert code == 0 and "Ember installed" in out, out[-4000:]
+    assert (tmp_path / 'scripts' / 'addons' / 'ember' / '__init__.py').exists()
+    settings = ("import bpy; s = bpy.context.scene; s.render.resolution_x = s.render.resolution_y = 16; "
+                "s.render.resolution_percentage = 100; s.ember.samples = 4")
+    code, out = run([BLENDER, '-b', os.path.join(SCENES_DIR, 'cornell.blend'), '-E', 'EMBER',
+                     '-o', str(tmp_path / 'frame_####'), '-F', 'PNG', '--python-expr', settings, '-f', '1'],
+                    env=env)
+    assert code == 0 and (tmp_path / 'frame_0001.png').exists(), out[-4000:]
+    assert "Error" not in out, out[-4000:]
