@@ -5,12 +5,14 @@ scene moved between them keeps its meaning.  Film transparency is Blender's
 own ``scene.render.film_transparent`` and is not duplicated here.
 """
 import bpy
-from bpy.props import EnumProperty, FloatProperty, IntProperty, PointerProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
 
 LIGHT_SELECTION_ITEMS = (
     ('POWER', "Power", "Pick one light per vertex, proportional to its power"),
     ('UNIFORM', "Uniform", "Pick one light per vertex, every light equally likely"),
     ('ALL', "All Lights", "Sample every light at every vertex (slower, less noise with few lights)"),
+    ('TREE', "Light Tree", "Pick one light per vertex by its estimated contribution there "
+     "(power, distance and orientation): far less noise with many lights"),
 )
 
 STRATEGY_ITEMS = (
@@ -45,6 +47,11 @@ class EmberRenderSettings(bpy.types.PropertyGroup):
     light_selection: EnumProperty(
         name="Light Selection", description="How a light is chosen for next-event estimation",
         items=LIGHT_SELECTION_ITEMS, default='POWER')
+    mis_compensation: BoolProperty(
+        name="World MIS Compensation",
+        description="Sample an HDRI world by its radiance above the mean (Karlik et al. 2019): "
+                    "lower noise when BSDF and light sampling are combined",
+        default=True)
     strategy: EnumProperty(
         name="Sampling Strategy", description="Which estimators are combined",
         items=STRATEGY_ITEMS, default='MIS')

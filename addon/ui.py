@@ -67,6 +67,7 @@ class RENDER_PT_ember_sampling_lights(EmberPanel, bpy.types.Panel):
         layout.use_property_split = True
         layout.use_property_decorate = False
         layout.prop(context.scene.ember, "light_selection")
+        layout.prop(context.scene.ember, "mis_compensation")
 
 
 class RENDER_PT_ember_sampling_advanced(EmberPanel, bpy.types.Panel):
@@ -113,7 +114,8 @@ class RENDER_PT_ember_film(EmberPanel, bpy.types.Panel):
         layout.use_property_split = True
         layout.use_property_decorate = False
         layout.prop(context.scene.ember, "filter_type")
-        layout.prop(context.scene.ember, "filter_width")
+        if context.scene.ember.filter_type != 'BOX':  # Cycles' box is always 1 pixel wide
+            layout.prop(context.scene.ember, "filter_width")
         layout.prop(context.scene.render, "film_transparent", text="Transparent")
 
 

@@ -4,182 +4,548 @@ A material is a weighted set of lobes (``scene.Lobe``).  ``MaterialTable``
 turns the scene's materials into parameter arrays; ``gather`` picks the
 parameters for each ray by material id, so a later texture stage only has to
 overwrite those per-ray arrays.  All directions here are in the local shading
-frame (+Z = shading normal), with wo pointing away from the surface.
+frame (+Z = shading normal), with wo pointing away from the surface (wo.z > 0)
+and wi.z < 0 for transmitted directions.
+
+Lobes follow Cycles' closures (kernel/closure/*.h): Lambert diffuse and
+translucent, GGX reflection (no Fresnel, Schlick, F82-tint metal, or the
+Principled BSDF's dielectric Fresnel), GGX glass and refraction (Walter et
+al. 2007; smooth ones are delta lobes), Zeltner's LTC sheen, transparent.
+Multiscatter GGX is Cycles' energy compensation (1/E(mu) from albedo tables,
+darkened by the multiple-bounce Fresnel).  A lobe may lie on top of the
+lobes after it (``covers``): they are weighed down by its albedo estimate,
+as Cycles layers the Principled BSDF's sheen, coat and specular.
 
 Sampling picks one lobe with probability proportional to its estimated
 reflectance (one-sample MIS over lobes): for a non-delta lobe the returned
 f and pdf are the sums over all non-delta lobes, so ``eval``/``pdf`` and
-``sample`` always agree.  Delta lobes (mirror) return their own weight.
+``sample`` always agree.  Delta lobes (mirror, smooth glass, transparent)
+return their own weight.
 """
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
-from .sampling import cosine_hemisphere, INV_PI
+from . import microfacet as mf
+from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_sample_vndf
+from .sampling import cosine_hemisphere, INV_PI, TWO_PI
+from .textures import MaterialTextures
 from .vec import count, luminance, subset
 
-NONE, DIFFUSE, MIRROR, GLOSSY = -1, 0, 1, 2
-KIND_IDS = {"diffuse": DIFFUSE, "mirror": MIRROR, "glossy": GLOSSY}
-# Below this alpha, GGX is numerically a mirror; Cycles switches to a
-# singular reflection at alpha^2 <= 1e-7 too.
+NONE, DIFFUSE, MIRROR, GLOSSY, GLASS, REFRACTION, TRANSLUCENT, TRANSPARENT, SHEEN = range(-1, 8)
+KIND_IDS = {"diffuse": DIFFUSE, "mirror": MIRROR, "glossy": GLOSSY, "glass": GLASS,
+            "refraction": REFRACTION, "translucent": TRANSLUCENT, "transparent": TRANSPARENT,
+            "sheen": SHEEN}
+F_NONE, F_SCHLICK, F_F82, F_DIELECTRIC = range(4)
+FRESNEL_IDS = {"none": F_NONE, "schlick": F_SCHLICK, "f82": F_F82, "dielectric": F_DIELECTRIC}
+# Below this alpha, GGX is numerically a mirror (glass: a smooth refractor);
+# Cycles switches to a singular lobe at alpha^2 <= 2e-10.
 MIN_ALPHA = 1e-3
-COS_EPS = 1e-9
 
 
 @dataclass
 class Lobes:
-    """Per-ray lobe parameters: (N, K) kinds, (N, K, 3) colours, (N, K) alpha,
-    (N, K) bool schlick Fresnel (colour is F0)."""
+    """Per-ray lobe parameters, one array per ``scene.Lobe`` field (N rays,
+    K lobe slots); a texture stage may overwrite any of them after gather:
+
+    kind (N, K) int8, color (N, K, 3), alpha (N, K) = roughness^2,
+    schlick (N, K) bool (legacy: fresnel == 'schlick'), fresnel (N, K) int8,
+    ior (N, K), f0 (N, K, 3), edge_tint (N, K, 3), transmission_tint (N, K, 3),
+    multiscatter (N, K) bool, covers (N, K) int8, absorb (N, K, 3),
+    weight (N, K); back (N,) bool: the ray arrived on the back face (set by
+    the integrator; inverts the IOR of refracting lobes).
+    """
     kind: np.ndarray
     color: np.ndarray
     alpha: np.ndarray
     schlick: np.ndarray
+    fresnel: Optional[np.ndarray] = None
+    ior: Optional[np.ndarray] = None
+    f0: Optional[np.ndarray] = None
+    edge_tint: Optional[np.ndarray] = None
+    transmission_tint: Optional[np.ndarray] = None
+    multiscatter: Optional[np.ndarray] = None
+    covers: Optional[np.ndarray] = None
+    absorb: Optional[np.ndarray] = None
+    weight: Optional[np.ndarray] = None
+    back: Optional[np.ndarray] = None
+
+    def __post_init__(self):
+        # Defaults for lobes built from the four original fields.
+        shape, rgb = self.kind.shape, self.kind.shape + (3,)
+        if self.fresnel is None:
+            self.fresnel = np.where(self.schlick, F_SCHLICK, F_NONE).astype(np.int8)
+        if self.ior is None:
+            self.ior = np.full(shape, 1.5)
+        if self.f0 is None:
+            self.f0 = np.array(self.color, dtype=np.float64)
+        for name in ("edge_tint", "transmission_tint", "absorb"):
+            if getattr(self, name) is None:
+                setattr(self, name, np.ones(rgb))
+        if self.multiscatter is None:
+            self.multiscatter = np.zeros(shape, bool)
+        if self.covers is None:
+            self.covers = np.zeros(shape, np.int8)
+        if self.weight is None:
+            self.weight = np.ones(shape)
+        if self.back is None:
+            self.back = np.zeros(len(self.kind), bool)
 
     def __len__(self):
         return len(self.kind)
 
 
+# Per-lobe table arrays beside kind/color/alpha/schlick: (name, trailing shape, dtype).
+EXTRA_FIELDS = (("fresnel", (), np.int8), ("ior", (), np.float64), ("f0", (3,), np.float64),
+                ("edge_tint", (3,), np.float64), ("transmission_tint", (3,), np.float64),
+                ("multiscatter", (), bool), ("covers", (), np.int8), ("absorb", (3,), np.float64),
+                ("weight", (), np.float64))
+
+
+def _lobe_extras(lobe):
+    """The extra table values of one scene.Lobe (f0 defaults: the real
+    dielectric F0 of the IOR for 'dielectric' and glass, else the colour)."""
+    ior = float(getattr(lobe, "ior", 1.5))
+    fresnel = getattr(lobe, "fresnel", "none")
+    f0 = getattr(lobe, "f0", None)
+    if f0 is None:
+        dielectric = fresnel == "dielectric" or lobe.kind in ("glass", "refraction")
+        f0 = (float(mf.f0_from_ior(ior)),) * 3 if dielectric else lobe.color
+    return {"fresnel": FRESNEL_IDS.get(fresnel, F_NONE), "ior": ior, "f0": np.maximum(f0, 0.0),
+            "edge_tint": getattr(lobe, "edge_tint", (1.0, 1.0, 1.0)),
+            "transmission_tint": np.maximum(getattr(lobe, "transmission_tint", (1.0, 1.0, 1.0)), 0.0),
+            "multiscatter": bool(getattr(lobe, "multiscatter", False)),
+            "covers": int(getattr(lobe, "covers", 0)),
+            "absorb": getattr(lobe, "absorb", (1.0, 1.0, 1.0)),
+            "weight": max(float(getattr(lobe, "weight", 1.0)), 0.0)}
+
+
 class MaterialTable:
     def __init__(self, materials):
+        # Texture expressions are compiled apart; the constant tables below
+        # are built from the materials with each expression replaced by its
+        # mean, and gather overwrites the textured parameters per ray.
+        self.textures = MaterialTextures(materials)
+        materials = self.textures.constants
         k = max(1, max(len(m.lobes) for m in materials))
         n = len(materials)
         self.kind = np.full((n, k), NONE, np.int8)
         self.color = np.zeros((n, k, 3))
         self.alpha = np.ones((n, k))
         self.schlick = np.zeros((n, k), bool)
+        for name, tail, dtype in EXTRA_FIELDS:
+            setattr(self, name, np.zeros((n, k) + tail, dtype))
         self.emission = np.zeros((n, 3))
         for i, mat in enumerate(materials):
             self.emission[i] = mat.emission
             for j, lobe in enumerate(mat.lobes):
                 alpha = float(np.clip(lobe.roughness, 0.0, 1.0)) ** 2
                 kind = KIND_IDS[lobe.kind]
-                if kind == GLOSSY and alpha < MIN_ALPHA:
+                if kind == GLOSSY and alpha < MIN_ALPHA and not getattr(lobe, "covers", 0):
                     kind = MIRROR
                 self.kind[i, j] = kind
                 self.color[i, j] = np.maximum(lobe.color, 0.0)
                 self.alpha[i, j] = max(alpha, MIN_ALPHA)
                 self.schlick[i, j] = lobe.fresnel == "schlick"
+                for name, value in _lobe_extras(lobe).items():
+                    getattr(self, name)[i, j] = value
         self.emissive = np.any(self.emission > 0, axis=1)
         self.names = [m.name for m in materials]
 
     def gather(self, mat, uv=None):
         """Per-ray lobe parameters for material ids ``mat`` at texture
-        coordinates ``uv`` ((N, 2); unused until materials carry textures)."""
-        return Lobes(self.kind[mat], self.color[mat], self.alpha[mat], self.schlick[mat])
+        coordinates ``uv`` ((N, 2)): constants gathered, then the textured
+        parameters of the rays' materials evaluated at their UVs."""
+        lobes = Lobes(self.kind[mat], self.color[mat], self.alpha[mat], self.schlick[mat],
+                      *(getattr(self, name)[mat] for name, _, _ in EXTRA_FIELDS))
+        if self.textures.any:
+            self.textures.apply(mat, uv, lobes, MIN_ALPHA)
+        return lobes
 
 
 # ----------------------------------------------------------------------------
-# GGX with visible-normal sampling (Heitz 2018) and height-correlated Smith G2
+# Per-ray weights that depend on the view direction
 
-def ggx_d(h_z, alpha):
-    a2 = alpha * alpha
-    t = h_z * h_z * (a2 - 1.0) + 1.0
-    return a2 / (np.pi * t * t)
+def _rough(lobes, k):
+    return np.sqrt(lobes.alpha[:, k])
 
 
-def ggx_lambda(w_z, alpha):
-    z2 = np.maximum(w_z * w_z, COS_EPS)
-    tan2 = np.maximum(1.0 - z2, 0.0) / z2
-    return 0.5 * (np.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
+def _eta(lobes, k):
+    """Relative IOR seen from the side of wo: Cycles inverts it on back faces
+    for the lobes that refract (a coat or specular layer keeps its IOR)."""
+    ior = np.maximum(lobes.ior[:, k], 1e-5)
+    refracts = (lobes.kind[:, k] == GLASS) | (lobes.kind[:, k] == REFRACTION)
+    return np.where(lobes.back & refracts, 1.0 / ior, ior)
 
 
-def ggx_sample_vndf(wo, alpha, u1, u2):
-    """Visible microfacet normal for wo (wo.z > 0)."""
-    vh = np.stack([alpha * wo[:, 0], alpha * wo[:, 1], wo[:, 2]], axis=1)
-    vh /= np.linalg.norm(vh, axis=1, keepdims=True)
-    lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
-    inv = np.where(lensq > 0, 1.0 / np.sqrt(np.where(lensq > 0, lensq, 1.0)), 0.0)
-    t1 = np.stack([-vh[:, 1] * inv, vh[:, 0] * inv, np.zeros(len(vh))], axis=1)
-    t1[lensq <= 0] = (1.0, 0.0, 0.0)
-    t2 = np.cross(vh, t1)
-    r = np.sqrt(u1)
-    phi = 2.0 * np.pi * u2
-    p1 = r * np.cos(phi)
-    p2 = r * np.sin(phi)
-    s = 0.5 * (1.0 + vh[:, 2])
-    p2 = (1.0 - s) * np.sqrt(np.maximum(0.0, 1.0 - p1 * p1)) + s * p2
-    p3 = np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))
-    nh = p1[:, None] * t1 + p2[:, None] * t2 + p3[:, None] * vh
-    ne = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 1e-12)], axis=1)
-    return ne / np.linalg.norm(ne, axis=1, keepdims=True)
+def _glossy_fss(lobes, k, rows):
+    """Average single-scattering Fresnel of a glossy lobe (Kulla-Conty's
+    Fss, as Cycles' setup functions compute it)."""
+    code = lobes.fresnel[rows, k]
+    f0 = lobes.f0[rows, k]
+    fss = lobes.color[rows, k].copy()                      # constant Fresnel: the colour
+    ior = np.maximum(lobes.ior[rows, k], 1e-5)
+    f0_real = mf.f0_from_ior(ior)
+    s = np.clip((mf.dielectric_fss(ior) - f0_real) / np.maximum(1.0 - f0_real, 1e-12), 0.0, 1.0)
+    diel = f0 + (1.0 - f0) * s[:, None]
+    b = mf.f82_b(f0, lobes.edge_tint[rows, k])
+    fss = np.where((code == F_DIELECTRIC)[:, None], diel, fss)
+    fss = np.where((code == F_F82)[:, None], mf.f82_fss(f0, b), fss)
+    return np.where((code == F_SCHLICK)[:, None], f0 + (1.0 - f0) / 21.0, fss)
 
 
-def ggx_pdf(wo, wi, alpha):
-    """Solid-angle pdf of wi under VNDF sampling of the reflection."""
-    h = wo + wi
-    hl = np.linalg.norm(h, axis=1)
-    h = h / np.where(hl > 0, hl, 1.0)[:, None]
-    ok = (wo[:, 2] > COS_EPS) & (wi[:, 2] > COS_EPS) & (hl > 0)
-    g1 = 1.0 / (1.0 + ggx_lambda(wo[:, 2], alpha))
-    pdf = ggx_d(h[:, 2], alpha) * g1 / (4.0 * np.maximum(wo[:, 2], COS_EPS))
-    return np.where(ok, pdf, 0.0), h
+def _energy(lobes, k, rows, mu):
+    """Multiscatter GGX as Cycles: scale by 1/E(mu) and darken by the
+    multiple-bounce Fresnel: returns (1 + Fms (1 - E) / E) per channel and the
+    darkening alone (what a layer's albedo estimate includes)."""
+    t = mf.tables()
+    rough = _rough(lobes, k)[rows]
+    if lobes.kind[rows[0] if len(rows) else 0, k] == GLASS:
+        eta = _eta(lobes, k)[rows]
+        inv = eta < 1.0
+        z = mf.ior_z(np.where(inv, 1.0 / eta, eta))
+        e = np.where(inv, mf.lookup(t["ggx_glass_inv_E"], rough, mu, z),
+                     mf.lookup(t["ggx_glass_E"], rough, mu, z))
+        e_avg = np.where(inv, mf.lookup(t["ggx_glass_inv_Eavg"], rough, z),
+                         mf.lookup(t["ggx_glass_Eavg"], rough, z))
+        fss = lobes.color[rows, k] * lobes.transmission_tint[rows, k]
+    else:
+        e = mf.lookup(t["ggx_E"], rough, mu)
+        e_avg = mf.lookup(t["ggx_Eavg"], rough)
+        fss = _glossy_fss(lobes, k, rows)
+    e = np.maximum(e, 1e-4)
+    missing = ((1.0 - e) / e)[:, None]
+    fms = fss * e_avg[:, None] / np.maximum(1.0 - fss * (1.0 - e_avg)[:, None], 1e-12)
+    # Cycles' energy_scale and darkening fold together into 1 + Fms (1 - E) / E.
+    factor = 1.0 + fms * missing
+    return factor, factor / (1.0 + missing)
 
+
+def _layer_albedo(lobes, k, rows, mu):
+    """Cycles' albedo estimate of a layer lobe (relative to the weight of
+    what it covers): colour times the Fresnel estimate (tables) for a glossy
+    layer, colour times the LTC albedo for sheen."""
+    col = lobes.color[rows, k]
+    kind = lobes.kind[rows, k]
+    rough = _rough(lobes, k)[rows]
+    out = col.copy()
+    sheen = kind == SHEEN
+    if sheen.any():
+        out[sheen] = col[sheen] * _sheen_ltc(rough[sheen], mu[sheen])[2][:, None]
+    gl = ~sheen
+    if gl.any():
+        ior = np.maximum(lobes.ior[rows[gl], k], 1e-5)
+        s = mf.lookup(mf.tables()["ggx_gen_schlick_ior_s"], rough[gl], mu[gl], mf.ior_z(ior))
+        f0 = lobes.f0[rows[gl], k]
+        est = f0 + (1.0 - f0) * s[:, None]
+        ms = lobes.multiscatter[rows[gl], k]
+        if ms.any():
+            g = rows[gl][ms]
+            est[ms] *= _energy(lobes, k, g, mu[gl][ms])[1]
+        out[gl] = col[gl] * est
+    return out
+
+
+def _coat_absorption(lobes, k, rows, mu):
+    """Coat tint seen along the refracted view ray: tint^(1 / cos_t), mixed
+    in by the coat weight (Cycles' Beer-Lambert approximation)."""
+    absorb = lobes.absorb[rows, k]
+    ior = np.maximum(lobes.ior[rows, k], 1.0)
+    cos_t = np.sqrt(np.maximum(1.0 - (1.0 - mu * mu) / (ior * ior), 1e-12))
+    tinted = np.power(np.maximum(absorb, 0.0), (1.0 / cos_t)[:, None])
+    w = lobes.color[rows, k].mean(axis=1)[:, None]
+    return 1.0 + w * (tinted - 1.0)
+
+
+def weights(lobes, wo):
+    """(N, K, 3) effective lobe colours for view direction wo: weight x
+    colour, energy compensation (Multiscatter GGX), and the attenuation of
+    lobes lying under a layer (coat, sheen, Principled specular) by that
+    layer's albedo, as Cycles' Principled BSDF."""
+    n, kk = lobes.kind.shape
+    mu = np.clip(wo[:, 2], 0.0, 1.0)
+    w = lobes.color * lobes.weight[:, :, None]
+    w = np.where((lobes.fresnel == F_SCHLICK)[:, :, None], lobes.weight[:, :, None], w)
+    for k in range(kk):
+        sheen = np.nonzero(lobes.kind[:, k] == SHEEN)[0]
+        if len(sheen):
+            # Cycles folds the sheen's directional albedo into its weight.
+            w[sheen, k] *= _sheen_ltc(_rough(lobes, k)[sheen], mu[sheen])[2][:, None]
+        ms = np.nonzero(lobes.multiscatter[:, k] & np.isin(lobes.kind[:, k], (GLOSSY, GLASS)))[0]
+        if len(ms):
+            glass = lobes.kind[ms, k] == GLASS
+            for part in (ms[glass], ms[~glass]):
+                if len(part):
+                    w[part, k] *= _energy(lobes, k, part, mu[part])[0]
+        layer = np.nonzero(lobes.covers[:, k] > 0)[0]
+        if len(layer) == 0:
+            continue
+        below = 1.0 - np.clip(_layer_albedo(lobes, k, layer, mu[layer]).max(axis=1), 0.0, 1.0)
+        tint = _coat_absorption(lobes, k, layer, mu[layer])
+        for j in range(k + 1, kk):
+            under = lobes.covers[layer, k] >= j - k
+            w[layer, j] *= np.where(under, below, 1.0)[:, None]
+            w[layer, j] *= np.where(under[:, None], tint, 1.0)
+    return np.maximum(w, 0.0)
+
+
+def _albedo_guess(lobes, k, mu):
+    """Cheap estimate of a lobe's albedo for choosing lobes (any positive
+    guess is unbiased: it only moves variance)."""
+    kind = lobes.kind[:, k]
+    guess = np.ones(len(kind))
+    gl = kind == GLOSSY
+    f0 = luminance(lobes.f0[:, k])
+    est = f0 + (1.0 - f0) * (1.0 - mu) ** 5
+    guess = np.where(gl & (lobes.fresnel[:, k] != F_NONE) & (lobes.fresnel[:, k] != F_SCHLICK), est, guess)
+    return np.where(kind == NONE, 0.0, guess)
+
+
+def selection(lobes, wo, w=None):
+    """(N, K) probability of sampling each lobe."""
+    if w is None:
+        w = weights(lobes, wo)
+    cos_o = np.clip(wo[:, 2], 0.0, 1.0)
+    sel = np.zeros(lobes.kind.shape)
+    for k in range(lobes.kind.shape[1]):
+        col = w[:, k]
+        legacy = lobes.fresnel[:, k] == F_SCHLICK
+        if legacy.any():
+            col = np.where(legacy[:, None], schlick(lobes.color[:, k], cos_o) * w[:, k], col)
+        sel[:, k] = luminance(col) * _albedo_guess(lobes, k, cos_o)
+    sel = np.maximum(sel, 0.0)
+    total = sel.sum(axis=1, keepdims=True)
+    return np.where(total > 0, sel / np.where(total > 0, total, 1.0), 0.0)
+
+
+# ----------------------------------------------------------------------------
+# Fresnel of the reflecting lobes
 
 def schlick(f0, cos):
     c = np.clip(1.0 - cos, 0.0, 1.0)
     return f0 + (1.0 - f0) * (c ** 5)[:, None]
 
 
-def _fresnel(color, schlick_on, cos):
-    return np.where(schlick_on[:, None], schlick(color, cos), color)
+def _fresnel(lobes, rows, k, cos):
+    """(n, 3) reflectance of a glossy or mirror lobe at cos(wo, h)."""
+    code = lobes.fresnel[rows, k]
+    out = np.ones((len(code), 3))
+    sch = code == F_SCHLICK
+    if sch.any():
+        out[sch] = schlick(lobes.color[rows, k][sch], cos[sch])
+    f82 = code == F_F82
+    if f82.any():
+        f0 = lobes.f0[rows, k][f82]
+        out[f82] = mf.f82(cos[f82], f0, mf.f82_b(f0, lobes.edge_tint[rows, k][f82]))
+    diel = code == F_DIELECTRIC
+    if diel.any():
+        f0 = lobes.f0[rows, k][diel]
+        s, _ = mf.schlick_s(cos[diel], np.maximum(lobes.ior[rows, k][diel], 1e-5))
+        out[diel] = f0 + (1.0 - f0) * s[:, None]
+    return out
 
 
-def ggx_eval(wo, wi, color, alpha, schlick_on):
-    pdf, h = ggx_pdf(wo, wi, alpha)
-    ok = pdf > 0
-    g2 = 1.0 / (1.0 + ggx_lambda(wo[:, 2], alpha) + ggx_lambda(wi[:, 2], alpha))
-    denom = 4.0 * np.maximum(wo[:, 2], COS_EPS) * np.maximum(wi[:, 2], COS_EPS)
-    spec = ggx_d(h[:, 2], alpha) * g2 / denom
-    f = _fresnel(color, schlick_on, np.einsum("ij,ij->i", wo, h)) * np.where(ok, spec, 0.0)[:, None]
+def _dielectric(lobes, rows, k, cos, eta):
+    """Glass: reflectance (n, 3), transmittance (n, 3), probability of
+    reflecting, |cos| of the refracted angle (0 under total internal
+    reflection).  Principled/Glass BSDF: F = mix(f0, 1, s) with s the real
+    Fresnel remapped; Refraction BSDF: no reflection, T = 1 unless TIR."""
+    s, cos_t = mf.schlick_s(cos, eta)
+    f0 = lobes.f0[rows, k]
+    refl = f0 + (1.0 - f0) * s[:, None]
+    refraction = lobes.kind[rows, k] == REFRACTION
+    refl = np.where(refraction[:, None], 0.0, refl)
+    trans = np.where(refraction[:, None], 1.0, 1.0 - refl) * lobes.transmission_tint[rows, k]
+    trans = np.where((cos_t > 0)[:, None], trans, 0.0)
+    r, t = refl.mean(axis=1), trans.mean(axis=1)
+    p_refl = np.where(r + t > 0, r / np.where(r + t > 0, r + t, 1.0), 1.0)
+    return refl, trans, p_refl, cos_t
+
+
+# ----------------------------------------------------------------------------
+# Lobe evaluation: f (without the lobe's weight) and the solid-angle pdf
+
+def _ggx_reflect(wo, wi, alpha):
+    """D G2 / (4 cos_o cos_i), the VNDF pdf of wi, and the half vector."""
+    h = wo + wi
+    hl = np.linalg.norm(h, axis=1)
+    h = h / np.where(hl > 0, hl, 1.0)[:, None]
+    ok = (wo[:, 2] > COS_EPS) & (wi[:, 2] > COS_EPS) & (hl > 0)
+    lo, li = ggx_lambda(wo[:, 2], alpha), ggx_lambda(wi[:, 2], alpha)
+    d = ggx_d(h[:, 2], alpha)
+    co = np.maximum(wo[:, 2], COS_EPS)
+    spec = d / (4.0 * co * np.maximum(wi[:, 2], COS_EPS) * (1.0 + lo + li))
+    pdf = d / ((1.0 + lo) * 4.0 * co)
+    return np.where(ok, spec, 0.0), np.where(ok, pdf, 0.0), h
+
+
+def ggx_pdf(wo, wi, alpha):
+    """Solid-angle pdf of wi under VNDF sampling of the reflection."""
+    _, pdf, h = _ggx_reflect(wo, wi, alpha)
+    return pdf, h
+
+
+def _eval_glossy(lobes, rows, k, wo, wi):
+    spec, pdf, h = _ggx_reflect(wo, wi, lobes.alpha[rows, k])
+    f = _fresnel(lobes, rows, k, np.einsum("ij,ij->i", wo, h)) * spec[:, None]
     return f, pdf
+
+
+def _eval_glass(lobes, rows, k, wo, wi):
+    """Rough dielectric (Walter et al. 2007, as Cycles): reflection above,
+    refraction below the surface; pdf includes the reflect/refract choice."""
+    alpha = lobes.alpha[rows, k]
+    eta = _eta(lobes, k)[rows]
+    n = len(rows)
+    f = np.zeros((n, 3))
+    pdf = np.zeros(n)
+    up = wi[:, 2] > COS_EPS
+    down = wi[:, 2] < -COS_EPS
+    co = np.maximum(wo[:, 2], COS_EPS)
+    ok_o = wo[:, 2] > COS_EPS
+    if up.any():
+        r = np.nonzero(up & ok_o)[0]
+        spec, p, h = _ggx_reflect(wo[r], wi[r], alpha[r])
+        refl, _, p_refl, _ = _dielectric(lobes, rows[r], k, np.einsum("ij,ij->i", wo[r], h), eta[r])
+        f[r] = refl * spec[:, None]
+        pdf[r] = p * p_refl
+    if down.any():
+        t = np.nonzero(down & ok_o)[0]
+        h, length = mf.refraction_half(wo[t], wi[t], eta[t])
+        c_o = np.einsum("ij,ij->i", wo[t], h)
+        c_i = np.einsum("ij,ij->i", wi[t], h)
+        # Only microfacets that face wo and refract into wi (pbrt's check).
+        valid = (h[:, 2] > 0) & (c_o > 0) & (c_i < 0) & (length > 0)
+        _, trans, p_refl, _ = _dielectric(lobes, rows[t], k, c_o, eta[t])
+        a = alpha[t]
+        lo, li = ggx_lambda(wo[t, 2], a), ggx_lambda(wi[t, 2], a)
+        common = (ggx_d(h[:, 2], a) / co[t] * (eta[t] / np.where(length > 0, length, 1.0)) ** 2
+                  * np.abs(c_o * c_i))
+        f[t] = np.where(valid[:, None], trans * (common / ((1.0 + lo + li) * -wi[t, 2]))[:, None], 0.0)
+        pdf[t] = np.where(valid, common * (1.0 - p_refl) / (1.0 + lo), 0.0)
+    return f, pdf
+
+
+def _sheen_ltc(rough, mu):
+    """Cycles' sheen LTC coefficients a, b and albedo for (roughness, cos)."""
+    t = mf.tables()["sheen_ltc"]
+    r = np.clip(rough, 1e-3, 1.0)
+    return tuple(mf.lookup(t[i], mu, r) for i in range(3))
+
+
+def _sheen_frame(wo):
+    """Tangent towards wo (Cycles' make_orthonormals_safe_tangent)."""
+    t = np.stack([wo[:, 0], wo[:, 1], np.zeros(len(wo))], axis=1)
+    length = np.linalg.norm(t, axis=1)
+    flat = length < 1e-7
+    t = np.where(flat[:, None], np.array([1.0, 0.0, 0.0]), t / np.where(flat, 1.0, length)[:, None])
+    b = np.stack([-t[:, 1], t[:, 0], np.zeros(len(wo))], axis=1)   # z x t
+    return t, b
+
+
+def _ltc(lobes, rows, k, wo):
+    a, b, _ = _sheen_ltc(np.sqrt(lobes.alpha[rows, k]), np.clip(wo[:, 2], 0.0, 1.0))
+    return a, b
+
+
+def _eval_sheen(lobes, rows, k, wo, wi):
+    """Zeltner et al. 2022 LTC sheen; f * cos = pdf (the albedo sits in the
+    weight), so f = pdf / cos."""
+    a, b = _ltc(lobes, rows, k, wo)
+    t, bt = _sheen_frame(wo)
+    x, y, z = np.einsum("ij,ij->i", wi, t), np.einsum("ij,ij->i", wi, bt), wi[:, 2]
+    len_sq = (a * x + b * z) ** 2 + (a * y) ** 2 + z * z
+    ok = (z > COS_EPS) & (wo[:, 2] > COS_EPS) & (np.abs(a) >= 1e-5)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        val = INV_PI * (a / len_sq) ** 2
+    val = np.where(ok & np.isfinite(val), val, 0.0)
+    return np.repeat(val[:, None], 3, axis=1), val * np.maximum(z, 0.0)
+
+
+def _sample_sheen(lobes, rows, k, wo, u1, u2):
+    a, b = _ltc(lobes, rows, k, wo)
+    r = np.sqrt(u1)
+    phi = TWO_PI * u2
+    dx, dy = r * np.cos(phi), r * np.sin(phi)
+    dz = np.sqrt(np.maximum(0.0, 1.0 - u1))
+    local = np.stack([dx - dz * b, dy, dz * a], axis=1)
+    local /= np.maximum(np.linalg.norm(local, axis=1), 1e-30)[:, None]
+    t, bt = _sheen_frame(wo)
+    return local[:, :1] * t + local[:, 1:2] * bt + local[:, 2:3] * np.array([0.0, 0.0, 1.0])
+
+
+def _sample_glass(lobes, rows, k, wo, u_choice, u1, u2, singular):
+    """Reflect or refract through a visible microfacet (the normal itself
+    when singular); returns wi and whether it refracted."""
+    alpha = lobes.alpha[rows, k]
+    eta = _eta(lobes, k)[rows]
+    h = np.zeros((len(rows), 3))
+    h[:, 2] = 1.0
+    rough = ~singular
+    if rough.any():
+        h[rough] = ggx_sample_vndf(wo[rough], alpha[rough], u1[rough], u2[rough])
+    cos = np.einsum("ij,ij->i", wo, h)
+    _, _, p_refl, cos_t = _dielectric(lobes, rows, k, cos, eta)
+    refract = u_choice >= p_refl
+    wi = mf.reflect(wo, h)
+    if refract.any():
+        wi[refract] = mf.refract(wo[refract], h[refract], cos_t[refract], eta[refract])
+    return wi, refract, p_refl
 
 
 # ----------------------------------------------------------------------------
 # The material as a whole
 
-def selection(lobes, wo):
-    """(N, K) probability of sampling each lobe."""
-    cos_o = np.clip(wo[:, 2], 0.0, 1.0)
-    w = np.zeros(lobes.kind.shape)
-    for k in range(lobes.kind.shape[1]):
-        col = _fresnel(lobes.color[:, k], lobes.schlick[:, k], cos_o)
-        w[:, k] = np.where(lobes.kind[:, k] == NONE, 0.0, luminance(col))
-    total = w.sum(axis=1, keepdims=True)
-    return np.where(total > 0, w / np.where(total > 0, total, 1.0), 0.0)
-
-
-def eval_pdf(lobes, wo, wi, sel=None):
-    """f (N, 3) and pdf (N,) summed over the non-delta lobes."""
+def eval_pdf(lobes, wo, wi, sel=None, w=None):
+    """f (N, 3) and pdf (N,) summed over the non-delta lobes; wi below the
+    surface (wi.z < 0) reaches the transmitting lobes only."""
     n = len(wo)
+    if w is None:
+        w = weights(lobes, wo)
     if sel is None:
-        sel = selection(lobes, wo)
+        sel = selection(lobes, wo, w)
     f = np.zeros((n, 3))
     pdf = np.zeros(n)
-    upper = (wo[:, 2] > COS_EPS) & (wi[:, 2] > COS_EPS)
+    front = wo[:, 2] > COS_EPS
+    upper = front & (wi[:, 2] > COS_EPS)
+    lower = front & (wi[:, 2] < -COS_EPS)
     for k in range(lobes.kind.shape[1]):
         kind = lobes.kind[:, k]
-        d = subset((kind == DIFFUSE) & upper)
-        if count(d, n):
-            f[d] += lobes.color[d, k] * INV_PI
-            pdf[d] += sel[d, k] * wi[d, 2] * INV_PI
-        g = subset((kind == GLOSSY) & upper)
-        if count(g, n):
-            fg, pg = ggx_eval(wo[g], wi[g], lobes.color[g, k], lobes.alpha[g, k], lobes.schlick[g, k])
-            f[g] += fg
-            pdf[g] += sel[g, k] * pg
+        for mask, lobe_f in (((kind == DIFFUSE) & upper, None), ((kind == TRANSLUCENT) & lower, None)):
+            d = subset(mask)
+            if count(d, n):
+                f[d] += w[d, k] * INV_PI
+                pdf[d] += sel[d, k] * np.abs(wi[d, 2]) * INV_PI
+        for mask, fn in (((kind == GLOSSY) & upper, _eval_glossy), ((kind == SHEEN) & upper, _eval_sheen),
+                         (np.isin(kind, (GLASS, REFRACTION)) & front
+                          & (lobes.alpha[:, k] > MIN_ALPHA), _eval_glass)):
+            g = np.nonzero(mask)[0]
+            if len(g):
+                fg, pg = fn(lobes, g, k, wo[g], wi[g])
+                f[g] += w[g, k] * fg
+                pdf[g] += sel[g, k] * pg
     return f, pdf
+
+
+def _is_delta(lobes, k, rows):
+    kind = lobes.kind[rows, k]
+    smooth = np.isin(kind, (GLASS, REFRACTION)) & (lobes.alpha[rows, k] <= MIN_ALPHA)
+    return (kind == MIRROR) | (kind == TRANSPARENT) | smooth
 
 
 def sample(lobes, wo, u_lobe, u1, u2):
     """Sample wi.  Returns wi, weight (= f cos / pdf), pdf, delta (bool).
 
     A sample with weight 0 is an absorbed path.  For delta samples pdf is the
-    lobe's selection probability (only its being > 0 matters downstream).
+    probability of that discrete choice (only its being > 0 matters downstream).
+    Transmitted samples have wi.z < 0.
     """
-    if lobes.kind.shape[1] == 1:
+    if lobes.kind.shape[1] == 1 and _simple(lobes):
         return _sample_single(lobes, wo, u1, u2)
     n = len(wo)
-    sel = selection(lobes, wo)
+    w = weights(lobes, wo)
+    sel = selection(lobes, wo, w)
     cdf = np.cumsum(sel, axis=1)
     # u_lobe past a rounded CDF that ends an ulp below 1 belongs to the last
     # lobe with a selection probability, not to an unused slot after it.
@@ -187,31 +553,81 @@ def sample(lobes, wo, u_lobe, u1, u2):
     chosen = np.minimum((u_lobe[:, None] >= cdf).sum(axis=1), last)
     rows = np.arange(n)
     kind = np.where(cdf[:, -1] > 0, lobes.kind[rows, chosen], NONE)
+    p_lobe = sel[rows, chosen]
+    # The part of u_lobe inside the chosen lobe's interval, reused for the
+    # reflect/refract choice of glass.
+    lo = cdf[rows, chosen] - p_lobe
+    u_sub = np.clip((u_lobe - lo) / np.where(p_lobe > 0, p_lobe, 1.0), 0.0, 1.0 - 1e-12)
     wi = np.zeros((n, 3))
     wi[:, 2] = 1.0
-
-    d = subset(kind == DIFFUSE)
-    if count(d, n):
-        wi[d] = cosine_hemisphere(u1[d], u2[d])[0]
-    g = subset(kind == GLOSSY)
-    if count(g, n):
-        h = ggx_sample_vndf(wo[g], lobes.alpha[rows[g], chosen[g]], u1[g], u2[g])
-        wi[g] = 2.0 * np.einsum("ij,ij->i", wo[g], h)[:, None] * h - wo[g]
-    m = kind == MIRROR
-    if m.any():
-        wi[m] = wo[m] * np.array([-1.0, -1.0, 1.0])
-
-    f, pdf = eval_pdf(lobes, wo, wi, sel)
+    delta = np.zeros(n, bool)
     weight = np.zeros((n, 3))
-    smooth = (pdf > 0) & ~m
-    weight[smooth] = f[smooth] * (wi[smooth, 2] / pdf[smooth])[:, None]
-    if m.any():
-        ps = sel[rows[m], chosen[m]]
-        col = _fresnel(lobes.color[rows[m], chosen[m]], lobes.schlick[rows[m], chosen[m]], wo[m, 2])
-        ok = (wo[m, 2] > COS_EPS) & (ps > 0)
-        weight[m] = np.where(ok[:, None], col / np.where(ps > 0, ps, 1.0)[:, None], 0.0)
-        pdf[m] = ps
-    return wi, weight, pdf, m
+    pdf = np.zeros(n)
+    front = wo[:, 2] > COS_EPS
+
+    for kind_id, flip in ((DIFFUSE, 1.0), (TRANSLUCENT, -1.0)):
+        d = np.nonzero(kind == kind_id)[0]
+        if len(d):
+            wi[d] = cosine_hemisphere(u1[d], u2[d])[0] * np.array([1.0, 1.0, flip])
+    g = np.nonzero(kind == GLOSSY)[0]
+    if len(g):
+        h = ggx_sample_vndf(wo[g], lobes.alpha[g, chosen[g]], u1[g], u2[g])
+        wi[g] = mf.reflect(wo[g], h)
+    sh = np.nonzero(kind == SHEEN)[0]
+    for k in np.unique(chosen[sh]):
+        r = sh[chosen[sh] == k]
+        wi[r] = _sample_sheen(lobes, r, k, wo[r], u1[r], u2[r])
+    m = np.nonzero(kind == MIRROR)[0]
+    if len(m):
+        wi[m] = wo[m] * np.array([-1.0, -1.0, 1.0])
+        for k in np.unique(chosen[m]):
+            r = m[chosen[m] == k]
+            weight[r] = w[r, k] * _fresnel(lobes, r, k, wo[r, 2]) / p_lobe[r, None]
+        delta[m] = True
+        pdf[m] = p_lobe[m]
+    t = np.nonzero(kind == TRANSPARENT)[0]
+    if len(t):
+        wi[t] = -wo[t]
+        weight[t] = w[t, chosen[t]] / p_lobe[t, None]
+        delta[t] = True
+        pdf[t] = p_lobe[t]
+    gl = np.nonzero(np.isin(kind, (GLASS, REFRACTION)))[0]
+    for k in np.unique(chosen[gl]):
+        r = gl[chosen[gl] == k]
+        singular = lobes.alpha[r, k] <= MIN_ALPHA
+        wi[r], refract, p_refl = _sample_glass(lobes, r, k, wo[r], u_sub[r], u1[r], u2[r], singular)
+        # A refraction that ends above the surface (or a reflection below)
+        # is absorbed, as Cycles does: eval would read it as the other branch.
+        kind[r[refract != (wi[r, 2] < 0)]] = NONE
+        s = r[singular]
+        if len(s):
+            refl, trans, _, _ = _dielectric(lobes, s, k, wo[s, 2], _eta(lobes, k)[s])
+            rs = refract[singular]
+            p = np.where(rs, 1.0 - p_refl[singular], p_refl[singular])
+            col = np.where(rs[:, None], trans, refl)
+            weight[s] = w[s, k] * col / np.maximum(p * p_lobe[s], 1e-300)[:, None]
+            delta[s] = True
+            pdf[s] = p * p_lobe[s]
+
+    smooth = np.nonzero(~delta & (kind != NONE))[0]
+    if len(smooth):
+        fs, ps = eval_pdf(_take(lobes, smooth), wo[smooth], wi[smooth], sel[smooth], w[smooth])
+        ok = ps > 0
+        weight[smooth] = np.where(ok[:, None], fs * (np.abs(wi[smooth, 2]) / np.where(ok, ps, 1.0))[:, None], 0.0)
+        pdf[smooth] = ps
+    weight[~front] = 0.0
+    return wi, weight, pdf, delta
+
+
+def _take(lobes, rows):
+    return Lobes(*(None if getattr(lobes, f) is None else getattr(lobes, f)[rows]
+                   for f in lobes.__dataclass_fields__))
+
+
+def _simple(lobes):
+    """One-lobe materials with a closed-form sample weight."""
+    return (np.all(np.isin(lobes.kind[:, 0], (NONE, DIFFUSE, GLOSSY, MIRROR)))
+            and not lobes.multiscatter.any() and np.all(lobes.weight == 1.0))
 
 
 def _sample_single(lobes, wo, u1, u2):
@@ -228,8 +644,8 @@ def _sample_single(lobes, wo, u1, u2):
     if count(d, n):
         wi[d], pdf[d] = cosine_hemisphere(u1[d], u2[d])
         weight[d] = np.where((pdf[d] > 0)[:, None], color[d], 0.0)
-    g = subset((kind == GLOSSY) & up)
-    if count(g, n):
+    g = np.nonzero((kind == GLOSSY) & up)[0]
+    if len(g):
         wo_g, alpha = wo[g], lobes.alpha[g, 0]
         h = ggx_sample_vndf(wo_g, alpha, u1[g], u2[g])
         cos_oh = np.einsum("ij,ij->i", wo_g, h)
@@ -240,10 +656,12 @@ def _sample_single(lobes, wo, u1, u2):
         g2 = 1.0 / (1.0 + lam_o + ggx_lambda(wi_g[:, 2], alpha))
         wi[g] = wi_g
         pdf[g] = np.where(ok, ggx_d(h[:, 2], alpha) * g1 / (4.0 * wo_g[:, 2]), 0.0)
-        weight[g] = _fresnel(color[g], lobes.schlick[g, 0], cos_oh) * np.where(ok, g2 / g1, 0.0)[:, None]
-    m = (kind == MIRROR) & up
-    if m.any():
+        col = np.where((lobes.fresnel[g, 0] == F_SCHLICK)[:, None], 1.0, color[g])
+        weight[g] = col * _fresnel(lobes, g, 0, cos_oh) * np.where(ok, g2 / g1, 0.0)[:, None]
+    m = np.nonzero((kind == MIRROR) & up)[0]
+    if len(m):
         wi[m] = wo[m] * np.array([-1.0, -1.0, 1.0])
-        weight[m] = _fresnel(color[m], lobes.schlick[m, 0], wo[m, 2])
+        col = np.where((lobes.fresnel[m, 0] == F_SCHLICK)[:, None], 1.0, color[m])
+        weight[m] = col * _fresnel(lobes, m, 0, wo[m, 2])
         pdf[m] = 1.0
-    return wi, weight, pdf, m
+    return wi, weight, pdf, (kind == MIRROR) & up

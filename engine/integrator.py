@@ -19,6 +19,7 @@ import numpy as np
 
 from . import bsdf
 from .film import Tile
+from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .lights import POINT, SUN
 from .sampling import power_heuristic
 from .vec import dot, frame, luminance, to_local, to_world
@@ -45,6 +46,7 @@ class Context:
             delta[suns] = lt.suns.delta[lt.local[suns]]
         self.delta_emitters = np.nonzero(delta)[0]
         self.all_emitters = np.arange(lt.count)
+        _visibility_setup(self)
 
 
 @dataclass
@@ -57,6 +59,13 @@ class Paths:
     L: np.ndarray
     prev_pdf: np.ndarray
     prev_delta: np.ndarray
+    # The previous path vertex and its geometric normal: the light tree's
+    # selection probability at that vertex weighs emitters hit by MIS.
+    prev_p: np.ndarray
+    prev_n: np.ndarray
+    # VIS_* bit of the ray: camera, or the kind of the bounce that cast it
+    # (tracked only when something in the scene is invisible to some rays).
+    ray: np.ndarray
 
     def take(self, keep):
         return Paths(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
@@ -73,6 +82,11 @@ class Hit:
     prim: np.ndarray
     eps: np.ndarray  # ray-origin offset for this point
     uv: np.ndarray   # (N, 2) interpolated texture coordinates (0 without UVs)
+    # For normal maps: interpolated world tangent (N, 3) and bitangent sign
+    # (N,), or None; back: the ray hit the triangle's back face.
+    tangent: object = None
+    tangent_sign: object = None
+    back: object = None
 
 
 def trace_batch(ctx, pix, rng, tile):
@@ -81,7 +95,7 @@ def trace_batch(ctx, pix, rng, tile):
     u = rng.random((n, 4))
     o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3])
     paths = Paths(pix, o, d, tmax, np.ones((n, 3)), np.zeros((n, 3)),
-                  np.ones(n), np.ones(n, bool))
+                  np.ones(n), np.ones(n, bool), o, np.zeros((n, 3)), np.full(n, VIS_CAMERA, np.uint8))
     s = ctx.settings
     for depth in range(s.max_bounces + 2):
         if len(paths.pix) == 0:
@@ -102,8 +116,11 @@ def _finish(ctx, paths, tile):
 def _bounce(ctx, paths, depth, rng, tile):
     s = ctx.settings
     t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax)
+    if ctx.triangles.visibility is not None:
+        t, prim, bu, bv = _skip_invisible(ctx, paths.o, paths.d, paths.tmax, paths.ray, t, prim, bu, bv)
     lt, emitter, lLe, lpdf = ctx.lights.intersect(paths.o, paths.d, np.minimum(t, paths.tmax),
-                                                  camera=depth == 0)
+                                                  camera=depth == 0,
+                                                  ray=paths.ray if ctx.track_rays else None)
     hit_light = lt < np.inf
     hit_surf = (prim >= 0) & ~hit_light
     if depth == 0:
@@ -137,10 +154,16 @@ def _bounce(ctx, paths, depth, rng, tile):
         return paths.take(np.zeros(len(paths.pix), bool))
 
     lobes = ctx.materials.gather(hit.mat, hit.uv)
+    # Texture hook: normal maps and bump replace the shading normal.
+    if ctx.materials.textures.normals:
+        hit.ns = ctx.materials.textures.perturb(hit, ctx.triangles)
     tt, bb = frame(hit.ns)
     wo_l = to_local(hit.wo, tt, bb, hit.ns)
     _next_event(ctx, paths, hit, lobes, tt, bb, wo_l, rng)
     alive = _scatter(ctx, paths, hit, lobes, tt, bb, wo_l, depth, rng)
+    paths.prev_p, paths.prev_n = hit.p, hit.ng   # for the light tree's MIS pdf
+    if ctx.track_rays:
+        paths.ray = _ray_kind(hit, lobes, wo_l, tt, bb, paths, rng)
     if alive.all():
         return paths
     _finish(ctx, paths.take(~alive), tile)
@@ -173,15 +196,21 @@ def _mis_hit(ctx, paths, i, emitter, pdf_light):
         return np.ones(len(i))
     if s.strategy == "light":
         return prev_delta.astype(np.float64)
-    p_light = ctx.lights.selection_pdf(emitter) * pdf_light
+    p_light = ctx.lights.selection_pdf(emitter, paths.prev_p[i], paths.prev_n[i]) * pdf_light
     return np.where(prev_delta, 1.0, power_heuristic(paths.prev_pdf[i], p_light))
 
 
 def _escaped(ctx, paths, i, depth):
     transparent = ctx.settings.transparent and depth == 0
-    if not transparent:
+    env = None if transparent else ctx.lights.environment_hits(paths.d[i])
+    if env is not None:
+        # An HDRI world is an emitter NEE samples: weigh it by MIS.
+        emitter, Le, pdf = env
+        w = _mis_hit(ctx, paths, i, np.full(len(i), emitter), pdf)
+        paths.L[i] += paths.beta[i] * Le * w[:, None]
+    elif not transparent:
         paths.L[i] += paths.beta[i] * ctx.world
-    for mask, emitter, Le, pdf in ctx.lights.sun_hits(paths.d[i]):
+    for mask, emitter, Le, pdf in ctx.lights.sun_hits(paths.d[i], paths.ray[i] if ctx.track_rays else None):
         j = i[mask]
         if len(j):
             w = _mis_hit(ctx, paths, j, np.full(len(j), emitter), np.full(len(j), pdf))
@@ -218,7 +247,13 @@ def _interaction(ctx, paths, t, prim, bu, bv):
         uv = (1.0 - bu - bv)[:, None] * c[:, 0] + bu[:, None] * c[:, 1] + bv[:, None] * c[:, 2]
     else:
         uv = np.zeros((len(p), 2))
-    return Hit(p, ng, ns, -d, tr.material[prim], prim, ctx.accel.offset_scale(p), uv)
+    hit = Hit(p, ng, ns, -d, tr.material[prim], prim, ctx.accel.offset_scale(p), uv, back=back)
+    if getattr(tr, "tangent", None) is not None:
+        w = np.stack([1.0 - bu - bv, bu, bv], axis=1)
+        # Unnormalised, as Cycles interpolates its tangent attribute.
+        hit.tangent = np.einsum("nk,nkj->nj", w, tr.tangent[prim])
+        hit.tangent_sign = np.where(np.einsum("nk,nk->n", w, tr.tangent_sign[prim]) < 0, -1.0, 1.0)
+    return hit
 
 
 def _emission_hit(ctx, paths, em, hit, Le):
@@ -249,7 +284,7 @@ def _next_event(ctx, paths, hit, lobes, tt, bb, wo_l, rng):
     mode, emitters = _nee_emitters(ctx)
     if mode == "select":
         u = rng.random((n, 4))
-        e, p_sel = lt.select(u[:, 0])
+        e, p_sel = lt.select(u[:, 0], hit.p, hit.ng)
         _shade_light(ctx, paths, hit, lobes, tt, bb, wo_l, e, p_sel, u[:, 1:])
         return
     for e in emitters:
@@ -261,10 +296,15 @@ def _shade_light(ctx, paths, hit, lobes, tt, bb, wo_l, e, p_sel, u):
     s = ctx.settings
     ls = ctx.lights.sample(e, hit.p, u[:, 0], u[:, 1], u[:, 2])
     wi_l = to_local(ls.wi, tt, bb, hit.ns)
+    _orient(hit, lobes)
     f, pdf_b = bsdf.eval_pdf(lobes, wo_l, wi_l)
-    cos = wi_l[:, 2]
+    if ctx.light_excludes:
+        f = _visible_lobes_f(ctx, lobes, wo_l, wi_l, ls.wi, hit.ng, e, f)
+    # Lights behind the surface count for transmitting lobes (f is 0 below
+    # for the others); wi must be on the same side of both normals.
+    cos = np.abs(wi_l[:, 2])
     p_light = p_sel * ls.pdf
-    ok = (ls.pdf > 0) & (cos > 0) & (dot(ls.wi, hit.ng) > 0)
+    ok = (ls.pdf > 0) & (cos > 0) & _same_side(ls.wi, hit.ng, wi_l)
     if s.strategy == "mis":
         w = np.where(ls.delta, 1.0, power_heuristic(p_light, pdf_b))
     else:
@@ -278,22 +318,52 @@ def _shade_light(ctx, paths, hit, lobes, tt, bb, wo_l, e, p_sel, u):
     eps = hit.eps[live]
     origin = ctx.accel.offset_origin(hit.p[live], hit.ng[live], ls.wi[live], eps)
     dist = ls.dist[live]
+    wi = ls.wi[live]
+    on = ls.on_surface[live]
+    if on.any():
+        # Aim from the offset origin at the sampled point itself: parallel to
+        # wi, a ray raised by eps meets a grazing emitter's plane eps / sin
+        # before the point, past any shortening, and is blocked by it.
+        q = hit.p[live[on]] + wi[on] * dist[on, None]
+        v = q - origin[on]
+        dist = dist.copy()
+        dist[on] = np.linalg.norm(v, axis=1)
+        wi = wi.copy()
+        wi[on] = v / np.maximum(dist[on], 1e-30)[:, None]
     # Points on triangles would block their own shadow ray: stop short.
-    shorten = np.where(ls.on_surface[live], 10.0 * eps, 0.0)
+    shorten = np.where(on, 10.0 * eps, 0.0)
     tmax = np.where(np.isfinite(dist), dist * (1.0 - 1e-6) - shorten, 1e37)
-    blocked = ctx.accel.occluded(origin, ls.wi[live], tmax)
+    blocked = _occluded(ctx, origin, wi, tmax, e[live])
     free = live[~blocked]
     paths.L[free] += contrib[free]
+
+
+def _orient(hit, lobes):
+    """Tell the lobes which rays arrived on a back face: refraction inverts
+    the relative IOR there (leaving the medium)."""
+    back = getattr(hit, "back", None)
+    if back is not None:
+        lobes.back = back
+
+
+def _same_side(wi, ng, wi_l):
+    """wi is on the same side of the geometric and the shading surface:
+    a transmission (wi_l.z < 0) must leave through the back, a reflection
+    through the front (ng faces the incoming ray)."""
+    g = dot(wi, ng)
+    return (g != 0) & ((g > 0) == (wi_l[:, 2] > 0))
 
 
 def _scatter(ctx, paths, hit, lobes, tt, bb, wo_l, depth, rng):
     """Sample the BSDF and update the path state in place; returns which paths live on."""
     s = ctx.settings
     u = rng.random((len(paths.pix), 4))
+    _orient(hit, lobes)
     wi_l, weight, pdf, delta = bsdf.sample(lobes, wo_l, u[:, 0], u[:, 1], u[:, 2])
     wi = to_world(wi_l, tt, bb, hit.ns)
-    # Reflection only: a direction below the geometric surface would leak.
-    ok = (dot(wi, hit.ng) > 0) & np.all(np.isfinite(weight), axis=1) & np.any(weight > 0, axis=1)
+    # A reflection below the geometric surface (or a transmission above it)
+    # would leak light through the surface: absorb it, as Cycles does.
+    ok = _same_side(wi, hit.ng, wi_l) & np.all(np.isfinite(weight), axis=1) & np.any(weight > 0, axis=1)
     beta = paths.beta * weight
     if depth >= s.rr_depth:
         q = np.minimum(beta.max(axis=1), 0.95)
@@ -307,3 +377,128 @@ def _scatter(ctx, paths, hit, lobes, tt, bb, wo_l, depth, rng):
     paths.prev_pdf = pdf
     paths.prev_delta = delta
     return ok
+
+
+# ----------------------------------------------------------------------------
+# Ray visibility (Blender's Object > Visibility > Ray Visibility, as Cycles)
+
+MAX_SKIPS = 16   # invisible surfaces a ray may pass before it counts as a miss
+
+
+def _visibility_setup(ctx):
+    """Whether paths must track their ray kind, and whether some light is
+    excluded from some bounce kind: both False in the common scene, which
+    then pays nothing for visibility."""
+    vis = ctx.lights.visibility
+    indirect = VIS_DIFFUSE | VIS_GLOSSY | VIS_TRANSMISSION
+    ctx.light_excludes = bool(np.any((vis & indirect) != indirect))
+    ctx.light_no_shadow = bool(np.any((vis & VIS_SHADOW) == 0))
+    tv = ctx.triangles.visibility
+    ctx.track_rays = ctx.light_excludes or (tv is not None and bool(np.any((tv & indirect) != indirect)))
+    ctx.shadow_skips = tv is not None and bool(np.any((tv & VIS_SHADOW) == 0))
+
+
+def _skip_invisible(ctx, o, d, tmax, ray, t, prim, bu, bv):
+    """Closest hit among triangles visible to each ray's kind: embreex has no
+    ray masks, so rays that hit an invisible triangle continue past it."""
+    vis = ctx.triangles.visibility
+    t, prim, bu, bv = t.copy(), prim.copy(), bu.copy(), bv.copy()
+    for _ in range(MAX_SKIPS):
+        again = np.nonzero((prim >= 0) & ((vis[np.maximum(prim, 0)] & ray) == 0))[0]
+        if len(again) == 0:
+            return t, prim, bu, bv
+        tn, pn, un, vn = _continue_past(ctx, o[again], d[again], tmax[again], t[again], prim[again])
+        t[again], prim[again], bu[again], bv[again] = tn, pn, un, vn
+    miss = (prim >= 0) & ((vis[np.maximum(prim, 0)] & ray) == 0)
+    t[miss], prim[miss] = np.inf, -1
+    return t, prim, bu, bv
+
+
+def _continue_past(ctx, o, d, tmax, t, prim):
+    """Intersect again from just behind the hit triangle; t stays measured
+    from the original origin o."""
+    p = o + d * t[:, None]
+    start = ctx.accel.offset_origin(p, ctx.triangles.ng[prim], d)
+    t0 = dot(start - o, d)
+    tn, pn, un, vn = ctx.accel.intersect(start, d, np.maximum(tmax - t0, 0.0))
+    return np.where(pn >= 0, tn + t0, np.inf), pn, un, vn
+
+
+def _occluded(ctx, origin, wi, tmax, emitter):
+    """Shadow test: lights with visible_shadow off (Cycles' Cast Shadow) are
+    never blocked; objects with visible_shadow off never block."""
+    blocked = np.zeros(len(origin), bool)
+    test = np.ones(len(origin), bool)
+    if ctx.light_no_shadow:
+        test = (ctx.lights.visibility[emitter] & VIS_SHADOW) != 0
+    idx = np.nonzero(test)[0]
+    if not ctx.shadow_skips:
+        blocked[idx] = ctx.accel.occluded(origin[idx], wi[idx], tmax[idx])
+        return blocked
+    t, prim, _, _ = ctx.accel.intersect(origin[idx], wi[idx], tmax[idx])
+    ray = np.full(len(idx), VIS_SHADOW, np.uint8)
+    t, prim, _, _ = _skip_invisible(ctx, origin[idx], wi[idx], tmax[idx], ray, t, prim, t, t)
+    blocked[idx] = prim >= 0
+    return blocked
+
+
+def _ray_kind(hit, lobes, wo_l, tt, bb, paths, rng):
+    """VIS_* bit of the bounce just sampled, distributed as Cycles' (the kind
+    of the closure it sampled): below the surface = transmission; after a
+    delta (mirror) sample = glossy; else diffuse with the probability that
+    the diffuse lobes produced this direction, sel_d pdf_d / pdf."""
+    n = len(paths.pix)
+    kind = np.full(n, VIS_GLOSSY, np.uint8)
+    diffuse = _diffuse_lobe(lobes.kind)
+    other = ~diffuse & (lobes.kind != bsdf.NONE)
+    kind[diffuse.any(axis=1) & ~other.any(axis=1)] = VIS_DIFFUSE
+    mixed = np.nonzero(diffuse.any(axis=1) & other.any(axis=1) & ~paths.prev_delta)[0]
+    if len(mixed):
+        wi_l = to_local(paths.d[mixed], tt[mixed], bb[mixed], hit.ns[mixed])
+        only_d = _lobes_where(lobes, ~diffuse, mixed)
+        sel = bsdf.selection(_lobes_where(lobes, np.zeros_like(diffuse), mixed), wo_l[mixed])
+        _, pdf_d = bsdf.eval_pdf(only_d, wo_l[mixed], wi_l, sel)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            p_d = np.where(paths.prev_pdf[mixed] > 0, pdf_d / paths.prev_pdf[mixed], 0.0)
+        kind[mixed] = np.where(rng.random(len(mixed)) < p_d, VIS_DIFFUSE, VIS_GLOSSY)
+    kind[dot(paths.d, hit.ng) < 0] = VIS_TRANSMISSION
+    return kind
+
+
+def _diffuse_lobe(kind):
+    """Lobes Cycles counts as diffuse closures (diffuse, translucent, sheen);
+    the others reflect as glossy (transmission is told by direction)."""
+    ids = [getattr(bsdf, name) for name in ("DIFFUSE", "TRANSLUCENT", "SHEEN") if hasattr(bsdf, name)]
+    return np.isin(kind, ids)
+
+
+def _lobes_where(lobes, drop, rows):
+    """The lobes of ``rows`` with the ``drop`` (N, K) entries switched off."""
+    from dataclasses import fields, replace
+    per_ray = {f.name: getattr(lobes, f.name) for f in fields(lobes)}
+    sub = replace(lobes, **{k: v[rows] for k, v in per_ray.items()
+                            if isinstance(v, np.ndarray) and len(v) == len(lobes)})
+    return replace(sub, kind=np.where(drop[rows], bsdf.NONE, sub.kind).astype(lobes.kind.dtype))
+
+
+def _visible_lobes_f(ctx, lobes, wo_l, wi_l, wi, ng, emitter, f):
+    """BSDF value for NEE with lights that are invisible to some bounce
+    kinds: as Cycles, the excluded lobes' f is dropped (the pdf, for MIS,
+    keeps every lobe)."""
+    vis = ctx.lights.visibility[emitter]
+    no_d = (vis & VIS_DIFFUSE) == 0
+    no_g = (vis & VIS_GLOSSY) == 0
+    rows = np.nonzero(no_d | no_g)[0]
+    if len(rows) == 0:
+        return f
+    kind = lobes.kind[rows]
+    drop = np.zeros(lobes.kind.shape, bool)
+    diffuse = _diffuse_lobe(kind)
+    drop[rows] = (diffuse & no_d[rows, None]) | (~diffuse & (kind != bsdf.NONE) & no_g[rows, None])
+    sel = bsdf.selection(_lobes_where(lobes, np.zeros_like(drop), rows), wo_l[rows])
+    f = f.copy()
+    f[rows] = bsdf.eval_pdf(_lobes_where(lobes, drop, rows), wo_l[rows], wi_l[rows], sel)[0]
+    no_t = np.nonzero((vis & VIS_TRANSMISSION) == 0)[0]
+    f[no_t[dot(wi[no_t], ng[no_t]) < 0]] = 0.0
+    return f
+

@@ -22,11 +22,22 @@ from dataclasses import dataclass
 import numpy as np
 
 from .sampling import (Distribution1D, concentric_disk, sin_sq_to_one_minus_cos,
-                       uniform_cone, uniform_cone_pdf, uniform_triangle)
+                       spherical_rectangle, spherical_rectangle_solid_angle, spherical_triangle,
+                       triangle_solid_angle, uniform_cone, uniform_cone_pdf, uniform_triangle)
+from .environment import EnvironmentMap
+from .geometry import VIS_ALL, visibility_bits
+from .lighttree import LightTree, emitter_bounds
 from .scene import AreaLight, PointLight, SpotLight, SunLight
 from .vec import count, dot, frame, luminance, subset, to_world
 
-POINT, SUN, AREA, MESH = 0, 1, 2, 3
+POINT, SUN, AREA, MESH, ENV = 0, 1, 2, 3, 4
+
+# Solid-angle sampling of rectangles and triangles is used between these
+# solid angles (sr); outside, area sampling (pbrt-v4's Triangle thresholds:
+# below, the two pdfs are the same up to rounding; near 2 pi, the spherical
+# triangle warp degenerates).
+MIN_SPHERICAL = 3e-4
+MAX_SPHERICAL = 6.22
 
 
 @dataclass
@@ -45,16 +56,23 @@ def smoothstep(x):
 
 
 class LightSet:
-    def __init__(self, scene, triangles, materials, strategy="power"):
+    """env_compensation: sample an HDRI world by max(L - mean, 0) (only
+    unbiased when BSDF sampling is combined by MIS: RenderSettings
+    ``mis_compensation`` with strategy 'mis')."""
+
+    def __init__(self, scene, triangles, materials, strategy="power", env_compensation=False):
         self.strategy = strategy
         self.points = _PointLights([l for l in scene.lights if isinstance(l, PointLight)])
         self.suns = _SunLights([l for l in scene.lights if isinstance(l, SunLight)])
         self.areas = _AreaLights([l for l in scene.lights if isinstance(l, AreaLight)])
+        self.env = _EnvironmentLight(scene.world.texture, env_compensation)
         self.meshes = _MeshLights(triangles, materials)
         radius = _scene_radius(triangles)
-        # Emitter index -> (type, index within type).
+        # Emitter index -> (type, index within type).  Meshes stay last
+        # (mesh_emitter below counts from the end).
         kinds, locals_, power = [], [], []
-        for group, kind in ((self.points, POINT), (self.suns, SUN), (self.areas, AREA), (self.meshes, MESH)):
+        for group, kind in ((self.points, POINT), (self.suns, SUN), (self.areas, AREA), (self.env, ENV),
+                            (self.meshes, MESH)):
             kinds += [kind] * group.count
             locals_ += list(range(group.count))
             power += list(group.power(radius))
@@ -64,17 +82,29 @@ class LightSet:
         self.mesh_emitter = np.full(max(1, len(materials.emission)), -1, np.int64)
         for j, mat in enumerate(self.meshes.material):
             self.mesh_emitter[mat] = self.count - self.meshes.count + j
+        self.env_emitter = self.points.count + self.suns.count + self.areas.count
         if self.count:
             weights = np.ones(self.count) if strategy == "uniform" else np.array(power)
             self.dist = Distribution1D(weights)
+        self.visibility = _emitter_visibility(scene, self.kind)
+        # Light tree (strategy 'tree'): built over every emitter's bounds and power.
+        self.power = np.array(power, float)
+        self.tree = LightTree(emitter_bounds(self)) if strategy == "tree" and self.count else None
 
     # -- selection ----------------------------------------------------------
-    def select(self, u):
+    def select(self, u, p=None, n=None):
+        """Emitter per uniform u and its probability; the tree needs the
+        shading points p and their normals n (zero rows: no normal)."""
+        if self.tree is not None:
+            return self.tree.select(u, p, _normals(n, len(u)))
         return self.dist.sample(u)
 
-    def selection_pdf(self, emitter):
+    def selection_pdf(self, emitter, p=None, n=None):
+        """Probability that ``select`` at p (normal n) picks ``emitter``."""
         if self.strategy == "all":
             return np.ones(len(emitter))
+        if self.tree is not None:
+            return self.tree.pmf(emitter, p, _normals(n, len(emitter)))
         return self.dist.pmf[emitter]
 
     # -- NEE ----------------------------------------------------------------
@@ -85,19 +115,22 @@ class LightSet:
                           np.zeros(n), np.zeros(n, bool), np.zeros(n, bool))
         kind = self.kind[emitter]
         local = self.local[emitter]
-        for k, group in ((POINT, self.points), (SUN, self.suns), (AREA, self.areas), (MESH, self.meshes)):
+        for k, group in ((POINT, self.points), (SUN, self.suns), (AREA, self.areas), (ENV, self.env),
+                         (MESH, self.meshes)):
             idx = subset(kind == k)
             if count(idx, n):
                 group.sample(out, idx, local[idx], p[idx], u1[idx], u2[idx], u3[idx])
         return out
 
     # -- what BSDF rays see -------------------------------------------------
-    def intersect(self, o, d, tmax, camera=False):
+    def intersect(self, o, d, tmax, camera=False, ray=None):
         """Closest analytic emitter (point/spot/area) before tmax.
 
         camera: the rays are camera rays, which see only lights with
-        ``visible_camera``.  Returns t (inf = none), emitter index, Le and the
-        solid-angle pdf of sampling that point from o."""
+        ``visible_camera``; ray: per-ray VIS_* bits (camera, diffuse, glossy,
+        transmission), when set, see only lights with a common bit.  Returns
+        t (inf = none), emitter index, Le and the solid-angle pdf of sampling
+        that point from o."""
         n = len(o)
         t = np.array(tmax, dtype=np.float64, copy=True)
         hit_t = np.full(n, np.inf)
@@ -112,8 +145,11 @@ class LightSet:
             for j in range(group.count):
                 if camera and not group.visible_camera[j]:
                     continue
+                sees = True if ray is None else (ray & self.visibility[base + j]) != 0
+                if not np.any(sees):
+                    continue
                 th, le, pw = group.intersect(j, o, d)
-                closer = th < t
+                closer = (th < t) & sees
                 if closer.any():
                     t[closer] = th[closer]
                     hit_t[closer] = th[closer]
@@ -123,8 +159,9 @@ class LightSet:
             base += group.count
         return hit_t, emitter, Le, pdf
 
-    def sun_hits(self, d):
-        """Radiance of sun disks along escaping directions, with MIS pdfs.
+    def sun_hits(self, d, ray=None):
+        """Radiance of sun disks along escaping directions, with MIS pdfs;
+        ray: per-ray VIS_* bits, as in ``intersect``.
 
         Returns a list of (mask, emitter, Le, pdf) per sun with angle > 0."""
         hits = []
@@ -133,8 +170,17 @@ class LightSet:
             res = self.suns.hit(j, d)
             if res is not None:
                 mask, Le, pdf = res
+                if ray is not None:
+                    mask = mask & ((ray & self.visibility[base + j]) != 0)
                 hits.append((mask, base + j, Le, pdf))
         return hits
+
+    def environment_hits(self, d):
+        """What escaping rays see of an HDRI world: (emitter, Le, pdf), the
+        pdf NEE has for these directions; None for a constant world."""
+        if not self.env.count:
+            return None
+        return self.env_emitter, self.env.map.eval(d), self.env.map.pdf(d)
 
     def triangle_pdf(self, prim, o, p_hit, ng):
         """Solid-angle pdf of NEE picking this emissive triangle's point from o."""
@@ -142,6 +188,23 @@ class LightSet:
 
     def emitter_of_triangle(self, material):
         return self.mesh_emitter[material]
+
+
+def _emitter_visibility(scene, kind):
+    """VIS_* bits per emitter: the light objects' ray visibility; the world
+    and emissive meshes (whose triangles carry their own bits) see all."""
+    vis = np.full(len(kind), VIS_ALL, np.uint8)
+    lists = {POINT: [l for l in scene.lights if isinstance(l, PointLight)],
+             SUN: [l for l in scene.lights if isinstance(l, SunLight)],
+             AREA: [l for l in scene.lights if isinstance(l, AreaLight)]}
+    for k, group in lists.items():
+        idx = np.nonzero(kind == k)[0]
+        vis[idx] = [visibility_bits(l) for l in group]
+    return vis
+
+
+def _normals(n, count):
+    return np.zeros((count, 3)) if n is None else n
 
 
 def _scene_radius(triangles):
@@ -153,6 +216,24 @@ def _scene_radius(triangles):
 
 
 # ----------------------------------------------------------------------------
+
+class _EnvironmentLight:
+    """An HDRI world as one emitter (a constant world is not one: Cycles
+    only BSDF-samples it)."""
+
+    def __init__(self, texture, compensate):
+        self.map = EnvironmentMap(texture, compensate) if texture is not None else None
+        self.count = int(texture is not None)
+
+    def power(self, radius):
+        # Like a sun from every direction: flux through the scene's disk.
+        return [self.map.power() * np.pi * radius ** 2] if self.count else []
+
+    def sample(self, out, idx, j, p, u1, u2, u3):
+        wi, pdf = self.map.sample(u1, u2)
+        out.wi[idx], out.dist[idx], out.Le[idx] = wi, np.inf, self.map.eval(wi)
+        out.pdf[idx] = pdf
+
 
 class _PointLights:
     """Point and spot lights (sphere, soft-falloff disk, or delta)."""
@@ -325,6 +406,13 @@ class _AreaLights:
         # Projections onto the light's axes: local coords in [-0.5, 0.5].
         self.du = self.u / np.maximum(np.sum(self.u ** 2, axis=1), 1e-300)[:, None]
         self.dv = self.v / np.maximum(np.sum(self.v ** 2, axis=1), 1e-300)[:, None]
+        # Rectangles (not sheared by the matrix) are sampled by solid angle.
+        self.len_u = np.linalg.norm(self.u, axis=1)
+        self.len_v = np.linalg.norm(self.v, axis=1)
+        self.ex = self.u / np.maximum(self.len_u, 1e-300)[:, None]
+        self.ey = self.v / np.maximum(self.len_v, 1e-300)[:, None]
+        skew = np.abs(np.sum(self.ex * self.ey, axis=1))
+        self.rect = ~self.ellipse & (self.area > 0) & (skew < 1e-9)
 
     def power(self, radius):
         return luminance(self.L) * np.pi * self.area if self.count else []
@@ -338,6 +426,7 @@ class _AreaLights:
             dx, dy = concentric_disk(u1[e], u2[e])
             x[e], y[e] = 0.5 * dx, 0.5 * dy
         q = self.c[j] + x[:, None] * self.u[j] + y[:, None] * self.v[j]
+        sph, solid_angle = self._spherical(j, p, u1, u2, q)
         v = q - p
         t = np.linalg.norm(v, axis=1)
         wi = v / np.maximum(t, 1e-30)[:, None]
@@ -345,8 +434,35 @@ class _AreaLights:
         area = self.area[j]
         ok = (cos_l > 1e-12) & (t > 0) & (area > 0)
         pdf = np.where(ok, t * t / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
+        pdf = np.where(ok & sph, 1.0 / np.maximum(solid_angle, 1e-300), pdf)
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, self.L[j]
         out.pdf[idx] = pdf
+
+    def _spherical(self, j, p, u1=None, u2=None, q=None):
+        """Which rays use solid-angle sampling, and the solid angle.
+
+        Rectangles seen under a solid angle above MIN_SPHERICAL are sampled
+        uniformly in it (pdf 1 / solid angle); tiny or grazing ones, where
+        the warp loses precision (Cycles' area.h falls back there too) and
+        area sampling is as good, keep area sampling.  With u1, u2 the
+        chosen rays' points in q are replaced by solid-angle samples."""
+        n = len(p)
+        sph = np.zeros(n, bool)
+        solid_angle = np.zeros(n)
+        cand = np.nonzero(np.broadcast_to(self.rect[j], (n,)))[0]
+        if len(cand) == 0:
+            return sph, solid_angle
+        jj = j if np.ndim(j) == 0 else j[cand]
+        args = (p[cand], self.c[jj], self.ex[jj], self.ey[jj], self.len_u[jj], self.len_v[jj])
+        if q is None:
+            s, min_nz2 = spherical_rectangle_solid_angle(*args)
+        else:
+            point, s, min_nz2 = spherical_rectangle(*args, u1[cand], u2[cand])
+        use = (s >= MIN_SPHERICAL) & (min_nz2 < 1.0 - 1e-8)
+        sph[cand], solid_angle[cand] = use, s
+        if q is not None:
+            q[cand[use]] = point[use]
+        return sph, solid_angle
 
     def intersect(self, j, o, d):
         n = len(o)
@@ -367,6 +483,10 @@ class _AreaLights:
         ok = front & (th > 0) & inside & (self.area[j] > 0)
         t[ok] = th[ok]
         pdf[ok] = th[ok] ** 2 / (-denom[ok] * self.area[j])
+        if self.rect[j] and ok.any():
+            # The pdf NEE has for this point: the same choice of strategy.
+            sph, solid_angle = self._spherical(j, o[ok])
+            pdf[ok] = np.where(sph, 1.0 / np.maximum(solid_angle, 1e-300), pdf[ok])
         return t, np.tile(self.L[j], (n, 1)), pdf
 
 
@@ -403,14 +523,42 @@ class _MeshLights:
         b1, b2 = uniform_triangle(u1, u2)
         tr = self.tris
         q = tr.p0[tri] + b1[:, None] * tr.e1[tri] + b2[:, None] * tr.e2[tri]
+        sph, solid_angle = self._spherical(tri, p)
+        s = np.nonzero(sph)[0]
+        if len(s):
+            ts = tri[s]
+            d, _ = spherical_triangle(p[s], tr.p0[ts], tr.p0[ts] + tr.e1[ts], tr.p0[ts] + tr.e2[ts],
+                                      u1[s], u2[s])
+            # The point where the sampled direction meets the triangle's plane.
+            ng = tr.ng[ts]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                th = dot(tr.p0[ts] - p[s], ng) / dot(d, ng)
+            q[s] = p[s] + d * np.nan_to_num(th)[:, None]
         v = q - p
         t = np.linalg.norm(v, axis=1)
         wi = v / np.maximum(t, 1e-30)[:, None]
         cos_l = np.abs(dot(wi, tr.ng[tri]))
         ok = (cos_l > 1e-12) & (t > 0)
         pdf = np.where(ok, t * t / (np.maximum(cos_l, 1e-12) * self.total_area[j]), 0.0)
+        pdf = np.where(ok & sph, self._spherical_pdf(tri, solid_angle), pdf)
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, self.L[j]
         out.pdf[idx], out.on_surface[idx] = pdf, True
+
+    def _spherical(self, tri, p):
+        """Which shading points sample their triangle by solid angle (Arvo):
+        those that see it large (Cycles and pbrt-v4 switch the same way);
+        small or distant triangles keep area sampling, as good and cheaper."""
+        tr = self.tris
+        solid_angle = triangle_solid_angle(p, tr.p0[tri], tr.p0[tri] + tr.e1[tri],
+                                           tr.p0[tri] + tr.e2[tri])[0]
+        return (solid_angle >= MIN_SPHERICAL) & (solid_angle <= MAX_SPHERICAL), solid_angle
+
+    def _spherical_pdf(self, tri, solid_angle):
+        """P(triangle | its group) / solid angle: triangles are picked by area."""
+        area = self.group_area[self.tris.material[tri]]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pdf = self.tris.area[tri] / (area * solid_angle)
+        return np.where(np.isfinite(pdf), pdf, 0.0)
 
     def pdf(self, prim, o, p_hit, ng):
         v = p_hit - o
@@ -418,7 +566,9 @@ class _MeshLights:
         cos_l = np.abs(dot(v, ng)) / np.sqrt(np.maximum(t2, 1e-300))
         area = self.group_area[self.tris.material[prim]]
         ok = (cos_l > 1e-12) & (area > 0)
-        return np.where(ok, t2 / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
+        pdf = np.where(ok, t2 / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
+        sph, solid_angle = self._spherical(prim, o)
+        return np.where(ok & sph, self._spherical_pdf(prim, solid_angle), pdf)
 
 
 def _uniform_index(j):

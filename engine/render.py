@@ -45,7 +45,8 @@ def prepare(scene, settings):
     validate_settings(settings)
     tris = flatten(scene)
     materials = MaterialTable(material_table(scene))
-    lights = LightSet(scene, tris, materials, settings.light_selection)
+    lights = LightSet(scene, tris, materials, settings.light_selection,
+                      env_compensation=settings.mis_compensation and settings.strategy == "mis")
     try:
         camera = CameraModel(scene.camera, PixelFilter(settings.filter_type, settings.filter_width))
     except ValueError as exc:

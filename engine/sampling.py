@@ -121,3 +121,149 @@ class Distribution1D:
         with np.errstate(divide="ignore", invalid="ignore"):
             du = np.where(p > 0, (u - lo) / p, 0.0)
         return idx, p, np.clip(du, 0.0, np.nextafter(1.0, 0.0))
+
+
+# ----------------------------------------------------------------------------
+# Solid-angle sampling of planar emitters
+
+def spherical_rectangle(p, c, ex, ey, len_u, len_v, u1, u2):
+    """Urena et al. 2013: a point on the rectangle (centre c, unit orthogonal
+    axes ex, ey, side lengths len_u, len_v) uniform in the solid angle it
+    subtends from p.  Follows Cycles' area.h, whose asin form of the internal
+    angles avoids the cancellation of the paper's acos sum for small lights.
+
+    Returns (point (N, 3), solid angle (N,), min_nz2 (N,)): min_nz2 near 1 means
+    p lies almost in the rectangle's plane, where the warp loses precision."""
+    z = np.cross(ex, ey)
+    rel = c - p
+    z0 = rel @ z if np.ndim(z) == 1 else np.einsum("ij,ij->i", rel, z)
+    flip = np.where(z0 > 0, -1.0, 1.0)   # make z point away from the rectangle
+    z0 = z0 * flip
+    xc = rel @ ex if np.ndim(ex) == 1 else np.einsum("ij,ij->i", rel, ex)
+    yc = rel @ ey if np.ndim(ey) == 1 else np.einsum("ij,ij->i", rel, ey)
+    x0, x1 = xc - 0.5 * len_u, xc + 0.5 * len_u
+    y0, y1 = yc - 0.5 * len_v, yc + 0.5 * len_v
+    nz = np.stack([-y0, x1, y1, -x0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nz = nz / np.sqrt(nz * nz + z0 * z0)
+    nz = np.nan_to_num(nz)
+    g0 = np.arcsin(np.clip(-nz[0] * nz[1], -1.0, 1.0))
+    g1 = np.arcsin(np.clip(-nz[1] * nz[2], -1.0, 1.0))
+    g2 = np.arcsin(np.clip(-nz[2] * nz[3], -1.0, 1.0))
+    g3 = np.arcsin(np.clip(-nz[3] * nz[0], -1.0, 1.0))
+    solid_angle = np.maximum(-(g0 + g1 + g2 + g3), 0.0)
+    b0, b1 = nz[0], nz[2]
+    au = u1 * solid_angle + g2 + g3
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fu = (np.cos(au) * b0 + b1) / np.sin(au)
+        cu = np.clip(np.copysign(1.0 / np.sqrt(fu * fu + b0 * b0), fu), -1.0, 1.0)
+        xu = -(cu * z0) / np.maximum(np.sqrt(1.0 - cu * cu), 1e-300)
+    xu = np.clip(np.nan_to_num(xu), x0, x1)
+    d2 = xu * xu + z0 * z0
+    h0 = y0 / np.sqrt(d2 + y0 * y0)
+    h1 = y1 / np.sqrt(d2 + y1 * y1)
+    hv = h0 + u2 * (h1 - h0)
+    hv2 = hv * hv
+    with np.errstate(divide="ignore", invalid="ignore"):
+        yv = np.where(hv2 < 1.0 - 1e-12, hv * np.sqrt(d2 / (1.0 - hv2)), y1)
+    yv = np.clip(yv, y0, y1)
+    point = p + xu[:, None] * ex + yv[:, None] * ey + (z0 * flip)[:, None] * z
+    return point, solid_angle, (nz * nz).min(axis=0)
+
+
+def spherical_rectangle_solid_angle(p, c, ex, ey, len_u, len_v):
+    n = len(p)
+    return spherical_rectangle(p, c, ex, ey, len_u, len_v, np.zeros(n), np.zeros(n))[1:]
+
+
+def _unit_rows(v):
+    length = np.sqrt(np.einsum("ij,ij->i", v, v))
+    return v / np.where(length > 0, length, 1.0)[:, None]
+
+
+def triangle_solid_angle(p, v0, v1, v2):
+    """Solid angle of triangles (v0, v1, v2) seen from points p (Van Oosterom
+    and Strackee), plus the unit vectors towards the corners."""
+    a, b, c = _unit_rows(v0 - p), _unit_rows(v1 - p), _unit_rows(v2 - p)
+    triple = np.abs(np.einsum("ij,ij->i", a, np.cross(b, c)))
+    denom = 1.0 + np.einsum("ij,ij->i", b, c) + np.einsum("ij,ij->i", a, c) + np.einsum("ij,ij->i", a, b)
+    return 2.0 * np.arctan2(triple, denom), a, b, c
+
+
+def spherical_triangle(p, v0, v1, v2, u1, u2):
+    """Arvo 1995 (as Cycles' triangle.h): a direction from p uniform in the
+    solid angle of triangle (v0, v1, v2).  Returns (dirs (N, 3), solid angle)."""
+    solid_angle, A, B, C = triangle_solid_angle(p, v0, v1, v2)
+    cos_a = np.einsum("ij,ij->i", B, C)
+    cos_b = np.einsum("ij,ij->i", A, C)
+    cos_c = np.einsum("ij,ij->i", A, B)
+    cos_alpha = np.clip(np.einsum("ij,ij->i", _unit_rows(np.cross(A, B)), _unit_rows(np.cross(A, C))),
+                        -1.0, 1.0)
+    sin_alpha = np.sqrt(np.maximum(0.0, 1.0 - cos_alpha * cos_alpha))
+    alpha = np.arccos(cos_alpha)
+    phi = u1 * solid_angle - alpha
+    sin_phi, cos_phi = np.sin(phi), np.cos(phi)
+    u = cos_phi - cos_alpha
+    v = sin_phi + sin_alpha * cos_c
+    num = (v * cos_phi - u * sin_phi) * cos_alpha - v
+    den = (v * sin_phi + u * cos_phi) * sin_alpha
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = np.clip(np.where(den == 0.0, 1.0, num / den), -1.0, 1.0)
+    U = _unit_rows(C - cos_b[:, None] * A)
+    C_ = _unit_rows(q[:, None] * A + np.sqrt(1.0 - q * q)[:, None] * U)
+    cos_cb = np.einsum("ij,ij->i", C_, B)
+    z = 1.0 - u2 * (1.0 - cos_cb)
+    w = _unit_rows(C_ - cos_cb[:, None] * B)
+    d = z[:, None] * B + np.sqrt(np.maximum(0.0, 1.0 - z * z))[:, None] * w
+    return _unit_rows(d), solid_angle
+
+
+class Distribution2D:
+    """Piecewise-constant density on the unit square from a (rows, cols) grid
+    of non-negative weights: a marginal distribution over rows and a
+    conditional one per row (pbrt's Distribution2D; Cycles' background map).
+
+    Coordinates are (x, y) in [0, 1)^2: x along columns, y along rows (row 0
+    covers y in [0, 1/rows)).  Sampling is by inverse CDF with binary search,
+    one ``searchsorted`` for the whole batch of rows and one for the columns.
+    """
+
+    def __init__(self, weights):
+        w = np.asarray(weights, dtype=np.float64)
+        if w.ndim != 2 or w.size == 0:
+            raise ValueError("Distribution2D needs a non-empty 2D weight array")
+        w = np.where(np.isfinite(w) & (w > 0), w, 0.0)
+        self.rows, self.cols = w.shape
+        row_sums = w.sum(axis=1)
+        self.marginal = Distribution1D(row_sums)
+        # An empty row is never picked by the marginal; give it a uniform
+        # conditional so that every row's CDF is well defined.
+        w[row_sums <= 0] = 1.0
+        self.pmf = w / w.sum(axis=1, keepdims=True)
+        cdf = np.cumsum(self.pmf, axis=1)
+        last = self.cols - 1 - np.argmax((self.pmf > 0)[:, ::-1], axis=1)
+        cdf[np.arange(self.cols)[None, :] >= last[:, None]] = 1.0  # see Distribution1D
+        # Row r's CDF shifted to [r, r + 1]: one sorted array for all rows.
+        self.flat_cdf = (cdf + np.arange(self.rows)[:, None]).ravel()
+
+    def sample(self, u_row, u_col):
+        """Points (x, y) for uniforms (u_row picks the row) and their density."""
+        row, p_row, du_row = self.marginal.sample_continuous(u_row)
+        u_col = np.asarray(u_col, dtype=np.float64)
+        key = row + np.minimum(u_col, np.nextafter(1.0, 0.0))
+        k = np.searchsorted(self.flat_cdf, key, side="right")
+        col = np.clip(k - row * self.cols, 0, self.cols - 1)
+        p_col = self.pmf[row, col]
+        lo = np.where(col > 0, self.flat_cdf[row * self.cols + np.maximum(col - 1, 0)] - row, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            du_col = np.where(p_col > 0, (u_col - lo) / p_col, 0.0)
+        du_col = np.clip(du_col, 0.0, np.nextafter(1.0, 0.0))
+        x = (col + du_col) / self.cols
+        y = (row + du_row) / self.rows
+        return x, y, p_row * p_col * (self.rows * self.cols)
+
+    def pdf(self, x, y):
+        """Density at points of the unit square (cells found by truncation)."""
+        col = np.clip((np.asarray(x) * self.cols).astype(np.int64), 0, self.cols - 1)
+        row = np.clip((np.asarray(y) * self.rows).astype(np.int64), 0, self.rows - 1)
+        return self.marginal.pmf[row] * self.pmf[row, col] * (self.rows * self.cols)

@@ -47,6 +47,12 @@ class Mesh:
     uvs: Optional[np.ndarray] = None
     material_slots: Optional[np.ndarray] = None
     name: str = "mesh"
+    # Per-corner tangents (T, 3, 3) of the UV map (Blender's MikkTSpace
+    # ``calc_tangents``) and bitangent signs (T, 3): bitangent =
+    # sign * cross(normal, tangent).  Optional; normal maps need them and
+    # fall back to per-triangle UV tangents without.
+    tangents: Optional[np.ndarray] = None
+    tangent_signs: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -56,11 +62,19 @@ class Instance:
     matrix: (4, 4) object-to-world.
     materials: scene material index per material slot of the mesh; a slot past
         the end or holding -1 uses the default grey diffuse material.
+    visible_*: Blender's Object > Visibility > Ray Visibility: which rays
+        see the object (camera rays, rays leaving a diffuse, glossy or
+        transmission bounce); visible_shadow=False: it casts no shadow.
     """
     mesh: int
     matrix: np.ndarray = field(default_factory=lambda: np.eye(4))
     materials: Sequence[int] = ()
     name: str = "object"
+    visible_camera: bool = True
+    visible_diffuse: bool = True
+    visible_glossy: bool = True
+    visible_transmission: bool = True
+    visible_shadow: bool = True
 
 
 # ----------------------------------------------------------------------------
@@ -68,23 +82,55 @@ class Instance:
 
 @dataclass
 class Lobe:
-    """One BSDF lobe of a material.
+    """One BSDF lobe of a material (Cycles' closures, see engine.bsdf).
 
-    kind: 'diffuse' (Lambert), 'mirror' (perfect specular reflection) or
-          'glossy' (GGX microfacet reflection, alpha = roughness^2).
-    color: RGB weight of the lobe.
-    roughness: Blender roughness in [0, 1] (glossy only).
-    fresnel: 'none' (Blender's Glossy BSDF: colour times the microfacet term) or
-             'schlick' (colour is F0, the reflectance at normal incidence;
-             used for the Principled BSDF's specular layer).
+    kind: 'diffuse' (Lambert), 'mirror' (perfect specular reflection),
+          'glossy' (GGX microfacet reflection, alpha = roughness^2),
+          'glass' (GGX dielectric: reflection and refraction; smooth below
+          roughness ~0.03), 'refraction' (Refraction BSDF: refraction only),
+          'translucent' (Lambert on the other side), 'transparent' (straight
+          through) or 'sheen' (Cycles' LTC sheen, Zeltner et al. 2022).
+    color: RGB colour of the lobe (for glass it tints reflection and
+        refraction; for a layer, see covers).
+    roughness: Blender roughness in [0, 1] (glossy, glass, refraction, sheen).
+    fresnel (glossy and mirror): 'none' (Glossy BSDF: colour times the
+        microfacet term), 'schlick' (legacy: colour is F0), 'f82' (Principled
+        metal: F82-tint with F0 = ``f0`` and ``edge_tint``), 'dielectric'
+        (the Principled BSDF's Fresnel: mix(f0, 1, s) with s the real
+        Fresnel curve of ``ior`` remapped to [0, 1]; f0 None = F0 of ior).
+        Glass and refraction always use the dielectric Fresnel of ``ior``.
+    ior: index of refraction (relative to the outside; inverted automatically
+        when a ray arrives from the back face of a glass or refraction lobe).
+    f0: RGB reflectance at normal incidence ('f82', 'dielectric', glass).
+    edge_tint: RGB F82 tint ('f82').
+    transmission_tint: RGB factor on the refracted part only (glass).
+    multiscatter: Multiscatter GGX energy compensation (glossy, glass).
+    covers: this lobe is a layer over the next ``covers`` lobes of the
+        material, which are weighed down by (1 - its albedo estimate), as
+        Cycles layers the Principled BSDF; colour is then the layer's weight
+        relative to what it covers (coat weight, sheen weight x tint).
+    absorb: RGB coat tint applied to the covered lobes (Beer-Lambert along
+        the refracted view ray, mixed in by the colour).
+    weight: scalar factor from Mix/Add shaders and Principled mixing; unlike
+        colour it does not enter Fresnel, energy or layering estimates.
     """
     kind: str
     color: RGB = (0.8, 0.8, 0.8)
     roughness: float = 0.5
     fresnel: str = "none"
+    ior: float = 1.5
+    f0: Optional[RGB] = None
+    edge_tint: RGB = (1.0, 1.0, 1.0)
+    transmission_tint: RGB = (1.0, 1.0, 1.0)
+    multiscatter: bool = False
+    covers: int = 0
+    absorb: RGB = (1.0, 1.0, 1.0)
+    weight: float = 1.0
 
 
-LOBE_KINDS = ("diffuse", "mirror", "glossy")
+LOBE_KINDS = ("diffuse", "mirror", "glossy", "glass", "refraction", "translucent", "transparent",
+              "sheen")
+FRESNEL_MODES = ("none", "schlick", "f82", "dielectric")
 
 
 @dataclass
@@ -93,9 +139,109 @@ class Material:
     name: str = "material"
     lobes: Sequence[Lobe] = (Lobe("diffuse"),)
     emission: RGB = (0.0, 0.0, 0.0)
+    # A Bump or NormalMap expression replacing the shading normal, or None.
+    normal: Optional["Texture"] = None
 
 
 DEFAULT_MATERIAL = Material("default", (Lobe("diffuse", (0.8, 0.8, 0.8)),))
+
+
+# ----------------------------------------------------------------------------
+# Textures: expressions a Lobe parameter, a Material's emission or its normal
+# may hold instead of a constant (evaluated per ray by engine.textures).
+# Colours evaluate to RGB, everything else to a float; a colour used as a float
+# is its Rec.709 luminance and a float used as a colour is grey, as Cycles.
+
+INTERPOLATIONS = ("Closest", "Linear")
+EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")
+ALPHA_MODES = ("STRAIGHT", "PREMUL", "CHANNEL_PACKED", "NONE")
+
+
+@dataclass(eq=False)
+class TextureImage:
+    """Pixels of an image: (H, W, C) float, C in 1..4, row 0 at the TOP,
+    linear values (or data for Non-Color images).
+
+    srgb_filter: filter in sRGB encoding and decode after (Cycles keeps 8-bit
+        sRGB images encoded and decodes after interpolation).
+    alpha_mode: Blender's image alpha mode; STRAIGHT colours are associated
+        with alpha before filtering (Cycles does); NONE ignores alpha.
+    data: Non-Color (no alpha association).
+    """
+    pixels: np.ndarray
+    name: str = "image"
+    srgb_filter: bool = False
+    alpha_mode: str = "STRAIGHT"
+    data: bool = False
+
+
+@dataclass(eq=False)
+class ImageTexture:
+    """Image Texture node.  uv: None = the hit's UV map.  output 'Color' or
+    'Alpha'.  unassociate: divide colour by alpha (Cycles does when the
+    node's Alpha output is linked)."""
+    image: TextureImage
+    interpolation: str = "Linear"
+    extension: str = "REPEAT"
+    output: str = "Color"
+    unassociate: bool = False
+    uv: Optional[object] = None
+
+
+MIX_BLENDS = ("MIX", "ADD", "MULTIPLY", "SUBTRACT", "SCREEN", "OVERLAY", "DIVIDE",
+              "DIFFERENCE", "DARKEN", "LIGHTEN")
+
+
+@dataclass(eq=False)
+class MixColor:
+    """Mix node in colour mode (and the legacy MixRGB): a colour."""
+    blend: str
+    fac: object
+    a: object
+    b: object
+    clamp_factor: bool = True
+    clamp_result: bool = False
+
+
+MATH_OPERATIONS = ("ADD", "SUBTRACT", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "POWER", "LOGARITHM",
+                   "SQRT", "INVERSE_SQRT", "ABSOLUTE", "EXPONENT", "MINIMUM", "MAXIMUM",
+                   "LESS_THAN", "GREATER_THAN", "SIGN", "ROUND", "FLOOR", "CEIL", "TRUNC",
+                   "FRACT", "MODULO", "SINE", "COSINE", "TANGENT", "SNAP")
+
+
+@dataclass(eq=False)
+class Math:
+    """Math node on floats (a, b, c as its three inputs): a float."""
+    operation: str
+    a: object
+    b: object = 0.0
+    c: object = 0.0
+    clamp: bool = False
+
+
+@dataclass(eq=False)
+class NormalMap:
+    """Tangent-space Normal Map node: colour (in [0, 1]) and strength."""
+    color: object
+    strength: object = 1.0
+
+
+@dataclass(eq=False)
+class Bump:
+    """Bump node: height (a float), strength, distance, invert, and an
+    optional NormalMap feeding its Normal input."""
+    height: object
+    strength: object = 1.0
+    distance: object = 1.0
+    invert: bool = False
+    normal: Optional[NormalMap] = None
+
+
+Texture = Union[ImageTexture, MixColor, Math, NormalMap, Bump]
+TEXTURE_TYPES = (ImageTexture, MixColor, Math, NormalMap, Bump)
+# What a Lobe parameter or a Material's emission may hold.
+Color = Union[RGB, Texture]
+Scalar = Union[float, Texture]
 
 
 # ----------------------------------------------------------------------------
@@ -106,7 +252,11 @@ class PointLight:
     """Blender point light.  ``power`` = colour * watts.
 
     Every light has ``visible_camera`` (Blender's Object > Visibility > Camera
-    ray, False by default for lights): whether camera rays see its shape.
+    ray, False by default for lights): whether camera rays see its shape;
+    ``visible_diffuse`` / ``visible_glossy`` / ``visible_transmission``:
+    whether it lights (by NEE) and is seen (by BSDF rays) through those
+    bounces, as Cycles' light visibility; ``visible_shadow=False``: objects
+    do not block its light (Cycles' light "Cast Shadow" off).
 
     soft_falloff=False: a sphere of radius ``radius`` with radiance
     P / (4 pi^2 r^2).  soft_falloff=True (Blender 4.0+ default): Cycles' disk of
@@ -118,6 +268,10 @@ class PointLight:
     soft_falloff: bool = False
     name: str = "point"
     visible_camera: bool = False
+    visible_diffuse: bool = True
+    visible_glossy: bool = True
+    visible_transmission: bool = True
+    visible_shadow: bool = True
 
 
 @dataclass
@@ -140,6 +294,10 @@ class SunLight:
     angle: float = 0.0
     name: str = "sun"
     visible_camera: bool = False
+    visible_diffuse: bool = True
+    visible_glossy: bool = True
+    visible_transmission: bool = True
+    visible_shadow: bool = True
 
 
 AREA_SHAPES = ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE")
@@ -162,15 +320,45 @@ class AreaLight:
     normalize: bool = True
     name: str = "area"
     visible_camera: bool = False
+    visible_diffuse: bool = True
+    visible_glossy: bool = True
+    visible_transmission: bool = True
+    visible_shadow: bool = True
 
 
 Light = Union[PointLight, SpotLight, SunLight, AreaLight]
 
 
+ENV_INTERPOLATIONS = ("Linear", "Closest")
+
+
+@dataclass
+class EnvironmentTexture:
+    """An equirectangular HDRI (Blender's Environment Texture node).
+
+    pixels: (H, W, 3) float32 linear RGB, row 0 = the top of the image (+Z).
+    strength: the Background node's strength (radiance = pixels * strength).
+    matrix: (3, 3) world direction -> texture lookup vector (the Mapping
+        node's linear part, e.g. its rotation); any invertible matrix.
+    interpolation: 'Linear' (bilinear, Cycles' default) or 'Closest'.
+    Lookups follow Cycles exactly: direction_to_equirectangular, pixel
+    centres at (i + 0.5) / W, periodic wrap in both axes.
+    """
+    pixels: np.ndarray
+    strength: float = 1.0
+    matrix: np.ndarray = field(default_factory=lambda: np.eye(3))
+    interpolation: str = "Linear"
+    name: str = "environment"
+
+
 @dataclass
 class World:
-    """A constant-colour background: radiance = colour * strength."""
+    """The background.  Without ``texture``: a constant radiance ``color``
+    (Background colour * strength), which is only BSDF sampled, as Cycles.
+    With ``texture``: the HDRI replaces ``color`` and is importance sampled
+    (next-event estimation combined with BSDF sampling by MIS)."""
     color: RGB = (0.05, 0.05, 0.05)
+    texture: Optional[EnvironmentTexture] = None
 
 
 # ----------------------------------------------------------------------------
@@ -220,7 +408,8 @@ class RenderSettings:
     added between two progress callbacks.  max_bounces follows Cycles: the
     number of indirect bounces, so 0 is direct lighting only (light sampling
     at the first hit, emission found by its BSDF sample).  light_selection: 'uniform',
-    'power' or 'all'.  strategy: 'mis', 'light' (NEE only) or 'bsdf'.
+    'power', 'all' or 'tree' (a light tree: by each light's estimated
+    contribution at the shading point; for scenes with many lights).  strategy: 'mis', 'light' (NEE only) or 'bsdf'.
     clamp: 0 disables clamping of a sample's radiance.  max_paths bounds the
     number of paths in flight (memory); threads 0 = every core.
     time_limit: seconds (0 = none); stops after the pass that crosses it.
@@ -239,6 +428,11 @@ class RenderSettings:
     max_paths: int = 1 << 18
     threads: int = 0
     time_limit: float = 0.0
+    # Sample an HDRI world by max(L - mean, 0) instead of L (MIS compensation,
+    # Karlik et al. 2019): BSDF sampling covers the dim parts, NEE spends its
+    # samples on what stands out.  Only with strategy 'mis' (NEE alone would
+    # miss the dim parts).
+    mis_compensation: bool = True
 
 
 @dataclass

@@ -1,8 +1,11 @@
 """Input checks with messages a user can act on (raised as SceneError)."""
 import numpy as np
 
-from .scene import (AREA_SHAPES, LOBE_KINDS, AreaLight, PointLight, SceneError,
-                    SpotLight, SunLight)
+from .scene import (AREA_SHAPES, ENV_INTERPOLATIONS, LOBE_KINDS, AreaLight, PointLight,
+                    SceneError, SpotLight, SunLight)
+
+from . import scene as _scene
+from .textures import is_texture
 
 
 def _array(value, what, shape_tail, kinds):
@@ -71,16 +74,41 @@ def _rgb(value, what):
 
 def validate_material(mat, index):
     what = f"material {index} ({mat.name!r})"
-    _rgb(mat.emission, f"{what} emission")
+    _color_param(mat.emission, f"{what} emission")
+    if getattr(mat, "normal", None) is not None:
+        validate_normal(mat.normal, f"{what} normal")
     for k, lobe in enumerate(mat.lobes):
         if lobe.kind not in LOBE_KINDS:
             raise SceneError(f"{what}: lobe {k} has unknown kind {lobe.kind!r} "
                              f"(expected one of {LOBE_KINDS})")
-        _rgb(lobe.color, f"{what} lobe {k} colour")
-        if lobe.fresnel not in ("none", "schlick"):
-            raise SceneError(f"{what}: lobe {k} has unknown fresnel {lobe.fresnel!r}")
-        if not np.isfinite(lobe.roughness):
+        _color_param(lobe.color, f"{what} lobe {k} colour")
+        if lobe.fresnel not in _scene.FRESNEL_MODES:
+            raise SceneError(f"{what}: lobe {k} has unknown fresnel {lobe.fresnel!r} "
+                             f"(expected one of {_scene.FRESNEL_MODES})")
+        if is_texture(lobe.roughness):
+            validate_texture(lobe.roughness, f"{what} lobe {k} roughness")
+        elif not np.isfinite(lobe.roughness):
             raise SceneError(f"{what}: lobe {k} roughness is not finite")
+        _validate_lobe_extras(lobe, k, what, len(mat.lobes))
+
+
+def _validate_lobe_extras(lobe, k, what, n_lobes):
+    """The Fresnel, IOR, layering and weight parameters of a lobe."""
+    for name in ("ior", "weight"):
+        value = getattr(lobe, name, None)
+        if value is not None and not is_texture(value) and not np.isfinite(value):
+            raise SceneError(f"{what}: lobe {k} {name} is not finite")
+    ior = getattr(lobe, "ior", 1.5)
+    if not is_texture(ior) and ior <= 0:
+        raise SceneError(f"{what}: lobe {k} IOR must be > 0, got {ior}")
+    for name in ("f0", "edge_tint", "transmission_tint", "absorb"):
+        value = getattr(lobe, name, None)
+        if value is not None:
+            _color_param(value, f"{what} lobe {k} {name}")
+    covers = getattr(lobe, "covers", 0)
+    if not 0 <= covers < n_lobes - k:
+        raise SceneError(f"{what}: lobe {k} covers {covers} lobes, but only "
+                         f"{n_lobes - k - 1} follow it")
 
 
 def validate_light(light, index):
@@ -113,6 +141,31 @@ def validate_light(light, index):
         raise SceneError(f"{what}: unknown light type {type(light).__name__}")
 
 
+def validate_world(world):
+    _rgb(world.color, "world colour")
+    tex = world.texture
+    if tex is None:
+        return
+    what = f"world texture {tex.name!r}"
+    px = np.asarray(tex.pixels)
+    if px.dtype.kind != "f":
+        raise SceneError(f"{what}: pixels must be a float array, got dtype {px.dtype}")
+    if px.ndim != 3 or px.shape[2] != 3 or px.shape[0] < 1 or px.shape[1] < 1:
+        raise SceneError(f"{what}: pixels must have shape (H, W, 3), got {px.shape}")
+    _finite(px, f"{what} pixels")
+    if not np.isfinite(tex.strength):
+        raise SceneError(f"{what}: strength is not finite")
+    m = np.asarray(tex.matrix, dtype=np.float64)
+    if m.shape != (3, 3):
+        raise SceneError(f"{what}: matrix must be 3x3, got {m.shape}")
+    _finite(m, f"{what} matrix")
+    if abs(np.linalg.det(m)) < 1e-12 * max(1.0, np.abs(m).max()) ** 3:
+        raise SceneError(f"{what}: matrix is singular (a Mapping scale of 0?)")
+    if tex.interpolation not in ENV_INTERPOLATIONS:
+        raise SceneError(f"{what}: unknown interpolation {tex.interpolation!r} "
+                         f"(expected one of {ENV_INTERPOLATIONS})")
+
+
 def validate_camera(cam):
     m = np.asarray(cam.matrix, dtype=np.float64)
     if m.shape != (4, 4):
@@ -134,7 +187,7 @@ def validate_camera(cam):
 def validate_settings(s):
     if s.samples < 1:
         raise SceneError("settings: samples must be >= 1")
-    if s.light_selection not in ("uniform", "power", "all"):
+    if s.light_selection not in ("uniform", "power", "all", "tree"):
         raise SceneError(f"settings: unknown light selection {s.light_selection!r}")
     if s.strategy not in ("mis", "light", "bsdf"):
         raise SceneError(f"settings: unknown strategy {s.strategy!r}")
@@ -155,5 +208,79 @@ def validate_scene(scene):
         validate_material(mat, i)
     for i, light in enumerate(scene.lights):
         validate_light(light, i)
-    _rgb(scene.world.color, "world colour")
+    validate_world(scene.world)
     validate_camera(scene.camera)
+
+
+# ----------------------------------------------------------------------------
+# Texture expressions
+
+def _color_param(value, what):
+    if is_texture(value):
+        validate_texture(value, what)
+    else:
+        _rgb(value, what)
+
+
+def validate_image(image, what):
+    what = f"{what} image {image.name!r}"
+    px = np.asarray(image.pixels)
+    if px.dtype.kind not in "fiu":
+        raise SceneError(f"{what}: pixels must be numbers, got dtype {px.dtype}")
+    if px.ndim not in (2, 3) or px.shape[0] < 1 or px.shape[1] < 1 or (px.ndim == 3 and not 1 <= px.shape[2] <= 4):
+        raise SceneError(f"{what}: pixels must have shape (H, W) or (H, W, 1..4), got {px.shape}")
+    _finite(px, f"{what} pixels")
+    if image.alpha_mode not in _scene.ALPHA_MODES:
+        raise SceneError(f"{what}: unknown alpha mode {image.alpha_mode!r} (expected one of {_scene.ALPHA_MODES})")
+
+
+def _choice(value, allowed, what, name):
+    if value not in allowed:
+        raise SceneError(f"{what}: unknown {name} {value!r} (expected one of {allowed})")
+
+
+def validate_texture(expr, what):
+    """A texture expression (or constant operand): enums, images, operands."""
+    if isinstance(expr, _scene.ImageTexture):
+        validate_image(expr.image, what)
+        _choice(expr.interpolation, _scene.INTERPOLATIONS, what, "interpolation")
+        _choice(expr.extension, _scene.EXTENSIONS, what, "extension")
+        _choice(expr.output, ("Color", "Alpha"), what, "image output")
+        if expr.uv is not None:
+            validate_texture(expr.uv, f"{what} vector")
+    elif isinstance(expr, _scene.MixColor):
+        _choice(expr.blend, _scene.MIX_BLENDS, what, "mix blend")
+        for name in ("fac", "a", "b"):
+            validate_texture(getattr(expr, name), f"{what} mix {name}")
+    elif isinstance(expr, _scene.Math):
+        _choice(expr.operation, _scene.MATH_OPERATIONS, what, "math operation")
+        for name in ("a", "b", "c"):
+            validate_texture(getattr(expr, name), f"{what} math {name}")
+    elif isinstance(expr, (_scene.NormalMap, _scene.Bump)):
+        raise SceneError(f"{what}: a {type(expr).__name__} gives a normal, not a colour or value")
+    else:
+        arr = np.asarray(expr, dtype=np.float64) if _numeric(expr) else None
+        if arr is None or arr.shape not in ((), (3,)):
+            raise SceneError(f"{what}: expected a number, an RGB triple or a texture, got {expr!r}")
+        _finite(arr, what)
+
+
+def _numeric(value):
+    try:
+        np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
+def validate_normal(expr, what):
+    if isinstance(expr, _scene.NormalMap):
+        validate_texture(expr.color, f"{what} normal map colour")
+        validate_texture(expr.strength, f"{what} normal map strength")
+    elif isinstance(expr, _scene.Bump):
+        for name in ("height", "strength", "distance"):
+            validate_texture(getattr(expr, name), f"{what} bump {name}")
+        if expr.normal is not None:
+            validate_normal(expr.normal, what)
+    else:
+        raise SceneError(f"{what}: expected a NormalMap or Bump, got {type(expr).__name__}")

@@ -38,6 +38,7 @@ class InstanceCollector:
             matrix=np.array(inst.matrix_world, dtype=np.float64),
             materials=self.material_index(obj),
             name=obj.name,
+            **ray_visibility(inst),
         ))
 
     def _mesh_id(self, obj):
@@ -56,6 +57,23 @@ class InstanceCollector:
                 self.mesh_of_key[key] = len(self.meshes)
                 self.meshes.append(mesh)
         return self.mesh_of_key[key]
+
+
+VISIBILITY_FLAGS = ('visible_camera', 'visible_diffuse', 'visible_glossy', 'visible_transmission',
+                    'visible_shadow')
+
+
+def ray_visibility(inst):
+    """Object > Visibility > Ray Visibility as engine Instance fields.  An
+    instance is hidden from the rays its instancer is hidden from (Cycles)."""
+    flags = {}
+    parent = inst.parent if inst.is_instance else None
+    for name in VISIBILITY_FLAGS:
+        visible = bool(getattr(inst.object, name, True))
+        if parent is not None:
+            visible = visible and bool(getattr(parent, name, True))
+        flags[name] = visible
+    return flags
 
 
 def _geometry_name(obj):

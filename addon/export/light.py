@@ -45,16 +45,32 @@ def _point_fields(light, matrix):
     )
 
 
-def light_from_blender(light, matrix, name, visible_camera=False):
+def light_from_blender(light, matrix, name, visible_camera=False, visibility=None):
     """Translate one light data block placed at ``matrix`` (4x4 NumPy).
 
     visible_camera is the object's camera ray visibility (off by default for
-    Blender lights); passed on when the engine's light types have the field.
+    Blender lights); visibility: the object's other ray visibility flags
+    (visible_diffuse, visible_glossy, visible_transmission).  The engine's
+    visible_shadow is the light's Cast Shadow: Cycles ignores the light
+    object's Shadow ray visibility (measured in bpy 5.0).  Each is passed
+    on when the engine's light types have the field.
     """
-    light = _translate(light, matrix, name)
-    if 'visible_camera' in {f.name for f in dataclasses.fields(light)}:
-        light.visible_camera = bool(visible_camera)
+    data = light
+    light = _translate(data, matrix, name)
+    flags = dict(visibility or {}, visible_camera=visible_camera, visible_shadow=_casts_shadow(data))
+    names = {f.name for f in dataclasses.fields(light)}
+    for key, value in flags.items():
+        if key in names:
+            setattr(light, key, bool(value))
     return light
+
+
+def _casts_shadow(light):
+    """Cycles' Cast Shadow: light.cycles.cast_shadow in 3.x, use_shadow in 4.x+."""
+    cycles = getattr(light, 'cycles', None)
+    if LEGACY_LIGHT_UNITS and cycles is not None and hasattr(cycles, 'cast_shadow'):
+        return bool(cycles.cast_shadow)
+    return bool(getattr(light, 'use_shadow', True))
 
 
 def _translate(light, matrix, name):
@@ -89,8 +105,10 @@ def collect_lights(depsgraph):
             continue
         matrix = np.array(inst.matrix_world, dtype=np.float64)
         try:
+            visibility = {key: getattr(obj, key, True)
+                          for key in ('visible_diffuse', 'visible_glossy', 'visible_transmission')}
             light = light_from_blender(obj.data, matrix, obj.name,
-                                       getattr(obj, 'visible_camera', False))
+                                       getattr(obj, 'visible_camera', False), visibility)
         except ValueError as err:
             warnings.append(f"Light '{obj.name}' skipped: it {err}")
             continue

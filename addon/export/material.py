@@ -6,14 +6,20 @@ A node Ember cannot translate becomes a grey diffuse (or a diffuse of the
 node's Color input) and is named in one warning per material.  Texture inputs
 are read as their unlinked default value, also with a warning.
 """
+import dataclasses
+import math
 from dataclasses import dataclass, field
 
+from . import nodes
+
 GREY = (0.8, 0.8, 0.8)
-# Principled BSDF inputs (3.x and 4.x names) whose layers are not rendered yet.
+# Principled BSDF inputs (3.x and 4.x names) whose features are not rendered
+# yet (subsurface scattering renders as diffuse; anisotropy as isotropic).
 PRINCIPLED_UNSUPPORTED = (
-    'Subsurface', 'Subsurface Weight', 'Transmission', 'Transmission Weight',
-    'Clearcoat', 'Coat Weight', 'Sheen', 'Sheen Weight',
+    'Subsurface', 'Subsurface Weight', 'Anisotropic', 'Diffuse Roughness', 'Thin Film Thickness',
 )
+# Weights below this are no closure in Cycles (CLOSURE_WEIGHT_CUTOFF).
+CUTOFF = 1e-5
 BLACK = (0.0, 0.0, 0.0)
 
 
@@ -24,29 +30,25 @@ class Closure:
     emission: tuple = BLACK
 
     def scaled(self, weight):
-        scene = _scene()
-        lobes = [scene.Lobe(lobe.kind, _scale(lobe.color, weight), lobe.roughness, lobe.fresnel)
-                 for lobe in self.lobes]
+        """Every lobe and the emission times a Mix Shader factor.  A lobe's
+        weight carries it (its colour also enters Fresnel, multiscatter and
+        layering terms, which a mix must not change)."""
+        lobes = [dataclasses.replace(lobe, weight=lobe.weight * weight) for lobe in self.lobes]
         return Closure(lobes, _scale(self.emission, weight))
 
     def plus(self, other):
         return Closure(self.lobes + other.lobes, _add(self.emission, other.emission))
 
 
-def _scale(color, weight):
-    return tuple(float(c) * weight for c in color)
-
-
-def _add(a, b):
-    return tuple(float(x) + float(y) for x, y in zip(a, b))
-
-
-def _mix(a, b, t):
-    return tuple((1.0 - t) * float(x) + t * float(y) for x, y in zip(a, b))
-
-
-def _clamp01(value):
-    return min(max(float(value), 0.0), 1.0)
+# Colours and roughness may be texture expressions: nodes' helpers combine
+# constants and expressions alike.
+_scale = nodes.scale
+_add = nodes.add
+_mix = nodes.mix
+_clamp01 = nodes.clamp01
+# Float inputs read as textures; the others are compared or combined as
+# numbers by the BSDF translation, so a linked one is read as its constant.
+TEXTURE_VALUE_INPUTS = ('Roughness', 'Strength', 'Emission Strength')
 
 
 class NodeTranslator:
@@ -57,6 +59,7 @@ class NodeTranslator:
         self.unsupported = []   # node labels, in order of discovery
         self.textured = []      # "node.input" names read as constants
         self.approximated = []  # Principled BSDF features not rendered yet
+        self.reader = nodes.SocketReader(self._linked_node)
 
     # -- socket values --------------------------------------------------------
 
@@ -75,33 +78,35 @@ class NodeTranslator:
             node, out = link.from_node, link.from_socket
         return node, out
 
-    def color(self, node, name, default=GREY):
+    def _read(self, node, name):
+        """The input's constant or texture expression (nodes.SocketReader);
+        an untranslatable link falls back to the socket's own value."""
         socket = node.inputs.get(name)
-        if socket is None:
-            return default
-        source, _ = self._linked_node(socket)
-        if source is not None:
-            if source.type == 'RGB':
-                return tuple(source.outputs[0].default_value)[:3]
+        value = self.reader.read(socket)
+        if value is None:
             self._note_texture(node, name)
-        value = socket.default_value
-        if isinstance(value, float):
-            return (value, value, value)
-        return tuple(value)[:3]
+            value = nodes.constant(socket)
+        return value
+
+    def color(self, node, name, default=GREY):
+        """RGB tuple or texture expression."""
+        if node.inputs.get(name) is None:
+            return default
+        value = self._read(node, name)
+        return (value, value, value) if isinstance(value, float) else value
 
     def value(self, node, name, default=0.0):
+        """A float; a texture expression for TEXTURE_VALUE_INPUTS."""
         socket = node.inputs.get(name)
         if socket is None:
             return default
-        source, _ = self._linked_node(socket)
-        if source is not None:
-            if source.type == 'VALUE':
-                return float(source.outputs[0].default_value)
+        value = self._read(node, name)
+        if nodes.is_expr(value) and name not in TEXTURE_VALUE_INPUTS:
             self._note_texture(node, name)
-        value = socket.default_value
-        if not isinstance(value, float):
-            value = sum(tuple(value)[:3]) / 3.0
-        return float(value)
+            value = nodes.constant(socket)
+        if nodes.is_expr(value):
+            return value
+        return nodes.luminance(value) if isinstance(value, tuple) else float(value)
 
     def _note_texture(self, node, name):
         label = f"{node.name}.{name}"
@@ -135,39 +140,120 @@ class NodeTranslator:
     def _node_bsdf_diffuse(self, node):
         return Closure([_scene().Lobe('diffuse', self.color(node, 'Color'))])
 
+    def _multiscatter(self, node):
+        """Multiscatter GGX (Blender 5.0's default) or single-scatter GGX;
+        Beckmann and Ashikhmin-Shirley are rendered as GGX, with a warning."""
+        dist = getattr(node, 'distribution', 'GGX')
+        if dist not in ('GGX', 'MULTI_GGX', 'SHARP'):
+            self._approximate(node, f"{dist.title()} as GGX")
+        return dist == 'MULTI_GGX'
+
+    def _approximate(self, node, what):
+        label = f"'{node.name}' ({what})"
+        if label not in self.approximated:
+            self.approximated.append(label)
+
     def _node_bsdf_glossy(self, node):
         roughness = _clamp01(self.value(node, 'Roughness', 0.5))
-        return Closure([_scene().Lobe('glossy', self.color(node, 'Color'), roughness, 'none')])
+        if 'Anisotropy' in node.inputs and self.value(node, 'Anisotropy', 0.0) != 0.0:
+            self._approximate(node, "Anisotropy")
+        return Closure([_scene().Lobe('glossy', self.color(node, 'Color'), roughness, 'none',
+                                      multiscatter=self._multiscatter(node))])
 
     # Blender 5.0 registers the Glossy BSDF under the anisotropic type.
     _node_bsdf_anisotropic = _node_bsdf_glossy
+
+    def _node_bsdf_glass(self, node):
+        """Cycles' Glass BSDF: the colour tints reflection and refraction."""
+        roughness = _clamp01(self.value(node, 'Roughness', 0.0))
+        ior = max(self.value(node, 'IOR', 1.5), 1e-5)
+        return Closure([_scene().Lobe('glass', self.color(node, 'Color', (1.0, 1.0, 1.0)), roughness,
+                                      'dielectric', ior=ior, multiscatter=self._multiscatter(node))])
+
+    def _node_bsdf_refraction(self, node):
+        """Refraction only, no Fresnel (total internal reflection absorbs)."""
+        roughness = _clamp01(self.value(node, 'Roughness', 0.0))
+        ior = max(self.value(node, 'IOR', 1.5), 1e-5)
+        self._multiscatter(node)
+        return Closure([_scene().Lobe('refraction', self.color(node, 'Color', (1.0, 1.0, 1.0)),
+                                      roughness, ior=ior)])
+
+    def _node_bsdf_translucent(self, node):
+        return Closure([_scene().Lobe('translucent', self.color(node, 'Color'))])
+
+    def _node_bsdf_transparent(self, node):
+        return Closure([_scene().Lobe('transparent', self.color(node, 'Color', (1.0, 1.0, 1.0)))])
+
+    def _node_bsdf_sheen(self, node):
+        """Blender 4.0+ Sheen BSDF (Microfiber: Cycles' LTC sheen)."""
+        roughness = _clamp01(self.value(node, 'Roughness', 0.5))
+        return Closure([_scene().Lobe('sheen', self.color(node, 'Color'), roughness)])
 
     def _node_emission(self, node):
         strength = self.value(node, 'Strength', 1.0)
         return Closure([], _scale(self.color(node, 'Color', (1.0, 1.0, 1.0)), strength))
 
     def _node_bsdf_principled(self, node):
-        scene = _scene()
-        base = self.color(node, 'Base Color')
-        metallic = _clamp01(self.value(node, 'Metallic', 0.0))
-        roughness = _clamp01(self.value(node, 'Roughness', 0.5))
-        f0 = _dielectric_f0(self, node)
-        specular = _mix((f0, f0, f0), base, metallic)
-        diffuse = _scale(base, 1.0 - metallic)
-        lobes = [scene.Lobe('glossy', specular, roughness, 'schlick')]
-        if metallic < 1.0:
-            lobes.insert(0, scene.Lobe('diffuse', diffuse))
+        """Cycles' Principled BSDF (svm/closure.h): transparency, then sheen
+        over coat over [metal | transmission | specular over diffuse], each
+        layer weighing down what it covers by its albedo."""
+        p = _principled_inputs(self, node)
         self._note_principled_features(node)
-        return Closure(lobes, _principled_emission(self, node))
+        top = self._principled_layers(p)
+        base = self._principled_base(p)
+        for i, lobe in enumerate(top):
+            top[i] = dataclasses.replace(lobe, covers=len(top) - 1 - i + len(base))
+        lobes = top + base
+        if p['alpha'] < 1.0:
+            lobes = [_scene().Lobe('transparent', (1.0, 1.0, 1.0), weight=1.0 - p['alpha'])] + lobes
+        return Closure(lobes, _scale(_principled_emission(self, node), p['alpha']))
+
+    def _principled_layers(self, p):
+        """Sheen and coat, the layers on top (covers set by the caller)."""
+        scene = _scene()
+        layers = []
+        if p['sheen'] > CUTOFF:
+            layers.append(scene.Lobe('sheen', _scale(p['sheen_tint'], p['sheen']), p['sheen_roughness'],
+                                     weight=p['alpha']))
+        if p['coat'] > CUTOFF:
+            layers.append(scene.Lobe('glossy', (p['coat'],) * 3, p['coat_roughness'], 'dielectric',
+                                     ior=p['coat_ior'], multiscatter=True, absorb=p['coat_tint'],
+                                     weight=p['alpha']))
+        return layers
+
+    def _principled_base(self, p):
+        """Metal, transmission, specular layer and diffuse, with their weights."""
+        scene = _scene()
+        lobes = []
+        w = p['alpha']
+        ms = p['multiscatter']
+        if p['metallic'] > CUTOFF:
+            lobes.append(scene.Lobe('glossy', (1.0, 1.0, 1.0), p['roughness'], 'f82', f0=p['base_clamped'],
+                                    edge_tint=_clamp_color(p['specular_tint']), multiscatter=ms,
+                                    weight=w * p['metallic']))
+            w *= 1.0 - p['metallic']
+        if p['transmission'] > CUTOFF and w > 0:
+            f0 = _clamp_color(_scale(p['specular_tint'], _f0_from_ior(p['ior'])))
+            lobes.append(scene.Lobe('glass', (1.0, 1.0, 1.0), p['roughness'], 'dielectric', ior=p['ior'],
+                                    f0=f0, transmission_tint=_sqrt_color(p['base_clamped']),
+                                    multiscatter=ms, weight=w * p['transmission']))
+            w *= 1.0 - p['transmission']
+        if w <= 0:
+            return lobes
+        eta, f0 = p['specular_eta'], p['specular_f0']
+        if eta != 1.0:
+            lobes.append(scene.Lobe('glossy', (1.0, 1.0, 1.0), p['roughness'], 'dielectric', ior=eta,
+                                    f0=_clamp_color(_scale(p['specular_tint'], f0)), covers=1,
+                                    multiscatter=ms, weight=w))
+        lobes.append(scene.Lobe('diffuse', p['base'], weight=w))
+        return lobes
 
     def _note_principled_features(self, node):
-        """Name the Principled layers in use that Ember does not render yet."""
+        """Name the Principled features in use that Ember does not render yet."""
         used = [name.split()[0] for name in PRINCIPLED_UNSUPPORTED
                 if name in node.inputs and self.value(node, name, 0.0) > 0.0]
-        if 'Alpha' in node.inputs and self.value(node, 'Alpha', 1.0) < 1.0:
-            used.append('Alpha')
         if used:
-            self.approximated.append(f"'{node.name}' ({', '.join(used)})")
+            self._approximate(node, ', '.join(used))
 
     def _node_mix_shader(self, node):
         fac = _clamp01(self.value(node, 'Fac', 0.5))
@@ -189,22 +275,97 @@ class NodeTranslator:
             parts.append("Principled BSDF " + ", ".join(self.approximated) + " not rendered yet")
         if self.textured:
             parts.append("linked input " + ", ".join(self.textured) + " read as its constant value")
+        if self.reader.unsupported:
+            parts.append("texture node " + ", ".join(self.reader.unsupported) + " not translated")
+        parts += self.reader.warnings
         if not parts:
             return None
         return f"Material '{self.material_name}': " + "; ".join(parts)
 
 
-def _dielectric_f0(translator, node):
-    """Reflectance at normal incidence of the Principled BSDF's specular layer.
+def _f0_from_ior(ior):
+    return ((ior - 1.0) / (ior + 1.0)) ** 2
 
-    4.x: from the IOR, scaled by 2 * Specular IOR Level (0.5 keeps it as is).
-    3.x: 0.08 * Specular (0.5 -> 0.04, i.e. IOR 1.5).
-    """
+
+def _ior_from_f0(f0):
+    s = math.sqrt(min(max(f0, 0.0), 0.99))
+    return (1.0 + s) / (1.0 - s)
+
+
+def _clamp_color(color):
+    if nodes.is_expr(color):
+        return color
+    return tuple(min(max(float(c), 0.0), 1.0) for c in color)
+
+
+def _sqrt_color(color):
+    """sqrt of a colour (Cycles' transmission tint); a textured colour is
+    used as it is (expressions have no square root yet)."""
+    if nodes.is_expr(color):
+        return color
+    return tuple(math.sqrt(max(float(c), 0.0)) for c in color)
+
+
+def _first_input(translator, node, names, default, color=False):
+    """The first of ``names`` the node has (4.x name first, then 3.x)."""
+    for name in names:
+        if name in node.inputs:
+            return translator.color(node, name, default) if color else translator.value(node, name, default)
+    return default
+
+
+def _specular(translator, node, ior):
+    """IOR and F0 of the Principled specular layer.
+
+    4.x: F0 of the IOR times 2 * Specular IOR Level (0.5 keeps it), the IOR
+    recomputed from that F0 (Cycles' svm_node_closure_bsdf).
+    3.x: F0 = 0.08 * Specular (0.5 -> 0.04, i.e. IOR 1.5)."""
     if 'Specular IOR Level' in node.inputs:
-        ior = max(translator.value(node, 'IOR', 1.5), 1.0)
         level = max(translator.value(node, 'Specular IOR Level', 0.5), 0.0)
-        return ((ior - 1.0) / (ior + 1.0)) ** 2 * 2.0 * level
-    return 0.08 * max(translator.value(node, 'Specular', 0.5), 0.0)
+        f0 = _f0_from_ior(ior)
+        if level == 0.5:
+            return ior, f0
+        f0 *= 2.0 * level
+        eta = _ior_from_f0(f0)
+        return (1.0 / eta if ior < 1.0 else eta), f0
+    f0 = 0.08 * max(translator.value(node, 'Specular', 0.5), 0.0)
+    return (_ior_from_f0(f0) if f0 > 0 else 1.0), f0
+
+
+def _principled_inputs(translator, node):
+    """The Principled BSDF's inputs, clamped as Cycles does, for 4.x and the
+    3.x names (3.x float tints become white: the 4.x model has colour tints)."""
+    t = translator
+    base = _first_input(t, node, ('Base Color',), GREY, color=True)
+    ior = max(t.value(node, 'IOR', 1.45), 1e-5)
+    tint = t.color(node, 'Specular Tint', (1.0, 1.0, 1.0)) if 'Specular IOR Level' in node.inputs \
+        else (1.0, 1.0, 1.0)
+    eta, f0 = _specular(t, node, ior)
+    sheen_tint = (1.0, 1.0, 1.0)
+    if 'Sheen Weight' in node.inputs:
+        sheen_tint = t.color(node, 'Sheen Tint', (1.0, 1.0, 1.0))
+    return {
+        'base': _max0(base), 'base_clamped': _clamp_color(_max0(base)),
+        'metallic': _clamp01(t.value(node, 'Metallic', 0.0)),
+        'roughness': _clamp01(t.value(node, 'Roughness', 0.5)),
+        'ior': ior, 'specular_tint': _max0(tint), 'specular_eta': eta, 'specular_f0': f0,
+        'transmission': _clamp01(_first_input(t, node, ('Transmission Weight', 'Transmission'), 0.0)),
+        'coat': max(_first_input(t, node, ('Coat Weight', 'Clearcoat'), 0.0), 0.0),
+        'coat_roughness': _clamp01(_first_input(t, node, ('Coat Roughness', 'Clearcoat Roughness'), 0.03)),
+        'coat_ior': max(_first_input(t, node, ('Coat IOR',), 1.5), 1.0),
+        'coat_tint': _max0(_first_input(t, node, ('Coat Tint',), (1.0, 1.0, 1.0), color=True)),
+        'sheen': max(_first_input(t, node, ('Sheen Weight', 'Sheen'), 0.0), 0.0),
+        'sheen_roughness': _clamp01(_first_input(t, node, ('Sheen Roughness',), 0.5)),
+        'sheen_tint': _max0(sheen_tint),
+        'alpha': _clamp01(t.value(node, 'Alpha', 1.0)) if 'Alpha' in node.inputs else 1.0,
+        'multiscatter': getattr(node, 'distribution', 'GGX') == 'MULTI_GGX',
+    }
+
+
+def _max0(color):
+    if nodes.is_expr(color):
+        return color
+    return tuple(max(float(c), 0.0) for c in color)
 
 
 def _principled_emission(translator, node):
@@ -238,7 +399,32 @@ def translate(material):
     if output is None:
         return scene.Material(name, ()), f"Material '{name}': no Material Output node, rendered black"
     closure = translator.surface(output.inputs['Surface'])
-    return scene.Material(name, tuple(closure.lobes), closure.emission), translator.warning()
+    normal = _material_normal(translator, output)
+    if nodes.is_expr(closure.emission):
+        translator.reader.warnings.append("textured emission rendered with its mean colour")
+    return (scene.Material(name, tuple(closure.lobes), closure.emission, normal=normal),
+            translator.warning())
+
+
+def _material_normal(translator, output):
+    """The normal map / bump of the first shader node (through Mix and Add
+    Shaders) whose Normal input is linked: Ember has one normal per material."""
+    found = []
+    stack = [output.inputs['Surface']]
+    while stack:
+        node, _ = translator._linked_node(stack.pop())
+        if node is None or node.mute:
+            continue
+        if node.type in ('MIX_SHADER', 'ADD_SHADER'):
+            stack += [s for s in reversed(node.inputs) if s.type == 'SHADER']
+        elif 'Normal' in node.inputs and node.inputs['Normal'].is_linked:
+            found.append(node)
+    if not found:
+        return None
+    if len(found) > 1:
+        translator.reader.warnings.append(
+            "one normal per material: the normal input of '" + found[0].name + "' is used for all shaders")
+    return translator.reader.normal(found[0].inputs['Normal'])
 
 
 class MaterialTable:

@@ -54,7 +54,37 @@ def _corner_uvs(mesh, loops):
     return uv[loops]
 
 
-def mesh_from_blender(mesh, name):
+def _corner_tangents(mesh, loops):
+    """MikkTSpace tangents of the active UV map and bitangent signs per
+    corner, ((T, 3, 3), (T, 3)), as Cycles uses for normal maps; (None, None)
+    without UVs or where Blender cannot compute them (n-gons before 4.x):
+    the renderer then uses per-triangle UV tangents."""
+    layer = mesh.uv_layers.active
+    if layer is None:
+        return None, None
+    try:
+        mesh.calc_tangents(uvmap=layer.name)
+    except RuntimeError:
+        return None, None
+    try:
+        count = len(mesh.loops)
+        tangents = _get(mesh.loops, 'tangent', count, 3, np.float32)
+        signs = _get(mesh.loops, 'bitangent_sign', count, 1, np.float32)
+    finally:
+        mesh.free_tangents()
+    return tangents[loops], signs[loops]
+
+
+def needs_tangents(obj):
+    """True if a material of the object uses a tangent-space Normal Map node."""
+    for slot in getattr(obj, 'material_slots', ()):
+        tree = getattr(slot.material, 'node_tree', None) if slot.material else None
+        if tree is not None and any(n.type == 'NORMAL_MAP' and n.space == 'TANGENT' for n in tree.nodes):
+            return True
+    return False
+
+
+def mesh_from_blender(mesh, name, tangents=False):
     """Copy a triangulated Blender mesh into an engine Mesh.
 
     Returns None for geometry without triangles (empty meshes, edges, points),
@@ -69,6 +99,7 @@ def mesh_from_blender(mesh, name):
     triangles = _get(mesh.loop_triangles, 'vertices', tri_count, 3, np.int32)
     loops = _get(mesh.loop_triangles, 'loops', tri_count, 3, np.int32)
     slots = _get(mesh.loop_triangles, 'material_index', tri_count, 1, np.int32)
+    corner_tangents, signs = _corner_tangents(mesh, loops) if tangents else (None, None)
     return scene.Mesh(
         positions=positions,
         triangles=triangles,
@@ -76,6 +107,8 @@ def mesh_from_blender(mesh, name):
         uvs=_corner_uvs(mesh, loops),
         material_slots=slots if slots.any() else None,
         name=name,
+        tangents=corner_tangents,
+        tangent_signs=signs,
     )
 
 
@@ -87,12 +120,12 @@ def mesh_from_object(obj, name):
     """
     if obj.type == 'MESH':
         # The evaluated mesh already has the modifiers applied: no copy needed.
-        return mesh_from_blender(obj.data, name)
+        return mesh_from_blender(obj.data, name, needs_tangents(obj))
     mesh = obj.to_mesh()
     try:
         if mesh is None:
             return None
-        return mesh_from_blender(mesh, name)
+        return mesh_from_blender(mesh, name, needs_tangents(obj))
     finally:
         obj.to_mesh_clear()
 

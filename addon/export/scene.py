@@ -70,7 +70,9 @@ def render_settings(scene, is_preview=False):
         strategy=settings.strategy.lower(),
         clamp=settings.clamp,
         filter_type=settings.filter_type,
-        filter_width=settings.filter_width,
+        # Cycles ignores the width of its box filter: always one pixel.
+        filter_width=1.0 if settings.filter_type == 'BOX' else settings.filter_width,
+        mis_compensation=settings.mis_compensation,
         transparent=bool(scene.render.film_transparent),
         threads=settings.threads,
         time_limit=0.0 if is_preview else settings.time_limit,

@@ -1,11 +1,27 @@
-"""Blender world -> engine.scene.World (a constant background radiance).
+"""Blender world -> engine.scene.World: a constant background or an HDRI.
 
 Radiance = Background colour * strength of the node linked to the World
 Output, as Cycles; without nodes, ``world.color``; no world renders black, as
-in Cycles.  Textures (sky, HDRI) are read as the Background's constant colour
-and reported.
+in Cycles.
+
+The Background's Color may come from an Environment Texture (equirectangular)
+whose Vector is unlinked or comes from a Texture Coordinate node (Generated,
+or Object: the ray direction, through the chosen object's inverse rotation)
+through any number of Mapping nodes.  Mapping rotation and scale become the
+texture's world -> texture matrix (Cycles' svm_mapping and
+euler_to_transform); a location cannot move a direction and is ignored with a
+warning.  As Cycles: a Mapping with nothing linked to its Vector looks up the
+texture at the zero vector (one constant colour), a missing image renders
+magenta.  Anything else linked to the Background (sky, other textures) is read
+as the Background's constant colour and reported.
 """
+import numpy as np
+
+from . import images
+
 BLACK = (0.0, 0.0, 0.0)
+MAGENTA = (1.0, 0.0, 1.0)
+CUBIC = ('Cubic', 'Smart')
 
 
 def _output_node(tree):
@@ -18,14 +34,18 @@ def _output_node(tree):
     return node
 
 
-def _source(socket):
-    """The node feeding a socket, skipping reroutes."""
+def _linked(socket):
+    """(node, output socket) feeding an input, skipping reroutes; (None, None)
+    when unlinked or the link is muted (Cycles then uses the socket's value)."""
     while socket.is_linked:
-        node = socket.links[0].from_node
+        link = socket.links[0]
+        if getattr(link, 'is_muted', False):
+            return None, None
+        node = link.from_node
         if node.type != 'REROUTE':
-            return node
+            return node, link.from_socket
         socket = node.inputs[0]
-    return None
+    return None, None
 
 
 def _constant(node, name):
@@ -34,33 +54,183 @@ def _constant(node, name):
     return value if isinstance(value, float) else tuple(value)[:3]
 
 
-def world_color(world):
-    """Returns (rgb radiance, warning or None)."""
+class _Notes:
+    """Warnings about one world, reported as one sentence."""
+
+    def __init__(self, world):
+        self.world = world
+        self.items = []
+
+    def add(self, text):
+        if text not in self.items:
+            self.items.append(text)
+
+    def message(self):
+        if not self.items:
+            return None
+        return f"World '{self.world.name}': " + "; ".join(self.items)
+
+
+def world_from_blender(world):
+    """Returns (engine World, warning or None)."""
+    from .. import backend
+    scene = backend.scene_module()
     if world is None:
-        return BLACK, None
+        return scene.World(color=BLACK), None
+    notes = _Notes(world)
+    color, texture = _translate(world, notes)
+    return scene.World(color=color, texture=texture), notes.message()
+
+
+def _translate(world, notes):
+    """(constant rgb, EnvironmentTexture or None)."""
     tree = world.node_tree if _uses_nodes(world) else None
     if tree is None:
         return tuple(float(c) for c in world.color), None
     output = _output_node(tree)
     if output is None:
         return BLACK, None
-    node = _source(output.inputs['Surface'])
+    node, _ = _linked(output.inputs['Surface'])
     if node is None:
         return BLACK, None
     if node.type != 'BACKGROUND':
-        return BLACK, f"World '{world.name}': '{node.name}' ({node.bl_idname}) is not supported, world is black"
-    warning = None
-    if node.inputs['Color'].is_linked or node.inputs['Strength'].is_linked:
-        warning = f"World '{world.name}': linked Background inputs are read as their constant values"
-    color, strength = _constant(node, 'Color'), float(_constant(node, 'Strength'))
-    return tuple(float(c) * strength for c in color), warning
+        notes.add(f"'{node.name}' ({node.bl_idname}) is not supported, world is black")
+        return BLACK, None
+    if node.inputs['Strength'].is_linked:
+        notes.add("a linked Background Strength is read as its constant value")
+    strength = float(_constant(node, 'Strength'))
+    color = tuple(float(c) * strength for c in _constant(node, 'Color'))
+    source, out = _linked(node.inputs['Color'])
+    if source is None:
+        return color, None
+    if source.type == 'TEX_ENVIRONMENT' and out.name == 'Color' and not source.mute:
+        return _environment(source, strength, color, notes)
+    notes.add(f"'{source.name}' ({source.bl_idname}) is not supported: the Background's "
+              "constant colour is used")
+    return color, None
 
 
-def world_from_blender(world):
-    """Returns (engine World, warning or None)."""
+def _environment(node, strength, fallback, notes):
+    """The Environment Texture as (constant rgb, EnvironmentTexture or None)."""
     from .. import backend
-    color, warning = world_color(world)
-    return backend.scene_module().World(color=color), warning
+    scene = backend.scene_module()
+    if node.projection != 'EQUIRECTANGULAR':
+        notes.add(f"'{node.name}' {node.projection} projection is not supported: the "
+                  "Background's constant colour is used")
+        return fallback, None
+    pixels, missing = _pixels(node, notes)
+    if missing:
+        return tuple(c * strength for c in MAGENTA), None
+    interpolation = node.interpolation
+    if interpolation in CUBIC:
+        notes.add(f"'{node.name}' {interpolation} interpolation rendered as Linear")
+        interpolation = 'Linear'
+    matrix = _vector_matrix(node, notes)
+    mean = tuple(float(c) * strength for c in pixels.reshape(-1, 3).mean(axis=0))
+    if matrix is None:
+        # Cycles looks up the zero vector: (u, v) = (0, 0), one colour.
+        env = backend.load('environment')
+        value = env.lookup(pixels[::-1], np.zeros(1), np.zeros(1), interpolation == 'Closest')[0]
+        return tuple(float(c) * strength for c in value), None
+    texture = scene.EnvironmentTexture(pixels, strength, matrix, interpolation, name=node.image.name)
+    return mean, texture
+
+
+def _pixels(node, notes):
+    """(H, W, 3) float32 linear pixels, row 0 = top; (None, True) if missing."""
+    if node.image is None:
+        notes.add(f"'{node.name}' has no image: rendered magenta")
+        return None, True
+    pixels, warnings = images.load_image(node.image)
+    for warning in warnings:
+        notes.add(warning)
+    if images.is_missing(pixels, warnings):
+        return None, True
+    pixels = np.asarray(pixels, np.float32)
+    channels = pixels.shape[2]
+    rgb = pixels[..., :3] if channels >= 3 else np.repeat(pixels[..., :1], 3, axis=2)
+    bad = ~np.isfinite(rgb)
+    if bad.any():
+        notes.add(f"image '{node.image.name}' has {int(bad.sum())} NaN or infinite values, read as 0")
+        rgb = np.where(bad, 0.0, rgb)
+    return np.ascontiguousarray(rgb, dtype=np.float32), False
+
+
+# ----------------------------------------------------------------------------
+# Vector input: Texture Coordinate and Mapping nodes -> a 3x3 matrix
+
+def _vector_matrix(env_node, notes):
+    """World direction -> lookup vector; None when a Mapping node's Vector
+    is unlinked (Cycles then looks up the zero vector)."""
+    matrix = np.eye(3)
+    node, out = _linked(env_node.inputs['Vector'])
+    while node is not None and node.type == 'MAPPING' and not node.mute:
+        mapping = node
+        matrix = matrix @ _mapping_matrix(mapping, notes)
+        node, out = _linked(mapping.inputs['Vector'])
+        if node is None:
+            notes.add(f"Mapping '{mapping.name}' Vector is unlinked: one constant colour, as in Cycles")
+            return None
+    if node is None:
+        return matrix
+    if node.type == 'TEX_COORD' and out.name in ('Generated', 'Object') and not node.mute:
+        if out.name == 'Object' and node.object is not None:
+            matrix = matrix @ _object_rotation(node.object, notes)
+        return matrix
+    notes.add(f"'{node.name}' ({node.bl_idname}) output '{out.name}' as the environment "
+              "vector is not supported: the ray direction is used")
+    return matrix
+
+
+def euler_matrix(rotation):
+    """Cycles' euler_to_transform: R = Rz Ry Rx."""
+    cx, cy, cz = np.cos(rotation)
+    sx, sy, sz = np.sin(rotation)
+    return np.array([[cy * cz, sy * sx * cz - cx * sz, sy * cx * cz + sx * sz],
+                     [cy * sz, sy * sx * sz + cx * cz, sy * cx * sz - sx * cz],
+                     [-sy, cy * sx, cy * cx]])
+
+
+def _mapping_matrix(node, notes):
+    """The linear part of Cycles' svm_mapping for one Mapping node."""
+    values = {}
+    for name in ('Location', 'Rotation', 'Scale'):
+        socket = node.inputs.get(name)
+        if socket is None:
+            continue
+        if socket.is_linked:
+            notes.add(f"Mapping '{node.name}' linked {name} is read as its constant value")
+        values[name] = np.array(socket.default_value[:3], float)
+    rot = euler_matrix(values.get('Rotation', np.zeros(3)))
+    scale = values.get('Scale', np.ones(3))
+    kind = node.vector_type
+    location = values.get('Location', np.zeros(3))
+    if kind in ('POINT', 'TEXTURE') and np.any(location != 0):
+        notes.add(f"Mapping '{node.name}' location cannot move a direction and is ignored")
+    if kind in ('TEXTURE', 'NORMAL') and np.any(scale == 0):
+        notes.add(f"Mapping '{node.name}' has a zero scale: ignored")
+        scale = np.ones(3)
+    if kind == 'TEXTURE':
+        return np.diag(1.0 / scale) @ rot.T
+    if kind == 'NORMAL':
+        return rot @ np.diag(1.0 / scale)
+    if np.any(scale == 0):
+        notes.add(f"Mapping '{node.name}' has a zero scale: ignored")
+        scale = np.ones(3)
+    return rot @ np.diag(scale)
+
+
+def _object_rotation(obj, notes):
+    """Object coordinates of a direction: the object's inverse 3x3 (its
+    translation would shift a direction, Ember ignores it)."""
+    m = np.array(obj.matrix_world, float)
+    if abs(np.linalg.det(m[:3, :3])) < 1e-12:
+        notes.add(f"Texture Coordinate object '{obj.name}' has a zero scale: ignored")
+        return np.eye(3)
+    inverse = np.linalg.inv(m)
+    if np.any(np.abs(inverse[:3, 3]) > 1e-9):
+        notes.add(f"Texture Coordinate object '{obj.name}' location is ignored")
+    return inverse[:3, :3]
 
 
 def _uses_nodes(datablock):

@@ -57,7 +57,11 @@ def test_render_settings_follow_scene(factory_scene):
     settings = scene_export.render_settings(factory_scene)
     assert (settings.samples, settings.seed, settings.max_bounces, settings.clamp) == (7, 3, 4, 2.5)
     assert (settings.light_selection, settings.strategy, settings.filter_type) == ('all', 'bsdf', 'BOX')
-    assert settings.filter_width == pytest.approx(0.5) and settings.time_limit == 12.0
+    # Cycles ignores the box filter's width (always one pixel); so does the export.
+    assert settings.filter_width == 1.0 and settings.time_limit == 12.0
+    ember.filter_type = 'GAUSSIAN'
+    assert scene_export.render_settings(factory_scene).filter_width == pytest.approx(0.5)
+    assert settings.mis_compensation is True
     assert settings.transparent
     assert scene_export.render_settings(factory_scene, is_preview=True).samples == ember.preview_samples
 
@@ -383,11 +387,18 @@ def test_principled_translation(factory_scene):
     p.inputs['Emission Strength'].default_value = 2.0
     translated, warning = material_export.translate(material)
     assert warning is None
-    diffuse, glossy = translated.lobes
-    assert diffuse.kind == 'diffuse' and diffuse.color == pytest.approx((0.75, 0.6, 0.15))
-    assert glossy.kind == 'glossy' and glossy.fresnel == 'schlick' and glossy.roughness == pytest.approx(0.3)
-    f0 = 0.04
-    assert glossy.color == pytest.approx(tuple(0.75 * f0 + 0.25 * c for c in (1.0, 0.8, 0.2)), rel=1e-4)
+    # Cycles' Principled BSDF: metal (F82, F0 = base colour) mixed by
+    # Metallic with a specular layer (IOR 1.5 default: F0 0.04) over diffuse.
+    metal, specular, diffuse = translated.lobes
+    assert metal.kind == 'glossy' and metal.fresnel == 'f82' and metal.weight == pytest.approx(0.25)
+    assert metal.f0 == pytest.approx((1.0, 0.8, 0.2)) and metal.roughness == pytest.approx(0.3)
+    assert specular.kind == 'glossy' and specular.fresnel == 'dielectric' and specular.covers == 1
+    assert specular.weight == pytest.approx(0.75) and specular.roughness == pytest.approx(0.3)
+    ior = p.inputs['IOR'].default_value
+    f0 = ((ior - 1) / (ior + 1)) ** 2 if 'Specular IOR Level' in p.inputs else 0.08 * 0.5  # 3.x: Specular
+    assert specular.f0 == pytest.approx((f0,) * 3, rel=1e-4)
+    assert diffuse.kind == 'diffuse' and diffuse.color == pytest.approx((1.0, 0.8, 0.2))
+    assert diffuse.weight == pytest.approx(0.75)
     assert translated.emission == pytest.approx((2.0, 1.0, 0.0))
 
 
@@ -411,16 +422,18 @@ def test_diffuse_glossy_emission_and_mix(factory_scene):
     tree.links.new(add.outputs[0], tree.nodes['Material Output'].inputs['Surface'])
     translated, warning = material_export.translate(material)
     assert warning is None
-    kinds = [(lobe.kind, lobe.color, lobe.roughness) for lobe in translated.lobes]
-    assert kinds[0][0] == 'diffuse' and kinds[0][1] == pytest.approx((0.375,) * 3)
-    assert kinds[1][0] == 'glossy' and kinds[1][1] == pytest.approx((0.25,) * 3)
-    assert kinds[1][2] == pytest.approx(0.2)
+    kinds = [(lobe.kind, lobe.color, lobe.roughness, lobe.weight) for lobe in translated.lobes]
+    # The Mix factor is the lobe's weight (colours stay the nodes' colours).
+    assert kinds[0][0] == 'diffuse' and kinds[0][1] == pytest.approx((0.5,) * 3)
+    assert kinds[0][3] == pytest.approx(0.75)
+    assert kinds[1][0] == 'glossy' and kinds[1][1] == pytest.approx((1.0,) * 3)
+    assert kinds[1][2] == pytest.approx(0.2) and kinds[1][3] == pytest.approx(0.25)
     assert translated.emission == pytest.approx((3.0, 3.0, 3.0))
 
 
 def test_unsupported_nodes_fall_back_with_one_warning(factory_scene):
     material, tree = new_material("Weird")
-    glass = tree.nodes.new('ShaderNodeBsdfGlass')
+    glass = tree.nodes.new('ShaderNodeBsdfToon')
     glass.inputs['Color'].default_value = (0.2, 0.9, 0.3, 1.0)
     noise = tree.nodes.new('ShaderNodeTexNoise')
     mix = tree.nodes.new('ShaderNodeMixShader')
@@ -434,17 +447,38 @@ def test_unsupported_nodes_fall_back_with_one_warning(factory_scene):
     assert len(warnings) == 1
     assert glass.name in warnings[0] and 'Fac' in warnings[0]
     lobes = exported.scene.materials[0].lobes
-    assert lobes[0].kind == 'diffuse' and lobes[0].color == pytest.approx((0.1, 0.45, 0.15))
+    assert lobes[0].kind == 'diffuse' and lobes[0].color == pytest.approx((0.2, 0.9, 0.3))
+    assert lobes[0].weight == pytest.approx(0.5)
 
 
 def test_principled_layers_not_rendered_are_named(factory_scene):
     material, tree = new_material("Glassy")
     principled = tree.nodes['Principled BSDF']
-    name = 'Transmission Weight' if 'Transmission Weight' in principled.inputs else 'Transmission'
+    name = 'Subsurface Weight' if 'Subsurface Weight' in principled.inputs else 'Subsurface'
     principled.inputs[name].default_value = 1.0
     translated, warning = material_export.translate(material)
-    assert warning is not None and 'Transmission' in warning and principled.name in warning
-    assert [lobe.kind for lobe in translated.lobes] == ['diffuse', 'glossy']
+    assert warning is not None and 'Subsurface' in warning and principled.name in warning
+    assert [lobe.kind for lobe in translated.lobes] == ['glossy', 'diffuse']
+
+
+def test_principled_transmission_coat_sheen_alpha(factory_scene):
+    """Every Principled layer Ember renders becomes its lobe, no warning."""
+    material, tree = new_material("Layers")
+    p = tree.nodes['Principled BSDF']
+    four = 'Coat Weight' in p.inputs
+    p.inputs['Transmission Weight' if four else 'Transmission'].default_value = 0.6
+    p.inputs['Coat Weight' if four else 'Clearcoat'].default_value = 0.5
+    p.inputs['Sheen Weight' if four else 'Sheen'].default_value = 0.4
+    p.inputs['Alpha'].default_value = 0.8
+    translated, warning = material_export.translate(material)
+    assert warning is None
+    kinds = [lobe.kind for lobe in translated.lobes]
+    assert kinds == ['transparent', 'sheen', 'glossy', 'glass', 'glossy', 'diffuse']
+    transparent, sheen, coat, glass, specular, diffuse = translated.lobes
+    assert transparent.weight == pytest.approx(0.2)
+    assert sheen.covers == 4 and coat.covers == 3 and specular.covers == 1
+    assert coat.fresnel == 'dielectric' and coat.color == pytest.approx((0.5,) * 3)
+    assert glass.weight == pytest.approx(0.8 * 0.6) and diffuse.weight == pytest.approx(0.8 * 0.4)
 
 
 def test_no_surface_is_black(factory_scene):

@@ -1,0 +1,1 @@
+"""Precomputed tables (tables.npz) and the script that builds them (build_tables)."""

@@ -1,0 +1,164 @@
+"""Equirectangular environment maps (HDRI worlds): lookups as Cycles does
+them, and importance sampling by a piecewise-constant 2D distribution.
+
+Coordinates follow Cycles (kernel/camera/projection.h,
+direction_to_equirectangular): for a lookup vector e,
+
+    u = (pi - atan2(e_y, e_x)) / (2 pi),   v = 1 - acos(e_z / |e|) / pi,
+
+so +X is the middle of the image, +Y a quarter from its left edge, and v = 1
+(the image's top row) is +Z.  Cycles' v counts rows from the bottom (Blender's
+image convention); ``EnvironmentTexture.pixels`` has row 0 at the top, so the
+map flips it once.  Lookups (kernel/device/cpu/image.h) put pixel centres at
+(i + 0.5) / W and wrap periodically in both axes (EXTENSION_REPEAT, which the
+Environment Texture node always uses): bilinear ('Linear') or nearest
+('Closest').
+
+The world direction d becomes the lookup vector e = M d (``matrix``, the
+Mapping node).  Sampling picks (u, v) from a table of luminance x sin(theta)
+over the texture's pixels (pbrt's Distribution2D, Cycles' background map), so
+
+    pdf(d) = pdf_uv / (2 pi^2 sin(theta)) * |det M| / |M d|^3,
+
+the last factor being the Jacobian of d -> M d / |M d| (1 for rotations).
+"""
+import numpy as np
+
+from .sampling import Distribution2D
+from .vec import luminance
+
+TWO_PI_SQ = 2.0 * np.pi * np.pi
+# Wider textures are summed into blocks for the sampling table (Cycles'
+# background map resolution plays the same role): the pdf stays exact, the
+# table small.
+MAX_TABLE_WIDTH = 2048
+
+
+def direction_to_equirect(e):
+    """(u, v) in [0, 1] of lookup vectors e (N, 3), any length > 0."""
+    u = (np.pi - np.arctan2(e[:, 1], e[:, 0])) / (2.0 * np.pi)
+    length = np.sqrt(np.einsum("ij,ij->i", e, e))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos_t = np.clip(e[:, 2] / length, -1.0, 1.0)
+    v = 1.0 - np.arccos(np.where(length > 0, cos_t, 1.0)) / np.pi
+    return u, v
+
+
+def equirect_to_direction(u, v):
+    """Unit directions for (u, v): phi = pi - 2 pi u, theta = pi (1 - v)."""
+    phi = np.pi - 2.0 * np.pi * u
+    theta = np.pi * (1.0 - v)
+    s = np.sin(theta)
+    return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=1)
+
+
+def lookup(image, u, v, closest=False):
+    """Cycles' image lookup at (u, v) of an (H, W, C) image whose row 0 is
+    the bottom (v = 0); periodic wrap in both axes."""
+    h, w = image.shape[:2]
+    x = np.asarray(u, np.float64) * w
+    y = np.asarray(v, np.float64) * h
+    if closest:
+        ix = np.floor(x).astype(np.int64) % w
+        iy = np.floor(y).astype(np.int64) % h
+        return image[iy, ix].astype(np.float64)
+    # Pixel centres at i + 0.5: interpolate between the two nearest.
+    fx, fy = np.floor(x - 0.5), np.floor(y - 0.5)
+    tx, ty = (x - 0.5 - fx)[:, None], (y - 0.5 - fy)[:, None]
+    ix, iy = fx.astype(np.int64) % w, fy.astype(np.int64) % h
+    nix, niy = (ix + 1) % w, (iy + 1) % h
+    bottom = (1.0 - tx) * image[iy, ix] + tx * image[iy, nix]
+    top = (1.0 - tx) * image[niy, ix] + tx * image[niy, nix]
+    return (1.0 - ty) * bottom + ty * top
+
+
+class EnvironmentMap:
+    """An ``EnvironmentTexture`` ready to evaluate and sample.
+
+    compensate: sample max(L - mean, 0) (MIS compensation, Karlik et al.
+    2019) instead of L.  Directions darker than the mean then have pdf 0, so
+    this is only unbiased when BSDF sampling covers them (strategy 'mis').
+    """
+
+    def __init__(self, texture, compensate=False):
+        pixels = np.asarray(texture.pixels, dtype=np.float32)[..., :3]
+        # Row 0 = bottom from here on, as Cycles' v.
+        self.image = np.ascontiguousarray(pixels[::-1] * np.float32(texture.strength))
+        self.closest = texture.interpolation == "Closest"
+        self.matrix = np.asarray(texture.matrix, dtype=np.float64)
+        self.inverse = np.linalg.inv(self.matrix)
+        self.det = abs(float(np.linalg.det(self.matrix)))
+        lum = np.maximum(luminance(self.image.astype(np.float64)), 0.0)
+        sin_rows = np.sin(np.pi * (np.arange(lum.shape[0]) + 0.5) / lum.shape[0])[:, None]
+        # Mean luminance over the sphere (solid-angle weighted).
+        self.mean_luminance = float((lum * sin_rows).sum() / (sin_rows.sum() * lum.shape[1]))
+        self.dist = Distribution2D(self._table(lum, compensate))
+
+    def _table(self, lum, compensate):
+        cells = lum if self.closest else _cover_neighbours(lum)
+        cells = _downsample(cells)
+        h = cells.shape[0]
+        sin_rows = np.sin(np.pi * (np.arange(h) + 0.5) / h)[:, None]
+        if compensate:
+            mean = (cells * sin_rows).sum() / (sin_rows.sum() * cells.shape[1])
+            weights = np.maximum(cells - mean, 0.0) * sin_rows
+            if weights.sum() > 0:  # a constant map has nothing above its mean
+                return weights
+        return cells * sin_rows
+
+    def power(self):
+        """Integral of luminance over the sphere (W / m^2 per unit area seen)."""
+        return 4.0 * np.pi * self.mean_luminance
+
+    def eval(self, d):
+        """Radiance (N, 3) arriving from world directions d (N, 3)."""
+        u, v = direction_to_equirect(d @ self.matrix.T)
+        return lookup(self.image, u, v, self.closest)
+
+    def sample(self, u1, u2):
+        """World directions (N, 3) and their solid-angle pdf."""
+        x, y, pdf_uv = self.dist.sample(u1, u2)
+        e = equirect_to_direction(x, y)
+        d = e @ self.inverse.T
+        inv_len = np.sqrt(np.einsum("ij,ij->i", d, d))  # = 1 / |M d| for unit d
+        d /= inv_len[:, None]
+        return d, self._solid_angle_pdf(pdf_uv, np.sin(np.pi * y), inv_len ** 3)
+
+    def pdf(self, d):
+        """Solid-angle pdf of ``sample`` returning world directions d."""
+        e = d @ self.matrix.T
+        u, v = direction_to_equirect(e)
+        length = np.sqrt(np.einsum("ij,ij->i", e, e))
+        sin_t = np.hypot(e[:, 0], e[:, 1]) / length
+        return self._solid_angle_pdf(self.dist.pdf(u, v), sin_t, 1.0 / length ** 3)
+
+    def _solid_angle_pdf(self, pdf_uv, sin_t, inv_len_cubed):
+        ok = sin_t > 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pdf = pdf_uv / (TWO_PI_SQ * sin_t) * self.det * inv_len_cubed
+        return np.where(ok, pdf, 0.0)
+
+
+def _cover_neighbours(lum):
+    """Weights positive wherever bilinear lookups are: a texel's cell also
+    sees its 8 neighbours (periodic), so mix in their mean.  NEE alone then
+    reaches every direction with radiance, and bright texels still dominate."""
+    acc = np.zeros_like(lum)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            acc += np.roll(np.roll(lum, dy, axis=0), dx, axis=1)
+    return 0.5 * lum + 0.5 * acc / 9.0
+
+
+def _downsample(cells):
+    """Sum k x k blocks when the table would be wider than MAX_TABLE_WIDTH
+    (k divides both sizes, so blocks line up with texels)."""
+    h, w = cells.shape
+    k = -(-w // MAX_TABLE_WIDTH)
+    while k > 1 and (w % k or h % k):
+        k += 1
+        if k > w or k > h:
+            return cells
+    if k <= 1:
+        return cells
+    return cells.reshape(h // k, k, w // k, k).sum(axis=(1, 3))

@@ -1,0 +1,306 @@
+"""A light tree: picks the emitter for next-event estimation by its estimated
+contribution at the shading point, not by power alone.
+
+A binary tree over the emitters with a position (points, spots, area lights,
+emissive-mesh groups), after Estevez & Kulla 2018 and pbrt-v4's
+BVHLightSampler (Cycles' light tree is the same idea).  Every node bounds its
+emitters by a box, their total power and an orientation cone (axis w, spread
+theta_o of the normals, theta_e of the emission about a normal).  Descending
+from the root, a shading point p with normal n picks a child with
+probability proportional to the child's importance
+
+    phi * cos(theta') / d^2 * cos(theta_i')
+
+(pbrt-v4 LightBounds::Importance): theta' is the smallest angle between the
+cone and the direction to p, widened by the angle the box subtends, and
+theta_i' likewise for the receiver's normal.  The bounds are conservative, so
+an emitter that can light p never gets probability 0.  Emitters without a
+position (suns, and any type the tree does not know) are picked uniformly
+with probability n_inf / (n_inf + 1), the tree with the rest (pbrt-v4).
+
+``select`` and ``pmf`` evaluate the same products in the same order, so the
+selection probability MIS uses is exactly the one NEE sampled with.
+"""
+import numpy as np
+
+from .vec import dot
+
+# Half-angle of emission beyond a spot cone: its light ends at the cone edge.
+SPOT_MARGIN = 1e-3
+
+
+class Bounds:
+    """Light bounds of one emitter or node (pbrt-v4 LightBounds)."""
+
+    def __init__(self, lo, hi, phi, w, cos_o, cos_e, two_sided):
+        self.lo, self.hi = np.asarray(lo, float), np.asarray(hi, float)
+        self.phi = float(phi)
+        self.w = np.asarray(w, float)
+        self.cos_o, self.cos_e, self.two_sided = float(cos_o), float(cos_e), bool(two_sided)
+
+    def centroid(self):
+        return 0.5 * (self.lo + self.hi)
+
+
+def union(a, b):
+    if a.phi <= 0:
+        return b
+    if b.phi <= 0:
+        return a
+    w, cos_o = _cone_union(a.w, a.cos_o, b.w, b.cos_o)
+    return Bounds(np.minimum(a.lo, b.lo), np.maximum(a.hi, b.hi), a.phi + b.phi, w, cos_o,
+                  min(a.cos_e, b.cos_e), a.two_sided or b.two_sided)
+
+
+def _cone_union(wa, cos_a, wb, cos_b):
+    """Smallest cone holding two direction cones (pbrt-v4 DirectionCone Union)."""
+    theta_a, theta_b = np.arccos(np.clip(cos_a, -1, 1)), np.arccos(np.clip(cos_b, -1, 1))
+    theta_d = np.arccos(np.clip(wa @ wb, -1, 1))
+    if min(theta_d + theta_b, np.pi) <= theta_a:
+        return wa, cos_a
+    if min(theta_d + theta_a, np.pi) <= theta_b:
+        return wb, cos_b
+    theta_o = 0.5 * (theta_a + theta_d + theta_b)
+    axis = np.cross(wa, wb)
+    length = np.linalg.norm(axis)
+    if theta_o >= np.pi or length == 0:
+        return wa, -1.0
+    axis /= length
+    theta_r = theta_o - theta_a
+    # Rodrigues: rotate wa by theta_r about axis (perpendicular to wa).
+    w = wa * np.cos(theta_r) + np.cross(axis, wa) * np.sin(theta_r)
+    return w / np.linalg.norm(w), float(np.cos(theta_o))
+
+
+def emitter_bounds(lights):
+    """Bounds per emitter of a LightSet (None: no position, i.e. infinite)."""
+    from .lights import AREA, MESH, POINT
+    out = []
+    power = lights.power
+    for e in range(lights.count):
+        kind, j = lights.kind[e], lights.local[e]
+        if kind == POINT:
+            out.append(_point_bounds(lights.points, j, power[e]))
+        elif kind == AREA:
+            out.append(_area_bounds(lights.areas, j, power[e]))
+        elif kind == MESH:
+            out.append(_mesh_bounds(lights.meshes, j, power[e]))
+        else:
+            out.append(None)
+    return out
+
+
+def _point_bounds(points, j, phi):
+    r = points.radius[j]
+    c = points.pos[j]
+    if points.spot[j]:
+        # Emission inside the cone only, from anywhere on the sphere/disk:
+        # the box's angular size adds that spread at the shading point.
+        return Bounds(c - r, c + r, phi, points.dir[j], points.cos_half[j], np.cos(SPOT_MARGIN), False)
+    return Bounds(c - r, c + r, phi, (0.0, 0.0, 1.0), -1.0, 0.0, False)
+
+
+def _area_bounds(areas, j, phi):
+    c, u, v = areas.c[j], areas.u[j], areas.v[j]
+    corners = c + 0.5 * np.array([u + v, u - v, -u + v, -u - v])
+    # One-sided Lambertian: normals all equal (theta_o = 0), emission up to 90 degrees.
+    return Bounds(corners.min(axis=0), corners.max(axis=0), phi, areas.n[j], 1.0, 0.0, False)
+
+
+def _mesh_bounds(meshes, j, phi):
+    tr = meshes.tris
+    members = meshes.members[j]
+    corners = np.concatenate([tr.p0[members], tr.p0[members] + tr.e1[members],
+                              tr.p0[members] + tr.e2[members]])
+    ng = tr.ng[members]
+    # Two-sided emitters: a cone around +-w holding every normal.
+    ref = ng[np.argmax(tr.area[members])]
+    signed = ng * np.where(ng @ ref < 0, -1.0, 1.0)[:, None]
+    w = (signed * tr.area[members, None]).sum(axis=0)
+    length = np.linalg.norm(w)
+    if length > 1e-12:
+        w = w / length
+        cos_o = float(np.min(np.abs(ng @ w)))
+    else:
+        w, cos_o = ref, -1.0
+    return Bounds(corners.min(axis=0), corners.max(axis=0), phi, w, cos_o, 0.0, True)
+
+
+# ----------------------------------------------------------------------------
+
+class LightTree:
+    def __init__(self, bounds):
+        self.count = len(bounds)
+        self.infinite = np.array([e for e, b in enumerate(bounds) if b is None], np.int64)
+        finite = [e for e, b in enumerate(bounds) if b is not None]
+        self.has_tree = len(finite) > 0
+        n_inf = len(self.infinite)
+        self.p_infinite = n_inf / (n_inf + (1 if self.has_tree else 0)) if n_inf else 0.0
+        nodes = []      # (Bounds, left, right, emitter)
+        if finite:
+            self._build([(e, bounds[e]) for e in finite], nodes)
+        self._pack(nodes)
+        self._paths(nodes)
+
+    # -- construction ---------------------------------------------------------
+    def _build(self, items, nodes):
+        """Append the subtree of items; returns its node index.  Splits at the
+        median centroid along the longest axis of the centroids' box."""
+        index = len(nodes)
+        nodes.append(None)
+        if len(items) == 1:
+            e, b = items[0]
+            nodes[index] = (b, -1, -1, e)
+            return index
+        cent = np.array([b.centroid() for _, b in items])
+        axis = int(np.argmax(cent.max(axis=0) - cent.min(axis=0)))
+        order = np.argsort(cent[:, axis], kind="stable")
+        half = len(items) // 2
+        left = self._build([items[k] for k in order[:half]], nodes)
+        right = self._build([items[k] for k in order[half:]], nodes)
+        nodes[index] = (union(nodes[left][0], nodes[right][0]), left, right, -1)
+        return index
+
+    def _pack(self, nodes):
+        m = len(nodes)
+        self.lo = np.array([n[0].lo for n in nodes], float).reshape(m, 3)
+        self.hi = np.array([n[0].hi for n in nodes], float).reshape(m, 3)
+        self.phi = np.array([n[0].phi for n in nodes], float)
+        self.w = np.array([n[0].w for n in nodes], float).reshape(m, 3)
+        self.cos_o = np.array([n[0].cos_o for n in nodes], float)
+        self.sin_o = np.sqrt(np.maximum(0.0, 1.0 - self.cos_o ** 2))
+        self.cos_e = np.array([n[0].cos_e for n in nodes], float)
+        self.two_sided = np.array([n[0].two_sided for n in nodes], bool)
+        self.left = np.array([n[1] for n in nodes], np.int64)
+        self.right = np.array([n[2] for n in nodes], np.int64)
+        self.leaf_emitter = np.array([n[3] for n in nodes], np.int64)
+        self.center = 0.5 * (self.lo + self.hi)
+        self.radius = 0.5 * np.linalg.norm(self.hi - self.lo, axis=1)
+
+    def _paths(self, nodes):
+        """Per emitter: the interior nodes from the root to its leaf and
+        whether the path turns left at each, for ``pmf``."""
+        steps = {}
+        stack = [(0, [])] if nodes else []
+        while stack:
+            node, path = stack.pop()
+            e = self.leaf_emitter[node]
+            if e >= 0:
+                steps[e] = path
+                continue
+            stack.append((self.left[node], path + [(node, True)]))
+            stack.append((self.right[node], path + [(node, False)]))
+        depth = max([len(p) for p in steps.values()] + [0])
+        self.depth = depth
+        self.path_node = np.zeros((self.count, max(depth, 1)), np.int64)
+        self.path_left = np.zeros((self.count, max(depth, 1)), bool)
+        self.path_len = np.zeros(self.count, np.int64)
+        for e, path in steps.items():
+            self.path_len[e] = len(path)
+            for k, (node, left) in enumerate(path):
+                self.path_node[e, k], self.path_left[e, k] = node, left
+
+    # -- importance -------------------------------------------------------------
+    def importance(self, node, p, n):
+        """pbrt-v4 LightBounds::Importance of nodes for points p with normals n
+        (rows of zeros: no normal)."""
+        pc = self.center[node]
+        to_p = p - pc
+        d2_true = dot(to_p, to_p)
+        r = self.radius[node]
+        d2 = np.maximum(d2_true, r * r)
+        wi = to_p / np.sqrt(np.maximum(d2_true, 1e-300))[:, None]
+        cos_w = dot(self.w[node], wi)
+        cos_w = np.where(self.two_sided[node], np.abs(cos_w), cos_w)
+        sin_w = _sin(cos_w)
+        # Angle the node's bounding sphere subtends at p.
+        inside = d2_true <= r * r
+        sin2_b = np.where(inside, 1.0, r * r / np.maximum(d2_true, 1e-300))
+        cos_b = np.where(inside, -1.0, np.sqrt(np.maximum(0.0, 1.0 - sin2_b)))
+        sin_b = _sin(cos_b)
+        cos_x, sin_x = _cos_sub(sin_w, cos_w, self.sin_o[node], self.cos_o[node]), \
+            _sin_sub(sin_w, cos_w, self.sin_o[node], self.cos_o[node])
+        cos_p = _cos_sub(sin_x, cos_x, sin_b, cos_b)
+        imp = np.where(cos_p > self.cos_e[node], self.phi[node] * cos_p / d2, 0.0)
+        cos_i = np.abs(dot(wi, n))
+        has_n = dot(n, n) > 0
+        cos_pi = _cos_sub(_sin(cos_i), cos_i, sin_b, cos_b)
+        imp = imp * np.where(has_n, cos_pi, 1.0)
+        return np.maximum(imp, 0.0)
+
+    def _p_left(self, node, p, n):
+        """Probability of descending into the left child."""
+        il = self.importance(self.left[node], p, n)
+        ir = self.importance(self.right[node], p, n)
+        total = il + ir
+        # Both zero: neither child can light p; any choice is unbiased.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(total > 0, il / total, 0.5)
+
+    # -- sampling ---------------------------------------------------------------
+    def select(self, u, p, n):
+        """Emitter index and its selection probability for each shading point."""
+        m = len(u)
+        emitter = np.zeros(m, np.int64)
+        prob = np.ones(m)
+        u = np.asarray(u, float).copy()
+        tree = np.ones(m, bool)
+        if len(self.infinite):
+            pick_inf = (u < self.p_infinite) | (not self.has_tree)
+            k = np.minimum((u[pick_inf] / self.p_infinite * len(self.infinite)).astype(np.int64),
+                           len(self.infinite) - 1)
+            emitter[pick_inf] = self.infinite[k]
+            prob[pick_inf] = self.p_infinite / len(self.infinite)
+            tree = ~pick_inf
+            u = np.where(tree, (u - self.p_infinite) / (1.0 - self.p_infinite), u)
+        rows = np.nonzero(tree)[0]
+        prob[rows] = 1.0 - self.p_infinite
+        node = np.zeros(len(rows), np.int64)
+        uu = u[rows]
+        while len(rows):
+            interior = self.leaf_emitter[node] < 0
+            done = rows[~interior]
+            emitter[done] = self.leaf_emitter[node[~interior]]
+            rows, node, uu = rows[interior], node[interior], uu[interior]
+            if len(rows) == 0:
+                break
+            pl = self._p_left(node, p[rows], n[rows])
+            left = uu < pl
+            prob[rows] *= np.where(left, pl, 1.0 - pl)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                uu = np.where(left, uu / pl, (uu - pl) / (1.0 - pl))
+            uu = np.clip(np.nan_to_num(uu), 0.0, np.nextafter(1.0, 0.0))
+            node = np.where(left, self.left[node], self.right[node])
+        return emitter, prob
+
+    def pmf(self, emitter, p, n):
+        """Probability that ``select`` picks ``emitter`` at p (same products)."""
+        emitter = np.asarray(emitter, np.int64)
+        prob = np.ones(len(emitter))
+        inf = np.isin(emitter, self.infinite)
+        if len(self.infinite):
+            prob[inf] = self.p_infinite / len(self.infinite)
+        rows = np.nonzero(~inf)[0]
+        prob[rows] = 1.0 - self.p_infinite
+        for k in range(self.depth):
+            rows = rows[self.path_len[emitter[rows]] > k]
+            if len(rows) == 0:
+                break
+            e = emitter[rows]
+            pl = self._p_left(self.path_node[e, k], p[rows], n[rows])
+            prob[rows] *= np.where(self.path_left[e, k], pl, 1.0 - pl)
+        return prob
+
+
+def _sin(cos):
+    return np.sqrt(np.maximum(0.0, 1.0 - cos * cos))
+
+
+def _cos_sub(sin_a, cos_a, sin_b, cos_b):
+    """cos(max(0, a - b))."""
+    return np.where(cos_a > cos_b, 1.0, cos_a * cos_b + sin_a * sin_b)
+
+
+def _sin_sub(sin_a, cos_a, sin_b, cos_b):
+    """sin(max(0, a - b))."""
+    return np.where(cos_a > cos_b, 0.0, sin_a * cos_b - cos_a * sin_b)

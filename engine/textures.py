@@ -1,0 +1,485 @@
+"""Texture expressions evaluated per ray, and normal perturbation.
+
+A Lobe parameter, a Material's emission or its normal may be an expression
+(``scene.ImageTexture``, ``MixColor``, ``Math``, ``NormalMap``, ``Bump``)
+instead of a constant.  ``compile_expr`` turns one into a function of the
+hit's UVs (N, 2) returning (N,) floats or (N, 3) colours.  ``MaterialTextures``
+collects a scene's expressions; ``bsdf.MaterialTable.gather`` lets it overwrite
+the textured lobe parameters, and the integrator asks it to perturb shading
+normals.
+
+Image lookups follow Cycles' CPU kernel (``kernel/device/cpu/image.h``): image
+row 0 is the bottom (UV v = 0), Closest reads texel floor(u W), Linear blends
+the texels around u W - 0.5; REPEAT wraps, EXTEND clamps, CLIP reads zero
+outside, MIRROR reflects.  8-bit sRGB images are filtered in sRGB encoding and
+decoded after, straight alpha is associated before filtering and divided out
+again only when the node's Alpha output is used, as Cycles does.
+"""
+import dataclasses
+
+import numpy as np
+
+from .scene import (TEXTURE_TYPES, Bump, ImageTexture, Math, MixColor, NormalMap)
+
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+# Far-away UVs lose all precision anyway; keep them within int64 range.
+UV_LIMIT = 1e9
+
+
+def is_texture(value):
+    return isinstance(value, TEXTURE_TYPES)
+
+
+# ----------------------------------------------------------------------------
+# colour spaces
+
+def srgb_to_linear(c):
+    c = np.asarray(c, dtype=np.float64)
+    low = np.maximum(c, 0.0) / 12.92
+    high = np.power(np.maximum(c + 0.055, 0.0) / 1.055, 2.4)
+    return np.where(c < 0.04045, low, high)
+
+
+def linear_to_srgb(c):
+    c = np.asarray(c, dtype=np.float64)
+    low = np.maximum(c, 0.0) * 12.92
+    high = 1.055 * np.power(np.maximum(c, 0.0), 1.0 / 2.4) - 0.055
+    return np.where(c < 0.0031308, low, high)
+
+
+# ----------------------------------------------------------------------------
+# images
+
+def prepare_texels(image):
+    """(H, W, 4) float64 RGBA, row 0 at the BOTTOM, in the space Cycles
+    filters in: sRGB-encoded for srgb_filter images, alpha associated for
+    straight-alpha colour images."""
+    px = np.asarray(image.pixels, dtype=np.float64)
+    if px.ndim == 2:
+        px = px[..., None]
+    h, w, c = px.shape
+    rgba = np.ones((h, w, 4))
+    if c <= 2:
+        rgba[..., :3] = px[..., :1]
+    else:
+        rgba[..., :3] = px[..., :3]
+    if c in (2, 4) and image.alpha_mode != "NONE":
+        rgba[..., 3] = px[..., -1]
+    rgba = np.nan_to_num(rgba, nan=0.0, posinf=0.0, neginf=0.0)
+    if image.srgb_filter:
+        rgba[..., :3] = linear_to_srgb(rgba[..., :3])
+    if image.alpha_mode == "STRAIGHT" and not image.data:
+        rgba[..., :3] *= rgba[..., 3:]
+    return np.ascontiguousarray(rgba[::-1])
+
+
+def _wrap(i, size, extension):
+    if extension == "REPEAT":
+        return np.mod(i, size)
+    if extension == "MIRROR":
+        m = np.mod(np.abs(i + (i < 0)), 2 * size)
+        return np.where(m >= size, 2 * size - m - 1, m)
+    return np.clip(i, 0, size - 1)  # EXTEND; CLIP masks separately
+
+
+def _read(texels, ix, iy, extension):
+    h, w = texels.shape[:2]
+    out = texels[_wrap(iy, h, extension), _wrap(ix, w, extension)]
+    if extension == "CLIP":
+        inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
+        out = out * inside[:, None]
+    return out
+
+
+def sample_texels(texels, uv, interpolation="Linear", extension="REPEAT"):
+    """(N, 4) filtered texels at uv (N, 2); texels row 0 = bottom (v = 0)."""
+    h, w = texels.shape[:2]
+    uv = np.clip(np.nan_to_num(np.asarray(uv, dtype=np.float64)), -UV_LIMIT, UV_LIMIT)
+    x, y = uv[:, 0] * w, uv[:, 1] * h
+    if interpolation == "Closest":
+        return _read(texels, np.floor(x).astype(np.int64), np.floor(y).astype(np.int64), extension)
+    x, y = x - 0.5, y - 0.5
+    fx, fy = np.floor(x), np.floor(y)
+    tx, ty = (x - fx)[:, None], (y - fy)[:, None]
+    ix, iy = fx.astype(np.int64), fy.astype(np.int64)
+    return ((1 - ty) * ((1 - tx) * _read(texels, ix, iy, extension) + tx * _read(texels, ix + 1, iy, extension))
+            + ty * ((1 - tx) * _read(texels, ix, iy + 1, extension)
+                    + tx * _read(texels, ix + 1, iy + 1, extension)))
+
+
+def _image_lookup(node, texels):
+    """RGBA at uv as the Image Texture node outputs it (colour linear)."""
+    def lookup(uv):
+        rgba = sample_texels(texels, uv, node.interpolation, node.extension)
+        if node.unassociate:
+            a = rgba[:, 3:]
+            scale = np.where((a != 0) & (a != 1), 1.0 / np.where(a != 0, a, 1.0), 1.0)
+            rgba[:, :3] *= scale
+        if node.image.srgb_filter:
+            rgba[:, :3] = srgb_to_linear(rgba[:, :3])
+        return rgba
+    return lookup
+
+
+# ----------------------------------------------------------------------------
+# expressions
+
+class Compiler:
+    """Compiles expressions to functions of uv; images are prepared once."""
+
+    def __init__(self):
+        self.texels = {}
+
+    def texels_of(self, image):
+        key = id(image)
+        if key not in self.texels:
+            self.texels[key] = (image, prepare_texels(image))
+        return self.texels[key][1]
+
+    def compile(self, expr):
+        """-> (fn(uv) -> (N,) or (N, 3), is_colour)."""
+        if isinstance(expr, ImageTexture):
+            return self._image(expr)
+        if isinstance(expr, MixColor):
+            return self._mix(expr), True
+        if isinstance(expr, Math):
+            return self._math(expr), False
+        if isinstance(expr, (NormalMap, Bump)):
+            raise TypeError(f"{type(expr).__name__} is a normal, not a colour or value")
+        value = np.asarray(expr, dtype=np.float64)
+        if value.ndim == 0:
+            v = float(value)
+            return (lambda uv: np.full(len(uv), v)), False
+        rgb = value.reshape(-1)[:3]
+        return (lambda uv: np.broadcast_to(rgb, (len(uv), 3)).copy()), True
+
+    def color(self, expr):
+        fn, is_color = self.compile(expr)
+        return fn if is_color else (lambda uv: np.repeat(fn(uv)[:, None], 3, axis=1))
+
+    def value(self, expr):
+        fn, is_color = self.compile(expr)
+        return (lambda uv: fn(uv) @ LUMA) if is_color else fn
+
+    def _image(self, node):
+        lookup = _image_lookup(node, self.texels_of(node.image))
+        coords = (lambda uv: uv) if node.uv is None else self._uv(node.uv)
+        if node.output == "Alpha":
+            return (lambda uv: lookup(coords(uv))[:, 3]), False
+        return (lambda uv: lookup(coords(uv))[:, :3]), True
+
+    def _uv(self, expr):
+        """A vector input: its first two components are the UV."""
+        fn = self.color(expr)
+        return lambda uv: fn(uv)[:, :2]
+
+    def _mix(self, node):
+        fac, a, b = self.value(node.fac), self.color(node.a), self.color(node.b)
+
+        def mix(uv):
+            t = fac(uv)
+            if node.clamp_factor:
+                t = np.clip(t, 0.0, 1.0)
+            out = mix_colors(node.blend, t[:, None], a(uv), b(uv))
+            return np.clip(out, 0.0, 1.0) if node.clamp_result else out
+        return mix
+
+    def _math(self, node):
+        a, b, c = self.value(node.a), self.value(node.b), self.value(node.c)
+
+        def math(uv):
+            out = math_op(node.operation, a(uv), b(uv), c(uv))
+            return np.clip(out, 0.0, 1.0) if node.clamp else out
+        return math
+
+
+def mix_colors(blend, t, a, b):
+    """Cycles' svm_mix_* (kernel/svm/color_util.h); t is (N, 1)."""
+    tm = 1.0 - t
+    if blend == "MIX":
+        return tm * a + t * b
+    if blend == "ADD":
+        return a + t * b
+    if blend == "MULTIPLY":
+        return a * (tm + t * b)
+    if blend == "SUBTRACT":
+        return a - t * b
+    if blend == "SCREEN":
+        return 1.0 - (tm + t * (1.0 - b)) * (1.0 - a)
+    if blend == "OVERLAY":
+        return np.where(a < 0.5, a * (tm + 2.0 * t * b), 1.0 - (tm + 2.0 * t * (1.0 - b)) * (1.0 - a))
+    if blend == "DIVIDE":
+        safe = np.where(b != 0, b, 1.0)
+        return np.where(b != 0, tm * a + t * a / safe, a)
+    if blend == "DIFFERENCE":
+        return tm * a + t * np.abs(a - b)
+    if blend == "DARKEN":
+        return tm * a + t * np.minimum(a, b)
+    if blend == "LIGHTEN":
+        return tm * a + t * np.maximum(a, b)
+    raise ValueError(f"unknown mix blend {blend!r}")
+
+
+def _safe_div(a, b):
+    return np.where(b != 0, a / np.where(b != 0, b, 1.0), 0.0)
+
+
+def math_op(op, a, b, c):
+    """Cycles' svm_math (kernel/svm/math_util.h) with its safe variants."""
+    with np.errstate(all="ignore"):
+        out = _math_raw(op, a, b, c)
+    return np.where(np.isfinite(out), out, 0.0)
+
+
+def _math_raw(op, a, b, c):
+    simple = {
+        "ADD": lambda: a + b, "SUBTRACT": lambda: a - b, "MULTIPLY": lambda: a * b,
+        "DIVIDE": lambda: _safe_div(a, b), "MULTIPLY_ADD": lambda: a * b + c,
+        "MINIMUM": lambda: np.minimum(a, b), "MAXIMUM": lambda: np.maximum(a, b),
+        "LESS_THAN": lambda: (a < b).astype(float), "GREATER_THAN": lambda: (a > b).astype(float),
+        "ABSOLUTE": lambda: np.abs(a), "EXPONENT": lambda: np.exp(a), "SIGN": lambda: np.sign(a),
+        "ROUND": lambda: np.floor(a + 0.5), "FLOOR": lambda: np.floor(a), "CEIL": lambda: np.ceil(a),
+        "TRUNC": lambda: np.trunc(a), "FRACT": lambda: a - np.floor(a),
+        "SINE": lambda: np.sin(a), "COSINE": lambda: np.cos(a), "TANGENT": lambda: np.tan(a),
+        "SQRT": lambda: np.where(a > 0, np.sqrt(np.maximum(a, 0.0)), 0.0),
+        "INVERSE_SQRT": lambda: np.where(a > 0, 1.0 / np.sqrt(np.where(a > 0, a, 1.0)), 0.0),
+        "MODULO": lambda: np.where(b != 0, np.fmod(a, np.where(b != 0, b, 1.0)), 0.0),
+        "SNAP": lambda: np.where(b != 0, np.floor(_safe_div(a, b)) * b, 0.0),
+    }
+    if op in simple:
+        return simple[op]()
+    if op == "POWER":
+        # safe_powf: a negative base needs an integer exponent.
+        ok = (a >= 0) | (b == np.floor(b))
+        return np.where(ok, np.power(np.where(ok, a, 1.0), b), 0.0)
+    if op == "LOGARITHM":
+        ok = (a > 0) & (b > 0)
+        return np.where(ok, np.log(np.where(ok, a, 1.0)) / np.log(np.where(ok, b, 2.0)), 0.0)
+    raise ValueError(f"unknown math operation {op!r}")
+
+
+def constant_of(fn, is_color):
+    """A representative constant of an expression: its mean over a UV grid
+    (used where one number per material is needed, e.g. the albedo AOV)."""
+    g = (np.arange(16) + 0.5) / 16
+    uv = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    mean = fn(uv).mean(axis=0)
+    return tuple(float(x) for x in mean) if is_color else float(mean)
+
+
+# ----------------------------------------------------------------------------
+# the scene's textures
+
+# Lobe fields whose table array has another name or needs a conversion;
+# every other textured field is stored as is into the Lobes array of its name.
+ROUGHNESS_FLOOR = 0.1  # a textured glossy lobe must stay glossy in the table
+
+
+class MaterialTextures:
+    """Every texture expression of a scene's materials, compiled.
+
+    ``constants`` is the material list with each expression replaced by a
+    constant (so the constant tables build as before); ``apply`` overwrites
+    the textured parameters per ray; ``perturb`` replaces shading normals.
+    """
+
+    def __init__(self, materials):
+        self.compiler = Compiler()
+        self.lobe_fields = []    # (material, lobe, field, fn)
+        self.emission = {}       # material -> fn
+        self.normals = {}        # material -> NormalMap | Bump
+        self.constants = [self._constant_material(i, m) for i, m in enumerate(materials)]
+        self.any = bool(self.lobe_fields or self.emission)
+
+    def _constant_material(self, i, mat):
+        lobes = [self._constant_lobe(i, j, lobe) for j, lobe in enumerate(mat.lobes)]
+        emission = mat.emission
+        if is_texture(emission):
+            fn = self.compiler.color(emission)
+            self.emission[i] = fn
+            emission = constant_of(fn, True)
+        normal = getattr(mat, "normal", None)
+        if normal is not None:
+            self.normals[i] = self._compile_normal(normal)
+        return dataclasses.replace(mat, lobes=tuple(lobes), emission=emission, normal=None)
+
+    def _constant_lobe(self, i, j, lobe):
+        changes = {}
+        for f in dataclasses.fields(lobe):
+            value = getattr(lobe, f.name)
+            if not is_texture(value):
+                continue
+            fn, is_color = self.compiler.compile(value)
+            const = constant_of(fn, is_color)
+            if f.name == "roughness":
+                const = max(const if not is_color else float(np.dot(const, LUMA)), ROUGHNESS_FLOOR)
+            self.lobe_fields.append((i, j, f.name, fn, is_color))
+            changes[f.name] = const
+        return dataclasses.replace(lobe, **changes) if changes else lobe
+
+    def _compile_normal(self, expr):
+        if isinstance(expr, NormalMap):
+            return ("normal_map", self.compiler.color(expr.color), self.compiler.value(expr.strength))
+        if isinstance(expr, Bump):
+            inner = None if expr.normal is None else self._compile_normal(expr.normal)
+            return ("bump", self.compiler.value(expr.height), self.compiler.value(expr.strength),
+                    self.compiler.value(expr.distance), expr.invert, inner, _bump_step(expr))
+        raise TypeError(f"a material normal must be a NormalMap or Bump, not {type(expr).__name__}")
+
+    # -- per ray -------------------------------------------------------------
+
+    def apply(self, mat, uv, lobes, min_alpha):
+        """Overwrite the textured lobe parameters of the rays' materials."""
+        if uv is None:
+            uv = np.zeros((len(mat), 2))
+        for i, j, name, fn, is_color in self.lobe_fields:
+            rows = np.nonzero(mat == i)[0]
+            if len(rows) == 0:
+                continue
+            value = fn(uv[rows])
+            _store(lobes, name, rows, j, value, is_color, min_alpha)
+
+    def emission_at(self, mat, uv, emission):
+        """Per-ray emission: the constant table's rows, textured ones evaluated."""
+        for i, fn in self.emission.items():
+            rows = np.nonzero(mat == i)[0]
+            if len(rows):
+                emission = np.array(emission, copy=True)
+                emission[rows] = np.maximum(fn(uv[rows]), 0.0)
+        return emission
+
+    def perturb(self, hit, triangles):
+        """Shading normals with each material's normal map / bump applied."""
+        ns = hit.ns
+        for i, normal in self.normals.items():
+            rows = np.nonzero(hit.mat == i)[0]
+            if len(rows):
+                ns = np.array(ns, copy=True)
+                ns[rows] = _perturbed(normal, hit, rows, triangles)
+        return ns
+
+
+def _store(lobes, name, rows, j, value, is_color, min_alpha):
+    if name == "roughness":
+        r = np.clip(value @ LUMA if is_color else value, 0.0, 1.0)
+        lobes.alpha[rows, j] = np.maximum(r * r, min_alpha)
+        return
+    target = getattr(lobes, name)
+    if target.ndim == 3 and not is_color:
+        value = np.repeat(value[:, None], 3, axis=1)
+    elif target.ndim == 2 and is_color:
+        value = value @ LUMA
+    if name == "color":
+        value = np.maximum(value, 0.0)
+    target[rows, j] = value
+
+
+def _bump_step(expr):
+    """UV step of the bump's finite differences: a tenth of a texel of the
+    finest image in the height expression (Cycles differentiates at a
+    fraction of a pixel footprint), or 1e-4 without images."""
+    sizes = [max(np.shape(img.pixels)[:2]) for img in _images_in(expr.height)]
+    return 0.1 / max(sizes) if sizes else 1e-4
+
+
+def _images_in(expr):
+    if isinstance(expr, ImageTexture):
+        yield expr.image
+    if is_texture(expr):
+        for f in dataclasses.fields(expr):
+            value = getattr(expr, f.name)
+            if is_texture(value):
+                yield from _images_in(value)
+
+
+# ----------------------------------------------------------------------------
+# normal perturbation
+
+def _unit(v, fallback):
+    length = np.linalg.norm(v, axis=1, keepdims=True)
+    ok = np.isfinite(length) & (length > 1e-12)
+    return np.where(ok, v / np.where(ok, length, 1.0), fallback)
+
+
+def _perturbed(normal, hit, rows, triangles):
+    """New unit shading normals for hit rows, facing the same side as hit.ns;
+    normals the viewer would see from behind keep the unperturbed one."""
+    ns = hit.ns[rows]
+    out = _evaluate_normal(normal, hit, rows, triangles, ns)
+    out = _unit(out, ns)
+    wo = hit.wo[rows]
+    return np.where((np.einsum("ij,ij->i", out, wo) > 1e-6)[:, None], out, ns)
+
+
+def _evaluate_normal(normal, hit, rows, triangles, ns):
+    if normal[0] == "normal_map":
+        return normal_map(hit, rows, ns, normal[1], normal[2])
+    _, height, strength, distance, invert, inner, step = normal
+    base = ns if inner is None else _unit(_evaluate_normal(inner, hit, rows, triangles, ns), ns)
+    uv = hit.uv[rows]
+    grad = surface_gradient(height, uv, step, triangles, hit.prim[rows])
+    return bump(base, grad, strength(uv), distance(uv), invert)
+
+
+def normal_map(hit, rows, ns, color_fn, strength_fn):
+    """Cycles' tangent-space svm_node_normal_map (5.0): the strength scales
+    the tangential part, the frame is (tangent, sign * n x tangent, n) with n
+    the front-facing normal; back-facing hits flip the result."""
+    uv = hit.uv[rows]
+    c = 2.0 * (color_fn(uv) - 0.5)
+    s = strength_fn(uv)
+    c[:, 0] *= s
+    c[:, 1] *= s
+    c[:, 2] = 1.0 + (c[:, 2] - 1.0) * np.clip(s, 0.0, 1.0)
+    tangent = getattr(hit, "tangent", None)
+    if tangent is None:
+        return ns  # no UVs: Cycles leaves the normal as is
+    back = hit.back[rows] if getattr(hit, "back", None) is not None else np.zeros(len(rows), bool)
+    flip = np.where(back, -1.0, 1.0)[:, None]
+    n = ns * flip
+    t = tangent[rows]
+    b = hit.tangent_sign[rows][:, None] * np.cross(n, t)
+    out = c[:, :1] * t + c[:, 1:2] * b + c[:, 2:3] * n
+    return out * flip
+
+
+def surface_gradient(height_fn, uv, step, triangles, prim):
+    """World-space surface gradient of height(uv) on each hit's triangle:
+    UV finite differences times the gradients of u and v over the triangle."""
+    h0 = height_fn(uv)
+    hu = (height_fn(uv + np.array([step, 0.0])) - h0) / step
+    hv = (height_fn(uv + np.array([0.0, step])) - h0) / step
+    grad_u, grad_v = uv_gradients(triangles, prim)
+    return hu[:, None] * grad_u + hv[:, None] * grad_v
+
+
+def uv_gradients(triangles, prim):
+    """World-space gradients of u and v over triangles (0 without UVs or on
+    triangles whose UVs are degenerate)."""
+    n = len(prim)
+    if triangles.uv is None:
+        return np.zeros((n, 3)), np.zeros((n, 3))
+    e1, e2 = triangles.e1[prim], triangles.e2[prim]
+    c = triangles.uv[prim]
+    d1, d2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
+    # Gram matrix of the edges; gradient of f = [e1 e2] M^-1 [df1, df2].
+    m11, m12, m22 = (np.einsum("ij,ij->i", e1, e1), np.einsum("ij,ij->i", e1, e2),
+                     np.einsum("ij,ij->i", e2, e2))
+    det = m11 * m22 - m12 * m12
+    ok = np.abs(det) > 1e-30
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+
+    def grad(f1, f2):
+        a = (m22 * f1 - m12 * f2) * inv
+        b = (m11 * f2 - m12 * f1) * inv
+        return a[:, None] * e1 + b[:, None] * e2
+    return grad(d1[:, 0], d2[:, 0]), grad(d1[:, 1], d2[:, 1])
+
+
+def bump(normal, grad, strength, distance, invert):
+    """Cycles' svm_node_set_bump in the limit of small differentials:
+    n' = normalize(n - distance * grad h), then mixed with n by strength."""
+    d = -distance if invert else distance
+    bumped = _unit(normal - d[:, None] * grad, normal)
+    s = np.maximum(strength, 0.0)[:, None]
+    return s * bumped + (1.0 - s) * normal
