@@ -121,6 +121,8 @@ def _bounce(ctx, paths, depth, rng, tile):
     lt, emitter, lLe, lpdf = ctx.lights.intersect(paths.o, paths.d, np.minimum(t, paths.tmax),
                                                   camera=depth == 0,
                                                   ray=paths.ray if ctx.track_rays else None)
+    # A path ends at the closest light it meets (measured against Cycles:
+    # light_over_lit_world in tests/addon/test_light_parity.py).
     hit_light = lt < np.inf
     hit_surf = (prim >= 0) & ~hit_light
     if depth == 0:
@@ -145,6 +147,8 @@ def _bounce(ctx, paths, depth, rng, tile):
         return paths
     hit = _interaction(ctx, paths, t, prim, bu, bv)
     emission = ctx.materials.emission[hit.mat]
+    if ctx.materials.textures.emission:
+        emission = ctx.materials.textures.emission_at(hit.mat, hit.uv, emission)
     em = np.nonzero(np.any(emission > 0, axis=1))[0]
     if len(em):
         _emission_hit(ctx, paths, em, hit, emission[em])
@@ -183,7 +187,8 @@ def _camera_aovs(ctx, paths, t, prim, hit_light, hit_surf, tile):
     if len(hs):
         tr = ctx.triangles
         normal[hs] = tr.ng[prim[hs]]
-        col = ctx.materials.color[tr.material[prim[hs]]]
+        m = tr.material[prim[hs]]
+        col = ctx.materials.color[m] * ctx.materials.weight[m][..., None]
         albedo[hs] = np.clip(col.sum(axis=1), 0.0, 1.0)
     tile.add_camera(paths.pix, alpha, depth, normal, albedo)
 

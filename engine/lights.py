@@ -500,6 +500,7 @@ class _MeshLights:
         self.material = np.array(mats, np.int64)
         self.count = len(self.material)
         self.L = materials.emission[self.material].reshape(-1, 3)
+        self.textures = materials.textures
         self.members, self.dists, self.total_area = [], [], []
         for m in self.material:
             members = np.nonzero(triangles.material == m)[0]
@@ -541,8 +542,25 @@ class _MeshLights:
         ok = (cos_l > 1e-12) & (t > 0)
         pdf = np.where(ok, t * t / (np.maximum(cos_l, 1e-12) * self.total_area[j]), 0.0)
         pdf = np.where(ok & sph, self._spherical_pdf(tri, solid_angle), pdf)
-        out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, self.L[j]
+        out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, self._radiance(tri, q, self.L[j])
         out.pdf[idx], out.on_surface[idx] = pdf, True
+
+    def _radiance(self, tri, q, L):
+        """Emission at points q on triangles tri: the constant, or the
+        material's emission texture evaluated at q's UVs."""
+        if not self.textures.emission or self.tris.uv is None:
+            return L
+        tr = self.tris
+        d = q - tr.p0[tri]
+        e1, e2 = tr.e1[tri], tr.e2[tri]
+        d00, d01, d11 = dot(e1, e1), dot(e1, e2), dot(e2, e2)
+        d20, d21 = dot(d, e1), dot(d, e2)
+        denom = np.where(d00 * d11 - d01 * d01 > 0, d00 * d11 - d01 * d01, 1.0)
+        b1 = (d11 * d20 - d01 * d21) / denom
+        b2 = (d00 * d21 - d01 * d20) / denom
+        c = tr.uv[tri]
+        uv = (1.0 - b1 - b2)[:, None] * c[:, 0] + b1[:, None] * c[:, 1] + b2[:, None] * c[:, 2]
+        return self.textures.emission_at(tr.material[tri], uv, np.broadcast_to(L, q.shape))
 
     def _spherical(self, tri, p):
         """Which shading points sample their triangle by solid angle (Arvo):

@@ -400,8 +400,6 @@ def translate(material):
         return scene.Material(name, ()), f"Material '{name}': no Material Output node, rendered black"
     closure = translator.surface(output.inputs['Surface'])
     normal = _material_normal(translator, output)
-    if nodes.is_expr(closure.emission):
-        translator.reader.warnings.append("textured emission rendered with its mean colour")
     return (scene.Material(name, tuple(closure.lobes), closure.emission, normal=normal),
             translator.warning())
 

@@ -165,7 +165,21 @@ def diffuse_camera_invisible(scene):
     return 2
 
 
-SCENES = {'rect_close': rect_close, 'big_triangle': big_triangle, 'spot_blend': spot_blend,
+def light_over_lit_world(scene):
+    """A large area light over a diffuse floor under a grey-blue world: in
+    Cycles a BSDF ray that meets a light adds its emission and goes on to the
+    world behind it, so the light must not hide the sky from the floor."""
+    plane("floor", material("floor", 'diffuse'))
+    light('AREA', (0.0, 0.0, 0.6), 30.0, shape='SQUARE', size=1.5)
+    top_camera(scene, 5.0)
+    sky = (0.3, 0.35, 0.4)
+    scene.world.color = sky
+    if scene.world.use_nodes and 'Background' in scene.world.node_tree.nodes:
+        scene.world.node_tree.nodes['Background'].inputs['Color'].default_value = (*sky, 1.0)
+    return 1
+
+
+SCENES = {'rect_close': rect_close, 'light_over_lit_world': light_over_lit_world, 'big_triangle': big_triangle, 'spot_blend': spot_blend,
           'shadow_invisible': shadow_invisible, 'glossy_invisible_light': glossy_invisible_light,
           'diffuse_camera_invisible': diffuse_camera_invisible}
 

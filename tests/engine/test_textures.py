@@ -280,3 +280,41 @@ def test_bad_textures_raise_scene_errors_naming_the_material(bad, message):
     with pytest.raises(SceneError, match="broken") as err:
         scene.validate()
     assert message in str(err.value)
+
+
+def test_textured_emission_per_texel_in_nee_and_bsdf_hits():
+    """An emissive quad textured half red, half blue: seen directly it shows
+    its texels, and the floor it lights renders the same by light sampling
+    (emission evaluated at the sampled point's UVs) and by BSDF sampling."""
+    from engine.render import render
+    from engine.scene import Camera, Instance, Lobe, Material, RenderSettings, Scene, World
+    from engine.testscenes import look_at, quad
+
+    import sys, os
+    sys.path.insert(0, os.path.dirname(__file__))
+    from stats import block_means, sidak_z, z_scores
+
+    image = TextureImage(np.array([[[4.0, 0.0, 0.0], [0.0, 0.0, 4.0]]], np.float32))
+    lamp = quad([[-0.5, -0.5, 1.0], [0.5, -0.5, 1.0], [0.5, 0.5, 1.0], [-0.5, 0.5, 1.0]])
+    lamp.uvs = np.array([[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]]], float)
+    floor = quad([[-20, -20, 0], [20, -20, 0], [20, 20, 0], [-20, 20, 0]])
+    mats = [Material("lamp", (), emission=ImageTexture(image, interpolation="Closest")),
+            Material("floor", (Lobe("diffuse", (0.8, 0.8, 0.8)),))]
+    cam = Camera(look_at((0, 0, 5), (0, 0, 0), (0, 1, 0)), kind="ORTHO", ortho_scale=4.0,
+                 resolution=(32, 32), clip_start=0.01)
+    scene = Scene([lamp, floor], [Instance(0, materials=[0]), Instance(1, materials=[1])], mats, [],
+                  World((0.0, 0.0, 0.0)), cam)
+    r = {s: render(scene, RenderSettings(samples=256, samples_per_pass=256, seed=3, strategy=s, max_bounces=0))
+         for s in ("light", "bsdf")}
+    img = r["light"].image
+    left, right = img[16, 13, :3], img[16, 18, :3]   # the lamp's two halves, seen from above
+    assert left[0] > 3.9 and left[2] == 0 and right[2] > 3.9 and right[0] == 0
+    ma, va = block_means(r["light"].image[..., :3].astype(float), r["light"].variance.astype(float), 4)
+    mb, vb = block_means(r["bsdf"].image[..., :3].astype(float), r["bsdf"].variance.astype(float), 4)
+    z = z_scores(ma, va, mb, vb)
+    floor_blocks = np.isfinite(z) & (va + vb > 0)
+    print(f"textured emission, light vs bsdf: max |z| {np.abs(z[floor_blocks]).max():.2f}")
+    assert np.abs(z[floor_blocks]).max() < sidak_z(0.01, floor_blocks.sum())
+    # The floor under the red half is redder than under the blue half.
+    floor_left, floor_right = ma[4, 0], ma[4, 7]
+    assert floor_left[0] > floor_left[2] and floor_right[2] > floor_right[0]
