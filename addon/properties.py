@@ -44,6 +44,11 @@ class EmberRenderSettings(bpy.types.PropertyGroup):
     max_bounces: IntProperty(
         name="Max Bounces", description="Path vertices that sample lights; as Cycles' Max Bounces",
         default=12, min=0, max=1024)
+    transparent_max_bounces: IntProperty(
+        name="Transparent Max Bounces",
+        description="Transparent surfaces (Transparent BSDF, Principled Alpha) a path or shadow ray "
+                    "may pass through, counted apart from Max Bounces; as Cycles' (default 8)",
+        default=8, min=0, max=1024)
     light_selection: EnumProperty(
         name="Light Selection", description="How a light is chosen for next-event estimation",
         items=LIGHT_SELECTION_ITEMS, default='POWER')

@@ -92,6 +92,7 @@ class RENDER_PT_ember_light_paths(EmberPanel, bpy.types.Panel):
         layout.use_property_split = True
         layout.use_property_decorate = False
         layout.prop(context.scene.ember, "max_bounces", text="Total Bounces")
+        layout.prop(context.scene.ember, "transparent_max_bounces", text="Transparent")
 
 
 class RENDER_PT_ember_light_paths_clamping(EmberPanel, bpy.types.Panel):

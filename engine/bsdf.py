@@ -290,6 +290,15 @@ def weights(lobes, wo):
     return np.maximum(w, 0.0)
 
 
+def transparency(lobes):
+    """(N, 3) light a surface lets straight through: the summed weight x
+    colour of its transparent lobes (Cycles' closure_transparent_extinction),
+    what a shadow ray keeps crossing it.  The exporter never puts a
+    transparent lobe under a layer, so this is also its entry in ``weights``."""
+    t = lobes.color * (lobes.weight * (lobes.kind == TRANSPARENT))[:, :, None]
+    return np.maximum(t.sum(axis=1), 0.0)
+
+
 def _albedo_guess(lobes, k, mu):
     """Cheap estimate of a lobe's albedo for choosing lobes (any positive
     guess is unbiased: it only moves variance)."""

@@ -9,11 +9,17 @@ contiguous range of pixels and returns a ``film.Tile``.
 
 Conventions (Cycles, measured against it): max_bounces = N means light
 sampling at path vertices 0..N (vertex 0 = the first hit), and vertex N + 1
-only collects emission, so N = 0 is direct lighting.  A constant world is not light
-sampled (BSDF sampling only, as Cycles does); delta lights cannot be hit by
-BSDF rays, so they are always light sampled, in every strategy.
+only collects emission, so N = 0 is direct lighting.  A constant world is not
+light sampled (BSDF sampling only, as Cycles does); delta lights cannot be hit
+by BSDF rays, so they are always light sampled, in every strategy.
+
+Transparent surfaces (Cycles' transparent bounces and shadows): a pass
+straight through a sampled transparent lobe is not a vertex; it keeps the
+ray's start, MIS state and kind and counts towards ``transparent_max_bounces``
+instead of max_bounces.  Shadow rays cross transparent surfaces, attenuated
+by their transparency.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -47,6 +53,7 @@ class Context:
         self.delta_emitters = np.nonzero(delta)[0]
         self.all_emitters = np.arange(lt.count)
         _visibility_setup(self)
+        _transparency_setup(self)
 
 
 @dataclass
@@ -66,9 +73,18 @@ class Paths:
     # VIS_* bit of the ray: camera, or the kind of the bounce that cast it
     # (tracked only when something in the scene is invisible to some rays).
     ray: np.ndarray
+    # Where the ray's straight line started (the last vertex; transparent
+    # passes move o, not this): lights hit are weighed by MIS from here.
+    mis_o: np.ndarray
+    bounce: np.ndarray    # vertices scattered so far (0 = camera ray)
+    tbounce: np.ndarray   # transparent surfaces passed so far
 
     def take(self, keep):
         return Paths(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
+
+    def concat(self, other):
+        return Paths(*(np.concatenate([getattr(self, f), getattr(other, f)])
+                       for f in self.__dataclass_fields__))
 
 
 @dataclass
@@ -95,12 +111,17 @@ def trace_batch(ctx, pix, rng, tile):
     u = rng.random((n, 4))
     o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3])
     paths = Paths(pix, o, d, tmax, np.ones((n, 3)), np.zeros((n, 3)),
-                  np.ones(n), np.ones(n, bool), o, np.zeros((n, 3)), np.full(n, VIS_CAMERA, np.uint8))
-    s = ctx.settings
-    for depth in range(s.max_bounces + 2):
+                  np.ones(n), np.ones(n, bool), o, np.zeros((n, 3)), np.full(n, VIS_CAMERA, np.uint8),
+                  o, np.zeros(n, np.int32), np.zeros(n, np.int32))
+    # Every step raises a live path's bounce or its transparent bounce
+    # count, both bounded: max_bounces + 1 vertices scatter, one more only
+    # collects emission, and transparent passes end at transparent_limit.
+    for depth in range(ctx.settings.max_bounces + 2 + ctx.transparent_limit):
         if len(paths.pix) == 0:
             break
         paths = _bounce(ctx, paths, depth, rng, tile)
+    if len(paths.pix):
+        _finish(ctx, paths, tile)
 
 
 def _finish(ctx, paths, tile):
@@ -118,9 +139,7 @@ def _bounce(ctx, paths, depth, rng, tile):
     t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax)
     if ctx.triangles.visibility is not None:
         t, prim, bu, bv = _skip_invisible(ctx, paths.o, paths.d, paths.tmax, paths.ray, t, prim, bu, bv)
-    lt, emitter, lLe, lpdf = ctx.lights.intersect(paths.o, paths.d, np.minimum(t, paths.tmax),
-                                                  camera=depth == 0,
-                                                  ray=paths.ray if ctx.track_rays else None)
+    lt, emitter, lLe, lpdf = _lights_along(ctx, paths, np.minimum(t, paths.tmax))
     # A path ends at the closest light it meets (measured against Cycles:
     # light_over_lit_world in tests/addon/test_light_parity.py).
     hit_light = lt < np.inf
@@ -135,7 +154,7 @@ def _bounce(ctx, paths, depth, rng, tile):
         paths.L[i] += paths.beta[i] * lLe[i] * w[:, None]
     miss = (prim < 0) & ~hit_light
     if miss.any():
-        _escaped(ctx, paths, np.nonzero(miss)[0], depth)
+        _escaped(ctx, paths, np.nonzero(miss)[0], tile)
 
     # Compact to the paths that hit a surface: everything below works on
     # dense arrays, with no index indirection.
@@ -153,9 +172,19 @@ def _bounce(ctx, paths, depth, rng, tile):
     if len(em):
         _emission_hit(ctx, paths, em, hit, emission[em])
 
-    if depth == s.max_bounces + 1:
+    last = paths.bounce > s.max_bounces
+    if ctx.transparent_shadows:
+        # Cycles' TERMINATE_ON_NEXT_SURFACE after the last transparent pass.
+        last |= paths.tbounce >= ctx.transparent_limit
+    carried = None
+    if last.all() and not ctx.transparent_shadows:
         _finish(ctx, paths, tile)
         return paths.take(np.zeros(len(paths.pix), bool))
+    if last.any():
+        carried = _pass_last(ctx, paths.take(last), _take_hit(hit, last), tile)
+        paths, hit = paths.take(~last), _take_hit(hit, ~last)
+        if len(paths.pix) == 0:
+            return carried
 
     lobes = ctx.materials.gather(hit.mat, hit.uv)
     # Texture hook: normal maps and bump replace the shading normal.
@@ -164,14 +193,56 @@ def _bounce(ctx, paths, depth, rng, tile):
     tt, bb = frame(hit.ns)
     wo_l = to_local(hit.wo, tt, bb, hit.ns)
     _next_event(ctx, paths, hit, lobes, tt, bb, wo_l, rng)
-    alive = _scatter(ctx, paths, hit, lobes, tt, bb, wo_l, depth, rng)
-    paths.prev_p, paths.prev_n = hit.p, hit.ng   # for the light tree's MIS pdf
+    ray = paths.ray
+    alive, through = _scatter(ctx, paths, hit, lobes, tt, bb, wo_l, rng)
+    # For the light tree's MIS pdf; a transparent pass keeps the vertex.
+    paths.prev_p = _unless(through, paths.prev_p, hit.p)
+    paths.prev_n = _unless(through, paths.prev_n, hit.ng)
     if ctx.track_rays:
-        paths.ray = _ray_kind(hit, lobes, wo_l, tt, bb, paths, rng)
-    if alive.all():
-        return paths
-    _finish(ctx, paths.take(~alive), tile)
-    return paths.take(alive)
+        paths.ray = _unless(through, ray, _ray_kind(hit, lobes, wo_l, tt, bb, paths, rng))
+    elif ctx.triangles.visibility is not None:
+        # Only camera (or shadow) visibility differs: any indirect kind sees
+        # the same triangles, but no longer as a camera ray.
+        paths.ray = _unless(through, ray, np.full(len(ray), VIS_INDIRECT, np.uint8))
+    if not alive.all():
+        _finish(ctx, paths.take(~alive), tile)
+        paths = paths.take(alive)
+    return paths if carried is None or len(carried.pix) == 0 else paths.concat(carried)
+
+
+def _unless(mask, old, new):
+    """new, but old where mask (per ray); new itself when mask is empty."""
+    if not mask.any():
+        return new
+    return np.where(mask.reshape((-1,) + (1,) * (new.ndim - 1)), old, new)
+
+
+def _take_hit(hit, keep):
+    return replace(hit, **{f.name: getattr(hit, f.name)[keep] for f in fields(hit)
+                           if isinstance(getattr(hit, f.name), np.ndarray)})
+
+
+def _lights_along(ctx, paths, tmax):
+    """Analytic lights on each ray before tmax, seen from where its straight
+    line started (before any transparent pass, as Cycles keeps the ray's
+    origin), so MIS weighs them with the pdf NEE had at that vertex.  Camera
+    rays (bounce 0) see only camera-visible lights."""
+    ray = paths.ray if ctx.track_rays else None
+    o = paths.o
+    if ctx.transparent_shadows:
+        o = paths.mis_o
+        tmax = tmax + dot(paths.o - o, paths.d)
+    camera = paths.bounce == 0
+    if camera.all() or not camera.any():
+        return ctx.lights.intersect(o, paths.d, tmax, camera=bool(camera.all()), ray=ray)
+    n = len(o)
+    out = (np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros((n, 3)), np.zeros(n))
+    for rows in (np.nonzero(camera)[0], np.nonzero(~camera)[0]):
+        res = ctx.lights.intersect(o[rows], paths.d[rows], tmax[rows], camera=bool(camera[rows[0]]),
+                                   ray=None if ray is None else ray[rows])
+        for a, r in zip(out, res):
+            a[rows] = r
+    return out
 
 
 def _camera_aovs(ctx, paths, t, prim, hit_light, hit_surf, tile):
@@ -205,21 +276,35 @@ def _mis_hit(ctx, paths, i, emitter, pdf_light):
     return np.where(prev_delta, 1.0, power_heuristic(paths.prev_pdf[i], p_light))
 
 
-def _escaped(ctx, paths, i, depth):
-    transparent = ctx.settings.transparent and depth == 0
-    env = None if transparent else ctx.lights.environment_hits(paths.d[i])
+def _escaped(ctx, paths, i, tile):
+    sky = i
+    if ctx.settings.transparent:
+        # With a transparent film camera rays (also through transparent
+        # surfaces, which keep the ray's kind) see no world.
+        camera = paths.bounce[i] == 0
+        _film_alpha_through(paths, i[camera & (paths.tbounce[i] > 0)], tile)
+        sky = i[~camera]
+    env = ctx.lights.environment_hits(paths.d[sky]) if len(sky) else None
     if env is not None:
         # An HDRI world is an emitter NEE samples: weigh it by MIS.
         emitter, Le, pdf = env
-        w = _mis_hit(ctx, paths, i, np.full(len(i), emitter), pdf)
-        paths.L[i] += paths.beta[i] * Le * w[:, None]
-    elif not transparent:
-        paths.L[i] += paths.beta[i] * ctx.world
+        w = _mis_hit(ctx, paths, sky, np.full(len(sky), emitter), pdf)
+        paths.L[sky] += paths.beta[sky] * Le * w[:, None]
+    else:
+        paths.L[sky] += paths.beta[sky] * ctx.world
     for mask, emitter, Le, pdf in ctx.lights.sun_hits(paths.d[i], paths.ray[i] if ctx.track_rays else None):
         j = i[mask]
         if len(j):
             w = _mis_hit(ctx, paths, j, np.full(len(j), emitter), np.full(len(j), pdf))
             paths.L[j] += paths.beta[j] * Le * w[:, None]
+
+
+def _film_alpha_through(paths, i, tile):
+    """Camera rays that leave through transparent surfaces uncover the
+    transparent film by their throughput (Cycles: alpha = 1 - the average
+    throughput of such rays); their first hit counted them opaque."""
+    if len(i):
+        np.subtract.at(tile.alpha, paths.pix[i] - tile.lo, paths.beta[i].mean(axis=1))
 
 
 def _interaction(ctx, paths, t, prim, bu, bv):
@@ -247,11 +332,7 @@ def _interaction(ctx, paths, t, prim, bu, bv):
         ns = np.where((dot(ns, -d) <= 1e-6)[:, None], ng, ns)
     else:
         ns = ng
-    if tr.uv is not None:
-        c = tr.uv[prim]
-        uv = (1.0 - bu - bv)[:, None] * c[:, 0] + bu[:, None] * c[:, 1] + bv[:, None] * c[:, 2]
-    else:
-        uv = np.zeros((len(p), 2))
+    uv = _hit_uv(tr, prim, bu, bv)
     hit = Hit(p, ng, ns, -d, tr.material[prim], prim, ctx.accel.offset_scale(p), uv, back=back)
     if getattr(tr, "tangent", None) is not None:
         w = np.stack([1.0 - bu - bv, bu, bv], axis=1)
@@ -261,11 +342,19 @@ def _interaction(ctx, paths, t, prim, bu, bv):
     return hit
 
 
+def _hit_uv(tr, prim, bu, bv):
+    """Interpolated texture coordinates (0 without a UV map)."""
+    if tr.uv is None:
+        return np.zeros((len(prim), 2))
+    c = tr.uv[prim]
+    return (1.0 - bu - bv)[:, None] * c[:, 0] + bu[:, None] * c[:, 1] + bv[:, None] * c[:, 2]
+
+
 def _emission_hit(ctx, paths, em, hit, Le):
     s = ctx.settings
     if s.strategy == "mis":
         emitter = ctx.lights.emitter_of_triangle(hit.mat[em])
-        pdf = ctx.lights.triangle_pdf(hit.prim[em], paths.o[em], hit.p[em], hit.ng[em])
+        pdf = ctx.lights.triangle_pdf(hit.prim[em], paths.mis_o[em], hit.p[em], hit.ng[em])
         w = _mis_hit(ctx, paths, em, emitter, pdf)
     else:
         w = _mis_hit(ctx, paths, em, None, None)
@@ -338,6 +427,9 @@ def _shade_light(ctx, paths, hit, lobes, tt, bb, wo_l, e, p_sel, u):
     # Points on triangles would block their own shadow ray: stop short.
     shorten = np.where(on, 10.0 * eps, 0.0)
     tmax = np.where(np.isfinite(dist), dist * (1.0 - 1e-6) - shorten, 1e37)
+    if ctx.transparent_shadows:
+        paths.L[live] += contrib[live] * _transmittance(ctx, origin, wi, tmax, e[live], paths.tbounce[live])
+        return
     blocked = _occluded(ctx, origin, wi, tmax, e[live])
     free = live[~blocked]
     paths.L[free] += contrib[free]
@@ -359,8 +451,9 @@ def _same_side(wi, ng, wi_l):
     return (g != 0) & ((g > 0) == (wi_l[:, 2] > 0))
 
 
-def _scatter(ctx, paths, hit, lobes, tt, bb, wo_l, depth, rng):
-    """Sample the BSDF and update the path state in place; returns which paths live on."""
+def _scatter(ctx, paths, hit, lobes, tt, bb, wo_l, rng):
+    """Sample the BSDF and update the path state in place; returns which
+    paths live on and which passed straight through a transparent lobe."""
     s = ctx.settings
     u = rng.random((len(paths.pix), 4))
     _orient(hit, lobes)
@@ -370,24 +463,46 @@ def _scatter(ctx, paths, hit, lobes, tt, bb, wo_l, depth, rng):
     # would leak light through the surface: absorb it, as Cycles does.
     ok = _same_side(wi, hit.ng, wi_l) & np.all(np.isfinite(weight), axis=1) & np.any(weight > 0, axis=1)
     beta = paths.beta * weight
-    if depth >= s.rr_depth:
-        q = np.minimum(beta.max(axis=1), 0.95)
+    rr = paths.bounce >= s.rr_depth
+    if rr.any():
+        q = np.where(rr, np.minimum(beta.max(axis=1), 0.95), 1.0)
         survive = u[:, 3] < q
         beta = beta / np.where(survive, np.maximum(q, 1e-30), 1.0)[:, None]
         ok &= survive
     paths.beta = beta
-    paths.o = ctx.accel.offset_origin(hit.p, hit.ng, wi, hit.eps)
+    through = _sampled_transparent(ctx, hit, delta, wi_l, wo_l)
+    if through.any():
+        # A transparent pass is not a vertex: the path keeps its direction,
+        # MIS pdf and segment start (Cycles moves only the ray's tmin).
+        wi[through] = paths.d[through]
+        pdf = np.where(through, paths.prev_pdf, pdf)
+        delta = np.where(through, paths.prev_delta, delta)
+    o = ctx.accel.offset_origin(hit.p, hit.ng, wi, hit.eps)
+    paths.tmax = _unless(through, paths.tmax - dot(o - paths.o, wi), np.full(len(wi), np.inf))
+    paths.mis_o = _unless(through, paths.mis_o, o)
+    paths.o = o
     paths.d = wi
-    paths.tmax = np.full(len(wi), np.inf)
     paths.prev_pdf = pdf
     paths.prev_delta = delta
-    return ok
+    paths.bounce = paths.bounce + ~through
+    paths.tbounce = paths.tbounce + through
+    return ok, through
+
+
+def _sampled_transparent(ctx, hit, delta, wi_l, wo_l):
+    """Which samples chose a transparent lobe: bsdf.sample returns exactly
+    -wo for them (a delta sample; refraction through glass of IOR 1 is not
+    bit-exact, and materials without a transparent lobe are excluded)."""
+    if not ctx.transparent_shadows:
+        return np.zeros(len(delta), bool)
+    return delta & ctx.transparent_mat[hit.mat] & np.all(wi_l == -wo_l, axis=1)
 
 
 # ----------------------------------------------------------------------------
 # Ray visibility (Blender's Object > Visibility > Ray Visibility, as Cycles)
 
 MAX_SKIPS = 16   # invisible surfaces a ray may pass before it counts as a miss
+VIS_INDIRECT = VIS_DIFFUSE | VIS_GLOSSY | VIS_TRANSMISSION
 
 
 def _visibility_setup(ctx):
@@ -479,7 +594,6 @@ def _diffuse_lobe(kind):
 
 def _lobes_where(lobes, drop, rows):
     """The lobes of ``rows`` with the ``drop`` (N, K) entries switched off."""
-    from dataclasses import fields, replace
     per_ray = {f.name: getattr(lobes, f.name) for f in fields(lobes)}
     sub = replace(lobes, **{k: v[rows] for k, v in per_ray.items()
                             if isinstance(v, np.ndarray) and len(v) == len(lobes)})
@@ -507,3 +621,72 @@ def _visible_lobes_f(ctx, lobes, wo_l, wi_l, wi, ng, emitter, f):
     f[no_t[dot(wi[no_t], ng[no_t]) < 0]] = 0.0
     return f
 
+
+# ----------------------------------------------------------------------------
+# Transparency (Transparent BSDF, Principled Alpha: the 'transparent' lobe)
+
+def _transparency_setup(ctx):
+    """Which materials have a transparent lobe; scenes without one pay
+    nothing (shadow rays stay plain occlusion tests).  transparent_limit:
+    transparent passes after which the next surface ends the path; Cycles
+    lets a path cross one even when transparent_max_bounces is 0."""
+    ctx.transparent_mat = np.any(ctx.materials.kind == bsdf.TRANSPARENT, axis=1)
+    ctx.transparent_shadows = bool(ctx.transparent_mat.any())
+    ctx.transparent_limit = max(int(ctx.settings.transparent_max_bounces), 1)
+
+
+def _pass_last(ctx, paths, hit, tile):
+    """Paths at a vertex that only collects emission (past max_bounces)
+    still cross transparent surfaces, weighted by their transparency, as
+    Cycles (TERMINATE_AFTER_TRANSPARENT keeps the transparent closure);
+    the others end here.  Returns the paths that go on."""
+    go = ctx.transparent_mat[hit.mat] & (paths.tbounce < ctx.transparent_limit)
+    rows = np.nonzero(go)[0]
+    if len(rows):
+        T = bsdf.transparency(ctx.materials.gather(hit.mat[rows], hit.uv[rows]))
+        paths.beta[rows] *= T
+        go[rows] = np.any(T > 0, axis=1)
+    if not go.all():
+        _finish(ctx, paths.take(~go), tile)
+        paths, hit = paths.take(go), _take_hit(hit, go)
+    o = ctx.accel.offset_origin(hit.p, hit.ng, paths.d, hit.eps)
+    paths.tmax = paths.tmax - dot(o - paths.o, paths.d)
+    paths.o = o
+    paths.tbounce = paths.tbounce + 1
+    return paths
+
+
+def _transmittance(ctx, origin, wi, tmax, emitter, tbounce):
+    """(N, 3) light reaching the shadow rays' ends through transparent
+    surfaces (Cycles' transparent shadows).  embreex has no any-hit filter,
+    so each ray is traced again from past its transparent hit, times that
+    surface's transparency; an opaque hit blocks it, and so does a
+    transparent hit beyond the transparent bounces its path has left."""
+    n = len(origin)
+    out = np.ones((n, 3))
+    cast = np.ones(n, bool)
+    if ctx.light_no_shadow:
+        cast = (ctx.lights.visibility[emitter] & VIS_SHADOW) != 0
+    idx = np.nonzero(cast)[0]
+    o, d, tm = origin[idx], wi[idx], tmax[idx]
+    left = np.maximum(ctx.settings.transparent_max_bounces - tbounce[idx], 0)
+    while len(idx):
+        t, prim, bu, bv = ctx.accel.intersect(o, d, tm)
+        if ctx.shadow_skips:
+            ray = np.full(len(idx), VIS_SHADOW, np.uint8)
+            t, prim, bu, bv = _skip_invisible(ctx, o, d, tm, ray, t, prim, bu, bv)
+        hit = prim >= 0
+        mat = ctx.triangles.material[np.maximum(prim, 0)]
+        crosses = hit & ctx.transparent_mat[mat] & (left > 0)
+        out[idx[hit & ~crosses]] = 0.0
+        c = np.nonzero(crosses)[0]
+        if len(c) == 0:
+            break
+        T = bsdf.transparency(ctx.materials.gather(mat[c], _hit_uv(ctx.triangles, prim[c], bu[c], bv[c])))
+        out[idx[c]] *= T
+        c = c[np.any(T > 0, axis=1)]
+        # Go on from just past the surface, towards the same end point.
+        start = ctx.accel.offset_origin(o[c] + d[c] * t[c, None], ctx.triangles.ng[prim[c]], d[c])
+        tm = tm[c] - dot(start - o[c], d[c])
+        idx, o, d, left = idx[c], start, d[c], left[c] - 1
+    return out

@@ -151,6 +151,9 @@ DEFAULT_MATERIAL = Material("default", (Lobe("diffuse", (0.8, 0.8, 0.8)),))
 # may hold instead of a constant (evaluated per ray by engine.textures).
 # Colours evaluate to RGB, everything else to a float; a colour used as a float
 # is its Rec.709 luminance and a float used as a colour is grey, as Cycles.
+# Every Lobe field but kind, fresnel, multiscatter and covers may be one (so a
+# lobe's weight and IOR may vary per ray, e.g. a textured Principled Metallic,
+# Alpha or Mix Shader factor); engine.textures.value_range bounds their values.
 
 INTERPOLATIONS = ("Closest", "Linear")
 EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")
@@ -413,6 +416,11 @@ class RenderSettings:
     clamp: 0 disables clamping of a sample's radiance.  max_paths bounds the
     number of paths in flight (memory); threads 0 = every core.
     time_limit: seconds (0 = none); stops after the pass that crosses it.
+    transparent_max_bounces: passes straight through transparent surfaces
+    (Transparent BSDF, Principled Alpha), counted apart from max_bounces as
+    Cycles does (its default is 8): a path may cross this many, after which
+    the next surface only adds its emission; a shadow ray crosses at most
+    this many minus those its path has crossed, else it is blocked.
     """
     samples: int = 16
     samples_per_pass: int = 1
@@ -428,6 +436,7 @@ class RenderSettings:
     max_paths: int = 1 << 18
     threads: int = 0
     time_limit: float = 0.0
+    transparent_max_bounces: int = 8
     # Sample an HDRI world by max(L - mean, 0) instead of L (MIS compensation,
     # Karlik et al. 2019): BSDF sampling covers the dim parts, NEE spends its
     # samples on what stands out.  Only with strategy 'mis' (NEE alone would

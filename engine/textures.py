@@ -107,6 +107,21 @@ def sample_texels(texels, uv, interpolation="Linear", extension="REPEAT"):
                     + tx * _read(texels, ix + 1, iy + 1, extension)))
 
 
+def _last_call(fn):
+    """fn remembering its last argument and result: one image feeds several
+    lobe fields of a material (Principled metallic weighs the metal and,
+    as 1 - metallic, the layers beside it), looked up once per ray batch.
+    The argument is held, so its identity cannot be reused; results are
+    read-only to callers."""
+    last = [None, None]
+
+    def cached(uv):
+        if last[0] is not uv:
+            last[0], last[1] = uv, fn(uv)
+        return last[1]
+    return cached
+
+
 def _image_lookup(node, texels):
     """RGBA at uv as the Image Texture node outputs it (colour linear)."""
     def lookup(uv):
@@ -129,6 +144,7 @@ class Compiler:
 
     def __init__(self):
         self.texels = {}
+        self.compiled = {}  # id(expr) -> (expr, compiled): shared sub-expressions compile once
 
     def texels_of(self, image):
         key = id(image)
@@ -138,6 +154,14 @@ class Compiler:
 
     def compile(self, expr):
         """-> (fn(uv) -> (N,) or (N, 3), is_colour)."""
+        if not is_texture(expr):
+            return self._compile(expr)
+        key = id(expr)
+        if key not in self.compiled:
+            self.compiled[key] = (expr, self._compile(expr))
+        return self.compiled[key][1]
+
+    def _compile(self, expr):
         if isinstance(expr, ImageTexture):
             return self._image(expr)
         if isinstance(expr, MixColor):
@@ -162,7 +186,7 @@ class Compiler:
         return (lambda uv: fn(uv) @ LUMA) if is_color else fn
 
     def _image(self, node):
-        lookup = _image_lookup(node, self.texels_of(node.image))
+        lookup = _last_call(_image_lookup(node, self.texels_of(node.image)))
         coords = (lambda uv: uv) if node.uv is None else self._uv(node.uv)
         if node.output == "Alpha":
             return (lambda uv: lookup(coords(uv))[:, 3]), False
@@ -268,6 +292,124 @@ def constant_of(fn, is_color):
 
 
 # ----------------------------------------------------------------------------
+# value ranges (interval arithmetic), for deciding at export which lobes exist
+
+UNBOUNDED = (-np.inf, np.inf)
+# Math operations monotone in each operand (for fixed others) on any box:
+# their extremes over a box of operand intervals lie at its corners.
+MONOTONE_MATH = ("ADD", "SUBTRACT", "MULTIPLY", "MULTIPLY_ADD", "MINIMUM", "MAXIMUM", "LESS_THAN",
+                 "GREATER_THAN", "SIGN", "ROUND", "FLOOR", "CEIL", "TRUNC", "EXPONENT", "SQRT")
+# Mix blends multilinear in (factor, a, b): extremes at the corners too.
+MULTILINEAR_BLENDS = ("MIX", "ADD", "MULTIPLY", "SUBTRACT", "SCREEN")
+
+
+def value_range(expr):
+    """(lo, hi) bounding every value of every channel a constant or texture
+    expression can take (a colour used as a float, its luminance, lies in
+    it too).  Conservative: an operation it cannot bound gives (-inf, inf),
+    which only costs the exporter a lobe it might have left out."""
+    if isinstance(expr, ImageTexture):
+        return _image_range(expr)
+    if isinstance(expr, MixColor):
+        return _mix_range(expr)
+    if isinstance(expr, Math):
+        lo, hi = _math_range(expr)
+        return (max(lo, 0.0), min(hi, 1.0)) if expr.clamp else (lo, hi)
+    if is_texture(expr):
+        return UNBOUNDED
+    value = np.asarray(expr, dtype=np.float64).reshape(-1)
+    return float(value.min()), float(value.max())
+
+
+def _hull(values, *extra):
+    values = np.concatenate([np.asarray(values, dtype=np.float64).reshape(-1), np.asarray(extra, float)])
+    if not np.isfinite(values).all():
+        return UNBOUNDED
+    return float(values.min()), float(values.max())
+
+
+def _image_range(node):
+    """Filtering blends the prepared texels (sRGB-encoded, alpha associated)
+    with weights in [0, 1] summing to 1, so it stays within their hull (CLIP
+    adds 0); decoding sRGB after is monotone.  Dividing by filtered alpha
+    (unassociate) is not bounded here."""
+    texels = prepare_texels(node.image)
+    zero = (0.0,) if node.extension == "CLIP" else ()
+    if node.output == "Alpha":
+        return _hull(texels[..., 3], *zero)
+    if node.unassociate and (texels[..., 3] != 1).any():
+        return UNBOUNDED
+    lo, hi = _hull(texels[..., :3], *zero)
+    if node.image.srgb_filter:
+        lo, hi = (float(x) for x in srgb_to_linear([lo, hi]))
+    return lo, hi
+
+
+def _corners(fn, ranges):
+    """fn evaluated at every corner of the box of operand ranges (a corner
+    that overflows leaves the range unbounded)."""
+    if not all(np.isfinite(r).all() for r in ranges):
+        return UNBOUNDED
+    grid = np.array(np.meshgrid(*ranges, indexing="ij")).reshape(len(ranges), -1)
+    with np.errstate(all="ignore"):
+        return _hull(fn(*grid))
+
+
+def _math_range(node):
+    op = node.operation
+    a, b, c = value_range(node.a), value_range(node.b), value_range(node.c)
+    if op in MONOTONE_MATH:
+        return _corners(lambda x, y, z: _math_raw(op, x, y, z), (a, b, c))
+    if op == "DIVIDE" and (b[0] > 0 or b[1] < 0):
+        return _corners(lambda x, y: _math_raw(op, x, y, 0.0), (a, b))
+    if op == "POWER" and a[0] > 0:
+        return _corners(lambda x, y: _math_raw(op, x, y, 0.0), (a, b))
+    if op == "INVERSE_SQRT" and a[0] > 0:
+        return _corners(lambda x: _math_raw(op, x, 0.0, 0.0), (a,))
+    if op == "ABSOLUTE":
+        top = max(abs(a[0]), abs(a[1]))
+        return (0.0 if a[0] <= 0 <= a[1] else min(abs(a[0]), abs(a[1])), top)
+    if op in ("SINE", "COSINE"):
+        return (-1.0, 1.0)
+    if op == "FRACT":
+        return (0.0, 1.0)
+    return UNBOUNDED
+
+
+def _mix_range(node):
+    t, a, b = value_range(node.fac), value_range(node.a), value_range(node.b)
+    if node.clamp_factor:
+        t = (min(max(t[0], 0.0), 1.0), min(max(t[1], 0.0), 1.0))
+    blend = node.blend
+    if blend in MULTILINEAR_BLENDS:
+        lo, hi = _corners(lambda s, x, y: mix_colors(blend, s, x, y), (t, a, b))
+    elif blend == "OVERLAY":
+        # Either branch may apply: the union of both (each multilinear).
+        pieces = [_corners(lambda s, x, y, f=f: f(s, x, y), (t, a, b)) for f in _OVERLAY_BRANCHES]
+        lo, hi = min(p[0] for p in pieces), max(p[1] for p in pieces)
+    elif blend in ("DIFFERENCE", "DARKEN", "LIGHTEN"):
+        # (1 - t) a + t g with g = |a - b|, min or max, bounded apart.
+        g = _blend_operand_range(blend, a, b)
+        lo, hi = _corners(lambda s, x, y: (1.0 - s) * x + s * y, (t, a, g))
+    else:
+        lo, hi = UNBOUNDED
+    return (max(lo, 0.0), min(hi, 1.0)) if node.clamp_result else (lo, hi)
+
+
+_OVERLAY_BRANCHES = (lambda t, a, b: a * (1.0 - t + 2.0 * t * b),
+                     lambda t, a, b: 1.0 - (1.0 - t + 2.0 * t * (1.0 - b)) * (1.0 - a))
+
+
+def _blend_operand_range(blend, a, b):
+    if blend == "DARKEN":
+        return min(a[0], b[0]), min(a[1], b[1])
+    if blend == "LIGHTEN":
+        return max(a[0], b[0]), max(a[1], b[1])
+    top = max(abs(a[1] - b[0]), abs(b[1] - a[0]))
+    return 0.0, top
+
+
+# ----------------------------------------------------------------------------
 # the scene's textures
 
 # Lobe fields whose table array has another name or needs a conversion;
@@ -304,6 +446,7 @@ class MaterialTextures:
         return dataclasses.replace(mat, lobes=tuple(lobes), emission=emission, normal=None)
 
     def _constant_lobe(self, i, j, lobe):
+        lobe = _with_derived_f0(lobe)
         changes = {}
         for f in dataclasses.fields(lobe):
             value = getattr(lobe, f.name)
@@ -311,8 +454,10 @@ class MaterialTextures:
                 continue
             fn, is_color = self.compiler.compile(value)
             const = constant_of(fn, is_color)
+            if is_color and isinstance(f.default, float):
+                const = float(np.dot(const, LUMA))   # a colour in a scalar field: its luminance
             if f.name == "roughness":
-                const = max(const if not is_color else float(np.dot(const, LUMA)), ROUGHNESS_FLOOR)
+                const = max(const, ROUGHNESS_FLOOR)
             self.lobe_fields.append((i, j, f.name, fn, is_color))
             changes[f.name] = const
         return dataclasses.replace(lobe, **changes) if changes else lobe
@@ -329,15 +474,18 @@ class MaterialTextures:
     # -- per ray -------------------------------------------------------------
 
     def apply(self, mat, uv, lobes, min_alpha):
-        """Overwrite the textured lobe parameters of the rays' materials."""
+        """Overwrite the textured lobe parameters of the rays' materials
+        (any Lobe field: colours, roughness, weight, ior, f0, ...)."""
         if uv is None:
             uv = np.zeros((len(mat), 2))
+        at = {}  # material -> (rows, their UVs): one UV array per material
         for i, j, name, fn, is_color in self.lobe_fields:
-            rows = np.nonzero(mat == i)[0]
-            if len(rows) == 0:
-                continue
-            value = fn(uv[rows])
-            _store(lobes, name, rows, j, value, is_color, min_alpha)
+            if i not in at:
+                rows = np.nonzero(mat == i)[0]
+                at[i] = rows, uv[rows]
+            rows, uv_rows = at[i]
+            if len(rows):
+                _store(lobes, name, rows, j, fn(uv_rows), is_color, min_alpha)
 
     def emission_at(self, mat, uv, emission):
         """Per-ray emission: the constant table's rows, textured ones evaluated."""
@@ -359,6 +507,10 @@ class MaterialTextures:
         return ns
 
 
+# Lower bounds of textured fields, as the constant tables clamp them.
+FIELD_FLOORS = {"color": 0.0, "weight": 0.0, "f0": 0.0, "transmission_tint": 0.0, "ior": 1e-5}
+
+
 def _store(lobes, name, rows, j, value, is_color, min_alpha):
     if name == "roughness":
         r = np.clip(value @ LUMA if is_color else value, 0.0, 1.0)
@@ -369,9 +521,29 @@ def _store(lobes, name, rows, j, value, is_color, min_alpha):
         value = np.repeat(value[:, None], 3, axis=1)
     elif target.ndim == 2 and is_color:
         value = value @ LUMA
-    if name == "color":
-        value = np.maximum(value, 0.0)
+    if name in FIELD_FLOORS:
+        value = np.maximum(value, FIELD_FLOORS[name])
     target[rows, j] = value
+
+
+def _with_derived_f0(lobe):
+    """A lobe whose f0 is left to its default (the dielectric F0 of the IOR,
+    or the colour) gets that default as an expression when the IOR or colour
+    it follows is textured, so f0 follows it per ray."""
+    if getattr(lobe, "f0", None) is not None:
+        return lobe
+    dielectric = getattr(lobe, "fresnel", "none") == "dielectric" or lobe.kind in ("glass", "refraction")
+    if dielectric and is_texture(lobe.ior):
+        return dataclasses.replace(lobe, f0=f0_of_ior(lobe.ior))
+    if not dielectric and is_texture(lobe.color):
+        return dataclasses.replace(lobe, f0=lobe.color)
+    return lobe
+
+
+def f0_of_ior(ior):
+    """((ior - 1) / (ior + 1))^2 as a texture expression."""
+    ratio = Math("DIVIDE", Math("SUBTRACT", ior, 1.0), Math("ADD", ior, 1.0))
+    return Math("MULTIPLY", ratio, ratio)
 
 
 def _bump_step(expr):

@@ -96,7 +96,9 @@ def _validate_lobe_extras(lobe, k, what, n_lobes):
     """The Fresnel, IOR, layering and weight parameters of a lobe."""
     for name in ("ior", "weight"):
         value = getattr(lobe, name, None)
-        if value is not None and not is_texture(value) and not np.isfinite(value):
+        if is_texture(value):
+            validate_texture(value, f"{what} lobe {k} {name}")
+        elif value is not None and not np.isfinite(value):
             raise SceneError(f"{what}: lobe {k} {name} is not finite")
     ior = getattr(lobe, "ior", 1.5)
     if not is_texture(ior) and ior <= 0:
@@ -195,6 +197,8 @@ def validate_settings(s):
         raise SceneError(f"settings: unknown pixel filter {s.filter_type!r}")
     if s.max_bounces < 0:
         raise SceneError("settings: max bounces must be >= 0")
+    if s.transparent_max_bounces < 0:
+        raise SceneError("settings: transparent max bounces must be >= 0")
     if s.max_paths < 1024:
         raise SceneError("settings: max_paths must be >= 1024")
 

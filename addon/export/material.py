@@ -1,10 +1,14 @@
 """Blender shader node trees -> engine.scene.Material (a weighted set of lobes).
 
-Covered so far: Diffuse BSDF, Glossy BSDF, Emission, Principled BSDF (base
-colour, metallic, roughness, specular, emission), Mix Shader and Add Shader.
-A node Ember cannot translate becomes a grey diffuse (or a diffuse of the
-node's Color input) and is named in one warning per material.  Texture inputs
-are read as their unlinked default value, also with a warning.
+Covered: Diffuse, Glossy, Glass, Refraction, Translucent, Transparent, Sheen,
+Emission, Principled BSDF (Cycles' layering), Mix Shader and Add Shader.  A
+node Ember cannot translate becomes a grey diffuse (or a diffuse of the
+node's Color input) and is named in one warning per material.  Inputs may be
+driven by textures (nodes.SocketReader): lobe colours, roughness, IOR and
+weights become texture expressions evaluated per ray, and a lobe is left out
+only where its weight's range (nodes.may_exceed) shows it is always zero.
+Inputs of features Ember does not render (CONSTANT_VALUE_INPUTS) are read as
+their unlinked value, with a warning.
 """
 import dataclasses
 import math
@@ -33,22 +37,25 @@ class Closure:
         """Every lobe and the emission times a Mix Shader factor.  A lobe's
         weight carries it (its colour also enters Fresnel, multiscatter and
         layering terms, which a mix must not change)."""
-        lobes = [dataclasses.replace(lobe, weight=lobe.weight * weight) for lobe in self.lobes]
+        lobes = [dataclasses.replace(lobe, weight=nodes.multiply(lobe.weight, weight))
+                 for lobe in self.lobes]
         return Closure(lobes, _scale(self.emission, weight))
 
     def plus(self, other):
         return Closure(self.lobes + other.lobes, _add(self.emission, other.emission))
 
 
-# Colours and roughness may be texture expressions: nodes' helpers combine
-# constants and expressions alike.
+# Colours, roughness, IOR and weights may be texture expressions: nodes'
+# helpers combine constants and expressions alike.
 _scale = nodes.scale
 _add = nodes.add
 _mix = nodes.mix
 _clamp01 = nodes.clamp01
-# Float inputs read as textures; the others are compared or combined as
-# numbers by the BSDF translation, so a linked one is read as its constant.
-TEXTURE_VALUE_INPUTS = ('Roughness', 'Strength', 'Emission Strength')
+_mul = nodes.multiply
+_one_minus = nodes.one_minus
+# Float inputs of features Ember does not render (they only decide a
+# warning): a texture on them is read as its constant.
+CONSTANT_VALUE_INPUTS = PRINCIPLED_UNSUPPORTED + ('Anisotropy',)
 
 
 class NodeTranslator:
@@ -96,16 +103,17 @@ class NodeTranslator:
         return (value, value, value) if isinstance(value, float) else value
 
     def value(self, node, name, default=0.0):
-        """A float; a texture expression for TEXTURE_VALUE_INPUTS."""
+        """A float, or a float texture expression (a colour one is read as
+        its luminance); CONSTANT_VALUE_INPUTS are always constants."""
         socket = node.inputs.get(name)
         if socket is None:
             return default
         value = self._read(node, name)
-        if nodes.is_expr(value) and name not in TEXTURE_VALUE_INPUTS:
+        if nodes.is_expr(value) and name in CONSTANT_VALUE_INPUTS:
             self._note_texture(node, name)
             value = nodes.constant(socket)
         if nodes.is_expr(value):
-            return value
+            return nodes.as_value(value)
         return nodes.luminance(value) if isinstance(value, tuple) else float(value)
 
     def _note_texture(self, node, name):
@@ -166,14 +174,14 @@ class NodeTranslator:
     def _node_bsdf_glass(self, node):
         """Cycles' Glass BSDF: the colour tints reflection and refraction."""
         roughness = _clamp01(self.value(node, 'Roughness', 0.0))
-        ior = max(self.value(node, 'IOR', 1.5), 1e-5)
+        ior = nodes.at_least(self.value(node, 'IOR', 1.5), 1e-5)
         return Closure([_scene().Lobe('glass', self.color(node, 'Color', (1.0, 1.0, 1.0)), roughness,
                                       'dielectric', ior=ior, multiscatter=self._multiscatter(node))])
 
     def _node_bsdf_refraction(self, node):
         """Refraction only, no Fresnel (total internal reflection absorbs)."""
         roughness = _clamp01(self.value(node, 'Roughness', 0.0))
-        ior = max(self.value(node, 'IOR', 1.5), 1e-5)
+        ior = nodes.at_least(self.value(node, 'IOR', 1.5), 1e-5)
         self._multiscatter(node)
         return Closure([_scene().Lobe('refraction', self.color(node, 'Color', (1.0, 1.0, 1.0)),
                                       roughness, ior=ior)])
@@ -204,44 +212,48 @@ class NodeTranslator:
         for i, lobe in enumerate(top):
             top[i] = dataclasses.replace(lobe, covers=len(top) - 1 - i + len(base))
         lobes = top + base
-        if p['alpha'] < 1.0:
-            lobes = [_scene().Lobe('transparent', (1.0, 1.0, 1.0), weight=1.0 - p['alpha'])] + lobes
+        if nodes.may_be_below(p['alpha'], 1.0):
+            lobes = [_scene().Lobe('transparent', (1.0, 1.0, 1.0), weight=_one_minus(p['alpha']))] + lobes
         return Closure(lobes, _scale(_principled_emission(self, node), p['alpha']))
 
     def _principled_layers(self, p):
         """Sheen and coat, the layers on top (covers set by the caller)."""
         scene = _scene()
         layers = []
-        if p['sheen'] > CUTOFF:
+        if nodes.may_exceed(p['sheen'], CUTOFF):
             layers.append(scene.Lobe('sheen', _scale(p['sheen_tint'], p['sheen']), p['sheen_roughness'],
                                      weight=p['alpha']))
-        if p['coat'] > CUTOFF:
-            layers.append(scene.Lobe('glossy', (p['coat'],) * 3, p['coat_roughness'], 'dielectric',
+        if nodes.may_exceed(p['coat'], CUTOFF):
+            # The coat weight is the layer's colour (its albedo estimate and
+            # the coat tint's mix both scale with it).
+            layers.append(scene.Lobe('glossy', _grey(p['coat']), p['coat_roughness'], 'dielectric',
                                      ior=p['coat_ior'], multiscatter=True, absorb=p['coat_tint'],
                                      weight=p['alpha']))
         return layers
 
     def _principled_base(self, p):
-        """Metal, transmission, specular layer and diffuse, with their weights."""
+        """Metal, transmission, specular layer and diffuse, with their weights
+        (per ray where an input is textured; a lobe is left out where its
+        weight is zero everywhere)."""
         scene = _scene()
         lobes = []
         w = p['alpha']
         ms = p['multiscatter']
-        if p['metallic'] > CUTOFF:
+        if nodes.may_exceed(p['metallic'], CUTOFF):
             lobes.append(scene.Lobe('glossy', (1.0, 1.0, 1.0), p['roughness'], 'f82', f0=p['base_clamped'],
                                     edge_tint=_clamp_color(p['specular_tint']), multiscatter=ms,
-                                    weight=w * p['metallic']))
-            w *= 1.0 - p['metallic']
-        if p['transmission'] > CUTOFF and w > 0:
+                                    weight=_mul(w, p['metallic'])))
+            w = _mul(w, _one_minus(p['metallic']))
+        if nodes.may_exceed(p['transmission'], CUTOFF) and nodes.may_exceed(w, 0.0):
             f0 = _clamp_color(_scale(p['specular_tint'], _f0_from_ior(p['ior'])))
             lobes.append(scene.Lobe('glass', (1.0, 1.0, 1.0), p['roughness'], 'dielectric', ior=p['ior'],
                                     f0=f0, transmission_tint=_sqrt_color(p['base_clamped']),
-                                    multiscatter=ms, weight=w * p['transmission']))
-            w *= 1.0 - p['transmission']
-        if w <= 0:
+                                    multiscatter=ms, weight=_mul(w, p['transmission'])))
+            w = _mul(w, _one_minus(p['transmission']))
+        if not nodes.may_exceed(w, 0.0):
             return lobes
         eta, f0 = p['specular_eta'], p['specular_f0']
-        if eta != 1.0:
+        if nodes.is_expr(eta) or eta != 1.0:
             lobes.append(scene.Lobe('glossy', (1.0, 1.0, 1.0), p['roughness'], 'dielectric', ior=eta,
                                     f0=_clamp_color(_scale(p['specular_tint'], f0)), covers=1,
                                     multiscatter=ms, weight=w))
@@ -251,13 +263,13 @@ class NodeTranslator:
     def _note_principled_features(self, node):
         """Name the Principled features in use that Ember does not render yet."""
         used = [name.split()[0] for name in PRINCIPLED_UNSUPPORTED
-                if name in node.inputs and self.value(node, name, 0.0) > 0.0]
+                if name in node.inputs and self.value(node, name, 0.0) > 0.0]  # constants here
         if used:
             self._approximate(node, ', '.join(used))
 
     def _node_mix_shader(self, node):
         fac = _clamp01(self.value(node, 'Fac', 0.5))
-        first = self.surface(node.inputs[1]).scaled(1.0 - fac)
+        first = self.surface(node.inputs[1]).scaled(_one_minus(fac))
         second = self.surface(node.inputs[2]).scaled(fac)
         return first.plus(second)
 
@@ -284,12 +296,23 @@ class NodeTranslator:
 
 
 def _f0_from_ior(ior):
+    if nodes.is_expr(ior):
+        ratio = nodes.math('DIVIDE', nodes.math('SUBTRACT', ior, 1.0), nodes.math('ADD', ior, 1.0))
+        return nodes.math('MULTIPLY', ratio, ratio)
     return ((ior - 1.0) / (ior + 1.0)) ** 2
 
 
 def _ior_from_f0(f0):
+    if nodes.is_expr(f0):
+        s = nodes.math('SQRT', nodes.math('MINIMUM', nodes.at_least(f0, 0.0), 0.99))
+        return nodes.math('DIVIDE', nodes.math('ADD', 1.0, s), nodes.math('SUBTRACT', 1.0, s))
     s = math.sqrt(min(max(f0, 0.0), 0.99))
     return (1.0 + s) / (1.0 - s)
+
+
+def _grey(value):
+    """A float weight as a colour: an expression is grey by itself."""
+    return value if nodes.is_expr(value) else (value,) * 3
 
 
 def _clamp_color(color):
@@ -321,15 +344,27 @@ def _specular(translator, node, ior):
     recomputed from that F0 (Cycles' svm_node_closure_bsdf).
     3.x: F0 = 0.08 * Specular (0.5 -> 0.04, i.e. IOR 1.5)."""
     if 'Specular IOR Level' in node.inputs:
-        level = max(translator.value(node, 'Specular IOR Level', 0.5), 0.0)
+        level = nodes.at_least(translator.value(node, 'Specular IOR Level', 0.5), 0.0)
         f0 = _f0_from_ior(ior)
-        if level == 0.5:
+        if not nodes.is_expr(level) and level == 0.5:
             return ior, f0
-        f0 *= 2.0 * level
+        f0 = _mul(f0, _mul(2.0, level))
         eta = _ior_from_f0(f0)
-        return (1.0 / eta if ior < 1.0 else eta), f0
-    f0 = 0.08 * max(translator.value(node, 'Specular', 0.5), 0.0)
+        return _inverted_below_one(eta, ior), f0
+    f0 = _mul(0.08, nodes.at_least(translator.value(node, 'Specular', 0.5), 0.0))
+    if nodes.is_expr(f0):
+        return _ior_from_f0(f0), f0   # f0 = 0 gives IOR 1 there
     return (_ior_from_f0(f0) if f0 > 0 else 1.0), f0
+
+
+def _inverted_below_one(eta, ior):
+    """1 / eta where ior < 1 (a specular layer seen from inside), else eta."""
+    if not nodes.is_expr(ior):
+        return nodes.math('DIVIDE', 1.0, eta) if ior < 1.0 else eta
+    # eta + [ior < 1] (1 / eta - eta)
+    flip = nodes.math('LESS_THAN', ior, 1.0)
+    return nodes.math('ADD', eta, nodes.math('MULTIPLY', flip,
+                                             nodes.math('SUBTRACT', nodes.math('DIVIDE', 1.0, eta), eta)))
 
 
 def _principled_inputs(translator, node):
@@ -337,7 +372,7 @@ def _principled_inputs(translator, node):
     3.x names (3.x float tints become white: the 4.x model has colour tints)."""
     t = translator
     base = _first_input(t, node, ('Base Color',), GREY, color=True)
-    ior = max(t.value(node, 'IOR', 1.45), 1e-5)
+    ior = nodes.at_least(t.value(node, 'IOR', 1.45), 1e-5)
     tint = t.color(node, 'Specular Tint', (1.0, 1.0, 1.0)) if 'Specular IOR Level' in node.inputs \
         else (1.0, 1.0, 1.0)
     eta, f0 = _specular(t, node, ior)
@@ -350,11 +385,11 @@ def _principled_inputs(translator, node):
         'roughness': _clamp01(t.value(node, 'Roughness', 0.5)),
         'ior': ior, 'specular_tint': _max0(tint), 'specular_eta': eta, 'specular_f0': f0,
         'transmission': _clamp01(_first_input(t, node, ('Transmission Weight', 'Transmission'), 0.0)),
-        'coat': max(_first_input(t, node, ('Coat Weight', 'Clearcoat'), 0.0), 0.0),
+        'coat': nodes.at_least(_first_input(t, node, ('Coat Weight', 'Clearcoat'), 0.0), 0.0),
         'coat_roughness': _clamp01(_first_input(t, node, ('Coat Roughness', 'Clearcoat Roughness'), 0.03)),
-        'coat_ior': max(_first_input(t, node, ('Coat IOR',), 1.5), 1.0),
+        'coat_ior': nodes.at_least(_first_input(t, node, ('Coat IOR',), 1.5), 1.0),
         'coat_tint': _max0(_first_input(t, node, ('Coat Tint',), (1.0, 1.0, 1.0), color=True)),
-        'sheen': max(_first_input(t, node, ('Sheen Weight', 'Sheen'), 0.0), 0.0),
+        'sheen': nodes.at_least(_first_input(t, node, ('Sheen Weight', 'Sheen'), 0.0), 0.0),
         'sheen_roughness': _clamp01(_first_input(t, node, ('Sheen Roughness',), 0.5)),
         'sheen_tint': _max0(sheen_tint),
         'alpha': _clamp01(t.value(node, 'Alpha', 1.0)) if 'Alpha' in node.inputs else 1.0,

@@ -5,8 +5,10 @@ Image Texture (with UV Map / Texture Coordinate UV vectors), Mix (colour and
 float) / legacy MixRGB, and Math nodes.  The result is a constant (float or
 RGB tuple) or an ``engine.scene`` texture expression.  A node it cannot
 translate gives None: the caller uses the socket's own constant and names the
-input in its warning.  ``scale``, ``add``, ``mix`` and ``clamp01`` combine
-constants and expressions alike, so closure weighting works on both.
+input in its warning.  ``scale``, ``add``, ``mix``, ``clamp01``, ``math``,
+``multiply`` and ``one_minus`` combine constants and expressions alike, so
+closure weighting works on both; ``may_exceed`` / ``may_be_below`` decide
+from an expression's range whether a lobe can be present.
 """
 from . import images
 
@@ -53,6 +55,69 @@ def clamp01(value):
     if is_expr(value):
         return _scene().Math('ADD', value, 0.0, clamp=True)
     return min(max(float(value), 0.0), 1.0)
+
+
+# Float operations on constants (exactly as Python computes them, so a
+# constant input keeps today's numbers) or, with an expression among the
+# operands, as a Math expression evaluated per ray.
+_FLOAT_OPS = {
+    'ADD': lambda a, b: a + b, 'SUBTRACT': lambda a, b: a - b, 'MULTIPLY': lambda a, b: a * b,
+    'DIVIDE': lambda a, b: a / b if b != 0 else 0.0, 'MINIMUM': min, 'MAXIMUM': max,
+    'LESS_THAN': lambda a, b: float(a < b), 'SQRT': lambda a, b: a ** 0.5 if a > 0 else 0.0,
+}
+
+
+def math(op, a, b=0.0):
+    if is_expr(a) or is_expr(b):
+        return _scene().Math(op, a, b)
+    return _FLOAT_OPS[op](float(a), float(b))
+
+
+def multiply(a, b):
+    """a * b for float weights; a factor 1 leaves the other operand as is."""
+    if not is_expr(a) and float(a) == 1.0:
+        return b if is_expr(b) else float(b)
+    if not is_expr(b) and float(b) == 1.0:
+        return a if is_expr(a) else float(a)
+    return math('MULTIPLY', a, b)
+
+
+def one_minus(value):
+    return math('SUBTRACT', 1.0, value)
+
+
+def at_least(value, low):
+    return math('MAXIMUM', value, low)
+
+
+def as_value(value):
+    """A colour expression used as a float input: its luminance (Cycles'
+    colour-to-float conversion), made explicit so that a float lobe field
+    (e.g. a coat weight stored as a grey colour) does not keep the hue."""
+    scene = _scene()
+    colour = isinstance(value, scene.MixColor) or (
+        isinstance(value, scene.ImageTexture) and value.output == 'Color')
+    return scene.Math('ADD', value, 0.0) if colour else value
+
+
+def value_range(value):
+    """(lo, hi) a constant or expression can take (engine.textures)."""
+    from .. import backend
+    return backend.load('textures').value_range(value)
+
+
+def may_exceed(value, level):
+    """Whether value > level somewhere: ``value > level`` for a constant."""
+    if not is_expr(value):
+        return float(value) > level
+    return value_range(value)[1] > level
+
+
+def may_be_below(value, level):
+    """Whether value < level somewhere: ``value < level`` for a constant."""
+    if not is_expr(value):
+        return float(value) < level
+    return value_range(value)[0] < level
 
 
 # ----------------------------------------------------------------------------

@@ -65,6 +65,7 @@ def render_settings(scene, is_preview=False):
     return backend.scene_module().RenderSettings(
         samples=settings.preview_samples if is_preview else settings.samples,
         max_bounces=settings.max_bounces,
+        transparent_max_bounces=settings.transparent_max_bounces,
         seed=settings.seed,
         light_selection=settings.light_selection.lower(),
         strategy=settings.strategy.lower(),

@@ -105,6 +105,7 @@ def setup_ember(scene, samples, seed, max_bounces, filter_type='BLACKMAN_HARRIS'
     ember.samples = samples
     ember.seed = seed
     ember.max_bounces = max_bounces
+    ember.transparent_max_bounces = max_bounces   # as setup_cycles
     ember.clamp = 0.0
     ember.time_limit = 0.0
     ember.filter_type = filter_type

@@ -1,4 +1,5 @@
-"""Texture and input nodes rendered by Ember and by Cycles agree.
+"""Texture and input nodes rendered by Ember and by Cycles agree (also
+textures on float inputs: weights, IORs, Mix Shader factors).
 
 Test images are made at test time (NumPy + OpenImageIO) in a tmp folder.
 Each scene groups several materials on quads side by side, seen from above
@@ -312,7 +313,60 @@ def build_normals(folder):
     return scene
 
 
-SCENES = {'images': build_images, 'nodes': build_nodes, 'normals': build_normals}
+def principled_material(name, **inputs):
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    tree = mat.node_tree
+    bsdf = tree.nodes['Principled BSDF']
+    for socket, value in inputs.items():
+        bsdf.inputs[socket].default_value = value
+    return mat, tree, bsdf
+
+
+def build_inputs(folder):
+    """Float inputs driven by textures (weights, IORs, factors): Principled
+    Metallic, Alpha, Transmission, Coat, Sheen, IOR and Specular IOR Level,
+    Mix Shader Fac and Glass IOR, from grey checkers and gradients."""
+    scene = empty_scene()
+    grey = checker(a=(0.9,) * 3, b=(0.15,) * 3)
+    grey[0, 0] = 0.5
+    mask = write_image(os.path.join(folder, "mask.exr"), grey)
+    ramp = write_image(os.path.join(folder, "ramp.exr"), np.repeat(gradient()[..., :1], 3, axis=2))
+    ior_checker = checker(a=(2.3,) * 3, b=(1.4,) * 3)
+    ior_checker[0, 0] = 1.8
+    iors = write_image(os.path.join(folder, "iors.exr"), ior_checker)
+    orange = (0.8, 0.35, 0.1, 1.0)
+    cases = [
+        ('metallic', dict(Roughness=0.35), 'Metallic', mask, 'Closest'),
+        ('alpha', dict(), 'Alpha', mask, 'Closest'),
+        ('transmission', dict(Roughness=0.3), 'Transmission Weight', ramp, 'Linear'),
+        ('coat', dict(Roughness=0.6), 'Coat Weight', ramp, 'Linear'),
+        ('sheen', dict(Roughness=0.7), 'Sheen Weight', mask, 'Closest'),
+        ('ior', dict(Roughness=0.2), 'IOR', iors, 'Closest'),
+        ('specular', dict(Roughness=0.25), 'Specular IOR Level', ramp, 'Linear'),
+    ]
+    for index, (name, inputs, socket, path, interpolation) in enumerate(cases):
+        mat, tree, bsdf = principled_material(name, **{'Base Color': orange, **inputs})
+        node = image_node(tree, path, 'Non-Color', interpolation)
+        tree.links.new(node.outputs['Color'], bsdf.inputs[socket])
+        add_quad(index, mat)
+    # Mix Shader: Fac from a texture between a red diffuse and a Glass BSDF
+    # whose IOR is textured too.
+    mat, tree, diffuse = diffuse_material("mix_fac")
+    diffuse.inputs['Color'].default_value = (0.7, 0.1, 0.1, 1.0)
+    glass = tree.nodes.new('ShaderNodeBsdfGlass')
+    glass.inputs['Roughness'].default_value = 0.25
+    mix = tree.nodes.new('ShaderNodeMixShader')
+    tree.links.new(image_node(tree, ramp, 'Non-Color').outputs['Color'], mix.inputs['Fac'])
+    tree.links.new(image_node(tree, iors, 'Non-Color', 'Closest').outputs['Color'], glass.inputs['IOR'])
+    tree.links.new(diffuse.outputs[0], mix.inputs[1])
+    tree.links.new(glass.outputs[0], mix.inputs[2])
+    tree.links.new(mix.outputs[0], tree.nodes['Material Output'].inputs['Surface'])
+    add_quad(7, mat)
+    return scene
+
+
+SCENES = {'images': build_images, 'nodes': build_nodes, 'normals': build_normals, 'inputs': build_inputs}
 
 
 def render_both(scene, tmp_path, name, taps):
@@ -336,7 +390,7 @@ def test_textures_agree_with_cycles(name, tmp_path, tapped_engine):
     image, ember_batches, cycles = render_both(scene, tmp_path, name, tapped_engine)
     from addon import engine as ember_engine
     warnings = ember_engine.RENDER_LOG[-1].get('warnings') or []
-    assert not any("magenta" in w or "not translated" in w for w in warnings), warnings
+    assert not any("magenta" in w or "not translated" in w or "constant value" in w for w in warnings), warnings
     ember_blocks = stats.block_means(ember_batches, BLOCK)
     cycles_blocks = stats.block_means(cycles, BLOCK)
     failures, details = stats.failing_blocks(ember_blocks, cycles_blocks)
@@ -369,3 +423,30 @@ def test_missing_image_renders_magenta_with_one_warning(tmp_path, tapped_engine)
     assert len(lost) == 1 and "magenta" in lost[0] and "gone.exr" in lost[0], log['warnings']
     quad = image[2:TILE - 2, 2:TILE - 2, :3].mean(axis=(0, 1))
     assert quad[1] == 0.0 and quad[0] > 0.05 and quad[0] == pytest.approx(quad[2], rel=1e-6), quad
+
+
+def test_textured_float_inputs_become_expressions_without_warnings(tmp_path):
+    """Metallic, Alpha, IOR, Coat, Specular IOR Level and Mix Fac textures are
+    rendered (no "read as its constant value" warning); a texture on an input
+    of a feature Ember does not render (Subsurface) still is, and a lobe
+    whose weight texture is zero everywhere is left out."""
+    from addon.export import material as material_export
+    from engine.scene import TEXTURE_TYPES
+    empty_scene()
+    mask = write_image(os.path.join(str(tmp_path), "mask.exr"), checker(a=(1.0,) * 3, b=(0.0,) * 3))
+    black = write_image(os.path.join(str(tmp_path), "black.exr"), np.zeros((2, 2, 3)))
+    mat, tree, bsdf = principled_material("inputs")
+    for socket in ('Metallic', 'Alpha', 'IOR', 'Specular IOR Level'):
+        tree.links.new(image_node(tree, mask, 'Non-Color').outputs['Color'], bsdf.inputs[socket])
+    tree.links.new(image_node(tree, black, 'Non-Color').outputs['Color'], bsdf.inputs['Coat Weight'])
+    translated, warning = material_export.translate(mat)
+    assert warning is None, warning
+    kinds = [lobe.kind for lobe in translated.lobes]
+    assert kinds == ['transparent', 'glossy', 'glossy', 'diffuse'], kinds   # no coat: its weight is 0
+    assert all(isinstance(lobe.weight, TEXTURE_TYPES) for lobe in translated.lobes)
+    assert isinstance(translated.lobes[2].ior, TEXTURE_TYPES)            # specular layer IOR
+    subsurface = 'Subsurface Weight' if 'Subsurface Weight' in bsdf.inputs else 'Subsurface'
+    tree.links.new(image_node(tree, mask, 'Non-Color').outputs['Color'], bsdf.inputs[subsurface])
+    _, warning = material_export.translate(mat)
+    assert warning is not None and f"{bsdf.name}.{subsurface}" in warning and "constant value" in warning
+    assert "Metallic" not in warning and "Alpha" not in warning
