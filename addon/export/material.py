@@ -410,15 +410,7 @@ def _principled_emission(translator, node):
 
 
 def _output_node(tree):
-    """The Material Output node Cycles would use."""
-    try:
-        node = tree.get_output_node('CYCLES')
-    except (AttributeError, TypeError):
-        node = None
-    if node is None:
-        outputs = [n for n in tree.nodes if n.type == 'OUTPUT_MATERIAL']
-        node = next((n for n in outputs if n.is_active_output), outputs[0] if outputs else None)
-    return node
+    return nodes.output_node(tree, 'OUTPUT_MATERIAL')
 
 
 def translate(material):

@@ -312,3 +312,17 @@ def _as_value(value):
 def _alpha_mode(bpy_image):
     mode = getattr(bpy_image, 'alpha_mode', 'STRAIGHT')
     return mode if mode in ('STRAIGHT', 'PREMUL', 'CHANNEL_PACKED', 'NONE') else 'STRAIGHT'
+
+
+def output_node(tree, output_type):
+    """The output node Cycles would use ('OUTPUT_MATERIAL' or 'OUTPUT_WORLD'):
+    Blender's choice for Cycles, else the active (or first) node of the type."""
+    try:
+        node = tree.get_output_node('CYCLES')
+    except (AttributeError, TypeError):
+        node = None
+    if node is None:
+        outputs = [n for n in tree.nodes if n.type == output_type]
+        node = next((n for n in outputs if getattr(n, 'is_active_output', False)),
+                    outputs[0] if outputs else None)
+    return node

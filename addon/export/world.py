@@ -17,7 +17,7 @@ as the Background's constant colour and reported.
 """
 import numpy as np
 
-from . import images
+from . import images, nodes
 
 BLACK = (0.0, 0.0, 0.0)
 MAGENTA = (1.0, 0.0, 1.0)
@@ -25,13 +25,7 @@ CUBIC = ('Cubic', 'Smart')
 
 
 def _output_node(tree):
-    try:
-        node = tree.get_output_node('CYCLES')
-    except (AttributeError, TypeError):
-        node = None
-    if node is None:
-        node = next((n for n in tree.nodes if n.type == 'OUTPUT_WORLD'), None)
-    return node
+    return nodes.output_node(tree, 'OUTPUT_WORLD')
 
 
 def _linked(socket):
