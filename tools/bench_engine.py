@@ -70,11 +70,14 @@ def replay(accel, threads):
 
 
 def memory_probe(size, max_paths):
-    """Peak RSS (MiB) of a fresh process rendering 1 spp at size x size."""
-    code = ("import resource; from engine.render import render; from engine.scene import RenderSettings;"
+    """Peak RSS (MiB) of a fresh process rendering 1 spp at size x size.
+
+    Read from VmHWM: ru_maxrss survives fork + exec on Linux, so a child of
+    this (large) process would report our peak instead of its own."""
+    code = ("from engine.render import render; from engine.scene import RenderSettings;"
             "from engine.testscenes import cornell_box;"
             f"render(cornell_box({size},{size}), RenderSettings(samples=1, max_paths={max_paths}));"
-            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)")
+            "print([int(l.split()[1]) / 1024 for l in open('/proc/self/status') if l.startswith('VmHWM')][0])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return float(out.stdout.strip().splitlines()[-1])
 
