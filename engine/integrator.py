@@ -24,11 +24,10 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from . import bsdf
-from .film import Tile
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .lights import POINT, SUN
 from .sampling import power_heuristic
-from .vec import dot, frame, luminance, to_local, to_world
+from .vec import dot, frame, to_local, to_world
 
 
 @dataclass

@@ -194,7 +194,6 @@ def spherical_triangle(p, v0, v1, v2, u1, u2):
     """Arvo 1995 (as Cycles' triangle.h): a direction from p uniform in the
     solid angle of triangle (v0, v1, v2).  Returns (dirs (N, 3), solid angle)."""
     solid_angle, A, B, C = triangle_solid_angle(p, v0, v1, v2)
-    cos_a = np.einsum("ij,ij->i", B, C)
     cos_b = np.einsum("ij,ij->i", A, C)
     cos_c = np.einsum("ij,ij->i", A, B)
     cos_alpha = np.clip(np.einsum("ij,ij->i", _unit_rows(np.cross(A, B)), _unit_rows(np.cross(A, C))),

@@ -145,3 +145,43 @@ def per_pass_estimates(images):
         batches.append((total - previous_sum) / (n - previous_n))
         previous_n, previous_sum = n, total
     return np.array(batches)
+
+
+# ----------------------------------------------------------------------------
+# Ember against Cycles
+
+def render_ember_and_cycles(scene, tmp_path, name, taps, ember_spp, ember_seed, cycles_seeds, cycles_spp,
+                            bounces):
+    """Ember's final image and per-pass estimates (RGB), and Cycles' RGB
+    images for seeds 0..cycles_seeds-1, with the same bounces and filter."""
+    setup_ember(scene, ember_spp, seed=ember_seed, max_bounces=bounces)
+    image = render_array(scene, tmp_path, "ember_" + name)
+    from addon import engine as ember_engine
+    log = ember_engine.RENDER_LOG[-1]
+    assert log['error'] is None, log['error']
+    assert np.isfinite(image).all()
+    ember_batches = per_pass_estimates(taps[-1].images)[..., :3]
+    cycles = []
+    for seed in range(cycles_seeds):
+        setup_cycles(scene, cycles_spp, seed, bounces)
+        cycles.append(render_array(scene, tmp_path, f"cycles_{name}_{seed}")[..., :3])
+    return image, ember_batches, np.array(cycles, dtype=np.float64)
+
+
+def compare_with_cycles(name, ember_batches, cycles, block):
+    """Block Welch test of Ember's passes against Cycles' seeds (ember_stats);
+    prints the relative mean error.  Returns failures, details and both
+    block-mean arrays."""
+    import ember_stats as stats
+    ember_blocks = stats.block_means(ember_batches, block)
+    cycles_blocks = stats.block_means(cycles, block)
+    failures, details = stats.failing_blocks(ember_blocks, cycles_blocks)
+    print(f"\n{name}: relative mean error vs Cycles {details['relative_mean_error']:.4f}, "
+          f"mean |block error| {details['relative_abs_error']:.4f}, max |t| {details['max_abs_t']:.2f} "
+          f"over {details['blocks']} block-channels (reject below p={details['level']:.2e})")
+    return failures, details, ember_blocks, cycles_blocks
+
+
+def assert_no_failing_blocks(failures, details):
+    assert len(failures) == 0, (
+        f"{len(failures)} blocks differ from Cycles (block, y, x, channel): {failures[:10].tolist()}; {details}")

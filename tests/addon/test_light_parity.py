@@ -8,14 +8,12 @@ Beside the comparison, each visibility scene checks in Ember's own image
 that the flag has its effect (a shadow gone, an object missing).
 """
 import math
-import time
 
 import bpy
-import numpy as np
 import pytest
 
-import ember_stats as stats
-from ember_testlib import per_pass_estimates, render_array, setup_cycles, setup_ember, small_resolution
+from ember_testlib import (assert_no_failing_blocks, compare_with_cycles, render_ember_and_cycles,
+                           small_resolution)
 
 EMBER_SPP = 48
 CYCLES_SEEDS = 6
@@ -192,29 +190,12 @@ def build(name, empty_scene):
 @pytest.mark.parametrize("name", sorted(SCENES))
 def test_light_parity_with_cycles(name, empty_scene, tmp_path, tapped_engine):
     scene, bounces = build(name, empty_scene)
-    t0 = time.perf_counter()
-    setup_ember(scene, EMBER_SPP, seed=2, max_bounces=bounces)
-    image = render_array(scene, tmp_path, "ember_" + name)
-    from addon import engine as ember_engine
-    assert ember_engine.RENDER_LOG[-1]['error'] is None
-    assert np.isfinite(image).all()
-    ember_batches = per_pass_estimates(tapped_engine[-1].images)[..., :3]
-    t1 = time.perf_counter()
-    cycles_images = []
-    for seed in range(CYCLES_SEEDS):
-        setup_cycles(scene, CYCLES_SPP, seed, bounces)
-        cycles_images.append(render_array(scene, tmp_path, f"cycles_{name}_{seed}")[..., :3])
-    t2 = time.perf_counter()
-    cycles = np.array(cycles_images, dtype=np.float64)
-    failures, details = stats.failing_blocks(stats.block_means(ember_batches, BLOCK),
-                                             stats.block_means(cycles, BLOCK))
-    print(f"\n{name}: relative mean error vs Cycles {details['relative_mean_error']:.4f}, "
-          f"mean |block error| {details['relative_abs_error']:.4f}, max |t| {details['max_abs_t']:.2f} "
-          f"over {details['blocks']} block-channels; Ember {t1 - t0:.1f}s, Cycles {t2 - t1:.1f}s")
+    image, ember_batches, cycles = render_ember_and_cycles(scene, tmp_path, name, tapped_engine, EMBER_SPP, 2,
+                                                           CYCLES_SEEDS, CYCLES_SPP, bounces)
+    failures, details, _, _ = compare_with_cycles(name, ember_batches, cycles, BLOCK)
     assert image[..., :3].mean() > 1e-3, "black image"
     check_effect(name, image[..., :3])
-    assert len(failures) == 0, (
-        f"{len(failures)} blocks differ from Cycles (block, y, x, channel): {failures[:10].tolist()}; {details}")
+    assert_no_failing_blocks(failures, details)
 
 
 def check_effect(name, rgb):

@@ -20,8 +20,8 @@ import bpy
 import numpy as np
 import pytest
 
-import ember_stats as stats
-from ember_testlib import per_pass_estimates, render_array, setup_cycles, setup_ember, small_resolution
+from ember_testlib import (assert_no_failing_blocks, compare_with_cycles, per_pass_estimates, render_array,
+                           setup_cycles, setup_ember, small_resolution)
 
 EMBER_SPP = 64
 CYCLES_SEEDS = 8
@@ -233,16 +233,10 @@ def test_material_parity_with_cycles(name, empty_scene, tmp_path, tapped_engine)
         setup_cycles(scene, CYCLES_SPP, seed, bounces)
         cycles_images.append(render_array(scene, tmp_path, f"cycles_{name}_{seed}")[..., :3])
     cycles = np.array(cycles_images, dtype=np.float64)
-    ember_blocks = stats.block_means(ember_batches, BLOCK)
-    cycles_blocks = stats.block_means(cycles, BLOCK)
-    failures, details = stats.failing_blocks(ember_blocks, cycles_blocks)
-    print(f"\n{name}: relative mean error vs Cycles {details['relative_mean_error']:.4f}, "
-          f"mean |block error| {details['relative_abs_error']:.4f}, max |t| {details['max_abs_t']:.2f} "
-          f"over {details['blocks']} block-channels (reject below p={details['level']:.2e})")
+    failures, details, _, _ = compare_with_cycles(name, ember_batches, cycles, BLOCK)
     if name == 'furnace':
         left = image[:, :WIDTH // 2, :3].mean()
         right = image[:, WIDTH // 2:, :3].mean()
         print(f"furnace: Ember multiscatter half {left:.4f}, single-scatter half {right:.4f}; Cycles "
               f"{cycles[:, :, :WIDTH // 2].mean():.4f}, {cycles[:, :, WIDTH // 2:].mean():.4f}")
-    assert len(failures) == 0, (
-        f"{len(failures)} blocks differ from Cycles (block, y, x, channel): {failures[:10].tolist()}; {details}")
+    assert_no_failing_blocks(failures, details)

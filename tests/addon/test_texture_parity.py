@@ -13,9 +13,8 @@ import bpy
 import numpy as np
 import pytest
 
-import ember_stats as stats
-from ember_testlib import (per_pass_estimates, render_array, require, setup_cycles, setup_ember,
-                           small_resolution)
+from ember_testlib import (assert_no_failing_blocks, compare_with_cycles, render_array, render_ember_and_cycles,
+                           require, setup_ember, small_resolution)
 
 EMBER_SPP = 32
 CYCLES_SEEDS = 6
@@ -370,18 +369,7 @@ SCENES = {'images': build_images, 'nodes': build_nodes, 'normals': build_normals
 
 
 def render_both(scene, tmp_path, name, taps):
-    setup_ember(scene, EMBER_SPP, seed=1, max_bounces=0)
-    image = render_array(scene, tmp_path, "ember_" + name)
-    from addon import engine as ember_engine
-    log = ember_engine.RENDER_LOG[-1]
-    assert log['error'] is None, log['error']
-    assert np.isfinite(image).all()
-    ember_batches = per_pass_estimates(taps[-1].images)[..., :3]
-    cycles = []
-    for seed in range(CYCLES_SEEDS):
-        setup_cycles(scene, CYCLES_SPP, seed, 0)
-        cycles.append(render_array(scene, tmp_path, f"cycles_{name}_{seed}")[..., :3])
-    return image, ember_batches, np.array(cycles, dtype=np.float64)
+    return render_ember_and_cycles(scene, tmp_path, name, taps, EMBER_SPP, 1, CYCLES_SEEDS, CYCLES_SPP, 0)
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))
@@ -391,17 +379,11 @@ def test_textures_agree_with_cycles(name, tmp_path, tapped_engine):
     from addon import engine as ember_engine
     warnings = ember_engine.RENDER_LOG[-1].get('warnings') or []
     assert not any("magenta" in w or "not translated" in w or "constant value" in w for w in warnings), warnings
-    ember_blocks = stats.block_means(ember_batches, BLOCK)
-    cycles_blocks = stats.block_means(cycles, BLOCK)
-    failures, details = stats.failing_blocks(ember_blocks, cycles_blocks)
-    print(f"\n{name}: relative mean error vs Cycles {details['relative_mean_error']:.4f}, "
-          f"mean |block error| {details['relative_abs_error']:.4f}, max |t| {details['max_abs_t']:.2f} "
-          f"over {details['blocks']} block-channels (reject below p={details['level']:.2e})")
+    failures, details, ember_blocks, cycles_blocks = compare_with_cycles(name, ember_batches, cycles, BLOCK)
     per_quad = np.abs(ember_blocks.mean(0) - cycles_blocks.mean(0)).reshape(
         2, TILE // BLOCK, GRID, TILE // BLOCK, 3).mean(axis=(1, 3, 4))
     print(f"{name}: mean |error| per quad\n{np.round(per_quad, 4)}")
-    assert len(failures) == 0, (
-        f"{len(failures)} blocks differ from Cycles (block, y, x, channel): {failures[:10].tolist()}; {details}")
+    assert_no_failing_blocks(failures, details)
 
 
 def test_missing_image_renders_magenta_with_one_warning(tmp_path, tapped_engine):

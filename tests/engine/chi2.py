@@ -190,7 +190,7 @@ def _integrate(density, x0, x1, y0, y1, nodes):
 
 
 def _cell_args(xedges, yedges, cells):
-    nx, ny = len(xedges) - 1, len(yedges) - 1
+    ny = len(yedges) - 1
     ix, iy = np.divmod(np.asarray(cells), ny)
     return xedges[ix], xedges[ix + 1], yedges[iy], yedges[iy + 1]
 

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 import chi2 as C
-from engine import lights, sampling
+from engine import lights
 from engine import scene as S
-from test_sampling_chi2 import (FP_RTOL, area_matrix, assert_close, assert_unit, cone_theta_edges,
+from test_sampling_chi2 import (area_matrix, assert_close, assert_unit, cone_theta_edges,
                                 direction_chi2, make_light_set, ray_triangles, uniform_phi_edges)
 
 N = 400_000

@@ -1,14 +1,13 @@
 """The render API: progress, cancel, time limit, bounded batches, film
 options; plus analytic checks of the sun and spot lights."""
 import numpy as np
-import pytest
 
 from engine.render import _batches, render
-from engine.scene import (Lobe, Material, RenderSettings, SpotLight, SunLight, World)
+from engine.scene import RenderSettings, SpotLight, SunLight, World
 from engine.testscenes import cornell_box
 
 from stats import sidak_z
-from test_integrator import analytic_scene, big_plane, pixel_centres
+from test_integrator import analytic_scene, pixel_centres
 
 
 class Recorder:
