@@ -37,73 +37,57 @@ class EmberPanel:
     bl_context = 'render'
     COMPAT_ENGINES = {ENGINE_ID}
 
+    # (property of scene.ember, label or None) drawn by the default draw().
+    PROPS = ()
+
     @classmethod
     def poll(cls, context):
         return context.engine in cls.COMPAT_ENGINES
 
-
-class RENDER_PT_ember_sampling(EmberPanel, bpy.types.Panel):
-    bl_label = "Sampling"
-
-    def draw(self, context):
+    def split_layout(self):
         layout = self.layout
         layout.use_property_split = True
         layout.use_property_decorate = False
-        settings = context.scene.ember
-        col = layout.column()
-        col.prop(settings, "samples", text="Samples")
-        col.prop(settings, "preview_samples", text="Preview")
-        col.prop(settings, "time_limit")
-        col.prop(settings, "seed")
+        return layout
+
+    def draw(self, context):
+        layout = self.split_layout()
+        for name, label in self.PROPS:
+            if label is None:
+                layout.prop(context.scene.ember, name)
+            else:
+                layout.prop(context.scene.ember, name, text=label)
+
+
+class RENDER_PT_ember_sampling(EmberPanel, bpy.types.Panel):
+    bl_label = "Sampling"
+    PROPS = (("samples", "Samples"), ("preview_samples", "Preview"), ("time_limit", None), ("seed", None))
 
 
 class RENDER_PT_ember_sampling_lights(EmberPanel, bpy.types.Panel):
     bl_label = "Lights"
     bl_parent_id = 'RENDER_PT_ember_sampling'
     bl_options = {'DEFAULT_CLOSED'}
-
-    def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        layout.prop(context.scene.ember, "light_selection")
-        layout.prop(context.scene.ember, "mis_compensation")
+    PROPS = (("light_selection", None), ("mis_compensation", None))
 
 
 class RENDER_PT_ember_sampling_advanced(EmberPanel, bpy.types.Panel):
     bl_label = "Advanced"
     bl_parent_id = 'RENDER_PT_ember_sampling'
     bl_options = {'DEFAULT_CLOSED'}
-
-    def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        layout.prop(context.scene.ember, "strategy")
-        layout.prop(context.scene.ember, "threads")
+    PROPS = (("strategy", None), ("threads", None))
 
 
 class RENDER_PT_ember_light_paths(EmberPanel, bpy.types.Panel):
     bl_label = "Light Paths"
     bl_options = {'DEFAULT_CLOSED'}
-
-    def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        layout.prop(context.scene.ember, "max_bounces", text="Total Bounces")
-        layout.prop(context.scene.ember, "transparent_max_bounces", text="Transparent")
+    PROPS = (("max_bounces", "Total Bounces"), ("transparent_max_bounces", "Transparent"))
 
 
 class RENDER_PT_ember_light_paths_clamping(EmberPanel, bpy.types.Panel):
     bl_label = "Clamping"
     bl_parent_id = 'RENDER_PT_ember_light_paths'
-
-    def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        layout.prop(context.scene.ember, "clamp", text="Samples")
+    PROPS = (("clamp", "Samples"),)
 
 
 class RENDER_PT_ember_film(EmberPanel, bpy.types.Panel):
@@ -111,9 +95,7 @@ class RENDER_PT_ember_film(EmberPanel, bpy.types.Panel):
     bl_options = {'DEFAULT_CLOSED'}
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         layout.prop(context.scene.ember, "filter_type")
         if context.scene.ember.filter_type != 'BOX':  # Cycles' box is always 1 pixel wide
             layout.prop(context.scene.ember, "filter_width")

@@ -562,3 +562,35 @@ def test_exported_blend_scenes_validate(registered_addon):
         exported = export()
         exported.scene.validate()
         assert exported.warnings == [], exported.warnings
+
+
+def test_every_ember_panel_draws(factory_scene):
+    """Run each Ember panel's draw() against a recording layout: every
+    property it shows exists (a typo would only show up in a real UI)."""
+    import types
+    from addon import ui
+
+    class Layout:
+        use_property_split = False
+        use_property_decorate = True
+
+        def __init__(self):
+            self.shown = []
+
+        def prop(self, data, name, text=None):
+            assert hasattr(data, name), name
+            self.shown.append(name)
+
+        def column(self):
+            return self
+
+    for cls in ui.classes:
+        panel = types.SimpleNamespace(layout=Layout(), PROPS=cls.PROPS)
+        panel.split_layout = lambda p=panel: ui.EmberPanel.split_layout(p)
+        cls.draw(panel, bpy.context)
+        assert panel.layout.shown, cls.__name__
+    film = types.SimpleNamespace(layout=Layout(), PROPS=())
+    film.split_layout = lambda: ui.EmberPanel.split_layout(film)
+    factory_scene.ember.filter_type = 'BOX'
+    ui.RENDER_PT_ember_film.draw(film, bpy.context)
+    assert 'filter_width' not in film.layout.shown  # Cycles' box filter has no width
