@@ -543,18 +543,21 @@ def _is_delta(lobes, k, rows):
     return (kind == MIRROR) | (kind == TRANSPARENT) | smooth
 
 
-def sample(lobes, wo, u_lobe, u1, u2):
+def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
     """Sample wi.  Returns wi, weight (= f cos / pdf), pdf, delta (bool).
 
     A sample with weight 0 is an absorbed path.  For delta samples pdf is the
     probability of that discrete choice (only its being > 0 matters downstream).
-    Transmitted samples have wi.z < 0.
+    Transmitted samples have wi.z < 0.  ``w``/``sel`` (weights, selection for
+    this wo) may be passed when the caller has them already.
     """
     if lobes.kind.shape[1] == 1 and _simple(lobes):
         return _sample_single(lobes, wo, u1, u2)
     n = len(wo)
-    w = weights(lobes, wo)
-    sel = selection(lobes, wo, w)
+    if w is None:
+        w = weights(lobes, wo)
+    if sel is None:
+        sel = selection(lobes, wo, w)
     cdf = np.cumsum(sel, axis=1)
     # u_lobe past a rounded CDF that ends an ulp below 1 belongs to the last
     # lobe with a selection probability, not to an unused slot after it.

@@ -186,14 +186,19 @@ def _bounce(ctx, paths, depth, rng, tile):
             return carried
 
     lobes = ctx.materials.gather(hit.mat, hit.uv)
+    _orient(hit, lobes)
     # Texture hook: normal maps and bump replace the shading normal.
     if ctx.materials.textures.normals:
         hit.ns = ctx.materials.textures.perturb(hit, ctx.triangles)
     tt, bb = frame(hit.ns)
     wo_l = to_local(hit.wo, tt, bb, hit.ns)
-    _next_event(ctx, paths, hit, lobes, tt, bb, wo_l, rng)
+    # Lobe weights and selection depend on wo only: once per vertex, shared
+    # by light sampling (every emitter) and BSDF sampling.
+    w = bsdf.weights(lobes, wo_l)
+    lobes_wo = (bsdf.selection(lobes, wo_l, w), w)
+    _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, rng)
     ray = paths.ray
-    alive, through = _scatter(ctx, paths, hit, lobes, tt, bb, wo_l, rng)
+    alive, through = _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, rng)
     # For the light tree's MIS pdf; a transparent pass keeps the vertex.
     paths.prev_p = _unless(through, paths.prev_p, hit.p)
     paths.prev_n = _unless(through, paths.prev_n, hit.ng)
@@ -369,7 +374,7 @@ def _nee_emitters(ctx):
     return "select", None
 
 
-def _next_event(ctx, paths, hit, lobes, tt, bb, wo_l, rng):
+def _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, rng):
     lt = ctx.lights
     n = len(paths.pix)
     if lt.count == 0 or n == 0:
@@ -378,19 +383,18 @@ def _next_event(ctx, paths, hit, lobes, tt, bb, wo_l, rng):
     if mode == "select":
         u = rng.random((n, 4))
         e, p_sel = lt.select(u[:, 0], hit.p, hit.ng)
-        _shade_light(ctx, paths, hit, lobes, tt, bb, wo_l, e, p_sel, u[:, 1:])
+        _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u[:, 1:])
         return
     for e in emitters:
         u = rng.random((n, 3))
-        _shade_light(ctx, paths, hit, lobes, tt, bb, wo_l, np.full(n, e), np.ones(n), u)
+        _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, np.full(n, e), np.ones(n), u)
 
 
-def _shade_light(ctx, paths, hit, lobes, tt, bb, wo_l, e, p_sel, u):
+def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u):
     s = ctx.settings
     ls = ctx.lights.sample(e, hit.p, u[:, 0], u[:, 1], u[:, 2])
     wi_l = to_local(ls.wi, tt, bb, hit.ns)
-    _orient(hit, lobes)
-    f, pdf_b = bsdf.eval_pdf(lobes, wo_l, wi_l)
+    f, pdf_b = bsdf.eval_pdf(lobes, wo_l, wi_l, *lobes_wo)
     if ctx.light_excludes:
         f = _visible_lobes_f(ctx, lobes, wo_l, wi_l, ls.wi, hit.ng, e, f)
     # Lights behind the surface count for transmitting lobes (f is 0 below
@@ -450,13 +454,12 @@ def _same_side(wi, ng, wi_l):
     return (g != 0) & ((g > 0) == (wi_l[:, 2] > 0))
 
 
-def _scatter(ctx, paths, hit, lobes, tt, bb, wo_l, rng):
+def _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, rng):
     """Sample the BSDF and update the path state in place; returns which
     paths live on and which passed straight through a transparent lobe."""
     s = ctx.settings
     u = rng.random((len(paths.pix), 4))
-    _orient(hit, lobes)
-    wi_l, weight, pdf, delta = bsdf.sample(lobes, wo_l, u[:, 0], u[:, 1], u[:, 2])
+    wi_l, weight, pdf, delta = bsdf.sample(lobes, wo_l, u[:, 0], u[:, 1], u[:, 2], *lobes_wo)
     wi = to_world(wi_l, tt, bb, hit.ns)
     # A reflection below the geometric surface (or a transmission above it)
     # would leak light through the surface: absorb it, as Cycles does.
@@ -509,7 +512,7 @@ def _visibility_setup(ctx):
     excluded from some bounce kind: both False in the common scene, which
     then pays nothing for visibility."""
     vis = ctx.lights.visibility
-    indirect = VIS_DIFFUSE | VIS_GLOSSY | VIS_TRANSMISSION
+    indirect = VIS_INDIRECT
     ctx.light_excludes = bool(np.any((vis & indirect) != indirect))
     ctx.light_no_shadow = bool(np.any((vis & VIS_SHADOW) == 0))
     tv = ctx.triangles.visibility

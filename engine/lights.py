@@ -433,7 +433,8 @@ class _AreaLights:
         cos_l = -(wi @ self.n[j]) if np.ndim(j) == 0 else -dot(wi, self.n[j])
         area = self.area[j]
         ok = (cos_l > 1e-12) & (t > 0) & (area > 0)
-        pdf = np.where(ok, t * t / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
+        with np.errstate(over="ignore"):  # zero-area lights: masked out by ok
+            pdf = np.where(ok, t * t / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
         pdf = np.where(ok & sph, 1.0 / np.maximum(solid_angle, 1e-300), pdf)
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, self.L[j]
         out.pdf[idx] = pdf
