@@ -92,6 +92,8 @@ class Film:
         var -= mean * mean
         np.maximum(var, 0.0, out=var)
         var /= c - 1.0  # unbiased sample variance / c = variance of the mean
+        # Squares of radiance near the float32 limit overflow float32: saturate.
+        np.minimum(var, np.finfo(np.float32).max, out=var)
         return var.astype(np.float32).reshape(self.height, self.width, 3)
 
     def aov(self, name):

@@ -19,10 +19,23 @@ def _array(value, what, shape_tail, kinds):
     return arr
 
 
+# Colours, strengths and powers beyond this cannot be summed and stored as
+# float32 pixels without overflowing to infinity; 1e30 itself still renders.
+MAX_MAGNITUDE = 1e30
+
+
 def _finite(arr, what):
     if not np.all(np.isfinite(arr)):
         bad = int(np.count_nonzero(~np.isfinite(arr)))
         raise SceneError(f"{what}: {bad} values are NaN or infinite")
+
+
+def _bounded(arr, what):
+    """Finite and at most MAX_MAGNITUDE: a radiance or power that can be rendered."""
+    _finite(arr, what)
+    if arr.size and np.abs(arr).max() > MAX_MAGNITUDE * (1 + 1e-6):  # 1e30 as float32 passes
+        raise SceneError(f"{what}: {np.abs(arr).max():.3g} is beyond the largest value Ember "
+                         f"can render ({MAX_MAGNITUDE:g})")
 
 
 def validate_mesh(mesh, index):
@@ -68,7 +81,7 @@ def _rgb(value, what):
     arr = np.asarray(value, dtype=np.float64)
     if arr.shape != (3,):
         raise SceneError(f"{what}: expected an RGB triple, got shape {arr.shape}")
-    _finite(arr, what)
+    _bounded(arr, what)
     return arr
 
 
@@ -130,6 +143,10 @@ def validate_light(light, index):
         _finite(m, f"{what} matrix")
         if light.shape not in AREA_SHAPES:
             raise SceneError(f"{what}: unknown shape {light.shape!r}")
+        for name in ("size_x", "size_y"):
+            size = getattr(light, name)
+            if not (np.isfinite(size) and size >= 0):
+                raise SceneError(f"{what}: {name} must be a finite size >= 0, got {size}")
     elif isinstance(light, PointLight):
         _rgb(light.power, f"{what} power")
         _rgb(light.position, f"{what} position")
@@ -139,6 +156,9 @@ def validate_light(light, index):
             d = _rgb(light.direction, f"{what} direction")
             if np.linalg.norm(d) == 0:
                 raise SceneError(f"{what}: direction is zero")
+            for name in ("spot_size", "spot_blend"):
+                if not np.isfinite(getattr(light, name)):
+                    raise SceneError(f"{what}: {name} is not finite")
     else:
         raise SceneError(f"{what}: unknown light type {type(light).__name__}")
 

@@ -83,7 +83,18 @@ def _linearize(pixels, bpy_image, is_float):
 
 
 def load_image(bpy_image):
-    """(pixels float32 (H, W, C) linear, row 0 = top, warnings)."""
+    """(pixels float32 (H, W, C) linear, row 0 = top, warnings).  NaN and
+    infinite texels (a damaged EXR) become 0, with a warning."""
+    pixels, warnings = _load_image(bpy_image)
+    finite = np.isfinite(pixels)
+    if not finite.all():
+        bad = int(finite.size - np.count_nonzero(finite))
+        pixels = np.where(finite, pixels, np.float32(0.0))
+        warnings = warnings + [f"Image '{bpy_image.name}': {bad} NaN or infinite values were replaced by 0"]
+    return pixels, warnings
+
+
+def _load_image(bpy_image):
     name = bpy_image.name
     path = _external_path(bpy_image)
     try:

@@ -112,12 +112,32 @@ def collect_lights(depsgraph):
         except ValueError as err:
             warnings.append(f"Light '{obj.name}' skipped: it {err}")
             continue
+        bad = _nonfinite_field(light)
+        if bad:
+            warnings.append(f"Light '{obj.name}' skipped: its {bad} is NaN or infinite")
+            continue
         if _is_black(light):
             continue
         if getattr(obj.data, 'use_nodes', False) and _has_light_nodes(obj.data):
             warnings.append(f"Light '{obj.name}': light nodes are ignored")
         lights.append(light)
     return lights, warnings
+
+
+def _nonfinite_field(light):
+    """The first number field of an engine light that is NaN or infinite
+    (strength, colour, size, angle, ...), or None."""
+    for f in dataclasses.fields(light):
+        value = getattr(light, f.name)
+        if isinstance(value, (bool, str)) or value is None:
+            continue
+        try:
+            numbers = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            continue
+        if not np.isfinite(numbers).all():
+            return f.name.replace('_', ' ')
+    return None
 
 
 def _is_black(light):

@@ -112,6 +112,21 @@ def mesh_from_blender(mesh, name, tangents=False):
     )
 
 
+def drop_nonfinite_triangles(mesh):
+    """Remove the triangles that use a NaN or infinite vertex (Cycles skips
+    them too) and zero those vertices; returns how many were dropped."""
+    finite = np.isfinite(mesh.positions).all(axis=1)
+    if finite.all():
+        return 0
+    keep = finite[mesh.triangles].all(axis=1)
+    mesh.positions = np.where(finite[:, None], mesh.positions, np.float32(0.0))
+    for name in ('triangles', 'normals', 'uvs', 'material_slots', 'tangents', 'tangent_signs'):
+        value = getattr(mesh, name)
+        if value is not None:
+            setattr(mesh, name, value[keep])
+    return int(len(keep) - np.count_nonzero(keep))
+
+
 def mesh_from_object(obj, name):
     """Export an evaluated object's geometry (modifiers applied).
 

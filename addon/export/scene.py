@@ -43,11 +43,13 @@ def export_scene(depsgraph, camera_override=None):
     meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots)
     lights, light_warnings = light_export.collect_lights(depsgraph)
     world, world_warning = world_export.world_from_blender(scene.world)
+    camera_object = scene_camera(depsgraph, camera_override)
     try:
-        camera, camera_warnings = camera_export.camera_from_blender(
-            scene_camera(depsgraph, camera_override), scene.render)
-    except ValueError as err:
-        raise ExportError(str(err)) from err
+        camera, camera_warnings = camera_export.camera_from_blender(camera_object, scene.render)
+        backend.load('validate').validate_camera(camera)
+    except ValueError as err:  # engine.scene.SceneError is a ValueError
+        message = str(err).removeprefix('camera: ')
+        raise ExportError(f"Camera '{camera_object.name}': {message}") from err
     result = engine_scene.Scene(
         meshes=meshes, instances=instances, materials=materials.materials,
         lights=lights, world=world, camera=camera)

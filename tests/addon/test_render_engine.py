@@ -251,7 +251,7 @@ def test_material_preview_renders_with_ember(small, scripted):
 def test_bad_scene_is_reported_with_a_reason(small, scripted):
     scripted(passes=1)
     small.camera.scale = (0.0, 1.0, 1.0)
-    with pytest.raises(RuntimeError, match="Ember: The camera has a zero scale"):
+    with pytest.raises(RuntimeError, match="Ember: Camera 'Camera': it has a zero scale"):
         bpy.ops.render.render()
     assert "zero scale" in ember_engine.RENDER_LOG[-1]['error']
 
