@@ -62,7 +62,12 @@ class EmberRenderEngine(bpy.types.RenderEngine):
     def _render(self, depsgraph, info):
         scene = depsgraph.scene
         self.update_stats("", "Ember: exporting scene")
-        exported = scene_export.export_scene(depsgraph, self.camera_override)
+        try:
+            exported = scene_export.export_scene(depsgraph, self.camera_override,
+                                                 should_stop=lambda: output.break_requested(self))
+        except scene_export.ExportCancelled:
+            info['cancelled'] = True
+            return
         info.update(export_seconds=exported.seconds, triangles=exported.triangles,
                     warnings=list(exported.warnings))
         if not self.is_preview:
@@ -77,9 +82,15 @@ class EmberRenderEngine(bpy.types.RenderEngine):
         progress = output.Progress(self, writer, settings.samples, info)
         try:
             exported.scene.validate()
-            result = render(exported.scene, settings, progress)
+            try:
+                result = render(exported.scene, settings, progress)
+            except backend.scene_module().Cancelled:  # Esc before the first pass
+                info['cancelled'] = True
+                return
             # A stopped render returns its partial image: write it either way.
-            writer.write(result.image, _extra_passes(result))
+            extra = _extra_passes(result, writer.layer)
+            if extra or not progress.cancelled or not info['passes']:
+                writer.write(result.image, extra)  # after a cancel the last pass is the image
         finally:
             writer.finish()
         info.update(samples=getattr(result, 'samples', progress.samples_done),
@@ -94,8 +105,10 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             self.report({'WARNING'}, message)
 
 
-def _extra_passes(result):
-    return {'Depth': getattr(result, 'depth', None), 'Normal': getattr(result, 'normal', None)}
+def _extra_passes(result, layer):
+    """Only the passes the view layer has: each one costs a full-frame array."""
+    wanted = (('Depth', 'depth'), ('Normal', 'normal'))
+    return {name: getattr(result, attr, None) for name, attr in wanted if layer.passes.get(name) is not None}
 
 
 def _message(err):

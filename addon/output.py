@@ -104,6 +104,8 @@ class Progress:
         self.info = info
         self.samples_done = 0
         self.cancelled = False
+        self.shown_progress = 0.0
+        self.shown_seconds_left = None
 
     def on_pass(self, image, samples_done, stats):
         self.writer.write(image)
@@ -112,10 +114,23 @@ class Progress:
             self.info['first_pass_seconds'] = time.perf_counter() - self.info['started']
         self.samples_done = samples_done
         total = stats.get('samples_total') or self.samples_total
+        stats = self._monotone(stats)
         self.engine.update_stats("", format_stats(samples_done, total, stats))
-        self.engine.update_progress(min(samples_done / max(total, 1), 1.0))
+        self.shown_progress = max(self.shown_progress, min(samples_done / max(total, 1), 1.0))
+        self.engine.update_progress(self.shown_progress)
         for listener in progress_listeners:
             listener(samples_done, total, stats)
+
+    def _monotone(self, stats):
+        """The status bar's time left never goes up (a slower pass would
+        otherwise raise the estimate): show the smallest estimate so far."""
+        left = stats.get('seconds_left')
+        if left is None:
+            return stats
+        if self.shown_seconds_left is not None:
+            left = min(left, self.shown_seconds_left)
+        self.shown_seconds_left = left
+        return dict(stats, seconds_left=left)
 
     def should_stop(self):
         if not self.cancelled and break_requested(self.engine):

@@ -9,10 +9,10 @@ embreex both release the GIL, so the cores stay busy and memory stays bounded
 whatever the resolution.
 """
 import os
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FuturesTimeout
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -23,20 +23,38 @@ from .film import Film, Tile
 from .geometry import flatten, material_table
 from .integrator import Context, trace_batch
 from .lights import LightSet
-from .scene import RenderSettings, SceneError
+from .scene import Cancelled, RenderSettings, SceneError
 from .validate import validate_settings
 
 
-@dataclass
 class RenderResult:
-    image: np.ndarray          # (H, W, 4) float32, row 0 at the top
-    depth: np.ndarray          # (H, W)
-    normal: np.ndarray         # (H, W, 3)
-    albedo: np.ndarray         # (H, W, 3)
-    variance: np.ndarray       # (H, W, 3) variance of each pixel's mean
-    samples: int
-    stats: dict = field(default_factory=dict)
-    warnings: list = field(default_factory=list)
+    """The finished (or stopped) render: the RGBA image and the film behind
+    it; first-hit AOVs and variance are computed from the film on demand
+    (each is a full-frame array: seconds at 8K that a cancel must not wait for)."""
+
+    def __init__(self, film, image, samples, stats=None, warnings=None):
+        self.film = film
+        self.image = image          # (H, W, 4) float32, row 0 at the top
+        self.samples = samples
+        self.stats = stats or {}
+        self.warnings = warnings or []
+
+    @property
+    def depth(self):
+        return self.film.aov("depth")
+
+    @property
+    def normal(self):
+        return self.film.aov("normal")
+
+    @property
+    def albedo(self):
+        return self.film.aov("albedo")
+
+    @property
+    def variance(self):
+        """(H, W, 3) variance of each pixel's mean."""
+        return self.film.variance()
 
 
 def prepare(scene, settings):
@@ -54,6 +72,34 @@ def prepare(scene, settings):
     accel = Accel(tris)
     world = np.asarray(scene.world.color, dtype=np.float64)
     return Context(accel, tris, materials, lights, camera, world, settings)
+
+
+def prepare_interruptibly(scene, settings, progress, poll=0.05):
+    """``prepare`` (flattening, light set, BVH build: seconds on millions of
+    triangles, none of it interruptible) in a daemon thread, asking
+    ``progress.should_stop`` every ``poll`` seconds.  On a stop the thread is
+    abandoned (it finishes in the background, its result is dropped) and
+    ``Cancelled`` is raised at once."""
+    if not hasattr(progress, "should_stop"):
+        return prepare(scene, settings)
+    outcome = {}
+
+    def work():
+        try:
+            outcome["ctx"] = prepare(scene, settings)
+        except BaseException as exc:  # noqa: BLE001 - re-raised in the caller's thread
+            outcome["error"] = exc
+    worker = threading.Thread(target=work, name="ember-prepare", daemon=True)
+    worker.start()
+    while True:
+        worker.join(poll)
+        if not worker.is_alive():
+            break
+        if _stop_requested(progress):
+            raise Cancelled("stopped while preparing the scene")
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["ctx"]
 
 
 def warnings_for(ctx):
@@ -78,7 +124,7 @@ def _batches(npix, spp, settings, threads):
 def render(scene, settings=None, progress=None):
     settings = settings or RenderSettings()
     t_start = time.perf_counter()
-    ctx = prepare(scene, settings)
+    ctx = prepare_interruptibly(scene, settings, progress)
     cam = ctx.camera
     film = Film(cam.width, cam.height)
     threads = settings.threads or os.cpu_count() or 1
@@ -87,27 +133,30 @@ def render(scene, settings=None, progress=None):
     batches = _batches(cam.width * cam.height, spp_pass, settings, threads)
     stats = {"samples": 0, "samples_total": settings.samples, "prepare_seconds": time.perf_counter() - t_start}
     t_trace = time.perf_counter()
-    with ThreadPoolExecutor(max_workers=threads) as pool:
+    image = None  # the last pass's image: the film does not change after it
+    with _AbandonablePool(threads, film) as pool:
         for pass_index in range(n_passes):
             spp = min(spp_pass, settings.samples - pass_index * spp_pass)
-            jobs = [pool.submit(_run_batch, ctx, film, lo, hi, spp, settings.seed, pass_index)
+            jobs = [pool.submit(_run_batch, ctx, pool.film, lo, hi, spp, settings.seed, pass_index)
                     for lo, hi in batches]
             cancelled = _wait(jobs, progress)
             stats.update(_stats(ctx, film, stats, spp, t_trace, settings))
             if cancelled:
+                pool.abandon()  # batches still running finish unseen
                 # Part of a pass was traced: pixels carry unequal counts, each
                 # mean is still unbiased.  Report the fewest samples any pixel has.
                 stats["samples"] = int(film.count.min())
             if progress is not None and hasattr(progress, "on_pass"):
-                progress.on_pass(film.image(settings.transparent), stats["samples"], dict(stats))
+                image = film.image(settings.transparent)
+                progress.on_pass(image, stats["samples"], dict(stats))
             if cancelled or _should_stop(progress, stats, settings):
                 break
-    return RenderResult(film.image(settings.transparent), film.aov("depth"),
-                        film.aov("normal"), film.aov("albedo"), film.variance(),
-                        stats["samples"], stats, warnings_for(ctx))
+    if image is None:
+        image = film.image(settings.transparent)
+    return RenderResult(film, image, stats["samples"], stats, warnings_for(ctx))
 
 
-def _wait(jobs, progress, poll=0.2):
+def _wait(jobs, progress, poll=0.1):
     """Wait for a pass's batches, asking ``should_stop`` about every ``poll``
     seconds so a cancel lands within a fraction of a second, not a whole
     pass.  Returns True if the pass was cut short."""
@@ -131,11 +180,51 @@ def _wait(jobs, progress, poll=0.2):
 
 
 def _cancel(jobs):
+    """Drop the batches not started; the running ones are abandoned (see
+    _AbandonablePool): waiting for them cost up to a batch's time (seconds
+    on a busy machine) between Esc and the render stopping."""
     for job in jobs:
         job.cancel()
-    for job in jobs:
-        if not job.cancelled():
-            job.result()
+
+
+class _GatedFilm:
+    """The film as the batches see it: merges stop once ``close`` returns,
+    so a batch abandoned at a cancel never changes the image being returned."""
+
+    def __init__(self, film):
+        self._film = film
+        self._lock = threading.Lock()
+        self._open = True
+
+    def __getattr__(self, name):
+        return getattr(self._film, name)
+
+    def merge(self, tile):
+        with self._lock:
+            if self._open:
+                self._film.merge(tile)
+
+    def close(self):
+        with self._lock:
+            self._open = False
+
+
+class _AbandonablePool(ThreadPoolExecutor):
+    """A thread pool that, once ``abandon``ed, is left without waiting for
+    its running batches (their threads end on their own, results dropped)."""
+
+    def __init__(self, threads, film):
+        super().__init__(max_workers=threads, thread_name_prefix="ember-batch")
+        self.film = _GatedFilm(film)
+        self.abandoned = False
+
+    def abandon(self):
+        self.abandoned = True
+        self.film.close()
+
+    def __exit__(self, *exc):
+        self.shutdown(wait=not self.abandoned, cancel_futures=True)
+        return False
 
 
 def _stop_requested(progress):

@@ -14,7 +14,7 @@ from . import mesh as mesh_export
 class InstanceCollector:
     """Accumulates meshes and instances while walking the depsgraph."""
 
-    def __init__(self, material_index):
+    def __init__(self, material_index, check=None):
         # material_index(obj) -> list of scene material indices per slot
         self.material_index = material_index
         self.meshes = []
@@ -23,6 +23,7 @@ class InstanceCollector:
         self.skipped_types = set()
         self.warnings = []
         self._warned = set()
+        self.check = check or (lambda: None)
 
     def add(self, inst):
         obj = inst.object  # for instances: the instanced (possibly temporary) object
@@ -57,7 +58,8 @@ class InstanceCollector:
             # on its data block: share it only between copies of the object.
             key = ('object', obj.name_full)
         if key not in self.mesh_of_key:
-            mesh = mesh_export.mesh_from_object(obj, _geometry_name(obj))
+            self.check()
+            mesh = mesh_export.mesh_from_object(obj, _geometry_name(obj), self.check)
             dropped = mesh_export.drop_nonfinite_triangles(mesh) if mesh is not None else 0
             if dropped:
                 self._warn_once(('vertices', key), f"Object '{obj.name}': {dropped} triangles with "
@@ -98,10 +100,14 @@ def _geometry_name(obj):
     return data.name if data is not None else obj.name
 
 
-def collect_instances(depsgraph, material_index):
-    """Walk every object instance; returns (meshes, instances, warnings)."""
-    collector = InstanceCollector(material_index)
-    for inst in depsgraph.object_instances:
+def collect_instances(depsgraph, material_index, check=None):
+    """Walk every object instance; returns (meshes, instances, warnings).
+    ``check()`` (which raises to cancel) runs every 256 instances and before
+    each mesh is exported."""
+    collector = InstanceCollector(material_index, check)
+    for count, inst in enumerate(depsgraph.object_instances):
+        if count % 256 == 255:
+            collector.check()
         collector.add(inst)
     warnings = collector.warnings + [f"Ember skips {kind.lower()} objects (not supported yet)"
                 for kind in sorted(collector.skipped_types)]

@@ -96,10 +96,13 @@ def _translate(light, matrix, name):
     raise ValueError(f"has an unknown light type {light.type}")
 
 
-def collect_lights(depsgraph):
-    """Every visible light, including instanced ones; returns (lights, warnings)."""
+def collect_lights(depsgraph, check=None):
+    """Every visible light, including instanced ones; returns (lights, warnings).
+    ``check()`` (which raises to cancel) runs every 256 instances."""
     lights, warnings = [], []
-    for inst in depsgraph.object_instances:
+    for count, inst in enumerate(depsgraph.object_instances):
+        if check is not None and count % 256 == 255:
+            check()
         obj = inst.object  # for instances: the instanced (possibly temporary) object
         if obj.type != 'LIGHT':
             continue

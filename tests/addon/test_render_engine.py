@@ -132,11 +132,9 @@ def test_progressive_updates_and_stats(small, scripted, monkeypatch):
 
 
 def test_cancel_keeps_partial_image(small, scripted, monkeypatch, tmp_path):
-    checks = []
-
     def esc_after_two_passes(engine):
-        checks.append(True)
-        return len(checks) > 2
+        # Also asked during export (between objects): Esc only once two passes are shown.
+        return ember_engine.RENDER_LOG[-1]['passes'] >= 2
     monkeypatch.setattr(output, 'break_requested', esc_after_two_passes)
     renderer = scripted(passes=10)
     pixels = render_pixels(small, tmp_path)
