@@ -199,14 +199,43 @@ class _GatedFilm:
     def __getattr__(self, name):
         return getattr(self._film, name)
 
+    def new_tile(self, lo, hi):
+        make = getattr(self._film, "new_tile", None)
+        return _GatedTile(make(lo, hi) if make else Tile(lo, hi), self)
+
     def merge(self, tile):
         with self._lock:
             if self._open:
-                self._film.merge(tile)
+                self._film.merge(getattr(tile, "tile", tile))
 
     def close(self):
         with self._lock:
             self._open = False
+
+
+class _Abandoned(Exception):
+    """Raised inside an abandoned batch to end it at its next film write."""
+
+
+class _GatedTile:
+    """A batch's tile that ends the batch (raises _Abandoned) at its next
+    write once the gate is closed: an abandoned batch stops within a
+    bounce instead of competing for the cores with what follows a cancel."""
+
+    def __init__(self, tile, gate):
+        self.tile = tile
+        self._gate = gate
+
+    def __getattr__(self, name):
+        value = getattr(self.tile, name)
+        if not callable(value):
+            return value
+
+        def checked(*args, **kwargs):
+            if not self._gate._open:
+                raise _Abandoned()
+            return value(*args, **kwargs)
+        return checked
 
 
 class _AbandonablePool(ThreadPoolExecutor):
@@ -233,7 +262,7 @@ def _stop_requested(progress):
 
 def _run_batch(ctx, film, lo, hi, spp, seed, pass_index):
     rng = np.random.default_rng([seed, pass_index, lo])
-    tile = Tile(lo, hi)
+    tile = film.new_tile(lo, hi)
     pix = np.repeat(np.arange(lo, hi), spp)
     trace_batch(ctx, pix, rng, tile)
     film.merge(tile)

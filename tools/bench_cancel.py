@@ -43,16 +43,14 @@ PATH = os.environ['EMBER_CANCEL_LOG']
 def event(name):
     LOG['events'].append([name, time.time()])
 
-import signal, threading
 PHASE = os.environ.get('EMBER_CANCEL_PHASE', '')
-DELAY = float(os.environ.get('EMBER_CANCEL_DELAY', '0'))
 
 def interrupt_later():
-    """SIGINT to this Blender DELAY s from now: Blender's own handler sets G.is_break."""
-    def fire():
-        LOG['sent'] = time.time()
-        os.kill(os.getpid(), signal.SIGINT)
-    threading.Timer(DELAY, fire).start()
+    """Tell the parent that PHASE has begun: it sends SIGINT from outside
+    (a timer thread here would wait for the GIL that a long foreach_get holds,
+    while Blender's Esc does not)."""
+    with open(PATH + '.phase', 'w') as f:
+        f.write(str(time.time()))
 
 def timed(module, name, label):
     real = getattr(module, name)
@@ -136,9 +134,9 @@ def build_legacy_zip(folder):
 def run_once(scripts, delay, folder, triangles, samples, scene, phase=None, timeout=300):
     """One render cancelled `delay` s after render() started, or, with
     `phase` ('export', 'prepare' or 'passes' = after the first pass), `delay`
-    s after that phase began (Blender signals itself from a timer thread);
+    s after that phase began;
     returns a dict of timings (delay=None: render to the end)."""
-    log_path = os.path.join(folder, f'cancel_{phase}_{delay}.json')
+    log_path = tempfile.mktemp(prefix=f'cancel_{phase}_{delay}_', suffix='.json', dir=folder)
     probe = os.path.join(folder, 'probe.py')
     with open(probe, 'w') as f:
         f.write(PROBE)
@@ -152,12 +150,13 @@ def run_once(scripts, delay, folder, triangles, samples, scene, phase=None, time
     started = time.time()
     sent = None
     try:
-        if delay is not None and not phase:
-            # Count the delay from the moment render() starts (the probe marks it).
-            while not os.path.exists(log_path + '.started') and proc.poll() is None:
+        if delay is not None:
+            # Count the delay from the moment render() (or the phase) starts: the probe marks it.
+            marker = log_path + ('.phase' if phase else '.started')
+            while not os.path.exists(marker) and proc.poll() is None:
                 if time.time() - started > timeout:
                     raise subprocess.TimeoutExpired(cmd, timeout)
-                time.sleep(0.01)
+                time.sleep(0.002)
             time.sleep(delay)
             sent = time.time()
             proc.send_signal(signal.SIGINT)
@@ -171,8 +170,6 @@ def run_once(scripts, delay, folder, triangles, samples, scene, phase=None, time
         return {'delay': delay, 'error': 'no probe log: ' + (rest or '')[-1500:]}
     with open(log_path) as f:
         log = json.load(f)
-    if phase:
-        sent = log.get('sent')
     row = summarize(log, delay, sent, exited, proc.returncode)
     row['phase_requested'] = phase
     return row
