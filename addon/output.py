@@ -28,6 +28,48 @@ def to_blender_pixels(image):
     return flipped.reshape(-1), bad
 
 
+BAND = 256  # rows checked for NaN at a time: no full-frame mask
+
+
+def _zero_nonfinite_in_place(image):
+    """Replace NaN and Inf by 0, a band of rows at a time; returns how many."""
+    bad = 0
+    for lo in range(0, len(image), BAND):
+        band = image[lo:lo + BAND]
+        finite = np.isfinite(band)
+        count = band.size - int(np.count_nonzero(finite))
+        if count:
+            band[~finite] = 0.0
+            bad += count
+    return bad
+
+
+def _flip_rows_in_place(image):
+    """Reverse the row order with one row of scratch (top-first <->
+    Blender's bottom-first): a flipped copy would cost a full frame,
+    530 MB at 8K."""
+    height = len(image)
+    scratch = np.empty_like(image[0])
+    for top in range(height // 2):
+        bottom = height - 1 - top
+        scratch[...] = image[top]
+        image[top] = image[bottom]
+        image[bottom] = scratch
+
+
+def write_rgba_in_place(render_pass, image):
+    """Write a contiguous float32 (H, W, 4) top-first image into a pass
+    without copying it: flip it in place, write, flip it back.  NaN/Inf
+    become 0 (in the image too); returns how many there were."""
+    bad = _zero_nonfinite_in_place(image)
+    _flip_rows_in_place(image)
+    try:
+        set_pass(render_pass, image.reshape(-1))
+    finally:
+        _flip_rows_in_place(image)
+    return bad
+
+
 def set_pass(render_pass, flat):
     """foreach_set that accepts 5.0's flat and 3.4's (pixels, channels) layouts."""
     try:
@@ -52,9 +94,13 @@ class ResultWriter:
         if image.shape[:2] != (self.height, self.width):
             raise ValueError(f"the renderer returned a {image.shape[1]}x{image.shape[0]} image "
                              f"for a {self.width}x{self.height} window")
-        pixels, bad = to_blender_pixels(image[..., :4])
+        combined = self.layer.passes["Combined"]
+        if image.shape[2] == 4 and image.dtype == np.float32 and image.flags.c_contiguous:
+            bad = write_rgba_in_place(combined, image)
+        else:
+            pixels, bad = to_blender_pixels(image[..., :4])
+            set_pass(combined, pixels)
         self.nonfinite = max(self.nonfinite, bad)
-        set_pass(self.layer.passes["Combined"], pixels)
         for name, data in (extra or {}).items():
             render_pass = self.layer.passes.get(name)
             if render_pass is not None and data is not None:
