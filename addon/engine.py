@@ -12,7 +12,7 @@ import traceback
 
 import bpy
 
-from . import backend, output
+from . import backend, output, shards
 from .export import camera as camera_export
 from .export import scene as scene_export
 
@@ -70,7 +70,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
                 self.report({'WARNING'}, "Ember: " + warning)
         settings = scene_export.render_settings(scene, self.is_preview)
         _, _, width, height = camera_export.border_window(scene.render)
-        render = backend.render_function()
+        render = shards.wrap(backend.render_function(), scene, depsgraph.view_layer.name, self.is_preview)
         if self.test_break():
             return
         writer = output.ResultWriter(self, width, height, depsgraph.view_layer.name)
