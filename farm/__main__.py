@@ -1,5 +1,6 @@
 """Command line of the Ember render farm (see farm/__init__.py and README)."""
 import argparse
+import glob
 import os
 import sys
 
@@ -33,7 +34,9 @@ def parse(argv):
     worker.add_argument('--local-directory')
 
     merge = sub.add_parser('merge', help="merge shard files of one frame into an image")
-    merge.add_argument('shards', nargs='+')
+    merge.add_argument('shards', nargs='+', help="shard files (patterns with * are expanded)")
+    merge.add_argument('--plan', help="the planned sample ranges, e.g. 0-32,32-64: exactly these are "
+                       "merged, each once (default: the given shards must tile [0, N))")
     merge.add_argument('-o', '--output', required=True, help="output .exr")
     return parser.parse_args(argv)
 
@@ -85,8 +88,16 @@ def cmd_render(args):
 def cmd_merge(args):
     from .merge import merge_to_image
     from .shardfile import ShardError
+    paths = []
+    for arg in args.shards:
+        paths += sorted(glob.glob(arg)) if any(c in arg for c in '*?[') else [arg]
     try:
-        meta = merge_to_image(args.shards, args.output)
+        ranges = [tuple(int(x) for x in r.split('-')) for r in args.plan.split(',')] if args.plan else None
+    except ValueError:
+        print(f"bad --plan {args.plan!r}: use e.g. 0-32,32-64", file=sys.stderr)
+        return 2
+    try:
+        meta = merge_to_image(paths, args.output, plan=ranges)
     except ShardError as err:
         print(f"merge refused: {err}", file=sys.stderr)
         return 1

@@ -17,10 +17,15 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 def parse(argv):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('blend')
-    parser.add_argument('-o', dest='pattern', required=True)
-    parser.add_argument('-F', dest='format', default='OPEN_EXR')
+    parser.add_argument('-o', '--render-output', dest='pattern', required=True)
+    parser.add_argument('-F', '--render-format', dest='format', default='OPEN_EXR')
     parser.add_argument('--python-expr', dest='code', default='')
-    parser.add_argument('-f', dest='frames', required=True)
+    parser.add_argument('-f', '--render-frame', dest='frames', required=True)
+    # Accepted for Blender's command line (Flamenco passes them): background
+    # mode is the only mode here, the engine is set by the code.
+    parser.add_argument('-b', '--background', action='store_true')
+    parser.add_argument('-y', '--enable-autoexec', action='store_true')
+    parser.add_argument('-E', '--engine', default='EMBER')
     return parser.parse_args(argv)
 
 
@@ -42,7 +47,12 @@ def frame_path(pattern, frame):
 
 def main(argv):
     args = parse(argv)
-    os.environ.setdefault('BLENDER_USER_RESOURCES', tempfile.mkdtemp(prefix='ember-farm-'))
+    with tempfile.TemporaryDirectory(prefix='ember-farm-') as user:
+        os.environ.setdefault('BLENDER_USER_RESOURCES', user)
+        return render(args)
+
+
+def render(args):
     sys.path.insert(0, ROOT)
     import bpy
     import addon

@@ -25,22 +25,19 @@ def select(metas, plan=None):
     if not metas:
         raise ShardError("no shards to merge")
     first = metas[0]
-    for meta in metas[1:]:
-        for key in SHARED:
-            if meta.get(key) != first.get(key):
-                raise ShardError(f"{meta['path']} and {first['path']} differ in {key}: "
-                                 f"{meta.get(key)!r} vs {first.get(key)!r}")
     chosen = {}
     for meta in metas:
-        chosen.setdefault((meta['sample_start'], meta['sample_end']), meta)
-    ranges = sorted(chosen)
+        # A range rendered twice (a retried task, a file given twice) counts once.
+        kept = chosen.setdefault((meta['sample_start'], meta['sample_end']), meta)
+        _check_same(kept, meta)
     if plan is not None:
+        # Shards of other plans (an earlier job with another split) are left out.
         planned = sorted(tuple(r) for r in plan)
-        missing = sorted(set(planned) - set(ranges))
-        extra = sorted(set(ranges) - set(planned))
-        if missing or extra:
-            raise ShardError(f"frame {first['frame']}: shards do not match the plan: missing sample ranges "
-                             f"{missing}, unplanned {extra}")
+        missing = sorted(set(planned) - set(chosen))
+        if missing:
+            raise ShardError(f"frame {first['frame']}: planned sample ranges {missing} have no shard")
+        chosen = {r: chosen[r] for r in planned}
+    ranges = sorted(chosen)
     position = 0
     for start, end in ranges:
         if start != position:
@@ -48,7 +45,16 @@ def select(metas, plan=None):
             raise ShardError(f"frame {first['frame']}: sample ranges {kind} at sample {min(start, position)} "
                              f"(ranges {ranges})")
         position = end
-    return [chosen[r] for r in ranges]
+    picked = [chosen[r] for r in ranges]
+    for meta in picked[1:]:
+        _check_same(picked[0], meta)
+    return picked
+
+
+def _check_same(a, b):
+    for key in SHARED:
+        if a.get(key) != b.get(key):
+            raise ShardError(f"{b['path']} and {a['path']} differ in {key}: {b.get(key)!r} vs {a.get(key)!r}")
 
 
 def film_class():
