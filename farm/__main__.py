@@ -24,6 +24,8 @@ def parse(argv):
     render.add_argument('-o', '--output', required=True, help="output folder (shared by all machines)")
     render.add_argument('--blender', default='', help="Blender binary with Ember installed "
                         "(default: the bpy module of this Python)")
+    render.add_argument('--threads', type=int, default=0, help="render threads per task (default: every core, "
+                        "shared out among --local workers)")
     render.add_argument('--resume', action='store_true', help="skip frames and shards already on disk")
     render.add_argument('--retries', type=int, default=2, help="reruns of a failing task (default 2)")
 
@@ -56,7 +58,7 @@ def make_job(args):
         frames = plan.parse_frames(args.frames)
     except ValueError as err:
         raise SystemExit(str(err)) from None
-    threads = max(1, (os.cpu_count() or 1) // args.local) if args.local else 0
+    threads = args.threads or (max(1, (os.cpu_count() or 1) // args.local) if args.local else 0)
     return plan.Job(blend=blend, out_dir=os.path.abspath(args.output), frames=frames, samples=args.samples,
                     split=max(1, args.split_samples), chunk=args.chunk, blender=args.blender,
                     python=sys.executable, threads=threads, blend_sha256=blend_hash(blend))

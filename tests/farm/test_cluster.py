@@ -1,0 +1,158 @@
+"""The farm on a Dask LocalCluster with two workers: an animation in chunks,
+a frame split into sample shards, a worker killed mid-task, --resume.
+Every output is compared with the same frames rendered locally."""
+import glob
+import importlib.util
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from farmlib import ROOT, require
+from farm import client as farm_client
+from farm import plan
+from farm.commands import BPY_RENDER, setup_code
+
+SAMPLES = 8
+THREADS = 1          # per render: two workers share the two cores
+
+
+def read_exr(path):
+    from engine.imageio import read_image
+    return read_image(path)
+
+
+def assert_same_image(got, want, what):
+    scale = max(float(np.abs(want).max()), 1e-6)
+    worst = float(np.abs(got - want).max()) / scale
+    assert got.shape == want.shape and worst < 1e-5, f"{what}: largest relative difference {worst}"
+
+
+@pytest.fixture(scope='module')
+def references(animated_blend, tmp_path_factory):
+    """Frames 1-4 rendered by one local Blender process, no farm involved."""
+    folder = tmp_path_factory.mktemp('local')
+    cmd = [sys.executable, '-P', BPY_RENDER, animated_blend, '-o', str(folder / 'frame_####'),
+           '--python-expr', setup_code(SAMPLES, THREADS), '-f', '1..4']
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=300,
+                         env=dict(os.environ, PYTHONPATH=ROOT))
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
+    return {f: read_exr(str(folder / f"frame_{f:04d}.exr")) for f in range(1, 5)}
+
+
+@pytest.fixture(scope='module')
+def cluster():
+    require(importlib.util.find_spec('distributed') is not None, "dask distributed is not installed")
+    import distributed
+    lc = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    dask_client = distributed.Client(lc)
+    yield lc, dask_client
+    dask_client.close()
+    lc.close()
+
+
+def make_job(blend, out_dir, frames=(1, 2, 3, 4), **kw):
+    kw.setdefault('samples', SAMPLES)
+    return plan.Job(blend=blend, out_dir=str(out_dir), frames=list(frames), threads=THREADS,
+                    python=sys.executable, blend_sha256=farm_client.blend_hash(blend), **kw)
+
+
+def run_job(dask_client, job, **kw):
+    written, failures = farm_client.run(dask_client, job, **kw)
+    assert not failures, failures
+    return written
+
+
+def test_animation_in_chunks_equals_local_renders(cluster, animated_blend, references, tmp_path):
+    _, dask_client = cluster
+    job = make_job(animated_blend, tmp_path, chunk=2)
+    written = run_job(dask_client, job)
+    assert sorted(written) == [plan.frame_path(str(tmp_path), f) for f in range(1, 5)]
+    for frame in range(1, 5):
+        assert_same_image(read_exr(plan.frame_path(str(tmp_path), frame)), references[frame], f"frame {frame}")
+    # The frames differ from each other (the animation was rendered).
+    assert np.abs(references[1] - references[4]).max() > 0.05
+    assert not glob.glob(str(tmp_path / '.farm' / 'tmp' / '*')), "scratch folders left behind"
+
+
+def test_frame_in_two_shards_equals_local_render(cluster, animated_blend, references, tmp_path):
+    from engine.film import Film
+    require(hasattr(Film, 'from_state'), "engine.film.Film has no state API (sample ranges) yet")
+    _, dask_client = cluster
+    job = make_job(animated_blend, tmp_path, frames=[2], split=2)
+    assert run_job(dask_client, job) == [plan.frame_path(str(tmp_path), 2)]
+    shards = sorted(os.listdir(plan.shard_dir(str(tmp_path))))
+    assert shards == ['frame_000002.s000000000-000000004.ViewLayer.npz',
+                      'frame_000002.s000000004-000000008.ViewLayer.npz']
+    assert_same_image(read_exr(plan.frame_path(str(tmp_path), 2)), references[2], "merged frame 2")
+
+
+def _kill_first_running_task(out_dir, killed, timeout=60):
+    """SIGKILL the worker process of the first task seen running."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and not killed:
+        for marker in glob.glob(os.path.join(out_dir, '.farm', 'running', '*.json')):
+            try:
+                with open(marker) as handle:
+                    info = json.load(handle)
+            except (OSError, ValueError):
+                continue  # being written
+            os.kill(info['worker_pid'], signal.SIGKILL)
+            killed.append(info)
+            return
+        time.sleep(0.02)
+
+
+def test_worker_killed_mid_task_job_still_equals_local(cluster, animated_blend, references, tmp_path):
+    _, dask_client = cluster
+    job = make_job(animated_blend, tmp_path, chunk=2)
+    killed = []
+    killer = threading.Thread(target=_kill_first_running_task, args=(str(tmp_path), killed))
+    killer.start()
+    written = run_job(dask_client, job)
+    killer.join()
+    assert killed, "no task was seen running"
+    assert len(written) == 4
+    for frame in range(1, 5):
+        assert_same_image(read_exr(plan.frame_path(str(tmp_path), frame)), references[frame], f"frame {frame}")
+    # The killed task's render died with its worker (no orphan left running).
+    time.sleep(0.5)
+    assert not os.path.exists(f"/proc/{killed[0]['child_pid']}") or \
+        open(f"/proc/{killed[0]['child_pid']}/stat").read().split()[2] == 'Z'
+
+
+def test_resume_after_interrupted_client_submits_only_missing(cluster, animated_blend, references, tmp_path):
+    """A client killed after its first frames; --resume renders the others only."""
+    lc, _ = cluster
+    cmd = [sys.executable, '-m', 'farm', 'render', animated_blend, '--frames', '1-4', '--scheduler',
+           lc.scheduler_address, '--threads', str(THREADS), '--samples', str(SAMPLES), '-o', str(tmp_path)]
+    env = dict(os.environ, PYTHONPATH=ROOT)
+    first = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                             start_new_session=True)
+    deadline = time.monotonic() + 120
+    try:
+        while not glob.glob(str(tmp_path / 'frame_*.exr')) and time.monotonic() < deadline:
+            assert first.poll() is None, first.stdout.read().decode()[-3000:]
+            time.sleep(0.05)
+    finally:
+        os.kill(first.pid, signal.SIGKILL)
+        first.wait()
+    # Renders already running finish on their workers (the scheduler drops
+    # the rest with the client): wait for them, then see what is missing.
+    while glob.glob(str(tmp_path / '.farm' / 'running' / '*')) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    done = sorted(glob.glob(str(tmp_path / 'frame_*.exr')))
+    assert 1 <= len(done) < 4, done
+    missing = [f for f in range(1, 5) if plan.frame_path(str(tmp_path), f) not in done]
+    second = subprocess.run(cmd + ['--resume'], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert second.returncode == 0, second.stdout[-3000:] + second.stderr[-3000:]
+    (line,) = [l for l in second.stderr.splitlines() if l.startswith('farm:')]
+    assert line.split(': ', 2)[2].split() == [f"ember-chunk-{f}-{f}" for f in missing], line
+    for frame in range(1, 5):
+        assert_same_image(read_exr(plan.frame_path(str(tmp_path), frame)), references[frame], f"frame {frame}")
