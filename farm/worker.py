@@ -10,7 +10,7 @@ from .tasks import THREADS_ENV
 
 
 def worker_args(address, name=None, render_threads=0, local_directory=None):
-    args = [address, '--nworkers', '1', '--nthreads', '1', '--resources', 'render=1',
+    args = [address, '--nworkers', '1', '--nthreads', '1',
             '--name', name or f"ember-{socket.gethostname()}-{os.getpid()}"]
     if local_directory:
         args += ['--local-directory', local_directory]

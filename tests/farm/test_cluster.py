@@ -156,3 +156,29 @@ def test_resume_after_interrupted_client_submits_only_missing(cluster, animated_
     assert line.split(': ', 2)[2].split() == [f"ember-chunk-{f}-{f}" for f in missing], line
     for frame in range(1, 5):
         assert_same_image(read_exr(plan.frame_path(str(tmp_path), frame)), references[frame], f"frame {frame}")
+
+
+def test_farm_worker_joins_with_one_render_slot(cluster):
+    """`python -m farm worker ADDRESS` registers one single-threaded worker
+    whose tasks can import the farm and see the render-thread setting."""
+    lc, dask_client = cluster
+    before = set(dask_client.scheduler_info()['workers'])
+    proc = subprocess.Popen([sys.executable, '-m', 'farm', 'worker', lc.scheduler_address, '--name', 'farm-cli',
+                             '--render-threads', '3'], cwd=ROOT, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60
+        new = {}
+        while not new and time.monotonic() < deadline:
+            workers = dask_client.scheduler_info()['workers']
+            new = {a: w for a, w in workers.items() if a not in before}
+            time.sleep(0.1)
+        assert len(new) == 1, "the farm worker did not join"
+        (address, info), = new.items()
+        assert info['nthreads'] == 1 and info['name'] == 'farm-cli'
+        threads = dask_client.submit(lambda: __import__('os').environ.get('EMBER_FARM_RENDER_THREADS'),
+                                     workers=[address], pure=False).result(timeout=60)
+        assert threads == '3'
+    finally:
+        os.killpg(proc.pid, signal.SIGTERM)
+        proc.wait(timeout=30)
