@@ -19,3 +19,14 @@ def animated_blend(tmp_path_factory):
     require(sys.version_info[:2] == (3, 11), "the bpy module needs Python 3.11")
     require(importlib.util.find_spec('bpy') is not None, "the bpy module is not installed in this Python")
     return make_animation(tmp_path_factory.mktemp('anim') / 'anim.blend')
+
+
+@pytest.fixture(scope='session')
+def cluster():
+    require(importlib.util.find_spec('distributed') is not None, "dask distributed is not installed")
+    import distributed
+    lc = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    dask_client = distributed.Client(lc)
+    yield lc, dask_client
+    dask_client.close()
+    lc.close()

@@ -2,7 +2,6 @@
 a frame split into sample shards, a worker killed mid-task, --resume.
 Every output is compared with the same frames rendered locally."""
 import glob
-import importlib.util
 import json
 import os
 import signal
@@ -14,59 +13,14 @@ import time
 import numpy as np
 import pytest
 
-from farmlib import ROOT, require
-from farm import client as farm_client
+from farmlib import (ROOT, SAMPLES, THREADS, assert_same_image, make_job, read_exr, render_locally, require,
+                     run_job)
 from farm import plan
-from farm.commands import BPY_RENDER, setup_code
-
-SAMPLES = 8
-THREADS = 1          # per render: two workers share the two cores
-
-
-def read_exr(path):
-    from engine.imageio import read_image
-    return read_image(path)
-
-
-def assert_same_image(got, want, what):
-    scale = max(float(np.abs(want).max()), 1e-6)
-    worst = float(np.abs(got - want).max()) / scale
-    assert got.shape == want.shape and worst < 1e-5, f"{what}: largest relative difference {worst}"
-
 
 @pytest.fixture(scope='module')
 def references(animated_blend, tmp_path_factory):
     """Frames 1-4 rendered by one local Blender process, no farm involved."""
-    folder = tmp_path_factory.mktemp('local')
-    cmd = [sys.executable, '-P', BPY_RENDER, animated_blend, '-o', str(folder / 'frame_####'),
-           '--python-expr', setup_code(SAMPLES, THREADS), '-f', '1..4']
-    out = subprocess.run(cmd, capture_output=True, text=True, timeout=300,
-                         env=dict(os.environ, PYTHONPATH=ROOT))
-    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
-    return {f: read_exr(str(folder / f"frame_{f:04d}.exr")) for f in range(1, 5)}
-
-
-@pytest.fixture(scope='module')
-def cluster():
-    require(importlib.util.find_spec('distributed') is not None, "dask distributed is not installed")
-    import distributed
-    lc = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
-    dask_client = distributed.Client(lc)
-    yield lc, dask_client
-    dask_client.close()
-    lc.close()
-
-
-def make_job(blend, out_dir, frames=(1, 2, 3, 4), **kw):
-    kw.setdefault('samples', SAMPLES)
-    return plan.Job(blend=blend, out_dir=str(out_dir), frames=list(frames), threads=THREADS,
-                    python=sys.executable, blend_sha256=farm_client.blend_hash(blend), **kw)
-
-
-def run_job(dask_client, job, **kw):
-    written, failures = farm_client.run(dask_client, job, **kw)
-    assert not failures, failures
-    return written
+    return render_locally(animated_blend, tmp_path_factory.mktemp('local'), '1..4')
 
 
 def test_animation_in_chunks_equals_local_renders(cluster, animated_blend, references, tmp_path):

@@ -43,3 +43,36 @@ def test_resume_leaves_only_missing_frames_and_shards(tmp_path):
     _shard(split, 2, 4, 8)
     open(plan.frame_path(split.out_dir, 2), 'w').close()
     assert [t.key for t in client.pending(split, resume=True)] == ['ember-shard-1-s4-8', 'ember-merge-1']
+
+
+def test_blender_command_lines():
+    from farm.commands import BPY_RENDER, frame_arg, render_command
+    assert frame_arg([3]) == '3' and frame_arg([1, 2, 3]) == '1..3' and frame_arg([1, 3]) == '1,3'
+    job = plan.Job(blend='/s/a.blend', out_dir='/o', frames=[1], samples=32, blender='/bin/blender', threads=2)
+    cmd = render_command(job, [1, 2], '/o/frame_####', shard=('/o/shards', 16, 8))
+    # --addons before the file; -F before the code that sets the EXR depth; -f last.
+    assert cmd[:5] == ['/bin/blender', '-b', '--addons', 'ember', '/s/a.blend']
+    assert cmd[cmd.index('-F') + 1] == 'OPEN_EXR' and cmd.index('-F') < cmd.index('--python-expr')
+    assert cmd[-2:] == ['-f', '1..2']
+    code = cmd[cmd.index('--python-expr') + 1]
+    for line in ("s.ember.samples = 32", "s.ember.threads = 2", "os.environ['EMBER_SHARD_START'] = '16'",
+                 "os.environ['EMBER_SHARD_SAMPLES'] = '8'", "os.environ['EMBER_SHARD_DIR'] = '/o/shards'"):
+        assert line in code
+    job.blender = ''
+    assert render_command(job, [1], '/o/f_####')[1:4] == ['-P', BPY_RENDER, '/s/a.blend']
+
+
+def test_error_check_stops_blender_with_status_1():
+    """The render_post handler of the setup code: Ember's recorded error ends
+    the Blender process with status 1 (Blender would exit 0 with a black frame)."""
+    import subprocess
+    import sys
+    from farm.commands import ERROR_CHECK
+    fake = ("import sys, types\n"
+            "bpy = types.SimpleNamespace(app=types.SimpleNamespace(handlers=types.SimpleNamespace(render_post=[])))\n"
+            "mod = types.ModuleType('ember.engine'); mod.RENDER_LOG = [{'error': None}]\n"
+            "sys.modules['ember.engine'] = mod\n" + ERROR_CHECK +
+            "bpy.app.handlers.render_post[0](None)\nprint('fine')\n"
+            "mod.RENDER_LOG.append({'error': 'boom'})\nbpy.app.handlers.render_post[0](None)\nprint('not reached')\n")
+    out = subprocess.run([sys.executable, '-c', fake], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 1 and out.stdout.split() == ['fine', 'EMBER-FARM-ERROR:', 'boom'], out
