@@ -145,7 +145,8 @@ def run(client, job, resume=False, stream=sys.stderr, retries=RETRIES):
     for fut in as_completed([f for _, f in futures]):
         task = by_future[fut.key]
         if fut.status == 'finished':
-            written += fut.result()
+            if task.kind != 'shard':  # shards are intermediate files
+                written += fut.result()
         else:
             failures.append(f"{task.key}: {fut.exception()}")
         bar.update(weight(job, task))

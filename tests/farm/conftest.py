@@ -11,7 +11,7 @@ for path in (os.path.dirname(os.path.dirname(HERE)), HERE):  # the repository, t
     if path not in sys.path:
         sys.path.insert(0, path)
 
-from farmlib import make_animation, require  # noqa: E402
+from farmlib import make_animation, render_locally, require  # noqa: E402
 
 
 @pytest.fixture(scope='session')
@@ -30,3 +30,9 @@ def cluster():
     yield lc, dask_client
     dask_client.close()
     lc.close()
+
+
+@pytest.fixture(scope='session')
+def references(animated_blend, tmp_path_factory):
+    """Frames 1-4 rendered by one local Blender process, no farm involved."""
+    return render_locally(animated_blend, tmp_path_factory.mktemp('local'), '1..4')

@@ -17,12 +17,6 @@ from farmlib import (ROOT, SAMPLES, THREADS, assert_same_image, make_job, read_e
                      run_job)
 from farm import plan
 
-@pytest.fixture(scope='module')
-def references(animated_blend, tmp_path_factory):
-    """Frames 1-4 rendered by one local Blender process, no farm involved."""
-    return render_locally(animated_blend, tmp_path_factory.mktemp('local'), '1..4')
-
-
 def test_animation_in_chunks_equals_local_renders(cluster, animated_blend, references, tmp_path):
     _, dask_client = cluster
     job = make_job(animated_blend, tmp_path, chunk=2)

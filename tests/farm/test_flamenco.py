@@ -4,6 +4,7 @@ import json
 import os
 import shutil
 import subprocess
+import sys
 
 import pytest
 
@@ -78,3 +79,32 @@ def test_split_samples_shards_then_merge():
 def test_bad_settings_are_refused(settings, message):
     job = compile_job(**settings)
     assert message in job.get('error', ''), job
+
+
+def test_compiled_split_job_runs_and_equals_local_render(animated_blend, references, tmp_path):
+    """Run what the job type compiled, as Flamenco workers would: the shard
+    tasks' blender-render commands ({blender} = the bpy module through
+    farm/bpy_render.py) in parallel, then the merge task's exec command."""
+    from engine.film import Film
+    require(hasattr(Film, 'from_state'), "engine.film.Film has no state API (sample ranges) yet")
+    from farm.commands import BPY_RENDER
+    from farmlib import SAMPLES, THREADS, assert_same_image, read_exr
+    job = compile_job(frames='2', samples=SAMPLES, split_samples=2, render_threads=THREADS,
+                      render_output_root=str(tmp_path), blendfile=animated_blend,
+                      ember_python=sys.executable, ember_root=ROOT)
+    env = dict(os.environ, PYTHONPATH=ROOT)
+    *shards, merge = job['tasks']
+    running = []
+    for task in shards:
+        params = task['commands'][0]['parameters']
+        argv = [sys.executable, '-P', BPY_RENDER, '-b', '-y', *params['argsBefore'], params['blendfile'],
+                *params['args']]
+        running.append(subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True))
+    for proc in running:
+        out, _ = proc.communicate(timeout=300)
+        assert proc.returncode == 0, out[-3000:]
+    params = merge['commands'][0]['parameters']
+    out = subprocess.run([params['exe'], *params['args']], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
+    assert "merged 2 shards, samples [0, 8)" in out.stdout
+    assert_same_image(read_exr(tmp_path / 'frame_0002.exr'), references[2], "frame 2 from Flamenco tasks")

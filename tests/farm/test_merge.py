@@ -2,72 +2,76 @@
 import numpy as np
 import pytest
 
-from farm import moments
-from farm.merge import select
+from engine.film import Film
+from farm.merge import merge_states, select
 from farm.shardfile import ShardError
+from farmlib import require
 
 
-def _shards(rng, pixels=40, shards=3):
+W, H = 8, 5
+
+
+def _shards(rng, shards=3):
     """Per pixel and shard a different number of samples (as adaptive
-    sampling leaves them, zero included): RGB radiance with a heavy tail and
-    an alpha in [0, 1]."""
-    out = []
+    sampling leaves them, zero included): radiance with a heavy tail, alpha
+    in [0, 1], a depth, and each sample's index (disjoint ranges per shard)."""
+    out, first = [], 0
     for _ in range(shards):
-        counts = rng.integers(0, 9, size=pixels)
-        counts[rng.integers(pixels)] = 0
-        out.append([np.concatenate([rng.lognormal(0.0, 1.5, size=(n, 3)),
-                                    rng.uniform(size=(n, 1))], axis=1) for n in counts])
+        counts = rng.integers(0, 9, size=W * H)
+        counts[rng.integers(W * H)] = 0
+        pix = np.repeat(np.arange(W * H), counts)
+        n = len(pix)
+        index = first + np.concatenate([np.arange(c) for c in counts])
+        first += int(counts.max())
+        out.append({'pix': pix, 'L': rng.lognormal(0.0, 1.5, size=(n, 3)), 'alpha': rng.uniform(size=n),
+                    'depth': rng.uniform(1, 5, size=n), 'index': index.astype(np.uint32)})
     return out
 
 
-def _union(shards, pixel):
-    return np.concatenate([shard[pixel] for shard in shards])
+def _film_state(shard):
+    film = Film(W, H, aovs=('depth',), adaptive=True)
+    tile = film.new_tile(0, W * H)
+    n = len(shard['pix'])
+    tile.add_radiance(shard['pix'], shard['L'], shard['index'])
+    tile.add_camera(shard['pix'], shard['alpha'], shard['depth'], np.zeros((n, 3)), np.zeros((n, 3)))
+    film.merge(tile)
+    return film.state()
 
 
-def test_combined_moments_equal_all_samples_at_once():
-    rng = np.random.default_rng(5)
-    shards = _shards(rng)
-    pixels = len(shards[0])
-    parts = []
-    for shard in shards:  # each shard's own (count, mean, M2) per pixel, RGBA
-        count = np.array([len(s) for s in shard], float)
-        mean = np.array([s.mean(0) if len(s) else np.zeros(4) for s in shard])
-        m2 = np.array([((s - s.mean(0)) ** 2).sum(0) if len(s) else np.zeros(4) for s in shard])
-        parts.append((count, mean, m2))
-    count, mean, m2 = moments.combine_all(parts)
-    for p in range(pixels):
-        union = _union(shards, p)
-        assert count[p] == len(union)
-        if len(union):
-            np.testing.assert_allclose(mean[p], union.mean(0), rtol=1e-12)
-            np.testing.assert_allclose(m2[p], ((union - union.mean(0)) ** 2).sum(0), rtol=1e-9, atol=1e-12)
-        else:
-            assert not mean[p].any() and not m2[p].any()
-    # Order and grouping do not matter: ((a, b), c) == (a, (b, c)).
-    other = moments.combine(parts[0], moments.combine(parts[1], parts[2]))
-    for x, y in zip((count, mean, m2), other):
-        np.testing.assert_allclose(x, y, rtol=1e-10, atol=1e-12)
-
-
-def test_summed_film_sums_give_the_same_statistics():
-    """What shards store (sums of x and x^2, counts, alpha sums) added up
-    gives the mean, variance and coverage of the union."""
-    rng = np.random.default_rng(6)
-    shards = _shards(rng)
-    pixels = len(shards[0])
-    count = sum(np.array([len(s) for s in shard], float) for shard in shards)
-    s1 = sum(np.array([s[:, :3].sum(0) for s in shard]) for shard in shards)
-    s2 = sum(np.array([(s[:, :3] ** 2).sum(0) for s in shard]) for shard in shards)
-    alpha = sum(np.array([s[:, 3].sum() for s in shard]) for shard in shards)
-    n, mean, m2 = moments.from_sums(count, s1, s2)
-    for p in range(pixels):
-        union = _union(shards, p)
-        if len(union) == 0:
-            assert n[p] == 0 and not mean[p].any()
+def test_merged_film_states_hold_the_statistics_of_all_samples():
+    """(count, mean, M2) per pixel of the merged shards equal those of all
+    their samples taken at once; alpha, depth and the adaptive half-buffer
+    add up; pixels without samples stay empty."""
+    require(hasattr(Film, 'from_state'), "engine.film.Film has no state API")
+    from engine.sampler import is_class_a
+    shards = _shards(np.random.default_rng(5))
+    film = merge_states([_film_state(s) for s in shards])
+    union = {key: np.concatenate([s[key] for s in shards]) for key in shards[0]}
+    for p in range(W * H):
+        mine = union['pix'] == p
+        L = union['L'][mine]
+        assert film.count[p] == len(L)
+        if not len(L):
+            assert not film.mean[p].any() and not film.m2[p].any() and film.alpha[p] == 0
             continue
-        np.testing.assert_allclose(mean[p], union[:, :3].mean(0), rtol=1e-12)
-        np.testing.assert_allclose(m2[p], ((union[:, :3] - union[:, :3].mean(0)) ** 2).sum(0), rtol=1e-7)
-        np.testing.assert_allclose(alpha[p] / n[p], union[:, 3].mean(), rtol=1e-12)
+        np.testing.assert_allclose(film.mean[p], L.mean(0), rtol=2e-6)
+        np.testing.assert_allclose(film.m2[p], ((L - L.mean(0)) ** 2).sum(0), rtol=1e-5)
+        np.testing.assert_allclose(film.alpha[p], union['alpha'][mine].sum(), rtol=1e-6)
+        np.testing.assert_allclose(film.aovs['depth'][p, 0], union['depth'][mine].sum(), rtol=1e-6)
+        class_a = is_class_a(union['index'][mine])
+        np.testing.assert_allclose(film.aux[p], L[class_a].sum(0), rtol=1e-5, atol=1e-6)
+    # Grouping does not matter: (a + b) + c == a + (b + c).
+    states = [_film_state(s) for s in shards]
+    other = merge_states([states[0], merge_states(states[1:]).state()])
+    np.testing.assert_array_equal(other.count, film.count)
+    np.testing.assert_allclose(other.mean, film.mean, rtol=1e-6)
+    np.testing.assert_allclose(other.m2, film.m2, rtol=1e-5, atol=1e-6)
+
+
+def test_states_of_different_sizes_do_not_merge():
+    require(hasattr(Film, 'from_state'), "engine.film.Film has no state API")
+    with pytest.raises(ValueError, match="size"):
+        merge_states([Film(4, 4).state(), Film(4, 5).state()])
 
 
 def _meta(start, end, path=None, **changes):
