@@ -12,7 +12,7 @@ import pytest
 from farmlib import (ROOT, assert_same_image, make_animation_with_binary, make_job, read_exr, render_locally,
                      require, run_job)
 from farm import client as farm_client
-from farm import plan
+from farm import plan, shardfile
 
 BLENDER = shutil.which('blender') or '/usr/bin/blender'
 
@@ -66,3 +66,19 @@ def test_failing_render_fails_its_task_with_the_log(cluster, blender34, tmp_path
         future.result(timeout=120)
     assert not os.path.exists(plan.shard_dir(job.out_dir)) or not os.listdir(plan.shard_dir(job.out_dir))
     assert farm_client.pending(job, resume=True) == plan.tasks(job)
+
+
+def test_split_frame_from_blender_binary_equals_bpy_module(cluster, blender34, tmp_path):
+    """The add-on's shard hook inside the real binary: two shards of frame 2
+    merged equal the frame rendered whole by the bpy module."""
+    from engine.film import Film
+    require(hasattr(Film, 'from_state'), "engine.film.Film has no state API (sample ranges) yet")
+    blend, env = blender34
+    _, dask_client = cluster
+    job = make_job(blend, tmp_path / 'farm', frames=[2], split=2, blender=BLENDER, extra_env=env)
+    assert run_job(dask_client, job) == [plan.frame_path(job.out_dir, 2)]
+    (shard,) = shardfile.find(plan.shard_dir(job.out_dir), 2, 4, 8)
+    meta = shardfile.read_meta(shard)
+    assert meta['blend_sha256'] == job.blend_sha256 and meta['ember_version'] == '0.1.0'
+    reference = render_locally(blend, tmp_path, '2')[2]
+    assert_same_image(read_exr(plan.frame_path(job.out_dir, 2)), reference, "frame 2 merged from 3.4 shards")

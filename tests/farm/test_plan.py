@@ -76,3 +76,31 @@ def test_error_check_stops_blender_with_status_1():
             "mod.RENDER_LOG.append({'error': 'boom'})\nbpy.app.handlers.render_post[0](None)\nprint('not reached')\n")
     out = subprocess.run([sys.executable, '-c', fake], capture_output=True, text=True, timeout=60)
     assert out.returncode == 1 and out.stdout.split() == ['fine', 'EMBER-FARM-ERROR:', 'boom'], out
+
+
+def test_resume_refuses_another_jobs_folder(tmp_path):
+    job = _job(tmp_path, samples=8)
+    client.check_manifest(job, resume=False)
+    client.check_manifest(job, resume=True)           # same job: fine
+    other = _job(tmp_path, samples=16)
+    with pytest.raises(SystemExit, match="changed: samples"):
+        client.check_manifest(other, resume=True)
+    client.check_manifest(other, resume=False)        # a fresh job takes the folder over
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['--frames', '1-3', '--local', '1', '-o', 'x', 'missing.blend'], 'no such .blend'),
+    (['--frames', '3-1', '--local', '1', '-o', 'x', 'BLEND'], 'ends before'),
+    (['--frames', '1', '--split-samples', '4', '--local', '1', '-o', 'x', 'BLEND'], 'needs --samples'),
+    (['--frames', '1', '--samples', '2', '--split-samples', '4', '--local', '1', '-o', 'x', 'BLEND'],
+     'cannot split 2 samples'),
+    (['--frames', '1', '--blender', '/nonexistent/blender', '--local', '1', '-o', 'x', 'BLEND'],
+     'not an executable'),
+])
+def test_bad_render_arguments_get_a_clear_message(tmp_path, argv, message):
+    from farm.__main__ import make_job, parse
+    blend = tmp_path / 'scene.blend'
+    blend.write_bytes(b'BLENDER')
+    args = parse(['render'] + [str(blend) if a == 'BLEND' else a for a in argv])
+    with pytest.raises(SystemExit, match=message):
+        make_job(args)
