@@ -89,3 +89,33 @@ def test_adaptive_shards_merge_to_the_samples_they_traced(scene):
     trace_batch(ctx, pix[order], sample[order], tile)
     union.merge(tile)
     assert_same_film(merged, union)
+
+
+def _write_shard(folder, frame, start, end, layer, state, **meta):
+    name = f"frame_{frame:06d}.s{start:09d}-{end:09d}.{layer}.npz"
+    fields = {'format': shardfile.FORMAT, 'sample_start': start, 'sample_end': end, 'ember_version': '0.1.0',
+              'seed': 3, 'blend_sha256': 'abc', 'frame': frame, 'layer': layer, 'transparent': False,
+              'settings': {}}
+    fields.update(meta)
+    shardfile.write_atomic(str(folder / name), state, fields)
+
+
+def test_merge_task_writes_each_view_layer_and_checks_the_blend(scene, tmp_path):
+    from engine.imageio import read_image
+    from farm import plan, tasks
+    base = settings()
+    states = shard_states(scene, base, 2)
+    whole = merge_states(states)
+    job = plan.Job(blend='scene.blend', out_dir=str(tmp_path), frames=[5], samples=12, split=2, blend_sha256='abc')
+    folder = tmp_path / 'shards'
+    for layer in ('Front', 'Back'):
+        for (a, b), state in zip(sample_ranges(12, 2), states):
+            _write_shard(folder, 5, a, b, layer, state)
+    written = tasks.run_merge(job, 5)
+    assert sorted(written) == [str(tmp_path / 'frame_0005.Back.exr'), str(tmp_path / 'frame_0005.Front.exr')]
+    for path in written:
+        np.testing.assert_array_equal(read_image(path), whole.image(False))
+    # A shard of another blend file under a planned name is refused.
+    _write_shard(folder, 5, 6, 12, 'Front', states[1], blend_sha256='other')
+    with pytest.raises(shardfile.ShardError, match="blend_sha256"):
+        tasks.run_merge(job, 5)
