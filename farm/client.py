@@ -138,6 +138,8 @@ def run(client, job, resume=False, stream=sys.stderr, retries=RETRIES):
     todo = pending(job, resume)
     print(f"farm: {len(todo)} tasks to run: {' '.join(t.key for t in todo) or '(nothing left)'}",
           file=stream, flush=True)
+    if todo and not client.scheduler_info().get('workers'):
+        print("farm: no workers yet: start some with `python -m farm worker ADDRESS`", file=stream, flush=True)
     futures = submit(client, job, todo, retries)
     by_future = {fut.key: task for task, fut in futures}
     bar = ProgressBar(len(futures), sum(weight(job, t) for t, _ in futures), stream)

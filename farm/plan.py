@@ -67,13 +67,11 @@ class Job:
     python: str = ''                 # interpreter with bpy (bpy-module mode)
     threads: int = 0                 # render threads per task (0 = all cores)
     blend_sha256: str = ''
-    seed: int = None
     extra_env: dict = field(default_factory=dict)
 
     def fingerprint(self):
         """What must not change between a job and its --resume."""
-        return {'blend_sha256': self.blend_sha256, 'samples': self.samples, 'split': self.split,
-                'seed': self.seed}
+        return {'blend_sha256': self.blend_sha256, 'samples': self.samples, 'split': self.split}
 
 
 @dataclass(frozen=True)
