@@ -42,6 +42,8 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             self.register_pass(scene, renderlayer, "Depth", 1, "Z", 'VALUE')
         if renderlayer.use_pass_normal:
             self.register_pass(scene, renderlayer, "Normal", 3, "XYZ", 'VECTOR')
+        if scene.ember.use_denoising:
+            self.register_pass(scene, renderlayer, "Noisy Image", 4, "RGBA", 'COLOR')
 
     def render(self, depsgraph):
         info = {'layer': depsgraph.view_layer.name, 'frame': depsgraph.scene.frame_current,
@@ -79,7 +81,10 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             exported.scene.validate()
             result = render(exported.scene, settings, progress)
             # A stopped render returns its partial image: write it either way.
-            writer.write(result.image, _extra_passes(result))
+            image, extra = result.image, _extra_passes(result)
+            if scene.ember.use_denoising and not self.is_preview:
+                image, extra = self._denoised(result, extra, info)
+            writer.write(image, extra)
         finally:
             writer.finish()
         info.update(samples=getattr(result, 'samples', progress.samples_done),
@@ -92,6 +97,25 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             message = f"Ember: {writer.nonfinite} non-finite pixel values were replaced by 0"
             info['warnings'].append(message)
             self.report({'WARNING'}, message)
+
+    def _denoised(self, result, extra, info):
+        """Combined denoised (alpha kept), the raw image as Noisy Image.  A
+        denoiser failure keeps the noisy image and says why."""
+        from . import denoise
+        self.update_stats("", "Ember: denoising")
+        start = time.perf_counter()
+        try:
+            rgb = denoise.denoise(result.image[..., :3], result.albedo, result.normal)
+        except (denoise.DenoiseError, OSError, ValueError) as err:
+            message = f"Ember: denoising failed, the image is not denoised: {err}"
+            info['warnings'].append(message)
+            self.report({'WARNING'}, message)
+            return result.image, extra
+        info['denoise_seconds'] = time.perf_counter() - start
+        info['denoiser'] = denoise.describe()
+        image = result.image.copy()
+        image[..., :3] = rgb
+        return image, dict(extra, **{'Noisy Image': result.image})
 
 
 def _extra_passes(result):
