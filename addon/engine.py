@@ -29,12 +29,41 @@ class EmberRenderEngine(bpy.types.RenderEngine):
     bl_use_postprocess = True
     # Keep Blender's shader nodes: Ember reads Cycles/EEVEE material trees.
     bl_use_shading_nodes_custom = False
-    # The viewport shows EEVEE's material preview in Ember's place.
+    # Material Preview shading uses EEVEE; Rendered shading is Ember's own
+    # (view_update / view_draw, addon/viewport.py).
     bl_use_eevee_viewport = True
 
     def __init__(self, *args, **kwargs):
         # Blender 4.4+ passes arguments here; older versions pass none.
         super().__init__(*args, **kwargs)
+        self.viewport = None
+
+    def __del__(self):
+        try:
+            viewport_session = self.viewport
+        except (AttributeError, ReferenceError):  # Blender freed the struct first
+            return
+        if viewport_session is not None:
+            viewport_session.close()
+
+    def view_update(self, context, depsgraph):
+        from . import viewport
+        try:
+            if self.viewport is None:
+                self.viewport = viewport.ViewportSession(self)
+            self.viewport.view_update(context, depsgraph)
+        except Exception as err:  # noqa: BLE001 - shown in the viewport header
+            traceback.print_exc()
+            self.update_stats("", "Ember: " + _message(err))
+
+    def view_draw(self, context, depsgraph):
+        if self.viewport is None:
+            return
+        try:
+            self.viewport.view_draw(context, depsgraph)
+        except Exception as err:  # noqa: BLE001
+            traceback.print_exc()
+            self.update_stats("", "Ember: " + _message(err))
 
     def update_render_passes(self, scene=None, renderlayer=None):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", 'COLOR')
