@@ -78,12 +78,15 @@ class SceneCache:
             kind = type(ident).__name__
             if kind == 'Object' and update.is_updated_geometry:
                 stale_geometry.update(_geometry_keys(ident))
-            elif kind == 'Mesh':
+            elif kind == 'Mesh' and update.is_updated_geometry:
                 stale_geometry.add(ident.as_pointer())
             elif kind == 'Material':
                 self._refresh_material(ident)
-            elif kind in ('ShaderNodeTree', 'Image'):
-                self._refresh_all_materials()   # node groups and images may be shared
+            elif kind == 'Image' or (kind == 'ShaderNodeTree'
+                                     and not getattr(ident, 'is_embedded_data', False)):
+                # Node groups and images may be shared by any material.  (A
+                # material's own tree arrives with the Material update.)
+                self._refresh_all_materials()
             elif kind == 'World':
                 self._export_world(depsgraph)
         if first or self._world_changed(depsgraph):

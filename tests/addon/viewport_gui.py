@@ -24,6 +24,7 @@ sys.path.insert(0, ROOT)
 sys.path.append(SITE)
 
 import bpy  # noqa: E402
+import numpy as np  # noqa: E402
 from bpy_extras import view3d_utils  # noqa: E402
 
 import addon  # noqa: E402
@@ -33,6 +34,8 @@ addon.register()
 RESULT = {'errors': []}
 STEP_TIMEOUT = 100.0
 MOVED = 'ShortBox'
+F12_SIZE = 48
+F12_SAMPLES = 64
 
 
 def view3d():
@@ -86,6 +89,7 @@ def setup():
     scene.view_settings.look = 'None'
     scene.view_settings.exposure = 0.0
     scene.view_settings.gamma = 1.0
+    scene.render.dither_intensity = 0.0
     window, area, region = view3d()
     with bpy.context.temp_override(window=window, area=area, region=region):
         bpy.ops.screen.screen_full_area(use_hide_panels=True)
@@ -107,19 +111,28 @@ def look_through_camera():
     space.shading.type = 'RENDERED'
 
 
+def save_float_image(name):
+    """The viewport's own scene-linear image (what view_draw was given)."""
+    s = session()
+    np.save(os.path.join(OUT, name), s.thread.image)
+    RESULT['pixel_size'] = int(s.engine.get_preview_pixel_size(bpy.context.scene))
+
+
 def first_screenshot():
     RESULT['frame'] = camera_frame()
     screenshot('viewport.png')
+    save_float_image('viewport.npy')
     RESULT['stats_before_move'] = dict(viewport.STATS, errors=list(viewport.STATS['errors']))
 
 
 def render_f12():
     scene = bpy.context.scene
-    scene.render.resolution_x = scene.render.resolution_y = 64
+    scene.render.resolution_x = scene.render.resolution_y = F12_SIZE
     scene.render.resolution_percentage = 100
-    scene.ember.samples = 64
-    scene.render.image_settings.file_format = 'PNG'
-    scene.render.filepath = os.path.join(OUT, 'f12.png')
+    scene.ember.samples = F12_SAMPLES
+    scene.render.image_settings.file_format = 'OPEN_EXR'
+    scene.render.image_settings.color_depth = '32'
+    scene.render.filepath = os.path.join(OUT, 'f12.exr')
     bpy.ops.render.render(write_still=True)
     # The frame's aspect is unchanged (square): the viewport must not restart
     # for the resolution either, but it may; wait for it below.
@@ -134,6 +147,7 @@ def move_object():
 
 def second_screenshot():
     screenshot('viewport_moved.png')
+    save_float_image('viewport_moved.npy')
     RESULT['stats_after_move'] = dict(viewport.STATS, errors=list(viewport.STATS['errors']))
     RESULT['mesh_exports_after_move'] = viewport.STATS['mesh_exports']
 
