@@ -444,17 +444,22 @@ class ViewportSession:
             self.scene_version += 1
             self.changed_at = time.perf_counter()
         self.synced = True
-        scene = depsgraph.scene
+        self._read_settings(depsgraph.scene)
+        self._ensure_timer()
+
+    def _read_settings(self, scene):
+        """Render settings, pause and denoise: read at every update and draw
+        (a setting changed in a panel need not come with a depsgraph update)."""
         settings = scene_export.render_settings(scene, is_preview=False)
         self.settings = dataclasses.replace(settings, samples=scene.ember.viewport_samples,
                                             time_limit=0.0)
         self.denoise = scene.ember.use_preview_denoising
         self.paused = scene.ember.preview_pause
-        self._ensure_timer()
 
     def view_draw(self, context, depsgraph):
-        if self.settings is None:
+        if not self.synced:
             return
+        self._read_settings(depsgraph.scene)
         region = context.region
         size = (region.width, region.height)
         self._maybe_restart(context, depsgraph, size)
@@ -475,33 +480,34 @@ class ViewportSession:
         self._show_status()
 
     def _maybe_restart(self, context, depsgraph, size):
+        """Start a job when the scene, the view, the settings or (once it
+        holds still) the region size changed since the running one."""
         key = view_key(context)
-        inputs = (self.scene_version, key, self.settings, self.denoise)
+        inputs = (self.scene_version, key, self.settings, self.denoise, self.paused)
         started = self.started
-        if started is not None and started[0] == inputs and started[1] == size:
-            self.pending_size = None
-            return
-        if started is not None and started[0] == inputs and started[1] != size:
-            # A resize: wait until the size holds still.
-            now = time.perf_counter()
+        now = time.perf_counter()
+        if started is not None and started[1] != size:
+            # A resize: wait until the size holds still (the old image stretches meanwhile).
             if self.pending_size is None or self.pending_size[0] != size:
                 self.pending_size = (size, now)
                 self.changed_at = now
                 return
             if now - self.pending_size[1] < RESIZE_DELAY:
                 return
+        elif started is not None and started[0] == inputs:
+            return
+        elif started is not None and started[0][0] == self.scene_version and started[0][1] != key:
+            self.changed_at = now  # the view moved: that is the change
+        self.started = (inputs, size)
+        self.pending_size = None
         if self.paused:
             self.thread.stop()
             return
-        if started is not None and started[0][0] == self.scene_version and started[0][1] != key:
-            self.changed_at = time.perf_counter()  # the view moved: that is the change
         pixel_size = max(1, int(self.engine.get_preview_pixel_size(depsgraph.scene)))
         camera = viewport_camera(context, depsgraph, pixel_size)
         scene = self.cache.scene(camera)
         self.job_number = self.thread.submit(Job(scene, self.settings, self.denoise, self.changed_at))
         self.job_changed_at = self.changed_at
-        self.started = (inputs, size)
-        self.pending_size = None
 
     def _show_status(self):
         thread = self.thread

@@ -297,3 +297,80 @@ def test_first_picture_at_1280x720(cornell, needs_engine):
         assert first < 2.0
     finally:
         thread.close()
+
+
+class FakeEngine:
+    """What ViewportSession asks of the RenderEngine, without a window."""
+
+    def get_preview_pixel_size(self, scene):
+        return 1
+
+    def update_stats(self, stats, info):
+        pass
+
+    def tag_redraw(self):
+        pass
+
+
+def _view_context(scene, width, height):
+    from types import SimpleNamespace
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    cam = scene.camera.evaluated_get(depsgraph)
+    rv3d = SimpleNamespace(window_matrix=cam.calc_matrix_camera(depsgraph, x=width, y=height),
+                           view_matrix=cam.matrix_world.inverted(), view_perspective='PERSP')
+    return SimpleNamespace(region=SimpleNamespace(width=width, height=height), region_data=rv3d,
+                           space_data=SimpleNamespace(camera=None))
+
+
+def test_session_restarts_only_when_the_picture_changes(cornell, needs_engine):
+    """View moves restart without export; colour management and selection do
+    not restart; a resize waits until it holds still; pause stops, unpause
+    restarts."""
+    scene = cornell
+    scene.ember.viewport_samples = 1
+    session = viewport.ViewportSession(FakeEngine())
+
+    def update():
+        session.view_update(context, bpy.context.evaluated_depsgraph_get())
+
+    def handler(scene_, depsgraph):
+        session.view_update(context, depsgraph)
+    context = _view_context(scene, 64, 36)
+    viewport.reset_stats()
+    bpy.app.handlers.depsgraph_update_post.append(handler)
+    try:
+        update()
+        session._maybe_restart(context, bpy.context.evaluated_depsgraph_get(), (64, 36))
+        assert viewport.STATS['restarts'] == 1
+        exports = viewport.STATS['mesh_exports']
+        scene.view_settings.exposure = 1.5
+        bpy.context.view_layer.update()
+        session._maybe_restart(context, bpy.context.evaluated_depsgraph_get(), (64, 36))
+        assert viewport.STATS['restarts'] == 1, "colour management must only redraw"
+        context.region_data.view_matrix = context.region_data.view_matrix.copy()
+        context.region_data.view_matrix[0][3] += 0.1    # orbit/pan: the view matrix moves
+        session._maybe_restart(context, bpy.context.evaluated_depsgraph_get(), (64, 36))
+        assert viewport.STATS['restarts'] == 2 and viewport.STATS['mesh_exports'] == exports
+        context.region.width, context.region.height = 80, 45
+        session._maybe_restart(context, bpy.context.evaluated_depsgraph_get(), (80, 45))  # resize: wait
+        assert viewport.STATS['restarts'] == 2
+        time.sleep(viewport.RESIZE_DELAY + 0.05)
+        session._maybe_restart(context, bpy.context.evaluated_depsgraph_get(), (80, 45))
+        assert viewport.STATS['restarts'] == 3
+        scene.ember.preview_pause = True
+        bpy.context.view_layer.update()
+        session._read_settings(scene)  # as view_draw does
+        session._maybe_restart(context, bpy.context.evaluated_depsgraph_get(), (80, 45))
+        assert viewport.STATS['restarts'] == 3 and session.thread.job is None
+        scene.ember.preview_pause = False
+        session._read_settings(scene)
+        session._maybe_restart(context, bpy.context.evaluated_depsgraph_get(), (80, 45))
+        assert viewport.STATS['restarts'] == 4
+        assert viewport.STATS['mesh_exports'] == exports
+        deadline = time.perf_counter() + 30
+        while session.thread.finished_job != session.job_number and time.perf_counter() < deadline:
+            time.sleep(0.01)
+        assert session.thread.image.shape[:2] == (45, 80) and session.thread.error is None
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(handler)
+        session.close()

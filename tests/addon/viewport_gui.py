@@ -82,7 +82,8 @@ def setup():
     scene = bpy.context.scene
     scene.render.engine = 'EMBER'
     settings = scene.ember
-    settings.viewport_samples = 2
+    # EMBER_VIEWPORT_SAMPLES: more samples for a picture (docs/gallery), not the test.
+    settings.viewport_samples = int(os.environ.get('EMBER_VIEWPORT_SAMPLES', '2'))
     settings.max_bounces = 4
     settings.seed = 0
     scene.view_settings.view_transform = 'Standard'
