@@ -91,6 +91,10 @@ class SceneCache:
                 self._export_world(depsgraph)
         if first or self._world_changed(depsgraph):
             self._export_world(depsgraph)
+        override = getattr(depsgraph.view_layer, 'material_override', None)
+        if override != self.materials.override:
+            self.materials = material_export.MaterialTable(override)
+            self.version += 1
         for key in stale_geometry:
             self.mesh_of_key.pop(key, None)
         self._walk(depsgraph)
@@ -124,7 +128,21 @@ class SceneCache:
         for key in [k for k in self.mesh_of_key if k not in seen]:
             del self.mesh_of_key[key]
         self.instances = collector.instances
+        self._compact()
         self.lights, self.warnings = light_export.collect_lights(depsgraph)
+
+    def _compact(self):
+        """Drop meshes no key refers to any more (replaced by a geometry edit,
+        or their object gone), so long editing sessions do not pile them up."""
+        live = sorted({i for i in self.mesh_of_key.values() if i is not None})
+        if len(live) == len(self.meshes):
+            return
+        remap = {old: new for new, old in enumerate(live)}
+        self.meshes[:] = [self.meshes[i] for i in live]
+        for key, index in self.mesh_of_key.items():
+            if index is not None:
+                self.mesh_of_key[key] = remap[index]
+        self.instances = [dataclasses.replace(inst, mesh=remap[inst.mesh]) for inst in self.instances]
 
     def _placements(self):
         """Everything the walk produced, comparable between syncs."""

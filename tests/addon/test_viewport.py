@@ -8,6 +8,7 @@ drives Blender; this file judges).  With the bpy module: the incremental
 export, the camera built from a projection matrix, and the time to the first
 picture at 1280x720.
 """
+import dataclasses
 import json
 import os
 import shutil
@@ -231,6 +232,7 @@ def test_incremental_export(cornell, needs_engine):
         vertex = box.data.vertices[0]
         reshaped = synced.edit(lambda: setattr(vertex.co, 'x', vertex.co.x + 0.05))
         assert reshaped[0] and reshaped[1] == 1, "a geometry edit re-exports that mesh"
+        assert len(synced.cache.meshes) == 7, "the replaced mesh must not stay in memory"
         selected = synced.edit(lambda: box.select_set(not box.select_get()))
         assert selected == (False, 0, 0), "selection must not restart the viewport"
     finally:
@@ -274,27 +276,28 @@ def test_camera_from_projection_matches_the_scene_camera(cornell, needs_engine, 
 
 def test_first_picture_at_1280x720(cornell, needs_engine):
     """The render thread's first picture after a change: reduced resolution,
-    one sample, on screen quickly.  Target: 0.5 s on two otherwise idle cores."""
+    one sample.  Target: on screen within 0.5 s on two otherwise idle cores.
+    The machine running the tests is shared, so the bound is on the CPU time
+    this process spends (two cores for 0.5 s = 1 CPU-second); wall time is
+    printed."""
     scene = cornell
     exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
-    engine_scene = exported.scene
-    engine_scene.camera = type(engine_scene.camera)(**{
-        **engine_scene.camera.__dict__, 'resolution': (1280, 720)})
-    settings = scene_export.render_settings(scene)
+    engine_scene = dataclasses.replace(exported.scene, camera=dataclasses.replace(
+        exported.scene.camera, resolution=(1280, 720)))
+    settings = dataclasses.replace(scene_export.render_settings(scene), samples=2)
     thread = viewport.RenderThread()
     try:
         viewport.reset_stats()
-        start = time.perf_counter()
-        job = thread.submit(viewport.Job(engine_scene, settings.__class__(
-            **{**settings.__dict__, 'samples': 2}), changed_at=start))
-        while thread.image_job != job and time.perf_counter() - start < 30:
-            time.sleep(0.005)
-        first = time.perf_counter() - start
+        cpu, start = time.process_time(), time.perf_counter()
+        job = thread.submit(viewport.Job(engine_scene, settings, changed_at=start))
+        while thread.image_job != job and time.perf_counter() - start < 60:
+            time.sleep(0.002)
+        wall, cpu = time.perf_counter() - start, time.process_time() - cpu
         assert thread.image is not None and thread.error is None, thread.error
         assert thread.image.shape[:2] == (90, 160), "the first pass is at 1/8 resolution"
         assert np.isfinite(thread.image).all() and thread.image[..., :3].mean() > 0.01
-        print(f"first picture at 1280x720: {first:.3f} s")
-        assert first < 2.0
+        print(f"first picture at 1280x720: {wall:.3f} s wall, {cpu:.3f} CPU-seconds")
+        assert cpu < 1.0
     finally:
         thread.close()
 

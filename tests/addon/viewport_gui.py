@@ -32,7 +32,10 @@ from addon import viewport  # noqa: E402
 
 addon.register()
 RESULT = {'errors': []}
-STEP_TIMEOUT = 100.0
+STEP_TIMEOUT = float(os.environ.get('EMBER_STEP_TIMEOUT', '100'))
+# EMBER_GALLERY=1: keep Blender's interface, denoise, and save the whole
+# window (docs/gallery/viewport.png); stops after that picture.
+GALLERY = os.environ.get('EMBER_GALLERY') == '1'
 MOVED = 'ShortBox'
 F12_SIZE = 48
 F12_SAMPLES = 64
@@ -91,6 +94,9 @@ def setup():
     scene.view_settings.exposure = 0.0
     scene.view_settings.gamma = 1.0
     scene.render.dither_intensity = 0.0
+    settings.use_preview_denoising = GALLERY
+    if GALLERY:
+        return
     window, area, region = view3d()
     with bpy.context.temp_override(window=window, area=area, region=region):
         bpy.ops.screen.screen_full_area(use_hide_panels=True)
@@ -99,11 +105,11 @@ def setup():
 def look_through_camera():
     window, area, region = view3d()
     space = area.spaces.active
-    space.overlay.show_overlays = False
-    space.show_gizmo = False
-    for name in ('show_region_header', 'show_region_toolbar', 'show_region_ui', 'show_region_tool_header'):
+    for name in () if GALLERY else ('show_region_header', 'show_region_toolbar', 'show_region_ui', 'show_region_tool_header'):
         if hasattr(space, name):
             setattr(space, name, False)
+    space.overlay.show_overlays = GALLERY
+    space.show_gizmo = GALLERY
     space.region_3d.view_perspective = 'CAMERA'
     with bpy.context.temp_override(window=window, area=area, region=region):
         bpy.ops.view3d.view_center_camera()
@@ -120,6 +126,12 @@ def save_float_image(name):
 
 
 def first_screenshot():
+    if GALLERY:
+        window = bpy.context.window_manager.windows[0]
+        with bpy.context.temp_override(window=window):
+            bpy.ops.screen.screenshot(filepath=os.path.join(OUT, 'window.png'))
+        del STEPS[3:]
+        return
     RESULT['frame'] = camera_frame()
     screenshot('viewport.png')
     save_float_image('viewport.npy')
@@ -156,7 +168,8 @@ def second_screenshot():
 STEPS = [
     (setup, None),
     (look_through_camera, None),
-    (first_screenshot, lambda: finished(session())),
+    (first_screenshot, lambda: finished(session()) and session().thread.status.endswith(
+        '(denoised)') == GALLERY),
     (render_f12, None),
     (move_object, lambda: finished(session())),
     (second_screenshot, lambda: finished(session()) and viewport.STATS['restarts'] > RESULT['restarts_before_move']),
