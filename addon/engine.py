@@ -77,7 +77,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
     def render(self, depsgraph):
         info = {'layer': depsgraph.view_layer.name, 'frame': depsgraph.scene.frame_current,
                 'error': None, 'warnings': [], 'started': time.perf_counter(),
-                'preview': self.is_preview, 'passes': 0}
+                'preview': self.is_preview, 'passes': 0, 'cpu_started': time.process_time()}
         RENDER_LOG.append(info)
         del RENDER_LOG[:-MAX_LOG]
         try:
@@ -89,6 +89,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             print(info['traceback'])
             self.report({'ERROR'}, "Ember: " + message)
         info['seconds'] = time.perf_counter() - info['started']
+        info['cpu_seconds'] = time.process_time() - info['cpu_started']
 
     def _render(self, depsgraph, info):
         scene = depsgraph.scene
