@@ -41,6 +41,19 @@ class EmberRenderSettings(bpy.types.PropertyGroup):
     preview_samples: IntProperty(
         name="Preview Samples", description="Samples per pixel for material previews",
         default=16, min=1, max=1 << 16, soft_max=256)
+    viewport_samples: IntProperty(
+        name="Viewport Samples", description="Samples per pixel in the Rendered viewport; "
+        "sampling pauses when they are reached (as Cycles' viewport Max Samples)",
+        default=128, min=1, max=1 << 24, soft_max=4096)
+    preview_pause: BoolProperty(
+        name="Pause Preview", description="Pause sampling in the Rendered viewport", default=False)
+    use_denoising: BoolProperty(
+        name="Denoise", description="Denoise final renders with Intel Open Image Denoise "
+        "(albedo and normal guided); the result is Combined, the raw image the Noisy Image pass",
+        default=False)
+    use_preview_denoising: BoolProperty(
+        name="Denoise Viewport", description="Denoise the Rendered viewport with Intel Open Image "
+        "Denoise once its samples are done (and whenever it pauses)", default=False)
     use_adaptive_sampling: BoolProperty(
         name="Noise Threshold", description="Stop sampling pixels once their noise is below the "
         "threshold, as Cycles' adaptive sampling", default=True)
