@@ -4,12 +4,15 @@ import threading
 
 import numpy as np
 
+from . import passes as extra_passes
+
 
 class Tile:
     """Sums for a contiguous range of pixels [lo, hi), filled by one batch."""
 
-    def __init__(self, lo, hi):
+    def __init__(self, lo, hi, passes=()):
         self.lo, self.hi = lo, hi
+        self.extra = extra_passes.Sums(passes, lo, hi) if passes else None
         n = hi - lo
         self.rgb = np.zeros((n, 3))
         self.rgb2 = np.zeros((n, 3))
@@ -53,8 +56,10 @@ class Film:
     thousands of samples of any magnitude); coverage, counts and the first-hit
     AOVs are float32, which halves their memory on large frames."""
 
-    def __init__(self, width, height):
+    def __init__(self, width, height, passes=()):
         self.width, self.height = width, height
+        self.passes = tuple(passes)
+        self.extra = extra_passes.Sums(self.passes, 0, width * height) if self.passes else None
         n = width * height
         self.rgb = np.zeros((n, 3))
         self.rgb2 = np.zeros((n, 3))
@@ -71,6 +76,8 @@ class Film:
         with self._lock:
             for name in ("rgb", "rgb2", "alpha", "count", "depth", "normal", "albedo"):
                 getattr(self, name)[s] += getattr(tile, name)
+            if self.extra is not None and tile.extra is not None:
+                self.extra.merge(tile.extra, tile.lo)
 
     def _mean(self, arr):
         c = np.maximum(self.count, 1.0)
@@ -98,3 +105,30 @@ class Film:
         arr = self._mean(getattr(self, name))
         shape = (self.height, self.width) + arr.shape[1:]
         return arr.reshape(shape).astype(np.float32)
+
+
+# ----------------------------------------------------------------------------
+# Named extra passes (engine/passes.py): Tile.add_pass collects, Film.pass_images
+# hands out the pictures.
+
+def _tile_add_pass(self, name, pix, values):
+    """Add per-sample values of the named pass (ignored when not requested)."""
+    if self.extra is not None:
+        self.extra.add(name, pix, values)
+
+
+def _tile_wants(self, name):
+    return self.extra is not None and self.extra.wants(name)
+
+
+def _film_pass_images(self, config=None):
+    """{name: (H, W, C) float32} for every requested pass."""
+    if not self.passes:
+        return {}
+    return extra_passes.images(self.extra, self.count, self.width, self.height, self.passes,
+                               film=self, config=config)
+
+
+Tile.add_pass = _tile_add_pass
+Tile.wants = _tile_wants
+Film.pass_images = _film_pass_images

@@ -19,6 +19,7 @@ import numpy as np
 from .accel import Accel
 from .bsdf import MaterialTable
 from .camera import CameraModel, PixelFilter
+from . import pass_events
 from .film import Film, Tile
 from .geometry import flatten, material_table
 from .integrator import Context, trace_batch
@@ -37,13 +38,17 @@ class RenderResult:
     samples: int
     stats: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
+    # Requested extra passes {name: (H, W, C) float32} and their metadata
+    # (Cryptomatte manifests): engine/passes.py.
+    passes: dict = field(default_factory=dict)
+    pass_metadata: dict = field(default_factory=dict)
 
 
 def prepare(scene, settings):
     """Validate and compile a Scene into the read-only Context batches share."""
     scene.validate()
     validate_settings(settings)
-    tris = flatten(scene)
+    tris = flatten(scene, with_instance=bool(settings.passes))
     materials = MaterialTable(material_table(scene))
     lights = LightSet(scene, tris, materials, settings.light_selection,
                       env_compensation=settings.mis_compensation and settings.strategy == "mis")
@@ -53,7 +58,9 @@ def prepare(scene, settings):
         raise SceneError(f"camera: {exc}") from None
     accel = Accel(tris)
     world = np.asarray(scene.world.color, dtype=np.float64)
-    return Context(accel, tris, materials, lights, camera, world, settings)
+    ctx = Context(accel, tris, materials, lights, camera, world, settings)
+    ctx.pass_config = pass_events.configure(scene, settings)
+    return ctx
 
 
 def warnings_for(ctx):
@@ -80,7 +87,7 @@ def render(scene, settings=None, progress=None):
     t_start = time.perf_counter()
     ctx = prepare(scene, settings)
     cam = ctx.camera
-    film = Film(cam.width, cam.height)
+    film = Film(cam.width, cam.height, settings.passes)
     threads = settings.threads or os.cpu_count() or 1
     spp_pass = max(1, min(settings.samples_per_pass, settings.samples))
     n_passes = -(-settings.samples // spp_pass)
@@ -104,7 +111,8 @@ def render(scene, settings=None, progress=None):
                 break
     return RenderResult(film.image(settings.transparent), film.aov("depth"),
                         film.aov("normal"), film.aov("albedo"), film.variance(),
-                        stats["samples"], stats, warnings_for(ctx))
+                        stats["samples"], stats, warnings_for(ctx),
+                        film.pass_images(ctx.pass_config), pass_events.metadata(ctx.pass_config, settings.passes))
 
 
 def _wait(jobs, progress, poll=0.2):
@@ -144,7 +152,7 @@ def _stop_requested(progress):
 
 def _run_batch(ctx, film, lo, hi, spp, seed, pass_index):
     rng = np.random.default_rng([seed, pass_index, lo])
-    tile = Tile(lo, hi)
+    tile = Tile(lo, hi, ctx.settings.passes)
     pix = np.repeat(np.arange(lo, hi), spp)
     trace_batch(ctx, pix, rng, tile)
     film.merge(tile)

@@ -75,6 +75,10 @@ class Instance:
     visible_glossy: bool = True
     visible_transmission: bool = True
     visible_shadow: bool = True
+    # Blender's Object Index (pass_index) and the Cryptomatte asset: the
+    # name of the topmost parent ("" = the object itself).
+    pass_index: int = 0
+    asset: str = ""
 
 
 # ----------------------------------------------------------------------------
@@ -141,6 +145,7 @@ class Material:
     emission: RGB = (0.0, 0.0, 0.0)
     # A Bump or NormalMap expression replacing the shading normal, or None.
     normal: Optional["Texture"] = None
+    pass_index: int = 0  # Blender's Material Index
 
 
 DEFAULT_MATERIAL = Material("default", (Lobe("diffuse", (0.8, 0.8, 0.8)),))
@@ -442,6 +447,10 @@ class RenderSettings:
     # samples on what stands out.  Only with strategy 'mis' (NEE alone would
     # miss the dim parts).
     mis_compensation: bool = True
+    # Extra passes by name (engine/passes.py ALL_PASSES; none by default, and
+    # none costs nothing) and their settings (a passes.PassConfig or None).
+    passes: tuple = ()
+    pass_config: object = None
 
 
 @dataclass

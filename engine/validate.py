@@ -201,6 +201,14 @@ def validate_settings(s):
         raise SceneError("settings: transparent max bounces must be >= 0")
     if s.max_paths < 1024:
         raise SceneError("settings: max_paths must be >= 1024")
+    _validate_passes(s)
+
+
+def _validate_passes(s):
+    from .passes import unknown
+    bad = unknown(getattr(s, "passes", ()) or ())
+    if bad:
+        raise SceneError(f"settings: unknown render passes {bad}")
 
 
 def validate_scene(scene):
