@@ -62,6 +62,15 @@ class ResultWriter:
                 set_pass(render_pass, to_blender_pixels(values)[0])
         self.engine.update_result(self.result)
 
+    def add_metadata(self, fields):
+        """Render-result metadata (e.g. Cryptomatte manifests); Blender
+        versions without stamp_data_add_field skip it."""
+        add = getattr(self.result, 'stamp_data_add_field', None)
+        if add is None:
+            return
+        for key, value in fields.items():
+            add(key, value)
+
     def finish(self):
         # cancel=False keeps what was written: an interrupted render shows its
         # partial image instead of black.
