@@ -63,9 +63,14 @@ class ResultWriter:
         self.engine.update_result(self.result)
 
     def add_metadata(self, fields):
-        """Render-result metadata (e.g. Cryptomatte manifests); Blender
-        versions without stamp_data_add_field skip it."""
-        add = getattr(self.result, 'stamp_data_add_field', None)
+        """Render-result metadata (Cryptomatte manifests), written into the
+        engine's whole result as Cycles does (get_result): the result of
+        begin_result does not carry metadata over."""
+        if not fields:
+            return
+        get_result = getattr(self.engine, 'get_result', None)
+        target = get_result() if get_result is not None else self.result
+        add = getattr(target, 'stamp_data_add_field', None)
         if add is None:
             return
         for key, value in fields.items():
