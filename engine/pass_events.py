@@ -19,15 +19,17 @@ clamping).  The Unweighted passes hold each strategy's own estimate of the
 same light, from the same samples, without the MIS weight: only light that
 both strategies can reach counts there (no delta lights, no light after a
 mirror bounce, no constant-colour world, which Ember samples by BSDF only).
-``MIS Weight Light`` averages the weight MIS gave light sampling over the
-light samples at vertex 0 that reached a light.
+``MIS Weight Light`` averages the weight MIS gives light sampling over the
+directions both strategies sampled at vertex 0, each counted by what it
+brings: it converges to the share of the direct light MIS takes from light
+sampling (see _add_light_weight).
 """
 import numpy as np
 
 from . import bsdf
 from .passes import LIGHT_CLASSES, STRATEGY, PassConfig, crypto_manifest, CRYPTO
 from .sampling import cosine_hemisphere
-from .vec import dot, frame, to_local, to_world
+from .vec import dot, luminance, to_local, to_world
 
 # Per-path state: the share of each light class (diffuse, glossy,
 # transmission; RGB each) in the BSDF sample that left vertex 0.
@@ -244,9 +246,9 @@ def nee(ctx, paths, rows, contrib, w, delta, lobes, lobes_wo, wo_l, wi_l, f, til
         with np.errstate(divide="ignore", invalid="ignore"):
             tile.add_pass("Strategy Light Unweighted", pix[both], contrib[both] / w[both, None])
     if tile.wants("MIS Weight Light"):
-        first = (vertex == 0) & ~delta & np.any(contrib > 0, axis=1)
-        tile.add_pass("MIS Weight Light", pix[first], w[first])
-        tile.add_pass("MIS Weight Light:n", pix[first], np.ones(int(first.sum())))
+        first = np.nonzero((vertex == 0) & ~delta & (w > 0))[0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            _add_light_weight(tile, pix[first], w[first], luminance(contrib[first]) / w[first])
     if paths.aux.shape[1]:
         direct = vertex == 0
         shares = paths.aux[rows].reshape(len(rows), 3, 3).copy()
@@ -256,6 +258,15 @@ def nee(ctx, paths, rows, contrib, w, delta, lobes, lobes_wo, wo_l, wi_l, f, til
             shares[d] = _class_split(ctx, sub, (lobes_wo[0][rows[d]], lobes_wo[1][rows[d]]),
                                      wo_l[rows[d]], wi_l[d], f[d])
         _add_light_classes(paths, rows, contrib, direct, tile, shares)
+
+
+def _add_light_weight(tile, pix, w_light, brings):
+    """MIS Weight Light: light sampling's MIS weight at the directions both
+    strategies sampled at vertex 0, each counted by what the sample brings
+    (its unweighted luminance), so the pass converges to the share of the
+    direct light that MIS takes from light sampling, SL / (SL + SB)."""
+    tile.add_pass("MIS Weight Light", pix, w_light * brings)
+    tile.add_pass("MIS Weight Light:n", pix, brings)
 
 
 def _wants_strategy(tile):
@@ -280,6 +291,9 @@ def emitter(ctx, paths, rows, unweighted, w, tile, world=False, bsdf_only=False)
         if not bsdf_only:
             both = on & ~paths.prev_delta[rows]
             tile.add_pass("Strategy BSDF Unweighted", pix[both], unweighted[both])
+    if tile.wants("MIS Weight Light") and not bsdf_only:
+        first = (bounce == 1) & ~paths.prev_delta[rows]
+        _add_light_weight(tile, pix[first], 1.0 - w[first], luminance(unweighted[first]))
     if paths.aux.shape[1] and not camera.all():
         lit = np.nonzero(~camera)[0]
         _add_light_classes(paths, rows[lit], contrib[lit], bounce[lit] == 1, tile)
