@@ -39,9 +39,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
 
     def update_render_passes(self, scene=None, renderlayer=None):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", 'COLOR')
-        if renderlayer.use_pass_z:
-            self.register_pass(scene, renderlayer, "Depth", 1, "Z", 'VALUE')
-        # Normal and the other Cycles-named passes: addon/passes.py.
+        # Depth, Normal and the other Cycles-named passes: addon/passes.py.
         render_passes.register_passes(self, scene, renderlayer)
 
     def render(self, depsgraph):
@@ -84,7 +82,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             exported.scene.validate()
             result = render(exported.scene, settings, progress)
             # A stopped render returns its partial image: write it either way.
-            writer.write(result.image, _extra_passes(result, depsgraph.view_layer))
+            writer.write(result.image, _extra_passes(result, depsgraph.view_layer, settings.samples))
             writer.add_metadata(render_passes.crypto_metadata(
                 depsgraph.view_layer, getattr(result, 'pass_metadata', None) or {}))
         finally:
@@ -101,10 +99,9 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             self.report({'WARNING'}, message)
 
 
-def _extra_passes(result, view_layer):
-    extra = {'Depth': getattr(result, 'depth', None), 'Normal': getattr(result, 'normal', None)}
-    extra.update(render_passes.blender_images(view_layer, getattr(result, 'passes', None) or {}))
-    return extra
+def _extra_passes(result, view_layer, samples):
+    """{Blender pass name: image} (the engine's Cycles-named passes)."""
+    return render_passes.blender_images(view_layer, getattr(result, 'passes', None) or {}, samples)
 
 
 def _with_passes(settings, scene, view_layer):

@@ -13,6 +13,7 @@ import bpy
 # engine name, legacy (< 5.0) name, channels, chan_id, type, enabled by
 # (a view_layer property, or "ember.<property>" on view_layer.ember).
 PASSES = (
+    ("Depth", "Depth", 1, "Z", 'VALUE', "use_pass_z"),
     ("Mist", "Mist", 1, "Z", 'VALUE', "use_pass_mist"),
     ("Position", "Position", 3, "XYZ", 'VECTOR', "use_pass_position"),
     ("Normal", "Normal", 3, "XYZ", 'VECTOR', "use_pass_normal"),
@@ -95,8 +96,6 @@ def register_passes(engine, scene, view_layer):
 def add_result_passes(engine, view_layer):
     """Blender creates a render result with Combined only: add the layer's
     other passes before begin_result."""
-    if getattr(view_layer, "use_pass_z", False):
-        engine.add_pass("Depth", 1, "Z", layer=view_layer.name)
     for _, blender, channels, chan_id, _ in requested(view_layer):
         engine.add_pass(blender, channels, chan_id, layer=view_layer.name)
 
@@ -125,8 +124,9 @@ def pass_config(scene, view_layer, config_class):
                         crypto_levels=2 * crypto_layers(view_layer), **kwargs)
 
 
-def blender_images(view_layer, engine_images):
-    """{blender pass name: (H, W, C) array} from the engine's pass images."""
+def blender_images(view_layer, engine_images, samples=1):
+    """{blender pass name: (H, W, C) array} from the engine's pass images.
+    Sample Count is Cycles' Debug Sample Count: a fraction of the samples."""
     out = {}
     for name, blender, channels, _, _ in requested(view_layer):
         image = engine_images.get(name)
@@ -137,6 +137,8 @@ def blender_images(view_layer, engine_images):
             image = image[..., 4 * layer:4 * layer + 4]
             if image.shape[-1] < 4:
                 continue
+        if name == "Sample Count":
+            image = image / max(samples, 1)
         out[blender] = image
     return out
 

@@ -111,10 +111,10 @@ class Film:
 # Named extra passes (engine/passes.py): Tile.add_pass collects, Film.pass_images
 # hands out the pictures.
 
-def _tile_add_pass(self, name, pix, values):
+def _tile_add_pass(self, name, pix, values, rank=None):
     """Add per-sample values of the named pass (ignored when not requested)."""
     if self.extra is not None:
-        self.extra.add(name, pix, values)
+        self.extra.add(name, pix, values, rank)
 
 
 def _tile_wants(self, name):

@@ -31,9 +31,14 @@ from .passes import LIGHT_CLASSES, STRATEGY, PassConfig, crypto_manifest, CRYPTO
 from .sampling import cosine_hemisphere
 from .vec import dot, luminance, to_local, to_world
 
-# Per-path state: the share of each light class (diffuse, glossy,
-# transmission; RGB each) in the BSDF sample that left vertex 0.
-AUX_WIDTH = 9
+# Per-path state (Paths.aux columns), only when passes are requested:
+# the share of each light class (diffuse, glossy, transmission; RGB each) in
+# the BSDF sample that left vertex 0; the camera sample's distance to its
+# pixel centre (FIRST passes keep the nearest); whether the denoising
+# features are still to be written, and their throughput (Cycles').
+SHARES, RANK, PENDING, FEATURE_TP = slice(0, 9), 9, 10, slice(11, 14)
+AUX_WIDTH = 14
+SPECULAR_ALPHA = 0.075  # Cycles: roughness^2 below this is specular for denoising features
 DIFFUSE_KINDS = tuple(getattr(bsdf, k) for k in ("DIFFUSE", "TRANSLUCENT", "SHEEN") if hasattr(bsdf, k))
 
 
@@ -59,11 +64,28 @@ def metadata(config, names):
 
 
 def aux_width(settings):
-    return AUX_WIDTH if _light_passes(settings.passes) else 0
+    return AUX_WIDTH if settings.passes else 0
 
 
-def _light_passes(names):
-    return any(n.startswith(LIGHT_CLASSES) and not n.endswith("Color") for n in names)
+def start(paths, u_filter):
+    """Camera paths: their sample's rank (squared distance of the filter's
+    random numbers from the centre, where the pixel filter puts offset 0)."""
+    if paths.aux.shape[1]:
+        paths.aux[:, RANK] = ((u_filter - 0.5) ** 2).sum(axis=1)
+        paths.aux[:, PENDING] = 1.0
+        paths.aux[:, FEATURE_TP] = 1.0
+
+
+def camera_rays(ctx, paths, hit_surf, tile):
+    """Camera samples that hit no surface: background values of the FIRST
+    passes (Cycles: depth 1e10, index 0)."""
+    if not listening(tile):
+        return
+    miss = np.nonzero(~hit_surf)[0]
+    rank = paths.aux[miss, RANK]
+    tile.add_pass("Depth", paths.pix[miss], np.full(len(miss), 1e10), rank)
+    for name in ("Object Index", "Material Index"):
+        tile.add_pass(name, paths.pix[miss], np.zeros(len(miss)), rank)
 
 
 def listening(tile):
@@ -73,33 +95,96 @@ def listening(tile):
 # ----------------------------------------------------------------------------
 # Vertex 0: data passes (Cycles' data_passes.h), colours, Cryptomatte, AO
 
-def first_hit(ctx, paths, hit, lobes, w, tt, bb, tile):
-    """Paths at their first surface (camera rays, before any bounce)."""
+def vertex(ctx, paths, hit, lobes, w, tt, bb, depth, tile):
+    """Paths at a surface that scatters: the first one's data passes, and
+    the denoising features of paths still looking for a non-specular one."""
     if not listening(tile):
         return
+    if depth == 0:
+        first_hit(ctx, paths, hit, lobes, w, tt, bb, tile)
+    if tile.wants("Denoising Albedo") or tile.wants("Denoising Normal"):
+        _denoising_features(ctx, paths, hit, lobes, w, tile)
+
+
+def first_hit(ctx, paths, hit, lobes, w, tt, bb, tile):
+    """Paths at their first surface (camera rays, before any bounce)."""
     cfg = ctx.pass_config
     pix = paths.pix
     add = tile.add_pass
     add("Position", pix, hit.p)
     add("Normal", pix, hit.ns)
-    add("Denoising Normal", pix, hit.ns)
+    rank = paths.aux[:, RANK]
+    if tile.wants("Depth"):
+        add("Depth", pix, (hit.p - ctx.camera.pos) @ ctx.camera.forward, rank)
     if tile.wants("UV"):
         add("UV", pix, np.column_stack([hit.uv, np.ones(len(pix))]))
     if tile.wants("Mist"):
         add("Mist", pix, 1.0 - _mist(ctx, cfg, hit.p))
     inst = ctx.triangles.instance[hit.prim] if ctx.triangles.instance is not None else np.zeros(len(pix), int)
     if tile.wants("Object Index"):
-        add("Object Index", pix, np.asarray(cfg.object_pass_index + (0,), float)[inst])
+        add("Object Index", pix, np.asarray(cfg.object_pass_index + (0,), float)[inst], rank)
     if tile.wants("Material Index"):
-        add("Material Index", pix, np.asarray(cfg.material_pass_index + (0,), float)[hit.mat])
+        add("Material Index", pix, np.asarray(cfg.material_pass_index + (0,), float)[hit.mat], rank)
     _colours(lobes, w, dot(hit.wo, hit.ns), pix, tile)
-    if tile.wants("Denoising Albedo"):
-        solid = (_class_of(lobes) >= 0)[:, :, None]
-        add("Denoising Albedo", pix, np.clip((w * solid).sum(axis=1), 0.0, 1.0))
     if tile.extra.crypto:
         _cryptomatte(cfg, inst, hit.mat, pix, tile)
     if tile.wants("Ambient Occlusion"):
         _ambient_occlusion(ctx, cfg, hit, tt, bb, pix, tile)
+
+
+def _denoising_features(ctx, paths, hit, lobes, w, tile):
+    """Cycles' denoising features (film/denoising_passes.h): at the first
+    surface whose non-specular lobes hold over a quarter of the sample
+    weight, write throughput x their albedo and the averaged normal (in
+    camera space); before it, the throughput takes the specular albedo."""
+    rows = np.nonzero(paths.aux[:, PENDING] > 0)[0]
+    if len(rows) == 0:
+        return
+    kind = lobes.kind[rows]
+    solid = (kind != bsdf.NONE) & (kind != bsdf.TRANSPARENT)
+    albedo = w[rows] * solid[:, :, None]
+    weight = albedo.mean(axis=2)
+    specular = (lobes.alpha[rows] <= SPECULAR_ALPHA) | np.isin(kind, (bsdf.MIRROR,))
+    total = weight.sum(axis=1)
+    rough = (weight * ~specular).sum(axis=1)
+    done = (total == 0) | (4.0 * rough > total)
+    tp = paths.aux[rows][:, FEATURE_TP]
+    d = np.nonzero(done)[0]
+    if len(d):
+        pix = paths.pix[rows[d]]
+        diffuse = (albedo[d] * ~specular[d][:, :, None]).sum(axis=1)
+        tile.add_pass("Denoising Albedo", pix, tp[d] * diffuse)
+        normal = np.where(total[d, None] > 0, hit.ns[rows[d]], 0.0)
+        tile.add_pass("Denoising Normal", pix, _to_camera(ctx, normal))
+        paths.aux[rows[d], PENDING] = 0.0
+    g = np.nonzero(~done)[0]
+    if len(g):
+        paths.aux[rows[g], FEATURE_TP] = tp[g] * (albedo[g] * specular[g][:, :, None]).sum(axis=1)
+
+
+def _to_camera(ctx, v):
+    """World directions in Cycles' camera space (x right, y up, z forward)."""
+    rot = ctx.camera.rot
+    out = v @ rot
+    out[:, 2] = -out[:, 2]
+    return out
+
+
+def _features_at_emitter(paths, rows, unweighted, world, tile):
+    """A path still looking for its denoising features meets light: Cycles
+    adds throughput x radiance to the albedo; the world ends the path."""
+    if not (tile.wants("Denoising Albedo") or tile.wants("Denoising Normal")):
+        return
+    pending = paths.aux[rows, PENDING] > 0
+    if not pending.any():
+        return
+    r = rows[pending]
+    beta = paths.beta[r]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Le = np.where(beta > 0, unweighted[pending] / np.where(beta > 0, beta, 1.0), 0.0)
+    tile.add_pass("Denoising Albedo", paths.pix[r], paths.aux[r][:, FEATURE_TP] * Le)
+    if world:
+        paths.aux[r, PENDING] = 0.0
 
 
 def _mist(ctx, cfg, p):
@@ -197,7 +282,7 @@ def _class_split(ctx, lobes, lobes_wo, wo_l, wi_l, f, delta=None):
 def after_scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, through, tile):
     """Remember, for paths that just left vertex 0, which light class their
     BSDF sample belongs to (Cycles' pass_diffuse_weight / glossy_weight)."""
-    if not listening(tile) or paths.aux.shape[1] == 0:
+    if not listening(tile) or not _light_passes(tile):
         return
     rows = np.nonzero((paths.bounce == 1) & ~through)[0]
     if len(rows) == 0:
@@ -206,8 +291,8 @@ def after_scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, through, tile)
     wi_l = to_local(paths.d[rows], tt[rows], bb[rows], hit.ns[rows])
     sel, w = lobes_wo[0][rows], lobes_wo[1][rows]
     f = bsdf.eval_pdf(sub, wo_l[rows], wi_l, sel, w)[0]
-    paths.aux[rows] = _class_split(ctx, sub, (sel, w), wo_l[rows], wi_l, f,
-                                   paths.prev_delta[rows]).reshape(len(rows), 9)
+    paths.aux[rows, SHARES] = _class_split(ctx, sub, (sel, w), wo_l[rows], wi_l, f,
+                                           paths.prev_delta[rows]).reshape(len(rows), 9)
 
 
 def _lobe_rows(lobes, rows):
@@ -218,12 +303,14 @@ def _lobe_rows(lobes, rows):
                              and len(getattr(lobes, f.name)) == n})
 
 
+def _light_passes(tile):
+    return any(tile.wants(f"{c} {p}") for c in LIGHT_CLASSES for p in ("Direct", "Indirect"))
+
+
 def _add_light_classes(paths, rows, contrib, direct, tile, shares=None):
     """Split light by class into the Direct / Indirect passes."""
-    if paths.aux.shape[1] == 0:
-        return
     if shares is None:
-        shares = paths.aux[rows].reshape(len(rows), 3, 3)
+        shares = paths.aux[rows][:, SHARES].reshape(len(rows), 3, 3)
     for index, name in enumerate(LIGHT_CLASSES):
         part = contrib * shares[:, index]
         for sel, suffix in ((direct, " Direct"), (~direct, " Indirect")):
@@ -249,9 +336,9 @@ def nee(ctx, paths, rows, contrib, w, delta, lobes, lobes_wo, wo_l, wi_l, f, til
         first = np.nonzero((vertex == 0) & ~delta & (w > 0))[0]
         with np.errstate(divide="ignore", invalid="ignore"):
             _add_light_weight(tile, pix[first], w[first], luminance(contrib[first]) / w[first])
-    if paths.aux.shape[1]:
+    if _light_passes(tile):
         direct = vertex == 0
-        shares = paths.aux[rows].reshape(len(rows), 3, 3).copy()
+        shares = paths.aux[rows][:, SHARES].reshape(len(rows), 3, 3).copy()
         d = np.nonzero(direct)[0]
         if len(d):
             sub = _lobe_rows(lobes, rows[d])
@@ -294,6 +381,7 @@ def emitter(ctx, paths, rows, unweighted, w, tile, world=False, bsdf_only=False)
     if tile.wants("MIS Weight Light") and not bsdf_only:
         first = (bounce == 1) & ~paths.prev_delta[rows]
         _add_light_weight(tile, pix[first], 1.0 - w[first], luminance(unweighted[first]))
-    if paths.aux.shape[1] and not camera.all():
+    if _light_passes(tile) and not camera.all():
         lit = np.nonzero(~camera)[0]
         _add_light_classes(paths, rows[lit], contrib[lit], bounce[lit] == 1, tile)
+    _features_at_emitter(paths, rows, unweighted, world, tile)

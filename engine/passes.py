@@ -12,8 +12,9 @@ them for older Blenders).  How each sum becomes a picture:
 
 - MEAN: the sum over the pixel's camera samples / their count (Cycles'
   filtered passes: Normal, Position, light passes' numerators ...).
-- FIRST: the value of the pixel's first sample (Cycles writes Object and
-  Material Index from sample 0 only: an index must not be averaged).
+- FIRST: the value of the pixel's sample nearest to the pixel centre
+  (Cycles writes Depth, Object and Material Index from sample 0 only, which
+  its sampler puts at the centre: an index must not be averaged).
 - RATIO: sum / the sum of a weight channel (a mean over the events that
   happened, e.g. MIS Weight Light over the light samples that hit a light).
 - DIVIDE: the mean divided by another pass's mean where that is non-zero,
@@ -42,6 +43,7 @@ DEFS = {
     "Position": (3, MEAN, None),
     "Normal": (3, MEAN, None),
     "UV": (3, MEAN, None),
+    "Depth": (1, FIRST, None),
     "Object Index": (1, FIRST, None),
     "Material Index": (1, FIRST, None),
     "Denoising Albedo": (3, MEAN, None),
@@ -106,21 +108,24 @@ class Sums:
         self.lo, self.hi = lo, hi
         self.need = sums_needed(names)
         self.arrays = {name: np.zeros((hi - lo, c), np.float32) for name, c in self.need.items()}
-        self.first = {name: np.zeros(hi - lo, bool) for name in self.need if name in DEFS and DEFS[name][1] == FIRST}
+        # FIRST passes: the rank (distance to the pixel centre) of the sample held.
+        self.first = {name: np.full(hi - lo, np.inf, np.float32)
+                      for name in self.need if name in DEFS and DEFS[name][1] == FIRST}
         self.crypto = {kind: Coverage() for kind in CRYPTO if kind in names}
 
     def wants(self, name):
         return name in self.arrays
 
-    def add(self, name, pix, values):
-        """Add per-sample values ((N,) or (N, C)) of pixels ``pix``."""
+    def add(self, name, pix, values, rank=None):
+        """Add per-sample values ((N,) or (N, C)) of pixels ``pix``; FIRST
+        passes keep the value of the lowest ``rank`` instead."""
         arr = self.arrays.get(name)
         if arr is None or len(pix) == 0:
             return
         values = np.asarray(values, np.float64).reshape(len(pix), -1)
         values = np.where(np.isfinite(values), values, 0.0)
         if name in self.first:
-            self._set_first(name, arr, pix, values)
+            self._keep_first(name, pix - self.lo, values, rank)
             return
         n = self.hi - self.lo
         local = pix - self.lo
@@ -132,21 +137,25 @@ class Sums:
         if cov is not None and len(pix):
             cov.add(pix - self.lo, ids, weight)
 
-    def _set_first(self, name, arr, pix, values):
-        local, at = np.unique(pix - self.lo, return_index=True)
-        new = ~self.first[name][local]
-        arr[local[new]] = values[at[new]]
-        self.first[name][local[new]] = True
+    def _keep_first(self, name, local, values, rank):
+        """Per pixel, the value of the lowest-ranked sample seen so far."""
+        order = np.lexsort((rank, local))
+        local, values, rank = local[order], values[order], rank[order]
+        head = np.ones(len(local), bool)
+        head[1:] = local[1:] != local[:-1]
+        local, values, rank = local[head], values[head], rank[head]
+        better = rank < self.first[name][local]
+        self.arrays[name][local[better]] = values[better]
+        self.first[name][local[better]] = rank[better]
 
     def merge(self, other, offset):
         """Add another Sums whose range starts ``offset`` pixels into ours."""
         s = slice(offset, offset + other.hi - other.lo)
         for name, arr in other.arrays.items():
             if name in self.first:
-                take = other.first[name] & ~self.first[name][s]
-                arr_s = self.arrays[name][s]
-                arr_s[take] = arr[take]
-                self.first[name][s] |= take
+                take = other.first[name] < self.first[name][s]
+                self.arrays[name][s][take] = arr[take]
+                self.first[name][s][take] = other.first[name][take]
             else:
                 self.arrays[name][s] += arr
         for kind, cov in other.crypto.items():
