@@ -84,6 +84,7 @@ def camera_rays(ctx, paths, hit_surf, tile):
     miss = np.nonzero(~hit_surf)[0]
     rank = paths.aux[miss, RANK]
     tile.add_pass("Depth", paths.pix[miss], np.full(len(miss), 1e10), rank)
+    tile.add_pass("Position", paths.pix[miss], np.zeros((len(miss), 3)), rank)
     for name in ("Object Index", "Material Index"):
         tile.add_pass(name, paths.pix[miss], np.zeros(len(miss)), rank)
 
@@ -100,10 +101,22 @@ def vertex(ctx, paths, hit, lobes, w, tt, bb, depth, tile):
     the denoising features of paths still looking for a non-specular one."""
     if not listening(tile):
         return
+    features = tile.wants("Denoising Albedo") or tile.wants("Denoising Normal")
+    colours = depth == 0 and any(tile.wants(c + " Color") for c in LIGHT_CLASSES)
+    if features or colours:
+        w = _closure_weights(lobes, hit, tt, bb)
     if depth == 0:
         first_hit(ctx, paths, hit, lobes, w, tt, bb, tile)
-    if tile.wants("Denoising Albedo") or tile.wants("Denoising Normal"):
+    if features:
         _denoising_features(ctx, paths, hit, lobes, w, tile)
+
+
+def _closure_weights(lobes, hit, tt, bb):
+    """Lobe colours as Cycles' closure weights: with layering, without the
+    multiscatter energy compensation (Cycles keeps that in energy_scale)."""
+    from dataclasses import replace
+    plain = replace(lobes, multiscatter=np.zeros_like(lobes.multiscatter))
+    return bsdf.weights(plain, to_local(hit.wo, tt, bb, hit.ns))
 
 
 def first_hit(ctx, paths, hit, lobes, w, tt, bb, tile):
@@ -111,9 +124,9 @@ def first_hit(ctx, paths, hit, lobes, w, tt, bb, tile):
     cfg = ctx.pass_config
     pix = paths.pix
     add = tile.add_pass
-    add("Position", pix, hit.p)
-    add("Normal", pix, hit.ns)
     rank = paths.aux[:, RANK]
+    add("Position", pix, hit.p, rank)
+    add("Normal", pix, hit.ns)
     if tile.wants("Depth"):
         add("Depth", pix, (hit.p - ctx.camera.pos) @ ctx.camera.forward, rank)
     if tile.wants("UV"):
@@ -212,20 +225,31 @@ def _class_of(lobes):
 def _colours(lobes, w, cos_o, pix, tile):
     """Diffuse / Glossy / Transmission Color: the summed effective lobe
     colours of each class at vertex 0 (Cycles' closure albedos).  A glass
-    lobe's colour is split by Schlick's Fresnel of its IOR at the view
+    lobe's colour is split by the dielectric Fresnel of its IOR at the view
     angle: reflection to glossy, the rest to transmission."""
     if not any(tile.wants(c + " Color") for c in LIGHT_CLASSES):
         return
     cls = _class_of(lobes)
     glass = lobes.kind == bsdf.GLASS
-    f0 = ((lobes.ior - 1.0) / (lobes.ior + 1.0)) ** 2
-    fresnel = f0 + (1.0 - f0) * (1.0 - np.clip(cos_o, 0.0, 1.0))[:, None] ** 5
+    fresnel = _fresnel_dielectric(np.clip(cos_o, 0.0, 1.0)[:, None], lobes.ior)
     share = np.where(glass, fresnel, 1.0)
     for index, name in enumerate(LIGHT_CLASSES):
         part = np.where(cls == index, share, 0.0)
         if index == 2:
             part = part + np.where(glass, 1.0 - fresnel, 0.0)
         tile.add_pass(name + " Color", pix, (w * part[:, :, None]).sum(axis=1))
+
+
+def _fresnel_dielectric(cos_i, eta):
+    """Unpolarised Fresnel reflectance of a dielectric (IOR ratio eta)."""
+    eta = np.where(eta > 0, eta, 1.5)
+    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
+    cos_t = np.sqrt(np.maximum(1.0 - sin2_t, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
+        rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    f = 0.5 * (rs * rs + rp * rp)
+    return np.where(sin2_t >= 1.0, 1.0, np.nan_to_num(f, nan=1.0))
 
 
 def _cryptomatte(cfg, inst, mat, pix, tile):

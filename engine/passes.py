@@ -40,7 +40,7 @@ DEFS = {
     "Strategy BSDF Unweighted": (3, MEAN, None),
     "MIS Weight Light": (1, RATIO, "MIS Weight Light:n"),
     "Mist": (1, ONE_MINUS, None),
-    "Position": (3, MEAN, None),
+    "Position": (3, FIRST, None),
     "Normal": (3, MEAN, None),
     "UV": (3, MEAN, None),
     "Depth": (1, FIRST, None),
