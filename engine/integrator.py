@@ -114,7 +114,7 @@ def trace_batch(ctx, pix, rng, tile):
                   np.ones(n), np.ones(n, bool), o, np.zeros((n, 3)), np.full(n, VIS_CAMERA, np.uint8),
                   o, np.zeros(n, np.int32), np.zeros(n, np.int32),
                   np.zeros((n, pass_events.aux_width(ctx.settings)), np.float32))
-    pass_events.start(paths, u[:, :2])
+    pass_events.start(ctx, paths, tile)
     # Every step raises a live path's bounce or its transparent bounce
     # count, both bounded: max_bounces + 1 vertices scatter, one more only
     # collects emission, and transparent passes end at transparent_limit.
@@ -272,7 +272,6 @@ def _camera_aovs(ctx, paths, t, prim, hit_light, hit_surf, tile):
         col = ctx.materials.color[m] * ctx.materials.weight[m][..., None]
         albedo[hs] = np.clip(col.sum(axis=1), 0.0, 1.0)
     tile.add_camera(paths.pix, alpha, depth, normal, albedo)
-    pass_events.camera_rays(ctx, paths, hit_surf, tile)
 
 
 def _mis_hit(ctx, paths, i, emitter, pdf_light):

@@ -24,6 +24,8 @@ directions both strategies sampled at vertex 0, each counted by what it
 brings: it converges to the share of the direct light MIS takes from light
 sampling (see _add_light_weight).
 """
+import threading
+
 import numpy as np
 
 from . import bsdf
@@ -33,11 +35,11 @@ from .vec import dot, luminance, to_local, to_world
 
 # Per-path state (Paths.aux columns), only when passes are requested:
 # the share of each light class (diffuse, glossy, transmission; RGB each) in
-# the BSDF sample that left vertex 0; the camera sample's distance to its
-# pixel centre (FIRST passes keep the nearest); whether the denoising
-# features are still to be written, and their throughput (Cycles').
-SHARES, RANK, PENDING, FEATURE_TP = slice(0, 9), 9, 10, slice(11, 14)
-AUX_WIDTH = 14
+# the BSDF sample that left vertex 0; whether the denoising features are
+# still to be written, and their throughput (Cycles').
+SHARES, PENDING, FEATURE_TP = slice(0, 9), 9, slice(10, 13)
+AUX_WIDTH = 13
+_CENTRE_LOCK = threading.Lock()
 SPECULAR_ALPHA = 0.075  # Cycles: roughness^2 below this is specular for denoising features
 DIFFUSE_KINDS = tuple(getattr(bsdf, k) for k in ("DIFFUSE", "TRANSLUCENT", "SHEEN") if hasattr(bsdf, k))
 
@@ -67,26 +69,52 @@ def aux_width(settings):
     return AUX_WIDTH if settings.passes else 0
 
 
-def start(paths, u_filter):
-    """Camera paths: their sample's rank (squared distance of the filter's
-    random numbers from the centre, where the pixel filter puts offset 0)."""
-    if paths.aux.shape[1]:
-        paths.aux[:, RANK] = ((u_filter - 0.5) ** 2).sum(axis=1)
-        paths.aux[:, PENDING] = 1.0
-        paths.aux[:, FEATURE_TP] = 1.0
-
-
-def camera_rays(ctx, paths, hit_surf, tile):
-    """Camera samples that hit no surface: background values of the FIRST
-    passes (Cycles: depth 1e10, index 0)."""
+def start(ctx, paths, tile):
+    """New camera paths: reset their pass state; the first batch of a pixel
+    range also traces the centre rays of the FIRST passes."""
     if not listening(tile):
         return
-    miss = np.nonzero(~hit_surf)[0]
-    rank = paths.aux[miss, RANK]
-    tile.add_pass("Depth", paths.pix[miss], np.full(len(miss), 1e10), rank)
-    tile.add_pass("Position", paths.pix[miss], np.zeros((len(miss), 3)), rank)
-    for name in ("Object Index", "Material Index"):
-        tile.add_pass(name, paths.pix[miss], np.zeros(len(miss)), rank)
+    if paths.aux.shape[1]:
+        paths.aux[:, PENDING] = 1.0
+        paths.aux[:, FEATURE_TP] = 1.0
+    if tile.extra.first and _claim_centres(ctx, tile):
+        _centre_rays(ctx, tile)
+
+
+def _claim_centres(ctx, tile):
+    """True once per pixel range (batches cover the same ranges every pass)."""
+    with _CENTRE_LOCK:
+        done = ctx.__dict__.setdefault("_pass_centres", set())
+        key = (tile.lo, tile.hi)
+        if key in done:
+            return False
+        done.add(key)
+        return True
+
+
+def _centre_rays(ctx, tile):
+    """Depth, Position, Object and Material Index from one ray through each
+    pixel's centre (and the lens centre), as Cycles writes them from its
+    sample 0: never averaged.  Background: depth 1e10, the rest 0."""
+    cfg = ctx.pass_config
+    pix = np.arange(tile.lo, tile.hi)
+    half = np.full(len(pix), 0.5)
+    o, d, tmax = ctx.camera.generate(pix, half, half, half, half)
+    t, prim, _, _ = ctx.accel.intersect(o, d, tmax)
+    hit = (prim >= 0) & (t < tmax)
+    p = o + d * np.where(hit, t, 0.0)[:, None]
+    safe = np.where(hit, prim, 0)
+    rank = np.full(len(pix), -1.0)
+    depth = np.where(hit, (p - ctx.camera.pos) @ ctx.camera.forward, 1e10)
+    tile.add_pass("Depth", pix, depth, rank)
+    tile.add_pass("Position", pix, np.where(hit[:, None], p, 0.0), rank)
+    if tile.wants("Object Index"):
+        inst = ctx.triangles.instance[safe] if ctx.triangles.instance is not None else np.zeros(len(pix), int)
+        index = np.asarray(cfg.object_pass_index + (0,), float)[inst]
+        tile.add_pass("Object Index", pix, np.where(hit, index, 0.0), rank)
+    if tile.wants("Material Index"):
+        index = np.asarray(cfg.material_pass_index + (0,), float)[ctx.triangles.material[safe]]
+        tile.add_pass("Material Index", pix, np.where(hit, index, 0.0), rank)
 
 
 def listening(tile):
@@ -124,20 +152,12 @@ def first_hit(ctx, paths, hit, lobes, w, tt, bb, tile):
     cfg = ctx.pass_config
     pix = paths.pix
     add = tile.add_pass
-    rank = paths.aux[:, RANK]
-    add("Position", pix, hit.p, rank)
     add("Normal", pix, hit.ns)
-    if tile.wants("Depth"):
-        add("Depth", pix, (hit.p - ctx.camera.pos) @ ctx.camera.forward, rank)
     if tile.wants("UV"):
         add("UV", pix, np.column_stack([hit.uv, np.ones(len(pix))]))
     if tile.wants("Mist"):
         add("Mist", pix, 1.0 - _mist(ctx, cfg, hit.p))
     inst = ctx.triangles.instance[hit.prim] if ctx.triangles.instance is not None else np.zeros(len(pix), int)
-    if tile.wants("Object Index"):
-        add("Object Index", pix, np.asarray(cfg.object_pass_index + (0,), float)[inst], rank)
-    if tile.wants("Material Index"):
-        add("Material Index", pix, np.asarray(cfg.material_pass_index + (0,), float)[hit.mat], rank)
     _colours(lobes, w, dot(hit.wo, hit.ns), pix, tile)
     if tile.extra.crypto:
         _cryptomatte(cfg, inst, hit.mat, pix, tile)

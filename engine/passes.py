@@ -12,9 +12,9 @@ them for older Blenders).  How each sum becomes a picture:
 
 - MEAN: the sum over the pixel's camera samples / their count (Cycles'
   filtered passes: Normal, Position, light passes' numerators ...).
-- FIRST: the value of the pixel's sample nearest to the pixel centre
-  (Cycles writes Depth, Object and Material Index from sample 0 only, which
-  its sampler puts at the centre: an index must not be averaged).
+- FIRST: the value of one ray through the pixel centre (Cycles writes
+  Depth, Position, Object and Material Index from its sample 0, at the
+  pixel centre: an index must not be averaged).
 - RATIO: sum / the sum of a weight channel (a mean over the events that
   happened, e.g. MIS Weight Light over the light samples that hit a light).
 - DIVIDE: the mean divided by another pass's mean where that is non-zero,
