@@ -194,7 +194,10 @@ def _block_test(name, ember, cycles, floor, keep=None):
     a, b = stats.block_means(ember, 4), stats.block_means(cycles, 4)
     t, dof, ma, mb = stats.welch(a, b)
     va, vb = a.var(axis=0, ddof=1) / len(a), b.var(axis=0, ddof=1) / len(b)
-    se = np.sqrt(va + vb + (floor * np.maximum(np.abs(ma), np.abs(mb))) ** 2 + 1e-20)
+    # The floor is relative to each block's value, and to the pass's largest
+    # value for blocks near 0 (a unit normal's 0 component stored as 1e-9).
+    scale = np.maximum(np.abs(ma), np.abs(mb)) + 1e-3 * np.abs(mb).max()
+    se = np.sqrt(va + vb + (floor * scale) ** 2 + 1e-30)
     t = (ma - mb) / se
     if keep is not None:
         blocks = stats.block_means(keep[None, :, :, None].astype(float), 4)[0, ..., 0] == 1.0
