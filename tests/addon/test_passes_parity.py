@@ -27,7 +27,8 @@ import numpy as np
 import pytest
 
 import ember_stats as stats
-from ember_testlib import require, setup_cycles, setup_ember, small_resolution
+from ember_testlib import SCENES_DIR, require, setup_cycles, setup_ember, small_resolution
+from test_other_blenders import legacy_zip  # noqa: F401  (fixture)
 
 SEEDS, SPP, BOUNCES = 4, 24, 3
 WIDTH, HEIGHT = 32, 24
@@ -269,3 +270,37 @@ def test_sample_count_and_vector(renders):
     for images in renders['EMBER']:
         assert np.all(images["Debug Sample Count"] == 1.0)  # every sample taken, as Cycles writes it
         assert np.all(images["Vector"] == 0.0)              # no motion blur
+
+
+def test_legacy_pass_names_in_blender_34_binary(tmp_path, legacy_zip, needs_engine):
+    """Debian's Blender 3.4 (legacy zip, `blender -b -f 1`, multilayer EXR):
+    the passes carry 3.4's names (IndexOB, DiffDir, Emit, Env, AO) and the
+    file holds the Cryptomatte manifest."""
+    import OpenImageIO as oiio
+    from test_other_blenders import BLENDER, blender_version, install_legacy, run
+    version = blender_version()
+    require(version is not None and version.startswith('Blender 3.4'),
+            f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
+    scripts = install_legacy(legacy_zip, tmp_path)
+    settings = ("import bpy; s = bpy.context.scene; s.render.resolution_x = s.render.resolution_y = 16; "
+                "s.render.resolution_percentage = 100; s.ember.samples = 4; s.ember.max_bounces = 2; "
+                "s.render.image_settings.color_depth = '32'; l = bpy.context.view_layer; "
+                "[setattr(l, n, True) for n in ('use_pass_object_index', 'use_pass_diffuse_direct', "
+                "'use_pass_diffuse_color', 'use_pass_emit', 'use_pass_environment', 'use_pass_ambient_occlusion', "
+                "'use_pass_cryptomatte_object')]; l.ember.use_pass_strategies = True")
+    code, out = run([BLENDER, '-b', '--addons', 'ember', os.path.join(SCENES_DIR, 'cornell.blend'),
+                     '-E', 'EMBER', '-o', str(tmp_path / 'frame_####'), '-F', 'OPEN_EXR_MULTILAYER',
+                     '--python-expr', settings, '-f', '1'], env={'BLENDER_USER_SCRIPTS': scripts})
+    path = str(tmp_path / 'frame_0001.exr')
+    assert code == 0 and os.path.exists(path), out[-4000:]
+    image = oiio.ImageInput.open(path)
+    spec = image.spec()
+    names = {c.split('.')[-2] for c in spec.channelnames}
+    for name in ("IndexOB", "DiffDir", "DiffCol", "Emit", "Env", "AO", "CryptoObject00", "Strategy Light",
+                 "MIS Weight Light"):
+        assert name in names, (name, sorted(names))
+    pixels = image.read_image('float')
+    assert np.isfinite(pixels).all()
+    keys = [a.name for a in spec.extra_attribs if a.name.startswith('cryptomatte/')]
+    image.close()
+    assert any(k.endswith('/manifest') for k in keys), keys
