@@ -21,6 +21,12 @@ STRATEGY_ITEMS = (
     ('BSDF', "BSDF Only", "BSDF sampling only (debugging)"),
 )
 
+PATTERN_ITEMS = (
+    ('SOBOL', "Sobol-Burley", "Shuffled, Owen-scrambled Sobol sequence (Cycles' default): "
+     "less noise for the same samples"),
+    ('RANDOM', "Independent", "Independent random numbers per sample (for comparisons)"),
+)
+
 FILTER_ITEMS = (
     ('BLACKMAN_HARRIS', "Blackman-Harris", "Blackman-Harris filter, as Cycles"),
     ('GAUSSIAN', "Gaussian", "Gaussian filter"),
@@ -35,6 +41,19 @@ class EmberRenderSettings(bpy.types.PropertyGroup):
     preview_samples: IntProperty(
         name="Preview Samples", description="Samples per pixel for material previews",
         default=16, min=1, max=1 << 16, soft_max=256)
+    use_adaptive_sampling: BoolProperty(
+        name="Noise Threshold", description="Stop sampling pixels once their noise is below the "
+        "threshold, as Cycles' adaptive sampling", default=True)
+    adaptive_threshold: FloatProperty(
+        name="Noise Threshold", description="Error a pixel may keep when adaptive sampling stops it "
+        "(lower: less noise, longer renders); as Cycles'", default=0.01, min=0.0001, max=1.0,
+        soft_min=0.001, precision=4)
+    adaptive_min_samples: IntProperty(
+        name="Min Samples", description="Samples every pixel gets before adaptive sampling may stop "
+        "it (0 = automatic, from the threshold, as Cycles)", default=0, min=0, max=4096)
+    sampling_pattern: EnumProperty(
+        name="Pattern", description="Where the random numbers of each sample come from",
+        items=PATTERN_ITEMS, default='SOBOL')
     time_limit: FloatProperty(
         name="Time Limit", description="Stop after this many seconds (0 = no limit); "
         "the pass that crosses the limit is finished", default=0.0, min=0.0, subtype='TIME_ABSOLUTE')

@@ -61,7 +61,22 @@ class EmberPanel:
 
 class RENDER_PT_ember_sampling(EmberPanel, bpy.types.Panel):
     bl_label = "Sampling"
-    PROPS = (("samples", "Samples"), ("preview_samples", "Preview"), ("time_limit", None), ("seed", None))
+
+    def draw(self, context):
+        layout = self.split_layout()
+        ember = context.scene.ember
+        row = layout.row(heading="Noise Threshold")
+        row.prop(ember, "use_adaptive_sampling", text="")
+        sub = row.row()
+        sub.active = ember.use_adaptive_sampling
+        sub.prop(ember, "adaptive_threshold", text="")
+        layout.prop(ember, "samples", text="Max Samples" if ember.use_adaptive_sampling else "Samples")
+        sub = layout.column()
+        sub.active = ember.use_adaptive_sampling
+        sub.prop(ember, "adaptive_min_samples", text="Min Samples")
+        layout.prop(ember, "preview_samples", text="Preview")
+        layout.prop(ember, "time_limit")
+        layout.prop(ember, "seed")
 
 
 class RENDER_PT_ember_sampling_lights(EmberPanel, bpy.types.Panel):
@@ -75,7 +90,7 @@ class RENDER_PT_ember_sampling_advanced(EmberPanel, bpy.types.Panel):
     bl_label = "Advanced"
     bl_parent_id = 'RENDER_PT_ember_sampling'
     bl_options = {'DEFAULT_CLOSED'}
-    PROPS = (("strategy", None), ("threads", None))
+    PROPS = (("sampling_pattern", None), ("strategy", None), ("threads", None))
 
 
 class RENDER_PT_ember_light_paths(EmberPanel, bpy.types.Panel):

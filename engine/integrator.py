@@ -26,6 +26,7 @@ import numpy as np
 from . import bsdf, pass_events
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .lights import POINT, SUN
+from .sampler import BSDF, CAMERA, KIND, LIGHT, emitter_set, vertex_set
 from .sampling import power_heuristic
 from .vec import dot, frame, to_local, to_world
 
@@ -77,6 +78,11 @@ class Paths:
     mis_o: np.ndarray
     bounce: np.ndarray    # vertices scattered so far (0 = camera ray)
     tbounce: np.ndarray   # transparent surfaces passed so far
+    # The sample's address for the sampler: pixel scramble seed and sample
+    # index (uint32), so every random number is fixed by (seed, pixel,
+    # sample index, dimension), whatever the batching.
+    pseed: np.ndarray
+    sample: np.ndarray
     aux: np.ndarray       # (N, k) per-path state of the extra passes (k = 0 without)
 
     def take(self, keep):
@@ -105,14 +111,17 @@ class Hit:
     back: object = None
 
 
-def trace_batch(ctx, pix, rng, tile):
-    """Trace one camera sample per entry of ``pix`` and add them to ``tile``."""
+def trace_batch(ctx, pix, sample, tile):
+    """Trace camera sample ``sample[i]`` of pixel ``pix[i]`` for every i and
+    add them to ``tile``."""
     n = len(pix)
-    u = rng.random((n, 4))
+    pseed = ctx.sampler.pixel_seeds(pix)
+    sample = np.asarray(sample, np.uint32)
+    u = ctx.sampler.get(pseed, sample, CAMERA)
     o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3])
     paths = Paths(pix, o, d, tmax, np.ones((n, 3)), np.zeros((n, 3)),
                   np.ones(n), np.ones(n, bool), o, np.zeros((n, 3)), np.full(n, VIS_CAMERA, np.uint8),
-                  o, np.zeros(n, np.int32), np.zeros(n, np.int32),
+                  o, np.zeros(n, np.int32), np.zeros(n, np.int32), pseed, sample,
                   np.zeros((n, pass_events.aux_width(ctx.settings)), np.float32))
     pass_events.start(ctx, paths, tile)
     # Every step raises a live path's bounce or its transparent bounce
@@ -121,7 +130,7 @@ def trace_batch(ctx, pix, rng, tile):
     for depth in range(ctx.settings.max_bounces + 2 + ctx.transparent_limit):
         if len(paths.pix) == 0:
             break
-        paths = _bounce(ctx, paths, depth, rng, tile)
+        paths = _bounce(ctx, paths, depth, tile)
     if len(paths.pix):
         _finish(ctx, paths, tile)
 
@@ -133,10 +142,10 @@ def _finish(ctx, paths, tile):
     if clamp > 0:
         m = L.max(axis=1)
         L = L * np.where(m > clamp, clamp / np.maximum(m, 1e-30), 1.0)[:, None]
-    tile.add_radiance(paths.pix, L)
+    tile.add_radiance(paths.pix, L, paths.sample)
 
 
-def _bounce(ctx, paths, depth, rng, tile):
+def _bounce(ctx, paths, depth, tile):
     s = ctx.settings
     t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax)
     if ctx.triangles.visibility is not None:
@@ -201,15 +210,15 @@ def _bounce(ctx, paths, depth, rng, tile):
     w = bsdf.weights(lobes, wo_l)
     lobes_wo = (bsdf.selection(lobes, wo_l, w), w)
     pass_events.vertex(ctx, paths, hit, lobes, w, tt, bb, depth, tile)
-    _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, rng, tile)
+    _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth, tile)
     ray = paths.ray
-    alive, through = _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, rng)
+    alive, through = _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth)
     pass_events.after_scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, through, tile)
     # For the light tree's MIS pdf; a transparent pass keeps the vertex.
     paths.prev_p = _unless(through, paths.prev_p, hit.p)
     paths.prev_n = _unless(through, paths.prev_n, hit.ng)
     if ctx.track_rays:
-        paths.ray = _unless(through, ray, _ray_kind(hit, lobes, wo_l, tt, bb, paths, rng))
+        paths.ray = _unless(through, ray, _ray_kind(ctx, hit, lobes, wo_l, tt, bb, paths, depth))
     elif ctx.triangles.visibility is not None:
         # Only camera (or shadow) visibility differs: any indirect kind sees
         # the same triangles, but no longer as a camera ray.
@@ -385,19 +394,24 @@ def _nee_emitters(ctx):
     return "select", None
 
 
-def _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, rng, tile=None):
+def _uniforms(ctx, paths, dim_set):
+    """(N, 4) sample values of one dimension set for the live paths."""
+    return ctx.sampler.get(paths.pseed, paths.sample, dim_set)
+
+
+def _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth, tile=None):
     lt = ctx.lights
     n = len(paths.pix)
     if lt.count == 0 or n == 0:
         return
     mode, emitters = _nee_emitters(ctx)
     if mode == "select":
-        u = rng.random((n, 4))
+        u = _uniforms(ctx, paths, vertex_set(depth, LIGHT))
         e, p_sel = lt.select(u[:, 0], hit.p, hit.ng)
         _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u[:, 1:], tile)
         return
     for e in emitters:
-        u = rng.random((n, 3))
+        u = _uniforms(ctx, paths, emitter_set(depth, e))[:, :3]
         _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, np.full(n, e), np.ones(n), u, tile)
 
 
@@ -470,11 +484,11 @@ def _same_side(wi, ng, wi_l):
     return (g != 0) & ((g > 0) == (wi_l[:, 2] > 0))
 
 
-def _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, rng):
+def _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth):
     """Sample the BSDF and update the path state in place; returns which
     paths live on and which passed straight through a transparent lobe."""
     s = ctx.settings
-    u = rng.random((len(paths.pix), 4))
+    u = _uniforms(ctx, paths, vertex_set(depth, BSDF))
     wi_l, weight, pdf, delta = bsdf.sample(lobes, wo_l, u[:, 0], u[:, 1], u[:, 2], *lobes_wo)
     wi = to_world(wi_l, tt, bb, hit.ns)
     # A reflection below the geometric surface (or a transmission above it)
@@ -580,7 +594,7 @@ def _occluded(ctx, origin, wi, tmax, emitter):
     return blocked
 
 
-def _ray_kind(hit, lobes, wo_l, tt, bb, paths, rng):
+def _ray_kind(ctx, hit, lobes, wo_l, tt, bb, paths, depth):
     """VIS_* bit of the bounce just sampled, distributed as Cycles' (the kind
     of the closure it sampled): below the surface = transmission; after a
     delta (mirror) sample = glossy; else diffuse with the probability that
@@ -598,7 +612,8 @@ def _ray_kind(hit, lobes, wo_l, tt, bb, paths, rng):
         _, pdf_d = bsdf.eval_pdf(only_d, wo_l[mixed], wi_l, sel)
         with np.errstate(divide="ignore", invalid="ignore"):
             p_d = np.where(paths.prev_pdf[mixed] > 0, pdf_d / paths.prev_pdf[mixed], 0.0)
-        kind[mixed] = np.where(rng.random(len(mixed)) < p_d, VIS_DIFFUSE, VIS_GLOSSY)
+        u = ctx.sampler.get(paths.pseed[mixed], paths.sample[mixed], vertex_set(depth, KIND))[:, 0]
+        kind[mixed] = np.where(u < p_d, VIS_DIFFUSE, VIS_GLOSSY)
     kind[dot(paths.d, hit.ng) < 0] = VIS_TRANSMISSION
     return kind
 

@@ -70,34 +70,36 @@ def aux_width(settings):
 
 
 def start(ctx, paths, tile):
-    """New camera paths: reset their pass state; the first batch of a pixel
-    range also traces the centre rays of the FIRST passes."""
+    """New camera paths: reset their pass state; the first batch to reach a
+    pixel also traces its centre ray for the FIRST passes."""
     if not listening(tile):
         return
     if paths.aux.shape[1]:
         paths.aux[:, PENDING] = 1.0
         paths.aux[:, FEATURE_TP] = 1.0
-    if tile.extra.first and _claim_centres(ctx, tile):
-        _centre_rays(ctx, tile)
+    if tile.extra.first:
+        pix = _claim_centres(ctx, paths)
+        if len(pix):
+            _centre_rays(ctx, pix, tile)
 
 
-def _claim_centres(ctx, tile):
-    """True once per pixel range (batches cover the same ranges every pass)."""
+def _claim_centres(ctx, paths):
+    """The batch's pixels whose centre ray is not traced yet (claimed now)."""
     with _CENTRE_LOCK:
-        done = ctx.__dict__.setdefault("_pass_centres", set())
-        key = (tile.lo, tile.hi)
-        if key in done:
-            return False
-        done.add(key)
-        return True
+        done = ctx.__dict__.get("_pass_centres")
+        if done is None:
+            done = ctx._pass_centres = np.zeros(ctx.camera.width * ctx.camera.height, bool)
+        pix = np.unique(paths.pix)
+        pix = pix[~done[pix]]
+        done[pix] = True
+        return pix
 
 
-def _centre_rays(ctx, tile):
+def _centre_rays(ctx, pix, tile):
     """Depth, Position, Object and Material Index from one ray through each
     pixel's centre (and the lens centre), as Cycles writes them from its
     sample 0: never averaged.  Background: depth 1e10, the rest 0."""
     cfg = ctx.pass_config
-    pix = np.arange(tile.lo, tile.hi)
     half = np.full(len(pix), 0.5)
     o, d, tmax = ctx.camera.generate(pix, half, half, half, half)
     t, prim, _, _ = ctx.accel.intersect(o, d, tmax)

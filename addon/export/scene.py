@@ -77,4 +77,7 @@ def render_settings(scene, is_preview=False):
         transparent=bool(scene.render.film_transparent),
         threads=settings.threads,
         time_limit=0.0 if is_preview else settings.time_limit,
+        sampling_pattern=settings.sampling_pattern.lower(),
+        adaptive_threshold=settings.adaptive_threshold if settings.use_adaptive_sampling else 0.0,
+        adaptive_min_samples=settings.adaptive_min_samples,
     )
