@@ -127,10 +127,10 @@ class Sums:
         if name in self.first:
             self._keep_first(name, pix - self.lo, values, rank)
             return
-        n = self.hi - self.lo
-        local = pix - self.lo
-        for c in range(arr.shape[1]):
-            arr[:, c] += np.bincount(local, weights=values[:, c], minlength=n)
+        n, c = arr.shape
+        # One bincount over (pixel, channel) pairs.
+        idx = ((pix - self.lo)[:, None] * c + np.arange(c)).ravel()
+        arr += np.bincount(idx, weights=values.ravel(), minlength=n * c).reshape(n, c)
 
     def add_crypto(self, kind, pix, ids, weight):
         cov = self.crypto.get(kind)
