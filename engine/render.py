@@ -13,31 +13,36 @@ import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FuturesTimeout
-
 import numpy as np
 
 from .accel import Accel
 from .bsdf import MaterialTable
 from .camera import CameraModel, PixelFilter
-from .film import Film, Tile
+from . import pass_events
+from .film import Film
 from .geometry import flatten, material_table
 from .integrator import Context, trace_batch
 from .lights import LightSet
+from .sampler import Sampler
 from .scene import Cancelled, RenderSettings, SceneError
 from .validate import validate_settings
 
 
 class RenderResult:
-    """The finished (or stopped) render: the RGBA image and the film behind
-    it; first-hit AOVs and variance are computed from the film on demand
-    (each is a full-frame array: seconds at 8K that a cancel must not wait for)."""
+    """The finished (or stopped) render: the RGBA image, the film behind it
+    (per-pixel counts, means and M2; ``film.state()`` is a farm shard) and
+    first-hit AOVs and variance computed from the film on demand."""
 
-    def __init__(self, film, image, samples, stats=None, warnings=None):
+    def __init__(self, film, image, samples, stats=None, warnings=None, passes=None, pass_metadata=None):
         self.film = film
         self.image = image          # (H, W, 4) float32, row 0 at the top
         self.samples = samples
         self.stats = stats or {}
         self.warnings = warnings or []
+        # Requested extra passes {name: (H, W, C) float32} and their metadata
+        # (Cryptomatte manifests): engine/passes.py.
+        self.passes = passes or {}
+        self.pass_metadata = pass_metadata or {}
 
     @property
     def depth(self):
@@ -56,12 +61,17 @@ class RenderResult:
         """(H, W, 3) variance of each pixel's mean."""
         return self.film.variance()
 
+    @property
+    def sample_count(self):
+        """(H, W) samples each pixel received (fewer where adaptive sampling stopped)."""
+        return self.film.sample_count()
+
 
 def prepare(scene, settings):
     """Validate and compile a Scene into the read-only Context batches share."""
     scene.validate()
     validate_settings(settings)
-    tris = flatten(scene)
+    tris = flatten(scene, with_instance=bool(settings.passes))
     materials = MaterialTable(material_table(scene))
     lights = LightSet(scene, tris, materials, settings.light_selection,
                       env_compensation=settings.mis_compensation and settings.strategy == "mis")
@@ -71,7 +81,10 @@ def prepare(scene, settings):
         raise SceneError(f"camera: {exc}") from None
     accel = Accel(tris)
     world = np.asarray(scene.world.color, dtype=np.float64)
-    return Context(accel, tris, materials, lights, camera, world, settings)
+    ctx = Context(accel, tris, materials, lights, camera, world, settings)
+    ctx.sampler = Sampler(settings.seed, settings.sampling_pattern)
+    ctx.pass_config = pass_events.configure(scene, settings)
+    return ctx
 
 
 def prepare_interruptibly(scene, settings, progress, poll=0.05):
@@ -113,12 +126,47 @@ def warnings_for(ctx):
     return out
 
 
-def _batches(npix, spp, settings, threads):
-    """Contiguous pixel ranges: at most max_paths / threads paths each, and at
-    least one per thread so small frames keep every core busy."""
+def _batches(pixels, spp, settings, threads):
+    """Pixel lists for one pass: at most max_paths / threads paths each, and
+    at least one per thread so small frames keep every core busy.
+    ``pixels`` is a sorted index array (all pixels, or the unconverged ones)."""
     per_thread = max(1024, settings.max_paths // threads)
-    pixels = max(1, min(per_thread // spp, -(-npix // threads)))
-    return [(lo, min(npix, lo + pixels)) for lo in range(0, npix, pixels)]
+    n = len(pixels)
+    size = max(1, min(per_thread // spp, -(-n // threads)))
+    return [pixels[lo:lo + size] for lo in range(0, n, size)]
+
+
+def adaptive_parameters(settings):
+    """(threshold as the convergence test uses it, min samples, step), as
+    Cycles derives them from Noise Threshold and Min Samples; None when
+    adaptive sampling is off."""
+    threshold = settings.adaptive_threshold
+    if threshold <= 0:
+        return None
+    if settings.adaptive_min_samples == 0:
+        min_samples = max(4, int(np.ceil(16.0 / threshold ** 0.3)))
+    else:
+        min_samples = max(4, settings.adaptive_min_samples)
+    return threshold * 5.0, min_samples, 16
+
+
+class _Adaptive:
+    """Which pixels still sample: all until min samples, then re-checked
+    every ``step`` samples; converged pixels stop for good."""
+
+    def __init__(self, settings, npix):
+        self.params = adaptive_parameters(settings)
+        self.active = np.arange(npix)
+
+    def update(self, film, done, last_checked):
+        if self.params is None:
+            return last_checked
+        threshold, min_samples, step = self.params
+        if done < min_samples or done // step == last_checked // step:
+            return last_checked
+        noisy = film.unconverged(threshold)
+        self.active = self.active[noisy[self.active]]
+        return done
 
 
 def render(scene, settings=None, progress=None):
@@ -126,21 +174,26 @@ def render(scene, settings=None, progress=None):
     t_start = time.perf_counter()
     ctx = prepare_interruptibly(scene, settings, progress)
     cam = ctx.camera
-    film = Film(cam.width, cam.height)
+    adaptive = _Adaptive(settings, cam.width * cam.height)
+    film = Film(cam.width, cam.height, settings.aovs, adaptive.params is not None, settings.passes)
     threads = settings.threads or os.cpu_count() or 1
     spp_pass = max(1, min(settings.samples_per_pass, settings.samples))
-    n_passes = -(-settings.samples // spp_pass)
-    batches = _batches(cam.width * cam.height, spp_pass, settings, threads)
     stats = {"samples": 0, "samples_total": settings.samples, "prepare_seconds": time.perf_counter() - t_start}
     t_trace = time.perf_counter()
+    done, checked = 0, 0
     image = None  # the last pass's image: the film does not change after it
     with _AbandonablePool(threads, film) as pool:
-        for pass_index in range(n_passes):
-            spp = min(spp_pass, settings.samples - pass_index * spp_pass)
-            jobs = [pool.submit(_run_batch, ctx, pool.film, lo, hi, spp, settings.seed, pass_index)
-                    for lo, hi in batches]
+        while done < settings.samples and len(adaptive.active):
+            spp = min(spp_pass, settings.samples - done)
+            first = settings.sample_start + done
+            jobs = [pool.submit(_run_batch, ctx, pool.film, pixels, spp, first)
+                    for pixels in _batches(adaptive.active, spp, settings, threads)]
             cancelled = _wait(jobs, progress)
-            stats.update(_stats(ctx, film, stats, spp, t_trace, settings))
+            paths = spp * len(adaptive.active)
+            done += spp
+            stats.update(_stats(ctx, stats, done, paths, t_trace, settings))
+            checked = adaptive.update(film, done, checked)
+            stats["active_pixels"] = len(adaptive.active)
             if cancelled:
                 pool.abandon()  # batches still running finish unseen
                 # Part of a pass was traced: pixels carry unequal counts, each
@@ -153,7 +206,8 @@ def render(scene, settings=None, progress=None):
                 break
     if image is None:
         image = film.image(settings.transparent)
-    return RenderResult(film, image, stats["samples"], stats, warnings_for(ctx))
+    return RenderResult(film, image, stats["samples"], stats, warnings_for(ctx),
+                        film.pass_images(ctx.pass_config), pass_events.metadata(ctx.pass_config, settings.passes))
 
 
 def _wait(jobs, progress, poll=0.1):
@@ -200,8 +254,7 @@ class _GatedFilm:
         return getattr(self._film, name)
 
     def new_tile(self, lo, hi):
-        make = getattr(self._film, "new_tile", None)
-        return _GatedTile(make(lo, hi) if make else Tile(lo, hi), self)
+        return _GatedTile(self._film.new_tile(lo, hi), self)
 
     def merge(self, tile):
         with self._lock:
@@ -260,25 +313,25 @@ def _stop_requested(progress):
     return progress is not None and hasattr(progress, "should_stop") and bool(progress.should_stop())
 
 
-def _run_batch(ctx, film, lo, hi, spp, seed, pass_index):
-    rng = np.random.default_rng([seed, pass_index, lo])
-    tile = film.new_tile(lo, hi)
-    pix = np.repeat(np.arange(lo, hi), spp)
-    trace_batch(ctx, pix, rng, tile)
+def _run_batch(ctx, film, pixels, spp, first):
+    """Samples [first, first + spp) of each pixel in ``pixels`` (sorted)."""
+    tile = film.new_tile(int(pixels[0]), int(pixels[-1]) + 1)
+    pix = np.repeat(pixels, spp)
+    sample = np.tile(np.arange(first, first + spp, dtype=np.uint32), len(pixels))
+    trace_batch(ctx, pix, sample, tile)
     film.merge(tile)
 
 
-def _stats(ctx, film, stats, spp, t_trace, settings):
+def _stats(ctx, stats, done, paths, t_trace, settings):
     elapsed = time.perf_counter() - t_trace
-    done = stats["samples"] + spp
     totals = ctx.accel.totals()
-    npix = film.width * film.height
     left = elapsed / done * (settings.samples - done) if done else 0.0
+    paths_total = stats.get("paths", 0) + paths
     return {
         "samples": done,
         "seconds": elapsed,
-        "paths": done * npix,
-        "paths_per_second": done * npix / max(elapsed, 1e-9),
+        "paths": paths_total,
+        "paths_per_second": paths_total / max(elapsed, 1e-9),
         "rays": totals["rays"],
         "rays_per_second": totals["rays"] / max(elapsed, 1e-9),
         "embree_seconds": totals["seconds"],

@@ -79,13 +79,18 @@ def export_scene(depsgraph, camera_override=None, should_stop=None):
     return Export(result, warnings, time.perf_counter() - start, triangles)
 
 
+# Material, world and light previews stop after this many bounces: they must
+# feel interactive, and a sphere on a floor shows little past the fourth.
+PREVIEW_MAX_BOUNCES = 4
+
+
 def render_settings(scene, is_preview=False):
     """engine.scene.RenderSettings from the scene's Ember and Blender settings."""
     from .. import backend
     settings = scene.ember
     return backend.scene_module().RenderSettings(
         samples=settings.preview_samples if is_preview else settings.samples,
-        max_bounces=settings.max_bounces,
+        max_bounces=min(settings.max_bounces, PREVIEW_MAX_BOUNCES) if is_preview else settings.max_bounces,
         transparent_max_bounces=settings.transparent_max_bounces,
         seed=settings.seed,
         light_selection=settings.light_selection.lower(),
@@ -102,4 +107,7 @@ def render_settings(scene, is_preview=False):
         # ~0.3 s, so Esc lands within a second, and the path state near 100 MB,
         # at the same speed as 2^18 (measured on 2 cores).
         max_paths=MAX_PATHS,
+        sampling_pattern=settings.sampling_pattern.lower(),
+        adaptive_threshold=settings.adaptive_threshold if settings.use_adaptive_sampling else 0.0,
+        adaptive_min_samples=settings.adaptive_min_samples,
     )
