@@ -84,7 +84,7 @@ def _translate(light, matrix, name):
     if light.type == 'SUN':
         return scene.SunLight(
             name=name, direction=_direction(matrix), strength=_intensity(light, light.energy),
-            angle=float(light.angle))
+            angle=min(float(light.angle), math.pi))  # 180 degrees in float32 is above pi
     if light.type == 'AREA':
         square = light.shape in ('SQUARE', 'DISK')
         energy = light.energy * (LEGACY_AREA_SCALE if LEGACY_LIGHT_UNITS else 1.0)

@@ -442,7 +442,7 @@ def many_instances(scene, rng, folder, count=10 ** 6):
 
 
 def some_instances(scene, rng, folder):
-    return many_instances(scene, rng, folder, count=10 ** 4)
+    return many_instances(scene, rng, folder, count=2500)
 
 
 def more_instances(scene, rng, folder):
