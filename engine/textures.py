@@ -57,7 +57,22 @@ def prepare_texels(image):
     """(H, W, 4) float32 RGBA, row 0 at the BOTTOM, in the space Cycles
     filters in: sRGB-encoded for srgb_filter images, alpha associated for
     straight-alpha colour images.  One float32 copy of the image and no
-    full-size temporaries (a 16k x 16k texture is 4 GiB as float32 RGBA)."""
+    full-size temporaries (a 16k x 16k texture is 4 GiB as float32 RGBA).
+    Kept on the image (read-only) so that every user - the shader compiler,
+    value ranges, later renders of the same scene - shares one copy."""
+    cached = getattr(image, "_texels", None)
+    if cached is not None and cached[0] is image.pixels:
+        return cached[1]
+    rgba = _convert_texels(image)
+    rgba.flags.writeable = False
+    try:
+        image._texels = (image.pixels, rgba)
+    except AttributeError:  # an image type without a __dict__: no sharing
+        pass
+    return rgba
+
+
+def _convert_texels(image):
     px = np.asarray(image.pixels)
     if px.ndim == 2:
         px = px[..., None]
