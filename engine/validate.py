@@ -77,6 +77,41 @@ def validate_instance(inst, index, n_meshes, n_materials):
                              f"but the scene has {n_materials}")
 
 
+def validate_instances(instances, n_meshes, n_materials):
+    """validate_instance for every instance, vectorized: a million instances
+    (particles, geometry nodes) took ~40 s one by one.  Only an instance that
+    fails a check is looked at alone, for its message."""
+    if len(instances) < 64:
+        for i, inst in enumerate(instances):
+            validate_instance(inst, i, n_meshes, n_materials)
+        return
+    bad = _first_bad_instance(instances, n_meshes, n_materials)
+    if bad is not None:
+        validate_instance(instances[bad], bad, n_meshes, n_materials)
+
+
+def _first_bad_instance(instances, n_meshes, n_materials):
+    """Index of the first instance that may fail validate_instance, or None."""
+    meshes = np.fromiter((inst.mesh for inst in instances), np.int64, len(instances))
+    suspects = [np.flatnonzero((meshes < 0) | (meshes >= n_meshes))]
+    try:
+        matrices = np.array([inst.matrix for inst in instances], dtype=np.float64)
+    except (ValueError, TypeError):
+        matrices = None
+    if matrices is None or matrices.shape != (len(instances), 4, 4):
+        suspects.append(np.arange(len(instances)))  # a wrong shape somewhere: check one by one
+    else:
+        suspects.append(np.flatnonzero(~np.isfinite(matrices).all(axis=(1, 2))))
+    slot_sets = {}
+    for i, inst in enumerate(instances):
+        slot_sets.setdefault(tuple(inst.materials), i)
+    for slots, i in slot_sets.items():
+        if any(not -1 <= mat < n_materials for mat in slots):
+            suspects.append(np.array([i]))
+    found = np.concatenate(suspects)
+    return int(found.min()) if found.size else None
+
+
 def _rgb(value, what):
     arr = np.asarray(value, dtype=np.float64)
     if arr.shape != (3,):
@@ -243,8 +278,7 @@ def _validate_passes(s):
 def validate_scene(scene):
     for i, mesh in enumerate(scene.meshes):
         validate_mesh(mesh, i)
-    for i, inst in enumerate(scene.instances):
-        validate_instance(inst, i, len(scene.meshes), len(scene.materials))
+    validate_instances(scene.instances, len(scene.meshes), len(scene.materials))
     for i, mat in enumerate(scene.materials):
         validate_material(mat, i)
     for i, light in enumerate(scene.lights):
