@@ -87,6 +87,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             info['traceback'] = traceback.format_exc()
             print(info['traceback'])
             self.report({'ERROR'}, "Ember: " + message)
+            self.update_stats("", "Ember: " + message)  # the status bar says why the image is empty
         info['seconds'] = time.perf_counter() - info['started']
         info['cpu_seconds'] = time.process_time() - info['cpu_started']
 
