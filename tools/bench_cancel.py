@@ -93,6 +93,7 @@ def render(self, depsgraph):
         return real_render(self, depsgraph)
     finally:
         event('render_end')
+        LOG['cpu_end'] = time.process_time()  # all threads of this Blender
         LOG['log'] = {k: v for k, v in eng.RENDER_LOG[-1].items() if k in ('error', 'samples', 'cancelled', 'passes')}
         with open(PATH, 'w') as f:
             json.dump(LOG, f)
@@ -148,7 +149,7 @@ def run_once(scripts, delay, folder, triangles, samples, scene, phase=None, time
            '-o', os.path.join(folder, 'frame_####'), '-F', 'PNG', '-f', '1']
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     started = time.time()
-    sent = None
+    sent = cpu_sent = None
     try:
         if delay is not None:
             # Count the delay from the moment render() (or the phase) starts: the probe marks it.
@@ -160,6 +161,7 @@ def run_once(scripts, delay, folder, triangles, samples, scene, phase=None, time
             time.sleep(delay)
             sent = time.time()
             proc.send_signal(signal.SIGINT)
+            cpu_sent = process_cpu_seconds(proc.pid)
         rest, _ = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
         proc.kill()
@@ -172,7 +174,18 @@ def run_once(scripts, delay, folder, triangles, samples, scene, phase=None, time
         log = json.load(f)
     row = summarize(log, delay, sent, exited, proc.returncode)
     row['phase_requested'] = phase
+    if cpu_sent is not None and log.get('cpu_end') is not None:
+        # CPU seconds Blender spent between the signal and render() returning:
+        # what the latency would be on idle cores (wall time grows with load).
+        row['cpu_latency_s'] = log['cpu_end'] - cpu_sent
     return row
+
+
+def process_cpu_seconds(pid):
+    """User + system CPU time of a process so far (all its threads)."""
+    with open(f'/proc/{pid}/stat') as f:
+        fields = f.read().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
 def phase_at(events, moment):
@@ -236,6 +249,9 @@ def report(rows, triangles):
         if r.get('latency_s') is not None:
             by_phase.setdefault(r['phase'], []).append(r['latency_s'])
     parts = ", ".join(f"{phase} max {max(v):.2f} s (n={len(v)})" for phase, v in sorted(by_phase.items()))
+    cpu = [r['cpu_latency_s'] for r in rows if r.get('cpu_latency_s') is not None]
+    if cpu:
+        parts += f"; CPU seconds from signal to return: max {max(cpu):.2f}"
     return (f"cancel latency at 1920x1080 with {triangles} triangles in Blender's binary: "
             f"max {max(latencies):.2f} s over {len(latencies)} cancels; {parts}")
 
