@@ -57,6 +57,9 @@ def run_blender(job, key, frames, out_pattern, shard=None):
     env = dict(os.environ, **CHILD_ENV, **job.extra_env)
     if not job.blender:
         env['PYTHONPATH'] = ROOT
+        # bpy's user folder inside the scratch folder: gone with it, also
+        # when the task is killed.
+        env.setdefault('BLENDER_USER_RESOURCES', os.path.join(os.path.dirname(out_pattern), 'user'))
     log_path = _state_path(job, 'logs', f"{key}.log")
     running = _state_path(job, 'running', f"{key}.{socket.gethostname()}.{os.getpid()}.json")
     with open(log_path, 'w') as log:
