@@ -26,10 +26,18 @@ if [ ! -x build/venv-bpy42/bin/python ] || ! build/venv-bpy42/bin/python -c 'imp
     build/venv-bpy42/bin/pip install -q 'bpy==4.2.23' 'numpy==1.26.4' pytest
 fi
 
+# The Rendered viewport test runs a real Blender window under Xvfb.
+if ! command -v xvfb-run >/dev/null 2>&1 || ! command -v xauth >/dev/null 2>&1; then
+    if [ "$(id -u)" = 0 ]; then SUDO=; else SUDO=sudo; fi
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq xvfb xauth >/dev/null
+fi
+
 .venv/bin/python - <<'PY'
 import sys
 sys.path.insert(0, 'tools')
 import build_zip
 build_zip.fetch_wheels(build_zip.needed_wheels(), 'build/wheels')
+build_zip.fetch_oidn_wheel('build/wheels')
 print("wheels ready in build/wheels")
 PY
