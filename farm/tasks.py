@@ -22,9 +22,8 @@ from .commands import ROOT, render_command
 from .merge import merge_to_image
 
 # One render owns the machine's cores through Ember's own thread pool:
-# keep BLAS and OpenMP pools in the child from multiplying it.
-CHILD_ENV = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1',
-             'NUMBA_NUM_THREADS': '1'}
+# keep BLAS pools in the child from multiplying it.
+CHILD_ENV = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1'}
 THREADS_ENV = 'EMBER_FARM_RENDER_THREADS'
 LOG_TAIL = 3000
 
