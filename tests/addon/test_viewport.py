@@ -377,3 +377,34 @@ def test_session_restarts_only_when_the_picture_changes(cornell, needs_engine):
     finally:
         bpy.app.handlers.depsgraph_update_post.remove(handler)
         session.close()
+
+
+def test_user_orthographic_view_clips_behind_the_view_point():
+    """Blender's user ortho views clip from behind the view point (negative
+    near); the camera moves back instead and sees the same rays."""
+    near, far, half_w, half_h = -50.0, 50.0, 4.0, 2.25
+    window = np.array([[1 / half_w, 0, 0, 0], [0, 1 / half_h, 0, 0],
+                       [0, 0, -2 / (far - near), -(far + near) / (far - near)], [0, 0, 0, 1]])
+    fields = viewport.frustum(window, np.eye(4))
+    assert fields['kind'] == 'ORTHO' and fields['clip_start'] == 0.0
+    assert np.isclose(fields['clip_end'], far - near) and np.isclose(fields['ortho_scale'], 2 * half_w)
+    assert np.allclose(fields['matrix'][:3, 3], [0, 0, -near])  # moved back along +Z by 50
+
+
+def test_viewport_denoises_when_its_samples_are_done(cornell, needs_engine):
+    scene = cornell
+    exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
+    engine_scene = dataclasses.replace(exported.scene, camera=dataclasses.replace(
+        exported.scene.camera, resolution=(64, 64)))
+    settings = dataclasses.replace(scene_export.render_settings(scene), samples=2)
+    thread = viewport.RenderThread()
+    try:
+        job = thread.submit(viewport.Job(engine_scene, settings, denoise=True))
+        deadline = time.perf_counter() + 60
+        while thread.finished_job != job and thread.error is None and time.perf_counter() < deadline:
+            time.sleep(0.01)
+        assert thread.error is None and thread.status.endswith('(denoised)'), (thread.error, thread.status)
+        rough = float(np.abs(np.diff(thread.image[..., :3], axis=1)).mean())
+        assert rough < 0.05, f"the final viewport image is not denoised (pixel-to-pixel {rough:.3f})"
+    finally:
+        thread.close()
