@@ -21,7 +21,7 @@ import pytest
 from addon import denoise
 from addon import engine as ember_engine
 from addon.export import scene as scene_export
-from ember_testlib import ROOT, SCENES_DIR, load_exr, require, setup_ember, small_resolution
+from ember_testlib import ROOT, SCENES_DIR, require, setup_ember, small_resolution
 
 BLENDER = shutil.which('blender') or '/usr/bin/blender'
 BPY42_PYTHON = os.path.join(ROOT, 'build', 'venv-bpy42', 'bin', 'python')
