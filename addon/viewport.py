@@ -545,6 +545,7 @@ class ViewportSession:
             if self.closed:
                 return None
             try:
+                self.engine.is_preview  # noqa: B018 - raises once Blender freed the engine
                 if (self.thread.image_generation != self.drawn_generation
                         or self.pending_size is not None or self.thread.busy):
                     self.engine.tag_redraw()

@@ -408,3 +408,10 @@ def test_viewport_denoises_when_its_samples_are_done(cornell, needs_engine):
         assert rough < 0.05, f"the final viewport image is not denoised (pixel-to-pixel {rough:.3f})"
     finally:
         thread.close()
+
+
+def test_leaving_rendered_shading_stops_the_render_thread(gui_run):
+    result, _ = gui_run
+    assert result['threads_before_leaving'] >= 1
+    assert result['render_threads_left'] == 0
+    print(f"render thread gone {result['cleanup_seconds']:.2f} s after leaving Rendered shading")
