@@ -12,7 +12,8 @@ import traceback
 
 import bpy
 
-from . import backend, output
+from . import backend, output, shards
+from . import passes as render_passes
 from .export import camera as camera_export
 from .export import scene as scene_export
 
@@ -67,10 +68,8 @@ class EmberRenderEngine(bpy.types.RenderEngine):
 
     def update_render_passes(self, scene=None, renderlayer=None):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", 'COLOR')
-        if renderlayer.use_pass_z:
-            self.register_pass(scene, renderlayer, "Depth", 1, "Z", 'VALUE')
-        if renderlayer.use_pass_normal:
-            self.register_pass(scene, renderlayer, "Normal", 3, "XYZ", 'VECTOR')
+        # Depth, Normal and the other Cycles-named passes: addon/passes.py.
+        render_passes.register_passes(self, scene, renderlayer)
         if scene.ember.use_denoising:
             self.register_pass(scene, renderlayer, "Noisy Image", 4, "RGBA", 'COLOR')
 
@@ -101,20 +100,27 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             for warning in exported.warnings:
                 self.report({'WARNING'}, "Ember: " + warning)
         settings = scene_export.render_settings(scene, self.is_preview)
+        if not self.is_preview:
+            settings = _with_passes(settings, scene, depsgraph.view_layer)
         _, _, width, height = camera_export.border_window(scene.render)
-        render = backend.render_function()
+        render = shards.wrap(backend.render_function(), scene, depsgraph.view_layer.name, self.is_preview)
         if self.test_break():
             return
+        if not self.is_preview:
+            render_passes.add_result_passes(self, depsgraph.view_layer)
         writer = output.ResultWriter(self, width, height, depsgraph.view_layer.name)
         progress = output.Progress(self, writer, settings.samples, info)
         try:
             exported.scene.validate()
             result = render(exported.scene, settings, progress)
             # A stopped render returns its partial image: write it either way.
-            image, extra = result.image, _extra_passes(result)
+            image = result.image
+            extra = _extra_passes(result, depsgraph.view_layer, settings.samples)
             if scene.ember.use_denoising and not self.is_preview:
                 image, extra = self._denoised(result, extra, info)
             writer.write(image, extra)
+            writer.add_metadata(render_passes.crypto_metadata(
+                depsgraph.view_layer, getattr(result, 'pass_metadata', None) or {}))
         finally:
             writer.finish()
         info.update(samples=getattr(result, 'samples', progress.samples_done),
@@ -148,8 +154,19 @@ class EmberRenderEngine(bpy.types.RenderEngine):
         return image, dict(extra, **{'Noisy Image': result.image})
 
 
-def _extra_passes(result):
-    return {'Depth': getattr(result, 'depth', None), 'Normal': getattr(result, 'normal', None)}
+def _extra_passes(result, view_layer, samples):
+    """{Blender pass name: image} (the engine's Cycles-named passes)."""
+    return render_passes.blender_images(view_layer, getattr(result, 'passes', None) or {}, samples)
+
+
+def _with_passes(settings, scene, view_layer):
+    """The render settings with the passes this view layer asks for."""
+    import dataclasses
+    names = render_passes.engine_passes(view_layer)
+    if not names or not hasattr(settings, 'passes'):
+        return settings
+    config = render_passes.pass_config(scene, view_layer, backend.load('passes').PassConfig)
+    return dataclasses.replace(settings, passes=names, pass_config=config)
 
 
 def _message(err):

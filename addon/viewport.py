@@ -469,8 +469,9 @@ class ViewportSession:
         """Render settings, pause and denoise: read at every update and draw
         (a setting changed in a panel need not come with a depsgraph update)."""
         settings = scene_export.render_settings(scene, is_preview=False)
-        self.settings = dataclasses.replace(settings, samples=scene.ember.viewport_samples,
-                                            time_limit=0.0)
+        self.settings = dataclasses.replace(
+            settings, samples=scene.ember.viewport_samples, time_limit=0.0,
+            aovs=("normal", "albedo") if scene.ember.use_preview_denoising else ())
         self.denoise = scene.ember.use_preview_denoising
         self.paused = scene.ember.preview_pause
 

@@ -16,6 +16,7 @@ import threading
 
 import numpy as np
 
+from . import passes as extra_passes
 from .sampler import is_class_a
 
 AOV_CHANNELS = {"depth": 1, "normal": 3, "albedo": 3}
@@ -25,8 +26,9 @@ STATE_VERSION = 1
 class Tile:
     """float64 sums for the pixels [lo, hi), filled by one batch."""
 
-    def __init__(self, lo, hi, aovs=tuple(AOV_CHANNELS), aux=False):
+    def __init__(self, lo, hi, aovs=tuple(AOV_CHANNELS), aux=False, passes=()):
         self.lo, self.hi = lo, hi
+        self.extra = extra_passes.Sums(passes, lo, hi) if passes else None
         n = hi - lo
         self.rgb = np.zeros((n, 3))
         self.rgb2 = np.zeros((n, 3))
@@ -77,11 +79,13 @@ class Tile:
 class Film:
     """Per-pixel sample statistics of a whole frame (row 0 at the top)."""
 
-    def __init__(self, width, height, aovs=tuple(AOV_CHANNELS), adaptive=False):
+    def __init__(self, width, height, aovs=tuple(AOV_CHANNELS), adaptive=False, passes=()):
         unknown = set(aovs) - set(AOV_CHANNELS)
         if unknown:
             raise ValueError(f"unknown AOVs {sorted(unknown)}; known: {sorted(AOV_CHANNELS)}")
         self.width, self.height = width, height
+        self.passes = tuple(passes)   # named extra passes, see the block at the end
+        self.extra = extra_passes.Sums(self.passes, 0, width * height) if self.passes else None
         n = width * height
         self.count = np.zeros(n, np.float32)
         self.mean = np.zeros((n, 3), np.float32)
@@ -95,7 +99,7 @@ class Film:
     # -- accumulation ------------------------------------------------------
 
     def new_tile(self, lo, hi):
-        return Tile(lo, hi, tuple(self.aovs), self.aux is not None)
+        return Tile(lo, hi, tuple(self.aovs), self.aux is not None, self.passes)
 
     def merge(self, tile):
         tile.flush()
@@ -111,6 +115,8 @@ class Film:
                 acc[s] += tile.aovs[name]
             if self.aux is not None:
                 self.aux[s] += tile.aux
+            if self.extra is not None and tile.extra is not None:
+                self.extra.merge(tile.extra, tile.lo)
 
     def _combine(self, s, nb, mean_b, m2_b):
         """Chan et al.'s pairwise update of (count, mean, M2)."""
@@ -214,3 +220,30 @@ class Film:
                 acc += state["aov_" + name]
             if self.aux is not None and "aux" in state:
                 self.aux += state["aux"]
+
+
+# ----------------------------------------------------------------------------
+# Named extra passes (engine/passes.py): Tile.add_pass collects, Film.pass_images
+# hands out the pictures.  Not part of state(): farm shards carry no passes yet.
+
+def _tile_add_pass(self, name, pix, values, rank=None):
+    """Add per-sample values of the named pass (ignored when not requested)."""
+    if self.extra is not None:
+        self.extra.add(name, pix, values, rank)
+
+
+def _tile_wants(self, name):
+    return self.extra is not None and self.extra.wants(name)
+
+
+def _film_pass_images(self, config=None):
+    """{name: (H, W, C) float32} for every requested pass."""
+    if not self.passes:
+        return {}
+    return extra_passes.images(self.extra, self.count, self.width, self.height, self.passes,
+                               film=self, config=config)
+
+
+Tile.add_pass = _tile_add_pass
+Tile.wants = _tile_wants
+Film.pass_images = _film_pass_images

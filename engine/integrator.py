@@ -23,7 +23,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from . import bsdf
+from . import bsdf, pass_events
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .lights import POINT, SUN
 from .sampler import BSDF, CAMERA, KIND, LIGHT, emitter_set, vertex_set
@@ -83,6 +83,7 @@ class Paths:
     # sample index, dimension), whatever the batching.
     pseed: np.ndarray
     sample: np.ndarray
+    aux: np.ndarray       # (N, k) per-path state of the extra passes (k = 0 without)
 
     def take(self, keep):
         return Paths(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
@@ -120,7 +121,9 @@ def trace_batch(ctx, pix, sample, tile):
     o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3])
     paths = Paths(pix, o, d, tmax, np.ones((n, 3)), np.zeros((n, 3)),
                   np.ones(n), np.ones(n, bool), o, np.zeros((n, 3)), np.full(n, VIS_CAMERA, np.uint8),
-                  o, np.zeros(n, np.int32), np.zeros(n, np.int32), pseed, sample)
+                  o, np.zeros(n, np.int32), np.zeros(n, np.int32), pseed, sample,
+                  np.zeros((n, pass_events.aux_width(ctx.settings)), np.float32))
+    pass_events.start(ctx, paths, tile)
     # Every step raises a live path's bounce or its transparent bounce
     # count, both bounded: max_bounces + 1 vertices scatter, one more only
     # collects emission, and transparent passes end at transparent_limit.
@@ -160,6 +163,7 @@ def _bounce(ctx, paths, depth, tile):
         i = np.nonzero(hit_light)[0]
         w = _mis_hit(ctx, paths, i, emitter[i], lpdf[i])
         paths.L[i] += paths.beta[i] * lLe[i] * w[:, None]
+        pass_events.emitter(ctx, paths, i, paths.beta[i] * lLe[i], w, tile)
     miss = (prim < 0) & ~hit_light
     if miss.any():
         _escaped(ctx, paths, np.nonzero(miss)[0], tile)
@@ -178,7 +182,7 @@ def _bounce(ctx, paths, depth, tile):
         emission = ctx.materials.textures.emission_at(hit.mat, hit.uv, emission)
     em = np.nonzero(np.any(emission > 0, axis=1))[0]
     if len(em):
-        _emission_hit(ctx, paths, em, hit, emission[em])
+        _emission_hit(ctx, paths, em, hit, emission[em], tile)
 
     last = paths.bounce > s.max_bounces
     if ctx.transparent_shadows:
@@ -205,9 +209,11 @@ def _bounce(ctx, paths, depth, tile):
     # by light sampling (every emitter) and BSDF sampling.
     w = bsdf.weights(lobes, wo_l)
     lobes_wo = (bsdf.selection(lobes, wo_l, w), w)
-    _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth)
+    pass_events.vertex(ctx, paths, hit, lobes, w, tt, bb, depth, tile)
+    _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth, tile)
     ray = paths.ray
     alive, through = _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth)
+    pass_events.after_scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, through, tile)
     # For the light tree's MIS pdf; a transparent pass keeps the vertex.
     paths.prev_p = _unless(through, paths.prev_p, hit.p)
     paths.prev_n = _unless(through, paths.prev_n, hit.ng)
@@ -303,13 +309,17 @@ def _escaped(ctx, paths, i, tile):
         emitter, Le, pdf = env
         w = _mis_hit(ctx, paths, sky, np.full(len(sky), emitter), pdf)
         paths.L[sky] += paths.beta[sky] * Le * w[:, None]
+        pass_events.emitter(ctx, paths, sky, paths.beta[sky] * Le, w, tile, world=True)
     else:
         paths.L[sky] += paths.beta[sky] * ctx.world
+        pass_events.emitter(ctx, paths, sky, paths.beta[sky] * ctx.world, np.ones(len(sky)), tile,
+                            world=True, bsdf_only=True)
     for mask, emitter, Le, pdf in ctx.lights.sun_hits(paths.d[i], paths.ray[i] if ctx.track_rays else None):
         j = i[mask]
         if len(j):
             w = _mis_hit(ctx, paths, j, np.full(len(j), emitter), np.full(len(j), pdf))
             paths.L[j] += paths.beta[j] * Le * w[:, None]
+            pass_events.emitter(ctx, paths, j, paths.beta[j] * Le, w, tile)
 
 
 def _film_alpha_through(paths, i, tile):
@@ -363,7 +373,7 @@ def _hit_uv(tr, prim, bu, bv):
     return (1.0 - bu - bv)[:, None] * c[:, 0] + bu[:, None] * c[:, 1] + bv[:, None] * c[:, 2]
 
 
-def _emission_hit(ctx, paths, em, hit, Le):
+def _emission_hit(ctx, paths, em, hit, Le, tile=None):
     s = ctx.settings
     if s.strategy == "mis":
         emitter = ctx.lights.emitter_of_triangle(hit.mat[em])
@@ -372,6 +382,7 @@ def _emission_hit(ctx, paths, em, hit, Le):
     else:
         w = _mis_hit(ctx, paths, em, None, None)
     paths.L[em] += paths.beta[em] * Le * w[:, None]
+    pass_events.emitter(ctx, paths, em, paths.beta[em] * Le, w, tile)
 
 
 def _nee_emitters(ctx):
@@ -388,7 +399,7 @@ def _uniforms(ctx, paths, dim_set):
     return ctx.sampler.get(paths.pseed, paths.sample, dim_set)
 
 
-def _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth):
+def _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth, tile=None):
     lt = ctx.lights
     n = len(paths.pix)
     if lt.count == 0 or n == 0:
@@ -397,14 +408,14 @@ def _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth):
     if mode == "select":
         u = _uniforms(ctx, paths, vertex_set(depth, LIGHT))
         e, p_sel = lt.select(u[:, 0], hit.p, hit.ng)
-        _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u[:, 1:])
+        _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u[:, 1:], tile)
         return
     for e in emitters:
         u = _uniforms(ctx, paths, emitter_set(depth, e))[:, :3]
-        _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, np.full(n, e), np.ones(n), u)
+        _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, np.full(n, e), np.ones(n), u, tile)
 
 
-def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u):
+def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u, tile=None):
     s = ctx.settings
     ls = ctx.lights.sample(e, hit.p, u[:, 0], u[:, 1], u[:, 2])
     wi_l = to_local(ls.wi, tt, bb, hit.ns)
@@ -445,11 +456,16 @@ def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u):
     shorten = np.where(on, 10.0 * eps, 0.0)
     tmax = np.where(np.isfinite(dist), dist * (1.0 - 1e-6) - shorten, 1e37)
     if ctx.transparent_shadows:
-        paths.L[live] += contrib[live] * _transmittance(ctx, origin, wi, tmax, e[live], paths.tbounce[live])
-        return
-    blocked = _occluded(ctx, origin, wi, tmax, e[live])
-    free = live[~blocked]
-    paths.L[free] += contrib[free]
+        added = contrib[live] * _transmittance(ctx, origin, wi, tmax, e[live], paths.tbounce[live])
+        paths.L[live] += added
+        free = live
+    else:
+        free = live[~_occluded(ctx, origin, wi, tmax, e[live])]
+        added = contrib[free]
+        paths.L[free] += added
+    if pass_events.listening(tile):
+        pass_events.nee(ctx, paths, free, added, w[free], np.broadcast_to(ls.delta, w.shape)[free],
+                        lobes, lobes_wo, wo_l, wi_l[free], f[free], tile)
 
 
 def _orient(hit, lobes):

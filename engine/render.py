@@ -17,6 +17,7 @@ import numpy as np
 from .accel import Accel
 from .bsdf import MaterialTable
 from .camera import CameraModel, PixelFilter
+from . import pass_events
 from .film import Film
 from .geometry import flatten, material_table
 from .integrator import Context, trace_batch
@@ -31,12 +32,16 @@ class RenderResult:
     (per-pixel counts, means and M2; ``film.state()`` is a farm shard) and
     first-hit AOVs and variance computed from the film on demand."""
 
-    def __init__(self, film, image, samples, stats=None, warnings=None):
+    def __init__(self, film, image, samples, stats=None, warnings=None, passes=None, pass_metadata=None):
         self.film = film
         self.image = image          # (H, W, 4) float32, row 0 at the top
         self.samples = samples
         self.stats = stats or {}
         self.warnings = warnings or []
+        # Requested extra passes {name: (H, W, C) float32} and their metadata
+        # (Cryptomatte manifests): engine/passes.py.
+        self.passes = passes or {}
+        self.pass_metadata = pass_metadata or {}
 
     @property
     def depth(self):
@@ -65,7 +70,7 @@ def prepare(scene, settings):
     """Validate and compile a Scene into the read-only Context batches share."""
     scene.validate()
     validate_settings(settings)
-    tris = flatten(scene)
+    tris = flatten(scene, with_instance=bool(settings.passes))
     materials = MaterialTable(material_table(scene))
     lights = LightSet(scene, tris, materials, settings.light_selection,
                       env_compensation=settings.mis_compensation and settings.strategy == "mis")
@@ -77,6 +82,7 @@ def prepare(scene, settings):
     world = np.asarray(scene.world.color, dtype=np.float64)
     ctx = Context(accel, tris, materials, lights, camera, world, settings)
     ctx.sampler = Sampler(settings.seed, settings.sampling_pattern)
+    ctx.pass_config = pass_events.configure(scene, settings)
     return ctx
 
 
@@ -140,7 +146,7 @@ def render(scene, settings=None, progress=None):
     ctx = prepare(scene, settings)
     cam = ctx.camera
     adaptive = _Adaptive(settings, cam.width * cam.height)
-    film = Film(cam.width, cam.height, settings.aovs, adaptive.params is not None)
+    film = Film(cam.width, cam.height, settings.aovs, adaptive.params is not None, settings.passes)
     threads = settings.threads or os.cpu_count() or 1
     spp_pass = max(1, min(settings.samples_per_pass, settings.samples))
     stats = {"samples": 0, "samples_total": settings.samples, "prepare_seconds": time.perf_counter() - t_start}
@@ -166,7 +172,8 @@ def render(scene, settings=None, progress=None):
                 progress.on_pass(film.image(settings.transparent), stats["samples"], dict(stats))
             if cancelled or _should_stop(progress, stats, settings):
                 break
-    return RenderResult(film, film.image(settings.transparent), stats["samples"], stats, warnings_for(ctx))
+    return RenderResult(film, film.image(settings.transparent), stats["samples"], stats, warnings_for(ctx),
+                        film.pass_images(ctx.pass_config), pass_events.metadata(ctx.pass_config, settings.passes))
 
 
 def _wait(jobs, progress, poll=0.2):

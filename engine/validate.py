@@ -210,6 +210,14 @@ def validate_settings(s):
     unknown = set(s.aovs) - {"depth", "normal", "albedo"}
     if unknown:
         raise SceneError(f"settings: unknown AOVs {sorted(unknown)}")
+    _validate_passes(s)
+
+
+def _validate_passes(s):
+    from .passes import unknown
+    bad = unknown(getattr(s, "passes", ()) or ())
+    if bad:
+        raise SceneError(f"settings: unknown render passes {bad}")
 
 
 def validate_scene(scene):

@@ -67,6 +67,7 @@ def renders(registered_addon, tmp_path_factory):
     for name, samples, seed in (('16', 16, 1), ('128', 128, 2), ('reference', 512, 3)):
         settings = scene_export.render_settings(scene)
         settings.samples, settings.seed, settings.samples_per_pass = samples, seed, samples
+        settings.aovs = ("normal", "albedo")   # the denoiser's guides
         out[name] = render(exported.scene, settings)
     folder = tmp_path_factory.mktemp('denoise')
     inputs = folder / 'inputs.npz'
