@@ -26,7 +26,7 @@ from addon.export import scene as scene_export
 from ember_testlib import ROOT, SCENES_DIR, load_exr, require
 
 BLENDER = shutil.which('blender') or '/usr/bin/blender'
-WINDOW = (800, 520)
+WINDOW = (640, 420)
 # Two-sided z-tests over blocks x channels, Sidak-corrected to 1 % overall.
 Z_LIMIT = 3.6
 
