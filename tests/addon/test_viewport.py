@@ -235,6 +235,16 @@ def test_incremental_export(cornell, needs_engine):
         assert len(synced.cache.meshes) == 7, "the replaced mesh must not stay in memory"
         selected = synced.edit(lambda: box.select_set(not box.select_get()))
         assert selected == (False, 0, 0), "selection must not restart the viewport"
+
+        def add_cube():
+            mesh = bpy.data.meshes.new('Extra')
+            mesh.from_pydata([(0, 0, 0), (0.2, 0, 0), (0, 0.2, 0)], [], [(0, 1, 2)])
+            bpy.context.scene.collection.objects.link(bpy.data.objects.new('Extra', mesh))
+        added = synced.edit(add_cube)
+        assert added[:2] == (True, 1) and len(synced.cache.instances) == 8
+        removed = synced.edit(lambda: bpy.data.objects.remove(bpy.data.objects['Extra']))
+        assert removed[:2] == (True, 0) and len(synced.cache.instances) == 7
+        assert len(synced.cache.meshes) == 7, "a removed object's mesh must not stay in memory"
     finally:
         synced.close()
 
