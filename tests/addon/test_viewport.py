@@ -245,6 +245,10 @@ def test_incremental_export(cornell, needs_engine):
         removed = synced.edit(lambda: bpy.data.objects.remove(bpy.data.objects['Extra']))
         assert removed[:2] == (True, 0) and len(synced.cache.instances) == 7
         assert len(synced.cache.meshes) == 7, "a removed object's mesh must not stay in memory"
+        background = next(n for n in bpy.context.scene.world.node_tree.nodes if n.type == 'BACKGROUND')
+        worlds = viewport.STATS['world_exports']
+        lit = synced.edit(lambda: setattr(background.inputs['Strength'], 'default_value', 2.0))
+        assert lit == (True, 0, 0) and viewport.STATS['world_exports'] > worlds
     finally:
         synced.close()
 
