@@ -206,12 +206,15 @@ def _block_test(name, ember, cycles, floor, keep=None):
         dof = dof[blocks]
     level = stats.sidak_alpha(0.01, t.size)
     p = np.array([stats.t_two_sided_p(ti, di) for ti, di in zip(t.ravel(), dof.ravel())])
-    totals = [x.mean(axis=tuple(range(1, x.ndim))) for x in (ember, cycles)]
-    z = (totals[0].mean() - totals[1].mean()) / max(np.sqrt(sum(x.var(ddof=1) / len(x) for x in totals)), 1e-12)
-    print(f"\n{name}: mean {totals[0].mean():.5g} vs Cycles {totals[1].mean():.5g} (z {z:.2f}); "
-          f"max |t| {np.abs(t).max():.2f} over {t.size} block-channels")
+    # Whole-image mean: Welch's t over the seeds' image means (Student's t:
+    # 4 seeds estimate their spread poorly, a normal z would overreach).
+    totals = [x.mean(axis=tuple(range(1, x.ndim)))[:, None] for x in (ember, cycles)]
+    t_all, dof_all, _, _ = stats.welch(*totals)
+    p_all = stats.t_two_sided_p(float(t_all[0]), float(dof_all[0]))
+    print(f"\n{name}: mean {totals[0].mean():.5g} vs Cycles {totals[1].mean():.5g} (t {float(t_all[0]):.2f}, "
+          f"p {p_all:.3g}); max |t| {np.abs(t).max():.2f} over {t.size} block-channels")
     assert (p >= level).all(), f"{name}: {int((p < level).sum())} blocks differ from Cycles"
-    return z
+    return p_all
 
 
 def test_every_pass_cycles_writes_exists(renders):
@@ -222,9 +225,8 @@ def test_every_pass_cycles_writes_exists(renders):
 @pytest.mark.parametrize("name", STATISTICAL)
 def test_sampled_pass_matches_cycles(renders, name):
     ember, cycles = _stack(renders, 'EMBER', name)[..., :3], _stack(renders, 'CYCLES', name)[..., :3]
-    z = _block_test(name, ember, cycles, 1e-5)
-    if np.isfinite(z):
-        assert abs(z) < 3.29, name   # whole-image mean, two-sided 0.1%
+    p = _block_test(name, ember, cycles, 1e-5)
+    assert p >= 0.001, name   # whole-image mean, two-sided
 
 
 @pytest.mark.parametrize("name", CENTRE)
