@@ -85,6 +85,9 @@ def requested(view_layer):
         if _enabled(view_layer, prop):
             for i in range(crypto_layers(view_layer)):
                 out.append((name, f"{name}{i:02d}", 4, "RGBA", 'COLOR'))
+    for group in getattr(view_layer, "lightgroups", ()):
+        name = "Combined_" + group.name
+        out.append((name, name, 3, "RGB", 'COLOR'))
     return out
 
 
@@ -118,9 +121,13 @@ def pass_config(scene, view_layer, config_class):
         kwargs.update(mist_start=float(mist.start), mist_depth=float(mist.depth),
                       mist_falloff=MIST_FALLOFF.get(mist.falloff, 2.0),
                       ao_distance=float(world.light_settings.distance))
+        kwargs.update(world_lightgroup=str(getattr(world, "lightgroup", "") or ""))
     ember = getattr(view_layer, "ember", None)
     first = ember is not None and ember.strategy_passes_vertex == 'FIRST'
-    return config_class(strategy_first_vertex=first,
+    # Light groups by object name (lights and meshes; instances of an object
+    # share its name and group, as in Cycles).
+    groups = {obj.name: obj.lightgroup for obj in scene.objects if getattr(obj, "lightgroup", "")}
+    return config_class(strategy_first_vertex=first, lightgroup_of=groups,
                         crypto_levels=2 * crypto_layers(view_layer), **kwargs)
 
 

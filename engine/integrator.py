@@ -163,7 +163,7 @@ def _bounce(ctx, paths, depth, tile):
         i = np.nonzero(hit_light)[0]
         w = _mis_hit(ctx, paths, i, emitter[i], lpdf[i])
         paths.L[i] += paths.beta[i] * lLe[i] * w[:, None]
-        pass_events.emitter(ctx, paths, i, paths.beta[i] * lLe[i], w, tile)
+        pass_events.emitter(ctx, paths, i, paths.beta[i] * lLe[i], w, tile, emitters=emitter[i])
     miss = (prim < 0) & ~hit_light
     if miss.any():
         _escaped(ctx, paths, np.nonzero(miss)[0], tile)
@@ -309,7 +309,8 @@ def _escaped(ctx, paths, i, tile):
         emitter, Le, pdf = env
         w = _mis_hit(ctx, paths, sky, np.full(len(sky), emitter), pdf)
         paths.L[sky] += paths.beta[sky] * Le * w[:, None]
-        pass_events.emitter(ctx, paths, sky, paths.beta[sky] * Le, w, tile, world=True)
+        pass_events.emitter(ctx, paths, sky, paths.beta[sky] * Le, w, tile, world=True,
+                            emitters=np.full(len(sky), emitter))
     else:
         paths.L[sky] += paths.beta[sky] * ctx.world
         pass_events.emitter(ctx, paths, sky, paths.beta[sky] * ctx.world, np.ones(len(sky)), tile,
@@ -319,7 +320,7 @@ def _escaped(ctx, paths, i, tile):
         if len(j):
             w = _mis_hit(ctx, paths, j, np.full(len(j), emitter), np.full(len(j), pdf))
             paths.L[j] += paths.beta[j] * Le * w[:, None]
-            pass_events.emitter(ctx, paths, j, paths.beta[j] * Le, w, tile)
+            pass_events.emitter(ctx, paths, j, paths.beta[j] * Le, w, tile, emitters=np.full(len(j), emitter))
 
 
 def _film_alpha_through(paths, i, tile):
@@ -382,7 +383,8 @@ def _emission_hit(ctx, paths, em, hit, Le, tile=None):
     else:
         w = _mis_hit(ctx, paths, em, None, None)
     paths.L[em] += paths.beta[em] * Le * w[:, None]
-    pass_events.emitter(ctx, paths, em, paths.beta[em] * Le, w, tile)
+    pass_events.emitter(ctx, paths, em, paths.beta[em] * Le, w, tile,
+                        emitters=ctx.lights.emitter_of_triangle(hit.mat[em]))
 
 
 def _nee_emitters(ctx):
@@ -465,7 +467,7 @@ def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u, ti
         paths.L[free] += added
     if pass_events.listening(tile):
         pass_events.nee(ctx, paths, free, added, w[free], np.broadcast_to(ls.delta, w.shape)[free],
-                        lobes, lobes_wo, wo_l, wi_l[free], f[free], tile)
+                        lobes, lobes_wo, wo_l, wi_l[free], f[free], tile, emitters=e[free])
 
 
 def _orient(hit, lobes):

@@ -22,7 +22,7 @@ them for older Blenders).  How each sum becomes a picture:
 - ONE_MINUS: 1 - mean (Cycles' Mist accumulates (1 - mist) x coverage).
 - Cryptomatte: per pixel the coverage of every id met, ranked (``crypto``).
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -80,10 +80,31 @@ class PassConfig:
     asset_names: tuple = ()
     object_pass_index: tuple = ()
     material_pass_index: tuple = ()
+    # Light groups (Cycles' Combined_<group>): object or light name -> group,
+    # the world's group ("" = none).
+    lightgroup_of: dict = field(default_factory=dict)
+    world_lightgroup: str = ""
+    group_parts: object = None   # filled by pass_events.configure
+
+
+LIGHT_GROUP_PREFIX = "Combined_"
 
 
 def unknown(names):
-    return [n for n in names if n not in ALL_PASSES]
+    return [n for n in names if n not in ALL_PASSES and not is_light_group(n)]
+
+
+def is_light_group(name):
+    return name.startswith(LIGHT_GROUP_PREFIX) and len(name) > len(LIGHT_GROUP_PREFIX)
+
+
+def light_groups(names):
+    """The light-group names among requested passes, in order."""
+    return tuple(n[len(LIGHT_GROUP_PREFIX):] for n in names if is_light_group(n))
+
+
+def _definition(name):
+    return (3, MEAN, None) if is_light_group(name) else DEFS[name]
 
 
 def sums_needed(names):
@@ -91,8 +112,8 @@ def sums_needed(names):
     weight channels), as {name: channels}."""
     need = {}
     for name in names:
-        if name in DEFS:
-            channels, kind, other = DEFS[name]
+        if name in DEFS or is_light_group(name):
+            channels, kind, other = _definition(name)
             need[name] = channels
             if kind == RATIO:
                 need[other] = 1
@@ -202,7 +223,7 @@ def images(sums, count, width, height, names, film=None, config=None):
 
 def _pass_image(sums, name, c):
     arr = sums.arrays[name].astype(np.float64)
-    kind, other = DEFS[name][1], DEFS[name][2]
+    kind, other = _definition(name)[1:]
     if kind == FIRST:
         return arr
     if kind == RATIO:

@@ -17,6 +17,9 @@ with independent seeds.
   (specular for the denoiser: roughness^2 < 0.075) Cycles writes smaller
   normals than Ember (its glass sample weights are not Ember's); that
   difference is known and left out here.
+- Light groups (Combined_key: the area light, Combined_card: the emissive
+  card) by the block test; that groups add up to Combined is tested in
+  tests/engine/test_passes.py.
 - Cryptomatte: Blender's Cryptomatte node, reading Ember's manifest, selects
   the box; its matte is compared with Cycles' by block test.
 """
@@ -33,11 +36,12 @@ from test_other_blenders import legacy_zip  # noqa: F401  (fixture)
 SEEDS, SPP, BOUNCES = 4, 24, 3
 WIDTH, HEIGHT = 32, 24
 BOX, BALL = 2, 3   # object indices
-STATISTICAL = ("Combined", "Mist", "Normal", "UV", "Ambient Occlusion", "Emission", "Environment",
+STATISTICAL = ("Combined", "Combined_key", "Combined_card", "Mist", "Normal", "UV", "Ambient Occlusion", "Emission", "Environment",
                "Diffuse Direct x Color", "Diffuse Indirect x Color", "Glossy Direct x Color",
                "Glossy Indirect x Color", "Transmission Direct x Color", "Transmission Indirect x Color")
 CENTRE = ("Depth", "Position", "Object Index", "Material Index")
 COLOURS = ("Diffuse Color", "Glossy Color", "Transmission Color")
+LIGHT_GROUPS = ("key", "card")   # the area light's and the emissive card's (the world has none)
 CLASSES = ("Diffuse", "Glossy", "Transmission")
 
 
@@ -81,13 +85,16 @@ def _scene():
     _object(mesh.primitive_uv_sphere_add, "Ball", _material("BallMat", 'ShaderNodeBsdfGlass', (0.9, 0.9, 0.9), 3,
                                                              Roughness=0.2), BALL, location=(1.3, -0.6, 1),
             radius=0.9)
-    _object(mesh.primitive_plane_add, "Card", _material("CardMat", 'ShaderNodeEmission', (1.0, 0.8, 0.6), 4,
-                                                        Strength=4.0), 4, size=0.8, location=(0, 2.5, 0.8),
-            rotation=(1.2, 0, 0))
+    card = _object(mesh.primitive_plane_add, "Card", _material("CardMat", 'ShaderNodeEmission', (1.0, 0.8, 0.6),
+                                                               4, Strength=4.0), 4, size=0.8,
+                   location=(0, 2.5, 0.8), rotation=(1.2, 0, 0))
     bpy.ops.object.light_add(type='AREA', location=(1, -1, 5))
     light = bpy.context.active_object
     light.data.energy = 300.0
     light.data.size = 1.5
+    for name in LIGHT_GROUPS:
+        bpy.context.view_layer.lightgroups.add(name=name)
+    light.lightgroup, card.lightgroup = LIGHT_GROUPS
     world = scene.world
     world.use_nodes = True
     background = next(n for n in world.node_tree.nodes if n.type == 'BACKGROUND')
@@ -253,9 +260,11 @@ def test_denoising_pass_matches_cycles_off_glass(renders, name):
 
 def test_light_passes_add_up_to_combined(renders):
     for images in renders['EMBER']:
+        combined = images["Combined"][..., :3]
         total = sum(images[f"{c} {p} x Color"] for c in CLASSES for p in ("Direct", "Indirect"))
         total = total + images["Emission"] + images["Environment"]
-        assert np.abs(total - images["Combined"][..., :3]).max() <= 1e-4 * (1.0 + images["Combined"].max())
+        assert np.abs(total - combined).max() <= 1e-4 * (1.0 + combined.max())
+
 
 
 def test_cryptomatte_node_selects_the_box_as_in_cycles(renders):

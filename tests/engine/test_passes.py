@@ -156,7 +156,7 @@ def test_passes_cost_nothing_when_off_and_do_not_change_the_image():
 
 def test_unknown_pass_is_a_clear_error():
     with pytest.raises(SceneError, match="unknown render passes"):
-        render(cornell_box(8, 8), RenderSettings(samples=1, passes=("Combined_typo",)))
+        render(cornell_box(8, 8), RenderSettings(samples=1, passes=("Normals",)))
 
 
 def test_cryptomatte_ids_and_coverage():
@@ -175,3 +175,21 @@ def test_cryptomatte_ids_and_coverage():
     ids = crypto[..., 0::2][crypto[..., 1::2] > 0]
     assert {i.tobytes() for i in ids} <= names
     assert r.pass_metadata["CryptoObject"]["floor"] == f"{murmur3_32('floor'):08x}"
+
+
+def test_light_groups_add_up_to_combined():
+    """Combined_<group> holds the light of the group's emitters (Cycles'
+    light groups): the Cornell box's light in one group, the emissive
+    block in another; with no other light they add up to Combined."""
+    from engine.scene import Material, Lobe
+    scene = cornell_box(20, 20)
+    glowing = Material("glow", (Lobe("diffuse", (0.5, 0.5, 0.5)),), emission=(2.0, 1.0, 0.5))
+    instances = list(scene.instances)
+    instances[6] = replace(instances[6], materials=[3])
+    scene = replace(scene, materials=list(scene.materials) + [glowing], instances=instances)
+    config = PassConfig(lightgroup_of={"area": "key", "short block": "glow"})
+    r = render(scene, RenderSettings(samples=8, samples_per_pass=8, seed=4, max_bounces=3,
+                                     passes=("Combined_key", "Combined_glow"), pass_config=config))
+    key, glow = r.passes["Combined_key"], r.passes["Combined_glow"]
+    assert key.max() > 0 and glow.max() > 0
+    assert _close(key + glow, r.image[..., :3])
