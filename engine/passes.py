@@ -125,14 +125,17 @@ def sums_needed(names):
 class Sums:
     """Per-pixel sums of named passes over the pixel range [lo, hi)."""
 
-    def __init__(self, names, lo, hi):
+    def __init__(self, names, lo, hi, crypto_levels=None):
+        """crypto_levels: the film's Cryptomatte slots per pixel (a tile,
+        None, keeps its few (pixel, id) pairs compactly instead)."""
         self.lo, self.hi = lo, hi
         self.need = sums_needed(names)
         self.arrays = {name: np.zeros((hi - lo, c), np.float32) for name, c in self.need.items()}
         # FIRST passes: the rank (distance to the pixel centre) of the sample held.
         self.first = {name: np.full(hi - lo, np.inf, np.float32)
                       for name in self.need if name in DEFS and DEFS[name][1] == FIRST}
-        self.crypto = {kind: Coverage() for kind in CRYPTO if kind in names}
+        self.crypto = {kind: Coverage() if crypto_levels is None else Slots(hi - lo, crypto_levels)
+                       for kind in CRYPTO if kind in names}
 
     def wants(self, name):
         return name in self.arrays
@@ -184,9 +187,8 @@ class Sums:
 
 
 class Coverage:
-    """Cryptomatte: per (pixel, id) the number of samples that saw id first,
-    kept as sorted unique keys pixel * 2^32 + id (compact: a pixel holds
-    entries only for the ids it saw)."""
+    """A tile's Cryptomatte samples: per (pixel, id) the number of samples
+    that saw id first, kept as sorted unique keys pixel * 2^32 + id."""
 
     def __init__(self):
         self.keys = np.zeros(0, np.int64)
@@ -204,6 +206,35 @@ class Coverage:
         weights = np.concatenate([self.weights.astype(np.float64), weights])
         self.keys, inverse = np.unique(keys, return_inverse=True)
         self.weights = np.bincount(inverse, weights=weights).astype(np.float32)
+
+
+class Slots:
+    """The film's Cryptomatte accumulator, as Cycles': per pixel ``levels``
+    (id, samples) slots, filled in the order ids arrive; an id arriving at
+    a pixel whose slots are full is dropped (Cycles does the same)."""
+
+    def __init__(self, npix, levels):
+        self.ids = np.full((npix, levels), -1, np.int32)
+        self.weights = np.zeros((npix, levels), np.float32)
+
+    def merge(self, cov, offset):
+        if len(cov.keys) == 0:
+            return
+        pix = (cov.keys >> 32) + offset
+        ids = (cov.keys & 0xffffffff).astype(np.int32)
+        match = self.ids[pix] == ids[:, None]
+        known = match.any(axis=1)
+        rows = np.nonzero(known)[0]
+        self.weights[pix[rows], match[rows].argmax(axis=1)] += cov.weights[rows]
+        new = np.nonzero(~known)[0]
+        if len(new) == 0:
+            return
+        p = pix[new]   # sorted by pixel: the keys are
+        rank = np.arange(len(p)) - np.searchsorted(p, p, side="left")
+        slot = (self.ids[p] >= 0).sum(axis=1) + rank
+        fits = slot < self.ids.shape[1]
+        self.ids[p[fits], slot[fits]] = ids[new][fits]
+        self.weights[p[fits], slot[fits]] = cov.weights[new][fits]
 
 
 def images(sums, count, width, height, names, film=None, config=None):
@@ -301,25 +332,17 @@ def crypto_manifest(config, kind):
     return {n: f"{crypto_hash(n):08x}" for n in sorted(set(crypto_names(config, kind)))}
 
 
-def crypto_image(cov, count, config, kind):
-    """(npix, 4 * levels / 2) float32: per pixel the ids it saw, by
-    decreasing coverage, as (id, coverage) pairs, two per RGBA layer."""
-    levels = config.crypto_levels
-    npix = len(count)
-    out = np.zeros((npix, 2 * levels), np.float32)
-    if len(cov.keys) == 0:
-        return out
+def crypto_image(slots, count, config, kind):
+    """(npix, 2 * levels) float32: per pixel the ids it saw, by decreasing
+    coverage, as (id, coverage) pairs, two per RGBA layer."""
+    levels = slots.ids.shape[1]
     names = crypto_names(config, kind)
     floats = np.array([crypto_hash(n) for n in names] or [0], np.uint32).view(np.float32)
-    pix = (cov.keys >> 32).astype(np.int64)
-    ids = (cov.keys & 0xffffffff).astype(np.int64)
-    frac = cov.weights / np.maximum(count[pix].astype(np.float32), 1.0)
-    order = np.lexsort((-frac, pix))
-    pix, ids, frac = pix[order], ids[order], frac[order]
-    start = np.searchsorted(pix, pix, side="left")
-    rank = np.arange(len(pix)) - start
-    keep = rank < levels
-    pix, ids, frac, rank = pix[keep], ids[keep], frac[keep], rank[keep]
-    out[pix, 2 * rank] = floats[ids]
-    out[pix, 2 * rank + 1] = frac
+    order = np.argsort(-slots.weights, axis=1, kind="stable")
+    ids = np.take_along_axis(slots.ids, order, axis=1)
+    cover = np.take_along_axis(slots.weights, order, axis=1) / np.maximum(count, 1.0)[:, None]
+    out = np.zeros((len(count), 2 * levels), np.float32)
+    used = ids >= 0
+    out[:, 0::2] = np.where(used, floats[np.clip(ids, 0, len(floats) - 1)], 0.0)
+    out[:, 1::2] = np.where(used, cover, 0.0)
     return out

@@ -193,3 +193,20 @@ def test_light_groups_add_up_to_combined():
     key, glow = r.passes["Combined_key"], r.passes["Combined_glow"]
     assert key.max() > 0 and glow.max() > 0
     assert _close(key + glow, r.image[..., :3])
+
+
+def test_cryptomatte_slots_keep_the_first_ids_and_rank_by_coverage():
+    """The film keeps `levels` (id, samples) slots per pixel, as Cycles:
+    ids past the last slot are dropped; the image ranks them by coverage."""
+    from engine.passes import Coverage, Slots, crypto_image
+    slots = Slots(2, 2)
+    for ids, weight in (([0, 1], [1.0, 3.0]), ([1, 2], [2.0, 5.0])):   # pixel 0
+        cov = Coverage()
+        cov.add(np.zeros(2, np.int64), np.array(ids), np.array(weight))
+        slots.merge(cov, 0)
+    assert slots.ids[0].tolist() == [0, 1] and slots.weights[0].tolist() == [1.0, 5.0]
+    config = PassConfig(object_names=("a", "b", "c"))
+    image = crypto_image(slots, np.array([10.0, 10.0]), config, "CryptoObject")
+    assert image[0, 0] == crypto_float("b") and image[0, 1] == pytest.approx(0.5)
+    assert image[0, 2] == crypto_float("a") and image[0, 3] == pytest.approx(0.1)
+    assert (image[1] == 0).all()
