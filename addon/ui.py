@@ -187,6 +187,30 @@ class VIEWLAYER_PT_ember_passes_lightgroups(EmberPassesPanel, bpy.types.Panel):
             layout.prop(world, "lightgroup", text="World")
 
 
+class VIEWLAYER_PT_ember_passes_aovs(EmberPassesPanel, bpy.types.Panel):
+    """Cycles' Shader AOV list (its panel is Cycles-only): one pass per AOV,
+    written by the materials' AOV Output nodes."""
+    bl_label = "Shader AOV"
+    bl_parent_id = 'VIEWLAYER_PT_ember_passes'
+    bl_options = {'DEFAULT_CLOSED'}
+    PROPS = (('layer', 'use_pass_combined', "Combined"),)
+
+    def draw(self, context):
+        layout = self.split_layout()
+        layer = context.view_layer
+        if not hasattr(layer, "aovs") or not hasattr(layout, "template_list"):
+            EmberPassesPanel.draw(self, context)
+            return
+        row = layout.row()
+        row.template_list("UI_UL_list", "ember_aovs", layer, "aovs", layer, "active_aov_index", rows=3)
+        col = row.column(align=True)
+        col.operator("scene.view_layer_add_aov", icon='ADD', text="")
+        col.operator("scene.view_layer_remove_aov", icon='REMOVE', text="")
+        aov = layer.active_aov
+        if aov is not None:
+            layout.prop(aov, "type")
+
+
 class OBJECT_PT_ember_lightgroup(bpy.types.Panel):
     bl_label = "Light Group"
     bl_space_type = 'PROPERTIES'
@@ -236,6 +260,7 @@ classes = (
     VIEWLAYER_PT_ember_passes_light,
     VIEWLAYER_PT_ember_passes_crypto,
     VIEWLAYER_PT_ember_passes_lightgroups,
+    VIEWLAYER_PT_ember_passes_aovs,
     OBJECT_PT_ember_lightgroup,
 )
 

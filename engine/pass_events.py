@@ -29,7 +29,8 @@ import threading
 import numpy as np
 
 from . import bsdf
-from .passes import CRYPTO, LIGHT_CLASSES, STRATEGY, PassConfig, crypto_manifest, light_groups
+from .passes import (AOV_COLOR, CRYPTO, LIGHT_CLASSES, STRATEGY, PassConfig, crypto_manifest, is_aov,
+                     light_groups)
 from .sampling import cosine_hemisphere
 from .vec import dot, luminance, to_local, to_world
 
@@ -55,11 +56,30 @@ def configure(scene, settings):
     return replace(
         cfg,
         group_parts=_group_parts(scene, mats, cfg, settings.passes),
+        aov_tables=_aov_tables(mats, settings.passes),
         object_names=tuple(i.name for i in scene.instances),
         material_names=tuple(m.name for m in mats),
         asset_names=tuple(i.asset or i.name for i in scene.instances),
         object_pass_index=tuple(int(getattr(i, "pass_index", 0)) for i in scene.instances),
         material_pass_index=tuple(int(getattr(m, "pass_index", 0)) for m in mats))
+
+
+def _aov_tables(materials, names):
+    """{pass name: (materials, C) values}: each material's constant AOV
+    output, RGB + 1 for colour AOVs (0 where the material has none)."""
+    tables = {}
+    for name in names:
+        if not is_aov(name):
+            continue
+        aov = name.split(":", 1)[1]
+        colour = name.startswith(AOV_COLOR)
+        table = np.zeros((len(materials), 4 if colour else 1))
+        for i, mat in enumerate(materials):
+            entry = (getattr(mat, "aovs", None) or {}).get(aov)
+            if entry is not None:
+                table[i] = (*entry[0], 1.0) if colour else entry[1]
+        tables[name] = table
+    return tables
 
 
 def _group_parts(scene, materials, cfg, names):
@@ -216,6 +236,8 @@ def first_hit(ctx, paths, hit, lobes, w, tt, bb, tile):
         add("Mist", pix, 1.0 - _mist(ctx, cfg, hit.p))
     inst = ctx.triangles.instance[hit.prim] if ctx.triangles.instance is not None else np.zeros(len(pix), int)
     _colours(lobes, w, dot(hit.wo, hit.ns), pix, tile)
+    for name, table in (cfg.aov_tables or {}).items():
+        add(name, pix, table[hit.mat])
     if tile.extra.crypto:
         _cryptomatte(cfg, inst, hit.mat, pix, tile)
     if tile.wants("Ambient Occlusion"):

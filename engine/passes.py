@@ -85,13 +85,23 @@ class PassConfig:
     lightgroup_of: dict = field(default_factory=dict)
     world_lightgroup: str = ""
     group_parts: object = None   # filled by pass_events.configure
+    aov_tables: object = None    # filled by pass_events.configure
 
 
 LIGHT_GROUP_PREFIX = "Combined_"
 
 
+AOV_COLOR, AOV_VALUE = "AOV Color:", "AOV Value:"
+
+
 def unknown(names):
-    return [n for n in names if n not in ALL_PASSES and not is_light_group(n)]
+    return [n for n in names if n not in ALL_PASSES and not is_light_group(n) and not is_aov(n)]
+
+
+def is_aov(name):
+    """Shader AOV passes: 'AOV Color:<name>' (RGBA, A = the share of samples
+    whose material wrote it, as Cycles) or 'AOV Value:<name>'."""
+    return name.startswith((AOV_COLOR, AOV_VALUE)) and len(name.split(":", 1)[1]) > 0
 
 
 def is_light_group(name):
@@ -104,7 +114,11 @@ def light_groups(names):
 
 
 def _definition(name):
-    return (3, MEAN, None) if is_light_group(name) else DEFS[name]
+    if is_light_group(name):
+        return (3, MEAN, None)
+    if is_aov(name):
+        return (4 if name.startswith(AOV_COLOR) else 1, MEAN, None)
+    return DEFS[name]
 
 
 def sums_needed(names):
@@ -112,7 +126,7 @@ def sums_needed(names):
     weight channels), as {name: channels}."""
     need = {}
     for name in names:
-        if name in DEFS or is_light_group(name):
+        if name in DEFS or is_light_group(name) or is_aov(name):
             channels, kind, other = _definition(name)
             need[name] = channels
             if kind == RATIO:

@@ -146,6 +146,8 @@ class Material:
     # A Bump or NormalMap expression replacing the shading normal, or None.
     normal: Optional["Texture"] = None
     pass_index: int = 0  # Blender's Material Index
+    # Shader AOVs (AOV Output nodes): name -> ((r, g, b), value), constants.
+    aovs: dict = field(default_factory=dict)
 
 
 DEFAULT_MATERIAL = Material("default", (Lobe("diffuse", (0.8, 0.8, 0.8)),))

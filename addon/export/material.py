@@ -470,6 +470,9 @@ class MaterialTable:
             translated, warning = translate(material)
             if getattr(material, 'pass_index', 0) and hasattr(translated, 'pass_index'):
                 translated.pass_index = int(material.pass_index)  # Material Index pass
+            if hasattr(translated, 'aovs'):
+                from .. import passes as render_passes
+                translated.aovs = render_passes.material_aovs(material)  # Shader AOV passes
             self.index_of[key] = len(self.materials)
             self.materials.append(translated)
             if warning:

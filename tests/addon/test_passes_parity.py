@@ -20,6 +20,8 @@ with independent seeds.
 - Light groups (Combined_key: the area light, Combined_card: the emissive
   card) by the block test; that groups add up to Combined is tested in
   tests/engine/test_passes.py.
+- Shader AOVs 'tint' (colour) and 'mask' (value), written by AOV Output
+  nodes, by the block test.
 - Cryptomatte: Blender's Cryptomatte node, reading Ember's manifest, selects
   the box; its matte is compared with Cycles' by block test.
 """
@@ -36,7 +38,7 @@ from test_other_blenders import legacy_zip  # noqa: F401  (fixture)
 SEEDS, SPP, BOUNCES = 4, 24, 3
 WIDTH, HEIGHT = 32, 24
 BOX, BALL = 2, 3   # object indices
-STATISTICAL = ("Combined", "Combined_key", "Combined_card", "Mist", "Normal", "UV", "Ambient Occlusion", "Emission", "Environment",
+STATISTICAL = ("Combined", "Combined_key", "Combined_card", "tint", "mask", "Mist", "Normal", "UV", "Ambient Occlusion", "Emission", "Environment",
                "Diffuse Direct x Color", "Diffuse Indirect x Color", "Glossy Direct x Color",
                "Glossy Indirect x Color", "Transmission Direct x Color", "Transmission Indirect x Color")
 CENTRE = ("Depth", "Position", "Object Index", "Material Index")
@@ -95,6 +97,7 @@ def _scene():
     for name in LIGHT_GROUPS:
         bpy.context.view_layer.lightgroups.add(name=name)
     light.lightgroup, card.lightgroup = LIGHT_GROUPS
+    _shader_aovs(bpy.context.view_layer)
     world = scene.world
     world.use_nodes = True
     background = next(n for n in world.node_tree.nodes if n.type == 'BACKGROUND')
@@ -111,6 +114,22 @@ def _scene():
         settings.file_format = 'OPEN_EXR_MULTILAYER'
     settings.color_depth = '32'
     return scene
+
+
+def _shader_aovs(layer):
+    """AOVs 'tint' (colour, written by the box) and 'mask' (value, written
+    by the box and the floor)."""
+    for name, kind in (("tint", 'COLOR'), ("mask", 'VALUE')):
+        aov = layer.aovs.add()
+        aov.name, aov.type = name, kind
+    for mat, aovs in (("BoxMat", (("tint", (0.2, 0.4, 0.6), 0.0), ("mask", (0, 0, 0), 0.7))),
+                      ("FloorMat", (("mask", (0, 0, 0), 0.3),))):
+        tree = bpy.data.materials[mat].node_tree
+        for name, colour, value in aovs:
+            node = tree.nodes.new('ShaderNodeOutputAOV')
+            node.aov_name = name
+            node.inputs['Color'].default_value = colour + (1.0,)
+            node.inputs['Value'].default_value = value
 
 
 def _enable_passes(layer):

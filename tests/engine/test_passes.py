@@ -210,3 +210,20 @@ def test_cryptomatte_slots_keep_the_first_ids_and_rank_by_coverage():
     assert image[0, 0] == crypto_float("b") and image[0, 1] == pytest.approx(0.5)
     assert image[0, 2] == crypto_float("a") and image[0, 3] == pytest.approx(0.1)
     assert (image[1] == 0).all()
+
+
+def test_shader_aovs_hold_each_materials_value():
+    """AOV passes: the first surface's material's AOV (RGB + the share of
+    samples that wrote it, as Cycles), 0 where a material has none."""
+    scene = cornell_box(16, 16)
+    mats = list(scene.materials)
+    mats[1] = replace(mats[1], aovs={"tint": ((0.2, 0.4, 0.6), 0.5)})   # the red wall
+    scene = replace(scene, materials=mats)
+    r = render(scene, RenderSettings(samples=4, samples_per_pass=4, seed=1, max_bounces=1,
+                                     passes=("AOV Color:tint", "AOV Value:tint", "Object Index")))
+    colour, value = r.passes["AOV Color:tint"], r.passes["AOV Value:tint"][..., 0]
+    written = colour[..., 3]
+    full = written == 1.0
+    assert full.sum() > 5 and np.allclose(colour[full][:, :3], (0.2, 0.4, 0.6), atol=1e-6)
+    assert np.allclose(value[full], 0.5, atol=1e-6)
+    assert (colour[written == 0] == 0).all() and (written == 0).sum() > 100
