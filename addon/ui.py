@@ -79,6 +79,19 @@ class RENDER_PT_ember_sampling(EmberPanel, bpy.types.Panel):
         layout.prop(ember, "seed")
 
 
+class RENDER_PT_ember_sampling_viewport(EmberPanel, bpy.types.Panel):
+    bl_label = "Viewport"
+    bl_parent_id = 'RENDER_PT_ember_sampling'
+    PROPS = (("viewport_samples", "Max Samples"), ("preview_pause", None),
+             ("use_preview_denoising", "Denoise"))
+
+
+class RENDER_PT_ember_sampling_denoise(EmberPanel, bpy.types.Panel):
+    bl_label = "Denoise"
+    bl_parent_id = 'RENDER_PT_ember_sampling'
+    PROPS = (("use_denoising", "Denoise Render"),)
+
+
 class RENDER_PT_ember_sampling_lights(EmberPanel, bpy.types.Panel):
     bl_label = "Lights"
     bl_parent_id = 'RENDER_PT_ember_sampling'
@@ -250,6 +263,8 @@ class VIEWLAYER_PT_ember_passes_strategies(EmberPassesPanel, bpy.types.Panel):
 
 classes = (
     RENDER_PT_ember_sampling,
+    RENDER_PT_ember_sampling_viewport,
+    RENDER_PT_ember_sampling_denoise,
     RENDER_PT_ember_sampling_lights,
     RENDER_PT_ember_sampling_advanced,
     RENDER_PT_ember_light_paths,
