@@ -13,9 +13,8 @@ from engine.scene import (AreaLight, Camera, Instance, Lobe, Material, Mesh, Poi
                           RenderSettings, Scene, SceneError, SpotLight, SunLight, World)
 from engine.testscenes import box, look_at, quad, uv_sphere
 
-from stats import block_means, sidak_z, z_scores
+from ember_stats import block_means_var, family_z, z_scores
 
-ALPHA = 0.01
 
 
 def ortho_camera(eye, target, size, scale, up=(0.0, 1.0, 0.0)):
@@ -85,7 +84,7 @@ def test_glossy_furnace_matches_albedo(roughness, mu):
     z = (mean - expected) / se
     print(f"roughness {roughness} mu {mu}: rendered {mean:.5f} +- {se:.5f}, albedo {expected:.5f}, "
           f"energy lost {1 - expected:.4f}, z {z:+.2f}")
-    assert abs(z) < sidak_z(ALPHA, 9)
+    assert abs(z) < family_z(__name__, 9)
     if roughness == 1.0 and mu == 0.25:
         assert expected < 0.9  # single scattering really does lose energy here
 
@@ -99,7 +98,7 @@ def test_mixed_lobes_furnace():
     r = furnace_plane(mat, mu, spp=32)
     img = r.image[..., 0].astype(np.float64)
     se = np.sqrt(r.variance[..., 0].astype(np.float64).sum()) / img.size
-    assert abs(img.mean() - expected) < sidak_z(ALPHA, 1) * se
+    assert abs(img.mean() - expected) < family_z(__name__, 1) * se
 
 
 # ----------------------------------------------------------------------------
@@ -133,11 +132,11 @@ def check_against(result, expected, mask, label, block=4):
     hit at all, and its sample variance (0) would be no estimate of the error."""
     img = np.where(mask, result.image[..., 0], np.nan).astype(np.float64)
     var = result.variance[..., 0].astype(np.float64)
-    m, v = block_means(img[..., None], var[..., None], block)
-    e, _ = block_means(expected[..., None], np.zeros_like(var)[..., None], block)
+    m, v = block_means_var(img[..., None], var[..., None], block)
+    e, _ = block_means_var(expected[..., None], np.zeros_like(var)[..., None], block)
     ok = np.isfinite(m)
     z = z_scores(m[ok], v[ok], e[ok], 0.0)
-    zc = sidak_z(ALPHA, ok.sum())
+    zc = family_z(__name__, ok.sum())
     rel = (m[ok].mean() - e[ok].mean()) / e[ok].mean()
     print(f"{label}: {ok.sum()} blocks, max |z| {np.abs(z).max():.2f} (limit {zc:.2f}), "
           f"relative mean error {rel:+.4f}")
@@ -195,7 +194,7 @@ def test_soft_falloff_point_light_is_cycles_disk(d):
     se = est.std() / np.sqrt(n)
     print(f"soft falloff d={d}: E {est.mean():.5f} +- {se:.5f}, expected {expected:.5f}, "
           f"ratio to sphere {est.mean() / (P / (4 * np.pi * d * d)):.4f}")
-    assert abs(est.mean() - expected) < sidak_z(ALPHA, 2) * se
+    assert abs(est.mean() - expected) < family_z(__name__, 2) * se
 
 
 # ----------------------------------------------------------------------------
@@ -242,12 +241,12 @@ def test_strategies_agree_and_mis_has_lowest_variance():
         results[strategy] = r
     variances = {k: float(r.variance[..., :3].astype(np.float64).sum()) for k, r in results.items()}
     print("summed pixel variance:", {k: f"{v:.4g}" for k, v in variances.items()})
-    blocks = {k: block_means(r.image[..., :3].astype(np.float64), r.variance.astype(np.float64), 4)
+    blocks = {k: block_means_var(r.image[..., :3].astype(np.float64), r.variance.astype(np.float64), 4)
               for k, r in results.items()}
     ref = blocks["mis"][0]
     keep = ref > 0.01 * ref.max()
     pairs = (("light", "bsdf"), ("light", "mis"), ("bsdf", "mis"))
-    zc = sidak_z(ALPHA, keep.sum() * len(pairs))
+    zc = family_z(__name__, keep.sum() * len(pairs))
     worst = {}
     for a, b in pairs:
         z = z_scores(*blocks[a], *blocks[b])[keep]

@@ -5,7 +5,7 @@ As tests/engine/test_sampling_chi2.py (whose helpers this file reuses):
 chi-square of the sampled directions against the pdf a BSDF ray sees for the
 same direction (``intersect`` / ``triangle_pdf``), exact agreement of the two
 pdfs, mean(1/pdf) = solid angle, plus the variance the new strategies save.
-All statistical tests here form one family of level FAMILY_ALPHA (Sidak).
+All statistical tests here form one family of the suite budget (ember_stats.family_level, Sidak).
 """
 import math
 
@@ -13,13 +13,14 @@ import numpy as np
 import pytest
 
 import chi2 as C
+import ember_stats
 from engine import lights
 from engine import scene as S
 from test_sampling_chi2 import (area_matrix, assert_close, assert_unit, cone_theta_edges,
                                 direction_chi2, make_light_set, ray_triangles, uniform_phi_edges)
 
 N = 400_000
-FAMILY_ALPHA = 0.01
+
 
 RECTS = {
     # name: (shape, size_x, size_y, centre, emit direction, scale, roll, shading point)
@@ -35,7 +36,7 @@ TRIS = {
     "triangle_wide": ([(-3.0, -2.0, 0.2), (3.0, -2.5, 0.25), (0.5, 3.0, 0.1)], (0.1, 0.1, 0.0)),
 }
 N_TESTS = 2 * len(RECTS) + 2 * len(TRIS) + 1 + 2 + 1
-LEVEL = C.sidak(FAMILY_ALPHA, N_TESTS)
+LEVEL = ember_stats.family_level(__name__, N_TESTS)   # the suite budget, Sidak over N_TESTS
 Z_MAX = C.z_threshold(LEVEL)
 
 
@@ -334,7 +335,7 @@ def test_light_tree_render_agrees_and_lowers_variance():
     with power selection block by block, with clearly lower variance."""
     import time
     from engine.render import render
-    from stats import block_means, sidak_z, z_scores
+    from ember_stats import block_means_var, family_z, z_scores
     out = {}
     for sel in ("power", "tree"):
         scene, settings = floor_scene(sel)
@@ -342,10 +343,10 @@ def test_light_tree_render_agrees_and_lowers_variance():
         out[sel] = render(scene, settings)
         out[sel + "_s"] = time.perf_counter() - t0
     a, b = out["power"], out["tree"]
-    ma, va = block_means(a.image[..., :3].astype(float), a.variance.astype(float), 4)
-    mb, vb = block_means(b.image[..., :3].astype(float), b.variance.astype(float), 4)
+    ma, va = block_means_var(a.image[..., :3].astype(float), a.variance.astype(float), 4)
+    mb, vb = block_means_var(b.image[..., :3].astype(float), b.variance.astype(float), 4)
     z = z_scores(ma, va, mb, vb)
-    limit = sidak_z(0.01, z.size)
+    limit = family_z(__name__, z.size)
     var_power, var_tree = float(a.variance.mean()), float(b.variance.mean())
     rel = abs(mb.sum() - ma.sum()) / ma.sum()
     print(f"\nmany lights: mean pixel variance power {var_power:.4g}, tree {var_tree:.4g} "
@@ -366,7 +367,7 @@ def test_shadow_and_camera_invisible_object_is_absent():
     from engine import geometry
     from engine.render import render
     from engine.testscenes import box, look_at, quad
-    from stats import block_means, sidak_z, z_scores
+    from ember_stats import block_means_var, family_z, z_scores
     floor = quad([[-3, -3, 0], [3, -3, 0], [3, 3, 0], [-3, 3, 0]])
     cube = box((0.8, 0.8, 0.8))
     mats = [S.Material("floor", (S.Lobe("diffuse", (0.8, 0.8, 0.8)),))]
@@ -384,12 +385,12 @@ def test_shadow_and_camera_invisible_object_is_absent():
                                                                        | geometry.VIS_GLOSSY
                                                                        | geometry.VIS_TRANSMISSION}
     a, b = render(with_ghost, settings), render(without, settings)
-    ma, va = block_means(a.image[..., :3].astype(float), a.variance.astype(float), 4)
-    mb, vb = block_means(b.image[..., :3].astype(float), b.variance.astype(float), 4)
+    ma, va = block_means_var(a.image[..., :3].astype(float), a.variance.astype(float), 4)
+    mb, vb = block_means_var(b.image[..., :3].astype(float), b.variance.astype(float), 4)
     z = z_scores(ma, va, mb, vb)
     print(f"\ninvisible box: max |z| {np.abs(z).max():.2f}, relative mean difference "
           f"{abs(ma.sum() - mb.sum()) / mb.sum():.4f}")
-    assert np.abs(z).max() < sidak_z(0.01, z.size)
+    assert np.abs(z).max() < family_z(__name__, z.size)
     visible = S.Scene([floor, cube], [S.Instance(0, materials=[0]), S.Instance(1, m, [0])], mats, light,
                       S.World((0, 0, 0)), cam)
     c = render(visible, settings)

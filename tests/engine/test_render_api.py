@@ -6,7 +6,7 @@ from engine.render import _batches, render
 from engine.scene import RenderSettings, SpotLight, SunLight, World
 from engine.testscenes import cornell_box
 
-from stats import sidak_z
+from ember_stats import family_z
 from test_integrator import analytic_scene, pixel_centres
 
 
@@ -85,7 +85,7 @@ def test_sun_irradiance():
             np.testing.assert_allclose(img, expected, rtol=1e-6)  # float32 film
         else:
             se = np.sqrt(r.variance[..., 0].astype(np.float64).sum()) / img.size
-            assert abs(img.mean() - expected) < sidak_z(0.01, 1) * se + 1e-12
+            assert abs(img.mean() - expected) < family_z(__name__, 1) * se + 1e-12
 
 
 def test_spot_cone_and_blend():

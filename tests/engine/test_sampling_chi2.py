@@ -13,9 +13,9 @@ apply Pearson's chi-square test.  Beside the histogram:
   exact measure in units of its standard error computed from the samples.
 
 All statistical tests of this file form one family: its error rate is
-FAMILY_ALPHA, split over the tests with Sidak's correction, so a correct
-engine fails this file with probability <= 1% for a random seed (the seeds
-here are fixed: the outcome is deterministic).  Deterministic checks use
+the suite's family level (ember_stats.family_level), split over the tests
+with Sidak's correction (docs/testing.md; the seeds here are fixed: the
+outcome is deterministic).  Deterministic checks use
 tolerances of floating-point rounding, never statistics.
 """
 import math
@@ -32,12 +32,13 @@ for _path in (ROOT, HERE):
         sys.path.insert(0, _path)
 
 import chi2 as C  # noqa: E402
+import ember_stats
 from engine import bsdf, camera, geometry, lights, sampling  # noqa: E402
 from engine import scene as S  # noqa: E402
 
 N = 1_000_000           # samples per histogram
 RES = 31                # cells per axis (odd, as Mitsuba)
-FAMILY_ALPHA = 0.01
+
 FP_RTOL = 1e-9          # agreement of two float64 computations of one quantity
 TWO_PI = 2.0 * np.pi
 FZ = C.frame((0.0, 0.0, 1.0))
@@ -93,7 +94,7 @@ N_TESTS = (2                      # cosine hemisphere: chi2 + mean(1/pdf)
            + 2 * len(LIGHTS)      # chi2 + mean(1/pdf)
            + 2                    # light selection (power, uniform)
            + 2 * len(FILTERS))    # chi2 + mean(1/pdf)
-LEVEL = C.sidak(FAMILY_ALPHA, N_TESTS)
+LEVEL = ember_stats.family_level(__name__, N_TESTS)   # the suite budget, Sidak over N_TESTS
 Z_MAX = C.z_threshold(LEVEL)
 
 

@@ -15,10 +15,9 @@ from engine.scene import (AreaLight, Camera, Instance, Lobe, Material, PointLigh
                           Scene, World)
 from engine.testscenes import look_at, quad
 
-from stats import block_means, sidak_z, z_scores
+from ember_stats import block_means_var, family_z, z_scores
 from test_integrator import check_against, disk_irradiance, pixel_centres
 
-ALPHA = 0.01
 RHO = 0.5
 SIZE, SCALE = 40, 5.0      # ortho camera: 40 x 40 pixels over 5 x 5 m of floor
 FLOOR = Material("floor", (Lobe("diffuse", (RHO, RHO, RHO)),))
@@ -107,11 +106,11 @@ def test_strategies_agree_through_transparent_plate(bounces):
         r = render(scene, settings(strategy=strategy, samples=spp, samples_per_pass=spp, seed=5,
                                    max_bounces=bounces))
         assert np.isfinite(r.image).all()
-        blocks[strategy] = block_means(r.image[..., :3].astype(np.float64), r.variance.astype(np.float64), 4)
+        blocks[strategy] = block_means_var(r.image[..., :3].astype(np.float64), r.variance.astype(np.float64), 4)
     pairs = (("light", "bsdf"), ("light", "mis"), ("bsdf", "mis"))
     ref = blocks["mis"][0]
     keep = ref > 0.01 * ref.max()
-    zc = sidak_z(ALPHA, keep.sum() * len(pairs))
+    zc = family_z(__name__, keep.sum() * len(pairs))
     for a, b in pairs:
         z = np.abs(z_scores(*blocks[a], *blocks[b])[keep])
         rel = blocks[a][0][keep].mean() / blocks[b][0][keep].mean() - 1.0
