@@ -354,22 +354,27 @@ def region_mean_tests(batches_a, batches_b, name='region means', splits=2):
     return tests, family_level(name, len(tests))
 
 
-def region_mean_tests_var(image_a, var_a, dof_a, image_b, var_b, dof_b, name='region means', splits=2):
+def region_mean_tests_var(image_a, var_a, dof_a, image_b, var_b, dof_b, name='region means', splits=2,
+                          float32_sums_b=1):
     """As ``region_mean_tests`` for two images (H, W, C) with per-pixel
-    variances of their means (pixels independent)."""
+    variances of their means (pixels independent).  ``float32_sums_b``: image
+    b's pixels are float32 sums of that many samples (Cycles' film)."""
     tests = []
     for label, mask in regions(*image_a.shape[:2], splits):
         sa, sb = image_a[mask].sum(), image_b[mask].sum()
-        tests.append(MeanTest(label, sa, var_a[mask].sum() + _rounding_var(image_a[mask]), dof_a,
-                              sb, var_b[mask].sum() + _rounding_var(image_b[mask]), dof_b))
+        tests.append(MeanTest(label, sa, var_a[mask].sum() + _rounding_var(image_a[mask], 1), dof_a,
+                              sb, var_b[mask].sum() + _rounding_var(image_b[mask], float32_sums_b), dof_b))
     return tests, family_level(name, len(tests))
 
 
-def _rounding_var(pixels):
-    """Images are stored in float32: a noiseless region (a constant world)
-    is still only known to half an ulp per pixel; as a variance of the sum
-    (uniform rounding errors, independent)."""
-    return float(np.sum((np.abs(pixels) * 2.0 ** -24) ** 2) / 3.0)
+def _rounding_var(pixels, sums=1):
+    """Images are float32: a noiseless region (a constant world) is only
+    known to rounding.  A pixel accumulated as a float32 sum of ``sums``
+    equal samples can be off by up to sums x 2^-24 relative, the same way in
+    every pixel (systematic); as the variance of a uniform error on the
+    region's sum."""
+    bound = float(np.abs(pixels).sum()) * max(sums, 1) * 2.0 ** -24
+    return bound * bound / 3.0
 
 
 def report_mean_tests(title, tests, level):

@@ -12,7 +12,7 @@ residual noise.  The EXR header records the Blender/Cycles version, the
 samples, seeds, bounces, filter and resolution (``ember:*`` attributes); the
 tests refuse a reference whose settings differ from theirs.
 
-The scenes are those of blend_scenes/ plus ``glossy_world`` (built here by
+The scenes are blend_scenes/cornell.blend and ``glossy_world`` (built here by
 ``build_glossy_world``: smooth GGX plates reflecting a constant world), all
 rendered at the settings in ``REFERENCES``.  Re-run after changing a scene or
 a setting; it takes a few minutes on two cores.
@@ -30,7 +30,6 @@ SEEDS = 8
 REFERENCES = {
     'cornell': (48, 48, 4, 4096),
     'glossy_world': (48, 32, 4, 2048),
-    'veach_mis': (64, 48, 3, 8192),
 }
 FILTER = ('BLACKMAN_HARRIS', 1.5)
 

@@ -28,7 +28,7 @@ from ember_testlib import ROOT, engine_available, require, setup_ember
 HELD = 0.003            # |relative bias| the image mean must resolve (issue 8: 0.3 %)
 EMBER = {
     # name: (samples per pixel, seed); power printed by the test
-    'cornell': (256, 11),
+    'cornell': (384, 11),
     'glossy_world': (64, 12),
 }
 MUTANT_SPP = 128        # the mutation only needs to see 1 %
@@ -81,9 +81,11 @@ def ember_render(refs, name, spp, seed, light_scale=1.0):
     return image, result.variance.astype(np.float64)
 
 
-def compare(name, image, var, spp, ref, ref_var, seeds):
+def compare(name, image, var, spp, ref, ref_var, header):
+    seeds, samples = int(header['seeds']), int(header['samples'])
     tests, level = stats.region_mean_tests_var(image, var, spp - 1, ref, ref_var, seeds - 1,
-                                               name=f"{name} against Cycles", splits=3)
+                                               name=f"{name} against Cycles", splits=3,
+                                               float32_sums_b=samples)
     failures = stats.report_mean_tests(f"{name}: Ember against the converged Cycles reference", tests, level)
     return tests, level, failures
 
@@ -100,7 +102,7 @@ def test_held_to_converged_cycles(name, refs):
     ref, ref_var, header = load_reference(refs, name)
     spp, seed = EMBER[name]
     image, var = ember_render(refs, name, spp, seed)
-    tests, level, failures = compare(name, image, var, spp, ref, ref_var, int(header['seeds']))
+    tests, level, failures = compare(name, image, var, spp, ref, ref_var, header)
     image_test = tests[0]
     power = stats.detectable(image_test.relative_se, level, image_test.dof)
     print(f"{name}: Cycles {header['blender']}, {header['seeds']} x {header['samples']} spp; Ember {spp} spp")
@@ -116,6 +118,5 @@ def test_mutation_light_power_099_is_caught(refs):
     must fail the comparison that holds the real one."""
     ref, ref_var, header = load_reference(refs, 'cornell')
     image, var = ember_render(refs, 'cornell', MUTANT_SPP, 13, light_scale=0.99)
-    tests, level, failures = compare('cornell, light x 0.99', image, var, MUTANT_SPP, ref, ref_var,
-                                     int(header['seeds']))
+    tests, level, failures = compare('cornell, light x 0.99', image, var, MUTANT_SPP, ref, ref_var, header)
     assert tests[0] in failures and tests[0].relative < 0, f"a 1 % darker light went unnoticed: {tests[0]}"

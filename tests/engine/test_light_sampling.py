@@ -153,12 +153,14 @@ def test_spherical_rectangle_lowers_variance():
     with the analytic value; solid-angle sampling has far lower variance."""
     light, _, p = rect_light("square_close")
     ls, _, _ = make_light_set([light])
-    L = ls.areas.L[0, 0]
+    # Cycles' units from the light's definition, not from the light set: a
+    # normalized area light of power P and area A has radiance P / (pi A).
+    L = light.power[0] / (math.pi * 2.0 * 2.0)
     n = N
     P = np.tile(p, (n, 1))
     u = uniforms(40, 3)
     s = ls.sample(np.zeros(n, int), P, *u)
-    e_sph = L * s.wi[:, 2] / s.pdf
+    e_sph = s.Le[:, 0] * s.wi[:, 2] / s.pdf
     saved = lights.MIN_SPHERICAL
     lights.MIN_SPHERICAL = np.inf
     try:
@@ -166,7 +168,7 @@ def test_spherical_rectangle_lowers_variance():
     finally:
         lights.MIN_SPHERICAL = saved
     ok = s.pdf > 0
-    e_area = np.where(ok, L * s.wi[:, 2] / np.where(ok, s.pdf, 1.0), 0.0)
+    e_area = np.where(ok, s.Le[:, 0] * s.wi[:, 2] / np.where(ok, s.pdf, 1.0), 0.0)
     # Four corner rectangles 1 x 1 at height h: the differential form factor.
     a = 1.0 / 0.3
     f = (a / math.sqrt(1 + a * a) * math.atan(a / math.sqrt(1 + a * a))) / math.pi
@@ -326,7 +328,9 @@ def floor_scene(selection, count=300, size=(24, 24)):
                    resolution=size, clip_start=0.1, clip_end=100.0)
     scene = S.Scene([floor], [S.Instance(0, materials=[0])], mats, many_lights(count),
                     S.World((0.0, 0.0, 0.0)), cam)
-    return scene, S.RenderSettings(samples=32, samples_per_pass=32, max_bounces=0, seed=5,
+    # A seed per selection: renders compared by z-tests must be independent.
+    return scene, S.RenderSettings(samples=32, samples_per_pass=32, max_bounces=0,
+                                   seed=5 + ("power", "tree", "uniform", "all").index(selection),
                                    light_selection=selection)
 
 
@@ -384,7 +388,8 @@ def test_shadow_and_camera_invisible_object_is_absent():
     assert set(np.unique(geometry.flatten(with_ghost).visibility)) == {geometry.VIS_ALL, geometry.VIS_DIFFUSE
                                                                        | geometry.VIS_GLOSSY
                                                                        | geometry.VIS_TRANSMISSION}
-    a, b = render(with_ghost, settings), render(without, settings)
+    # Independent seeds: the z-test assumes independent renders.
+    a, b = render(with_ghost, settings), render(without, S.RenderSettings(**{**vars(settings), "seed": 10}))
     ma, va = block_means_var(a.image[..., :3].astype(float), a.variance.astype(float), 4)
     mb, vb = block_means_var(b.image[..., :3].astype(float), b.variance.astype(float), 4)
     z = z_scores(ma, va, mb, vb)
