@@ -7,7 +7,7 @@ from engine.scene import RenderSettings, SpotLight, SunLight, World
 from engine.testscenes import cornell_box
 
 from ember_stats import family_z
-from test_integrator import analytic_scene, pixel_centres
+from analytic import analytic_scene, pixel_centres
 
 
 class Recorder:
