@@ -302,6 +302,7 @@ def failing_blocks(batches_a, batches_b, name='blocks'):
     details = {
         'blocks': int(t.size), 'level': level, 'max_abs_t': float(np.nanmax(np.abs(t))),
         'min_p': float(p.min()),
+        'relative_mean_error': float(abs(mean_a.sum() - mean_b.sum()) / total_b) if total_b else 0.0,
         'relative_abs_error': float(np.abs(mean_a - mean_b).sum() / total_b) if total_b else 0.0,
     }
     return failures, details
