@@ -325,6 +325,26 @@ def failing_single(single, batches, name='single vs batches'):
     return np.argwhere(p < level), {'blocks': int(t.size), 'max_abs_t': float(np.abs(t).max())}
 
 
+def failing_blocks_var(image_a, var_a, dof_a, image_b, var_b, dof_b, block, name='blocks', float32_sums_b=1):
+    """Blocks (and channels) where two images with per-pixel variances of
+    their means differ (Welch's t), with the float32 rounding floor of
+    ``region_mean_tests_var``.  Returns (failures, details); details holds
+    the median block's detectable relative bias."""
+    ma, va = block_means_var(image_a, var_a, block)
+    mb, vb = block_means_var(image_b, var_b, block)
+    va = va + (np.abs(ma) * 2.0 ** -24) ** 2 / 3.0
+    vb = vb + (np.abs(mb) * max(float32_sums_b, 1) * 2.0 ** -24) ** 2 / 3.0
+    t, dof = _welch_t(ma, va, dof_a, mb, vb, dof_b)
+    level = family_level(name, t.size)
+    p = t_p_values(t, dof)
+    lit = np.abs(mb) > 0
+    rel_se = np.sqrt(va + vb)[lit] / np.abs(mb[lit])
+    median = float(np.median(rel_se)) if lit.any() else 0.0
+    details = {'blocks': int(t.size), 'level': level, 'max_abs_t': float(np.nanmax(np.abs(t))),
+               'median_block_detects': detectable(median, level, float(np.median(dof)))}
+    return np.argwhere(p < level), details
+
+
 class MeanTest:
     """Relative difference of two estimates of one total (a region's sum over
     pixels and channels), its standard error, t, dof and p."""

@@ -5,8 +5,9 @@ resolution, rendered once by tools/cycles_references.py (bpy 5.0.1; version,
 samples, bounces and filter in the EXR header) with the variance of their mean
 per pixel.  Here Ember renders the same scene through the add-on's export with
 a modest sample count and its own per-pixel variances; the totals of the whole
-image and of a 3 x 3 grid of regions are compared by Welch's t with both noises
-(ember_stats.region_mean_tests_var), at the suite's family level.
+image and of a 3 x 3 grid of regions, and then 8 x 8-pixel blocks per channel,
+are compared by Welch's t with both noises (ember_stats.region_mean_tests_var,
+failing_blocks_var), at the suite's family level.
 
 A scene is *held* to a relative bias: the test also requires the power to see
 it (the image-mean test detects ``HELD`` with probability at least 1/2), so
@@ -26,6 +27,7 @@ import ember_stats as stats
 from ember_testlib import ROOT, engine_available, require, setup_ember
 
 HELD = 0.003            # |relative bias| the image mean must resolve (issue 8: 0.3 %)
+BLOCK = 8               # pixels per block side for the block test
 EMBER = {
     # name: (samples per pixel, seed); power printed by the test
     'cornell': (384, 11),
@@ -111,6 +113,12 @@ def test_held_to_converged_cycles(name, refs):
     assert not failures, f"Ember differs from converged Cycles: {failures}"
     # Implied by the two assertions above; stated for the reader.
     assert abs(image_test.relative) < HELD
+    blocks, details = stats.failing_blocks_var(image, var, spp - 1, ref, ref_var, int(header['seeds']) - 1,
+                                               BLOCK, name=f"{name} blocks against Cycles",
+                                               float32_sums_b=int(header['samples']))
+    print(f"{name}: {details['blocks']} block-channels, max |t| {details['max_abs_t']:.2f}; a bias in one "
+          f"block is detected with probability 1/2 from {details['median_block_detects']:.1%} (median block)")
+    assert len(blocks) == 0, f"blocks (y, x, channel) differ from Cycles: {blocks[:10].tolist()}; {details}"
 
 
 def test_mutation_light_power_099_is_caught(refs):

@@ -141,3 +141,26 @@ def test_single_render_against_batches():
     single[1, 1, 0] += 2.0  # ~8 standard errors of the difference
     failures, _ = stats.failing_single(single, batches)
     assert failures.tolist() == [[1, 1, 0]]
+
+
+def test_blocks_with_pixel_variances_and_float32_floor():
+    rng = np.random.default_rng(13)
+    truth = rng.uniform(0.5, 2.0, size=(16, 16, 3))
+    var = np.full_like(truth, 1e-3)
+    a = truth + rng.normal(0.0, np.sqrt(var))
+    failures, details = stats.failing_blocks_var(a, var, 255, truth, np.zeros_like(var), 7, 4)
+    assert len(failures) == 0, details
+    a[4:8, 8:12, 1] *= 1.2
+    failures, _ = stats.failing_blocks_var(a, var, 255, truth, np.zeros_like(var), 7, 4)
+    assert failures.tolist() == [[1, 2, 1]]
+    # Noiseless on both sides (a constant world): equal up to float32 sums.
+    sky = np.full((8, 8, 3), 0.9, np.float32).astype(float)
+    summed = np.float32(0.0)
+    for _ in range(2048):
+        summed += np.float32(0.9)
+    cycles_like = np.full_like(sky, float(summed / np.float32(2048)))
+    zero = np.zeros_like(sky)
+    failures, _ = stats.failing_blocks_var(sky, zero, 63, cycles_like, zero, 7, 4, float32_sums_b=2048)
+    assert len(failures) == 0
+    failures, _ = stats.failing_blocks_var(sky * 1.001, zero, 63, cycles_like, zero, 7, 4, float32_sums_b=2048)
+    assert len(failures) == 4 * 3
