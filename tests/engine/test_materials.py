@@ -31,7 +31,7 @@ from engine import scene as S  # noqa: E402
 from engine.render import render  # noqa: E402
 from engine.scene import Instance, Material, RenderSettings, Scene, World  # noqa: E402
 from engine.testscenes import uv_sphere  # noqa: E402
-from test_integrator import directional_albedo, furnace_plane, ortho_camera  # noqa: E402
+from analytic import directional_albedo, furnace_plane, ortho_camera  # noqa: E402
 
 N = 400_000
 

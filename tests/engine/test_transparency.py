@@ -16,7 +16,7 @@ from engine.scene import (AreaLight, Camera, Instance, Lobe, Material, PointLigh
 from engine.testscenes import look_at, quad
 
 from ember_stats import block_means_var, family_z, z_scores
-from test_integrator import check_against, disk_irradiance, pixel_centres
+from analytic import check_against, disk_irradiance, pixel_centres
 
 RHO = 0.5
 SIZE, SCALE = 40, 5.0      # ortho camera: 40 x 40 pixels over 5 x 5 m of floor
