@@ -2,8 +2,9 @@
 
 Each scene is built with bpy, rendered by Ember (one sample per pass: the
 passes are independent batches) and by Cycles with several seeds, and
-compared block by block with Welch's t, Sidak-corrected to a family-wise 1%
-(as test_render_scenes.py).  The relative mean error per scene is printed.
+compared block by block with Welch's t and by the image and quadrant totals,
+at the suite's family level (ember_testlib.compare_with_cycles, as
+test_render_scenes.py); results and power are printed.
 Beside the comparison, each visibility scene checks in Ember's own image
 that the flag has its effect (a shadow gone, an object missing).
 """
