@@ -16,8 +16,8 @@ import chi2 as C
 import ember_stats
 from engine import lights
 from engine import scene as S
-from test_sampling_chi2 import (area_matrix, assert_close, assert_unit, cone_theta_edges,
-                                direction_chi2, make_light_set, ray_triangles, uniform_phi_edges)
+from sampling_lib import (area_matrix, assert_close, assert_unit, cone_theta_edges, direction_chi2,
+                          make_light_set, ray_triangles, uniform_phi_edges)
 
 N = 400_000
 
@@ -286,7 +286,7 @@ def many_lights(count=300, seed=7):
 
 
 def tree_set(count=300):
-    from test_sampling_chi2 import emissive_mesh_scene
+    from sampling_lib import emissive_mesh_scene
     meshes, instances, materials = emissive_mesh_scene()
     lts = many_lights(count) + [S.SunLight((0.2, 0.1, -1.0), (0.5, 0.5, 0.5), 0.05)]
     return make_light_set(lts, meshes, instances, materials, "tree")[0]
