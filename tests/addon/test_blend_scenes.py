@@ -39,7 +39,7 @@ def test_committed_scene_matches_builder(name, registered_addon):
 
 
 @pytest.mark.parametrize("name", SCENE_NAMES)
-def test_scene_opens_with_ember(name, registered_addon, needs_engine):
+def test_scene_opens_with_ember(name, registered_addon):
     """The committed file opens, has a camera, and Ember's export translates
     all of it: no warning (every node known) and a scene that validates."""
     from addon.export import scene as scene_export
