@@ -151,20 +151,20 @@ def _bounce(ctx, paths, depth, tile):
     if ctx.triangles.visibility is not None:
         t, prim, bu, bv = _skip_invisible(ctx, paths.o, paths.d, paths.tmax, paths.ray, t, prim, bu, bv)
     lt, emitter, lLe, lpdf = _lights_along(ctx, paths, np.minimum(t, paths.tmax))
-    # A path ends at the closest light it meets (measured against Cycles:
-    # light_over_lit_world in tests/addon/test_light_parity.py).
     hit_light = lt < np.inf
-    hit_surf = (prim >= 0) & ~hit_light
     if depth == 0:
-        _camera_aovs(ctx, paths, t, prim, hit_light, hit_surf, tile)
+        _camera_aovs(ctx, paths, t, prim, hit_light, (prim >= 0) & ~hit_light, tile)
 
     # Emitters and the world seen along the ray.
+    stop = np.zeros(len(prim), bool)
     if hit_light.any():
         i = np.nonzero(hit_light)[0]
         w = _mis_hit(ctx, paths, i, emitter[i], lpdf[i])
         paths.L[i] += paths.beta[i] * lLe[i] * w[:, None]
         pass_events.emitter(ctx, paths, i, paths.beta[i] * lLe[i], w, tile, emitters=emitter[i])
-    miss = (prim < 0) & ~hit_light
+        stop[i] = _pass_light(ctx, paths, i)
+    hit_surf = (prim >= 0) & ~stop
+    miss = (prim < 0) & ~stop
     if miss.any():
         _escaped(ctx, paths, np.nonzero(miss)[0], tile)
 
@@ -227,6 +227,15 @@ def _bounce(ctx, paths, depth, tile):
         _finish(ctx, paths.take(~alive), tile)
         paths = paths.take(alive)
     return paths if carried is None or len(carried.pix) == 0 else paths.concat(carried)
+
+
+def _pass_light(ctx, paths, i):
+    """Paths ``i`` met a light: as Cycles (integrator_shade_light) they go on
+    past it to the surface or world behind, counting a transparent bounce,
+    and end once that count reaches transparent_max_bounces (so with 0 or 1
+    a light still ends the path).  Returns which of ``i`` end."""
+    paths.tbounce[i] += 1
+    return paths.tbounce[i] >= ctx.settings.transparent_max_bounces
 
 
 def _unless(mask, old, new):

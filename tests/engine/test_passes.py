@@ -9,9 +9,8 @@ from engine.passes import ALL_PASSES, PassConfig, crypto_float, murmur3_32
 from engine.render import render
 from engine.scene import RenderSettings, SceneError
 from engine.testscenes import cornell_box, veach_four
-from stats import block_means, sidak_z, z_scores
+from ember_stats import block_means_var, family_z, z_scores
 
-ALPHA = 0.01
 STRATEGY = ("Strategy Light", "Strategy BSDF", "Strategy Light Unweighted", "Strategy BSDF Unweighted",
             "MIS Weight Light", "Object Index", "Emission", "Environment")
 LIGHT = tuple(f"{c} {p}" for c in ("Diffuse", "Glossy", "Transmission") for p in ("Direct", "Indirect", "Color"))
@@ -90,18 +89,18 @@ def test_unweighted_strategies_agree(veach_seeds):
     stacks = {k: np.array([r.passes[f"Strategy {k} Unweighted"][..., :1] for r in veach_seeds], np.float64)
               for k in ("Light", "BSDF")}
     n = len(veach_seeds)
-    blocks = {k: block_means(s.mean(axis=0), s.var(axis=0, ddof=1) / n, 4) for k, s in stacks.items()}
+    blocks = {k: block_means_var(s.mean(axis=0), s.var(axis=0, ddof=1) / n, 4) for k, s in stacks.items()}
     keep = np.ones(blocks["Light"][0].shape, bool)
     for mean, var in blocks.values():
         keep &= (mean > 0) & (np.sqrt(var) < 0.1 * mean)
     z = z_scores(*blocks["Light"], *blocks["BSDF"])[keep]
-    limit = sidak_z(ALPHA, keep.sum())
+    limit = family_z(__name__, keep.sum())
     diff = (blocks["Light"][0] - blocks["BSDF"][0])[keep].sum()
     pooled = diff / np.sqrt((blocks["Light"][1] + blocks["BSDF"][1])[keep].sum())
     print(f"{keep.sum()} blocks, max |z| {np.abs(z).max():.2f} (limit {limit:.2f}), pooled z {pooled:.2f}")
     assert keep.sum() >= 15
     assert np.abs(z).max() < limit
-    assert abs(pooled) < sidak_z(ALPHA, 1)
+    assert abs(pooled) < family_z(__name__, 1)
 
 
 def _regions(results):
