@@ -57,6 +57,9 @@ class Triangles:
     # for normal maps, or None when no material has one.
     tangent: Optional[np.ndarray] = None
     tangent_sign: Optional[np.ndarray] = None
+    # Shader-node data (engine.nodes.SceneShading): each triangle's instance
+    # and its index in its mesh, object matrices and info, corner attributes.
+    shading: object = None
 
     def __len__(self):
         return len(self.p0)
@@ -88,7 +91,8 @@ def flatten(scene):
     n_mat = len(scene.materials)
     mesh_cache = {}
     parts = []
-    for inst in scene.instances:
+    owners = []   # (instance index, triangle count) per part
+    for index, inst in enumerate(scene.instances):
         mesh = scene.meshes[inst.mesh]
         if len(mesh.triangles) == 0:
             continue
@@ -96,7 +100,9 @@ def flatten(scene):
             mesh_cache[inst.mesh] = _mesh_corners(mesh)
         corners = mesh_cache[inst.mesh]
         parts.append(_instance_part(mesh, corners, inst, n_mat))
+        owners.append((index, len(corners)))
     tris = _concat(parts)
+    tris.shading = _scene_shading(scene, owners, tris)
     if _needs_tangents(scene):
         _add_tangents(tris, scene, parts)
     return tris
@@ -118,6 +124,16 @@ def _instance_part(mesh, corners, inst, n_mat):
         ns = np.asarray(mesh.normals, dtype=np.float64) @ nmat.T
     uv = None if mesh.uvs is None else np.asarray(mesh.uvs, dtype=np.float64)
     return world, ns, uv, material, visibility_bits(inst)
+
+
+def _scene_shading(scene, owners, tris):
+    """SceneShading for the kept triangles: _concat keeps the rows whose
+    kept mask it does not return, so it is recomputed from the same test."""
+    from .nodes import SceneShading
+    instance = np.concatenate([np.full(n, i, np.int64) for i, n in owners]) if owners else np.zeros(0, np.int64)
+    local = np.concatenate([np.arange(n) for _, n in owners]) if owners else np.zeros(0, np.int64)
+    keep = tris.kept if getattr(tris, "kept", None) is not None else np.ones(len(instance), bool)
+    return SceneShading(scene, instance[keep], local[keep])
 
 
 def _concat(parts):
@@ -147,10 +163,12 @@ def _concat(parts):
     ng = c[keep] / clen[keep, None]
     if ns is not None:
         ns = _fix_normals(ns[keep], ng, smooth[keep])
-    return Triangles(p0[keep], e1[keep], e2[keep], ng, ns, smooth[keep],
+    tris = Triangles(p0[keep], e1[keep], e2[keep], ng, ns, smooth[keep],
                      None if uv is None else uv[keep], material[keep],
                      0.5 * clen[keep], dropped,
                      visibility=None if visibility is None else visibility[keep])
+    tris.kept = keep
+    return tris
 
 
 def _stack_optional(arrays, counts, tail):

@@ -192,7 +192,8 @@ class ImageTexture:
 
 
 MIX_BLENDS = ("MIX", "ADD", "MULTIPLY", "SUBTRACT", "SCREEN", "OVERLAY", "DIVIDE",
-              "DIFFERENCE", "DARKEN", "LIGHTEN")
+              "DIFFERENCE", "DARKEN", "LIGHTEN", "BURN", "DODGE", "HUE", "SATURATION", "VALUE",
+              "COLOR", "SOFT_LIGHT", "LINEAR_LIGHT", "EXCLUSION")
 
 
 @dataclass(eq=False)
@@ -209,7 +210,9 @@ class MixColor:
 MATH_OPERATIONS = ("ADD", "SUBTRACT", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "POWER", "LOGARITHM",
                    "SQRT", "INVERSE_SQRT", "ABSOLUTE", "EXPONENT", "MINIMUM", "MAXIMUM",
                    "LESS_THAN", "GREATER_THAN", "SIGN", "ROUND", "FLOOR", "CEIL", "TRUNC",
-                   "FRACT", "MODULO", "SINE", "COSINE", "TANGENT", "SNAP")
+                   "FRACT", "MODULO", "SINE", "COSINE", "TANGENT", "SNAP", "COMPARE", "SMOOTH_MIN",
+                   "SMOOTH_MAX", "WRAP", "PINGPONG", "ARCSINE", "ARCCOSINE", "ARCTANGENT", "ARCTAN2",
+                   "SINH", "COSH", "TANH", "RADIANS", "DEGREES", "FLOORED_MODULO")
 
 
 @dataclass(eq=False)
@@ -240,8 +243,24 @@ class Bump:
     normal: Optional[NormalMap] = None
 
 
-Texture = Union[ImageTexture, MixColor, Math, NormalMap, Bump]
-TEXTURE_TYPES = (ImageTexture, MixColor, Math, NormalMap, Bump)
+@dataclass(eq=False)
+class NodeCall:
+    """One shader node of engine.nodes.REGISTRY: its Blender id, its inputs
+    (identifier -> constant or expression) and its properties."""
+    idname: str
+    inputs: dict
+    props: dict = field(default_factory=dict)
+
+
+@dataclass(eq=False)
+class NodeOutput:
+    """One output socket of a NodeCall (outputs of one call evaluate once)."""
+    call: NodeCall
+    output: str
+
+
+Texture = Union[ImageTexture, MixColor, Math, NormalMap, Bump, NodeOutput]
+TEXTURE_TYPES = (ImageTexture, MixColor, Math, NormalMap, Bump, NodeOutput)
 # What a Lobe parameter or a Material's emission may hold.
 Color = Union[RGB, Texture]
 Scalar = Union[float, Texture]

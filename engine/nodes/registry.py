@@ -1,0 +1,57 @@
+"""The shader-node registry: one entry per Blender node Ember evaluates.
+
+An entry (``NodeDef``) declares the node's Blender id, its input sockets
+(Blender identifiers, with kinds 'float', 'color' or 'vector'), its outputs,
+the node properties the exporter copies (name and default for Blenders that
+lack it), an optional ``translate`` for data a property copy cannot carry
+(a colour ramp's baked table), the coordinates an unlinked Vector input
+stands for, a vectorized ``evaluate(ctx, inputs, props) -> {output: array}``
+over a ``ShadingContext``, and a ``bounds`` giving each output's value range
+(None: unbounded).  The exporter, the compiler, validation and the tests all
+iterate over ``REGISTRY``: adding a node is adding one entry.
+
+Arrays: floats are (N,), colours and vectors (N, 3).
+"""
+from dataclasses import dataclass, field
+from typing import Callable, Optional
+
+REGISTRY = {}
+KINDS = ("float", "color", "vector")
+
+
+@dataclass
+class NodeDef:
+    idname: str
+    inputs: tuple                  # ((identifier, kind), ...)
+    outputs: tuple                 # ((identifier, kind), ...)
+    evaluate: Callable
+    props: tuple = ()              # ((bpy property, default), ...)
+    translate: Optional[Callable] = None   # bpy node -> dict of extra props
+    coords: Optional[str] = None   # what an unlinked 'Vector' input reads: 'generated', 'uv', 'position'
+    bounds: Optional[Callable] = None      # (props) -> {output: (lo, hi)}
+    unsupported_outputs: tuple = ()
+    # Property combinations the parity tests render (each a dict of props
+    # and input values); the first entry's defaults when empty.
+    cases: list = field(default_factory=list)
+
+    def input_kind(self, name):
+        return dict(self.inputs)[name]
+
+    def output_kind(self, name):
+        return dict(self.outputs)[name]
+
+
+def node(idname, inputs=(), outputs=(), props=(), translate=None, coords=None, bounds=None,
+         unsupported_outputs=(), cases=()):
+    """Decorator registering an evaluate function as a node."""
+    def register(fn):
+        for _, kind in tuple(inputs) + tuple(outputs):
+            assert kind in KINDS, (idname, kind)
+        REGISTRY[idname] = NodeDef(idname, tuple(inputs), tuple(outputs), fn, tuple(props), translate,
+                                   coords, bounds, tuple(unsupported_outputs), list(cases))
+        return fn
+    return register
+
+
+def lookup(idname):
+    return REGISTRY.get(idname)
