@@ -53,6 +53,16 @@ class Mesh:
     # fall back to per-triangle UV tangents without.
     tangents: Optional[np.ndarray] = None
     tangent_signs: Optional[np.ndarray] = None
+    # For shader nodes (engine.nodes.context): UV maps by name {name: (T, 3, 2)}
+    # beside the active one in ``uvs``; colour attributes {name: (T, 3, 4)}
+    # linear RGBA per corner ('' = the default colour attribute); the
+    # texture space (location, size) of Generated coordinates (None: the
+    # bounding box, as Blender's automatic one); undeformed corner positions
+    # (T, 3, 3) for Generated when modifiers deform the mesh.
+    uv_maps: Optional[dict] = None
+    attributes: Optional[dict] = None
+    texspace: Optional[tuple] = None
+    orco: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -75,6 +85,11 @@ class Instance:
     visible_glossy: bool = True
     visible_transmission: bool = True
     visible_shadow: bool = True
+    # Object Info node: the object's colour, pass index and random number
+    # (the depsgraph instance's random_id / 0xFFFFFFFF, as Cycles).
+    color: tuple = (1.0, 1.0, 1.0)
+    pass_index: int = 0
+    random: float = 0.0
 
 
 # ----------------------------------------------------------------------------

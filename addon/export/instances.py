@@ -39,6 +39,7 @@ class InstanceCollector:
             materials=self.material_index(obj),
             name=obj.name,
             **ray_visibility(inst),
+            **object_info(inst),
         ))
 
     def _mesh_id(self, obj):
@@ -74,6 +75,16 @@ def ray_visibility(inst):
             visible = visible and bool(getattr(parent, name, True))
         flags[name] = visible
     return flags
+
+
+def object_info(inst):
+    """Object Info node data: colour, pass index, and Cycles' random number
+    (float32(random_id) / 2^32, random_id read as uint32)."""
+    obj = inst.object
+    rid = int(getattr(inst, 'random_id', 0)) & 0xFFFFFFFF
+    random = float(np.float32(rid) * np.float32(1.0 / 4294967296.0))
+    return {'color': tuple(float(c) for c in tuple(getattr(obj, 'color', (1.0, 1.0, 1.0)))[:3]),
+            'pass_index': int(getattr(obj, 'pass_index', 0)), 'random': random}
 
 
 def _geometry_name(obj):

@@ -115,8 +115,9 @@ def generated_corners(mesh):
         size = np.where(size == 0.0, 1.0, np.where(size < 1e-5, 1e-5, size))
     else:
         loc, size = (np.asarray(v, dtype=np.float64) for v in space)
-    size = np.where(size == 0.0, 1.0, size)
-    return (corners - loc) / (2.0 * size) + 0.5
+    # Cycles: a zero size maps that axis to 0.5.
+    factor = np.where(size != 0.0, 0.5 / np.where(size != 0.0, size, 1.0), 0.0)
+    return (corners - loc) * factor + 0.5
 
 
 class ShadingContext:
