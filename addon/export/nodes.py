@@ -316,7 +316,8 @@ class SocketReader:
             socket = _find_input(node, identifier)
             if socket is None:
                 continue
-            if not socket.is_linked and getattr(socket, 'hide_value', False):
+            if not socket.is_linked and identifier in ('Vector', 'Normal') and (
+                    entry.coords is not None or identifier == 'Normal'):
                 continue   # the engine's default (texture coordinates, the shading normal)
             inputs[identifier] = _as_kind(self.input_value(socket), kind, self._source_is_vector(socket))
         props = {name: _prop(getattr(node, name, default)) for name, default in entry.props}

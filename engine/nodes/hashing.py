@@ -116,3 +116,45 @@ def hash_same_dim(*k):
 
 def _full(like, value):
     return np.full(np.shape(like), value, np.float32)
+
+
+# ----------------------------------------------------------------------------
+# PCG hashes on signed int32 cells (Cycles >= 4.x Voronoi in 2D-4D)
+
+I32 = np.int32
+PCG_MUL, PCG_ADD = I32(1664525), I32(1013904223)
+INV_INT_MAX = np.float32(1.0 / 2147483648.0)   # Cycles' 1.0f / (float)0x7FFFFFFFu
+
+
+def _pcg(v):
+    """hash_pcg{2,3,4}d_i on a list of int32 arrays (wrapping, arithmetic shift)."""
+    with np.errstate(over="ignore"):
+        v = [x.astype(I32) * PCG_MUL + PCG_ADD for x in v]
+        for _ in range(2):
+            if len(v) == 2:
+                v[0] = v[0] + v[1] * PCG_MUL
+                v[1] = v[1] + v[0] * PCG_MUL
+            elif len(v) == 3:
+                v[0] = v[0] + v[1] * v[2]
+                v[1] = v[1] + v[2] * v[0]
+                v[2] = v[2] + v[0] * v[1]
+            else:
+                v[0] = v[0] + v[1] * v[3]
+                v[1] = v[1] + v[2] * v[0]
+                v[2] = v[2] + v[0] * v[1]
+                v[3] = v[3] + v[1] * v[2]
+            if _ == 0:
+                v = [x ^ (x >> I32(16)) for x in v]
+    return [x & I32(0x7FFFFFFF) for x in v]
+
+
+def hash_int_to_floats(*k):
+    """hash_int{2,3,4}_to_float{2,3,4}: (N, D) float32 in [0, 1]."""
+    return np.stack([h.astype(np.float32) * INV_INT_MAX for h in _pcg(list(k))], axis=-1)
+
+
+def hash_int_to_float3(*k):
+    """hash_int{2,4}_to_float3 and hash_int3_to_float3."""
+    if len(k) == 2:
+        return hash_int_to_floats(k[0], k[1], np.zeros_like(k[0]))
+    return hash_int_to_floats(*k)[..., :3]

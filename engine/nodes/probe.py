@@ -13,9 +13,11 @@ import numpy as np
 from .context import ShadingContext
 
 
-def emission_at_pixel_centres(scene):
+def emission_at_pixel_centres(scene, offset=(0.0, 0.0)):
     """(H, W, 3) emitted radiance seen through each pixel centre (row 0 at
-    the top), and the (H, W) material index hit (-1 for none)."""
+    the top), and the (H, W) material index hit (-1 for none).  offset:
+    a shift of every sample in pixels (x right, y up), e.g. where Cycles'
+    filter table puts its first sample."""
     from ..integrator import _interaction
     from ..render import prepare
     from ..scene import RenderSettings
@@ -25,6 +27,9 @@ def emission_at_pixel_centres(scene):
     pix = np.arange(npix)
     half = np.full(npix, 0.5)
     o, d, tmax = cam.generate(pix, half, half, half, half)
+    if offset != (0.0, 0.0):
+        shift = cam.rot @ np.array([offset[0] * cam.pw, offset[1] * cam.ph, 0.0])
+        o = o + shift   # orthographic cameras only: the ray moves parallel
     t, prim, bu, bv = ctx.accel.intersect(o, d, tmax)
     out = np.broadcast_to(ctx.world, (npix, 3)).copy()
     material = np.full(npix, -1)

@@ -4,7 +4,7 @@ import itertools
 import numpy as np
 
 from . import noise
-from .hashing import hash_float, hash_same_dim, hash_to_float3
+from .hashing import hash_float, hash_int_to_float3, hash_int_to_floats, hash_same_dim, hash_to_float3
 from .registry import node
 
 F = np.float32
@@ -43,7 +43,7 @@ def checker(ctx, i, p):
     q = f32(i["Vector"]) * f32(i["Scale"])[:, None]
     q = (q + F(1e-6)) * F(0.999999)
     parity = np.abs(np.floor(q).astype(np.int64)) % 2
-    f = np.where((parity[:, 0] == parity[:, 1]) == (parity[:, 2] == 1), 0.0, 1.0)
+    f = np.where((parity[:, 0] == parity[:, 1]) == (parity[:, 2] == 1), 1.0, 0.0)
     color = np.where(f[:, None] == 1.0, i["Color1"], i["Color2"])
     return {"Color": color, "Fac": f}
 
@@ -158,12 +158,28 @@ def _smoothstep(e0, e1, x):
     return np.where(x < e0, F(0.0), np.where(x >= e1, F(1.0), (F(3.0) - F(2.0) * t) * (t * t)))
 
 
+def _cell_hash(key, cell_int, dim):
+    """Feature-point offsets of cells: 1D hashes float bits, 2D-4D hash the
+    integer cell with PCG (Cycles 4.x+)."""
+    if dim == 1:
+        return hash_same_dim(key[:, 0])
+    return hash_int_to_floats(*(cell_int[:, k] for k in range(dim)))
+
+
+def _cell_color(key, cell_int, dim):
+    if dim == 1:
+        return hash_to_float3(key[:, 0])
+    return hash_int_to_float3(*(cell_int[:, k] for k in range(dim)))
+
+
 def _voronoi_octave(q, feature, metric, exponent, randomness, smoothness):
     """F1, F2 or smooth F1 of one octave: distance (N,), colour (N, 3),
-    position (N, dim)."""
+    position (N, dim).  F1 compares squared Euclidean distances (Cycles'
+    voronoi_distance_bound) and measures the winner after."""
     n, dim = q.shape
     cell = np.floor(q)
     local = q - cell
+    cell_int = cell.astype(np.int64).astype(np.int32)
     smooth = feature == "SMOOTH_F1"
     reach = 2 if smooth else 1
     offsets = [np.array(o[::-1], F) for o in itertools.product(range(-reach, reach + 1), repeat=dim)]
@@ -180,8 +196,13 @@ def _voronoi_octave(q, feature, metric, exponent, randomness, smoothness):
     first = True
     for off in offsets:
         key = cell + off
-        point = off + hash_same_dim(*(key[:, k] for k in range(dim))) * randomness[:, None]
-        dist = _distance(point - local, metric, exponent).astype(F)
+        key_int = cell_int + off.astype(np.int32)
+        point = off + _cell_hash(key, key_int, dim) * randomness[:, None]
+        if feature == "F1" and metric == "EUCLIDEAN" and dim > 1:
+            d = point - local
+            dist = np.sum(d * d, axis=-1).astype(F)
+        else:
+            dist = _distance(point - local, metric, exponent).astype(F)
         if smooth:
             if first:
                 h = np.ones(n, F)
@@ -191,7 +212,7 @@ def _voronoi_octave(q, feature, metric, exponent, randomness, smoothness):
             corr = smoothness * h * (F(1.0) - h)
             sd = (F(1.0) - h) * sd + h * dist - corr
             corr = corr / (F(1.0) + F(3.0) * smoothness)
-            color = hash_to_float3(*(key[:, k] for k in range(dim)))
+            color = _cell_color(key, key_int, dim)
             sc = (F(1.0) - h)[:, None] * sc + h[:, None] * color - corr[:, None]
             sp = (F(1.0) - h)[:, None] * sp + h[:, None] * point - corr[:, None]
             continue
@@ -206,8 +227,9 @@ def _voronoi_octave(q, feature, metric, exponent, randomness, smoothness):
     if smooth:
         return sd, sc, cell + sp
     d, o, pos = (d2, o2, p2) if feature == "F2" else (d1, o1, p1)
-    key = cell + o
-    return d, hash_to_float3(*(key[:, k] for k in range(dim))), pos + cell
+    if feature == "F1" and dim > 1:
+        d = _distance(pos - local, metric, exponent).astype(F)
+    return d, _cell_color(cell + o, cell_int + o.astype(np.int32), dim), pos + cell
 
 
 def _position_out(pos, dim):
@@ -411,7 +433,7 @@ def brick(ctx, i, p):
     tint = np.clip(_brick_noise(key) + bias, F(0.0), F(1.0))
     min_dist = np.minimum(np.minimum(x, y), np.minimum(width - x, height - y))
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = (F(1.0) - min_dist / mortar_size) / mortar_smooth
+        t = np.clip((F(1.0) - min_dist / mortar_size) / mortar_smooth, F(0.0), F(1.0))
         smooth = F(3.0) * t * t - F(2.0) * t * t * t
     mortar = np.where(min_dist >= mortar_size, F(0.0), np.where(mortar_smooth == 0, F(1.0), smooth))
     c1 = np.where((mortar != 1.0)[:, None], (F(1.0) - tint)[:, None] * i["Color1"] + tint[:, None] * i["Color2"],

@@ -1,0 +1,263 @@
+"""Every registered shader node evaluates as in Cycles, per pixel.
+
+One scene holds a quad per (node, property case, output) of
+engine.nodes.REGISTRY: an Emission shader whose colour is the node's output
+mapped by x * 0.25 + 0.5 (so signed values stay visible), seen from above by
+an orthographic camera.  Cycles renders it with one sample, which sits at
+each pixel centre (its first sample is never jittered); Ember evaluates the
+same exported scene at the pixel centres (engine.nodes.probe).  Both are
+deterministic, so every pixel must agree to float32 precision.
+
+Quads are objects placed, scaled and coloured differently, with a corner
+colour attribute, so object, generated and attribute inputs vary.  Nodes
+without a Vector input read the Generated coordinates through their first
+input (a vector into a float socket also exercises Cycles' implicit
+conversion).  The parametrized test runs one check per registry entry on
+the one shared render.
+"""
+import bpy
+import numpy as np
+import pytest
+
+from ember_testlib import render_array, require, small_resolution
+
+TILE = 6            # pixels per quad side
+COLUMNS = 16
+# Cycles computes shading in float32; outputs pass x * 0.25 + 0.5.
+ATOL = 4e-6
+RTOL = 1e-5
+SHIFT_Y_SIGN = 1.0
+
+
+def _registry():
+    from engine.nodes import REGISTRY
+    return REGISTRY
+
+
+def quad_cases():
+    """[(idname, case index, props/inputs dict, output)] for every output
+    the registry evaluates (Vector Math: the output its operation writes)."""
+    cases = []
+    scratch = bpy.data.materials.new("scratch")
+    scratch.use_nodes = True
+    for idname, entry in _registry().items():
+        for k, case in enumerate(entry.cases or [{}]):
+            node = scratch.node_tree.nodes.new(idname)
+            _configure(node, idname, case)
+            enabled = {s.identifier for s in node.outputs if getattr(s, 'enabled', True)}
+            enabled |= {s.name for s in node.outputs if getattr(s, 'enabled', True)}
+            for output, _ in entry.outputs:
+                if output in entry.unsupported_outputs or output not in enabled:
+                    continue
+                if idname == 'ShaderNodeVectorMath':
+                    value_op = case['operation'] in ('DOT_PRODUCT', 'DISTANCE', 'LENGTH')
+                    if (output == 'Value') != value_op:
+                        continue
+                cases.append((idname, k, case, output))
+    bpy.data.materials.remove(scratch)
+    return cases
+
+
+# ----------------------------------------------------------------------------
+# scene
+
+def _socket(sockets, identifier):
+    for s in sockets:
+        if s.identifier == identifier and getattr(s, 'enabled', True):
+            return s
+    for s in sockets:
+        if s.name == identifier and getattr(s, 'enabled', True):
+            return s
+    return None
+
+
+def _configure(node, idname, case):
+    entry = _registry()[idname]
+    for key, value in case.items():
+        if key in ('ramp', 'curve') or value is None:
+            continue
+        if hasattr(node, key) and key not in dict(entry.inputs):
+            setattr(node, key, value)
+    for key, value in case.items():
+        socket = _socket(node.inputs, key) if key in dict(entry.inputs) else None
+        if socket is not None and value is not None:
+            socket.default_value = value if isinstance(value, (int, float)) else tuple(value)[:len(socket.default_value)]
+    if 'ramp' in case:
+        ramp = node.color_ramp
+        ramp.interpolation = case['ramp']
+        ramp.elements[0].position, ramp.elements[0].color = 0.2, (0.9, 0.1, 0.2, 0.3)
+        ramp.elements[1].position, ramp.elements[1].color = 0.8, (0.1, 0.3, 1.0, 1.0)
+        mid = ramp.elements.new(0.55)
+        mid.color = (0.2, 0.9, 0.4, 0.6)
+    if 'curve' in case:
+        mapping = node.mapping
+        for curve in mapping.curves:
+            curve.points.new(0.3, 0.15)
+            curve.points.new(0.7, 0.9)
+        mapping.update()
+
+
+def _first_input(node, idname, case):
+    """The input that receives the Generated coordinates (None: none)."""
+    entry = _registry()[idname]
+    if entry.coords is not None or not entry.inputs:
+        return None
+    if idname == 'ShaderNodeMix':
+        return _socket(node.inputs, 'A_Vector')
+    if idname == 'ShaderNodeMapRange' and case.get('data_type') == 'FLOAT_VECTOR':
+        return _socket(node.inputs, 'Vector')
+    for identifier, _ in entry.inputs:
+        if identifier in case and case[identifier] is not None:
+            continue
+        socket = _socket(node.inputs, identifier)
+        if socket is not None and identifier != 'Normal':
+            return socket
+    return None
+
+
+def build_material(idname, case, output):
+    mat = bpy.data.materials.new(f"{idname}-{output}")
+    mat.use_nodes = True
+    tree = mat.node_tree
+    for n in list(tree.nodes):
+        tree.nodes.remove(n)
+    out = tree.nodes.new('ShaderNodeOutputMaterial')
+    emission = tree.nodes.new('ShaderNodeEmission')
+    tree.links.new(emission.outputs[0], out.inputs['Surface'])
+    node = tree.nodes.new(idname)
+    _configure(node, idname, case)
+    target = _first_input(node, idname, case)
+    if target is not None:
+        coords = tree.nodes.new('ShaderNodeTexCoord')
+        tree.links.new(coords.outputs['Generated'], target)
+    socket = _socket(node.outputs, output)
+    assert socket is not None, (idname, output)
+    kind = dict(_registry()[idname].outputs)[output]
+    if kind == 'float':
+        scale = tree.nodes.new('ShaderNodeMath')
+        scale.operation = 'MULTIPLY_ADD'
+        scale.inputs[1].default_value, scale.inputs[2].default_value = 0.25, 0.5
+        tree.links.new(socket, scale.inputs[0])
+    else:
+        scale = tree.nodes.new('ShaderNodeVectorMath')
+        scale.operation = 'MULTIPLY_ADD'
+        scale.inputs[1].default_value, scale.inputs[2].default_value = (0.25,) * 3, (0.5,) * 3
+        tree.links.new(socket, scale.inputs[0])
+    tree.links.new(scale.outputs[0], emission.inputs['Color'])
+    return mat
+
+
+def add_quad(index, material, rows):
+    x, y = index % COLUMNS, rows - 1 - index // COLUMNS
+    mesh = bpy.data.meshes.new(f"quad{index}")
+    mesh.from_pydata([(-0.5, -0.5, 0), (0.5, -0.5, 0), (0.5, 0.5, 0), (-0.5, 0.5, 0)], [], [(0, 1, 2, 3)])
+    layer = mesh.uv_layers.new(name="UVMap")
+    for loop, uv in zip(mesh.polygons[0].loop_indices, [(0, 0), (1, 0), (1, 1), (0, 1)]):
+        layer.data[loop].uv = uv
+    colors = mesh.color_attributes.new("Col", 'BYTE_COLOR', 'CORNER')
+    for k, c in enumerate([(0.9, 0.2, 0.1, 1.0), (0.1, 0.8, 0.3, 0.5), (0.2, 0.3, 0.9, 1.0), (1.0, 1.0, 0.2, 0.2)]):
+        colors.data[k].color = c
+    mesh.materials.append(material)
+    obj = bpy.data.objects.new(f"quad{index}", mesh)
+    # A slight scale and a location per quad: Object coordinates and Object
+    # Info differ from the world position; the image still tiles exactly.
+    obj.location = (x + 0.5, y + 0.5, 0.1 * (index % 3))
+    obj.pass_index = index
+    obj.color = (0.3 + 0.05 * (index % 7), 0.6, 0.9 - 0.04 * (index % 11), 1.0)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def build_scene(cases):
+    bpy.ops.wm.read_factory_settings()
+    for obj in list(bpy.data.objects):
+        bpy.data.objects.remove(obj)
+    scene = bpy.context.scene
+    rows = (len(cases) + COLUMNS - 1) // COLUMNS
+    cam_data = bpy.data.cameras.new("cam")
+    cam_data.type = 'ORTHO'
+    cam_data.ortho_scale = COLUMNS
+    cam = bpy.data.objects.new("cam", cam_data)
+    cam.location = (COLUMNS / 2, rows / 2, 5.0)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    scene.world.use_nodes = False
+    scene.world.color = (0.0, 0.0, 0.0)
+    small_resolution(scene, COLUMNS * TILE, rows * TILE)
+    for index, (idname, _, case, output) in enumerate(cases):
+        add_quad(index, build_material(idname, case, output), rows)
+    return scene
+
+
+def render_cycles(scene, folder):
+    scene.render.engine = 'CYCLES'
+    cycles = scene.cycles
+    cycles.device = 'CPU'
+    cycles.samples = 1
+    cycles.use_denoising = False
+    cycles.use_adaptive_sampling = False
+    cycles.pixel_filter_type = 'BOX'
+    cycles.max_bounces = 0
+    scene.view_settings.view_transform = 'Standard'
+    return render_array(scene, folder, "node_parity")[..., :3]
+
+
+@pytest.fixture(scope='module')
+def parity(registered_addon, tmp_path_factory):
+    """(cases, Cycles image, Ember image, warnings) of the one shared scene."""
+    from addon import backend
+    from addon.export.scene import export_scene
+    probe = backend.load('nodes.probe')
+    bpy.ops.wm.read_factory_settings()
+    cases = quad_cases()
+    scene = build_scene(cases)
+    exported = export_scene(bpy.context.evaluated_depsgraph_get())
+    shift = cycles_first_sample_offset()
+    ember, _ = probe.emission_at_pixel_centres(exported.scene, offset=(shift, SHIFT_Y_SIGN * shift))
+    cycles = render_cycles(scene, tmp_path_factory.mktemp("nodes"))
+    return cases, cycles, ember, exported.warnings
+
+
+def cycles_first_sample_offset(resolution=1024):
+    """Where Cycles' first sample (filter table read at u = 0.5) sits from
+    the pixel centre, in pixels, for its box filter: the table is the
+    inverted CDF built symmetric from its middle entry (film.cpp /
+    util_cdf_inverted), and reading between entries 511 and 512 lands half
+    an entry off the centre (about 5e-4 pixel)."""
+    cdf = np.arange(resolution + 1) / resolution          # box filter: a linear CDF
+    half = (resolution - 1) // 2
+    x = 1.0 / half
+    index = int(np.searchsorted(cdf, x, side='right'))
+    t = (x - cdf[index]) / (cdf[index + 1] - cdf[index])
+    y = ((index + t) / (resolution - 1)) * (2.0 * 0.5)
+    entry_512 = 0.5 * (1.0 + y)
+    return 0.5 * (0.5 + entry_512) - 0.5
+
+
+def _blocks(image, index, rows):
+    x, y = index % COLUMNS, index // COLUMNS
+    return image[y * TILE:(y + 1) * TILE, x * TILE:(x + 1) * TILE]
+
+
+@pytest.mark.parametrize('idname', sorted(_registry()))
+def test_node_matches_cycles_per_pixel(parity, idname):
+    cases, cycles, ember, warnings = parity
+    require(cycles.shape == ember.shape, f"images differ in shape {cycles.shape} vs {ember.shape}")
+    rows = (len(cases) + COLUMNS - 1) // COLUMNS
+    failures = []
+    for index, (name, k, case, output) in enumerate(cases):
+        if name != idname:
+            continue
+        want = _blocks(cycles, index, rows)
+        got = _blocks(ember, index, rows)
+        bad = ~np.isclose(got, want, atol=ATOL, rtol=RTOL)
+        if bad.any():
+            err = np.abs(got - want).max()
+            failures.append(f"case {k} {case} output {output}: {int(bad.sum())} values off, max |error| {err:.3g}")
+    assert not [w for w in warnings if idname in w], warnings
+    assert not failures, "\n".join(failures)
+
+
+def test_every_registered_node_is_in_the_scene(parity):
+    cases = parity[0]
+    assert {c[0] for c in cases} == set(_registry())
