@@ -30,6 +30,9 @@ class NodeDef:
     coords: Optional[str] = None   # what an unlinked 'Vector' input reads: 'generated', 'uv', 'position'
     bounds: Optional[Callable] = None      # (props) -> {output: (lo, hi)}
     unsupported_outputs: tuple = ()
+    # Extra absolute error allowed against Cycles: chains of float32
+    # trigonometry (Magic) amplify last-bit differences between libms.
+    tolerance: float = 0.0
     # Property combinations the parity tests render (each a dict of props
     # and input values); the first entry's defaults when empty.
     cases: list = field(default_factory=list)
@@ -42,13 +45,13 @@ class NodeDef:
 
 
 def node(idname, inputs=(), outputs=(), props=(), translate=None, coords=None, bounds=None,
-         unsupported_outputs=(), cases=()):
+         unsupported_outputs=(), cases=(), tolerance=0.0):
     """Decorator registering an evaluate function as a node."""
     def register(fn):
         for _, kind in tuple(inputs) + tuple(outputs):
             assert kind in KINDS, (idname, kind)
         REGISTRY[idname] = NodeDef(idname, tuple(inputs), tuple(outputs), fn, tuple(props), translate,
-                                   coords, bounds, tuple(unsupported_outputs), list(cases))
+                                   coords, bounds, tuple(unsupported_outputs), tolerance, list(cases))
         return fn
     return register
 

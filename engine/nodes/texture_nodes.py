@@ -128,9 +128,12 @@ def noise_texture(ctx, i, p):
 
 @node("ShaderNodeTexWhiteNoise", inputs=(("Vector", "vector"), ("W", "float")),
       outputs=(("Value", "float"), ("Color", "color")), props=(("noise_dimensions", "3D"),),
-      coords="position", bounds=lambda p: {"Value": (0.0, 1.0), "Color": (0.0, 1.0)},
-      cases=[{}, {"noise_dimensions": "1D", "W": 0.25}, {"noise_dimensions": "2D"},
-             {"noise_dimensions": "4D", "W": 0.5}])
+      bounds=lambda p: {"Value": (0.0, 1.0), "Color": (0.0, 1.0)},
+      # Hashes of float bits: only bit-identical inputs agree, so the cases
+      # feed constants (a continuous coordinate differs in its last bits).
+      cases=[{"Vector": (0.3, -0.7, 1.1)}, {"noise_dimensions": "1D", "W": 0.25},
+             {"noise_dimensions": "2D", "Vector": (2.5, 0.0, 0.0)},
+             {"noise_dimensions": "4D", "Vector": (-0.0, 1.5, 3.0), "W": 0.5}])
 def white_noise(ctx, i, p):
     dim = DIMS[p["noise_dimensions"]]
     q = _coords(f32(i["Vector"]), f32(i["W"]), dim)
@@ -365,6 +368,7 @@ def wave(ctx, i, p):
 
 @node("ShaderNodeTexMagic", inputs=(("Vector", "vector"), ("Scale", "float"), ("Distortion", "float")),
       outputs=(("Color", "color"), ("Fac", "float")), props=(("turbulence_depth", 2),), coords="generated",
+      tolerance=2e-4,
       cases=[{}, {"turbulence_depth": 5, "Distortion": 2.0, "Scale": 3.0}, {"turbulence_depth": 0}])
 def magic(ctx, i, p):
     q = np.fmod(f32(i["Vector"]), F(2 * np.pi))
