@@ -728,7 +728,8 @@ def surface_gradient(height_fn, ctx, uv_step, triangles):
     the point moved in position (so procedural heights of P, Generated or
     Object coordinates and image heights of UV alike follow it).  The step
     is uv_step in UV (a tenth of the finest texel) where UVs vary, else
-    1e-4 of the triangle's size."""
+    1e-3 of the triangle's size; central differences keep float32 node
+    arithmetic (about 1e-7) from dominating the slope."""
     prim = ctx.prim
     if prim is None:
         grad_u, grad_v = np.tile([1.0, 0.0, 0.0], (len(ctx), 1)), np.tile([0.0, 1.0, 0.0], (len(ctx), 1))
@@ -740,11 +741,12 @@ def surface_gradient(height_fn, ctx, uv_step, triangles):
         grad_u, grad_v = uv_gradients(triangles, prim)
         uv_rate = np.maximum(np.linalg.norm(grad_u, axis=1), np.linalg.norm(grad_v, axis=1))
         size = np.sqrt(triangles.area[prim])
-        h = np.where(uv_rate > 0, uv_step / np.where(uv_rate > 0, uv_rate, 1.0), 1e-4 * size)
+        h = np.where(uv_rate > 0, uv_step / np.where(uv_rate > 0, uv_rate, 1.0), 1e-3 * size)
         h = np.clip(h, 1e-7 * (1.0 + np.abs(ctx.p).max(axis=1)), np.maximum(size, 1e-12))
-    h0 = height_fn(ctx)
-    d1 = (height_fn(ctx.shifted(t1 * h[:, None])) - h0) / h
-    d2 = (height_fn(ctx.shifted(t2 * h[:, None])) - h0) / h
+    def slope(t):
+        step = t * h[:, None]
+        return (height_fn(ctx.shifted(step)) - height_fn(ctx.shifted(-step))) / (2.0 * h)
+    d1, d2 = slope(t1), slope(t2)
     return d1[:, None] * t1 + d2[:, None] * t2
 
 
