@@ -168,6 +168,143 @@ def add_quad(index, material, rows):
     return obj
 
 
+# ----------------------------------------------------------------------------
+# structure cases: node groups, muted nodes, Mapping in materials
+
+def _group(name, build):
+    """A shader node group whose interface build(tree, group_in, group_out) fills."""
+    group = bpy.data.node_groups.new(name, 'ShaderNodeTree')
+    group_in = group.nodes.new('NodeGroupInput')
+    group_out = group.nodes.new('NodeGroupOutput')
+    build(group, group_in, group_out)
+    return group
+
+
+def _interface(group, name, in_out, socket_type, default=None):
+    if hasattr(group, 'interface'):
+        item = group.interface.new_socket(name, in_out=in_out, socket_type=socket_type)
+    else:   # Blender before 4.0
+        sockets = group.inputs if in_out == 'INPUT' else group.outputs
+        item = sockets.new(socket_type, name)
+    if default is not None:
+        item.default_value = default
+    return item
+
+
+def _inner_group():
+    """Value * Factor (Factor defaults to 2.5), a group used inside another."""
+    def build(tree, gin, gout):
+        _interface(tree, 'Value', 'INPUT', 'NodeSocketFloat', 0.0)
+        _interface(tree, 'Factor', 'INPUT', 'NodeSocketFloat', 2.5)
+        _interface(tree, 'Result', 'OUTPUT', 'NodeSocketFloat')
+        math = tree.nodes.new('ShaderNodeMath')
+        math.operation = 'MULTIPLY'
+        tree.links.new(gin.outputs['Value'], math.inputs[0])
+        tree.links.new(gin.outputs['Factor'], math.inputs[1])
+        tree.links.new(math.outputs[0], gout.inputs['Result'])
+    return _group("inner", build)
+
+
+def _outer_group(inner):
+    """Noise(scale from the group input) -> inner group -> Color Ramp."""
+    def build(tree, gin, gout):
+        _interface(tree, 'Scale', 'INPUT', 'NodeSocketFloat', 3.0)
+        _interface(tree, 'Color', 'OUTPUT', 'NodeSocketColor')
+        noise = tree.nodes.new('ShaderNodeTexNoise')
+        tree.links.new(gin.outputs['Scale'], noise.inputs['Scale'])
+        nested = tree.nodes.new('ShaderNodeGroup')
+        nested.node_tree = inner
+        tree.links.new(noise.outputs['Fac'], nested.inputs['Value'])
+        ramp = tree.nodes.new('ShaderNodeValToRGB')
+        ramp.color_ramp.elements[0].color = (0.1, 0.2, 0.6, 1.0)
+        tree.links.new(nested.outputs['Result'], ramp.inputs['Fac'])
+        reroute = tree.nodes.new('NodeReroute')
+        tree.links.new(ramp.outputs['Color'], reroute.inputs[0])
+        tree.links.new(reroute.outputs[0], gout.inputs['Color'])
+    return _group("outer", build)
+
+
+def _structure_group_default(tree):
+    group = tree.nodes.new('ShaderNodeGroup')
+    group.node_tree = bpy.data.node_groups.get('outer') or _outer_group(_inner_group())
+    return group.outputs['Color']
+
+
+def _structure_group_linked(tree):
+    group = tree.nodes.new('ShaderNodeGroup')
+    group.node_tree = bpy.data.node_groups.get('outer') or _outer_group(_inner_group())
+    value = tree.nodes.new('ShaderNodeValue')
+    value.outputs[0].default_value = 7.0
+    tree.links.new(value.outputs[0], group.inputs['Scale'])
+    return group.outputs['Color']
+
+
+def _structure_muted(tree):
+    """A muted Invert passes its Color through; a muted Math its first value."""
+    coords = tree.nodes.new('ShaderNodeTexCoord')
+    invert = tree.nodes.new('ShaderNodeInvert')
+    tree.links.new(coords.outputs['Generated'], invert.inputs['Color'])
+    invert.mute = True
+    math = tree.nodes.new('ShaderNodeMath')
+    math.operation = 'POWER'
+    tree.links.new(invert.outputs['Color'], math.inputs[0])
+    math.mute = True
+    mix = tree.nodes.new('ShaderNodeMix')
+    mix.data_type = 'RGBA'
+    sockets = {s.identifier: s for s in mix.inputs}
+    tree.links.new(math.outputs[0], sockets['Factor_Float'])
+    tree.links.new(invert.outputs['Color'], sockets['A_Color'])
+    sockets['B_Color'].default_value = (0.9, 0.1, 0.3, 1.0)
+    return mix.outputs[2]
+
+
+def _structure_mapping_object(tree):
+    """Mapping (rotated, scaled) on Object coordinates into a Checker, the
+    texture's own hidden texture_mapping scaled too."""
+    coords = tree.nodes.new('ShaderNodeTexCoord')
+    mapping = tree.nodes.new('ShaderNodeMapping')
+    mapping.inputs['Rotation'].default_value = (0.0, 0.0, 0.4)
+    mapping.inputs['Scale'].default_value = (1.5, 0.7, 1.0)
+    tree.links.new(coords.outputs['Object'], mapping.inputs['Vector'])
+    checker = tree.nodes.new('ShaderNodeTexChecker')
+    checker.inputs['Scale'].default_value = 3.0
+    tree.links.new(mapping.outputs['Vector'], checker.inputs['Vector'])
+    return checker.outputs['Color']
+
+
+def _structure_texture_mapping(tree):
+    wave = tree.nodes.new('ShaderNodeTexWave')
+    wave.texture_mapping.scale = (2.0, 1.0, 1.0)
+    wave.texture_mapping.rotation = (0.0, 0.0, 0.3)
+    wave.texture_mapping.translation = (0.1, 0.2, 0.0)
+    return wave.outputs['Fac']
+
+
+# Extra tolerance: Wave multiplies coordinates by Scale * 20 = 100, so the
+# float32 rounding of Cycles' mapping matrix (Ember maps in float64) shows.
+STRUCTURE_TOLERANCE = {'hidden texture mapping': 2e-4}
+STRUCTURES = {
+    'group with defaults': _structure_group_default,
+    'group with a linked input': _structure_group_linked,
+    'muted nodes': _structure_muted,
+    'mapping on object coordinates': _structure_mapping_object,
+    'hidden texture mapping': _structure_texture_mapping,
+}
+
+
+def build_structure_material(name):
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    tree = mat.node_tree
+    for n in list(tree.nodes):
+        tree.nodes.remove(n)
+    out = tree.nodes.new('ShaderNodeOutputMaterial')
+    emission = tree.nodes.new('ShaderNodeEmission')
+    tree.links.new(emission.outputs[0], out.inputs['Surface'])
+    tree.links.new(STRUCTURES[name](tree), emission.inputs['Color'])
+    return mat
+
+
 def build_scene(cases):
     bpy.ops.wm.read_factory_settings()
     for obj in list(bpy.data.objects):
@@ -185,7 +322,9 @@ def build_scene(cases):
     scene.world.color = (0.0, 0.0, 0.0)
     small_resolution(scene, COLUMNS * TILE, rows * TILE)
     for index, (idname, _, case, output) in enumerate(cases):
-        add_quad(index, build_material(idname, case, output), rows)
+        material = (build_structure_material(idname) if idname in STRUCTURES
+                    else build_material(idname, case, output))
+        add_quad(index, material, rows)
     return scene
 
 
@@ -209,7 +348,7 @@ def parity(registered_addon, tmp_path_factory):
     from addon.export.scene import export_scene
     probe = backend.load('nodes.probe')
     bpy.ops.wm.read_factory_settings()
-    cases = quad_cases()
+    cases = quad_cases() + [(name, 0, {}, 'Color') for name in STRUCTURES]
     scene = build_scene(cases)
     exported = export_scene(bpy.context.evaluated_depsgraph_get())
     shift = cycles_first_sample_offset()
@@ -261,4 +400,17 @@ def test_node_matches_cycles_per_pixel(parity, idname):
 
 def test_every_registered_node_is_in_the_scene(parity):
     cases = parity[0]
-    assert {c[0] for c in cases} == set(_registry())
+    assert {c[0] for c in cases} == set(_registry()) | set(STRUCTURES)
+
+
+@pytest.mark.parametrize('name', sorted(STRUCTURES))
+def test_node_structures_match_cycles_per_pixel(parity, name):
+    """Node groups (nested, defaults and linked inputs), muted nodes,
+    reroutes, Mapping and hidden texture mappings: inlined as Cycles does."""
+    cases, cycles, ember, warnings = parity
+    rows = (len(cases) + COLUMNS - 1) // COLUMNS
+    index = next(i for i, c in enumerate(cases) if c[0] == name)
+    want, got = _blocks(cycles, index, rows), _blocks(ember, index, rows)
+    assert want.std() > 1e-3, "the case must vary over its quad"
+    assert not [w for w in warnings if name in w], warnings
+    np.testing.assert_allclose(got, want, atol=ATOL + STRUCTURE_TOLERANCE.get(name, 0.0), rtol=RTOL)
