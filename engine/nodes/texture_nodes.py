@@ -93,6 +93,9 @@ NOISE_INPUTS = (("Vector", "vector"), ("W", "float"), ("Scale", "float"), ("Deta
 
 @node("ShaderNodeTexNoise", inputs=NOISE_INPUTS, outputs=(("Fac", "float"), ("Color", "color")),
       props=(("noise_dimensions", "3D"), ("noise_type", "FBM"), ("normalize", True)), coords="generated",
+      # Octaves reach Scale x Lacunarity^Detail (about 230 in a case): the
+      # float32 rounding of P that Cycles starts from shows at that frequency.
+      tolerance=2e-5,
       bounds=lambda p: UNIT if p.get("noise_type", "FBM") == "FBM" and p.get("normalize", True) else {},
       cases=[{"Scale": 5.0, "Detail": 2.0}, {"noise_dimensions": "2D", "Scale": 3.0, "Detail": 3.5},
              {"noise_dimensions": "1D", "W": 0.3, "Scale": 4.0},
@@ -332,6 +335,8 @@ def voronoi(ctx, i, p):
       props=(("wave_type", "BANDS"), ("bands_direction", "X"), ("rings_direction", "X"),
              ("wave_profile", "SIN")),
       coords="generated", bounds=lambda p: UNIT,
+      # Bands and rings run at Scale x 20 per unit: float32 rounding of P shows.
+      tolerance=5e-5,
       cases=[{"Scale": 2.0}, {"wave_type": "RINGS", "rings_direction": "SPHERICAL", "wave_profile": "SAW"},
              {"bands_direction": "DIAGONAL", "wave_profile": "TRI", "Distortion": 3.0, "Detail": 2.0},
              {"wave_type": "RINGS", "rings_direction": "Z", "Phase Offset": 1.0}])
