@@ -60,6 +60,8 @@ class Triangles:
     # Shader-node data (engine.nodes.SceneShading): each triangle's instance
     # and its index in its mesh, object matrices and info, corner attributes.
     shading: object = None
+    # (T,) int32 index of the triangle's scene instance (for passes).
+    instance: Optional[np.ndarray] = None
 
     def __len__(self):
         return len(self.p0)
@@ -86,12 +88,13 @@ def _slot_table(inst, n_materials):
     return np.array(ids + [default], dtype=np.int32)
 
 
-def flatten(scene):
-    """Build Triangles for every instance; degenerate triangles are dropped."""
+def flatten(scene, with_instance=False):
+    """Build Triangles for every instance; degenerate triangles are dropped.
+    with_instance: also record each triangle's instance index (passes)."""
     n_mat = len(scene.materials)
     mesh_cache = {}
     parts = []
-    owners = []   # (instance index, triangle count) per part
+    owners = []   # per part: its instance index for each triangle
     for index, inst in enumerate(scene.instances):
         mesh = scene.meshes[inst.mesh]
         if len(mesh.triangles) == 0:
@@ -100,8 +103,10 @@ def flatten(scene):
             mesh_cache[inst.mesh] = _mesh_corners(mesh)
         corners = mesh_cache[inst.mesh]
         parts.append(_instance_part(mesh, corners, inst, n_mat))
-        owners.append((index, len(corners)))
+        owners.append(np.full(len(corners), index, np.int32))
     tris = _concat(parts)
+    if owners and with_instance:
+        tris.instance = np.concatenate(owners)[tris.kept]
     tris.shading = _scene_shading(scene, owners, tris)
     if _needs_tangents(scene):
         _add_tangents(tris, scene, parts)
@@ -127,13 +132,13 @@ def _instance_part(mesh, corners, inst, n_mat):
 
 
 def _scene_shading(scene, owners, tris):
-    """SceneShading for the kept triangles: _concat keeps the rows whose
-    kept mask it does not return, so it is recomputed from the same test."""
+    """SceneShading (shader-node data) for the triangles _concat kept."""
     from .nodes import SceneShading
-    instance = np.concatenate([np.full(n, i, np.int64) for i, n in owners]) if owners else np.zeros(0, np.int64)
-    local = np.concatenate([np.arange(n) for _, n in owners]) if owners else np.zeros(0, np.int64)
-    keep = tris.kept if getattr(tris, "kept", None) is not None else np.ones(len(instance), bool)
-    return SceneShading(scene, instance[keep], local[keep])
+    if not owners:
+        return SceneShading(scene, np.zeros(0, np.int64), np.zeros(0, np.int64))
+    instance = np.concatenate(owners).astype(np.int64)
+    local = np.concatenate([np.arange(len(o)) for o in owners])
+    return SceneShading(scene, instance[tris.kept], local[tris.kept])
 
 
 def _concat(parts):

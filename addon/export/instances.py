@@ -39,6 +39,7 @@ class InstanceCollector:
             materials=self.material_index(obj),
             name=obj.name,
             **ray_visibility(inst),
+            **_pass_fields(inst),
             **object_info(inst),
         ))
 
@@ -78,7 +79,7 @@ def ray_visibility(inst):
 
 
 def object_info(inst):
-    """Object Info node data: colour, pass index, and Cycles' random number
+    """Object Info node data: colour and Cycles' random number
     (float32(random_id) / 2^32, random_id read as uint32)."""
     obj = inst.object
     if inst.is_instance:
@@ -92,7 +93,7 @@ def object_info(inst):
         rid = int(backend.load('nodes.hashing').hash_uint(np.uint32(h), np.uint32(0)))
     random = float(np.float32(rid) * np.float32(1.0 / 4294967296.0))
     return {'color': tuple(float(c) for c in tuple(getattr(obj, 'color', (1.0, 1.0, 1.0)))[:3]),
-            'pass_index': int(getattr(obj, 'pass_index', 0)), 'random': random}
+            'random': random}
 
 
 def _geometry_name(obj):
@@ -113,3 +114,13 @@ def collect_instances(depsgraph, material_index):
 def _scene():
     from .. import backend
     return backend.scene_module()
+
+
+def _pass_fields(inst):
+    """Object Index and the Cryptomatte asset (the topmost parent's name; for
+    instances, the instancer's), as Cycles."""
+    obj = inst.parent if inst.is_instance and inst.parent is not None else inst.object
+    root = obj
+    while root.parent is not None:
+        root = root.parent
+    return {'pass_index': int(getattr(inst.object, 'pass_index', 0)), 'asset': root.name}
