@@ -246,9 +246,14 @@ class Math:
 
 @dataclass(eq=False)
 class NormalMap:
-    """Tangent-space Normal Map node: colour (in [0, 1]) and strength."""
+    """Normal Map node: colour (in [0, 1]), strength and space ('TANGENT',
+    'OBJECT', 'WORLD', 'BLENDER_OBJECT', 'BLENDER_WORLD')."""
     color: object
     strength: object = 1.0
+    space: str = "TANGENT"
+
+
+NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WORLD")
 
 
 @dataclass(eq=False)

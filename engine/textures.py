@@ -568,7 +568,8 @@ class MaterialTextures:
 
     def _compile_normal(self, expr):
         if isinstance(expr, NormalMap):
-            return ("normal_map", self.compiler.color(expr.color), self.compiler.value(expr.strength))
+            return ("normal_map", self.compiler.color(expr.color), self.compiler.value(expr.strength),
+                    getattr(expr, "space", "TANGENT"))
         if isinstance(expr, Bump):
             inner = None if expr.normal is None else self._compile_normal(expr.normal)
             return ("bump", self.compiler.value(expr.height), self.compiler.value(expr.strength),
@@ -694,6 +695,8 @@ def _perturbed(normal, hit, rows, triangles, ctx):
 
 def _evaluate_normal(normal, hit, rows, triangles, ns, ctx):
     if normal[0] == "normal_map":
+        if normal[3] != "TANGENT":
+            return space_normal_map(hit, rows, ns, normal[1], normal[2], normal[3], ctx)
         return normal_map(hit, rows, ns, normal[1], normal[2], ctx)
     _, height, strength, distance, invert, inner, step = normal
     base = ns if inner is None else _unit(_evaluate_normal(inner, hit, rows, triangles, ns, ctx), ns)
@@ -720,6 +723,22 @@ def normal_map(hit, rows, ns, color_fn, strength_fn, ctx):
     b = hit.tangent_sign[rows][:, None] * np.cross(n, t)
     out = c[:, :1] * t + c[:, 1:2] * b + c[:, 2:3] * n
     return out * flip
+
+
+def space_normal_map(hit, rows, ns, color_fn, strength_fn, space, ctx):
+    """Cycles' object- and world-space svm_node_normal_map: the colour is
+    the normal (Blender's variants negate y and z), object space goes
+    through the object's normal matrix, back faces flip it, and a strength
+    other than 1 blends linearly from the shading normal."""
+    c = 2.0 * (color_fn(ctx) - 0.5)
+    if space.startswith("BLENDER_"):
+        c[:, 1:] = -c[:, 1:]
+    n = ctx.to_world_normal(c) if space.endswith("OBJECT") else _unit(c, ns)
+    back = hit.back[rows] if getattr(hit, "back", None) is not None else np.zeros(len(rows), bool)
+    n = np.where(back[:, None], -n, n)
+    s = np.maximum(strength_fn(ctx), 0.0)[:, None]
+    mixed = _unit(ns + (n - ns) * s, ns)
+    return np.where(s == 1.0, n, mixed)
 
 
 def surface_gradient(height_fn, ctx, uv_step, triangles):

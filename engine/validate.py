@@ -318,6 +318,7 @@ def _numeric(value):
 
 def validate_normal(expr, what):
     if isinstance(expr, _scene.NormalMap):
+        _choice(getattr(expr, "space", "TANGENT"), _scene.NORMAL_MAP_SPACES, what, "normal map space")
         validate_texture(expr.color, f"{what} normal map colour")
         validate_texture(expr.strength, f"{what} normal map strength")
     elif isinstance(expr, _scene.Bump):

@@ -454,12 +454,10 @@ class SocketReader:
             return None
         scene = _scene()
         if node.type == 'NORMAL_MAP' and not node.mute:
-            if node.space != 'TANGENT':
-                self._note(f"'{node.name}' {node.space.lower()}-space normal map is not rendered yet")
-                return None
-            if node.uv_map:
+            if node.space == 'TANGENT' and node.uv_map:
                 self._note(f"'{node.name}' UV map '{node.uv_map}' read as the active UV map")
-            return scene.NormalMap(self.input(node, 'Color'), _as_value(self.input(node, 'Strength')))
+            return scene.NormalMap(self.input(node, 'Color'), _as_value(self.input(node, 'Strength')),
+                                   node.space)
         if node.type == 'BUMP' and not node.mute:
             inner = self.normal(node.inputs['Normal']) if node.inputs['Normal'].is_linked else None
             return scene.Bump(_as_value(self.input(node, 'Height')),

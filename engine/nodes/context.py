@@ -282,6 +282,15 @@ class ShadingContext:
         out = np.einsum("nji,nj->ni", m, v)   # transpose(M) v: inverse-transpose of the inverse
         return _normalize(out)
 
+    def to_world_normal(self, v):
+        """An object-space normal in world space (Cycles'
+        object_normal_transform: the inverse transpose), normalized."""
+        shading, inst = self.instance
+        if shading is None:
+            return _normalize(v)
+        inv = shading.inverse[inst][:, :3, :3]
+        return _normalize(np.einsum("nji,nj->ni", inv, v))
+
     @property
     def generated(self):
         """(N, 3) Generated coordinates (object-space P without a mesh)."""

@@ -203,3 +203,29 @@ def test_bump_on_a_procedural_height_follows_its_position_gradient():
     got = ctx.materials.textures.perturb(hit, ctx.triangles)
     want = np.array([-0.4 * 0.5, 0.0, 1.0])
     np.testing.assert_allclose(got, [want / np.linalg.norm(want)] * 2, atol=2e-5)   # float32 heights
+
+
+@pytest.mark.parametrize("space, strength", [("OBJECT", 1.0), ("BLENDER_OBJECT", 1.0), ("WORLD", 1.0),
+                                             ("OBJECT", 0.5)])
+def test_object_and_world_space_normal_maps(space, strength):
+    """Colour (0.8, 0.5, 0.9) is the normal (0.6, 0, 0.8); Blender's spaces
+    negate y and z; object space turns with the object (here 90 degrees
+    about z); strength blends linearly from the shading normal (Cycles)."""
+    from types import SimpleNamespace
+    from engine.integrator import _interaction
+    from engine.scene import NormalMap
+    rot = np.array([[0.0, -1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+    color = (0.8, 0.5, 0.1) if space == "BLENDER_OBJECT" else (0.8, 0.5, 0.9)
+    scene = quad_scene(Material("mapped", normal=NormalMap(color, strength, space)), matrix=rot)
+    ctx = prepare(scene, RenderSettings(samples=1))
+    o = np.array([[0.2, 0.3, 5.0]])
+    d = np.array([[0.0, 0.0, -1.0]])
+    t, prim, bu, bv = ctx.accel.intersect(o, d, np.full(1, 10.0))
+    hit = _interaction(ctx, SimpleNamespace(o=o, d=d), t, prim, bu, bv)
+    got = ctx.materials.textures.perturb(hit, ctx.triangles)[0]
+    want = np.array([0.6, 0.0, 0.8]) if space == "WORLD" else np.array([0.0, 0.6, 0.8])
+    if strength != 1.0:
+        n = np.array([0.0, 0.0, 1.0])
+        want = n + (want - n) * strength
+        want /= np.linalg.norm(want)
+    np.testing.assert_allclose(got, want, atol=1e-6)
