@@ -301,6 +301,9 @@ def _node_def(call, what):
 def validate_node_call(call, what):
     """A registered node: known inputs, each a constant or an expression."""
     entry = _node_def(call, what)
+    reason = entry.accepts(call.props) if entry.accepts is not None else None
+    if reason:
+        raise SceneError(f"{what}: node {call.idname}: {reason}")
     known = dict(entry.inputs)
     for name, value in call.inputs.items():
         if name not in known:

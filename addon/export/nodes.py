@@ -305,6 +305,10 @@ class SocketReader:
         if call is None:
             call = self._call(node, entry)
             self.calls[key] = call
+        reason = entry.accepts(call.props) if entry.accepts is not None else None
+        if reason:
+            self._note(f"'{node.name}' {reason}")
+            return self._unsupported(node)
         used = call.props.setdefault('_outputs', [])
         if output not in used:
             used.append(output)

@@ -3,7 +3,7 @@ Fresnel / Layer Weight, and Mapping (kernel/svm/tex_coord.h, geometry.h,
 fresnel.h, attribute.h, light_path.h, mapping_util.h)."""
 import numpy as np
 
-from .registry import node
+from .registry import node, one_of
 
 VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION, VIS_SHADOW = 1, 2, 4, 8, 16
 
@@ -76,7 +76,8 @@ def _attribute_rgba(ctx, name):
 
 @node("ShaderNodeAttribute", outputs=(("Color", "color"), ("Vector", "vector"), ("Fac", "float"),
                                       ("Alpha", "float")),
-      props=(("attribute_name", ""), ("attribute_type", "GEOMETRY")), cases=[{"attribute_name": "Col"}])
+      props=(("attribute_name", ""), ("attribute_type", "GEOMETRY")), cases=[{"attribute_name": "Col"}],
+      accepts=one_of(attribute_type=("GEOMETRY",)))
 def attribute(ctx, i, p):
     rgba = _attribute_rgba(ctx, p["attribute_name"])
     return {"Color": rgba[:, :3], "Vector": rgba[:, :3], "Fac": rgba[:, :3].mean(axis=1), "Alpha": rgba[:, 3]}

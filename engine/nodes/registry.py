@@ -33,6 +33,9 @@ class NodeDef:
     # Extra absolute error allowed against Cycles: chains of float32
     # trigonometry (Magic) amplify last-bit differences between libms.
     tolerance: float = 0.0
+    # (props) -> None, or why these properties are not evaluated (the
+    # exporter then falls back with a warning; validation rejects them).
+    accepts: Optional[Callable] = None
     # Property combinations the parity tests render (each a dict of props
     # and input values); the first entry's defaults when empty.
     cases: list = field(default_factory=list)
@@ -45,15 +48,26 @@ class NodeDef:
 
 
 def node(idname, inputs=(), outputs=(), props=(), translate=None, coords=None, bounds=None,
-         unsupported_outputs=(), cases=(), tolerance=0.0):
+         unsupported_outputs=(), cases=(), tolerance=0.0, accepts=None):
     """Decorator registering an evaluate function as a node."""
     def register(fn):
         for _, kind in tuple(inputs) + tuple(outputs):
             assert kind in KINDS, (idname, kind)
         REGISTRY[idname] = NodeDef(idname, tuple(inputs), tuple(outputs), fn, tuple(props), translate,
-                                   coords, bounds, tuple(unsupported_outputs), tolerance, list(cases))
+                                   coords, bounds, tuple(unsupported_outputs), tolerance, accepts,
+                                   list(cases))
         return fn
     return register
+
+
+def one_of(**allowed):
+    """An ``accepts`` check: each named property must be one of its values."""
+    def check(props):
+        for name, values in allowed.items():
+            if props.get(name, values[0]) not in values:
+                return f"{name} {props.get(name)!r} is not rendered yet"
+        return None
+    return check
 
 
 def lookup(idname):

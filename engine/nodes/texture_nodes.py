@@ -5,7 +5,7 @@ import numpy as np
 
 from . import noise
 from .hashing import hash_float, hash_int_to_float3, hash_int_to_floats, hash_same_dim, hash_to_float3
-from .registry import node
+from .registry import node, one_of
 
 F = np.float32
 DIMS = {"1D": 1, "2D": 2, "3D": 3, "4D": 4}
@@ -93,6 +93,8 @@ NOISE_INPUTS = (("Vector", "vector"), ("W", "float"), ("Scale", "float"), ("Deta
 
 @node("ShaderNodeTexNoise", inputs=NOISE_INPUTS, outputs=(("Fac", "float"), ("Color", "color")),
       props=(("noise_dimensions", "3D"), ("noise_type", "FBM"), ("normalize", True)), coords="generated",
+      accepts=one_of(noise_type=("FBM", "MULTIFRACTAL", "RIDGED_MULTIFRACTAL", "HYBRID_MULTIFRACTAL",
+                                 "HETERO_TERRAIN"), noise_dimensions=tuple(DIMS)),
       # Octaves reach Scale x Lacunarity^Detail (about 230 in a case): the
       # float32 rounding of P that Cycles starts from shows at that frequency.
       tolerance=2e-5,
@@ -261,6 +263,8 @@ def _position_out(pos, dim):
                ("Radius", "float")),
       props=(("voronoi_dimensions", "3D"), ("feature", "F1"), ("distance", "EUCLIDEAN"), ("normalize", False)),
       coords="generated", unsupported_outputs=("Radius",),
+      accepts=one_of(feature=("F1", "F2", "SMOOTH_F1"), voronoi_dimensions=tuple(DIMS),
+                     distance=("EUCLIDEAN", "MANHATTAN", "CHEBYCHEV", "MINKOWSKI")),
       cases=[{"Scale": 5.0}, {"feature": "F2", "Scale": 4.0}, {"feature": "SMOOTH_F1", "Scale": 4.0},
              {"voronoi_dimensions": "2D", "distance": "MANHATTAN", "Scale": 6.0},
              {"voronoi_dimensions": "2D", "distance": "CHEBYCHEV", "Scale": 6.0, "Randomness": 0.6},
