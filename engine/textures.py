@@ -282,7 +282,9 @@ def _default_input(ctx, entry, name, kind):
         return uv
     if name == "Normal":
         return None
-    return np.zeros(len(ctx)) if kind == "float" else np.zeros((len(ctx), 3))
+    value = entry.input_defaults.get(name, 0.0)
+    return np.full(len(ctx), float(value)) if kind == "float" else np.broadcast_to(
+        np.asarray(value, dtype=np.float64), (len(ctx), 3)).copy()
 
 
 def _finite(value):

@@ -25,8 +25,8 @@ class SceneShading:
 
     def __init__(self, scene, instance_of_triangle, local_triangle):
         self.scene = scene
-        self.instance = instance_of_triangle      # (T,) index into scene.instances
-        self.local = local_triangle               # (T,) triangle index in its mesh
+        self.instance = np.asarray(instance_of_triangle, np.int32)   # (T,) index into scene.instances
+        self.local = np.asarray(local_triangle, np.int32)            # (T,) triangle index in its mesh
         inst = scene.instances
         mats = np.array([np.asarray(i.matrix, dtype=np.float64) for i in inst]).reshape(-1, 4, 4)
         self.matrix = mats

@@ -36,6 +36,9 @@ class NodeDef:
     # (props) -> None, or why these properties are not evaluated (the
     # exporter then falls back with a warning; validation rejects them).
     accepts: Optional[Callable] = None
+    # Values of inputs older Blenders lack (e.g. Noise Lacunarity before 4.0),
+    # as those versions behaved; other absent inputs read as zero.
+    input_defaults: dict = field(default_factory=dict)
     # Property combinations the parity tests render (each a dict of props
     # and input values); the first entry's defaults when empty.
     cases: list = field(default_factory=list)
@@ -48,14 +51,14 @@ class NodeDef:
 
 
 def node(idname, inputs=(), outputs=(), props=(), translate=None, coords=None, bounds=None,
-         unsupported_outputs=(), cases=(), tolerance=0.0, accepts=None):
+         unsupported_outputs=(), cases=(), tolerance=0.0, accepts=None, input_defaults=None):
     """Decorator registering an evaluate function as a node."""
     def register(fn):
         for _, kind in tuple(inputs) + tuple(outputs):
             assert kind in KINDS, (idname, kind)
         REGISTRY[idname] = NodeDef(idname, tuple(inputs), tuple(outputs), fn, tuple(props), translate,
                                    coords, bounds, tuple(unsupported_outputs), tolerance, accepts,
-                                   list(cases))
+                                   dict(input_defaults or {}), list(cases))
         return fn
     return register
 

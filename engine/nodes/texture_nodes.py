@@ -93,6 +93,7 @@ NOISE_INPUTS = (("Vector", "vector"), ("W", "float"), ("Scale", "float"), ("Deta
 
 @node("ShaderNodeTexNoise", inputs=NOISE_INPUTS, outputs=(("Fac", "float"), ("Color", "color")),
       props=(("noise_dimensions", "3D"), ("noise_type", "FBM"), ("normalize", True)), coords="generated",
+      input_defaults={"Lacunarity": 2.0, "Gain": 1.0},
       accepts=one_of(noise_type=("FBM", "MULTIFRACTAL", "RIDGED_MULTIFRACTAL", "HYBRID_MULTIFRACTAL",
                                  "HETERO_TERRAIN"), noise_dimensions=tuple(DIMS)),
       # Octaves reach Scale x Lacunarity^Detail (about 230 in a case): the
@@ -263,6 +264,8 @@ def _position_out(pos, dim):
                ("Radius", "float")),
       props=(("voronoi_dimensions", "3D"), ("feature", "F1"), ("distance", "EUCLIDEAN"), ("normalize", False)),
       coords="generated", unsupported_outputs=("Radius",),
+      input_defaults={"Roughness": 0.5, "Lacunarity": 2.0, "Smoothness": 1.0, "Exponent": 0.5,
+                      "Randomness": 1.0},
       accepts=one_of(feature=("F1", "F2", "SMOOTH_F1"), voronoi_dimensions=tuple(DIMS),
                      distance=("EUCLIDEAN", "MANHATTAN", "CHEBYCHEV", "MINKOWSKI")),
       cases=[{"Scale": 5.0}, {"feature": "F2", "Scale": 4.0}, {"feature": "SMOOTH_F1", "Scale": 4.0},
