@@ -325,6 +325,8 @@ class SocketReader:
                 continue   # the engine's default (texture coordinates, the shading normal)
             inputs[identifier] = _as_kind(self.input_value(socket), kind, self._source_is_vector(socket))
         props = {name: _prop(getattr(node, name, default)) for name, default in entry.props}
+        # Some kernels changed between Blender versions (Voronoi's cell hash).
+        props['_blender_version'] = _blender_version()
         if entry.translate is not None:
             props.update(entry.translate(_raw(node)))
         mapping = _texture_mapping(node, entry, inputs.get('Vector'))
@@ -469,6 +471,11 @@ class SocketReader:
                               _as_value(self.input(node, 'Distance')), bool(node.invert), inner)
         self._unsupported(node)
         return None
+
+
+def _blender_version():
+    import bpy
+    return tuple(bpy.app.version)
 
 
 def _registry():

@@ -167,21 +167,27 @@ def _smoothstep(e0, e1, x):
     return np.where(x < e0, F(0.0), np.where(x >= e1, F(1.0), (F(3.0) - F(2.0) * t) * (t * t)))
 
 
-def _cell_hash(key, cell_int, dim):
-    """Feature-point offsets of cells: 1D hashes float bits, 2D-4D hash the
-    integer cell with PCG (Cycles 4.x+)."""
-    if dim == 1:
-        return hash_same_dim(key[:, 0])
+def _cell_hash(key, cell_int, dim, pcg):
+    """Feature-point offsets of cells: float bits hashed with lookup3 (1D
+    always; 2D-4D up to Blender 4.2), or the integer cell with PCG (5.0)."""
+    if dim == 1 or not pcg:
+        return hash_same_dim(*(key[:, k] for k in range(dim)))
     return hash_int_to_floats(*(cell_int[:, k] for k in range(dim)))
 
 
-def _cell_color(key, cell_int, dim):
-    if dim == 1:
-        return hash_to_float3(key[:, 0])
+def _cell_color(key, cell_int, dim, pcg):
+    if dim == 1 or not pcg:
+        return hash_to_float3(*(key[:, k] for k in range(dim)))
     return hash_int_to_float3(*(cell_int[:, k] for k in range(dim)))
 
 
-def _voronoi_octave(q, feature, metric, exponent, randomness, smoothness):
+def _pcg_cells(props):
+    """Whether the exporting Blender hashes Voronoi cells as integers
+    (measured: 3.4 and 4.2 hash float bits, 5.0 integer cells)."""
+    return tuple(props.get("_blender_version", (5, 0, 0))) >= (5, 0, 0)
+
+
+def _voronoi_octave(q, feature, metric, exponent, randomness, smoothness, pcg=True):
     """F1, F2 or smooth F1 of one octave: distance (N,), colour (N, 3),
     position (N, dim).  F1 compares squared Euclidean distances (Cycles'
     voronoi_distance_bound) and measures the winner after."""
@@ -206,8 +212,8 @@ def _voronoi_octave(q, feature, metric, exponent, randomness, smoothness):
     for off in offsets:
         key = cell + off
         key_int = cell_int + off.astype(np.int32)
-        point = off + _cell_hash(key, key_int, dim) * randomness[:, None]
-        if feature == "F1" and metric == "EUCLIDEAN" and dim > 1:
+        point = off + _cell_hash(key, key_int, dim, pcg) * randomness[:, None]
+        if feature == "F1" and metric == "EUCLIDEAN" and dim > 1 and pcg:
             d = point - local
             dist = np.sum(d * d, axis=-1).astype(F)
         else:
@@ -221,7 +227,7 @@ def _voronoi_octave(q, feature, metric, exponent, randomness, smoothness):
             corr = smoothness * h * (F(1.0) - h)
             sd = (F(1.0) - h) * sd + h * dist - corr
             corr = corr / (F(1.0) + F(3.0) * smoothness)
-            color = _cell_color(key, key_int, dim)
+            color = _cell_color(key, key_int, dim, pcg)
             sc = (F(1.0) - h)[:, None] * sc + h[:, None] * color - corr[:, None]
             sp = (F(1.0) - h)[:, None] * sp + h[:, None] * point - corr[:, None]
             continue
@@ -236,9 +242,9 @@ def _voronoi_octave(q, feature, metric, exponent, randomness, smoothness):
     if smooth:
         return sd, sc, cell + sp
     d, o, pos = (d2, o2, p2) if feature == "F2" else (d1, o1, p1)
-    if feature == "F1" and dim > 1:
+    if feature == "F1" and dim > 1 and pcg:
         d = _distance(pos - local, metric, exponent).astype(F)
-    return d, _cell_color(cell + o, cell_int + o.astype(np.int32), dim), pos + cell
+    return d, _cell_color(cell + o, cell_int + o.astype(np.int32), dim, pcg), pos + cell
 
 
 def _position_out(pos, dim):
@@ -307,7 +313,8 @@ def voronoi(ctx, i, p):
     pos = np.zeros((n, dim), F)
     top = int(np.ceil(detail.max(initial=0.0)))
     for k in range(top + 1):
-        d, c, ps = _voronoi_octave(q * fscale[:, None], feature, metric, expo, rand, smooth)
+        d, c, ps = _voronoi_octave(q * fscale[:, None], feature, metric, expo, rand, smooth,
+                                   _pcg_cells(p))
         ps = ps / fscale[:, None]
         first_only = zero & (k == 0)
         full = ~zero & (k <= detail)
