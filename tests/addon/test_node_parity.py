@@ -494,3 +494,38 @@ def test_unevaluated_node_variants_fall_back_with_one_warning(registered_addon):
     assert translated.lobes
     assert not [lobe for lobe in translated.lobes
                 if isinstance(lobe.roughness, textures) or isinstance(lobe.weight, textures)]
+
+
+def test_displacement_output_becomes_bump_only(registered_addon):
+    """Material Output Displacement (via a Displacement node) renders as
+    Cycles' default "Bump Only": a bump of (Height - Midlevel) * Scale
+    over the BSDF's own normal map."""
+    from addon.export import material as material_export
+    from addon import backend
+    scene = backend.scene_module()
+    bpy.ops.wm.read_factory_settings()
+    mat = bpy.data.materials.new("Displaced")
+    mat.use_nodes = True
+    tree = mat.node_tree
+    noise = tree.nodes.new('ShaderNodeTexNoise')
+    displacement = tree.nodes.new('ShaderNodeDisplacement')
+    displacement.inputs['Midlevel'].default_value = 0.4
+    displacement.inputs['Scale'].default_value = 0.2
+    tree.links.new(noise.outputs['Fac'], displacement.inputs['Height'])
+    tree.links.new(displacement.outputs[0], tree.nodes['Material Output'].inputs['Displacement'])
+    normal_map = tree.nodes.new('ShaderNodeNormalMap')
+    normal_map.space = 'OBJECT'
+    normal_map.inputs['Color'].default_value = (0.6, 0.5, 1.0, 1.0)
+    tree.links.new(normal_map.outputs[0], tree.nodes['Principled BSDF'].inputs['Normal'])
+    translated, warning = material_export.translate(mat)
+    assert warning is None, warning
+    bump = translated.normal
+    assert isinstance(bump, scene.Bump) and bump.strength == 1.0 and bump.distance == 1.0
+    assert isinstance(bump.normal, scene.NormalMap) and bump.normal.space == 'OBJECT'
+    # The height: (noise - 0.4) * 0.2, evaluated through the engine.
+    from engine.nodes import ShadingContext
+    from engine.textures import Compiler
+    ctx = ShadingContext(3, p=np.array([[0.1, 0.2, 0.3], [1.0, 0.5, 0.2], [0.3, 0.9, 0.7]]))
+    height = Compiler().value(bump.height)(ctx)
+    fac = Compiler().value(scene.NodeOutput(bump.height.a.a.call, 'Fac'))(ctx)
+    np.testing.assert_allclose(height, (fac - 0.4) * 0.2, rtol=1e-6)
