@@ -194,7 +194,7 @@ class ShadingContext:
         for name in ("prim", "bary", "p", "ng", "ns", "wo", "back", "depth", "ray"):
             value = getattr(self, name)
             setattr(out, name, None if value is None else value[rows])
-        out._cache = {k: v[rows] for k, v in self._cache.items()}
+        out._cache = {k: None if v is None else v[rows] for k, v in self._cache.items()}
         return out
 
     def shifted(self, dp):

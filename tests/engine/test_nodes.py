@@ -237,3 +237,11 @@ def test_unevaluated_properties_are_rejected_by_validation():
     scene = Scene([quad], [Instance(0, materials=[0])], [Material("m", emission=edge)], camera=Camera())
     with pytest.raises(SceneError, match="DISTANCE_TO_EDGE"):
         scene.validate()
+
+
+def test_context_subsets_keep_missing_attributes_missing():
+    scene = quad_scene(Material("m"))
+    ctx = _hit_context(scene, np.array([[0.0, 0.0], [0.5, 0.5]]))
+    assert ctx.attribute("Nope") is None
+    sub = ctx.take(np.array([1]))
+    assert sub.attribute("Nope") is None and len(sub) == 1
