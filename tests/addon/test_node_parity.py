@@ -529,3 +529,30 @@ def test_displacement_output_becomes_bump_only(registered_addon):
     height = Compiler().value(bump.height)(ctx)
     fac = Compiler().value(scene.NodeOutput(bump.height.a.a.call, 'Fac'))(ctx)
     np.testing.assert_allclose(height, (fac - 0.4) * 0.2, rtol=1e-6)
+
+
+def test_light_node_tree_scales_the_light(registered_addon):
+    """A light whose Emission colour is a Blackbody (and strength 2) emits
+    colour x energy x Blackbody x 2; a tree varying over the light is
+    reported."""
+    from addon.export.light import collect_lights
+    from engine.nodes.converter_nodes import blackbody_rec709
+    bpy.ops.wm.read_factory_settings()
+    light = bpy.data.objects['Light']
+    data = light.data
+    data.energy = 100.0
+    data.use_nodes = True
+    tree = data.node_tree
+    emission = next(n for n in tree.nodes if n.type == 'EMISSION')
+    emission.inputs['Strength'].default_value = 2.0
+    black = tree.nodes.new('ShaderNodeBlackbody')
+    black.inputs['Temperature'].default_value = 3200.0
+    tree.links.new(black.outputs[0], emission.inputs['Color'])
+    lights, warnings = collect_lights(bpy.context.evaluated_depsgraph_get())
+    assert not warnings, warnings
+    want = 100.0 * 2.0 * np.maximum(blackbody_rec709(np.array([3200.0])), 0.0)[0] * np.array(data.color)
+    np.testing.assert_allclose(lights[0].power, want, rtol=1e-6)
+    noise = tree.nodes.new('ShaderNodeTexNoise')
+    tree.links.new(noise.outputs['Color'], emission.inputs['Color'])
+    lights, warnings = collect_lights(bpy.context.evaluated_depsgraph_get())
+    assert len(warnings) == 1 and 'varies' in warnings[0]
