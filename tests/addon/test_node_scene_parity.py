@@ -17,11 +17,11 @@ from ember_testlib import (assert_no_failing_blocks, compare_with_cycles, render
 from test_material_parity import _area_light, _bsdf, _camera, _floor, _material, _object, _sphere, _world
 from test_node_parity import _inner_group, _outer_group
 
-EMBER_SPP = 64
-CYCLES_SEEDS = 8
+EMBER_SPP = 32
+CYCLES_SEEDS = 6
 CYCLES_SPP = 16
 BLOCK = 6
-WIDTH, HEIGHT = 48, 36
+WIDTH, HEIGHT = 42, 30
 BOUNCES = 2
 Z_LIMIT = 3.29   # two-sided 0.1%
 
@@ -219,9 +219,9 @@ def test_procedural_world_matches_cycles(empty_scene, tmp_path, tapped_engine):
     _sphere(_diffuse("Ball", (0.8, 0.8, 0.8)), (0.0, 0.0, 0.5))
     procedural_world(scene)
     _camera(scene, (0.0, -3.4, 1.6), (0.0, 0.0, 0.6))
-    small_resolution(scene, 32, 24)
+    small_resolution(scene, 24, 18)
     image, ember_batches, cycles = render_ember_and_cycles(
-        scene, tmp_path, "world", tapped_engine, 32, 1, 6, 16, BOUNCES)
+        scene, tmp_path, "world", tapped_engine, 16, 1, 4, 16, 1)
     from addon import engine as ember_engine
     log = ember_engine.RENDER_LOG[-1]
     assert not [w for w in log.get('warnings', ()) if 'World' in w], log.get('warnings')
