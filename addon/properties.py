@@ -7,12 +7,14 @@ own ``scene.render.film_transparent`` and is not duplicated here.
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
 
+# The light tree is the default, as in Cycles: with one light it costs
+# nothing, with many it lowers the noise several times.
 LIGHT_SELECTION_ITEMS = (
+    ('TREE', "Light Tree", "Pick one light per vertex by its estimated contribution there "
+     "(power, distance and orientation): far less noise with many lights"),
     ('POWER', "Power", "Pick one light per vertex, proportional to its power"),
     ('UNIFORM', "Uniform", "Pick one light per vertex, every light equally likely"),
     ('ALL', "All Lights", "Sample every light at every vertex (slower, less noise with few lights)"),
-    ('TREE', "Light Tree", "Pick one light per vertex by its estimated contribution there "
-     "(power, distance and orientation): far less noise with many lights"),
 )
 
 STRATEGY_ITEMS = (
@@ -83,7 +85,7 @@ class EmberRenderSettings(bpy.types.PropertyGroup):
         default=8, min=0, max=1024)
     light_selection: EnumProperty(
         name="Light Selection", description="How a light is chosen for next-event estimation",
-        items=LIGHT_SELECTION_ITEMS, default='POWER')
+        items=LIGHT_SELECTION_ITEMS, default='TREE')
     mis_compensation: BoolProperty(
         name="World MIS Compensation",
         description="Sample an HDRI world by its radiance above the mean (Karlik et al. 2019): "
@@ -112,6 +114,14 @@ def _passes_changed(self, context):
         view_layer.update_render_passes()
 
 
+def _pass_toggle_update():
+    """The update callback of the pass checkboxes, or None without a UI:
+    the render pipeline registers passes itself when it renders, and the
+    bpy 4.2 module segfaults at exit when a ViewLayer property group has
+    any update callback (measured: even a no-op one)."""
+    return None if bpy.app.background else _passes_changed
+
+
 STRATEGY_VERTEX_ITEMS = (
     ('ALL', "Every Vertex", "Direct light of every path vertex: with Emission and Environment "
      "the strategy passes add up to Combined"),
@@ -125,19 +135,19 @@ class EmberViewLayerSettings(bpy.types.PropertyGroup):
     Cycles also has use Blender's own View Layer checkboxes."""
     use_pass_strategies: BoolProperty(
         name="Strategies", description="Strategy Light, Strategy BSDF (their MIS-weighted direct light), "
-        "the same unweighted, and MIS Weight Light", default=False, update=_passes_changed)
+        "the same unweighted, and MIS Weight Light", default=False, update=_pass_toggle_update())
     strategy_passes_vertex: EnumProperty(
         name="Strategy Vertices", description="Which path vertices the strategy passes show",
         items=STRATEGY_VERTEX_ITEMS, default='ALL')
     use_pass_variance: BoolProperty(
         name="Variance", description="Per-pixel variance of the Combined mean (what adaptive sampling reads)",
-        default=False, update=_passes_changed)
+        default=False, update=_pass_toggle_update())
     use_pass_denoising_data: BoolProperty(
         name="Denoising Data", description="Denoising Albedo and Denoising Normal, as Cycles",
-        default=False, update=_passes_changed)
+        default=False, update=_pass_toggle_update())
     use_pass_sample_count: BoolProperty(
         name="Sample Count", description="Samples per pixel (Cycles' Debug Sample Count)",
-        default=False, update=_passes_changed)
+        default=False, update=_pass_toggle_update())
 
 
 classes = (EmberRenderSettings, EmberViewLayerSettings)

@@ -40,6 +40,7 @@ def main(argv=None):
     for samples in (16, 128):
         settings = scene_export.render_settings(scene)
         settings.samples, settings.samples_per_pass = samples, samples
+        settings.aovs = ("normal", "albedo")   # the denoiser's guides
         result = render(exported.scene, settings)
         panels.append(result.image[..., :3])
         if samples == 16:

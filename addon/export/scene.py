@@ -85,4 +85,7 @@ def render_settings(scene, is_preview=False):
         sampling_pattern=settings.sampling_pattern.lower(),
         adaptive_threshold=settings.adaptive_threshold if settings.use_adaptive_sampling else 0.0,
         adaptive_min_samples=settings.adaptive_min_samples,
+        # The film keeps first-hit AOVs only for the denoiser (memory: the
+        # Depth and Normal passes come from the pass accumulators).
+        aovs=("normal", "albedo") if settings.use_denoising and not is_preview else (),
     )
