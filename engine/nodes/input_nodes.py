@@ -51,11 +51,22 @@ def uv_map(ctx, i, p):
 
 
 @node("ShaderNodeNewGeometry", outputs=(("Position", "vector"), ("Normal", "vector"), ("True Normal", "vector"),
-                                        ("Incoming", "vector"), ("Backfacing", "float")),
-      unsupported_outputs=("Tangent", "Parametric", "Pointiness", "Random Per Island"), cases=[{}])
+                                        ("Incoming", "vector"), ("Parametric", "vector"), ("Backfacing", "float")),
+      unsupported_outputs=("Tangent", "Pointiness", "Random Per Island"), cases=[{}])
 def geometry(ctx, i, p):
     return {"Position": ctx.p, "Normal": ctx.ns, "True Normal": ctx.ng, "Incoming": ctx.wo,
-            "Backfacing": ctx.back.astype(np.float64)}
+            "Parametric": _parametric(ctx), "Backfacing": ctx.back.astype(np.float64)}
+
+
+def _parametric(ctx):
+    """Cycles' (1 - u - v, u, 0) in its barycentrics: measured against
+    Cycles, 1 - u - v weighs Ember's first corner and u its second."""
+    out = np.zeros((len(ctx), 3))
+    if ctx.bary is not None:
+        bu, bv = ctx.bary[:, 0], ctx.bary[:, 1]
+        out[:, 0] = 1.0 - bu - bv
+        out[:, 1] = bu
+    return out
 
 
 @node("ShaderNodeObjectInfo", outputs=(("Location", "vector"), ("Color", "color"), ("Alpha", "float"),

@@ -150,10 +150,14 @@ def build_material(idname, case, output):
 def add_quad(index, material, rows):
     x, y = index % COLUMNS, rows - 1 - index // COLUMNS
     mesh = bpy.data.meshes.new(f"quad{index}")
-    mesh.from_pydata([(-0.5, -0.5, 0), (0.5, -0.5, 0), (0.5, 0.5, 0), (-0.5, 0.5, 0)], [], [(0, 1, 2, 3)])
+    # Starting the face at the second corner puts the triangles' shared edge
+    # on x + y = 0, which no (shifted) pixel centre lies on: the triangle hit
+    # is never ambiguous (Geometry Parametric jumps across that edge).
+    mesh.from_pydata([(-0.5, -0.5, 0), (0.5, -0.5, 0), (0.5, 0.5, 0), (-0.5, 0.5, 0)], [], [(1, 2, 3, 0)])
     layer = mesh.uv_layers.new(name="UVMap")
-    for loop, uv in zip(mesh.polygons[0].loop_indices, [(0, 0), (1, 0), (1, 1), (0, 1)]):
-        layer.data[loop].uv = uv
+    for loop in mesh.polygons[0].loop_indices:
+        co = mesh.vertices[mesh.loops[loop].vertex_index].co
+        layer.data[loop].uv = (co.x + 0.5, co.y + 0.5)
     colors = mesh.color_attributes.new("Col", 'BYTE_COLOR', 'CORNER')
     for k, c in enumerate([(0.9, 0.2, 0.1, 1.0), (0.1, 0.8, 0.3, 0.5), (0.2, 0.3, 0.9, 1.0), (1.0, 1.0, 0.2, 0.2)]):
         colors.data[k].color = c
