@@ -247,6 +247,103 @@ def _voronoi_octave(q, feature, metric, exponent, randomness, smoothness, pcg=Tr
     return d, _cell_color(cell + o, cell_int + o.astype(np.int32), dim, pcg), pos + cell
 
 
+def _offsets(dim, reach=1):
+    return [np.array(o[::-1], F) for o in itertools.product(range(-reach, reach + 1), repeat=dim)]
+
+
+def _points(q, randomness, pcg):
+    """cell, local coordinates and a function giving the feature point of
+    the cell at an offset (N, dim), relative to the cell."""
+    cell = np.floor(q)
+    local = q - cell
+    cell_int = cell.astype(np.int64).astype(np.int32)
+    dim = q.shape[1]
+
+    def point(off):
+        off = np.broadcast_to(off, q.shape).astype(F)
+        return off + _cell_hash(cell + off, cell_int + off.astype(np.int32), dim, pcg) * randomness[:, None]
+    return local, point
+
+
+def _distance_to_edge(q, randomness, pcg):
+    """Cycles' voronoi_distance_to_edge (1D: the two midpoints)."""
+    n, dim = q.shape
+    local, point = _points(q, randomness, pcg)
+    if dim == 1:
+        mid, left, right = point(F(0.0)), point(F(-1.0)), point(F(1.0))
+        return np.minimum(np.abs((mid + left) / F(2.0) - local), np.abs((mid + right) / F(2.0) - local))[:, 0]
+    big = F(np.finfo(np.float32).max)
+    best = np.full(n, big, F)
+    closest = np.zeros((n, dim), F)
+    vectors = [point(off) - local for off in _offsets(dim)]
+    for v in vectors:
+        d = np.sum(v * v, axis=1)
+        closer = d < best
+        best = np.where(closer, d, best)
+        closest = np.where(closer[:, None], v, closest)
+    edge = np.full(n, big, F)
+    for v in vectors:
+        perp = v - closest
+        length2 = np.sum(perp * perp, axis=1)
+        ok = length2 > F(0.0001)
+        unit = perp / np.sqrt(np.where(ok, length2, F(1.0)))[:, None]
+        dist = np.sum((closest + v) / F(2.0) * unit, axis=1)
+        edge = np.where(ok, np.minimum(edge, dist), edge)
+    return edge
+
+
+def _n_sphere_radius(q, randomness, pcg):
+    """Cycles' voronoi_n_sphere_radius: half the distance from the closest
+    feature point to its own nearest neighbour."""
+    n, dim = q.shape
+    local, point = _points(q, randomness, pcg)
+    big = F(np.finfo(np.float32).max)
+    best = np.full(n, big, F)
+    closest = np.zeros((n, dim), F)
+    closest_off = np.zeros((n, dim), F)
+    for off in _offsets(dim):
+        pt = point(off)
+        d = np.sum((pt - local) ** 2, axis=1)
+        closer = d < best
+        best, closest = np.where(closer, d, best), np.where(closer[:, None], pt, closest)
+        closest_off = np.where(closer[:, None], off, closest_off)
+    best = np.full(n, big, F)
+    other = np.zeros((n, dim), F)
+    for off in _offsets(dim):
+        if not off.any():
+            continue
+        pt = point(off + closest_off)
+        d = np.sum((closest - pt) ** 2, axis=1)
+        closer = d < best
+        best, other = np.where(closer, d, best), np.where(closer[:, None], pt, other)
+    return np.sqrt(np.sum((other - closest) ** 2, axis=1)) / F(2.0)
+
+
+def _fractal_edge(q, detail, rough, lac, rand, normalize, pcg):
+    """fractal_voronoi_distance_to_edge."""
+    n = len(q)
+    max_dist = F(0.5) + F(0.5) * rand
+    amp = np.ones(n, F)
+    max_amp = max_dist.copy()
+    fscale = np.ones(n, F)
+    dist = np.full(n, F(8.0))
+    zero = (detail == 0) | (rough == 0)
+    rmd = detail - np.floor(detail)
+    for k in range(int(np.ceil(detail.max(initial=0.0))) + 1):
+        octave = _distance_to_edge(q * fscale[:, None], rand, pcg)
+        first_only = zero & (k == 0)
+        full = ~zero & (k <= detail)
+        part = ~zero & (k > detail) & (k <= np.ceil(detail)) & (rmd != 0)
+        lerp_amp = (F(1.0) - amp) * max_amp + amp * (max_dist / fscale)
+        lerp_dist = (F(1.0) - amp) * dist + amp * np.minimum(dist, octave / fscale)
+        max_amp = np.where(full, lerp_amp, np.where(part, (F(1.0) - rmd) * max_amp + rmd * lerp_amp, max_amp))
+        dist = np.where(first_only, octave, np.where(full, lerp_dist, np.where(
+            part, (F(1.0) - rmd) * dist + rmd * np.minimum(dist, lerp_dist), dist)))
+        fscale = np.where(full, fscale * lac, fscale)
+        amp = np.where(full, amp * rough, amp)
+    return dist / max_amp if normalize else dist
+
+
 def _position_out(pos, dim):
     n = len(pos)
     vec = np.zeros((n, 3), F)
@@ -269,10 +366,11 @@ def _position_out(pos, dim):
       outputs=(("Distance", "float"), ("Color", "color"), ("Position", "vector"), ("W", "float"),
                ("Radius", "float")),
       props=(("voronoi_dimensions", "3D"), ("feature", "F1"), ("distance", "EUCLIDEAN"), ("normalize", False)),
-      coords="generated", unsupported_outputs=("Radius",),
+      coords="generated",
       input_defaults={"Roughness": 0.5, "Lacunarity": 2.0, "Smoothness": 1.0, "Exponent": 0.5,
                       "Randomness": 1.0},
-      accepts=one_of(feature=("F1", "F2", "SMOOTH_F1"), voronoi_dimensions=tuple(DIMS),
+      accepts=one_of(feature=("F1", "F2", "SMOOTH_F1", "DISTANCE_TO_EDGE", "N_SPHERE_RADIUS"),
+                     voronoi_dimensions=tuple(DIMS),
                      distance=("EUCLIDEAN", "MANHATTAN", "CHEBYCHEV", "MINKOWSKI")),
       cases=[{"Scale": 5.0}, {"feature": "F2", "Scale": 4.0}, {"feature": "SMOOTH_F1", "Scale": 4.0},
              {"voronoi_dimensions": "2D", "distance": "MANHATTAN", "Scale": 6.0},
@@ -280,18 +378,30 @@ def _position_out(pos, dim):
              {"distance": "MINKOWSKI", "Exponent": 1.5, "Scale": 4.0},
              {"voronoi_dimensions": "1D", "W": 0.4, "Scale": 3.0},
              {"voronoi_dimensions": "4D", "W": 0.4, "Scale": 3.0},
-             {"Scale": 3.0, "Detail": 2.5, "Roughness": 0.6, "normalize": True}])
+             {"Scale": 3.0, "Detail": 2.5, "Roughness": 0.6, "normalize": True},
+             {"feature": "DISTANCE_TO_EDGE", "Scale": 4.0}, {"feature": "N_SPHERE_RADIUS", "Scale": 4.0},
+             {"feature": "DISTANCE_TO_EDGE", "voronoi_dimensions": "2D", "Scale": 3.0, "Detail": 1.5,
+              "normalize": True},
+             {"feature": "DISTANCE_TO_EDGE", "voronoi_dimensions": "1D", "W": 0.3, "Scale": 3.0},
+             {"feature": "N_SPHERE_RADIUS", "voronoi_dimensions": "2D", "Scale": 5.0}])
 def voronoi(ctx, i, p):
     dim = DIMS[p["voronoi_dimensions"]]
     feature, metric = p["feature"], p["distance"]
-    if feature not in ("F1", "F2", "SMOOTH_F1"):
-        raise ValueError(f"Voronoi feature {feature} is not evaluated")
     scale = f32(i["Scale"])
     q = _coords(f32(i["Vector"]) * scale[:, None], f32(i["W"]) * scale, dim)
     detail = np.clip(f32(i["Detail"]), F(0.0), F(15.0))
     rough = np.clip(f32(i["Roughness"]), F(0.0), F(1.0))
     lac = f32(i["Lacunarity"])
     rand = np.clip(f32(i["Randomness"]), F(0.0), F(1.0))
+    if feature in ("DISTANCE_TO_EDGE", "N_SPHERE_RADIUS"):
+        n = len(q)
+        zeros = {"Distance": np.zeros(n, F), "Color": np.zeros((n, 3), F), "Position": np.zeros((n, 3), F),
+                 "W": np.zeros(n, F), "Radius": np.zeros(n, F)}
+        if feature == "N_SPHERE_RADIUS":
+            zeros["Radius"] = _n_sphere_radius(q, rand, _pcg_cells(p))
+        else:
+            zeros["Distance"] = _fractal_edge(q, detail, rough, lac, rand, bool(p["normalize"]), _pcg_cells(p))
+        return zeros
     smooth = np.clip(f32(i["Smoothness"]) / F(2.0), F(0.0), F(0.5))
     expo = f32(i["Exponent"])
     half = F(0.5) + F(0.5) * rand

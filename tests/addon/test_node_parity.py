@@ -477,22 +477,24 @@ def test_node_structures_match_cycles_per_pixel(parity, name):
 
 
 def test_unevaluated_node_variants_fall_back_with_one_warning(registered_addon):
-    """A Voronoi Distance to Edge and a Geometry Pointiness feed a colour:
-    each falls back to the socket's constant, both named in one warning."""
+    """An object-attribute Attribute node and a Geometry Pointiness feed
+    inputs: each falls back to the socket's constant, both named in one
+    warning."""
     from addon.export import material as material_export
     bpy.ops.wm.read_factory_settings()
     mat = bpy.data.materials.new("Unrendered")
     mat.use_nodes = True
     tree = mat.node_tree
     principled = tree.nodes['Principled BSDF']
-    voronoi = tree.nodes.new('ShaderNodeTexVoronoi')
-    voronoi.feature = 'DISTANCE_TO_EDGE'
+    attribute = tree.nodes.new('ShaderNodeAttribute')
+    attribute.attribute_type = 'OBJECT'
+    attribute.attribute_name = 'color'
     geometry = tree.nodes.new('ShaderNodeNewGeometry')
-    tree.links.new(voronoi.outputs['Distance'], principled.inputs['Roughness'])
+    tree.links.new(attribute.outputs['Fac'], principled.inputs['Roughness'])
     tree.links.new(geometry.outputs['Pointiness'], principled.inputs['Metallic'])
     translated, warning = material_export.translate(mat)
     assert warning is not None and warning.count("'Unrendered'") == 1, warning
-    assert voronoi.name in warning and geometry.name in warning and 'DISTANCE_TO_EDGE' in warning
+    assert attribute.name in warning and geometry.name in warning and "'OBJECT'" in warning
     from addon import backend
     textures = backend.scene_module().TEXTURE_TYPES
     assert translated.lobes

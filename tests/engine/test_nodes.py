@@ -233,9 +233,9 @@ def test_object_and_world_space_normal_maps(space, strength):
 
 def test_unevaluated_properties_are_rejected_by_validation():
     quad = Mesh(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float), np.array([[0, 1, 2], [0, 2, 3]]))
-    edge = NodeOutput(NodeCall("ShaderNodeTexVoronoi", {}, {"feature": "DISTANCE_TO_EDGE"}), "Distance")
-    scene = Scene([quad], [Instance(0, materials=[0])], [Material("m", emission=edge)], camera=Camera())
-    with pytest.raises(SceneError, match="DISTANCE_TO_EDGE"):
+    attr = NodeOutput(NodeCall("ShaderNodeAttribute", {}, {"attribute_type": "VIEW_LAYER"}), "Fac")
+    scene = Scene([quad], [Instance(0, materials=[0])], [Material("m", emission=attr)], camera=Camera())
+    with pytest.raises(SceneError, match="VIEW_LAYER"):
         scene.validate()
 
 
