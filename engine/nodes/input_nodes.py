@@ -25,9 +25,23 @@ def _object_matrix_inverse(n):
     return {"object_inverse": np.linalg.inv(np.array(obj.matrix_world)).tolist()}
 
 
+def _camera_coords(ctx):
+    """World to camera space as Cycles' worldtocamera: the camera's matrix
+    without scale, its z axis flipped (Cycles' camera looks down +z)."""
+    shading = getattr(ctx.tris, "shading", None) if ctx.tris is not None else None
+    camera = getattr(getattr(shading, "scene", None), "camera", None)
+    if camera is None:
+        return ctx.p
+    m = np.asarray(camera.matrix, dtype=np.float64)
+    rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0, keepdims=True)
+    local = (ctx.p - m[:3, 3]) @ rot
+    local[:, 2] = -local[:, 2]
+    return local
+
+
 @node("ShaderNodeTexCoord", outputs=(("Generated", "vector"), ("Normal", "vector"), ("UV", "vector"),
-                                     ("Object", "vector"), ("Reflection", "vector")),
-      translate=_object_matrix_inverse, unsupported_outputs=("Camera", "Window"), cases=[{}])
+                                     ("Object", "vector"), ("Camera", "vector"), ("Reflection", "vector")),
+      translate=_object_matrix_inverse, unsupported_outputs=("Window",), cases=[{}])
 def tex_coord(ctx, i, p):
     n = len(ctx)
     uv = np.zeros((n, 3))
@@ -40,7 +54,7 @@ def tex_coord(ctx, i, p):
         obj = ctx.object_coords
     refl = 2.0 * _dot(ctx.ns, ctx.wo)[:, None] * ctx.ns - ctx.wo
     return {"Generated": ctx.generated, "Normal": ctx.to_object(ctx.ns), "UV": uv, "Object": obj,
-            "Reflection": refl}
+            "Camera": _camera_coords(ctx), "Reflection": refl}
 
 
 @node("ShaderNodeUVMap", outputs=(("UV", "vector"),), props=(("uv_map", ""),), cases=[{}])
