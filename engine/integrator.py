@@ -26,6 +26,7 @@ import numpy as np
 from . import bsdf, pass_events
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .lights import POINT, SUN
+from .nodes import ShadingContext
 from .sampler import BSDF, CAMERA, KIND, LIGHT, emitter_set, vertex_set
 from .sampling import power_heuristic
 from .vec import dot, frame, to_local, to_world
@@ -109,6 +110,11 @@ class Hit:
     tangent: object = None
     tangent_sign: object = None
     back: object = None
+    # For shader nodes (engine.nodes.ShadingContext): barycentrics (N, 2),
+    # bounces before this hit and the VIS_* bit of the ray that found it.
+    bary: object = None
+    depth: object = None
+    ray: object = None
 
 
 def trace_batch(ctx, pix, sample, tile):
@@ -179,7 +185,7 @@ def _bounce(ctx, paths, depth, tile):
     hit = _interaction(ctx, paths, t, prim, bu, bv)
     emission = ctx.materials.emission[hit.mat]
     if ctx.materials.textures.emission:
-        emission = ctx.materials.textures.emission_at(hit.mat, hit.uv, emission)
+        emission = ctx.materials.textures.emission_at(hit.mat, _shading(ctx, hit), emission)
     em = np.nonzero(np.any(emission > 0, axis=1))[0]
     if len(em):
         _emission_hit(ctx, paths, em, hit, emission[em], tile)
@@ -198,7 +204,7 @@ def _bounce(ctx, paths, depth, tile):
         if len(paths.pix) == 0:
             return carried
 
-    lobes = ctx.materials.gather(hit.mat, hit.uv)
+    lobes = ctx.materials.gather(hit.mat, _shading(ctx, hit))
     _orient(hit, lobes)
     # Texture hook: normal maps and bump replace the shading normal.
     if ctx.materials.textures.normals:
@@ -366,13 +372,20 @@ def _interaction(ctx, paths, t, prim, bu, bv):
     else:
         ns = ng
     uv = _hit_uv(tr, prim, bu, bv)
-    hit = Hit(p, ng, ns, -d, tr.material[prim], prim, ctx.accel.offset_scale(p), uv, back=back)
+    hit = Hit(p, ng, ns, -d, tr.material[prim], prim, ctx.accel.offset_scale(p), uv, back=back,
+              bary=np.stack([bu, bv], axis=1), depth=getattr(paths, "bounce", None),
+              ray=getattr(paths, "ray", None))
     if getattr(tr, "tangent", None) is not None:
         w = np.stack([1.0 - bu - bv, bu, bv], axis=1)
         # Unnormalised, as Cycles interpolates its tangent attribute.
         hit.tangent = np.einsum("nk,nkj->nj", w, tr.tangent[prim])
         hit.tangent_sign = np.where(np.einsum("nk,nk->n", w, tr.tangent_sign[prim]) < 0, -1.0, 1.0)
     return hit
+
+
+def _shading(ctx, hit):
+    """The hit's shading context for texture and shader-node evaluation."""
+    return ShadingContext.of_hit(ctx.triangles, hit)
 
 
 def _hit_uv(tr, prim, bu, bv):
@@ -687,7 +700,7 @@ def _pass_last(ctx, paths, hit, tile):
     go = ctx.transparent_mat[hit.mat] & (paths.tbounce < ctx.transparent_limit)
     rows = np.nonzero(go)[0]
     if len(rows):
-        T = bsdf.transparency(ctx.materials.gather(hit.mat[rows], hit.uv[rows]))
+        T = bsdf.transparency(ctx.materials.gather(hit.mat[rows], _shading(ctx, hit).take(rows)))
         paths.beta[rows] *= T
         go[rows] = np.any(T > 0, axis=1)
     if not go.all():
@@ -726,7 +739,8 @@ def _transmittance(ctx, origin, wi, tmax, emitter, tbounce):
         c = np.nonzero(crosses)[0]
         if len(c) == 0:
             break
-        T = bsdf.transparency(ctx.materials.gather(mat[c], _hit_uv(ctx.triangles, prim[c], bu[c], bv[c])))
+        T = bsdf.transparency(ctx.materials.gather(mat[c], ShadingContext.at(
+            ctx.triangles, prim[c], bu[c], bv[c], wo=-d[c], ray=np.full(len(c), VIS_SHADOW, np.uint8))))
         out[idx[c]] *= T
         c = c[np.any(T > 0, axis=1)]
         # Go on from just past the surface, towards the same end point.
