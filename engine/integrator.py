@@ -23,7 +23,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from . import bsdf
+from . import bsdf, kernels
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .lights import POINT, SUN
 from .sampling import power_heuristic
@@ -42,6 +42,7 @@ class Context:
     settings: object
 
     def __post_init__(self):
+        self.jit = kernels.configure(getattr(self.settings, "use_jit", True))
         lt = self.lights
         delta = np.zeros(lt.count, bool)
         if lt.count:

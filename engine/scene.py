@@ -442,6 +442,10 @@ class RenderSettings:
     # samples on what stands out.  Only with strategy 'mis' (NEE alone would
     # miss the dim parts).
     mis_compensation: bool = True
+    # Compiled kernels (engine/kernels.py, numba) instead of plain NumPy for
+    # the same elementwise maths; off, or without numba, or with EMBER_JIT=0,
+    # the NumPy code runs.  Images agree to float rounding.
+    use_jit: bool = True
 
 
 @dataclass

@@ -77,4 +77,5 @@ def render_settings(scene, is_preview=False):
         transparent=bool(scene.render.film_transparent),
         threads=settings.threads,
         time_limit=0.0 if is_preview else settings.time_limit,
+        use_jit=getattr(settings, 'use_jit', True),
     )
