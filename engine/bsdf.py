@@ -158,8 +158,9 @@ class MaterialTable:
         """Per-ray lobe parameters for material ids ``mat`` at texture
         coordinates ``uv`` ((N, 2)): constants gathered, then the textured
         parameters of the rays' materials evaluated at their UVs."""
-        lobes = Lobes(self.kind[mat], self.color[mat], self.alpha[mat], self.schlick[mat],
-                      *(getattr(self, name)[mat] for name, _, _ in EXTRA_FIELDS))
+        # np.take: rows copied several times faster than by fancy indexing.
+        lobes = Lobes(*(np.take(a, mat, axis=0) for a in (self.kind, self.color, self.alpha, self.schlick)),
+                      *(np.take(getattr(self, name), mat, axis=0) for name, _, _ in EXTRA_FIELDS))
         if self.textures.any:
             self.textures.apply(mat, uv, lobes, MIN_ALPHA)
         return lobes

@@ -80,7 +80,15 @@ class Paths:
     tbounce: np.ndarray   # transparent surfaces passed so far
 
     def take(self, keep):
-        return Paths(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
+        """The paths where ``keep`` (a mask or indices).  np.take with
+        indices copies rows 4-5x faster than boolean indexing."""
+        idx = rows_of(keep)
+        return Paths(*(np.take(getattr(self, f), idx, axis=0) for f in self.__dataclass_fields__))
+
+    def finish_rows(self, keep):
+        """Pixel and radiance of the paths where ``keep``: all that ends a path."""
+        idx = rows_of(keep)
+        return np.take(self.pix, idx), np.take(self.L, idx, axis=0)
 
     def concat(self, other):
         return Paths(*(np.concatenate([getattr(self, f), getattr(other, f)])
@@ -124,14 +132,28 @@ def trace_batch(ctx, pix, rng, tile):
         _finish(ctx, paths, tile)
 
 
-def _finish(ctx, paths, tile):
-    L = paths.L
+def rows_of(keep):
+    """Indices of a boolean mask (indices pass through)."""
+    keep = np.asarray(keep)
+    return np.flatnonzero(keep) if keep.dtype == bool else keep
+
+
+def _finish(ctx, paths, tile, keep=None):
+    """Add the radiance of the paths (those where ``keep``, if given) to the tile."""
+    if keep is None:
+        pix, L = paths.pix, paths.L
+    else:
+        pix, L = paths.finish_rows(keep)
+    _add_radiance(ctx, pix, L, tile)
+
+
+def _add_radiance(ctx, pix, L, tile):
     L = np.where(np.isfinite(L), L, 0.0)
     clamp = ctx.settings.clamp
     if clamp > 0:
         m = L.max(axis=1)
         L = L * np.where(m > clamp, clamp / np.maximum(m, 1e-30), 1.0)[:, None]
-    tile.add_radiance(paths.pix, L)
+    tile.add_radiance(pix, L)
 
 
 def _bounce(ctx, paths, depth, rng, tile):
@@ -159,9 +181,10 @@ def _bounce(ctx, paths, depth, rng, tile):
     # Compact to the paths that hit a surface: everything below works on
     # dense arrays, with no index indirection.
     if not hit_surf.all():
-        _finish(ctx, paths.take(~hit_surf), tile)
-        paths = paths.take(hit_surf)
-        t, prim, bu, bv = t[hit_surf], prim[hit_surf], bu[hit_surf], bv[hit_surf]
+        _finish(ctx, paths, tile, ~hit_surf)
+        rows = np.flatnonzero(hit_surf)
+        paths = paths.take(rows)
+        t, prim, bu, bv = t.take(rows), prim.take(rows), bu.take(rows), bv.take(rows)
     if len(paths.pix) == 0:
         return paths
     hit = _interaction(ctx, paths, t, prim, bu, bv)
@@ -210,7 +233,7 @@ def _bounce(ctx, paths, depth, rng, tile):
         # the same triangles, but no longer as a camera ray.
         paths.ray = _unless(through, ray, np.full(len(ray), VIS_INDIRECT, np.uint8))
     if not alive.all():
-        _finish(ctx, paths.take(~alive), tile)
+        _finish(ctx, paths, tile, ~alive)
         paths = paths.take(alive)
     return paths if carried is None or len(carried.pix) == 0 else paths.concat(carried)
 
@@ -223,7 +246,8 @@ def _unless(mask, old, new):
 
 
 def _take_hit(hit, keep):
-    return replace(hit, **{f.name: getattr(hit, f.name)[keep] for f in fields(hit)
+    idx = rows_of(keep)
+    return replace(hit, **{f.name: np.take(getattr(hit, f.name), idx, axis=0) for f in fields(hit)
                            if isinstance(getattr(hit, f.name), np.ndarray)})
 
 
@@ -316,19 +340,19 @@ def _interaction(ctx, paths, t, prim, bu, bv):
     tr = ctx.triangles
     d = paths.d
     o = paths.o
-    ng = tr.ng[prim]
+    ng = np.take(tr.ng, prim, axis=0)
     # Embree's t and barycentrics are float32; re-intersect the triangle's
     # plane in float64 so hit points (and shadow rays) sit on the surface
     # even on large triangles.
     cos = dot(d, ng)
     with np.errstate(divide="ignore", invalid="ignore"):
-        t64 = dot(tr.p0[prim] - o, ng) / cos
+        t64 = dot(np.take(tr.p0, prim, axis=0) - o, ng) / cos
     t = np.where(np.isfinite(t64) & (np.abs(cos) > 1e-6), t64, t)
     p = o + d * t[:, None]
     back = dot(ng, d) > 0
     ng = np.where(back[:, None], -ng, ng)
     if tr.ns is not None:
-        c = tr.ns[prim]
+        c = np.take(tr.ns, prim, axis=0)
         ns = (1.0 - bu - bv)[:, None] * c[:, 0] + bu[:, None] * c[:, 1] + bv[:, None] * c[:, 2]
         ns /= np.maximum(np.linalg.norm(ns, axis=1), 1e-30)[:, None]
         ns = np.where((dot(ns, ng) < 0)[:, None], -ns, ns)
@@ -338,7 +362,7 @@ def _interaction(ctx, paths, t, prim, bu, bv):
     else:
         ns = ng
     uv = _hit_uv(tr, prim, bu, bv)
-    hit = Hit(p, ng, ns, -d, tr.material[prim], prim, ctx.accel.offset_scale(p), uv, back=back)
+    hit = Hit(p, ng, ns, -d, np.take(tr.material, prim), prim, ctx.accel.offset_scale(p), uv, back=back)
     if getattr(tr, "tangent", None) is not None:
         w = np.stack([1.0 - bu - bv, bu, bv], axis=1)
         # Unnormalised, as Cycles interpolates its tangent attribute.
@@ -351,7 +375,7 @@ def _hit_uv(tr, prim, bu, bv):
     """Interpolated texture coordinates (0 without a UV map)."""
     if tr.uv is None:
         return np.zeros((len(prim), 2))
-    c = tr.uv[prim]
+    c = np.take(tr.uv, prim, axis=0)
     return (1.0 - bu - bv)[:, None] * c[:, 0] + bu[:, None] * c[:, 1] + bv[:, None] * c[:, 2]
 
 
@@ -435,8 +459,19 @@ def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u):
         paths.L[live] += contrib[live] * _transmittance(ctx, origin, wi, tmax, e[live], paths.tbounce[live])
         return
     blocked = _occluded(ctx, origin, wi, tmax, e[live])
-    free = live[~blocked]
-    paths.L[free] += contrib[free]
+    _add_rows(paths.L, live[~blocked], contrib)
+
+
+def _add_rows(L, rows, values):
+    """L[rows] += values[rows] (rows unique).  A dense masked add when rows
+    are most of L: row-wise fancy indexing of (N, 3) arrays costs several
+    times a pass over the whole array."""
+    if len(rows) * 4 < len(L):
+        L[rows] += np.take(values, rows, axis=0)
+        return
+    use = np.zeros(len(L), bool)
+    use[rows] = True
+    L += np.where(use[:, None], values, 0.0)
 
 
 def _orient(hit, lobes):
@@ -650,7 +685,7 @@ def _pass_last(ctx, paths, hit, tile):
         paths.beta[rows] *= T
         go[rows] = np.any(T > 0, axis=1)
     if not go.all():
-        _finish(ctx, paths.take(~go), tile)
+        _finish(ctx, paths, tile, ~go)
         paths, hit = paths.take(go), _take_hit(hit, go)
     o = ctx.accel.offset_origin(hit.p, hit.ng, paths.d, hit.eps)
     paths.tmax = paths.tmax - dot(o - paths.o, paths.d)

@@ -26,9 +26,15 @@ def require_numba():
     pytest.skip(str(kernels.UNAVAILABLE))
 
 
+def compiled_ready():
+    require_numba()
+    kernels.configure(True)
+    assert kernels.wait(600), kernels.UNAVAILABLE
+
+
 @pytest.fixture
 def jit():
-    require_numba()
+    compiled_ready()
     yield
     kernels.configure(True)
 
@@ -94,10 +100,24 @@ def test_ggx_reflect_agrees(jit):
     assert_agree(*both_ways(ggx_reflect, *args))
 
 
-def test_disabled_by_setting_and_env(jit):
+def test_disabled_by_setting(jit):
     assert kernels.configure(False) is False
     assert not kernels.enabled()
     assert kernels.configure(True) is True
+
+
+def test_disabled_by_environment():
+    """EMBER_JIT=0: nothing is compiled, the NumPy forms run."""
+    import subprocess
+    import sys
+    code = ("from engine import kernels, sampling; import numpy as np; "
+            "assert not kernels.AVAILABLE and kernels.UNAVAILABLE == 'EMBER_JIT=0'; "
+            "assert kernels.configure(True) is False and not kernels.wait(1); "
+            "assert float(sampling.power_heuristic(np.ones(1), np.ones(1))[0]) == 0.5; "
+            "assert all(k.compiled is None for k in kernels.KERNELS); print('ok')")
+    env = dict(os.environ, EMBER_JIT="0")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and "ok" in out.stdout, out.stderr
 
 
 @pytest.fixture(scope="module")
@@ -106,6 +126,7 @@ def renders():
     GGX spheres) at a fixed seed, with compiled kernels and without."""
     if not kernels.AVAILABLE:
         return None
+    compiled_ready()
     scene = cornell_spheres(40, 40, grid=3, segments=16, rings=8)
     out = {}
     for jit in (False, True):
