@@ -648,7 +648,7 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
 
 
 def _take(lobes, rows):
-    return Lobes(*(None if getattr(lobes, f) is None else getattr(lobes, f)[rows]
+    return Lobes(*(None if getattr(lobes, f) is None else np.take(getattr(lobes, f), rows, axis=0)
                    for f in lobes.__dataclass_fields__))
 
 
@@ -674,7 +674,7 @@ def _sample_single(lobes, wo, u1, u2):
         weight[d] = np.where((pdf[d] > 0)[:, None], color[d], 0.0)
     g = np.nonzero((kind == GLOSSY) & up)[0]
     if len(g):
-        wo_g, alpha = wo[g], lobes.alpha[g, 0]
+        wo_g, alpha = np.take(wo, g, axis=0), np.take(lobes.alpha[:, 0], g)
         h = ggx_sample_vndf(wo_g, alpha, u1[g], u2[g])
         cos_oh = np.einsum("ij,ij->i", wo_g, h)
         wi_g = 2.0 * cos_oh[:, None] * h - wo_g

@@ -65,6 +65,21 @@ def setup():
         sys.path.insert(0, ROOT)
     import addon
     addon.register()
+    return jit_warm_up()
+
+
+def jit_warm_up():
+    """Compile Ember's kernels (or load them from the cache) before timing:
+    renders would otherwise start on the NumPy forms.  Returns a note."""
+    try:
+        from engine import kernels
+    except ImportError:
+        return "Ember without compiled kernels"
+    if not kernels.configure(True):
+        return f"Ember's compiled kernels off ({kernels.UNAVAILABLE})"
+    ready = kernels.wait(900)
+    return (f"Ember's compiled kernels {'ready' if ready else 'NOT ready'} after "
+            f"{kernels.warm_up_seconds() or 0:.1f} s")
 
 
 # ----------------------------------------------------------------------------
@@ -312,7 +327,7 @@ def write_docs(text):
         handle.write(doc)
 
 
-def report(rows, adaptive_rows, cfg, quick, adaptive_note):
+def report(rows, adaptive_rows, cfg, quick, adaptive_note, jit_note):
     import bpy
     import numpy
     when = time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())
@@ -321,7 +336,7 @@ def report(rows, adaptive_rows, cfg, quick, adaptive_note):
              f"{cfg['bounces']} bounces, Blackman-Harris 1.5, no denoising, no clamping, each engine's "
              f"default light selection; Ember at {', '.join(map(str, cfg['ember']))} spp, Cycles at "
              f"{', '.join(map(str, cfg['cycles']))} spp, reference Cycles {cfg['reference']} spp. "
-             "Times are the wall time of `bpy.ops.render.render()` (export/sync included).",
+             f"Times are the wall time of `bpy.ops.render.render()` (export/sync included). {jit_note}.",
              "", "Adaptive sampling off:", "", table(rows, False)]
     if adaptive_rows:
         lines += ["", "Adaptive sampling on for both (Cycles' defaults: threshold 0.01, min samples auto):",
@@ -339,7 +354,9 @@ def main(argv=None):
     cfg = dict(QUICK if args.quick else FULL)
     cfg['size'] = args.size or cfg['size']
     cfg['bounces'] = args.bounces
-    setup()
+    load_start = os.getloadavg()[0]
+    jit_note = setup()
+    print(jit_note, flush=True)
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import bench_scenes
     names = args.scenes.split(',') if args.scenes else list(bench_scenes.SCENES)
@@ -365,7 +382,10 @@ def main(argv=None):
                 cycles_a = measure(name, 'CYCLES', cfg['cycles'], cfg, folder, ref, True)
                 adaptive_rows.append(summarise_adaptive(name, ember_a, cycles_a, ref_spp, cfg))
                 raw[name].update(ember_adaptive=ember_a, cycles_adaptive=cycles_a)
-    text = report(rows, adaptive_rows, cfg, args.quick, note)
+    # Other jobs on the machine skew wall times and "cores used": say how busy it was.
+    jit_note += (f". Load average {load_start:.1f} at the start, {os.getloadavg()[0]:.1f} at the end "
+                 f"(on {os.cpu_count()} cores; above that, both engines shared the CPU with other jobs)")
+    text = report(rows, adaptive_rows, cfg, args.quick, note, jit_note)
     print()
     print(text)
     if args.docs if args.docs is not None else not args.quick:
