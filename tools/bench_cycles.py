@@ -306,7 +306,9 @@ def table(rows, adaptive):
         title = bench_scenes.SCENES[r['scene']][0]
         cells = [title, f"{r['time_ratio']:.1f}x"]
         if not adaptive:
-            cells += [f"{r['spp_ratio']:.1f}x", f"{r['var_ratio']:.2f}x"]
+            # A slope lost in the fixed cost (tiny frames, busy machine) has no ratio.
+            spp = f"{r['spp_ratio']:.1f}x" if 0 < r['spp_ratio'] < 1e3 else "-"
+            cells += [spp, f"{r['var_ratio']:.2f}x"]
         cells += [f"{r['ember_cores']:.2f} ({r['cycles_cores']:.2f})",
                   f"{r['ember_paths_per_second'] / 1e6:.3f} M ({r['cycles_paths_per_second'] / 1e6:.2f} M)",
                   f"{100 * r['embree_share']:.0f} %"]
