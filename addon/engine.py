@@ -12,7 +12,8 @@ import traceback
 
 import bpy
 
-from . import backend, output
+from . import backend, output, shards
+from . import passes as render_passes
 from .export import camera as camera_export
 from .export import scene as scene_export
 
@@ -29,24 +30,53 @@ class EmberRenderEngine(bpy.types.RenderEngine):
     bl_use_postprocess = True
     # Keep Blender's shader nodes: Ember reads Cycles/EEVEE material trees.
     bl_use_shading_nodes_custom = False
-    # The viewport shows EEVEE's material preview in Ember's place.
+    # Material Preview shading uses EEVEE; Rendered shading is Ember's own
+    # (view_update / view_draw, addon/viewport.py).
     bl_use_eevee_viewport = True
 
     def __init__(self, *args, **kwargs):
         # Blender 4.4+ passes arguments here; older versions pass none.
         super().__init__(*args, **kwargs)
+        self.viewport = None
+
+    def __del__(self):
+        try:
+            viewport_session = self.viewport
+        except (AttributeError, ReferenceError):  # Blender freed the struct first
+            return
+        if viewport_session is not None:
+            viewport_session.close()
+
+    def view_update(self, context, depsgraph):
+        from . import viewport
+        try:
+            if self.viewport is None:
+                self.viewport = viewport.ViewportSession(self)
+            self.viewport.view_update(context, depsgraph)
+        except Exception as err:  # noqa: BLE001 - shown in the viewport header
+            traceback.print_exc()
+            self.update_stats("", "Ember: " + _message(err))
+
+    def view_draw(self, context, depsgraph):
+        if self.viewport is None:
+            return
+        try:
+            self.viewport.view_draw(context, depsgraph)
+        except Exception as err:  # noqa: BLE001
+            traceback.print_exc()
+            self.update_stats("", "Ember: " + _message(err))
 
     def update_render_passes(self, scene=None, renderlayer=None):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", 'COLOR')
-        if renderlayer.use_pass_z:
-            self.register_pass(scene, renderlayer, "Depth", 1, "Z", 'VALUE')
-        if renderlayer.use_pass_normal:
-            self.register_pass(scene, renderlayer, "Normal", 3, "XYZ", 'VECTOR')
+        # Depth, Normal and the other Cycles-named passes: addon/passes.py.
+        render_passes.register_passes(self, scene, renderlayer)
+        if scene.ember.use_denoising:
+            self.register_pass(scene, renderlayer, "Noisy Image", 4, "RGBA", 'COLOR')
 
     def render(self, depsgraph):
         info = {'layer': depsgraph.view_layer.name, 'frame': depsgraph.scene.frame_current,
                 'error': None, 'warnings': [], 'started': time.perf_counter(),
-                'preview': self.is_preview, 'passes': 0}
+                'preview': self.is_preview, 'passes': 0, 'cpu_started': time.process_time()}
         RENDER_LOG.append(info)
         del RENDER_LOG[:-MAX_LOG]
         try:
@@ -58,6 +88,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             print(info['traceback'])
             self.report({'ERROR'}, "Ember: " + message)
         info['seconds'] = time.perf_counter() - info['started']
+        info['cpu_seconds'] = time.process_time() - info['cpu_started']
 
     def _render(self, depsgraph, info):
         scene = depsgraph.scene
@@ -69,17 +100,27 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             for warning in exported.warnings:
                 self.report({'WARNING'}, "Ember: " + warning)
         settings = scene_export.render_settings(scene, self.is_preview)
+        if not self.is_preview:
+            settings = _with_passes(settings, scene, depsgraph.view_layer)
         _, _, width, height = camera_export.border_window(scene.render)
-        render = backend.render_function()
+        render = shards.wrap(backend.render_function(), scene, depsgraph.view_layer.name, self.is_preview)
         if self.test_break():
             return
+        if not self.is_preview:
+            render_passes.add_result_passes(self, depsgraph.view_layer)
         writer = output.ResultWriter(self, width, height, depsgraph.view_layer.name)
         progress = output.Progress(self, writer, settings.samples, info)
         try:
             exported.scene.validate()
             result = render(exported.scene, settings, progress)
             # A stopped render returns its partial image: write it either way.
-            writer.write(result.image, _extra_passes(result))
+            image = result.image
+            extra = _extra_passes(result, depsgraph.view_layer, settings.samples)
+            if scene.ember.use_denoising and not self.is_preview:
+                image, extra = self._denoised(result, extra, info)
+            writer.write(image, extra)
+            writer.add_metadata(render_passes.crypto_metadata(
+                depsgraph.view_layer, getattr(result, 'pass_metadata', None) or {}))
         finally:
             writer.finish()
         info.update(samples=getattr(result, 'samples', progress.samples_done),
@@ -93,9 +134,39 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             info['warnings'].append(message)
             self.report({'WARNING'}, message)
 
+    def _denoised(self, result, extra, info):
+        """Combined denoised (alpha kept), the raw image as Noisy Image.  A
+        denoiser failure keeps the noisy image and says why."""
+        from . import denoise
+        self.update_stats("", "Ember: denoising")
+        start = time.perf_counter()
+        try:
+            rgb = denoise.denoise(result.image[..., :3], result.albedo, result.normal)
+        except (denoise.DenoiseError, OSError, ValueError) as err:
+            message = f"Ember: denoising failed, the image is not denoised: {err}"
+            info['warnings'].append(message)
+            self.report({'WARNING'}, message)
+            return result.image, extra
+        info['denoise_seconds'] = time.perf_counter() - start
+        info['denoiser'] = denoise.describe()
+        image = result.image.copy()
+        image[..., :3] = rgb
+        return image, dict(extra, **{'Noisy Image': result.image})
 
-def _extra_passes(result):
-    return {'Depth': getattr(result, 'depth', None), 'Normal': getattr(result, 'normal', None)}
+
+def _extra_passes(result, view_layer, samples):
+    """{Blender pass name: image} (the engine's Cycles-named passes)."""
+    return render_passes.blender_images(view_layer, getattr(result, 'passes', None) or {}, samples)
+
+
+def _with_passes(settings, scene, view_layer):
+    """The render settings with the passes this view layer asks for."""
+    import dataclasses
+    names = render_passes.engine_passes(view_layer)
+    if not names or not hasattr(settings, 'passes'):
+        return settings
+    config = render_passes.pass_config(scene, view_layer, backend.load('passes').PassConfig)
+    return dataclasses.replace(settings, passes=names, pass_config=config)
 
 
 def _message(err):

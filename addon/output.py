@@ -62,6 +62,20 @@ class ResultWriter:
                 set_pass(render_pass, to_blender_pixels(values)[0])
         self.engine.update_result(self.result)
 
+    def add_metadata(self, fields):
+        """Render-result metadata (Cryptomatte manifests), written into the
+        engine's whole result as Cycles does (get_result): the result of
+        begin_result does not carry metadata over."""
+        if not fields:
+            return
+        get_result = getattr(self.engine, 'get_result', None)
+        target = get_result() if get_result is not None else self.result
+        add = getattr(target, 'stamp_data_add_field', None)
+        if add is None:
+            return
+        for key, value in fields.items():
+            add(key, value)
+
     def finish(self):
         # cancel=False keeps what was written: an interrupted render shows its
         # partial image instead of black.

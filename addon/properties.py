@@ -7,18 +7,26 @@ own ``scene.render.film_transparent`` and is not duplicated here.
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
 
+# The light tree is the default, as in Cycles: with one light it costs
+# nothing, with many it lowers the noise several times.
 LIGHT_SELECTION_ITEMS = (
+    ('TREE', "Light Tree", "Pick one light per vertex by its estimated contribution there "
+     "(power, distance and orientation): far less noise with many lights"),
     ('POWER', "Power", "Pick one light per vertex, proportional to its power"),
     ('UNIFORM', "Uniform", "Pick one light per vertex, every light equally likely"),
     ('ALL', "All Lights", "Sample every light at every vertex (slower, less noise with few lights)"),
-    ('TREE', "Light Tree", "Pick one light per vertex by its estimated contribution there "
-     "(power, distance and orientation): far less noise with many lights"),
 )
 
 STRATEGY_ITEMS = (
     ('MIS', "Multiple Importance", "Combine light and BSDF sampling (the robust default)"),
     ('LIGHT', "Light Only", "Next-event estimation only (debugging)"),
     ('BSDF', "BSDF Only", "BSDF sampling only (debugging)"),
+)
+
+PATTERN_ITEMS = (
+    ('SOBOL', "Sobol-Burley", "Shuffled, Owen-scrambled Sobol sequence (Cycles' default): "
+     "less noise for the same samples"),
+    ('RANDOM', "Independent", "Independent random numbers per sample (for comparisons)"),
 )
 
 FILTER_ITEMS = (
@@ -35,6 +43,32 @@ class EmberRenderSettings(bpy.types.PropertyGroup):
     preview_samples: IntProperty(
         name="Preview Samples", description="Samples per pixel for material previews",
         default=16, min=1, max=1 << 16, soft_max=256)
+    viewport_samples: IntProperty(
+        name="Viewport Samples", description="Samples per pixel in the Rendered viewport; "
+        "sampling pauses when they are reached (as Cycles' viewport Max Samples)",
+        default=128, min=1, max=1 << 24, soft_max=4096)
+    preview_pause: BoolProperty(
+        name="Pause Preview", description="Pause sampling in the Rendered viewport", default=False)
+    use_denoising: BoolProperty(
+        name="Denoise", description="Denoise final renders with Intel Open Image Denoise "
+        "(albedo and normal guided); the result is Combined, the raw image the Noisy Image pass",
+        default=False)
+    use_preview_denoising: BoolProperty(
+        name="Denoise Viewport", description="Denoise the Rendered viewport with Intel Open Image "
+        "Denoise once its samples are done (and whenever it pauses)", default=False)
+    use_adaptive_sampling: BoolProperty(
+        name="Noise Threshold", description="Stop sampling pixels once their noise is below the "
+        "threshold, as Cycles' adaptive sampling", default=True)
+    adaptive_threshold: FloatProperty(
+        name="Noise Threshold", description="Error a pixel may keep when adaptive sampling stops it "
+        "(lower: less noise, longer renders); as Cycles'", default=0.01, min=0.0001, max=1.0,
+        soft_min=0.001, precision=4)
+    adaptive_min_samples: IntProperty(
+        name="Min Samples", description="Samples every pixel gets before adaptive sampling may stop "
+        "it (0 = automatic, from the threshold, as Cycles)", default=0, min=0, max=4096)
+    sampling_pattern: EnumProperty(
+        name="Pattern", description="Where the random numbers of each sample come from",
+        items=PATTERN_ITEMS, default='SOBOL')
     time_limit: FloatProperty(
         name="Time Limit", description="Stop after this many seconds (0 = no limit); "
         "the pass that crosses the limit is finished", default=0.0, min=0.0, subtype='TIME_ABSOLUTE')
@@ -51,7 +85,7 @@ class EmberRenderSettings(bpy.types.PropertyGroup):
         default=8, min=0, max=1024)
     light_selection: EnumProperty(
         name="Light Selection", description="How a light is chosen for next-event estimation",
-        items=LIGHT_SELECTION_ITEMS, default='POWER')
+        items=LIGHT_SELECTION_ITEMS, default='TREE')
     mis_compensation: BoolProperty(
         name="World MIS Compensation",
         description="Sample an HDRI world by its radiance above the mean (Karlik et al. 2019): "
@@ -79,7 +113,42 @@ class EmberRenderSettings(bpy.types.PropertyGroup):
         default=True)
 
 
-classes = (EmberRenderSettings,)
+def _passes_changed(self, context):
+    """Tell Blender the layer's passes changed (compositor sockets)."""
+    view_layer = getattr(context, 'view_layer', None)
+    if view_layer is not None:
+        view_layer.update_render_passes()
+
+
+STRATEGY_VERTEX_ITEMS = (
+    ('ALL', "Every Vertex", "Direct light of every path vertex: with Emission and Environment "
+     "the strategy passes add up to Combined"),
+    ('FIRST', "First Vertex", "Direct light of the first surface only: add up to a render with "
+     "Max Bounces 0"),
+)
+
+
+class EmberViewLayerSettings(bpy.types.PropertyGroup):
+    """Ember's passes of a view layer (``view_layer.ember``); the passes that
+    Cycles also has use Blender's own View Layer checkboxes."""
+    use_pass_strategies: BoolProperty(
+        name="Strategies", description="Strategy Light, Strategy BSDF (their MIS-weighted direct light), "
+        "the same unweighted, and MIS Weight Light", default=False, update=_passes_changed)
+    strategy_passes_vertex: EnumProperty(
+        name="Strategy Vertices", description="Which path vertices the strategy passes show",
+        items=STRATEGY_VERTEX_ITEMS, default='ALL')
+    use_pass_variance: BoolProperty(
+        name="Variance", description="Per-pixel variance of the Combined mean (what adaptive sampling reads)",
+        default=False, update=_passes_changed)
+    use_pass_denoising_data: BoolProperty(
+        name="Denoising Data", description="Denoising Albedo and Denoising Normal, as Cycles",
+        default=False, update=_passes_changed)
+    use_pass_sample_count: BoolProperty(
+        name="Sample Count", description="Samples per pixel (Cycles' Debug Sample Count)",
+        default=False, update=_passes_changed)
+
+
+classes = (EmberRenderSettings, EmberViewLayerSettings)
 
 
 def register():
@@ -89,9 +158,12 @@ def register():
     # module crashes at exit when the pointer is created inside register_class.
     bpy.types.Scene.ember = PointerProperty(
         type=EmberRenderSettings, name="Ember", description="Ember render settings")
+    bpy.types.ViewLayer.ember = PointerProperty(
+        type=EmberViewLayerSettings, name="Ember", description="Ember's passes of this view layer")
 
 
 def unregister():
+    del bpy.types.ViewLayer.ember
     del bpy.types.Scene.ember
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

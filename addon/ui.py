@@ -61,7 +61,35 @@ class EmberPanel:
 
 class RENDER_PT_ember_sampling(EmberPanel, bpy.types.Panel):
     bl_label = "Sampling"
-    PROPS = (("samples", "Samples"), ("preview_samples", "Preview"), ("time_limit", None), ("seed", None))
+
+    def draw(self, context):
+        layout = self.split_layout()
+        ember = context.scene.ember
+        row = layout.row(heading="Noise Threshold")
+        row.prop(ember, "use_adaptive_sampling", text="")
+        sub = row.row()
+        sub.active = ember.use_adaptive_sampling
+        sub.prop(ember, "adaptive_threshold", text="")
+        layout.prop(ember, "samples", text="Max Samples" if ember.use_adaptive_sampling else "Samples")
+        sub = layout.column()
+        sub.active = ember.use_adaptive_sampling
+        sub.prop(ember, "adaptive_min_samples", text="Min Samples")
+        layout.prop(ember, "preview_samples", text="Preview")
+        layout.prop(ember, "time_limit")
+        layout.prop(ember, "seed")
+
+
+class RENDER_PT_ember_sampling_viewport(EmberPanel, bpy.types.Panel):
+    bl_label = "Viewport"
+    bl_parent_id = 'RENDER_PT_ember_sampling'
+    PROPS = (("viewport_samples", "Max Samples"), ("preview_pause", None),
+             ("use_preview_denoising", "Denoise"))
+
+
+class RENDER_PT_ember_sampling_denoise(EmberPanel, bpy.types.Panel):
+    bl_label = "Denoise"
+    bl_parent_id = 'RENDER_PT_ember_sampling'
+    PROPS = (("use_denoising", "Denoise Render"),)
 
 
 class RENDER_PT_ember_sampling_lights(EmberPanel, bpy.types.Panel):
@@ -75,7 +103,7 @@ class RENDER_PT_ember_sampling_advanced(EmberPanel, bpy.types.Panel):
     bl_label = "Advanced"
     bl_parent_id = 'RENDER_PT_ember_sampling'
     bl_options = {'DEFAULT_CLOSED'}
-    PROPS = (("strategy", None), ("threads", None), ("use_jit", None))
+    PROPS = (("sampling_pattern", None), ("strategy", None), ("threads", None), ("use_jit", None))
 
 
 class RENDER_PT_ember_light_paths(EmberPanel, bpy.types.Panel):
@@ -102,13 +130,81 @@ class RENDER_PT_ember_film(EmberPanel, bpy.types.Panel):
         layout.prop(context.scene.render, "film_transparent", text="Transparent")
 
 
+class EmberPassesPanel(EmberPanel):
+    bl_context = 'view_layer'
+    # (owner, property, label): owner 'layer' = view_layer, 'ember' = view_layer.ember;
+    # properties a Blender version lacks are left out.
+    PROPS = ()
+
+    def draw(self, context):
+        layout = self.split_layout()
+        layer = context.view_layer
+        for owner, name, label in self.PROPS:
+            target = layer.ember if owner == 'ember' else layer
+            if hasattr(target, name):
+                layout.prop(target, name, text=label)
+
+
+class VIEWLAYER_PT_ember_passes(EmberPassesPanel, bpy.types.Panel):
+    """Ember's own passes on top; Cycles' passes in the sub-panels."""
+    bl_label = "Passes"
+    PROPS = (('ember', 'use_pass_strategies', "Strategies"),
+             ('ember', 'strategy_passes_vertex', "Vertices"),
+             ('ember', 'use_pass_variance', "Variance"))
+
+
+class VIEWLAYER_PT_ember_passes_data(EmberPassesPanel, bpy.types.Panel):
+    bl_label = "Data"
+    bl_parent_id = 'VIEWLAYER_PT_ember_passes'
+    PROPS = (('layer', 'use_pass_combined', "Combined"), ('layer', 'use_pass_z', "Z"),
+                   ('layer', 'use_pass_mist', "Mist"), ('layer', 'use_pass_position', "Position"),
+                   ('layer', 'use_pass_normal', "Normal"), ('layer', 'use_pass_vector', "Vector"),
+                   ('layer', 'use_pass_uv', "UV"), ('ember', 'use_pass_denoising_data', "Denoising Data"),
+                   ('layer', 'use_pass_object_index', "Object Index"),
+                   ('layer', 'use_pass_material_index', "Material Index"),
+                   ('ember', 'use_pass_sample_count', "Sample Count"))
+
+
+class VIEWLAYER_PT_ember_passes_light(EmberPassesPanel, bpy.types.Panel):
+    bl_label = "Light"
+    bl_parent_id = 'VIEWLAYER_PT_ember_passes'
+    PROPS = tuple(('layer', f'use_pass_{kind}_{part}', f"{kind.title()} {part.title()}")
+                        for kind in ('diffuse', 'glossy', 'transmission')
+                        for part in ('direct', 'indirect', 'color')) + (
+        ('layer', 'use_pass_emit', "Emission"), ('layer', 'use_pass_environment', "Environment"),
+        ('layer', 'use_pass_ambient_occlusion', "Ambient Occlusion"))
+
+
+class VIEWLAYER_PT_ember_passes_crypto(EmberPassesPanel, bpy.types.Panel):
+    bl_label = "Cryptomatte"
+    bl_parent_id = 'VIEWLAYER_PT_ember_passes'
+    PROPS = (('layer', 'use_pass_cryptomatte_object', "Object"),
+                   ('layer', 'use_pass_cryptomatte_material', "Material"),
+                   ('layer', 'use_pass_cryptomatte_asset', "Asset"),
+                   ('layer', 'pass_cryptomatte_depth', "Levels"))
+
+
+class VIEWLAYER_PT_ember_passes_strategies(EmberPassesPanel, bpy.types.Panel):
+    bl_label = "Ember"
+    bl_parent_id = 'VIEWLAYER_PT_ember_passes'
+    PROPS = (('ember', 'use_pass_strategies', "Strategies"),
+                   ('ember', 'strategy_passes_vertex', "Vertices"),
+                   ('ember', 'use_pass_variance', "Variance"))
+
+
 classes = (
     RENDER_PT_ember_sampling,
+    RENDER_PT_ember_sampling_viewport,
+    RENDER_PT_ember_sampling_denoise,
     RENDER_PT_ember_sampling_lights,
     RENDER_PT_ember_sampling_advanced,
     RENDER_PT_ember_light_paths,
     RENDER_PT_ember_light_paths_clamping,
     RENDER_PT_ember_film,
+    VIEWLAYER_PT_ember_passes,
+    VIEWLAYER_PT_ember_passes_data,
+    VIEWLAYER_PT_ember_passes_light,
+    VIEWLAYER_PT_ember_passes_crypto,
 )
 
 

@@ -1,100 +1,249 @@
-"""Per-pixel accumulation of samples: radiance (with second moments for
-variance estimates), alpha, and first-hit depth, normal and albedo."""
+"""Per-pixel accumulation of samples.
+
+A batch of paths fills a Tile (float64 sums over a contiguous range of
+pixels); the Film keeps, per pixel, the sample count, the mean radiance and
+the sum of squared deviations from it (M2), combined tile by tile with
+Chan's parallel formula.  Means and M2 are float32: no cancellation (M2 is
+never a difference of large sums), half the memory of float64 sums, and two
+films merge exactly as the statistics of all their samples (farm shards).
+
+Adaptive sampling reads a second estimate of each pixel built from half of
+its samples (Cycles' "aux" buffer, class-A samples); it is kept only when
+adaptive sampling is on.  First-hit AOVs (depth, normal, albedo) are kept
+only when asked for.
+"""
 import threading
 
 import numpy as np
 
+from . import passes as extra_passes
+from .sampler import is_class_a
+
+AOV_CHANNELS = {"depth": 1, "normal": 3, "albedo": 3}
+STATE_VERSION = 1
+
 
 class Tile:
-    """Sums for a contiguous range of pixels [lo, hi), filled by one batch."""
+    """float64 sums for the pixels [lo, hi), filled by one batch."""
 
-    def __init__(self, lo, hi):
+    def __init__(self, lo, hi, aovs=tuple(AOV_CHANNELS), aux=False, passes=()):
         self.lo, self.hi = lo, hi
+        self.extra = extra_passes.Sums(passes, lo, hi) if passes else None
         n = hi - lo
         self.rgb = np.zeros((n, 3))
         self.rgb2 = np.zeros((n, 3))
         self.alpha = np.zeros(n)
         self.count = np.zeros(n)
-        self.depth = np.zeros(n)
-        self.normal = np.zeros((n, 3))
-        self.albedo = np.zeros((n, 3))
+        self.aovs = {name: np.zeros((n, AOV_CHANNELS[name])) for name in aovs}
+        self.aux = np.zeros((n, 3)) if aux else None
         self._pending = []
 
     def _bin(self, pix, w):
         return np.bincount(pix - self.lo, weights=w, minlength=self.hi - self.lo)
 
-    def add_radiance(self, pix, L):
-        """Queue finished paths; ``flush`` bins them all at once."""
-        self._pending.append((pix, L))
+    def add_radiance(self, pix, L, sample=None):
+        """Queue finished paths; ``flush`` bins them all at once.  ``sample``
+        (the paths' sample indices) feeds adaptive sampling's half buffer."""
+        self._pending.append((pix, L, sample))
+
+    def _bin3(self, pix, values):
+        idx = (pix[:, None] * 3 + np.arange(3)).ravel()
+        n = 3 * (self.hi - self.lo)
+        return np.bincount(idx, weights=values.ravel(), minlength=n).reshape(-1, 3)
 
     def flush(self):
         if not self._pending:
             return
-        pix = np.concatenate([p for p, _ in self._pending]) - self.lo
-        L = np.concatenate([l for _, l in self._pending])
+        pix = np.concatenate([p for p, _, _ in self._pending]) - self.lo
+        L = np.concatenate([l for _, l, _ in self._pending])
+        if self.aux is not None:
+            sample = np.concatenate([s for _, _, s in self._pending])
+            a = is_class_a(sample)
+            self.aux += self._bin3(pix[a], L[a])
         self._pending = []
-        # One bincount per moment over (pixel, channel) pairs.
-        idx = (pix[:, None] * 3 + np.arange(3)).ravel()
-        n = 3 * (self.hi - self.lo)
-        self.rgb += np.bincount(idx, weights=L.ravel(), minlength=n).reshape(-1, 3)
-        self.rgb2 += np.bincount(idx, weights=(L * L).ravel(), minlength=n).reshape(-1, 3)
+        self.rgb += self._bin3(pix, L)
+        self.rgb2 += self._bin3(pix, L * L)
 
     def add_camera(self, pix, alpha, depth, normal, albedo):
         self.count += np.bincount(pix - self.lo, minlength=self.hi - self.lo)
         self.alpha += self._bin(pix, alpha)
-        self.depth += self._bin(pix, depth)
-        for c in range(3):
-            self.normal[:, c] += self._bin(pix, normal[:, c])
-            self.albedo[:, c] += self._bin(pix, albedo[:, c])
+        for name, values in (("depth", depth), ("normal", normal), ("albedo", albedo)):
+            acc = self.aovs.get(name)
+            if acc is None:
+                continue
+            values = values.reshape(len(pix), -1)
+            for c in range(acc.shape[1]):
+                acc[:, c] += self._bin(pix, values[:, c])
 
 
 class Film:
-    """Per-pixel sums.  Radiance and its second moment stay float64 (they sum
-    thousands of samples of any magnitude); coverage, counts and the first-hit
-    AOVs are float32, which halves their memory on large frames."""
+    """Per-pixel sample statistics of a whole frame (row 0 at the top)."""
 
-    def __init__(self, width, height):
+    def __init__(self, width, height, aovs=tuple(AOV_CHANNELS), adaptive=False, passes=()):
+        unknown = set(aovs) - set(AOV_CHANNELS)
+        if unknown:
+            raise ValueError(f"unknown AOVs {sorted(unknown)}; known: {sorted(AOV_CHANNELS)}")
         self.width, self.height = width, height
+        self.passes = tuple(passes)   # named extra passes, see the block at the end
+        self.extra = extra_passes.Sums(self.passes, 0, width * height) if self.passes else None
         n = width * height
-        self.rgb = np.zeros((n, 3))
-        self.rgb2 = np.zeros((n, 3))
-        self.alpha = np.zeros(n, np.float32)
         self.count = np.zeros(n, np.float32)
-        self.depth = np.zeros(n, np.float32)
-        self.normal = np.zeros((n, 3), np.float32)
-        self.albedo = np.zeros((n, 3), np.float32)
+        self.mean = np.zeros((n, 3), np.float32)
+        self.m2 = np.zeros((n, 3), np.float32)
+        self.alpha = np.zeros(n, np.float32)   # sum of coverage
+        self.aovs = {name: np.zeros((n, AOV_CHANNELS[name]), np.float32) for name in aovs}
+        # Adaptive sampling: sum of the class-A samples' radiance.
+        self.aux = np.zeros((n, 3), np.float32) if adaptive else None
         self._lock = threading.Lock()
+
+    # -- accumulation ------------------------------------------------------
+
+    def new_tile(self, lo, hi):
+        return Tile(lo, hi, tuple(self.aovs), self.aux is not None, self.passes)
 
     def merge(self, tile):
         tile.flush()
         s = slice(tile.lo, tile.hi)
+        nb = tile.count
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mean_b = np.where(nb[:, None] > 0, tile.rgb / nb[:, None], 0.0)
+        m2_b = np.maximum(tile.rgb2 - tile.rgb * mean_b, 0.0)
         with self._lock:
-            for name in ("rgb", "rgb2", "alpha", "count", "depth", "normal", "albedo"):
-                getattr(self, name)[s] += getattr(tile, name)
+            self._combine(s, nb, mean_b, m2_b)
+            self.alpha[s] += tile.alpha
+            for name, acc in self.aovs.items():
+                acc[s] += tile.aovs[name]
+            if self.aux is not None:
+                self.aux[s] += tile.aux
+            if self.extra is not None and tile.extra is not None:
+                self.extra.merge(tile.extra, tile.lo)
 
-    def _mean(self, arr):
+    def _combine(self, s, nb, mean_b, m2_b):
+        """Chan et al.'s pairwise update of (count, mean, M2)."""
+        na = self.count[s].astype(np.float64)
+        n = na + nb
+        with np.errstate(divide="ignore", invalid="ignore"):
+            fb = np.where(n > 0, nb / n, 0.0)[:, None]
+        mean_a = self.mean[s].astype(np.float64)
+        delta = mean_b - mean_a
+        self.mean[s] = mean_a + delta * fb
+        self.m2[s] += m2_b + delta * delta * (na[:, None] * fb)
+        self.count[s] = n
+
+    # -- read-out ----------------------------------------------------------
+
+    def _per_sample(self, arr):
         c = np.maximum(self.count, 1.0)
         return arr / (c if arr.ndim == 1 else c[:, None])
 
     def image(self, transparent=True):
-        """(H, W, 4) float32 RGBA, row 0 at the top.  Alpha is the coverage
-        with a transparent film, else 1 (as Cycles)."""
+        """(H, W, 4) float32 RGBA.  Alpha is the coverage with a transparent
+        film, else 1 (as Cycles)."""
         out = np.empty((self.height * self.width, 4), np.float32)
-        out[:, :3] = self._mean(self.rgb)
-        out[:, 3] = self._mean(self.alpha) if transparent else 1.0
+        out[:, :3] = self.mean
+        out[:, 3] = self._per_sample(self.alpha) if transparent else 1.0
         return out.reshape(self.height, self.width, 4)
 
     def variance(self):
-        """(H, W, 3) float32 variance of the pixel mean, from the per-sample moments."""
-        c = np.maximum(self.count.astype(np.float64), 2.0)[:, None]
-        mean = self.rgb / c
-        var = self.rgb2 / c
-        var -= mean * mean
-        np.maximum(var, 0.0, out=var)
-        var /= c - 1.0  # unbiased sample variance / c = variance of the mean
+        """(H, W, 3) float32 variance of each pixel's mean: the unbiased
+        per-sample variance over the count (0 below two samples)."""
+        c = self.count.astype(np.float64)[:, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            var = np.where(c > 1, self.m2 / (c * (c - 1.0)), 0.0)
         return var.astype(np.float32).reshape(self.height, self.width, 3)
 
     def aov(self, name):
-        arr = self._mean(getattr(self, name))
-        shape = (self.height, self.width) + arr.shape[1:]
+        acc = self.aovs.get(name)
+        if acc is None:
+            return None
+        arr = self._per_sample(acc)
+        shape = (self.height, self.width) + ((arr.shape[1],) if arr.shape[1] > 1 else ())
         return arr.reshape(shape).astype(np.float32)
+
+    def sample_count(self):
+        return self.count.reshape(self.height, self.width).copy()
+
+    # -- adaptive sampling (Cycles' convergence test) -------------------------
+
+    def unconverged(self, threshold):
+        """Pixels whose error estimate is above ``threshold`` (already
+        scaled as Cycles scales its Noise Threshold), dilated by one pixel
+        in x, then in y, so neighbours of noisy pixels keep sampling."""
+        c = np.maximum(self.count, 1.0)[:, None]
+        I = self.mean
+        A = 2.0 * self.aux / c
+        diff = np.abs(I - A).sum(axis=1)
+        intensity = I.sum(axis=1)
+        norm = np.where(intensity < 1.0, np.sqrt(np.maximum(intensity, 0.0)), intensity)
+        noisy = (diff / (1e-4 + norm) >= threshold) | ~np.isfinite(diff)
+        u = noisy.reshape(self.height, self.width)
+        ux = u.copy()
+        ux[:, 1:] |= u[:, :-1]
+        ux[:, :-1] |= u[:, 1:]
+        uy = ux.copy()
+        uy[1:, :] |= ux[:-1, :]
+        uy[:-1, :] |= ux[1:, :]
+        return uy.ravel()
+
+    # -- state for farm shards ---------------------------------------------
+
+    def state(self):
+        """The film's statistics as plain arrays (a farm shard)."""
+        out = {"version": np.array(STATE_VERSION), "width": np.array(self.width),
+               "height": np.array(self.height), "count": self.count, "mean": self.mean,
+               "m2": self.m2, "alpha": self.alpha}
+        for name, acc in self.aovs.items():
+            out["aov_" + name] = acc
+        if self.aux is not None:
+            out["aux"] = self.aux
+        return out
+
+    @classmethod
+    def from_state(cls, state):
+        if int(state["version"]) != STATE_VERSION:
+            raise ValueError(f"film state version {int(state['version'])}, expected {STATE_VERSION}")
+        aovs = tuple(k[4:] for k in state if k.startswith("aov_"))
+        film = cls(int(state["width"]), int(state["height"]), aovs, "aux" in state)
+        film.merge_state(state)
+        return film
+
+    def merge_state(self, state):
+        """Add another film's samples (same size, disjoint samples)."""
+        if (int(state["width"]), int(state["height"])) != (self.width, self.height):
+            raise ValueError("film states of different sizes cannot merge")
+        n = self.width * self.height
+        with self._lock:
+            self._combine(slice(0, n), np.asarray(state["count"], np.float64),
+                          np.asarray(state["mean"], np.float64), np.asarray(state["m2"], np.float64))
+            self.alpha += state["alpha"]
+            for name, acc in self.aovs.items():
+                acc += state["aov_" + name]
+            if self.aux is not None and "aux" in state:
+                self.aux += state["aux"]
+
+
+# ----------------------------------------------------------------------------
+# Named extra passes (engine/passes.py): Tile.add_pass collects, Film.pass_images
+# hands out the pictures.  Not part of state(): farm shards carry no passes yet.
+
+def _tile_add_pass(self, name, pix, values, rank=None):
+    """Add per-sample values of the named pass (ignored when not requested)."""
+    if self.extra is not None:
+        self.extra.add(name, pix, values, rank)
+
+
+def _tile_wants(self, name):
+    return self.extra is not None and self.extra.wants(name)
+
+
+def _film_pass_images(self, config=None):
+    """{name: (H, W, C) float32} for every requested pass."""
+    if not self.passes:
+        return {}
+    return extra_passes.images(self.extra, self.count, self.width, self.height, self.passes,
+                               film=self, config=config)
+
+
+Tile.add_pass = _tile_add_pass
+Tile.wants = _tile_wants
+Film.pass_images = _film_pass_images

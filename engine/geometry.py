@@ -57,6 +57,8 @@ class Triangles:
     # for normal maps, or None when no material has one.
     tangent: Optional[np.ndarray] = None
     tangent_sign: Optional[np.ndarray] = None
+    # (T,) int32 index of the triangle's scene instance (for passes).
+    instance: Optional[np.ndarray] = None
 
     def __len__(self):
         return len(self.p0)
@@ -83,12 +85,14 @@ def _slot_table(inst, n_materials):
     return np.array(ids + [default], dtype=np.int32)
 
 
-def flatten(scene):
-    """Build Triangles for every instance; degenerate triangles are dropped."""
+def flatten(scene, with_instance=False):
+    """Build Triangles for every instance; degenerate triangles are dropped.
+    with_instance: also record each triangle's instance index (passes)."""
     n_mat = len(scene.materials)
     mesh_cache = {}
     parts = []
-    for inst in scene.instances:
+    owners = []
+    for index, inst in enumerate(scene.instances):
         mesh = scene.meshes[inst.mesh]
         if len(mesh.triangles) == 0:
             continue
@@ -96,7 +100,10 @@ def flatten(scene):
             mesh_cache[inst.mesh] = _mesh_corners(mesh)
         corners = mesh_cache[inst.mesh]
         parts.append(_instance_part(mesh, corners, inst, n_mat))
+        owners.append(np.full(len(corners), index, np.int32))
     tris = _concat(parts)
+    if owners and with_instance:
+        tris.instance = np.concatenate(owners)[_kept(parts)]
     if _needs_tangents(scene):
         _add_tangents(tris, scene, parts)
     return tris

@@ -23,9 +23,10 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from . import bsdf, kernels
+from . import bsdf, kernels, pass_events
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .lights import POINT, SUN
+from .sampler import BSDF, CAMERA, KIND, LIGHT, emitter_set, vertex_set
 from .sampling import power_heuristic
 from .vec import dot, frame, to_local, to_world
 
@@ -78,6 +79,12 @@ class Paths:
     mis_o: np.ndarray
     bounce: np.ndarray    # vertices scattered so far (0 = camera ray)
     tbounce: np.ndarray   # transparent surfaces passed so far
+    # The sample's address for the sampler: pixel scramble seed and sample
+    # index (uint32), so every random number is fixed by (seed, pixel,
+    # sample index, dimension), whatever the batching.
+    pseed: np.ndarray
+    sample: np.ndarray
+    aux: np.ndarray       # (N, k) per-path state of the extra passes (k = 0 without)
 
     def take(self, keep):
         """The paths where ``keep`` (a mask or indices).  np.take with
@@ -86,9 +93,10 @@ class Paths:
         return Paths(*(np.take(getattr(self, f), idx, axis=0) for f in self.__dataclass_fields__))
 
     def finish_rows(self, keep):
-        """Pixel and radiance of the paths where ``keep``: all that ends a path."""
+        """Pixel, radiance and sample index of the paths where ``keep``: all
+        that ending a path needs."""
         idx = rows_of(keep)
-        return np.take(self.pix, idx), np.take(self.L, idx, axis=0)
+        return np.take(self.pix, idx), np.take(self.L, idx, axis=0), np.take(self.sample, idx)
 
     def concat(self, other):
         return Paths(*(np.concatenate([getattr(self, f), getattr(other, f)])
@@ -113,21 +121,26 @@ class Hit:
     back: object = None
 
 
-def trace_batch(ctx, pix, rng, tile):
-    """Trace one camera sample per entry of ``pix`` and add them to ``tile``."""
+def trace_batch(ctx, pix, sample, tile):
+    """Trace camera sample ``sample[i]`` of pixel ``pix[i]`` for every i and
+    add them to ``tile``."""
     n = len(pix)
-    u = rng.random((n, 4))
+    pseed = ctx.sampler.pixel_seeds(pix)
+    sample = np.asarray(sample, np.uint32)
+    u = ctx.sampler.get(pseed, sample, CAMERA)
     o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3])
     paths = Paths(pix, o, d, tmax, np.ones((n, 3)), np.zeros((n, 3)),
                   np.ones(n), np.ones(n, bool), o, np.zeros((n, 3)), np.full(n, VIS_CAMERA, np.uint8),
-                  o, np.zeros(n, np.int32), np.zeros(n, np.int32))
+                  o, np.zeros(n, np.int32), np.zeros(n, np.int32), pseed, sample,
+                  np.zeros((n, pass_events.aux_width(ctx.settings)), np.float32))
+    pass_events.start(ctx, paths, tile)
     # Every step raises a live path's bounce or its transparent bounce
     # count, both bounded: max_bounces + 1 vertices scatter, one more only
     # collects emission, and transparent passes end at transparent_limit.
     for depth in range(ctx.settings.max_bounces + 2 + ctx.transparent_limit):
         if len(paths.pix) == 0:
             break
-        paths = _bounce(ctx, paths, depth, rng, tile)
+        paths = _bounce(ctx, paths, depth, tile)
     if len(paths.pix):
         _finish(ctx, paths, tile)
 
@@ -141,22 +154,22 @@ def rows_of(keep):
 def _finish(ctx, paths, tile, keep=None):
     """Add the radiance of the paths (those where ``keep``, if given) to the tile."""
     if keep is None:
-        pix, L = paths.pix, paths.L
+        pix, L, sample = paths.pix, paths.L, paths.sample
     else:
-        pix, L = paths.finish_rows(keep)
-    _add_radiance(ctx, pix, L, tile)
+        pix, L, sample = paths.finish_rows(keep)
+    _add_radiance(ctx, pix, L, sample, tile)
 
 
-def _add_radiance(ctx, pix, L, tile):
+def _add_radiance(ctx, pix, L, sample, tile):
     L = np.where(np.isfinite(L), L, 0.0)
     clamp = ctx.settings.clamp
     if clamp > 0:
         m = L.max(axis=1)
         L = L * np.where(m > clamp, clamp / np.maximum(m, 1e-30), 1.0)[:, None]
-    tile.add_radiance(pix, L)
+    tile.add_radiance(pix, L, sample)
 
 
-def _bounce(ctx, paths, depth, rng, tile):
+def _bounce(ctx, paths, depth, tile):
     s = ctx.settings
     t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax)
     if ctx.triangles.visibility is not None:
@@ -174,6 +187,7 @@ def _bounce(ctx, paths, depth, rng, tile):
         i = np.nonzero(hit_light)[0]
         w = _mis_hit(ctx, paths, i, emitter[i], lpdf[i])
         paths.L[i] += paths.beta[i] * lLe[i] * w[:, None]
+        pass_events.emitter(ctx, paths, i, paths.beta[i] * lLe[i], w, tile)
     miss = (prim < 0) & ~hit_light
     if miss.any():
         _escaped(ctx, paths, np.nonzero(miss)[0], tile)
@@ -193,7 +207,7 @@ def _bounce(ctx, paths, depth, rng, tile):
         emission = ctx.materials.textures.emission_at(hit.mat, hit.uv, emission)
     em = np.nonzero(np.any(emission > 0, axis=1))[0]
     if len(em):
-        _emission_hit(ctx, paths, em, hit, emission[em])
+        _emission_hit(ctx, paths, em, hit, emission[em], tile)
 
     last = paths.bounce > s.max_bounces
     if ctx.transparent_shadows:
@@ -220,14 +234,16 @@ def _bounce(ctx, paths, depth, rng, tile):
     # by light sampling (every emitter) and BSDF sampling.
     w = bsdf.weights(lobes, wo_l)
     lobes_wo = (bsdf.selection(lobes, wo_l, w), w)
-    _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, rng)
+    pass_events.vertex(ctx, paths, hit, lobes, w, tt, bb, depth, tile)
+    _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth, tile)
     ray = paths.ray
-    alive, through = _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, rng)
+    alive, through = _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth)
+    pass_events.after_scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, through, tile)
     # For the light tree's MIS pdf; a transparent pass keeps the vertex.
     paths.prev_p = _unless(through, paths.prev_p, hit.p)
     paths.prev_n = _unless(through, paths.prev_n, hit.ng)
     if ctx.track_rays:
-        paths.ray = _unless(through, ray, _ray_kind(hit, lobes, wo_l, tt, bb, paths, rng))
+        paths.ray = _unless(through, ray, _ray_kind(ctx, hit, lobes, wo_l, tt, bb, paths, depth))
     elif ctx.triangles.visibility is not None:
         # Only camera (or shadow) visibility differs: any indirect kind sees
         # the same triangles, but no longer as a camera ray.
@@ -319,13 +335,17 @@ def _escaped(ctx, paths, i, tile):
         emitter, Le, pdf = env
         w = _mis_hit(ctx, paths, sky, np.full(len(sky), emitter), pdf)
         paths.L[sky] += paths.beta[sky] * Le * w[:, None]
+        pass_events.emitter(ctx, paths, sky, paths.beta[sky] * Le, w, tile, world=True)
     else:
         paths.L[sky] += paths.beta[sky] * ctx.world
+        pass_events.emitter(ctx, paths, sky, paths.beta[sky] * ctx.world, np.ones(len(sky)), tile,
+                            world=True, bsdf_only=True)
     for mask, emitter, Le, pdf in ctx.lights.sun_hits(paths.d[i], paths.ray[i] if ctx.track_rays else None):
         j = i[mask]
         if len(j):
             w = _mis_hit(ctx, paths, j, np.full(len(j), emitter), np.full(len(j), pdf))
             paths.L[j] += paths.beta[j] * Le * w[:, None]
+            pass_events.emitter(ctx, paths, j, paths.beta[j] * Le, w, tile)
 
 
 def _film_alpha_through(paths, i, tile):
@@ -379,7 +399,7 @@ def _hit_uv(tr, prim, bu, bv):
     return (1.0 - bu - bv)[:, None] * c[:, 0] + bu[:, None] * c[:, 1] + bv[:, None] * c[:, 2]
 
 
-def _emission_hit(ctx, paths, em, hit, Le):
+def _emission_hit(ctx, paths, em, hit, Le, tile=None):
     s = ctx.settings
     if s.strategy == "mis":
         emitter = ctx.lights.emitter_of_triangle(hit.mat[em])
@@ -388,6 +408,7 @@ def _emission_hit(ctx, paths, em, hit, Le):
     else:
         w = _mis_hit(ctx, paths, em, None, None)
     paths.L[em] += paths.beta[em] * Le * w[:, None]
+    pass_events.emitter(ctx, paths, em, paths.beta[em] * Le, w, tile)
 
 
 def _nee_emitters(ctx):
@@ -399,23 +420,28 @@ def _nee_emitters(ctx):
     return "select", None
 
 
-def _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, rng):
+def _uniforms(ctx, paths, dim_set):
+    """(N, 4) sample values of one dimension set for the live paths."""
+    return ctx.sampler.get(paths.pseed, paths.sample, dim_set)
+
+
+def _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth, tile=None):
     lt = ctx.lights
     n = len(paths.pix)
     if lt.count == 0 or n == 0:
         return
     mode, emitters = _nee_emitters(ctx)
     if mode == "select":
-        u = rng.random((n, 4))
+        u = _uniforms(ctx, paths, vertex_set(depth, LIGHT))
         e, p_sel = lt.select(u[:, 0], hit.p, hit.ng)
-        _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u[:, 1:])
+        _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u[:, 1:], tile)
         return
     for e in emitters:
-        u = rng.random((n, 3))
-        _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, np.full(n, e), np.ones(n), u)
+        u = _uniforms(ctx, paths, emitter_set(depth, e))[:, :3]
+        _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, np.full(n, e), np.ones(n), u, tile)
 
 
-def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u):
+def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u, tile=None):
     s = ctx.settings
     ls = ctx.lights.sample(e, hit.p, u[:, 0], u[:, 1], u[:, 2])
     wi_l = to_local(ls.wi, tt, bb, hit.ns)
@@ -456,10 +482,18 @@ def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u):
     shorten = np.where(on, 10.0 * eps, 0.0)
     tmax = np.where(np.isfinite(dist), dist * (1.0 - 1e-6) - shorten, 1e37)
     if ctx.transparent_shadows:
-        paths.L[live] += contrib[live] * _transmittance(ctx, origin, wi, tmax, e[live], paths.tbounce[live])
-        return
-    blocked = _occluded(ctx, origin, wi, tmax, e[live])
-    _add_rows(paths.L, live[~blocked], contrib)
+        added = contrib[live] * _transmittance(ctx, origin, wi, tmax, e[live], paths.tbounce[live])
+        paths.L[live] += added
+        free = live
+    else:
+        free = live[~_occluded(ctx, origin, wi, tmax, e[live])]
+        _add_rows(paths.L, free, contrib)
+        added = None
+    if pass_events.listening(tile):
+        if added is None:
+            added = np.take(contrib, free, axis=0)
+        pass_events.nee(ctx, paths, free, added, w[free], np.broadcast_to(ls.delta, w.shape)[free],
+                        lobes, lobes_wo, wo_l, wi_l[free], f[free], tile)
 
 
 def _add_rows(L, rows, values):
@@ -490,11 +524,11 @@ def _same_side(wi, ng, wi_l):
     return (g != 0) & ((g > 0) == (wi_l[:, 2] > 0))
 
 
-def _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, rng):
+def _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth):
     """Sample the BSDF and update the path state in place; returns which
     paths live on and which passed straight through a transparent lobe."""
     s = ctx.settings
-    u = rng.random((len(paths.pix), 4))
+    u = _uniforms(ctx, paths, vertex_set(depth, BSDF))
     wi_l, weight, pdf, delta = bsdf.sample(lobes, wo_l, u[:, 0], u[:, 1], u[:, 2], *lobes_wo)
     wi = to_world(wi_l, tt, bb, hit.ns)
     # A reflection below the geometric surface (or a transmission above it)
@@ -600,7 +634,7 @@ def _occluded(ctx, origin, wi, tmax, emitter):
     return blocked
 
 
-def _ray_kind(hit, lobes, wo_l, tt, bb, paths, rng):
+def _ray_kind(ctx, hit, lobes, wo_l, tt, bb, paths, depth):
     """VIS_* bit of the bounce just sampled, distributed as Cycles' (the kind
     of the closure it sampled): below the surface = transmission; after a
     delta (mirror) sample = glossy; else diffuse with the probability that
@@ -618,7 +652,8 @@ def _ray_kind(hit, lobes, wo_l, tt, bb, paths, rng):
         _, pdf_d = bsdf.eval_pdf(only_d, wo_l[mixed], wi_l, sel)
         with np.errstate(divide="ignore", invalid="ignore"):
             p_d = np.where(paths.prev_pdf[mixed] > 0, pdf_d / paths.prev_pdf[mixed], 0.0)
-        kind[mixed] = np.where(rng.random(len(mixed)) < p_d, VIS_DIFFUSE, VIS_GLOSSY)
+        u = ctx.sampler.get(paths.pseed[mixed], paths.sample[mixed], vertex_set(depth, KIND))[:, 0]
+        kind[mixed] = np.where(u < p_d, VIS_DIFFUSE, VIS_GLOSSY)
     kind[dot(paths.d, hit.ng) < 0] = VIS_TRANSMISSION
     return kind
 

@@ -12,38 +12,65 @@ import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FuturesTimeout
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from .accel import Accel
 from .bsdf import MaterialTable
 from .camera import CameraModel, PixelFilter
-from .film import Film, Tile
+from . import pass_events
+from .film import Film
 from .geometry import flatten, material_table
 from .integrator import Context, trace_batch
 from .lights import LightSet
+from .sampler import Sampler
 from .scene import RenderSettings, SceneError
 from .validate import validate_settings
 
 
-@dataclass
 class RenderResult:
-    image: np.ndarray          # (H, W, 4) float32, row 0 at the top
-    depth: np.ndarray          # (H, W)
-    normal: np.ndarray         # (H, W, 3)
-    albedo: np.ndarray         # (H, W, 3)
-    variance: np.ndarray       # (H, W, 3) variance of each pixel's mean
-    samples: int
-    stats: dict = field(default_factory=dict)
-    warnings: list = field(default_factory=list)
+    """The finished (or stopped) render: the RGBA image, the film behind it
+    (per-pixel counts, means and M2; ``film.state()`` is a farm shard) and
+    first-hit AOVs and variance computed from the film on demand."""
+
+    def __init__(self, film, image, samples, stats=None, warnings=None, passes=None, pass_metadata=None):
+        self.film = film
+        self.image = image          # (H, W, 4) float32, row 0 at the top
+        self.samples = samples
+        self.stats = stats or {}
+        self.warnings = warnings or []
+        # Requested extra passes {name: (H, W, C) float32} and their metadata
+        # (Cryptomatte manifests): engine/passes.py.
+        self.passes = passes or {}
+        self.pass_metadata = pass_metadata or {}
+
+    @property
+    def depth(self):
+        return self.film.aov("depth")
+
+    @property
+    def normal(self):
+        return self.film.aov("normal")
+
+    @property
+    def albedo(self):
+        return self.film.aov("albedo")
+
+    @property
+    def variance(self):
+        """(H, W, 3) variance of each pixel's mean."""
+        return self.film.variance()
+
+    @property
+    def sample_count(self):
+        """(H, W) samples each pixel received (fewer where adaptive sampling stopped)."""
+        return self.film.sample_count()
 
 
 def prepare(scene, settings):
     """Validate and compile a Scene into the read-only Context batches share."""
     scene.validate()
     validate_settings(settings)
-    tris = flatten(scene)
+    tris = flatten(scene, with_instance=bool(settings.passes))
     materials = MaterialTable(material_table(scene))
     lights = LightSet(scene, tris, materials, settings.light_selection,
                       env_compensation=settings.mis_compensation and settings.strategy == "mis")
@@ -53,7 +80,10 @@ def prepare(scene, settings):
         raise SceneError(f"camera: {exc}") from None
     accel = Accel(tris)
     world = np.asarray(scene.world.color, dtype=np.float64)
-    return Context(accel, tris, materials, lights, camera, world, settings)
+    ctx = Context(accel, tris, materials, lights, camera, world, settings)
+    ctx.sampler = Sampler(settings.seed, settings.sampling_pattern)
+    ctx.pass_config = pass_events.configure(scene, settings)
+    return ctx
 
 
 def warnings_for(ctx):
@@ -67,12 +97,47 @@ def warnings_for(ctx):
     return out
 
 
-def _batches(npix, spp, settings, threads):
-    """Contiguous pixel ranges: at most max_paths / threads paths each, and at
-    least one per thread so small frames keep every core busy."""
+def _batches(pixels, spp, settings, threads):
+    """Pixel lists for one pass: at most max_paths / threads paths each, and
+    at least one per thread so small frames keep every core busy.
+    ``pixels`` is a sorted index array (all pixels, or the unconverged ones)."""
     per_thread = max(1024, settings.max_paths // threads)
-    pixels = max(1, min(per_thread // spp, -(-npix // threads)))
-    return [(lo, min(npix, lo + pixels)) for lo in range(0, npix, pixels)]
+    n = len(pixels)
+    size = max(1, min(per_thread // spp, -(-n // threads)))
+    return [pixels[lo:lo + size] for lo in range(0, n, size)]
+
+
+def adaptive_parameters(settings):
+    """(threshold as the convergence test uses it, min samples, step), as
+    Cycles derives them from Noise Threshold and Min Samples; None when
+    adaptive sampling is off."""
+    threshold = settings.adaptive_threshold
+    if threshold <= 0:
+        return None
+    if settings.adaptive_min_samples == 0:
+        min_samples = max(4, int(np.ceil(16.0 / threshold ** 0.3)))
+    else:
+        min_samples = max(4, settings.adaptive_min_samples)
+    return threshold * 5.0, min_samples, 16
+
+
+class _Adaptive:
+    """Which pixels still sample: all until min samples, then re-checked
+    every ``step`` samples; converged pixels stop for good."""
+
+    def __init__(self, settings, npix):
+        self.params = adaptive_parameters(settings)
+        self.active = np.arange(npix)
+
+    def update(self, film, done, last_checked):
+        if self.params is None:
+            return last_checked
+        threshold, min_samples, step = self.params
+        if done < min_samples or done // step == last_checked // step:
+            return last_checked
+        noisy = film.unconverged(threshold)
+        self.active = self.active[noisy[self.active]]
+        return done
 
 
 def render(scene, settings=None, progress=None):
@@ -80,20 +145,25 @@ def render(scene, settings=None, progress=None):
     t_start = time.perf_counter()
     ctx = prepare(scene, settings)
     cam = ctx.camera
-    film = Film(cam.width, cam.height)
+    adaptive = _Adaptive(settings, cam.width * cam.height)
+    film = Film(cam.width, cam.height, settings.aovs, adaptive.params is not None, settings.passes)
     threads = settings.threads or os.cpu_count() or 1
     spp_pass = max(1, min(settings.samples_per_pass, settings.samples))
-    n_passes = -(-settings.samples // spp_pass)
-    batches = _batches(cam.width * cam.height, spp_pass, settings, threads)
     stats = {"samples": 0, "samples_total": settings.samples, "prepare_seconds": time.perf_counter() - t_start}
     t_trace = time.perf_counter()
+    done, checked = 0, 0
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        for pass_index in range(n_passes):
-            spp = min(spp_pass, settings.samples - pass_index * spp_pass)
-            jobs = [pool.submit(_run_batch, ctx, film, lo, hi, spp, settings.seed, pass_index)
-                    for lo, hi in batches]
+        while done < settings.samples and len(adaptive.active):
+            spp = min(spp_pass, settings.samples - done)
+            first = settings.sample_start + done
+            jobs = [pool.submit(_run_batch, ctx, film, pixels, spp, first)
+                    for pixels in _batches(adaptive.active, spp, settings, threads)]
             cancelled = _wait(jobs, progress)
-            stats.update(_stats(ctx, film, stats, spp, t_trace, settings))
+            paths = spp * len(adaptive.active)
+            done += spp
+            stats.update(_stats(ctx, stats, done, paths, t_trace, settings))
+            checked = adaptive.update(film, done, checked)
+            stats["active_pixels"] = len(adaptive.active)
             if cancelled:
                 # Part of a pass was traced: pixels carry unequal counts, each
                 # mean is still unbiased.  Report the fewest samples any pixel has.
@@ -102,9 +172,8 @@ def render(scene, settings=None, progress=None):
                 progress.on_pass(film.image(settings.transparent), stats["samples"], dict(stats))
             if cancelled or _should_stop(progress, stats, settings):
                 break
-    return RenderResult(film.image(settings.transparent), film.aov("depth"),
-                        film.aov("normal"), film.aov("albedo"), film.variance(),
-                        stats["samples"], stats, warnings_for(ctx))
+    return RenderResult(film, film.image(settings.transparent), stats["samples"], stats, warnings_for(ctx),
+                        film.pass_images(ctx.pass_config), pass_events.metadata(ctx.pass_config, settings.passes))
 
 
 def _wait(jobs, progress, poll=0.2):
@@ -142,25 +211,25 @@ def _stop_requested(progress):
     return progress is not None and hasattr(progress, "should_stop") and bool(progress.should_stop())
 
 
-def _run_batch(ctx, film, lo, hi, spp, seed, pass_index):
-    rng = np.random.default_rng([seed, pass_index, lo])
-    tile = Tile(lo, hi)
-    pix = np.repeat(np.arange(lo, hi), spp)
-    trace_batch(ctx, pix, rng, tile)
+def _run_batch(ctx, film, pixels, spp, first):
+    """Samples [first, first + spp) of each pixel in ``pixels`` (sorted)."""
+    tile = film.new_tile(int(pixels[0]), int(pixels[-1]) + 1)
+    pix = np.repeat(pixels, spp)
+    sample = np.tile(np.arange(first, first + spp, dtype=np.uint32), len(pixels))
+    trace_batch(ctx, pix, sample, tile)
     film.merge(tile)
 
 
-def _stats(ctx, film, stats, spp, t_trace, settings):
+def _stats(ctx, stats, done, paths, t_trace, settings):
     elapsed = time.perf_counter() - t_trace
-    done = stats["samples"] + spp
     totals = ctx.accel.totals()
-    npix = film.width * film.height
     left = elapsed / done * (settings.samples - done) if done else 0.0
+    paths_total = stats.get("paths", 0) + paths
     return {
         "samples": done,
         "seconds": elapsed,
-        "paths": done * npix,
-        "paths_per_second": done * npix / max(elapsed, 1e-9),
+        "paths": paths_total,
+        "paths_per_second": paths_total / max(elapsed, 1e-9),
         "rays": totals["rays"],
         "rays_per_second": totals["rays"] / max(elapsed, 1e-9),
         "embree_seconds": totals["seconds"],

@@ -75,6 +75,10 @@ class Instance:
     visible_glossy: bool = True
     visible_transmission: bool = True
     visible_shadow: bool = True
+    # Blender's Object Index (pass_index) and the Cryptomatte asset: the
+    # name of the topmost parent ("" = the object itself).
+    pass_index: int = 0
+    asset: str = ""
 
 
 # ----------------------------------------------------------------------------
@@ -141,6 +145,7 @@ class Material:
     emission: RGB = (0.0, 0.0, 0.0)
     # A Bump or NormalMap expression replacing the shading normal, or None.
     normal: Optional["Texture"] = None
+    pass_index: int = 0  # Blender's Material Index
 
 
 DEFAULT_MATERIAL = Material("default", (Lobe("diffuse", (0.8, 0.8, 0.8)),))
@@ -442,6 +447,23 @@ class RenderSettings:
     # samples on what stands out.  Only with strategy 'mis' (NEE alone would
     # miss the dim parts).
     mis_compensation: bool = True
+    # Samples traced are the indices [sample_start, sample_start + samples):
+    # every random number is addressed by (seed, pixel, sample index,
+    # dimension), so disjoint ranges merge into the render of their union.
+    sample_start: int = 0
+    # 'sobol' (shuffled Owen-scrambled Sobol, Cycles' default) or 'random'.
+    sampling_pattern: str = "sobol"
+    # Adaptive sampling as Cycles: a pixel stops once its error estimate
+    # falls below adaptive_threshold (Cycles' Noise Threshold; 0 = off),
+    # checked every 16 samples after adaptive_min_samples (0 = automatic).
+    adaptive_threshold: float = 0.0
+    adaptive_min_samples: int = 0
+    # First-hit AOVs the film keeps (memory: only what is asked for).
+    aovs: tuple = ("depth", "normal", "albedo")
+    # Extra passes by name (engine/passes.py ALL_PASSES; none by default, and
+    # none costs nothing) and their settings (a passes.PassConfig or None).
+    passes: tuple = ()
+    pass_config: object = None
     # Compiled kernels (engine/kernels.py, numba) instead of plain NumPy for
     # the same elementwise maths; off, or without numba, or with EMBER_JIT=0,
     # the NumPy code runs.  Images agree to float rounding.

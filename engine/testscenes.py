@@ -114,3 +114,56 @@ def cornell_spheres(width=256, height=256, grid=10, segments=96, rings=48):
 
 
 SCENES = {"cornell": cornell_box, "cornell-spheres": cornell_spheres}
+
+
+def veach_plates(size=(48, 36), near_mirror=0.12, rough=0.4, small=0.3, big=1.2, power=20.0):
+    """Veach's MIS test (thesis fig. 9.2, simplified): a near-mirror and a
+    rough glossy plate, each tilted to reflect a small disk light and a large
+    square light into the camera.  No floor: every pixel is a contest
+    between light sampling and BSDF sampling."""
+    eye = np.array([0.0, -4.0, 1.5])
+    light_mid = np.array([0.0, 2.5, 2.0])
+    meshes, instances = [], []
+    mats = [Material("near-mirror", (Lobe("glossy", (0.9, 0.9, 0.9), near_mirror),)),
+            Material("rough", (Lobe("glossy", (0.9, 0.9, 0.9), rough),))]
+    for k, y in enumerate((-0.45, 0.45)):
+        p = np.array([0.0, y, 0.0])
+        n = (eye - p) / np.linalg.norm(eye - p) + (light_mid - p) / np.linalg.norm(light_mid - p)
+        n /= np.linalg.norm(n)
+        x_axis = np.array([1.0, 0.0, 0.0])
+        m = np.eye(4)
+        m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x_axis, np.cross(n, x_axis), n, p
+        meshes.append(quad([[-1.5, -0.4, 0], [1.5, -0.4, 0], [1.5, 0.4, 0], [-1.5, 0.4, 0]]))
+        instances.append(Instance(k, m, [k], mats[k].name + " plate"))
+    lights = []
+    for x, diameter, shape in ((-0.8, small, "DISK"), (0.8, big, "SQUARE")):
+        m = look_at(light_mid + [x, 0, 0], (0, 0, 0))  # -Z (emission) towards the plates
+        lights.append(AreaLight(m, (power, power, power), shape, diameter, visible_camera=True))
+    cam = Camera(look_at(eye, (0, 0, 0)), lens=45.0, resolution=size)
+    return Scene(meshes, instances, mats, lights, World((0.0, 0.0, 0.0)), cam)
+
+
+def veach_four(size=(240, 180), roughness=(0.08, 0.16, 0.3, 0.55), diameters=(0.06, 0.2, 0.5, 1.2),
+               power=60.0):
+    """Veach's MIS figure (thesis fig. 9.2): four glossy plates from
+    near-mirror (front) to rough (back), each tilted to reflect four disk
+    lights of equal power and growing size (left to right) into the camera."""
+    eye = np.array([0.0, -6.0, 1.0])
+    light_mid = np.array([0.0, 0.5, 3.5])
+    meshes, instances, mats = [], [], []
+    for k, (r, y) in enumerate(zip(roughness, (-0.9, -0.3, 0.3, 0.9))):
+        mats.append(Material(f"plate {r}", (Lobe("glossy", (0.8, 0.8, 0.8), r),)))
+        p = np.array([0.0, y, 0.35 * k])
+        n = (eye - p) / np.linalg.norm(eye - p) + (light_mid - p) / np.linalg.norm(light_mid - p)
+        n /= np.linalg.norm(n)
+        x_axis = np.array([1.0, 0.0, 0.0])
+        m = np.eye(4)
+        m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x_axis, np.cross(n, x_axis), n, p
+        meshes.append(quad([[-2.2, -0.26, 0], [2.2, -0.26, 0], [2.2, 0.26, 0], [-2.2, 0.26, 0]]))
+        instances.append(Instance(k, m, [k], f"plate {k}", pass_index=k + 1))
+    lights = []
+    for x, diameter in zip((-1.8, -0.6, 0.6, 1.8), diameters):
+        m = look_at(light_mid + [x, 0, 0], (0.0, -0.3, 0.0))
+        lights.append(AreaLight(m, (power, power, power), "DISK", diameter, visible_camera=True))
+    cam = Camera(look_at(eye, (0, 0, 0.55)), lens=62.0, resolution=size)
+    return Scene(meshes, instances, mats, lights, World((0.0, 0.0, 0.0)), cam)

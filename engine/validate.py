@@ -201,6 +201,23 @@ def validate_settings(s):
         raise SceneError("settings: transparent max bounces must be >= 0")
     if s.max_paths < 1024:
         raise SceneError("settings: max_paths must be >= 1024")
+    if s.sample_start < 0 or s.sample_start + s.samples > 2 ** 32:
+        raise SceneError("settings: sample indices must lie in [0, 2^32)")
+    if s.sampling_pattern not in ("sobol", "random"):
+        raise SceneError(f"settings: unknown sampling pattern {s.sampling_pattern!r}")
+    if not (s.adaptive_threshold >= 0.0) or s.adaptive_min_samples < 0:
+        raise SceneError("settings: adaptive threshold and min samples must be >= 0")
+    unknown = set(s.aovs) - {"depth", "normal", "albedo"}
+    if unknown:
+        raise SceneError(f"settings: unknown AOVs {sorted(unknown)}")
+    _validate_passes(s)
+
+
+def _validate_passes(s):
+    from .passes import unknown
+    bad = unknown(getattr(s, "passes", ()) or ())
+    if bad:
+        raise SceneError(f"settings: unknown render passes {bad}")
 
 
 def validate_scene(scene):

@@ -41,6 +41,11 @@ WHEELS = {
 DEPENDS = {'numba': ('llvmlite',)}
 PYTHON_VERSION = '3.11'
 PLATFORM_TAG = 'manylinux_2_28_x86_64'
+# Intel Open Image Denoise for addon/denoise.py where Blender has none (3.4):
+# only the CPU device, its TBB and the oidnDenoise program of the wheel.
+OIDN_REQUIREMENT = 'pyoidn==2.5.1.0'
+OIDN_FILES = re.compile(r'^pyoidn/oidn/(bin/oidnDenoise|lib/libOpenImageDenoise\.so\.2'
+                        r'|lib/libOpenImageDenoise_(core|device_cpu)\.so\.[.0-9]+|lib/libtbb\.so\.12)$')
 IGNORED = shutil.ignore_patterns('__pycache__', '*.pyc', '*.pyo', '.pytest_cache')
 
 
@@ -103,6 +108,35 @@ def fetch_wheels(requirements, wheel_dir):
     return found
 
 
+def fetch_oidn_wheel(wheel_dir):
+    """The pyoidn wheel (pure-Python tag, native libraries inside), downloaded once."""
+    os.makedirs(wheel_dir, exist_ok=True)
+    prefix = OIDN_REQUIREMENT.replace('==', '-') + '-'
+    matches = [f for f in os.listdir(wheel_dir) if f.startswith(prefix) and f.endswith('x86_64.whl')]
+    if not matches:
+        subprocess.check_call([sys.executable, '-m', 'pip', 'download', '--quiet', '--no-deps',
+                               '--only-binary=:all:', '--platform', 'manylinux2014_x86_64',
+                               '-d', wheel_dir, OIDN_REQUIREMENT])
+        matches = [f for f in os.listdir(wheel_dir) if f.startswith(prefix) and f.endswith('x86_64.whl')]
+    if not matches:
+        raise SystemExit(f"no Linux x86-64 wheel for {OIDN_REQUIREMENT}")
+    return os.path.join(wheel_dir, sorted(matches)[-1])
+
+
+def vendor_oidn(package, wheel):
+    """Unpack OIDN's CPU libraries and oidnDenoise into <package>/vendor/oidn."""
+    target = os.path.join(package, 'vendor', 'oidn')
+    with zipfile.ZipFile(wheel) as archive:
+        for member in archive.namelist():
+            if OIDN_FILES.match(member):
+                path = os.path.join(target, member[len('pyoidn/oidn/'):])
+                os.makedirs(os.path.dirname(path), exist_ok=True)
+                with archive.open(member) as source, open(path, 'wb') as dest:
+                    shutil.copyfileobj(source, dest)
+                os.chmod(path, 0o755)
+    return target
+
+
 def stage_package(stage):
     """addon/ as ember/ with engine/ vendored inside; returns the package folder."""
     package = os.path.join(stage, PACKAGE)
@@ -156,17 +190,21 @@ wheels = [
 '''
 
 
-def build_legacy(version, wheels, build_dir, dist_dir):
+def build_legacy(version, wheels, build_dir, dist_dir, oidn_wheel=None):
     stage = os.path.join(build_dir, 'legacy')
     package = stage_package(stage)
+    if oidn_wheel:
+        vendor_oidn(package, oidn_wheel)
     unpack_wheels(wheels, os.path.join(package, 'vendor', 'site'))
     name = f"{PACKAGE}-{'.'.join(map(str, version))}-addon.zip"
     return write_zip(stage, os.path.join(dist_dir, name))
 
 
-def build_extension(version, wheels, build_dir, dist_dir):
+def build_extension(version, wheels, build_dir, dist_dir, oidn_wheel=None):
     stage = os.path.join(build_dir, 'extension')
     package = stage_package(stage)
+    if oidn_wheel:
+        vendor_oidn(package, oidn_wheel)
     wheel_dir = os.path.join(package, 'wheels')
     os.makedirs(wheel_dir)
     for wheel in wheels:
@@ -189,11 +227,12 @@ def main(argv=None):
     check_engine_is_relocatable()
     version = addon_version()
     wheels = fetch_wheels(needed_wheels(), args.wheels or os.path.join(args.build, 'wheels'))
+    oidn_wheel = fetch_oidn_wheel(args.wheels or os.path.join(args.build, 'wheels'))
     built = []
     if not args.extension:
-        built.append(build_legacy(version, wheels, args.build, args.dist))
+        built.append(build_legacy(version, wheels, args.build, args.dist, oidn_wheel))
     if not args.legacy:
-        built.append(build_extension(version, wheels, args.build, args.dist))
+        built.append(build_extension(version, wheels, args.build, args.dist, oidn_wheel))
     for path in built:
         print(f"{path} ({os.path.getsize(path) / 1e6:.1f} MB)")
     return built

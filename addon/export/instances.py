@@ -39,6 +39,7 @@ class InstanceCollector:
             materials=self.material_index(obj),
             name=obj.name,
             **ray_visibility(inst),
+            **_pass_fields(inst),
         ))
 
     def _mesh_id(self, obj):
@@ -94,3 +95,13 @@ def collect_instances(depsgraph, material_index):
 def _scene():
     from .. import backend
     return backend.scene_module()
+
+
+def _pass_fields(inst):
+    """Object Index and the Cryptomatte asset (the topmost parent's name; for
+    instances, the instancer's), as Cycles."""
+    obj = inst.parent if inst.is_instance and inst.parent is not None else inst.object
+    root = obj
+    while root.parent is not None:
+        root = root.parent
+    return {'pass_index': int(getattr(inst.object, 'pass_index', 0)), 'asset': root.name}

@@ -468,6 +468,8 @@ class MaterialTable:
         key = material.as_pointer()
         if key not in self.index_of:
             translated, warning = translate(material)
+            if getattr(material, 'pass_index', 0) and hasattr(translated, 'pass_index'):
+                translated.pass_index = int(material.pass_index)  # Material Index pass
             self.index_of[key] = len(self.materials)
             self.materials.append(translated)
             if warning:

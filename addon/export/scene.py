@@ -58,13 +58,18 @@ def export_scene(depsgraph, camera_override=None):
     return Export(result, warnings, time.perf_counter() - start, triangles)
 
 
+# Material, world and light previews stop after this many bounces: they must
+# feel interactive, and a sphere on a floor shows little past the fourth.
+PREVIEW_MAX_BOUNCES = 4
+
+
 def render_settings(scene, is_preview=False):
     """engine.scene.RenderSettings from the scene's Ember and Blender settings."""
     from .. import backend
     settings = scene.ember
     return backend.scene_module().RenderSettings(
         samples=settings.preview_samples if is_preview else settings.samples,
-        max_bounces=settings.max_bounces,
+        max_bounces=min(settings.max_bounces, PREVIEW_MAX_BOUNCES) if is_preview else settings.max_bounces,
         transparent_max_bounces=settings.transparent_max_bounces,
         seed=settings.seed,
         light_selection=settings.light_selection.lower(),
@@ -77,5 +82,11 @@ def render_settings(scene, is_preview=False):
         transparent=bool(scene.render.film_transparent),
         threads=settings.threads,
         time_limit=0.0 if is_preview else settings.time_limit,
+        sampling_pattern=settings.sampling_pattern.lower(),
+        adaptive_threshold=settings.adaptive_threshold if settings.use_adaptive_sampling else 0.0,
+        adaptive_min_samples=settings.adaptive_min_samples,
+        # The film keeps first-hit AOVs only for the denoiser (memory: the
+        # Depth and Normal passes come from the pass accumulators).
+        aovs=("normal", "albedo") if settings.use_denoising and not is_preview else (),
         use_jit=getattr(settings, 'use_jit', True),
     )

@@ -103,6 +103,7 @@ def setup_ember(scene, samples, seed, max_bounces, filter_type='BLACKMAN_HARRIS'
     scene.render.engine = 'EMBER'
     ember = scene.ember
     ember.samples = samples
+    ember.use_adaptive_sampling = False   # as setup_cycles
     ember.seed = seed
     ember.max_bounces = max_bounces
     ember.transparent_max_bounces = max_bounces   # as setup_cycles

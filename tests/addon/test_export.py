@@ -584,6 +584,9 @@ def test_every_ember_panel_draws(factory_scene):
         def column(self):
             return self
 
+        def row(self, heading=None):
+            return self
+
     for cls in ui.classes:
         panel = types.SimpleNamespace(layout=Layout(), PROPS=cls.PROPS)
         panel.split_layout = lambda p=panel: ui.EmberPanel.split_layout(p)

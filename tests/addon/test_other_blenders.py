@@ -191,3 +191,24 @@ def test_one_command_install_into_blender_34(tmp_path, legacy_zip, needs_engine)
                     env=env)
     assert code == 0 and (tmp_path / 'frame_0001.png').exists(), out[-4000:]
     assert "Error" not in out, out[-4000:]
+
+
+def test_legacy_zip_denoises_in_blender_34(tmp_path, legacy_zip):
+    """The OIDN program bundled in the legacy zip runs inside Debian's 3.4
+    (which ships no OIDN): addon/denoise.py finds it in vendor/oidn."""
+    version = blender_version()
+    require(version is not None and version.startswith('Blender 3.4'),
+            f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
+    scripts = install_legacy(legacy_zip, tmp_path)
+    expr = ("import numpy as np; from ember import denoise; rng = np.random.default_rng(0); "
+            "flat = np.full((24, 24, 3), 0.5, np.float32); noisy = flat * rng.exponential(1, flat.shape)"
+            ".astype(np.float32); out = denoise.denoise(noisy, flat, None); "
+            "print('DENOISED', denoise.describe(), float(np.abs(noisy - flat).mean()), "
+            "float(np.abs(out - flat).mean()))")
+    code, out = run([BLENDER, '-b', '--addons', 'ember', '--python-expr', expr],
+                    env={'BLENDER_USER_SCRIPTS': scripts})
+    line = next((line for line in out.splitlines() if line.startswith('DENOISED')), None)
+    assert code == 0 and line is not None, out[-4000:]
+    assert 'vendor/oidn/bin/oidnDenoise' in line, line
+    before, after = (float(v) for v in line.split()[-2:])
+    assert after < 0.5 * before, line

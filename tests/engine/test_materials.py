@@ -250,7 +250,7 @@ def test_glass_sphere_furnace(lobe):
     path escapes with weight exactly 1); rough Multiscatter glass keeps the energy up to
     the tables' interpolation (< 1%)."""
     r = render(glass_sphere_scene(lobe), RenderSettings(samples=32, samples_per_pass=32,
-                                                          max_bounces=64, rr_depth=64, seed=4))
+                                                          max_bounces=64, rr_depth=1000, seed=4))
     img = r.image[..., 0].astype(np.float64)
     se = np.sqrt(r.variance[..., 0].astype(np.float64).sum()) / img.size
     print(f"glass sphere {lobe.roughness}: mean {img.mean():.5f} +- {se:.5f}, min {img.min():.4f}")

@@ -1,0 +1,433 @@
+"""What the integrator tells the extra passes, and what each pass adds.
+
+The integrator calls these at the few points where it adds light or leaves
+the first surface; each returns at once when no pass listens, so the
+physics stays in integrator.py and the passes stay here.
+
+Vertices: vertex 0 is the first surface a camera path scatters at
+(``paths.bounce`` counts scattering vertices; transparent passes are not
+vertices).  Light found by next-event estimation (NEE) at vertex k, or by the
+BSDF sample of vertex k hitting an emitter (``paths.bounce`` = k + 1), is
+*direct* light of vertex k; Cycles' Direct passes hold vertex 0's, its
+Indirect passes every later vertex's.
+
+Strategy passes (issue 13): ``Strategy Light`` and ``Strategy BSDF`` hold the
+MIS-weighted contributions of light sampling and of BSDF sampling, at every
+vertex (or vertex 0 only with ``PassConfig.strategy_first_vertex``), so
+Strategy Light + Strategy BSDF + Emission + Environment = Combined (before
+clamping).  The Unweighted passes hold each strategy's own estimate of the
+same light, from the same samples, without the MIS weight: only light that
+both strategies can reach counts there (no delta lights, no light after a
+mirror bounce, no constant-colour world, which Ember samples by BSDF only).
+``MIS Weight Light`` averages the weight MIS gives light sampling over the
+directions both strategies sampled at vertex 0, each counted by what it
+brings: it converges to the share of the direct light MIS takes from light
+sampling (see _add_light_weight).
+"""
+import threading
+
+import numpy as np
+
+from . import bsdf
+from .passes import LIGHT_CLASSES, STRATEGY, PassConfig, crypto_manifest, CRYPTO
+from .sampling import cosine_hemisphere
+from .vec import dot, luminance, to_local, to_world
+
+# Per-path state (Paths.aux columns), only when passes are requested:
+# the share of each light class (diffuse, glossy, transmission; RGB each) in
+# the BSDF sample that left vertex 0; whether the denoising features are
+# still to be written, and their throughput (Cycles').
+SHARES, PENDING, FEATURE_TP = slice(0, 9), 9, slice(10, 13)
+AUX_WIDTH = 13
+_CENTRE_LOCK = threading.Lock()
+SPECULAR_ALPHA = 0.075  # Cycles: roughness^2 below this is specular for denoising features
+DIFFUSE_KINDS = tuple(getattr(bsdf, k) for k in ("DIFFUSE", "TRANSLUCENT", "SHEEN") if hasattr(bsdf, k))
+
+
+def configure(scene, settings):
+    """The PassConfig of a render, with the scene's names for Cryptomatte."""
+    cfg = settings.pass_config if settings.pass_config is not None else PassConfig()
+    if not settings.passes:
+        return cfg
+    from dataclasses import replace
+    from .scene import DEFAULT_MATERIAL
+    mats = list(scene.materials) + [DEFAULT_MATERIAL]
+    return replace(
+        cfg,
+        object_names=tuple(i.name for i in scene.instances),
+        material_names=tuple(m.name for m in mats),
+        asset_names=tuple(i.asset or i.name for i in scene.instances),
+        object_pass_index=tuple(int(getattr(i, "pass_index", 0)) for i in scene.instances),
+        material_pass_index=tuple(int(getattr(m, "pass_index", 0)) for m in mats))
+
+
+def metadata(config, names):
+    return {kind: crypto_manifest(config, kind) for kind in CRYPTO if kind in names}
+
+
+def aux_width(settings):
+    return AUX_WIDTH if settings.passes else 0
+
+
+def start(ctx, paths, tile):
+    """New camera paths: reset their pass state; the first batch to reach a
+    pixel also traces its centre ray for the FIRST passes."""
+    if not listening(tile):
+        return
+    if paths.aux.shape[1]:
+        paths.aux[:, PENDING] = 1.0
+        paths.aux[:, FEATURE_TP] = 1.0
+    if tile.extra.first:
+        pix = _claim_centres(ctx, paths)
+        if len(pix):
+            _centre_rays(ctx, pix, tile)
+
+
+def _claim_centres(ctx, paths):
+    """The batch's pixels whose centre ray is not traced yet (claimed now)."""
+    with _CENTRE_LOCK:
+        done = ctx.__dict__.get("_pass_centres")
+        if done is None:
+            done = ctx._pass_centres = np.zeros(ctx.camera.width * ctx.camera.height, bool)
+        pix = np.unique(paths.pix)
+        pix = pix[~done[pix]]
+        done[pix] = True
+        return pix
+
+
+def _centre_rays(ctx, pix, tile):
+    """Depth, Position, Object and Material Index from one ray through each
+    pixel's centre (and the lens centre), as Cycles writes them from its
+    sample 0: never averaged.  Background: depth 1e10, the rest 0."""
+    cfg = ctx.pass_config
+    half = np.full(len(pix), 0.5)
+    o, d, tmax = ctx.camera.generate(pix, half, half, half, half)
+    t, prim, _, _ = ctx.accel.intersect(o, d, tmax)
+    hit = (prim >= 0) & (t < tmax)
+    p = o + d * np.where(hit, t, 0.0)[:, None]
+    safe = np.where(hit, prim, 0)
+    rank = np.full(len(pix), -1.0)
+    depth = np.where(hit, (p - ctx.camera.pos) @ ctx.camera.forward, 1e10)
+    tile.add_pass("Depth", pix, depth, rank)
+    tile.add_pass("Position", pix, np.where(hit[:, None], p, 0.0), rank)
+    if tile.wants("Object Index"):
+        inst = ctx.triangles.instance[safe] if ctx.triangles.instance is not None else np.zeros(len(pix), int)
+        index = np.asarray(cfg.object_pass_index + (0,), float)[inst]
+        tile.add_pass("Object Index", pix, np.where(hit, index, 0.0), rank)
+    if tile.wants("Material Index"):
+        index = np.asarray(cfg.material_pass_index + (0,), float)[ctx.triangles.material[safe]]
+        tile.add_pass("Material Index", pix, np.where(hit, index, 0.0), rank)
+
+
+def listening(tile):
+    return getattr(tile, "extra", None) is not None
+
+
+# ----------------------------------------------------------------------------
+# Vertex 0: data passes (Cycles' data_passes.h), colours, Cryptomatte, AO
+
+def vertex(ctx, paths, hit, lobes, w, tt, bb, depth, tile):
+    """Paths at a surface that scatters: the first one's data passes, and
+    the denoising features of paths still looking for a non-specular one."""
+    if not listening(tile):
+        return
+    features = tile.wants("Denoising Albedo") or tile.wants("Denoising Normal")
+    colours = depth == 0 and any(tile.wants(c + " Color") for c in LIGHT_CLASSES)
+    if features or colours:
+        w = _closure_weights(lobes, hit, tt, bb)
+    if depth == 0:
+        first_hit(ctx, paths, hit, lobes, w, tt, bb, tile)
+    if features:
+        _denoising_features(ctx, paths, hit, lobes, w, tile)
+
+
+def _closure_weights(lobes, hit, tt, bb):
+    """Lobe colours as Cycles' closure weights: with layering, without the
+    multiscatter energy compensation (Cycles keeps that in energy_scale)."""
+    from dataclasses import replace
+    plain = replace(lobes, multiscatter=np.zeros_like(lobes.multiscatter))
+    return bsdf.weights(plain, to_local(hit.wo, tt, bb, hit.ns))
+
+
+def first_hit(ctx, paths, hit, lobes, w, tt, bb, tile):
+    """Paths at their first surface (camera rays, before any bounce)."""
+    cfg = ctx.pass_config
+    pix = paths.pix
+    add = tile.add_pass
+    add("Normal", pix, hit.ns)
+    if tile.wants("UV"):
+        add("UV", pix, np.column_stack([hit.uv, np.ones(len(pix))]))
+    if tile.wants("Mist"):
+        add("Mist", pix, 1.0 - _mist(ctx, cfg, hit.p))
+    inst = ctx.triangles.instance[hit.prim] if ctx.triangles.instance is not None else np.zeros(len(pix), int)
+    _colours(lobes, w, dot(hit.wo, hit.ns), pix, tile)
+    if tile.extra.crypto:
+        _cryptomatte(cfg, inst, hit.mat, pix, tile)
+    if tile.wants("Ambient Occlusion"):
+        _ambient_occlusion(ctx, cfg, hit, tt, bb, pix, tile)
+
+
+def _denoising_features(ctx, paths, hit, lobes, w, tile):
+    """Cycles' denoising features (film/denoising_passes.h): at the first
+    surface whose non-specular lobes hold over a quarter of the sample
+    weight, write throughput x their albedo and the averaged normal (in
+    camera space); before it, the throughput takes the specular albedo."""
+    rows = np.nonzero(paths.aux[:, PENDING] > 0)[0]
+    if len(rows) == 0:
+        return
+    kind = lobes.kind[rows]
+    solid = (kind != bsdf.NONE) & (kind != bsdf.TRANSPARENT)
+    albedo = w[rows] * solid[:, :, None]
+    weight = albedo.mean(axis=2)
+    specular = (lobes.alpha[rows] <= SPECULAR_ALPHA) | np.isin(kind, (bsdf.MIRROR,))
+    total = weight.sum(axis=1)
+    rough = (weight * ~specular).sum(axis=1)
+    done = (total == 0) | (4.0 * rough > total)
+    tp = paths.aux[rows][:, FEATURE_TP]
+    d = np.nonzero(done)[0]
+    if len(d):
+        pix = paths.pix[rows[d]]
+        diffuse = (albedo[d] * ~specular[d][:, :, None]).sum(axis=1)
+        tile.add_pass("Denoising Albedo", pix, tp[d] * diffuse)
+        normal = np.where(total[d, None] > 0, hit.ns[rows[d]], 0.0)
+        tile.add_pass("Denoising Normal", pix, _to_camera(ctx, normal))
+        paths.aux[rows[d], PENDING] = 0.0
+    g = np.nonzero(~done)[0]
+    if len(g):
+        paths.aux[rows[g], FEATURE_TP] = tp[g] * (albedo[g] * specular[g][:, :, None]).sum(axis=1)
+
+
+def _to_camera(ctx, v):
+    """World directions in Cycles' camera space (x right, y up, z forward)."""
+    rot = ctx.camera.rot
+    out = v @ rot
+    out[:, 2] = -out[:, 2]
+    return out
+
+
+def _features_at_emitter(paths, rows, unweighted, world, tile):
+    """A path still looking for its denoising features meets light: Cycles
+    adds throughput x radiance to the albedo; the world ends the path."""
+    if not (tile.wants("Denoising Albedo") or tile.wants("Denoising Normal")):
+        return
+    pending = paths.aux[rows, PENDING] > 0
+    if not pending.any():
+        return
+    r = rows[pending]
+    beta = paths.beta[r]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Le = np.where(beta > 0, unweighted[pending] / np.where(beta > 0, beta, 1.0), 0.0)
+    tile.add_pass("Denoising Albedo", paths.pix[r], paths.aux[r][:, FEATURE_TP] * Le)
+    if world:
+        paths.aux[r, PENDING] = 0.0
+
+
+def _mist(ctx, cfg, p):
+    """Cycles' mist: distance from the camera (its view depth for an
+    orthographic one) mapped to 0..1 by start, depth and falloff."""
+    cam = ctx.camera
+    if cam.cam.kind == "ORTHO":
+        dist = (p - cam.pos) @ cam.forward
+    else:
+        dist = np.linalg.norm(p - cam.pos, axis=1)
+    m = np.clip((dist - cfg.mist_start) / max(cfg.mist_depth, 1e-30), 0.0, 1.0)
+    return m if cfg.mist_falloff == 1.0 else m ** cfg.mist_falloff
+
+
+def _class_of(lobes):
+    """(N, K) light class of each lobe: 0 diffuse, 1 glossy, 2 transmission
+    (a glass lobe counts as glossy here; its refraction is told by direction),
+    -1 none or transparent."""
+    kind = lobes.kind
+    cls = np.where(np.isin(kind, DIFFUSE_KINDS), 0, 1)
+    cls = np.where(kind == bsdf.REFRACTION, 2, cls)
+    return np.where((kind == bsdf.NONE) | (kind == bsdf.TRANSPARENT), -1, cls)
+
+
+def _colours(lobes, w, cos_o, pix, tile):
+    """Diffuse / Glossy / Transmission Color: the summed effective lobe
+    colours of each class at vertex 0 (Cycles' closure albedos).  A glass
+    lobe's colour is split by the dielectric Fresnel of its IOR at the view
+    angle: reflection to glossy, the rest to transmission."""
+    if not any(tile.wants(c + " Color") for c in LIGHT_CLASSES):
+        return
+    cls = _class_of(lobes)
+    glass = lobes.kind == bsdf.GLASS
+    fresnel = _fresnel_dielectric(np.clip(cos_o, 0.0, 1.0)[:, None], lobes.ior)
+    share = np.where(glass, fresnel, 1.0)
+    for index, name in enumerate(LIGHT_CLASSES):
+        part = np.where(cls == index, share, 0.0)
+        if index == 2:
+            part = part + np.where(glass, 1.0 - fresnel, 0.0)
+        tile.add_pass(name + " Color", pix, (w * part[:, :, None]).sum(axis=1))
+
+
+def _fresnel_dielectric(cos_i, eta):
+    """Unpolarised Fresnel reflectance of a dielectric (IOR ratio eta)."""
+    eta = np.where(eta > 0, eta, 1.5)
+    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
+    cos_t = np.sqrt(np.maximum(1.0 - sin2_t, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
+        rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    f = 0.5 * (rs * rs + rp * rp)
+    return np.where(sin2_t >= 1.0, 1.0, np.nan_to_num(f, nan=1.0))
+
+
+def _cryptomatte(cfg, inst, mat, pix, tile):
+    names = cfg.asset_names
+    asset_ids = {n: i for i, n in enumerate(names)}
+    asset = np.array([asset_ids[n] for n in names] or [0], np.int64)
+    ones = np.ones(len(pix))
+    tile.extra.add_crypto("CryptoObject", pix, inst, ones)
+    tile.extra.add_crypto("CryptoMaterial", pix, mat, ones)
+    tile.extra.add_crypto("CryptoAsset", pix, asset[inst], ones)
+
+
+def _ambient_occlusion(ctx, cfg, hit, tt, bb, pix, tile):
+    """Cycles' AO pass: 1 where a cosine-distributed ray about the shading
+    normal leaves above the geometric surface and meets nothing within the
+    world's AO distance."""
+    # Own random numbers: asking for AO must not change the other passes.
+    u = np.random.default_rng([int(ctx.settings.seed), 0xA0, int(pix[0]), len(pix)]).random((len(pix), 2))
+    d_l, _ = cosine_hemisphere(u[:, 0], u[:, 1])
+    d = to_world(d_l, tt, bb, hit.ns)
+    up = dot(d, hit.ng) > 0
+    value = np.zeros(len(pix))
+    rows = np.nonzero(up)[0]
+    if len(rows):
+        o = ctx.accel.offset_origin(hit.p[rows], hit.ng[rows], d[rows], hit.eps[rows])
+        blocked = ctx.accel.occluded(o, d[rows], np.full(len(rows), cfg.ao_distance))
+        value[rows] = ~blocked
+    tile.add_pass("Ambient Occlusion", pix, np.repeat(value[:, None], 3, axis=1))
+
+
+# ----------------------------------------------------------------------------
+# Light arriving: NEE, emitters hit, the world
+
+def _class_split(ctx, lobes, lobes_wo, wo_l, wi_l, f, delta=None):
+    """(N, 3, 3) share of f in each light class for direction wi_l."""
+    from dataclasses import replace
+    cls = _class_of(lobes)
+    diffuse_only = replace(lobes, kind=np.where(cls == 0, lobes.kind, bsdf.NONE).astype(lobes.kind.dtype))
+    f_d = bsdf.eval_pdf(diffuse_only, wo_l, wi_l, *lobes_wo)[0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share_d = np.where(f > 0, np.clip(f_d / np.where(f > 0, f, 1.0), 0.0, 1.0), 0.0)
+    rest = 1.0 - share_d
+    below = (wi_l[:, 2] < 0)[:, None]
+    if delta is not None:
+        share_d = np.where(delta[:, None], 0.0, share_d)
+        rest = np.where(delta[:, None], 1.0, rest)
+    out = np.zeros((len(f), 3, 3))
+    out[:, 0] = share_d
+    out[:, 1] = np.where(below, 0.0, rest)
+    out[:, 2] = np.where(below, rest, 0.0)
+    return out
+
+
+def after_scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, through, tile):
+    """Remember, for paths that just left vertex 0, which light class their
+    BSDF sample belongs to (Cycles' pass_diffuse_weight / glossy_weight)."""
+    if not listening(tile) or not _light_passes(tile):
+        return
+    rows = np.nonzero((paths.bounce == 1) & ~through)[0]
+    if len(rows) == 0:
+        return
+    sub = _lobe_rows(lobes, rows)
+    wi_l = to_local(paths.d[rows], tt[rows], bb[rows], hit.ns[rows])
+    sel, w = lobes_wo[0][rows], lobes_wo[1][rows]
+    f = bsdf.eval_pdf(sub, wo_l[rows], wi_l, sel, w)[0]
+    paths.aux[rows, SHARES] = _class_split(ctx, sub, (sel, w), wo_l[rows], wi_l, f,
+                                           paths.prev_delta[rows]).reshape(len(rows), 9)
+
+
+def _lobe_rows(lobes, rows):
+    from dataclasses import fields, replace
+    n = len(lobes.kind)
+    return replace(lobes, **{f.name: getattr(lobes, f.name)[rows] for f in fields(lobes)
+                             if isinstance(getattr(lobes, f.name), np.ndarray)
+                             and len(getattr(lobes, f.name)) == n})
+
+
+def _light_passes(tile):
+    return any(tile.wants(f"{c} {p}") for c in LIGHT_CLASSES for p in ("Direct", "Indirect"))
+
+
+def _add_light_classes(paths, rows, contrib, direct, tile, shares=None):
+    """Split light by class into the Direct / Indirect passes."""
+    if shares is None:
+        shares = paths.aux[rows][:, SHARES].reshape(len(rows), 3, 3)
+    for index, name in enumerate(LIGHT_CLASSES):
+        part = contrib * shares[:, index]
+        for sel, suffix in ((direct, " Direct"), (~direct, " Indirect")):
+            if sel.any():
+                tile.add_pass(name + suffix, paths.pix[rows[sel]], part[sel])
+
+
+def nee(ctx, paths, rows, contrib, w, delta, lobes, lobes_wo, wo_l, wi_l, f, tile):
+    """Light sampling added ``contrib`` (MIS-weighted, after the shadow test)
+    to paths ``rows``; w is its MIS weight, delta marks delta lights."""
+    if not listening(tile) or len(rows) == 0:
+        return
+    cfg = ctx.pass_config
+    vertex = paths.bounce[rows]
+    pix = paths.pix[rows]
+    if _wants_strategy(tile):
+        on = vertex == 0 if cfg.strategy_first_vertex else np.ones(len(rows), bool)
+        tile.add_pass("Strategy Light", pix[on], contrib[on])
+        both = on & ~delta & (w > 0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tile.add_pass("Strategy Light Unweighted", pix[both], contrib[both] / w[both, None])
+    if tile.wants("MIS Weight Light"):
+        first = np.nonzero((vertex == 0) & ~delta & (w > 0))[0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            _add_light_weight(tile, pix[first], w[first], luminance(contrib[first]) / w[first])
+    if _light_passes(tile):
+        direct = vertex == 0
+        shares = paths.aux[rows][:, SHARES].reshape(len(rows), 3, 3).copy()
+        d = np.nonzero(direct)[0]
+        if len(d):
+            sub = _lobe_rows(lobes, rows[d])
+            shares[d] = _class_split(ctx, sub, (lobes_wo[0][rows[d]], lobes_wo[1][rows[d]]),
+                                     wo_l[rows[d]], wi_l[d], f[d])
+        _add_light_classes(paths, rows, contrib, direct, tile, shares)
+
+
+def _add_light_weight(tile, pix, w_light, brings):
+    """MIS Weight Light: light sampling's MIS weight at the directions both
+    strategies sampled at vertex 0, each counted by what the sample brings
+    (its unweighted luminance), so the pass converges to the share of the
+    direct light that MIS takes from light sampling, SL / (SL + SB)."""
+    tile.add_pass("MIS Weight Light", pix, w_light * brings)
+    tile.add_pass("MIS Weight Light:n", pix, brings)
+
+
+def _wants_strategy(tile):
+    return any(tile.wants(n) for n in STRATEGY)
+
+
+def emitter(ctx, paths, rows, unweighted, w, tile, world=False, bsdf_only=False):
+    """An emitter (or the world) seen along the paths ``rows``: added
+    unweighted * w.  bsdf_only: light that NEE never samples (a constant
+    world)."""
+    if not listening(tile) or len(rows) == 0:
+        return
+    contrib = unweighted * w[:, None]
+    bounce = paths.bounce[rows]
+    pix = paths.pix[rows]
+    camera = bounce == 0
+    tile.add_pass("Environment" if world else "Emission", pix[camera], contrib[camera])
+    if _wants_strategy(tile):
+        cfg = ctx.pass_config
+        on = bounce == 1 if cfg.strategy_first_vertex else ~camera
+        tile.add_pass("Strategy BSDF", pix[on], contrib[on])
+        if not bsdf_only:
+            both = on & ~paths.prev_delta[rows]
+            tile.add_pass("Strategy BSDF Unweighted", pix[both], unweighted[both])
+    if tile.wants("MIS Weight Light") and not bsdf_only:
+        first = (bounce == 1) & ~paths.prev_delta[rows]
+        _add_light_weight(tile, pix[first], 1.0 - w[first], luminance(unweighted[first]))
+    if _light_passes(tile) and not camera.all():
+        lit = np.nonzero(~camera)[0]
+        _add_light_classes(paths, rows[lit], contrib[lit], bounce[lit] == 1, tile)
+    _features_at_emitter(paths, rows, unweighted, world, tile)

@@ -1,0 +1,200 @@
+"""Sample values addressed by (seed, pixel, sample index, dimension).
+
+The default pattern is a shuffled, Owen-scrambled 4D Sobol sequence with
+padding (Burley 2020, "Practical Hash-based Owen Scrambling"; Cycles'
+default pattern since 3.5): every group of up to four dimensions (a
+*dimension set*: the pixel filter and lens; at each path vertex the light
+choice and point; the lobe choice, direction and roulette) reads a 4D
+Sobol point whose index is shuffled per (pixel, set) and whose digits are
+Owen-scrambled per (pixel, set, dimension).  Within a set the samples of a
+pixel are stratified in all four dimensions; different sets and pixels
+are decorrelated by their hashes.
+
+Nothing depends on how samples are batched: any range of sample indices
+[a, b) of a pixel is reproducible, and disjoint ranges merge into the
+render of their union (farm shards rely on it).
+
+The "random" pattern hashes the same address into independent uniforms
+(for tests that need independent samples).
+
+Everything is vectorized over uint32 arrays: the Sobol matrix-vector
+product and the bit reversals are 16-bit table lookups.
+"""
+import numpy as np
+
+SOBOL = "sobol"
+RANDOM = "random"
+PATTERNS = (SOBOL, RANDOM)
+
+# Dimension sets.  Camera: filter x, y and lens x, y.  Per path vertex
+# (indexed by the wavefront step, so transparent passes get their own):
+# LIGHT = selection, three numbers for the point; BSDF = lobe choice,
+# direction (2), roulette; KIND = the bounce kind for ray visibility.
+CAMERA = 0
+LIGHT, BSDF, KIND = 0, 1, 2
+_SETS_PER_STEP = 4
+
+
+def vertex_set(step, which):
+    """Dimension-set id of ``which`` (LIGHT, BSDF, KIND) at wavefront step ``step``."""
+    return 1 + step * _SETS_PER_STEP + which
+
+
+def emitter_set(step, emitter):
+    """Dimension-set id for emitter ``emitter`` in all-lights mode."""
+    return 0x40000000 | ((step & 0xff) << 22) | (int(emitter) & 0x3fffff)
+
+
+# ---------------------------------------------------------------------------
+# Tables
+
+def _reverse16():
+    r = np.arange(1 << 16, dtype=np.uint32)
+    out = np.zeros(1 << 16, np.uint32)
+    for b in range(16):
+        out |= ((r >> b) & 1) << (15 - b)
+    return out
+
+
+_REV16 = _reverse16()
+
+
+def reverse_bits(x):
+    """Bit reversal of uint32 values."""
+    x = np.asarray(x, np.uint32)
+    return (_REV16[x & 0xFFFF] << np.uint32(16)) | _REV16[x >> np.uint32(16)]
+
+
+def _direction_numbers():
+    """(4, 32) MSB-aligned direction numbers of the first four Sobol
+    dimensions: van der Corput, then the primitive polynomials x + 1,
+    x^2 + x + 1 and x^3 + x + 1 with initial numbers (Joe and Kuo)
+    1; 1, 3; 1, 3, 1."""
+    v = np.zeros((4, 32), np.uint64)
+    v[0] = [1 << (31 - k) for k in range(32)]
+    for d, (s, a, m) in enumerate([(1, 0, [1]), (2, 1, [1, 3]), (3, 1, [1, 3, 1])], start=1):
+        mk = list(m)
+        for k in range(s, 32):
+            new = mk[k - s] ^ (mk[k - s] << s)
+            for j in range(1, s):
+                if (a >> (s - 1 - j)) & 1:
+                    new ^= mk[k - j] << j
+            mk.append(new)
+        v[d] = [mk[k] << (31 - k) for k in range(32)]
+    return v.astype(np.uint32)
+
+
+def _half_tables():
+    """Tables giving the bit-reversed Sobol value of an index from the two
+    16-bit halves of its bit-reversed form: high half = index bits 0..15,
+    low half = index bits 16..31."""
+    v = _direction_numbers()
+    h = np.arange(1 << 16, dtype=np.uint32)
+    hi = np.zeros((4, 1 << 16), np.uint32)
+    lo = np.zeros((4, 1 << 16), np.uint32)
+    for d in range(4):
+        rv = reverse_bits(v[d])
+        for k in range(16):
+            # Bit k of the index is bit 15 - k of the high half.
+            hi[d] ^= np.where((h >> (15 - k)) & 1, rv[k], 0).astype(np.uint32)
+            lo[d] ^= np.where((h >> (15 - k)) & 1, rv[k + 16], 0).astype(np.uint32)
+    return hi, lo
+
+
+_HI, _LO = _half_tables()
+
+
+# ---------------------------------------------------------------------------
+# Hashes (uint32 arithmetic wraps modulo 2^32)
+
+def hash32(x):
+    """A well-mixed 32-bit integer hash (Wellons' lowbias32)."""
+    x = np.asarray(x, np.uint32).copy()
+    x ^= x >> np.uint32(16)
+    x *= np.uint32(0x7FEB352D)
+    x ^= x >> np.uint32(15)
+    x *= np.uint32(0x846CA68B)
+    x ^= x >> np.uint32(16)
+    return x
+
+
+def _hash_scalar(x):
+    return int(hash32(np.array([x & 0xFFFFFFFF], np.uint32))[0])
+
+
+def owen_reversed(x, seed):
+    """Nested uniform (Owen) scramble of bit-reversed values: each bit is
+    flipped by a hash of the bits below it (Burley's Laine-Karras variant).
+    ``seed`` is a scalar or an array like ``x``."""
+    x = x ^ (x * np.uint32(0x3D20ADEA))
+    x += seed
+    x *= (seed >> np.uint32(16)) | np.uint32(1)
+    x ^= x * np.uint32(0x05526C56)
+    x ^= x * np.uint32(0x53A22864)
+    return x
+
+
+def pixel_seed(seed, pix):
+    """Per-pixel scramble seed (uint32) for a render seed."""
+    return hash32(np.asarray(pix, np.uint32) ^ np.uint32(_hash_scalar(seed * 0x9E3779B9 + 0x632BE5AB)))
+
+
+_SHUFFLE_SALT = 0xC2C1A055
+_DIM_SALT = (0x39468210, 0xE9D8A845, 0x5F32B482, 0x1524CC56)
+_TO_UNIT = 1.0 / 4294967296.0
+
+
+def sobol4(pseed, sample, dim_set):
+    """(N, 4) float64 values in [0, 1) of dimension set ``dim_set`` for
+    paths with pixel seeds ``pseed`` and sample indices ``sample``."""
+    seed = pseed ^ np.uint32(_hash_scalar(dim_set))
+    idx = owen_reversed(reverse_bits(sample), seed ^ np.uint32(_SHUFFLE_SALT))
+    hi = idx >> np.uint32(16)
+    lo = idx & np.uint32(0xFFFF)
+    out = np.empty((len(idx), 4))
+    for d in range(4):
+        r = _HI[d][hi] ^ _LO[d][lo]
+        r = owen_reversed(r, seed ^ np.uint32(_DIM_SALT[d]))
+        out[:, d] = reverse_bits(r) * _TO_UNIT
+    return out
+
+
+def random4(pseed, sample, dim_set):
+    """(N, 4) independent uniforms hashed from the same address."""
+    base = hash32(pseed ^ hash32(np.asarray(sample, np.uint32) + np.uint32(_hash_scalar(dim_set))))
+    out = np.empty((len(base), 4))
+    for d in range(4):
+        out[:, d] = hash32(base ^ np.uint32(_DIM_SALT[d])) * _TO_UNIT
+    return out
+
+
+class Sampler:
+    """Sample values for paths identified by pixel seed and sample index."""
+
+    def __init__(self, seed=0, pattern=SOBOL):
+        if pattern not in PATTERNS:
+            raise ValueError(f"unknown sampling pattern {pattern!r}; expected one of {PATTERNS}")
+        self.seed = int(seed)
+        self.pattern = pattern
+        self._get = sobol4 if pattern == SOBOL else random4
+
+    def pixel_seeds(self, pix):
+        return pixel_seed(self.seed, pix)
+
+    def get(self, pseed, sample, dim_set):
+        """(N, 4) values of one dimension set."""
+        return self._get(pseed, sample, dim_set)
+
+
+def is_class_a(sample):
+    """Splits samples into two halves for adaptive sampling's error
+    estimate; each half stays well stratified in the 4D Sobol pattern
+    (the parity of the odd-position bits, as Cycles classifies them)."""
+    s = np.asarray(sample, np.uint32) & np.uint32(0xAAAAAAAA)
+    # popcount parity by folding
+    s ^= s >> np.uint32(16)
+    s ^= s >> np.uint32(8)
+    s ^= s >> np.uint32(4)
+    s ^= s >> np.uint32(2)
+    s ^= s >> np.uint32(1)
+    return (s & np.uint32(1)) == 0

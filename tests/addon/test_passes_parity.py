@@ -1,0 +1,306 @@
+"""Render passes under Cycles' names (issue 9): every pass Ember fills is
+compared with Cycles' pass of the same name on one small scene (diffuse
+floor, rough glossy box, rough glass ball, emissive card, area light, a
+coloured world, mist), both rendered through Blender into multilayer EXRs
+with independent seeds.
+
+- Passes estimated by sampling: block Welch t-test per 4x4 block (Sidak)
+  and a whole-image mean z-test.  Light passes are compared undivided
+  (Direct x Color: the light itself; the divided ones blow up where a colour
+  is near 0 at object edges), and their sum must give Combined.
+- Passes Cycles writes from one sample at the pixel centre (Depth, Position,
+  Object / Material Index): 99% of the pixels must agree (1e-3).
+- Closure colours (Diffuse / Glossy / Transmission Color): block test with a
+  1% known difference allowed (Cycles' multiscatter GGX closure weight is
+  0.5% under its colour; Ember's is the colour).
+- Denoising Albedo / Normal: compared off the glass ball.  Behind rough glass
+  (specular for the denoiser: roughness^2 < 0.075) Cycles writes smaller
+  normals than Ember (its glass sample weights are not Ember's); that
+  difference is known and left out here.
+- Cryptomatte: Blender's Cryptomatte node, reading Ember's manifest, selects
+  the box; its matte is compared with Cycles' by block test.
+"""
+import os
+
+import bpy
+import numpy as np
+import pytest
+
+import ember_stats as stats
+from ember_testlib import SCENES_DIR, require, setup_cycles, setup_ember, small_resolution
+from test_other_blenders import legacy_zip  # noqa: F401  (fixture)
+
+SEEDS, SPP, BOUNCES = 4, 24, 3
+WIDTH, HEIGHT = 32, 24
+BOX, BALL = 2, 3   # object indices
+STATISTICAL = ("Combined", "Mist", "Normal", "UV", "Ambient Occlusion", "Emission", "Environment",
+               "Diffuse Direct x Color", "Diffuse Indirect x Color", "Glossy Direct x Color",
+               "Glossy Indirect x Color", "Transmission Direct x Color", "Transmission Indirect x Color")
+CENTRE = ("Depth", "Position", "Object Index", "Material Index")
+COLOURS = ("Diffuse Color", "Glossy Color", "Transmission Color")
+CLASSES = ("Diffuse", "Glossy", "Transmission")
+
+
+def _material(name, kind, color, index, **inputs):
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    mat.pass_index = index
+    tree = mat.node_tree
+    out = next(n for n in tree.nodes if n.type == 'OUTPUT_MATERIAL')
+    for node in list(tree.nodes):
+        if node != out:
+            tree.nodes.remove(node)
+    node = tree.nodes.new(kind)
+    node.inputs['Color'].default_value = color + (1.0,)
+    for key, value in inputs.items():
+        node.inputs[key].default_value = value
+    tree.links.new(node.outputs[0], out.inputs['Surface'])
+    return mat
+
+
+def _object(add, name, mat, index, **kwargs):
+    add(**kwargs)
+    obj = bpy.context.active_object
+    obj.name = name
+    obj.pass_index = index
+    obj.data.materials.append(mat)
+    return obj
+
+
+def _scene():
+    bpy.ops.wm.read_factory_settings()
+    scene = bpy.context.scene
+    for obj in list(bpy.data.objects):
+        if obj.type != 'CAMERA':
+            bpy.data.objects.remove(obj)
+    mesh = bpy.ops.mesh
+    _object(mesh.primitive_plane_add, "Floor", _material("FloorMat", 'ShaderNodeBsdfDiffuse', (0.6, 0.5, 0.4), 1),
+            1, size=8)
+    _object(mesh.primitive_cube_add, "Box", _material("BoxMat", 'ShaderNodeBsdfGlossy', (0.8, 0.8, 0.8), 2,
+                                                      Roughness=0.3), BOX, location=(-1.2, 0.5, 1))
+    _object(mesh.primitive_uv_sphere_add, "Ball", _material("BallMat", 'ShaderNodeBsdfGlass', (0.9, 0.9, 0.9), 3,
+                                                             Roughness=0.2), BALL, location=(1.3, -0.6, 1),
+            radius=0.9)
+    _object(mesh.primitive_plane_add, "Card", _material("CardMat", 'ShaderNodeEmission', (1.0, 0.8, 0.6), 4,
+                                                        Strength=4.0), 4, size=0.8, location=(0, 2.5, 0.8),
+            rotation=(1.2, 0, 0))
+    bpy.ops.object.light_add(type='AREA', location=(1, -1, 5))
+    light = bpy.context.active_object
+    light.data.energy = 300.0
+    light.data.size = 1.5
+    world = scene.world
+    world.use_nodes = True
+    background = next(n for n in world.node_tree.nodes if n.type == 'BACKGROUND')
+    background.inputs['Color'].default_value = (0.05, 0.06, 0.1, 1.0)
+    world.mist_settings.start = 3.0
+    world.mist_settings.depth = 12.0
+    small_resolution(scene, WIDTH, HEIGHT)
+    _enable_passes(bpy.context.view_layer)
+    _cryptomatte_compositor(scene)
+    settings = scene.render.image_settings
+    if hasattr(settings, 'media_type'):
+        settings.media_type = 'MULTI_LAYER_IMAGE'
+    else:
+        settings.file_format = 'OPEN_EXR_MULTILAYER'
+    settings.color_depth = '32'
+    return scene
+
+
+def _enable_passes(layer):
+    skip = ('use_pass_grease_pencil', 'use_pass_shadow', 'use_pass_cryptomatte_accurate')
+    for name in dir(layer):
+        if name.startswith('use_pass') and name not in skip and 'subsurface' not in name:
+            setattr(layer, name, True)
+    layer.ember.use_pass_denoising_data = True
+    layer.ember.use_pass_sample_count = True
+    layer.cycles.denoising_store_passes = True
+    layer.cycles.pass_debug_sample_count = True
+
+
+def _cryptomatte_compositor(scene):
+    """Composite = the Cryptomatte node's matte of the object 'Box'."""
+    tree = bpy.data.node_groups.new("Passes Compositor", 'CompositorNodeTree')
+    scene.compositing_node_group = tree
+    layers = tree.nodes.new('CompositorNodeRLayers')
+    crypto = tree.nodes.new('CompositorNodeCryptomatteV2')
+    crypto.source = 'RENDER'
+    crypto.scene = scene
+    crypto.layer_name = f"{bpy.context.view_layer.name}.CryptoObject"
+    crypto.matte_id = "Box"
+    tree.interface.new_socket("Image", in_out='OUTPUT', socket_type='NodeSocketColor')
+    out = tree.nodes.new('NodeGroupOutput')
+    tree.links.new(layers.outputs['Image'], crypto.inputs['Image'])
+    tree.links.new(crypto.outputs['Matte'], out.inputs[0])
+
+
+def _read_exr(path):
+    """{pass name: (H, W, C)} of a multilayer EXR (Composite as 'Composite')."""
+    import OpenImageIO as oiio
+    image = oiio.ImageInput.open(path)
+    assert image is not None, oiio.geterror()
+    channels = {}
+    index = 0
+    while image.seek_subimage(index, 0):
+        spec = image.spec()
+        pixels = image.read_image('float')
+        for k, name in enumerate(spec.channelnames):
+            parts = name.split('.')
+            key = 'Composite' if parts[0] == 'Composite' else parts[-2]
+            channels.setdefault(key, []).append(pixels[..., k])
+        index += 1
+    image.close()
+    return {k: np.stack(v, axis=-1).astype(np.float64) for k, v in channels.items()}
+
+
+def _with_products(images):
+    for c in CLASSES:
+        for part in ("Direct", "Indirect"):
+            images[f"{c} {part} x Color"] = images[f"{c} {part}"] * images[f"{c} Color"]
+    return images
+
+
+@pytest.fixture(scope="module")
+def renders(registered_addon, tmp_path_factory):
+    require(bpy.app.version >= (5, 0, 0), "the parity scene's compositor set-up needs Blender 5.0")
+    folder = tmp_path_factory.mktemp("passes")
+    scene = _scene()
+    out = {}
+    for engine, setup in (('EMBER', setup_ember), ('CYCLES', setup_cycles)):
+        out[engine] = []
+        for seed in range(SEEDS):
+            setup(scene, SPP, seed, BOUNCES)
+            scene.render.filepath = os.path.join(str(folder), f"{engine}_{seed}.exr")
+            bpy.ops.render.render(write_still=True)
+            out[engine].append(_with_products(_read_exr(scene.render.filepath)))
+    from addon import engine as ember_engine
+    assert all(entry['error'] is None for entry in ember_engine.RENDER_LOG[-SEEDS:])
+    return out
+
+
+def _stack(renders, engine, name):
+    return np.array([r[name] for r in renders[engine]])
+
+
+def _interior(mask, steps=1):
+    for _ in range(steps):
+        mask = mask & np.roll(mask, 1, 0) & np.roll(mask, -1, 0) & np.roll(mask, 1, 1) & np.roll(mask, -1, 1)
+    return mask
+
+
+def _block_test(name, ember, cycles, floor, keep=None):
+    """Welch t per 4x4 block-channel over the seeds (Sidak, alpha 0.01).
+    ``floor``: a known relative difference added to the standard error
+    (float32 storage: 1e-5; closure colours, see the module doc: 0.01).
+    ``keep``: (H, W) pixels to compare; blocks with any other are left out."""
+    a, b = stats.block_means(ember, 4), stats.block_means(cycles, 4)
+    t, dof, ma, mb = stats.welch(a, b)
+    va, vb = a.var(axis=0, ddof=1) / len(a), b.var(axis=0, ddof=1) / len(b)
+    # The floor is relative to each block's value, and to the pass's largest
+    # value for blocks near 0 (a unit normal's 0 component stored as 1e-9).
+    scale = np.maximum(np.abs(ma), np.abs(mb)) + 1e-3 * np.abs(mb).max()
+    se = np.sqrt(va + vb + (floor * scale) ** 2 + 1e-30)
+    t = (ma - mb) / se
+    if keep is not None:
+        blocks = stats.block_means(keep[None, :, :, None].astype(float), 4)[0, ..., 0] == 1.0
+        t = t[blocks]
+        dof = dof[blocks]
+    level = stats.sidak_alpha(0.01, t.size)
+    p = np.array([stats.t_two_sided_p(ti, di) for ti, di in zip(t.ravel(), dof.ravel())])
+    totals = [x.mean(axis=tuple(range(1, x.ndim))) for x in (ember, cycles)]
+    z = (totals[0].mean() - totals[1].mean()) / max(np.sqrt(sum(x.var(ddof=1) / len(x) for x in totals)), 1e-12)
+    print(f"\n{name}: mean {totals[0].mean():.5g} vs Cycles {totals[1].mean():.5g} (z {z:.2f}); "
+          f"max |t| {np.abs(t).max():.2f} over {t.size} block-channels")
+    assert (p >= level).all(), f"{name}: {int((p < level).sum())} blocks differ from Cycles"
+    return z
+
+
+def test_every_pass_cycles_writes_exists(renders):
+    missing = set(renders['CYCLES'][0]) - set(renders['EMBER'][0]) - {'Denoising Depth', 'Noisy Image'}
+    assert not missing, f"passes Cycles has and Ember lacks: {sorted(missing)}"
+
+
+@pytest.mark.parametrize("name", STATISTICAL)
+def test_sampled_pass_matches_cycles(renders, name):
+    ember, cycles = _stack(renders, 'EMBER', name)[..., :3], _stack(renders, 'CYCLES', name)[..., :3]
+    z = _block_test(name, ember, cycles, 1e-5)
+    if np.isfinite(z):
+        assert abs(z) < 3.29, name   # whole-image mean, two-sided 0.1%
+
+
+@pytest.mark.parametrize("name", CENTRE)
+def test_centre_sample_pass_matches_cycles(renders, name):
+    """One value per pixel from a ray through its centre, in both."""
+    ember, cycles = _stack(renders, 'EMBER', name)[0], _stack(renders, 'CYCLES', name)[0]
+    close = np.all(np.abs(ember - cycles) <= 1e-3 * (1.0 + np.abs(cycles)), axis=-1)
+    print(f"\n{name}: {close.mean():.4f} of the pixels agree")
+    assert close.mean() >= 0.99, name
+
+
+@pytest.mark.parametrize("name", COLOURS)
+def test_colour_pass_matches_cycles(renders, name):
+    _block_test(name, _stack(renders, 'EMBER', name), _stack(renders, 'CYCLES', name), 0.01)
+
+
+@pytest.mark.parametrize("name", ("Denoising Albedo", "Denoising Normal"))
+def test_denoising_pass_matches_cycles_off_glass(renders, name):
+    index = renders['CYCLES'][0]['Object Index'][..., 0]
+    off_glass = _interior(index != BALL, 2)
+    _block_test(name, _stack(renders, 'EMBER', name), _stack(renders, 'CYCLES', name),
+                0.01 if name == "Denoising Albedo" else 1e-5, keep=off_glass)
+
+
+def test_light_passes_add_up_to_combined(renders):
+    for images in renders['EMBER']:
+        total = sum(images[f"{c} {p} x Color"] for c in CLASSES for p in ("Direct", "Indirect"))
+        total = total + images["Emission"] + images["Environment"]
+        assert np.abs(total - images["Combined"][..., :3]).max() <= 1e-4 * (1.0 + images["Combined"].max())
+
+
+def test_cryptomatte_node_selects_the_box_as_in_cycles(renders):
+    """The node reads Ember's manifest: the box's matte is 1 inside it, 0
+    away from it, and matches Cycles' block by block."""
+    ember, cycles = _stack(renders, 'EMBER', 'Composite')[..., :1], _stack(renders, 'CYCLES', 'Composite')[..., :1]
+    index = renders['CYCLES'][0]['Object Index'][..., 0]
+    assert ember.mean(axis=0)[_interior(index == BOX, 2)].min() > 0.99
+    assert ember.mean(axis=0)[_interior(index != BOX, 2)].max() < 0.01
+    _block_test("Cryptomatte matte", ember, cycles, 1e-5)
+
+
+def test_sample_count_and_vector(renders):
+    for images in renders['EMBER']:
+        assert np.all(images["Debug Sample Count"] == 1.0)  # every sample taken, as Cycles writes it
+        assert np.all(images["Vector"] == 0.0)              # no motion blur
+
+
+def test_legacy_pass_names_in_blender_34_binary(tmp_path, legacy_zip, needs_engine):
+    """Debian's Blender 3.4 (legacy zip, `blender -b -f 1`, multilayer EXR):
+    the passes carry 3.4's names (IndexOB, DiffDir, Emit, Env, AO) and the
+    file holds the Cryptomatte manifest."""
+    import OpenImageIO as oiio
+    from test_other_blenders import BLENDER, blender_version, install_legacy, run
+    version = blender_version()
+    require(version is not None and version.startswith('Blender 3.4'),
+            f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
+    scripts = install_legacy(legacy_zip, tmp_path)
+    settings = ("import bpy; s = bpy.context.scene; s.render.resolution_x = s.render.resolution_y = 16; "
+                "s.render.resolution_percentage = 100; s.ember.samples = 4; s.ember.max_bounces = 2; "
+                "s.render.image_settings.color_depth = '32'; l = bpy.context.view_layer; "
+                "[setattr(l, n, True) for n in ('use_pass_object_index', 'use_pass_diffuse_direct', "
+                "'use_pass_diffuse_color', 'use_pass_emit', 'use_pass_environment', 'use_pass_ambient_occlusion', "
+                "'use_pass_cryptomatte_object')]; l.ember.use_pass_strategies = True")
+    code, out = run([BLENDER, '-b', '--addons', 'ember', os.path.join(SCENES_DIR, 'cornell.blend'),
+                     '-E', 'EMBER', '-o', str(tmp_path / 'frame_####'), '-F', 'OPEN_EXR_MULTILAYER',
+                     '--python-expr', settings, '-f', '1'], env={'BLENDER_USER_SCRIPTS': scripts})
+    path = str(tmp_path / 'frame_0001.exr')
+    assert code == 0 and os.path.exists(path), out[-4000:]
+    image = oiio.ImageInput.open(path)
+    spec = image.spec()
+    names = {c.split('.')[-2] for c in spec.channelnames}
+    for name in ("IndexOB", "DiffDir", "DiffCol", "Emit", "Env", "AO", "CryptoObject00", "Strategy Light",
+                 "MIS Weight Light"):
+        assert name in names, (name, sorted(names))
+    pixels = image.read_image('float')
+    assert np.isfinite(pixels).all()
+    keys = [a.name for a in spec.extra_attribs if a.name.startswith('cryptomatte/')]
+    image.close()
+    assert any(k.endswith('/manifest') for k in keys), keys

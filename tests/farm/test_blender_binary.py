@@ -1,0 +1,84 @@
+"""Farm tasks run by a real Blender binary (Debian's 3.4) with the add-on
+installed from the legacy zip: frames equal the bpy module's, a failing
+render fails its task with Blender's log."""
+import os
+import shutil
+import subprocess
+import sys
+import zipfile
+
+import pytest
+
+from farmlib import (ROOT, assert_same_image, make_animation_with_binary, make_job, read_exr, render_locally,
+                     require, run_job)
+from farm import client as farm_client
+from farm import plan, shardfile
+
+BLENDER = shutil.which('blender') or '/usr/bin/blender'
+
+
+@pytest.fixture(scope='module')
+def blender34(tmp_path_factory):
+    ok = os.path.exists(BLENDER) and subprocess.run([BLENDER, '--version'], capture_output=True,
+                                                    text=True).stdout.startswith('Blender 3.4')
+    require(ok, f"Debian's Blender 3.4 binary is needed at {BLENDER} (tools/setup_test_env.sh)")
+    folder = tmp_path_factory.mktemp('blender34')
+    sys.path.insert(0, os.path.join(ROOT, 'tools'))
+    try:
+        import build_zip
+    finally:
+        sys.path.pop(0)
+    try:
+        (zip_path,) = build_zip.main(['--dist', str(folder), '--build', str(folder / 'build'),
+                                      '--wheels', os.path.join(ROOT, 'build', 'wheels'), '--legacy'])
+    except (subprocess.CalledProcessError, SystemExit) as err:
+        require(False, f"could not build the legacy zip: {err}")
+    scripts = folder / 'scripts'
+    with zipfile.ZipFile(zip_path) as archive:
+        archive.extractall(scripts / 'addons')
+    for dirpath, _, files in os.walk(scripts):  # zipfile drops the execute bits
+        for name in files:
+            if '.so' in name:
+                os.chmod(os.path.join(dirpath, name), 0o755)
+    blend = make_animation_with_binary(BLENDER, folder / 'anim34.blend', scripts)
+    return blend, {'BLENDER_USER_SCRIPTS': str(scripts)}
+
+
+def test_frames_from_blender_binary_equal_bpy_module(cluster, blender34, tmp_path):
+    blend, env = blender34
+    _, dask_client = cluster
+    job = make_job(blend, tmp_path / 'farm', frames=[1, 2], chunk=2, blender=BLENDER, extra_env=env)
+    run_job(dask_client, job)
+    references = render_locally(blend, tmp_path, '1..2')
+    for frame in (1, 2):
+        assert_same_image(read_exr(plan.frame_path(job.out_dir, frame)), references[frame], f"frame {frame}")
+
+
+def test_failing_render_fails_its_task_with_the_log(cluster, blender34, tmp_path):
+    """A shard whose render cannot start (bad sample range): the task fails
+    with Blender's output; nothing is written."""
+    blend, env = blender34
+    _, dask_client = cluster
+    from farm import tasks
+    job = make_job(blend, tmp_path, frames=[1], blender=BLENDER, extra_env=env)
+    future = dask_client.submit(tasks.run_shard, job, 1, -4, 4, pure=False)
+    with pytest.raises(tasks.TaskFailed, match=r"(?s)status 1.*bad shard sample range"):
+        future.result(timeout=120)
+    assert not os.path.exists(plan.shard_dir(job.out_dir)) or not os.listdir(plan.shard_dir(job.out_dir))
+    assert farm_client.pending(job, resume=True) == plan.tasks(job)
+
+
+def test_split_frame_from_blender_binary_equals_bpy_module(cluster, blender34, tmp_path):
+    """The add-on's shard hook inside the real binary: two shards of frame 2
+    merged equal the frame rendered whole by the bpy module."""
+    from engine.film import Film
+    require(hasattr(Film, 'from_state'), "engine.film.Film has no state API (sample ranges) yet")
+    blend, env = blender34
+    _, dask_client = cluster
+    job = make_job(blend, tmp_path / 'farm', frames=[2], split=2, blender=BLENDER, extra_env=env)
+    assert run_job(dask_client, job) == [plan.frame_path(job.out_dir, 2)]
+    (shard,) = shardfile.find(plan.shard_dir(job.out_dir), 2, 4, 8)
+    meta = shardfile.read_meta(shard)
+    assert meta['blend_sha256'] == job.blend_sha256 and meta['ember_version'] == '0.1.0'
+    reference = render_locally(blend, tmp_path, '2')[2]
+    assert_same_image(read_exr(plan.frame_path(job.out_dir, 2)), reference, "frame 2 merged from 3.4 shards")

@@ -1,0 +1,121 @@
+"""Shards are exact: one render of S samples equals the merge of K renders
+of disjoint sample ranges (to float32 rounding), and with adaptive sampling
+the merge holds exactly the statistics of the samples the shards traced.
+The engine alone, no Blender."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from engine.film import Film
+from engine.render import prepare, render
+from engine.scene import RenderSettings
+from engine.testscenes import cornell_box
+from farm import shardfile
+from farm.merge import merge_files, merge_states
+from farm.plan import sample_ranges
+from farmlib import require
+
+SIZE = 24
+
+
+def settings(**kw):
+    require(hasattr(RenderSettings(), 'sample_start') and hasattr(Film, 'from_state'),
+            "the engine has no sample ranges / film state (RenderSettings.sample_start, Film.state)")
+    base = dict(samples=12, samples_per_pass=4, seed=3, max_bounces=4, threads=2)
+    base.update(kw)
+    return RenderSettings(**base)
+
+
+@pytest.fixture(scope='module')
+def scene():
+    return cornell_box(SIZE, SIZE)
+
+
+def shard_states(scene, base, parts):
+    return [render(scene, dataclasses.replace(base, sample_start=a, samples=b - a)).film.state()
+            for a, b in sample_ranges(base.samples, parts)]
+
+
+def assert_same_film(got, want):
+    np.testing.assert_array_equal(got.count, want.count)
+    scale = float(np.abs(want.mean).max())
+    np.testing.assert_allclose(got.mean, want.mean, rtol=0, atol=2e-6 * scale)
+    np.testing.assert_allclose(got.alpha, want.alpha, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(got.m2, want.m2, rtol=1e-4, atol=1e-5 * float(np.abs(want.m2).max()))
+
+
+def test_one_render_equals_merged_shards(scene, tmp_path):
+    base = settings(transparent=True)
+    whole = render(scene, base)
+    states = shard_states(scene, base, 3)
+    merged = merge_states(states)
+    assert_same_film(merged, whole.film)
+    np.testing.assert_allclose(merged.image(True), whole.image, rtol=0, atol=2e-6 * float(whole.image.max()))
+    np.testing.assert_allclose(merged.variance(), whole.variance, rtol=1e-3, atol=1e-9)
+    # The same through shard files, given in another order and one twice.
+    paths = []
+    for (a, b), state in zip(sample_ranges(base.samples, 3), states):
+        paths.append(str(tmp_path / f"s{a}.npz"))
+        shardfile.write_atomic(paths[-1], state, {
+            'format': shardfile.FORMAT, 'sample_start': a, 'sample_end': b, 'ember_version': '0', 'seed': 3,
+            'blend_sha256': 'x', 'frame': 1, 'layer': 'L', 'transparent': True, 'settings': {}})
+    film, meta = merge_files([paths[2], paths[0], paths[1], paths[0]])
+    assert_same_film(film, whole.film)
+    assert (meta['sample_start'], meta['sample_end']) == (0, 12) and len(meta['shards']) == 3
+
+
+def test_adaptive_shards_merge_to_the_samples_they_traced(scene):
+    """With adaptive sampling each shard stops converged pixels on its own
+    (so the merge is not the image of one adaptive render, which would stop
+    other pixels): the merged counts, means and M2 are those of exactly the
+    samples traced, recomputed here in one batch from (pixel, sample index)."""
+    if not hasattr(RenderSettings(), 'adaptive_threshold'):
+        require(False, "the engine has no adaptive sampling (RenderSettings.adaptive_threshold)")
+    base = settings(samples=64, samples_per_pass=8, adaptive_threshold=0.05, adaptive_min_samples=8)
+    ranges = sample_ranges(base.samples, 2)
+    states = shard_states(scene, base, 2)
+    counts = [s['count'].astype(int) for s in states]
+    assert all((c < 32).any() and (c == 32).any() for c in counts), "adaptive sampling stopped no pixel"
+    merged = merge_states(states)
+    # Every (pixel, sample index) the shards traced: a prefix of each range.
+    pix = np.concatenate([np.repeat(np.arange(SIZE * SIZE), c) for c in counts])
+    sample = np.concatenate([np.concatenate([np.arange(a, a + n) for n in c]) for (a, _), c in zip(ranges, counts)])
+    from engine.integrator import trace_batch
+    ctx = prepare(scene, base)
+    union = Film(SIZE, SIZE, base.aovs, adaptive=True)
+    order = np.argsort(pix, kind='stable')
+    tile = union.new_tile(0, SIZE * SIZE)
+    trace_batch(ctx, pix[order], sample[order], tile)
+    union.merge(tile)
+    assert_same_film(merged, union)
+
+
+def _write_shard(folder, frame, start, end, layer, state, **meta):
+    name = f"frame_{frame:06d}.s{start:09d}-{end:09d}.{layer}.npz"
+    fields = {'format': shardfile.FORMAT, 'sample_start': start, 'sample_end': end, 'ember_version': '0.1.0',
+              'seed': 3, 'blend_sha256': 'abc', 'frame': frame, 'layer': layer, 'transparent': False,
+              'settings': {}}
+    fields.update(meta)
+    shardfile.write_atomic(str(folder / name), state, fields)
+
+
+def test_merge_task_writes_each_view_layer_and_checks_the_blend(scene, tmp_path):
+    from engine.imageio import read_image
+    from farm import plan, tasks
+    base = settings()
+    states = shard_states(scene, base, 2)
+    whole = merge_states(states)
+    job = plan.Job(blend='scene.blend', out_dir=str(tmp_path), frames=[5], samples=12, split=2, blend_sha256='abc')
+    folder = tmp_path / 'shards'
+    for layer in ('Front', 'Back'):
+        for (a, b), state in zip(sample_ranges(12, 2), states):
+            _write_shard(folder, 5, a, b, layer, state)
+    written = tasks.run_merge(job, 5)
+    assert sorted(written) == [str(tmp_path / 'frame_0005.Back.exr'), str(tmp_path / 'frame_0005.Front.exr')]
+    for path in written:
+        np.testing.assert_array_equal(read_image(path), whole.image(False))
+    # A shard of another blend file under a planned name is refused.
+    _write_shard(folder, 5, 6, 12, 'Front', states[1], blend_sha256='other')
+    with pytest.raises(shardfile.ShardError, match="blend_sha256"):
+        tasks.run_merge(job, 5)

@@ -1,0 +1,106 @@
+"""Frames, chunks, sample ranges and what --resume leaves to do."""
+import os
+
+import numpy as np
+import pytest
+
+from farm import client, plan, shardfile
+
+
+def test_frames_chunks_and_ranges():
+    assert plan.parse_frames('1-4,7, 9-10,3') == [1, 2, 3, 4, 7, 9, 10]
+    assert plan.parse_frames('5') == [5]
+    for bad in ('4-1', 'a', '1-', ''):
+        with pytest.raises(ValueError):
+            plan.parse_frames(bad)
+    assert plan.chunks([1, 2, 3, 4, 7, 9, 10], 3) == [[1, 2, 3], [4], [7], [9, 10]]
+    assert plan.sample_ranges(10, 3) == [(0, 3), (3, 6), (6, 10)]
+    with pytest.raises(ValueError):
+        plan.sample_ranges(2, 3)
+
+
+def _job(tmp_path, **kw):
+    kw.setdefault('frames', [1, 2, 3, 4])
+    return plan.Job(blend='x.blend', out_dir=str(tmp_path), blend_sha256='abc', **kw)
+
+
+def _shard(job, frame, start, end, sha='abc'):
+    path = os.path.join(plan.shard_dir(job.out_dir), f"frame_{frame:06d}.s{start:09d}-{end:09d}.ViewLayer.npz")
+    shardfile.write_atomic(path, {'rgb': np.zeros(3)}, {'blend_sha256': sha, 'format': shardfile.FORMAT})
+
+
+def test_resume_leaves_only_missing_frames_and_shards(tmp_path):
+    job = _job(tmp_path, chunk=2)
+    assert [t.key for t in client.pending(job, resume=True)] == ['ember-chunk-1-2', 'ember-chunk-3-4']
+    open(plan.frame_path(job.out_dir, 2), 'w').close()
+    assert [t.key for t in client.pending(job, resume=True)] == ['ember-chunk-1-1', 'ember-chunk-3-4']
+    assert len(client.pending(job, resume=False)) == 2
+
+    split = _job(tmp_path / 'split', frames=[1, 2], samples=8, split=2)
+    _shard(split, 1, 0, 4)
+    _shard(split, 1, 4, 8, sha='stale')   # another blend's shard: rendered again
+    _shard(split, 2, 0, 4)
+    _shard(split, 2, 4, 8)
+    open(plan.frame_path(split.out_dir, 2), 'w').close()
+    assert [t.key for t in client.pending(split, resume=True)] == ['ember-shard-1-s4-8', 'ember-merge-1']
+
+
+def test_blender_command_lines():
+    from farm.commands import BPY_RENDER, frame_arg, render_command
+    assert frame_arg([3]) == '3' and frame_arg([1, 2, 3]) == '1..3' and frame_arg([1, 3]) == '1,3'
+    job = plan.Job(blend='/s/a.blend', out_dir='/o', frames=[1], samples=32, blender='/bin/blender', threads=2)
+    cmd = render_command(job, [1, 2], '/o/frame_####', shard=('/o/shards', 16, 8))
+    # --addons before the file; -F before the code that sets the EXR depth; -f last.
+    assert cmd[:5] == ['/bin/blender', '-b', '--addons', 'ember', '/s/a.blend']
+    assert cmd[cmd.index('-F') + 1] == 'OPEN_EXR' and cmd.index('-F') < cmd.index('--python-expr')
+    assert cmd[-2:] == ['-f', '1..2']
+    code = cmd[cmd.index('--python-expr') + 1]
+    for line in ("s.ember.samples = 32", "s.ember.threads = 2", "os.environ['EMBER_SHARD_START'] = '16'",
+                 "os.environ['EMBER_SHARD_SAMPLES'] = '8'", "os.environ['EMBER_SHARD_DIR'] = '/o/shards'"):
+        assert line in code
+    job.blender = ''
+    assert render_command(job, [1], '/o/f_####')[1:4] == ['-P', BPY_RENDER, '/s/a.blend']
+
+
+def test_error_check_stops_blender_with_status_1():
+    """The render_post handler of the setup code: Ember's recorded error ends
+    the Blender process with status 1 (Blender would exit 0 with a black frame)."""
+    import subprocess
+    import sys
+    from farm.commands import ERROR_CHECK
+    fake = ("import sys, types\n"
+            "bpy = types.SimpleNamespace(app=types.SimpleNamespace(handlers=types.SimpleNamespace(render_post=[])))\n"
+            "mod = types.ModuleType('ember.engine'); mod.RENDER_LOG = [{'error': None}]\n"
+            "sys.modules['ember.engine'] = mod\n" + ERROR_CHECK +
+            "bpy.app.handlers.render_post[0](None)\nprint('fine')\n"
+            "mod.RENDER_LOG.append({'error': 'boom'})\nbpy.app.handlers.render_post[0](None)\nprint('not reached')\n")
+    out = subprocess.run([sys.executable, '-c', fake], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 1 and out.stdout.split() == ['fine', 'EMBER-FARM-ERROR:', 'boom'], out
+
+
+def test_resume_refuses_another_jobs_folder(tmp_path):
+    job = _job(tmp_path, samples=8)
+    client.check_manifest(job, resume=False)
+    client.check_manifest(job, resume=True)           # same job: fine
+    other = _job(tmp_path, samples=16)
+    with pytest.raises(SystemExit, match="changed: samples"):
+        client.check_manifest(other, resume=True)
+    client.check_manifest(other, resume=False)        # a fresh job takes the folder over
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['--frames', '1-3', '--local', '1', '-o', 'x', 'missing.blend'], 'no such .blend'),
+    (['--frames', '3-1', '--local', '1', '-o', 'x', 'BLEND'], 'ends before'),
+    (['--frames', '1', '--split-samples', '4', '--local', '1', '-o', 'x', 'BLEND'], 'needs --samples'),
+    (['--frames', '1', '--samples', '2', '--split-samples', '4', '--local', '1', '-o', 'x', 'BLEND'],
+     'cannot split 2 samples'),
+    (['--frames', '1', '--blender', '/nonexistent/blender', '--local', '1', '-o', 'x', 'BLEND'],
+     'not an executable'),
+])
+def test_bad_render_arguments_get_a_clear_message(tmp_path, argv, message):
+    from farm.__main__ import make_job, parse
+    blend = tmp_path / 'scene.blend'
+    blend.write_bytes(b'BLENDER')
+    args = parse(['render'] + [str(blend) if a == 'BLEND' else a for a in argv])
+    with pytest.raises(SystemExit, match=message):
+        make_job(args)
