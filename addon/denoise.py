@@ -71,7 +71,12 @@ def backend():
     with _backend_lock:
         if _backend is None:
             library = blender_oidn_library()
-            _backend = InProcess(library) if library else Program(oidn_program())
+            try:
+                _backend = InProcess(library) if library else None
+            except (OSError, AttributeError, DenoiseError):
+                _backend = None  # an OIDN Ember cannot drive: use the program instead
+            if _backend is None:
+                _backend = Program(oidn_program())
         return _backend
 
 

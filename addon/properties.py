@@ -120,6 +120,14 @@ def _passes_changed(self, context):
         view_layer.update_render_passes()
 
 
+def _pass_toggle_update():
+    """The update callback of the pass checkboxes, or None without a UI:
+    the render pipeline registers passes itself when it renders, and the
+    bpy 4.2 module segfaults at exit when a ViewLayer property group has
+    any update callback (measured: even a no-op one)."""
+    return None if bpy.app.background else _passes_changed
+
+
 STRATEGY_VERTEX_ITEMS = (
     ('ALL', "Every Vertex", "Direct light of every path vertex: with Emission and Environment "
      "the strategy passes add up to Combined"),
@@ -133,19 +141,19 @@ class EmberViewLayerSettings(bpy.types.PropertyGroup):
     Cycles also has use Blender's own View Layer checkboxes."""
     use_pass_strategies: BoolProperty(
         name="Strategies", description="Strategy Light, Strategy BSDF (their MIS-weighted direct light), "
-        "the same unweighted, and MIS Weight Light", default=False, update=_passes_changed)
+        "the same unweighted, and MIS Weight Light", default=False, update=_pass_toggle_update())
     strategy_passes_vertex: EnumProperty(
         name="Strategy Vertices", description="Which path vertices the strategy passes show",
         items=STRATEGY_VERTEX_ITEMS, default='ALL')
     use_pass_variance: BoolProperty(
         name="Variance", description="Per-pixel variance of the Combined mean (what adaptive sampling reads)",
-        default=False, update=_passes_changed)
+        default=False, update=_pass_toggle_update())
     use_pass_denoising_data: BoolProperty(
         name="Denoising Data", description="Denoising Albedo and Denoising Normal, as Cycles",
-        default=False, update=_passes_changed)
+        default=False, update=_pass_toggle_update())
     use_pass_sample_count: BoolProperty(
         name="Sample Count", description="Samples per pixel (Cycles' Debug Sample Count)",
-        default=False, update=_passes_changed)
+        default=False, update=_pass_toggle_update())
 
 
 classes = (EmberRenderSettings, EmberViewLayerSettings)

@@ -354,8 +354,10 @@ class RenderThread:
             small = dataclasses.replace(camera, resolution=(max(1, width // divider),
                                                             max(1, height // divider)))
             samples = 1 if divider > 1 else job.settings.samples
+            # The denoiser's guides only where it runs: the last, full-size level.
+            aovs = ("normal", "albedo") if job.denoise and divider == 1 else ()
             settings = dataclasses.replace(job.settings, samples=samples, samples_per_pass=1,
-                                           time_limit=0.0)
+                                           time_limit=0.0, aovs=aovs)
             progress = _ThreadProgress(self, generation, divider, samples)
             result = render(dataclasses.replace(job.scene, camera=small), settings, progress)
             if self._stale(generation):
@@ -546,6 +548,7 @@ class ViewportSession:
             if self.closed:
                 return None
             try:
+                self.engine.is_preview  # noqa: B018 - raises once Blender freed the engine
                 if (self.thread.image_generation != self.drawn_generation
                         or self.pending_size is not None or self.thread.busy):
                     self.engine.tag_redraw()

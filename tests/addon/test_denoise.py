@@ -21,7 +21,7 @@ import pytest
 from addon import denoise
 from addon import engine as ember_engine
 from addon.export import scene as scene_export
-from ember_testlib import ROOT, SCENES_DIR, load_exr, require, setup_ember, small_resolution
+from ember_testlib import ROOT, SCENES_DIR, require, setup_ember, small_resolution
 
 BLENDER = shutil.which('blender') or '/usr/bin/blender'
 BPY42_PYTHON = os.path.join(ROOT, 'build', 'venv-bpy42', 'bin', 'python')
@@ -162,3 +162,44 @@ def test_final_render_denoises_combined_and_keeps_noisy_image(registered_addon, 
     print("pixel-to-pixel variation: noisy", rough(noisy), "denoised", rough(combined))
     assert rough(combined) < 0.7 * rough(noisy)
     assert abs(combined[..., :3].mean() - noisy[..., :3].mean()) < 0.1 * noisy[..., :3].mean()
+
+
+def _noisy_gradient(size=40, seed=0):
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:size, 0:size] / size
+    clean = np.stack([x, y, 0.3 + 0 * x], -1).astype(np.float32)
+    return clean, (clean * rng.exponential(1.0, clean.shape)).astype(np.float32)
+
+
+def test_program_and_in_process_backends_agree(tmp_path):
+    """The subprocess path (PFM files, rows flipped twice) gives what OIDN in
+    this process gives: orientation and channels survive the files."""
+    clean, noisy = _noisy_gradient()
+    normal = np.zeros_like(clean)
+    normal[..., 2] = 1.0
+    try:
+        program = denoise.Program(denoise.oidn_program())
+    except denoise.DenoiseError as err:
+        require(False, str(err))
+    in_process = denoise.backend().run(noisy, clean, normal)
+    via_files = program.run(noisy, clean, normal)
+    assert via_files.shape == in_process.shape == noisy.shape
+    assert np.abs(via_files - in_process).mean() < 1e-3 * np.abs(in_process).mean() + 1e-6
+    assert np.mean((via_files - clean) ** 2) < 0.1 * np.mean((noisy - clean) ** 2)
+
+
+def test_bad_input_gives_finite_output_or_a_clear_error():
+    clean, noisy = _noisy_gradient(16)
+    noisy[3, 4] = np.nan
+    noisy[5, 6] = np.inf
+    out = denoise.denoise(noisy, clean, None)
+    assert np.isfinite(out).all()
+    assert denoise.denoise(np.zeros((0, 0, 3), np.float32)).shape == (0, 0, 3)
+    with pytest.raises(ValueError, match="quality"):
+        denoise.denoise(noisy, quality='best')
+
+
+def test_pfm_round_trip(tmp_path):
+    image = np.random.default_rng(3).random((5, 7, 3), dtype=np.float32)
+    path = denoise._write_pfm(str(tmp_path), 'x', image)
+    assert np.array_equal(denoise.read_pfm(path), image)

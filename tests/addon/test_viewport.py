@@ -26,7 +26,7 @@ from addon.export import scene as scene_export
 from ember_testlib import ROOT, SCENES_DIR, load_exr, require
 
 BLENDER = shutil.which('blender') or '/usr/bin/blender'
-WINDOW = (800, 520)
+WINDOW = (640, 420)
 # Two-sided z-tests over blocks x channels, Sidak-corrected to 1 % overall.
 Z_LIMIT = 3.6
 
@@ -235,6 +235,20 @@ def test_incremental_export(cornell, needs_engine):
         assert len(synced.cache.meshes) == 7, "the replaced mesh must not stay in memory"
         selected = synced.edit(lambda: box.select_set(not box.select_get()))
         assert selected == (False, 0, 0), "selection must not restart the viewport"
+
+        def add_cube():
+            mesh = bpy.data.meshes.new('Extra')
+            mesh.from_pydata([(0, 0, 0), (0.2, 0, 0), (0, 0.2, 0)], [], [(0, 1, 2)])
+            bpy.context.scene.collection.objects.link(bpy.data.objects.new('Extra', mesh))
+        added = synced.edit(add_cube)
+        assert added[:2] == (True, 1) and len(synced.cache.instances) == 8
+        removed = synced.edit(lambda: bpy.data.objects.remove(bpy.data.objects['Extra']))
+        assert removed[:2] == (True, 0) and len(synced.cache.instances) == 7
+        assert len(synced.cache.meshes) == 7, "a removed object's mesh must not stay in memory"
+        background = next(n for n in bpy.context.scene.world.node_tree.nodes if n.type == 'BACKGROUND')
+        worlds = viewport.STATS['world_exports']
+        lit = synced.edit(lambda: setattr(background.inputs['Strength'], 'default_value', 2.0))
+        assert lit == (True, 0, 0) and viewport.STATS['world_exports'] > worlds
     finally:
         synced.close()
 
@@ -377,3 +391,41 @@ def test_session_restarts_only_when_the_picture_changes(cornell, needs_engine):
     finally:
         bpy.app.handlers.depsgraph_update_post.remove(handler)
         session.close()
+
+
+def test_user_orthographic_view_clips_behind_the_view_point():
+    """Blender's user ortho views clip from behind the view point (negative
+    near); the camera moves back instead and sees the same rays."""
+    near, far, half_w, half_h = -50.0, 50.0, 4.0, 2.25
+    window = np.array([[1 / half_w, 0, 0, 0], [0, 1 / half_h, 0, 0],
+                       [0, 0, -2 / (far - near), -(far + near) / (far - near)], [0, 0, 0, 1]])
+    fields = viewport.frustum(window, np.eye(4))
+    assert fields['kind'] == 'ORTHO' and fields['clip_start'] == 0.0
+    assert np.isclose(fields['clip_end'], far - near) and np.isclose(fields['ortho_scale'], 2 * half_w)
+    assert np.allclose(fields['matrix'][:3, 3], [0, 0, -near])  # moved back along +Z by 50
+
+
+def test_viewport_denoises_when_its_samples_are_done(cornell, needs_engine):
+    scene = cornell
+    exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
+    engine_scene = dataclasses.replace(exported.scene, camera=dataclasses.replace(
+        exported.scene.camera, resolution=(64, 64)))
+    settings = dataclasses.replace(scene_export.render_settings(scene), samples=2)
+    thread = viewport.RenderThread()
+    try:
+        job = thread.submit(viewport.Job(engine_scene, settings, denoise=True))
+        deadline = time.perf_counter() + 60
+        while thread.finished_job != job and thread.error is None and time.perf_counter() < deadline:
+            time.sleep(0.01)
+        assert thread.error is None and thread.status.endswith('(denoised)'), (thread.error, thread.status)
+        rough = float(np.abs(np.diff(thread.image[..., :3], axis=1)).mean())
+        assert rough < 0.05, f"the final viewport image is not denoised (pixel-to-pixel {rough:.3f})"
+    finally:
+        thread.close()
+
+
+def test_leaving_rendered_shading_stops_the_render_thread(gui_run):
+    result, _ = gui_run
+    assert result['threads_before_leaving'] >= 1
+    assert result['render_threads_left'] == 0
+    print(f"render thread gone {result['cleanup_seconds']:.2f} s after leaving Rendered shading")

@@ -165,6 +165,25 @@ def second_screenshot():
     RESULT['mesh_exports_after_move'] = viewport.STATS['mesh_exports']
 
 
+def leave_rendered():
+    """Back to Solid shading: Blender frees the engine, the session must stop."""
+    _, area, _ = view3d()
+    RESULT['threads_before_leaving'] = sum(s.thread.thread.is_alive() for s in viewport.SESSIONS)
+    area.spaces.active.shading.type = 'SOLID'
+    RESULT['left_at'] = time.perf_counter()
+
+
+def sessions_gone():
+    import gc
+    gc.collect()
+    return all(s.closed and not s.thread.thread.is_alive() for s in viewport.SESSIONS)
+
+
+def record_cleanup():
+    RESULT['render_threads_left'] = sum(s.thread.thread.is_alive() for s in viewport.SESSIONS)
+    RESULT['cleanup_seconds'] = time.perf_counter() - RESULT['left_at']
+
+
 STEPS = [
     (setup, None),
     (look_through_camera, None),
@@ -173,6 +192,8 @@ STEPS = [
     (render_f12, None),
     (move_object, lambda: finished(session())),
     (second_screenshot, lambda: finished(session()) and viewport.STATS['restarts'] > RESULT['restarts_before_move']),
+    (leave_rendered, None),
+    (record_cleanup, sessions_gone),
 ]
 state = {'index': 0, 'since': time.perf_counter()}
 
