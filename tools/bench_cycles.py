@@ -304,7 +304,10 @@ def table(rows, adaptive):
     lines = [head, '|' + '---|' * (head.count('|') - 1)]
     for r in rows:
         title = bench_scenes.SCENES[r['scene']][0]
-        cells = [title, f"{r['time_ratio']:.1f}x"]
+        # No finite ratio when Ember's error does not fall with time in the
+        # measured range (e.g. a fixed cost larger than all sampling).
+        ratio = f"{r['time_ratio']:.1f}x" if np.isfinite(r['time_ratio']) and r['time_ratio'] > 0 else "-"
+        cells = [title, ratio]
         if not adaptive:
             # A slope lost in the fixed cost (tiny frames, busy machine) has no ratio.
             spp = f"{r['spp_ratio']:.1f}x" if 0 < r['spp_ratio'] < 1e3 else "-"
