@@ -71,6 +71,8 @@ def _request(scene, layer):
         raise ValueError("a render-farm shard needs a saved .blend file")
     from . import bl_info
     return {'folder': folder, 'start': start, 'samples': samples, 'frame': scene.frame_current,
+            # Denoising waits for the merge (the film keeps albedo and normal for it).
+            'denoise': bool(getattr(scene.ember, 'use_denoising', False)),
             'layer': layer, 'blend_path': blend, 'blend_sha256': file_sha256(blend),
             'ember_version': '.'.join(map(str, bl_info['version']))}
 
@@ -100,7 +102,8 @@ def wrap(render, scene, layer, is_preview=False):
 
 def save_state(request, settings, state):
     end = request['start'] + request['samples']
-    meta = {key: request[key] for key in ('frame', 'layer', 'blend_path', 'blend_sha256', 'ember_version')}
+    meta = {key: request[key] for key in ('frame', 'layer', 'blend_path', 'blend_sha256', 'ember_version',
+                                          'denoise')}
     meta.update(format=FORMAT, seed=settings.seed, sample_start=request['start'], sample_end=end,
                 transparent=bool(settings.transparent), host=socket.gethostname(), created=time.time(),
                 settings={k: v for k, v in dataclasses.asdict(settings).items() if k not in PER_SHARD})

@@ -7,6 +7,7 @@ import glob
 import hashlib
 import json
 import os
+import shutil
 import sys
 import time
 import uuid
@@ -152,4 +153,8 @@ def run(client, job, resume=False, stream=sys.stderr, retries=RETRIES):
         else:
             failures.append(f"{task.key}: {fut.exception()}")
         bar.update(weight(job, task))
+    if not failures:
+        # Scratch folders and markers of tasks killed on the way.
+        for name in ('tmp', 'running'):
+            shutil.rmtree(os.path.join(job.out_dir, plan.STATE_DIR, name), ignore_errors=True)
     return written, failures

@@ -5,16 +5,17 @@ another worker writes the same file again, and duplicates given on the
 command line are counted once), refuses shards that belong to another blend
 file, Ember version, seed, frame, view layer or render setting, and refuses
 ranges that overlap or leave a gap.  The film states are added by the
-engine's own ``Film.merge_state``; only then is the image formed (and any
-denoising or compositing would follow here, after the merge).  Output files
-are written atomically.
+engine's own ``Film.merge_state``; only then is the image formed and, when
+the scene asks for it, denoised (with the merged albedo and normal).  Output
+files are written atomically.
 """
 import os
+import sys
 
 from .shardfile import ShardError, read
 
 # Metadata every shard of one image must share.
-SHARED = ('ember_version', 'blend_sha256', 'seed', 'frame', 'layer', 'transparent', 'settings')
+SHARED = ('ember_version', 'blend_sha256', 'seed', 'frame', 'layer', 'transparent', 'settings', 'denoise')
 
 
 def select(metas, plan=None):
@@ -102,7 +103,34 @@ def write_image(path, image):
     return path
 
 
+def denoiser():
+    """addon/denoise.py (it imports no bpy), loaded without the add-on package."""
+    import importlib.util
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'addon', 'denoise.py')
+    spec = importlib.util.spec_from_file_location('ember_farm_denoise', path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def final_image(film, meta):
+    """The merged image, denoised when the scene asked for it (only here,
+    after the merge: a shard's noise is not the frame's)."""
+    image = film.image(meta['transparent'])
+    if not meta.get('denoise'):
+        return image
+    try:
+        denoise = denoiser()
+        rgb = denoise.denoise(image[..., :3], film.aov('albedo'), film.aov('normal'))
+    except Exception as err:  # noqa: BLE001 - the noisy frame is still a frame
+        print(f"farm: frame {meta['frame']} is not denoised: {err}", file=sys.stderr)
+        return image
+    image = image.copy()
+    image[..., :3] = rgb
+    return image
+
+
 def merge_to_image(paths, out_path, plan=None, expect=None):
     film, meta = merge_files(paths, plan, expect)
-    write_image(out_path, film.image(meta['transparent']))
+    write_image(out_path, final_image(film, meta))
     return meta

@@ -22,9 +22,8 @@ from .commands import ROOT, render_command
 from .merge import merge_to_image
 
 # One render owns the machine's cores through Ember's own thread pool:
-# keep BLAS and OpenMP pools in the child from multiplying it.
-CHILD_ENV = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1',
-             'NUMBA_NUM_THREADS': '1'}
+# keep BLAS pools in the child from multiplying it.
+CHILD_ENV = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1'}
 THREADS_ENV = 'EMBER_FARM_RENDER_THREADS'
 LOG_TAIL = 3000
 
@@ -57,6 +56,9 @@ def run_blender(job, key, frames, out_pattern, shard=None):
     env = dict(os.environ, **CHILD_ENV, **job.extra_env)
     if not job.blender:
         env['PYTHONPATH'] = ROOT
+        # bpy's user folder inside the scratch folder: gone with it, also
+        # when the task is killed.
+        env.setdefault('BLENDER_USER_RESOURCES', os.path.join(os.path.dirname(out_pattern), 'user'))
     log_path = _state_path(job, 'logs', f"{key}.log")
     running = _state_path(job, 'running', f"{key}.{socket.gethostname()}.{os.getpid()}.json")
     with open(log_path, 'w') as log:

@@ -44,14 +44,19 @@ def blender34(tmp_path_factory):
     return blend, {'BLENDER_USER_SCRIPTS': str(scripts)}
 
 
-def test_frames_from_blender_binary_equal_bpy_module(cluster, blender34, tmp_path):
+@pytest.fixture(scope='module')
+def references34(blender34, tmp_path_factory):
+    """Frames 1-2 of the 3.4-saved animation rendered by the bpy module."""
+    return render_locally(blender34[0], tmp_path_factory.mktemp('local34'), '1..2')
+
+
+def test_frames_from_blender_binary_equal_bpy_module(cluster, blender34, references34, tmp_path):
     blend, env = blender34
     _, dask_client = cluster
     job = make_job(blend, tmp_path / 'farm', frames=[1, 2], chunk=2, blender=BLENDER, extra_env=env)
     run_job(dask_client, job)
-    references = render_locally(blend, tmp_path, '1..2')
     for frame in (1, 2):
-        assert_same_image(read_exr(plan.frame_path(job.out_dir, frame)), references[frame], f"frame {frame}")
+        assert_same_image(read_exr(plan.frame_path(job.out_dir, frame)), references34[frame], f"frame {frame}")
 
 
 def test_failing_render_fails_its_task_with_the_log(cluster, blender34, tmp_path):
@@ -68,7 +73,7 @@ def test_failing_render_fails_its_task_with_the_log(cluster, blender34, tmp_path
     assert farm_client.pending(job, resume=True) == plan.tasks(job)
 
 
-def test_split_frame_from_blender_binary_equals_bpy_module(cluster, blender34, tmp_path):
+def test_split_frame_from_blender_binary_equals_bpy_module(cluster, blender34, references34, tmp_path):
     """The add-on's shard hook inside the real binary: two shards of frame 2
     merged equal the frame rendered whole by the bpy module."""
     from engine.film import Film
@@ -80,5 +85,4 @@ def test_split_frame_from_blender_binary_equals_bpy_module(cluster, blender34, t
     (shard,) = shardfile.find(plan.shard_dir(job.out_dir), 2, 4, 8)
     meta = shardfile.read_meta(shard)
     assert meta['blend_sha256'] == job.blend_sha256 and meta['ember_version'] == '0.1.0'
-    reference = render_locally(blend, tmp_path, '2')[2]
-    assert_same_image(read_exr(plan.frame_path(job.out_dir, 2)), reference, "frame 2 merged from 3.4 shards")
+    assert_same_image(read_exr(plan.frame_path(job.out_dir, 2)), references34[2], "frame 2 merged from 3.4 shards")

@@ -119,3 +119,24 @@ def test_merge_task_writes_each_view_layer_and_checks_the_blend(scene, tmp_path)
     _write_shard(folder, 5, 6, 12, 'Front', states[1], blend_sha256='other')
     with pytest.raises(shardfile.ShardError, match="blend_sha256"):
         tasks.run_merge(job, 5)
+
+
+def test_denoising_happens_after_the_merge(scene):
+    """Shards of a scene that denoises are merged first, then the merged
+    image is denoised with the merged albedo and normal."""
+    from farm.merge import denoiser, final_image
+    denoise = denoiser()
+    try:
+        denoise.oidn_program()
+    except denoise.DenoiseError as err:
+        require(False, f"OIDN is needed for denoising: {err}")
+    base = settings(samples=8, aovs=('albedo', 'normal'))
+    merged = merge_states(shard_states(scene, base, 2))
+    meta = {'transparent': False, 'frame': 1, 'denoise': True}
+    image = final_image(merged, meta)
+    noisy = merged.image(False)
+    expected = denoise.denoise(noisy[..., :3], merged.aov('albedo'), merged.aov('normal'))
+    np.testing.assert_allclose(image[..., :3], expected, rtol=1e-6, atol=1e-7)
+    assert np.abs(image[..., :3] - noisy[..., :3]).mean() > 1e-3 * noisy[..., :3].mean()
+    np.testing.assert_array_equal(image[..., 3], noisy[..., 3])
+    np.testing.assert_array_equal(final_image(merged, dict(meta, denoise=False)), noisy)
