@@ -15,8 +15,10 @@ Debian's Blender 3.4 crash at exit).
 
 Compilation never delays a render: ``configure(True)`` starts one background
 thread that imports numba and compiles every kernel (or loads it from the
-disk cache); until a kernel is ready its NumPy form runs.  Both agree to
-float rounding (tests/engine/test_kernels.py), so a render may mix them.
+disk cache); until a kernel is ready its NumPy form runs.  Both round
+alike, bit for bit (IEEE arithmetic and the same libm; checked by
+tests/engine/test_kernels.py), so a render may mix them and a seed's image
+does not depend on when compilation finished.
 The cache is ``NUMBA_CACHE_DIR`` or ``~/.cache/ember/numba`` (XDG_CACHE_HOME
 respected), one sub-folder per version of the engine's sources.  The JIT is
 off with ``RenderSettings.use_jit = False``, with ``EMBER_JIT=0``, or when
