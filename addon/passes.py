@@ -85,6 +85,14 @@ def requested(view_layer):
         if _enabled(view_layer, prop):
             for i in range(crypto_layers(view_layer)):
                 out.append((name, f"{name}{i:02d}", 4, "RGBA", 'COLOR'))
+    for group in getattr(view_layer, "lightgroups", ()):
+        name = "Combined_" + group.name
+        out.append((name, name, 3, "RGB", 'COLOR'))
+    for aov in getattr(view_layer, "aovs", ()):
+        if aov.type == 'COLOR':
+            out.append(("AOV Color:" + aov.name, aov.name, 4, "RGBA", 'COLOR'))
+        else:
+            out.append(("AOV Value:" + aov.name, aov.name, 1, "X", 'VALUE'))
     return out
 
 
@@ -118,9 +126,13 @@ def pass_config(scene, view_layer, config_class):
         kwargs.update(mist_start=float(mist.start), mist_depth=float(mist.depth),
                       mist_falloff=MIST_FALLOFF.get(mist.falloff, 2.0),
                       ao_distance=float(world.light_settings.distance))
+        kwargs.update(world_lightgroup=str(getattr(world, "lightgroup", "") or ""))
     ember = getattr(view_layer, "ember", None)
     first = ember is not None and ember.strategy_passes_vertex == 'FIRST'
-    return config_class(strategy_first_vertex=first,
+    # Light groups by object name (lights and meshes; instances of an object
+    # share its name and group, as in Cycles).
+    groups = {obj.name: obj.lightgroup for obj in scene.objects if getattr(obj, "lightgroup", "")}
+    return config_class(strategy_first_vertex=first, lightgroup_of=groups,
                         crypto_levels=2 * crypto_layers(view_layer), **kwargs)
 
 
@@ -158,3 +170,28 @@ def crypto_metadata(view_layer, manifests):
         fields[key + "/conversion"] = "uint32_to_float32"
         fields[key + "/manifest"] = json.dumps(manifest, separators=(",", ":"))
     return fields
+
+
+def material_aovs(material):
+    """{AOV name: ((r, g, b), value)} from a material's AOV Output nodes.
+    Constants only: a linked input is read as far as the shader translator
+    reads constants, else as the socket's own value."""
+    tree = getattr(material, "node_tree", None)
+    if tree is None:
+        return {}
+    from .export import material as material_export
+    from .export import nodes
+    translator = material_export.NodeTranslator(material.name)
+    out = {}
+    for node in tree.nodes:
+        if node.bl_idname != 'ShaderNodeOutputAOV' or node.mute:
+            continue
+        name = getattr(node, "aov_name", "") or node.name
+        colour = translator.color(node, 'Color', (0.0, 0.0, 0.0))
+        value = translator.value(node, 'Value', 0.0)
+        if nodes.is_expr(colour):
+            colour = tuple(node.inputs['Color'].default_value)[:3]
+        if nodes.is_expr(value):
+            value = float(node.inputs['Value'].default_value)
+        out[name] = (tuple(float(c) for c in colour[:3]), float(value))
+    return out

@@ -175,6 +175,75 @@ class VIEWLAYER_PT_ember_passes_light(EmberPassesPanel, bpy.types.Panel):
         ('layer', 'use_pass_ambient_occlusion', "Ambient Occlusion"))
 
 
+class VIEWLAYER_PT_ember_passes_lightgroups(EmberPassesPanel, bpy.types.Panel):
+    """Cycles' Light Groups list (its panel is Cycles-only): one
+    Combined_<group> pass each; objects and lights join a group in Object
+    Properties > Light Group, the world here."""
+    bl_label = "Light Groups"
+    bl_parent_id = 'VIEWLAYER_PT_ember_passes'
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.split_layout()
+        layer = context.view_layer
+        if not hasattr(layer, "lightgroups"):
+            return
+        if hasattr(layout, "template_list"):
+            row = layout.row()
+            row.template_list("UI_UL_list", "ember_lightgroups", layer, "lightgroups",
+                              layer, "active_lightgroup_index", rows=3)
+            col = row.column(align=True)
+            col.operator("scene.view_layer_add_lightgroup", icon='ADD', text="")
+            col.operator("scene.view_layer_remove_lightgroup", icon='REMOVE', text="")
+        world = context.scene.world
+        if world is not None and hasattr(world, "lightgroup"):
+            layout.prop(world, "lightgroup", text="World")
+
+
+class VIEWLAYER_PT_ember_passes_aovs(EmberPassesPanel, bpy.types.Panel):
+    """Cycles' Shader AOV list (its panel is Cycles-only): one pass per AOV,
+    written by the materials' AOV Output nodes."""
+    bl_label = "Shader AOV"
+    bl_parent_id = 'VIEWLAYER_PT_ember_passes'
+    bl_options = {'DEFAULT_CLOSED'}
+    PROPS = (('layer', 'use_pass_combined', "Combined"),)
+
+    def draw(self, context):
+        layout = self.split_layout()
+        layer = context.view_layer
+        if not hasattr(layer, "aovs") or not hasattr(layout, "template_list"):
+            EmberPassesPanel.draw(self, context)
+            return
+        row = layout.row()
+        row.template_list("UI_UL_list", "ember_aovs", layer, "aovs", layer, "active_aov_index", rows=3)
+        col = row.column(align=True)
+        col.operator("scene.view_layer_add_aov", icon='ADD', text="")
+        col.operator("scene.view_layer_remove_aov", icon='REMOVE', text="")
+        aov = layer.active_aov
+        if aov is not None:
+            layout.prop(aov, "type")
+
+
+class OBJECT_PT_ember_lightgroup(bpy.types.Panel):
+    bl_label = "Light Group"
+    bl_space_type = 'PROPERTIES'
+    bl_region_type = 'WINDOW'
+    bl_context = 'object'
+    bl_options = {'DEFAULT_CLOSED'}
+    COMPAT_ENGINES = {ENGINE_ID}
+    PROPS = ()
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES and context.object is not None
+
+    def draw(self, context):
+        layout = self.layout
+        obj = context.object
+        if hasattr(obj, "lightgroup"):
+            layout.prop(obj, "lightgroup", text="Light Group")
+
+
 class VIEWLAYER_PT_ember_passes_crypto(EmberPassesPanel, bpy.types.Panel):
     bl_label = "Cryptomatte"
     bl_parent_id = 'VIEWLAYER_PT_ember_passes'
@@ -205,6 +274,9 @@ classes = (
     VIEWLAYER_PT_ember_passes_data,
     VIEWLAYER_PT_ember_passes_light,
     VIEWLAYER_PT_ember_passes_crypto,
+    VIEWLAYER_PT_ember_passes_lightgroups,
+    VIEWLAYER_PT_ember_passes_aovs,
+    OBJECT_PT_ember_lightgroup,
 )
 
 

@@ -79,13 +79,13 @@ class Tile:
 class Film:
     """Per-pixel sample statistics of a whole frame (row 0 at the top)."""
 
-    def __init__(self, width, height, aovs=tuple(AOV_CHANNELS), adaptive=False, passes=()):
+    def __init__(self, width, height, aovs=tuple(AOV_CHANNELS), adaptive=False, passes=(), crypto_levels=6):
         unknown = set(aovs) - set(AOV_CHANNELS)
         if unknown:
             raise ValueError(f"unknown AOVs {sorted(unknown)}; known: {sorted(AOV_CHANNELS)}")
         self.width, self.height = width, height
         self.passes = tuple(passes)   # named extra passes, see the block at the end
-        self.extra = extra_passes.Sums(self.passes, 0, width * height) if self.passes else None
+        self.extra = extra_passes.Sums(self.passes, 0, width * height, crypto_levels) if self.passes else None
         n = width * height
         self.count = np.zeros(n, np.float32)
         self.mean = np.zeros((n, 3), np.float32)

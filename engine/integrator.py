@@ -26,6 +26,7 @@ import numpy as np
 from . import bsdf, kernels, pass_events
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .lights import POINT, SUN
+from .nodes import ShadingContext
 from .sampler import BSDF, CAMERA, KIND, LIGHT, emitter_set, vertex_set
 from .sampling import power_heuristic
 from .vec import dot, frame, to_local, to_world
@@ -119,6 +120,11 @@ class Hit:
     tangent: object = None
     tangent_sign: object = None
     back: object = None
+    # For shader nodes (engine.nodes.ShadingContext): barycentrics (N, 2),
+    # bounces before this hit and the VIS_* bit of the ray that found it.
+    bary: object = None
+    depth: object = None
+    ray: object = None
 
 
 def trace_batch(ctx, pix, sample, tile):
@@ -175,20 +181,20 @@ def _bounce(ctx, paths, depth, tile):
     if ctx.triangles.visibility is not None:
         t, prim, bu, bv = _skip_invisible(ctx, paths.o, paths.d, paths.tmax, paths.ray, t, prim, bu, bv)
     lt, emitter, lLe, lpdf = _lights_along(ctx, paths, np.minimum(t, paths.tmax))
-    # A path ends at the closest light it meets (measured against Cycles:
-    # light_over_lit_world in tests/addon/test_light_parity.py).
     hit_light = lt < np.inf
-    hit_surf = (prim >= 0) & ~hit_light
     if depth == 0:
-        _camera_aovs(ctx, paths, t, prim, hit_light, hit_surf, tile)
+        _camera_aovs(ctx, paths, t, prim, hit_light, (prim >= 0) & ~hit_light, tile)
 
     # Emitters and the world seen along the ray.
+    stop = np.zeros(len(prim), bool)
     if hit_light.any():
         i = np.nonzero(hit_light)[0]
         w = _mis_hit(ctx, paths, i, emitter[i], lpdf[i])
         paths.L[i] += paths.beta[i] * lLe[i] * w[:, None]
-        pass_events.emitter(ctx, paths, i, paths.beta[i] * lLe[i], w, tile)
-    miss = (prim < 0) & ~hit_light
+        pass_events.emitter(ctx, paths, i, paths.beta[i] * lLe[i], w, tile, emitters=emitter[i])
+        stop[i] = _pass_light(ctx, paths, i)
+    hit_surf = (prim >= 0) & ~stop
+    miss = (prim < 0) & ~stop
     if miss.any():
         _escaped(ctx, paths, np.nonzero(miss)[0], tile)
 
@@ -204,7 +210,7 @@ def _bounce(ctx, paths, depth, tile):
     hit = _interaction(ctx, paths, t, prim, bu, bv)
     emission = ctx.materials.emission[hit.mat]
     if ctx.materials.textures.emission:
-        emission = ctx.materials.textures.emission_at(hit.mat, hit.uv, emission)
+        emission = ctx.materials.textures.emission_at(hit.mat, _shading(ctx, hit), emission)
     em = np.nonzero(np.any(emission > 0, axis=1))[0]
     if len(em):
         _emission_hit(ctx, paths, em, hit, emission[em], tile)
@@ -223,7 +229,7 @@ def _bounce(ctx, paths, depth, tile):
         if len(paths.pix) == 0:
             return carried
 
-    lobes = ctx.materials.gather(hit.mat, hit.uv)
+    lobes = ctx.materials.gather(hit.mat, _shading(ctx, hit))
     _orient(hit, lobes)
     # Texture hook: normal maps and bump replace the shading normal.
     if ctx.materials.textures.normals:
@@ -252,6 +258,15 @@ def _bounce(ctx, paths, depth, tile):
         _finish(ctx, paths, tile, ~alive)
         paths = paths.take(alive)
     return paths if carried is None or len(carried.pix) == 0 else paths.concat(carried)
+
+
+def _pass_light(ctx, paths, i):
+    """Paths ``i`` met a light: as Cycles (integrator_shade_light) they go on
+    past it to the surface or world behind, counting a transparent bounce,
+    and end once that count reaches transparent_max_bounces (so with 0 or 1
+    a light still ends the path).  Returns which of ``i`` end."""
+    paths.tbounce[i] += 1
+    return paths.tbounce[i] >= ctx.settings.transparent_max_bounces
 
 
 def _unless(mask, old, new):
@@ -335,7 +350,8 @@ def _escaped(ctx, paths, i, tile):
         emitter, Le, pdf = env
         w = _mis_hit(ctx, paths, sky, np.full(len(sky), emitter), pdf)
         paths.L[sky] += paths.beta[sky] * Le * w[:, None]
-        pass_events.emitter(ctx, paths, sky, paths.beta[sky] * Le, w, tile, world=True)
+        pass_events.emitter(ctx, paths, sky, paths.beta[sky] * Le, w, tile, world=True,
+                            emitters=np.full(len(sky), emitter))
     else:
         paths.L[sky] += paths.beta[sky] * ctx.world
         pass_events.emitter(ctx, paths, sky, paths.beta[sky] * ctx.world, np.ones(len(sky)), tile,
@@ -345,7 +361,7 @@ def _escaped(ctx, paths, i, tile):
         if len(j):
             w = _mis_hit(ctx, paths, j, np.full(len(j), emitter), np.full(len(j), pdf))
             paths.L[j] += paths.beta[j] * Le * w[:, None]
-            pass_events.emitter(ctx, paths, j, paths.beta[j] * Le, w, tile)
+            pass_events.emitter(ctx, paths, j, paths.beta[j] * Le, w, tile, emitters=np.full(len(j), emitter))
 
 
 def _film_alpha_through(paths, i, tile):
@@ -382,13 +398,20 @@ def _interaction(ctx, paths, t, prim, bu, bv):
     else:
         ns = ng
     uv = _hit_uv(tr, prim, bu, bv)
-    hit = Hit(p, ng, ns, -d, np.take(tr.material, prim), prim, ctx.accel.offset_scale(p), uv, back=back)
+    hit = Hit(p, ng, ns, -d, np.take(tr.material, prim), prim, ctx.accel.offset_scale(p), uv, back=back,
+              bary=np.stack([bu, bv], axis=1), depth=getattr(paths, "bounce", None),
+              ray=getattr(paths, "ray", None))
     if getattr(tr, "tangent", None) is not None:
         w = np.stack([1.0 - bu - bv, bu, bv], axis=1)
         # Unnormalised, as Cycles interpolates its tangent attribute.
         hit.tangent = np.einsum("nk,nkj->nj", w, tr.tangent[prim])
         hit.tangent_sign = np.where(np.einsum("nk,nk->n", w, tr.tangent_sign[prim]) < 0, -1.0, 1.0)
     return hit
+
+
+def _shading(ctx, hit):
+    """The hit's shading context for texture and shader-node evaluation."""
+    return ShadingContext.of_hit(ctx.triangles, hit)
 
 
 def _hit_uv(tr, prim, bu, bv):
@@ -408,7 +431,8 @@ def _emission_hit(ctx, paths, em, hit, Le, tile=None):
     else:
         w = _mis_hit(ctx, paths, em, None, None)
     paths.L[em] += paths.beta[em] * Le * w[:, None]
-    pass_events.emitter(ctx, paths, em, paths.beta[em] * Le, w, tile)
+    pass_events.emitter(ctx, paths, em, paths.beta[em] * Le, w, tile,
+                        emitters=ctx.lights.emitter_of_triangle(hit.mat[em]))
 
 
 def _nee_emitters(ctx):
@@ -493,7 +517,7 @@ def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u, ti
         if added is None:
             added = np.take(contrib, free, axis=0)
         pass_events.nee(ctx, paths, free, added, w[free], np.broadcast_to(ls.delta, w.shape)[free],
-                        lobes, lobes_wo, wo_l, wi_l[free], f[free], tile)
+                        lobes, lobes_wo, wo_l, wi_l[free], f[free], tile, emitters=e[free])
 
 
 def _add_rows(L, rows, values):
@@ -716,7 +740,7 @@ def _pass_last(ctx, paths, hit, tile):
     go = ctx.transparent_mat[hit.mat] & (paths.tbounce < ctx.transparent_limit)
     rows = np.nonzero(go)[0]
     if len(rows):
-        T = bsdf.transparency(ctx.materials.gather(hit.mat[rows], hit.uv[rows]))
+        T = bsdf.transparency(ctx.materials.gather(hit.mat[rows], _shading(ctx, hit).take(rows)))
         paths.beta[rows] *= T
         go[rows] = np.any(T > 0, axis=1)
     if not go.all():
@@ -755,7 +779,8 @@ def _transmittance(ctx, origin, wi, tmax, emitter, tbounce):
         c = np.nonzero(crosses)[0]
         if len(c) == 0:
             break
-        T = bsdf.transparency(ctx.materials.gather(mat[c], _hit_uv(ctx.triangles, prim[c], bu[c], bv[c])))
+        T = bsdf.transparency(ctx.materials.gather(mat[c], ShadingContext.at(
+            ctx.triangles, prim[c], bu[c], bv[c], wo=-d[c], ray=np.full(len(c), VIS_SHADOW, np.uint8))))
         out[idx[c]] *= T
         c = c[np.any(T > 0, axis=1)]
         # Go on from just past the surface, towards the same end point.

@@ -29,7 +29,8 @@ import threading
 import numpy as np
 
 from . import bsdf
-from .passes import LIGHT_CLASSES, STRATEGY, PassConfig, crypto_manifest, CRYPTO
+from .passes import (AOV_COLOR, CRYPTO, LIGHT_CLASSES, STRATEGY, PassConfig, crypto_manifest, is_aov,
+                     light_groups)
 from .sampling import cosine_hemisphere
 from .vec import dot, luminance, to_local, to_world
 
@@ -54,11 +55,85 @@ def configure(scene, settings):
     mats = list(scene.materials) + [DEFAULT_MATERIAL]
     return replace(
         cfg,
+        group_parts=_group_parts(scene, mats, cfg, settings.passes),
+        aov_tables=_aov_tables(mats, settings.passes),
         object_names=tuple(i.name for i in scene.instances),
         material_names=tuple(m.name for m in mats),
         asset_names=tuple(i.asset or i.name for i in scene.instances),
         object_pass_index=tuple(int(getattr(i, "pass_index", 0)) for i in scene.instances),
         material_pass_index=tuple(int(getattr(m, "pass_index", 0)) for m in mats))
+
+
+def _aov_tables(materials, names):
+    """{pass name: (materials, C) values}: each material's constant AOV
+    output, RGB + 1 for colour AOVs (0 where the material has none)."""
+    tables = {}
+    for name in names:
+        if not is_aov(name):
+            continue
+        aov = name.split(":", 1)[1]
+        colour = name.startswith(AOV_COLOR)
+        table = np.zeros((len(materials), 4 if colour else 1))
+        for i, mat in enumerate(materials):
+            entry = (getattr(mat, "aovs", None) or {}).get(aov)
+            if entry is not None:
+                table[i] = (*entry[0], 1.0) if colour else entry[1]
+        tables[name] = table
+    return tables
+
+
+def _group_parts(scene, materials, cfg, names):
+    """Light-group ids (-1 = none) of the emitters, by kind, in LightSet's
+    order: point and spot lights, suns, area lights, the world (HDRI, or the
+    constant world BSDF sampling finds), emissive materials (the group of
+    the first grouped object using the material: Ember's emissive meshes
+    are one emitter per material)."""
+    from .scene import AreaLight, PointLight, SunLight
+    groups = {g: i for i, g in enumerate(light_groups(names))}
+    if not groups:
+        return None
+    of = cfg.lightgroup_of
+
+    def ids(kind):
+        return [groups.get(of.get(l.name, ""), -1) for l in scene.lights if isinstance(l, kind)]
+    material = np.full(len(materials), -1, np.int64)
+    for inst in scene.instances:
+        g = groups.get(of.get(inst.name, ""), -1)
+        for m in inst.materials:
+            if g >= 0 and 0 <= m < len(material) and material[m] < 0:
+                material[m] = g
+    return {"lights": ids(PointLight) + ids(SunLight) + ids(AreaLight),
+            "world": groups.get(cfg.world_lightgroup, -1), "material": material, "count": len(groups),
+            "names": tuple(groups)}
+
+
+def _emitter_groups(ctx):
+    """(emitters,) light-group id per LightSet emitter, built once."""
+    cached = ctx.__dict__.get("_pass_emitter_groups")
+    if cached is None:
+        parts = ctx.pass_config.group_parts
+        lt = ctx.lights
+        env = [parts["world"]] * lt.env.count
+        cached = np.array(parts["lights"] + env + list(parts["material"][lt.meshes.material]) + [-1], np.int64)
+        ctx._pass_emitter_groups = cached
+    return cached
+
+
+def _add_light_groups(ctx, pix, contrib, emitters, tile, world=False):
+    """Combined_<group>: light from the group's emitters, MIS-weighted as
+    in Combined (all bounces), so the groups and the ungrouped light add
+    up to Combined."""
+    parts = ctx.pass_config.group_parts
+    if parts is None or len(pix) == 0:
+        return
+    if emitters is None:
+        gid = np.full(len(pix), parts["world"] if world else -1)
+    else:
+        gid = _emitter_groups(ctx)[np.asarray(emitters, np.int64)]
+    for g, name in enumerate(parts["names"]):
+        sel = gid == g
+        if sel.any():
+            tile.add_pass("Combined_" + name, pix[sel], contrib[sel])
 
 
 def metadata(config, names):
@@ -161,6 +236,8 @@ def first_hit(ctx, paths, hit, lobes, w, tt, bb, tile):
         add("Mist", pix, 1.0 - _mist(ctx, cfg, hit.p))
     inst = ctx.triangles.instance[hit.prim] if ctx.triangles.instance is not None else np.zeros(len(pix), int)
     _colours(lobes, w, dot(hit.wo, hit.ns), pix, tile)
+    for name, table in (cfg.aov_tables or {}).items():
+        add(name, pix, table[hit.mat])
     if tile.extra.crypto:
         _cryptomatte(cfg, inst, hit.mat, pix, tile)
     if tile.wants("Ambient Occlusion"):
@@ -364,14 +441,16 @@ def _add_light_classes(paths, rows, contrib, direct, tile, shares=None):
                 tile.add_pass(name + suffix, paths.pix[rows[sel]], part[sel])
 
 
-def nee(ctx, paths, rows, contrib, w, delta, lobes, lobes_wo, wo_l, wi_l, f, tile):
+def nee(ctx, paths, rows, contrib, w, delta, lobes, lobes_wo, wo_l, wi_l, f, tile, emitters=None):
     """Light sampling added ``contrib`` (MIS-weighted, after the shadow test)
-    to paths ``rows``; w is its MIS weight, delta marks delta lights."""
+    to paths ``rows``; w is its MIS weight, delta marks delta lights,
+    emitters the lights sampled."""
     if not listening(tile) or len(rows) == 0:
         return
     cfg = ctx.pass_config
     vertex = paths.bounce[rows]
     pix = paths.pix[rows]
+    _add_light_groups(ctx, pix, contrib, emitters, tile)
     if _wants_strategy(tile):
         on = vertex == 0 if cfg.strategy_first_vertex else np.ones(len(rows), bool)
         tile.add_pass("Strategy Light", pix[on], contrib[on])
@@ -406,15 +485,17 @@ def _wants_strategy(tile):
     return any(tile.wants(n) for n in STRATEGY)
 
 
-def emitter(ctx, paths, rows, unweighted, w, tile, world=False, bsdf_only=False):
+def emitter(ctx, paths, rows, unweighted, w, tile, world=False, bsdf_only=False, emitters=None):
     """An emitter (or the world) seen along the paths ``rows``: added
     unweighted * w.  bsdf_only: light that NEE never samples (a constant
-    world)."""
+    world); emitters: LightSet indices (None: the constant world or a
+    light the passes do not group)."""
     if not listening(tile) or len(rows) == 0:
         return
     contrib = unweighted * w[:, None]
     bounce = paths.bounce[rows]
     pix = paths.pix[rows]
+    _add_light_groups(ctx, pix, contrib, emitters, tile, world)
     camera = bounce == 0
     tile.add_pass("Environment" if world else "Emission", pix[camera], contrib[camera])
     if _wants_strategy(tile):

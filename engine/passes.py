@@ -22,7 +22,7 @@ them for older Blenders).  How each sum becomes a picture:
 - ONE_MINUS: 1 - mean (Cycles' Mist accumulates (1 - mist) x coverage).
 - Cryptomatte: per pixel the coverage of every id met, ranked (``crypto``).
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -80,10 +80,45 @@ class PassConfig:
     asset_names: tuple = ()
     object_pass_index: tuple = ()
     material_pass_index: tuple = ()
+    # Light groups (Cycles' Combined_<group>): object or light name -> group,
+    # the world's group ("" = none).
+    lightgroup_of: dict = field(default_factory=dict)
+    world_lightgroup: str = ""
+    group_parts: object = None   # filled by pass_events.configure
+    aov_tables: object = None    # filled by pass_events.configure
+
+
+LIGHT_GROUP_PREFIX = "Combined_"
+
+
+AOV_COLOR, AOV_VALUE = "AOV Color:", "AOV Value:"
 
 
 def unknown(names):
-    return [n for n in names if n not in ALL_PASSES]
+    return [n for n in names if n not in ALL_PASSES and not is_light_group(n) and not is_aov(n)]
+
+
+def is_aov(name):
+    """Shader AOV passes: 'AOV Color:<name>' (RGBA, A = the share of samples
+    whose material wrote it, as Cycles) or 'AOV Value:<name>'."""
+    return name.startswith((AOV_COLOR, AOV_VALUE)) and len(name.split(":", 1)[1]) > 0
+
+
+def is_light_group(name):
+    return name.startswith(LIGHT_GROUP_PREFIX) and len(name) > len(LIGHT_GROUP_PREFIX)
+
+
+def light_groups(names):
+    """The light-group names among requested passes, in order."""
+    return tuple(n[len(LIGHT_GROUP_PREFIX):] for n in names if is_light_group(n))
+
+
+def _definition(name):
+    if is_light_group(name):
+        return (3, MEAN, None)
+    if is_aov(name):
+        return (4 if name.startswith(AOV_COLOR) else 1, MEAN, None)
+    return DEFS[name]
 
 
 def sums_needed(names):
@@ -91,8 +126,8 @@ def sums_needed(names):
     weight channels), as {name: channels}."""
     need = {}
     for name in names:
-        if name in DEFS:
-            channels, kind, other = DEFS[name]
+        if name in DEFS or is_light_group(name) or is_aov(name):
+            channels, kind, other = _definition(name)
             need[name] = channels
             if kind == RATIO:
                 need[other] = 1
@@ -104,14 +139,17 @@ def sums_needed(names):
 class Sums:
     """Per-pixel sums of named passes over the pixel range [lo, hi)."""
 
-    def __init__(self, names, lo, hi):
+    def __init__(self, names, lo, hi, crypto_levels=None):
+        """crypto_levels: the film's Cryptomatte slots per pixel (a tile,
+        None, keeps its few (pixel, id) pairs compactly instead)."""
         self.lo, self.hi = lo, hi
         self.need = sums_needed(names)
         self.arrays = {name: np.zeros((hi - lo, c), np.float32) for name, c in self.need.items()}
         # FIRST passes: the rank (distance to the pixel centre) of the sample held.
         self.first = {name: np.full(hi - lo, np.inf, np.float32)
                       for name in self.need if name in DEFS and DEFS[name][1] == FIRST}
-        self.crypto = {kind: Coverage() for kind in CRYPTO if kind in names}
+        self.crypto = {kind: Coverage() if crypto_levels is None else Slots(hi - lo, crypto_levels)
+                       for kind in CRYPTO if kind in names}
 
     def wants(self, name):
         return name in self.arrays
@@ -163,9 +201,8 @@ class Sums:
 
 
 class Coverage:
-    """Cryptomatte: per (pixel, id) the number of samples that saw id first,
-    kept as sorted unique keys pixel * 2^32 + id (compact: a pixel holds
-    entries only for the ids it saw)."""
+    """A tile's Cryptomatte samples: per (pixel, id) the number of samples
+    that saw id first, kept as sorted unique keys pixel * 2^32 + id."""
 
     def __init__(self):
         self.keys = np.zeros(0, np.int64)
@@ -185,6 +222,35 @@ class Coverage:
         self.weights = np.bincount(inverse, weights=weights).astype(np.float32)
 
 
+class Slots:
+    """The film's Cryptomatte accumulator, as Cycles': per pixel ``levels``
+    (id, samples) slots, filled in the order ids arrive; an id arriving at
+    a pixel whose slots are full is dropped (Cycles does the same)."""
+
+    def __init__(self, npix, levels):
+        self.ids = np.full((npix, levels), -1, np.int32)
+        self.weights = np.zeros((npix, levels), np.float32)
+
+    def merge(self, cov, offset):
+        if len(cov.keys) == 0:
+            return
+        pix = (cov.keys >> 32) + offset
+        ids = (cov.keys & 0xffffffff).astype(np.int32)
+        match = self.ids[pix] == ids[:, None]
+        known = match.any(axis=1)
+        rows = np.nonzero(known)[0]
+        self.weights[pix[rows], match[rows].argmax(axis=1)] += cov.weights[rows]
+        new = np.nonzero(~known)[0]
+        if len(new) == 0:
+            return
+        p = pix[new]   # sorted by pixel: the keys are
+        rank = np.arange(len(p)) - np.searchsorted(p, p, side="left")
+        slot = (self.ids[p] >= 0).sum(axis=1) + rank
+        fits = slot < self.ids.shape[1]
+        self.ids[p[fits], slot[fits]] = ids[new][fits]
+        self.weights[p[fits], slot[fits]] = cov.weights[new][fits]
+
+
 def images(sums, count, width, height, names, film=None, config=None):
     """{name: (H, W, C) float32} for the requested passes."""
     out = {}
@@ -202,7 +268,7 @@ def images(sums, count, width, height, names, film=None, config=None):
 
 def _pass_image(sums, name, c):
     arr = sums.arrays[name].astype(np.float64)
-    kind, other = DEFS[name][1], DEFS[name][2]
+    kind, other = _definition(name)[1:]
     if kind == FIRST:
         return arr
     if kind == RATIO:
@@ -280,25 +346,17 @@ def crypto_manifest(config, kind):
     return {n: f"{crypto_hash(n):08x}" for n in sorted(set(crypto_names(config, kind)))}
 
 
-def crypto_image(cov, count, config, kind):
-    """(npix, 4 * levels / 2) float32: per pixel the ids it saw, by
-    decreasing coverage, as (id, coverage) pairs, two per RGBA layer."""
-    levels = config.crypto_levels
-    npix = len(count)
-    out = np.zeros((npix, 2 * levels), np.float32)
-    if len(cov.keys) == 0:
-        return out
+def crypto_image(slots, count, config, kind):
+    """(npix, 2 * levels) float32: per pixel the ids it saw, by decreasing
+    coverage, as (id, coverage) pairs, two per RGBA layer."""
+    levels = slots.ids.shape[1]
     names = crypto_names(config, kind)
     floats = np.array([crypto_hash(n) for n in names] or [0], np.uint32).view(np.float32)
-    pix = (cov.keys >> 32).astype(np.int64)
-    ids = (cov.keys & 0xffffffff).astype(np.int64)
-    frac = cov.weights / np.maximum(count[pix].astype(np.float32), 1.0)
-    order = np.lexsort((-frac, pix))
-    pix, ids, frac = pix[order], ids[order], frac[order]
-    start = np.searchsorted(pix, pix, side="left")
-    rank = np.arange(len(pix)) - start
-    keep = rank < levels
-    pix, ids, frac, rank = pix[keep], ids[keep], frac[keep], rank[keep]
-    out[pix, 2 * rank] = floats[ids]
-    out[pix, 2 * rank + 1] = frac
+    order = np.argsort(-slots.weights, axis=1, kind="stable")
+    ids = np.take_along_axis(slots.ids, order, axis=1)
+    cover = np.take_along_axis(slots.weights, order, axis=1) / np.maximum(count, 1.0)[:, None]
+    out = np.zeros((len(count), 2 * levels), np.float32)
+    used = ids >= 0
+    out[:, 0::2] = np.where(used, floats[np.clip(ids, 0, len(floats) - 1)], 0.0)
+    out[:, 1::2] = np.where(used, cover, 0.0)
     return out

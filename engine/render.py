@@ -146,7 +146,8 @@ def render(scene, settings=None, progress=None):
     ctx = prepare(scene, settings)
     cam = ctx.camera
     adaptive = _Adaptive(settings, cam.width * cam.height)
-    film = Film(cam.width, cam.height, settings.aovs, adaptive.params is not None, settings.passes)
+    film = Film(cam.width, cam.height, settings.aovs, adaptive.params is not None, settings.passes,
+                ctx.pass_config.crypto_levels)
     threads = settings.threads or os.cpu_count() or 1
     spp_pass = max(1, min(settings.samples_per_pass, settings.samples))
     stats = {"samples": 0, "samples_total": settings.samples, "prepare_seconds": time.perf_counter() - t_start}

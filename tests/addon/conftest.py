@@ -16,7 +16,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 SCENES_DIR = os.path.join(ROOT, 'blend_scenes')
 
 os.environ.setdefault('BLENDER_USER_RESOURCES', tempfile.mkdtemp(prefix='ember-blender-user-'))
-for path in (ROOT, os.path.dirname(os.path.abspath(__file__))):  # repo, then test helpers
+for path in (ROOT, os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+             os.path.dirname(os.path.abspath(__file__))):  # repo, tests/ember_stats.py, test helpers
     if path not in sys.path:
         sys.path.insert(0, path)
 

@@ -1,8 +1,9 @@
 """Materials against Cycles (issue 4): small scenes built here with bpy,
 rendered by Ember and by Cycles (CPU, caustics on, same bounces and filter),
-compared block by block with Welch's t-test, Sidak-corrected to a
-family-wise alpha of 1% per scene (ember_stats.failing_blocks, as
-test_render_scenes).  The relative mean error per scene is printed.
+compared block by block with Welch's t-test and by the totals of the image
+and its quadrants, at the suite's family level (ember_testlib.compare_with_cycles,
+as test_render_scenes); results and power are printed.  The furnace's halves
+(multiscatter left, single scatter right) are within those quadrant tests.
 
 Scenes (features grouped to keep the runtime small):
 * glass: a smooth Glass BSDF sphere and a rough Multiscatter glass slab over

@@ -21,7 +21,7 @@ from ember_testlib import ROOT, SCENES_DIR, load_exr, require
 BLENDER = shutil.which('blender') or '/usr/bin/blender'
 BPY42_PYTHON = os.path.join(ROOT, 'build', 'venv-bpy42', 'bin', 'python')
 PORTABLE_TESTS = ['tests/addon/test_export.py', 'tests/addon/test_render_engine.py', 'tests/addon/test_blend_scenes.py',
-                  'tests/addon/test_stats.py']
+                  'tests/engine/test_stats.py', 'tests/addon/test_pass_names.py']
 
 
 def run(cmd, env=None, timeout=600):

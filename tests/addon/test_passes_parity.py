@@ -17,6 +17,11 @@ with independent seeds.
   (specular for the denoiser: roughness^2 < 0.075) Cycles writes smaller
   normals than Ember (its glass sample weights are not Ember's); that
   difference is known and left out here.
+- Light groups (Combined_key: the area light, Combined_card: the emissive
+  card) by the block test; that groups add up to Combined is tested in
+  tests/engine/test_passes.py.
+- Shader AOVs 'tint' (colour) and 'mask' (value), written by AOV Output
+  nodes, by the block test.
 - Cryptomatte: Blender's Cryptomatte node, reading Ember's manifest, selects
   the box; its matte is compared with Cycles' by block test.
 """
@@ -33,11 +38,19 @@ from test_other_blenders import legacy_zip  # noqa: F401  (fixture)
 SEEDS, SPP, BOUNCES = 4, 24, 3
 WIDTH, HEIGHT = 32, 24
 BOX, BALL = 2, 3   # object indices
-STATISTICAL = ("Combined", "Mist", "Normal", "UV", "Ambient Occlusion", "Emission", "Environment",
+# Known, measured, outside the passes: Ember's directly seen emission of the
+# small card (about 7 pixels) sums 2.5-3% under Cycles' (16 seeds, random
+# pattern: t -2.5; 10 seeds, Sobol: t -4.6), interior pixels equal (4.0):
+# a projected-area (camera or geometry) difference Combined is too noisy to
+# show.  Combined_card inherits it and fails at these seeds; strict, so the
+# fix is noticed.
+CARD_AREA = pytest.mark.xfail(strict=True, reason="directly seen card emission 3% under Cycles (area)")
+STATISTICAL = ("Combined", "Combined_key", pytest.param("Combined_card", marks=CARD_AREA), "tint", "mask", "Mist", "Normal", "UV", "Ambient Occlusion", "Emission", "Environment",
                "Diffuse Direct x Color", "Diffuse Indirect x Color", "Glossy Direct x Color",
                "Glossy Indirect x Color", "Transmission Direct x Color", "Transmission Indirect x Color")
 CENTRE = ("Depth", "Position", "Object Index", "Material Index")
 COLOURS = ("Diffuse Color", "Glossy Color", "Transmission Color")
+LIGHT_GROUPS = ("key", "card")   # the area light's and the emissive card's (the world has none)
 CLASSES = ("Diffuse", "Glossy", "Transmission")
 
 
@@ -81,13 +94,17 @@ def _scene():
     _object(mesh.primitive_uv_sphere_add, "Ball", _material("BallMat", 'ShaderNodeBsdfGlass', (0.9, 0.9, 0.9), 3,
                                                              Roughness=0.2), BALL, location=(1.3, -0.6, 1),
             radius=0.9)
-    _object(mesh.primitive_plane_add, "Card", _material("CardMat", 'ShaderNodeEmission', (1.0, 0.8, 0.6), 4,
-                                                        Strength=4.0), 4, size=0.8, location=(0, 2.5, 0.8),
-            rotation=(1.2, 0, 0))
+    card = _object(mesh.primitive_plane_add, "Card", _material("CardMat", 'ShaderNodeEmission', (1.0, 0.8, 0.6),
+                                                               4, Strength=4.0), 4, size=0.8,
+                   location=(0, 2.5, 0.8), rotation=(1.2, 0, 0))
     bpy.ops.object.light_add(type='AREA', location=(1, -1, 5))
     light = bpy.context.active_object
     light.data.energy = 300.0
     light.data.size = 1.5
+    for name in LIGHT_GROUPS:
+        bpy.context.view_layer.lightgroups.add(name=name)
+    light.lightgroup, card.lightgroup = LIGHT_GROUPS
+    _shader_aovs(bpy.context.view_layer)
     world = scene.world
     world.use_nodes = True
     background = next(n for n in world.node_tree.nodes if n.type == 'BACKGROUND')
@@ -104,6 +121,22 @@ def _scene():
         settings.file_format = 'OPEN_EXR_MULTILAYER'
     settings.color_depth = '32'
     return scene
+
+
+def _shader_aovs(layer):
+    """AOVs 'tint' (colour, written by the box) and 'mask' (value, written
+    by the box and the floor)."""
+    for name, kind in (("tint", 'COLOR'), ("mask", 'VALUE')):
+        aov = layer.aovs.add()
+        aov.name, aov.type = name, kind
+    for mat, aovs in (("BoxMat", (("tint", (0.2, 0.4, 0.6), 0.0), ("mask", (0, 0, 0), 0.7))),
+                      ("FloorMat", (("mask", (0, 0, 0), 0.3),))):
+        tree = bpy.data.materials[mat].node_tree
+        for name, colour, value in aovs:
+            node = tree.nodes.new('ShaderNodeOutputAOV')
+            node.aov_name = name
+            node.inputs['Color'].default_value = colour + (1.0,)
+            node.inputs['Value'].default_value = value
 
 
 def _enable_passes(layer):
@@ -204,14 +237,17 @@ def _block_test(name, ember, cycles, floor, keep=None):
         blocks = stats.block_means(keep[None, :, :, None].astype(float), 4)[0, ..., 0] == 1.0
         t = t[blocks]
         dof = dof[blocks]
-    level = stats.sidak_alpha(0.01, t.size)
+    level = stats.family_level("passes parity blocks", t.size)
     p = np.array([stats.t_two_sided_p(ti, di) for ti, di in zip(t.ravel(), dof.ravel())])
-    totals = [x.mean(axis=tuple(range(1, x.ndim))) for x in (ember, cycles)]
-    z = (totals[0].mean() - totals[1].mean()) / max(np.sqrt(sum(x.var(ddof=1) / len(x) for x in totals)), 1e-12)
-    print(f"\n{name}: mean {totals[0].mean():.5g} vs Cycles {totals[1].mean():.5g} (z {z:.2f}); "
-          f"max |t| {np.abs(t).max():.2f} over {t.size} block-channels")
+    # Whole-image mean: Welch's t over the seeds' image means (Student's t:
+    # 4 seeds estimate their spread poorly, a normal z would overreach).
+    totals = [x.mean(axis=tuple(range(1, x.ndim)))[:, None] for x in (ember, cycles)]
+    t_all, dof_all, _, _ = stats.welch(*totals)
+    p_all = stats.t_two_sided_p(float(t_all[0]), float(dof_all[0]))
+    print(f"\n{name}: mean {totals[0].mean():.5g} vs Cycles {totals[1].mean():.5g} (t {float(t_all[0]):.2f}, "
+          f"p {p_all:.3g}); max |t| {np.abs(t).max():.2f} over {t.size} block-channels")
     assert (p >= level).all(), f"{name}: {int((p < level).sum())} blocks differ from Cycles"
-    return z
+    return p_all
 
 
 def test_every_pass_cycles_writes_exists(renders):
@@ -222,9 +258,9 @@ def test_every_pass_cycles_writes_exists(renders):
 @pytest.mark.parametrize("name", STATISTICAL)
 def test_sampled_pass_matches_cycles(renders, name):
     ember, cycles = _stack(renders, 'EMBER', name)[..., :3], _stack(renders, 'CYCLES', name)[..., :3]
-    z = _block_test(name, ember, cycles, 1e-5)
-    if np.isfinite(z):
-        assert abs(z) < 3.29, name   # whole-image mean, two-sided 0.1%
+    p = _block_test(name, ember, cycles, 1e-5)
+    # Whole-image mean: one family of the suite's budget (tests/ember_stats.py).
+    assert p >= stats.family_level(f"{name} image mean"), f"{name}: whole-image mean off, p = {p:.3g}"
 
 
 @pytest.mark.parametrize("name", CENTRE)
@@ -251,9 +287,11 @@ def test_denoising_pass_matches_cycles_off_glass(renders, name):
 
 def test_light_passes_add_up_to_combined(renders):
     for images in renders['EMBER']:
+        combined = images["Combined"][..., :3]
         total = sum(images[f"{c} {p} x Color"] for c in CLASSES for p in ("Direct", "Indirect"))
         total = total + images["Emission"] + images["Environment"]
-        assert np.abs(total - images["Combined"][..., :3]).max() <= 1e-4 * (1.0 + images["Combined"].max())
+        assert np.abs(total - combined).max() <= 1e-4 * (1.0 + combined.max())
+
 
 
 def test_cryptomatte_node_selects_the_box_as_in_cycles(renders):

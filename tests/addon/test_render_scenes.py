@@ -4,15 +4,16 @@ Agreement is a statistical test, not a tolerance: images are cut into pixel
 blocks; Ember's block means come with a standard error measured from its own
 passes (the difference of successive progressive images gives independent
 per-pass estimates), Cycles' from renders with different seeds.  Welch's t on
-every block and channel, Sidak-corrected to a family-wise alpha of 1%, must not
-reject.  The relative mean error per scene is printed (pytest -s shows it).
+every block and channel, and on the totals of the whole image and its quadrants,
+at the suite's family level (tests/ember_stats.py), must not reject.  The power of
+each is printed (pytest -s shows it); test_cycles_references.py holds the same
+scenes to converged Cycles references with far more power.
 """
 import numpy as np
 import pytest
 
-import ember_stats as stats
-from ember_testlib import (open_scene, per_pass_estimates, render_array, setup_cycles, setup_ember,
-                           small_resolution)
+from ember_testlib import (assert_no_failing_blocks, compare_with_cycles, open_scene, per_pass_estimates,
+                           render_array, setup_cycles, setup_ember, small_resolution)
 
 EMBER_SPP = 64        # one sample per pass -> 64 independent batches
 CYCLES_SEEDS = 8      # independent Cycles renders ...
@@ -45,7 +46,6 @@ def test_ember_renders_real_pixels(name, tmp_path, tapped_engine):
     assert np.isfinite(image).all(), "NaN or inf pixels"
     assert (image[..., 3] == 1.0).all()
     luminance = rgb @ np.array([0.2126, 0.7152, 0.0722])
-    assert 0.02 < luminance.mean() < 20.0, luminance.mean()
     h, w = luminance.shape
     for quadrant in (luminance[:h // 2, :w // 2], luminance[:h // 2, w // 2:],
                      luminance[h // 2:, :w // 2], luminance[h // 2:, w // 2:]):
@@ -74,14 +74,9 @@ def test_agrees_with_cycles(name, tmp_path, tapped_engine):
     for seed in range(CYCLES_SEEDS):
         setup_cycles(scene, CYCLES_SPP, seed, bounces)
         cycles_images.append(render_array(scene, tmp_path, f"cycles_{name}_{seed}")[..., :3])
-    ember_blocks = stats.block_means(ember_batches, BLOCK)
-    cycles_blocks = stats.block_means(np.array(cycles_images, dtype=np.float64), BLOCK)
-    failures, details = stats.failing_blocks(ember_blocks, cycles_blocks)
-    print(f"\n{name}: relative mean error vs Cycles {details['relative_mean_error']:.4f}, "
-          f"mean |block error| {details['relative_abs_error']:.4f}, max |t| {details['max_abs_t']:.2f} "
-          f"over {details['blocks']} block-channels (reject below p={details['level']:.2e})")
-    assert len(failures) == 0, (
-        f"{len(failures)} blocks differ from Cycles (block, y, x, channel): {failures[:10].tolist()}; {details}")
+    failures, details, _, _ = compare_with_cycles(name, ember_batches, np.array(cycles_images, dtype=np.float64),
+                                                  BLOCK)
+    assert_no_failing_blocks(failures, details)
 
 
 def test_cancel_with_the_real_engine(factory_scene, monkeypatch, tmp_path, tapped_engine):

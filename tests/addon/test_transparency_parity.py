@@ -13,7 +13,7 @@ import bpy
 import pytest
 
 from ember_testlib import assert_no_failing_blocks, compare_with_cycles, render_ember_and_cycles
-from test_light_parity import light, material, plane, top_camera
+from parity_scenes import light, material, plane, top_camera
 
 EMBER_SPP = 48
 CYCLES_SEEDS = 6

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 import ember_stats as stats
-from ember_testlib import (load_exr, per_pass_estimates, render_array, require, setup_cycles,
-                           setup_ember, small_resolution)
+from ember_testlib import (assert_no_failing_blocks, compare_with_cycles, load_exr, per_pass_estimates,
+                           render_array, require, setup_cycles, setup_ember, small_resolution)
 
 ROTATION = (math.radians(12.0), math.radians(-8.0), math.radians(75.0))
 
@@ -214,8 +214,8 @@ def spheres_on_a_plane(scene):
     camera.data.lens = 35.0
 
 
-def ember_batches(scene, tmp_path, taps, spp, name, strategy='MIS', bounces=2):
-    setup_ember(scene, spp, seed=3, max_bounces=bounces)
+def ember_batches(scene, tmp_path, taps, spp, name, strategy='MIS', bounces=2, seed=3):
+    setup_ember(scene, spp, seed=seed, max_bounces=bounces)
     scene.ember.strategy = strategy
     render_array(scene, tmp_path, name)
     return per_pass_estimates(taps[-1].images)[..., :3]
@@ -231,12 +231,15 @@ def test_environment_sampling_agrees_with_bsdf_sampling(factory_scene, tmp_path,
     spheres_on_a_plane(factory_scene)
     small_resolution(factory_scene, 32, 24)
     mis = ember_batches(factory_scene, tmp_path, tapped_engine, 64, "mis")
-    bsdf = ember_batches(factory_scene, tmp_path, tapped_engine, 256, "bsdf", strategy='BSDF')
+    bsdf = ember_batches(factory_scene, tmp_path, tapped_engine, 256, "bsdf", strategy='BSDF', seed=4)  # independent
     var_mis, var_bsdf = mis.var(axis=0, ddof=1).mean(), bsdf.var(axis=0, ddof=1).mean()
     failures, details = stats.failing_blocks(stats.block_means(mis, 4), stats.block_means(bsdf, 4))
     print(f"\ncourtyard: MIS vs BSDF relative mean error {details['relative_mean_error']:.4f}, max |t| "
           f"{details['max_abs_t']:.2f}; per-sample variance MIS {var_mis:.4g}, BSDF {var_bsdf:.4g}")
     assert len(failures) == 0, f"MIS and BSDF sampling disagree: {failures[:10].tolist()}; {details}"
+    tests, level = stats.region_mean_tests(mis, bsdf, name="courtyard MIS vs BSDF means")
+    wrong = stats.report_mean_tests("courtyard: MIS against BSDF sampling", tests, level)
+    assert not wrong, f"MIS and BSDF sampling disagree on the image or region means: {wrong}"
     assert var_mis < 0.5 * var_bsdf
 
 
@@ -256,12 +259,8 @@ def test_hdri_scene_matches_cycles(factory_scene, tmp_path, tapped_engine):
     for seed in range(CYCLES_SEEDS):
         setup_cycles(factory_scene, CYCLES_SPP, seed, 2)
         cycles.append(render_array(factory_scene, tmp_path, f"cycles_{seed}")[..., :3])
-    failures, details = stats.failing_blocks(stats.block_means(ember, 5),
-                                             stats.block_means(np.array(cycles, np.float64), 5))
-    print(f"\nHDRI spheres: relative mean error vs Cycles {details['relative_mean_error']:.4f}, "
-          f"mean |block error| {details['relative_abs_error']:.4f}, max |t| {details['max_abs_t']:.2f} "
-          f"over {details['blocks']} block-channels")
-    assert len(failures) == 0, f"{len(failures)} blocks differ from Cycles: {failures[:10].tolist()}; {details}"
+    failures, details, _, _ = compare_with_cycles("HDRI spheres", ember, np.array(cycles, np.float64), 5)
+    assert_no_failing_blocks(failures, details)
 
 
 def sky_only(scene, rotation_euler, lens, size):
@@ -312,8 +311,5 @@ def test_background_matches_cycles(factory_scene, tmp_path, tapped_engine):
     for seed in range(6):
         setup_cycles(factory_scene, 8, seed, 0)
         cycles.append(render_array(factory_scene, tmp_path, f"cycles_sky_{seed}")[..., :3])
-    failures, details = stats.failing_blocks(stats.block_means(ember, 4),
-                                             stats.block_means(np.array(cycles, np.float64), 4))
-    print(f"\nbackground: relative mean error vs Cycles {details['relative_mean_error']:.4f}, "
-          f"mean |block error| {details['relative_abs_error']:.4f}, max |t| {details['max_abs_t']:.2f}")
-    assert len(failures) == 0, f"{len(failures)} blocks differ from Cycles: {failures[:10].tolist()}; {details}"
+    failures, details, _, _ = compare_with_cycles("background", ember, np.array(cycles, np.float64), 4)
+    assert_no_failing_blocks(failures, details)

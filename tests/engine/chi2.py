@@ -2,9 +2,8 @@
 
 Mitsuba's ChiSquareTest, reduced to what the engine tests need:
 
-* ``chi2_sf``: survival function of the chi-square distribution, the
-  regularized upper incomplete gamma Q(dof/2, x/2) (series / Lentz continued
-  fraction, Numerical Recipes ``gammq``);
+* ``chi2_sf`` (from ember_stats): survival function of the chi-square
+  distribution;
 * ``chi2_test``: Pearson's statistic with cells of expected count < 5 pooled;
   a cell with observations where the pdf integrates to zero is a failure;
 * ``integrate_cells``: per-cell integral of a density on a tensor grid of
@@ -14,87 +13,16 @@ Mitsuba's ChiSquareTest, reduced to what the engine tests need:
 * direction coordinates (phi, theta) about any axis (solid angle
   sin(theta) dtheta dphi), theta taken from the chord so that tiny cones keep
   their precision; solid angles of triangles/polygons; polygon clipping;
-* ``sidak`` / ``z_threshold`` for the family-wise significance level.
+* ``sidak`` / ``z_threshold`` (from ember_stats) for the family-wise level.
 """
 import math
 
 import numpy as np
 
 # ----------------------------------------------------------------------------
-# Distributions
+# Distributions and levels: one module for the suite (tests/ember_stats.py)
 
-
-def _gamma_series(a, x):
-    """Regularized lower incomplete gamma P(a, x) by its series (x < a + 1)."""
-    term = 1.0 / a
-    total = term
-    ap = a
-    for _ in range(100000):
-        ap += 1.0
-        term *= x / ap
-        total += term
-        if abs(term) < abs(total) * 1e-16:
-            break
-    return total * math.exp(-x + a * math.log(x) - math.lgamma(a))
-
-
-def _gamma_cf(a, x):
-    """Regularized upper incomplete gamma Q(a, x), modified Lentz (x >= a + 1)."""
-    tiny = 1e-300
-    b = x + 1.0 - a
-    c = 1.0 / tiny
-    d = 1.0 / b
-    h = d
-    for i in range(1, 100000):
-        an = -i * (i - a)
-        b += 2.0
-        d = an * d + b
-        d = tiny if abs(d) < tiny else d
-        c = b + an / c
-        c = tiny if abs(c) < tiny else c
-        d = 1.0 / d
-        delta = d * c
-        h *= delta
-        if abs(delta - 1.0) < 1e-16:
-            break
-    return math.exp(-x + a * math.log(x) - math.lgamma(a)) * h
-
-
-def gamma_q(a, x):
-    """Q(a, x) = Gamma(a, x) / Gamma(a)."""
-    if x <= 0.0:
-        return 1.0
-    if not math.isfinite(x):
-        return 0.0
-    if x < a + 1.0:
-        return max(0.0, 1.0 - _gamma_series(a, x))
-    return _gamma_cf(a, x)
-
-
-def chi2_sf(stat, dof):
-    """P(X >= stat) for X ~ chi-square with ``dof`` degrees of freedom."""
-    return gamma_q(0.5 * dof, 0.5 * float(stat))
-
-
-def normal_two_sided_p(z):
-    return math.erfc(abs(z) / math.sqrt(2.0))
-
-
-def sidak(alpha, tests):
-    """Per-test level keeping the family-wise error rate at ``alpha``."""
-    return 1.0 - (1.0 - alpha) ** (1.0 / tests)
-
-
-def z_threshold(level):
-    """|z| whose two-sided normal tail probability is ``level`` (bisection)."""
-    lo, hi = 0.0, 40.0
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if normal_two_sided_p(mid) > level:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
+from ember_stats import chi2_sf, normal_two_sided_p, sidak, z_threshold  # noqa: E402,F401
 
 
 # ----------------------------------------------------------------------------

@@ -10,8 +10,8 @@ translucent, transparent, sheen, Principled layers, Multiscatter GGX.
 * refraction geometry: a smooth glass slab shifts a ray and keeps its
   direction, Fresnel transmission of a slab matches the analytic series.
 
-All statistical tests here form one family with error rate FAMILY_ALPHA
-(Sidak), seeds fixed.
+All statistical tests here form one family of the suite budget
+(ember_stats.family_level, Sidak), seeds fixed.
 """
 import math
 import os
@@ -25,15 +25,16 @@ if HERE not in sys.path:
     sys.path.insert(0, HERE)
 
 import chi2 as C  # noqa: E402
+import ember_stats
 from engine import bsdf, microfacet as mf  # noqa: E402
 from engine import scene as S  # noqa: E402
 from engine.render import render  # noqa: E402
 from engine.scene import Instance, Material, RenderSettings, Scene, World  # noqa: E402
 from engine.testscenes import uv_sphere  # noqa: E402
-from test_integrator import directional_albedo, furnace_plane, ortho_camera  # noqa: E402
+from analytic import directional_albedo, furnace_plane, ortho_camera  # noqa: E402
 
 N = 400_000
-FAMILY_ALPHA = 0.01
+
 FP_RTOL = 1e-9
 FZ = C.frame((0.0, 0.0, 1.0))
 
@@ -66,7 +67,7 @@ MATERIALS = {
 CASES = [(m, c, False) for m in MATERIALS for c in (0.9, 0.4)] + \
         [("glass", 0.9, True), ("glass", 0.5, True), ("refraction", 0.7, True), ("smooth_glass", 0.8, True)]
 N_TESTS = 3 * len(CASES) + 9 + 2   # an upper bound: Sidak stays conservative
-LEVEL = C.sidak(FAMILY_ALPHA, N_TESTS)
+LEVEL = ember_stats.family_level(__name__, N_TESTS)   # the suite budget, Sidak over N_TESTS
 Z_MAX = C.z_threshold(LEVEL)
 
 

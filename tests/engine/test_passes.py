@@ -9,9 +9,8 @@ from engine.passes import ALL_PASSES, PassConfig, crypto_float, murmur3_32
 from engine.render import render
 from engine.scene import RenderSettings, SceneError
 from engine.testscenes import cornell_box, veach_four
-from stats import block_means, sidak_z, z_scores
+from ember_stats import block_means_var, family_z, z_scores
 
-ALPHA = 0.01
 STRATEGY = ("Strategy Light", "Strategy BSDF", "Strategy Light Unweighted", "Strategy BSDF Unweighted",
             "MIS Weight Light", "Object Index", "Emission", "Environment")
 LIGHT = tuple(f"{c} {p}" for c in ("Diffuse", "Glossy", "Transmission") for p in ("Direct", "Indirect", "Color"))
@@ -90,18 +89,18 @@ def test_unweighted_strategies_agree(veach_seeds):
     stacks = {k: np.array([r.passes[f"Strategy {k} Unweighted"][..., :1] for r in veach_seeds], np.float64)
               for k in ("Light", "BSDF")}
     n = len(veach_seeds)
-    blocks = {k: block_means(s.mean(axis=0), s.var(axis=0, ddof=1) / n, 4) for k, s in stacks.items()}
+    blocks = {k: block_means_var(s.mean(axis=0), s.var(axis=0, ddof=1) / n, 4) for k, s in stacks.items()}
     keep = np.ones(blocks["Light"][0].shape, bool)
     for mean, var in blocks.values():
         keep &= (mean > 0) & (np.sqrt(var) < 0.1 * mean)
     z = z_scores(*blocks["Light"], *blocks["BSDF"])[keep]
-    limit = sidak_z(ALPHA, keep.sum())
+    limit = family_z(__name__, keep.sum())
     diff = (blocks["Light"][0] - blocks["BSDF"][0])[keep].sum()
     pooled = diff / np.sqrt((blocks["Light"][1] + blocks["BSDF"][1])[keep].sum())
     print(f"{keep.sum()} blocks, max |z| {np.abs(z).max():.2f} (limit {limit:.2f}), pooled z {pooled:.2f}")
     assert keep.sum() >= 15
     assert np.abs(z).max() < limit
-    assert abs(pooled) < sidak_z(ALPHA, 1)
+    assert abs(pooled) < family_z(__name__, 1)
 
 
 def _regions(results):
@@ -156,7 +155,7 @@ def test_passes_cost_nothing_when_off_and_do_not_change_the_image():
 
 def test_unknown_pass_is_a_clear_error():
     with pytest.raises(SceneError, match="unknown render passes"):
-        render(cornell_box(8, 8), RenderSettings(samples=1, passes=("Combined_typo",)))
+        render(cornell_box(8, 8), RenderSettings(samples=1, passes=("Normals",)))
 
 
 def test_cryptomatte_ids_and_coverage():
@@ -175,3 +174,55 @@ def test_cryptomatte_ids_and_coverage():
     ids = crypto[..., 0::2][crypto[..., 1::2] > 0]
     assert {i.tobytes() for i in ids} <= names
     assert r.pass_metadata["CryptoObject"]["floor"] == f"{murmur3_32('floor'):08x}"
+
+
+def test_light_groups_add_up_to_combined():
+    """Combined_<group> holds the light of the group's emitters (Cycles'
+    light groups): the Cornell box's light in one group, the emissive
+    block in another; with no other light they add up to Combined."""
+    from engine.scene import Material, Lobe
+    scene = cornell_box(20, 20)
+    glowing = Material("glow", (Lobe("diffuse", (0.5, 0.5, 0.5)),), emission=(2.0, 1.0, 0.5))
+    instances = list(scene.instances)
+    instances[6] = replace(instances[6], materials=[3])
+    scene = replace(scene, materials=list(scene.materials) + [glowing], instances=instances)
+    config = PassConfig(lightgroup_of={"area": "key", "short block": "glow"})
+    r = render(scene, RenderSettings(samples=8, samples_per_pass=8, seed=4, max_bounces=3,
+                                     passes=("Combined_key", "Combined_glow"), pass_config=config))
+    key, glow = r.passes["Combined_key"], r.passes["Combined_glow"]
+    assert key.max() > 0 and glow.max() > 0
+    assert _close(key + glow, r.image[..., :3])
+
+
+def test_cryptomatte_slots_keep_the_first_ids_and_rank_by_coverage():
+    """The film keeps `levels` (id, samples) slots per pixel, as Cycles:
+    ids past the last slot are dropped; the image ranks them by coverage."""
+    from engine.passes import Coverage, Slots, crypto_image
+    slots = Slots(2, 2)
+    for ids, weight in (([0, 1], [1.0, 3.0]), ([1, 2], [2.0, 5.0])):   # pixel 0
+        cov = Coverage()
+        cov.add(np.zeros(2, np.int64), np.array(ids), np.array(weight))
+        slots.merge(cov, 0)
+    assert slots.ids[0].tolist() == [0, 1] and slots.weights[0].tolist() == [1.0, 5.0]
+    config = PassConfig(object_names=("a", "b", "c"))
+    image = crypto_image(slots, np.array([10.0, 10.0]), config, "CryptoObject")
+    assert image[0, 0] == crypto_float("b") and image[0, 1] == pytest.approx(0.5)
+    assert image[0, 2] == crypto_float("a") and image[0, 3] == pytest.approx(0.1)
+    assert (image[1] == 0).all()
+
+
+def test_shader_aovs_hold_each_materials_value():
+    """AOV passes: the first surface's material's AOV (RGB + the share of
+    samples that wrote it, as Cycles), 0 where a material has none."""
+    scene = cornell_box(16, 16)
+    mats = list(scene.materials)
+    mats[1] = replace(mats[1], aovs={"tint": ((0.2, 0.4, 0.6), 0.5)})   # the red wall
+    scene = replace(scene, materials=mats)
+    r = render(scene, RenderSettings(samples=4, samples_per_pass=4, seed=1, max_bounces=1,
+                                     passes=("AOV Color:tint", "AOV Value:tint", "Object Index")))
+    colour, value = r.passes["AOV Color:tint"], r.passes["AOV Value:tint"][..., 0]
+    written = colour[..., 3]
+    full = written == 1.0
+    assert full.sum() > 5 and np.allclose(colour[full][:, :3], (0.2, 0.4, 0.6), atol=1e-6)
+    assert np.allclose(value[full], 0.5, atol=1e-6)
+    assert (colour[written == 0] == 0).all() and (written == 0).sum() > 100

@@ -6,8 +6,8 @@ from engine.render import _batches, render
 from engine.scene import RenderSettings, SpotLight, SunLight, World
 from engine.testscenes import cornell_box
 
-from stats import sidak_z
-from test_integrator import analytic_scene, pixel_centres
+from ember_stats import family_z
+from analytic import analytic_scene, pixel_centres
 
 
 class Recorder:
@@ -40,10 +40,28 @@ def test_cancel_keeps_partial_image():
     assert r.image[..., :3].mean() > 0.01
 
 
+class Clock:
+    """Progress that records the render's own clock after every pass."""
+
+    def __init__(self):
+        self.seconds = []
+
+    def on_pass(self, image, samples, stats):
+        self.seconds.append(stats["seconds"])
+
+    def should_stop(self):
+        return False
+
+
 def test_time_limit_stops_early():
-    r = render(cornell_box(32, 32), RenderSettings(samples=100000, samples_per_pass=1, time_limit=0.3))
+    """The render stops after the first pass that crosses the limit: every
+    earlier pass ended before it.  (Checked on the render's own clock, so a
+    busy machine slows the passes but cannot fail the test.)"""
+    clock = Clock()
+    r = render(cornell_box(32, 32), RenderSettings(samples=100000, samples_per_pass=1, time_limit=0.3), clock)
     assert 1 <= r.samples < 100000
-    assert r.stats["seconds"] < 5.0
+    assert len(clock.seconds) == r.samples
+    assert clock.seconds[-1] >= 0.3 and all(t < 0.3 for t in clock.seconds[:-1]), clock.seconds[-3:]
 
 
 def test_batches_bound_paths_in_flight():
@@ -85,7 +103,7 @@ def test_sun_irradiance():
             np.testing.assert_allclose(img, expected, rtol=1e-6)  # float32 film
         else:
             se = np.sqrt(r.variance[..., 0].astype(np.float64).sum()) / img.size
-            assert abs(img.mean() - expected) < sidak_z(0.01, 1) * se + 1e-12
+            assert abs(img.mean() - expected) < family_z(__name__, 1) * se + 1e-12
 
 
 def test_spot_cone_and_blend():
@@ -117,10 +135,10 @@ def test_cancel_within_a_pass():
         def should_stop(self):
             return time.perf_counter() - self.t0 > 0.3
 
+    # One pass of 64 samples: fewer samples back means the pass itself was
+    # cut short (no wall-clock bound: a busy machine must not fail this).
     scene = cornell_box(256, 256)
-    t0 = time.perf_counter()
     r = render(scene, RenderSettings(samples=64, samples_per_pass=64, max_paths=1 << 14), StopSoon())
-    assert time.perf_counter() - t0 < 3.0
     assert r.samples < 64 and np.isfinite(r.image).all()
 
 

@@ -10,7 +10,8 @@ from engine.render import render
 from engine.scene import RenderSettings
 from engine.testscenes import cornell_box
 
-from chi2 import chi2_sf, sidak
+import ember_stats
+from chi2 import chi2_sf
 
 
 def _values(pattern, pseed, n, dim_set=5, start=0):
@@ -69,7 +70,7 @@ def test_values_are_uniform_over_pixels_and_sets():
                     counts = np.bincount((v[:, d] * bins).astype(int), minlength=bins)
                     expected = len(pix) / bins
                     checks.append(chi2_sf(((counts - expected) ** 2 / expected).sum(), bins - 1))
-    assert min(checks) > sidak(0.01, len(checks)), min(checks)
+    assert min(checks) > ember_stats.family_level(__name__, len(checks)), min(checks)
 
 
 def test_dimension_sets_and_pixels_are_decorrelated():

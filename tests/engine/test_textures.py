@@ -271,7 +271,7 @@ def test_normal_map_without_uvs_keeps_the_normal():
     (ImageTexture(TextureImage(np.zeros((2, 2, 5)), name="fat")), "'fat'"),
     (ImageTexture(TextureImage(np.full((2, 2, 3), np.nan), name="nan")), "NaN"),
     (ImageTexture(IMAGE, extension="WRAP"), "extension"),
-    (MixColor("BURN", 0.5, (1, 1, 1), (0, 0, 0)), "mix blend"),
+    (MixColor("BLUR", 0.5, (1, 1, 1), (0, 0, 0)), "mix blend"),
     (Math("HYPOT", 1.0, 2.0), "math operation"),
     (Math("ADD", "one", 2.0), "expected a number"),
 ])
@@ -292,7 +292,7 @@ def test_textured_emission_per_texel_in_nee_and_bsdf_hits():
 
     import sys, os
     sys.path.insert(0, os.path.dirname(__file__))
-    from stats import block_means, sidak_z, z_scores
+    from ember_stats import block_means_var, family_z, z_scores
 
     image = TextureImage(np.array([[[4.0, 0.0, 0.0], [0.0, 0.0, 4.0]]], np.float32))
     lamp = quad([[-0.5, -0.5, 1.0], [0.5, -0.5, 1.0], [0.5, 0.5, 1.0], [-0.5, 0.5, 1.0]])
@@ -309,12 +309,12 @@ def test_textured_emission_per_texel_in_nee_and_bsdf_hits():
     img = r["light"].image
     left, right = img[16, 13, :3], img[16, 18, :3]   # the lamp's two halves, seen from above
     assert left[0] > 3.9 and left[2] == 0 and right[2] > 3.9 and right[0] == 0
-    ma, va = block_means(r["light"].image[..., :3].astype(float), r["light"].variance.astype(float), 4)
-    mb, vb = block_means(r["bsdf"].image[..., :3].astype(float), r["bsdf"].variance.astype(float), 4)
+    ma, va = block_means_var(r["light"].image[..., :3].astype(float), r["light"].variance.astype(float), 4)
+    mb, vb = block_means_var(r["bsdf"].image[..., :3].astype(float), r["bsdf"].variance.astype(float), 4)
     z = z_scores(ma, va, mb, vb)
     floor_blocks = np.isfinite(z) & (va + vb > 0)
     print(f"textured emission, light vs bsdf: max |z| {np.abs(z[floor_blocks]).max():.2f}")
-    assert np.abs(z[floor_blocks]).max() < sidak_z(0.01, floor_blocks.sum())
+    assert np.abs(z[floor_blocks]).max() < family_z(__name__, floor_blocks.sum())
     # The floor under the red half is redder than under the blue half.
     floor_left, floor_right = ma[4, 0], ma[4, 7]
     assert floor_left[0] > floor_left[2] and floor_right[2] > floor_right[0]
