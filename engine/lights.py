@@ -450,8 +450,9 @@ class _AreaLights:
         n = len(p)
         sph = np.zeros(n, bool)
         solid_angle = np.zeros(n)
-        cand = np.nonzero(np.broadcast_to(self.rect[j], (n,)))[0]
-        if len(cand) == 0:
+        # A slice when every ray qualifies (one rectangle light): views, not copies.
+        cand = subset(np.broadcast_to(self.rect[j], (n,)))
+        if count(cand, n) == 0:
             return sph, solid_angle
         jj = j if np.ndim(j) == 0 else j[cand]
         args = (p[cand], self.c[jj], self.ex[jj], self.ey[jj], self.len_u[jj], self.len_v[jj])
@@ -462,7 +463,7 @@ class _AreaLights:
         use = (s >= MIN_SPHERICAL) & (min_nz2 < 1.0 - 1e-8)
         sph[cand], solid_angle[cand] = use, s
         if q is not None:
-            q[cand[use]] = point[use]
+            q[cand] = np.where(use[:, None], point, q[cand])
         return sph, solid_angle
 
     def intersect(self, j, o, d):

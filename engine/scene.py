@@ -509,6 +509,10 @@ class RenderSettings:
     # none costs nothing) and their settings (a passes.PassConfig or None).
     passes: tuple = ()
     pass_config: object = None
+    # Compiled kernels (engine/kernels.py, numba) instead of plain NumPy for
+    # the same elementwise maths; off, or without numba, or with EMBER_JIT=0,
+    # the NumPy code runs.  Images are the same bit for bit.
+    use_jit: bool = True
 
 
 @dataclass
