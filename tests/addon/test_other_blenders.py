@@ -21,7 +21,13 @@ from ember_testlib import ROOT, SCENES_DIR, load_exr, require
 BLENDER = shutil.which('blender') or '/usr/bin/blender'
 BPY42_PYTHON = os.path.join(ROOT, 'build', 'venv-bpy42', 'bin', 'python')
 PORTABLE_TESTS = ['tests/addon/test_export.py', 'tests/addon/test_render_engine.py', 'tests/addon/test_blend_scenes.py',
-                  'tests/engine/test_stats.py', 'tests/addon/test_pass_names.py']
+                  'tests/engine/test_stats.py', 'tests/addon/test_pass_names.py',
+                  # Renders through the engine, which these interpreters lack
+                  # (no embreex there): Blender 3.4's pass names are rendered
+                  # through the legacy zip in test_passes_parity instead.
+                  '--deselect', 'tests/addon/test_pass_names.py::test_passes_have_this_blenders_names',
+                  '--deselect', 'tests/addon/test_pass_names.py::test_written_passes_are_finite_and_meaningful',
+                  '--deselect', 'tests/addon/test_pass_names.py::test_cryptomatte_manifest_in_metadata']
 
 
 def run(cmd, env=None, timeout=600):
