@@ -2,7 +2,7 @@
 PY := .venv/bin/python
 export PYTHONPATH := $(CURDIR)
 
-.PHONY: setup render render-engine test test-engine test-addon bench bench-export zip install-blender clean
+.PHONY: setup render render-engine test test-engine test-addon bench bench-cycles bench-export zip install-blender clean
 
 setup:
 	./scripts/setup.sh
@@ -31,6 +31,10 @@ test-addon: setup
 
 bench: setup
 	$(PY) -m tools.bench_engine
+
+# Ember against Cycles through Blender on the yardstick scenes (QUICK=1: 64x64).
+bench-cycles: setup
+	$(PY) -P tools/bench_cycles.py $(if $(QUICK),--quick,)
 
 bench-export: setup
 	$(PY) -P tools/bench_export.py

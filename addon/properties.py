@@ -105,6 +105,12 @@ class EmberRenderSettings(bpy.types.PropertyGroup):
         default=1.5, min=0.01, max=10.0, subtype='PIXEL')
     threads: IntProperty(
         name="Threads", description="Render threads (0 = every core)", default=0, min=0, max=1024)
+    use_jit: BoolProperty(
+        name="Compiled Kernels",
+        description="Run the renderer's per-ray maths as kernels compiled by numba (cached in the user "
+                    "cache folder after the first render); off, or without numba, the same maths runs "
+                    "in NumPy. The environment variable EMBER_JIT=0 also turns it off",
+        default=True)
 
 
 def _passes_changed(self, context):

@@ -103,7 +103,7 @@ class RENDER_PT_ember_sampling_advanced(EmberPanel, bpy.types.Panel):
     bl_label = "Advanced"
     bl_parent_id = 'RENDER_PT_ember_sampling'
     bl_options = {'DEFAULT_CLOSED'}
-    PROPS = (("sampling_pattern", None), ("strategy", None), ("threads", None))
+    PROPS = (("sampling_pattern", None), ("strategy", None), ("threads", None), ("use_jit", None))
 
 
 class RENDER_PT_ember_light_paths(EmberPanel, bpy.types.Panel):

@@ -57,6 +57,9 @@ class Triangles:
     # for normal maps, or None when no material has one.
     tangent: Optional[np.ndarray] = None
     tangent_sign: Optional[np.ndarray] = None
+    # Shader-node data (engine.nodes.SceneShading): each triangle's instance
+    # and its index in its mesh, object matrices and info, corner attributes.
+    shading: object = None
     # (T,) int32 index of the triangle's scene instance (for passes).
     instance: Optional[np.ndarray] = None
 
@@ -91,7 +94,7 @@ def flatten(scene, with_instance=False):
     n_mat = len(scene.materials)
     mesh_cache = {}
     parts = []
-    owners = []
+    owners = []   # per part: its instance index for each triangle
     for index, inst in enumerate(scene.instances):
         mesh = scene.meshes[inst.mesh]
         if len(mesh.triangles) == 0:
@@ -103,7 +106,8 @@ def flatten(scene, with_instance=False):
         owners.append(np.full(len(corners), index, np.int32))
     tris = _concat(parts)
     if owners and with_instance:
-        tris.instance = np.concatenate(owners)[_kept(parts)]
+        tris.instance = np.concatenate(owners)[tris.kept]
+    tris.shading = _scene_shading(scene, owners, tris)
     if _needs_tangents(scene):
         _add_tangents(tris, scene, parts)
     return tris
@@ -125,6 +129,16 @@ def _instance_part(mesh, corners, inst, n_mat):
         ns = np.asarray(mesh.normals, dtype=np.float64) @ nmat.T
     uv = None if mesh.uvs is None else np.asarray(mesh.uvs, dtype=np.float64)
     return world, ns, uv, material, visibility_bits(inst)
+
+
+def _scene_shading(scene, owners, tris):
+    """SceneShading (shader-node data) for the triangles _concat kept."""
+    from .nodes import SceneShading
+    if not owners:
+        return SceneShading(scene, np.zeros(0, np.int64), np.zeros(0, np.int64))
+    instance = np.concatenate(owners).astype(np.int64)
+    local = np.concatenate([np.arange(len(o)) for o in owners])
+    return SceneShading(scene, instance[tris.kept], local[tris.kept])
 
 
 def _concat(parts):
@@ -154,10 +168,12 @@ def _concat(parts):
     ng = c[keep] / clen[keep, None]
     if ns is not None:
         ns = _fix_normals(ns[keep], ng, smooth[keep])
-    return Triangles(p0[keep], e1[keep], e2[keep], ng, ns, smooth[keep],
+    tris = Triangles(p0[keep], e1[keep], e2[keep], ng, ns, smooth[keep],
                      None if uv is None else uv[keep], material[keep],
                      0.5 * clen[keep], dropped,
                      visibility=None if visibility is None else visibility[keep])
+    tris.kept = keep
+    return tris
 
 
 def _stack_optional(arrays, counts, tail):

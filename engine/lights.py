@@ -450,8 +450,9 @@ class _AreaLights:
         n = len(p)
         sph = np.zeros(n, bool)
         solid_angle = np.zeros(n)
-        cand = np.nonzero(np.broadcast_to(self.rect[j], (n,)))[0]
-        if len(cand) == 0:
+        # A slice when every ray qualifies (one rectangle light): views, not copies.
+        cand = subset(np.broadcast_to(self.rect[j], (n,)))
+        if count(cand, n) == 0:
             return sph, solid_angle
         jj = j if np.ndim(j) == 0 else j[cand]
         args = (p[cand], self.c[jj], self.ex[jj], self.ey[jj], self.len_u[jj], self.len_v[jj])
@@ -462,7 +463,7 @@ class _AreaLights:
         use = (s >= MIN_SPHERICAL) & (min_nz2 < 1.0 - 1e-8)
         sph[cand], solid_angle[cand] = use, s
         if q is not None:
-            q[cand[use]] = point[use]
+            q[cand] = np.where(use[:, None], point, q[cand])
         return sph, solid_angle
 
     def intersect(self, j, o, d):
@@ -549,7 +550,7 @@ class _MeshLights:
     def _radiance(self, tri, q, L):
         """Emission at points q on triangles tri: the constant, or the
         material's emission texture evaluated at q's UVs."""
-        if not self.textures.emission or self.tris.uv is None:
+        if not self.textures.emission:
             return L
         tr = self.tris
         d = q - tr.p0[tri]
@@ -559,9 +560,9 @@ class _MeshLights:
         denom = np.where(d00 * d11 - d01 * d01 > 0, d00 * d11 - d01 * d01, 1.0)
         b1 = (d11 * d20 - d01 * d21) / denom
         b2 = (d00 * d21 - d01 * d20) / denom
-        c = tr.uv[tri]
-        uv = (1.0 - b1 - b2)[:, None] * c[:, 0] + b1[:, None] * c[:, 1] + b2[:, None] * c[:, 2]
-        return self.textures.emission_at(tr.material[tri], uv, np.broadcast_to(L, q.shape))
+        from .nodes import ShadingContext
+        shading = ShadingContext.at(tr, tri, b1, b2)
+        return self.textures.emission_at(tr.material[tri], shading, np.broadcast_to(L, q.shape))
 
     def _spherical(self, tri, p):
         """Which shading points sample their triangle by solid angle (Arvo):

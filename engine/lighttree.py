@@ -252,7 +252,8 @@ class LightTree:
             emitter[pick_inf] = self.infinite[k]
             prob[pick_inf] = self.p_infinite / len(self.infinite)
             tree = ~pick_inf
-            u = np.where(tree, (u - self.p_infinite) / (1.0 - self.p_infinite), u)
+            if self.has_tree:   # else every emitter is infinite and p_infinite is 1
+                u = np.where(tree, (u - self.p_infinite) / (1.0 - self.p_infinite), u)
         rows = np.nonzero(tree)[0]
         prob[rows] = 1.0 - self.p_infinite
         node = np.zeros(len(rows), np.int64)

@@ -14,6 +14,8 @@ import os
 
 import numpy as np
 
+from .kernels import helper
+
 COS_EPS = 1e-9
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "tables.npz")
 
@@ -21,12 +23,14 @@ DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "tables.
 # ----------------------------------------------------------------------------
 # GGX distribution, Smith masking (height-correlated), visible-normal sampling
 
+@helper
 def ggx_d(h_z, alpha):
     a2 = alpha * alpha
     t = h_z * h_z * (a2 - 1.0) + 1.0
     return a2 / (np.pi * t * t)
 
 
+@helper
 def ggx_lambda(w_z, alpha):
     z2 = np.maximum(w_z * w_z, COS_EPS)
     tan2 = np.maximum(1.0 - z2, 0.0) / z2

@@ -5,6 +5,8 @@ Directions are in a local frame whose +Z is the pole (normal, cone axis).
 """
 import numpy as np
 
+from .kernels import clip, helper, kernel, where
+
 TWO_PI = 2.0 * np.pi
 INV_PI = 1.0 / np.pi
 
@@ -76,12 +78,12 @@ def uniform_triangle(u1, u2):
     return 1.0 - su, u2 * su
 
 
+@kernel(2)
 def power_heuristic(a, b):
     """w = a^2 / (a^2 + b^2), defined as 0 where that is not finite."""
     a2 = a * a
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        w = a2 / (a2 + b * b)
-    return np.where(np.isfinite(w), w, np.where(np.isinf(a) & np.isfinite(b), 1.0, 0.0))
+    w = a2 / (a2 + b * b)
+    return where(np.isfinite(w), w, where(np.isinf(a) & np.isfinite(b), 1.0, 0.0))
 
 
 class Distribution1D:
@@ -138,37 +140,53 @@ def spherical_rectangle(p, c, ex, ey, len_u, len_v, u1, u2):
     rel = c - p
     z0 = rel @ z if np.ndim(z) == 1 else np.einsum("ij,ij->i", rel, z)
     flip = np.where(z0 > 0, -1.0, 1.0)   # make z point away from the rectangle
-    z0 = z0 * flip
     xc = rel @ ex if np.ndim(ex) == 1 else np.einsum("ij,ij->i", rel, ex)
     yc = rel @ ey if np.ndim(ey) == 1 else np.einsum("ij,ij->i", rel, ey)
-    x0, x1 = xc - 0.5 * len_u, xc + 0.5 * len_u
-    y0, y1 = yc - 0.5 * len_v, yc + 0.5 * len_v
-    nz = np.stack([-y0, x1, y1, -x0])
     with np.errstate(divide="ignore", invalid="ignore"):
-        nz = nz / np.sqrt(nz * nz + z0 * z0)
-    nz = np.nan_to_num(nz)
-    g0 = np.arcsin(np.clip(-nz[0] * nz[1], -1.0, 1.0))
-    g1 = np.arcsin(np.clip(-nz[1] * nz[2], -1.0, 1.0))
-    g2 = np.arcsin(np.clip(-nz[2] * nz[3], -1.0, 1.0))
-    g3 = np.arcsin(np.clip(-nz[3] * nz[0], -1.0, 1.0))
+        xu, yv, solid_angle, min_nz2 = spherical_rectangle_warp(xc, yc, z0 * flip, len_u, len_v, u1, u2)
+    point = p + xu[:, None] * ex + yv[:, None] * ey + z0[:, None] * z
+    return point, solid_angle, min_nz2
+
+
+@helper
+def _nz(a, z0):
+    """a / sqrt(a^2 + z0^2), 0 where undefined."""
+    r = a / np.sqrt(a * a + z0 * z0)
+    return where(np.isfinite(r), r, 0.0)
+
+
+@kernel(7, 4)
+def spherical_rectangle_warp(xc, yc, z0, len_u, len_v, u1, u2):
+    """The warp of ``spherical_rectangle`` in the rectangle's frame (z0 >= 0:
+    distance of p from its plane): the point's (x, y), the solid angle and
+    min_nz2."""
+    x0 = xc - 0.5 * len_u
+    x1 = xc + 0.5 * len_u
+    y0 = yc - 0.5 * len_v
+    y1 = yc + 0.5 * len_v
+    n0 = _nz(-y0, z0)
+    n1 = _nz(x1, z0)
+    n2 = _nz(y1, z0)
+    n3 = _nz(-x0, z0)
+    g0 = np.arcsin(clip(-n0 * n1, -1.0, 1.0))
+    g1 = np.arcsin(clip(-n1 * n2, -1.0, 1.0))
+    g2 = np.arcsin(clip(-n2 * n3, -1.0, 1.0))
+    g3 = np.arcsin(clip(-n3 * n0, -1.0, 1.0))
     solid_angle = np.maximum(-(g0 + g1 + g2 + g3), 0.0)
-    b0, b1 = nz[0], nz[2]
     au = u1 * solid_angle + g2 + g3
-    with np.errstate(divide="ignore", invalid="ignore"):
-        fu = (np.cos(au) * b0 + b1) / np.sin(au)
-        cu = np.clip(np.copysign(1.0 / np.sqrt(fu * fu + b0 * b0), fu), -1.0, 1.0)
-        xu = -(cu * z0) / np.maximum(np.sqrt(1.0 - cu * cu), 1e-300)
-    xu = np.clip(np.nan_to_num(xu), x0, x1)
+    fu = (np.cos(au) * n0 + n2) / np.sin(au)
+    cu = clip(np.copysign(1.0 / np.sqrt(fu * fu + n0 * n0), fu), -1.0, 1.0)
+    xu = -(cu * z0) / np.maximum(np.sqrt(1.0 - cu * cu), 1e-300)
+    xu = clip(where(np.isfinite(xu), xu, where(np.isnan(xu), 0.0, np.copysign(1.7976931348623157e308, xu))),
+              x0, x1)
     d2 = xu * xu + z0 * z0
     h0 = y0 / np.sqrt(d2 + y0 * y0)
     h1 = y1 / np.sqrt(d2 + y1 * y1)
     hv = h0 + u2 * (h1 - h0)
     hv2 = hv * hv
-    with np.errstate(divide="ignore", invalid="ignore"):
-        yv = np.where(hv2 < 1.0 - 1e-12, hv * np.sqrt(d2 / (1.0 - hv2)), y1)
-    yv = np.clip(yv, y0, y1)
-    point = p + xu[:, None] * ex + yv[:, None] * ey + (z0 * flip)[:, None] * z
-    return point, solid_angle, (nz * nz).min(axis=0)
+    yv = clip(where(hv2 < 1.0 - 1e-12, hv * np.sqrt(d2 / (1.0 - hv2)), y1), y0, y1)
+    min_nz2 = np.minimum(np.minimum(n0 * n0, n1 * n1), np.minimum(n2 * n2, n3 * n3))
+    return xu, yv, solid_angle, min_nz2
 
 
 def spherical_rectangle_solid_angle(p, c, ex, ey, len_u, len_v):

@@ -53,6 +53,16 @@ class Mesh:
     # fall back to per-triangle UV tangents without.
     tangents: Optional[np.ndarray] = None
     tangent_signs: Optional[np.ndarray] = None
+    # For shader nodes (engine.nodes.context): UV maps by name {name: (T, 3, 2)}
+    # beside the active one in ``uvs``; colour attributes {name: (T, 3, 4)}
+    # linear RGBA per corner ('' = the default colour attribute); the
+    # texture space (location, size) of Generated coordinates (None: the
+    # bounding box, as Blender's automatic one); undeformed corner positions
+    # (T, 3, 3) for Generated when modifiers deform the mesh.
+    uv_maps: Optional[dict] = None
+    attributes: Optional[dict] = None
+    texspace: Optional[tuple] = None
+    orco: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -75,9 +85,13 @@ class Instance:
     visible_glossy: bool = True
     visible_transmission: bool = True
     visible_shadow: bool = True
-    # Blender's Object Index (pass_index) and the Cryptomatte asset: the
-    # name of the topmost parent ("" = the object itself).
+    # Object Info node: the object's colour and random number (the
+    # depsgraph instance's random_id / 0xFFFFFFFF, as Cycles); pass_index
+    # is Blender's Object Index (Object Info and passes); the Cryptomatte
+    # asset: the name of the topmost parent ("" = the object itself).
+    color: tuple = (1.0, 1.0, 1.0)
     pass_index: int = 0
+    random: float = 0.0
     asset: str = ""
 
 
@@ -199,7 +213,8 @@ class ImageTexture:
 
 
 MIX_BLENDS = ("MIX", "ADD", "MULTIPLY", "SUBTRACT", "SCREEN", "OVERLAY", "DIVIDE",
-              "DIFFERENCE", "DARKEN", "LIGHTEN")
+              "DIFFERENCE", "DARKEN", "LIGHTEN", "BURN", "DODGE", "HUE", "SATURATION", "VALUE",
+              "COLOR", "SOFT_LIGHT", "LINEAR_LIGHT", "EXCLUSION")
 
 
 @dataclass(eq=False)
@@ -216,7 +231,9 @@ class MixColor:
 MATH_OPERATIONS = ("ADD", "SUBTRACT", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "POWER", "LOGARITHM",
                    "SQRT", "INVERSE_SQRT", "ABSOLUTE", "EXPONENT", "MINIMUM", "MAXIMUM",
                    "LESS_THAN", "GREATER_THAN", "SIGN", "ROUND", "FLOOR", "CEIL", "TRUNC",
-                   "FRACT", "MODULO", "SINE", "COSINE", "TANGENT", "SNAP")
+                   "FRACT", "MODULO", "SINE", "COSINE", "TANGENT", "SNAP", "COMPARE", "SMOOTH_MIN",
+                   "SMOOTH_MAX", "WRAP", "PINGPONG", "ARCSINE", "ARCCOSINE", "ARCTANGENT", "ARCTAN2",
+                   "SINH", "COSH", "TANH", "RADIANS", "DEGREES", "FLOORED_MODULO")
 
 
 @dataclass(eq=False)
@@ -231,9 +248,14 @@ class Math:
 
 @dataclass(eq=False)
 class NormalMap:
-    """Tangent-space Normal Map node: colour (in [0, 1]) and strength."""
+    """Normal Map node: colour (in [0, 1]), strength and space ('TANGENT',
+    'OBJECT', 'WORLD', 'BLENDER_OBJECT', 'BLENDER_WORLD')."""
     color: object
     strength: object = 1.0
+    space: str = "TANGENT"
+
+
+NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WORLD")
 
 
 @dataclass(eq=False)
@@ -247,8 +269,24 @@ class Bump:
     normal: Optional[NormalMap] = None
 
 
-Texture = Union[ImageTexture, MixColor, Math, NormalMap, Bump]
-TEXTURE_TYPES = (ImageTexture, MixColor, Math, NormalMap, Bump)
+@dataclass(eq=False)
+class NodeCall:
+    """One shader node of engine.nodes.REGISTRY: its Blender id, its inputs
+    (identifier -> constant or expression) and its properties."""
+    idname: str
+    inputs: dict
+    props: dict = field(default_factory=dict)
+
+
+@dataclass(eq=False)
+class NodeOutput:
+    """One output socket of a NodeCall (outputs of one call evaluate once)."""
+    call: NodeCall
+    output: str
+
+
+Texture = Union[ImageTexture, MixColor, Math, NormalMap, Bump, NodeOutput]
+TEXTURE_TYPES = (ImageTexture, MixColor, Math, NormalMap, Bump, NodeOutput)
 # What a Lobe parameter or a Material's emission may hold.
 Color = Union[RGB, Texture]
 Scalar = Union[float, Texture]
@@ -466,6 +504,10 @@ class RenderSettings:
     # none costs nothing) and their settings (a passes.PassConfig or None).
     passes: tuple = ()
     pass_config: object = None
+    # Compiled kernels (engine/kernels.py, numba) instead of plain NumPy for
+    # the same elementwise maths; off, or without numba, or with EMBER_JIT=0,
+    # the NumPy code runs.  Images are the same bit for bit.
+    use_jit: bool = True
 
 
 @dataclass

@@ -19,7 +19,8 @@ import dataclasses
 
 import numpy as np
 
-from .scene import (TEXTURE_TYPES, Bump, ImageTexture, Math, MixColor, NormalMap)
+from .nodes import REGISTRY, ShadingContext, as_context
+from .scene import (TEXTURE_TYPES, Bump, ImageTexture, Math, MixColor, NodeOutput, NormalMap)
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 # Far-away UVs lose all precision anyway; keep them within int64 range.
@@ -113,12 +114,15 @@ def _last_call(fn):
     as 1 - metallic, the layers beside it), looked up once per ray batch.
     The argument is held, so its identity cannot be reused; results are
     read-only to callers."""
-    last = [None, None]
+    last = [None]
 
-    def cached(uv):
-        if last[0] is not uv:
-            last[0], last[1] = uv, fn(uv)
-        return last[1]
+    def cached(arg):
+        # One (argument, result) pair swapped in whole: render threads share it.
+        entry = last[0]
+        if entry is None or entry[0] is not arg:
+            entry = (arg, fn(arg))
+            last[0] = entry
+        return entry[1]
     return cached
 
 
@@ -140,11 +144,14 @@ def _image_lookup(node, texels):
 # expressions
 
 class Compiler:
-    """Compiles expressions to functions of uv; images are prepared once."""
+    """Compiles expressions to functions of a shading context
+    (engine.nodes.ShadingContext; (N, 2) UVs are accepted too);
+    images are prepared once, every node call is evaluated once per context."""
 
     def __init__(self):
         self.texels = {}
         self.compiled = {}  # id(expr) -> (expr, compiled): shared sub-expressions compile once
+        self.calls = {}     # id(NodeCall) -> (call, fn(ctx) -> outputs)
 
     def texels_of(self, image):
         key = id(image)
@@ -153,68 +160,136 @@ class Compiler:
         return self.texels[key][1]
 
     def compile(self, expr):
-        """-> (fn(uv) -> (N,) or (N, 3), is_colour)."""
+        """-> (fn(ctx) -> (N,) or (N, 3), is_colour)."""
+        fn, kind = self.compile_kind(expr)
+        return fn, kind != "float"
+
+    def compile_kind(self, expr):
+        """-> (fn(ctx), kind) with kind 'float', 'color' or 'vector'."""
         if not is_texture(expr):
-            return self._compile(expr)
-        key = id(expr)
-        if key not in self.compiled:
-            self.compiled[key] = (expr, self._compile(expr))
-        return self.compiled[key][1]
+            fn, kind = self._compile(expr)
+        else:
+            key = id(expr)
+            if key not in self.compiled:
+                self.compiled[key] = (expr, self._compile(expr))
+            fn, kind = self.compiled[key][1]
+        return (lambda ctx: fn(as_context(ctx))), kind
 
     def _compile(self, expr):
         if isinstance(expr, ImageTexture):
             return self._image(expr)
         if isinstance(expr, MixColor):
-            return self._mix(expr), True
+            return self._mix(expr), "color"
         if isinstance(expr, Math):
-            return self._math(expr), False
+            return self._math(expr), "float"
+        if isinstance(expr, NodeOutput):
+            return self._node_output(expr)
         if isinstance(expr, (NormalMap, Bump)):
             raise TypeError(f"{type(expr).__name__} is a normal, not a colour or value")
         value = np.asarray(expr, dtype=np.float64)
         if value.ndim == 0:
             v = float(value)
-            return (lambda uv: np.full(len(uv), v)), False
+            return (lambda ctx: np.full(len(ctx), v)), "float"
         rgb = value.reshape(-1)[:3]
-        return (lambda uv: np.broadcast_to(rgb, (len(uv), 3)).copy()), True
+        return (lambda ctx: np.broadcast_to(rgb, (len(ctx), 3)).copy()), "color"
 
     def color(self, expr):
         fn, is_color = self.compile(expr)
-        return fn if is_color else (lambda uv: np.repeat(fn(uv)[:, None], 3, axis=1))
+        return fn if is_color else (lambda ctx: np.repeat(fn(ctx)[:, None], 3, axis=1))
 
     def value(self, expr):
-        fn, is_color = self.compile(expr)
-        return (lambda uv: fn(uv) @ LUMA) if is_color else fn
+        fn, kind = self.compile_kind(expr)
+        if kind == "vector":
+            return lambda ctx: fn(ctx).mean(axis=1)       # Cycles: vector to float = average
+        return (lambda ctx: fn(ctx) @ LUMA) if kind == "color" else fn
+
+    def as_kind(self, expr, kind):
+        """expr converted to a socket kind as Cycles' implicit conversions."""
+        return self.value(expr) if kind == "float" else self.color(expr)
 
     def _image(self, node):
         lookup = _last_call(_image_lookup(node, self.texels_of(node.image)))
-        coords = (lambda uv: uv) if node.uv is None else self._uv(node.uv)
+        coords = (lambda ctx: ctx.uv) if node.uv is None else self._uv(node.uv)
         if node.output == "Alpha":
-            return (lambda uv: lookup(coords(uv))[:, 3]), False
-        return (lambda uv: lookup(coords(uv))[:, :3]), True
+            return (lambda ctx: lookup(coords(ctx))[:, 3]), "float"
+        return (lambda ctx: lookup(coords(ctx))[:, :3]), "color"
 
     def _uv(self, expr):
         """A vector input: its first two components are the UV."""
         fn = self.color(expr)
-        return lambda uv: fn(uv)[:, :2]
+        return lambda ctx: fn(ctx)[:, :2]
 
     def _mix(self, node):
         fac, a, b = self.value(node.fac), self.color(node.a), self.color(node.b)
 
-        def mix(uv):
-            t = fac(uv)
+        def mix(ctx):
+            t = fac(ctx)
             if node.clamp_factor:
                 t = np.clip(t, 0.0, 1.0)
-            out = mix_colors(node.blend, t[:, None], a(uv), b(uv))
+            out = mix_colors(node.blend, t[:, None], a(ctx), b(ctx))
             return np.clip(out, 0.0, 1.0) if node.clamp_result else out
         return mix
 
     def _math(self, node):
         a, b, c = self.value(node.a), self.value(node.b), self.value(node.c)
 
-        def math(uv):
-            out = math_op(node.operation, a(uv), b(uv), c(uv))
+        def math(ctx):
+            out = math_op(node.operation, a(ctx), b(ctx), c(ctx))
             return np.clip(out, 0.0, 1.0) if node.clamp else out
         return math
+
+    def _node_output(self, expr):
+        entry = REGISTRY[expr.call.idname]
+        run = self._call(expr.call)
+        name = expr.output
+        return (lambda ctx: run(ctx)[name]), entry.output_kind(name)
+
+    def _call(self, call):
+        key = id(call)
+        if key not in self.calls:
+            self.calls[key] = (call, _last_call(self._call_fn(call)))
+        return self.calls[key][1]
+
+    def _call_fn(self, call):
+        entry = REGISTRY[call.idname]
+        inputs = {name: self.as_kind(call.inputs[name], kind)
+                  for name, kind in entry.inputs if name in call.inputs}
+        defaults = [(name, kind) for name, kind in entry.inputs if name not in call.inputs]
+        props = dict(call.props)
+
+        def run(ctx):
+            values = {name: fn(ctx) for name, fn in inputs.items()}
+            for name, kind in defaults:
+                default = _default_input(ctx, entry, name, kind)
+                if default is not None:
+                    values[name] = default
+            with np.errstate(all="ignore"):
+                out = entry.evaluate(ctx, values, props)
+            return {k: _finite(v) for k, v in out.items()}
+        return run
+
+
+def _default_input(ctx, entry, name, kind):
+    """An input the expression leaves out: the coordinates a texture reads
+    by default, the shading normal for Normal (None), else zero."""
+    if name == "Vector" and entry.coords is not None:
+        if entry.coords == "generated":
+            return ctx.generated
+        if entry.coords == "position":
+            return ctx.p
+        uv = np.zeros((len(ctx), 3))
+        uv[:, :2] = ctx.uv
+        return uv
+    if name == "Normal":
+        return None
+    value = entry.input_defaults.get(name, 0.0)
+    return np.full(len(ctx), float(value)) if kind == "float" else np.broadcast_to(
+        np.asarray(value, dtype=np.float64), (len(ctx), 3)).copy()
+
+
+def _finite(value):
+    value = np.asarray(value, dtype=np.float64)
+    return np.where(np.isfinite(value), value, 0.0)
 
 
 def mix_colors(blend, t, a, b):
@@ -241,6 +316,13 @@ def mix_colors(blend, t, a, b):
         return tm * a + t * np.minimum(a, b)
     if blend == "LIGHTEN":
         return tm * a + t * np.maximum(a, b)
+    from .nodes.color_math import EXTRA_BLENDS
+    if blend in EXTRA_BLENDS:
+        t = np.broadcast_to(t, np.broadcast_shapes(np.shape(t), np.shape(a), np.shape(b))[:-1] + (1,))
+        a, b = (np.broadcast_to(x, t.shape[:-1] + (3,)).astype(np.float64) for x in (a, b))
+        if t.ndim == 1:
+            return EXTRA_BLENDS[blend](t[None], a[None], b[None])[0]
+        return EXTRA_BLENDS[blend](t, a, b)
     raise ValueError(f"unknown mix blend {blend!r}")
 
 
@@ -253,6 +335,17 @@ def math_op(op, a, b, c):
     with np.errstate(all="ignore"):
         out = _math_raw(op, a, b, c)
     return np.where(np.isfinite(out), out, 0.0)
+
+
+def _fract(x):
+    return x - np.floor(x)
+
+
+def _smooth_min(a, b, c):
+    """Cycles' smoothminf: a polynomial blend of width c."""
+    safe_c = np.where(c != 0, c, 1.0)
+    h = np.maximum(c - np.abs(a - b), 0.0) / safe_c
+    return np.where(c != 0, np.minimum(a, b) - h * h * h * c * (1.0 / 6.0), np.minimum(a, b))
 
 
 def _math_raw(op, a, b, c):
@@ -269,6 +362,15 @@ def _math_raw(op, a, b, c):
         "INVERSE_SQRT": lambda: np.where(a > 0, 1.0 / np.sqrt(np.where(a > 0, a, 1.0)), 0.0),
         "MODULO": lambda: np.where(b != 0, np.fmod(a, np.where(b != 0, b, 1.0)), 0.0),
         "SNAP": lambda: np.where(b != 0, np.floor(_safe_div(a, b)) * b, 0.0),
+        "COMPARE": lambda: (np.abs(a - b) <= np.maximum(c, 1e-5)).astype(float),
+        "SMOOTH_MIN": lambda: _smooth_min(a, b, c), "SMOOTH_MAX": lambda: -_smooth_min(-a, -b, c),
+        "WRAP": lambda: np.where(b - c != 0, a - (b - c) * np.floor(_safe_div(a - c, b - c)), c),
+        "PINGPONG": lambda: np.where(b != 0, np.abs(_fract(_safe_div(a - b, b * 2.0)) * b * 2.0 - b), 0.0),
+        "ARCSINE": lambda: np.arcsin(np.clip(a, -1.0, 1.0)), "ARCCOSINE": lambda: np.arccos(np.clip(a, -1.0, 1.0)),
+        "ARCTANGENT": lambda: np.arctan(a), "ARCTAN2": lambda: np.arctan2(a, b),
+        "SINH": lambda: np.sinh(a), "COSH": lambda: np.cosh(a), "TANH": lambda: np.tanh(a),
+        "RADIANS": lambda: a * (np.pi / 180.0), "DEGREES": lambda: a * (180.0 / np.pi),
+        "FLOORED_MODULO": lambda: np.where(b != 0, a - np.floor(_safe_div(a, b)) * b, 0.0),
     }
     if op in simple:
         return simple[op]()
@@ -315,6 +417,10 @@ def value_range(expr):
     if isinstance(expr, Math):
         lo, hi = _math_range(expr)
         return (max(lo, 0.0), min(hi, 1.0)) if expr.clamp else (lo, hi)
+    if isinstance(expr, NodeOutput):
+        entry = REGISTRY.get(expr.call.idname)
+        bounds = entry.bounds(expr.call.props) if entry is not None and entry.bounds is not None else {}
+        return tuple(bounds.get(expr.output, UNBOUNDED))
     if is_texture(expr):
         return UNBOUNDED
     value = np.asarray(expr, dtype=np.float64).reshape(-1)
@@ -464,7 +570,8 @@ class MaterialTextures:
 
     def _compile_normal(self, expr):
         if isinstance(expr, NormalMap):
-            return ("normal_map", self.compiler.color(expr.color), self.compiler.value(expr.strength))
+            return ("normal_map", self.compiler.color(expr.color), self.compiler.value(expr.strength),
+                    getattr(expr, "space", "TANGENT"))
         if isinstance(expr, Bump):
             inner = None if expr.normal is None else self._compile_normal(expr.normal)
             return ("bump", self.compiler.value(expr.height), self.compiler.value(expr.strength),
@@ -473,37 +580,39 @@ class MaterialTextures:
 
     # -- per ray -------------------------------------------------------------
 
-    def apply(self, mat, uv, lobes, min_alpha):
+    def apply(self, mat, shading, lobes, min_alpha):
         """Overwrite the textured lobe parameters of the rays' materials
-        (any Lobe field: colours, roughness, weight, ior, f0, ...)."""
-        if uv is None:
-            uv = np.zeros((len(mat), 2))
-        at = {}  # material -> (rows, their UVs): one UV array per material
+        (any Lobe field: colours, roughness, weight, ior, f0, ...) at their
+        shading points (a ShadingContext, or (N, 2) UVs)."""
+        ctx = as_context(np.zeros((len(mat), 2)) if shading is None else shading)
+        at = {}  # material -> (rows, their context): one sub-context per material
         for i, j, name, fn, is_color in self.lobe_fields:
             if i not in at:
                 rows = np.nonzero(mat == i)[0]
-                at[i] = rows, uv[rows]
-            rows, uv_rows = at[i]
+                at[i] = rows, ctx.take(rows)
+            rows, sub = at[i]
             if len(rows):
-                _store(lobes, name, rows, j, fn(uv_rows), is_color, min_alpha)
+                _store(lobes, name, rows, j, fn(sub), is_color, min_alpha)
 
-    def emission_at(self, mat, uv, emission):
+    def emission_at(self, mat, shading, emission):
         """Per-ray emission: the constant table's rows, textured ones evaluated."""
+        ctx = as_context(shading)
         for i, fn in self.emission.items():
             rows = np.nonzero(mat == i)[0]
             if len(rows):
                 emission = np.array(emission, copy=True)
-                emission[rows] = np.maximum(fn(uv[rows]), 0.0)
+                emission[rows] = np.maximum(fn(ctx.take(rows)), 0.0)
         return emission
 
     def perturb(self, hit, triangles):
         """Shading normals with each material's normal map / bump applied."""
+        ctx = ShadingContext.of_hit(triangles, hit)
         ns = hit.ns
         for i, normal in self.normals.items():
             rows = np.nonzero(hit.mat == i)[0]
             if len(rows):
                 ns = np.array(ns, copy=True)
-                ns[rows] = _perturbed(normal, hit, rows, triangles)
+                ns[rows] = _perturbed(normal, hit, rows, triangles, ctx.take(rows))
         return ns
 
 
@@ -557,7 +666,10 @@ def _bump_step(expr):
 def _images_in(expr):
     if isinstance(expr, ImageTexture):
         yield expr.image
-    if is_texture(expr):
+    if isinstance(expr, NodeOutput):
+        for value in expr.call.inputs.values():
+            yield from _images_in(value)
+    elif is_texture(expr):
         for f in dataclasses.fields(expr):
             value = getattr(expr, f.name)
             if is_texture(value):
@@ -573,33 +685,33 @@ def _unit(v, fallback):
     return np.where(ok, v / np.where(ok, length, 1.0), fallback)
 
 
-def _perturbed(normal, hit, rows, triangles):
+def _perturbed(normal, hit, rows, triangles, ctx):
     """New unit shading normals for hit rows, facing the same side as hit.ns;
     normals the viewer would see from behind keep the unperturbed one."""
     ns = hit.ns[rows]
-    out = _evaluate_normal(normal, hit, rows, triangles, ns)
+    out = _evaluate_normal(normal, hit, rows, triangles, ns, ctx)
     out = _unit(out, ns)
     wo = hit.wo[rows]
     return np.where((np.einsum("ij,ij->i", out, wo) > 1e-6)[:, None], out, ns)
 
 
-def _evaluate_normal(normal, hit, rows, triangles, ns):
+def _evaluate_normal(normal, hit, rows, triangles, ns, ctx):
     if normal[0] == "normal_map":
-        return normal_map(hit, rows, ns, normal[1], normal[2])
+        if normal[3] != "TANGENT":
+            return space_normal_map(hit, rows, ns, normal[1], normal[2], normal[3], ctx)
+        return normal_map(hit, rows, ns, normal[1], normal[2], ctx)
     _, height, strength, distance, invert, inner, step = normal
-    base = ns if inner is None else _unit(_evaluate_normal(inner, hit, rows, triangles, ns), ns)
-    uv = hit.uv[rows]
-    grad = surface_gradient(height, uv, step, triangles, hit.prim[rows])
-    return bump(base, grad, strength(uv), distance(uv), invert)
+    base = ns if inner is None else _unit(_evaluate_normal(inner, hit, rows, triangles, ns, ctx), ns)
+    grad = surface_gradient(height, ctx, step, triangles)
+    return bump(base, grad, strength(ctx), distance(ctx), invert)
 
 
-def normal_map(hit, rows, ns, color_fn, strength_fn):
+def normal_map(hit, rows, ns, color_fn, strength_fn, ctx):
     """Cycles' tangent-space svm_node_normal_map (5.0): the strength scales
     the tangential part, the frame is (tangent, sign * n x tangent, n) with n
     the front-facing normal; back-facing hits flip the result."""
-    uv = hit.uv[rows]
-    c = 2.0 * (color_fn(uv) - 0.5)
-    s = strength_fn(uv)
+    c = 2.0 * (color_fn(ctx) - 0.5)
+    s = strength_fn(ctx)
     c[:, 0] *= s
     c[:, 1] *= s
     c[:, 2] = 1.0 + (c[:, 2] - 1.0) * np.clip(s, 0.0, 1.0)
@@ -615,14 +727,48 @@ def normal_map(hit, rows, ns, color_fn, strength_fn):
     return out * flip
 
 
-def surface_gradient(height_fn, uv, step, triangles, prim):
-    """World-space surface gradient of height(uv) on each hit's triangle:
-    UV finite differences times the gradients of u and v over the triangle."""
-    h0 = height_fn(uv)
-    hu = (height_fn(uv + np.array([step, 0.0])) - h0) / step
-    hv = (height_fn(uv + np.array([0.0, step])) - h0) / step
-    grad_u, grad_v = uv_gradients(triangles, prim)
-    return hu[:, None] * grad_u + hv[:, None] * grad_v
+def space_normal_map(hit, rows, ns, color_fn, strength_fn, space, ctx):
+    """Cycles' object- and world-space svm_node_normal_map: the colour is
+    the normal (Blender's variants negate y and z), object space goes
+    through the object's normal matrix, back faces flip it, and a strength
+    other than 1 blends linearly from the shading normal."""
+    c = 2.0 * (color_fn(ctx) - 0.5)
+    if space.startswith("BLENDER_"):
+        c[:, 1:] = -c[:, 1:]
+    n = ctx.to_world_normal(c) if space.endswith("OBJECT") else _unit(c, ns)
+    back = hit.back[rows] if getattr(hit, "back", None) is not None else np.zeros(len(rows), bool)
+    n = np.where(back[:, None], -n, n)
+    s = np.maximum(strength_fn(ctx), 0.0)[:, None]
+    mixed = _unit(ns + (n - ns) * s, ns)
+    return np.where(s == 1.0, n, mixed)
+
+
+def surface_gradient(height_fn, ctx, uv_step, triangles):
+    """World-space surface gradient of the height at the context's points:
+    finite differences along two unit directions in each triangle's plane,
+    the point moved in position (so procedural heights of P, Generated or
+    Object coordinates and image heights of UV alike follow it).  The step
+    is uv_step in UV (a tenth of the finest texel) where UVs vary, else
+    1e-3 of the triangle's size; central differences keep float32 node
+    arithmetic (about 1e-7) from dominating the slope."""
+    prim = ctx.prim
+    if prim is None:
+        grad_u, grad_v = np.tile([1.0, 0.0, 0.0], (len(ctx), 1)), np.tile([0.0, 1.0, 0.0], (len(ctx), 1))
+        t1, t2, h = grad_u, grad_v, np.full(len(ctx), uv_step)
+    else:
+        ng = triangles.ng[prim]
+        t1 = _unit(triangles.e1[prim], ng)
+        t2 = np.cross(ng, t1)
+        grad_u, grad_v = uv_gradients(triangles, prim)
+        uv_rate = np.maximum(np.linalg.norm(grad_u, axis=1), np.linalg.norm(grad_v, axis=1))
+        size = np.sqrt(triangles.area[prim])
+        h = np.where(uv_rate > 0, uv_step / np.where(uv_rate > 0, uv_rate, 1.0), 1e-3 * size)
+        h = np.clip(h, 1e-7 * (1.0 + np.abs(ctx.p).max(axis=1)), np.maximum(size, 1e-12))
+    def slope(t):
+        step = t * h[:, None]
+        return (height_fn(ctx.shifted(step)) - height_fn(ctx.shifted(-step))) / (2.0 * h)
+    d1, d2 = slope(t1), slope(t2)
+    return d1[:, None] * t1 + d2[:, None] * t2
 
 
 def uv_gradients(triangles, prim):

@@ -277,6 +277,10 @@ def validate_texture(expr, what):
         _choice(expr.operation, _scene.MATH_OPERATIONS, what, "math operation")
         for name in ("a", "b", "c"):
             validate_texture(getattr(expr, name), f"{what} math {name}")
+    elif isinstance(expr, _scene.NodeOutput):
+        validate_node_call(expr.call, what)
+        if expr.output not in dict(_node_def(expr.call, what).outputs):
+            raise SceneError(f"{what}: node {expr.call.idname} has no output {expr.output!r}")
     elif isinstance(expr, (_scene.NormalMap, _scene.Bump)):
         raise SceneError(f"{what}: a {type(expr).__name__} gives a normal, not a colour or value")
     else:
@@ -284,6 +288,27 @@ def validate_texture(expr, what):
         if arr is None or arr.shape not in ((), (3,)):
             raise SceneError(f"{what}: expected a number, an RGB triple or a texture, got {expr!r}")
         _finite(arr, what)
+
+
+def _node_def(call, what):
+    from .nodes import REGISTRY
+    entry = REGISTRY.get(call.idname)
+    if entry is None:
+        raise SceneError(f"{what}: unknown shader node {call.idname!r}")
+    return entry
+
+
+def validate_node_call(call, what):
+    """A registered node: known inputs, each a constant or an expression."""
+    entry = _node_def(call, what)
+    reason = entry.accepts(call.props) if entry.accepts is not None else None
+    if reason:
+        raise SceneError(f"{what}: node {call.idname}: {reason}")
+    known = dict(entry.inputs)
+    for name, value in call.inputs.items():
+        if name not in known:
+            raise SceneError(f"{what}: node {call.idname} has no input {name!r}")
+        validate_texture(value, f"{what} {call.idname}.{name}")
 
 
 def _numeric(value):
@@ -296,6 +321,7 @@ def _numeric(value):
 
 def validate_normal(expr, what):
     if isinstance(expr, _scene.NormalMap):
+        _choice(getattr(expr, "space", "TANGENT"), _scene.NORMAL_MAP_SPACES, what, "normal map space")
         validate_texture(expr.color, f"{what} normal map colour")
         validate_texture(expr.strength, f"{what} normal map strength")
     elif isinstance(expr, _scene.Bump):

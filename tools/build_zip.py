@@ -34,7 +34,11 @@ PACKAGE = 'ember'
 WHEELS = {
     'embreex': 'embreex==4.4.0.post1',
     'OpenImageIO': 'openimageio==3.0.21.0',
+    'numba': 'numba==0.68.1',       # compiled kernels (engine/kernels.py)
+    'llvmlite': 'llvmlite==0.50.0',  # numba's compiler, needed with it
 }
+# Wheels another bundled wheel needs, by import name.
+DEPENDS = {'numba': ('llvmlite',)}
 PYTHON_VERSION = '3.11'
 PLATFORM_TAG = 'manylinux_2_28_x86_64'
 # Intel Open Image Denoise for addon/denoise.py where Blender has none (3.4):
@@ -79,6 +83,8 @@ def check_engine_is_relocatable():
 
 def needed_wheels():
     imported = engine_imports() | {'embreex'}  # the renderer's ray tracer
+    for module in list(imported):
+        imported.update(DEPENDS.get(module, ()))
     return [requirement for module, requirement in WHEELS.items() if module in imported]
 
 

@@ -40,6 +40,7 @@ class InstanceCollector:
             name=obj.name,
             **ray_visibility(inst),
             **_pass_fields(inst),
+            **object_info(inst),
         ))
 
     def _mesh_id(self, obj):
@@ -75,6 +76,24 @@ def ray_visibility(inst):
             visible = visible and bool(getattr(parent, name, True))
         flags[name] = visible
     return flags
+
+
+def object_info(inst):
+    """Object Info node data: colour and Cycles' random number
+    (float32(random_id) / 2^32, random_id read as uint32)."""
+    obj = inst.object
+    if inst.is_instance:
+        rid = int(getattr(inst, 'random_id', 0)) & 0xFFFFFFFF
+    else:
+        # Cycles: hash_uint2(hash_string(name), 0) for objects that are not instances.
+        h = 0
+        for ch in obj.name.encode('utf-8'):
+            h = (h * 37 + ch) & 0xFFFFFFFF
+        from .. import backend
+        rid = int(backend.load('nodes.hashing').hash_uint(np.uint32(h), np.uint32(0)))
+    random = float(np.float32(rid) * np.float32(1.0 / 4294967296.0))
+    return {'color': tuple(float(c) for c in tuple(getattr(obj, 'color', (1.0, 1.0, 1.0)))[:3]),
+            'random': random}
 
 
 def _geometry_name(obj):

@@ -2,7 +2,10 @@
 
 power (point, spot, area) = colour * energy [W]; sun strength = colour *
 strength [W/m^2]; Blender 4.0+ light exposure multiplies both by 2^exposure.
-Light node trees are not evaluated (Cycles-only feature), which is reported.
+Light node trees (Cycles-only) are read through the shader-node registry
+(nodes.SocketReader): an Emission node's Color x Strength that is the same
+at every point (e.g. a Blackbody of a fixed temperature) scales the light;
+one that varies per point is reported and its mean is used.
 
 Blender 3.x lights follow older conventions, converted here the way Blender
 4.0 converts a 3.x file when it opens it (measured: the same Cornell box
@@ -115,9 +118,58 @@ def collect_lights(depsgraph):
         if _is_black(light):
             continue
         if getattr(obj.data, 'use_nodes', False) and _has_light_nodes(obj.data):
-            warnings.append(f"Light '{obj.name}': light nodes are ignored")
+            light, note = _with_node_tree(light, obj.data)
+            if note:
+                warnings.append(f"Light '{obj.name}': {note}")
+            if _is_black(light):
+                continue
         lights.append(light)
     return lights, warnings
+
+
+def _with_node_tree(light, data):
+    """The light scaled by its node tree's emission (Color x Strength of the
+    Emission node feeding the Light Output), and a note or None."""
+    from . import nodes
+    output = nodes.output_node(data.node_tree, 'OUTPUT_LIGHT')
+    if output is None:
+        return light, None
+    reader = nodes.SocketReader()
+    source, _ = reader.linked_node(output.inputs['Surface'])
+    if source is None or source.type != 'EMISSION' or source.mute:
+        name = 'nothing' if source is None else f"'{source.name}'"
+        return light, f"light nodes ({name} at the output) are ignored"
+    color = reader.input(source, 'Color')
+    strength = reader.input(source, 'Strength')
+    if reader.unsupported:
+        return light, "light nodes " + ", ".join(reader.unsupported) + " are ignored"
+    factor, varies = _constant_rgb(nodes._as_color(color), strength)
+    note = "the light's node tree varies over the light: its mean is used" if varies else None
+    for name in ('power', 'strength'):
+        value = getattr(light, name, None)
+        if value is not None:
+            return dataclasses.replace(light, **{name: tuple(v * f for v, f in zip(value, factor))}), note
+    return light, note
+
+
+def _constant_rgb(color, strength):
+    """(rgb, varies): the expression color * strength evaluated at random
+    shading points; varies when they disagree (then the mean)."""
+    from .. import backend
+    from . import nodes
+    expr = nodes.scale(color, strength)
+    if not nodes.is_expr(expr):
+        return tuple(float(c) for c in expr), False
+    context = backend.load('nodes.context')
+    rng = np.random.default_rng(0)
+    n = 64
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    ctx = context.ShadingContext(n, p=rng.uniform(-1.0, 1.0, (n, 3)), ng=d, ns=d, wo=d, uv=rng.random((n, 2)))
+    values = backend.load('textures').Compiler().color(expr)(ctx)
+    mean = values.mean(axis=0)
+    varies = bool(np.abs(values - mean).max() > 1e-6 * max(1.0, float(np.abs(mean).max())))
+    return tuple(float(c) for c in np.maximum(mean, 0.0)), varies
 
 
 def _is_black(light):

@@ -71,19 +71,9 @@ class NodeTranslator:
     # -- socket values --------------------------------------------------------
 
     def _linked_node(self, socket):
-        """The node feeding a socket, skipping reroutes and muted links."""
-        if not socket.is_linked:
-            return None, None
-        link = socket.links[0]
-        if getattr(link, 'is_muted', False) or not getattr(link, 'is_valid', True):
-            return None, None
-        node, out = link.from_node, link.from_socket
-        while node.type == 'REROUTE':
-            if not node.inputs[0].is_linked:
-                return None, None
-            link = node.inputs[0].links[0]
-            node, out = link.from_node, link.from_socket
-        return node, out
+        """The node feeding a socket: reroutes and muted links skipped,
+        node groups inlined (nodes.linked_node)."""
+        return nodes.linked_node(socket)
 
     def _read(self, node, name):
         """The input's constant or texture expression (nodes.SocketReader);
@@ -124,11 +114,13 @@ class NodeTranslator:
     # -- closures -------------------------------------------------------------
 
     def surface(self, socket):
-        node, _ = self._linked_node(socket)
-        if node is None:
+        node, out = self._linked_node(socket)
+        if node is None or node.type == 'GROUP_DEFAULT':
             return Closure()  # an unlinked surface renders black, as in Cycles
         if node.mute:
-            return self._fallback(node)
+            # Cycles passes a muted node's first matching input through.
+            source = nodes.muted_source(node, out)
+            return Closure() if source is None else self.surface(source)
         handler = getattr(self, '_node_' + node.type.lower(), None)
         if handler is None:
             return self._fallback(node)
@@ -426,7 +418,7 @@ def translate(material):
     if output is None:
         return scene.Material(name, ()), f"Material '{name}': no Material Output node, rendered black"
     closure = translator.surface(output.inputs['Surface'])
-    normal = _material_normal(translator, output)
+    normal = _displacement_bump(translator, output, _material_normal(translator, output))
     return (scene.Material(name, tuple(closure.lobes), closure.emission, normal=normal),
             translator.warning())
 
@@ -450,6 +442,38 @@ def _material_normal(translator, output):
         translator.reader.warnings.append(
             "one normal per material: the normal input of '" + found[0].name + "' is used for all shaders")
     return translator.reader.normal(found[0].inputs['Normal'])
+
+
+def _displacement_bump(translator, output, inner):
+    """The Material Output's Displacement as Cycles' default "Bump Only": a
+    bump whose height is the displacement along the normal (a Displacement
+    node's (Height - Midlevel) * Scale, or a float linked directly), over the
+    BSDF's own normal map / bump.  Other displacement methods render as bump
+    too (with a warning)."""
+    socket = output.inputs.get('Displacement')
+    if socket is None or not socket.is_linked:
+        return inner
+    node, _ = translator._linked_node(socket)
+    if node is None:
+        return inner
+    reader = translator.reader
+    method = getattr(getattr(translator, 'material', None), 'displacement_method', 'BUMP')
+    if method not in ('BUMP', None):
+        reader.warnings.append(f"displacement method {method} rendered as bump")
+    if node.type == 'DISPLACEMENT' and not node.mute:
+        if getattr(node, 'space', 'OBJECT') != 'OBJECT':
+            reader.warnings.append(f"'{node.name}' {node.space.lower()}-space displacement read as object space")
+        height = nodes.math('MULTIPLY', nodes.math('SUBTRACT', nodes.as_value(reader.input(node, 'Height')),
+                                                   nodes.as_value(reader.input(node, 'Midlevel'))),
+                            nodes.as_value(reader.input(node, 'Scale')))
+    else:
+        value = reader.read(socket)
+        if value is None:
+            return inner
+        height = nodes.as_value(value)
+    if not nodes.is_expr(height):
+        return inner   # a constant displacement moves nothing
+    return _scene().Bump(height, 1.0, 1.0, False, inner)
 
 
 class MaterialTable:

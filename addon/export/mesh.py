@@ -109,7 +109,50 @@ def mesh_from_blender(mesh, name, tangents=False):
         name=name,
         tangents=corner_tangents,
         tangent_signs=signs,
+        uv_maps=_named_uv_maps(mesh, loops),
+        attributes=_color_attributes(mesh, triangles, loops),
+        texspace=_texspace(mesh),
     )
+
+
+def _named_uv_maps(mesh, loops):
+    """Every UV map by name, (T, 3, 2) each, when there is more than one
+    (the active one is ``uvs``), for UV Map nodes and image nodes naming one."""
+    layers = list(mesh.uv_layers)
+    if len(layers) < 2:
+        return None
+    return {layer.name: _get(layer.data, 'uv', len(mesh.loops), 2, np.float32)[loops] for layer in layers}
+
+
+def _color_attributes(mesh, triangles, loops):
+    """Colour attributes as linear RGBA per corner, (T, 3, 4) by name; ''
+    names the default (render) one.  Blender's ``color`` is scene linear for
+    byte colours too (stored sRGB, decoded as Cycles does at sync)."""
+    attrs = getattr(mesh, 'color_attributes', None)
+    if attrs is None or len(attrs) == 0:
+        return None
+    out = {}
+    for attr in attrs:
+        if attr.domain not in ('POINT', 'CORNER'):
+            continue
+        count = len(attr.data)
+        rgba = _get(attr.data, 'color', count, 4, np.float32)
+        out[attr.name] = rgba[triangles] if attr.domain == 'POINT' else rgba[loops]
+    index = getattr(attrs, 'render_color_index', -1)
+    if 0 <= index < len(attrs) and attrs[index].name in out:
+        out[''] = out[attrs[index].name]
+    elif out:
+        out[''] = next(iter(out.values()))
+    return out or None
+
+
+def _texspace(mesh):
+    """(location, size) of the mesh's texture space (Generated coordinates)."""
+    loc = getattr(mesh, 'texspace_location', None)
+    size = getattr(mesh, 'texspace_size', None)
+    if loc is None or size is None:
+        return None
+    return (tuple(float(v) for v in loc), tuple(float(v) for v in size))
 
 
 def mesh_from_object(obj, name):

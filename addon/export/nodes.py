@@ -121,6 +121,139 @@ def may_be_below(value, level):
 
 
 # ----------------------------------------------------------------------------
+# following links: reroutes, muted links, node groups
+
+class SocketList:
+    """A node's inputs or outputs seen inside node groups (list and name access)."""
+
+    def __init__(self, sockets, path):
+        self._sockets = sockets
+        self._path = path
+
+    def __getitem__(self, key):
+        return InGroup(self._sockets[key], self._path)
+
+    def get(self, key, default=None):
+        socket = self._sockets.get(key)
+        return default if socket is None else InGroup(socket, self._path)
+
+    def __contains__(self, key):
+        return key in self._sockets
+
+    def __iter__(self):
+        return (InGroup(s, self._path) for s in self._sockets)
+
+    def __reversed__(self):
+        return (InGroup(s, self._path) for s in reversed(list(self._sockets)))
+
+    def __len__(self):
+        return len(self._sockets)
+
+
+class InGroup:
+    """A node or socket inside node groups: ``path`` holds the group nodes
+    from the outermost in, so a Group Input leads back to the right instance."""
+
+    def __init__(self, target, path):
+        self.__dict__['_target'] = target
+        self.__dict__['_path'] = path
+
+    def __getattr__(self, name):
+        if name in ('inputs', 'outputs'):
+            return SocketList(getattr(self._target, name), self._path)
+        return getattr(self._target, name)
+
+    def __eq__(self, other):
+        return isinstance(other, InGroup) and self._target == other._target and self._path == other._path
+
+    def __hash__(self):
+        return hash((self._target.as_pointer(), tuple(g.as_pointer() for g in self._path)))
+
+
+class GroupDefault:
+    """Stands for an unlinked input of a group node read from inside the
+    group: its value is that input's own (readers use ``constant``)."""
+    type = 'GROUP_DEFAULT'
+    mute = False
+    bl_idname = 'NodeGroupInput'
+
+    def __init__(self, socket):
+        self.socket = socket
+        self.name = getattr(socket, 'name', 'Group Input')
+
+
+def _raw(item):
+    return item._target if isinstance(item, InGroup) else item
+
+
+def _wrap(item, path):
+    return InGroup(item, path) if path else item
+
+
+def group_output_node(tree):
+    outputs = [n for n in tree.nodes if n.type == 'GROUP_OUTPUT']
+    return next((n for n in outputs if getattr(n, 'is_active_output', False)), outputs[0] if outputs else None)
+
+
+def _by_identifier(sockets, identifier):
+    for socket in sockets:
+        if socket.identifier == identifier:
+            return socket
+    return None
+
+
+def linked_node(socket):
+    """(node, output socket) feeding ``socket``: reroutes and muted or
+    invalid links skipped, node groups entered (nested, each instance with
+    its own inputs) and left again at their Group Input.  (None, None) when
+    nothing is linked; (GroupDefault, socket) for an unlinked group input."""
+    path = getattr(socket, '_path', ())
+    raw = _raw(socket)
+    for _ in range(10000):   # bounded: a malformed tree cannot loop forever
+        if not raw.is_linked:
+            return None, None
+        link = raw.links[0]
+        if getattr(link, 'is_muted', False) or not getattr(link, 'is_valid', True):
+            return None, None
+        node, out = link.from_node, link.from_socket
+        if node.type == 'REROUTE':
+            raw = node.inputs[0]
+            continue
+        if node.type == 'GROUP' and not node.mute:
+            tree = node.node_tree
+            inner_out = group_output_node(tree) if tree is not None else None
+            inner = _by_identifier(inner_out.inputs, out.identifier) if inner_out is not None else None
+            if inner is None:
+                return None, None
+            path, raw = path + (node,), inner
+            continue
+        if node.type == 'GROUP_INPUT':
+            if not path:
+                return None, None
+            group, path = path[-1], path[:-1]
+            outer = _by_identifier(group.inputs, out.identifier)
+            if outer is None:
+                return None, None
+            if not outer.is_linked:
+                return GroupDefault(_wrap(outer, path)), _wrap(outer, path)
+            raw = outer
+            continue
+        return _wrap(node, path), _wrap(out, path)
+    return None, None
+
+
+def muted_source(node, out):
+    """The input a muted node passes to ``out`` (Blender's internal links,
+    as Cycles), or None."""
+    path = getattr(node, '_path', ())
+    raw_out = _raw(out)
+    for link in getattr(_raw(node), 'internal_links', ()):
+        if link.to_socket.identifier == raw_out.identifier:
+            return _wrap(link.from_socket, path)
+    return None
+
+
+# ----------------------------------------------------------------------------
 # reading sockets
 
 class SocketReader:
@@ -130,11 +263,12 @@ class SocketReader:
     links (NodeTranslator._linked_node).  Notes go to ``unsupported`` (node
     labels) and ``warnings`` (sentences, e.g. a missing image)."""
 
-    def __init__(self, linked_node, image_cache=None):
-        self.linked_node = linked_node
+    def __init__(self, linked_node=None, image_cache=None):
+        self.linked_node = linked_node or globals()['linked_node']
         self.images = {} if image_cache is None else image_cache
         self.unsupported = []
         self.warnings = []
+        self.calls = {}   # (node, group path) -> NodeCall: outputs of one node share it
 
     def read(self, socket):
         """Constant or expression for an input socket (its own default when
@@ -142,12 +276,67 @@ class SocketReader:
         node, out = self.linked_node(socket)
         if node is None:
             return constant(socket)
+        if node.type == 'GROUP_DEFAULT':
+            return constant(out)
         if node.mute:
-            return self._unsupported(node)
+            source = muted_source(node, out)
+            return _zero(out) if source is None else self.input_value(source)
         handler = getattr(self, '_node_' + node.type.lower(), None)
-        if handler is None:
+        if handler is not None:
+            return handler(node, out)
+        entry = _registry().get(node.bl_idname)
+        if entry is not None:
+            return self._registered(node, out, entry)
+        return self._unsupported(node)
+
+    def input_value(self, socket):
+        value = self.read(socket)
+        return constant(socket) if value is None else value
+
+    # -- registered nodes (engine.nodes.REGISTRY) ------------------------------
+
+    def _registered(self, node, out, entry):
+        output = _match_output(entry, out)
+        if output is None:
+            self._note(f"'{node.name}' output '{out.name}' is not rendered yet")
             return self._unsupported(node)
-        return handler(node, out)
+        key = (_raw(node).as_pointer(), tuple(g.as_pointer() for g in getattr(node, '_path', ())))
+        call = self.calls.get(key)
+        if call is None:
+            call = self._call(node, entry)
+            self.calls[key] = call
+        reason = entry.accepts(call.props) if entry.accepts is not None else None
+        if reason:
+            self._note(f"'{node.name}' {reason}")
+            return self._unsupported(node)
+        used = call.props.setdefault('_outputs', [])
+        if output not in used:
+            used.append(output)
+        return _scene().NodeOutput(call, output)
+
+    def _call(self, node, entry):
+        inputs = {}
+        for identifier, kind in entry.inputs:
+            socket = _find_input(node, identifier)
+            if socket is None:
+                continue
+            if not socket.is_linked and identifier in ('Vector', 'Normal') and (
+                    entry.coords is not None or identifier == 'Normal'):
+                continue   # the engine's default (texture coordinates, the shading normal)
+            inputs[identifier] = _as_kind(self.input_value(socket), kind, self._source_is_vector(socket))
+        props = {name: _prop(getattr(node, name, default)) for name, default in entry.props}
+        # Some kernels changed between Blender versions (Voronoi's cell hash).
+        props['_blender_version'] = _blender_version()
+        if entry.translate is not None:
+            props.update(entry.translate(_raw(node)))
+        mapping = _texture_mapping(node, entry, inputs.get('Vector'))
+        if mapping is not None:
+            inputs['Vector'] = mapping
+        return _scene().NodeCall(node.bl_idname, inputs, props)
+
+    def _source_is_vector(self, socket):
+        source, out = self.linked_node(socket)
+        return out is not None and getattr(out, 'type', '') == 'VECTOR'
 
     def input(self, node, name_or_index):
         """Reads a node's input; an untranslatable source counts as its default."""
@@ -188,18 +377,20 @@ class SocketReader:
                                   self._vector(node))
 
     def _vector(self, node):
-        """None (the active UV map) for UV inputs Ember knows."""
-        source, out = self.linked_node(node.inputs['Vector'])
+        """None (the active UV map) when unlinked or fed by the UV output of
+        a Texture Coordinate node; else the vector expression (UV Map by
+        name, Mapping, procedural coordinates, ...)."""
+        socket = node.inputs['Vector']
+        source, out = self.linked_node(socket)
         if source is None:
-            return None
-        if source.type == 'TEX_COORD' and out.name == 'UV':
-            return None
-        if source.type == 'UVMAP':
-            if source.uv_map:
-                self._note(f"'{source.name}' UV map '{source.uv_map}' read as the active UV map")
-            return None
-        self._unsupported(source)
-        return None
+            return _texture_mapping(node, None, None)
+        if source.type == 'TEX_COORD' and out.name == 'UV' and getattr(source, 'object', None) is None:
+            vector = None
+        else:
+            vector = self.read(socket)
+            if vector is None:
+                return None
+        return _texture_mapping(node, None, vector) or vector
 
     def _image(self, node):
         """engine TextureImage for the node's image (loaded once per image),
@@ -237,7 +428,7 @@ class SocketReader:
         elif data_type == 'FLOAT':
             a, b = self.input(node, 'A_Float'), self.input(node, 'B_Float')
         else:
-            return self._unsupported(node)
+            return self._registered(node, out, _registry()['ShaderNodeMix'])
         blend = node.blend_type if data_type == 'RGBA' else 'MIX'
         if blend not in _scene().MIX_BLENDS:
             return self._unsupported(node)
@@ -269,12 +460,10 @@ class SocketReader:
             return None
         scene = _scene()
         if node.type == 'NORMAL_MAP' and not node.mute:
-            if node.space != 'TANGENT':
-                self._note(f"'{node.name}' {node.space.lower()}-space normal map is not rendered yet")
-                return None
-            if node.uv_map:
+            if node.space == 'TANGENT' and node.uv_map:
                 self._note(f"'{node.name}' UV map '{node.uv_map}' read as the active UV map")
-            return scene.NormalMap(self.input(node, 'Color'), _as_value(self.input(node, 'Strength')))
+            return scene.NormalMap(self.input(node, 'Color'), _as_value(self.input(node, 'Strength')),
+                                   node.space)
         if node.type == 'BUMP' and not node.mute:
             inner = self.normal(node.inputs['Normal']) if node.inputs['Normal'].is_linked else None
             return scene.Bump(_as_value(self.input(node, 'Height')),
@@ -282,6 +471,90 @@ class SocketReader:
                               _as_value(self.input(node, 'Distance')), bool(node.invert), inner)
         self._unsupported(node)
         return None
+
+
+def _blender_version():
+    import bpy
+    return tuple(bpy.app.version)
+
+
+def _registry():
+    from .. import backend
+    return backend.load('nodes').REGISTRY
+
+
+def _zero(socket):
+    """What a muted node without a pass-through outputs: zero."""
+    return 0.0 if getattr(socket, 'type', 'VALUE') in ('VALUE', 'INT', 'BOOLEAN') else (0.0, 0.0, 0.0)
+
+
+def _match_output(entry, out):
+    names = dict(entry.outputs)
+    for key in (out.identifier, out.name):
+        if key in names and key not in entry.unsupported_outputs:
+            return key
+    return None
+
+
+def _find_input(node, identifier):
+    """An enabled input by identifier (else by name)."""
+    sockets = list(node.inputs)
+    for socket in sockets:
+        if socket.identifier == identifier and getattr(socket, 'enabled', True):
+            return socket
+    for socket in sockets:
+        if socket.name == identifier and getattr(socket, 'enabled', True):
+            return socket
+    return None
+
+
+def _as_kind(value, kind, from_vector=False):
+    """A constant converted to a socket kind as Cycles' implicit conversions
+    (colour to float = luminance, vector to float = average, float to
+    colour = grey); expressions are converted by the engine."""
+    if is_expr(value):
+        return value
+    if kind == 'float':
+        if isinstance(value, tuple):
+            return sum(value[:3]) / 3.0 if from_vector else luminance(value)
+        return float(value)
+    if isinstance(value, (float, int)):
+        return (float(value),) * 3
+    return tuple(float(c) for c in value[:3])
+
+
+def _prop(value):
+    if isinstance(value, (bool, int, float, str)) or value is None:
+        return value
+    try:
+        return [float(v) for v in value]
+    except TypeError:
+        return str(value)
+
+
+def _texture_mapping(node, entry, vector):
+    """The hidden texture_mapping of a texture node as a Mapping node call
+    (None when it is the identity, as almost always).  vector None: the
+    node's default coordinates."""
+    tm = getattr(_raw(node), 'texture_mapping', None)
+    if tm is None:
+        return None
+    identity = (tuple(tm.translation) == (0.0, 0.0, 0.0) and tuple(tm.rotation) == (0.0, 0.0, 0.0)
+                and tuple(tm.scale) == (1.0, 1.0, 1.0) and not tm.use_min and not tm.use_max
+                and (tm.mapping_x, tm.mapping_y, tm.mapping_z) == ('X', 'Y', 'Z'))
+    if identity:
+        return None
+    scene = _scene()
+    if vector is None:
+        coords = getattr(entry, 'coords', None) or 'uv'
+        if coords == 'position':
+            vector = scene.NodeOutput(scene.NodeCall('ShaderNodeNewGeometry', {}), 'Position')
+        else:
+            vector = scene.NodeOutput(scene.NodeCall('ShaderNodeTexCoord', {}),
+                                      'Generated' if coords == 'generated' else 'UV')
+    return scene.NodeOutput(scene.NodeCall('ShaderNodeMapping', {
+        'Vector': vector, 'Location': tuple(tm.translation), 'Rotation': tuple(tm.rotation),
+        'Scale': tuple(tm.scale)}, {'vector_type': tm.vector_type}), 'Vector')
 
 
 def _input(node, name_or_index):

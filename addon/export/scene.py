@@ -88,4 +88,5 @@ def render_settings(scene, is_preview=False):
         # The film keeps first-hit AOVs only for the denoiser (memory: the
         # Depth and Normal passes come from the pass accumulators).
         aovs=("normal", "albedo") if settings.use_denoising and not is_preview else (),
+        use_jit=getattr(settings, 'use_jit', True),
     )

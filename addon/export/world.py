@@ -99,9 +99,51 @@ def _translate(world, notes):
         return color, None
     if source.type == 'TEX_ENVIRONMENT' and out.name == 'Color' and not source.mute:
         return _environment(source, strength, color, notes)
+    baked = _bake_node_tree(node.inputs['Color'], strength, notes)
+    if baked is not None:
+        return baked
     notes.add(f"'{source.name}' ({source.bl_idname}) is not supported: the Background's "
               "constant colour is used")
     return color, None
+
+
+# Resolution of a baked procedural world (equirectangular, importance-sampled
+# like an HDRI); 512 x 256 texels are 0.7 degrees each.
+BAKE_SIZE = (512, 256)
+
+
+def _bake_node_tree(socket, strength, notes):
+    """Any node tree of the shader-node registry above the Background Color,
+    evaluated per direction as Cycles shades the world (P = Generated =
+    Object = the ray direction, N = incoming = -direction, camera rays) and
+    baked into an equirectangular EnvironmentTexture.  None if a node in it
+    is not evaluated (the caller falls back to the constant colour)."""
+    from .. import backend
+    reader = nodes.SocketReader()
+    expr = reader.read(socket)
+    if expr is None or reader.unsupported:
+        for warning in reader.warnings:
+            notes.add(warning)
+        return None
+    for warning in reader.warnings:
+        notes.add(warning)
+    if not nodes.is_expr(expr):
+        value = expr if isinstance(expr, tuple) else (float(expr),) * 3
+        return tuple(float(c) * strength for c in value), None
+    env = backend.load('environment')
+    context = backend.load('nodes.context')
+    width, height = BAKE_SIZE
+    u = (np.arange(width) + 0.5) / width
+    v = 1.0 - (np.arange(height) + 0.5) / height      # row 0 is the top (+Z)
+    uu, vv = np.meshgrid(u, v)
+    d = env.equirect_to_direction(uu.reshape(-1), vv.reshape(-1))
+    ctx = context.ShadingContext(len(d), p=d, ng=-d, ns=-d, wo=-d)
+    rgb = backend.load('textures').Compiler().color(expr)(ctx)
+    pixels = np.ascontiguousarray(np.maximum(rgb, 0.0).reshape(height, width, 3), dtype=np.float32)
+    scene = backend.scene_module()
+    texture = scene.EnvironmentTexture(pixels, strength, np.eye(3), 'Linear', name='baked world nodes')
+    mean = tuple(float(c) * strength for c in pixels.reshape(-1, 3).mean(axis=0))
+    return mean, texture
 
 
 def _environment(node, strength, fallback, notes):

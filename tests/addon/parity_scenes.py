@@ -2,6 +2,10 @@
 test modules do not import each other)."""
 import bpy
 
+from ember_testlib import small_resolution
+
+WIDTH, HEIGHT = 32, 24   # the light and transparency parity frames
+
 
 def material(name, kind, color=(0.8, 0.8, 0.8), strength=1.0, roughness=0.3):
     mat = bpy.data.materials.new(name)

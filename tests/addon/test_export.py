@@ -435,9 +435,9 @@ def test_unsupported_nodes_fall_back_with_one_warning(factory_scene):
     material, tree = new_material("Weird")
     glass = tree.nodes.new('ShaderNodeBsdfToon')
     glass.inputs['Color'].default_value = (0.2, 0.9, 0.3, 1.0)
-    noise = tree.nodes.new('ShaderNodeTexNoise')
+    wire = tree.nodes.new('ShaderNodeWireframe')   # a node Ember does not evaluate
     mix = tree.nodes.new('ShaderNodeMixShader')
-    tree.links.new(noise.outputs['Fac'], mix.inputs['Fac'])
+    tree.links.new(wire.outputs['Fac'], mix.inputs['Fac'])
     tree.links.new(glass.outputs[0], mix.inputs[1])
     tree.links.new(tree.nodes['Principled BSDF'].outputs[0], mix.inputs[2])
     tree.links.new(mix.outputs[0], tree.nodes['Material Output'].inputs['Surface'])

@@ -66,7 +66,7 @@ def cone_theta_edges(one_minus_cos_max, k=RES, margin=1e-7):
     return C.theta_of_w(np.linspace(0.0, one_minus_cos_max * (1.0 + margin), k + 1))
 
 
-def _unit(v):
+def unit(v):
     v = np.asarray(v, float)
     return v / np.linalg.norm(v)
 
@@ -74,9 +74,9 @@ def _unit(v):
 def area_matrix(center, emit_dir, scale=(1.0, 1.0), roll=0.0):
     """Light-to-world matrix of an area light at ``center`` emitting along
     ``emit_dir`` (its local -Z), local X/Y scaled by ``scale``."""
-    z = -_unit(emit_dir)
+    z = -unit(emit_dir)
     helper = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    x = _unit(np.cross(helper, z))
+    x = unit(np.cross(helper, z))
     y = np.cross(z, x)
     x, y = math.cos(roll) * x + math.sin(roll) * y, -math.sin(roll) * x + math.cos(roll) * y
     m = np.eye(4)

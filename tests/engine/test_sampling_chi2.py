@@ -39,7 +39,7 @@ from engine import scene as S  # noqa: E402
 N = 1_000_000           # samples per histogram
 from sampling_lib import (FP_RTOL, RES, TWO_PI, area_matrix, assert_close, assert_unit,  # noqa: E402,F401
                           cone_theta_edges, direction_chi2, emissive_mesh_scene, make_light_set, ray_triangles,
-                          uniform_phi_edges)
+                          uniform_phi_edges, unit)
 FZ = C.frame((0.0, 0.0, 1.0))
 
 
@@ -438,11 +438,11 @@ class LightCase:
                 omc = (r * r / (d * d + r * r)) / (1.0 + d / math.hypot(d, r))
             else:      # sphere: sin = r / d
                 omc = (r * r / (d * d)) / (1.0 + math.sqrt(1.0 - r * r / (d * d)))
-            self.axis, self.omc = _unit(pos), omc
+            self.axis, self.omc = unit(pos), omc
             self.solid_angle = TWO_PI * omc
         elif kind == "sun":
             angle = {"sun_real": 0.00918, "sun_wide": 0.3, "sun_huge": 2.5}[name]
-            direction = _unit((0.3, -0.2, -1.0))
+            direction = unit((0.3, -0.2, -1.0))
             light = S.SunLight(direction, (3.0, 2.5, 2.0), angle)
             self.axis, self.omc = -direction, 2.0 * math.sin(angle / 4) ** 2
             self.solid_angle = TWO_PI * self.omc
@@ -484,7 +484,7 @@ class LightCase:
 
     def _bound(self, center, boundary):
         """Axis to the centre; a cone 1% wider than the farthest boundary point."""
-        self.axis = _unit(center - self.p)
+        self.axis = unit(center - self.p)
         rays = np.asarray(boundary, float) - self.p
         rays /= np.linalg.norm(rays, axis=1, keepdims=True)
         _, theta = C.to_phi_theta(rays, C.frame(self.axis))
@@ -553,7 +553,7 @@ def test_light_sampling(name):
 def test_delta_lights():
     p = np.array([[0.2, -0.1, 0.3], [1.0, 2.0, -1.0]])
     pos = np.array([0.5, 0.5, 2.0])
-    sun_dir = _unit((0.3, -0.2, -1.0))
+    sun_dir = unit((0.3, -0.2, -1.0))
     spot = S.SpotLight(tuple(pos), (8.0, 4.0, 2.0), 0.0, direction=(0.0, 0.0, -1.0),
                        spot_size=2.0, spot_blend=1.0)
     ls, _, _ = make_light_set([S.PointLight(tuple(pos), (8.0, 4.0, 2.0), 0.0), spot,
@@ -577,7 +577,7 @@ def test_delta_lights():
         else:
             assert_close(s.wi, np.tile(-sun_dir, (n, 1)), "delta sun direction")
             assert_close(s.Le, np.tile([3.0, 2.0, 1.0], (n, 1)), "delta sun irradiance")
-    t, emitter, _, _ = ls.intersect(p, np.tile(_unit(pos), (n, 1)), np.full(n, np.inf))
+    t, emitter, _, _ = ls.intersect(p, np.tile(unit(pos), (n, 1)), np.full(n, np.inf))
     assert np.all(np.isinf(t)) and np.all(emitter == -1)
     assert ls.sun_hits(np.tile(-sun_dir, (n, 1))) == []
 
@@ -600,7 +600,7 @@ def test_light_ray_consistency_in_a_shared_set():
     towards each NEE sample hits the sampled emitter (global index) with the
     same pdf and radiance."""
     meshes, instances, materials = emissive_mesh_scene()
-    sun_dir = _unit((1.0, 1.0, -1.0))
+    sun_dir = unit((1.0, 1.0, -1.0))
     lts = [S.PointLight((0.0, 0.0, 5.0), (10.0, 10.0, 10.0), 0.5),
            S.PointLight((5.0, 0.0, 0.0), (10.0, 5.0, 1.0), 0.7, soft_falloff=True),
            S.SpotLight((0.0, -5.0, 0.0), (20.0, 20.0, 20.0), 0.3, direction=(0, 1, 0.1)),

@@ -126,7 +126,7 @@ def test_textured_weight_and_ior_are_validated():
     with pytest.raises(SceneError, match="lobe 0 ior"):
         quad_scene(Material("bad", (bad,))).validate()
     with pytest.raises(SceneError, match="lobe 0 weight"):
-        quad_scene(Material("bad", (Lobe("diffuse", weight=MixColor("BURN", 0.5, 1.0, 0.0)),))).validate()
+        quad_scene(Material("bad", (Lobe("diffuse", weight=MixColor("BLUR", 0.5, 1.0, 0.0)),))).validate()
 
 
 # ----------------------------------------------------------------------------

@@ -271,7 +271,7 @@ def test_normal_map_without_uvs_keeps_the_normal():
     (ImageTexture(TextureImage(np.zeros((2, 2, 5)), name="fat")), "'fat'"),
     (ImageTexture(TextureImage(np.full((2, 2, 3), np.nan), name="nan")), "NaN"),
     (ImageTexture(IMAGE, extension="WRAP"), "extension"),
-    (MixColor("BURN", 0.5, (1, 1, 1), (0, 0, 0)), "mix blend"),
+    (MixColor("BLUR", 0.5, (1, 1, 1), (0, 0, 0)), "mix blend"),
     (Math("HYPOT", 1.0, 2.0), "math operation"),
     (Math("ADD", "one", 2.0), "expected a number"),
 ])

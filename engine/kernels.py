@@ -1,0 +1,240 @@
+"""Elementwise kernels: one source, run by NumPy or compiled by numba.
+
+A kernel is a plain function of per-ray numbers written with NumPy ufuncs
+(``np.sqrt``, ``np.maximum``...), this module's ``where`` and ``clip``, and
+functions marked ``@helper``.  Called on arrays it is ordinary vectorized
+NumPy code (a temporary array per operation).  With the JIT on, the very same
+function is compiled by numba into a generalized ufunc that runs the whole
+body per element in one loop: no temporaries, one pass over memory.  A kernel
+may return one value or a tuple; the compiled form returns the same.
+
+The compiled loops are serial and release the GIL (NumPy runs ufunc loops
+without it), so Ember's own thread pool (engine/render.py) keeps the cores
+busy; numba's threading layer is never started (``parallel=True`` makes
+Debian's Blender 3.4 crash at exit).
+
+Compilation never delays a render: ``configure(True)`` starts one background
+thread that imports numba and compiles every kernel (or loads it from the
+disk cache); until a kernel is ready its NumPy form runs.  Both round
+alike, bit for bit (IEEE arithmetic and the same libm; checked by
+tests/engine/test_kernels.py), so a render may mix them and a seed's image
+does not depend on when compilation finished.
+The cache is ``NUMBA_CACHE_DIR`` or ``~/.cache/ember/numba`` (XDG_CACHE_HOME
+respected), one sub-folder per version of the engine's sources.  The JIT is
+off with ``RenderSettings.use_jit = False``, with ``EMBER_JIT=0``, or when
+numba does not import.
+"""
+import atexit
+import hashlib
+import importlib.util
+import inspect
+import os
+import threading
+import time
+
+import numpy as np
+
+
+def source_hash():
+    """Hash of the engine's sources: numba invalidates a cached kernel only
+    when its own file changes, not when a helper it inlines (in another
+    module) does, so each version of the engine gets its own cache folder."""
+    digest = hashlib.sha1()
+    folder = os.path.dirname(os.path.abspath(__file__))
+    for name in sorted(os.listdir(folder)):
+        if name.endswith(".py"):
+            with open(os.path.join(folder, name), "rb") as handle:
+                digest.update(name.encode() + handle.read())
+    return digest.hexdigest()[:12]
+
+
+def cache_dir():
+    base = os.environ.get("NUMBA_CACHE_DIR")
+    if not base:
+        home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        base = os.path.join(home, "ember", "numba")
+    return os.path.join(base, source_hash())
+
+
+def _unavailable_reason():
+    if os.environ.get("EMBER_JIT", "1").strip() == "0":
+        return "EMBER_JIT=0"
+    if importlib.util.find_spec("numba") is None:
+        return "numba is not installed"
+    return None
+
+
+UNAVAILABLE = _unavailable_reason()
+AVAILABLE = UNAVAILABLE is None
+KERNELS = []      # every Kernel, in definition order
+HELPERS = []      # functions kernels call
+compile_seconds = {}
+_state = {"enabled": False, "thread": None, "numba": None, "started": None, "finished": None}
+_lock = threading.Lock()
+
+
+def configure(use_jit):
+    """Compiled kernels on or off for the renders that follow; returns
+    whether they are on.  Turning them on starts the background compile."""
+    _state["enabled"] = bool(use_jit) and AVAILABLE
+    if _state["enabled"]:
+        _start()
+    return _state["enabled"]
+
+
+def enabled():
+    return _state["enabled"]
+
+
+def wait(timeout=None):
+    """Block until every kernel is compiled (or failed); True when all are ready."""
+    thread = _state["thread"]
+    if thread is not None:
+        thread.join(timeout)
+    return all(k.compiled is not None for k in KERNELS)
+
+
+def warm_up_seconds():
+    """Seconds the background compile took (None while it runs)."""
+    if _state["finished"] is None:
+        return None
+    return _state["finished"] - _state["started"]
+
+
+# ----------------------------------------------------------------------------
+# helpers usable in kernels: NumPy on arrays, scalar code when compiled
+
+def where(cond, a, b):
+    return np.where(cond, a, b)
+
+
+def clip(x, lo, hi):
+    return np.clip(x, lo, hi)
+
+
+def helper(fn):
+    """Mark a function kernels call: plain Python for NumPy, inlined when compiled."""
+    HELPERS.append(fn)
+    return fn
+
+
+# ----------------------------------------------------------------------------
+# kernels
+
+class Kernel:
+    """``fn`` called on arrays by NumPy, or its compiled gufunc once ready.
+
+    inputs/outputs: how many per-element float64 values go in and come out.
+    Inputs may be arrays of one shape or scalars (broadcast as NumPy does)."""
+
+    def __init__(self, fn, inputs, outputs):
+        self.fn = fn
+        self.inputs = inputs
+        self.outputs = outputs
+        self.compiled = None
+        self.__name__ = fn.__name__
+        self.__doc__ = fn.__doc__
+        KERNELS.append(self)
+
+    def __call__(self, *args):
+        compiled = self.compiled if _state["enabled"] else None
+        # Each kernel defines its result where intermediates overflow or are
+        # not numbers: no floating-point warnings, run either way.
+        with np.errstate(all="ignore"):
+            if compiled is None:
+                return self.fn(*args)
+            return compiled(*args)
+
+
+def kernel(inputs, outputs=1):
+    """Decorator: an elementwise kernel of ``inputs`` float64 values."""
+    def wrap(fn):
+        return Kernel(fn, inputs, outputs)
+    return wrap
+
+
+# ----------------------------------------------------------------------------
+# compilation (background thread)
+
+def _start():
+    with _lock:
+        if _state["thread"] is None:
+            _state["started"] = time.perf_counter()
+            thread = threading.Thread(target=_compile_all, name="ember-jit", daemon=True)
+            _state["thread"] = thread
+            atexit.register(_stop)
+            thread.start()
+
+
+def _stop():
+    """At exit: let the compile thread finish its current kernel, not start
+    another, and end before the interpreter does (a thread killed inside
+    LLVM could crash the exit of a command-line render)."""
+    _state["stop"] = True
+    thread = _state["thread"]
+    if thread is not None:
+        thread.join()
+
+
+def _compile_all():
+    try:
+        numba = _import_numba()
+        for k in list(KERNELS):
+            if _state.get("stop"):
+                break
+            t0 = time.perf_counter()
+            k.compiled = _gufunc(numba, k.fn, k.inputs, k.outputs)
+            with np.errstate(all="ignore"):
+                k.compiled(*([np.zeros(1)] * k.inputs))   # load or build the machine code now
+            compile_seconds[k.__name__] = time.perf_counter() - t0
+    except Exception as exc:  # noqa: BLE001 - the NumPy path keeps working
+        global UNAVAILABLE
+        UNAVAILABLE = f"numba failed: {type(exc).__name__}: {exc}"
+    finally:
+        _state["finished"] = time.perf_counter()
+
+
+def _import_numba():
+    if _state["numba"] is not None:
+        return _state["numba"]
+    import numba
+    from numba.extending import overload, register_jitable
+    numba.config.CACHE_DIR = cache_dir()   # read by the cache locator when a function is cached
+
+    @overload(where)
+    def _where_scalar(cond, a, b):
+        def impl(cond, a, b):
+            return a if cond else b
+        return impl
+
+    @overload(clip)
+    def _clip_scalar(x, lo, hi):
+        def impl(x, lo, hi):
+            return np.minimum(np.maximum(x, lo), hi)  # NaN propagates, as np.clip
+        return impl
+
+    for fn in HELPERS:
+        register_jitable(inline="always")(fn)
+    _state["numba"] = numba
+    return numba
+
+
+def _gufunc(numba, fn, inputs, outputs):
+    """numba gufunc with scalar core dimensions that stores fn's results."""
+    inner = numba.njit(inline="always", cache=True)(fn)
+    ins = [f"a{i}" for i in range(inputs)]
+    outs = [f"o{i}" for i in range(outputs)]
+    if outputs == 1:
+        stores = "    o0[0] = r\n"
+    else:
+        stores = "".join(f"    o{i}[0] = r[{i}]\n" for i in range(outputs))
+    source = f"def {fn.__name__}({', '.join(ins + outs)}):\n    r = inner({', '.join(ins)})\n{stores}"
+    namespace = {"inner": inner}
+    # Compiled as if from the kernel's own file, where numba's cache looks.
+    exec(compile(source, inspect.getfile(fn), "exec"), namespace)  # noqa: S102
+    signature = "void(" + ", ".join(["float64"] * inputs + ["float64[:]"] * outputs) + ")"
+    layout = ",".join(["()"] * inputs) + "->" + ",".join(["()"] * outputs)
+    wrapper = namespace[fn.__name__]
+    wrapper.__module__ = fn.__module__
+    wrapper.__qualname__ = fn.__name__ + "_gufunc"
+    return numba.guvectorize([signature], layout, nopython=True, cache=True)(wrapper)

@@ -1,0 +1,12 @@
+"""Shader nodes evaluated per shading point, as Cycles' SVM does.
+
+``REGISTRY`` (registry.py) maps a Blender node id to its entry; importing
+this package registers every node module.  ``ShadingContext`` (context.py)
+is what the nodes read.  engine.textures compiles ``scene.NodeOutput``
+expressions through the registry.
+"""
+from . import converter_nodes, input_nodes, texture_nodes  # noqa: F401  (registration)
+from .context import SceneShading, ShadingContext, as_context
+from .registry import REGISTRY, NodeDef, lookup
+
+__all__ = ["REGISTRY", "NodeDef", "lookup", "ShadingContext", "SceneShading", "as_context"]

@@ -1,0 +1,342 @@
+"""The per-hit shading context that shader nodes read.
+
+A ``ShadingContext`` describes N shading points: the triangle and the
+barycentrics of each, the world position, normals, the incoming direction,
+which side was hit and the ray's depth.  Everything else a node may ask for
+(UV maps by name, Generated and Object coordinates, colour attributes,
+object info) is interpolated from the triangle on first use and kept, so a
+material that only reads UVs costs what it did before.
+
+``SceneShading`` holds the per-scene tables behind it (object matrices and
+info per instance, per-mesh corner attributes gathered into per-triangle
+arrays on demand).  It hangs off ``geometry.Triangles.shading``.
+
+Bump mapping moves a context along the surface (``shifted``): barycentrics
+change with the world offset, so every interpolated attribute, UVs
+included, moves consistently with the position.
+"""
+import numpy as np
+
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+class SceneShading:
+    """Per-instance and per-mesh data the shading context interpolates."""
+
+    def __init__(self, scene, instance_of_triangle, local_triangle):
+        self.scene = scene
+        self.instance = np.asarray(instance_of_triangle, np.int32)   # (T,) index into scene.instances
+        self.local = np.asarray(local_triangle, np.int32)            # (T,) triangle index in its mesh
+        inst = scene.instances
+        mats = np.array([np.asarray(i.matrix, dtype=np.float64) for i in inst]).reshape(-1, 4, 4)
+        self.matrix = mats
+        self.inverse = np.array([_safe_inverse(m) for m in mats]).reshape(-1, 4, 4)
+        self.location = mats[:, :3, 3] if len(mats) else np.zeros((0, 3))
+        self.color = np.array([tuple(getattr(i, "color", (1.0, 1.0, 1.0)))[:3] for i in inst],
+                              dtype=np.float64).reshape(-1, 3)
+        self.pass_index = np.array([float(getattr(i, "pass_index", 0)) for i in inst]).reshape(-1)
+        self.random = np.array([float(getattr(i, "random", 0.0)) for i in inst]).reshape(-1)
+        self.mesh_of_instance = np.array([i.mesh for i in inst], dtype=np.int64).reshape(-1)
+        self._corners = {}
+
+    def corners(self, key):
+        """(T, 3, C) per-corner data of every triangle, or None when no mesh
+        has it.  key: ('uv', name), ('attr', name) or ('generated',)."""
+        if key not in self._corners:
+            self._corners[key] = self._gather(key)
+        return self._corners[key]
+
+    def _gather(self, key):
+        meshes = self.scene.meshes
+        per_mesh = [_mesh_corner_data(mesh, key) for mesh in meshes]
+        if all(d is None for d in per_mesh):
+            return None
+        width = next(d.shape[2] for d in per_mesh if d is not None)
+        fill = _fill_value(key, width)
+        out = np.empty((len(self.instance), 3, width))
+        out[:] = fill
+        mesh_of_tri = self.mesh_of_instance[self.instance]
+        for m, data in enumerate(per_mesh):
+            if data is None:
+                continue
+            rows = np.nonzero(mesh_of_tri == m)[0]
+            if len(rows):
+                out[rows] = data[self.local[rows], :, :width]
+        return out
+
+
+def _safe_inverse(m):
+    try:
+        return np.linalg.inv(m)
+    except np.linalg.LinAlgError:
+        return np.eye(4)
+
+
+def _fill_value(key, width):
+    if key[0] == "attr":
+        return np.zeros(width) if width != 4 else np.array([0.0, 0.0, 0.0, 1.0])
+    return np.zeros(width)
+
+
+def _mesh_corner_data(mesh, key):
+    """A mesh's (T, 3, C) corner data for key, or None."""
+    if key[0] == "uv":
+        name = key[1]
+        maps = getattr(mesh, "uv_maps", None) or {}
+        if name and name in maps:
+            return np.asarray(maps[name], dtype=np.float64)
+        return None if mesh.uvs is None or name else np.asarray(mesh.uvs, dtype=np.float64)
+    if key[0] == "attr":
+        attrs = getattr(mesh, "attributes", None) or {}
+        data = attrs.get(key[1])
+        if data is None:
+            return None
+        data = np.asarray(data, dtype=np.float64)
+        return data[..., None] if data.ndim == 2 else data
+    if key[0] == "generated":
+        return generated_corners(mesh)
+    raise KeyError(key)
+
+
+def generated_corners(mesh):
+    """Cycles' Generated coordinates at each corner: the undeformed position
+    (``mesh.orco`` when the exporter gave it, else the positions) mapped
+    through the texture space, (orco - location) / (2 size) + 0.5.  Without
+    an exported texture space Blender's automatic one is used: the bounding
+    box, with a zero extent replaced by 1 as Blender does."""
+    orco = getattr(mesh, "orco", None)
+    pos = np.asarray(mesh.positions, dtype=np.float64)
+    tris = np.asarray(mesh.triangles, dtype=np.int64)
+    corners = np.asarray(orco, dtype=np.float64) if orco is not None else pos[tris]
+    space = getattr(mesh, "texspace", None)
+    if space is None:
+        lo, hi = (pos.min(axis=0), pos.max(axis=0)) if len(pos) else (np.zeros(3), np.zeros(3))
+        loc, size = 0.5 * (lo + hi), 0.5 * (hi - lo)
+        size = np.where(size == 0.0, 1.0, np.where(size < 1e-5, 1e-5, size))
+    else:
+        loc, size = (np.asarray(v, dtype=np.float64) for v in space)
+    # Cycles: a zero size maps that axis to 0.5.
+    factor = np.where(size != 0.0, 0.5 / np.where(size != 0.0, size, 1.0), 0.0)
+    return (corners - loc) * factor + 0.5
+
+
+class ShadingContext:
+    """N shading points.  Arrays: p (N, 3) world position, ng (N, 3)
+    geometric normal and ns (N, 3) shading normal facing the incoming ray,
+    wo (N, 3) unit direction back along the ray, back (N,) hit the back
+    face, depth (N,) bounces before this hit (0: camera ray), ray (N,)
+    VIS_* bit of the ray (camera, diffuse, glossy, transmission, shadow).
+    prim/bary locate the point on the scene's triangles (None for a context
+    made from UVs alone)."""
+
+    def __init__(self, n, tris=None, prim=None, bary=None, p=None, ng=None, ns=None, wo=None,
+                 back=None, depth=None, ray=None, uv=None):
+        self.n = n
+        self.tris = tris
+        self.prim = prim
+        self.bary = bary
+        self.p = _or_zeros(p, (n, 3))
+        self.ng = _or_default(ng, n, (0.0, 0.0, 1.0))
+        self.ns = self.ng if ns is None else ns
+        self.wo = _or_default(wo, n, (0.0, 0.0, 1.0))
+        self.back = np.zeros(n, bool) if back is None else back
+        self.depth = np.zeros(n, np.int32) if depth is None else depth
+        self.ray = np.ones(n, np.uint8) if ray is None else ray
+        self._cache = {}
+        if uv is not None:
+            self._cache[("uv", "")] = uv
+
+    def __len__(self):
+        return self.n
+
+    # -- construction ---------------------------------------------------------
+
+    @classmethod
+    def from_uv(cls, uv):
+        """A context knowing only UVs (tests and callers without geometry)."""
+        uv = np.asarray(uv, dtype=np.float64)
+        return cls(len(uv), uv=uv)
+
+    @classmethod
+    def of_hit(cls, tris, hit):
+        ctx = getattr(hit, "shading", None)
+        if ctx is None:
+            bary = getattr(hit, "bary", None)
+            ctx = cls(len(hit.p), tris, hit.prim, bary, hit.p, hit.ng, hit.ns, hit.wo,
+                      getattr(hit, "back", None), getattr(hit, "depth", None), getattr(hit, "ray", None),
+                      uv=None if bary is not None else hit.uv)
+            hit.shading = ctx
+        return ctx
+
+    @classmethod
+    def at(cls, tris, prim, bu, bv, wo=None, depth=None, ray=None):
+        """Points on triangles prim at barycentrics (bu, bv), normals facing wo."""
+        p = tris.p0[prim] + bu[:, None] * tris.e1[prim] + bv[:, None] * tris.e2[prim]
+        ng = tris.ng[prim]
+        back = np.zeros(len(prim), bool)
+        if wo is not None:
+            back = np.einsum("ij,ij->i", ng, wo) < 0
+            ng = np.where(back[:, None], -ng, ng)
+        ns = ng
+        if tris.ns is not None:
+            c = tris.ns[prim]
+            ns = (1 - bu - bv)[:, None] * c[:, 0] + bu[:, None] * c[:, 1] + bv[:, None] * c[:, 2]
+            ns /= np.maximum(np.linalg.norm(ns, axis=1), 1e-30)[:, None]
+            ns = np.where((np.einsum("ij,ij->i", ns, ng) < 0)[:, None], -ns, ns)
+        return cls(len(prim), tris, prim, np.stack([bu, bv], axis=1), p, ng, ns,
+                   ng if wo is None else wo, back, depth, ray)
+
+    def take(self, rows):
+        """The context of a subset of the points (cached values carried)."""
+        out = ShadingContext.__new__(ShadingContext)
+        out.n = len(rows)
+        out.tris = self.tris
+        for name in ("prim", "bary", "p", "ng", "ns", "wo", "back", "depth", "ray"):
+            value = getattr(self, name)
+            setattr(out, name, None if value is None else value[rows])
+        out._cache = {k: None if v is None else v[rows] for k, v in self._cache.items()}
+        return out
+
+    def shifted(self, dp):
+        """The same points moved by world offsets dp (N, 3) within their
+        triangles' planes; interpolated attributes move with them."""
+        out = ShadingContext(self.n, self.tris, self.prim, None, self.p + dp, self.ng, self.ns, self.wo,
+                             self.back, self.depth, self.ray)
+        if self.bary is not None and self.tris is not None:
+            d = _bary_of_offset(self.tris, self.prim, dp)
+            out.bary = self.bary + d
+        else:
+            # Without triangles, only the UV map can follow: along x and y.
+            uv = self.uv
+            out._cache[("uv", "")] = uv + dp[:, :2]
+        return out
+
+    # -- interpolated data -----------------------------------------------------
+
+    def _interpolate(self, key):
+        if key in self._cache:
+            return self._cache[key]
+        value = None
+        shading = getattr(self.tris, "shading", None) if self.tris is not None else None
+        if shading is not None and self.bary is not None:
+            corners = shading.corners(key)
+            if corners is not None:
+                c = corners[self.prim]
+                bu, bv = self.bary[:, 0], self.bary[:, 1]
+                value = (1 - bu - bv)[:, None] * c[:, 0] + bu[:, None] * c[:, 1] + bv[:, None] * c[:, 2]
+        self._cache[key] = value
+        return value
+
+    @property
+    def uv(self):
+        """(N, 2) active UV map (zeros without one)."""
+        return self.uv_map("")
+
+    def uv_map(self, name):
+        """(N, 2) UV map by name ('' = the active map); zeros if missing."""
+        value = self._interpolate(("uv", name or ""))
+        if value is None and name:
+            value = self.uv_map("")
+        return np.zeros((self.n, 2)) if value is None else value
+
+    def attribute(self, name):
+        """(N, 4) RGBA of a colour attribute (or (N, C) padded), None if absent."""
+        value = self._interpolate(("attr", name))
+        if value is None:
+            return None
+        if value.shape[1] < 4:
+            pad = np.zeros((self.n, 4))
+            pad[:, 3] = 1.0
+            pad[:, :value.shape[1]] = value
+            if value.shape[1] == 1:
+                pad[:, 1:3] = value
+            value = pad
+        return value
+
+    @property
+    def instance(self):
+        shading = getattr(self.tris, "shading", None) if self.tris is not None else None
+        if shading is None or self.prim is None:
+            return None, None
+        return shading, shading.instance[self.prim]
+
+    @property
+    def object_coords(self):
+        """Object-space position (Cycles' Object texture coordinate)."""
+        if "object" not in self._cache:
+            shading, inst = self.instance
+            if shading is None:
+                self._cache["object"] = self.p
+            else:
+                inv = shading.inverse[inst]
+                self._cache["object"] = np.einsum("nij,nj->ni", inv[:, :3, :3], self.p) + inv[:, :3, 3]
+        return self._cache["object"]
+
+    def to_object(self, v):
+        """A world direction in object space (normalized), as Cycles'
+        object_inverse_normal_transform for normals."""
+        shading, inst = self.instance
+        if shading is None:
+            return v
+        m = shading.matrix[inst][:, :3, :3]
+        out = np.einsum("nji,nj->ni", m, v)   # transpose(M) v: inverse-transpose of the inverse
+        return _normalize(out)
+
+    def to_world_normal(self, v):
+        """An object-space normal in world space (Cycles'
+        object_normal_transform: the inverse transpose), normalized."""
+        shading, inst = self.instance
+        if shading is None:
+            return _normalize(v)
+        inv = shading.inverse[inst][:, :3, :3]
+        return _normalize(np.einsum("nji,nj->ni", inv, v))
+
+    @property
+    def generated(self):
+        """(N, 3) Generated coordinates (object-space P without a mesh)."""
+        value = self._interpolate(("generated",))
+        return self.object_coords if value is None else value
+
+    def object_info(self, what):
+        shading, inst = self.instance
+        if shading is None:
+            defaults = {"location": np.zeros((self.n, 3)), "color": np.ones((self.n, 3)),
+                        "pass_index": np.zeros(self.n), "random": np.zeros(self.n)}
+            return defaults[what]
+        table = {"location": shading.location, "color": shading.color,
+                 "pass_index": shading.pass_index, "random": shading.random}[what]
+        return table[inst]
+
+
+def _bary_of_offset(tris, prim, dp):
+    """Barycentric change (dbu, dbv) of a world offset dp projected onto the
+    plane of each triangle."""
+    e1, e2 = tris.e1[prim], tris.e2[prim]
+    d00 = np.einsum("ij,ij->i", e1, e1)
+    d01 = np.einsum("ij,ij->i", e1, e2)
+    d11 = np.einsum("ij,ij->i", e2, e2)
+    d20 = np.einsum("ij,ij->i", dp, e1)
+    d21 = np.einsum("ij,ij->i", dp, e2)
+    det = d00 * d11 - d01 * d01
+    inv = np.where(np.abs(det) > 1e-300, 1.0 / np.where(det != 0, det, 1.0), 0.0)
+    return np.stack([(d11 * d20 - d01 * d21) * inv, (d00 * d21 - d01 * d20) * inv], axis=1)
+
+
+def _normalize(v):
+    length = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.where(length > 0, v / np.where(length > 0, length, 1.0), 0.0)
+
+
+def _or_zeros(value, shape):
+    return np.zeros(shape) if value is None else value
+
+
+def _or_default(value, n, default):
+    return np.broadcast_to(np.asarray(default, dtype=np.float64), (n, 3)).copy() if value is None else value
+
+
+def as_context(value):
+    """A ShadingContext from a context or from (N, 2) UVs."""
+    if isinstance(value, ShadingContext):
+        return value
+    return ShadingContext.from_uv(value)

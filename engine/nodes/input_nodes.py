@@ -1,0 +1,213 @@
+"""Input nodes: coordinates, geometry, object info, attributes, light path,
+Fresnel / Layer Weight, and Mapping (kernel/svm/tex_coord.h, geometry.h,
+fresnel.h, attribute.h, light_path.h, mapping_util.h)."""
+import numpy as np
+
+from .registry import node, one_of
+
+VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION, VIS_SHADOW = 1, 2, 4, 8, 16
+
+
+def _dot(a, b):
+    return np.einsum("ij,ij->i", a, b)
+
+
+def _normalize(v):
+    length = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.where(length > 0, v / np.where(length > 0, length, 1.0), 0.0)
+
+
+def _object_matrix_inverse(n):
+    """TexCoord 'object' property: the inverse matrix of another object."""
+    obj = getattr(n, "object", None)
+    if obj is None:
+        return {"object_inverse": None}
+    return {"object_inverse": np.linalg.inv(np.array(obj.matrix_world)).tolist()}
+
+
+def _camera_coords(ctx):
+    """World to camera space as Cycles' worldtocamera: the camera's matrix
+    without scale, its z axis flipped (Cycles' camera looks down +z)."""
+    shading = getattr(ctx.tris, "shading", None) if ctx.tris is not None else None
+    camera = getattr(getattr(shading, "scene", None), "camera", None)
+    if camera is None:
+        return ctx.p
+    m = np.asarray(camera.matrix, dtype=np.float64)
+    rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0, keepdims=True)
+    local = (ctx.p - m[:3, 3]) @ rot
+    local[:, 2] = -local[:, 2]
+    return local
+
+
+@node("ShaderNodeTexCoord", outputs=(("Generated", "vector"), ("Normal", "vector"), ("UV", "vector"),
+                                     ("Object", "vector"), ("Camera", "vector"), ("Reflection", "vector")),
+      translate=_object_matrix_inverse, unsupported_outputs=("Window",), cases=[{}])
+def tex_coord(ctx, i, p):
+    n = len(ctx)
+    uv = np.zeros((n, 3))
+    uv[:, :2] = ctx.uv
+    inv = p.get("object_inverse")
+    if inv is not None:
+        inv = np.asarray(inv)
+        obj = ctx.p @ inv[:3, :3].T + inv[:3, 3]
+    else:
+        obj = ctx.object_coords
+    refl = 2.0 * _dot(ctx.ns, ctx.wo)[:, None] * ctx.ns - ctx.wo
+    return {"Generated": ctx.generated, "Normal": ctx.to_object(ctx.ns), "UV": uv, "Object": obj,
+            "Camera": _camera_coords(ctx), "Reflection": refl}
+
+
+@node("ShaderNodeUVMap", outputs=(("UV", "vector"),), props=(("uv_map", ""),), cases=[{}])
+def uv_map(ctx, i, p):
+    uv = np.zeros((len(ctx), 3))
+    uv[:, :2] = ctx.uv_map(p["uv_map"])
+    return {"UV": uv}
+
+
+@node("ShaderNodeNewGeometry", outputs=(("Position", "vector"), ("Normal", "vector"), ("True Normal", "vector"),
+                                        ("Incoming", "vector"), ("Parametric", "vector"), ("Backfacing", "float")),
+      unsupported_outputs=("Tangent", "Pointiness", "Random Per Island"), cases=[{}])
+def geometry(ctx, i, p):
+    return {"Position": ctx.p, "Normal": ctx.ns, "True Normal": ctx.ng, "Incoming": ctx.wo,
+            "Parametric": _parametric(ctx), "Backfacing": ctx.back.astype(np.float64)}
+
+
+def _parametric(ctx):
+    """Cycles' (1 - u - v, u, 0) in its barycentrics: measured against
+    Cycles, 1 - u - v weighs Ember's first corner and u its second."""
+    out = np.zeros((len(ctx), 3))
+    if ctx.bary is not None:
+        bu, bv = ctx.bary[:, 0], ctx.bary[:, 1]
+        out[:, 0] = 1.0 - bu - bv
+        out[:, 1] = bu
+    return out
+
+
+@node("ShaderNodeObjectInfo", outputs=(("Location", "vector"), ("Color", "color"), ("Alpha", "float"),
+                                       ("Object Index", "float"), ("Random", "float")),
+      unsupported_outputs=("Material Index",), bounds=lambda p: {"Random": (0.0, 1.0)}, cases=[{}])
+def object_info(ctx, i, p):
+    return {"Location": ctx.object_info("location"), "Color": ctx.object_info("color"),
+            "Alpha": np.ones(len(ctx)), "Object Index": ctx.object_info("pass_index"),
+            "Random": ctx.object_info("random")}
+
+
+def _attribute_rgba(ctx, name):
+    rgba = ctx.attribute(name)
+    if rgba is None:
+        rgba = np.zeros((len(ctx), 4))
+    return rgba
+
+
+@node("ShaderNodeAttribute", outputs=(("Color", "color"), ("Vector", "vector"), ("Fac", "float"),
+                                      ("Alpha", "float")),
+      props=(("attribute_name", ""), ("attribute_type", "GEOMETRY")), cases=[{"attribute_name": "Col"}],
+      accepts=one_of(attribute_type=("GEOMETRY",)))
+def attribute(ctx, i, p):
+    rgba = _attribute_rgba(ctx, p["attribute_name"])
+    return {"Color": rgba[:, :3], "Vector": rgba[:, :3], "Fac": rgba[:, :3].mean(axis=1), "Alpha": rgba[:, 3]}
+
+
+@node("ShaderNodeVertexColor", outputs=(("Color", "color"), ("Alpha", "float")), props=(("layer_name", ""),),
+      cases=[{}])
+def color_attribute(ctx, i, p):
+    rgba = _attribute_rgba(ctx, p["layer_name"])
+    return {"Color": rgba[:, :3], "Alpha": rgba[:, 3]}
+
+
+@node("ShaderNodeLightPath",
+      outputs=(("Is Camera Ray", "float"), ("Is Shadow Ray", "float"), ("Is Diffuse Ray", "float"),
+               ("Is Glossy Ray", "float"), ("Is Reflection Ray", "float"), ("Is Transmission Ray", "float"),
+               ("Ray Depth", "float")),
+      unsupported_outputs=("Is Singular Ray", "Is Volume Scatter Ray", "Ray Length", "Diffuse Depth",
+                           "Glossy Depth", "Transparent Depth", "Transmission Depth", "Portal Depth"),
+      cases=[{}])
+def light_path(ctx, i, p):
+    ray = ctx.ray.astype(np.int64)
+    flag = lambda bits: ((ray & bits) != 0).astype(np.float64)
+    return {"Is Camera Ray": flag(VIS_CAMERA), "Is Shadow Ray": flag(VIS_SHADOW),
+            "Is Diffuse Ray": flag(VIS_DIFFUSE), "Is Glossy Ray": flag(VIS_GLOSSY),
+            "Is Reflection Ray": flag(VIS_DIFFUSE | VIS_GLOSSY), "Is Transmission Ray": flag(VIS_TRANSMISSION),
+            "Ray Depth": ctx.depth.astype(np.float64)}
+
+
+# ----------------------------------------------------------------------------
+# Fresnel and Layer Weight
+
+def fresnel_dielectric_cos(cosi, eta):
+    c = np.abs(cosi)
+    g = eta * eta - 1.0 + c * c
+    ok = g > 0
+    g = np.sqrt(np.where(ok, g, 1.0))
+    a = (g - c) / (g + c)
+    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    return np.where(ok, 0.5 * a * a * (1.0 + b * b), 1.0)
+
+
+def _normal_in(ctx, i):
+    """An unlinked Normal input is the shading normal (the exporter leaves
+    it out); a linked one is used as given."""
+    n = i.get("Normal")
+    return ctx.ns if n is None else n
+
+
+@node("ShaderNodeFresnel", inputs=(("IOR", "float"), ("Normal", "vector")), outputs=(("Fac", "float"),),
+      bounds=lambda p: {"Fac": (0.0, 1.0)}, cases=[{"IOR": 1.45}, {"IOR": 2.5}])
+def fresnel(ctx, i, p):
+    eta = np.maximum(i["IOR"], 1e-5)
+    eta = np.where(ctx.back, 1.0 / eta, eta)
+    return {"Fac": fresnel_dielectric_cos(_dot(ctx.wo, _normal_in(ctx, i)), eta)}
+
+
+@node("ShaderNodeLayerWeight", inputs=(("Blend", "float"), ("Normal", "vector")),
+      outputs=(("Fresnel", "float"), ("Facing", "float")),
+      bounds=lambda p: {"Fresnel": (0.0, 1.0), "Facing": (0.0, 1.0)},
+      cases=[{"Blend": 0.3}, {"Blend": 0.8}])
+def layer_weight(ctx, i, p):
+    blend = i["Blend"]
+    cos = _dot(ctx.wo, _normal_in(ctx, i))
+    eta = np.maximum(1.0 - blend, 1e-5)
+    eta = np.where(ctx.back, eta, 1.0 / eta)
+    fres = fresnel_dielectric_cos(cos, eta)
+    b = np.clip(blend, 0.0, 1.0 - 1e-5)
+    expo = np.where(b < 0.5, 2.0 * b, 0.5 / (1.0 - b))
+    facing = np.abs(cos)
+    facing = np.where(blend != 0.5, np.power(facing, expo), facing)
+    return {"Fresnel": fres, "Facing": 1.0 - facing}
+
+
+# ----------------------------------------------------------------------------
+# Mapping
+
+def euler_matrix(rot):
+    """(N, 3, 3) rotation Rz Ry Rx from Euler XYZ angles (N, 3)."""
+    cx, cy, cz = np.cos(rot[:, 0]), np.cos(rot[:, 1]), np.cos(rot[:, 2])
+    sx, sy, sz = np.sin(rot[:, 0]), np.sin(rot[:, 1]), np.sin(rot[:, 2])
+    return np.stack([
+        np.stack([cy * cz, sy * sx * cz - cx * sz, sy * cx * cz + sx * sz], axis=1),
+        np.stack([cy * sz, sy * sx * sz + cx * cz, sy * cx * sz - sx * cz], axis=1),
+        np.stack([-sy, cy * sx, cy * cx], axis=1)], axis=1)
+
+
+def _safe_div(a, b):
+    return np.where(b != 0, a / np.where(b != 0, b, 1.0), 0.0)
+
+
+def mapping_values(kind, v, loc, rot, scale):
+    r = euler_matrix(rot)
+    if kind == "POINT":
+        return np.einsum("nij,nj->ni", r, v * scale) + loc
+    if kind == "TEXTURE":
+        return _safe_div(np.einsum("nji,nj->ni", r, v - loc), scale)
+    if kind == "VECTOR":
+        return np.einsum("nij,nj->ni", r, v * scale)
+    return _normalize(np.einsum("nij,nj->ni", r, _safe_div(v, scale)))
+
+
+@node("ShaderNodeMapping",
+      inputs=(("Vector", "vector"), ("Location", "vector"), ("Rotation", "vector"), ("Scale", "vector")),
+      outputs=(("Vector", "vector"),), props=(("vector_type", "POINT"),),
+      cases=[{"vector_type": t, "Location": (0.2, -0.1, 0.3), "Rotation": (0.3, 0.5, 0.9), "Scale": (2.0, 1.5, 0.5)}
+             for t in ("POINT", "TEXTURE", "VECTOR", "NORMAL")])
+def mapping(ctx, i, p):
+    return {"Vector": mapping_values(p["vector_type"], i["Vector"], i["Location"], i["Rotation"], i["Scale"])}

@@ -1,0 +1,195 @@
+"""The yardstick scenes of ``tools/bench_cycles.py``, built in the running
+bpy session.
+
+Three come from blend_scenes/*.blend; the others are built here by script
+with the helpers of blend_scenes/build_scenes.py (API common to Blender 3.4 -
+5.0).  ``SCENES`` maps a name to (title, loader); ``scene_key(name)`` is a
+string that changes whenever the scene would change (file bytes or builder
+source), used to key cached references.
+"""
+import hashlib
+import inspect
+import math
+import os
+import sys
+
+import bpy
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BLEND_DIR = os.path.join(ROOT, 'blend_scenes')
+if BLEND_DIR not in sys.path:
+    sys.path.insert(0, BLEND_DIR)
+import build_scenes as bs  # noqa: E402
+
+
+def open_blend(name):
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(BLEND_DIR, name + '.blend'))
+    return bpy.context.scene
+
+
+def principled(name, color, metallic=0.0, roughness=0.5, coat=0.0):
+    material = bpy.data.materials.new(name)
+    material.use_nodes = True
+    tree = material.node_tree
+    node = next(n for n in tree.nodes if n.type == 'BSDF_PRINCIPLED')
+    node.inputs['Base Color'].default_value = (*color, 1.0)
+    node.inputs['Metallic'].default_value = metallic
+    node.inputs['Roughness'].default_value = roughness
+    if hasattr(node, 'distribution'):
+        node.distribution = 'GGX'  # 4.0+ defaults to multiscatter GGX
+    for label in ('Coat Weight', 'Clearcoat'):  # 4.x / 3.x names
+        if label in node.inputs:
+            node.inputs[label].default_value = coat
+            break
+    material.diffuse_color = (*color, 1.0)
+    return material
+
+
+def finish(scene, cam, target):
+    bs.look_at(cam, target)
+    bs.set_engine(scene)
+    bpy.context.view_layer.update()
+    return scene
+
+
+def floor(scene, material, half=6.0, z=0.0):
+    return bs.mesh_object(scene, "Floor", [(-half, -half, z), (half, -half, z), (half, half, z), (-half, half, z)],
+                          [(0, 1, 2, 3)], material)
+
+
+def backdrop(scene, material, y=3.0, half=6.0, height=6.0):
+    return bs.mesh_object(scene, "Backdrop", [(-half, y, 0), (half, y, 0), (half, y, height), (-half, y, height)],
+                          [(0, 1, 2, 3)], material)
+
+
+def build_principled_spheres():
+    """Three Principled spheres (dielectric, metal, coated) on a plane under a disk light."""
+    scene = bs.reset()
+    grey = principled("Floor", (0.5, 0.5, 0.5), roughness=0.6)
+    floor(scene, grey)
+    backdrop(scene, grey)
+    spheres = ((-1.1, principled("Plastic", (0.8, 0.1, 0.08), roughness=0.3)),
+               (0.0, principled("Gold", (1.0, 0.71, 0.29), metallic=1.0, roughness=0.2)),
+               (1.1, principled("Coated", (0.1, 0.3, 0.8), roughness=0.5, coat=1.0)))
+    for x, material in spheres:
+        bs.uv_sphere(scene, material.name, 0.5, (x, 0.0, 0.5), material, segments=48, rings=24)
+    bs.light(scene, "Disk", 'AREA', (0.5, -1.0, 3.0), 300.0, shape='DISK', size=1.0,
+             rotation=(math.radians(20), 0.0, 0.0))
+    cam = bs.camera(scene, (0.0, -4.5, 1.6), (0, 0, 0), lens=40.0)
+    bs.world(scene, (0.02, 0.02, 0.02))
+    return finish(scene, cam, (0.0, 0.0, 0.5))
+
+
+def build_many_lights():
+    """64 small coloured point lights over a floor, a wall and a few boxes."""
+    scene = bs.reset()
+    white = bs.node_material("White", 'diffuse', (0.7, 0.7, 0.7))
+    floor(scene, white)
+    backdrop(scene, white)
+    for i, (x, y) in enumerate(((-1.2, 0.5), (0.0, -0.3), (1.3, 0.8))):
+        bs.box(scene, f"Box{i}", (0.5, 0.5, 0.4 + 0.4 * i), (x, y, 0.2 + 0.2 * i), 0.3 * i, white)
+    for i in range(64):
+        row, col = divmod(i, 8)
+        hue = i / 64.0
+        color = tuple(0.55 + 0.45 * math.cos(2 * math.pi * (hue + k / 3.0)) for k in range(3))
+        bs.light(scene, f"Light{i}", 'POINT', (-2.8 + 0.8 * col, -1.5 + 0.6 * row, 1.2 + 0.3 * (i % 3)),
+                 4.0, color, shadow_soft_size=0.04)
+    cam = bs.camera(scene, (0.0, -5.0, 2.4), (0, 0, 0), lens=32.0)
+    bs.world(scene, (0.0, 0.0, 0.0))
+    return finish(scene, cam, (0.0, 0.5, 0.5))
+
+
+def build_emissive_meshes():
+    """Emissive spheres and bars light a diffuse room; no lamps."""
+    scene = bs.reset()
+    white = bs.node_material("White", 'diffuse', (0.7, 0.7, 0.7))
+    floor(scene, white)
+    backdrop(scene, white)
+    bs.box(scene, "Block", (0.6, 0.6, 0.9), (0.2, 0.4, 0.45), 0.4, white)
+    glows = ((1.0, 0.5, 0.2), (0.3, 0.6, 1.0), (0.5, 1.0, 0.4))
+    for i, color in enumerate(glows):
+        material = bs.node_material(f"Glow{i}", 'emission', color, strength=8.0)
+        bs.uv_sphere(scene, f"Glow{i}", 0.15, (-1.5 + 1.5 * i, -0.6, 0.15 + 0.5 * i), material)
+        bs.box(scene, f"Bar{i}", (1.2, 0.05, 0.05), (-1.2 + 1.2 * i, 1.5, 1.6), 0.2 * i, material)
+    cam = bs.camera(scene, (0.0, -4.8, 2.0), (0, 0, 0), lens=32.0)
+    bs.world(scene, (0.0, 0.0, 0.0))
+    return finish(scene, cam, (0.0, 0.3, 0.6))
+
+
+def build_instanced():
+    """128 collection instances of a 16k-triangle sphere (2.1 M triangles), sun and sky colour."""
+    scene = bs.reset()
+    ground = bs.node_material("Ground", 'diffuse', (0.5, 0.5, 0.5))
+    orange = bs.node_material("Orange", 'diffuse', (0.8, 0.35, 0.1))
+    floor(scene, ground, half=20.0)
+    sources = bpy.data.collections.new("Sources")
+    scene.collection.children.link(sources)
+    bs.uv_sphere(scene, "Ball", 0.35, (0.0, 0.0, 0.35), orange, segments=128, rings=64, collection=sources)
+    scene.view_layers[0].layer_collection.children["Sources"].exclude = True
+    for i in range(128):
+        row, col = divmod(i, 16)
+        empty = bs.link(scene, bpy.data.objects.new(f"Ball{i}", None))
+        empty.instance_type = 'COLLECTION'
+        empty.instance_collection = sources
+        empty.location = (-6.0 + 0.8 * col + 0.4 * (row % 2), -1.0 + 0.9 * row, 0.0)
+    bs.light(scene, "Sun", 'SUN', (0, 0, 5), 3.0, (1.0, 0.95, 0.85),
+             rotation=(math.radians(45), 0.0, math.radians(-35)), angle=math.radians(2))
+    cam = bs.camera(scene, (0.0, -7.0, 3.2), (0, 0, 0), lens=30.0)
+    bs.world(scene, (0.35, 0.5, 0.8))
+    return finish(scene, cam, (0.0, 2.0, 0.0))
+
+
+def hdri_path():
+    folder = bpy.utils.system_resource('DATAFILES', path=os.path.join('studiolights', 'world'))
+    return os.path.join(folder or '', 'courtyard.exr')
+
+
+def build_hdri():
+    """A diffuse and a glossy sphere on a plane under bpy's courtyard.exr."""
+    scene = bs.reset()
+    grey = bs.node_material("Grey", 'diffuse', (0.6, 0.6, 0.6))
+    floor(scene, grey)
+    bs.uv_sphere(scene, "Diffuse", 0.5, (-0.6, 0.0, 0.5), bs.node_material("Red", 'diffuse', (0.7, 0.2, 0.15)),
+                 segments=48, rings=24)
+    bs.uv_sphere(scene, "Glossy", 0.5, (0.6, 0.0, 0.5),
+                 bs.node_material("Metal", 'glossy', (0.9, 0.9, 0.9), roughness=0.25), segments=48, rings=24)
+    cam = bs.camera(scene, (0.0, -4.0, 1.4), (0, 0, 0), lens=40.0)
+    world = bpy.data.worlds.new("World")
+    scene.world = world
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
+    tree = world.node_tree
+    tree.nodes.clear()
+    out = tree.nodes.new('ShaderNodeOutputWorld')
+    background = tree.nodes.new('ShaderNodeBackground')
+    env = tree.nodes.new('ShaderNodeTexEnvironment')
+    env.image = bpy.data.images.load(hdri_path(), check_existing=True)
+    tree.links.new(env.outputs['Color'], background.inputs['Color'])
+    tree.links.new(background.outputs[0], out.inputs['Surface'])
+    return finish(scene, cam, (0.0, 0.0, 0.5))
+
+
+SCENES = {
+    'cornell': ("Cornell box, one rectangle light", lambda: open_blend('cornell')),
+    'veach_mis': ("Veach MIS (4 GGX plates, 4 sphere lights)", lambda: open_blend('veach_mis')),
+    'principled': ("three Principled spheres, disk light", build_principled_spheres),
+    'many_lights': ("64 small lights", build_many_lights),
+    'emissive': ("emissive mesh lights", build_emissive_meshes),
+    'instanced': ("2.1 M instanced triangles, sun + sky colour", build_instanced),
+    'hdri': ("spheres under an HDRI (courtyard.exr)", build_hdri),
+}
+BLEND_FILES = {'cornell', 'veach_mis'}
+
+
+def scene_key(name):
+    """Changes whenever the scene would: the .blend's bytes or the builder's source."""
+    digest = hashlib.sha256()
+    if name in BLEND_FILES:
+        with open(os.path.join(BLEND_DIR, name + '.blend'), 'rb') as handle:
+            digest.update(handle.read())
+    else:
+        builder = SCENES[name][1]
+        digest.update(inspect.getsource(builder).encode())
+        digest.update(inspect.getsource(sys.modules[__name__]).encode())
+        digest.update(inspect.getsource(bs).encode())
+    return digest.hexdigest()[:16]
