@@ -87,13 +87,19 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             info['traceback'] = traceback.format_exc()
             print(info['traceback'])
             self.report({'ERROR'}, "Ember: " + message)
+            self.update_stats("", "Ember: " + message)  # the status bar says why the image is empty
         info['seconds'] = time.perf_counter() - info['started']
         info['cpu_seconds'] = time.process_time() - info['cpu_started']
 
     def _render(self, depsgraph, info):
         scene = depsgraph.scene
         self.update_stats("", "Ember: exporting scene")
-        exported = scene_export.export_scene(depsgraph, self.camera_override)
+        try:
+            exported = scene_export.export_scene(depsgraph, self.camera_override,
+                                                 should_stop=lambda: output.break_requested(self))
+        except scene_export.ExportCancelled:
+            info['cancelled'] = True
+            return
         info.update(export_seconds=exported.seconds, triangles=exported.triangles,
                     warnings=list(exported.warnings))
         if not self.is_preview:
@@ -112,13 +118,18 @@ class EmberRenderEngine(bpy.types.RenderEngine):
         progress = output.Progress(self, writer, settings.samples, info)
         try:
             exported.scene.validate()
-            result = render(exported.scene, settings, progress)
+            try:
+                result = render(exported.scene, settings, progress)
+            except backend.scene_module().Cancelled:  # Esc before the first pass
+                info['cancelled'] = True
+                return
             # A stopped render returns its partial image: write it either way.
             image = result.image
             extra = _extra_passes(result, depsgraph.view_layer, settings.samples)
             if scene.ember.use_denoising and not self.is_preview:
                 image, extra = self._denoised(result, extra, info)
-            writer.write(image, extra)
+            if extra or not progress.cancelled or not info['passes'] or image is not result.image:
+                writer.write(image, extra)  # else the last pass written is the image
             writer.add_metadata(render_passes.crypto_metadata(
                 depsgraph.view_layer, getattr(result, 'pass_metadata', None) or {}))
         finally:

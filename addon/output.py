@@ -28,6 +28,48 @@ def to_blender_pixels(image):
     return flipped.reshape(-1), bad
 
 
+BAND = 256  # rows checked for NaN at a time: no full-frame mask
+
+
+def _zero_nonfinite_in_place(image):
+    """Replace NaN and Inf by 0, a band of rows at a time; returns how many."""
+    bad = 0
+    for lo in range(0, len(image), BAND):
+        band = image[lo:lo + BAND]
+        finite = np.isfinite(band)
+        count = band.size - int(np.count_nonzero(finite))
+        if count:
+            band[~finite] = 0.0
+            bad += count
+    return bad
+
+
+def _flip_rows_in_place(image):
+    """Reverse the row order with one row of scratch (top-first <->
+    Blender's bottom-first): a flipped copy would cost a full frame,
+    530 MB at 8K."""
+    height = len(image)
+    scratch = np.empty_like(image[0])
+    for top in range(height // 2):
+        bottom = height - 1 - top
+        scratch[...] = image[top]
+        image[top] = image[bottom]
+        image[bottom] = scratch
+
+
+def write_rgba_in_place(render_pass, image):
+    """Write a contiguous float32 (H, W, 4) top-first image into a pass
+    without copying it: flip it in place, write, flip it back.  NaN/Inf
+    become 0 (in the image too); returns how many there were."""
+    bad = _zero_nonfinite_in_place(image)
+    _flip_rows_in_place(image)
+    try:
+        set_pass(render_pass, image.reshape(-1))
+    finally:
+        _flip_rows_in_place(image)
+    return bad
+
+
 def set_pass(render_pass, flat):
     """foreach_set that accepts 5.0's flat and 3.4's (pixels, channels) layouts."""
     try:
@@ -52,9 +94,13 @@ class ResultWriter:
         if image.shape[:2] != (self.height, self.width):
             raise ValueError(f"the renderer returned a {image.shape[1]}x{image.shape[0]} image "
                              f"for a {self.width}x{self.height} window")
-        pixels, bad = to_blender_pixels(image[..., :4])
+        combined = self.layer.passes["Combined"]
+        if image.shape[2] == 4 and image.dtype == np.float32 and image.flags.c_contiguous:
+            bad = write_rgba_in_place(combined, image)
+        else:
+            pixels, bad = to_blender_pixels(image[..., :4])
+            set_pass(combined, pixels)
         self.nonfinite = max(self.nonfinite, bad)
-        set_pass(self.layer.passes["Combined"], pixels)
         for name, data in (extra or {}).items():
             render_pass = self.layer.passes.get(name)
             if render_pass is not None and data is not None:
@@ -118,6 +164,8 @@ class Progress:
         self.info = info
         self.samples_done = 0
         self.cancelled = False
+        self.shown_progress = 0.0
+        self.shown_seconds_left = None
 
     def on_pass(self, image, samples_done, stats):
         self.writer.write(image)
@@ -126,10 +174,23 @@ class Progress:
             self.info['first_pass_seconds'] = time.perf_counter() - self.info['started']
         self.samples_done = samples_done
         total = stats.get('samples_total') or self.samples_total
+        stats = self._monotone(stats)
         self.engine.update_stats("", format_stats(samples_done, total, stats))
-        self.engine.update_progress(min(samples_done / max(total, 1), 1.0))
+        self.shown_progress = max(self.shown_progress, min(samples_done / max(total, 1), 1.0))
+        self.engine.update_progress(self.shown_progress)
         for listener in progress_listeners:
             listener(samples_done, total, stats)
+
+    def _monotone(self, stats):
+        """The status bar's time left never goes up (a slower pass would
+        otherwise raise the estimate): show the smallest estimate so far."""
+        left = stats.get('seconds_left')
+        if left is None:
+            return stats
+        if self.shown_seconds_left is not None:
+            left = min(left, self.shown_seconds_left)
+        self.shown_seconds_left = left
+        return dict(stats, seconds_left=left)
 
     def should_stop(self):
         if not self.cancelled and break_requested(self.engine):

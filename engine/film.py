@@ -150,6 +150,8 @@ class Film:
         c = self.count.astype(np.float64)[:, None]
         with np.errstate(divide="ignore", invalid="ignore"):
             var = np.where(c > 1, self.m2 / (c * (c - 1.0)), 0.0)
+        # Squares of radiance near the float32 limit overflow float32: saturate.
+        np.minimum(var, np.finfo(np.float32).max, out=var)
         return var.astype(np.float32).reshape(self.height, self.width, 3)
 
     def aov(self, name):

@@ -9,6 +9,7 @@ embreex both release the GIL, so the cores stay busy and memory stays bounded
 whatever the resolution.
 """
 import os
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FuturesTimeout
@@ -23,7 +24,7 @@ from .geometry import flatten, material_table
 from .integrator import Context, trace_batch
 from .lights import LightSet
 from .sampler import Sampler
-from .scene import RenderSettings, SceneError
+from .scene import Cancelled, RenderSettings, SceneError
 from .validate import validate_settings
 
 
@@ -86,6 +87,34 @@ def prepare(scene, settings):
     return ctx
 
 
+def prepare_interruptibly(scene, settings, progress, poll=0.05):
+    """``prepare`` (flattening, light set, BVH build: seconds on millions of
+    triangles, none of it interruptible) in a daemon thread, asking
+    ``progress.should_stop`` every ``poll`` seconds.  On a stop the thread is
+    abandoned (it finishes in the background, its result is dropped) and
+    ``Cancelled`` is raised at once."""
+    if not hasattr(progress, "should_stop"):
+        return prepare(scene, settings)
+    outcome = {}
+
+    def work():
+        try:
+            outcome["ctx"] = prepare(scene, settings)
+        except BaseException as exc:  # noqa: BLE001 - re-raised in the caller's thread
+            outcome["error"] = exc
+    worker = threading.Thread(target=work, name="ember-prepare", daemon=True)
+    worker.start()
+    while True:
+        worker.join(poll)
+        if not worker.is_alive():
+            break
+        if _stop_requested(progress):
+            raise Cancelled("stopped while preparing the scene")
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["ctx"]
+
+
 def warnings_for(ctx):
     out = []
     if ctx.triangles.dropped:
@@ -143,7 +172,7 @@ class _Adaptive:
 def render(scene, settings=None, progress=None):
     settings = settings or RenderSettings()
     t_start = time.perf_counter()
-    ctx = prepare(scene, settings)
+    ctx = prepare_interruptibly(scene, settings, progress)
     cam = ctx.camera
     adaptive = _Adaptive(settings, cam.width * cam.height)
     film = Film(cam.width, cam.height, settings.aovs, adaptive.params is not None, settings.passes,
@@ -153,11 +182,12 @@ def render(scene, settings=None, progress=None):
     stats = {"samples": 0, "samples_total": settings.samples, "prepare_seconds": time.perf_counter() - t_start}
     t_trace = time.perf_counter()
     done, checked = 0, 0
-    with ThreadPoolExecutor(max_workers=threads) as pool:
+    image = None  # the last pass's image: the film does not change after it
+    with _AbandonablePool(threads, film) as pool:
         while done < settings.samples and len(adaptive.active):
             spp = min(spp_pass, settings.samples - done)
             first = settings.sample_start + done
-            jobs = [pool.submit(_run_batch, ctx, film, pixels, spp, first)
+            jobs = [pool.submit(_run_batch, ctx, pool.film, pixels, spp, first)
                     for pixels in _batches(adaptive.active, spp, settings, threads)]
             cancelled = _wait(jobs, progress)
             paths = spp * len(adaptive.active)
@@ -166,18 +196,22 @@ def render(scene, settings=None, progress=None):
             checked = adaptive.update(film, done, checked)
             stats["active_pixels"] = len(adaptive.active)
             if cancelled:
+                pool.abandon()  # batches still running finish unseen
                 # Part of a pass was traced: pixels carry unequal counts, each
                 # mean is still unbiased.  Report the fewest samples any pixel has.
                 stats["samples"] = int(film.count.min())
             if progress is not None and hasattr(progress, "on_pass"):
-                progress.on_pass(film.image(settings.transparent), stats["samples"], dict(stats))
+                image = film.image(settings.transparent)
+                progress.on_pass(image, stats["samples"], dict(stats))
             if cancelled or _should_stop(progress, stats, settings):
                 break
-    return RenderResult(film, film.image(settings.transparent), stats["samples"], stats, warnings_for(ctx),
+    if image is None:
+        image = film.image(settings.transparent)
+    return RenderResult(film, image, stats["samples"], stats, warnings_for(ctx),
                         film.pass_images(ctx.pass_config), pass_events.metadata(ctx.pass_config, settings.passes))
 
 
-def _wait(jobs, progress, poll=0.2):
+def _wait(jobs, progress, poll=0.1):
     """Wait for a pass's batches, asking ``should_stop`` about every ``poll``
     seconds so a cancel lands within a fraction of a second, not a whole
     pass.  Returns True if the pass was cut short."""
@@ -201,11 +235,79 @@ def _wait(jobs, progress, poll=0.2):
 
 
 def _cancel(jobs):
+    """Drop the batches not started; the running ones are abandoned (see
+    _AbandonablePool): waiting for them cost up to a batch's time (seconds
+    on a busy machine) between Esc and the render stopping."""
     for job in jobs:
         job.cancel()
-    for job in jobs:
-        if not job.cancelled():
-            job.result()
+
+
+class _GatedFilm:
+    """The film as the batches see it: merges stop once ``close`` returns,
+    so a batch abandoned at a cancel never changes the image being returned."""
+
+    def __init__(self, film):
+        self._film = film
+        self._lock = threading.Lock()
+        self._open = True
+
+    def __getattr__(self, name):
+        return getattr(self._film, name)
+
+    def new_tile(self, lo, hi):
+        return _GatedTile(self._film.new_tile(lo, hi), self)
+
+    def merge(self, tile):
+        with self._lock:
+            if self._open:
+                self._film.merge(getattr(tile, "tile", tile))
+
+    def close(self):
+        with self._lock:
+            self._open = False
+
+
+class _Abandoned(Exception):
+    """Raised inside an abandoned batch to end it at its next film write."""
+
+
+class _GatedTile:
+    """A batch's tile that ends the batch (raises _Abandoned) at its next
+    write once the gate is closed: an abandoned batch stops within a
+    bounce instead of competing for the cores with what follows a cancel."""
+
+    def __init__(self, tile, gate):
+        self.tile = tile
+        self._gate = gate
+
+    def __getattr__(self, name):
+        value = getattr(self.tile, name)
+        if not callable(value):
+            return value
+
+        def checked(*args, **kwargs):
+            if not self._gate._open:
+                raise _Abandoned()
+            return value(*args, **kwargs)
+        return checked
+
+
+class _AbandonablePool(ThreadPoolExecutor):
+    """A thread pool that, once ``abandon``ed, is left without waiting for
+    its running batches (their threads end on their own, results dropped)."""
+
+    def __init__(self, threads, film):
+        super().__init__(max_workers=threads, thread_name_prefix="ember-batch")
+        self.film = _GatedFilm(film)
+        self.abandoned = False
+
+    def abandon(self):
+        self.abandoned = True
+        self.film.close()
+
+    def __exit__(self, *exc):
+        self.shutdown(wait=not self.abandoned, cancel_futures=True)
+        return False
 
 
 def _stop_requested(progress):

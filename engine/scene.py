@@ -28,6 +28,11 @@ class SceneError(ValueError):
     """Invalid scene data, with a message meant for the user."""
 
 
+class Cancelled(Exception):
+    """The user stopped the render before its first pass (during export or
+    scene preparation): there is no image to keep."""
+
+
 # ----------------------------------------------------------------------------
 # Geometry
 

@@ -51,27 +51,48 @@ def linear_to_srgb(c):
 # ----------------------------------------------------------------------------
 # images
 
+TEXEL_BAND = 512  # rows converted at a time: float64 temporaries stay small
+
+
 def prepare_texels(image):
-    """(H, W, 4) float64 RGBA, row 0 at the BOTTOM, in the space Cycles
+    """(H, W, 4) float32 RGBA, row 0 at the BOTTOM, in the space Cycles
     filters in: sRGB-encoded for srgb_filter images, alpha associated for
-    straight-alpha colour images."""
-    px = np.asarray(image.pixels, dtype=np.float64)
+    straight-alpha colour images.  One float32 copy of the image and no
+    full-size temporaries (a 16k x 16k texture is 4 GiB as float32 RGBA).
+    Kept on the image (read-only) so that every user - the shader compiler,
+    value ranges, later renders of the same scene - shares one copy."""
+    cached = getattr(image, "_texels", None)
+    if cached is not None and cached[0] is image.pixels:
+        return cached[1]
+    rgba = _convert_texels(image)
+    rgba.flags.writeable = False
+    try:
+        image._texels = (image.pixels, rgba)
+    except AttributeError:  # an image type without a __dict__: no sharing
+        pass
+    return rgba
+
+
+def _convert_texels(image):
+    px = np.asarray(image.pixels)
     if px.ndim == 2:
         px = px[..., None]
     h, w, c = px.shape
-    rgba = np.ones((h, w, 4))
-    if c <= 2:
-        rgba[..., :3] = px[..., :1]
-    else:
-        rgba[..., :3] = px[..., :3]
+    source = px[::-1]
+    rgba = np.empty((h, w, 4), np.float32)
+    rgba[..., :3] = source[..., :1] if c <= 2 else source[..., :3]
     if c in (2, 4) and image.alpha_mode != "NONE":
-        rgba[..., 3] = px[..., -1]
-    rgba = np.nan_to_num(rgba, nan=0.0, posinf=0.0, neginf=0.0)
-    if image.srgb_filter:
-        rgba[..., :3] = linear_to_srgb(rgba[..., :3])
-    if image.alpha_mode == "STRAIGHT" and not image.data:
-        rgba[..., :3] *= rgba[..., 3:]
-    return np.ascontiguousarray(rgba[::-1])
+        rgba[..., 3] = source[..., -1]
+    else:
+        rgba[..., 3] = 1.0
+    np.nan_to_num(rgba, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
+    for lo in range(0, h, TEXEL_BAND):
+        band = rgba[lo:lo + TEXEL_BAND]
+        if image.srgb_filter:
+            band[..., :3] = linear_to_srgb(band[..., :3])
+        if image.alpha_mode == "STRAIGHT" and not image.data:
+            band[..., :3] *= band[..., 3:]
+    return rgba
 
 
 def _wrap(i, size, extension):

@@ -39,7 +39,7 @@ def _without_scale(matrix):
     for axis in range(3):
         length = np.linalg.norm(out[:3, axis])
         if length == 0.0:
-            raise ValueError("The camera has a zero scale")
+            raise ValueError("it has a zero scale")
         out[:3, axis] /= length
     return out
 

@@ -76,14 +76,29 @@ def _linearize(pixels, bpy_image, is_float):
     byte buffers are encoded; float data is already linear)."""
     if is_float or not is_srgb(bpy_image):
         return pixels
-    out = np.array(pixels, dtype=np.float32, copy=True)
+    # The pixels are this module's own fresh array: convert in place, a band
+    # of rows at a time (no second full-size copy of a 16k texture).
+    out = pixels if pixels.dtype == np.float32 and pixels.flags.writeable else pixels.astype(np.float32)
     colour = min(3, out.shape[2]) if out.shape[2] != 2 else 1
-    out[..., :colour] = srgb_to_linear(out[..., :colour])
+    for lo in range(0, len(out), 512):
+        band = out[lo:lo + 512]
+        band[..., :colour] = srgb_to_linear(band[..., :colour])
     return out
 
 
 def load_image(bpy_image):
-    """(pixels float32 (H, W, C) linear, row 0 = top, warnings)."""
+    """(pixels float32 (H, W, C) linear, row 0 = top, warnings).  NaN and
+    infinite texels (a damaged EXR) become 0, with a warning."""
+    pixels, warnings = _load_image(bpy_image)
+    finite = np.isfinite(pixels)
+    if not finite.all():
+        bad = int(finite.size - np.count_nonzero(finite))
+        pixels = np.where(finite, pixels, np.float32(0.0))
+        warnings = warnings + [f"Image '{bpy_image.name}': {bad} NaN or infinite values were replaced by 0"]
+    return pixels, warnings
+
+
+def _load_image(bpy_image):
     name = bpy_image.name
     path = _external_path(bpy_image)
     try:

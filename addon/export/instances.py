@@ -14,13 +14,16 @@ from . import mesh as mesh_export
 class InstanceCollector:
     """Accumulates meshes and instances while walking the depsgraph."""
 
-    def __init__(self, material_index):
+    def __init__(self, material_index, check=None):
         # material_index(obj) -> list of scene material indices per slot
         self.material_index = material_index
         self.meshes = []
         self.instances = []
         self.mesh_of_key = {}
         self.skipped_types = set()
+        self.warnings = []
+        self._warned = set()
+        self.check = check or (lambda: None)
 
     def add(self, inst):
         obj = inst.object  # for instances: the instanced (possibly temporary) object
@@ -33,9 +36,14 @@ class InstanceCollector:
         mesh_id = self._mesh_id(obj)
         if mesh_id is None:
             return
+        matrix = np.array(inst.matrix_world, dtype=np.float64)
+        if not np.isfinite(matrix).all():
+            self._warn_once(('matrix', obj.name),
+                            f"Object '{obj.name}' skipped: its transform is NaN or infinite")
+            return
         self.instances.append(_scene().Instance(
             mesh=mesh_id,
-            matrix=np.array(inst.matrix_world, dtype=np.float64),
+            matrix=matrix,
             materials=self.material_index(obj),
             name=obj.name,
             **ray_visibility(inst),
@@ -52,13 +60,24 @@ class InstanceCollector:
             # on its data block: share it only between copies of the object.
             key = ('object', obj.name_full)
         if key not in self.mesh_of_key:
-            mesh = mesh_export.mesh_from_object(obj, _geometry_name(obj))
-            if mesh is None:
+            self.check()
+            mesh = mesh_export.mesh_from_object(obj, _geometry_name(obj), self.check)
+            dropped = mesh_export.drop_nonfinite_triangles(mesh) if mesh is not None else 0
+            if dropped:
+                self._warn_once(('vertices', key), f"Object '{obj.name}': {dropped} triangles with "
+                                "NaN or infinite vertex positions were skipped")
+            if mesh is None or len(mesh.triangles) == 0:
                 self.mesh_of_key[key] = None
             else:
                 self.mesh_of_key[key] = len(self.meshes)
                 self.meshes.append(mesh)
         return self.mesh_of_key[key]
+
+
+    def _warn_once(self, key, message):
+        if key not in self._warned:
+            self._warned.add(key)
+            self.warnings.append(message)
 
 
 VISIBILITY_FLAGS = ('visible_camera', 'visible_diffuse', 'visible_glossy', 'visible_transmission',
@@ -101,12 +120,16 @@ def _geometry_name(obj):
     return data.name if data is not None else obj.name
 
 
-def collect_instances(depsgraph, material_index):
-    """Walk every object instance; returns (meshes, instances, warnings)."""
-    collector = InstanceCollector(material_index)
-    for inst in depsgraph.object_instances:
+def collect_instances(depsgraph, material_index, check=None):
+    """Walk every object instance; returns (meshes, instances, warnings).
+    ``check()`` (which raises to cancel) runs every 256 instances and before
+    each mesh is exported."""
+    collector = InstanceCollector(material_index, check)
+    for count, inst in enumerate(depsgraph.object_instances):
+        if count % 256 == 255:
+            collector.check()
         collector.add(inst)
-    warnings = [f"Ember skips {kind.lower()} objects (not supported yet)"
+    warnings = collector.warnings + [f"Ember skips {kind.lower()} objects (not supported yet)"
                 for kind in sorted(collector.skipped_types)]
     return collector.meshes, collector.instances, warnings
 

@@ -87,7 +87,7 @@ def _translate(light, matrix, name):
     if light.type == 'SUN':
         return scene.SunLight(
             name=name, direction=_direction(matrix), strength=_intensity(light, light.energy),
-            angle=float(light.angle))
+            angle=min(float(light.angle), math.pi))  # 180 degrees in float32 is above pi
     if light.type == 'AREA':
         square = light.shape in ('SQUARE', 'DISK')
         energy = light.energy * (LEGACY_AREA_SCALE if LEGACY_LIGHT_UNITS else 1.0)
@@ -99,10 +99,13 @@ def _translate(light, matrix, name):
     raise ValueError(f"has an unknown light type {light.type}")
 
 
-def collect_lights(depsgraph):
-    """Every visible light, including instanced ones; returns (lights, warnings)."""
+def collect_lights(depsgraph, check=None):
+    """Every visible light, including instanced ones; returns (lights, warnings).
+    ``check()`` (which raises to cancel) runs every 256 instances."""
     lights, warnings = [], []
-    for inst in depsgraph.object_instances:
+    for count, inst in enumerate(depsgraph.object_instances):
+        if check is not None and count % 256 == 255:
+            check()
         obj = inst.object  # for instances: the instanced (possibly temporary) object
         if obj.type != 'LIGHT':
             continue
@@ -115,16 +118,39 @@ def collect_lights(depsgraph):
         except ValueError as err:
             warnings.append(f"Light '{obj.name}' skipped: it {err}")
             continue
+        bad = _nonfinite_field(light)
+        if bad:
+            warnings.append(f"Light '{obj.name}' skipped: its {bad} is NaN or infinite")
+            continue
         if _is_black(light):
             continue
         if getattr(obj.data, 'use_nodes', False) and _has_light_nodes(obj.data):
             light, note = _with_node_tree(light, obj.data)
             if note:
                 warnings.append(f"Light '{obj.name}': {note}")
+            if _nonfinite_field(light):
+                warnings.append(f"Light '{obj.name}' skipped: its node tree gives a NaN or infinite strength")
+                continue
             if _is_black(light):
                 continue
         lights.append(light)
     return lights, warnings
+
+
+def _nonfinite_field(light):
+    """The first number field of an engine light that is NaN or infinite
+    (strength, colour, size, angle, ...), or None."""
+    for f in dataclasses.fields(light):
+        value = getattr(light, f.name)
+        if isinstance(value, (bool, str)) or value is None:
+            continue
+        try:
+            numbers = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            continue
+        if not np.isfinite(numbers).all():
+            return f.name.replace('_', ' ')
+    return None
 
 
 def _with_node_tree(light, data):

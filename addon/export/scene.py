@@ -9,8 +9,23 @@ from . import material as material_export
 from . import world as world_export
 
 
+MAX_PATHS = 1 << 16
+
+
 class ExportError(Exception):
     """The scene cannot be rendered; the message is meant for the user."""
+
+
+class ExportCancelled(Exception):
+    """The user pressed Esc while the scene was being exported."""
+
+
+def stop_checker(should_stop):
+    """A function raising ExportCancelled once ``should_stop()`` is true."""
+    def check():
+        if should_stop is not None and should_stop():
+            raise ExportCancelled("stopped while exporting")
+    return check
 
 
 @dataclass
@@ -32,22 +47,28 @@ def scene_camera(depsgraph, camera_override=None):
     return camera.evaluated_get(depsgraph)
 
 
-def export_scene(depsgraph, camera_override=None):
-    """Everything the renderer needs, read from an evaluated depsgraph."""
+def export_scene(depsgraph, camera_override=None, should_stop=None):
+    """Everything the renderer needs, read from an evaluated depsgraph.
+    ``should_stop()`` is asked between objects and between the arrays of a
+    mesh; once true, ExportCancelled is raised."""
+    check = stop_checker(should_stop)
     from .. import backend
     start = time.perf_counter()
     engine_scene = backend.scene_module()
     scene = depsgraph.scene
     override = getattr(depsgraph.view_layer, 'material_override', None)
     materials = material_export.MaterialTable(override)
-    meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots)
-    lights, light_warnings = light_export.collect_lights(depsgraph)
+    meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots, check)
+    check()
+    lights, light_warnings = light_export.collect_lights(depsgraph, check)
     world, world_warning = world_export.world_from_blender(scene.world)
+    camera_object = scene_camera(depsgraph, camera_override)
     try:
-        camera, camera_warnings = camera_export.camera_from_blender(
-            scene_camera(depsgraph, camera_override), scene.render)
-    except ValueError as err:
-        raise ExportError(str(err)) from err
+        camera, camera_warnings = camera_export.camera_from_blender(camera_object, scene.render)
+        backend.load('validate').validate_camera(camera)
+    except ValueError as err:  # engine.scene.SceneError is a ValueError
+        message = str(err).removeprefix('camera: ')
+        raise ExportError(f"Camera '{camera_object.name}': {message}") from err
     result = engine_scene.Scene(
         meshes=meshes, instances=instances, materials=materials.materials,
         lights=lights, world=world, camera=camera)
@@ -82,6 +103,10 @@ def render_settings(scene, is_preview=False):
         transparent=bool(scene.render.film_transparent),
         threads=settings.threads,
         time_limit=0.0 if is_preview else settings.time_limit,
+        # Paths in flight: 2^16 keeps a batch (max_paths / threads paths) under
+        # ~0.3 s, so Esc lands within a second, and the path state near 100 MB,
+        # at the same speed as 2^18 (measured on 2 cores).
+        max_paths=MAX_PATHS,
         sampling_pattern=settings.sampling_pattern.lower(),
         adaptive_threshold=settings.adaptive_threshold if settings.use_adaptive_sampling else 0.0,
         adaptive_min_samples=settings.adaptive_min_samples,
