@@ -38,14 +38,14 @@ from test_other_blenders import legacy_zip  # noqa: F401  (fixture)
 SEEDS, SPP, BOUNCES = 4, 24, 3
 WIDTH, HEIGHT = 32, 24
 BOX, BALL = 2, 3   # object indices
-# Known, measured, outside the passes: Ember's directly seen emission of the
-# small card (about 7 pixels) sums 2.5-3% under Cycles' (16 seeds, random
-# pattern: t -2.5; 10 seeds, Sobol: t -4.6), interior pixels equal (4.0):
-# a projected-area (camera or geometry) difference Combined is too noisy to
-# show.  Combined_card inherits it and fails at these seeds; strict, so the
-# fix is noticed.
-CARD_AREA = pytest.mark.xfail(strict=True, reason="directly seen card emission 3% under Cycles (area)")
-STATISTICAL = ("Combined", "Combined_key", pytest.param("Combined_card", marks=CARD_AREA), "tint", "mask", "Mist", "Normal", "UV", "Ambient Occlusion", "Emission", "Environment",
+# Combined_card was a strict xfail ("directly seen card emission 3% under
+# Cycles"): a seed-set artefact, not a bias.  Against the exact value (the
+# card's projected quad weighted by the pixel filter's periodic density)
+# Ember's directly seen card is -0.08% +- 0.13% over 240 seeds and Cycles'
+# +0.26% +- 0.14%; the card's light in the full scene -0.5% +- 0.5% (40 seeds).
+# Seeds 0-3 happen to sit 2 sigma apart.  tests/addon/test_emission_area.py
+# holds the exact claim (docs/testing.md, "Directly seen emission").
+STATISTICAL = ("Combined", "Combined_key", "Combined_card", "tint", "mask", "Mist", "Normal", "UV", "Ambient Occlusion", "Emission", "Environment",
                "Diffuse Direct x Color", "Diffuse Indirect x Color", "Glossy Direct x Color",
                "Glossy Indirect x Color", "Transmission Direct x Color", "Transmission Indirect x Color")
 CENTRE = ("Depth", "Position", "Object Index", "Material Index")
