@@ -88,6 +88,8 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             print(info['traceback'])
             self.report({'ERROR'}, "Ember: " + message)
             self.update_stats("", "Ember: " + message)  # the status bar says why the image is empty
+        if bpy.app.background and bpy.app.binary_path:
+            _settle_compiler()
         info['seconds'] = time.perf_counter() - info['started']
         info['cpu_seconds'] = time.process_time() - info['cpu_started']
 
@@ -163,6 +165,17 @@ class EmberRenderEngine(bpy.types.RenderEngine):
         image = result.image.copy()
         image[..., :3] = rgb
         return image, dict(extra, **{'Noisy Image': result.image})
+
+
+def _settle_compiler():
+    """A command-line render in Blender's binary ends its kernel compile
+    thread before Blender quits: Blender's exit walks sys.modules
+    (addon_utils.disable_all) and fails with "dictionary changed size
+    during iteration" if that thread is still importing numba."""
+    try:
+        backend.load('kernels').stop()
+    except ImportError:
+        pass
 
 
 def _extra_passes(result, view_layer, samples):

@@ -162,14 +162,15 @@ def _start():
             _state["started"] = time.perf_counter()
             thread = threading.Thread(target=_compile_all, name="ember-jit", daemon=True)
             _state["thread"] = thread
-            atexit.register(_stop)
+            atexit.register(stop)
             thread.start()
 
 
-def _stop():
-    """At exit: let the compile thread finish its current kernel, not start
-    another, and end before the interpreter does (a thread killed inside
-    LLVM could crash the exit of a command-line render)."""
+def stop():
+    """Let the compile thread finish its current kernel, start no other,
+    and end (the kernels compiled so far stay in use, the rest run as
+    NumPy).  Also run at exit: a thread killed inside LLVM could crash the
+    exit of a command-line render."""
     _state["stop"] = True
     thread = _state["thread"]
     if thread is not None:
