@@ -11,7 +11,7 @@ from engine import bsdf
 from engine.render import render
 from engine.scene import (AreaLight, Camera, Instance, Lobe, Material, Mesh, PointLight,
                           RenderSettings, Scene, SceneError, SpotLight, SunLight, World)
-from engine.testscenes import box, look_at, quad, uv_sphere
+from engine.testscenes import box, look_at, quad, uv_sphere, veach_plates
 
 from analytic import (analytic_scene, big_plane, check_against, directional_albedo, disk_irradiance,  # noqa: F401
                       furnace_plane, ortho_camera, pixel_centres)
@@ -167,39 +167,13 @@ def test_soft_falloff_point_light_is_cycles_disk(d):
 # ----------------------------------------------------------------------------
 # Strategy agreement (Veach's plates)
 
-def veach_scene(size=(48, 36), near_mirror=0.12, rough=0.4, small=0.3, big=1.2):
-    """Veach's test: a near-mirror and a rough plate, each tilted to reflect
-    a small and a large light into the camera.  No floor: only direct
-    reflection, so every pixel is a light-sampling vs BSDF-sampling contest."""
-    eye = np.array([0.0, -4.0, 1.5])
-    light_mid = np.array([0.0, 2.5, 2.0])
-    meshes, instances = [], []
-    mats = [Material("near-mirror", (Lobe("glossy", (0.9, 0.9, 0.9), near_mirror),)),
-            Material("rough", (Lobe("glossy", (0.9, 0.9, 0.9), rough),))]
-    for k, y in enumerate((-0.45, 0.45)):
-        p = np.array([0.0, y, 0.0])
-        n = (eye - p) / np.linalg.norm(eye - p) + (light_mid - p) / np.linalg.norm(light_mid - p)
-        n /= np.linalg.norm(n)
-        x_axis = np.array([1.0, 0.0, 0.0])
-        m = np.eye(4)
-        m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x_axis, np.cross(n, x_axis), n, p
-        meshes.append(quad([[-1.5, -0.4, 0], [1.5, -0.4, 0], [1.5, 0.4, 0], [-1.5, 0.4, 0]]))
-        instances.append(Instance(k, m, [k]))
-    lights = []
-    for x, diameter, shape in ((-0.8, small, "DISK"), (0.8, big, "SQUARE")):
-        m = look_at(light_mid + [x, 0, 0], (0, 0, 0))  # -Z (emission) towards the plates
-        lights.append(AreaLight(m, (20.0, 20.0, 20.0), shape, diameter, visible_camera=True))
-    cam = Camera(look_at(eye, (0, 0, 0)), lens=45.0, resolution=size)
-    return Scene(meshes, instances, mats, lights, World((0.0, 0.0, 0.0)), cam)
-
-
 def test_strategies_agree_and_mis_has_lowest_variance():
     """Light-only, BSDF-only and MIS agree block by block; MIS has the lowest
     variance.  Blocks holding under 1% of the brightest block's radiance are
     left out: there the weak strategy's only contributions are rare events
     (e.g. BSDF samples of a near-mirror's GGX tail hitting the small light), so
     its sample variance is no estimate of its error (it is often 0)."""
-    scene = veach_scene()
+    scene = veach_plates()
     results = {}
     # Independent seeds: the z-tests below assume independent estimates.
     for seed, strategy in enumerate(("light", "bsdf", "mis"), start=7):
@@ -295,7 +269,7 @@ def test_bad_input_is_a_clear_error(mutate, message):
 
 
 def test_deterministic_for_a_seed():
-    scene = veach_scene((16, 12))
+    scene = veach_plates((16, 12))
     a = render(scene, RenderSettings(samples=4, samples_per_pass=2, seed=9)).image
     b = render(scene, RenderSettings(samples=4, samples_per_pass=2, seed=9)).image
     c = render(scene, RenderSettings(samples=4, samples_per_pass=2, seed=10)).image
