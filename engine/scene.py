@@ -402,6 +402,23 @@ class EnvironmentTexture:
     matrix: np.ndarray = field(default_factory=lambda: np.eye(3))
     interpolation: str = "Linear"
     name: str = "environment"
+    # A baked procedural world: ``shader`` (a texture expression of the
+    # direction, e.g. a Sky Texture) gives the radiance of every direction
+    # exactly, as Cycles shades the background; ``pixels`` then only build
+    # the sampling table.  ``sun``: a disc the table cannot resolve, sampled
+    # by its cone as Cycles' sun guiding does (``SunGuide``).
+    shader: Optional[object] = None
+    sun: Optional["SunGuide"] = None
+
+
+@dataclass
+class SunGuide:
+    """A small bright disc of a procedural world (the Sky Texture's sun):
+    unit world ``direction``, ``half_angle`` (radians) and ``power``, its
+    luminance integrated over its solid angle (for light selection)."""
+    direction: Tuple[float, float, float]
+    half_angle: float
+    power: float = 0.0
 
 
 @dataclass

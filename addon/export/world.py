@@ -12,8 +12,11 @@ texture's world -> texture matrix (Cycles' svm_mapping and
 euler_to_transform); a location cannot move a direction and is ignored with a
 warning.  As Cycles: a Mapping with nothing linked to its Vector looks up the
 texture at the zero vector (one constant colour), a missing image renders
-magenta.  Anything else linked to the Background (sky, other textures) is read
-as the Background's constant colour and reported.
+magenta.  Other trees of registered nodes (procedural textures, the Sky
+Texture) are baked into an equirectangular map for sampling; worlds with a
+sky are shaded per direction and its sun disc sampled by its cone (Cycles'
+sun guiding).  Anything else is read as the Background's constant colour and
+reported.
 """
 import numpy as np
 
@@ -132,18 +135,68 @@ def _bake_node_tree(socket, strength, notes):
         return tuple(float(c) * strength for c in value), None
     env = backend.load('environment')
     context = backend.load('nodes.context')
+    skies = _sky_calls(expr)
+    sun = _sun_guide(skies)
     width, height = BAKE_SIZE
     u = (np.arange(width) + 0.5) / width
     v = 1.0 - (np.arange(height) + 0.5) / height      # row 0 is the top (+Z)
     uu, vv = np.meshgrid(u, v)
     d = env.equirect_to_direction(uu.reshape(-1), vv.reshape(-1))
     ctx = context.ShadingContext(len(d), p=d, ng=-d, ns=-d, wo=-d)
+    # Cycles' PATH_RAY_IMPORTANCE_BAKE: with sun guiding the disc stays out
+    # of the table (its cone is sampled instead).
+    ctx.importance_bake = sun is not None
     rgb = backend.load('textures').Compiler().color(expr)(ctx)
     pixels = np.ascontiguousarray(np.maximum(rgb, 0.0).reshape(height, width, 3), dtype=np.float32)
     scene = backend.scene_module()
-    texture = scene.EnvironmentTexture(pixels, strength, np.eye(3), 'Linear', name='baked world nodes')
+    # A sky's sun disc is smaller than a texel: such worlds are shaded per
+    # direction (the bake only builds the sampling table).
+    texture = scene.EnvironmentTexture(pixels, strength, np.eye(3), 'Linear', name='baked world nodes',
+                                       shader=expr if skies else None, sun=sun)
     mean = tuple(float(c) * strength for c in pixels.reshape(-1, 3).mean(axis=0))
     return mean, texture
+
+
+def _sky_calls(expr):
+    """The Sky Texture node calls inside a world expression."""
+    found, seen, stack = [], set(), [expr]
+    while stack:
+        item = stack.pop()
+        if id(item) in seen or item is None or isinstance(item, (str, int, float, bool)):
+            continue
+        seen.add(id(item))
+        if isinstance(item, (tuple, list)):
+            stack.extend(item)
+        elif isinstance(item, dict):
+            stack.extend(item.values())
+        elif hasattr(item, '__dataclass_fields__'):
+            if type(item).__name__ == 'NodeCall' and item.idname == 'ShaderNodeTexSky':
+                found.append(item)
+            stack.extend(getattr(item, name) for name in item.__dataclass_fields__)
+    return found
+
+
+def _sun_guide(skies):
+    """Cycles' sun guiding (scene/light.cpp): one sky with its disc on, looking
+    up the ray direction itself (Vector unlinked or Generated, no hidden
+    texture mapping).  Otherwise None: the disc stays in the baked table."""
+    from .. import backend
+    scene = backend.scene_module()
+    with_disc = [c for c in skies if c.props.get('sun_disc', True)]
+    if len(with_disc) != 1:
+        return None
+    call = with_disc[0]
+    vector = call.inputs.get('Vector')
+    if vector is not None and not (type(vector).__name__ == 'NodeOutput' and vector.output == 'Generated'
+                                   and vector.call.idname == 'ShaderNodeTexCoord'
+                                   and not vector.call.props.get('object')):
+        return None
+    sky = backend.load('nodes.sky')
+    k = sky.kernel_params(call.props)
+    if not k['diameter'] > 0:
+        return None
+    return scene.SunGuide(tuple(float(c) for c in sky.sun_direction(k)), 0.5 * k['diameter'],
+                          sky.sun_luminance_integral(k))
 
 
 def _environment(node, strength, fallback, notes):
