@@ -195,11 +195,18 @@ def sun_pixels(layout, elevation, diameter, altitude, air, dust):
             _sun_xyz(max(top, F(0.0)), altitude, air, dust, solid_angle))
 
 
-@lru_cache(maxsize=4)
 def sky_table(layout, elevation, altitude, air, dust, ozone):
     """The precomputed XYZ table (H, W, 3), row 0 = the lowest elevation,
     as Cycles' SkyLoader fills it.  Cached: a render reuses it."""
-    width, height = TABLE_SIZE[layout]
+    return _sky_table(layout, TABLE_SIZE[layout], elevation, altitude, air, dust, ozone)
+
+
+sky_table.cache_clear = lambda: _sky_table.cache_clear()
+
+
+@lru_cache(maxsize=4)
+def _sky_table(layout, size, elevation, altitude, air, dust, ozone):
+    width, height = size
     sun_dir = geographical_to_direction(elevation, 0.0)
     if layout == LEGACY:
         lat_step = HALF_PI / F(height)
@@ -211,8 +218,10 @@ def sky_table(layout, elevation, altitude, air, dust, ozone):
     lon = TWO_PI / F(width) * np.arange(width // 2, dtype=F) - PI
     la, lo = np.meshgrid(lat.astype(F), lon, indexing="ij")
     dirs = np.stack([np.cos(la) * np.cos(lo), np.cos(la) * np.sin(lo), np.sin(la)], axis=-1).reshape(-1, 3)
-    xyz = np.concatenate([single_scattering_xyz(chunk, sun_dir, altitude, air, dust, ozone)
-                          for chunk in np.array_split(dirs, max(1, len(dirs) // 2048))])
+    with np.errstate(all="ignore"):   # as Cycles, float32 may overflow to inf (-> exp(-inf) = 0)
+        xyz = np.concatenate([single_scattering_xyz(chunk, sun_dir, altitude, air, dust, ozone)
+                              for chunk in np.array_split(dirs, max(1, len(dirs) // 2048))])
+    xyz = np.nan_to_num(xyz, nan=0.0, posinf=0.0, neginf=0.0)
     half = xyz.reshape(len(rows), width // 2, 3)
     table = np.zeros((height, width, 3), F)
     table[rows, :width // 2] = half
@@ -308,7 +317,14 @@ def _precise_angle(a, b):
 
 def evaluate(d, k, include_sun=True):
     """Linear Rec.709 radiance (N, 3) float32 for lookup vectors d (N, 3)."""
-    d = np.asarray(d, F)
+    # Extreme properties overflow float32 as in Cycles (e.g. a disc of size
+    # 0 divides by zero where no direction is inside it); the result is
+    # made finite at the end.
+    with np.errstate(all="ignore"):
+        return _evaluate(np.asarray(d, F), k, include_sun)
+
+
+def _evaluate(d, k, include_sun):
     table = sky_table(k["layout"], k["elevation"], k["altitude"], k["air"], k["dust"], k["ozone"])
     bottom, top = sun_pixels(k["layout"], k["elevation"], k["diameter"], k["altitude"], k["air"], k["dust"])
     theta = np.arccos(np.clip(d[:, 2], F(-1.0), F(1.0)))
