@@ -426,9 +426,8 @@ def _accepts(props):
              ("dust_density", 1.0), ("ozone_density", 1.0)),
       translate=_translate, coords="generated", accepts=_accepts,
       bounds=lambda p: {"Color": (0.0, np.inf)},
-      # Generated coordinates in [0, 1]^3 look at the upper sky; the table's
-      # bilinear weights amplify last-bit differences of atan2 / sqrt.
-      tolerance=2e-5,
+      # In a material the Vector is Generated (in [0, 1]^3: the upper sky, not
+      # unit vectors; Cycles uses them as they are, so does Ember).
       cases=[{"sky_type": "SINGLE_SCATTERING", "sun_elevation": 0.5, "sun_rotation": 1.0, "altitude": 500.0},
              {"sky_type": "SINGLE_SCATTERING", "sun_size": 0.4, "sun_elevation": 0.7, "sun_rotation": 3.9,
               "air_density": 2.0, "ozone_density": 3.0, "sun_intensity": 1e-5}])
