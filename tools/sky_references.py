@@ -6,7 +6,7 @@ Run once per Blender version (each writes tests/data/sky_<major><minor>.npz):
     build/venv-bpy42/bin/python -P tools/sky_references.py          # bpy 4.2
     blender -b --factory-startup --python tools/sky_references.py   # Debian's 3.4
 
-A world of one Sky Texture (the version's Nishita model) is rendered by Cycles
+A world of one Sky Texture (the version's Nishita models) is rendered by Cycles
 with one sample, which sits at each pixel centre, for a few parameter cases
 and camera views (the horizon with the ground below it, the zenith, the sun
 disc close up).  The file holds, per pixel, the world direction through the
@@ -39,7 +39,16 @@ CASES = [
 VIEWS = [("horizon", (80.0, 0.0, -140.0), 14.0), ("zenith", (170.0, 0.0, 30.0), 20.0), ("sun", None, 300.0)]
 
 
-def sky_world(scene, props):
+def cases():
+    """(name, sky type, properties): the version's Nishita model; in 5.0 both
+    Single and Multiple Scattering."""
+    if bpy.app.version < (5, 0, 0):
+        return [(name, 'NISHITA', props) for name, props in CASES]
+    return ([(name, 'SINGLE_SCATTERING', props) for name, props in CASES]
+            + [(name + '_ms', 'MULTIPLE_SCATTERING', props) for name, props in CASES])
+
+
+def sky_world(scene, props, sky_type):
     world = bpy.data.worlds.new("sky")
     scene.world = world
     if bpy.app.version < (5, 0, 0):
@@ -49,7 +58,7 @@ def sky_world(scene, props):
     out = tree.nodes.new('ShaderNodeOutputWorld')
     background = tree.nodes.new('ShaderNodeBackground')
     sky = tree.nodes.new('ShaderNodeTexSky')
-    sky.sky_type = 'SINGLE_SCATTERING' if bpy.app.version >= (5, 0, 0) else 'NISHITA'
+    sky.sky_type = sky_type
     for key, value in props.items():
         if key == 'density':   # dust (3.x / 4.x) or aerosol (5.0)
             setattr(sky, 'aerosol_density' if hasattr(sky, 'aerosol_density') else 'dust_density', value)
@@ -151,10 +160,10 @@ def main():
     with tempfile.TemporaryDirectory() as folder:
         # The first render of a session saw the factory camera's orientation
         # (measured: the horizon a few pixels off); render once to settle it.
-        sky_world(scene, CASES[0][1])
+        sky_world(scene, CASES[0][1], cases()[0][1])
         render(scene, folder)
-        for name, props in CASES:
-            world = sky_world(scene, props)
+        for name, sky_type, props in cases():
+            world = sky_world(scene, props, sky_type)
             meta['cases'][name] = exported_props(world)
             for view in VIEWS:
                 aim(camera, view, props)

@@ -19,7 +19,8 @@ Layouts: Blender 3.4 / 4.2 ('NISHITA'): 512 x 128 texels over elevations 0
 to 90 degrees (row y at elevation (pi/2 + half a row) (y / 128)^2), the
 ground a fade of the horizon row.  Blender 5.0 ('SINGLE_SCATTERING'):
 512 x 256 texels over -90 to 90 degrees (the lower half the horizon row
-faded), the sun disc added to the sky.  Blender 5.0's 'MULTIPLE_SCATTERING', Preetham and
+faded), the sun disc added to the sky.  Blender 5.0 'MULTIPLE_SCATTERING': its own table
+(sky_multiple.py) and sun, looked up by the same 5.0 kernel.  Preetham and
 Hosek-Wilkie are not evaluated (the registry entry refuses them).
 """
 from functools import lru_cache
@@ -27,6 +28,8 @@ from functools import lru_cache
 import numpy as np
 
 from .registry import node
+from . import sky_multiple
+from .sky_multiple import in_threads
 
 F = np.float32
 PI = F(np.pi)
@@ -92,7 +95,10 @@ XYZ_TO_REC709 = np.array([[3.2409699, -1.5373832, -0.4986108], [-0.9692436, 1.87
 # Table sizes per layout (Cycles' SkyLoader::load_metadata).
 LEGACY = "legacy"          # Blender 3.4 - 4.x 'NISHITA'
 SINGLE = "single"          # Blender 5.0 'SINGLE_SCATTERING'
-TABLE_SIZE = {LEGACY: (512, 128), SINGLE: (512, 256)}
+MULTIPLE = "multiple"      # Blender 5.0 'MULTIPLE_SCATTERING' (sky_multiple.py)
+TABLE_SIZE = {LEGACY: (512, 128), SINGLE: (512, 256), MULTIPLE: (512, 256)}
+# Altitude clamps of the precomputes (metres).
+MAX_ALTITUDE = {LEGACY: 59999.0, SINGLE: 59999.0, MULTIPLE: 99999.0}
 
 
 def geographical_to_direction(lat, lon):
@@ -181,9 +187,12 @@ def _sun_xyz(elevation, altitude, air, dust, solid_angle):
     return (spectrum @ CMF_XYZ) * STEP_LAMBDA
 
 
-def sun_pixels(layout, elevation, diameter, altitude, air, dust):
+def sun_pixels(layout, elevation, diameter, altitude, air, dust, ozone=1.0):
     """XYZ radiance at the bottom and top edge of the sun disc (Cycles'
-    SKY_nishita_skymodel_precompute_sun / SKY_single_scattering_...)."""
+    SKY_nishita_skymodel_precompute_sun / SKY_single_scattering_... /
+    SKY_multiple_scattering_...)."""
+    if layout == MULTIPLE:
+        return sky_multiple.sun_pixels(elevation, diameter, altitude, air, dust, ozone)
     half = F(diameter) / F(2.0)
     solid_angle = TWO_PI * (F(1.0) - np.cos(half))
     bottom, top = F(elevation) - half, F(elevation) + half
@@ -206,6 +215,10 @@ sky_table.cache_clear = lambda: _sky_table.cache_clear()
 
 @lru_cache(maxsize=4)
 def _sky_table(layout, size, elevation, altitude, air, dust, ozone):
+    if layout == MULTIPLE:
+        table = sky_multiple.sky_table(size, elevation, altitude, air, dust, ozone)
+        table.setflags(write=False)
+        return table
     width, height = size
     sun_dir = geographical_to_direction(elevation, 0.0)
     if layout == LEGACY:
@@ -218,9 +231,10 @@ def _sky_table(layout, size, elevation, altitude, air, dust, ozone):
     lon = TWO_PI / F(width) * np.arange(width // 2, dtype=F) - PI
     la, lo = np.meshgrid(lat.astype(F), lon, indexing="ij")
     dirs = np.stack([np.cos(la) * np.cos(lo), np.cos(la) * np.sin(lo), np.sin(la)], axis=-1).reshape(-1, 3)
-    with np.errstate(all="ignore"):   # as Cycles, float32 may overflow to inf (-> exp(-inf) = 0)
-        xyz = np.concatenate([single_scattering_xyz(chunk, sun_dir, altitude, air, dust, ozone)
-                              for chunk in np.array_split(dirs, max(1, len(dirs) // 2048))])
+    def scatter(chunk):
+        with np.errstate(all="ignore"):   # as Cycles, float32 may overflow to inf (-> exp(-inf) = 0)
+            return single_scattering_xyz(chunk, sun_dir, altitude, air, dust, ozone)
+    xyz = np.concatenate(in_threads(scatter, np.array_split(dirs, max(1, len(dirs) // 2048))))
     xyz = np.nan_to_num(xyz, nan=0.0, posinf=0.0, neginf=0.0)
     half = xyz.reshape(len(rows), width // 2, 3)
     table = np.zeros((height, width, 3), F)
@@ -266,7 +280,10 @@ def kernel_params(props):
     """The node's properties as Cycles' kernel sees them: layout, wrapped sun
     elevation and rotation, clamped altitude, densities, disc."""
     version = tuple(props.get("_blender_version") or (5, 0, 0))
-    layout = SINGLE if version >= (5, 0, 0) else LEGACY
+    if version < (5, 0, 0):
+        layout = LEGACY
+    else:
+        layout = MULTIPLE if props.get("sky_type") == "MULTIPLE_SCATTERING" else SINGLE
     elevation = F(props.get("sun_elevation", np.radians(15.0)))
     rotation = F(props.get("sun_rotation", 0.0))
     if version >= (4, 0, 0):
@@ -276,7 +293,7 @@ def kernel_params(props):
         rotation = TWO_PI - (rotation + TWO_PI if rotation < 0 else rotation)
     return dict(
         layout=layout, elevation=float(elevation), rotation=float(F(rotation)),
-        altitude=float(np.clip(F(props.get("altitude", 1.0)), F(1.0), F(59999.0))),
+        altitude=float(np.clip(F(props.get("altitude", 1.0)), F(1.0), F(MAX_ALTITUDE[layout]))),
         raw_altitude=float(F(props.get("altitude", 1.0))),
         air=float(F(props.get("air_density", 1.0))), dust=float(F(props.get("dust_density", 1.0))),
         ozone=float(F(props.get("ozone_density", 1.0))),
@@ -326,7 +343,8 @@ def evaluate(d, k, include_sun=True):
 
 def _evaluate(d, k, include_sun):
     table = sky_table(k["layout"], k["elevation"], k["altitude"], k["air"], k["dust"], k["ozone"])
-    bottom, top = sun_pixels(k["layout"], k["elevation"], k["diameter"], k["altitude"], k["air"], k["dust"])
+    bottom, top = sun_pixels(k["layout"], k["elevation"], k["diameter"], k["altitude"], k["air"], k["dust"],
+                             k["ozone"])
     theta = np.arccos(np.clip(d[:, 2], F(-1.0), F(1.0)))
     dir_elevation = HALF_PI - theta
     rotation = F(k["rotation"])
@@ -394,7 +412,8 @@ def sun_luminance_integral(k):
     the limb darkening 1 - 0.6 (1 - sqrt(1 - r^2)) over the disc."""
     if not k["disc"]:
         return 0.0
-    bottom, top = sun_pixels(k["layout"], k["elevation"], k["diameter"], k["altitude"], k["air"], k["dust"])
+    bottom, top = sun_pixels(k["layout"], k["elevation"], k["diameter"], k["altitude"], k["air"], k["dust"],
+                             k["ozone"])
     rgb = np.maximum(XYZ_TO_REC709 @ ((bottom + top) * F(0.5)), 0.0) * k["intensity"]
     lum = float(rgb @ np.array([0.2126, 0.7152, 0.0722]))
     half = 0.5 * k["diameter"]
@@ -404,7 +423,7 @@ def sun_luminance_integral(k):
 # ----------------------------------------------------------------------------
 # The registry entry
 
-SKY_TYPES = ("NISHITA", "SINGLE_SCATTERING")
+SKY_TYPES = ("NISHITA", "SINGLE_SCATTERING", "MULTIPLE_SCATTERING")
 
 
 def _translate(node):
@@ -416,7 +435,7 @@ def _translate(node):
 def _accepts(props):
     kind = props.get("sky_type")
     if kind not in SKY_TYPES:
-        return f"sky type {kind!r} is not rendered yet (only Nishita / Single Scattering)"
+        return f"sky type {kind!r} is not rendered yet (only Nishita / Single / Multiple Scattering)"
     return None
 
 
@@ -430,7 +449,9 @@ def _accepts(props):
       # unit vectors; Cycles uses them as they are, so does Ember).
       cases=[{"sky_type": "SINGLE_SCATTERING", "sun_elevation": 0.5, "sun_rotation": 1.0, "altitude": 500.0},
              {"sky_type": "SINGLE_SCATTERING", "sun_size": 0.4, "sun_elevation": 0.7, "sun_rotation": 3.9,
-              "air_density": 2.0, "ozone_density": 3.0, "sun_intensity": 1e-5}])
+              "air_density": 2.0, "ozone_density": 3.0, "sun_intensity": 1e-5},
+             {"sky_type": "MULTIPLE_SCATTERING", "sun_size": 0.3, "sun_elevation": 0.4, "sun_rotation": 2.0,
+              "aerosol_density": 3.0, "sun_intensity": 1e-5}])
 def sky_texture(ctx, i, p):
     k = kernel_params(p)
     include_sun = not getattr(ctx, "importance_bake", False)

@@ -65,18 +65,19 @@ def test_export_sky_world_is_shaded_per_direction_with_a_sun_guide(factory_scene
     assert tex.sun.half_angle == np.float32(sky.sun_size) / 2
     # The disc is not in the sampling table (it is sampled by its cone).
     assert tex.pixels.max() < 100.0
-    # Multiple scattering is not evaluated yet: the constant colour, named.
-    sky.sky_type = 'MULTIPLE_SCATTERING'
+    # Hosek-Wilkie is not evaluated: the constant colour, named.
+    sky.sky_type = 'HOSEK_WILKIE'
     exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
     assert exported.scene.world.texture is None
-    assert any('MULTIPLE_SCATTERING' in w for w in exported.warnings)
+    assert any('HOSEK_WILKIE' in w for w in exported.warnings)
 
 
 def test_sky_lit_plane_matches_cycles(factory_scene, tmp_path, tapped_engine):
-    """The plane is lit mostly by the sun disc (0.55 degrees): without the
-    cone sampling its noise would swamp this comparison."""
-    sky_world(factory_scene, sun_elevation=math.radians(35.0), sun_rotation=math.radians(200.0),
-              altitude=300.0)
+    """Blender 5.0's default sky (Multiple Scattering).  The plane is lit
+    mostly by the sun disc (0.55 degrees): without the cone sampling its
+    noise would swamp this comparison."""
+    sky_world(factory_scene, 'MULTIPLE_SCATTERING', sun_elevation=math.radians(35.0),
+              sun_rotation=math.radians(200.0), altitude=300.0)
     plane_under_sky(factory_scene)
     small_resolution(factory_scene, 40, 30)
     setup_ember(factory_scene, 64, seed=5, max_bounces=1)
