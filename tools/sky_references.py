@@ -39,13 +39,22 @@ CASES = [
 VIEWS = [("horizon", (80.0, 0.0, -140.0), 14.0), ("zenith", (170.0, 0.0, 30.0), 20.0), ("sun", None, 300.0)]
 
 
+# Preetham: the sun given as a direction (the view 'sun' aims by elevation
+# and rotation, which point the same way here).
+PREETHAM = ("preetham", dict(sun_elevation=math.radians(25.0), sun_rotation=math.radians(60.0), turbidity=3.0,
+                             sun_direction=(math.cos(math.radians(25.0)) * math.sin(math.radians(60.0)),
+                                            math.cos(math.radians(25.0)) * math.cos(math.radians(60.0)),
+                                            math.sin(math.radians(25.0)))))
+
+
 def cases():
-    """(name, sky type, properties): the version's Nishita model; in 5.0 both
-    Single and Multiple Scattering."""
+    """(name, sky type, properties): the version's Nishita model (in 5.0
+    Single and Multiple Scattering) and Preetham."""
+    preetham = [(PREETHAM[0], 'PREETHAM', PREETHAM[1])]
     if bpy.app.version < (5, 0, 0):
-        return [(name, 'NISHITA', props) for name, props in CASES]
+        return [(name, 'NISHITA', props) for name, props in CASES] + preetham
     return ([(name, 'SINGLE_SCATTERING', props) for name, props in CASES]
-            + [(name + '_ms', 'MULTIPLE_SCATTERING', props) for name, props in CASES])
+            + [(name + '_ms', 'MULTIPLE_SCATTERING', props) for name, props in CASES] + preetham)
 
 
 def sky_world(scene, props, sky_type):

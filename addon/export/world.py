@@ -182,7 +182,8 @@ def _sun_guide(skies):
     texture mapping).  Otherwise None: the disc stays in the baked table."""
     from .. import backend
     scene = backend.scene_module()
-    with_disc = [c for c in skies if c.props.get('sun_disc', True)]
+    # Preetham has no disc (Cycles 5.0 would still aim at the Nishita sun).
+    with_disc = [c for c in skies if c.props.get('sun_disc', True) and c.props.get('sky_type') != 'PREETHAM']
     if len(with_disc) != 1:
         return None
     call = with_disc[0]

@@ -20,15 +20,16 @@ to 90 degrees (row y at elevation (pi/2 + half a row) (y / 128)^2), the
 ground a fade of the horizon row.  Blender 5.0 ('SINGLE_SCATTERING'):
 512 x 256 texels over -90 to 90 degrees (the lower half the horizon row
 faded), the sun disc added to the sky.  Blender 5.0 'MULTIPLE_SCATTERING': its own table
-(sky_multiple.py) and sun, looked up by the same 5.0 kernel.  Preetham and
-Hosek-Wilkie are not evaluated (the registry entry refuses them).
+(sky_multiple.py) and sun, looked up by the same 5.0 kernel.  'PREETHAM' is
+analytic (sky_preetham.py).  'HOSEK_WILKIE' is not evaluated (the registry
+entry refuses it): its model is a table of fitted coefficients Ember lacks.
 """
 from functools import lru_cache
 
 import numpy as np
 
 from .registry import node
-from . import sky_multiple
+from . import sky_multiple, sky_preetham
 from .sky_multiple import in_threads
 
 F = np.float32
@@ -91,6 +92,16 @@ QUADRATURE_WEIGHTS = np.array([0.01750893642, 0.04135477391, 0.06678839063, 0.09
 # Wavelength node; Cycles reads it from the OpenColorIO config).
 XYZ_TO_REC709 = np.array([[3.2409699, -1.5373832, -0.4986108], [-0.9692436, 1.8759675, 0.0415551],
                           [0.0556301, -0.2039770, 1.0569715]], F)
+# Blender 3.4 - 4.x: their OpenColorIO configs give Cycles the classic sRGB
+# (D65) matrix, 4 digits apart from 5.0's (fitted to Cycles' Preetham sky,
+# residual 3e-5, which Ember's 5.0 matrix leaves at 2.4e-4 there).
+XYZ_TO_REC709_LEGACY = np.array([[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560],
+                                 [0.0556434, -0.2040259, 1.0572252]], F)
+
+
+def xyz_to_rgb_matrix(props):
+    version = tuple(props.get("_blender_version") or (5, 0, 0))
+    return XYZ_TO_REC709 if version >= (5, 0, 0) else XYZ_TO_REC709_LEGACY
 
 # Table sizes per layout (Cycles' SkyLoader::load_metadata).
 LEGACY = "legacy"          # Blender 3.4 - 4.x 'NISHITA'
@@ -292,7 +303,7 @@ def kernel_params(props):
         rotation = np.fmod(rotation, TWO_PI)
         rotation = TWO_PI - (rotation + TWO_PI if rotation < 0 else rotation)
     return dict(
-        layout=layout, elevation=float(elevation), rotation=float(F(rotation)),
+        layout=layout, xyz_to_rgb=xyz_to_rgb_matrix(props), elevation=float(elevation), rotation=float(F(rotation)),
         altitude=float(np.clip(F(props.get("altitude", 1.0)), F(1.0), F(MAX_ALTITUDE[layout]))),
         raw_altitude=float(F(props.get("altitude", 1.0))),
         air=float(F(props.get("air_density", 1.0))), dust=float(F(props.get("dust_density", 1.0))),
@@ -358,7 +369,7 @@ def _evaluate(d, k, include_sun):
         xyz = lookup_extend(table, x, y)
     if k["disc"] and include_sun:
         xyz = _add_sun(d, xyz, dir_elevation, k, bottom, top)
-    rgb = xyz @ XYZ_TO_REC709.T
+    rgb = xyz @ k["xyz_to_rgb"].T
     return np.maximum(np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0), F(0.0))
 
 
@@ -414,7 +425,7 @@ def sun_luminance_integral(k):
         return 0.0
     bottom, top = sun_pixels(k["layout"], k["elevation"], k["diameter"], k["altitude"], k["air"], k["dust"],
                              k["ozone"])
-    rgb = np.maximum(XYZ_TO_REC709 @ ((bottom + top) * F(0.5)), 0.0) * k["intensity"]
+    rgb = np.maximum(k["xyz_to_rgb"] @ ((bottom + top) * F(0.5)), 0.0) * k["intensity"]
     lum = float(rgb @ np.array([0.2126, 0.7152, 0.0722]))
     half = 0.5 * k["diameter"]
     return lum * 2.0 * np.pi * (1.0 - np.cos(half)) * 0.8
@@ -423,7 +434,7 @@ def sun_luminance_integral(k):
 # ----------------------------------------------------------------------------
 # The registry entry
 
-SKY_TYPES = ("NISHITA", "SINGLE_SCATTERING", "MULTIPLE_SCATTERING")
+SKY_TYPES = ("NISHITA", "SINGLE_SCATTERING", "MULTIPLE_SCATTERING", "PREETHAM")
 
 
 def _translate(node):
@@ -435,14 +446,15 @@ def _translate(node):
 def _accepts(props):
     kind = props.get("sky_type")
     if kind not in SKY_TYPES:
-        return f"sky type {kind!r} is not rendered yet (only Nishita / Single / Multiple Scattering)"
+        return f"sky type {kind!r} is not rendered yet (Hosek-Wilkie's data tables are not in Ember)"
     return None
 
 
 @node("ShaderNodeTexSky", inputs=(("Vector", "vector"),), outputs=(("Color", "color"),),
       props=(("sky_type", "NISHITA"), ("sun_disc", True), ("sun_size", 0.009512), ("sun_intensity", 1.0),
              ("sun_elevation", 0.2617994), ("sun_rotation", 0.0), ("altitude", 1.0), ("air_density", 1.0),
-             ("dust_density", 1.0), ("ozone_density", 1.0)),
+             ("dust_density", 1.0), ("ozone_density", 1.0), ("sun_direction", (0.0, 0.0, 1.0)),
+             ("turbidity", 2.2), ("ground_albedo", 0.3)),
       translate=_translate, coords="generated", accepts=_accepts,
       bounds=lambda p: {"Color": (0.0, np.inf)},
       # In a material the Vector is Generated (in [0, 1]^3: the upper sky, not
@@ -451,8 +463,11 @@ def _accepts(props):
              {"sky_type": "SINGLE_SCATTERING", "sun_size": 0.4, "sun_elevation": 0.7, "sun_rotation": 3.9,
               "air_density": 2.0, "ozone_density": 3.0, "sun_intensity": 1e-5},
              {"sky_type": "MULTIPLE_SCATTERING", "sun_size": 0.3, "sun_elevation": 0.4, "sun_rotation": 2.0,
-              "aerosol_density": 3.0, "sun_intensity": 1e-5}])
+              "aerosol_density": 3.0, "sun_intensity": 1e-5},
+             {"sky_type": "PREETHAM", "sun_direction": (0.3, -0.5, 0.6), "turbidity": 3.5}])
 def sky_texture(ctx, i, p):
+    if p.get("sky_type") == "PREETHAM":
+        return {"Color": sky_preetham.evaluate(i["Vector"], p, xyz_to_rgb_matrix(p)).astype(np.float64)}
     k = kernel_params(p)
     include_sun = not getattr(ctx, "importance_bake", False)
     return {"Color": evaluate(np.asarray(i["Vector"], F), k, include_sun).astype(np.float64)}
