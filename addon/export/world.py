@@ -177,9 +177,12 @@ def _sky_calls(expr):
 
 
 def _sun_guide(skies):
-    """Cycles' sun guiding (scene/light.cpp): one sky with its disc on, looking
-    up the ray direction itself (Vector unlinked or Generated, no hidden
-    texture mapping).  Otherwise None: the disc stays in the baked table."""
+    """Cycles' sun guiding (scene/light.cpp): one sky with its disc on whose
+    Vector is the ray direction or a linear map of it (Generated through
+    Mapping nodes without location, the hidden texture mapping included:
+    the guide is the disc's direction mapped back; Cycles instead falls back
+    to a 4096 x 2048 table there).  Otherwise None: the disc stays in the
+    baked table, found by BSDF sampling."""
     from .. import backend
     scene = backend.scene_module()
     # Preetham has no disc (Cycles 5.0 would still aim at the Nishita sun).
@@ -187,17 +190,50 @@ def _sun_guide(skies):
     if len(with_disc) != 1:
         return None
     call = with_disc[0]
-    vector = call.inputs.get('Vector')
-    if vector is not None and not (type(vector).__name__ == 'NodeOutput' and vector.output == 'Generated'
-                                   and vector.call.idname == 'ShaderNodeTexCoord'
-                                   and not vector.call.props.get('object')):
+    matrix = _direction_matrix(call.inputs.get('Vector'))
+    if matrix is None or abs(np.linalg.det(matrix)) < 1e-12:
         return None
     sky = backend.load('nodes.sky')
     k = sky.kernel_params(call.props)
-    if not k['diameter'] > 0:
+    if not k['diameter'] > 0 or not sky.disc_visible(k):
+        return None      # nothing to guide to (Cycles would aim at the hidden disc)
+    direction = np.linalg.solve(matrix, sky.sun_direction(k))
+    direction /= np.linalg.norm(direction)
+    return scene.SunGuide(tuple(float(c) for c in direction), 0.5 * k['diameter'], sky.sun_luminance_integral(k))
+
+
+def _direction_matrix(vector):
+    """M with lookup vector = M (world direction) for a sky's Vector
+    expression, or None when it is not such a linear map."""
+    if vector is None:
+        return np.eye(3)
+    if type(vector).__name__ != 'NodeOutput':
         return None
-    return scene.SunGuide(tuple(float(c) for c in sky.sun_direction(k)), 0.5 * k['diameter'],
-                          sky.sun_luminance_integral(k))
+    call = vector.call
+    if call.idname == 'ShaderNodeTexCoord':
+        direct = vector.output == 'Generated' or (vector.output == 'Object' and not call.props.get('object'))
+        return np.eye(3) if direct else None
+    if call.idname != 'ShaderNodeMapping' or vector.output != 'Vector':
+        return None
+    values = [call.inputs.get(name, default) for name, default in
+              (('Location', (0.0, 0.0, 0.0)), ('Rotation', (0.0, 0.0, 0.0)), ('Scale', (1.0, 1.0, 1.0)))]
+    if not all(isinstance(v, tuple) for v in values):
+        return None      # a linked Location / Rotation / Scale
+    location, rotation, scale = (np.array(v, float) for v in values)
+    kind = call.props.get('vector_type', 'POINT')
+    if kind in ('POINT', 'TEXTURE') and np.any(location != 0):
+        return None
+    inner = _direction_matrix(call.inputs.get('Vector'))
+    if inner is None or (kind in ('TEXTURE', 'NORMAL') and np.any(scale == 0)):
+        return None
+    rot = euler_matrix(rotation)
+    if kind == 'TEXTURE':
+        outer = np.diag(1.0 / scale) @ rot.T
+    elif kind == 'NORMAL':
+        outer = rot @ np.diag(1.0 / scale)
+    else:
+        outer = rot @ np.diag(scale)
+    return outer @ inner
 
 
 def _environment(node, strength, fallback, notes):

@@ -339,6 +339,17 @@ def earth_intersection_angle(altitude):
     return float(-(HALF_PI - np.arcsin(radius / (radius + F(altitude) / F(1000.0)))))
 
 
+def disc_visible(k):
+    """Whether any of the sun disc is drawn: above the horizon in 3.4 -
+    4.x, above the Earth's edge seen from the altitude in 5.0."""
+    if not k["disc"]:
+        return False
+    top = k["elevation"] + 0.5 * k["diameter"]
+    if k["layout"] == LEGACY:
+        return top > 0
+    return top > earth_intersection_angle(k["raw_altitude"])
+
+
 def _precise_angle(a, b):
     return F(2.0) * np.arctan2(np.linalg.norm(a - b, axis=1), np.linalg.norm(a + b, axis=1))
 

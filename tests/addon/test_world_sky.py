@@ -15,7 +15,7 @@ from ember_testlib import assert_no_failing_blocks, compare_with_cycles, render_
 from ember_testlib import per_pass_estimates, setup_ember
 
 
-def sky_world(scene, sky_type='SINGLE_SCATTERING', strength=0.05, **props):
+def sky_world(scene, sky_type='SINGLE_SCATTERING', strength=0.05, rotation=None, **props):
     world = bpy.data.worlds.new("sky")
     scene.world = world
     tree = world.node_tree
@@ -29,6 +29,10 @@ def sky_world(scene, sky_type='SINGLE_SCATTERING', strength=0.05, **props):
         setattr(sky, key, value)
     tree.links.new(sky.outputs['Color'], background.inputs['Color'])
     tree.links.new(background.outputs[0], out.inputs['Surface'])
+    if rotation is not None:
+        # Blender 5.0 hides the Nishita skies' Vector input; the node's
+        # hidden texture mapping still turns it (in Cycles too).
+        sky.texture_mapping.rotation = rotation
     return sky
 
 
@@ -65,6 +69,16 @@ def test_export_sky_world_is_shaded_per_direction_with_a_sun_guide(factory_scene
     assert tex.sun.half_angle == np.float32(sky.sun_size) / 2
     # The disc is not in the sampling table (it is sampled by its cone).
     assert tex.pixels.max() < 100.0
+    # A texture-mapping rotation: the guide is the disc's direction rotated back.
+    rotation = (0.3, -0.2, 1.1)
+    sky_world(factory_scene, rotation=rotation, sun_elevation=e, sun_rotation=sky.sun_rotation)
+    from addon.export.world import euler_matrix
+    exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
+    np.testing.assert_allclose(exported.scene.world.texture.sun.direction,
+                               euler_matrix(np.array(rotation)).T @ np.array(expected), atol=1e-6)
+    # A sun below the horizon is not guided to.
+    sky = sky_world(factory_scene, sun_elevation=math.radians(-5.0))
+    assert scene_export.export_scene(bpy.context.evaluated_depsgraph_get()).scene.world.texture.sun is None
     # Hosek-Wilkie is not evaluated: the constant colour, named.
     sky.sky_type = 'HOSEK_WILKIE'
     exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
@@ -73,11 +87,11 @@ def test_export_sky_world_is_shaded_per_direction_with_a_sun_guide(factory_scene
 
 
 def test_sky_lit_plane_matches_cycles(factory_scene, tmp_path, tapped_engine):
-    """Blender 5.0's default sky (Multiple Scattering).  The plane is lit
-    mostly by the sun disc (0.55 degrees): without the cone sampling its
-    noise would swamp this comparison."""
+    """Blender 5.0's default sky (Multiple Scattering), turned by its
+    texture mapping.  The plane is lit mostly by the sun disc (0.55 degrees): without
+    the cone sampling its noise would swamp this comparison."""
     sky_world(factory_scene, 'MULTIPLE_SCATTERING', sun_elevation=math.radians(35.0),
-              sun_rotation=math.radians(200.0), altitude=300.0)
+              sun_rotation=math.radians(200.0), altitude=300.0, rotation=(0.0, 0.0, 0.7))
     plane_under_sky(factory_scene)
     small_resolution(factory_scene, 40, 30)
     setup_ember(factory_scene, 64, seed=5, max_bounces=1)
