@@ -84,7 +84,8 @@ def test_layouts_differ_where_versions_differ():
 
 
 @pytest.mark.parametrize("layout,version", [("legacy", (4, 2, 0)), ("single", (5, 0, 1))])
-def test_empty_atmosphere_is_black_and_leaves_the_sun_unattenuated(layout, version):
+def test_empty_atmosphere_is_black_and_leaves_the_sun_unattenuated(layout, version, monkeypatch):
+    monkeypatch.setattr(sky, "TABLE_SIZE", {"legacy": (64, 16), "single": (64, 32)})   # black anyway
     props = dict(_blender_version=version, sun_elevation=0.6, sun_rotation=0.3, sun_size=0.05,
                  air_density=0.0, dust_density=0.0, ozone_density=0.0, altitude=100.0)
     k = sky.kernel_params(props)
@@ -140,7 +141,9 @@ PROPS = dict(_blender_version=(5, 0, 1), sky_type="SINGLE_SCATTERING", sun_eleva
              sun_size=0.02, sun_intensity=1.0, altitude=100.0)
 
 
+@pytest.fixture(scope="module")
 def sky_map():
+    """The sun-guided map of a 5.0 sky (shared by the sampling tests)."""
     k = sky.kernel_params(PROPS)
     call = NodeCall("ShaderNodeTexSky", {}, dict(PROPS))
     w, h = 512, 256
@@ -180,8 +183,8 @@ def sky_integral(k):
     return total + weight @ disc.astype(np.float64)
 
 
-def test_sun_guided_sample_returns_its_pdf():
-    env, _ = sky_map()
+def test_sun_guided_sample_returns_its_pdf(sky_map):
+    env, _ = sky_map
     rng = np.random.default_rng(11)
     u1, u2 = rng.random(20000), rng.random(20000)
     d, pdf = env.sample(u1, u2)
@@ -191,10 +194,12 @@ def test_sun_guided_sample_returns_its_pdf():
     assert abs(in_cone.mean() - 0.8) < 0.02     # Cycles' sun weight 4 against the map's 1
 
 
-def test_sun_guided_sampling_estimates_the_sky_integral():
+def test_sun_guided_sampling_estimates_the_sky_integral(sky_map):
     """E[L(d) / pdf(d)] over sample() is the integral of L over the sphere:
-    the disc (96 % of it here) and the sky both."""
-    env, k = sky_map()
+    the disc (69 - 84 % of it here, by channel) and the sky both.  Sampling
+    the table alone (no guide) leaves a relative standard error of 7 - 9 %
+    at this count (measured), which the last assertion refuses."""
+    env, k = sky_map
     exact = 0.5 * sky_integral(k)
     rng = np.random.default_rng(23)
     n, batches = 40000, 10
@@ -208,4 +213,4 @@ def test_sun_guided_sampling_estimates_the_sky_integral():
     limit = ember_stats.family_z("sky sun-guided estimator", 3)
     print(f"\nsky integral {exact}, estimate {mean} +- {se} (z {z}); relative se {se / exact}")
     assert np.all(np.abs(z) < limit), (z, limit)
-    assert np.all(se / exact < 0.01)     # the disc is found: a map-only sampler misses it
+    assert np.all(se / exact < 0.01)     # the disc is found by its cone
