@@ -214,3 +214,14 @@ def test_sun_guided_sampling_estimates_the_sky_integral(sky_map):
     print(f"\nsky integral {exact}, estimate {mean} +- {se} (z {z}); relative se {se / exact}")
     assert np.all(np.abs(z) < limit), (z, limit)
     assert np.all(se / exact < 0.01)     # the disc is found by its cone
+
+
+def test_bad_sun_guides_are_refused():
+    from engine.scene import SceneError, World
+    from engine.validate import validate_world
+    pixels = np.ones((4, 8, 3), np.float32)
+    for guide in (SunGuide((0.0, 0.0, 0.0), 0.01), SunGuide((0.0, np.nan, 1.0), 0.01),
+                  SunGuide((0.0, 0.0, 1.0), 0.0), SunGuide((0.0, 0.0, 1.0), 0.01, np.inf)):
+        with pytest.raises(SceneError, match="sun"):
+            validate_world(World(texture=EnvironmentTexture(pixels, sun=guide)))
+    validate_world(World(texture=EnvironmentTexture(pixels, sun=SunGuide((0.0, 0.0, 1.0), 0.01, 3.0))))
