@@ -198,6 +198,7 @@ def _sun_xyz(elevation, altitude, air, dust, solid_angle):
     return (spectrum @ CMF_XYZ) * STEP_LAMBDA
 
 
+@lru_cache(maxsize=16)
 def sun_pixels(layout, elevation, diameter, altitude, air, dust, ozone=1.0):
     """XYZ radiance at the bottom and top edge of the sun disc (Cycles'
     SKY_nishita_skymodel_precompute_sun / SKY_single_scattering_... /
