@@ -13,6 +13,7 @@ import pytest
 from engine import kernels
 from engine.bsdf import ggx_reflect
 from engine.render import render
+from engine import sampling
 from engine.sampling import power_heuristic, spherical_rectangle_warp
 from engine.scene import RenderSettings
 from engine.testscenes import cornell_spheres
@@ -84,6 +85,10 @@ def test_spherical_rectangle_warp_agrees(jit):
     args = (mixed(rng, n), mixed(rng, n), np.abs(mixed(rng, n)), 0.5, np.abs(rng.normal(size=n)),
             rng.random(n), rng.random(n))
     assert_agree(*both_ways(spherical_rectangle_warp, *args))
+    # The solid angle alone (MIS pdf of lights hit) is the warp's, to the bit.
+    plain, compiled = both_ways(sampling._rectangle_solid_angle, *args[:5])
+    assert_agree(plain, compiled)
+    assert_agree(plain, spherical_rectangle_warp(*args)[2:])
 
 
 def test_sobol_sampler_agrees(jit):
