@@ -306,19 +306,23 @@ def _lights_along(ctx, paths, tmax):
 
 
 def _camera_aovs(ctx, paths, t, prim, hit_light, hit_surf, tile):
-    n = len(paths.pix)
+    """Alpha, and the first-hit AOVs the film keeps (none by default: the
+    denoiser asks for normal and albedo)."""
     visible = hit_light | hit_surf
     alpha = visible.astype(np.float64)
-    # Z depth along the view axis, counted from the camera (rays start at clip start).
-    cos = np.maximum(paths.d @ ctx.camera.forward, 0.0)
-    depth = np.where(hit_surf, t * cos + ctx.camera.cam.clip_start, 0.0)
-    normal = np.zeros((n, 3))
-    albedo = np.zeros((n, 3))
+    kept = getattr(tile, "aovs", None)
+    depth = normal = albedo = None
+    if kept is None or "depth" in kept:
+        # Z depth along the view axis, counted from the camera (rays start at clip start).
+        cos = np.maximum(dot(paths.d, np.broadcast_to(ctx.camera.forward, paths.d.shape)), 0.0)
+        depth = np.where(hit_surf, t * cos + ctx.camera.cam.clip_start, 0.0)
     hs = np.nonzero(hit_surf)[0]
-    if len(hs):
-        tr = ctx.triangles
-        normal[hs] = tr.ng[prim[hs]]
-        m = tr.material[prim[hs]]
+    if kept is None or "normal" in kept:
+        normal = np.zeros((len(paths.pix), 3))
+        normal[hs] = ctx.triangles.ng[prim[hs]]
+    if kept is None or "albedo" in kept:
+        albedo = np.zeros((len(paths.pix), 3))
+        m = ctx.triangles.material[prim[hs]]
         col = ctx.materials.color[m] * ctx.materials.weight[m][..., None]
         albedo[hs] = np.clip(col.sum(axis=1), 0.0, 1.0)
     tile.add_camera(paths.pix, alpha, depth, normal, albedo)
