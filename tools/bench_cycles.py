@@ -97,29 +97,18 @@ def configure(scene, engine, samples, seed, cfg, adaptive):
 
 
 def configure_cycles(scene, samples, seed, bounces, adaptive):
-    scene.render.engine = 'CYCLES'
+    """The parity tests' Cycles set-up (tests/addon/ember_testlib.py), but at
+    Cycles' own default light threshold (a speed feature a user has on), and
+    its default adaptive sampling when asked."""
+    sys.path.insert(0, os.path.join(ROOT, 'tests', 'addon'))
+    from ember_testlib import setup_cycles
+    setup_cycles(scene, samples, seed, bounces)
     c = scene.cycles
-    c.device = 'CPU'
-    c.samples = samples
-    c.seed = seed
-    c.use_animated_seed = False
-    c.use_denoising = False
+    c.light_sampling_threshold = c.bl_rna.properties['light_sampling_threshold'].default
     c.use_adaptive_sampling = adaptive
     if adaptive:
         c.adaptive_threshold = 0.01  # Cycles' defaults
         c.adaptive_min_samples = 0
-    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
-    c.blur_glossy = 0.0
-    c.caustics_reflective = c.caustics_refractive = True
-    c.max_bounces = bounces
-    for name in ('diffuse_bounces', 'glossy_bounces', 'transmission_bounces', 'volume_bounces',
-                 'transparent_max_bounces'):
-        setattr(c, name, bounces)
-    c.pixel_filter_type = 'BLACKMAN_HARRIS'
-    c.filter_width = 1.5
-    if hasattr(c, 'use_auto_tile'):
-        c.use_auto_tile = False
-    scene.render.threads_mode = 'AUTO'
 
 
 def configure_ember(scene, samples, seed, bounces, adaptive):
