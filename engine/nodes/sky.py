@@ -1,28 +1,30 @@
-"""The Sky Texture node's Nishita models, as Cycles evaluates them.
+"""The Sky Texture node, as Cycles evaluates it (the registry entry is at
+the end; sky_multiple.py and sky_preetham.py hold the other models).
 
-Cycles precomputes a table of single-scattered sky radiance (CIE XYZ) per
-direction on the host (Blender's intern/sky: sky_nishita.cpp in 3.x/4.x,
-sky_single_scattering.cpp in 5.0) and the sun disc's radiance at its bottom
-and top edge; the kernel (svm/sky.h) looks the table up bilinearly and
-draws the disc with limb darkening.  This module does the same in float32,
-vectorized:
+For its Nishita models Cycles precomputes a table of sky radiance (CIE XYZ)
+per direction on the host (Blender's intern/sky: sky_nishita.cpp in 3.x /
+4.x, sky_single_scattering.cpp and sky_multiple_scattering.cpp in 5.0) and
+the sun disc's radiance at its bottom and top edge; the kernel (svm/sky.h)
+looks the table up bilinearly and draws the disc with limb darkening.  This
+module does the same in float32, vectorized:
 
-* ``sky_table`` / ``sun_pixels``: the precompute.  32 ray-march steps per
-  direction, the sun's optical depth by 8-point Gauss-Laguerre quadrature,
-  21 wavelengths folded into XYZ.  Only half the columns are computed; the
-  sky is mirrored about the sun's azimuth (Cycles' own layout, including its
-  one-texel asymmetry).
-* ``evaluate``: the kernel per direction (sky, sun disc, ground fade), XYZ to
+* ``sky_table`` / ``sun_pixels``: the single-scattering precompute.  32
+  ray-march steps per direction, the sun's optical depth by 8-point
+  Gauss-Laguerre quadrature, 21 wavelengths folded into XYZ.  Only half the
+  columns are computed; the sky is mirrored about the sun's azimuth (Cycles'
+  own layout, including its one-texel asymmetry).
+* ``evaluate``: the kernel per direction (sky, sun disc, ground), XYZ to
   linear Rec.709 clamped at zero.
 
 Layouts: Blender 3.4 / 4.2 ('NISHITA'): 512 x 128 texels over elevations 0
 to 90 degrees (row y at elevation (pi/2 + half a row) (y / 128)^2), the
-ground a fade of the horizon row.  Blender 5.0 ('SINGLE_SCATTERING'):
-512 x 256 texels over -90 to 90 degrees (the lower half the horizon row
-faded), the sun disc added to the sky.  Blender 5.0 'MULTIPLE_SCATTERING': its own table
-(sky_multiple.py) and sun, looked up by the same 5.0 kernel.  'PREETHAM' is
-analytic (sky_preetham.py).  'HOSEK_WILKIE' is not evaluated (the registry
-entry refuses it): its model is a table of fitted coefficients Ember lacks.
+ground a fade of the horizon row, the disc replacing the sky.  Blender 5.0
+('SINGLE_SCATTERING'): 512 x 256 texels over -90 to 90 degrees (the lower
+half the horizon row faded), the disc added to the sky.  Blender 5.0
+'MULTIPLE_SCATTERING': its own table (sky_multiple.py) and sun, looked up by
+the same 5.0 kernel.  'PREETHAM' is analytic (sky_preetham.py).
+'HOSEK_WILKIE' is not evaluated (the registry entry refuses it): its model
+is a table of fitted coefficients Ember does not carry.
 """
 from functools import lru_cache
 
@@ -92,9 +94,10 @@ QUADRATURE_WEIGHTS = np.array([0.01750893642, 0.04135477391, 0.06678839063, 0.09
 # Wavelength node; Cycles reads it from the OpenColorIO config).
 XYZ_TO_REC709 = np.array([[3.2409699, -1.5373832, -0.4986108], [-0.9692436, 1.8759675, 0.0415551],
                           [0.0556301, -0.2039770, 1.0569715]], F)
-# Blender 3.4 - 4.x: their OpenColorIO configs give Cycles the classic sRGB
+# Blender 3.4 and 4.2: their OpenColorIO configs give Cycles the classic sRGB
 # (D65) matrix, 4 digits apart from 5.0's (fitted to Cycles' Preetham sky,
-# residual 3e-5, which Ember's 5.0 matrix leaves at 2.4e-4 there).
+# residual 3e-5, which Ember's 5.0 matrix leaves at 2.4e-4 there; versions
+# between 4.2 and 5.0 were not measured and get this one).
 XYZ_TO_REC709_LEGACY = np.array([[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560],
                                  [0.0556434, -0.2040259, 1.0572252]], F)
 
@@ -102,6 +105,7 @@ XYZ_TO_REC709_LEGACY = np.array([[3.2404542, -1.5371385, -0.4985314], [-0.969266
 def xyz_to_rgb_matrix(props):
     version = tuple(props.get("_blender_version") or (5, 0, 0))
     return XYZ_TO_REC709 if version >= (5, 0, 0) else XYZ_TO_REC709_LEGACY
+
 
 # Table sizes per layout (Cycles' SkyLoader::load_metadata).
 LEGACY = "legacy"          # Blender 3.4 - 4.x 'NISHITA'
@@ -298,7 +302,7 @@ def kernel_params(props):
         layout = MULTIPLE if props.get("sky_type") == "MULTIPLE_SCATTERING" else SINGLE
     elevation = F(props.get("sun_elevation", np.radians(15.0)))
     rotation = F(props.get("sun_rotation", 0.0))
-    if version >= (4, 0, 0):
+    if version >= (3, 6, 0):
         elevation, rotation = _simplify(elevation, rotation)
     else:
         rotation = np.fmod(rotation, TWO_PI)
@@ -314,7 +318,7 @@ def kernel_params(props):
 
 
 def _simplify(elevation, rotation):
-    """Cycles' SkyTextureNode::simplify_settings (4.x and newer)."""
+    """Cycles' SkyTextureNode::simplify_settings (3.6 and newer)."""
     elevation = np.fmod(elevation, TWO_PI)
     if abs(elevation) >= PI:
         elevation = F(elevation - np.copysign(F(2.0), elevation) * PI)
