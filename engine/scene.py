@@ -458,7 +458,8 @@ class RenderSettings:
     """How to render.
 
     samples: samples per pixel in total; samples_per_pass: how many are
-    added between two progress callbacks.  max_bounces follows Cycles: the
+    added between two progress callbacks (0: automatic, one sample first,
+    then passes of about a second; engine/render.py).  max_bounces follows Cycles: the
     number of indirect bounces, so 0 is direct lighting only (light sampling
     at the first hit, emission found by its BSDF sample).  light_selection: 'uniform',
     'power', 'all' or 'tree' (a light tree: by each light's estimated
