@@ -1,0 +1,169 @@
+"""Rays that shader nodes cast from their shading points (Ambient Occlusion,
+Bevel), as Cycles' SVM does with KERNEL_FEATURE_NODE_RAYTRACE.
+
+Cycles ray-traces from shaders only while shading the surface a path hit:
+the feature is in the node mask of ``integrator_shade_surface``, not in the
+masks of light samples (emission evaluated for next-event estimation),
+shadow rays or the world.  The integrator therefore hangs a ``NodeRays`` on
+the ShadingContext of its surface hits only; every other context has
+``rays = None`` and the nodes return what Cycles returns without the
+feature (AO 1, the unchanged normal).
+
+Random numbers come from the render's sampler at the path's own address:
+branch ``i`` of ``S`` at sample index ``s`` reads sample index ``s * S + i``
+(Cycles' ``path_branched_rng_2D``) in a dimension set of its own per
+wavefront step and node kind (``node_set``), so a render stays a pure
+function of (seed, pixel, sample index) and disjoint sample ranges still
+merge exactly.  As in Cycles every node of a kind shares its dimensions.
+"""
+import numpy as np
+
+VIS_SHADOW = 16
+# Dimension sets: disjoint from the integrator's (1 + 4 step + k, small)
+# and from the all-lights sets (bit 30).
+AO, BEVEL = 1, 2
+_NODE_SETS = 0x20000000
+# Surfaces a node ray may pass (other objects', or invisible ones) before
+# it counts as having met nothing more.
+MAX_CROSSINGS = 16
+
+
+def node_set(step, which):
+    """Dimension-set id of node kind ``which`` (AO, BEVEL) at wavefront step ``step``."""
+    return _NODE_SETS | ((int(step) & 0xFFFF) << 4) | which
+
+
+class NodeRays:
+    """What ray-casting nodes need from the renderer for N shading points:
+    the scene's ray caster (engine.accel.Accel) and triangles, the sampler,
+    each point's sample address (pixel seed, sample index; uint32) and the
+    wavefront step, and ``sharp``: whether the path got here without a
+    blurry bounce (Cycles bevels only while min_ray_pdf >= 8)."""
+
+    def __init__(self, accel, triangles, sampler, pseed, sample, step, sharp):
+        self.accel = accel
+        self.triangles = triangles
+        self.sampler = sampler
+        self.pseed = pseed
+        self.sample = sample
+        self.step = step
+        self.sharp = sharp
+
+    @classmethod
+    def of_paths(cls, ctx, paths, step):
+        """The handle for the surface hits of ``paths`` at wavefront step
+        ``step`` (engine.integrator's Context and Paths).  Ember keeps the
+        last bounce's pdf, not the path's minimum: a path is sharp at the
+        camera hit and after a delta or a narrow (pdf >= 8) bounce."""
+        sharp = (paths.bounce == 0) | paths.prev_delta | (paths.prev_pdf >= 8.0)
+        return cls(ctx.accel, ctx.triangles, ctx.sampler, paths.pseed, paths.sample, step, sharp)
+
+    def take(self, rows):
+        return NodeRays(self.accel, self.triangles, self.sampler, self.pseed[rows], self.sample[rows],
+                        self.step, self.sharp[rows])
+
+    # -- random numbers --------------------------------------------------------
+
+    def uniforms(self, which, branches):
+        """(N, branches, 2) values of branch i at sample index s * branches + i."""
+        n = len(self.pseed)
+        index = (self.sample.astype(np.uint64)[:, None] * np.uint64(branches)
+                 + np.arange(branches, dtype=np.uint64)[None, :])
+        index = (index & np.uint64(0xFFFFFFFF)).astype(np.uint32).reshape(-1)
+        pseed = np.repeat(self.pseed, branches)
+        u = self.sampler.get(pseed, index, node_set(self.step, which))
+        return u[:, :2].reshape(n, branches, 2)
+
+    # -- objects ---------------------------------------------------------------
+
+    def instance_of(self, prim):
+        """Scene instance (Cycles' object) of each triangle."""
+        return self.triangles.shading.instance[prim]
+
+    def outward_normal(self, prim):
+        """Geometric normals of triangles as Cycles' bevel reads them: the
+        winding's, flipped back for mirrored (negative-scale) instances."""
+        shading = self.triangles.shading
+        mirrored = getattr(shading, "_mirrored", None)
+        if mirrored is None:
+            det = np.linalg.det(shading.matrix[:, :3, :3]) if len(shading.matrix) else np.zeros(0)
+            mirrored = det < 0
+            shading._mirrored = mirrored
+        flip = np.where(mirrored[self.instance_of(prim)], -1.0, 1.0)
+        return self.triangles.ng[prim] * flip[:, None]
+
+    # -- ray casting -------------------------------------------------------------
+
+    def hits(self, o, d, tmax, accept, first_only=False):
+        """Hits along the segments o + t d, 0 < t < tmax, that ``accept(rows,
+        prim)`` takes; other surfaces are passed through.  Returns (rows,
+        prim, t, bu, bv) of every accepted hit (the first per ray with
+        first_only).  t is in units of |d|."""
+        accel, ng = self.accel, self.triangles.ng
+        rows = np.arange(len(o))
+        t0 = np.zeros(len(o))
+        found = []
+        for _ in range(MAX_CROSSINGS):
+            if len(rows) == 0:
+                break
+            t, prim, bu, bv = accel.intersect(o, d, tmax - t0)
+            hit = prim >= 0
+            rows, o, d, tmax, t0 = rows[hit], o[hit], d[hit], tmax[hit], t0[hit]
+            t, prim, bu, bv = t[hit], prim[hit], bu[hit], bv[hit]
+            took = accept(rows, prim)
+            found.append((rows[took], prim[took], t0[took] + t[took], bu[took], bv[took]))
+            go = ~took if first_only else np.ones(len(rows), bool)
+            # On from just past the surface (to the side the ray leaves).
+            p = o + d * t[:, None]
+            start = accel.offset_origin(p, ng[prim], d)
+            dd = np.einsum("ij,ij->i", d, d)
+            t_start = t0 + np.einsum("ij,ij->i", start - o, d) / np.where(dd > 0, dd, 1.0)
+            go &= t_start < tmax
+            rows, o, d, tmax, t0 = rows[go], start[go], d[go], tmax[go], t_start[go]
+        if not found:
+            empty = np.zeros(0)
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), empty, empty, empty
+        return tuple(np.concatenate([f[k] for f in found]) for k in range(5))
+
+    def blocked(self, o, d, tmax, instance=None):
+        """Whether each segment meets a surface: of ``instance[ray]`` only
+        (Cycles' scene_intersect_local), else any surface visible to shadow
+        rays (an opaque shadow ray: transparency is not looked at)."""
+        n = len(o)
+        if instance is None and self.triangles.visibility is None:
+            return self.accel.occluded(o, d, tmax)
+        if instance is None:
+            vis = self.triangles.visibility
+            accept = lambda rows, prim: (vis[prim] & VIS_SHADOW) != 0
+        else:
+            accept = lambda rows, prim: self.instance_of(prim) == instance[rows]
+        out = np.zeros(n, bool)
+        out[self.hits(o, d, tmax, accept, first_only=True)[0]] = True
+        return out
+
+
+# ----------------------------------------------------------------------------
+# shared geometry helpers
+
+def make_orthonormals(n):
+    """Cycles' make_orthonormals: a = normalize((1, 1, 1) x n) (or
+    (-1, 1, 1) x n when n is along the diagonal), b = n x a."""
+    diagonal = (n[:, 0] == n[:, 1]) & (n[:, 0] == n[:, 2])
+    a = np.where(diagonal[:, None],
+                 np.stack([n[:, 2] - n[:, 1], n[:, 0] + n[:, 2], -n[:, 1] - n[:, 0]], axis=1),
+                 np.stack([n[:, 2] - n[:, 1], n[:, 0] - n[:, 2], n[:, 1] - n[:, 0]], axis=1))
+    length = np.linalg.norm(a, axis=1, keepdims=True)
+    a = a / np.where(length > 0, length, 1.0)
+    return a, np.cross(n, a)
+
+
+def concentric_disk(u1, u2):
+    """Shirley-Chiu concentric map of [0, 1)^2 to the unit disk."""
+    a, b = 2.0 * u1 - 1.0, 2.0 * u2 - 1.0
+    first = np.abs(a) > np.abs(b)
+    safe_a = np.where(a != 0, a, 1.0)
+    safe_b = np.where(b != 0, b, 1.0)
+    r = np.where(first, a, b)
+    phi = np.where(first, (np.pi / 4) * (b / safe_a), np.pi / 2 - (np.pi / 4) * (a / safe_b))
+    r = np.where((a == 0) & (b == 0), 0.0, r)
+    return r * np.cos(phi), r * np.sin(phi)
