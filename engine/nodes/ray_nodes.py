@@ -135,8 +135,7 @@ def bevel_normal(ctx, radius, samples):
     origin = (rep(sub.p) + disk_n * height[:, None]
               + disk_r[:, None] * (np.cos(phi)[:, None] * disk_t + np.sin(phi)[:, None] * disk_b))
     own = rep(sub.rays.instance_of(sub.prim))
-    accept = lambda rows, prim: sub.rays.instance_of(prim) == own[rows]
-    rows, prim, _, bu, bv = sub.rays.hits(origin, -disk_n, 2.0 * height, accept)
+    rows, prim, _, bu, bv = sub.rays.local_hits(origin, -disk_n, 2.0 * height, own)
     if len(rows):
         weight, normal = _hit_weights(sub.rays.triangles, sub.rays, rows, prim, bu, bv, axes, pick,
                                       rep(sub.p), R, disk_r)

@@ -16,6 +16,9 @@ wavefront step and node kind (``node_set``), so a render stays a pure
 function of (seed, pixel, sample index) and disjoint sample ranges still
 merge exactly.  As in Cycles every node of a kind shares its dimensions.
 """
+import threading
+import weakref
+
 import numpy as np
 
 VIS_SHADOW = 16
@@ -94,12 +97,27 @@ class NodeRays:
 
     # -- ray casting -------------------------------------------------------------
 
-    def hits(self, o, d, tmax, accept, first_only=False):
+    def local_hits(self, o, d, tmax, instance, first_only=False):
+        """Hits on the surfaces of object ``instance[ray]`` alone along the
+        segments o + t d, 0 < t < tmax (Cycles' scene_intersect_local: the
+        object's own BVH, so other objects, even coincident ones, are not
+        seen).  Returns (rows, prim, t, bu, bv) of every hit (the first per
+        ray with first_only); t in units of |d|."""
+        found = []
+        for inst in np.unique(instance):
+            rows = np.nonzero(instance == inst)[0]
+            accel, prims = local_accel(self.accel, self.triangles, int(inst))
+            r, prim, t, bu, bv = self.hits(o[rows], d[rows], tmax[rows], None, first_only, accel)
+            found.append((rows[r], prims[prim], t, bu, bv))
+        return _joined(found)
+
+    def hits(self, o, d, tmax, accept, first_only=False, accel=None):
         """Hits along the segments o + t d, 0 < t < tmax, that ``accept(rows,
-        prim)`` takes; other surfaces are passed through.  Returns (rows,
-        prim, t, bu, bv) of every accepted hit (the first per ray with
-        first_only).  t is in units of |d|."""
-        accel, ng = self.accel, self.triangles.ng
+        prim)`` takes (all with accept None); other surfaces are passed
+        through.  Returns (rows, prim, t, bu, bv) of every accepted hit (the
+        first per ray with first_only).  t is in units of |d|.  ``accel``:
+        another ray caster (an object's own), whose prims are returned."""
+        accel = accel or self.accel
         rows = np.arange(len(o))
         t0 = np.zeros(len(o))
         found = []
@@ -110,36 +128,72 @@ class NodeRays:
             hit = prim >= 0
             rows, o, d, tmax, t0 = rows[hit], o[hit], d[hit], tmax[hit], t0[hit]
             t, prim, bu, bv = t[hit], prim[hit], bu[hit], bv[hit]
-            took = accept(rows, prim)
+            took = np.ones(len(rows), bool) if accept is None else accept(rows, prim)
             found.append((rows[took], prim[took], t0[took] + t[took], bu[took], bv[took]))
             go = ~took if first_only else np.ones(len(rows), bool)
             # On from just past the surface (to the side the ray leaves).
             p = o + d * t[:, None]
-            start = accel.offset_origin(p, ng[prim], d)
+            start = accel.offset_origin(p, accel.triangles.ng[prim], d)
             dd = np.einsum("ij,ij->i", d, d)
             t_start = t0 + np.einsum("ij,ij->i", start - o, d) / np.where(dd > 0, dd, 1.0)
             go &= t_start < tmax
             rows, o, d, tmax, t0 = rows[go], start[go], d[go], tmax[go], t_start[go]
-        if not found:
-            empty = np.zeros(0)
-            return np.zeros(0, np.int64), np.zeros(0, np.int64), empty, empty, empty
-        return tuple(np.concatenate([f[k] for f in found]) for k in range(5))
+        return _joined(found)
 
     def blocked(self, o, d, tmax, instance=None):
-        """Whether each segment meets a surface: of ``instance[ray]`` only
-        (Cycles' scene_intersect_local), else any surface visible to shadow
-        rays (an opaque shadow ray: transparency is not looked at)."""
-        n = len(o)
-        if instance is None and self.triangles.visibility is None:
+        """Whether each segment meets a surface: of object ``instance[ray]``
+        only (Cycles' scene_intersect_local), else any surface visible to
+        shadow rays (an opaque shadow ray: transparency is not looked at)."""
+        out = np.zeros(len(o), bool)
+        if instance is not None:
+            out[self.local_hits(o, d, tmax, instance, first_only=True)[0]] = True
+            return out
+        if self.triangles.visibility is None:
             return self.accel.occluded(o, d, tmax)
-        if instance is None:
-            vis = self.triangles.visibility
-            accept = lambda rows, prim: (vis[prim] & VIS_SHADOW) != 0
-        else:
-            accept = lambda rows, prim: self.instance_of(prim) == instance[rows]
-        out = np.zeros(n, bool)
-        out[self.hits(o, d, tmax, accept, first_only=True)[0]] = True
+        vis = self.triangles.visibility
+        out[self.hits(o, d, tmax, lambda rows, prim: (vis[prim] & VIS_SHADOW) != 0, first_only=True)[0]] = True
         return out
+
+
+def _joined(found):
+    if not found:
+        empty = np.zeros(0)
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), empty, empty, empty
+    return tuple(np.concatenate([f[k] for f in found]) for k in range(5))
+
+
+class _Part:
+    """The triangles of one object, as engine.accel.Accel reads them."""
+
+    def __init__(self, triangles, prims):
+        self.p0, self.e1, self.e2 = triangles.p0[prims], triangles.e1[prims], triangles.e2[prims]
+        self.ng = triangles.ng[prims]
+
+    def __len__(self):
+        return len(self.p0)
+
+    def corners_float32(self):
+        v = np.empty((len(self.p0), 3, 3), dtype=np.float32)
+        v[:, 0], v[:, 1], v[:, 2] = self.p0, self.p0 + self.e1, self.p0 + self.e2
+        return v
+
+
+_LOCAL = weakref.WeakKeyDictionary()   # scene Accel -> {instance: (Accel, global prims)}
+_LOCAL_LOCK = threading.Lock()
+
+
+def local_accel(accel, triangles, instance):
+    """A ray caster of one object's triangles (built once per scene and
+    object, shared by the render's threads) and their global indices."""
+    with _LOCAL_LOCK:
+        per_scene = _LOCAL.setdefault(accel, {})
+        entry = per_scene.get(instance)
+        if entry is None:
+            from ..accel import Accel
+            prims = np.nonzero(triangles.shading.instance == instance)[0]
+            entry = (Accel(_Part(triangles, prims)), prims)
+            per_scene[instance] = entry
+    return entry
 
 
 # ----------------------------------------------------------------------------
