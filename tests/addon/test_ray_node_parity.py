@@ -92,3 +92,37 @@ def test_ao_and_bevel_match_cycles(empty_scene, tmp_path, tapped_engine):
     assert abs(relative) < 0.01
     assert abs(z) < Z_LIMIT
     assert_no_failing_blocks(failures, details)
+
+
+def bevelled_diffuse_material(radius=0.15):
+    """Bevel into a Diffuse BSDF's Normal: the cube's edges shade round."""
+    def build(t):
+        bevel = t.nodes.new('ShaderNodeBevel')
+        bevel.inputs['Radius'].default_value = radius
+        diffuse = t.nodes.new('ShaderNodeBsdfDiffuse')
+        diffuse.inputs['Color'].default_value = (0.8, 0.6, 0.4, 1.0)
+        t.links.new(bevel.outputs['Normal'], diffuse.inputs['Normal'])
+        return diffuse.outputs[0]
+    return _material("Bevelled", build)
+
+
+def test_export_reads_the_world_ao_distance_and_a_bevel_normal(registered_addon):
+    """An unlinked AO Distance of 0 is Cycles' global radius: the world's AO
+    distance; a Bevel on a BSDF's Normal is the material's normal."""
+    from addon import backend
+    from addon.export import material as material_export
+    scene_module = backend.scene_module()
+    bpy.ops.wm.read_factory_settings()
+    bpy.context.scene.world.light_settings.distance = 3.5
+    mat = ao_floor_material(distance=0.0)
+    translated, warning = material_export.translate(mat)
+    assert warning is None, warning
+    ao = [v for v in (translated.emission, getattr(translated.emission, 'a', None),
+                      getattr(translated.emission, 'b', None))
+          if isinstance(v, scene_module.NodeOutput) and v.call.idname == 'ShaderNodeAmbientOcclusion']
+    assert ao and ao[0].call.props['global_distance'] == 3.5, translated.emission
+    translated, warning = material_export.translate(bevelled_diffuse_material())
+    assert warning is None, warning
+    normal = translated.normal
+    assert isinstance(normal, scene_module.NodeOutput) and normal.call.idname == 'ShaderNodeBevel'
+    assert normal.call.props['samples'] == 4 and abs(normal.call.inputs['Radius'] - 0.15) < 1e-7

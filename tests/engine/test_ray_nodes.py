@@ -195,3 +195,24 @@ def test_path_hits_cast_node_rays_and_sample_ranges_merge():
     second = render(scene, RenderSettings(samples=4, sample_start=4, **settings))
     merged = (first.image[..., 0] + second.image[..., 0]) / 2
     np.testing.assert_allclose(merged, img, rtol=1e-6, atol=1e-7)
+
+
+def test_a_bevel_output_as_the_material_normal():
+    """Material.normal may be a vector node's output: the shading normal
+    becomes the Bevel normal of the same context (the same rays)."""
+    from types import SimpleNamespace
+    bevel = NodeOutput(NodeCall("ShaderNodeBevel", {"Radius": 0.2}, {"samples": 4}), "Normal")
+    scene = scene_of([cube_mesh()], Material("bevelled", normal=bevel))
+    scene.validate()
+    ctx = points_context(scene, [(0.97, 0.0), (0.0, 0.0)], 64)
+    tex = textures.MaterialTextures(scene.materials)
+    hit = SimpleNamespace(ns=ctx.ns, ng=ctx.ng, wo=ctx.wo, mat=np.zeros(len(ctx), int), back=ctx.back,
+                          p=ctx.p, prim=ctx.prim, shading=ctx)
+    ns = tex.perturb(hit, ctx.tris)
+    want = evaluate("ShaderNodeBevel", "Normal", ctx, {"Radius": 0.2}, {"samples": 4})
+    # Ember's rule for every perturbed normal: one the viewer would see
+    # edge-on or from behind keeps the unperturbed normal.
+    facing = np.einsum("ij,ij->i", want, ctx.wo) > 1e-6
+    want = np.where(facing[:, None], want, ctx.ns)
+    np.testing.assert_allclose(ns, want, atol=1e-12)
+    assert (ns[:64, 0] > 0.05).mean() > 0.5 and np.allclose(ns[64:], [0.0, 0.0, 1.0])
