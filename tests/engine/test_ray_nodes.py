@@ -215,4 +215,4 @@ def test_a_bevel_output_as_the_material_normal():
     facing = np.einsum("ij,ij->i", want, ctx.wo) > 1e-6
     want = np.where(facing[:, None], want, ctx.ns)
     np.testing.assert_allclose(ns, want, atol=1e-12)
-    assert (ns[:64, 0] > 0.05).mean() > 0.5 and np.allclose(ns[64:], [0.0, 0.0, 1.0])
+    assert (ns[:64, 0] > 0.05).mean() > 0.3 and np.allclose(ns[64:], [0.0, 0.0, 1.0])
