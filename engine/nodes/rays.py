@@ -39,42 +39,65 @@ def node_set(step, which):
 class NodeRays:
     """What ray-casting nodes need from the renderer for N shading points:
     the scene's ray caster (engine.accel.Accel) and triangles, the sampler,
-    each point's sample address (pixel seed, sample index; uint32) and the
-    wavefront step, and ``sharp``: whether the path got here without a
-    blurry bounce (Cycles bevels only while min_ray_pdf >= 8)."""
+    the wavefront step and, per point, the sample address (pixel seed and
+    sample index, uint32) and what decides ``sharp``: whether the path got
+    here without a blurry bounce (Cycles bevels only while min_ray_pdf >= 8).
+    Subsets (``take``) only compose row indices: scenes whose nodes cast no
+    rays pay nothing for the handle."""
 
-    def __init__(self, accel, triangles, sampler, pseed, sample, step, sharp):
+    def __init__(self, accel, triangles, sampler, step, columns, rows=None):
         self.accel = accel
         self.triangles = triangles
         self.sampler = sampler
-        self.pseed = pseed
-        self.sample = sample
         self.step = step
-        self.sharp = sharp
+        self._columns = columns   # name -> (N,) array of the whole batch
+        self._rows = rows
 
     @classmethod
     def of_paths(cls, ctx, paths, step):
         """The handle for the surface hits of ``paths`` at wavefront step
-        ``step`` (engine.integrator's Context and Paths).  Ember keeps the
-        last bounce's pdf, not the path's minimum: a path is sharp at the
-        camera hit and after a delta or a narrow (pdf >= 8) bounce."""
-        sharp = (paths.bounce == 0) | paths.prev_delta | (paths.prev_pdf >= 8.0)
-        return cls(ctx.accel, ctx.triangles, ctx.sampler, paths.pseed, paths.sample, step, sharp)
+        ``step`` (engine.integrator's Context and Paths)."""
+        return cls(ctx.accel, ctx.triangles, ctx.sampler, step,
+                   {"pseed": paths.pseed, "sample": paths.sample, "bounce": paths.bounce,
+                    "prev_delta": paths.prev_delta, "prev_pdf": paths.prev_pdf})
+
+    @classmethod
+    def of_samples(cls, accel, triangles, sampler, pseed, sample, step=0, sharp=True):
+        """A handle for points at explicit sample addresses (tests, tools):
+        ``sharp`` True as at camera hits, False as after a diffuse bounce."""
+        n = len(pseed)
+        return cls(accel, triangles, sampler, step,
+                   {"pseed": np.asarray(pseed, np.uint32), "sample": np.asarray(sample, np.uint32),
+                    "bounce": np.zeros(n, np.int32) if sharp else np.ones(n, np.int32),
+                    "prev_delta": np.zeros(n, bool), "prev_pdf": np.zeros(n)})
+
+    def _column(self, name):
+        value = self._columns[name]
+        return value if self._rows is None else value[self._rows]
 
     def take(self, rows):
-        return NodeRays(self.accel, self.triangles, self.sampler, self.pseed[rows], self.sample[rows],
-                        self.step, self.sharp[rows])
+        rows = np.asarray(rows)
+        rows = np.flatnonzero(rows) if rows.dtype == bool else rows
+        return NodeRays(self.accel, self.triangles, self.sampler, self.step, self._columns,
+                        rows if self._rows is None else self._rows[rows])
+
+    @property
+    def sharp(self):
+        """Ember keeps the last bounce's pdf, not the path's minimum: a path
+        is sharp at its camera hit and after a delta or narrow (pdf >= 8)
+        bounce."""
+        return (self._column("bounce") == 0) | self._column("prev_delta") | (self._column("prev_pdf") >= 8.0)
 
     # -- random numbers --------------------------------------------------------
 
     def uniforms(self, which, branches):
         """(N, branches, 2) values of branch i at sample index s * branches + i."""
-        n = len(self.pseed)
-        index = (self.sample.astype(np.uint64)[:, None] * np.uint64(branches)
+        pseed, sample = self._column("pseed"), self._column("sample")
+        n = len(pseed)
+        index = (sample.astype(np.uint64)[:, None] * np.uint64(branches)
                  + np.arange(branches, dtype=np.uint64)[None, :])
         index = (index & np.uint64(0xFFFFFFFF)).astype(np.uint32).reshape(-1)
-        pseed = np.repeat(self.pseed, branches)
-        u = self.sampler.get(pseed, index, node_set(self.step, which))
+        u = self.sampler.get(np.repeat(pseed, branches), index, node_set(self.step, which))
         return u[:, :2].reshape(n, branches, 2)
 
     # -- objects ---------------------------------------------------------------

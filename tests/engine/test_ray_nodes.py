@@ -54,8 +54,8 @@ def points_context(scene, xy, copies, z=5.0, d=(0.0, 0.0, -1.0), sharp=True, see
     sc = ShadingContext.at(ctx.triangles, prim, bu, bv, wo=-dirs)
     sampler = Sampler(seed, "random")
     pix = np.repeat(np.arange(len(xy)), copies)
-    sc.rays = NodeRays(ctx.accel, ctx.triangles, sampler, sampler.pixel_seeds(pix),
-                       np.tile(np.arange(copies, dtype=np.uint32), len(xy)), 0, np.full(n, sharp))
+    sc.rays = NodeRays.of_samples(ctx.accel, ctx.triangles, sampler, sampler.pixel_seeds(pix),
+                                  np.tile(np.arange(copies, dtype=np.uint32), len(xy)), sharp=sharp)
     return sc
 
 
