@@ -51,8 +51,27 @@ def _global_distance(bpy_node):
       # cases are compared in tests/addon/test_ray_node_parity.py.
       cases=[{"only_local": True, "Distance": 0.5}, {"only_local": True, "inside": True, "samples": 4}])
 def ambient_occlusion(ctx, i, p):
-    ao = occlusion(ctx, i, p)
+    ao = _in_chunks(ctx, int(p.get("samples", 16)), lambda sub, rows: occlusion(
+        sub, {k: v[rows] for k, v in i.items()}, p))
     return {"Color": i["Color"] * ao[:, None], "AO": ao}
+
+
+# Rays cast at once by one node: memory stays bounded (a 128-sample AO on
+# 2^16 paths would otherwise hold 8 M rays).
+MAX_RAYS = 1 << 18
+
+
+def _in_chunks(ctx, samples, fn):
+    """fn(sub-context, rows) over runs of points casting at most MAX_RAYS rays."""
+    n = len(ctx)
+    step = max(MAX_RAYS // max(samples, 1), 1)
+    if n <= step:
+        return fn(ctx, slice(None))
+    parts = []
+    for lo in range(0, n, step):
+        rows = np.arange(lo, min(lo + step, n))
+        parts.append(fn(ctx.take(rows), rows))
+    return np.concatenate(parts)
 
 
 def occlusion(ctx, i, p):
@@ -103,7 +122,8 @@ def occlusion(ctx, i, p):
 def bevel(ctx, i, p):
     if ctx.rays is None:
         return {"Normal": ctx.ns}   # Cycles without the raytrace feature
-    out = bevel_normal(ctx, i["Radius"], int(p.get("samples", 4)))
+    samples = int(p.get("samples", 4))
+    out = _in_chunks(ctx, samples, lambda sub, rows: bevel_normal(sub, i["Radius"][rows], samples))
     ref = i.get("Normal")
     if ref is not None:
         # Cycles: "preserve input normal".

@@ -216,3 +216,15 @@ def test_a_bevel_output_as_the_material_normal():
     want = np.where(facing[:, None], want, ctx.ns)
     np.testing.assert_allclose(ns, want, atol=1e-12)
     assert (ns[:64, 0] > 0.05).mean() > 0.3 and np.allclose(ns[64:], [0.0, 0.0, 1.0])
+
+
+def test_nodes_cast_rays_in_bounded_chunks_with_the_same_result(monkeypatch):
+    """At most MAX_RAYS rays per node call at a time; chunking changes no value."""
+    import engine.nodes.ray_nodes as ray_nodes
+    ctx = points_context(scene_of([FLOOR, WALL, cube_mesh(0.3)]), [(0.97, 0.0), (0.4, 0.2), (0.2, 0.1)], 40)
+    calls = [("ShaderNodeBevel", "Normal", {"Radius": 0.2}, {"samples": 4}),
+             ("ShaderNodeAmbientOcclusion", "Color", {"Distance": 1.0, "Color": (0.5, 0.2, 0.1)}, {"samples": 8})]
+    whole = [evaluate(idname, out, ctx, i, p) for idname, out, i, p in calls]
+    monkeypatch.setattr(ray_nodes, "MAX_RAYS", 24)
+    for (idname, out, i, p), want in zip(calls, whole):
+        np.testing.assert_array_equal(evaluate(idname, out, ctx, i, p), want)
