@@ -9,9 +9,10 @@ tests/ember_stats.py), with the power printed.
 
 The scene is emission only, seen directly (no bounces): a floor whose
 emission is the AO node's Color output (Color = the Generated coordinates,
-so no block is constant) darkening around a rotated cube, and the cube's
+so no block is constant) darkening around a rotated cube, the cube's
 emission showing its Bevel normal as colour (0.5 N + 0.5), rounded over
-its edges, with a strength varying over the cube.
+its edges, with a strength varying over the cube, a Suzanne with Only
+Local AO and a smooth sphere with Inside AO.
 """
 import bpy
 import numpy as np
@@ -29,17 +30,19 @@ WIDTH, HEIGHT = 48, 36
 Z_LIMIT = 3.29   # two-sided 0.1%, as test_node_scene_parity
 
 
-def ao_floor_material(distance=0.8, samples=16):
+def ao_floor_material(distance=0.8, samples=16, name="AOFloor", **settings):
     def build(t):
         coords = t.nodes.new('ShaderNodeTexCoord')
         ao = t.nodes.new('ShaderNodeAmbientOcclusion')
         ao.samples = samples
+        for key, value in settings.items():
+            setattr(ao, key, value)
         ao.inputs['Distance'].default_value = distance
         t.links.new(coords.outputs['Generated'], ao.inputs['Color'])
         emission = t.nodes.new('ShaderNodeEmission')
         t.links.new(ao.outputs['Color'], emission.inputs['Color'])
         return emission.outputs[0]
-    return _material("AOFloor", build)
+    return _material(name, build)
 
 
 def bevel_cube_material(radius=0.12, samples=8):
@@ -70,8 +73,16 @@ def build(scene):
     cube = _object(bpy.ops.mesh.primitive_cube_add, bevel_cube_material(), smooth=False, size=1.0,
                    location=(0.0, 0.0, 0.5))
     cube.rotation_euler = (0.0, 0.0, 0.5)
+    # Only Local: Suzanne's own hollows darken, the floor under her does not.
+    monkey = _object(bpy.ops.mesh.primitive_monkey_add, ao_floor_material(0.3, 8, "AOLocal", only_local=True),
+                     smooth=False, size=0.8, location=(-1.3, 0.2, 0.45))
+    monkey.rotation_euler = (0.3, 0.0, -0.4)
+    # Inside: rays into a smooth sphere of radius 0.4 meet it within 0.5
+    # unless they leave within 51 degrees of the inward normal.
+    _object(bpy.ops.mesh.primitive_uv_sphere_add, ao_floor_material(0.5, 8, "AOInside", inside=True),
+            radius=0.4, location=(1.1, 0.7, 0.4), segments=24, ring_count=12)
     _world(scene, (0.0, 0.0, 0.0))
-    _camera(scene, (2.0, -2.6, 2.4), (0.0, 0.0, 0.35))
+    _camera(scene, (2.3, -3.3, 2.7), (0.0, 0.0, 0.35))
 
 
 def test_ao_and_bevel_match_cycles(empty_scene, tmp_path, tapped_engine):
