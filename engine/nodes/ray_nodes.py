@@ -139,7 +139,7 @@ def bevel_normal(ctx, radius, samples):
     n = len(ctx)
     rays = ctx.rays
     out = ctx.ns.copy()
-    live = np.nonzero((radius > 0) & rays.sharp)[0] if samples >= 1 else np.zeros(0, np.int64)
+    live = np.nonzero((radius > 0) & np.isfinite(radius) & rays.sharp)[0] if samples >= 1 else np.zeros(0, np.int64)
     if len(live) == 0 or ctx.prim is None:
         return out
     sub = ctx.take(live)

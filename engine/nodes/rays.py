@@ -201,6 +201,15 @@ class _Part:
         return v
 
 
+def _by_instance(triangles):
+    """Triangle indices sorted by instance, and where each instance starts."""
+    instance = triangles.shading.instance
+    order = np.argsort(instance, kind="stable")
+    count = int(instance.max()) + 2 if len(instance) else 1
+    starts = np.searchsorted(instance[order], np.arange(count))
+    return order, starts
+
+
 _LOCAL = weakref.WeakKeyDictionary()   # scene Accel -> {instance: (Accel, global prims)}
 _LOCAL_LOCK = threading.Lock()
 
@@ -213,7 +222,8 @@ def local_accel(accel, triangles, instance):
         entry = per_scene.get(instance)
         if entry is None:
             from ..accel import Accel
-            prims = np.nonzero(triangles.shading.instance == instance)[0]
+            order, starts = per_scene.get("order") or per_scene.setdefault("order", _by_instance(triangles))
+            prims = order[starts[instance]:starts[instance + 1]]
             entry = (Accel(_Part(triangles, prims)), prims)
             per_scene[instance] = entry
     return entry
