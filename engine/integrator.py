@@ -29,7 +29,7 @@ from .lights import POINT, SUN
 from .nodes import NodeRays, ShadingContext
 from .sampler import BSDF, CAMERA, KIND, LIGHT, emitter_set, vertex_set
 from .sampling import power_heuristic
-from .vec import dot, frame, to_local, to_world
+from .vec import dot, frame, row_all_finite, row_any_positive, row_max, to_local, to_world
 
 
 @dataclass
@@ -170,7 +170,7 @@ def _add_radiance(ctx, pix, L, sample, tile):
     L = np.where(np.isfinite(L), L, 0.0)
     clamp = ctx.settings.clamp
     if clamp > 0:
-        m = L.max(axis=1)
+        m = row_max(L)
         L = L * np.where(m > clamp, clamp / np.maximum(m, 1e-30), 1.0)[:, None]
     tile.add_radiance(pix, L, sample)
 
@@ -211,7 +211,7 @@ def _bounce(ctx, paths, depth, tile):
     emission = ctx.materials.emission[hit.mat]
     if ctx.materials.textures.emission:
         emission = ctx.materials.textures.emission_at(hit.mat, _shading(ctx, hit, paths, depth), emission)
-    em = np.nonzero(np.any(emission > 0, axis=1))[0]
+    em = np.flatnonzero(row_any_positive(emission))
     if len(em):
         _emission_hit(ctx, paths, em, hit, emission[em], tile)
 
@@ -488,7 +488,7 @@ def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u, ti
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         scale = np.where(ok, cos * w / np.where(ok, p_light, 1.0), 0.0)
     contrib = paths.beta * f * ls.Le * scale[:, None]
-    live = np.nonzero(np.any(contrib > 0, axis=1))[0]
+    live = np.flatnonzero(row_any_positive(contrib))
     if len(live) == 0:
         return
     eps = hit.eps[live]
@@ -561,11 +561,11 @@ def _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth):
     wi = to_world(wi_l, tt, bb, hit.ns)
     # A reflection below the geometric surface (or a transmission above it)
     # would leak light through the surface: absorb it, as Cycles does.
-    ok = _same_side(wi, hit.ng, wi_l) & np.all(np.isfinite(weight), axis=1) & np.any(weight > 0, axis=1)
+    ok = _same_side(wi, hit.ng, wi_l) & row_all_finite(weight) & row_any_positive(weight)
     beta = paths.beta * weight
     rr = paths.bounce >= s.rr_depth
     if rr.any():
-        q = np.where(rr, np.minimum(beta.max(axis=1), 0.95), 1.0)
+        q = np.where(rr, np.minimum(row_max(beta), 0.95), 1.0)
         survive = u[:, 3] < q
         beta = beta / np.where(survive, np.maximum(q, 1e-30), 1.0)[:, None]
         ok &= survive
@@ -746,7 +746,7 @@ def _pass_last(ctx, paths, hit, tile):
     if len(rows):
         T = bsdf.transparency(ctx.materials.gather(hit.mat[rows], _shading(ctx, hit).take(rows)))
         paths.beta[rows] *= T
-        go[rows] = np.any(T > 0, axis=1)
+        go[rows] = row_any_positive(T)
     if not go.all():
         _finish(ctx, paths, tile, ~go)
         paths, hit = paths.take(go), _take_hit(hit, go)
@@ -786,7 +786,7 @@ def _transmittance(ctx, origin, wi, tmax, emitter, tbounce):
         T = bsdf.transparency(ctx.materials.gather(mat[c], ShadingContext.at(
             ctx.triangles, prim[c], bu[c], bv[c], wo=-d[c], ray=np.full(len(c), VIS_SHADOW, np.uint8))))
         out[idx[c]] *= T
-        c = c[np.any(T > 0, axis=1)]
+        c = c[row_any_positive(T)]
         # Go on from just past the surface, towards the same end point.
         start = ctx.accel.offset_origin(o[c] + d[c] * t[c, None], ctx.triangles.ng[prim[c]], d[c])
         tm = tm[c] - dot(start - o[c], d[c])

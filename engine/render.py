@@ -16,6 +16,7 @@ from concurrent.futures import TimeoutError as FuturesTimeout
 import numpy as np
 
 from .accel import Accel
+from .blas import single_threaded_blas
 from .bsdf import MaterialTable
 from .camera import CameraModel, PixelFilter
 from . import pass_events
@@ -170,7 +171,11 @@ class _Adaptive:
 
 
 def render(scene, settings=None, progress=None):
-    settings = settings or RenderSettings()
+    with single_threaded_blas():
+        return _render(scene, settings or RenderSettings(), progress)
+
+
+def _render(scene, settings, progress):
     t_start = time.perf_counter()
     ctx = prepare_interruptibly(scene, settings, progress)
     cam = ctx.camera
