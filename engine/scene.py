@@ -162,7 +162,8 @@ class Material:
     name: str = "material"
     lobes: Sequence[Lobe] = (Lobe("diffuse"),)
     emission: RGB = (0.0, 0.0, 0.0)
-    # A Bump or NormalMap expression replacing the shading normal, or None.
+    # A Bump or NormalMap expression replacing the shading normal, a vector
+    # node's NodeOutput (e.g. Bevel; normalized), or None.
     normal: Optional["Texture"] = None
     pass_index: int = 0  # Blender's Material Index
     # Shader AOVs (AOV Output nodes): name -> ((r, g, b), value), constants.
@@ -266,7 +267,7 @@ NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WO
 @dataclass(eq=False)
 class Bump:
     """Bump node: height (a float), strength, distance, invert, and an
-    optional NormalMap feeding its Normal input."""
+    optional NormalMap (or vector NodeOutput) feeding its Normal input."""
     height: object
     strength: object = 1.0
     distance: object = 1.0

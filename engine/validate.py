@@ -385,5 +385,7 @@ def validate_normal(expr, what):
             validate_texture(getattr(expr, name), f"{what} bump {name}")
         if expr.normal is not None:
             validate_normal(expr.normal, what)
+    elif isinstance(expr, _scene.NodeOutput):
+        validate_texture(expr, f"{what} vector")
     else:
-        raise SceneError(f"{what}: expected a NormalMap or Bump, got {type(expr).__name__}")
+        raise SceneError(f"{what}: expected a NormalMap, Bump or node output, got {type(expr).__name__}")
