@@ -26,7 +26,7 @@ import numpy as np
 from . import bsdf, kernels, pass_events
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .lights import POINT, SUN
-from .nodes import ShadingContext
+from .nodes import NodeRays, ShadingContext
 from .sampler import BSDF, CAMERA, KIND, LIGHT, emitter_set, vertex_set
 from .sampling import power_heuristic
 from .vec import dot, frame, row_all_finite, row_any_positive, row_max, to_local, to_world
@@ -210,7 +210,7 @@ def _bounce(ctx, paths, depth, tile):
     hit = _interaction(ctx, paths, t, prim, bu, bv)
     emission = ctx.materials.emission[hit.mat]
     if ctx.materials.textures.emission:
-        emission = ctx.materials.textures.emission_at(hit.mat, _shading(ctx, hit), emission)
+        emission = ctx.materials.textures.emission_at(hit.mat, _shading(ctx, hit, paths, depth), emission)
     em = np.flatnonzero(row_any_positive(emission))
     if len(em):
         _emission_hit(ctx, paths, em, hit, emission[em], tile)
@@ -229,7 +229,7 @@ def _bounce(ctx, paths, depth, tile):
         if len(paths.pix) == 0:
             return carried
 
-    lobes = ctx.materials.gather(hit.mat, _shading(ctx, hit))
+    lobes = ctx.materials.gather(hit.mat, _shading(ctx, hit, paths, depth))
     _orient(hit, lobes)
     # Texture hook: normal maps and bump replace the shading normal.
     if ctx.materials.textures.normals:
@@ -413,9 +413,13 @@ def _interaction(ctx, paths, t, prim, bu, bv):
     return hit
 
 
-def _shading(ctx, hit):
-    """The hit's shading context for texture and shader-node evaluation."""
-    return ShadingContext.of_hit(ctx.triangles, hit)
+def _shading(ctx, hit, paths=None, step=None):
+    """The hit's shading context for texture and shader-node evaluation;
+    given the paths, nodes may cast rays from it (AO, Bevel)."""
+    shading = ShadingContext.of_hit(ctx.triangles, hit)
+    if paths is not None and shading.rays is None:
+        shading.rays = NodeRays.of_paths(ctx, paths, step)
+    return shading
 
 
 def _hit_uv(tr, prim, bu, bv):

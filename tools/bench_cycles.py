@@ -286,7 +286,7 @@ def table(rows, adaptive):
     import bench_scenes
     head = ("| scene | Ember time / Cycles time at equal RMSE | s per sample pass, Ember / Cycles "
             "| variance per sample, Ember / Cycles | cores used, Ember (Cycles) | paths/s, Ember (Cycles) "
-            "| Embree share of Ember's thread time |")
+            "| Embree share of Ember's thread time | Ember's first image (s) |")
     if adaptive:
         head = ("| scene | Ember time / Cycles time at equal RMSE | cores used, Ember (Cycles) "
                 "| paths/s, Ember (Cycles) | Embree share of Ember's thread time |")
@@ -304,6 +304,9 @@ def table(rows, adaptive):
         cells += [f"{r['ember_cores']:.2f} ({r['cycles_cores']:.2f})",
                   f"{r['ember_paths_per_second'] / 1e6:.3f} M ({r['cycles_paths_per_second'] / 1e6:.2f} M)",
                   f"{100 * r['embree_share']:.0f} %"]
+        if not adaptive:
+            first = r.get('first_pass_seconds')
+            cells.append(f"{first:.2f}" if first is not None else "-")
         lines.append('| ' + ' | '.join(cells) + ' |')
     return '\n'.join(lines)
 

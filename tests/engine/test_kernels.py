@@ -91,6 +91,19 @@ def test_spherical_rectangle_warp_agrees(jit):
     assert_agree(plain, spherical_rectangle_warp(*args)[2:])
 
 
+def test_light_tree_importance_agrees(jit):
+    from engine.lighttree import _importance
+    rng = np.random.default_rng(6)
+    n = 20000
+    args = [mixed(rng, n, 2.0) for _ in range(9)]                 # p, n, centre
+    args += [np.abs(mixed(rng, n))] + [mixed(rng, n) for _ in range(3)]   # radius, axis
+    args += [(rng.random(n) < 0.5).astype(float)]                  # two-sided
+    cos_o, cos_e = np.cos(rng.random(n) * np.pi), np.cos(rng.random(n) * np.pi / 2)
+    args += [np.sqrt(1.0 - cos_o ** 2), cos_o, cos_e, np.abs(mixed(rng, n))]
+    args[3][:100] = args[4][:100] = args[5][:100] = 0.0           # no normal
+    assert_agree(*both_ways(_importance, *args))
+
+
 def test_sobol_sampler_agrees(jit):
     """The compiled Sobol loop (uint32 maths in uint64) and the table-driven
     NumPy form give the same numbers, for every dimension set kind and
