@@ -542,6 +542,9 @@ class Scene:
     lights: Sequence[Light] = ()
     world: World = field(default_factory=World)
     camera: Camera = field(default_factory=Camera)
+    # The Blender version the scene comes from: where Cycles changed between
+    # versions (its bump shadowing term), Ember renders as that version's.
+    cycles_version: tuple = (5, 0, 0)
 
     def validate(self) -> None:
         from .validate import validate_scene

@@ -2,6 +2,8 @@
 import time
 from dataclasses import dataclass, field
 
+import bpy
+
 from . import camera as camera_export
 from . import instances as instance_export
 from . import light as light_export
@@ -71,7 +73,7 @@ def export_scene(depsgraph, camera_override=None, should_stop=None):
         raise ExportError(f"Camera '{camera_object.name}': {message}") from err
     result = engine_scene.Scene(
         meshes=meshes, instances=instances, materials=materials.materials,
-        lights=lights, world=world, camera=camera)
+        lights=lights, world=world, camera=camera, cycles_version=tuple(bpy.app.version))
     warnings = materials.warnings + warnings + light_warnings + camera_warnings
     if world_warning:
         warnings.append(world_warning)
