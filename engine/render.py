@@ -132,11 +132,13 @@ def warnings_for(ctx):
 # paths' work from about this many paths on (tools/bench_engine.py: 4K-path
 # batches cost 1.9x the CPU per path of 64K ones, 16K 1.2x).
 MIN_BATCH_PATHS = 1 << 15
-# Automatic passes (samples_per_pass = 0) last about this long after the
-# first, one-sample pass: long enough that the barrier at the end of each
-# pass (threads idle while the slowest batch finishes) costs little, short
-# enough for a live progressive image.
-PASS_SECONDS = 1.0
+# Automatic passes (samples_per_pass = 0): one sample first (a first image
+# soon), then doubling, up to about this many paths per pass (1-3 s on two
+# cores): long enough that the barrier at the end of a pass (a thread idle
+# while the other finishes its last batch) costs little, short enough for a
+# live progressive image.  The schedule depends on the frame only, never on
+# timing, so a seed's image is the same bit for bit on any machine.
+PASS_PATHS = 1 << 20
 
 
 def _batches(pixels, spp, settings, threads):
@@ -152,18 +154,15 @@ def _batches(pixels, spp, settings, threads):
     return [pixels[lo:lo + size] for lo in range(0, n, size)]
 
 
-def _pass_samples(settings, done, last, adaptive_params):
-    """Samples in the next pass: ``samples_per_pass``, or with 0 one sample
-    first (the first image soon) and then as many as take about
-    PASS_SECONDS at the speed of the last pass (``last`` = (samples,
-    seconds)).  Never past the total, nor past adaptive sampling's next
-    convergence check."""
+def _pass_samples(settings, done, pixels, adaptive_params):
+    """Samples in the next pass: ``samples_per_pass``, or with 0 the
+    automatic schedule 1, 1, 2, 4, ... up to PASS_PATHS paths over the
+    ``pixels`` still sampling.  Never past the total, nor past adaptive
+    sampling's next convergence check."""
     if settings.samples_per_pass > 0:
         spp = settings.samples_per_pass
-    elif last is None:
-        spp = 1
     else:
-        spp = max(1, int(PASS_SECONDS * last[0] / max(last[1], 1e-6)))
+        spp = min(max(done, 1), max(PASS_PATHS // max(pixels, 1), 1))
     spp = min(spp, settings.samples - done)
     if adaptive_params is not None and settings.samples_per_pass <= 0:
         _, min_samples, step = adaptive_params
@@ -218,20 +217,17 @@ def _render(scene, settings, progress):
     film = Film(cam.width, cam.height, settings.aovs, adaptive.params is not None, settings.passes,
                 ctx.pass_config.crypto_levels)
     threads = settings.threads or os.cpu_count() or 1
-    last = None   # (samples, seconds) of the last pass
     stats = {"samples": 0, "samples_total": settings.samples, "prepare_seconds": time.perf_counter() - t_start}
     t_trace = time.perf_counter()
     done, checked = 0, 0
     image = None  # the last pass's image: the film does not change after it
     with _AbandonablePool(threads, film) as pool:
         while done < settings.samples and len(adaptive.active):
-            spp = _pass_samples(settings, done, last, adaptive.params)
+            spp = _pass_samples(settings, done, len(adaptive.active), adaptive.params)
             first = settings.sample_start + done
-            t_pass = time.perf_counter()
             jobs = [pool.submit(_run_batch, ctx, pool.film, pixels, spp, first)
                     for pixels in _batches(adaptive.active, spp, settings, threads)]
             cancelled = _wait(jobs, progress)
-            last = (spp, time.perf_counter() - t_pass)
             paths = spp * len(adaptive.active)
             done += spp
             stats.update(_stats(ctx, stats, done, paths, t_trace, settings))

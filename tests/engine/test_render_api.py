@@ -2,7 +2,7 @@
 options; plus analytic checks of the sun and spot lights."""
 import numpy as np
 
-from engine.render import PASS_SECONDS, _batches, _pass_samples, adaptive_parameters, render
+from engine.render import PASS_PATHS, _batches, _pass_samples, adaptive_parameters, render
 from engine.scene import RenderSettings, SpotLight, SunLight, World
 from engine.testscenes import cornell_box
 
@@ -33,16 +33,15 @@ def test_progress_after_every_pass():
     assert r.samples == 10
 
 
-def test_automatic_passes_one_sample_then_about_a_second():
+def test_automatic_passes_one_sample_then_doubling():
     rec = Recorder()
     r = render(cornell_box(16, 16), RenderSettings(samples=40, samples_per_pass=0), rec)
-    done = [c[0] for c in rec.calls]
-    assert done[0] == 1 and done[-1] == 40 == r.samples
-    assert all(b > a for a, b in zip(done, done[1:]))
-    s = RenderSettings(samples=1000, samples_per_pass=0)
-    # 4 samples took 0.5 s: the next pass takes about PASS_SECONDS.
-    assert _pass_samples(s, 5, (4, 0.5), None) == int(PASS_SECONDS * 8)
-    assert _pass_samples(s, 990, (4, 0.001), None) == 10   # never past the total
+    assert [c[0] for c in rec.calls] == [1, 2, 4, 8, 16, 32, 40] and r.samples == 40
+    s = RenderSettings(samples=10 ** 6, samples_per_pass=0)
+    # Up to PASS_PATHS paths a pass; never past the total.
+    assert _pass_samples(s, 4096, 256 * 256, None) == PASS_PATHS // (256 * 256)
+    assert _pass_samples(s, 10, 3840 * 2160, None) == 1
+    assert _pass_samples(s, 10 ** 6 - 3, 16, None) == 3
 
 
 def test_automatic_passes_stop_at_adaptive_checks():
@@ -52,13 +51,13 @@ def test_automatic_passes_stop_at_adaptive_checks():
     s = RenderSettings(samples=1000, samples_per_pass=0, adaptive_threshold=0.01)
     params = adaptive_parameters(s)
     _, min_samples, step = params
-    done, ends, last = 0, [], None
+    done, ends = 0, []
     while done < 300:
-        done += _pass_samples(s, done, last, params)
-        last = (1, 1e-6)   # infinitely fast: passes as long as allowed
+        done += _pass_samples(s, done, 16, params)   # a tiny frame: passes as long as allowed
         ends.append(done)
-    assert ends[0] == 1 and ends[1] == min_samples
-    assert all(e % step == 0 and e - a == step for a, e in zip(ends[1:], ends[2:]) if a >= min_samples)
+    assert ends[0] == 1 and min_samples in ends and all(e <= min_samples for e in ends[:ends.index(min_samples)])
+    after = ends[ends.index(min_samples):]
+    assert all(e % step == 0 and e - a == step for a, e in zip(after, after[1:]))
 
 
 def test_cancel_keeps_partial_image():
