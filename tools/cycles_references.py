@@ -32,7 +32,7 @@ DATA = os.path.join(ROOT, 'tests', 'data')
 SEEDS = 8
 # name: (module building the scene (None: here), its scene name, Cycles samples per seed)
 REFERENCES = {
-    'cornell': (None, 'cornell', 4096),
+    'cornell': (None, 'cornell', 2048),
     'glossy_world': (None, 'glossy_world', 2048),
 }
 for _scene in ('veach_mis', 'instances_lights'):
