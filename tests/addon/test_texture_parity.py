@@ -19,8 +19,8 @@ import pytest
 from ember_testlib import (check_against_reference, render_array, render_for_reference, require, setup_ember,
                            small_resolution)
 
-EMBER_SPP = 64
-BLOCK = 6
+EMBER_SPP = 256
+BLOCK = 12          # one quad per block
 IMAGE_POWER, BLOCK_POWER = 0.005, 0.02   # issue 12's targets, asserted
 TILE = 12           # pixels per quad side
 GRID = 4            # quads per row
@@ -375,7 +375,18 @@ def reference_scene(name, folder):
     return SCENES[name](str(folder)), 0
 
 
-@pytest.mark.parametrize("name", sorted(SCENES))
+# Found by the converged reference (issue 12), left to the lead: the quads
+# with a tangent-space Normal Map at strength 1 render brighter than Cycles:
+# +0.9 % (t 10), +0.7 % rotated UVs (t 7.5), +0.6 % Principled (t 6.9) at
+# 1024 samples (seed 7); strength 0.5 and the Bump quads agree within 0.2 %.
+# Image mean +0.29 % +- 0.03 % at the test's 256 samples.  Strict: an XPASS
+# (the bias fixed) fails until this mark goes.
+NORMAL_MAP_BIAS = pytest.mark.xfail(strict=True, reason="Normal Map (strength 1) 0.6-0.9 % brighter than "
+                                                        "converged Cycles (docs/testing.md)")
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=NORMAL_MAP_BIAS) if n == 'normals' else n
+                                  for n in sorted(SCENES)])
 def test_textures_agree_with_cycles(name, tmp_path, tapped_engine):
     scene, bounces = reference_scene(name, tmp_path)
     image, var = render_for_reference(scene, tmp_path, name, tapped_engine, EMBER_SPP, 1, bounces)
