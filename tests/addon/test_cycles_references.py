@@ -1,14 +1,15 @@
 """Scenes held to converged Cycles references (tests/data/cycles_*.exr).
 
-The references are means of 8 x 2048-8192 Cycles samples per pixel at a small
+The references are means of 8 x 2048 Cycles samples per pixel at a small
 resolution, rendered once by tools/cycles_references.py (bpy 5.0.1; version,
-samples, bounces and filter in the EXR header) with the variance of their mean
-per pixel.  Here Ember renders the same scene through the add-on's export with
-a modest sample count and its own per-pixel variances; the totals of the whole
-image and of a 3 x 3 grid of regions, and then blocks (16 x 16 pixels for the Cornell box, 8 x 8 for
-the glossy plates) per channel,
-are compared by Welch's t with both noises (ember_stats.region_mean_tests_var,
-failing_blocks_var), at the suite's family level.
+samples, bounces, filter and scene fingerprint in the EXR header) with the
+variance of their mean per pixel.  Here Ember renders the same scene through
+the add-on's export with a modest sample count and its own per-pixel
+variances; the totals of the whole image and of a 3 x 3 grid of regions, and
+then blocks per channel (16 x 16 pixels for the Cornell box, 8 x 8 for the
+glossy plates), are compared by Welch's t with both noises
+(ember_stats.region_mean_tests_var, failing_blocks_var), at the suite's
+family level; the power of both is asserted.
 
 A scene is *held* to a relative bias: the test also requires the power to see
 it (the image-mean test detects ``HELD`` with probability at least 1/2), so
