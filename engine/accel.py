@@ -15,6 +15,8 @@ import time
 
 import numpy as np
 
+from .vec import row_max
+
 
 def _import_embreex():
     # Blender 3.4 links its own libembree3 globally; without DEEPBIND the
@@ -90,7 +92,7 @@ class Accel:
         """How far to move a point off its surface.  Embree sees float32
         vertices: the surface it hits can sit a few ulps of the coordinate
         magnitude away from our float64 point."""
-        return OFFSET_SCALE * (1.0 + np.abs(p).max(axis=1))
+        return OFFSET_SCALE * (1.0 + row_max(np.abs(p)))
 
     def offset_origin(self, p, ng, direction, eps=None):
         """Move p off its surface to the side ``direction`` leaves through."""

@@ -638,8 +638,11 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
             pdf[s] = p * p_lobe[s]
 
     smooth = np.nonzero(~delta & (kind != NONE))[0]
-    if len(smooth):
-        fs, ps = eval_pdf(_take(lobes, smooth), wo[smooth], wi[smooth], sel[smooth], w[smooth])
+    if len(smooth) == n:
+        smooth = slice(None)   # the usual case: no copies of the lobes
+    if len(wo[smooth]):
+        lobes_s = lobes if isinstance(smooth, slice) else _take(lobes, smooth)
+        fs, ps = eval_pdf(lobes_s, wo[smooth], wi[smooth], sel[smooth], w[smooth])
         ok = ps > 0
         weight[smooth] = np.where(ok[:, None], fs * (np.abs(wi[smooth, 2]) / np.where(ok, ps, 1.0))[:, None], 0.0)
         pdf[smooth] = ps

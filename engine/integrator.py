@@ -26,10 +26,10 @@ import numpy as np
 from . import bsdf, kernels, pass_events
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .lights import POINT, SUN
-from .nodes import ShadingContext
+from .nodes import NodeRays, ShadingContext
 from .sampler import BSDF, CAMERA, KIND, LIGHT, emitter_set, vertex_set
 from .sampling import power_heuristic
-from .vec import dot, frame, to_local, to_world
+from .vec import dot, frame, row_all_finite, row_any_positive, row_max, to_local, to_world
 
 
 @dataclass
@@ -170,7 +170,7 @@ def _add_radiance(ctx, pix, L, sample, tile):
     L = np.where(np.isfinite(L), L, 0.0)
     clamp = ctx.settings.clamp
     if clamp > 0:
-        m = L.max(axis=1)
+        m = row_max(L)
         L = L * np.where(m > clamp, clamp / np.maximum(m, 1e-30), 1.0)[:, None]
     tile.add_radiance(pix, L, sample)
 
@@ -210,8 +210,8 @@ def _bounce(ctx, paths, depth, tile):
     hit = _interaction(ctx, paths, t, prim, bu, bv)
     emission = ctx.materials.emission[hit.mat]
     if ctx.materials.textures.emission:
-        emission = ctx.materials.textures.emission_at(hit.mat, _shading(ctx, hit), emission)
-    em = np.nonzero(np.any(emission > 0, axis=1))[0]
+        emission = ctx.materials.textures.emission_at(hit.mat, _shading(ctx, hit, paths, depth), emission)
+    em = np.flatnonzero(row_any_positive(emission))
     if len(em):
         _emission_hit(ctx, paths, em, hit, emission[em], tile)
 
@@ -229,7 +229,7 @@ def _bounce(ctx, paths, depth, tile):
         if len(paths.pix) == 0:
             return carried
 
-    lobes = ctx.materials.gather(hit.mat, _shading(ctx, hit))
+    lobes = ctx.materials.gather(hit.mat, _shading(ctx, hit, paths, depth))
     _orient(hit, lobes)
     # Texture hook: normal maps and bump replace the shading normal.
     if ctx.materials.textures.normals:
@@ -306,19 +306,23 @@ def _lights_along(ctx, paths, tmax):
 
 
 def _camera_aovs(ctx, paths, t, prim, hit_light, hit_surf, tile):
-    n = len(paths.pix)
+    """Alpha, and the first-hit AOVs the film keeps (none by default: the
+    denoiser asks for normal and albedo)."""
     visible = hit_light | hit_surf
     alpha = visible.astype(np.float64)
-    # Z depth along the view axis, counted from the camera (rays start at clip start).
-    cos = np.maximum(paths.d @ ctx.camera.forward, 0.0)
-    depth = np.where(hit_surf, t * cos + ctx.camera.cam.clip_start, 0.0)
-    normal = np.zeros((n, 3))
-    albedo = np.zeros((n, 3))
+    kept = getattr(tile, "aovs", None)
+    depth = normal = albedo = None
+    if kept is None or "depth" in kept:
+        # Z depth along the view axis, counted from the camera (rays start at clip start).
+        cos = np.maximum(dot(paths.d, np.broadcast_to(ctx.camera.forward, paths.d.shape)), 0.0)
+        depth = np.where(hit_surf, t * cos + ctx.camera.cam.clip_start, 0.0)
     hs = np.nonzero(hit_surf)[0]
-    if len(hs):
-        tr = ctx.triangles
-        normal[hs] = tr.ng[prim[hs]]
-        m = tr.material[prim[hs]]
+    if kept is None or "normal" in kept:
+        normal = np.zeros((len(paths.pix), 3))
+        normal[hs] = ctx.triangles.ng[prim[hs]]
+    if kept is None or "albedo" in kept:
+        albedo = np.zeros((len(paths.pix), 3))
+        m = ctx.triangles.material[prim[hs]]
         col = ctx.materials.color[m] * ctx.materials.weight[m][..., None]
         albedo[hs] = np.clip(col.sum(axis=1), 0.0, 1.0)
     tile.add_camera(paths.pix, alpha, depth, normal, albedo)
@@ -409,9 +413,13 @@ def _interaction(ctx, paths, t, prim, bu, bv):
     return hit
 
 
-def _shading(ctx, hit):
-    """The hit's shading context for texture and shader-node evaluation."""
-    return ShadingContext.of_hit(ctx.triangles, hit)
+def _shading(ctx, hit, paths=None, step=None):
+    """The hit's shading context for texture and shader-node evaluation;
+    given the paths, nodes may cast rays from it (AO, Bevel)."""
+    shading = ShadingContext.of_hit(ctx.triangles, hit)
+    if paths is not None and shading.rays is None:
+        shading.rays = NodeRays.of_paths(ctx, paths, step)
+    return shading
 
 
 def _hit_uv(tr, prim, bu, bv):
@@ -484,7 +492,7 @@ def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u, ti
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         scale = np.where(ok, cos * w / np.where(ok, p_light, 1.0), 0.0)
     contrib = paths.beta * f * ls.Le * scale[:, None]
-    live = np.nonzero(np.any(contrib > 0, axis=1))[0]
+    live = np.flatnonzero(row_any_positive(contrib))
     if len(live) == 0:
         return
     eps = hit.eps[live]
@@ -557,11 +565,11 @@ def _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth):
     wi = to_world(wi_l, tt, bb, hit.ns)
     # A reflection below the geometric surface (or a transmission above it)
     # would leak light through the surface: absorb it, as Cycles does.
-    ok = _same_side(wi, hit.ng, wi_l) & np.all(np.isfinite(weight), axis=1) & np.any(weight > 0, axis=1)
+    ok = _same_side(wi, hit.ng, wi_l) & row_all_finite(weight) & row_any_positive(weight)
     beta = paths.beta * weight
     rr = paths.bounce >= s.rr_depth
     if rr.any():
-        q = np.where(rr, np.minimum(beta.max(axis=1), 0.95), 1.0)
+        q = np.where(rr, np.minimum(row_max(beta), 0.95), 1.0)
         survive = u[:, 3] < q
         beta = beta / np.where(survive, np.maximum(q, 1e-30), 1.0)[:, None]
         ok &= survive
@@ -742,7 +750,7 @@ def _pass_last(ctx, paths, hit, tile):
     if len(rows):
         T = bsdf.transparency(ctx.materials.gather(hit.mat[rows], _shading(ctx, hit).take(rows)))
         paths.beta[rows] *= T
-        go[rows] = np.any(T > 0, axis=1)
+        go[rows] = row_any_positive(T)
     if not go.all():
         _finish(ctx, paths, tile, ~go)
         paths, hit = paths.take(go), _take_hit(hit, go)
@@ -782,7 +790,7 @@ def _transmittance(ctx, origin, wi, tmax, emitter, tbounce):
         T = bsdf.transparency(ctx.materials.gather(mat[c], ShadingContext.at(
             ctx.triangles, prim[c], bu[c], bv[c], wo=-d[c], ray=np.full(len(c), VIS_SHADOW, np.uint8))))
         out[idx[c]] *= T
-        c = c[np.any(T > 0, axis=1)]
+        c = c[row_any_positive(T)]
         # Go on from just past the surface, towards the same end point.
         start = ctx.accel.offset_origin(o[c] + d[c] * t[c, None], ctx.triangles.ng[prim[c]], d[c])
         tm = tm[c] - dot(start - o[c], d[c])

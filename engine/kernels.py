@@ -66,7 +66,7 @@ def _unavailable_reason():
 
 UNAVAILABLE = _unavailable_reason()
 AVAILABLE = UNAVAILABLE is None
-KERNELS = []      # every Kernel, in definition order
+KERNELS = []      # every Kernel and LoopKernel, in definition order
 HELPERS = []      # functions kernels call
 compile_seconds = {}
 _state = {"enabled": False, "thread": None, "numba": None, "started": None, "finished": None}
@@ -153,6 +153,40 @@ def kernel(inputs, outputs=1):
     return wrap
 
 
+class LoopKernel:
+    """An explicit loop over arrays (for work that is not elementwise float
+    arithmetic: integer hashing with table lookups), compiled by numba with
+    ``signature``, next to the vectorized NumPy function ``numpy_fn`` that
+    defines the result.  Both take the same arguments and fill ``out`` (the
+    last argument) with identical values (tests/engine/test_kernels.py).
+    The loop is never run by the interpreter: until it is compiled, and
+    with the JIT off, ``numpy_fn`` runs."""
+
+    def __init__(self, fn, signature, numpy_fn):
+        self.fn = fn
+        self.signature = signature
+        self.numpy_fn = numpy_fn
+        self.compiled = None
+        self.__name__ = fn.__name__
+        KERNELS.append(self)
+
+    def __call__(self, *args):
+        compiled = self.compiled if _state["enabled"] else None
+        if compiled is None:
+            return self.numpy_fn(*args)
+        return compiled(*args)
+
+    def build(self, numba):
+        return numba.njit(self.signature, nogil=True, cache=True)(self.fn)
+
+
+def loop_kernel(signature, numpy_fn):
+    """Decorator: a LoopKernel compiled with ``signature`` (numba's string form)."""
+    def wrap(fn):
+        return LoopKernel(fn, signature, numpy_fn)
+    return wrap
+
+
 # ----------------------------------------------------------------------------
 # compilation (background thread)
 
@@ -184,9 +218,12 @@ def _compile_all():
             if _state.get("stop"):
                 break
             t0 = time.perf_counter()
-            k.compiled = _gufunc(numba, k.fn, k.inputs, k.outputs)
-            with np.errstate(all="ignore"):
-                k.compiled(*([np.zeros(1)] * k.inputs))   # load or build the machine code now
+            if isinstance(k, LoopKernel):
+                k.compiled = k.build(numba)   # compiled for its signature at once
+            else:
+                k.compiled = _gufunc(numba, k.fn, k.inputs, k.outputs)
+                with np.errstate(all="ignore"):
+                    k.compiled(*([np.zeros(1)] * k.inputs))   # load or build the machine code now
             compile_seconds[k.__name__] = time.perf_counter() - t0
     except Exception as exc:  # noqa: BLE001 - the NumPy path keeps working
         global UNAVAILABLE

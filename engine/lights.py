@@ -26,6 +26,7 @@ from .sampling import (Distribution1D, concentric_disk, sin_sq_to_one_minus_cos,
                        triangle_solid_angle, uniform_cone, uniform_cone_pdf, uniform_triangle)
 from .environment import EnvironmentMap
 from .geometry import VIS_ALL, visibility_bits
+from .lightproxy import LightProxies
 from .lighttree import LightTree, emitter_bounds
 from .scene import AreaLight, PointLight, SpotLight, SunLight
 from .vec import count, dot, frame, luminance, subset, to_world
@@ -90,6 +91,7 @@ class LightSet:
         # Light tree (strategy 'tree'): built over every emitter's bounds and power.
         self.power = np.array(power, float)
         self.tree = LightTree(emitter_bounds(self)) if strategy == "tree" and self.count else None
+        self.proxies = LightProxies.for_lights(self.points, self.areas)
 
     # -- selection ----------------------------------------------------------
     def select(self, u, p=None, n=None):
@@ -130,7 +132,21 @@ class LightSet:
         ``visible_camera``; ray: per-ray VIS_* bits (camera, diffuse, glossy,
         transmission), when set, see only lights with a common bit.  Returns
         t (inf = none), emitter index, Le and the solid-angle pdf of sampling
-        that point from o."""
+        that point from o.  With several lights only the rays their proxies
+        (engine/lightproxy.py) say may meet one are tested exactly."""
+        n = len(o)
+        if self.proxies is None:
+            return self._intersect_exact(o, d, tmax, camera, ray)
+        rows = np.flatnonzero(self.proxies.candidates(o, d, tmax))
+        out = (np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros((n, 3)), np.zeros(n))
+        if len(rows):
+            tm = np.broadcast_to(tmax, (n,))[rows]
+            found = self._intersect_exact(o[rows], d[rows], tm, camera, None if ray is None else ray[rows])
+            for whole, part in zip(out, found):
+                whole[rows] = part
+        return out
+
+    def _intersect_exact(self, o, d, tmax, camera, ray):
         n = len(o)
         t = np.array(tmax, dtype=np.float64, copy=True)
         hit_t = np.full(n, np.inf)

@@ -23,6 +23,7 @@ selection probability MIS uses is exactly the one NEE sampled with.
 """
 import numpy as np
 
+from .kernels import helper, kernel, where
 from .vec import dot
 
 # Half-angle of emission beyond a spot cone: its light ends at the cone edge.
@@ -171,6 +172,7 @@ class LightTree:
         self.sin_o = np.sqrt(np.maximum(0.0, 1.0 - self.cos_o ** 2))
         self.cos_e = np.array([n[0].cos_e for n in nodes], float)
         self.two_sided = np.array([n[0].two_sided for n in nodes], bool)
+        self.two_sided_f = self.two_sided.astype(np.float64)   # kernels take float64
         self.left = np.array([n[1] for n in nodes], np.int64)
         self.right = np.array([n[2] for n in nodes], np.int64)
         self.leaf_emitter = np.array([n[3] for n in nodes], np.int64)
@@ -204,29 +206,11 @@ class LightTree:
     def importance(self, node, p, n):
         """pbrt-v4 LightBounds::Importance of nodes for points p with normals n
         (rows of zeros: no normal)."""
-        pc = self.center[node]
-        to_p = p - pc
-        d2_true = dot(to_p, to_p)
-        r = self.radius[node]
-        d2 = np.maximum(d2_true, r * r)
-        wi = to_p / np.sqrt(np.maximum(d2_true, 1e-300))[:, None]
-        cos_w = dot(self.w[node], wi)
-        cos_w = np.where(self.two_sided[node], np.abs(cos_w), cos_w)
-        sin_w = _sin(cos_w)
-        # Angle the node's bounding sphere subtends at p.
-        inside = d2_true <= r * r
-        sin2_b = np.where(inside, 1.0, r * r / np.maximum(d2_true, 1e-300))
-        cos_b = np.where(inside, -1.0, np.sqrt(np.maximum(0.0, 1.0 - sin2_b)))
-        sin_b = _sin(cos_b)
-        cos_x, sin_x = _cos_sub(sin_w, cos_w, self.sin_o[node], self.cos_o[node]), \
-            _sin_sub(sin_w, cos_w, self.sin_o[node], self.cos_o[node])
-        cos_p = _cos_sub(sin_x, cos_x, sin_b, cos_b)
-        imp = np.where(cos_p > self.cos_e[node], self.phi[node] * cos_p / d2, 0.0)
-        cos_i = np.abs(dot(wi, n))
-        has_n = dot(n, n) > 0
-        cos_pi = _cos_sub(_sin(cos_i), cos_i, sin_b, cos_b)
-        imp = imp * np.where(has_n, cos_pi, 1.0)
-        return np.maximum(imp, 0.0)
+        c, w = self.center[node], self.w[node]
+        return _importance(p[:, 0], p[:, 1], p[:, 2], n[:, 0], n[:, 1], n[:, 2],
+                           c[:, 0], c[:, 1], c[:, 2], self.radius[node], w[:, 0], w[:, 1], w[:, 2],
+                           self.two_sided_f[node], self.sin_o[node], self.cos_o[node], self.cos_e[node],
+                           self.phi[node])
 
     def _p_left(self, node, p, n):
         """Probability of descending into the left child."""
@@ -293,15 +277,45 @@ class LightTree:
         return prob
 
 
+@kernel(18)
+def _importance(px, py, pz, nx, ny, nz, cx, cy, cz, r, wx, wy, wz, two_sided, sin_o, cos_o, cos_e, phi):
+    """One node's importance for one shading point (see ``importance``)."""
+    tx, ty, tz = px - cx, py - cy, pz - cz
+    d2_true = tx * tx + ty * ty + tz * tz
+    d2 = np.maximum(d2_true, r * r)
+    inv = 1.0 / np.sqrt(np.maximum(d2_true, 1e-300))
+    ix, iy, iz = tx * inv, ty * inv, tz * inv
+    cos_w = wx * ix + wy * iy + wz * iz
+    cos_w = where(two_sided > 0.0, np.abs(cos_w), cos_w)
+    sin_w = _sin(cos_w)
+    # Angle the node's bounding sphere subtends at p.
+    inside = d2_true <= r * r
+    sin2_b = where(inside, 1.0, r * r / np.maximum(d2_true, 1e-300))
+    cos_b = where(inside, -1.0, np.sqrt(np.maximum(0.0, 1.0 - sin2_b)))
+    sin_b = _sin(cos_b)
+    cos_x = _cos_sub(sin_w, cos_w, sin_o, cos_o)
+    sin_x = _sin_sub(sin_w, cos_w, sin_o, cos_o)
+    cos_p = _cos_sub(sin_x, cos_x, sin_b, cos_b)
+    imp = where(cos_p > cos_e, phi * cos_p / d2, 0.0)
+    cos_i = np.abs(ix * nx + iy * ny + iz * nz)
+    has_n = nx * nx + ny * ny + nz * nz > 0.0
+    cos_pi = _cos_sub(_sin(cos_i), cos_i, sin_b, cos_b)
+    imp = imp * where(has_n, cos_pi, 1.0)
+    return np.maximum(imp, 0.0)
+
+
+@helper
 def _sin(cos):
     return np.sqrt(np.maximum(0.0, 1.0 - cos * cos))
 
 
+@helper
 def _cos_sub(sin_a, cos_a, sin_b, cos_b):
     """cos(max(0, a - b))."""
-    return np.where(cos_a > cos_b, 1.0, cos_a * cos_b + sin_a * sin_b)
+    return where(cos_a > cos_b, 1.0, cos_a * cos_b + sin_a * sin_b)
 
 
+@helper
 def _sin_sub(sin_a, cos_a, sin_b, cos_b):
     """sin(max(0, a - b))."""
-    return np.where(cos_a > cos_b, 0.0, sin_a * cos_b - cos_a * sin_b)
+    return where(cos_a > cos_b, 0.0, sin_a * cos_b - cos_a * sin_b)

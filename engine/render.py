@@ -16,6 +16,7 @@ from concurrent.futures import TimeoutError as FuturesTimeout
 import numpy as np
 
 from .accel import Accel
+from .blas import single_threaded_blas
 from .bsdf import MaterialTable
 from .camera import CameraModel, PixelFilter
 from . import pass_events
@@ -126,14 +127,48 @@ def warnings_for(ctx):
     return out
 
 
+# A batch's fixed cost (~200 NumPy calls per bounce) is small next to its
+# paths' work from about this many paths on (tools/bench_engine.py: 4K-path
+# batches cost 1.9x the CPU per path of 64K ones, 16K 1.2x).
+MIN_BATCH_PATHS = 1 << 15
+# Automatic passes (samples_per_pass = 0) last about this long after the
+# first, one-sample pass: long enough that the barrier at the end of each
+# pass (threads idle while the slowest batch finishes) costs little, short
+# enough for a live progressive image.
+PASS_SECONDS = 1.0
+
+
 def _batches(pixels, spp, settings, threads):
-    """Pixel lists for one pass: at most max_paths / threads paths each, and
-    at least one per thread so small frames keep every core busy.
+    """Pixel lists for one pass: at most max_paths / threads paths each
+    (memory); two per thread where that leaves at least MIN_BATCH_PATHS
+    paths each, so a thread that finishes early takes more work instead of
+    idling at the end of the pass; at least one per thread.
     ``pixels`` is a sorted index array (all pixels, or the unconverged ones)."""
     per_thread = max(1024, settings.max_paths // threads)
     n = len(pixels)
-    size = max(1, min(per_thread // spp, -(-n // threads)))
+    balanced = max(MIN_BATCH_PATHS, -(-n * spp // (2 * threads)))
+    size = max(1, min(min(per_thread, balanced) // spp, -(-n // threads)))
     return [pixels[lo:lo + size] for lo in range(0, n, size)]
+
+
+def _pass_samples(settings, done, last, adaptive_params):
+    """Samples in the next pass: ``samples_per_pass``, or with 0 one sample
+    first (the first image soon) and then as many as take about
+    PASS_SECONDS at the speed of the last pass (``last`` = (samples,
+    seconds)).  Never past the total, nor past adaptive sampling's next
+    convergence check."""
+    if settings.samples_per_pass > 0:
+        spp = settings.samples_per_pass
+    elif last is None:
+        spp = 1
+    else:
+        spp = max(1, int(PASS_SECONDS * last[0] / max(last[1], 1e-6)))
+    spp = min(spp, settings.samples - done)
+    if adaptive_params is not None and settings.samples_per_pass <= 0:
+        _, min_samples, step = adaptive_params
+        check = min_samples if done < min_samples else (done // step + 1) * step
+        spp = min(spp, max(check - done, 1))
+    return max(spp, 1)
 
 
 def adaptive_parameters(settings):
@@ -170,7 +205,11 @@ class _Adaptive:
 
 
 def render(scene, settings=None, progress=None):
-    settings = settings or RenderSettings()
+    with single_threaded_blas():
+        return _render(scene, settings or RenderSettings(), progress)
+
+
+def _render(scene, settings, progress):
     t_start = time.perf_counter()
     ctx = prepare_interruptibly(scene, settings, progress)
     cam = ctx.camera
@@ -178,18 +217,20 @@ def render(scene, settings=None, progress=None):
     film = Film(cam.width, cam.height, settings.aovs, adaptive.params is not None, settings.passes,
                 ctx.pass_config.crypto_levels)
     threads = settings.threads or os.cpu_count() or 1
-    spp_pass = max(1, min(settings.samples_per_pass, settings.samples))
+    last = None   # (samples, seconds) of the last pass
     stats = {"samples": 0, "samples_total": settings.samples, "prepare_seconds": time.perf_counter() - t_start}
     t_trace = time.perf_counter()
     done, checked = 0, 0
     image = None  # the last pass's image: the film does not change after it
     with _AbandonablePool(threads, film) as pool:
         while done < settings.samples and len(adaptive.active):
-            spp = min(spp_pass, settings.samples - done)
+            spp = _pass_samples(settings, done, last, adaptive.params)
             first = settings.sample_start + done
+            t_pass = time.perf_counter()
             jobs = [pool.submit(_run_batch, ctx, pool.film, pixels, spp, first)
                     for pixels in _batches(adaptive.active, spp, settings, threads)]
             cancelled = _wait(jobs, progress)
+            last = (spp, time.perf_counter() - t_pass)
             paths = spp * len(adaptive.active)
             done += spp
             stats.update(_stats(ctx, stats, done, paths, t_trace, settings))

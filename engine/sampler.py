@@ -22,6 +22,8 @@ product and the bit reversals are 16-bit table lookups.
 """
 import numpy as np
 
+from . import kernels
+
 SOBOL = "sobol"
 RANDOM = "random"
 PATTERNS = (SOBOL, RANDOM)
@@ -147,16 +149,67 @@ _TO_UNIT = 1.0 / 4294967296.0
 def sobol4(pseed, sample, dim_set):
     """(N, 4) float64 values in [0, 1) of dimension set ``dim_set`` for
     paths with pixel seeds ``pseed`` and sample indices ``sample``."""
-    seed = pseed ^ np.uint32(_hash_scalar(dim_set))
+    pseed = np.ascontiguousarray(pseed, np.uint32)
+    sample = np.ascontiguousarray(sample, np.uint32)
+    out = np.empty((len(pseed), 4))
+    _sobol4_into(pseed, sample, np.uint32(_hash_scalar(dim_set)), out, _HI, _LO, _DIM_SALT64)
+    return out
+
+
+def _sobol4_numpy(pseed, sample, set_hash, out, hi_table, lo_table, salts):
+    seed = pseed ^ set_hash
     idx = owen_reversed(reverse_bits(sample), seed ^ np.uint32(_SHUFFLE_SALT))
     hi = idx >> np.uint32(16)
     lo = idx & np.uint32(0xFFFF)
-    out = np.empty((len(idx), 4))
     for d in range(4):
-        r = _HI[d][hi] ^ _LO[d][lo]
-        r = owen_reversed(r, seed ^ np.uint32(_DIM_SALT[d]))
+        r = hi_table[d][hi] ^ lo_table[d][lo]
+        r = owen_reversed(r, seed ^ salts[d].astype(np.uint32))
         out[:, d] = reverse_bits(r) * _TO_UNIT
-    return out
+
+
+# The same numbers one path at a time, for numba (engine/kernels.py): uint32
+# arithmetic done in uint64 and masked, every constant typed (a plain int
+# would turn uint64 maths into float64).  Tables come in as arguments (as
+# globals, or as a loop over the index bits, numba's code was 3-10x slower).
+_M32 = np.uint64(0xFFFFFFFF)
+_1, _2, _4, _8, _16 = (np.uint64(v) for v in (1, 2, 4, 8, 16))
+_B1, _B2, _B4, _B8, _B16 = (np.uint64(v) for v in (0x55555555, 0x33333333, 0x0F0F0F0F, 0x00FF00FF, 0xFFFF))
+_O1, _O2, _O3 = (np.uint64(v) for v in (0x3D20ADEA, 0x05526C56, 0x53A22864))
+_SHUFFLE64 = np.uint64(_SHUFFLE_SALT)
+_DIM_SALT64 = np.array(_DIM_SALT, np.uint64)
+
+
+@kernels.helper
+def _rev32(x):
+    x = ((x >> _1) & _B1) | ((x & _B1) << _1)
+    x = ((x >> _2) & _B2) | ((x & _B2) << _2)
+    x = ((x >> _4) & _B4) | ((x & _B4) << _4)
+    x = ((x >> _8) & _B8) | ((x & _B8) << _8)
+    return (((x >> _16) & _B16) | ((x & _B16) << _16)) & _M32
+
+
+@kernels.helper
+def _owen64(x, seed):
+    x ^= (x * _O1) & _M32
+    x = (x + seed) & _M32
+    x = (x * ((seed >> _16) | _1)) & _M32
+    x ^= (x * _O2) & _M32
+    x ^= (x * _O3) & _M32
+    return x
+
+
+@kernels.loop_kernel("void(uint32[::1], uint32[::1], uint32, float64[:, ::1], uint32[:, ::1], uint32[:, ::1], "
+                     "uint64[::1])", _sobol4_numpy)
+def _sobol4_into(pseed, sample, set_hash, out, hi_table, lo_table, salts):
+    for i in range(len(pseed)):
+        seed = np.uint64(pseed[i] ^ set_hash)
+        idx = _owen64(_rev32(np.uint64(sample[i])), seed ^ _SHUFFLE64)
+        hi = np.int64(idx >> _16)
+        lo = np.int64(idx & _B16)
+        for d in range(4):
+            r = np.uint64(hi_table[d, hi] ^ lo_table[d, lo])
+            # via int64: numba converts uint64 to float64 slowly
+            out[i, d] = np.float64(np.int64(_rev32(_owen64(r, seed ^ salts[d])))) * _TO_UNIT
 
 
 def random4(pseed, sample, dim_set):

@@ -162,7 +162,8 @@ class Material:
     name: str = "material"
     lobes: Sequence[Lobe] = (Lobe("diffuse"),)
     emission: RGB = (0.0, 0.0, 0.0)
-    # A Bump or NormalMap expression replacing the shading normal, or None.
+    # A Bump or NormalMap expression replacing the shading normal, a vector
+    # node's NodeOutput (e.g. Bevel; normalized), or None.
     normal: Optional["Texture"] = None
     pass_index: int = 0  # Blender's Material Index
     # Shader AOVs (AOV Output nodes): name -> ((r, g, b), value), constants.
@@ -266,7 +267,7 @@ NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WO
 @dataclass(eq=False)
 class Bump:
     """Bump node: height (a float), strength, distance, invert, and an
-    optional NormalMap feeding its Normal input."""
+    optional NormalMap (or vector NodeOutput) feeding its Normal input."""
     height: object
     strength: object = 1.0
     distance: object = 1.0
@@ -458,7 +459,8 @@ class RenderSettings:
     """How to render.
 
     samples: samples per pixel in total; samples_per_pass: how many are
-    added between two progress callbacks.  max_bounces follows Cycles: the
+    added between two progress callbacks (0: automatic, one sample first,
+    then passes of about a second; engine/render.py).  max_bounces follows Cycles: the
     number of indirect bounces, so 0 is direct lighting only (light sampling
     at the first hit, emission found by its BSDF sample).  light_selection: 'uniform',
     'power', 'all' or 'tree' (a light tree: by each light's estimated

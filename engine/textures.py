@@ -597,7 +597,10 @@ class MaterialTextures:
             inner = None if expr.normal is None else self._compile_normal(expr.normal)
             return ("bump", self.compiler.value(expr.height), self.compiler.value(expr.strength),
                     self.compiler.value(expr.distance), expr.invert, inner, _bump_step(expr))
-        raise TypeError(f"a material normal must be a NormalMap or Bump, not {type(expr).__name__}")
+        if isinstance(expr, NodeOutput):
+            # A vector node's output (e.g. Bevel): Cycles normalizes it.
+            return ("vector", self.compiler.color(expr))
+        raise TypeError(f"a material normal must be a NormalMap, Bump or node output, not {type(expr).__name__}")
 
     # -- per ray -------------------------------------------------------------
 
@@ -717,6 +720,8 @@ def _perturbed(normal, hit, rows, triangles, ctx):
 
 
 def _evaluate_normal(normal, hit, rows, triangles, ns, ctx):
+    if normal[0] == "vector":
+        return normal[1](ctx)
     if normal[0] == "normal_map":
         if normal[3] != "TANGENT":
             return space_normal_map(hit, rows, ns, normal[1], normal[2], normal[3], ctx)

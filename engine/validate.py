@@ -244,6 +244,8 @@ def validate_camera(cam):
 def validate_settings(s):
     if s.samples < 1:
         raise SceneError("settings: samples must be >= 1")
+    if s.samples_per_pass < 0:
+        raise SceneError("settings: samples per pass must be >= 0 (0 = automatic)")
     if s.light_selection not in ("uniform", "power", "all", "tree"):
         raise SceneError(f"settings: unknown light selection {s.light_selection!r}")
     if s.strategy not in ("mis", "light", "bsdf"):
@@ -383,5 +385,7 @@ def validate_normal(expr, what):
             validate_texture(getattr(expr, name), f"{what} bump {name}")
         if expr.normal is not None:
             validate_normal(expr.normal, what)
+    elif isinstance(expr, _scene.NodeOutput):
+        validate_texture(expr, f"{what} vector")
     else:
-        raise SceneError(f"{what}: expected a NormalMap or Bump, got {type(expr).__name__}")
+        raise SceneError(f"{what}: expected a NormalMap, Bump or node output, got {type(expr).__name__}")

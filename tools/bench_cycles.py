@@ -97,29 +97,18 @@ def configure(scene, engine, samples, seed, cfg, adaptive):
 
 
 def configure_cycles(scene, samples, seed, bounces, adaptive):
-    scene.render.engine = 'CYCLES'
+    """The parity tests' Cycles set-up (tests/addon/ember_testlib.py), but at
+    Cycles' own default light threshold (a speed feature a user has on), and
+    its default adaptive sampling when asked."""
+    sys.path.insert(0, os.path.join(ROOT, 'tests', 'addon'))
+    from ember_testlib import setup_cycles
+    setup_cycles(scene, samples, seed, bounces)
     c = scene.cycles
-    c.device = 'CPU'
-    c.samples = samples
-    c.seed = seed
-    c.use_animated_seed = False
-    c.use_denoising = False
+    c.light_sampling_threshold = c.bl_rna.properties['light_sampling_threshold'].default
     c.use_adaptive_sampling = adaptive
     if adaptive:
         c.adaptive_threshold = 0.01  # Cycles' defaults
         c.adaptive_min_samples = 0
-    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
-    c.blur_glossy = 0.0
-    c.caustics_reflective = c.caustics_refractive = True
-    c.max_bounces = bounces
-    for name in ('diffuse_bounces', 'glossy_bounces', 'transmission_bounces', 'volume_bounces',
-                 'transparent_max_bounces'):
-        setattr(c, name, bounces)
-    c.pixel_filter_type = 'BLACKMAN_HARRIS'
-    c.filter_width = 1.5
-    if hasattr(c, 'use_auto_tile'):
-        c.use_auto_tile = False
-    scene.render.threads_mode = 'AUTO'
 
 
 def configure_ember(scene, samples, seed, bounces, adaptive):
@@ -297,7 +286,7 @@ def table(rows, adaptive):
     import bench_scenes
     head = ("| scene | Ember time / Cycles time at equal RMSE | s per sample pass, Ember / Cycles "
             "| variance per sample, Ember / Cycles | cores used, Ember (Cycles) | paths/s, Ember (Cycles) "
-            "| Embree share of Ember's thread time |")
+            "| Embree share of Ember's thread time | Ember's first image (s) |")
     if adaptive:
         head = ("| scene | Ember time / Cycles time at equal RMSE | cores used, Ember (Cycles) "
                 "| paths/s, Ember (Cycles) | Embree share of Ember's thread time |")
@@ -315,6 +304,9 @@ def table(rows, adaptive):
         cells += [f"{r['ember_cores']:.2f} ({r['cycles_cores']:.2f})",
                   f"{r['ember_paths_per_second'] / 1e6:.3f} M ({r['cycles_paths_per_second'] / 1e6:.2f} M)",
                   f"{100 * r['embree_share']:.0f} %"]
+        if not adaptive:
+            first = r.get('first_pass_seconds')
+            cells.append(f"{first:.2f}" if first is not None else "-")
         lines.append('| ' + ' | '.join(cells) + ' |')
     return '\n'.join(lines)
 

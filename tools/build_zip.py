@@ -36,6 +36,7 @@ WHEELS = {
     'OpenImageIO': 'openimageio==3.0.21.0',
     'numba': 'numba==0.68.1',       # compiled kernels (engine/kernels.py)
     'llvmlite': 'llvmlite==0.50.0',  # numba's compiler, needed with it
+    'threadpoolctl': 'threadpoolctl==3.8.0',  # one BLAS thread while rendering (engine/blas.py)
 }
 # Wheels another bundled wheel needs, by import name.
 DEPENDS = {'numba': ('llvmlite',)}
@@ -94,7 +95,7 @@ def fetch_wheels(requirements, wheel_dir):
     found = []
     for requirement in requirements:
         name, version = requirement.split('==')
-        pattern = re.compile(rf"^{re.escape(name)}-{re.escape(version)}-cp311-.*x86_64.*\.whl$", re.I)
+        pattern = re.compile(rf"^{re.escape(name)}-{re.escape(version)}-(cp311-.*x86_64.*|py3-none-any)\.whl$", re.I)
         matches = [f for f in os.listdir(wheel_dir) if pattern.match(f)]
         if not matches:
             subprocess.check_call([

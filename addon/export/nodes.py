@@ -469,6 +469,9 @@ class SocketReader:
             return scene.Bump(_as_value(self.input(node, 'Height')),
                               _as_value(self.input(node, 'Strength')),
                               _as_value(self.input(node, 'Distance')), bool(node.invert), inner)
+        value = self.read(socket)
+        if isinstance(value, scene.NodeOutput) and _registry()[value.call.idname].output_kind(value.output) == 'vector':
+            return value   # a vector node (e.g. Bevel): the normal itself, normalized by the engine
         self._unsupported(node)
         return None
 

@@ -107,6 +107,9 @@ def render_settings(scene, is_preview=False):
         # ~0.3 s, so Esc lands within a second, and the path state near 100 MB,
         # at the same speed as 2^18 (measured on 2 cores).
         max_paths=MAX_PATHS,
+        # One sample first, then passes of about a second (not one sample
+        # each: a pass ends at a barrier where a core waits for the other).
+        samples_per_pass=0,
         sampling_pattern=settings.sampling_pattern.lower(),
         adaptive_threshold=settings.adaptive_threshold if settings.use_adaptive_sampling else 0.0,
         adaptive_min_samples=settings.adaptive_min_samples,

@@ -127,7 +127,10 @@ class ShadingContext:
     face, depth (N,) bounces before this hit (0: camera ray), ray (N,)
     VIS_* bit of the ray (camera, diffuse, glossy, transmission, shadow).
     prim/bary locate the point on the scene's triangles (None for a context
-    made from UVs alone)."""
+    made from UVs alone).  rays: the renderer's handle for nodes that cast
+    rays from the points (engine.nodes.rays.NodeRays: AO, Bevel), or None
+    where Cycles does not ray-trace in shaders (light samples, shadow rays,
+    worlds): those nodes then return their no-ray value."""
 
     def __init__(self, n, tris=None, prim=None, bary=None, p=None, ng=None, ns=None, wo=None,
                  back=None, depth=None, ray=None, uv=None):
@@ -142,6 +145,7 @@ class ShadingContext:
         self.back = np.zeros(n, bool) if back is None else back
         self.depth = np.zeros(n, np.int32) if depth is None else depth
         self.ray = np.ones(n, np.uint8) if ray is None else ray
+        self.rays = None
         self._cache = {}
         if uv is not None:
             self._cache[("uv", "")] = uv
@@ -194,6 +198,7 @@ class ShadingContext:
         for name in ("prim", "bary", "p", "ng", "ns", "wo", "back", "depth", "ray"):
             value = getattr(self, name)
             setattr(out, name, None if value is None else value[rows])
+        out.rays = None if self.rays is None else self.rays.take(rows)
         out._cache = {k: None if v is None else v[rows] for k, v in self._cache.items()}
         return out
 
@@ -202,6 +207,7 @@ class ShadingContext:
         triangles' planes; interpolated attributes move with them."""
         out = ShadingContext(self.n, self.tris, self.prim, None, self.p + dp, self.ng, self.ns, self.wo,
                              self.back, self.depth, self.ray)
+        out.rays = self.rays
         if self.bary is not None and self.tris is not None:
             d = _bary_of_offset(self.tris, self.prim, dp)
             out.bary = self.bary + d

@@ -2,7 +2,7 @@
 options; plus analytic checks of the sun and spot lights."""
 import numpy as np
 
-from engine.render import _batches, render
+from engine.render import PASS_SECONDS, _batches, _pass_samples, adaptive_parameters, render
 from engine.scene import RenderSettings, SpotLight, SunLight, World
 from engine.testscenes import cornell_box
 
@@ -31,6 +31,34 @@ def test_progress_after_every_pass():
     assert all(c[1] > 0 for c in rec.calls)
     assert rec.calls[-1][2] == 0.0
     assert r.samples == 10
+
+
+def test_automatic_passes_one_sample_then_about_a_second():
+    rec = Recorder()
+    r = render(cornell_box(16, 16), RenderSettings(samples=40, samples_per_pass=0), rec)
+    done = [c[0] for c in rec.calls]
+    assert done[0] == 1 and done[-1] == 40 == r.samples
+    assert all(b > a for a, b in zip(done, done[1:]))
+    s = RenderSettings(samples=1000, samples_per_pass=0)
+    # 4 samples took 0.5 s: the next pass takes about PASS_SECONDS.
+    assert _pass_samples(s, 5, (4, 0.5), None) == int(PASS_SECONDS * 8)
+    assert _pass_samples(s, 990, (4, 0.001), None) == 10   # never past the total
+
+
+def test_automatic_passes_stop_at_adaptive_checks():
+    """With adaptive sampling, automatic passes end where the convergence
+    check falls (min samples, then every step) so converged pixels stop
+    when Cycles' would."""
+    s = RenderSettings(samples=1000, samples_per_pass=0, adaptive_threshold=0.01)
+    params = adaptive_parameters(s)
+    _, min_samples, step = params
+    done, ends, last = 0, [], None
+    while done < 300:
+        done += _pass_samples(s, done, last, params)
+        last = (1, 1e-6)   # infinitely fast: passes as long as allowed
+        ends.append(done)
+    assert ends[0] == 1 and ends[1] == min_samples
+    assert all(e % step == 0 and e - a == step for a, e in zip(ends[1:], ends[2:]) if a >= min_samples)
 
 
 def test_cancel_keeps_partial_image():
@@ -66,9 +94,12 @@ def test_time_limit_stops_early():
 
 def test_batches_bound_paths_in_flight():
     s = RenderSettings(max_paths=1 << 16)
-    for npix, spp in ((3840 * 2160, 1), (512 * 512, 16), (7, 3)):
+    for npix, spp in ((3840 * 2160, 1), (512 * 512, 16), (7, 3), (256 * 256, 1)):
         batches = _batches(np.arange(npix), spp, s, threads=2)
         assert len(batches) >= min(2, npix)
+        # Load balance: two batches per thread when each keeps MIN_BATCH_PATHS paths.
+        if npix * spp >= 4 * 2 * (1 << 15):
+            assert len(batches) >= 4
         np.testing.assert_array_equal(np.concatenate(batches), np.arange(npix))
         assert max(len(b) for b in batches) * spp <= max(s.max_paths // 2, spp)
 

@@ -689,6 +689,18 @@ def cycles_filter(kind, width, x):
 
 
 @pytest.mark.parametrize("kind,width", FILTERS)
+def test_pixel_filter_guide_table_is_the_inverse_cdf(kind, width):
+    """The guide-table lookup returns np.interp's inverse CDF bit for bit,
+    tails and bin edges included."""
+    f = camera.PixelFilter(kind, width)
+    u = np.concatenate([np.random.default_rng(7).random(200000), np.linspace(0.0, 1.0, 20001)[:-1],
+                        0.5 * f.cdf, 0.5 + 0.5 * f.cdf[:-1], [np.nextafter(0.5, 0.0), np.nextafter(1.0, 0.0)]])
+    v = np.where(u < 0.5, 2.0 * u, 2.0 * u - 1.0)
+    expected = np.where(u < 0.5, -1.0, 1.0) * np.interp(v, f.cdf, f.edges)
+    np.testing.assert_array_equal(f.sample(u), expected)
+
+
+@pytest.mark.parametrize("kind,width", FILTERS)
 def test_pixel_filter(kind, width):
     f = camera.PixelFilter(kind, width)
     # Cycles' filter supports: box width / 2, Gaussian 1.5 width, Blackman-Harris width.
