@@ -50,6 +50,7 @@ for _scene in ('nodes', 'world'):
     REFERENCES['node_scene_' + _scene] = ('test_node_scene_parity', _scene, 2048)
 for _scene in ('spheres', 'background'):
     REFERENCES['hdri_' + _scene] = ('test_world_hdri', _scene, 2048)
+REFERENCES['ray_nodes_ao_bevel'] = ('test_ray_node_parity', 'ao_bevel', 2048)
 # the scenes built here: (width, height, max bounces)
 BUILT_HERE = {'cornell': (48, 48, 4), 'glossy_world': (48, 32, 4)}
 HEADER = ('scene', 'blender', 'samples', 'seeds', 'max_bounces', 'filter', 'width', 'height', 'fingerprint')
