@@ -55,7 +55,10 @@ class Lobes:
     ior (N, K), f0 (N, K, 3), edge_tint (N, K, 3), transmission_tint (N, K, 3),
     multiscatter (N, K) bool, covers (N, K) int8, absorb (N, K, 3),
     weight (N, K); back (N,) bool: the ray arrived on the back face (set by
-    the integrator; inverts the IOR of refracting lobes).
+    the integrator; inverts the IOR of refracting lobes); smooth_n (N, 3):
+    where a normal map, bump or Bevel moved the shading normal, the smooth
+    normal in the shading frame, and bump_model (N,) int8 which of Cycles'
+    bump shadowing terms applies (BUMP_CHIANG, BUMP_GGX); None without.
     """
     kind: np.ndarray
     color: np.ndarray
@@ -71,6 +74,8 @@ class Lobes:
     absorb: Optional[np.ndarray] = None
     weight: Optional[np.ndarray] = None
     back: Optional[np.ndarray] = None
+    smooth_n: Optional[np.ndarray] = None
+    bump_model: Optional[np.ndarray] = None
 
     def __post_init__(self):
         # Defaults for lobes built from the four original fields.
@@ -522,12 +527,53 @@ def _sample_glass(lobes, rows, k, wo, u_choice, u1, u2, singular):
 # ----------------------------------------------------------------------------
 # The material as a whole
 
-def eval_pdf(lobes, wo, wi, sel=None, w=None):
+# Cycles' bump shadowing terms (closure/bsdf.h), by Blender version.
+BUMP_CHIANG = 0   # up to 4.4: Chiang, Li and Burley 2019, "Taming the Shadow Terminator"
+BUMP_GGX = 1      # 4.5 on: Conty Estevez et al., "A Microfacet-Based Shadowing Function ..."
+
+
+def bump_model(version):
+    """Which bump shadowing term Cycles of Blender ``version`` applies."""
+    return BUMP_GGX if tuple(version) >= (4, 5) else BUMP_CHIANG
+
+
+def bump_shadowing(smooth_n, model, wi):
+    """Cycles' bump_shadowing_term for light arriving along wi (shading
+    frame) where the shading normal N (z) left the smooth normal Ns:
+    (factor for diffuse lobes, rows every lobe rejects when evaluated) or
+    (None, None) where no normal was moved.  The 4.5+ term rejects light and
+    normal on opposite sides of Ns for every closure evaluated and for
+    diffuse ones sampled; its softening, and all of the older term, scale
+    diffuse lobes only."""
+    s = smooth_n
+    if s is None:
+        return None, None
+    cos_si = s[:, 0] * wi[:, 0] + s[:, 1] * wi[:, 1] + s[:, 2] * wi[:, 2]
+    cos_sn, cos_ni = s[:, 2], wi[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        den = cos_ni * cos_sn
+        g = np.where(den != 0, cos_si / np.where(den != 0, den, 1.0), 0.0)
+        chiang = np.where(g >= 1.0, 1.0, np.where(g < 0.0, 0.0, -g * g * g + g * g + g))
+        wrong = cos_si * cos_sn * cos_ni < 0.0
+        ci, cd = np.abs(cos_si), np.abs(cos_sn)
+        alpha2 = np.clip(0.125 * (1.0 / (cd * cd) - 1.0), 0.0, 1.0)
+        tan2_i = np.maximum(1.0 / (ci * ci) - 1.0, 0.0)
+        g1 = 1.0 / (1.0 + 0.5 * (np.sqrt(1.0 + alpha2 * tan2_i) - 1.0))
+    ggx = np.where((cd >= 1.0) | (ci >= 1.0), 1.0, np.where(ci < 1e-6, 0.0, g1))
+    ggx = np.where(wrong, 0.0, ggx)
+    use_ggx = model == BUMP_GGX
+    return np.where(use_ggx, ggx, chiang), ~(use_ggx & wrong)
+
+
+def eval_pdf(lobes, wo, wi, sel=None, w=None, sampled=False):
     """f (N, 3) and pdf (N,) summed over the non-delta lobes; wi below the
-    surface (wi.z < 0) reaches the transmitting lobes only."""
+    surface (wi.z < 0) reaches the transmitting lobes only.  sampled: wi
+    came from ``sample`` (Cycles then softens only a reflecting diffuse
+    lobe's bump shadowing and rejects no other lobe)."""
     n = len(wo)
     if w is None:
         w = weights(lobes, wo)
+    diffuse_term, keep = bump_shadowing(lobes.smooth_n, lobes.bump_model, wi)
     if sel is None:
         sel = selection(lobes, wo, w)
     f = np.zeros((n, 3))
@@ -537,10 +583,13 @@ def eval_pdf(lobes, wo, wi, sel=None, w=None):
     lower = front & (wi[:, 2] < -COS_EPS)
     for k in range(lobes.kind.shape[1]):
         kind = lobes.kind[:, k]
-        for mask, lobe_f in (((kind == DIFFUSE) & upper, None), ((kind == TRANSLUCENT) & lower, None)):
+        for mask, softened in (((kind == DIFFUSE) & upper, True), ((kind == TRANSLUCENT) & lower, not sampled)):
             d = subset(mask)
             if count(d, n):
-                f[d] += w[d, k] * INV_PI
+                if diffuse_term is not None and softened:
+                    f[d] += w[d, k] * (INV_PI * diffuse_term[d])[:, None]
+                else:
+                    f[d] += w[d, k] * INV_PI
                 pdf[d] += sel[d, k] * np.abs(wi[d, 2]) * INV_PI
         for mask, fn in (((kind == GLOSSY) & upper, _eval_glossy), ((kind == SHEEN) & upper, _eval_sheen),
                          (np.isin(kind, (GLASS, REFRACTION)) & front
@@ -550,6 +599,9 @@ def eval_pdf(lobes, wo, wi, sel=None, w=None):
                 fg, pg = fn(lobes, g, k, wo[g], wi[g])
                 f[g] += w[g, k] * fg
                 pdf[g] += sel[g, k] * pg
+    if keep is not None and not sampled:
+        f = np.where(keep[:, None], f, 0.0)
+        pdf = np.where(keep, pdf, 0.0)
     return f, pdf
 
 
@@ -642,7 +694,7 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
         smooth = slice(None)   # the usual case: no copies of the lobes
     if len(wo[smooth]):
         lobes_s = lobes if isinstance(smooth, slice) else _take(lobes, smooth)
-        fs, ps = eval_pdf(lobes_s, wo[smooth], wi[smooth], sel[smooth], w[smooth])
+        fs, ps = eval_pdf(lobes_s, wo[smooth], wi[smooth], sel[smooth], w[smooth], sampled=True)
         ok = ps > 0
         weight[smooth] = np.where(ok[:, None], fs * (np.abs(wi[smooth, 2]) / np.where(ok, ps, 1.0))[:, None], 0.0)
         pdf[smooth] = ps
@@ -675,6 +727,8 @@ def _sample_single(lobes, wo, u1, u2):
     if count(d, n):
         wi[d], pdf[d] = cosine_hemisphere(u1[d], u2[d])
         weight[d] = np.where((pdf[d] > 0)[:, None], color[d], 0.0)
+        if lobes.smooth_n is not None:
+            weight[d] *= bump_shadowing(lobes.smooth_n[d], lobes.bump_model[d], wi[d])[0][:, None]
     g = np.nonzero((kind == GLOSSY) & up)[0]
     if len(g):
         wo_g, alpha = np.take(wo, g, axis=0), np.take(lobes.alpha[:, 0], g)

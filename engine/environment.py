@@ -21,17 +21,26 @@ over the texture's pixels (pbrt's Distribution2D, Cycles' background map), so
     pdf(d) = pdf_uv / (2 pi^2 sin(theta)) * |det M| / |M d|^3,
 
 the last factor being the Jacobian of d -> M d / |M d| (1 for rotations).
+
+Baked procedural worlds (``texture.shader``) are evaluated exactly per
+direction, as Cycles shades its background; the baked pixels only build the
+table.  A sun disc too small for the table (``texture.sun``, the Sky
+Texture's) is sampled as Cycles' background light does with sun guiding
+(kernel/light/background.h): the disc's cone with weight 4, the table with
+weight 1, one-sample MIS over the two (the pdf is their mixture).
 """
 import numpy as np
 
-from .sampling import Distribution2D
-from .vec import luminance
+from .sampling import Distribution2D, uniform_cone
+from .vec import frame, luminance, to_world
 
 TWO_PI_SQ = 2.0 * np.pi * np.pi
 # Wider textures are summed into blocks for the sampling table (Cycles'
 # background map resolution plays the same role): the pdf stays exact, the
 # table small.
 MAX_TABLE_WIDTH = 2048
+# Cycles' background strategy weights with sun guiding: map 1, sun 4.
+SUN_SHARE = 0.8
 
 
 def direction_to_equirect(e):
@@ -84,6 +93,7 @@ class EnvironmentMap:
         pixels = np.asarray(texture.pixels, dtype=np.float32)[..., :3]
         # Row 0 = bottom from here on, as Cycles' v.
         self.image = np.ascontiguousarray(pixels[::-1] * np.float32(texture.strength))
+        self.strength = float(texture.strength)
         self.closest = texture.interpolation == "Closest"
         self.matrix = np.asarray(texture.matrix, dtype=np.float64)
         self.inverse = np.linalg.inv(self.matrix)
@@ -93,6 +103,8 @@ class EnvironmentMap:
         # Mean luminance over the sphere (solid-angle weighted).
         self.mean_luminance = float((lum * sin_rows).sum() / (sin_rows.sum() * lum.shape[1]))
         self.dist = Distribution2D(self._table(lum, compensate))
+        self.shader = _compile(texture.shader) if getattr(texture, "shader", None) is not None else None
+        self.sun = _Sun(texture.sun) if getattr(texture, "sun", None) is not None else None
 
     def _table(self, lum, compensate):
         cells = lum if self.closest else _cover_neighbours(lum)
@@ -108,15 +120,28 @@ class EnvironmentMap:
 
     def power(self):
         """Integral of luminance over the sphere (W / m^2 per unit area seen)."""
-        return 4.0 * np.pi * self.mean_luminance
+        sun = self.sun.power * float(self.strength) if self.sun is not None else 0.0
+        return 4.0 * np.pi * self.mean_luminance + sun
 
     def eval(self, d):
         """Radiance (N, 3) arriving from world directions d (N, 3)."""
+        if self.shader is not None:
+            return self.shader(d) * self.strength
         u, v = direction_to_equirect(d @ self.matrix.T)
         return lookup(self.image, u, v, self.closest)
 
     def sample(self, u1, u2):
         """World directions (N, 3) and their solid-angle pdf."""
+        if self.sun is None:
+            return self._sample_map(u1, u2)
+        to_sun = u1 < SUN_SHARE
+        d = np.empty((len(u1), 3))
+        s, m = np.nonzero(to_sun)[0], np.nonzero(~to_sun)[0]
+        d[s] = self.sun.sample(u1[s] / SUN_SHARE, u2[s])
+        d[m] = self._sample_map((u1[m] - SUN_SHARE) / (1.0 - SUN_SHARE), u2[m])[0]
+        return d, self.pdf(d)
+
+    def _sample_map(self, u1, u2):
         x, y, pdf_uv = self.dist.sample(u1, u2)
         e = equirect_to_direction(x, y)
         d = e @ self.inverse.T
@@ -126,6 +151,11 @@ class EnvironmentMap:
 
     def pdf(self, d):
         """Solid-angle pdf of ``sample`` returning world directions d."""
+        if self.sun is None:
+            return self._map_pdf(d)
+        return (1.0 - SUN_SHARE) * self._map_pdf(d) + SUN_SHARE * self.sun.pdf(d)
+
+    def _map_pdf(self, d):
         e = d @ self.matrix.T
         u, v = direction_to_equirect(e)
         length = np.sqrt(np.einsum("ij,ij->i", e, e))
@@ -162,3 +192,40 @@ def _downsample(cells):
     if k <= 1:
         return cells
     return cells.reshape(h // k, k, w // k, k).sum(axis=(1, 3))
+
+
+def _compile(expression):
+    """A world colour expression as a function of directions (N, 3): the
+    shading context Cycles gives the background (P = Generated = the
+    direction, N = incoming = -direction, a camera ray)."""
+    from .nodes.context import ShadingContext
+    from .textures import Compiler
+    color = Compiler().color(expression)
+
+    def shade(d):
+        d = np.asarray(d, np.float64)
+        rgb = np.asarray(color(ShadingContext(len(d), p=d, ng=-d, ns=-d, wo=-d)), np.float64)
+        return np.maximum(np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0), 0.0)
+    return shade
+
+
+class _Sun:
+    """Uniform sampling of a sun disc's cone (Cycles' background_sun_sample)."""
+
+    def __init__(self, guide):
+        axis = np.asarray(guide.direction, np.float64)
+        self.axis = axis / np.linalg.norm(axis)
+        half = float(guide.half_angle)
+        self.one_minus_cos = 2.0 * np.sin(0.5 * half) ** 2     # 1 - cos without cancellation
+        self.cos_max = 1.0 - self.one_minus_cos
+        self.power = float(guide.power)
+
+    def sample(self, u1, u2):
+        local, _ = uniform_cone(u1, u2, self.one_minus_cos)
+        n = np.broadcast_to(self.axis, (len(u1), 3))
+        s, t = frame(n)
+        return to_world(local, s, t, n)
+
+    def pdf(self, d):
+        inside = d @ self.axis >= self.cos_max
+        return np.where(inside, 1.0 / (2.0 * np.pi * self.one_minus_cos), 0.0)

@@ -45,6 +45,7 @@ class Context:
 
     def __post_init__(self):
         self.jit = kernels.configure(getattr(self.settings, "use_jit", True))
+        self.bump_model = bsdf.bump_model(getattr(self, "cycles_version", (5, 0, 0)))
         lt = self.lights
         delta = np.zeros(lt.count, bool)
         if lt.count:
@@ -232,10 +233,14 @@ def _bounce(ctx, paths, depth, tile):
     lobes = ctx.materials.gather(hit.mat, _shading(ctx, hit, paths, depth))
     _orient(hit, lobes)
     # Texture hook: normal maps and bump replace the shading normal.
+    smooth = None
     if ctx.materials.textures.normals:
+        smooth = hit.ns
         hit.ns = ctx.materials.textures.perturb(hit, ctx.triangles)
     tt, bb = frame(hit.ns)
     wo_l = to_local(hit.wo, tt, bb, hit.ns)
+    if smooth is not None:
+        _bump_shadowing_setup(ctx, lobes, smooth, hit.ns, tt, bb)
     # Lobe weights and selection depend on wo only: once per vertex, shared
     # by light sampling (every emitter) and BSDF sampling.
     w = bsdf.weights(lobes, wo_l)
@@ -538,6 +543,17 @@ def _add_rows(L, rows, values):
     use = np.zeros(len(L), bool)
     use[rows] = True
     L += np.where(use[:, None], values, 0.0)
+
+
+def _bump_shadowing_setup(ctx, lobes, smooth, ns, tt, bb):
+    """Where a normal map, bump or Bevel moved the shading normal, give the
+    lobes the smooth normal (in the shading frame) for Cycles' bump
+    shadowing term (bsdf.bump_shadowing), in the form of the Blender
+    version the scene comes from."""
+    if np.array_equal(smooth, ns):
+        return
+    lobes.smooth_n = to_local(smooth, tt, bb, ns)
+    lobes.bump_model = np.full(len(ns), ctx.bump_model, np.int8)
 
 
 def _orient(hit, lobes):

@@ -17,7 +17,7 @@ import numpy as np
 
 from .accel import Accel
 from .blas import single_threaded_blas
-from .bsdf import MaterialTable
+from .bsdf import MaterialTable, bump_model
 from .camera import CameraModel, PixelFilter
 from . import pass_events
 from .film import Film
@@ -84,6 +84,7 @@ def prepare(scene, settings):
     world = np.asarray(scene.world.color, dtype=np.float64)
     ctx = Context(accel, tris, materials, lights, camera, world, settings)
     ctx.sampler = Sampler(settings.seed, settings.sampling_pattern)
+    ctx.bump_model = bump_model(getattr(scene, "cycles_version", (5, 0, 0)))
     ctx.pass_config = pass_events.configure(scene, settings)
     return ctx
 

@@ -403,6 +403,23 @@ class EnvironmentTexture:
     matrix: np.ndarray = field(default_factory=lambda: np.eye(3))
     interpolation: str = "Linear"
     name: str = "environment"
+    # A baked procedural world: ``shader`` (a texture expression of the
+    # direction, e.g. a Sky Texture) gives the radiance of every direction
+    # exactly, as Cycles shades the background; ``pixels`` then only build
+    # the sampling table.  ``sun``: a disc the table cannot resolve, sampled
+    # by its cone as Cycles' sun guiding does (``SunGuide``).
+    shader: Optional[object] = None
+    sun: Optional["SunGuide"] = None
+
+
+@dataclass
+class SunGuide:
+    """A small bright disc of a procedural world (the Sky Texture's sun):
+    unit world ``direction``, ``half_angle`` (radians) and ``power``, its
+    luminance integrated over its solid angle (for light selection)."""
+    direction: Tuple[float, float, float]
+    half_angle: float
+    power: float = 0.0
 
 
 @dataclass
@@ -525,6 +542,9 @@ class Scene:
     lights: Sequence[Light] = ()
     world: World = field(default_factory=World)
     camera: Camera = field(default_factory=Camera)
+    # The Blender version the scene comes from: where Cycles changed between
+    # versions (its bump shadowing term), Ember renders as that version's.
+    cycles_version: tuple = (5, 0, 0)
 
     def validate(self) -> None:
         from .validate import validate_scene

@@ -221,6 +221,15 @@ def validate_world(world):
     if tex.interpolation not in ENV_INTERPOLATIONS:
         raise SceneError(f"{what}: unknown interpolation {tex.interpolation!r} "
                          f"(expected one of {ENV_INTERPOLATIONS})")
+    sun = getattr(tex, "sun", None)
+    if sun is not None:
+        axis = np.asarray(sun.direction, dtype=np.float64)
+        if axis.shape != (3,) or not np.all(np.isfinite(axis)) or not np.linalg.norm(axis) > 0:
+            raise SceneError(f"{what}: sun direction must be a finite non-zero 3-vector, got {sun.direction}")
+        if not (np.isfinite(sun.half_angle) and 0 < sun.half_angle <= np.pi):
+            raise SceneError(f"{what}: sun half angle must be in (0, pi], got {sun.half_angle}")
+        if not (np.isfinite(sun.power) and sun.power >= 0):
+            raise SceneError(f"{what}: sun power must be finite and >= 0, got {sun.power}")
 
 
 def validate_camera(cam):

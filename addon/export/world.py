@@ -12,8 +12,11 @@ texture's world -> texture matrix (Cycles' svm_mapping and
 euler_to_transform); a location cannot move a direction and is ignored with a
 warning.  As Cycles: a Mapping with nothing linked to its Vector looks up the
 texture at the zero vector (one constant colour), a missing image renders
-magenta.  Anything else linked to the Background (sky, other textures) is read
-as the Background's constant colour and reported.
+magenta.  Other trees of registered nodes (procedural textures, the Sky
+Texture) are baked into an equirectangular map for sampling; worlds with a
+sky are shaded per direction and its sun disc sampled by its cone (Cycles'
+sun guiding).  Anything else is read as the Background's constant colour and
+reported.
 """
 import numpy as np
 
@@ -132,18 +135,105 @@ def _bake_node_tree(socket, strength, notes):
         return tuple(float(c) * strength for c in value), None
     env = backend.load('environment')
     context = backend.load('nodes.context')
+    skies = _sky_calls(expr)
+    sun = _sun_guide(skies)
     width, height = BAKE_SIZE
     u = (np.arange(width) + 0.5) / width
     v = 1.0 - (np.arange(height) + 0.5) / height      # row 0 is the top (+Z)
     uu, vv = np.meshgrid(u, v)
     d = env.equirect_to_direction(uu.reshape(-1), vv.reshape(-1))
     ctx = context.ShadingContext(len(d), p=d, ng=-d, ns=-d, wo=-d)
+    # Cycles' PATH_RAY_IMPORTANCE_BAKE: with sun guiding the disc stays out
+    # of the table (its cone is sampled instead).
+    ctx.importance_bake = sun is not None
     rgb = backend.load('textures').Compiler().color(expr)(ctx)
     pixels = np.ascontiguousarray(np.maximum(rgb, 0.0).reshape(height, width, 3), dtype=np.float32)
     scene = backend.scene_module()
-    texture = scene.EnvironmentTexture(pixels, strength, np.eye(3), 'Linear', name='baked world nodes')
+    # A sky's sun disc is smaller than a texel: such worlds are shaded per
+    # direction (the bake only builds the sampling table).
+    texture = scene.EnvironmentTexture(pixels, strength, np.eye(3), 'Linear', name='baked world nodes',
+                                       shader=expr if skies else None, sun=sun)
     mean = tuple(float(c) * strength for c in pixels.reshape(-1, 3).mean(axis=0))
     return mean, texture
+
+
+def _sky_calls(expr):
+    """The Sky Texture node calls inside a world expression."""
+    found, seen, stack = [], set(), [expr]
+    while stack:
+        item = stack.pop()
+        if id(item) in seen or item is None or isinstance(item, (str, int, float, bool)):
+            continue
+        seen.add(id(item))
+        if isinstance(item, (tuple, list)):
+            stack.extend(item)
+        elif isinstance(item, dict):
+            stack.extend(item.values())
+        elif hasattr(item, '__dataclass_fields__'):
+            if type(item).__name__ == 'NodeCall' and item.idname == 'ShaderNodeTexSky':
+                found.append(item)
+            stack.extend(getattr(item, name) for name in item.__dataclass_fields__)
+    return found
+
+
+def _sun_guide(skies):
+    """Cycles' sun guiding (scene/light.cpp): one sky with its disc on whose
+    Vector is the ray direction or a linear map of it (Generated through
+    Mapping nodes without location, the hidden texture mapping included:
+    the guide is the disc's direction mapped back; Cycles instead falls back
+    to a 4096 x 2048 table there).  Otherwise None: the disc stays in the
+    baked table, found by BSDF sampling."""
+    from .. import backend
+    scene = backend.scene_module()
+    # Preetham has no disc (Cycles 5.0 would still aim at the Nishita sun).
+    with_disc = [c for c in skies if c.props.get('sun_disc', True) and c.props.get('sky_type') != 'PREETHAM']
+    if len(with_disc) != 1:
+        return None
+    call = with_disc[0]
+    matrix = _direction_matrix(call.inputs.get('Vector'))
+    if matrix is None or abs(np.linalg.det(matrix)) < 1e-12:
+        return None
+    sky = backend.load('nodes.sky')
+    k = sky.kernel_params(call.props)
+    if not k['diameter'] > 0 or not sky.disc_visible(k):
+        return None      # nothing to guide to (Cycles would aim at the hidden disc)
+    direction = np.linalg.solve(matrix, sky.sun_direction(k))
+    direction /= np.linalg.norm(direction)
+    return scene.SunGuide(tuple(float(c) for c in direction), 0.5 * k['diameter'], sky.sun_luminance_integral(k))
+
+
+def _direction_matrix(vector):
+    """M with lookup vector = M (world direction) for a sky's Vector
+    expression, or None when it is not such a linear map."""
+    if vector is None:
+        return np.eye(3)
+    if type(vector).__name__ != 'NodeOutput':
+        return None
+    call = vector.call
+    if call.idname == 'ShaderNodeTexCoord':
+        direct = vector.output == 'Generated' or (vector.output == 'Object' and not call.props.get('object'))
+        return np.eye(3) if direct else None
+    if call.idname != 'ShaderNodeMapping' or vector.output != 'Vector':
+        return None
+    values = [call.inputs.get(name, default) for name, default in
+              (('Location', (0.0, 0.0, 0.0)), ('Rotation', (0.0, 0.0, 0.0)), ('Scale', (1.0, 1.0, 1.0)))]
+    if not all(isinstance(v, tuple) for v in values):
+        return None      # a linked Location / Rotation / Scale
+    location, rotation, scale = (np.array(v, float) for v in values)
+    kind = call.props.get('vector_type', 'POINT')
+    if kind in ('POINT', 'TEXTURE') and np.any(location != 0):
+        return None
+    inner = _direction_matrix(call.inputs.get('Vector'))
+    if inner is None or (kind in ('TEXTURE', 'NORMAL') and np.any(scale == 0)):
+        return None
+    rot = euler_matrix(rotation)
+    if kind == 'TEXTURE':
+        outer = np.diag(1.0 / scale) @ rot.T
+    elif kind == 'NORMAL':
+        outer = rot @ np.diag(1.0 / scale)
+    else:
+        outer = rot @ np.diag(scale)
+    return outer @ inner
 
 
 def _environment(node, strength, fallback, notes):

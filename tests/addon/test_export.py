@@ -361,10 +361,26 @@ def test_world_without_nodes_and_without_world(factory_scene):
 def test_world_texture_falls_back_with_warning(factory_scene):
     tree = factory_scene.world.node_tree
     sky = tree.nodes.new('ShaderNodeTexSky')
+    sky.sky_type = 'HOSEK_WILKIE'      # the one sky model Ember does not evaluate
     tree.links.new(sky.outputs[0], tree.nodes['Background'].inputs['Color'])
     exported = export()
-    assert any("World" in w for w in exported.warnings)
+    assert any("World" in w and "HOSEK_WILKIE" in w for w in exported.warnings)
     assert np.isfinite(exported.scene.world.color).all()
+
+
+def test_world_sky_of_this_blender_is_exported(factory_scene):
+    """The default sky of each Blender (3.4 / 4.2: Nishita, 5.0: Multiple
+    Scattering) becomes a world shaded per direction with its sun guided."""
+    tree = factory_scene.world.node_tree
+    sky = tree.nodes.new('ShaderNodeTexSky')
+    tree.links.new(sky.outputs[0], tree.nodes['Background'].inputs['Color'])
+    exported = export()
+    assert not [w for w in exported.warnings if "World" in w], exported.warnings
+    texture = exported.scene.world.texture
+    assert texture is not None and texture.shader is not None and texture.sun is not None
+    assert np.isfinite(texture.pixels).all() and texture.pixels.max() > 0
+    props = texture.shader.call.props
+    assert props['sky_type'] == sky.sky_type and props['_blender_version'] == tuple(bpy.app.version)
 
 
 # ----------------------------------------------------------------------------

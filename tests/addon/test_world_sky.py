@@ -1,0 +1,110 @@
+"""Sky Texture worlds through the add-on, against Cycles (bpy 5.0).
+
+One scene: a diffuse plane lit by the sky and its sun (the disc out of
+view), the sky above it seen directly.  Ember and Cycles render it with the
+same filter and bounces; blocks and image / quadrant means are compared
+(ember_testlib.compare_with_cycles, one family each).  The sky's per-pixel
+values against Cycles in 3.4, 4.2 and 5.0 are in tests/engine/test_sky.py.
+"""
+import math
+
+import bpy
+import numpy as np
+
+from ember_testlib import assert_no_failing_blocks, compare_with_cycles, render_array, setup_cycles, small_resolution
+from ember_testlib import per_pass_estimates, setup_ember
+
+
+def sky_world(scene, sky_type='SINGLE_SCATTERING', strength=0.05, rotation=None, **props):
+    world = bpy.data.worlds.new("sky")
+    scene.world = world
+    tree = world.node_tree
+    tree.nodes.clear()
+    out = tree.nodes.new('ShaderNodeOutputWorld')
+    background = tree.nodes.new('ShaderNodeBackground')
+    background.inputs['Strength'].default_value = strength
+    sky = tree.nodes.new('ShaderNodeTexSky')
+    sky.sky_type = sky_type
+    for key, value in props.items():
+        setattr(sky, key, value)
+    tree.links.new(sky.outputs['Color'], background.inputs['Color'])
+    tree.links.new(background.outputs[0], out.inputs['Surface'])
+    if rotation is not None:
+        # Blender 5.0 hides the Nishita skies' Vector input; the node's
+        # hidden texture mapping still turns it (in Cycles too).
+        sky.texture_mapping.rotation = rotation
+    return sky
+
+
+def plane_under_sky(scene):
+    for obj in list(bpy.data.objects):
+        if obj.type != 'CAMERA':
+            bpy.data.objects.remove(obj)
+    mat = bpy.data.materials.new("ground")
+    mat.use_nodes = True
+    nodes = mat.node_tree.nodes
+    nodes.clear()
+    diffuse = nodes.new('ShaderNodeBsdfDiffuse')
+    diffuse.inputs['Color'].default_value = (0.5, 0.5, 0.5, 1.0)
+    out = nodes.new('ShaderNodeOutputMaterial')
+    mat.node_tree.links.new(diffuse.outputs[0], out.inputs['Surface'])
+    bpy.ops.mesh.primitive_plane_add(size=6.0, location=(0.0, 0.0, 0.0))
+    bpy.context.active_object.data.materials.append(mat)
+    camera = scene.camera
+    camera.location = (0.0, -4.0, 1.2)
+    camera.rotation_euler = (math.radians(78.0), 0.0, 0.0)
+    camera.data.lens = 20.0
+
+
+def test_export_sky_world_is_shaded_per_direction_with_a_sun_guide(factory_scene):
+    from addon.export import scene as scene_export
+    sky = sky_world(factory_scene, sun_elevation=math.radians(20.0), sun_rotation=math.radians(30.0))
+    exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
+    tex = exported.scene.world.texture
+    assert tex is not None and tex.shader is not None and tex.sun is not None
+    assert not [w for w in exported.warnings if 'World' in w]
+    e, r = sky.sun_elevation, 2 * math.pi - sky.sun_rotation
+    expected = (-math.cos(e) * math.sin(r), math.cos(e) * math.cos(r), math.sin(e))
+    np.testing.assert_allclose(tex.sun.direction, expected, atol=1e-6)
+    assert tex.sun.half_angle == np.float32(sky.sun_size) / 2
+    # The disc is not in the sampling table (it is sampled by its cone).
+    assert tex.pixels.max() < 100.0
+    # A texture-mapping rotation: the guide is the disc's direction rotated back.
+    rotation = (0.3, -0.2, 1.1)
+    sky_world(factory_scene, rotation=rotation, sun_elevation=e, sun_rotation=sky.sun_rotation)
+    from addon.export.world import euler_matrix
+    exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
+    np.testing.assert_allclose(exported.scene.world.texture.sun.direction,
+                               euler_matrix(np.array(rotation)).T @ np.array(expected), atol=1e-6)
+    # A sun below the horizon is not guided to.
+    sky = sky_world(factory_scene, sun_elevation=math.radians(-5.0))
+    assert scene_export.export_scene(bpy.context.evaluated_depsgraph_get()).scene.world.texture.sun is None
+    # Hosek-Wilkie is not evaluated: the constant colour, named.
+    sky.sky_type = 'HOSEK_WILKIE'
+    exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
+    assert exported.scene.world.texture is None
+    assert any('HOSEK_WILKIE' in w for w in exported.warnings)
+
+
+def test_sky_lit_plane_matches_cycles(factory_scene, tmp_path, tapped_engine):
+    """Blender 5.0's default sky (Multiple Scattering), turned by its
+    texture mapping.  The plane is lit mostly by the sun disc (0.55 degrees): without
+    the cone sampling its noise would swamp this comparison."""
+    sky_world(factory_scene, 'MULTIPLE_SCATTERING', sun_elevation=math.radians(35.0),
+              sun_rotation=math.radians(200.0), altitude=300.0, rotation=(0.0, 0.0, 0.7))
+    plane_under_sky(factory_scene)
+    small_resolution(factory_scene, 40, 30)
+    setup_ember(factory_scene, 64, seed=5, max_bounces=1)
+    render_array(factory_scene, tmp_path, "ember")
+    from addon import engine as ember_engine
+    assert ember_engine.RENDER_LOG[-1]['error'] is None
+    ember = per_pass_estimates(tapped_engine[-1].images)[..., :3]
+    cycles = []
+    for seed in range(6):
+        setup_cycles(factory_scene, 16, seed, 1)
+        cycles.append(render_array(factory_scene, tmp_path, f"cycles_{seed}")[..., :3])
+    cycles = np.array(cycles, np.float64)
+    assert np.isfinite(ember).all()
+    print(f"\nplane + sky: image mean Ember {ember.mean(axis=(0, 1, 2))}, Cycles {cycles.mean(axis=(0, 1, 2))}")
+    failures, details, _, _ = compare_with_cycles("sky plane", ember, cycles, 5)
+    assert_no_failing_blocks(failures, details)
