@@ -137,6 +137,65 @@ def per_pass_estimates(images):
 
 
 # ----------------------------------------------------------------------------
+# Ember against live Cycles renders (where no converged reference can be: the
+# Blender 3.4 binary's Cycles; the sky parity test)
+
+def render_ember_and_cycles(scene, tmp_path, name, taps, ember_spp, ember_seed, cycles_seeds, cycles_spp,
+                            bounces):
+    """Ember's final image and per-pass estimates (RGB), and Cycles' RGB
+    images for seeds 0..cycles_seeds-1, with the same bounces and filter."""
+    setup_ember(scene, ember_spp, seed=ember_seed, max_bounces=bounces)
+    image = render_array(scene, tmp_path, "ember_" + name)
+    from addon import engine as ember_engine
+    log = ember_engine.RENDER_LOG[-1]
+    assert log['error'] is None, log['error']
+    assert np.isfinite(image).all()
+    ember_batches = per_pass_estimates(taps[-1].images)[..., :3]
+    cycles = []
+    for seed in range(cycles_seeds):
+        setup_cycles(scene, cycles_spp, seed, bounces)
+        cycles.append(render_array(scene, tmp_path, f"cycles_{name}_{seed}")[..., :3])
+    return image, ember_batches, np.array(cycles, dtype=np.float64)
+
+
+def compare_with_cycles(name, ember_batches, cycles, block):
+    """Ember's passes against Cycles' seeds (tests/ember_stats.py): Welch's t
+    per block and channel, and the total of the whole image and of its four
+    quadrants (a bias spread over many blocks hides in each of them).  Prints
+    both results with their power.  Returns failures (blocks), details (with
+    the failing mean tests) and both block-mean arrays."""
+    import ember_stats as stats
+    ember_blocks = stats.block_means(ember_batches, block)
+    cycles_blocks = stats.block_means(cycles, block)
+    failures, details = stats.failing_blocks(ember_blocks, cycles_blocks, name=f"{name} blocks")
+    tests, level = stats.region_mean_tests(ember_batches, cycles, name=f"{name} region means")
+    details['mean_failures'] = stats.report_mean_tests(f"{name}: Ember against Cycles", tests, level)
+    details['relative_mean_error'] = tests[0].relative
+    block_se = _typical_relative_block_se(ember_blocks, cycles_blocks)
+    print(f"{name}: mean |block error| {details['relative_abs_error']:.4f}, max |t| {details['max_abs_t']:.2f} "
+          f"over {details['blocks']} block-channels (reject below p={details['level']:.2e}); a bias in one "
+          f"block is detected with probability 1/2 from "
+          f"{stats.detectable(block_se, details['level'], min(len(ember_batches), len(cycles)) - 1):.1%} "
+          f"(median block)")
+    return failures, details, ember_blocks, cycles_blocks
+
+
+def _typical_relative_block_se(a, b):
+    """Median relative standard error of a block difference."""
+    se = np.sqrt(a.var(axis=0, ddof=1) / len(a) + b.var(axis=0, ddof=1) / len(b))
+    mean = np.abs(b.mean(axis=0))
+    keep = mean > 0
+    return float(np.median(se[keep] / mean[keep])) if keep.any() else 0.0
+
+
+def assert_no_failing_blocks(failures, details):
+    assert len(failures) == 0, (
+        f"{len(failures)} blocks differ from Cycles (block, y, x, channel): {failures[:10].tolist()}; {details}")
+    assert not details['mean_failures'], (
+        f"the image or region means differ from Cycles: {details['mean_failures']}")
+
+
+# ----------------------------------------------------------------------------
 # Converged Cycles references (tools/cycles_references.py, tests/data)
 
 def empty_factory_scene():

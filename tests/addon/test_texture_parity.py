@@ -375,18 +375,10 @@ def reference_scene(name, folder):
     return SCENES[name](str(folder)), 0
 
 
-# Found by the converged reference (issue 12), left to the lead: the quads
-# with a tangent-space Normal Map at strength 1 render brighter than Cycles:
-# +0.9 % (t 10), +0.7 % rotated UVs (t 7.5), +0.6 % Principled (t 6.9) at
-# 1024 samples (seed 7); strength 0.5 and the Bump quads agree within 0.2 %.
-# Image mean +0.29 % +- 0.03 % at the test's 256 samples.  Strict: an XPASS
-# (the bias fixed) fails until this mark goes.
-NORMAL_MAP_BIAS = pytest.mark.xfail(strict=True, reason="Normal Map (strength 1) 0.6-0.9 % brighter than "
-                                                        "converged Cycles (docs/testing.md)")
-
-
-@pytest.mark.parametrize("name", [pytest.param(n, marks=NORMAL_MAP_BIAS) if n == 'normals' else n
-                                  for n in sorted(SCENES)])
+# The converged reference found the quads with a tangent-space Normal Map at
+# strength 1 0.6-0.9 % brighter than Cycles (t 7-10; image +0.29 % +- 0.03 %):
+# Cycles' bump shadowing term, which main added since (2b2ce97), removed it.
+@pytest.mark.parametrize("name", sorted(SCENES))
 def test_textures_agree_with_cycles(name, tmp_path, tapped_engine):
     scene, bounces = reference_scene(name, tmp_path)
     image, var = render_for_reference(scene, tmp_path, name, tapped_engine, EMBER_SPP, 1, bounces)
