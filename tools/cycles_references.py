@@ -1,21 +1,25 @@
-"""Render the converged Cycles references of the scene-level parity tests.
+"""Render the converged Cycles references of the parity tests.
 
-    .venv/bin/python -P tools/cycles_references.py            # every reference
-    .venv/bin/python -P tools/cycles_references.py cornell    # one
+    .venv/bin/python -P tools/cycles_references.py                 # every reference
+    .venv/bin/python -P tools/cycles_references.py cornell light_*  # some (shell-style patterns)
 
 Each reference is the mean of ``SEEDS`` independent Cycles renders (CPU, no
-denoising, nothing clamped, the test's bounces and pixel filter) at a small
-resolution, written to tests/data/cycles_<name>.exr with six float channels:
-R, G, B (the mean) and var.R, var.G, var.B (the variance of that mean per
-pixel, from the scatter of the seeds), so a test can account for Cycles'
-residual noise.  The EXR header records the Blender/Cycles version, the
-samples, seeds, bounces, filter and resolution (``ember:*`` attributes); the
-tests refuse a reference whose settings differ from theirs.
+denoising, nothing clamped, the test's bounces and pixel filter) at the
+test's small resolution, written to tests/data/cycles_<name>.exr with six
+float channels: R, G, B (the mean) and var.R, var.G, var.B (the variance of
+that mean per pixel, from the scatter of the seeds), so a test can account
+for Cycles' residual noise.  The EXR header records the Blender/Cycles
+version, the samples, seeds, bounces, filter, resolution and a fingerprint
+of the Blender scene (``ember:*`` attributes,
+tests/addon/ember_testlib.scene_fingerprint); the tests refuse a reference
+whose settings or scene differ from theirs.
 
-The scenes are blend_scenes/cornell.blend and ``glossy_world`` (built here by
-``build_glossy_world``: smooth GGX plates reflecting a constant world), all
-rendered at the settings in ``REFERENCES``.  Re-run after changing a scene or
-a setting; it takes a few minutes on two cores.
+The scenes: blend_scenes/cornell.blend and ``glossy_world`` (built here by
+``build_glossy_world``: smooth GGX plates reflecting a constant world), held
+by tests/addon/test_cycles_references.py, and the parity tests' scenes,
+built by the ``reference_scene(name, folder)`` of the test module that owns
+them (``REFERENCES``).  Re-run a reference after changing its scene or
+setting; each takes one to a few minutes on two cores.
 """
 import math
 import os
@@ -26,11 +30,31 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DATA = os.path.join(ROOT, 'tests', 'data')
 
 SEEDS = 8
-# name: (width, height, max bounces, samples per seed)
+# name: (module building the scene (None: here), its scene name, Cycles samples per seed)
 REFERENCES = {
-    'cornell': (48, 48, 4, 4096),
-    'glossy_world': (48, 32, 4, 2048),
+    'cornell': (None, 'cornell', 2048),
+    'glossy_world': (None, 'glossy_world', 2048),
 }
+for _scene in ('veach_mis', 'instances_lights'):
+    REFERENCES['scenes_' + _scene] = ('test_render_scenes', _scene, 2048)
+for _scene in ('rect_close', 'light_over_lit_world', 'big_triangle', 'spot_blend', 'shadow_invisible',
+               'glossy_invisible_light', 'diffuse_camera_invisible'):
+    REFERENCES['light_' + _scene] = ('test_light_parity', _scene, 2048)
+for _scene in ('point_light', 'area_light'):
+    REFERENCES['transparency_' + _scene] = ('test_transparency_parity', _scene, 2048)
+for _scene in ('glass', 'principled', 'mix', 'furnace'):
+    REFERENCES['material_' + _scene] = ('test_material_parity', _scene, 2048)
+for _scene in ('images', 'nodes', 'normals', 'inputs'):
+    REFERENCES['texture_' + _scene] = ('test_texture_parity', _scene, 1024)
+for _scene in ('nodes', 'world'):
+    REFERENCES['node_scene_' + _scene] = ('test_node_scene_parity', _scene, 2048)
+for _scene in ('spheres', 'background'):
+    REFERENCES['hdri_' + _scene] = ('test_world_hdri', _scene, 2048)
+REFERENCES['ray_nodes_ao_bevel'] = ('test_ray_node_parity', 'ao_bevel', 2048)
+REFERENCES['sky_plane'] = ('test_world_sky', 'plane', 2048)
+# the scenes built here: (width, height, max bounces)
+BUILT_HERE = {'cornell': (48, 48, 4), 'glossy_world': (48, 32, 4)}
+HEADER = ('scene', 'blender', 'samples', 'seeds', 'max_bounces', 'filter', 'width', 'height', 'fingerprint')
 FILTER = ('BLACKMAN_HARRIS', 1.5)
 
 
@@ -82,33 +106,51 @@ def build_glossy_world(bpy):
 
 
 def open_reference_scene(bpy, name):
-    """The scene of reference ``name`` at its resolution (engine not set)."""
+    """The scene of a reference built here, at its resolution (engine not set)."""
     if name == 'glossy_world':
         scene = build_glossy_world(bpy)
     else:
         bpy.ops.wm.open_mainfile(filepath=os.path.join(ROOT, 'blend_scenes', name + '.blend'))
         scene = bpy.context.scene
-    width, height = REFERENCES[name][:2]
+    width, height = BUILT_HERE[name][:2]
     scene.render.resolution_x, scene.render.resolution_y = width, height
     scene.render.resolution_percentage = 100
     scene.render.use_border = False
     return scene
 
 
-def metadata(name):
+def build(name, folder):
+    """(scene, max bounces) of reference ``name``, as its test builds it."""
+    import importlib
     import bpy
-    width, height, bounces, samples = REFERENCES[name]
-    return {'ember:scene': name, 'ember:renderer': 'Cycles CPU', 'ember:blender': bpy.app.version_string,
-            'ember:samples': samples, 'ember:seeds': SEEDS, 'ember:max_bounces': bounces,
-            'ember:filter': f'{FILTER[0]} {FILTER[1]}', 'ember:width': width, 'ember:height': height}
+    module, scene_name, _ = REFERENCES[name]
+    if module is None:
+        return open_reference_scene(bpy, scene_name), BUILT_HERE[scene_name][2]
+    return importlib.import_module(module).reference_scene(scene_name, folder)
+
+
+def expected_header(name):
+    """The header entries that do not depend on the built scene."""
+    _, scene_name, samples = REFERENCES[name]
+    return {'scene': scene_name, 'samples': str(samples), 'seeds': str(SEEDS),
+            'filter': f'{FILTER[0]} {FILTER[1]}'}
+
+
+def metadata(name, scene, bounces):
+    import bpy
+    from ember_testlib import scene_fingerprint
+    return {'ember:' + key: value for key, value in dict(
+        expected_header(name), renderer='Cycles CPU', blender=bpy.app.version_string, max_bounces=bounces,
+        width=scene.render.resolution_x, height=scene.render.resolution_y,
+        fingerprint=scene_fingerprint(scene)).items()}
 
 
 def render(name, folder):
-    import bpy
     import numpy as np
     from ember_testlib import render_array, setup_cycles
-    width, height, bounces, samples = REFERENCES[name]
-    scene = open_reference_scene(bpy, name)
+    samples = REFERENCES[name][2]
+    scene, bounces = build(name, folder)
+    attributes = metadata(name, scene, bounces)     # before Cycles' settings: the scene as the test sees it
     images = []
     for seed in range(SEEDS):
         setup_cycles(scene, samples, seed, bounces, *FILTER)
@@ -116,9 +158,11 @@ def render(name, folder):
     images = np.array(images)
     mean = images.mean(axis=0)
     var_mean = images.var(axis=0, ddof=1) / SEEDS
-    write_reference(reference_path(name), mean, var_mean, metadata(name))
-    print(f"{name}: {width}x{height}, {SEEDS} x {samples} spp, mean {mean.mean(axis=(0, 1))}, "
-          f"relative se of the image mean {math.sqrt(var_mean.sum()) / mean.sum():.2e}")
+    write_reference(reference_path(name), mean, var_mean, attributes)
+    total = abs(mean.sum())
+    print(f"{name}: {scene.render.resolution_x}x{scene.render.resolution_y}, {SEEDS} x {samples} spp, "
+          f"mean {mean.mean(axis=(0, 1))}, relative se of the image mean "
+          f"{math.sqrt(var_mean.sum()) / total if total else 0.0:.2e}", flush=True)
 
 
 def write_reference(path, mean, var_mean, attributes):
@@ -136,15 +180,22 @@ def write_reference(path, mean, var_mean, attributes):
         raise OSError(f"could not write {path}: {oiio.geterror()}")
 
 
-def main(names):
+def main(patterns):
+    import fnmatch
     os.environ.setdefault('BLENDER_USER_RESOURCES', tempfile.mkdtemp(prefix='ember-refs-'))
-    for path in (ROOT, os.path.join(ROOT, 'tests', 'addon')):
+    for path in (ROOT, os.path.join(ROOT, 'tests'), os.path.join(ROOT, 'tests', 'addon')):
         if path not in sys.path:
             sys.path.insert(0, path)
     import bpy  # noqa: F401  (bpy before the add-on)
+    import addon
+    addon.register()       # the tests' scenes are built with the add-on registered
+    names = [n for n in REFERENCES if not patterns or any(fnmatch.fnmatch(n, p) for p in patterns)]
+    if not names:
+        print(f"no reference matches {patterns}; known: {', '.join(REFERENCES)}")
+        return 2
     os.makedirs(DATA, exist_ok=True)
-    with tempfile.TemporaryDirectory() as folder:
-        for name in names or sorted(REFERENCES):
+    for name in names:
+        with tempfile.TemporaryDirectory() as folder:
             render(name, folder)
     return 0
 

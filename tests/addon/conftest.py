@@ -26,7 +26,7 @@ import bpy  # noqa: E402
 import addon  # noqa: E402
 
 
-from ember_testlib import PassTap, engine_available, require  # noqa: E402
+from ember_testlib import PassTap, empty_factory_scene, engine_available, require  # noqa: E402
 from addon import backend  # noqa: E402
 
 
@@ -47,12 +47,11 @@ def factory_scene(registered_addon):
 
 
 @pytest.fixture
-def empty_scene(factory_scene):
+def empty_scene(registered_addon):
     """The factory scene without its cube and light, camera kept."""
-    for obj in list(bpy.data.objects):
-        if obj.type != 'CAMERA':
-            bpy.data.objects.remove(obj)
-    return factory_scene
+    scene = empty_factory_scene()
+    scene.render.engine = 'EMBER'
+    return scene
 
 
 @pytest.fixture
@@ -61,15 +60,27 @@ def needs_engine():
     require(ok, "engine.render is not importable: " + reason)
 
 
+class Taps(list):
+    """The PassTaps of the renders so far.  ``samples_per_pass`` (if set)
+    replaces the add-on's (one sample per pass) in the renders that follow:
+    a test that needs no per-pass estimates renders faster in one pass."""
+    samples_per_pass = None
+
+
 @pytest.fixture
 def tapped_engine(monkeypatch, needs_engine):
-    """Record Ember's progressive images while rendering through Blender."""
+    """Record Ember's progressive images, and its result, while rendering
+    through Blender."""
+    import dataclasses
     real = backend.render_function()
-    taps = []
+    taps = Taps()
 
     def render(scene, settings, progress=None):
         tap = PassTap(progress)
         taps.append(tap)
-        return real(scene, settings, tap)
+        if taps.samples_per_pass:
+            settings = dataclasses.replace(settings, samples_per_pass=taps.samples_per_pass)
+        tap.result = real(scene, settings, tap)
+        return tap.result
     monkeypatch.setattr(backend, 'render_function', lambda: render)
     return taps

@@ -3,24 +3,12 @@ import os
 
 import bpy
 import numpy as np
-import pytest
+
+from prerequisites import in_ci, require  # noqa: F401  (tests/prerequisites.py)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCENES_DIR = os.path.join(ROOT, 'blend_scenes')
 SCENE_NAMES = ('cornell', 'veach_mis', 'instances_lights')
-
-
-def in_ci():
-    return os.environ.get('CI', '').lower() == 'true'
-
-
-def require(condition, reason):
-    """Skip locally, fail in CI, when a prerequisite is missing."""
-    if condition:
-        return
-    if in_ci():
-        pytest.fail("missing prerequisite (CI=true): " + reason)
-    pytest.skip(reason)
 
 
 def engine_available():
@@ -149,7 +137,8 @@ def per_pass_estimates(images):
 
 
 # ----------------------------------------------------------------------------
-# Ember against Cycles
+# Ember against live Cycles renders (where no converged reference can be: the
+# Blender 3.4 binary's Cycles; the sky parity test)
 
 def render_ember_and_cycles(scene, tmp_path, name, taps, ember_spp, ember_seed, cycles_seeds, cycles_spp,
                             bounces):
@@ -204,3 +193,236 @@ def assert_no_failing_blocks(failures, details):
         f"{len(failures)} blocks differ from Cycles (block, y, x, channel): {failures[:10].tolist()}; {details}")
     assert not details['mean_failures'], (
         f"the image or region means differ from Cycles: {details['mean_failures']}")
+
+
+# ----------------------------------------------------------------------------
+# Converged Cycles references (tools/cycles_references.py, tests/data)
+
+def empty_factory_scene():
+    """Blender's factory scene without its cube and light (camera kept)."""
+    bpy.ops.wm.read_factory_settings()
+    for obj in list(bpy.data.objects):
+        if obj.type != 'CAMERA':
+            bpy.data.objects.remove(obj)
+    return bpy.context.scene
+
+
+def references_tool():
+    """tools/cycles_references.py as a module."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location('cycles_references',
+                                                  os.path.join(ROOT, 'tools', 'cycles_references.py'))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+# What a reference depends on, read from the Blender scene (not from Ember's
+# export): objects, meshes, materials and world node trees, lights, camera,
+# resolution.  Names, file paths and editor layout are left out.
+_SKIP = {'rna_type', 'name', 'name_full', 'session_uid', 'is_evaluated', 'original', 'users', 'use_fake_user',
+         'use_extra_user', 'is_embedded_data', 'is_library_indirect', 'is_missing', 'is_runtime_data', 'tag',
+         'id_type', 'library', 'library_weak_reference', 'asset_data', 'override_library', 'preview',
+         'location', 'width', 'height', 'dimensions', 'select', 'show_options', 'show_preview', 'show_texture',
+         'hide', 'label', 'width_hidden', 'color', 'use_custom_color', 'bl_width_default', 'bl_width_min',
+         'bl_width_max', 'bl_height_default', 'bl_height_min', 'bl_height_max', 'bl_icon', 'bl_label',
+         'bl_description', 'bl_static_type', 'type', 'color_tag', 'warning_propagation', 'is_active_output',
+         'is_editor_icon_update', 'filepath', 'filepath_raw', 'node_tree', 'image', 'object', 'parent'}
+
+
+def _rounded(value):
+    if isinstance(value, float):
+        return float(f"{value:.6g}")
+    if isinstance(value, (str, int, bool)) or value is None:
+        return value
+    try:
+        return tuple(_rounded(v) for v in value)
+    except TypeError:
+        return repr(type(value).__name__)
+
+
+def _rna(struct):
+    items = []
+    for prop in struct.bl_rna.properties:
+        key = prop.identifier
+        if key in _SKIP or prop.type in ('POINTER', 'COLLECTION'):
+            continue
+        try:
+            items.append((key, _rounded(getattr(struct, key))))
+        except (AttributeError, RuntimeError, TypeError):
+            continue
+    return items
+
+
+def _image_print(image):
+    if image is None:
+        return None
+    pixels = np.empty(len(image.pixels), np.float32)
+    image.pixels.foreach_get(pixels)
+    return (tuple(image.size), image.source, image.alpha_mode, image.colorspace_settings.name,
+            image.packed_file is not None, hashlib_sha(pixels.tobytes()))
+
+
+def hashlib_sha(data):
+    import hashlib
+    return hashlib.sha256(data).hexdigest()
+
+
+def _tree_print(tree):
+    if tree is None:
+        return None
+    nodes = list(tree.nodes)
+    index = {node.name: i for i, node in enumerate(nodes)}
+    out = []
+    for node in nodes:
+        inputs = [(s.identifier, _rounded(getattr(s, 'default_value', None))) for s in node.inputs]
+        ramp = getattr(node, 'color_ramp', None)
+        out.append((node.bl_idname, _rna(node), inputs,
+                    [(e.position, tuple(e.color)) for e in ramp.elements] if ramp else None,
+                    _image_print(getattr(node, 'image', None)),
+                    _tree_print(getattr(node, 'node_tree', None)),
+                    [(o.identifier, _rounded(getattr(o, 'default_value', None))) for o in node.outputs]))
+    links = sorted((index[link.from_node.name], link.from_socket.identifier, index[link.to_node.name],
+                    link.to_socket.identifier) for link in tree.links)
+    return _rounded(out), links
+
+
+def _mesh_print(mesh):
+    """Order-independent (Blender 5's primitives number their vertices and
+    faces differently from one call to the next): each face as the sorted
+    set of its corners (position, UVs, colours), the faces sorted."""
+    co = np.empty(len(mesh.vertices) * 3, np.float64)
+    mesh.vertices.foreach_get('co', co)
+    co = np.round(co.reshape(-1, 3), 5).tolist()
+    uvs = [[tuple(np.round(d.uv, 5)) for d in layer.data] for layer in mesh.uv_layers]
+    colours = [(a.domain == 'POINT', [tuple(np.round(d.color, 5)) for d in a.data]) for a in mesh.color_attributes]
+    faces = []
+    for poly in mesh.polygons:
+        corners = sorted((tuple(co[v]), tuple(uv[loop] for uv in uvs),
+                          tuple(data[v if by_point else loop] for by_point, data in colours))
+                         for v, loop in zip(poly.vertices, poly.loop_indices))
+        faces.append((tuple(corners), poly.use_smooth, poly.material_index))
+    return hashlib_sha(repr(sorted(faces)).encode()), [_material_print(m) for m in mesh.materials]
+
+
+def _material_print(material):
+    if material is None:
+        return None
+    return _rna(material), _tree_print(material.node_tree if material.use_nodes else None)
+
+
+def scene_fingerprint(scene):
+    """A hash of what the scene renders: a reference is only valid for the
+    scene it was rendered from."""
+    bpy.context.view_layer.update()     # matrix_world as rendered
+    objects = []
+    for obj in sorted(scene.objects, key=lambda o: o.name):
+        data = obj.data
+        if obj.type == 'MESH':
+            data_print = _mesh_print(data)
+        elif data is not None:
+            data_print = _rna(data)
+        else:
+            data_print = None
+        matrix = _rounded([tuple(row) for row in obj.matrix_world])
+        flags = [(k, getattr(obj, k)) for k in ('hide_render', 'visible_camera', 'visible_diffuse',
+                                                'visible_glossy', 'visible_transmission', 'visible_shadow')]
+        objects.append((obj.type, matrix, flags, data_print,
+                        [_material_print(slot.material) for slot in obj.material_slots if slot.link == 'OBJECT']))
+    world = scene.world
+    render = scene.render
+    description = (objects, _rna(world) if world else None, _tree_print(world.node_tree) if world else None,
+                   scene.camera.name if scene.camera else None,
+                   (render.resolution_x, render.resolution_y, render.resolution_percentage, render.film_transparent))
+    if os.environ.get('EMBER_FINGERPRINT_DUMP'):   # debugging a refused reference: what differs
+        with open(os.environ['EMBER_FINGERPRINT_DUMP'], 'a') as dump:
+            dump.write(repr(description).replace('), (', '),\n(') + '\n=====\n')
+    return hashlib_sha(repr(description).encode())[:16]
+
+
+def load_reference(name, scene=None, bounces=None):
+    """Mean, variance of the mean and header of tests/data/cycles_<name>.exr,
+    checked against the tool's settings and (given the scene the test built
+    and its bounces) the scene's resolution, bounces and fingerprint."""
+    import OpenImageIO as oiio
+    refs = references_tool()
+    path = refs.reference_path(name)
+    require(os.path.isfile(path), f"{path} is missing: run tools/cycles_references.py {name}")
+    buf = oiio.ImageBuf(path)
+    spec = buf.spec()
+    pixels = buf.get_pixels(oiio.FLOAT).astype(np.float64)
+    header = {key: spec.getattribute('ember:' + key) for key in refs.HEADER}
+    expected = refs.expected_header(name)
+    if scene is not None:
+        expected.update(width=str(scene.render.resolution_x), height=str(scene.render.resolution_y),
+                        fingerprint=scene_fingerprint(scene))
+    if bounces is not None:
+        expected['max_bounces'] = str(bounces)
+    stale = {k: (header.get(k), v) for k, v in expected.items() if header.get(k) != v}
+    assert not stale, (f"{path} was rendered from another scene or with other settings (file, now): {stale}; "
+                       f"re-run tools/cycles_references.py {name}")
+    height, width = int(header['height']), int(header['width'])
+    assert pixels.shape == (height, width, 6), pixels.shape
+    return pixels[..., :3], pixels[..., 3:], header
+
+
+def render_for_reference(scene, tmp_path, name, taps, spp, seed, bounces):
+    """Ember's render through Blender (one pass) and the variance of each
+    pixel's mean (tapped_engine keeps the engine's result)."""
+    setup_ember(scene, spp, seed=seed, max_bounces=bounces)
+    taps.samples_per_pass = spp
+    image = render_array(scene, tmp_path, "ember_" + name)
+    from addon import engine as ember_engine
+    log = ember_engine.RENDER_LOG[-1]
+    assert log['error'] is None, log['error']
+    assert np.isfinite(image).all()
+    var = taps[-1].result.variance.astype(np.float64)
+    return image, var
+
+
+class ReferenceCheck:
+    """Ember (image, per-pixel variance of the mean, spp samples) against a
+    converged Cycles reference: the image and region totals
+    (``region_mean_tests_var``) and blocks per channel
+    (``failing_blocks_var``), each one family of the suite budget, with their
+    power printed."""
+
+    def __init__(self, name, image, var, spp, ref, ref_var, header, block, splits=2):
+        import ember_stats as stats
+        seeds, samples = int(header['seeds']), int(header['samples'])
+        self.name = name
+        self.tests, self.level = stats.region_mean_tests_var(
+            image, var, spp - 1, ref, ref_var, seeds - 1, name=f"{name} against Cycles", splits=splits,
+            float32_sums_b=samples)
+        self.mean_failures = stats.report_mean_tests(
+            f"{name}: Ember ({spp} spp) against converged Cycles ({seeds} x {samples} spp)", self.tests, self.level)
+        image_test = self.tests[0]
+        self.image_detects = stats.detectable(image_test.relative_se, self.level, image_test.dof)
+        self.blocks, self.details = stats.failing_blocks_var(
+            image, var, spp - 1, ref, ref_var, seeds - 1, block, name=f"{name} blocks against Cycles",
+            float32_sums_b=samples)
+        self.block_detects = self.details['median_block_detects']
+        print(f"{name}: image mean detects {self.image_detects:.2%}; {self.details['blocks']} block-channels of "
+              f"{block}x{block} pixels, max |t| {self.details['max_abs_t']:.2f}, a bias in one block detected "
+              f"from {self.block_detects:.1%} (median block), with probability 1/2")
+
+    def assert_agrees(self, image_power=None, block_power=None):
+        """No region or block differs; where given, the power is asserted too
+        (a test that could not see the target bias must not pass as if it did)."""
+        if image_power is not None:
+            assert self.image_detects <= image_power, (
+                f"{self.name}: the image-mean test only resolves {self.image_detects:.2%}, not {image_power:.1%}")
+        if block_power is not None:
+            assert self.block_detects <= block_power, (
+                f"{self.name}: the median block only resolves {self.block_detects:.1%}, not {block_power:.0%}")
+        assert not self.mean_failures, f"{self.name}: the image or region means differ from Cycles: " \
+                                       f"{self.mean_failures}"
+        assert len(self.blocks) == 0, (f"{self.name}: blocks (y, x, channel) differ from Cycles: "
+                                       f"{self.blocks[:10].tolist()}; {self.details}")
+
+
+def check_against_reference(name, scene, bounces, image, var, spp, block, splits=2):
+    """Ember's image and variances against reference ``name`` of the scene
+    the test built (checked to be the one the reference was rendered from)."""
+    ref, ref_var, header = load_reference(name, scene, bounces)
+    return ReferenceCheck(name, image[..., :3].astype(np.float64), var, spp, ref, ref_var, header, block, splits)

@@ -1,10 +1,11 @@
 """Cycles parity for light sampling and ray visibility (issue 4).
 
-Each scene is built with bpy, rendered by Ember (one sample per pass: the
-passes are independent batches) and by Cycles with several seeds, and
-compared block by block with Welch's t and by the image and quadrant totals,
-at the suite's family level (ember_testlib.compare_with_cycles, as
-test_render_scenes.py); results and power are printed.
+Each scene is built with bpy (``reference_scene``) and rendered by Ember;
+tools/cycles_references.py rendered it once with Cycles to convergence
+(tests/data/cycles_light_<scene>.exr, with the variance of its mean).  The
+image and quadrant totals and every block and channel are compared by
+Welch's t with both noises, at the suite's family level
+(ember_testlib.check_against_reference); results and power are printed.
 Beside the comparison, each visibility scene checks in Ember's own image
 that the flag has its effect (a shadow gone, an object missing).
 """
@@ -13,14 +14,23 @@ import math
 import pytest
 
 from parity_scenes import box, light, material, mesh_object, plane, top_camera
-from ember_testlib import (assert_no_failing_blocks, compare_with_cycles, render_ember_and_cycles,
-                           small_resolution)
+from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference
 
-EMBER_SPP = 48
-CYCLES_SEEDS = 6
-CYCLES_SPP = 16
-BLOCK = 4
-WIDTH, HEIGHT = 32, 24
+BLOCK = 8
+IMAGE_POWER = 0.005     # the image mean must resolve a 0.5 % bias (issue 12) ...
+BLOCK_POWER = 0.02      # ... and the median block 2 %, except in the scenes below (docs/testing.md)
+# Ember's samples per scene: what reaches both targets (power printed).
+SAMPLES = {'big_triangle': 2048, 'spot_blend': 768, 'rect_close': 640, 'glossy_invisible_light': 2048}
+EMBER_SPP = 256
+# glossy_invisible_light: a glossy floor lit through reflections of two area
+# lights, each hidden from one kind of ray, is noisy in both renderers and
+# heavy-tailed: at 256 samples two quadrants came out 4.3 % and 5.7 % low
+# (t -4.6, -5.6; the image +2.3 % +- 1.3 %) because the rare bright paths
+# were missing from them, and their variance with them; at 2048 samples
+# (seeds 2, 5) every quadrant is within 0.6 % +- 0.8 %, i.e. the normal
+# approximation holds there.  2048 samples resolve about 2 % over the image,
+# about 8 % per block (the targets would need some 20 times more).
+WEAK = {'glossy_invisible_light': (0.025, 0.10)}
 
 
 def rect_close(scene):
@@ -113,20 +123,21 @@ SCENES = {'rect_close': rect_close, 'light_over_lit_world': light_over_lit_world
           'diffuse_camera_invisible': diffuse_camera_invisible}
 
 
-def build(name, empty_scene):
-    bounces = SCENES[name](empty_scene)
-    return empty_scene, bounces
+def reference_scene(name, folder=None):
+    """The scene ``name`` and its bounces (as tools/cycles_references.py renders it)."""
+    scene = empty_factory_scene()
+    return scene, SCENES[name](scene)
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))
-def test_light_parity_with_cycles(name, empty_scene, tmp_path, tapped_engine):
-    scene, bounces = build(name, empty_scene)
-    image, ember_batches, cycles = render_ember_and_cycles(scene, tmp_path, name, tapped_engine, EMBER_SPP, 2,
-                                                           CYCLES_SEEDS, CYCLES_SPP, bounces)
-    failures, details, _, _ = compare_with_cycles(name, ember_batches, cycles, BLOCK)
+def test_light_parity_with_cycles(name, tmp_path, tapped_engine):
+    scene, bounces = reference_scene(name)
+    spp = SAMPLES.get(name, EMBER_SPP)
+    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, spp, 2, bounces)
+    check = check_against_reference('light_' + name, scene, bounces, image, var, spp, BLOCK)
     assert image[..., :3].mean() > 1e-3, "black image"
     check_effect(name, image[..., :3])
-    assert_no_failing_blocks(failures, details)
+    check.assert_agrees(*WEAK.get(name, (IMAGE_POWER, BLOCK_POWER)))
 
 
 def check_effect(name, rgb):

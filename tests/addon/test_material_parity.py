@@ -1,9 +1,11 @@
 """Materials against Cycles (issue 4): small scenes built here with bpy,
-rendered by Ember and by Cycles (CPU, caustics on, same bounces and filter),
-compared block by block with Welch's t-test and by the totals of the image
-and its quadrants, at the suite's family level (ember_testlib.compare_with_cycles,
-as test_render_scenes); results and power are printed.  The furnace's halves
-(multiscatter left, single scatter right) are within those quadrant tests.
+rendered by Ember and compared with converged Cycles references (CPU,
+caustics on, same bounces and filter; tests/data/cycles_material_<scene>.exr
+rendered by tools/cycles_references.py) by the totals of the image and its
+quadrants and block by block, at the suite's family level
+(ember_testlib.check_against_reference); results and power are printed.  The
+furnace's halves (multiscatter left, single scatter right) are within those
+quadrant tests.
 
 Scenes (features grouped to keep the runtime small):
 * glass: a smooth Glass BSDF sphere and a rough Multiscatter glass slab over
@@ -21,19 +23,17 @@ import bpy
 import numpy as np
 import pytest
 
-from ember_testlib import (assert_no_failing_blocks, compare_with_cycles, per_pass_estimates, render_array,
-                           setup_cycles, setup_ember, small_resolution)
+from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
 
-EMBER_SPP = 64
-CYCLES_SEEDS = 8
-CYCLES_SPP = 16
-BLOCK = 6
+EMBER_SPP = 256
+BLOCK = 12
 WIDTH, HEIGHT = 48, 36
-# Scenes with lights have a black world: Cycles' BSDF rays pass through
-# lights (kernel/integrator/shade_light.h advances tmin) while Ember's stop
-# at them, so a world behind an area light is lost (a (0.3, 0.35, 0.4) world
-# renders a plain diffuse floor 1.1% darker) -- an integrator difference, not
-# a material one.
+IMAGE_POWER, BLOCK_POWER = 0.005, 0.02   # issue 12's targets, asserted except in WEAK (docs/testing.md)
+WEAK = {}
+# Scenes with lights have a black world: chosen when Ember's BSDF rays stopped
+# at lights and Cycles' pass them (kernel/integrator/shade_light.h); both
+# pass them now (docs/testing.md, "What the references found"), and
+# test_light_parity's light_over_lit_world covers a world behind a light.
 DARK_WORLD = (0.0, 0.0, 0.0)
 
 
@@ -130,6 +130,16 @@ def _diffuse(name, color):
     return _material(name, lambda t: _bsdf(t, 'ShaderNodeBsdfDiffuse', Color=color))
 
 
+def _three_lit_spheres(scene, materials, spacing):
+    """Three spheres in a row (``spacing`` apart) under the area light, dark
+    world, seen from the front and above."""
+    for k, material in enumerate(materials):
+        _sphere(material, ((k - 1) * spacing, 0.0, 0.5))
+    _area_light(power=300.0)
+    _world(scene, DARK_WORLD)
+    _camera(scene, (0.0, -3.6, 3.4), (0.0, 0.0, 0.3))
+
+
 # ----------------------------------------------------------------------------
 # Scenes
 
@@ -167,12 +177,8 @@ def scene_principled(scene):
             'Base Color': (0.7, 0.9, 0.8), 'Roughness': 0.25, 'Transmission Weight': 1.0, 'IOR': 1.4,
             'Alpha': 0.8, 'distribution': 'MULTI_GGX'})
 
-    _sphere(_material("Metal", metal), (-1.25, 0.0, 0.5))
-    _sphere(_material("Coated", coated), (0.0, 0.0, 0.5))
-    _sphere(_material("Clear", clear), (1.25, 0.0, 0.5))
-    _area_light(power=300.0)
-    _world(scene, DARK_WORLD)
-    _camera(scene, (0.0, -3.6, 3.4), (0.0, 0.0, 0.3))
+    _three_lit_spheres(scene, (_material("Metal", metal), _material("Coated", coated), _material("Clear", clear)),
+                       1.25)
     return 6
 
 
@@ -194,12 +200,7 @@ def scene_mix(scene):
         return _bsdf(t, 'ShaderNodeBsdfRefraction', Color=(1.0, 0.9, 0.8), Roughness=0.2, IOR=1.3,
                      distribution='GGX')
 
-    _sphere(_material("Leaf", leaf), (-1.2, 0.0, 0.5))
-    _sphere(_material("Veil", veil), (0.0, 0.0, 0.5))
-    _sphere(_material("Lens", lens), (1.2, 0.0, 0.5))
-    _area_light(power=300.0)
-    _world(scene, DARK_WORLD)
-    _camera(scene, (0.0, -3.6, 3.4), (0.0, 0.0, 0.3))
+    _three_lit_spheres(scene, (_material("Leaf", leaf), _material("Veil", veil), _material("Lens", lens)), 1.2)
     return 8
 
 
@@ -217,27 +218,35 @@ def scene_furnace(scene):
 SCENES = {'glass': scene_glass, 'principled': scene_principled, 'mix': scene_mix, 'furnace': scene_furnace}
 
 
-@pytest.mark.parametrize("name", sorted(SCENES))
-def test_material_parity_with_cycles(name, empty_scene, tmp_path, tapped_engine):
-    scene = empty_scene
+def reference_scene(name, folder=None):
+    """The scene ``name`` and its bounces (as tools/cycles_references.py renders it)."""
+    scene = empty_factory_scene()
     bounces = SCENES[name](scene)
     small_resolution(scene, WIDTH, HEIGHT)
-    setup_ember(scene, EMBER_SPP, seed=1, max_bounces=bounces)
-    image = render_array(scene, tmp_path, "ember_" + name)
+    return scene, bounces
+
+
+# Found by the converged reference (issue 12), left to the lead: the 'Leaf'
+# sphere, Mix Shader (Fac 0.3) of a Translucent (0.3, 0.8, 0.2) and a GGX
+# Glossy (roughness 0.5), renders brighter than Cycles: top-left quadrant
+# +0.46 % +- 0.09 % (t 5.0) at 256 samples, +0.43 % +- 0.05 % at 1024 (seed 7);
+# the sphere alone under the light, 2048 samples against 4 x 1024 Cycles
+# samples: green +1.41 % +- 0.09 %, red +0.26 %, blue +0.14 %, while the
+# Translucent alone and the Glossy alone agree within 0.1 %.  Strict: an
+# XPASS (the bias fixed) fails until this mark goes.
+MIX_BIAS = pytest.mark.xfail(strict=True, reason="Mix(Translucent, Glossy) 1.4 % brighter (green) than "
+                                                 "converged Cycles (docs/testing.md)")
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=MIX_BIAS) if n == 'mix' else n for n in sorted(SCENES)])
+def test_material_parity_with_cycles(name, tmp_path, tapped_engine):
+    scene, bounces = reference_scene(name)
+    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, EMBER_SPP, 1, bounces)
     from addon import engine as ember_engine
     log = ember_engine.RENDER_LOG[-1]
-    assert log['error'] is None and np.isfinite(image).all()
     assert not [w for w in log.get('warnings', ()) if 'Material' in w], log.get('warnings')
-    ember_batches = per_pass_estimates(tapped_engine[-1].images)[..., :3]
-    cycles_images = []
-    for seed in range(CYCLES_SEEDS):
-        setup_cycles(scene, CYCLES_SPP, seed, bounces)
-        cycles_images.append(render_array(scene, tmp_path, f"cycles_{name}_{seed}")[..., :3])
-    cycles = np.array(cycles_images, dtype=np.float64)
-    failures, details, _, _ = compare_with_cycles(name, ember_batches, cycles, BLOCK)
+    check = check_against_reference('material_' + name, scene, bounces, image, var, EMBER_SPP, BLOCK)
     if name == 'furnace':
-        left = image[:, :WIDTH // 2, :3].mean()
-        right = image[:, WIDTH // 2:, :3].mean()
-        print(f"furnace: Ember multiscatter half {left:.4f}, single-scatter half {right:.4f}; Cycles "
-              f"{cycles[:, :, :WIDTH // 2].mean():.4f}, {cycles[:, :, WIDTH // 2:].mean():.4f}")
-    assert_no_failing_blocks(failures, details)
+        print(f"furnace: Ember multiscatter half {image[:, :WIDTH // 2, :3].mean():.4f}, single-scatter half "
+              f"{image[:, WIDTH // 2:, :3].mean():.4f}")
+    check.assert_agrees(*WEAK.get(name, (IMAGE_POWER, BLOCK_POWER)))

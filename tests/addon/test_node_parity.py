@@ -115,8 +115,10 @@ def _first_input(node, idname, case):
     return None
 
 
-def build_material(idname, case, output):
-    mat = bpy.data.materials.new(f"{idname}-{output}")
+def emission_material(name):
+    """An empty material whose surface is an Emission shader: (material,
+    tree, emission node)."""
+    mat = bpy.data.materials.new(name)
     mat.use_nodes = True
     tree = mat.node_tree
     for n in list(tree.nodes):
@@ -124,6 +126,11 @@ def build_material(idname, case, output):
     out = tree.nodes.new('ShaderNodeOutputMaterial')
     emission = tree.nodes.new('ShaderNodeEmission')
     tree.links.new(emission.outputs[0], out.inputs['Surface'])
+    return mat, tree, emission
+
+
+def build_material(idname, case, output):
+    mat, tree, emission = emission_material(f"{idname}-{output}")
     node = tree.nodes.new(idname)
     _configure(node, idname, case)
     target = _first_input(node, idname, case)
@@ -352,14 +359,7 @@ STRUCTURES.update({f'mix {blend}': _structure_blend(blend) for blend in (
 
 
 def build_structure_material(name):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    tree = mat.node_tree
-    for n in list(tree.nodes):
-        tree.nodes.remove(n)
-    out = tree.nodes.new('ShaderNodeOutputMaterial')
-    emission = tree.nodes.new('ShaderNodeEmission')
-    tree.links.new(emission.outputs[0], out.inputs['Surface'])
+    mat, tree, emission = emission_material(name)
     tree.links.new(STRUCTURES[name](tree), emission.inputs['Color'])
     return mat
 

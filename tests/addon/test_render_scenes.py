@@ -1,24 +1,30 @@
 """Render blend_scenes/ with Ember: real pixels, and agreement with Cycles.
 
-Agreement is a statistical test, not a tolerance: images are cut into pixel
-blocks; Ember's block means come with a standard error measured from its own
-passes (the difference of successive progressive images gives independent
-per-pass estimates), Cycles' from renders with different seeds.  Welch's t on
-every block and channel, and on the totals of the whole image and its quadrants,
-at the suite's family level (tests/ember_stats.py), must not reject.  The power of
-each is printed (pytest -s shows it); test_cycles_references.py holds the same
-scenes to converged Cycles references with far more power.
+Agreement is a statistical test, not a tolerance: Ember's render, with the
+variance of each pixel's mean, against a converged Cycles reference rendered
+once by tools/cycles_references.py (tests/data/cycles_scenes_<scene>.exr,
+with the variance of its mean): Welch's t on the totals of the whole image
+and its quadrants and on every block and channel, at the suite's family level
+(tests/ember_stats.py), must not reject.  The power of each is printed
+(pytest -s shows it).  The Cornell box is held by test_cycles_references.py.
 """
 import numpy as np
 import pytest
 
-from ember_testlib import (assert_no_failing_blocks, compare_with_cycles, open_scene, per_pass_estimates,
-                           render_array, setup_cycles, setup_ember, small_resolution)
+from ember_testlib import (check_against_reference, open_scene, render_array, render_for_reference, setup_ember,
+                           small_resolution)
 
-EMBER_SPP = 64        # one sample per pass -> 64 independent batches
-CYCLES_SEEDS = 8      # independent Cycles renders ...
-CYCLES_SPP = 16       # ... of this many samples each
-BLOCK = 8             # pixels per block side
+EMBER_SPP = 64        # one sample per pass -> 64 passes (test_ember_renders_real_pixels)
+PARITY = {
+    # name: (Ember samples, block side in pixels, image and block power asserted)
+    'instances_lights': (384, 16, (0.005, 0.02)),
+    # Veach's plates reflect four small, very bright lights, and the lights
+    # themselves are in view: the image and block means are dominated by a
+    # few pixels' rare bright samples in both renderers (at 256 samples the
+    # image mean resolves 5.4 %).  Held to what 512 samples resolve; the
+    # targets (0.5 %, 2 %) would take some 100 times more.
+    'veach_mis': (512, 16, (0.045, 0.03)),
+}
 SCENES = {
     # name: (width, height, max bounces)
     'cornell': (48, 48, 4),
@@ -27,10 +33,17 @@ SCENES = {
 }
 
 
-def ember_render(name, tmp_path, taps):
+def reference_scene(name, folder=None):
+    """The scene ``name`` at the tests' resolution and its bounces (as
+    tools/cycles_references.py renders it)."""
     scene = open_scene(name)
     width, height, bounces = SCENES[name]
     small_resolution(scene, width, height)
+    return scene, bounces
+
+
+def ember_render(name, tmp_path, taps):
+    scene, bounces = reference_scene(name)
     setup_ember(scene, EMBER_SPP, seed=1, max_bounces=bounces)
     image = render_array(scene, tmp_path, "ember_" + name)
     return scene, image, taps[-1].images
@@ -65,18 +78,13 @@ def test_ember_renders_real_pixels(name, tmp_path, tapped_engine):
         assert plates.max() > 10 * np.median(plates), "no glossy highlights on the plates"
 
 
-@pytest.mark.parametrize("name", sorted(SCENES))
+@pytest.mark.parametrize("name", sorted(PARITY))
 def test_agrees_with_cycles(name, tmp_path, tapped_engine):
-    scene, _, passes = ember_render(name, tmp_path, tapped_engine)
-    ember_batches = per_pass_estimates(passes)[..., :3]
-    width, height, bounces = SCENES[name]
-    cycles_images = []
-    for seed in range(CYCLES_SEEDS):
-        setup_cycles(scene, CYCLES_SPP, seed, bounces)
-        cycles_images.append(render_array(scene, tmp_path, f"cycles_{name}_{seed}")[..., :3])
-    failures, details, _, _ = compare_with_cycles(name, ember_batches, np.array(cycles_images, dtype=np.float64),
-                                                  BLOCK)
-    assert_no_failing_blocks(failures, details)
+    scene, bounces = reference_scene(name)
+    spp, block, power = PARITY[name]
+    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, spp, 1, bounces)
+    check = check_against_reference('scenes_' + name, scene, bounces, image, var, spp, block)
+    check.assert_agrees(*(power or (None, None)))
 
 
 def test_cancel_with_the_real_engine(factory_scene, monkeypatch, tmp_path, tapped_engine):

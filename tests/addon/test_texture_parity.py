@@ -5,7 +5,10 @@ Test images are made at test time (NumPy + OpenImageIO) in a tmp folder.
 Each scene groups several materials on quads side by side, seen from above
 by an orthographic camera, direct light only (max bounces 0) from a large
 area light (its sampling noise gives every block a measurable variance).
-Blocks are compared with Welch's t, Sidak-corrected (see test_render_scenes).
+Ember's render is compared with a converged Cycles reference
+(tests/data/cycles_texture_<scene>.exr, tools/cycles_references.py) by the
+image and quadrant totals and block by block, at the suite's family level
+(ember_testlib.check_against_reference).
 """
 import os
 
@@ -13,13 +16,12 @@ import bpy
 import numpy as np
 import pytest
 
-from ember_testlib import (assert_no_failing_blocks, compare_with_cycles, render_array, render_ember_and_cycles,
-                           require, setup_ember, small_resolution)
+from ember_testlib import (check_against_reference, render_array, render_for_reference, require, setup_ember,
+                           small_resolution)
 
-EMBER_SPP = 32
-CYCLES_SEEDS = 6
-CYCLES_SPP = 16
-BLOCK = 4
+EMBER_SPP = 256
+BLOCK = 12          # one quad per block
+IMAGE_POWER, BLOCK_POWER = 0.005, 0.02   # issue 12's targets, asserted
 TILE = 12           # pixels per quad side
 GRID = 4            # quads per row
 
@@ -368,22 +370,23 @@ def build_inputs(folder):
 SCENES = {'images': build_images, 'nodes': build_nodes, 'normals': build_normals, 'inputs': build_inputs}
 
 
-def render_both(scene, tmp_path, name, taps):
-    return render_ember_and_cycles(scene, tmp_path, name, taps, EMBER_SPP, 1, CYCLES_SEEDS, CYCLES_SPP, 0)
+def reference_scene(name, folder):
+    """The scene ``name`` (its images written into ``folder``) and its bounces."""
+    return SCENES[name](str(folder)), 0
 
 
+# The converged reference found the quads with a tangent-space Normal Map at
+# strength 1 0.6-0.9 % brighter than Cycles (t 7-10; image +0.29 % +- 0.03 %):
+# Cycles' bump shadowing term, which main added since (2b2ce97), removed it.
 @pytest.mark.parametrize("name", sorted(SCENES))
 def test_textures_agree_with_cycles(name, tmp_path, tapped_engine):
-    scene = SCENES[name](str(tmp_path))
-    image, ember_batches, cycles = render_both(scene, tmp_path, name, tapped_engine)
+    scene, bounces = reference_scene(name, tmp_path)
+    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, EMBER_SPP, 1, bounces)
     from addon import engine as ember_engine
     warnings = ember_engine.RENDER_LOG[-1].get('warnings') or []
     assert not any("magenta" in w or "not translated" in w or "constant value" in w for w in warnings), warnings
-    failures, details, ember_blocks, cycles_blocks = compare_with_cycles(name, ember_batches, cycles, BLOCK)
-    per_quad = np.abs(ember_blocks.mean(0) - cycles_blocks.mean(0)).reshape(
-        2, TILE // BLOCK, GRID, TILE // BLOCK, 3).mean(axis=(1, 3, 4))
-    print(f"{name}: mean |error| per quad\n{np.round(per_quad, 4)}")
-    assert_no_failing_blocks(failures, details)
+    check = check_against_reference('texture_' + name, scene, bounces, image, var, EMBER_SPP, BLOCK)
+    check.assert_agrees(IMAGE_POWER, BLOCK_POWER)
 
 
 def test_missing_image_renders_magenta_with_one_warning(tmp_path, tapped_engine):

@@ -288,17 +288,22 @@ def test_camera_from_projection_matches_the_scene_camera(cornell, needs_engine, 
     assert np.abs(across).max() < 1e-4
 
 
+def viewport_job_inputs(scene, resolution, samples=2):
+    """The scene exported as the viewport would, at ``resolution``, and its
+    settings with ``samples`` samples."""
+    exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
+    engine_scene = dataclasses.replace(exported.scene, camera=dataclasses.replace(
+        exported.scene.camera, resolution=resolution))
+    return engine_scene, dataclasses.replace(scene_export.render_settings(scene), samples=samples)
+
+
 def test_first_picture_at_1280x720(cornell, needs_engine):
     """The render thread's first picture after a change: reduced resolution,
     one sample.  Target: on screen within 0.5 s on two otherwise idle cores.
     The machine running the tests is shared, so the bound is on the CPU time
     this process spends (two cores for 0.5 s = 1 CPU-second); wall time is
     printed."""
-    scene = cornell
-    exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
-    engine_scene = dataclasses.replace(exported.scene, camera=dataclasses.replace(
-        exported.scene.camera, resolution=(1280, 720)))
-    settings = dataclasses.replace(scene_export.render_settings(scene), samples=2)
+    engine_scene, settings = viewport_job_inputs(cornell, (1280, 720))
     thread = viewport.RenderThread()
     try:
         viewport.reset_stats()
@@ -406,11 +411,7 @@ def test_user_orthographic_view_clips_behind_the_view_point():
 
 
 def test_viewport_denoises_when_its_samples_are_done(cornell, needs_engine):
-    scene = cornell
-    exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
-    engine_scene = dataclasses.replace(exported.scene, camera=dataclasses.replace(
-        exported.scene.camera, resolution=(64, 64)))
-    settings = dataclasses.replace(scene_export.render_settings(scene), samples=2)
+    engine_scene, settings = viewport_job_inputs(cornell, (64, 64))
     thread = viewport.RenderThread()
     try:
         job = thread.submit(viewport.Job(engine_scene, settings, denoise=True))

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 import ember_stats as stats
-from ember_testlib import (assert_no_failing_blocks, compare_with_cycles, load_exr, per_pass_estimates,
-                           render_array, require, setup_cycles, setup_ember, small_resolution)
+from ember_testlib import (check_against_reference, load_exr, per_pass_estimates, render_array, render_for_reference,
+                           require, setup_cycles, setup_ember, small_resolution)
 
 ROTATION = (math.radians(12.0), math.radians(-8.0), math.radians(75.0))
 
@@ -243,24 +243,34 @@ def test_environment_sampling_agrees_with_bsdf_sampling(factory_scene, tmp_path,
     assert var_mis < 0.5 * var_bsdf
 
 
-EMBER_SPP = 64
-CYCLES_SEEDS = 8
-CYCLES_SPP = 16
+HDRI_SPP, HDRI_BLOCK = 256, 10
+BACKGROUND_SPP = 128
+IMAGE_POWER, BLOCK_POWER = 0.005, 0.02   # issue 12's targets, asserted (docs/testing.md)
 
 
-def test_hdri_scene_matches_cycles(factory_scene, tmp_path, tapped_engine):
+def reference_scene(name, folder=None):
+    """The scene 'spheres' or 'background' and its bounces (as
+    tools/cycles_references.py renders it)."""
+    bpy.ops.wm.read_factory_settings()
+    scene = bpy.context.scene
+    if name == 'spheres':
+        hdri_world(scene, hdri_path('forest'))
+        spheres_on_a_plane(scene)
+        small_resolution(scene, 40, 30)
+        return scene, 2
+    hdri_world(scene, hdri_path('city'))
+    sky_only(scene, (80.0, 0.0, 30.0), 12.0, (64, 40))
+    return scene, 0
+
+
+def test_hdri_scene_matches_cycles(tmp_path, tapped_engine):
     """forest.exr (a small bright sun) through a rotated Mapping lights a
-    diffuse and a glossy sphere: Ember and Cycles agree block by block."""
-    hdri_world(factory_scene, hdri_path('forest'))
-    spheres_on_a_plane(factory_scene)
-    small_resolution(factory_scene, 40, 30)
-    ember = ember_batches(factory_scene, tmp_path, tapped_engine, EMBER_SPP, "ember")
-    cycles = []
-    for seed in range(CYCLES_SEEDS):
-        setup_cycles(factory_scene, CYCLES_SPP, seed, 2)
-        cycles.append(render_array(factory_scene, tmp_path, f"cycles_{seed}")[..., :3])
-    failures, details, _, _ = compare_with_cycles("HDRI spheres", ember, np.array(cycles, np.float64), 5)
-    assert_no_failing_blocks(failures, details)
+    diffuse and a glossy sphere: Ember agrees with converged Cycles over the
+    image, its quadrants and block by block."""
+    scene, bounces = reference_scene('spheres')
+    image, var = render_for_reference(scene, tmp_path, "spheres", tapped_engine, HDRI_SPP, 3, bounces)
+    check = check_against_reference('hdri_spheres', scene, bounces, image, var, HDRI_SPP, HDRI_BLOCK)
+    check.assert_agrees(IMAGE_POWER, BLOCK_POWER)
 
 
 def sky_only(scene, rotation_euler, lens, size):
@@ -278,38 +288,80 @@ def sky_only(scene, rotation_euler, lens, size):
 VIEWS = ((90.0, 0.0, 30.0), (150.0, 0.0, -60.0), (25.0, 0.0, 120.0))
 
 
+# float32 results: each renderer sums 4 equal samples and scales (at most 2
+# roundings of 2^-24 each); the two may round differently.
+EXACT_RTOL = 4 * 2.0 ** -24
+GRID = 5            # points per pixel side at which the footprint's texels are found
+
+
+def footprint_texels(scene, image_size, rotation):
+    """(H, W, GRID*GRID) texel indices of the HDRI ('Closest') under a GRID x
+    GRID lattice over each pixel's square, from Blender's camera frame and
+    the Mapping rotation (mathutils), and Cycles' equirectangular mapping
+    (u = (pi - atan2(y, x)) / 2 pi, v = 1 - acos(z) / pi)."""
+    from mathutils import Euler
+    from engine.environment import direction_to_equirect
+    camera = scene.camera
+    frame = [np.array(v) for v in camera.data.view_frame(scene=scene)]
+    top_left = next(v for v in frame if v[0] < 0 and v[1] > 0)
+    top_right = next(v for v in frame if v[0] > 0 and v[1] > 0)
+    bottom_left = next(v for v in frame if v[0] < 0 and v[1] < 0)
+    width, height = scene.render.resolution_x, scene.render.resolution_y
+    f = np.linspace(0.0, 1.0, GRID)
+    xs = (np.arange(width)[:, None] + f[None, :]).ravel() / width        # (W * GRID)
+    ys = (np.arange(height)[:, None] + f[None, :]).ravel() / height      # rows from the top
+    local = (top_left[None, None] + xs[None, :, None] * (top_right - top_left)[None, None]
+             + ys[:, None, None] * (bottom_left - top_left)[None, None])
+    to_world = np.array(camera.matrix_world.to_3x3().normalized())
+    lookup = np.array(Euler(rotation, 'XYZ').to_matrix())
+    e = local.reshape(-1, 3) @ (lookup @ to_world).T
+    u, v = direction_to_equirect(e)
+    tw, th = image_size
+    texel = (np.floor(v * th).astype(np.int64) % th) * tw + np.floor(u * tw).astype(np.int64) % tw
+    texel = texel.reshape(height, GRID, width, GRID).transpose(0, 2, 1, 3)
+    return texel.reshape(height, width, GRID * GRID)
+
+
 @pytest.mark.parametrize("view", VIEWS)
 def test_background_texels_match_cycles_exactly(view, factory_scene, tmp_path, needs_engine):
-    """A long lens on a 'Closest' HDRI through a rotated Mapping: every
-    pixel whose footprint lies inside one texel is that texel's value in both
-    renderers, so orientation, rotation and texel addressing must match
-    Cycles exactly.  (Cycles' box filter is always 1 pixel wide.)"""
-    hdri_world(factory_scene, hdri_path('city'), interpolation='Closest')
+    """A long lens on a 'Closest' HDRI through a rotated Mapping: a pixel
+    whose footprint lies inside one texel is that texel's value in both
+    renderers (deterministic), so orientation, rotation and texel addressing
+    must match Cycles exactly there; a pixel across texel edges lies between
+    the values of the texels it covers, in both.  (Cycles' box filter is
+    always 1 pixel wide.)"""
+    env = hdri_world(factory_scene, hdri_path('city'), interpolation='Closest')
     sky_only(factory_scene, view, 1200.0, (48, 32))
     setup_ember(factory_scene, 4, seed=0, max_bounces=0, filter_type='BOX', filter_width=1.0)
     ember = render_array(factory_scene, tmp_path, "ember_sky")[..., :3].astype(np.float64)
     setup_cycles(factory_scene, 4, 0, 0, filter_type='BOX', filter_width=1.0)
     cycles = render_array(factory_scene, tmp_path, "cycles_sky")[..., :3].astype(np.float64)
 
-    def exact(a):
-        return float(np.mean(np.all(np.abs(a - cycles) <= 1e-4 * np.maximum(cycles, 1e-3), axis=2)))
-    mirrored, flipped = exact(ember[:, ::-1]), exact(ember[::-1])
-    print(f"\nview {view}: {exact(ember):.3f} of pixels equal Cycles' exactly "
-          f"(mirrored: {mirrored:.3f}, upside down: {flipped:.3f}); mean {ember.mean():.4f} vs "
-          f"{cycles.mean():.4f}")
-    assert exact(ember) > 0.5
-    assert max(mirrored, flipped) < 0.5 * exact(ember)
+    texels = footprint_texels(factory_scene, tuple(env.image.size), ROTATION)
+    inside = (texels == texels[..., :1]).all(axis=2)
+    texel_rgb = read_exr(env.image.filepath_from_user())[::-1, :, :3].reshape(-1, 3).astype(np.float64)
+    values = texel_rgb[texels]                                    # (H, W, GRID^2, 3)
+    low, high = values.min(axis=2), values.max(axis=2)
+    slack = EXACT_RTOL * high
+    print(f"\nview {view}: {inside.sum()} of {inside.size} pixels inside one texel; max relative difference "
+          f"there {np.max(np.abs(ember - cycles)[inside] / np.maximum(cycles[inside], 1e-30)):.2e}")
+    assert inside.sum() >= 100, "the view must put whole pixels inside texels"
+    for name, image in (('Ember', ember), ('Cycles', cycles)):
+        np.testing.assert_allclose(image[inside], low[inside], rtol=EXACT_RTOL, atol=0,
+                                   err_msg=f"{name}: a pixel inside one texel is not that texel's value")
+        outside = ~((image >= low - slack) & (image <= high + slack)).all(axis=2)
+        assert not outside.any(), (f"{name}: pixels {np.argwhere(outside)[:5].tolist()} lie outside the "
+                                   f"values of the texels their footprint covers")
+    # The view is not symmetric: a mirrored or upside-down image would fail.
+    for flipped in (cycles[:, ::-1], cycles[::-1]):
+        assert not np.allclose(flipped[inside], cycles[inside], rtol=EXACT_RTOL, atol=0)
 
 
-def test_background_matches_cycles(factory_scene, tmp_path, tapped_engine):
+def test_background_matches_cycles(tmp_path, tapped_engine):
     """A wide view of the rotated HDRI (bilinear, Blackman-Harris filter):
-    Ember and Cycles agree block by block."""
-    hdri_world(factory_scene, hdri_path('city'))
-    sky_only(factory_scene, (80.0, 0.0, 30.0), 12.0, (64, 40))
-    ember = ember_batches(factory_scene, tmp_path, tapped_engine, 32, "ember_sky", bounces=0)
-    cycles = []
-    for seed in range(6):
-        setup_cycles(factory_scene, 8, seed, 0)
-        cycles.append(render_array(factory_scene, tmp_path, f"cycles_sky_{seed}")[..., :3])
-    failures, details, _, _ = compare_with_cycles("background", ember, np.array(cycles, np.float64), 4)
-    assert_no_failing_blocks(failures, details)
+    Ember agrees with converged Cycles over the image, its quadrants and
+    block by block."""
+    scene, bounces = reference_scene('background')
+    image, var = render_for_reference(scene, tmp_path, "sky", tapped_engine, BACKGROUND_SPP, 3, bounces)
+    check = check_against_reference('hdri_background', scene, bounces, image, var, BACKGROUND_SPP, 8)
+    check.assert_agrees(IMAGE_POWER, BLOCK_POWER)

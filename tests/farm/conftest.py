@@ -7,7 +7,7 @@ import sys
 import pytest
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-for path in (os.path.dirname(os.path.dirname(HERE)), HERE):  # the repository, then farmlib
+for path in (os.path.dirname(os.path.dirname(HERE)), os.path.dirname(HERE), HERE):  # repository, tests/, farmlib
     if path not in sys.path:
         sys.path.insert(0, path)
 

@@ -4,7 +4,8 @@ import subprocess
 import sys
 
 import numpy as np
-import pytest
+
+from prerequisites import require  # noqa: F401  (the suite's one require: tests/prerequisites.py)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -29,19 +30,6 @@ scene.ember.seed = 7
 scene.ember.max_bounces = 3
 bpy.ops.wm.save_as_mainfile(filepath=out)
 '''
-
-
-def in_ci():
-    return os.environ.get('CI', '').lower() == 'true'
-
-
-def require(condition, reason):
-    """Skip locally, fail in CI, when a prerequisite is missing."""
-    if condition:
-        return
-    if in_ci():
-        pytest.fail("missing prerequisite (CI=true): " + reason)
-    pytest.skip(reason)
 
 
 def make_animation(path, size=32, samples=8):
