@@ -113,6 +113,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
         _, _, width, height = camera_export.border_window(scene.render)
         render = shards.wrap(backend.render_function(), scene, depsgraph.view_layer.name, self.is_preview)
         if self.test_break():
+            info['cancelled'] = True   # Esc between export and the first pass
             return
         if not self.is_preview:
             render_passes.add_result_passes(self, depsgraph.view_layer)
