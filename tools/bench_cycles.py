@@ -100,7 +100,9 @@ def configure_cycles(scene, samples, seed, bounces, adaptive):
     """The parity tests' Cycles set-up (tests/addon/ember_testlib.py), but at
     Cycles' own default light threshold (a speed feature a user has on), and
     its default adaptive sampling when asked."""
-    sys.path.insert(0, os.path.join(ROOT, 'tests', 'addon'))
+    for folder in (os.path.join(ROOT, 'tests'), os.path.join(ROOT, 'tests', 'addon')):
+        if folder not in sys.path:   # ember_testlib, and the prerequisites module it imports
+            sys.path.insert(0, folder)
     from ember_testlib import setup_cycles
     setup_cycles(scene, samples, seed, bounces)
     c = scene.cycles
