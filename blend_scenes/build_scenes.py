@@ -134,6 +134,23 @@ def world(scene, color, strength=1.0):
     scene.world = w
 
 
+def world_background(scene, name, texture_type):
+    """A new world for ``scene`` whose Background colour comes from a new
+    texture node of ``texture_type``; returns (world, texture node)."""
+    w = bpy.data.worlds.new(name)
+    scene.world = w
+    if bpy.app.version < (5, 0, 0):
+        w.use_nodes = True
+    tree = w.node_tree
+    tree.nodes.clear()
+    out = tree.nodes.new('ShaderNodeOutputWorld')
+    background = tree.nodes.new('ShaderNodeBackground')
+    texture = tree.nodes.new(texture_type)
+    tree.links.new(texture.outputs['Color'], background.inputs['Color'])
+    tree.links.new(background.outputs[0], out.inputs['Surface'])
+    return w, texture
+
+
 def light(scene, name, kind, location, energy, color=(1.0, 1.0, 1.0), rotation=(0.0, 0.0, 0.0), **settings):
     """A light; ``energy`` in Blender 3.x units.
 

@@ -690,9 +690,9 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
             pdf[s] = p * p_lobe[s]
 
     smooth = np.nonzero(~delta & (kind != NONE))[0]
-    if len(smooth) == n:
-        smooth = slice(None)   # the usual case: no copies of the lobes
-    if len(wo[smooth]):
+    if 0 < len(smooth):
+        if len(smooth) == n:
+            smooth = slice(None)   # the usual case: no copies of the lobes
         lobes_s = lobes if isinstance(smooth, slice) else _take(lobes, smooth)
         fs, ps = eval_pdf(lobes_s, wo[smooth], wi[smooth], sel[smooth], w[smooth], sampled=True)
         ok = ps > 0

@@ -154,18 +154,8 @@ def build_hdri():
     bs.uv_sphere(scene, "Glossy", 0.5, (0.6, 0.0, 0.5),
                  bs.node_material("Metal", 'glossy', (0.9, 0.9, 0.9), roughness=0.25), segments=48, rings=24)
     cam = bs.camera(scene, (0.0, -4.0, 1.4), (0, 0, 0), lens=40.0)
-    world = bpy.data.worlds.new("World")
-    scene.world = world
-    if bpy.app.version < (5, 0, 0):
-        world.use_nodes = True
-    tree = world.node_tree
-    tree.nodes.clear()
-    out = tree.nodes.new('ShaderNodeOutputWorld')
-    background = tree.nodes.new('ShaderNodeBackground')
-    env = tree.nodes.new('ShaderNodeTexEnvironment')
+    _, env = bs.world_background(scene, "World", 'ShaderNodeTexEnvironment')
     env.image = bpy.data.images.load(hdri_path(), check_existing=True)
-    tree.links.new(env.outputs['Color'], background.inputs['Color'])
-    tree.links.new(background.outputs[0], out.inputs['Surface'])
     return finish(scene, cam, (0.0, 0.0, 0.5))
 
 

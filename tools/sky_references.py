@@ -25,6 +25,8 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
+sys.path.insert(0, os.path.join(ROOT, 'blend_scenes'))
+import build_scenes as bs  # noqa: E402
 
 SIZE = (24, 16)
 # (name, properties): sun sizes of 4-5 degrees so that the disc covers pixels.
@@ -58,23 +60,13 @@ def cases():
 
 
 def sky_world(scene, props, sky_type):
-    world = bpy.data.worlds.new("sky")
-    scene.world = world
-    if bpy.app.version < (5, 0, 0):
-        world.use_nodes = True
-    tree = world.node_tree
-    tree.nodes.clear()
-    out = tree.nodes.new('ShaderNodeOutputWorld')
-    background = tree.nodes.new('ShaderNodeBackground')
-    sky = tree.nodes.new('ShaderNodeTexSky')
+    world, sky = bs.world_background(scene, "sky", 'ShaderNodeTexSky')
     sky.sky_type = sky_type
     for key, value in props.items():
         if key == 'density':   # dust (3.x / 4.x) or aerosol (5.0)
             setattr(sky, 'aerosol_density' if hasattr(sky, 'aerosol_density') else 'dust_density', value)
         else:
             setattr(sky, key, value)
-    tree.links.new(sky.outputs['Color'], background.inputs['Color'])
-    tree.links.new(background.outputs[0], out.inputs['Surface'])
     return world
 
 
