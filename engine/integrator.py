@@ -45,7 +45,9 @@ class Context:
 
     def __post_init__(self):
         self.jit = kernels.configure(getattr(self.settings, "use_jit", True))
-        self.bump_model = bsdf.bump_model(getattr(self, "cycles_version", (5, 0, 0)))
+        # prepare() sets the scene's own (its Blender version); this default
+        # serves contexts built directly.
+        self.bump_model = bsdf.BUMP_GGX
         lt = self.lights
         delta = np.zeros(lt.count, bool)
         if lt.count:
