@@ -27,7 +27,7 @@ from .sampling import (Distribution1D, concentric_disk, sin_sq_to_one_minus_cos,
 from .environment import EnvironmentMap
 from .geometry import VIS_ALL, visibility_bits
 from .lightproxy import LightProxies
-from .lighttree import LightTree, emitter_bounds
+from .lighttree import LightTree, emitter_bounds, triangle_tree
 from .scene import AreaLight, PointLight, SpotLight, SunLight
 from .vec import count, dot, frame, luminance, subset, to_world
 
@@ -39,6 +39,9 @@ POINT, SUN, AREA, MESH, ENV = 0, 1, 2, 3, 4
 # triangle warp degenerates).
 MIN_SPHERICAL = 3e-4
 MAX_SPHERICAL = 6.22
+# Emissive triangles of one material up to which the light-tree strategy
+# picks them by importance (a tree over them); above, by area.
+MAX_TREE_TRIANGLES = 16384
 
 
 @dataclass
@@ -67,7 +70,7 @@ class LightSet:
         self.suns = _SunLights([l for l in scene.lights if isinstance(l, SunLight)])
         self.areas = _AreaLights([l for l in scene.lights if isinstance(l, AreaLight)])
         self.env = _EnvironmentLight(scene.world.texture, env_compensation)
-        self.meshes = _MeshLights(triangles, materials)
+        self.meshes = _MeshLights(triangles, materials, by_importance=strategy == "tree")
         radius = _scene_radius(triangles)
         # Emitter index -> (type, index within type).  Meshes stay last
         # (mesh_emitter below counts from the end).
@@ -110,17 +113,22 @@ class LightSet:
         return self.dist.pmf[emitter]
 
     # -- NEE ----------------------------------------------------------------
-    def sample(self, emitter, p, u1, u2, u3):
-        """Sample a point on each ray's emitter as seen from p."""
-        n = len(p)
-        out = LightSample(np.zeros((n, 3)), np.full(n, np.inf), np.zeros((n, 3)),
-                          np.zeros(n), np.zeros(n, bool), np.zeros(n, bool))
+    def sample(self, emitter, p, u1, u2, u3, n=None):
+        """Sample a point on each ray's emitter as seen from p (normal n: a
+        mesh group picks its triangle by importance there, the light tree
+        strategy only)."""
+        m = len(p)
+        out = LightSample(np.zeros((m, 3)), np.full(m, np.inf), np.zeros((m, 3)),
+                          np.zeros(m), np.zeros(m, bool), np.zeros(m, bool))
         kind = self.kind[emitter]
         local = self.local[emitter]
         for k, group in ((POINT, self.points), (SUN, self.suns), (AREA, self.areas), (ENV, self.env),
                          (MESH, self.meshes)):
             idx = subset(kind == k)
-            if count(idx, n):
+            if count(idx, len(p)) and k == MESH:
+                group.sample(out, idx, local[idx], p[idx], u1[idx], u2[idx], u3[idx],
+                             None if n is None else n[idx])
+            elif count(idx, len(p)):
                 group.sample(out, idx, local[idx], p[idx], u1[idx], u2[idx], u3[idx])
         return out
 
@@ -198,9 +206,10 @@ class LightSet:
             return None
         return self.env_emitter, self.env.map.eval(d), self.env.map.pdf(d)
 
-    def triangle_pdf(self, prim, o, p_hit, ng):
-        """Solid-angle pdf of NEE picking this emissive triangle's point from o."""
-        return self.meshes.pdf(prim, o, p_hit, ng)
+    def triangle_pdf(self, prim, o, p_hit, ng, n=None):
+        """Solid-angle pdf of NEE picking this emissive triangle's point from o
+        (n: the normal ``sample`` had there, as for ``selection_pdf``)."""
+        return self.meshes.pdf(prim, o, p_hit, ng, n)
 
     def emitter_of_triangle(self, material):
         return self.mesh_emitter[material]
@@ -509,9 +518,18 @@ class _AreaLights:
 
 
 class _MeshLights:
-    """Emissive triangles, one emitter per emissive material."""
+    """Emissive triangles, one emitter per emissive material.
 
-    def __init__(self, triangles, materials):
+    Within its group a triangle is picked by area, or (by_importance, the
+    light-tree strategy) by a light tree over the group's triangles that
+    weighs each by its importance at the shading point, as Cycles' light tree
+    holds every emissive triangle: a group's triangles can lie far apart
+    (objects sharing a material), and area alone sends most samples to the
+    ones far from the shading point.  Groups larger than MAX_TREE_TRIANGLES
+    keep area selection: the tree is built in Python (about 60 us per
+    triangle)."""
+
+    def __init__(self, triangles, materials, by_importance=False):
         emissive = materials.emissive
         self.tris = triangles
         mats = np.unique(triangles.material[emissive[triangles.material]]) if len(triangles) else []
@@ -519,26 +537,27 @@ class _MeshLights:
         self.count = len(self.material)
         self.L = materials.emission[self.material].reshape(-1, 3)
         self.textures = materials.textures
-        self.members, self.dists, self.total_area = [], [], []
+        self.members, self.dists, self.total_area, self.trees = [], [], [], []
+        # Index of each triangle within its group (for the group's tree pmf).
+        self.rank = np.zeros(len(triangles), np.int64)
         for m in self.material:
             members = np.nonzero(triangles.material == m)[0]
             self.members.append(members)
+            self.rank[members] = np.arange(len(members))
             self.dists.append(Distribution1D(triangles.area[members]))
             self.total_area.append(triangles.area[members].sum())
+            tree = by_importance and 1 < len(members) <= MAX_TREE_TRIANGLES
+            self.trees.append(triangle_tree(triangles, members) if tree else None)
         self.total_area = np.array(self.total_area, float)
-        self.group_area = np.zeros(max(1, len(materials.emission)))
-        self.group_area[self.material] = self.total_area
+        self.group_of_material = np.full(max(1, len(materials.emission)), -1, np.int64)
+        self.group_of_material[self.material] = np.arange(self.count)
 
     def power(self, radius):
         # Two-sided Lambertian emitter: flux = pi * L * A per side.
         return luminance(self.L) * 2.0 * np.pi * self.total_area if self.count else []
 
-    def sample(self, out, idx, j, p, u1, u2, u3):
-        tri = np.empty(len(p), np.int64)
-        for g in np.unique(j):
-            sel = np.nonzero(j == g)[0]
-            k, _ = self.dists[g].sample(u3[sel])
-            tri[sel] = self.members[g][k]
+    def sample(self, out, idx, j, p, u1, u2, u3, n=None):
+        tri, p_tri = self._pick(j, p, u3, n)
         b1, b2 = uniform_triangle(u1, u2)
         tr = self.tris
         q = tr.p0[tri] + b1[:, None] * tr.e1[tri] + b2[:, None] * tr.e2[tri]
@@ -557,11 +576,48 @@ class _MeshLights:
         t = np.linalg.norm(v, axis=1)
         wi = v / np.maximum(t, 1e-30)[:, None]
         cos_l = np.abs(dot(wi, tr.ng[tri]))
-        ok = (cos_l > 1e-12) & (t > 0)
-        pdf = np.where(ok, t * t / (np.maximum(cos_l, 1e-12) * self.total_area[j]), 0.0)
-        pdf = np.where(ok & sph, self._spherical_pdf(tri, solid_angle), pdf)
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, self._radiance(tri, q, self.L[j])
-        out.pdf[idx], out.on_surface[idx] = pdf, True
+        out.pdf[idx] = self._pdf(tri, p_tri, t * t, cos_l, sph, solid_angle)
+        out.on_surface[idx] = True
+
+    def _pick(self, j, p, u, n):
+        """A triangle of each ray's group j and its probability within the group."""
+        tri = np.empty(len(p), np.int64)
+        prob = np.empty(len(p))
+        for g in np.unique(j):
+            sel = np.nonzero(j == g)[0]
+            if self.trees[g] is not None:
+                k, prob[sel] = self.trees[g].select(u[sel], p[sel], _normals(n, len(p))[sel])
+            else:
+                k, _ = self.dists[g].sample(u[sel])
+                prob[sel] = self.dists[g].pmf[k]
+            tri[sel] = self.members[g][k]
+        return tri, prob
+
+    def _pick_pmf(self, tri, o, n):
+        """Probability that ``_pick`` at o (normal n) picks triangle tri."""
+        group = self.group_of_material[self.tris.material[tri]]
+        prob = np.zeros(len(tri))
+        for g in np.unique(group):
+            if g < 0:
+                continue
+            sel = np.nonzero(group == g)[0]
+            k = self.rank[tri[sel]]
+            if self.trees[g] is not None:
+                prob[sel] = self.trees[g].pmf(k, o[sel], _normals(n, len(tri))[sel])
+            else:
+                prob[sel] = self.dists[g].pmf[k]
+        return prob
+
+    def _pdf(self, tri, p_tri, t2, cos_l, sph, solid_angle):
+        """Solid-angle pdf of a point on triangle tri: p_tri times the
+        triangle's own (area or solid-angle) pdf."""
+        area = self.tris.area[tri]
+        ok = (cos_l > 1e-12) & (t2 > 0) & (area > 0)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            pdf = np.where(ok, p_tri * t2 / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
+            pdf = np.where(ok & sph, p_tri / solid_angle, pdf)
+        return np.where(np.isfinite(pdf), pdf, 0.0)
 
     def _radiance(self, tri, q, L):
         """Emission at points q on triangles tri: the constant, or the
@@ -589,22 +645,13 @@ class _MeshLights:
                                            tr.p0[tri] + tr.e2[tri])[0]
         return (solid_angle >= MIN_SPHERICAL) & (solid_angle <= MAX_SPHERICAL), solid_angle
 
-    def _spherical_pdf(self, tri, solid_angle):
-        """P(triangle | its group) / solid angle: triangles are picked by area."""
-        area = self.group_area[self.tris.material[tri]]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            pdf = self.tris.area[tri] / (area * solid_angle)
-        return np.where(np.isfinite(pdf), pdf, 0.0)
-
-    def pdf(self, prim, o, p_hit, ng):
+    def pdf(self, prim, o, p_hit, ng, n=None):
+        """Solid-angle pdf of ``sample`` from o (normal n) giving p_hit on prim."""
         v = p_hit - o
         t2 = dot(v, v)
         cos_l = np.abs(dot(v, ng)) / np.sqrt(np.maximum(t2, 1e-300))
-        area = self.group_area[self.tris.material[prim]]
-        ok = (cos_l > 1e-12) & (area > 0)
-        pdf = np.where(ok, t2 / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
         sph, solid_angle = self._spherical(prim, o)
-        return np.where(ok & sph, self._spherical_pdf(prim, solid_angle), pdf)
+        return self._pdf(prim, self._pick_pmf(prim, o, n), t2, cos_l, sph, solid_angle)
 
 
 def _uniform_index(j):

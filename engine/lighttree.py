@@ -21,9 +21,11 @@ with probability n_inf / (n_inf + 1), the tree with the rest (pbrt-v4).
 ``select`` and ``pmf`` evaluate the same products in the same order, so the
 selection probability MIS uses is exactly the one NEE sampled with.
 """
+import math
+
 import numpy as np
 
-from .kernels import helper, kernel, where
+from .kernels import helper, kernel, loop_kernel, where
 from .vec import dot
 
 # Half-angle of emission beyond a spot cone: its light ends at the cone edge.
@@ -38,9 +40,10 @@ class Bounds:
         self.phi = float(phi)
         self.w = np.asarray(w, float)
         self.cos_o, self.cos_e, self.two_sided = float(cos_o), float(cos_e), bool(two_sided)
+        self.center = 0.5 * (self.lo + self.hi)
 
     def centroid(self):
-        return 0.5 * (self.lo + self.hi)
+        return self.center
 
 
 def union(a, b):
@@ -54,23 +57,29 @@ def union(a, b):
 
 
 def _cone_union(wa, cos_a, wb, cos_b):
-    """Smallest cone holding two direction cones (pbrt-v4 DirectionCone Union)."""
-    theta_a, theta_b = np.arccos(np.clip(cos_a, -1, 1)), np.arccos(np.clip(cos_b, -1, 1))
-    theta_d = np.arccos(np.clip(wa @ wb, -1, 1))
-    if min(theta_d + theta_b, np.pi) <= theta_a:
+    """Smallest cone holding two direction cones (pbrt-v4 DirectionCone Union).
+    Scalar maths: called once per tree node, where NumPy's per-call cost
+    on 3-vectors would dominate building trees over many triangles."""
+    ax, ay, az = float(wa[0]), float(wa[1]), float(wa[2])
+    bx, by, bz = float(wb[0]), float(wb[1]), float(wb[2])
+    theta_a, theta_b = math.acos(min(max(cos_a, -1.0), 1.0)), math.acos(min(max(cos_b, -1.0), 1.0))
+    theta_d = math.acos(min(max(ax * bx + ay * by + az * bz, -1.0), 1.0))
+    if min(theta_d + theta_b, math.pi) <= theta_a:
         return wa, cos_a
-    if min(theta_d + theta_a, np.pi) <= theta_b:
+    if min(theta_d + theta_a, math.pi) <= theta_b:
         return wb, cos_b
     theta_o = 0.5 * (theta_a + theta_d + theta_b)
-    axis = np.cross(wa, wb)
-    length = np.linalg.norm(axis)
-    if theta_o >= np.pi or length == 0:
+    cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+    length = math.sqrt(cx * cx + cy * cy + cz * cz)
+    if theta_o >= math.pi or length == 0:
         return wa, -1.0
-    axis /= length
+    cx, cy, cz = cx / length, cy / length, cz / length
     theta_r = theta_o - theta_a
-    # Rodrigues: rotate wa by theta_r about axis (perpendicular to wa).
-    w = wa * np.cos(theta_r) + np.cross(axis, wa) * np.sin(theta_r)
-    return w / np.linalg.norm(w), float(np.cos(theta_o))
+    # Rodrigues: rotate wa by theta_r about the axis (perpendicular to wa).
+    c, sn = math.cos(theta_r), math.sin(theta_r)
+    w = np.array([ax * c + (cy * az - cz * ay) * sn, ay * c + (cz * ax - cx * az) * sn,
+                  az * c + (cx * ay - cy * ax) * sn])
+    return w / math.sqrt(w @ w), math.cos(theta_o)
 
 
 def emitter_bounds(lights):
@@ -125,6 +134,18 @@ def _mesh_bounds(meshes, j, phi):
     else:
         w, cos_o = ref, -1.0
     return Bounds(corners.min(axis=0), corners.max(axis=0), phi, w, cos_o, 0.0, True)
+
+
+def triangle_tree(tris, members):
+    """A LightTree over emissive triangles (one group's members; leaf k is
+    members[k]): power by area (a group shares its emission), two-sided
+    Lambertian emission about each normal."""
+    p0 = tris.p0[members]
+    p1, p2 = p0 + tris.e1[members], p0 + tris.e2[members]
+    lo = np.minimum(np.minimum(p0, p1), p2)
+    hi = np.maximum(np.maximum(p0, p1), p2)
+    area, ng = tris.area[members], tris.ng[members]
+    return LightTree([Bounds(lo[k], hi[k], area[k], ng[k], 1.0, 0.0, True) for k in range(len(members))])
 
 
 # ----------------------------------------------------------------------------
@@ -202,24 +223,15 @@ class LightTree:
             for k, (node, left) in enumerate(path):
                 self.path_node[e, k], self.path_left[e, k] = node, left
 
-    # -- importance -------------------------------------------------------------
+    def _nodes(self):
+        """The node arrays ``_descend`` and ``_path_pmf`` read."""
+        return (self.left, self.right, self.leaf_emitter, self.center, self.radius, self.w, self.two_sided_f,
+                self.sin_o, self.cos_o, self.cos_e, self.phi)
+
     def importance(self, node, p, n):
         """pbrt-v4 LightBounds::Importance of nodes for points p with normals n
         (rows of zeros: no normal)."""
-        c, w = self.center[node], self.w[node]
-        return _importance(p[:, 0], p[:, 1], p[:, 2], n[:, 0], n[:, 1], n[:, 2],
-                           c[:, 0], c[:, 1], c[:, 2], self.radius[node], w[:, 0], w[:, 1], w[:, 2],
-                           self.two_sided_f[node], self.sin_o[node], self.cos_o[node], self.cos_e[node],
-                           self.phi[node])
-
-    def _p_left(self, node, p, n):
-        """Probability of descending into the left child."""
-        il = self.importance(self.left[node], p, n)
-        ir = self.importance(self.right[node], p, n)
-        total = il + ir
-        # Both zero: neither child can light p; any choice is unbiased.
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(total > 0, il / total, 0.5)
+        return _node_importance(node, p, n, *self._nodes()[3:])
 
     # -- sampling ---------------------------------------------------------------
     def select(self, u, p, n):
@@ -240,46 +252,159 @@ class LightTree:
                 u = np.where(tree, (u - self.p_infinite) / (1.0 - self.p_infinite), u)
         rows = np.nonzero(tree)[0]
         prob[rows] = 1.0 - self.p_infinite
-        node = np.zeros(len(rows), np.int64)
-        uu = u[rows]
-        while len(rows):
-            interior = self.leaf_emitter[node] < 0
-            done = rows[~interior]
-            emitter[done] = self.leaf_emitter[node[~interior]]
-            rows, node, uu = rows[interior], node[interior], uu[interior]
-            if len(rows) == 0:
-                break
-            pl = self._p_left(node, p[rows], n[rows])
-            left = uu < pl
-            prob[rows] *= np.where(left, pl, 1.0 - pl)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                uu = np.where(left, uu / pl, (uu - pl) / (1.0 - pl))
-            uu = np.clip(np.nan_to_num(uu), 0.0, np.nextafter(1.0, 0.0))
-            node = np.where(left, self.left[node], self.right[node])
+        if len(rows):
+            picked, factor = np.empty(len(rows), np.int64), np.empty(len(rows))
+            _descend(np.ascontiguousarray(u[rows]), _rows3(p, rows), _rows3(n, rows), *self._nodes(),
+                     picked, factor)
+            emitter[rows] = picked
+            prob[rows] *= factor
         return emitter, prob
 
     def pmf(self, emitter, p, n):
         """Probability that ``select`` picks ``emitter`` at p (same products)."""
         emitter = np.asarray(emitter, np.int64)
         prob = np.ones(len(emitter))
-        inf = np.isin(emitter, self.infinite)
+        inf = np.zeros(len(emitter), bool)
         if len(self.infinite):
+            inf = np.isin(emitter, self.infinite)
             prob[inf] = self.p_infinite / len(self.infinite)
         rows = np.nonzero(~inf)[0]
         prob[rows] = 1.0 - self.p_infinite
-        for k in range(self.depth):
-            rows = rows[self.path_len[emitter[rows]] > k]
-            if len(rows) == 0:
-                break
-            e = emitter[rows]
-            pl = self._p_left(self.path_node[e, k], p[rows], n[rows])
-            prob[rows] *= np.where(self.path_left[e, k], pl, 1.0 - pl)
+        if len(rows):
+            factor = np.empty(len(rows))
+            _path_pmf(np.ascontiguousarray(emitter[rows]), _rows3(p, rows), _rows3(n, rows), self.path_node,
+                      self.path_left, self.path_len, self.left, self.right, *self._nodes()[3:], factor)
+            prob[rows] *= factor
         return prob
+
+
+def _rows3(a, rows):
+    return np.ascontiguousarray(a[rows], dtype=np.float64)
+
+
+def _node_importance(node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi):
+    c, a = center[node], w[node]
+    return _importance(p[:, 0], p[:, 1], p[:, 2], n[:, 0], n[:, 1], n[:, 2], c[:, 0], c[:, 1], c[:, 2],
+                       radius[node], a[:, 0], a[:, 1], a[:, 2], two_sided[node], sin_o[node], cos_o[node],
+                       cos_e[node], phi[node])
+
+
+def _p_left(node, p, n, left, right, *bounds):
+    """Probability of descending from interior nodes into their left child."""
+    il = _node_importance(left[node], p, n, *bounds)
+    ir = _node_importance(right[node], p, n, *bounds)
+    total = il + ir
+    # Both zero: neither child can light p; any choice is unbiased.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(total > 0, il / total, 0.5)
+
+
+def _descend_levels(u, p, n, left, right, leaf, *rest):
+    """NumPy form of ``_descend``: level by level for all rays at once."""
+    *bounds, out_emitter, out_prob = rest
+    rows = np.arange(len(u))
+    node = np.zeros(len(u), np.int64)
+    uu = u.copy()
+    out_prob[:] = 1.0
+    while len(rows):
+        interior = leaf[node] < 0
+        out_emitter[rows[~interior]] = leaf[node[~interior]]
+        rows, node, uu = rows[interior], node[interior], uu[interior]
+        if len(rows) == 0:
+            break
+        pl = _p_left(node, p[rows], n[rows], left, right, *bounds)
+        go_left = uu < pl
+        out_prob[rows] *= np.where(go_left, pl, 1.0 - pl)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uu = np.where(go_left, uu / pl, (uu - pl) / (1.0 - pl))
+        uu = np.clip(np.nan_to_num(uu), 0.0, _BELOW_ONE)
+        node = np.where(go_left, left[node], right[node])
+
+
+def _path_levels(emitter, p, n, path_node, path_left, path_len, left, right, *rest):
+    """NumPy form of ``_path_pmf``: level by level for all rays at once."""
+    *bounds, out = rest
+    out[:] = 1.0
+    rows = np.arange(len(emitter))
+    for k in range(path_node.shape[1]):
+        rows = rows[path_len[emitter[rows]] > k]
+        if len(rows) == 0:
+            break
+        e = emitter[rows]
+        pl = _p_left(path_node[e, k], p[rows], n[rows], left, right, *bounds)
+        out[rows] *= np.where(path_left[e, k], pl, 1.0 - pl)
+
+
+_BELOW_ONE = float(np.nextafter(1.0, 0.0))
+_NODES = "int64[::1], int64[::1], float64[:, ::1], float64[::1], float64[:, ::1], " + ", ".join(["float64[::1]"] * 5)
+
+
+@helper
+def _child_p_left(px, py, pz, nx, ny, nz, node, left, right, center, radius, w, two_sided, sin_o, cos_o,
+                  cos_e, phi):
+    """One ray's ``_p_left`` at one interior node."""
+    a, b = left[node], right[node]
+    il = _importance_at(px, py, pz, nx, ny, nz, center[a, 0], center[a, 1], center[a, 2], radius[a],
+                        w[a, 0], w[a, 1], w[a, 2], two_sided[a], sin_o[a], cos_o[a], cos_e[a], phi[a])
+    ir = _importance_at(px, py, pz, nx, ny, nz, center[b, 0], center[b, 1], center[b, 2], radius[b],
+                        w[b, 0], w[b, 1], w[b, 2], two_sided[b], sin_o[b], cos_o[b], cos_e[b], phi[b])
+    total = il + ir
+    return il / total if total > 0.0 else 0.5
+
+
+@loop_kernel("void(float64[::1], float64[:, ::1], float64[:, ::1], int64[::1], " + _NODES +
+             ", int64[::1], float64[::1])", _descend_levels)
+def _descend(u, p, n, left, right, leaf, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi,
+             out_emitter, out_prob):
+    """Per ray: descend from the root by u, each child with its share of
+    the two children's importance; the leaf's emitter and the probability."""
+    for i in range(len(u)):
+        node = 0
+        uu = u[i]
+        prob = 1.0
+        while leaf[node] < 0:
+            pl = _child_p_left(p[i, 0], p[i, 1], p[i, 2], n[i, 0], n[i, 1], n[i, 2], node, left, right,
+                               center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
+            if uu < pl:
+                prob *= pl
+                uu = uu / pl
+                node = left[node]
+            else:
+                prob *= 1.0 - pl
+                uu = (uu - pl) / (1.0 - pl)
+                node = right[node]
+            if not uu == uu:   # NaN: as np.nan_to_num
+                uu = 0.0
+            uu = min(max(uu, 0.0), _BELOW_ONE)
+        out_emitter[i] = leaf[node]
+        out_prob[i] = prob
+
+
+@loop_kernel("void(int64[::1], float64[:, ::1], float64[:, ::1], int64[:, ::1], boolean[:, ::1], int64[::1], "
+             "int64[::1], int64[::1], float64[:, ::1], float64[::1], float64[:, ::1], " +
+             ", ".join(["float64[::1]"] * 5) + ", float64[::1])", _path_levels)
+def _path_pmf(emitter, p, n, path_node, path_left, path_len, left, right, center, radius, w, two_sided,
+              sin_o, cos_o, cos_e, phi, out):
+    """Per ray: the probability ``_descend`` reaches the emitter's leaf."""
+    for i in range(len(emitter)):
+        e = emitter[i]
+        prob = 1.0
+        for k in range(path_len[e]):
+            pl = _child_p_left(p[i, 0], p[i, 1], p[i, 2], n[i, 0], n[i, 1], n[i, 2], path_node[e, k], left,
+                               right, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
+            prob *= pl if path_left[e, k] else 1.0 - pl
+        out[i] = prob
 
 
 @kernel(18)
 def _importance(px, py, pz, nx, ny, nz, cx, cy, cz, r, wx, wy, wz, two_sided, sin_o, cos_o, cos_e, phi):
     """One node's importance for one shading point (see ``importance``)."""
+    return _importance_at(px, py, pz, nx, ny, nz, cx, cy, cz, r, wx, wy, wz, two_sided, sin_o, cos_o, cos_e,
+                          phi)
+
+
+@helper
+def _importance_at(px, py, pz, nx, ny, nz, cx, cy, cz, r, wx, wy, wz, two_sided, sin_o, cos_o, cos_e, phi):
     tx, ty, tz = px - cx, py - cy, pz - cz
     d2_true = tx * tx + ty * ty + tz * tz
     d2 = np.maximum(d2_true, r * r)
