@@ -104,6 +104,34 @@ def test_light_tree_importance_agrees(jit):
     assert_agree(*both_ways(_importance, *args))
 
 
+def test_light_tree_descent_agrees(jit):
+    """The compiled tree descent and path pmf (loops per ray) and their NumPy
+    forms (level by level) give identical picks and probabilities."""
+    from engine.lighttree import Bounds, LightTree
+    rng = np.random.default_rng(8)
+    bounds = []
+    for k in range(300):
+        lo = rng.uniform(-4, 4, 3)
+        w = rng.normal(size=3)
+        bounds.append(Bounds(lo, lo + rng.uniform(0, 0.3, 3), rng.uniform(0.1, 3.0), w / np.linalg.norm(w),
+                             np.cos(rng.uniform(0, np.pi)), np.cos(rng.uniform(0, np.pi / 2)), k % 3 == 0))
+    tree = LightTree(bounds)
+    n = 20000
+    p = rng.uniform(-5, 5, (n, 3))
+    normals = rng.normal(size=(n, 3))
+    normals[:500] = 0.0                                             # no normal
+    u = rng.random(n)
+    kernels.configure(False)
+    plain = tree.select(u, p, normals)
+    plain_pmf = tree.pmf(plain[0], p, normals)
+    kernels.configure(True)
+    compiled = tree.select(u, p, normals)
+    assert np.array_equal(plain[0], compiled[0])
+    assert_agree([plain[1]], [compiled[1]])
+    assert_agree([plain_pmf], [tree.pmf(compiled[0], p, normals)])
+    assert np.array_equal(plain_pmf, plain[1])                      # select's probability is the pmf
+
+
 def test_sobol_sampler_agrees(jit):
     """The compiled Sobol loop (uint32 maths in uint64) and the table-driven
     NumPy form give the same numbers, for every dimension set kind and
