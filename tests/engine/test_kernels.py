@@ -176,3 +176,33 @@ def test_fixed_seed_render_agrees_with_and_without_jit(renders):
     assert np.isfinite(compiled).all()
     # The same random numbers through the same maths, rounded the same way.
     np.testing.assert_array_equal(compiled, plain)
+
+
+def test_light_tree_descent_agrees(jit):
+    """The compiled descent and path pmf give the NumPy forms' picks and
+    probabilities bit for bit, points with and without normals, on a tree
+    with an infinite emitter (a sun) next to hundreds of bounded ones."""
+    from engine.lighttree import Bounds, LightTree
+    rng = np.random.default_rng(8)
+    bounds = [None]
+    for k in range(300):
+        c = rng.normal(size=3) * 3.0
+        r = rng.random() * 0.3
+        w = rng.normal(size=3)
+        cos_o = np.cos(rng.random() * np.pi)
+        bounds.append(Bounds(c - r, c + r, rng.random() * 10.0 * (k % 7 != 0), w / np.linalg.norm(w),
+                             cos_o, np.cos(rng.random() * np.pi / 2), k % 2 == 0))
+    tree = LightTree(bounds)
+    n = 20000
+    p = rng.normal(size=(n, 3)) * 4.0
+    nn = rng.normal(size=(n, 3))
+    nn /= np.linalg.norm(nn, axis=1)[:, None]
+    nn[:500] = 0.0
+    u = rng.random(n)
+    u[:20] = 0.0
+    plain, compiled = both_ways(tree.select, u, p, nn)
+    assert_agree(plain, compiled)
+    emitter = rng.integers(0, len(bounds), n)
+    assert_agree(*both_ways(tree.pmf, emitter, p, nn))
+    assert_agree(*both_ways(tree.pmf, plain[0], p, nn))
+    np.testing.assert_array_equal(tree.pmf(plain[0], p, nn), plain[1])
