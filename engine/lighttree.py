@@ -223,15 +223,10 @@ class LightTree:
             for k, (node, left) in enumerate(path):
                 self.path_node[e, k], self.path_left[e, k] = node, left
 
-    def _nodes(self):
-        """The node arrays ``_descend`` and ``_path_pmf`` read."""
-        return (self.left, self.right, self.leaf_emitter, self.center, self.radius, self.w, self.two_sided_f,
-                self.sin_o, self.cos_o, self.cos_e, self.phi)
-
-    def importance(self, node, p, n):
-        """pbrt-v4 LightBounds::Importance of nodes for points p with normals n
-        (rows of zeros: no normal)."""
-        return _node_importance(node, p, n, *self._nodes()[3:])
+    # -- importance -------------------------------------------------------------
+    def _tree_arrays(self):
+        return (self.center, self.radius, self.w, self.two_sided_f, self.sin_o, self.cos_o, self.cos_e,
+                self.phi, self.left, self.right)
 
     # -- sampling ---------------------------------------------------------------
     def select(self, u, p, n):
@@ -251,13 +246,12 @@ class LightTree:
             if self.has_tree:   # else every emitter is infinite and p_infinite is 1
                 u = np.where(tree, (u - self.p_infinite) / (1.0 - self.p_infinite), u)
         rows = np.nonzero(tree)[0]
-        prob[rows] = 1.0 - self.p_infinite
         if len(rows):
-            picked, factor = np.empty(len(rows), np.int64), np.empty(len(rows))
-            _descend(np.ascontiguousarray(u[rows]), _rows3(p, rows), _rows3(n, rows), *self._nodes(),
-                     picked, factor)
-            emitter[rows] = picked
-            prob[rows] *= factor
+            picked = np.empty(len(rows), np.int64)
+            p_rows = np.full(len(rows), 1.0 - self.p_infinite)
+            _descend(np.ascontiguousarray(u[rows]), _rows(p, rows), _rows(n, rows), *self._tree_arrays(),
+                     self.leaf_emitter, picked, p_rows)
+            emitter[rows], prob[rows] = picked, p_rows
         return emitter, prob
 
     def pmf(self, emitter, p, n):
@@ -269,142 +263,78 @@ class LightTree:
             inf = np.isin(emitter, self.infinite)
             prob[inf] = self.p_infinite / len(self.infinite)
         rows = np.nonzero(~inf)[0]
-        prob[rows] = 1.0 - self.p_infinite
         if len(rows):
-            factor = np.empty(len(rows))
-            _path_pmf(np.ascontiguousarray(emitter[rows]), _rows3(p, rows), _rows3(n, rows), self.path_node,
-                      self.path_left, self.path_len, self.left, self.right, *self._nodes()[3:], factor)
-            prob[rows] *= factor
+            p_rows = np.full(len(rows), 1.0 - self.p_infinite)
+            _path_pmf(np.ascontiguousarray(emitter[rows]), _rows(p, rows), _rows(n, rows), *self._tree_arrays(),
+                      self.path_node, self.path_left, self.path_len, p_rows)
+            prob[rows] = p_rows
         return prob
 
 
-def _rows3(a, rows):
-    return np.ascontiguousarray(a[rows], dtype=np.float64)
+def _rows(a, rows):
+    return np.ascontiguousarray(a[rows] if len(rows) < len(a) else a, dtype=np.float64)
 
 
-def _node_importance(node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi):
-    c, a = center[node], w[node]
-    return _importance(p[:, 0], p[:, 1], p[:, 2], n[:, 0], n[:, 1], n[:, 2], c[:, 0], c[:, 1], c[:, 2],
-                       radius[node], a[:, 0], a[:, 1], a[:, 2], two_sided[node], sin_o[node], cos_o[node],
-                       cos_e[node], phi[node])
-
-
-def _p_left(node, p, n, left, right, *bounds):
-    """Probability of descending from interior nodes into their left child."""
-    il = _node_importance(left[node], p, n, *bounds)
-    ir = _node_importance(right[node], p, n, *bounds)
+def _p_left_numpy(node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right):
+    """Probability of descending into the left child of each ``node``."""
+    il = _node_importance(left[node], p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
+    ir = _node_importance(right[node], p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
     total = il + ir
     # Both zero: neither child can light p; any choice is unbiased.
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(total > 0, il / total, 0.5)
 
 
-def _descend_levels(u, p, n, left, right, leaf, *rest):
-    """NumPy form of ``_descend``: level by level for all rays at once."""
-    *bounds, out_emitter, out_prob = rest
+def _node_importance(node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi):
+    c, wn = center[node], w[node]
+    return _importance(p[:, 0], p[:, 1], p[:, 2], n[:, 0], n[:, 1], n[:, 2],
+                       c[:, 0], c[:, 1], c[:, 2], radius[node], wn[:, 0], wn[:, 1], wn[:, 2],
+                       two_sided[node], sin_o[node], cos_o[node], cos_e[node], phi[node])
+
+
+_U_MAX = np.nextafter(1.0, 0.0)
+
+
+def _descend_numpy(u, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf,
+                   emitter, prob):
+    """From the root to a leaf per row, picking a child by importance; the
+    product of the choices' probabilities multiplies ``prob``."""
+    arrays = (center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right)
     rows = np.arange(len(u))
     node = np.zeros(len(u), np.int64)
-    uu = u.copy()
-    out_prob[:] = 1.0
+    uu = u
     while len(rows):
         interior = leaf[node] < 0
-        out_emitter[rows[~interior]] = leaf[node[~interior]]
+        emitter[rows[~interior]] = leaf[node[~interior]]
         rows, node, uu = rows[interior], node[interior], uu[interior]
         if len(rows) == 0:
             break
-        pl = _p_left(node, p[rows], n[rows], left, right, *bounds)
+        pl = _p_left_numpy(node, p[rows], n[rows], *arrays)
         go_left = uu < pl
-        out_prob[rows] *= np.where(go_left, pl, 1.0 - pl)
+        prob[rows] *= np.where(go_left, pl, 1.0 - pl)
         with np.errstate(divide="ignore", invalid="ignore"):
             uu = np.where(go_left, uu / pl, (uu - pl) / (1.0 - pl))
-        uu = np.clip(np.nan_to_num(uu), 0.0, _BELOW_ONE)
+        uu = np.clip(np.nan_to_num(uu), 0.0, _U_MAX)
         node = np.where(go_left, left[node], right[node])
 
 
-def _path_levels(emitter, p, n, path_node, path_left, path_len, left, right, *rest):
-    """NumPy form of ``_path_pmf``: level by level for all rays at once."""
-    *bounds, out = rest
-    out[:] = 1.0
+def _path_pmf_numpy(emitter, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right,
+                    path_node, path_left, path_len, prob):
+    """The product ``_descend`` forms for each row's emitter, along its path."""
+    arrays = (center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right)
     rows = np.arange(len(emitter))
     for k in range(path_node.shape[1]):
         rows = rows[path_len[emitter[rows]] > k]
         if len(rows) == 0:
             break
         e = emitter[rows]
-        pl = _p_left(path_node[e, k], p[rows], n[rows], left, right, *bounds)
-        out[rows] *= np.where(path_left[e, k], pl, 1.0 - pl)
-
-
-_BELOW_ONE = float(np.nextafter(1.0, 0.0))
-_NODES = "int64[::1], int64[::1], float64[:, ::1], float64[::1], float64[:, ::1], " + ", ".join(["float64[::1]"] * 5)
-
-
-@helper
-def _child_p_left(px, py, pz, nx, ny, nz, node, left, right, center, radius, w, two_sided, sin_o, cos_o,
-                  cos_e, phi):
-    """One ray's ``_p_left`` at one interior node."""
-    a, b = left[node], right[node]
-    il = _importance_at(px, py, pz, nx, ny, nz, center[a, 0], center[a, 1], center[a, 2], radius[a],
-                        w[a, 0], w[a, 1], w[a, 2], two_sided[a], sin_o[a], cos_o[a], cos_e[a], phi[a])
-    ir = _importance_at(px, py, pz, nx, ny, nz, center[b, 0], center[b, 1], center[b, 2], radius[b],
-                        w[b, 0], w[b, 1], w[b, 2], two_sided[b], sin_o[b], cos_o[b], cos_e[b], phi[b])
-    total = il + ir
-    return il / total if total > 0.0 else 0.5
-
-
-@loop_kernel("void(float64[::1], float64[:, ::1], float64[:, ::1], int64[::1], " + _NODES +
-             ", int64[::1], float64[::1])", _descend_levels)
-def _descend(u, p, n, left, right, leaf, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi,
-             out_emitter, out_prob):
-    """Per ray: descend from the root by u, each child with its share of
-    the two children's importance; the leaf's emitter and the probability."""
-    for i in range(len(u)):
-        node = 0
-        uu = u[i]
-        prob = 1.0
-        while leaf[node] < 0:
-            pl = _child_p_left(p[i, 0], p[i, 1], p[i, 2], n[i, 0], n[i, 1], n[i, 2], node, left, right,
-                               center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
-            if uu < pl:
-                prob *= pl
-                uu = uu / pl
-                node = left[node]
-            else:
-                prob *= 1.0 - pl
-                uu = (uu - pl) / (1.0 - pl)
-                node = right[node]
-            if not uu == uu:   # NaN: as np.nan_to_num
-                uu = 0.0
-            uu = min(max(uu, 0.0), _BELOW_ONE)
-        out_emitter[i] = leaf[node]
-        out_prob[i] = prob
-
-
-@loop_kernel("void(int64[::1], float64[:, ::1], float64[:, ::1], int64[:, ::1], boolean[:, ::1], int64[::1], "
-             "int64[::1], int64[::1], float64[:, ::1], float64[::1], float64[:, ::1], " +
-             ", ".join(["float64[::1]"] * 5) + ", float64[::1])", _path_levels)
-def _path_pmf(emitter, p, n, path_node, path_left, path_len, left, right, center, radius, w, two_sided,
-              sin_o, cos_o, cos_e, phi, out):
-    """Per ray: the probability ``_descend`` reaches the emitter's leaf."""
-    for i in range(len(emitter)):
-        e = emitter[i]
-        prob = 1.0
-        for k in range(path_len[e]):
-            pl = _child_p_left(p[i, 0], p[i, 1], p[i, 2], n[i, 0], n[i, 1], n[i, 2], path_node[e, k], left,
-                               right, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
-            prob *= pl if path_left[e, k] else 1.0 - pl
-        out[i] = prob
+        pl = _p_left_numpy(path_node[e, k], p[rows], n[rows], *arrays)
+        prob[rows] *= np.where(path_left[e, k], pl, 1.0 - pl)
 
 
 @kernel(18)
 def _importance(px, py, pz, nx, ny, nz, cx, cy, cz, r, wx, wy, wz, two_sided, sin_o, cos_o, cos_e, phi):
     """One node's importance for one shading point (see ``importance``)."""
-    return _importance_at(px, py, pz, nx, ny, nz, cx, cy, cz, r, wx, wy, wz, two_sided, sin_o, cos_o, cos_e,
-                          phi)
-
-
-@helper
-def _importance_at(px, py, pz, nx, ny, nz, cx, cy, cz, r, wx, wy, wz, two_sided, sin_o, cos_o, cos_e, phi):
     tx, ty, tz = px - cx, py - cy, pz - cz
     d2_true = tx * tx + ty * ty + tz * tz
     d2 = np.maximum(d2_true, r * r)
@@ -444,3 +374,63 @@ def _cos_sub(sin_a, cos_a, sin_b, cos_b):
 def _sin_sub(sin_a, cos_a, sin_b, cos_b):
     """sin(max(0, a - b))."""
     return where(cos_a > cos_b, 0.0, sin_a * cos_b - cos_a * sin_b)
+
+
+# -- the descent, compiled: one loop per row instead of a dozen array
+# operations per tree level (the NumPy forms above define the results).
+
+_importance_one = helper(_importance.fn)
+
+
+@helper
+def _importance_at(i, k, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi):
+    return _importance_one(p[i, 0], p[i, 1], p[i, 2], n[i, 0], n[i, 1], n[i, 2],
+                           center[k, 0], center[k, 1], center[k, 2], radius[k], w[k, 0], w[k, 1], w[k, 2],
+                           two_sided[k], sin_o[k], cos_o[k], cos_e[k], phi[k])
+
+
+@helper
+def _p_left_one(i, node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right):
+    il = _importance_at(i, left[node], p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
+    ir = _importance_at(i, right[node], p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
+    total = il + ir
+    if total > 0:
+        return il / total
+    return 0.5
+
+
+_TREE_SIGNATURE = ("float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64[:, ::1], "
+                   "float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], int64[::1], int64[::1]")
+
+
+@loop_kernel(f"void(float64[::1], {_TREE_SIGNATURE}, int64[::1], int64[::1], float64[::1])", _descend_numpy)
+def _descend(u, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf, emitter, prob):
+    for i in range(len(u)):
+        node = 0
+        uu = u[i]
+        while leaf[node] < 0:
+            pl = _p_left_one(i, node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right)
+            if uu < pl:
+                prob[i] *= pl
+                v = uu / pl
+                node = left[node]
+            else:
+                prob[i] *= 1.0 - pl
+                v = (uu - pl) / (1.0 - pl)
+                node = right[node]
+            if v != v:
+                v = 0.0
+            uu = min(max(v, 0.0), _U_MAX)
+        emitter[i] = leaf[node]
+
+
+@loop_kernel(f"void(int64[::1], {_TREE_SIGNATURE}, int64[:, ::1], boolean[:, ::1], int64[::1], float64[::1])",
+             _path_pmf_numpy)
+def _path_pmf(emitter, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right,
+              path_node, path_left, path_len, prob):
+    for i in range(len(emitter)):
+        e = emitter[i]
+        for k in range(path_len[e]):
+            pl = _p_left_one(i, path_node[e, k], p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi,
+                             left, right)
+            prob[i] *= pl if path_left[e, k] else 1.0 - pl
