@@ -37,7 +37,8 @@ POINT, SUN, AREA, MESH, ENV = 0, 1, 2, 3, 4
 # Solid-angle sampling of rectangles and triangles is used between these
 # solid angles (sr); outside, area sampling (pbrt-v4's Triangle thresholds:
 # below, the two pdfs are the same up to rounding; near 2 pi, the spherical
-# triangle warp degenerates).
+# triangle warp degenerates).  Triangles also only from points near their
+# plane (_MeshLights._spherical, Cycles' rule).
 MIN_SPHERICAL = 3e-4
 MAX_SPHERICAL = 6.22
 # Emissive triangles of one material up to which the light-tree strategy
@@ -646,12 +647,22 @@ class _MeshLights:
         return self.textures.emission_at(tr.material[tri], shading, np.broadcast_to(L, q.shape))
 
     def _spherical(self, tri, p):
-        """Which shading points sample their triangle by solid angle (Arvo):
-        those that see it large (Cycles and pbrt-v4 switch the same way);
-        small or distant triangles keep area sampling, as good and cheaper."""
+        """Which shading points sample their triangle by solid angle (Arvo),
+        and that solid angle: as Cycles (light/triangle.h), those nearer to
+        the triangle's plane than its longest edge, where area sampling's
+        pdf varies much over the triangle; farther, area sampling is about
+        as good and far cheaper.  The solid-angle limits guard the warp."""
         tr = self.tris
-        solid_angle = triangle_solid_angle(p, tr.p0[tri], tr.p0[tri] + tr.e1[tri],
-                                           tr.p0[tri] + tr.e2[tri])[0]
+        e1, e2 = tr.e1[tri], tr.e2[tri]
+        e3 = e2 - e1
+        longest2 = np.maximum(np.maximum(dot(e1, e1), dot(e2, e2)), dot(e3, e3))
+        plane = dot(tr.p0[tri] - p, tr.ng[tri])
+        close = np.nonzero(longest2 > plane * plane)[0]
+        solid_angle = np.zeros(len(tri))
+        if len(close):
+            tc = tri[close]
+            solid_angle[close] = triangle_solid_angle(p[close], tr.p0[tc], tr.p0[tc] + tr.e1[tc],
+                                                      tr.p0[tc] + tr.e2[tc])[0]
         return (solid_angle >= MIN_SPHERICAL) & (solid_angle <= MAX_SPHERICAL), solid_angle
 
     def pdf(self, prim, o, p_hit, ng, n=None):
