@@ -62,9 +62,24 @@ class Triangles:
     shading: object = None
     # (T,) int32 index of the triangle's scene instance (for passes).
     instance: Optional[np.ndarray] = None
+    # The same triangles as shared vertices for Embree: (V, 3) world-space
+    # vertices and (T, 3) indices into them (p0 = vertices[indices[:, 0]]),
+    # or None (then Embree gets the corners).
+    vertices: Optional[np.ndarray] = None
+    indices: Optional[np.ndarray] = None
+    # Which of flatten's triangles were kept (bool mask), None when all were.
+    kept: Optional[np.ndarray] = None
 
     def __len__(self):
         return len(self.p0)
+
+    def indexed_float32(self):
+        """(V, 3) float32 vertices and (T, 3) int32 indices for Embree, or
+        None when the triangles carry no shared vertices."""
+        if self.vertices is None or self.indices is None:
+            return None
+        return (np.ascontiguousarray(self.vertices, dtype=np.float32),
+                np.ascontiguousarray(self.indices, dtype=np.int32))
 
     def corners_float32(self):
         """(T, 3, 3) float32 vertex positions for Embree."""
@@ -75,10 +90,14 @@ class Triangles:
         return v
 
 
-def _mesh_corners(mesh):
-    pos = np.asarray(mesh.positions, dtype=np.float64)
-    tris = np.asarray(mesh.triangles, dtype=np.int64)
-    return pos[tris]  # (T, 3, 3)
+def _mesh_arrays(mesh):
+    """Per-mesh arrays every instance of it shares, converted once."""
+    slots = (None if mesh.material_slots is None
+             else np.asarray(mesh.material_slots, dtype=np.int64))
+    normals = None if mesh.normals is None else np.asarray(mesh.normals, dtype=np.float64)
+    uv = None if mesh.uvs is None else np.asarray(mesh.uvs, dtype=np.float64)
+    return (np.asarray(mesh.positions, dtype=np.float64),
+            np.asarray(mesh.triangles, dtype=np.int64), normals, uv, slots)
 
 
 def _slot_table(inst, n_materials):
@@ -100,35 +119,54 @@ def flatten(scene, with_instance=False):
         if len(mesh.triangles) == 0:
             continue
         if inst.mesh not in mesh_cache:
-            mesh_cache[inst.mesh] = _mesh_corners(mesh)
-        corners = mesh_cache[inst.mesh]
-        parts.append(_instance_part(mesh, corners, inst, n_mat))
-        owners.append(np.full(len(corners), index, np.int32))
+            mesh_cache[inst.mesh] = _mesh_arrays(mesh)
+        part = _instance_part(mesh_cache[inst.mesh], inst, n_mat)
+        parts.append(part)
+        owners.append(np.full(part.count, index, np.int32))
     tris = _concat(parts)
     if owners and with_instance:
-        tris.instance = np.concatenate(owners)[tris.kept]
+        tris.instance = _take_kept(np.concatenate(owners), tris.kept)
     tris.shading = _scene_shading(scene, owners, tris)
     if _needs_tangents(scene):
         _add_tangents(tris, scene, parts)
     return tris
 
 
-def _instance_part(mesh, corners, inst, n_mat):
+@dataclass
+class _Part:
+    """One instance's triangles: its world-space vertices and the mesh's
+    vertex indices (shared by every instance of the mesh)."""
+    vertices: np.ndarray       # (V, 3) float64, world space
+    triangles: np.ndarray      # (T, 3) int64 into vertices
+    ns: Optional[np.ndarray]   # (T, 3, 3) world-space corner normals
+    uv: Optional[np.ndarray]
+    material: np.ndarray
+    visibility: int
+
+    @property
+    def count(self):
+        return len(self.triangles)
+
+
+def _instance_part(arrays, inst, n_mat):
+    positions, triangles, normals, uv, slots = arrays
     m = np.asarray(inst.matrix, dtype=np.float64)
     lin, off = m[:3, :3], m[:3, 3]
-    world = corners @ lin.T + off
-    slots = (np.zeros(len(corners), np.int64) if mesh.material_slots is None
-             else np.asarray(mesh.material_slots, dtype=np.int64))
+    # Vertices, not corners: a third of the work, and (V, 3) @ (3, 3) is one
+    # BLAS call where a (T, 3, 3) stack is one per triangle.  Same values.
+    world = positions @ lin.T + off
     table = _slot_table(inst, n_mat)
-    material = table[np.minimum(slots, len(table) - 1)]
+    if slots is None:
+        material = np.full(len(triangles), table[0], np.int32)
+    else:
+        material = table[np.minimum(slots, len(table) - 1)]
     ns = None
-    if mesh.normals is not None:
+    if normals is not None:
         # Normals transform with the inverse transpose; a mirroring matrix
         # flips the winding, which the cross product in _concat sees too.
         nmat = np.linalg.inv(lin).T if abs(np.linalg.det(lin)) > 0 else lin
-        ns = np.asarray(mesh.normals, dtype=np.float64) @ nmat.T
-    uv = None if mesh.uvs is None else np.asarray(mesh.uvs, dtype=np.float64)
-    return world, ns, uv, material, visibility_bits(inst)
+        ns = (normals.reshape(-1, 3) @ nmat.T).reshape(normals.shape)
+    return _Part(world, triangles, ns, uv, material, visibility_bits(inst))
 
 
 def _scene_shading(scene, owners, tris):
@@ -138,41 +176,66 @@ def _scene_shading(scene, owners, tris):
         return SceneShading(scene, np.zeros(0, np.int64), np.zeros(0, np.int64))
     instance = np.concatenate(owners).astype(np.int64)
     local = np.concatenate([np.arange(len(o)) for o in owners])
-    return SceneShading(scene, instance[tris.kept], local[tris.kept])
+    return SceneShading(scene, _take_kept(instance, tris.kept), _take_kept(local, tris.kept))
+
+
+def _take_kept(array, keep):
+    """array[keep], without the copy when every triangle was kept."""
+    return array if keep is None else array[keep]
+
+
+def _row_norm(v):
+    """Euclidean length over the last axis; the same sums, in the same order,
+    as np.linalg.norm, without its temporaries."""
+    s = v * v
+    return np.sqrt(s[..., 0] + s[..., 1] + s[..., 2])
+
+
+def _stack_vertices(parts):
+    """All instances' vertices in one (V, 3) array and every triangle's
+    indices into it, (T, 3) int64."""
+    vertices = np.concatenate([p.vertices for p in parts])
+    offsets = np.cumsum([0] + [len(p.vertices) for p in parts[:-1]])
+    indices = np.concatenate([p.triangles + o for p, o in zip(parts, offsets)])
+    return vertices, indices
 
 
 def _concat(parts):
     if not parts:
         empty3 = np.zeros((0, 3))
-        return Triangles(empty3, empty3, empty3, empty3, None, np.zeros(0, bool), None,
+        tris = Triangles(empty3, empty3, empty3, empty3, None, np.zeros(0, bool), None,
                          np.zeros(0, np.int32), np.zeros(0))
-    world = np.concatenate([p[0] for p in parts])
-    any_ns = any(p[1] is not None for p in parts)
-    any_uv = any(p[2] is not None for p in parts)
-    n_each = [len(p[0]) for p in parts]
-    smooth = np.concatenate([np.full(n, p[1] is not None) for n, p in zip(n_each, parts)])
-    ns = _stack_optional([p[1] for p in parts], n_each, (3, 3)) if any_ns else None
-    uv = _stack_optional([p[2] for p in parts], n_each, (3, 2)) if any_uv else None
-    material = np.concatenate([p[3] for p in parts]).astype(np.int32)
+        return tris
+    vertices, indices = _stack_vertices(parts)
+    any_ns = any(p.ns is not None for p in parts)
+    any_uv = any(p.uv is not None for p in parts)
+    n_each = [p.count for p in parts]
+    smooth = np.concatenate([np.full(p.count, p.ns is not None) for p in parts])
+    ns = _stack_optional([p.ns for p in parts], n_each, (3, 3)) if any_ns else None
+    uv = _stack_optional([p.uv for p in parts], n_each, (3, 2)) if any_uv else None
+    material = np.concatenate([p.material for p in parts]).astype(np.int32)
     visibility = None
-    if any(p[4] != VIS_ALL for p in parts):
-        visibility = np.concatenate([np.full(n, p[4], np.uint8) for n, p in zip(n_each, parts)])
+    if any(p.visibility != VIS_ALL for p in parts):
+        visibility = np.concatenate([np.full(p.count, p.visibility, np.uint8) for p in parts])
 
-    p0 = world[:, 0]
-    e1 = world[:, 1] - p0
-    e2 = world[:, 2] - p0
+    p0 = vertices[indices[:, 0]]
+    e1 = vertices[indices[:, 1]] - p0
+    e2 = vertices[indices[:, 2]] - p0
     c = np.cross(e1, e2)
-    clen = np.linalg.norm(c, axis=1)
+    clen = _row_norm(c)
     keep = np.isfinite(clen) & (clen > 1e-12 * (1.0 + np.abs(p0).max(axis=1)) ** 2)
-    dropped = int(len(keep) - keep.sum())
-    ng = c[keep] / clen[keep, None]
+    dropped = int(len(keep) - np.count_nonzero(keep))
+    keep = None if dropped == 0 else keep
+    clen, c = _take_kept(clen, keep), _take_kept(c, keep)
+    ng = c / clen[:, None]
+    smooth = _take_kept(smooth, keep)
     if ns is not None:
-        ns = _fix_normals(ns[keep], ng, smooth[keep])
-    tris = Triangles(p0[keep], e1[keep], e2[keep], ng, ns, smooth[keep],
-                     None if uv is None else uv[keep], material[keep],
-                     0.5 * clen[keep], dropped,
-                     visibility=None if visibility is None else visibility[keep])
-    tris.kept = keep
+        ns = _fix_normals(_take_kept(ns, keep), ng, smooth)
+    tris = Triangles(_take_kept(p0, keep), _take_kept(e1, keep), _take_kept(e2, keep), ng, ns, smooth,
+                     None if uv is None else _take_kept(uv, keep), _take_kept(material, keep),
+                     0.5 * clen, dropped,
+                     visibility=None if visibility is None else _take_kept(visibility, keep))
+    tris.vertices, tris.indices, tris.kept = vertices, _take_kept(indices, keep), keep
     return tris
 
 
@@ -188,11 +251,15 @@ def _stack_optional(arrays, counts, tail):
 
 def _fix_normals(ns, ng, smooth):
     """Unit shading normals; zero or NaN ones fall back to the face normal."""
-    length = np.linalg.norm(ns, axis=2)
+    length = _row_norm(ns)
     bad = ~np.isfinite(length) | (length < 1e-12)
-    ns = np.where(bad[..., None], ng[:, None, :], ns / np.where(bad, 1.0, length)[..., None])
+    if bad.any():
+        ns = np.where(bad[..., None], ng[:, None, :], ns / np.where(bad, 1.0, length)[..., None])
+    else:
+        ns = ns / length[..., None]
     # Flat triangles in a partly smooth scene carry the face normal.
-    ns[~smooth] = ng[~smooth, None, :]
+    if not smooth.all():
+        ns[~smooth] = ng[~smooth, None, :]
     return ns
 
 
@@ -230,25 +297,15 @@ def _add_tangents(tris, scene, parts):
         else:
             tangent.append(None)
             sign.append(None)
-    n_each = [len(p[0]) for p in parts]
+    n_each = [p.count for p in parts]
     t = _stack_optional(tangent, n_each, (3, 3))
     s = _stack_optional(sign, n_each, (3,))
     have = np.concatenate([np.full(n, x is not None) for n, x in zip(n_each, tangent)])
-    keep = _kept(parts)
-    t, s, have = t[keep], s[keep], have[keep]
+    t, s, have = _take_kept(t, tris.kept), _take_kept(s, tris.kept), _take_kept(have, tris.kept)
     ut, us = uv_tangents(tris)
     t[~have] = ut[~have, None, :]
     s[~have] = us[~have, None]
     tris.tangent, tris.tangent_sign = t, np.where(s < 0, -1.0, 1.0)
-
-
-def _kept(parts):
-    """The triangles _concat kept (it drops degenerate ones)."""
-    world = np.concatenate([p[0] for p in parts])
-    p0 = world[:, 0]
-    c = np.cross(world[:, 1] - p0, world[:, 2] - p0)
-    clen = np.linalg.norm(c, axis=1)
-    return np.isfinite(clen) & (clen > 1e-12 * (1.0 + np.abs(p0).max(axis=1)) ** 2)
 
 
 def uv_tangents(tris):
