@@ -1,8 +1,10 @@
-"""Flattening instances into one world-space triangle soup.
+"""Flattening instances into one list of world-space triangles.
 
-embreex has no instancing, so every instance's triangles are transformed into
-world space.  Per-mesh work (corner gathering, slot lookup, validity) is done
-once per mesh; per instance only the matrix multiply remains.
+embreex has no instancing, so every instance's vertices are transformed into
+world space; the triangles keep the mesh's vertex indices (offset per
+instance), which Embree takes as they are.  Per-mesh conversions are done
+once per mesh; each instance's rows are computed in its own slice of the
+output, so temporaries stay the size of one instance.
 """
 from dataclasses import dataclass
 from typing import Optional
@@ -90,16 +92,6 @@ class Triangles:
         return v
 
 
-def _mesh_arrays(mesh):
-    """Per-mesh arrays every instance of it shares, converted once."""
-    slots = (None if mesh.material_slots is None
-             else np.asarray(mesh.material_slots, dtype=np.int64))
-    normals = None if mesh.normals is None else np.asarray(mesh.normals, dtype=np.float64)
-    uv = None if mesh.uvs is None else np.asarray(mesh.uvs, dtype=np.float64)
-    return (np.asarray(mesh.positions, dtype=np.float64),
-            np.asarray(mesh.triangles, dtype=np.int64), normals, uv, slots)
-
-
 def _slot_table(inst, n_materials):
     """Map material slot -> compiled material id; the last id is the default."""
     default = n_materials  # compiled table appends DEFAULT_MATERIAL
@@ -110,67 +102,152 @@ def _slot_table(inst, n_materials):
 def flatten(scene, with_instance=False):
     """Build Triangles for every instance; degenerate triangles are dropped.
     with_instance: also record each triangle's instance index (passes)."""
-    n_mat = len(scene.materials)
     mesh_cache = {}
-    parts = []
-    owners = []   # per part: its instance index for each triangle
+    placed = []   # (instance index, instance, its mesh's arrays)
     for index, inst in enumerate(scene.instances):
         mesh = scene.meshes[inst.mesh]
         if len(mesh.triangles) == 0:
             continue
         if inst.mesh not in mesh_cache:
-            mesh_cache[inst.mesh] = _mesh_arrays(mesh)
-        part = _instance_part(mesh_cache[inst.mesh], inst, n_mat)
-        parts.append(part)
-        owners.append(np.full(part.count, index, np.int32))
-    tris = _concat(parts)
+            mesh_cache[inst.mesh] = _MeshArrays.of(mesh)
+        placed.append((index, inst, mesh_cache[inst.mesh]))
+    tris = _place(placed, len(scene.materials))
+    counts = [arrays.count for _, _, arrays in placed]
+    owners = [np.full(n, index, np.int32) for (index, _, _), n in zip(placed, counts)]
     if owners and with_instance:
         tris.instance = _take_kept(np.concatenate(owners), tris.kept)
     tris.shading = _scene_shading(scene, owners, tris)
     if _needs_tangents(scene):
-        _add_tangents(tris, scene, parts)
+        _add_tangents(tris, scene, counts)
     return tris
 
 
 @dataclass
-class _Part:
-    """One instance's triangles: its world-space vertices and the mesh's
-    vertex indices (shared by every instance of the mesh)."""
-    vertices: np.ndarray       # (V, 3) float64, world space
-    triangles: np.ndarray      # (T, 3) int64 into vertices
-    ns: Optional[np.ndarray]   # (T, 3, 3) world-space corner normals
+class _MeshArrays:
+    """A mesh's arrays as float64 / int64, converted once for all its instances."""
+    positions: np.ndarray
+    triangles: np.ndarray
+    normals: Optional[np.ndarray]
     uv: Optional[np.ndarray]
-    material: np.ndarray
-    visibility: int
+    slots: Optional[np.ndarray]
+
+    @classmethod
+    def of(cls, mesh):
+        def optional(a, dtype):
+            return None if a is None else np.asarray(a, dtype=dtype)
+        return cls(np.asarray(mesh.positions, dtype=np.float64), np.asarray(mesh.triangles, dtype=np.int64),
+                   optional(mesh.normals, np.float64), optional(mesh.uvs, np.float64),
+                   optional(mesh.material_slots, np.int64))
 
     @property
     def count(self):
         return len(self.triangles)
 
 
-def _instance_part(arrays, inst, n_mat):
-    positions, triangles, normals, uv, slots = arrays
+class _Out:
+    """flatten's output arrays.  Per instance only what differs between
+    instances is computed (vertices, normals, materials); edges, face
+    normals and unit shading normals are computed over chunks of about
+    CHUNK_ROWS triangles: cache-sized temporaries for big meshes, few NumPy
+    calls for many small ones."""
+
+    def __init__(self, placed):
+        total = sum(arrays.count for _, _, arrays in placed)
+        self.p0, self.e1, self.e2, self.ng = (np.empty((total, 3)) for _ in range(4))
+        self.clen = np.empty(total)
+        self.ns = np.empty((total, 3, 3)) if any(a.normals is not None for _, _, a in placed) else None
+        self.uv = np.zeros((total, 3, 2)) if any(a.uv is not None for _, _, a in placed) else None
+        self.material = np.empty(total, np.int32)
+        self.smooth = np.empty(total, bool)
+        self.visibility = np.full(total, VIS_ALL, np.uint8)
+        self.vertices, self.indices = [], []
+
+
+CHUNK_ROWS = 1 << 16
+
+
+def _place(placed, n_mat):
+    """Triangles of every (index, instance, mesh arrays) in ``placed``."""
+    if not placed:
+        empty3 = np.zeros((0, 3))
+        return Triangles(empty3, empty3, empty3, empty3, None, np.zeros(0, bool), None,
+                         np.zeros(0, np.int32), np.zeros(0))
+    out = _Out(placed)
+    start, first_vertex = 0, 0
+    chunk = (0, 0, 0)   # first row, first vertex, first part of the chunk being gathered
+    for number, (_, inst, arrays) in enumerate(placed):
+        rows = slice(start, start + arrays.count)
+        _place_instance(out, rows, inst, arrays, n_mat, first_vertex)
+        start, first_vertex = rows.stop, first_vertex + len(arrays.positions)
+        if start - chunk[0] >= CHUNK_ROWS or number == len(placed) - 1:
+            _place_chunk(out, slice(chunk[0], start), chunk[1], chunk[2])
+            chunk = (start, first_vertex, number + 1)
+    keep = np.isfinite(out.clen) & (out.clen > 1e-12 * (1.0 + np.abs(out.p0).max(axis=1)) ** 2)
+    dropped = int(len(keep) - np.count_nonzero(keep))
+    keep = None if dropped == 0 else keep
+
+    def kept(a):
+        return None if a is None else _take_kept(a, keep)
+    visibility = None if np.all(out.visibility == VIS_ALL) else kept(out.visibility)
+    tris = Triangles(kept(out.p0), kept(out.e1), kept(out.e2), kept(out.ng), kept(out.ns), kept(out.smooth),
+                     kept(out.uv), kept(out.material), 0.5 * kept(out.clen), dropped, visibility=visibility)
+    tris.vertices = np.concatenate(out.vertices)
+    indices = np.concatenate(out.indices)
+    if len(tris.vertices) < 2 ** 31:   # half the memory; Embree takes 32-bit indices
+        indices = indices.astype(np.int32)
+    tris.indices = kept(indices)
+    tris.kept = keep
+    return tris
+
+
+def _place_instance(out, rows, inst, arrays, n_mat, first_vertex):
+    """One instance's world-space vertices, vertex indices, materials,
+    flags, UVs and (not yet unit) shading normals."""
     m = np.asarray(inst.matrix, dtype=np.float64)
     lin, off = m[:3, :3], m[:3, 3]
     # Vertices, not corners: a third of the work, and (V, 3) @ (3, 3) is one
     # BLAS call where a (T, 3, 3) stack is one per triangle.  Same values.
-    world = positions @ lin.T + off
+    out.vertices.append(arrays.positions @ lin.T + off)
+    out.indices.append(arrays.triangles + first_vertex)
     table = _slot_table(inst, n_mat)
-    if slots is None:
-        material = np.full(len(triangles), table[0], np.int32)
-    else:
-        material = table[np.minimum(slots, len(table) - 1)]
-    ns = None
-    if normals is not None:
+    out.material[rows] = table[0] if arrays.slots is None else table[np.minimum(arrays.slots, len(table) - 1)]
+    out.smooth[rows] = arrays.normals is not None
+    out.visibility[rows] = visibility_bits(inst)
+    if arrays.uv is not None:
+        out.uv[rows] = arrays.uv
+    if out.ns is not None and arrays.normals is None:
+        out.ns[rows] = 0.0   # flat: _place_chunk puts the face normal
+    elif arrays.normals is not None:
         # Normals transform with the inverse transpose; a mirroring matrix
-        # flips the winding, which the cross product in _concat sees too.
+        # flips the winding, which the cross product in _place_chunk sees too.
         nmat = np.linalg.inv(lin).T if abs(np.linalg.det(lin)) > 0 else lin
-        ns = (normals.reshape(-1, 3) @ nmat.T).reshape(normals.shape)
-    return _Part(world, triangles, ns, uv, material, visibility_bits(inst))
+        ns = out.ns[rows].reshape(-1, 3)
+        np.matmul(arrays.normals.reshape(-1, 3), nmat.T, out=ns)
+
+
+def _place_chunk(out, rows, first_vertex, first_part):
+    """Edges, face normals, lengths and unit shading normals of ``rows``
+    (whole instances from part ``first_part`` on, their vertices from
+    ``first_vertex`` on)."""
+    vertices = out.vertices[first_part]
+    tri = out.indices[first_part]
+    if len(out.vertices) - first_part > 1:
+        vertices = np.concatenate(out.vertices[first_part:])
+        tri = np.concatenate(out.indices[first_part:])
+    tri = tri - first_vertex
+    p0 = out.p0[rows] = vertices[tri[:, 0]]
+    e1 = out.e1[rows] = vertices[tri[:, 1]] - p0
+    e2 = out.e2[rows] = vertices[tri[:, 2]] - p0
+    c = np.cross(e1, e2)
+    clen = out.clen[rows] = _row_norm(c)
+    with np.errstate(divide="ignore", invalid="ignore"):  # degenerate rows are dropped later
+        ng = out.ng[rows] = c / clen[:, None]
+    if out.ns is not None:
+        out.ns[rows] = _unit_normals(out.ns[rows], ng, out.smooth[rows])
 
 
 def _scene_shading(scene, owners, tris):
-    """SceneShading (shader-node data) for the triangles _concat kept."""
+    """SceneShading (shader-node data) for the triangles flatten kept."""
     from .nodes import SceneShading
     if not owners:
         return SceneShading(scene, np.zeros(0, np.int64), np.zeros(0, np.int64))
@@ -191,76 +268,15 @@ def _row_norm(v):
     return np.sqrt(s[..., 0] + s[..., 1] + s[..., 2])
 
 
-def _stack_vertices(parts):
-    """All instances' vertices in one (V, 3) array and every triangle's
-    indices into it, (T, 3) int64."""
-    vertices = np.concatenate([p.vertices for p in parts])
-    offsets = np.cumsum([0] + [len(p.vertices) for p in parts[:-1]])
-    indices = np.concatenate([p.triangles + o for p, o in zip(parts, offsets)])
-    return vertices, indices
-
-
-def _concat(parts):
-    if not parts:
-        empty3 = np.zeros((0, 3))
-        tris = Triangles(empty3, empty3, empty3, empty3, None, np.zeros(0, bool), None,
-                         np.zeros(0, np.int32), np.zeros(0))
-        return tris
-    vertices, indices = _stack_vertices(parts)
-    any_ns = any(p.ns is not None for p in parts)
-    any_uv = any(p.uv is not None for p in parts)
-    n_each = [p.count for p in parts]
-    smooth = np.concatenate([np.full(p.count, p.ns is not None) for p in parts])
-    ns = _stack_optional([p.ns for p in parts], n_each, (3, 3)) if any_ns else None
-    uv = _stack_optional([p.uv for p in parts], n_each, (3, 2)) if any_uv else None
-    material = np.concatenate([p.material for p in parts]).astype(np.int32)
-    visibility = None
-    if any(p.visibility != VIS_ALL for p in parts):
-        visibility = np.concatenate([np.full(p.count, p.visibility, np.uint8) for p in parts])
-
-    p0 = vertices[indices[:, 0]]
-    e1 = vertices[indices[:, 1]] - p0
-    e2 = vertices[indices[:, 2]] - p0
-    c = np.cross(e1, e2)
-    clen = _row_norm(c)
-    keep = np.isfinite(clen) & (clen > 1e-12 * (1.0 + np.abs(p0).max(axis=1)) ** 2)
-    dropped = int(len(keep) - np.count_nonzero(keep))
-    keep = None if dropped == 0 else keep
-    clen, c = _take_kept(clen, keep), _take_kept(c, keep)
-    ng = c / clen[:, None]
-    smooth = _take_kept(smooth, keep)
-    if ns is not None:
-        ns = _fix_normals(_take_kept(ns, keep), ng, smooth)
-    tris = Triangles(_take_kept(p0, keep), _take_kept(e1, keep), _take_kept(e2, keep), ng, ns, smooth,
-                     None if uv is None else _take_kept(uv, keep), _take_kept(material, keep),
-                     0.5 * clen, dropped,
-                     visibility=None if visibility is None else _take_kept(visibility, keep))
-    tris.vertices, tris.indices, tris.kept = vertices, _take_kept(indices, keep), keep
-    return tris
-
-
-def _stack_optional(arrays, counts, tail):
-    out = np.zeros((sum(counts),) + tail)
-    start = 0
-    for a, n in zip(arrays, counts):
-        if a is not None:
-            out[start:start + n] = a
-        start += n
-    return out
-
-
-def _fix_normals(ns, ng, smooth):
-    """Unit shading normals; zero or NaN ones fall back to the face normal."""
+def _unit_normals(ns, ng, smooth):
+    """Unit shading normals; zero or NaN ones fall back to the face normal,
+    and so do flat triangles (in a partly smooth scene)."""
     length = _row_norm(ns)
     bad = ~np.isfinite(length) | (length < 1e-12)
+    bad[~smooth] = True
     if bad.any():
-        ns = np.where(bad[..., None], ng[:, None, :], ns / np.where(bad, 1.0, length)[..., None])
-    else:
-        ns = ns / length[..., None]
-    # Flat triangles in a partly smooth scene carry the face normal.
-    if not smooth.all():
-        ns[~smooth] = ng[~smooth, None, :]
-    return ns
+        return np.where(bad[..., None], ng[:, None, :], ns / np.where(bad, 1.0, length)[..., None])
+    return ns / length[..., None]
 
 
 def material_table(scene):
@@ -277,7 +293,7 @@ def _needs_tangents(scene):
     return any(has_map(getattr(m, "normal", None)) for m in scene.materials)
 
 
-def _add_tangents(tris, scene, parts):
+def _add_tangents(tris, scene, n_each):
     """World-space corner tangents: the mesh's own (MikkTSpace from Blender)
     where it has them, else each triangle's UV tangent dP/du.  Kept
     triangles only, in Triangles order."""
@@ -297,7 +313,6 @@ def _add_tangents(tris, scene, parts):
         else:
             tangent.append(None)
             sign.append(None)
-    n_each = [p.count for p in parts]
     t = _stack_optional(tangent, n_each, (3, 3))
     s = _stack_optional(sign, n_each, (3,))
     have = np.concatenate([np.full(n, x is not None) for n, x in zip(n_each, tangent)])
@@ -306,6 +321,16 @@ def _add_tangents(tris, scene, parts):
     t[~have] = ut[~have, None, :]
     s[~have] = us[~have, None]
     tris.tangent, tris.tangent_sign = t, np.where(s < 0, -1.0, 1.0)
+
+
+def _stack_optional(arrays, counts, tail):
+    out = np.zeros((sum(counts),) + tail)
+    start = 0
+    for a, n in zip(arrays, counts):
+        if a is not None:
+            out[start:start + n] = a
+        start += n
+    return out
 
 
 def uv_tangents(tris):
