@@ -112,11 +112,13 @@ def flatten(scene, with_instance=False):
             mesh_cache[inst.mesh] = _MeshArrays.of(mesh)
         placed.append((index, inst, mesh_cache[inst.mesh]))
     tris = _place(placed, len(scene.materials))
-    counts = [arrays.count for _, _, arrays in placed]
-    owners = [np.full(n, index, np.int32) for (index, _, _), n in zip(placed, counts)]
-    if owners and with_instance:
-        tris.instance = _take_kept(np.concatenate(owners), tris.kept)
-    tris.shading = _scene_shading(scene, owners, tris)
+    counts = np.array([arrays.count for _, _, arrays in placed], np.int64)
+    owner = np.repeat(np.array([index for index, _, _ in placed], np.int64), counts)
+    first_row = np.cumsum(counts) - counts
+    local = np.arange(len(owner)) - np.repeat(first_row, counts)   # triangle index in its mesh
+    if placed and with_instance:
+        tris.instance = _take_kept(owner.astype(np.int32), tris.kept)
+    tris.shading = _scene_shading(scene, _take_kept(owner, tris.kept), _take_kept(local, tris.kept))
     if _needs_tangents(scene):
         _add_tangents(tris, scene, counts)
     return tris
@@ -145,43 +147,50 @@ class _MeshArrays:
 
 
 class _Out:
-    """flatten's output arrays.  Per instance only what differs between
-    instances is computed (vertices, normals, materials); edges, face
-    normals and unit shading normals are computed over chunks of about
-    CHUNK_ROWS triangles: cache-sized temporaries for big meshes, few NumPy
-    calls for many small ones."""
+    """flatten's output arrays, rows in instance order."""
 
     def __init__(self, placed):
         total = sum(arrays.count for _, _, arrays in placed)
+        self.vertices = np.empty((sum(len(arrays.positions) for _, _, arrays in placed), 3))
+        self.indices = np.empty((total, 3), np.int64)
         self.p0, self.e1, self.e2, self.ng = (np.empty((total, 3)) for _ in range(4))
         self.clen = np.empty(total)
         self.ns = np.empty((total, 3, 3)) if any(a.normals is not None for _, _, a in placed) else None
         self.uv = np.zeros((total, 3, 2)) if any(a.uv is not None for _, _, a in placed) else None
         self.material = np.empty(total, np.int32)
         self.smooth = np.empty(total, bool)
-        self.visibility = np.full(total, VIS_ALL, np.uint8)
-        self.vertices, self.indices = [], []
+        self.visibility = np.empty(total, np.uint8)
 
 
+# Rows computed at once: cache-sized temporaries for big meshes, few NumPy
+# calls for many instances of small ones.
 CHUNK_ROWS = 1 << 16
 
 
 def _place(placed, n_mat):
-    """Triangles of every (index, instance, mesh arrays) in ``placed``."""
+    """Triangles of every (index, instance, mesh arrays) in ``placed``.
+    Per instance only what differs between instances is computed
+    (vertices, normals, materials), for the instances of one mesh at once;
+    edges, face normals and unit shading normals then over row chunks."""
     if not placed:
         empty3 = np.zeros((0, 3))
         return Triangles(empty3, empty3, empty3, empty3, None, np.zeros(0, bool), None,
                          np.zeros(0, np.int32), np.zeros(0))
     out = _Out(placed)
-    start, first_vertex = 0, 0
-    chunk = (0, 0, 0)   # first row, first vertex, first part of the chunk being gathered
-    for number, (_, inst, arrays) in enumerate(placed):
-        rows = slice(start, start + arrays.count)
-        _place_instance(out, rows, inst, arrays, n_mat, first_vertex)
-        start, first_vertex = rows.stop, first_vertex + len(arrays.positions)
-        if start - chunk[0] >= CHUNK_ROWS or number == len(placed) - 1:
-            _place_chunk(out, slice(chunk[0], start), chunk[1], chunk[2])
-            chunk = (start, first_vertex, number + 1)
+    rows = np.array([arrays.count for _, _, arrays in placed], np.int64)
+    verts = np.array([len(arrays.positions) for _, _, arrays in placed], np.int64)
+    first_row, first_vertex = np.cumsum(rows) - rows, np.cumsum(verts) - verts
+    groups = {}
+    for number, (_, _, arrays) in enumerate(placed):
+        groups.setdefault(id(arrays), []).append(number)
+    for numbers in groups.values():
+        arrays = placed[numbers[0]][2]
+        step = max(1, CHUNK_ROWS // arrays.count)
+        for lo in range(0, len(numbers), step):
+            some = np.array(numbers[lo:lo + step])
+            _place_instances(out, arrays, [placed[n][1] for n in some], first_row[some], first_vertex[some], n_mat)
+    for lo in range(0, len(out.p0), CHUNK_ROWS):
+        _place_rows(out, slice(lo, lo + CHUNK_ROWS))
     keep = np.isfinite(out.clen) & (out.clen > 1e-12 * (1.0 + np.abs(out.p0).max(axis=1)) ** 2)
     dropped = int(len(keep) - np.count_nonzero(keep))
     keep = None if dropped == 0 else keep
@@ -191,53 +200,67 @@ def _place(placed, n_mat):
     visibility = None if np.all(out.visibility == VIS_ALL) else kept(out.visibility)
     tris = Triangles(kept(out.p0), kept(out.e1), kept(out.e2), kept(out.ng), kept(out.ns), kept(out.smooth),
                      kept(out.uv), kept(out.material), 0.5 * kept(out.clen), dropped, visibility=visibility)
-    tris.vertices = np.concatenate(out.vertices)
-    indices = np.concatenate(out.indices)
-    if len(tris.vertices) < 2 ** 31:   # half the memory; Embree takes 32-bit indices
-        indices = indices.astype(np.int32)
-    tris.indices = kept(indices)
+    tris.vertices = out.vertices
+    # Half the memory; Embree takes 32-bit indices.
+    tris.indices = kept(out.indices.astype(np.int32) if len(out.vertices) < 2 ** 31 else out.indices)
     tris.kept = keep
     return tris
 
 
-def _place_instance(out, rows, inst, arrays, n_mat, first_vertex):
-    """One instance's world-space vertices, vertex indices, materials,
-    flags, UVs and (not yet unit) shading normals."""
-    m = np.asarray(inst.matrix, dtype=np.float64)
-    lin, off = m[:3, :3], m[:3, 3]
-    # Vertices, not corners: a third of the work, and (V, 3) @ (3, 3) is one
-    # BLAS call where a (T, 3, 3) stack is one per triangle.  Same values.
-    out.vertices.append(arrays.positions @ lin.T + off)
-    out.indices.append(arrays.triangles + first_vertex)
-    table = _slot_table(inst, n_mat)
-    out.material[rows] = table[0] if arrays.slots is None else table[np.minimum(arrays.slots, len(table) - 1)]
+def _rows_of(first, count):
+    """Row numbers of blocks of ``count`` rows starting at each of ``first``."""
+    return (first[:, None] + np.arange(count)).reshape(-1)
+
+
+def _place_instances(out, arrays, insts, first_row, first_vertex, n_mat):
+    """Instances of one mesh: world-space vertices, vertex indices,
+    materials, flags, UVs and (not yet unit) shading normals."""
+    k, n = len(insts), arrays.count
+    m = np.array([np.asarray(inst.matrix, dtype=np.float64) for inst in insts])
+    lin, off = m[:, :3, :3], m[:, :3, 3]
+    rows = _rows_of(first_row, n)
+    # Vertices, not corners: a third of the work, and each instance's
+    # (V, 3) @ (3, 3) is one BLAS call.  The values of positions @ lin.T + off.
+    world = np.matmul(arrays.positions, lin.transpose(0, 2, 1)) + off[:, None, :]
+    out.vertices[_rows_of(first_vertex, len(arrays.positions))] = world.reshape(-1, 3)
+    out.indices[rows] = (arrays.triangles + first_vertex[:, None, None]).reshape(-1, 3)
+    out.material[rows] = _materials(arrays.slots, n, insts, n_mat).reshape(-1)
     out.smooth[rows] = arrays.normals is not None
-    out.visibility[rows] = visibility_bits(inst)
+    out.visibility[rows] = np.repeat(np.array([visibility_bits(inst) for inst in insts], np.uint8), n)
     if arrays.uv is not None:
-        out.uv[rows] = arrays.uv
+        out.uv[rows] = np.broadcast_to(arrays.uv, (k,) + arrays.uv.shape).reshape(-1, 3, 2)
     if out.ns is not None and arrays.normals is None:
-        out.ns[rows] = 0.0   # flat: _place_chunk puts the face normal
+        out.ns[rows] = 0.0   # flat: _place_rows puts the face normal
     elif arrays.normals is not None:
         # Normals transform with the inverse transpose; a mirroring matrix
-        # flips the winding, which the cross product in _place_chunk sees too.
-        nmat = np.linalg.inv(lin).T if abs(np.linalg.det(lin)) > 0 else lin
-        ns = out.ns[rows].reshape(-1, 3)
-        np.matmul(arrays.normals.reshape(-1, 3), nmat.T, out=ns)
+        # flips the winding, which the cross product in _place_rows sees too.
+        nmat_t = lin.transpose(0, 2, 1).copy()   # nmat.T where lin is singular
+        invertible = np.abs(np.linalg.det(lin)) > 0
+        if invertible.any():
+            nmat_t[invertible] = np.linalg.inv(lin[invertible])
+        ns = np.matmul(arrays.normals.reshape(-1, 3), nmat_t)
+        out.ns[rows] = ns.reshape(-1, 3, 3)
 
 
-def _place_chunk(out, rows, first_vertex, first_part):
-    """Edges, face normals, lengths and unit shading normals of ``rows``
-    (whole instances from part ``first_part`` on, their vertices from
-    ``first_vertex`` on)."""
-    vertices = out.vertices[first_part]
-    tri = out.indices[first_part]
-    if len(out.vertices) - first_part > 1:
-        vertices = np.concatenate(out.vertices[first_part:])
-        tri = np.concatenate(out.indices[first_part:])
-    tri = tri - first_vertex
-    p0 = out.p0[rows] = vertices[tri[:, 0]]
-    e1 = out.e1[rows] = vertices[tri[:, 1]] - p0
-    e2 = out.e2[rows] = vertices[tri[:, 2]] - p0
+def _materials(slots, n, insts, n_mat):
+    """(K, n) compiled material ids of K instances' triangles."""
+    tables = [_slot_table(inst, n_mat) for inst in insts]
+    if slots is None:
+        return np.repeat(np.array([t[0] for t in tables], np.int32)[:, None], n, axis=1)
+    width = max(len(t) for t in tables)
+    padded = np.full((len(tables), width), n_mat, np.int32)
+    for row, table in zip(padded, tables):
+        row[:len(table)] = table
+    last = np.array([len(t) - 1 for t in tables])
+    return padded[np.arange(len(tables))[:, None], np.minimum(slots[None, :], last[:, None])]
+
+
+def _place_rows(out, rows):
+    """Edges, face normals, lengths and unit shading normals of ``rows``."""
+    tri = out.indices[rows]
+    p0 = out.p0[rows] = out.vertices[tri[:, 0]]
+    e1 = out.e1[rows] = out.vertices[tri[:, 1]] - p0
+    e2 = out.e2[rows] = out.vertices[tri[:, 2]] - p0
     c = np.cross(e1, e2)
     clen = out.clen[rows] = _row_norm(c)
     with np.errstate(divide="ignore", invalid="ignore"):  # degenerate rows are dropped later
@@ -246,14 +269,11 @@ def _place_chunk(out, rows, first_vertex, first_part):
         out.ns[rows] = _unit_normals(out.ns[rows], ng, out.smooth[rows])
 
 
-def _scene_shading(scene, owners, tris):
-    """SceneShading (shader-node data) for the triangles flatten kept."""
+def _scene_shading(scene, instance, local):
+    """SceneShading (shader-node data) of the kept triangles: each one's
+    instance and index in its mesh."""
     from .nodes import SceneShading
-    if not owners:
-        return SceneShading(scene, np.zeros(0, np.int64), np.zeros(0, np.int64))
-    instance = np.concatenate(owners).astype(np.int64)
-    local = np.concatenate([np.arange(len(o)) for o in owners])
-    return SceneShading(scene, _take_kept(instance, tris.kept), _take_kept(local, tris.kept))
+    return SceneShading(scene, instance, local)
 
 
 def _take_kept(array, keep):
