@@ -32,7 +32,9 @@ def _instances():
     placements = [(0, np.eye(4)), (0, translate_rotate_z((1.5, 0.5, 0.2), 45.0, 0.8)), (0, mirror),
                   (1, translate_rotate_z((-1.5, 0.0, 0.0), 20.0)), (0, skew),
                   (1, translate_rotate_z((0.5, -2.0, 0.5), -60.0, 0.6))]
-    return [Instance(mesh, matrix, materials=(0, 1)) for mesh, matrix in placements]
+    slots = [(0, 1), (1,), (), (0, 1, 7), (1, 0), (0, 1)]   # 7: past the table -> default
+    return [Instance(mesh, matrix, materials=mats, visible_shadow=(i % 3 != 1))
+            for i, ((mesh, matrix), mats) in enumerate(zip(placements, slots))]
 
 
 @pytest.fixture(scope="module")
@@ -77,6 +79,27 @@ def test_flatten_matches_the_corner_soup(triangles, scene):
     assert len(triangles) == len(p0)
     for name, expected in (("p0", p0), ("e1", e1), ("e2", e2), ("ng", ng), ("ns", ns), ("area", area)):
         np.testing.assert_array_equal(getattr(triangles, name), expected, err_msg=name)
+
+
+def test_flatten_per_triangle_instance_data(triangles, scene):
+    """Materials (each instance's slot table), visibility, instance and
+    triangle-in-mesh indices, as one instance at a time would give them."""
+    material, visible, owner, local = [], [], [], []
+    n_mat = len(scene.materials)
+    for index, inst in enumerate(scene.instances):
+        mesh = scene.meshes[inst.mesh]
+        slots = np.zeros(len(mesh.triangles), int) if mesh.material_slots is None else mesh.material_slots
+        table = [m if 0 <= m < n_mat else n_mat for m in inst.materials] + [n_mat]
+        material.append([table[min(s, len(table) - 1)] for s in slots])
+        visible.append(np.full(len(slots), 15 if not inst.visible_shadow else 31))
+        owner.append(np.full(len(slots), index))
+        local.append(np.arange(len(slots)))
+    keep = triangles.kept
+    for name, got, expected in (("material", triangles.material, material),
+                                ("visibility", triangles.visibility, visible),
+                                ("instance", triangles.instance, owner),
+                                ("local", triangles.shading.local, local)):
+        np.testing.assert_array_equal(got, np.concatenate(expected)[keep], err_msg=name)
 
 
 def test_shared_vertices_give_the_triangles(triangles):
