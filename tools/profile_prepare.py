@@ -67,9 +67,11 @@ def main(argv=None):
     settings = scene_export.render_settings(scene)
     if args.profile:
         from engine import render
+        from engine.blas import single_threaded_blas
         exported = scene_export.export_scene(depsgraph)
         profile = cProfile.Profile()
-        profile.runcall(render.prepare, exported.scene, settings)
+        with single_threaded_blas():
+            profile.runcall(render.prepare, exported.scene, settings)
         pstats.Stats(profile).sort_stats('tottime').print_stats(25)
         return
     for _ in range(args.repeat):
