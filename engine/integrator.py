@@ -711,8 +711,7 @@ def _ray_kind(ctx, hit, lobes, wo_l, tt, bb, paths, depth):
 def _diffuse_lobe(kind):
     """Lobes Cycles counts as diffuse closures (diffuse, translucent, sheen);
     the others reflect as glossy (transmission is told by direction)."""
-    ids = [getattr(bsdf, name) for name in ("DIFFUSE", "TRANSLUCENT", "SHEEN") if hasattr(bsdf, name)]
-    return np.isin(kind, ids)
+    return bsdf.kind_in(kind, (bsdf.DIFFUSE, bsdf.TRANSLUCENT, bsdf.SHEEN))
 
 
 def _lobes_where(lobes, drop, rows):

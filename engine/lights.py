@@ -21,8 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import (Distribution1D, concentric_disk, sin_sq_to_one_minus_cos,
-                       spherical_rectangle, spherical_rectangle_solid_angle, spherical_triangle,
+from .kernels import helper, kernel, where
+from .sampling import (Distribution1D, concentric_disk, rectangle_frame, rectangle_solid_angle,
+                       sin_sq_to_one_minus_cos, spherical_rectangle_warp, spherical_triangle,
                        triangle_solid_angle, uniform_cone, uniform_cone_pdf, uniform_triangle)
 from .environment import EnvironmentMap
 from .geometry import VIS_ALL, visibility_bits
@@ -441,46 +442,22 @@ class _AreaLights:
             e = np.broadcast_to(e, x.shape)
             dx, dy = concentric_disk(u1[e], u2[e])
             x[e], y[e] = 0.5 * dx, 0.5 * dy
-        q = self.c[j] + x[:, None] * self.u[j] + y[:, None] * self.v[j]
-        sph, solid_angle = self._spherical(j, p, u1, u2, q)
-        v = q - p
-        t = np.linalg.norm(v, axis=1)
-        wi = v / np.maximum(t, 1e-30)[:, None]
-        cos_l = -(wi @ self.n[j]) if np.ndim(j) == 0 else -dot(wi, self.n[j])
-        area = self.area[j]
-        ok = (cos_l > 1e-12) & (t > 0) & (area > 0)
-        with np.errstate(over="ignore"):  # zero-area lights: masked out by ok
-            pdf = np.where(ok, t * t / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
-        pdf = np.where(ok & sph, 1.0 / np.maximum(solid_angle, 1e-300), pdf)
+        c, ex, ey, n = self.c[j], self.ex[j], self.ey[j], self.n[j]
+        wx, wy, wz, t, pdf = _area_light_sample(
+            p[:, 0], p[:, 1], p[:, 2], c[..., 0], c[..., 1], c[..., 2], ex[..., 0], ex[..., 1], ex[..., 2],
+            ey[..., 0], ey[..., 1], ey[..., 2], self.len_u[j], self.len_v[j], n[..., 0], n[..., 1], n[..., 2],
+            self.area[j], self.rect[j].astype(np.float64), x, y, u1, u2, MIN_SPHERICAL)
+        wi = out.wi[idx] if isinstance(idx, slice) else np.empty((len(t), 3))
+        wi[:, 0], wi[:, 1], wi[:, 2] = wx, wy, wz
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, self.L[j]
         out.pdf[idx] = pdf
 
-    def _spherical(self, j, p, u1=None, u2=None, q=None):
-        """Which rays use solid-angle sampling, and the solid angle.
-
-        Rectangles seen under a solid angle above MIN_SPHERICAL are sampled
-        uniformly in it (pdf 1 / solid angle); tiny or grazing ones, where
-        the warp loses precision (Cycles' area.h falls back there too) and
-        area sampling is as good, keep area sampling.  With u1, u2 the
-        chosen rays' points in q are replaced by solid-angle samples."""
-        n = len(p)
-        sph = np.zeros(n, bool)
-        solid_angle = np.zeros(n)
-        # A slice when every ray qualifies (one rectangle light): views, not copies.
-        cand = subset(np.broadcast_to(self.rect[j], (n,)))
-        if count(cand, n) == 0:
-            return sph, solid_angle
-        jj = j if np.ndim(j) == 0 else j[cand]
-        args = (p[cand], self.c[jj], self.ex[jj], self.ey[jj], self.len_u[jj], self.len_v[jj])
-        if q is None:
-            s, min_nz2 = spherical_rectangle_solid_angle(*args)
-        else:
-            point, s, min_nz2 = spherical_rectangle(*args, u1[cand], u2[cand])
+    def _solid_angle_pdf(self, j, o):
+        """Which rays from o NEE samples by solid angle, and that pdf."""
+        c, ex, ey = self.c[j], self.ex[j], self.ey[j]
+        s, min_nz2 = rectangle_solid_angle(o[:, 0], o[:, 1], o[:, 2], *c, *ex, *ey, self.len_u[j], self.len_v[j])
         use = (s >= MIN_SPHERICAL) & (min_nz2 < 1.0 - 1e-8)
-        sph[cand], solid_angle[cand] = use, s
-        if q is not None:
-            q[cand] = np.where(use[:, None], point, q[cand])
-        return sph, solid_angle
+        return use, 1.0 / np.maximum(s, 1e-300)
 
     def intersect(self, j, o, d):
         n = len(o)
@@ -503,9 +480,41 @@ class _AreaLights:
         pdf[ok] = th[ok] ** 2 / (-denom[ok] * self.area[j])
         if self.rect[j] and ok.any():
             # The pdf NEE has for this point: the same choice of strategy.
-            sph, solid_angle = self._spherical(j, o[ok])
-            pdf[ok] = np.where(sph, 1.0 / np.maximum(solid_angle, 1e-300), pdf[ok])
+            sph, solid_angle_pdf = self._solid_angle_pdf(j, o[ok])
+            pdf[ok] = np.where(sph, solid_angle_pdf, pdf[ok])
         return t, np.tile(self.L[j], (n, 1)), pdf
+
+
+@kernel(24, 5)
+def _area_light_sample(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, len_u, len_v, nx, ny, nz,
+                       area, rect, x, y, u1, u2, min_spherical):
+    """Direction (x, y, z), distance and solid-angle pdf towards a point of
+    an area light: the point (x, y) of the shape in its axes (area
+    sampling), or for rectangles seen under at least ``min_spherical`` sr a
+    point uniform in their solid angle (Urena et al.; tiny or grazing ones,
+    where the warp loses precision, keep area sampling as Cycles' area.h)."""
+    ax, ay = x * len_u, y * len_v
+    qx = cx + ax * exx + ay * eyx
+    qy = cy + ax * exy + ay * eyy
+    qz = cz + ax * exz + ay * eyz
+    xc, yc, z0, zx, zy, zz = rectangle_frame(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz)
+    xu, yv, solid_angle, min_nz2 = _rectangle_warp(xc, yc, where(z0 > 0, -z0, z0), len_u, len_v, u1, u2)
+    use = (rect > 0.0) & (solid_angle >= min_spherical) & (min_nz2 < 1.0 - 1e-8)
+    qx = where(use, px + xu * exx + yv * eyx + z0 * zx, qx)
+    qy = where(use, py + xu * exy + yv * eyy + z0 * zy, qy)
+    qz = where(use, pz + xu * exz + yv * eyz + z0 * zz, qz)
+    vx, vy, vz = qx - px, qy - py, qz - pz
+    t = np.sqrt(vx * vx + vy * vy + vz * vz)
+    inv = 1.0 / np.maximum(t, 1e-30)
+    wx, wy, wz = vx * inv, vy * inv, vz * inv
+    cos_l = -(wx * nx + wy * ny + wz * nz)
+    ok = (cos_l > 1e-12) & (t > 0.0) & (area > 0.0)
+    pdf = where(ok, t * t / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
+    pdf = where(ok & use, 1.0 / np.maximum(solid_angle, 1e-300), pdf)
+    return wx, wy, wz, t, pdf
+
+
+_rectangle_warp = helper(spherical_rectangle_warp.fn)
 
 
 class _MeshLights:
