@@ -56,15 +56,16 @@ class Accel:
         device = rtcore.EmbreeDevice()
         scene = rs.EmbreeScene(device)
         indexed = getattr(triangles, "indexed_float32", lambda: None)()
-        if indexed is None:
-            vertices = triangles.corners_float32().reshape(-1, 3)
+        if indexed is None:   # a corner soup: corner k of triangle t is vertex 3 t + k
+            corners = triangles.corners_float32()
+            vertices = corners.reshape(-1, 3)
             indices = np.arange(len(vertices), dtype=np.int32).reshape(-1, 3)
         else:
             vertices, indices = indexed
         if embree_upload.upload(scene, device, vertices, indices):
             self.upload = "direct"
         else:
-            mc.TriangleMesh(scene, vertices, indices)
+            mc.TriangleMesh(scene, *((corners,) if indexed is None else indexed))
             self.upload = "embreex"
         return scene
 

@@ -160,7 +160,12 @@ def _assert_same_hits(new, old, rays):
 
 @pytest.fixture(scope="module")
 def soup_accel(triangles):
-    return Accel(_Soup(triangles))
+    """The old upload: the corner soup through embreex's own TriangleMesh."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(embree_upload, "upload", lambda *args: False)
+        accel = Accel(_Soup(triangles))
+    assert accel.upload == "embreex"
+    return accel
 
 
 def test_direct_upload_gives_the_corner_soups_hits(triangles, soup_accel):
