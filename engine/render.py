@@ -141,17 +141,31 @@ MIN_BATCH_PATHS = 1 << 15
 PASS_PATHS = 1 << 20
 
 
-def _batches(pixels, spp, settings, threads):
+def _batches(pixels, spp, settings, threads, barrier=False):
     """Pixel lists for one pass: at most max_paths / threads paths each
     (memory); two per thread where that leaves at least MIN_BATCH_PATHS
     paths each, so a thread that finishes early takes more work instead of
-    idling at the end of the pass; at least one per thread.
-    ``pixels`` is a sorted index array (all pixels, or the unconverged ones)."""
+    idling at the end of the pass; at least one per thread.  Before a
+    barrier (an adaptive check, the end) the last ``threads`` batches are cut
+    in TAIL_SPLIT, so the threads run out of work at nearly the same time.
+    ``pixels`` is a sorted index array (all pixels, or the unconverged ones).
+    How pixels are grouped never changes the image: each pixel's samples of
+    a pass are binned in one batch and merged in pass order."""
     per_thread = max(1024, settings.max_paths // threads)
     n = len(pixels)
     balanced = max(MIN_BATCH_PATHS, -(-n * spp // (2 * threads)))
     size = max(1, min(min(per_thread, balanced) // spp, -(-n // threads)))
-    return [pixels[lo:lo + size] for lo in range(0, n, size)]
+    starts = list(range(0, n, size))
+    if barrier and len(starts) > threads:
+        tail = starts[-threads]
+        starts = starts[:-threads] + list(range(tail, n, max(1, size // TAIL_SPLIT)))
+    return [pixels[lo:hi] for lo, hi in zip(starts, starts[1:] + [n])]
+
+
+# Pieces each of the last batches before a barrier is cut into: the threads'
+# idle time there falls from up to a batch to up to a piece, for a little
+# more per-batch overhead on those few paths.
+TAIL_SPLIT = 4
 
 
 def _pass_samples(settings, done, pixels, adaptive_params):
@@ -301,7 +315,9 @@ class _Plan:
         if self.planned > self.done and adaptive.checks_at(self.planned, self.checked):
             return False  # wait for the film to reach the check
         spp = _pass_samples(settings, self.planned, len(adaptive.active), adaptive.params)
-        batches = _batches(adaptive.active, spp, settings, self.threads)
+        end = self.planned + spp
+        barrier = end >= settings.samples or adaptive.checks_at(end, self.checked)
+        batches = _batches(adaptive.active, spp, settings, self.threads, barrier)
         run = _Pass(spp, settings.sample_start + self.planned, len(adaptive.active), len(batches))
         self.batches.extend((run, pixels) for pixels in batches)
         self.planned += spp

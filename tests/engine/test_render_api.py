@@ -101,6 +101,12 @@ def test_batches_bound_paths_in_flight():
             assert len(batches) >= 4
         np.testing.assert_array_equal(np.concatenate(batches), np.arange(npix))
         assert max(len(b) for b in batches) * spp <= max(s.max_paths // 2, spp)
+        # Before a barrier the last batches are cut smaller, the same pixels in order.
+        tail = _batches(np.arange(npix), spp, s, threads=2, barrier=True)
+        np.testing.assert_array_equal(np.concatenate(tail), np.arange(npix))
+        if len(batches) > 2:
+            assert len(tail) > len(batches)
+            assert max(len(b) for b in tail[-2:]) * 2 <= max(len(b) for b in batches)
 
 
 def test_transparent_film_alpha():
