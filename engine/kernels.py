@@ -112,9 +112,14 @@ def clip(x, lo, hi):
     return np.clip(x, lo, hi)
 
 
-def helper(fn):
-    """Mark a function kernels call: plain Python for NumPy, inlined when compiled."""
-    HELPERS.append(fn)
+def helper(fn=None, inline=True):
+    """Mark a function kernels call: plain Python for NumPy, inlined when
+    compiled.  ``inline=False`` for a large helper called from several places
+    in a loop kernel: numba's own inlining of it there costs tens of seconds
+    of compile time (LLVM still inlines where it pays)."""
+    if fn is None:
+        return lambda f: helper(f, inline)
+    HELPERS.append((fn, inline))
     return fn
 
 
@@ -252,8 +257,8 @@ def _import_numba():
             return np.minimum(np.maximum(x, lo), hi)  # NaN propagates, as np.clip
         return impl
 
-    for fn in HELPERS:
-        register_jitable(inline="always")(fn)
+    for fn, inline in HELPERS:
+        register_jitable(inline="always" if inline else "never")(fn)
     _state["numba"] = numba
     return numba
 

@@ -594,7 +594,7 @@ def _area_light_sample(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, len
     return wx, wy, wz, t, pdf
 
 
-_rectangle_warp = helper(spherical_rectangle_warp.fn)
+_rectangle_warp = helper(spherical_rectangle_warp.fn, inline=False)
 
 
 class _MeshLights:

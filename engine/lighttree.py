@@ -357,7 +357,7 @@ def _sin_sub(sin_a, cos_a, sin_b, cos_b):
 # -- the descent, compiled: one loop per row instead of a dozen array
 # operations per tree level (the NumPy forms above define the results).
 
-_importance_one = helper(_importance.fn)
+_importance_one = helper(_importance.fn, inline=False)
 
 
 @helper
