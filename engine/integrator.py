@@ -365,7 +365,8 @@ def _escaped(ctx, paths, i, tile):
         pass_events.emitter(ctx, paths, sky, paths.beta[sky] * Le, w, tile, world=True,
                             emitters=np.full(len(sky), emitter))
     else:
-        paths.L[sky] += paths.beta[sky] * ctx.world
+        if np.any(ctx.world != 0):   # a black world adds nothing: skip the row gathers
+            paths.L[sky] += paths.beta[sky] * ctx.world
         pass_events.emitter(ctx, paths, sky, paths.beta[sky] * ctx.world, np.ones(len(sky)), tile,
                             world=True, bsdf_only=True)
     for mask, emitter, Le, pdf in ctx.lights.sun_hits(paths.d[i], paths.ray[i] if ctx.track_rays else None):

@@ -391,9 +391,15 @@ def _importance_at(i, k, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e
 
 @helper
 def _p_left_one(i, node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right):
-    il = _importance_at(i, left[node], p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
-    ir = _importance_at(i, right[node], p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
-    total = il + ir
+    # One call site for both children: numba inlines the importance once
+    # (two sites cost ~10 s more compile time).  0 + il + ir == il + ir exactly.
+    il, total = 0.0, 0.0
+    for side in range(2):
+        child = left[node] if side == 0 else right[node]
+        imp = _importance_at(i, child, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
+        if side == 0:
+            il = imp
+        total += imp
     if total > 0:
         return il / total
     return 0.5
