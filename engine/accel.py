@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from . import embree_upload
 from .vec import row_max
 
 
@@ -39,12 +40,34 @@ class Accel:
         self.empty = len(triangles) == 0
         self._lock = threading.Lock()
         self._totals = {"seconds": 0.0, "rays": 0}
+        self.upload = None
         if not self.empty:
-            mc, rs = _import_embreex()
-            self.scene = rs.EmbreeScene()
-            mc.TriangleMesh(self.scene, triangles.corners_float32())
+            self.scene = self._build(triangles)
             # The first run() commits the BVH; do it now, single-threaded.
             self.scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32))
+
+    def _build(self, triangles):
+        """An EmbreeScene holding the triangles (primID = their index).
+        Shared vertices when the triangles have them (fewer to copy), copied
+        at memory speed when engine.embree_upload can, else through
+        embreex's per-element loop.  ``self.upload`` says which."""
+        mc, rs = _import_embreex()
+        from embreex import rtcore  # loaded with rtcore_scene (its EmbreeDevice type)
+        device = rtcore.EmbreeDevice()
+        scene = rs.EmbreeScene(device)
+        indexed = getattr(triangles, "indexed_float32", lambda: None)()
+        if indexed is None:   # a corner soup: corner k of triangle t is vertex 3 t + k
+            corners = triangles.corners_float32()
+            vertices = corners.reshape(-1, 3)
+            indices = np.arange(len(vertices), dtype=np.int32).reshape(-1, 3)
+        else:
+            vertices, indices = indexed
+        if embree_upload.upload(scene, device, vertices, indices):
+            self.upload = "direct"
+        else:
+            mc.TriangleMesh(scene, *((corners,) if indexed is None else indexed))
+            self.upload = "embreex"
+        return scene
 
     # -- timing ---------------------------------------------------------------
     def _account(self, seconds, rays):

@@ -45,6 +45,23 @@ FRESNEL_IDS = {"none": F_NONE, "schlick": F_SCHLICK, "f82": F_F82, "dielectric":
 MIN_ALPHA = 1e-3
 
 
+_KIND_TABLES = {}
+
+
+def kind_in(kind, kinds):
+    """np.isin for lobe kinds (int8, NONE = -1): one table lookup instead
+    of isin's sort, several times faster on the short lists used here."""
+    kind = np.asarray(kind)
+    if kind.dtype != np.int8:
+        return np.isin(kind, kinds)
+    table = _KIND_TABLES.get(kinds)
+    if table is None:
+        table = np.zeros(256, bool)
+        table[np.asarray(kinds, np.int8).view(np.uint8)] = True
+        _KIND_TABLES[kinds] = table
+    return table.take(kind.view(np.uint8))
+
+
 @dataclass
 class Lobes:
     """Per-ray lobe parameters, one array per ``scene.Lobe`` field (N rays,
@@ -279,7 +296,7 @@ def weights(lobes, wo):
         if len(sheen):
             # Cycles folds the sheen's directional albedo into its weight.
             w[sheen, k] *= _sheen_ltc(_rough(lobes, k)[sheen], mu[sheen])[2][:, None]
-        ms = np.nonzero(lobes.multiscatter[:, k] & np.isin(lobes.kind[:, k], (GLOSSY, GLASS)))[0]
+        ms = np.nonzero(lobes.multiscatter[:, k] & kind_in(lobes.kind[:, k], (GLOSSY, GLASS)))[0]
         if len(ms):
             glass = lobes.kind[ms, k] == GLASS
             for part in (ms[glass], ms[~glass]):
@@ -346,20 +363,28 @@ def schlick(f0, cos):
 def _fresnel(lobes, rows, k, cos):
     """(n, 3) reflectance of a glossy or mirror lobe at cos(wo, h)."""
     code = lobes.fresnel[rows, k]
+    if len(code) and code.min() == code.max():
+        return _fresnel_of(int(code[0]), lobes, rows, k, cos)   # one kind: no masked copies
     out = np.ones((len(code), 3))
-    sch = code == F_SCHLICK
-    if sch.any():
-        out[sch] = schlick(lobes.color[rows, k][sch], cos[sch])
-    f82 = code == F_F82
-    if f82.any():
-        f0 = lobes.f0[rows, k][f82]
-        out[f82] = mf.f82(cos[f82], f0, mf.f82_b(f0, lobes.edge_tint[rows, k][f82]))
-    diel = code == F_DIELECTRIC
-    if diel.any():
-        f0 = lobes.f0[rows, k][diel]
-        s, _ = mf.schlick_s(cos[diel], np.maximum(lobes.ior[rows, k][diel], 1e-5))
-        out[diel] = f0 + (1.0 - f0) * s[:, None]
+    for kind in (F_SCHLICK, F_F82, F_DIELECTRIC):
+        m = np.flatnonzero(code == kind)
+        if len(m):
+            out[m] = _fresnel_of(kind, lobes, rows[m], k, cos[m])
     return out
+
+
+def _fresnel_of(code, lobes, rows, k, cos):
+    """``_fresnel`` for lobes that all have Fresnel mode ``code``."""
+    if code == F_SCHLICK:
+        return schlick(lobes.color[rows, k], cos)
+    if code == F_F82:
+        f0 = lobes.f0[rows, k]
+        return mf.f82(cos, f0, mf.f82_b(f0, lobes.edge_tint[rows, k]))
+    if code == F_DIELECTRIC:
+        f0 = lobes.f0[rows, k]
+        s, _ = mf.schlick_s(cos, np.maximum(lobes.ior[rows, k], 1e-5))
+        return f0 + (1.0 - f0) * s[:, None]
+    return np.ones((len(rows), 3))
 
 
 def _dielectric(lobes, rows, k, cos, eta):
@@ -592,7 +617,7 @@ def eval_pdf(lobes, wo, wi, sel=None, w=None, sampled=False):
                     f[d] += w[d, k] * INV_PI
                 pdf[d] += sel[d, k] * np.abs(wi[d, 2]) * INV_PI
         for mask, fn in (((kind == GLOSSY) & upper, _eval_glossy), ((kind == SHEEN) & upper, _eval_sheen),
-                         (np.isin(kind, (GLASS, REFRACTION)) & front
+                         (kind_in(kind, (GLASS, REFRACTION)) & front
                           & (lobes.alpha[:, k] > MIN_ALPHA), _eval_glass)):
             g = np.nonzero(mask)[0]
             if len(g):
@@ -607,7 +632,7 @@ def eval_pdf(lobes, wo, wi, sel=None, w=None, sampled=False):
 
 def _is_delta(lobes, k, rows):
     kind = lobes.kind[rows, k]
-    smooth = np.isin(kind, (GLASS, REFRACTION)) & (lobes.alpha[rows, k] <= MIN_ALPHA)
+    smooth = kind_in(kind, (GLASS, REFRACTION)) & (lobes.alpha[rows, k] <= MIN_ALPHA)
     return (kind == MIRROR) | (kind == TRANSPARENT) | smooth
 
 
@@ -671,7 +696,7 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
         weight[t] = w[t, chosen[t]] / p_lobe[t, None]
         delta[t] = True
         pdf[t] = p_lobe[t]
-    gl = np.nonzero(np.isin(kind, (GLASS, REFRACTION)))[0]
+    gl = np.nonzero(kind_in(kind, (GLASS, REFRACTION)))[0]
     for k in np.unique(chosen[gl]):
         r = gl[chosen[gl] == k]
         singular = lobes.alpha[r, k] <= MIN_ALPHA
@@ -709,7 +734,7 @@ def _take(lobes, rows):
 
 def _simple(lobes):
     """One-lobe materials with a closed-form sample weight."""
-    return (np.all(np.isin(lobes.kind[:, 0], (NONE, DIFFUSE, GLOSSY, MIRROR)))
+    return (np.all(kind_in(lobes.kind[:, 0], (NONE, DIFFUSE, GLOSSY, MIRROR)))
             and not lobes.multiscatter.any() and np.all(lobes.weight == 1.0))
 
 

@@ -1,8 +1,10 @@
-"""Flattening instances into one world-space triangle soup.
+"""Flattening instances into one list of world-space triangles.
 
-embreex has no instancing, so every instance's triangles are transformed into
-world space.  Per-mesh work (corner gathering, slot lookup, validity) is done
-once per mesh; per instance only the matrix multiply remains.
+embreex has no instancing, so every instance's vertices are transformed into
+world space; the triangles keep the mesh's vertex indices (offset per
+instance), which Embree takes as they are.  Per-mesh conversions are done
+once per mesh; each instance's rows are computed in its own slice of the
+output, so temporaries stay the size of one instance.
 """
 from dataclasses import dataclass
 from typing import Optional
@@ -62,9 +64,24 @@ class Triangles:
     shading: object = None
     # (T,) int32 index of the triangle's scene instance (for passes).
     instance: Optional[np.ndarray] = None
+    # The same triangles as shared vertices for Embree: (V, 3) world-space
+    # vertices and (T, 3) indices into them (p0 = vertices[indices[:, 0]]),
+    # or None (then Embree gets the corners).
+    vertices: Optional[np.ndarray] = None
+    indices: Optional[np.ndarray] = None
+    # Which of flatten's triangles were kept (bool mask), None when all were.
+    kept: Optional[np.ndarray] = None
 
     def __len__(self):
         return len(self.p0)
+
+    def indexed_float32(self):
+        """(V, 3) float32 vertices and (T, 3) int32 indices for Embree, or
+        None when the triangles carry no shared vertices."""
+        if self.vertices is None or self.indices is None:
+            return None
+        return (np.ascontiguousarray(self.vertices, dtype=np.float32),
+                np.ascontiguousarray(self.indices, dtype=np.int32))
 
     def corners_float32(self):
         """(T, 3, 3) float32 vertex positions for Embree."""
@@ -73,12 +90,6 @@ class Triangles:
         v[:, 1] = self.p0 + self.e1
         v[:, 2] = self.p0 + self.e2
         return v
-
-
-def _mesh_corners(mesh):
-    pos = np.asarray(mesh.positions, dtype=np.float64)
-    tris = np.asarray(mesh.triangles, dtype=np.int64)
-    return pos[tris]  # (T, 3, 3)
 
 
 def _slot_table(inst, n_materials):
@@ -91,109 +102,201 @@ def _slot_table(inst, n_materials):
 def flatten(scene, with_instance=False):
     """Build Triangles for every instance; degenerate triangles are dropped.
     with_instance: also record each triangle's instance index (passes)."""
-    n_mat = len(scene.materials)
     mesh_cache = {}
-    parts = []
-    owners = []   # per part: its instance index for each triangle
+    placed = []   # (instance index, instance, its mesh's arrays)
     for index, inst in enumerate(scene.instances):
         mesh = scene.meshes[inst.mesh]
         if len(mesh.triangles) == 0:
             continue
         if inst.mesh not in mesh_cache:
-            mesh_cache[inst.mesh] = _mesh_corners(mesh)
-        corners = mesh_cache[inst.mesh]
-        parts.append(_instance_part(mesh, corners, inst, n_mat))
-        owners.append(np.full(len(corners), index, np.int32))
-    tris = _concat(parts)
-    if owners and with_instance:
-        tris.instance = np.concatenate(owners)[tris.kept]
-    tris.shading = _scene_shading(scene, owners, tris)
+            mesh_cache[inst.mesh] = _MeshArrays.of(mesh)
+        placed.append((index, inst, mesh_cache[inst.mesh]))
+    tris = _place(placed, len(scene.materials))
+    counts = np.array([arrays.count for _, _, arrays in placed], np.int64)
+    owner = np.repeat(np.array([index for index, _, _ in placed], np.int64), counts)
+    first_row = np.cumsum(counts) - counts
+    local = np.arange(len(owner)) - np.repeat(first_row, counts)   # triangle index in its mesh
+    if placed and with_instance:
+        tris.instance = _take_kept(owner.astype(np.int32), tris.kept)
+    tris.shading = _scene_shading(scene, _take_kept(owner, tris.kept), _take_kept(local, tris.kept))
     if _needs_tangents(scene):
-        _add_tangents(tris, scene, parts)
+        _add_tangents(tris, scene, counts)
     return tris
 
 
-def _instance_part(mesh, corners, inst, n_mat):
-    m = np.asarray(inst.matrix, dtype=np.float64)
-    lin, off = m[:3, :3], m[:3, 3]
-    world = corners @ lin.T + off
-    slots = (np.zeros(len(corners), np.int64) if mesh.material_slots is None
-             else np.asarray(mesh.material_slots, dtype=np.int64))
-    table = _slot_table(inst, n_mat)
-    material = table[np.minimum(slots, len(table) - 1)]
-    ns = None
-    if mesh.normals is not None:
-        # Normals transform with the inverse transpose; a mirroring matrix
-        # flips the winding, which the cross product in _concat sees too.
-        nmat = np.linalg.inv(lin).T if abs(np.linalg.det(lin)) > 0 else lin
-        ns = np.asarray(mesh.normals, dtype=np.float64) @ nmat.T
-    uv = None if mesh.uvs is None else np.asarray(mesh.uvs, dtype=np.float64)
-    return world, ns, uv, material, visibility_bits(inst)
+@dataclass
+class _MeshArrays:
+    """A mesh's arrays as float64 / int64, converted once for all its instances."""
+    positions: np.ndarray
+    triangles: np.ndarray
+    normals: Optional[np.ndarray]
+    uv: Optional[np.ndarray]
+    slots: Optional[np.ndarray]
+
+    @classmethod
+    def of(cls, mesh):
+        def optional(a, dtype):
+            return None if a is None else np.asarray(a, dtype=dtype)
+        return cls(np.asarray(mesh.positions, dtype=np.float64), np.asarray(mesh.triangles, dtype=np.int64),
+                   optional(mesh.normals, np.float64), optional(mesh.uvs, np.float64),
+                   optional(mesh.material_slots, np.int64))
+
+    @property
+    def count(self):
+        return len(self.triangles)
 
 
-def _scene_shading(scene, owners, tris):
-    """SceneShading (shader-node data) for the triangles _concat kept."""
-    from .nodes import SceneShading
-    if not owners:
-        return SceneShading(scene, np.zeros(0, np.int64), np.zeros(0, np.int64))
-    instance = np.concatenate(owners).astype(np.int64)
-    local = np.concatenate([np.arange(len(o)) for o in owners])
-    return SceneShading(scene, instance[tris.kept], local[tris.kept])
+class _Out:
+    """flatten's output arrays, rows in instance order."""
+
+    def __init__(self, placed):
+        total = sum(arrays.count for _, _, arrays in placed)
+        self.vertices = np.empty((sum(len(arrays.positions) for _, _, arrays in placed), 3))
+        self.indices = np.empty((total, 3), np.int64)
+        self.p0, self.e1, self.e2, self.ng = (np.empty((total, 3)) for _ in range(4))
+        self.clen = np.empty(total)
+        self.ns = np.empty((total, 3, 3)) if any(a.normals is not None for _, _, a in placed) else None
+        self.uv = np.zeros((total, 3, 2)) if any(a.uv is not None for _, _, a in placed) else None
+        self.material = np.empty(total, np.int32)
+        self.smooth = np.empty(total, bool)
+        self.visibility = np.empty(total, np.uint8)
 
 
-def _concat(parts):
-    if not parts:
+# Rows computed at once: cache-sized temporaries for big meshes, few NumPy
+# calls for many instances of small ones.
+CHUNK_ROWS = 1 << 16
+
+
+def _place(placed, n_mat):
+    """Triangles of every (index, instance, mesh arrays) in ``placed``.
+    Per instance only what differs between instances is computed
+    (vertices, normals, materials), for the instances of one mesh at once;
+    edges, face normals and unit shading normals then over row chunks."""
+    if not placed:
         empty3 = np.zeros((0, 3))
         return Triangles(empty3, empty3, empty3, empty3, None, np.zeros(0, bool), None,
                          np.zeros(0, np.int32), np.zeros(0))
-    world = np.concatenate([p[0] for p in parts])
-    any_ns = any(p[1] is not None for p in parts)
-    any_uv = any(p[2] is not None for p in parts)
-    n_each = [len(p[0]) for p in parts]
-    smooth = np.concatenate([np.full(n, p[1] is not None) for n, p in zip(n_each, parts)])
-    ns = _stack_optional([p[1] for p in parts], n_each, (3, 3)) if any_ns else None
-    uv = _stack_optional([p[2] for p in parts], n_each, (3, 2)) if any_uv else None
-    material = np.concatenate([p[3] for p in parts]).astype(np.int32)
-    visibility = None
-    if any(p[4] != VIS_ALL for p in parts):
-        visibility = np.concatenate([np.full(n, p[4], np.uint8) for n, p in zip(n_each, parts)])
+    out = _Out(placed)
+    rows = np.array([arrays.count for _, _, arrays in placed], np.int64)
+    verts = np.array([len(arrays.positions) for _, _, arrays in placed], np.int64)
+    first_row, first_vertex = np.cumsum(rows) - rows, np.cumsum(verts) - verts
+    groups = {}
+    for number, (_, _, arrays) in enumerate(placed):
+        groups.setdefault(id(arrays), []).append(number)
+    for numbers in groups.values():
+        arrays = placed[numbers[0]][2]
+        step = max(1, CHUNK_ROWS // arrays.count)
+        for lo in range(0, len(numbers), step):
+            some = np.array(numbers[lo:lo + step])
+            _place_instances(out, arrays, [placed[n][1] for n in some], first_row[some], first_vertex[some], n_mat)
+    for lo in range(0, len(out.p0), CHUNK_ROWS):
+        _place_rows(out, slice(lo, lo + CHUNK_ROWS))
+    keep = np.isfinite(out.clen) & (out.clen > 1e-12 * (1.0 + np.abs(out.p0).max(axis=1)) ** 2)
+    dropped = int(len(keep) - np.count_nonzero(keep))
+    keep = None if dropped == 0 else keep
 
-    p0 = world[:, 0]
-    e1 = world[:, 1] - p0
-    e2 = world[:, 2] - p0
-    c = np.cross(e1, e2)
-    clen = np.linalg.norm(c, axis=1)
-    keep = np.isfinite(clen) & (clen > 1e-12 * (1.0 + np.abs(p0).max(axis=1)) ** 2)
-    dropped = int(len(keep) - keep.sum())
-    ng = c[keep] / clen[keep, None]
-    if ns is not None:
-        ns = _fix_normals(ns[keep], ng, smooth[keep])
-    tris = Triangles(p0[keep], e1[keep], e2[keep], ng, ns, smooth[keep],
-                     None if uv is None else uv[keep], material[keep],
-                     0.5 * clen[keep], dropped,
-                     visibility=None if visibility is None else visibility[keep])
+    def kept(a):
+        return None if a is None else _take_kept(a, keep)
+    visibility = None if np.all(out.visibility == VIS_ALL) else kept(out.visibility)
+    tris = Triangles(kept(out.p0), kept(out.e1), kept(out.e2), kept(out.ng), kept(out.ns), kept(out.smooth),
+                     kept(out.uv), kept(out.material), 0.5 * kept(out.clen), dropped, visibility=visibility)
+    tris.vertices = out.vertices
+    # Half the memory; Embree takes 32-bit indices.
+    tris.indices = kept(out.indices.astype(np.int32) if len(out.vertices) < 2 ** 31 else out.indices)
     tris.kept = keep
     return tris
 
 
-def _stack_optional(arrays, counts, tail):
-    out = np.zeros((sum(counts),) + tail)
-    start = 0
-    for a, n in zip(arrays, counts):
-        if a is not None:
-            out[start:start + n] = a
-        start += n
-    return out
+def _rows_of(first, count):
+    """Row numbers of blocks of ``count`` rows starting at each of ``first``."""
+    return (first[:, None] + np.arange(count)).reshape(-1)
 
 
-def _fix_normals(ns, ng, smooth):
-    """Unit shading normals; zero or NaN ones fall back to the face normal."""
-    length = np.linalg.norm(ns, axis=2)
+def _place_instances(out, arrays, insts, first_row, first_vertex, n_mat):
+    """Instances of one mesh: world-space vertices, vertex indices,
+    materials, flags, UVs and (not yet unit) shading normals."""
+    k, n = len(insts), arrays.count
+    m = np.array([np.asarray(inst.matrix, dtype=np.float64) for inst in insts])
+    lin, off = m[:, :3, :3], m[:, :3, 3]
+    rows = _rows_of(first_row, n)
+    # Vertices, not corners: a third of the work, and each instance's
+    # (V, 3) @ (3, 3) is one BLAS call.  The values of positions @ lin.T + off.
+    world = np.matmul(arrays.positions, lin.transpose(0, 2, 1)) + off[:, None, :]
+    out.vertices[_rows_of(first_vertex, len(arrays.positions))] = world.reshape(-1, 3)
+    out.indices[rows] = (arrays.triangles + first_vertex[:, None, None]).reshape(-1, 3)
+    out.material[rows] = _materials(arrays.slots, n, insts, n_mat).reshape(-1)
+    out.smooth[rows] = arrays.normals is not None
+    out.visibility[rows] = np.repeat(np.array([visibility_bits(inst) for inst in insts], np.uint8), n)
+    if arrays.uv is not None:
+        out.uv[rows] = np.broadcast_to(arrays.uv, (k,) + arrays.uv.shape).reshape(-1, 3, 2)
+    if out.ns is not None and arrays.normals is None:
+        out.ns[rows] = 0.0   # flat: _place_rows puts the face normal
+    elif arrays.normals is not None:
+        # Normals transform with the inverse transpose; a mirroring matrix
+        # flips the winding, which the cross product in _place_rows sees too.
+        nmat_t = lin.transpose(0, 2, 1).copy()   # nmat.T where lin is singular
+        invertible = np.abs(np.linalg.det(lin)) > 0
+        if invertible.any():
+            nmat_t[invertible] = np.linalg.inv(lin[invertible])
+        ns = np.matmul(arrays.normals.reshape(-1, 3), nmat_t)
+        out.ns[rows] = ns.reshape(-1, 3, 3)
+
+
+def _materials(slots, n, insts, n_mat):
+    """(K, n) compiled material ids of K instances' triangles."""
+    tables = [_slot_table(inst, n_mat) for inst in insts]
+    if slots is None:
+        return np.repeat(np.array([t[0] for t in tables], np.int32)[:, None], n, axis=1)
+    width = max(len(t) for t in tables)
+    padded = np.full((len(tables), width), n_mat, np.int32)
+    for row, table in zip(padded, tables):
+        row[:len(table)] = table
+    last = np.array([len(t) - 1 for t in tables])
+    return padded[np.arange(len(tables))[:, None], np.minimum(slots[None, :], last[:, None])]
+
+
+def _place_rows(out, rows):
+    """Edges, face normals, lengths and unit shading normals of ``rows``."""
+    tri = out.indices[rows]
+    p0 = out.p0[rows] = out.vertices[tri[:, 0]]
+    e1 = out.e1[rows] = out.vertices[tri[:, 1]] - p0
+    e2 = out.e2[rows] = out.vertices[tri[:, 2]] - p0
+    c = np.cross(e1, e2)
+    clen = out.clen[rows] = _row_norm(c)
+    with np.errstate(divide="ignore", invalid="ignore"):  # degenerate rows are dropped later
+        ng = out.ng[rows] = c / clen[:, None]
+    if out.ns is not None:
+        out.ns[rows] = _unit_normals(out.ns[rows], ng, out.smooth[rows])
+
+
+def _scene_shading(scene, instance, local):
+    """SceneShading (shader-node data) of the kept triangles: each one's
+    instance and index in its mesh."""
+    from .nodes import SceneShading
+    return SceneShading(scene, instance, local)
+
+
+def _take_kept(array, keep):
+    """array[keep], without the copy when every triangle was kept."""
+    return array if keep is None else array[keep]
+
+
+def _row_norm(v):
+    """Euclidean length over the last axis; the same sums, in the same order,
+    as np.linalg.norm, without its temporaries."""
+    s = v * v
+    return np.sqrt(s[..., 0] + s[..., 1] + s[..., 2])
+
+
+def _unit_normals(ns, ng, smooth):
+    """Unit shading normals; zero or NaN ones fall back to the face normal,
+    and so do flat triangles (in a partly smooth scene)."""
+    length = _row_norm(ns)
     bad = ~np.isfinite(length) | (length < 1e-12)
-    ns = np.where(bad[..., None], ng[:, None, :], ns / np.where(bad, 1.0, length)[..., None])
-    # Flat triangles in a partly smooth scene carry the face normal.
-    ns[~smooth] = ng[~smooth, None, :]
-    return ns
+    bad[~smooth] = True
+    if bad.any():
+        return np.where(bad[..., None], ng[:, None, :], ns / np.where(bad, 1.0, length)[..., None])
+    return ns / length[..., None]
 
 
 def material_table(scene):
@@ -210,7 +313,7 @@ def _needs_tangents(scene):
     return any(has_map(getattr(m, "normal", None)) for m in scene.materials)
 
 
-def _add_tangents(tris, scene, parts):
+def _add_tangents(tris, scene, n_each):
     """World-space corner tangents: the mesh's own (MikkTSpace from Blender)
     where it has them, else each triangle's UV tangent dP/du.  Kept
     triangles only, in Triangles order."""
@@ -230,25 +333,24 @@ def _add_tangents(tris, scene, parts):
         else:
             tangent.append(None)
             sign.append(None)
-    n_each = [len(p[0]) for p in parts]
     t = _stack_optional(tangent, n_each, (3, 3))
     s = _stack_optional(sign, n_each, (3,))
     have = np.concatenate([np.full(n, x is not None) for n, x in zip(n_each, tangent)])
-    keep = _kept(parts)
-    t, s, have = t[keep], s[keep], have[keep]
+    t, s, have = _take_kept(t, tris.kept), _take_kept(s, tris.kept), _take_kept(have, tris.kept)
     ut, us = uv_tangents(tris)
     t[~have] = ut[~have, None, :]
     s[~have] = us[~have, None]
     tris.tangent, tris.tangent_sign = t, np.where(s < 0, -1.0, 1.0)
 
 
-def _kept(parts):
-    """The triangles _concat kept (it drops degenerate ones)."""
-    world = np.concatenate([p[0] for p in parts])
-    p0 = world[:, 0]
-    c = np.cross(world[:, 1] - p0, world[:, 2] - p0)
-    clen = np.linalg.norm(c, axis=1)
-    return np.isfinite(clen) & (clen > 1e-12 * (1.0 + np.abs(p0).max(axis=1)) ** 2)
+def _stack_optional(arrays, counts, tail):
+    out = np.zeros((sum(counts),) + tail)
+    start = 0
+    for a, n in zip(arrays, counts):
+        if a is not None:
+            out[start:start + n] = a
+        start += n
+    return out
 
 
 def uv_tangents(tris):

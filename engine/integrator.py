@@ -25,6 +25,7 @@ import numpy as np
 
 from . import bsdf, kernels, pass_events
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
+from .hits import hit_geometry
 from .lights import POINT, SUN
 from .nodes import NodeRays, ShadingContext
 from .sampler import BSDF, CAMERA, KIND, LIGHT, emitter_set, vertex_set
@@ -364,7 +365,8 @@ def _escaped(ctx, paths, i, tile):
         pass_events.emitter(ctx, paths, sky, paths.beta[sky] * Le, w, tile, world=True,
                             emitters=np.full(len(sky), emitter))
     else:
-        paths.L[sky] += paths.beta[sky] * ctx.world
+        if np.any(ctx.world != 0):   # a black world adds nothing: skip the row gathers
+            paths.L[sky] += paths.beta[sky] * ctx.world
         pass_events.emitter(ctx, paths, sky, paths.beta[sky] * ctx.world, np.ones(len(sky)), tile,
                             world=True, bsdf_only=True)
     for mask, emitter, Le, pdf in ctx.lights.sun_hits(paths.d[i], paths.ray[i] if ctx.track_rays else None):
@@ -386,28 +388,7 @@ def _film_alpha_through(paths, i, tile):
 def _interaction(ctx, paths, t, prim, bu, bv):
     tr = ctx.triangles
     d = paths.d
-    o = paths.o
-    ng = np.take(tr.ng, prim, axis=0)
-    # Embree's t and barycentrics are float32; re-intersect the triangle's
-    # plane in float64 so hit points (and shadow rays) sit on the surface
-    # even on large triangles.
-    cos = dot(d, ng)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t64 = dot(np.take(tr.p0, prim, axis=0) - o, ng) / cos
-    t = np.where(np.isfinite(t64) & (np.abs(cos) > 1e-6), t64, t)
-    p = o + d * t[:, None]
-    back = dot(ng, d) > 0
-    ng = np.where(back[:, None], -ng, ng)
-    if tr.ns is not None:
-        c = np.take(tr.ns, prim, axis=0)
-        ns = (1.0 - bu - bv)[:, None] * c[:, 0] + bu[:, None] * c[:, 1] + bv[:, None] * c[:, 2]
-        ns /= np.maximum(np.linalg.norm(ns, axis=1), 1e-30)[:, None]
-        ns = np.where((dot(ns, ng) < 0)[:, None], -ns, ns)
-        # A shading normal that faces away from the viewer would make the
-        # BSDF see wo below its horizon: fall back to the geometric normal.
-        ns = np.where((dot(ns, -d) <= 1e-6)[:, None], ng, ns)
-    else:
-        ns = ng
+    p, ng, ns, back = hit_geometry(tr, paths.o, d, t, prim, bu, bv)
     uv = _hit_uv(tr, prim, bu, bv)
     hit = Hit(p, ng, ns, -d, np.take(tr.material, prim), prim, ctx.accel.offset_scale(p), uv, back=back,
               bary=np.stack([bu, bv], axis=1), depth=getattr(paths, "bounce", None),
@@ -711,8 +692,7 @@ def _ray_kind(ctx, hit, lobes, wo_l, tt, bb, paths, depth):
 def _diffuse_lobe(kind):
     """Lobes Cycles counts as diffuse closures (diffuse, translucent, sheen);
     the others reflect as glossy (transmission is told by direction)."""
-    ids = [getattr(bsdf, name) for name in ("DIFFUSE", "TRANSLUCENT", "SHEEN") if hasattr(bsdf, name)]
-    return np.isin(kind, ids)
+    return bsdf.kind_in(kind, (bsdf.DIFFUSE, bsdf.TRANSLUCENT, bsdf.SHEEN))
 
 
 def _lobes_where(lobes, drop, rows):

@@ -177,7 +177,8 @@ class LoopKernel:
         return compiled(*args)
 
     def build(self, numba):
-        return numba.njit(self.signature, nogil=True, cache=True)(self.fn)
+        # NumPy's floating-point rules (x / 0 is inf or NaN, no exception).
+        return numba.njit(self.signature, nogil=True, cache=True, error_model="numpy")(self.fn)
 
 
 def loop_kernel(signature, numpy_fn):

@@ -21,8 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import (Distribution1D, concentric_disk, sin_sq_to_one_minus_cos,
-                       spherical_rectangle, spherical_rectangle_solid_angle, spherical_triangle,
+from .kernels import helper, kernel, loop_kernel, where
+from .sampling import (Distribution1D, concentric_disk, rectangle_frame, rectangle_solid_angle,
+                       sin_sq_to_one_minus_cos, spherical_rectangle_warp, spherical_triangle,
                        triangle_solid_angle, uniform_cone, uniform_cone_pdf, uniform_triangle)
 from .environment import EnvironmentMap
 from .geometry import VIS_ALL, visibility_bits
@@ -163,26 +164,28 @@ class LightSet:
         emitter = np.full(n, -1, np.int64)
         Le = np.zeros((n, 3))
         pdf = np.zeros(n)
-        base = 0
-        for group in (self.points, None, self.areas):
-            if group is None:
-                base += self.suns.count
+        if self.points.count:   # emitters 0 .. points.count - 1, tested in one compiled loop
+            bits = self.visibility[:self.points.count] if ray is not None else np.full(self.points.count, 0xFF)
+            if camera:
+                bits = np.where(self.points.visible_camera, bits, 0)
+            ray_bits = ray if ray is not None else np.full(n, 0xFF, np.uint8)
+            hit_t, emitter, Le, pdf = self.points.nearest(o, d, t, ray_bits, bits)
+        base = self.points.count + self.suns.count
+        areas = self.areas
+        for j in range(areas.count):
+            if camera and not areas.visible_camera[j]:
                 continue
-            for j in range(group.count):
-                if camera and not group.visible_camera[j]:
-                    continue
-                sees = True if ray is None else (ray & self.visibility[base + j]) != 0
-                if not np.any(sees):
-                    continue
-                th, le, pw = group.intersect(j, o, d)
-                closer = (th < t) & sees
-                if closer.any():
-                    t[closer] = th[closer]
-                    hit_t[closer] = th[closer]
-                    emitter[closer] = base + j
-                    Le[closer] = le[closer]
-                    pdf[closer] = pw[closer]
-            base += group.count
+            sees = True if ray is None else (ray & self.visibility[base + j]) != 0
+            if not np.any(sees):
+                continue
+            th, le, pw = areas.intersect(j, o, d)
+            closer = (th < t) & sees
+            if closer.any():
+                t[closer] = th[closer]
+                hit_t[closer] = th[closer]
+                emitter[closer] = base + j
+                Le[closer] = le[closer]
+                pdf[closer] = pw[closer]
         return hit_t, emitter, Le, pdf
 
     def sun_hits(self, d, ray=None):
@@ -337,33 +340,111 @@ class _PointLights:
     def intersect(self, j, o, d):
         """t, Le and solid-angle pdf where rays hit light j (sphere or disk)."""
         n = len(o)
-        r = self.radius[j]
-        t = np.full(n, np.inf)
-        pdf = np.zeros(n)
-        if r <= 0:
-            return t, np.zeros((n, 3)), pdf
-        c = self.pos[j]
-        oc = o - c
-        d2 = dot(oc, oc)
-        if self.sphere[j]:
-            b = dot(oc, d)
-            disc = b * b - (d2 - r * r)
-            ok = (disc >= 0) & (d2 > r * r)
-            th = -b - np.sqrt(np.maximum(disc, 0.0))
-            ok &= th > 0
-            t[ok] = th[ok]
-            pdf[ok] = uniform_cone_pdf(sin_sq_to_one_minus_cos(r * r / d2[ok]))
-        else:
-            light_n = oc / np.sqrt(np.maximum(d2, 1e-30))[:, None]
-            denom = dot(d, light_n)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                th = -dot(oc, light_n) / denom
-            q = o + d * th[:, None]
-            ok = (denom < 0) & (th > 0) & (np.sum((q - c) ** 2, axis=1) <= r * r)
-            t[ok] = th[ok]
-            pdf[ok] = th[ok] ** 2 / (np.pi * r * r * np.abs(denom[ok]))
+        if self.radius[j] <= 0:
+            return np.full(n, np.inf), np.zeros((n, 3)), np.zeros(n)
+        t, pdf = _point_hit(o, d, self.pos[j], self.radius[j], self.sphere[j])
         Le = np.tile(self.L[j], (n, 1)) * self._spot_factor(j, -d)[:, None]
         return t, Le, pdf
+
+    def nearest(self, o, d, t, ray_bits, light_bits):
+        """The nearest of these lights each ray meets before t: t (updated
+        in place), the hit distance (inf = none), light index (-1), Le and
+        pdf.  A light counts for a ray where ray_bits & light_bits != 0."""
+        n = len(o)
+        hit_t, index, pdf = np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros(n)
+        _nearest_point(np.ascontiguousarray(o, np.float64), np.ascontiguousarray(d, np.float64), t,
+                       np.ascontiguousarray(ray_bits, np.uint8), self.pos, self.radius, self.sphere,
+                       np.ascontiguousarray(light_bits, np.uint8), hit_t, index, pdf)
+        Le = np.zeros((n, 3))
+        rows = np.flatnonzero(index >= 0)
+        if len(rows):
+            j = index[rows]
+            Le[rows] = self.L[j] * self._spot_factor(j, -d[rows])[:, None]
+        return hit_t, index, Le, pdf
+
+
+def _point_hit(o, d, c, r, sphere):
+    """Distance (inf = miss) and solid-angle pdf of rays (o, d) meeting a
+    point light of radius r > 0 at c: its sphere (sampled by its cone), or
+    with soft falloff its disk facing the ray's origin."""
+    n = len(o)
+    t = np.full(n, np.inf)
+    pdf = np.zeros(n)
+    oc = o - c
+    d2 = dot(oc, oc)
+    if sphere:
+        b = dot(oc, d)
+        disc = b * b - (d2 - r * r)
+        ok = (disc >= 0) & (d2 > r * r)
+        th = -b - np.sqrt(np.maximum(disc, 0.0))
+        ok &= th > 0
+        t[ok] = th[ok]
+        pdf[ok] = uniform_cone_pdf(sin_sq_to_one_minus_cos(r * r / d2[ok]))
+    else:
+        light_n = oc / np.sqrt(np.maximum(d2, 1e-30))[:, None]
+        denom = dot(d, light_n)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            th = -dot(oc, light_n) / denom
+        q = o + d * th[:, None]
+        ok = (denom < 0) & (th > 0) & (np.sum((q - c) ** 2, axis=1) <= r * r)
+        t[ok] = th[ok]
+        pdf[ok] = th[ok] ** 2 / (np.pi * r * r * np.abs(denom[ok]))
+    return t, pdf
+
+
+def _nearest_point_numpy(o, d, t, ray_bits, pos, radius, sphere, light_bits, hit_t, index, pdf):
+    for j in range(len(radius)):
+        sees = (ray_bits & light_bits[j]) != 0
+        if radius[j] <= 0 or not sees.any():
+            continue
+        th, pw = _point_hit(o, d, pos[j], radius[j], sphere[j])
+        closer = (th < t) & sees
+        t[closer] = hit_t[closer] = th[closer]
+        index[closer] = j
+        pdf[closer] = pw[closer]
+
+
+@helper
+def _dot3(ax, ay, az, bx, by, bz):
+    """A row of vec.dot (einsum adds the middle term last)."""
+    return (ax * bx + az * bz) + ay * by
+
+
+@loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[::1], uint8[::1], float64[:, ::1], float64[::1], "
+             "boolean[::1], uint8[::1], float64[::1], int64[::1], float64[::1])", _nearest_point_numpy)
+def _nearest_point(o, d, t, ray_bits, pos, radius, sphere, light_bits, hit_t, index, pdf):
+    for i in range(len(t)):
+        dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+        for j in range(len(radius)):
+            r = radius[j]
+            if r <= 0 or (ray_bits[i] & light_bits[j]) == 0:
+                continue
+            ox, oy, oz = o[i, 0] - pos[j, 0], o[i, 1] - pos[j, 1], o[i, 2] - pos[j, 2]
+            d2 = _dot3(ox, oy, oz, ox, oy, oz)
+            if sphere[j]:
+                b = _dot3(ox, oy, oz, dx, dy, dz)
+                disc = b * b - (d2 - r * r)
+                th = -b - np.sqrt(np.maximum(disc, 0.0))
+                if not (disc >= 0 and d2 > r * r and th > 0 and th < t[i]):
+                    continue
+                x = r * r / d2
+                omc = 0.5 * x + 0.125 * x * x if x < 0.0004 else 1.0 - np.sqrt(np.maximum(0.0, 1.0 - x))
+                pw = 1.0 / (2.0 * np.pi * omc)
+            else:
+                inv = np.sqrt(np.maximum(d2, 1e-30))
+                nx, ny, nz = ox / inv, oy / inv, oz / inv
+                denom = _dot3(dx, dy, dz, nx, ny, nz)
+                th = -_dot3(ox, oy, oz, nx, ny, nz) / denom
+                qx = (o[i, 0] + dx * th) - pos[j, 0]
+                qy = (o[i, 1] + dy * th) - pos[j, 1]
+                qz = (o[i, 2] + dz * th) - pos[j, 2]
+                if not (denom < 0 and th > 0 and (qx * qx + qy * qy) + qz * qz <= r * r and th < t[i]):
+                    continue
+                pw = th * th / (np.pi * r * r * np.abs(denom))
+            t[i] = th
+            hit_t[i] = th
+            index[i] = j
+            pdf[i] = pw
 
 
 class _SunLights:
@@ -451,46 +532,22 @@ class _AreaLights:
             e = np.broadcast_to(e, x.shape)
             dx, dy = concentric_disk(u1[e], u2[e])
             x[e], y[e] = 0.5 * dx, 0.5 * dy
-        q = self.c[j] + x[:, None] * self.u[j] + y[:, None] * self.v[j]
-        sph, solid_angle = self._spherical(j, p, u1, u2, q)
-        v = q - p
-        t = np.linalg.norm(v, axis=1)
-        wi = v / np.maximum(t, 1e-30)[:, None]
-        cos_l = -(wi @ self.n[j]) if np.ndim(j) == 0 else -dot(wi, self.n[j])
-        area = self.area[j]
-        ok = (cos_l > 1e-12) & (t > 0) & (area > 0)
-        with np.errstate(over="ignore"):  # zero-area lights: masked out by ok
-            pdf = np.where(ok, t * t / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
-        pdf = np.where(ok & sph, 1.0 / np.maximum(solid_angle, 1e-300), pdf)
+        c, ex, ey, n = self.c[j], self.ex[j], self.ey[j], self.n[j]
+        wx, wy, wz, t, pdf = _area_light_sample(
+            p[:, 0], p[:, 1], p[:, 2], c[..., 0], c[..., 1], c[..., 2], ex[..., 0], ex[..., 1], ex[..., 2],
+            ey[..., 0], ey[..., 1], ey[..., 2], self.len_u[j], self.len_v[j], n[..., 0], n[..., 1], n[..., 2],
+            self.area[j], self.rect[j].astype(np.float64), x, y, u1, u2, MIN_SPHERICAL)
+        wi = out.wi[idx] if isinstance(idx, slice) else np.empty((len(t), 3))
+        wi[:, 0], wi[:, 1], wi[:, 2] = wx, wy, wz
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, self.L[j]
         out.pdf[idx] = pdf
 
-    def _spherical(self, j, p, u1=None, u2=None, q=None):
-        """Which rays use solid-angle sampling, and the solid angle.
-
-        Rectangles seen under a solid angle above MIN_SPHERICAL are sampled
-        uniformly in it (pdf 1 / solid angle); tiny or grazing ones, where
-        the warp loses precision (Cycles' area.h falls back there too) and
-        area sampling is as good, keep area sampling.  With u1, u2 the
-        chosen rays' points in q are replaced by solid-angle samples."""
-        n = len(p)
-        sph = np.zeros(n, bool)
-        solid_angle = np.zeros(n)
-        # A slice when every ray qualifies (one rectangle light): views, not copies.
-        cand = subset(np.broadcast_to(self.rect[j], (n,)))
-        if count(cand, n) == 0:
-            return sph, solid_angle
-        jj = j if np.ndim(j) == 0 else j[cand]
-        args = (p[cand], self.c[jj], self.ex[jj], self.ey[jj], self.len_u[jj], self.len_v[jj])
-        if q is None:
-            s, min_nz2 = spherical_rectangle_solid_angle(*args)
-        else:
-            point, s, min_nz2 = spherical_rectangle(*args, u1[cand], u2[cand])
+    def _solid_angle_pdf(self, j, o):
+        """Which rays from o NEE samples by solid angle, and that pdf."""
+        c, ex, ey = self.c[j], self.ex[j], self.ey[j]
+        s, min_nz2 = rectangle_solid_angle(o[:, 0], o[:, 1], o[:, 2], *c, *ex, *ey, self.len_u[j], self.len_v[j])
         use = (s >= MIN_SPHERICAL) & (min_nz2 < 1.0 - 1e-8)
-        sph[cand], solid_angle[cand] = use, s
-        if q is not None:
-            q[cand] = np.where(use[:, None], point, q[cand])
-        return sph, solid_angle
+        return use, 1.0 / np.maximum(s, 1e-300)
 
     def intersect(self, j, o, d):
         n = len(o)
@@ -513,9 +570,41 @@ class _AreaLights:
         pdf[ok] = th[ok] ** 2 / (-denom[ok] * self.area[j])
         if self.rect[j] and ok.any():
             # The pdf NEE has for this point: the same choice of strategy.
-            sph, solid_angle = self._spherical(j, o[ok])
-            pdf[ok] = np.where(sph, 1.0 / np.maximum(solid_angle, 1e-300), pdf[ok])
+            sph, solid_angle_pdf = self._solid_angle_pdf(j, o[ok])
+            pdf[ok] = np.where(sph, solid_angle_pdf, pdf[ok])
         return t, np.tile(self.L[j], (n, 1)), pdf
+
+
+@kernel(24, 5)
+def _area_light_sample(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, len_u, len_v, nx, ny, nz,
+                       area, rect, x, y, u1, u2, min_spherical):
+    """Direction (x, y, z), distance and solid-angle pdf towards a point of
+    an area light: the point (x, y) of the shape in its axes (area
+    sampling), or for rectangles seen under at least ``min_spherical`` sr a
+    point uniform in their solid angle (Urena et al.; tiny or grazing ones,
+    where the warp loses precision, keep area sampling as Cycles' area.h)."""
+    ax, ay = x * len_u, y * len_v
+    qx = cx + ax * exx + ay * eyx
+    qy = cy + ax * exy + ay * eyy
+    qz = cz + ax * exz + ay * eyz
+    xc, yc, z0, zx, zy, zz = rectangle_frame(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz)
+    xu, yv, solid_angle, min_nz2 = _rectangle_warp(xc, yc, where(z0 > 0, -z0, z0), len_u, len_v, u1, u2)
+    use = (rect > 0.0) & (solid_angle >= min_spherical) & (min_nz2 < 1.0 - 1e-8)
+    qx = where(use, px + xu * exx + yv * eyx + z0 * zx, qx)
+    qy = where(use, py + xu * exy + yv * eyy + z0 * zy, qy)
+    qz = where(use, pz + xu * exz + yv * eyz + z0 * zz, qz)
+    vx, vy, vz = qx - px, qy - py, qz - pz
+    t = np.sqrt(vx * vx + vy * vy + vz * vz)
+    inv = 1.0 / np.maximum(t, 1e-30)
+    wx, wy, wz = vx * inv, vy * inv, vz * inv
+    cos_l = -(wx * nx + wy * ny + wz * nz)
+    ok = (cos_l > 1e-12) & (t > 0.0) & (area > 0.0)
+    pdf = where(ok, t * t / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
+    pdf = where(ok & use, 1.0 / np.maximum(solid_angle, 1e-300), pdf)
+    return wx, wy, wz, t, pdf
+
+
+_rectangle_warp = helper(spherical_rectangle_warp.fn)
 
 
 class _MeshLights:

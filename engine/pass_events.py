@@ -256,7 +256,7 @@ def _denoising_features(ctx, paths, hit, lobes, w, tile):
     solid = (kind != bsdf.NONE) & (kind != bsdf.TRANSPARENT)
     albedo = w[rows] * solid[:, :, None]
     weight = albedo.mean(axis=2)
-    specular = (lobes.alpha[rows] <= SPECULAR_ALPHA) | np.isin(kind, (bsdf.MIRROR,))
+    specular = (lobes.alpha[rows] <= SPECULAR_ALPHA) | (kind == bsdf.MIRROR)
     total = weight.sum(axis=1)
     rough = (weight * ~specular).sum(axis=1)
     done = (total == 0) | (4.0 * rough > total)
@@ -316,7 +316,7 @@ def _class_of(lobes):
     (a glass lobe counts as glossy here; its refraction is told by direction),
     -1 none or transparent."""
     kind = lobes.kind
-    cls = np.where(np.isin(kind, DIFFUSE_KINDS), 0, 1)
+    cls = np.where(bsdf.kind_in(kind, DIFFUSE_KINDS), 0, 1)
     cls = np.where(kind == bsdf.REFRACTION, 2, cls)
     return np.where((kind == bsdf.NONE) | (kind == bsdf.TRANSPARENT), -1, cls)
 

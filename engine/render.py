@@ -6,8 +6,10 @@ current image and ``progress.should_stop()`` may end the render (the partial
 image is kept).  Within a pass, pixels are cut into batches of at most
 ``max_paths / threads`` paths and the batches run on a thread pool: NumPy and
 embreex both release the GIL, so the cores stay busy and memory stays bounded
-whatever the resolution.
+whatever the resolution.  Passes overlap (a thread that ends one early starts
+the next) and tiles merge in planned order, so images do not depend on timing.
 """
+import collections
 import os
 import threading
 import time
@@ -134,24 +136,36 @@ def warnings_for(ctx):
 MIN_BATCH_PATHS = 1 << 15
 # Automatic passes (samples_per_pass = 0): one sample first (a first image
 # soon), then doubling, up to about this many paths per pass (1-3 s on two
-# cores): long enough that the barrier at the end of a pass (a thread idle
-# while the other finishes its last batch) costs little, short enough for a
-# live progressive image.  The schedule depends on the frame only, never on
+# cores): few progress updates, yet a live progressive image.  The schedule depends on the frame only, never on
 # timing, so a seed's image is the same bit for bit on any machine.
 PASS_PATHS = 1 << 20
 
 
-def _batches(pixels, spp, settings, threads):
+def _batches(pixels, spp, settings, threads, barrier=False):
     """Pixel lists for one pass: at most max_paths / threads paths each
     (memory); two per thread where that leaves at least MIN_BATCH_PATHS
     paths each, so a thread that finishes early takes more work instead of
-    idling at the end of the pass; at least one per thread.
-    ``pixels`` is a sorted index array (all pixels, or the unconverged ones)."""
+    idling at the end of the pass; at least one per thread.  Before a
+    barrier (an adaptive check, the end) the last ``threads`` batches are cut
+    in TAIL_SPLIT, so the threads run out of work at nearly the same time.
+    ``pixels`` is a sorted index array (all pixels, or the unconverged ones).
+    How pixels are grouped never changes the image: each pixel's samples of
+    a pass are binned in one batch and merged in pass order."""
     per_thread = max(1024, settings.max_paths // threads)
     n = len(pixels)
     balanced = max(MIN_BATCH_PATHS, -(-n * spp // (2 * threads)))
     size = max(1, min(min(per_thread, balanced) // spp, -(-n // threads)))
-    return [pixels[lo:lo + size] for lo in range(0, n, size)]
+    starts = list(range(0, n, size))
+    if barrier and len(starts) > threads:
+        tail = starts[-threads]
+        starts = starts[:-threads] + list(range(tail, n, max(1, size // TAIL_SPLIT)))
+    return [pixels[lo:hi] for lo, hi in zip(starts, starts[1:] + [n])]
+
+
+# Pieces each of the last batches before a barrier is cut into: the threads'
+# idle time there falls from up to a batch to up to a piece, for a little
+# more per-batch overhead on those few paths.
+TAIL_SPLIT = 4
 
 
 def _pass_samples(settings, done, pixels, adaptive_params):
@@ -193,12 +207,17 @@ class _Adaptive:
         self.params = adaptive_parameters(settings)
         self.active = np.arange(npix)
 
-    def update(self, film, done, last_checked):
+    def checks_at(self, done, last_checked):
+        """Whether a convergence check runs once ``done`` samples are in."""
         if self.params is None:
+            return False
+        _, min_samples, step = self.params
+        return done >= min_samples and done // step != last_checked // step
+
+    def update(self, film, done, last_checked):
+        if not self.checks_at(done, last_checked):
             return last_checked
-        threshold, min_samples, step = self.params
-        if done < min_samples or done // step == last_checked // step:
-            return last_checked
+        threshold = self.params[0]
         noisy = film.unconverged(threshold)
         self.active = self.active[noisy[self.active]]
         return done
@@ -219,21 +238,28 @@ def _render(scene, settings, progress):
     threads = settings.threads or os.cpu_count() or 1
     stats = {"samples": 0, "samples_total": settings.samples, "prepare_seconds": time.perf_counter() - t_start}
     t_trace = time.perf_counter()
-    done, checked = 0, 0
     image = None  # the last pass's image: the film does not change after it
     with _AbandonablePool(threads, film) as pool:
-        while done < settings.samples and len(adaptive.active):
-            spp = _pass_samples(settings, done, len(adaptive.active), adaptive.params)
-            first = settings.sample_start + done
-            jobs = [pool.submit(_run_batch, ctx, pool.film, pixels, spp, first)
-                    for pixels in _batches(adaptive.active, spp, settings, threads)]
-            cancelled = _wait(jobs, progress)
-            paths = spp * len(adaptive.active)
-            done += spp
-            stats.update(_stats(ctx, stats, done, paths, t_trace, settings))
-            checked = adaptive.update(film, done, checked)
+        plan = _Plan(settings, adaptive, threads)
+        queue = collections.deque()  # (pass, batch job), in planned order
+        while True:
+            _submit(queue, plan, pool, ctx, QUEUE_PER_THREAD * threads)
+            if not queue:
+                break
+            done_pass, job = queue.popleft()
+            cancelled = _wait(job, progress)
+            if not cancelled:
+                film.merge(job.result().tile)
+                done_pass.left -= 1
+            if done_pass.left and not cancelled:
+                continue
+            plan.done += 0 if cancelled else done_pass.spp
+            stats.update(_stats(ctx, stats, plan.done, 0 if cancelled else done_pass.paths, t_trace, settings))
+            if not cancelled:
+                plan.checked = adaptive.update(film, plan.done, plan.checked)
             stats["active_pixels"] = len(adaptive.active)
             if cancelled:
+                _cancel([job] + [j for _, j in queue])
                 pool.abandon()  # batches still running finish unseen
                 # Part of a pass was traced: pixels carry unequal counts, each
                 # mean is still unbiased.  Report the fewest samples any pixel has.
@@ -242,6 +268,9 @@ def _render(scene, settings, progress):
                 image = film.image(settings.transparent)
                 progress.on_pass(image, stats["samples"], dict(stats))
             if cancelled or _should_stop(progress, stats, settings):
+                if queue:
+                    _cancel([j for _, j in queue])
+                    pool.abandon()  # the next pass, already started, is dropped
                 break
     if image is None:
         image = film.image(settings.transparent)
@@ -249,27 +278,72 @@ def _render(scene, settings, progress):
                         film.pass_images(ctx.pass_config), pass_events.metadata(ctx.pass_config, settings.passes))
 
 
-def _wait(jobs, progress, poll=0.1):
-    """Wait for a pass's batches, asking ``should_stop`` about every ``poll``
+# Batches submitted ahead of the one merged next, per thread: a thread that
+# ends a pass early starts the next pass's batches instead of idling at a
+# barrier (passes are planned ahead; only a convergence check waits for the
+# film), while the finished tiles waiting to merge in order stay few.
+QUEUE_PER_THREAD = 4
+
+
+class _Pass:
+    def __init__(self, spp, first, pixels, batches):
+        self.spp, self.first = spp, first
+        self.paths = spp * pixels
+        self.left = batches  # batches not merged yet
+
+
+class _Plan:
+    """The passes ahead, batch by batch.  ``done``: samples merged into the
+    film; ``planned``: samples submitted.  Planning runs ahead of the film
+    except past an adaptive convergence check, whose outcome (the pixels
+    still sampling) needs the film up to it."""
+
+    def __init__(self, settings, adaptive, threads):
+        self.settings, self.adaptive, self.threads = settings, adaptive, threads
+        self.done = self.planned = self.checked = 0
+        self.batches = collections.deque()  # (pass, pixels) not submitted yet
+
+    def next_batch(self):
+        if not self.batches and not self._plan_pass():
+            return None
+        return self.batches.popleft()
+
+    def _plan_pass(self):
+        settings, adaptive = self.settings, self.adaptive
+        if self.planned >= settings.samples or not len(adaptive.active):
+            return False
+        if self.planned > self.done and adaptive.checks_at(self.planned, self.checked):
+            return False  # wait for the film to reach the check
+        spp = _pass_samples(settings, self.planned, len(adaptive.active), adaptive.params)
+        end = self.planned + spp
+        barrier = end >= settings.samples or adaptive.checks_at(end, self.checked)
+        batches = _batches(adaptive.active, spp, settings, self.threads, barrier)
+        run = _Pass(spp, settings.sample_start + self.planned, len(adaptive.active), len(batches))
+        self.batches.extend((run, pixels) for pixels in batches)
+        self.planned += spp
+        return True
+
+
+def _submit(queue, plan, pool, ctx, limit):
+    while len(queue) < limit:
+        batch = plan.next_batch()
+        if batch is None:
+            return
+        run, pixels = batch
+        queue.append((run, pool.submit(_run_batch, ctx, pool.film, pixels, run.spp, run.first)))
+
+
+def _wait(job, progress, poll=0.1):
+    """Wait for one batch, asking ``should_stop`` about every ``poll``
     seconds so a cancel lands within a fraction of a second, not a whole
-    pass.  Returns True if the pass was cut short."""
-    last_check = time.perf_counter()
-    for job in jobs:
-        while True:
-            try:
-                job.result(timeout=poll)
-                done = True
-            except FuturesTimeout:
-                done = False
-            now = time.perf_counter()
-            if now - last_check >= poll:
-                last_check = now
-                if _stop_requested(progress):
-                    _cancel(jobs)
-                    return True
-            if done:
-                break
-    return False
+    batch.  Returns True if a stop was requested."""
+    while True:
+        try:
+            job.result(timeout=poll)
+            return False
+        except FuturesTimeout:
+            if _stop_requested(progress):
+                return True
 
 
 def _cancel(jobs):
@@ -281,8 +355,9 @@ def _cancel(jobs):
 
 
 class _GatedFilm:
-    """The film as the batches see it: merges stop once ``close`` returns,
-    so a batch abandoned at a cancel never changes the image being returned."""
+    """The film as the batches see it: once ``close`` returns, an abandoned
+    batch ends at its next tile write (its tile is never merged: merges are
+    the render loop's, in planned order)."""
 
     def __init__(self, film):
         self._film = film
@@ -294,11 +369,6 @@ class _GatedFilm:
 
     def new_tile(self, lo, hi):
         return _GatedTile(self._film.new_tile(lo, hi), self)
-
-    def merge(self, tile):
-        with self._lock:
-            if self._open:
-                self._film.merge(getattr(tile, "tile", tile))
 
     def close(self):
         with self._lock:
@@ -358,7 +428,8 @@ def _run_batch(ctx, film, pixels, spp, first):
     pix = np.repeat(pixels, spp)
     sample = np.tile(np.arange(first, first + spp, dtype=np.uint32), len(pixels))
     trace_batch(ctx, pix, sample, tile)
-    film.merge(tile)
+    tile.flush()  # binned here, on the batch's thread; merged in order by the caller
+    return tile
 
 
 def _stats(ctx, stats, done, paths, t_trace, settings):

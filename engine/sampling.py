@@ -128,24 +128,30 @@ class Distribution1D:
 # ----------------------------------------------------------------------------
 # Solid-angle sampling of planar emitters
 
-def spherical_rectangle(p, c, ex, ey, len_u, len_v, u1, u2):
-    """Urena et al. 2013: a point on the rectangle (centre c, unit orthogonal
-    axes ex, ey, side lengths len_u, len_v) uniform in the solid angle it
-    subtends from p.  Follows Cycles' area.h, whose asin form of the internal
-    angles avoids the cancellation of the paper's acos sum for small lights.
+@helper
+def rectangle_frame(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz):
+    """A rectangle (centre c, unit orthogonal axes ex, ey) seen from p: the
+    centre's coordinates xc, yc along the axes, its height z0 along the
+    normal z = ex x ey, and z.  Shared by sampling and the MIS pdf, so both
+    pick the same strategy, bit for bit."""
+    zx = exy * eyz - exz * eyy
+    zy = exz * eyx - exx * eyz
+    zz = exx * eyy - exy * eyx
+    rx, ry, rz = cx - px, cy - py, cz - pz
+    xc = rx * exx + ry * exy + rz * exz
+    yc = rx * eyx + ry * eyy + rz * eyz
+    z0 = rx * zx + ry * zy + rz * zz
+    return xc, yc, z0, zx, zy, zz
 
-    Returns (point (N, 3), solid angle (N,), min_nz2 (N,)): min_nz2 near 1 means
-    p lies almost in the rectangle's plane, where the warp loses precision."""
-    z = np.cross(ex, ey)
-    rel = c - p
-    z0 = rel @ z if np.ndim(z) == 1 else np.einsum("ij,ij->i", rel, z)
-    flip = np.where(z0 > 0, -1.0, 1.0)   # make z point away from the rectangle
-    xc = rel @ ex if np.ndim(ex) == 1 else np.einsum("ij,ij->i", rel, ex)
-    yc = rel @ ey if np.ndim(ey) == 1 else np.einsum("ij,ij->i", rel, ey)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        xu, yv, solid_angle, min_nz2 = spherical_rectangle_warp(xc, yc, z0 * flip, len_u, len_v, u1, u2)
-    point = p + xu[:, None] * ex + yv[:, None] * ey + z0[:, None] * z
-    return point, solid_angle, min_nz2
+
+@kernel(14, 2)
+def rectangle_solid_angle(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, len_u, len_v):
+    """(solid angle, min_nz2) of the rectangle seen from p, as
+    ``spherical_rectangle_warp`` computes them: min_nz2 near 1 means p lies
+    almost in the rectangle's plane, where the warp loses precision."""
+    xc, yc, z0, _, _, _ = rectangle_frame(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz)
+    _, _, _, _, solid_angle, min_nz2 = _rectangle_angles(xc, yc, where(z0 > 0, -z0, z0), len_u, len_v)
+    return solid_angle, min_nz2
 
 
 @helper
@@ -157,9 +163,11 @@ def _nz(a, z0):
 
 @kernel(7, 4)
 def spherical_rectangle_warp(xc, yc, z0, len_u, len_v, u1, u2):
-    """The warp of ``spherical_rectangle`` in the rectangle's frame (z0 >= 0:
-    distance of p from its plane): the point's (x, y), the solid angle and
-    min_nz2."""
+    """Urena et al. 2013, in the rectangle's frame (``rectangle_frame``; z0
+    <= 0 here: minus the distance of p from the plane): the (x, y) of a
+    point uniform in the solid angle the rectangle subtends, the solid angle
+    and min_nz2.  Follows Cycles' area.h, whose asin form of the internal
+    angles avoids the cancellation of the paper's acos sum for small lights."""
     x0 = xc - 0.5 * len_u
     x1 = xc + 0.5 * len_u
     y0 = yc - 0.5 * len_v
@@ -178,19 +186,6 @@ def spherical_rectangle_warp(xc, yc, z0, len_u, len_v, u1, u2):
     hv2 = hv * hv
     yv = clip(where(hv2 < 1.0 - 1e-12, hv * np.sqrt(d2 / (1.0 - hv2)), y1), y0, y1)
     return xu, yv, solid_angle, min_nz2
-
-
-def spherical_rectangle_solid_angle(p, c, ex, ey, len_u, len_v):
-    """(solid angle, min_nz2) of ``spherical_rectangle`` without sampling a
-    point (the MIS pdf of lights hit by BSDF rays): the same arithmetic as
-    the warp's first half, so both agree bit for bit."""
-    z = np.cross(ex, ey)
-    rel = c - p
-    z0 = rel @ z if np.ndim(z) == 1 else np.einsum("ij,ij->i", rel, z)
-    xc = rel @ ex if np.ndim(ex) == 1 else np.einsum("ij,ij->i", rel, ex)
-    yc = rel @ ey if np.ndim(ey) == 1 else np.einsum("ij,ij->i", rel, ey)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return _rectangle_solid_angle(xc, yc, z0 * np.where(z0 > 0, -1.0, 1.0), len_u, len_v)
 
 
 @helper
@@ -212,12 +207,6 @@ def _rectangle_angles(xc, yc, z0, len_u, len_v):
     solid_angle = np.maximum(-(g0 + g1 + g2 + g3), 0.0)
     min_nz2 = np.minimum(np.minimum(n0 * n0, n1 * n1), np.minimum(n2 * n2, n3 * n3))
     return n0, n2, g2, g3, solid_angle, min_nz2
-
-
-@kernel(5, 2)
-def _rectangle_solid_angle(xc, yc, z0, len_u, len_v):
-    _, _, _, _, solid_angle, min_nz2 = _rectangle_angles(xc, yc, z0, len_u, len_v)
-    return solid_angle, min_nz2
 
 
 def _unit_rows(v):

@@ -85,10 +85,32 @@ def test_spherical_rectangle_warp_agrees(jit):
     args = (mixed(rng, n), mixed(rng, n), np.abs(mixed(rng, n)), 0.5, np.abs(rng.normal(size=n)),
             rng.random(n), rng.random(n))
     assert_agree(*both_ways(spherical_rectangle_warp, *args))
-    # The solid angle alone (MIS pdf of lights hit) is the warp's, to the bit.
-    plain, compiled = both_ways(sampling._rectangle_solid_angle, *args[:5])
+
+
+def test_area_light_sample_agrees(jit):
+    """The area light's fused sampling kernel, and the solid angle the MIS
+    pdf of a light hit uses (the warp's, to the bit: both choose the same
+    strategy for the same point)."""
+    from engine.lights import _area_light_sample
+    rng = np.random.default_rng(12)
+    n = 20000
+    p = [mixed(rng, n, 2.0) for _ in range(3)]
+    c = [0.3, -0.2, 1.5]
+    ex, ey = [1.0, 0.0, 0.0], [0.0, np.sqrt(0.5), np.sqrt(0.5)]
+    n_light = [0.0, np.sqrt(0.5), -np.sqrt(0.5)]
+    rect = (rng.random(n) < 0.8).astype(float)
+    x, y = rng.random(n) - 0.5, rng.random(n) - 0.5
+    args = (*p, *c, *ex, *ey, 0.7, np.abs(mixed(rng, n)), *n_light, 0.7, rect, x, y, rng.random(n),
+            rng.random(n), 3e-4)
+    plain, compiled = both_ways(_area_light_sample, *args)
     assert_agree(plain, compiled)
-    assert_agree(plain, spherical_rectangle_warp(*args)[2:])
+    solid_angle = both_ways(sampling.rectangle_solid_angle, *args[:14])
+    assert_agree(*solid_angle)
+    with np.errstate(all="ignore"):   # infinite points: NaN coordinates, as in the kernel
+        xc, yc, z0, _, _, _ = sampling.rectangle_frame(*args[:12])
+        z0 = np.where(z0 > 0, -z0, z0)
+    warp = spherical_rectangle_warp(xc, yc, z0, *args[12:14], *args[-3:-1])
+    assert_agree(solid_angle[0], warp[2:])
 
 
 def test_light_tree_importance_agrees(jit):
@@ -176,3 +198,90 @@ def test_fixed_seed_render_agrees_with_and_without_jit(renders):
     assert np.isfinite(compiled).all()
     # The same random numbers through the same maths, rounded the same way.
     np.testing.assert_array_equal(compiled, plain)
+
+
+def test_light_tree_descent_agrees(jit):
+    """The compiled descent and path pmf give the NumPy forms' picks and
+    probabilities bit for bit, points with and without normals, on a tree
+    with an infinite emitter (a sun) next to hundreds of bounded ones."""
+    from engine.lighttree import Bounds, LightTree
+    rng = np.random.default_rng(8)
+    bounds = [None]
+    for k in range(300):
+        c = rng.normal(size=3) * 3.0
+        r = rng.random() * 0.3
+        w = rng.normal(size=3)
+        cos_o = np.cos(rng.random() * np.pi)
+        bounds.append(Bounds(c - r, c + r, rng.random() * 10.0 * (k % 7 != 0), w / np.linalg.norm(w),
+                             cos_o, np.cos(rng.random() * np.pi / 2), k % 2 == 0))
+    tree = LightTree(bounds)
+    n = 20000
+    p = rng.normal(size=(n, 3)) * 4.0
+    nn = rng.normal(size=(n, 3))
+    nn /= np.linalg.norm(nn, axis=1)[:, None]
+    nn[:500] = 0.0
+    u = rng.random(n)
+    u[:20] = 0.0
+    plain, compiled = both_ways(tree.select, u, p, nn)
+    assert_agree(plain, compiled)
+    emitter = rng.integers(0, len(bounds), n)
+    assert_agree(*both_ways(tree.pmf, emitter, p, nn))
+    assert_agree(*both_ways(tree.pmf, plain[0], p, nn))
+    np.testing.assert_array_equal(tree.pmf(plain[0], p, nn), plain[1])
+
+
+def test_hit_geometry_agrees(jit):
+    """Hit points and normals from the compiled loop and the NumPy form, bit
+    for bit: rays parallel to their triangle (Embree's t kept), shading
+    normals facing away from the viewer or zero, back faces, flat meshes."""
+    from engine import hits
+    rng = np.random.default_rng(14)
+    tris, n = 50, 20000
+    ng = rng.normal(size=(tris, 3))
+    ng /= np.linalg.norm(ng, axis=1)[:, None]
+    p0 = rng.normal(size=(tris, 3))
+    ns = rng.normal(size=(tris, 3, 3))
+    ns[:3] = 0.0
+    o, d = rng.normal(size=(n, 3)) * 3.0, rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    prim = rng.integers(0, tris, n)
+    d[:200] -= ng[prim[:200]] * np.einsum("ij,ij->i", d[:200], ng[prim[:200]])[:, None]   # parallel
+    t, bu = rng.random(n) * 5.0, rng.random(n)
+    bv = rng.random(n) * (1.0 - bu)
+
+    def run(smooth):
+        outs = (np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n, bool))
+        hits._hit_geometry(o, d, t, prim, bu, bv, ng, p0, ns, smooth, *outs)
+        return outs
+    for smooth in (True, False):
+        plain, compiled = both_ways(run, smooth)
+        assert_agree(plain, compiled)
+
+
+def test_nearest_point_light_agrees(jit):
+    """The compiled nearest-light loop over spheres and soft-falloff disks,
+    against the NumPy loop over lights, bit for bit: visibility bits, lights
+    of radius 0, rays starting inside a sphere, a closer tmax."""
+    from engine.lights import _nearest_point
+    rng = np.random.default_rng(16)
+    n, lights = 20000, 24
+    pos = rng.normal(size=(lights, 3)) * 2.0
+    radius = np.abs(rng.normal(size=lights)) * 0.5
+    radius[:2] = 0.0
+    sphere = rng.random(lights) < 0.5
+    light_bits = rng.integers(0, 16, lights).astype(np.uint8)
+    o = rng.normal(size=(n, 3)) * 3.0
+    o[:100] = pos[5]                                   # inside a light
+    target = pos[rng.integers(0, lights, n)] + rng.normal(size=(n, 3)) * 0.3
+    d = target - o
+    d /= np.maximum(np.linalg.norm(d, axis=1), 1e-30)[:, None]
+    ray_bits = rng.integers(0, 16, n).astype(np.uint8)
+    tmax = np.where(rng.random(n) < 0.2, rng.random(n) * 3.0, np.inf)
+
+    def run():
+        outs = (tmax.copy(), np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros(n))
+        _nearest_point(o, d, outs[0], ray_bits, pos, radius, sphere, light_bits, *outs[1:])
+        return outs
+    plain, compiled = both_ways(run)
+    assert_agree(plain, compiled)
+    assert (plain[2] >= 0).sum() > n // 4

@@ -101,6 +101,12 @@ def test_batches_bound_paths_in_flight():
             assert len(batches) >= 4
         np.testing.assert_array_equal(np.concatenate(batches), np.arange(npix))
         assert max(len(b) for b in batches) * spp <= max(s.max_paths // 2, spp)
+        # Before a barrier the last batches are cut smaller, the same pixels in order.
+        tail = _batches(np.arange(npix), spp, s, threads=2, barrier=True)
+        np.testing.assert_array_equal(np.concatenate(tail), np.arange(npix))
+        if len(batches) > 2:
+            assert len(tail) > len(batches)
+            assert max(len(b) for b in tail[-2:]) * 2 <= max(len(b) for b in batches)
 
 
 def test_transparent_film_alpha():
@@ -178,3 +184,37 @@ def test_max_bounces_zero_is_direct_light():
     means = [render(scene, RenderSettings(samples=16, samples_per_pass=16, max_bounces=b)).image[..., :3].mean()
              for b in (0, 1)]
     assert 0 < means[0] < means[1]
+
+
+def test_passes_overlap_and_merge_in_order(monkeypatch):
+    """A thread that ends a pass early starts the next pass (no barrier),
+    yet tiles merge in planned order: with the first batch of every pass
+    held back so later batches finish first, the image is the same bit for
+    bit and progress still reports whole passes."""
+    import threading
+    import time
+    from engine import render as render_module
+
+    settings = RenderSettings(samples=6, samples_per_pass=2, threads=2, max_paths=1024, seed=3, aovs=())
+    scene = cornell_box(16, 16)
+    plain = render(scene, settings)
+    original = render_module._run_batch
+    events, lock = [], threading.Lock()
+
+    def slow_first_batch(ctx, film, pixels, spp, first):
+        with lock:
+            events.append(("start", first))
+        if pixels[0] == 0:
+            time.sleep(0.3)  # every pass's first batch ends last
+        tile = original(ctx, film, pixels, spp, first)
+        with lock:
+            events.append(("end", first))
+        return tile
+    monkeypatch.setattr(render_module, "_run_batch", slow_first_batch)
+    rec = Recorder()
+    delayed = render(scene, settings, rec)
+    np.testing.assert_array_equal(delayed.image, plain.image)
+    np.testing.assert_array_equal(delayed.film.count, plain.film.count)
+    assert [c[0] for c in rec.calls] == [2, 4, 6]
+    pass_1_ended = max(i for i, event in enumerate(events) if event == ("end", 0))
+    assert ("start", 2) in events[:pass_1_ended], "pass 2 began only after pass 1 ended"
