@@ -410,6 +410,22 @@ def test_light_tree_pmf():
     assert_chi2(C.chi2_test(np.bincount(e, minlength=ls.count), N * pmf), "light tree selection")
 
 
+def test_selection_weighs_the_mean_rgb_power_not_the_hue():
+    """Two sphere lights of one mean RGB power, red and green, placed
+    symmetrically about a shading point: power selection and the tree pick
+    each with probability 1/2 (Cycles' light tree weighs average(strength)).
+    By luminance the green light would get 0.77 (0.7152 vs 0.2126 for the
+    red one), starving the red light's highlights of samples."""
+    red = S.PointLight(position=(-2.0, 0.0, 3.0), power=(60.0, 0.0, 0.0), radius=0.03, soft_falloff=True)
+    green = S.PointLight(position=(2.0, 0.0, 3.0), power=(0.0, 60.0, 0.0), radius=0.03, soft_falloff=True)
+    p = np.zeros((2, 3))
+    n = np.tile([0.0, 0.0, 1.0], (2, 1))
+    for strategy in ("power", "tree"):
+        ls, _, _ = make_light_set([red, green], strategy=strategy)
+        pmf = ls.selection_pdf(np.arange(2), p, n)
+        assert np.allclose(pmf, 0.5, rtol=0, atol=1e-12), (strategy, pmf)
+
+
 def floor_scene(selection, count=300, size=(24, 24)):
     from engine.testscenes import look_at, quad
     floor = quad([[-5, -5, 0], [5, -5, 0], [5, 5, 0], [-5, 5, 0]])
