@@ -69,7 +69,8 @@ AVAILABLE = UNAVAILABLE is None
 KERNELS = []      # every Kernel and LoopKernel, in definition order
 HELPERS = []      # functions kernels call
 compile_seconds = {}
-_state = {"enabled": False, "thread": None, "numba": None, "started": None, "finished": None}
+_state = {"enabled": False, "thread": None, "numba": None, "started": None, "finished": None,
+          "helpers_registered": 0}
 _lock = threading.Lock()
 
 
@@ -192,13 +193,25 @@ def loop_kernel(signature, numpy_fn):
 # compilation (background thread)
 
 def _start():
+    """Compile, in one background thread, every kernel not compiled yet.
+    Kernels of modules imported later (node modules, a render that starts
+    after an early ``configure``) start a new thread at the next call."""
     with _lock:
-        if _state["thread"] is None:
-            _state["started"] = time.perf_counter()
-            thread = threading.Thread(target=_compile_all, name="ember-jit", daemon=True)
-            _state["thread"] = thread
+        thread = _state["thread"]
+        if thread is not None and thread.is_alive():
+            return   # it picks up kernels defined meanwhile
+        if _state.get("stop") or UNAVAILABLE is not None or not _pending():
+            return
+        if thread is None:
             atexit.register(stop)
-            thread.start()
+        _state["started"], _state["finished"] = time.perf_counter(), None
+        thread = threading.Thread(target=_compile_all, name="ember-jit", daemon=True)
+        _state["thread"] = thread
+        thread.start()
+
+
+def _pending():
+    return [k for k in list(KERNELS) if k.compiled is None]
 
 
 def stop():
@@ -215,17 +228,15 @@ def stop():
 def _compile_all():
     try:
         numba = _import_numba()
-        for k in list(KERNELS):
-            if _state.get("stop"):
+        while not _state.get("stop"):
+            todo = _pending()
+            if not todo:
                 break
-            t0 = time.perf_counter()
-            if isinstance(k, LoopKernel):
-                k.compiled = k.build(numba)   # compiled for its signature at once
-            else:
-                k.compiled = _gufunc(numba, k.fn, k.inputs, k.outputs)
-                with np.errstate(all="ignore"):
-                    k.compiled(*([np.zeros(1)] * k.inputs))   # load or build the machine code now
-            compile_seconds[k.__name__] = time.perf_counter() - t0
+            _register_helpers(numba)
+            for k in todo:
+                if _state.get("stop"):
+                    break
+                _compile(numba, k)
     except Exception as exc:  # noqa: BLE001 - the NumPy path keeps working
         global UNAVAILABLE
         UNAVAILABLE = f"numba failed: {type(exc).__name__}: {exc}"
@@ -233,11 +244,30 @@ def _compile_all():
         _state["finished"] = time.perf_counter()
 
 
+def _compile(numba, k):
+    t0 = time.perf_counter()
+    if isinstance(k, LoopKernel):
+        k.compiled = k.build(numba)   # compiled for its signature at once
+    else:
+        k.compiled = _gufunc(numba, k.fn, k.inputs, k.outputs)
+        with np.errstate(all="ignore"):
+            k.compiled(*([np.zeros(1)] * k.inputs))   # load or build the machine code now
+    compile_seconds[k.__name__] = time.perf_counter() - t0
+
+
+def _register_helpers(numba):
+    """Make helpers defined since the last call callable from compiled code."""
+    from numba.extending import register_jitable
+    for fn in HELPERS[_state["helpers_registered"]:]:
+        register_jitable(inline="always")(fn)
+    _state["helpers_registered"] = len(HELPERS)
+
+
 def _import_numba():
     if _state["numba"] is not None:
         return _state["numba"]
     import numba
-    from numba.extending import overload, register_jitable
+    from numba.extending import overload
     numba.config.CACHE_DIR = cache_dir()   # read by the cache locator when a function is cached
 
     @overload(where)
@@ -252,8 +282,6 @@ def _import_numba():
             return np.minimum(np.maximum(x, lo), hi)  # NaN propagates, as np.clip
         return impl
 
-    for fn in HELPERS:
-        register_jitable(inline="always")(fn)
     _state["numba"] = numba
     return numba
 

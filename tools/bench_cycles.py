@@ -77,7 +77,9 @@ def jit_warm_up():
     """Compile Ember's kernels (or load them from the cache) before timing:
     renders would otherwise start on the NumPy forms.  Returns a note."""
     try:
-        from engine import kernels
+        # Every kernel is defined once the renderer's modules are imported:
+        # compile them all now, not only those of modules already loaded.
+        from engine import kernels, render  # noqa: F401
     except ImportError:
         return "Ember without compiled kernels"
     if not kernels.configure(True):

@@ -285,3 +285,22 @@ def test_nearest_point_light_agrees(jit):
     plain, compiled = both_ways(run)
     assert_agree(plain, compiled)
     assert (plain[2] >= 0).sum() > n // 4
+
+
+def _double_plus_one(x):
+    return 2.0 * x + 1.0
+
+
+def test_kernels_defined_after_a_compile_are_compiled_too(jit):
+    """A kernel defined after the background compile ran (a module imported
+    later, as the add-on imports the renderer after an early configure) is
+    compiled at the next ``configure``, not left on its NumPy form."""
+    late = kernels.Kernel(_double_plus_one, 1, 1)
+    try:
+        assert late.compiled is None
+        assert kernels.configure(True)
+        assert kernels.wait(600) and late.compiled is not None
+        x = np.linspace(-3.0, 3.0, 101)
+        assert_agree(*both_ways(late, x))
+    finally:
+        kernels.KERNELS.remove(late)
