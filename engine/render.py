@@ -242,12 +242,13 @@ def _render(scene, settings, progress):
     with _AbandonablePool(threads, film) as pool:
         plan = _Plan(settings, adaptive, threads)
         queue = collections.deque()  # (pass, batch job), in planned order
+        stop_poll = _StopPoll(progress)
         while True:
             _submit(queue, plan, pool, ctx, QUEUE_PER_THREAD * threads)
             if not queue:
                 break
             done_pass, job = queue.popleft()
-            cancelled = _wait(job, progress)
+            cancelled = stop_poll.wait(job)
             if not cancelled:
                 film.merge(job.result().tile)
                 done_pass.left -= 1
@@ -333,17 +334,30 @@ def _submit(queue, plan, pool, ctx, limit):
         queue.append((run, pool.submit(_run_batch, ctx, pool.film, pixels, run.spp, run.first)))
 
 
-def _wait(job, progress, poll=0.1):
-    """Wait for one batch, asking ``should_stop`` about every ``poll``
-    seconds so a cancel lands within a fraction of a second, not a whole
-    batch.  Returns True if a stop was requested."""
-    while True:
-        try:
-            job.result(timeout=poll)
-            return False
-        except FuturesTimeout:
-            if _stop_requested(progress):
-                return True
+class _StopPoll:
+    """Asks ``progress.should_stop`` about every ``poll`` seconds while the
+    render loop waits for batches, however fast they finish, so a cancel
+    lands within a fraction of a second, not a pass."""
+
+    def __init__(self, progress, poll=0.1):
+        self.progress, self.poll = progress, poll
+        self.last = time.perf_counter()
+
+    def wait(self, job):
+        """Wait for one batch; True if a stop was requested meanwhile."""
+        while True:
+            try:
+                job.result(timeout=self.poll)
+                finished = True
+            except FuturesTimeout:
+                finished = False
+            now = time.perf_counter()
+            if now - self.last >= self.poll:
+                self.last = now
+                if _stop_requested(self.progress):
+                    return True
+            if finished:
+                return False
 
 
 def _cancel(jobs):
