@@ -218,3 +218,31 @@ def test_passes_overlap_and_merge_in_order(monkeypatch):
     assert [c[0] for c in rec.calls] == [2, 4, 6]
     pass_1_ended = max(i for i, event in enumerate(events) if event == ("end", 0))
     assert ("start", 2) in events[:pass_1_ended], "pass 2 began only after pass 1 ended"
+
+
+def test_stop_is_asked_while_queued_batches_finish_quickly(monkeypatch):
+    """Batches that each end well within the poll interval, queued ahead so
+    the one waited for is usually done already: should_stop is still asked
+    about every 0.1 s, and a long pass is cut short."""
+    import time
+    from engine import render as render_module
+
+    original = render_module._run_batch
+
+    def steady_batch(ctx, film, pixels, spp, first):
+        time.sleep(0.02)
+        return original(ctx, film, pixels, spp, first)
+    monkeypatch.setattr(render_module, "_run_batch", steady_batch)
+
+    class StopAfter:
+        def __init__(self):
+            self.t0 = time.perf_counter()
+
+        def should_stop(self):
+            return time.perf_counter() - self.t0 > 0.3
+
+    # One pass of 16 samples in 1024-path batches: about 260 batches, 2.6 s
+    # of sleeping alone; a stop at 0.3 s must end it long before.
+    settings = RenderSettings(samples=16, samples_per_pass=16, max_paths=1024, threads=2, aovs=())
+    r = render(cornell_box(128, 128), settings, StopAfter())
+    assert r.samples < 16
