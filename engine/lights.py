@@ -347,15 +347,6 @@ class _PointLights:
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, Le
         out.pdf[idx], out.delta[idx] = pdf, delta
 
-    def intersect(self, j, o, d):
-        """t, Le and solid-angle pdf where rays hit light j (sphere or disk)."""
-        n = len(o)
-        if self.radius[j] <= 0:
-            return np.full(n, np.inf), np.zeros((n, 3)), np.zeros(n)
-        t, pdf = _point_hit(o, d, self.pos[j], self.radius[j], self.sphere[j])
-        Le = np.tile(self.L[j], (n, 1)) * self._spot_factor(j, -d)[:, None]
-        return t, Le, pdf
-
     def nearest(self, o, d, t, ray_bits, light_bits):
         """The nearest of these lights each ray meets before t: t (updated
         in place), the hit distance (inf = none), light index (-1), Le and
@@ -547,9 +538,7 @@ class _AreaLights:
             p[:, 0], p[:, 1], p[:, 2], c[..., 0], c[..., 1], c[..., 2], ex[..., 0], ex[..., 1], ex[..., 2],
             ey[..., 0], ey[..., 1], ey[..., 2], self.len_u[j], self.len_v[j], n[..., 0], n[..., 1], n[..., 2],
             self.area[j], self.rect[j].astype(np.float64), x, y, u1, u2, MIN_SPHERICAL)
-        wi = out.wi[idx] if isinstance(idx, slice) else np.empty((len(t), 3))
-        wi[:, 0], wi[:, 1], wi[:, 2] = wx, wy, wz
-        out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, self.L[j]
+        out.wi[idx], out.dist[idx], out.Le[idx] = np.stack([wx, wy, wz], axis=1), t, self.L[j]
         out.pdf[idx] = pdf
 
     def _solid_angle_pdf(self, j, o):

@@ -334,7 +334,8 @@ def _path_pmf_numpy(emitter, p, n, center, radius, w, two_sided, sin_o, cos_o, c
 
 @kernel(18)
 def _importance(px, py, pz, nx, ny, nz, cx, cy, cz, r, wx, wy, wz, two_sided, sin_o, cos_o, cos_e, phi):
-    """One node's importance for one shading point (see ``importance``)."""
+    """pbrt-v4 LightBounds::Importance of one node for one shading point (normal
+    (0, 0, 0): none), as ``_descend`` and ``_path_pmf`` weigh the children."""
     tx, ty, tz = px - cx, py - cy, pz - cz
     d2_true = tx * tx + ty * ty + tz * tz
     d2 = np.maximum(d2_true, r * r)

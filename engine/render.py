@@ -136,8 +136,9 @@ def warnings_for(ctx):
 MIN_BATCH_PATHS = 1 << 15
 # Automatic passes (samples_per_pass = 0): one sample first (a first image
 # soon), then doubling, up to about this many paths per pass (1-3 s on two
-# cores): few progress updates, yet a live progressive image.  The schedule depends on the frame only, never on
-# timing, so a seed's image is the same bit for bit on any machine.
+# cores): few progress updates, yet a live progressive image.  The schedule
+# depends on the frame only, never on timing, so a seed's image is the same
+# bit for bit on any machine.
 PASS_PATHS = 1 << 20
 
 
