@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from . import embree_upload, kernels
-from .vec import rows3, row_max
+from .vec import column, row_max, rows3
 
 
 def _import_embreex():
@@ -126,8 +126,7 @@ class Accel:
             side = np.where(np.einsum("ij,ij->i", ng, direction) < 0, -eps, eps)
             return p + ng * side[:, None]
         out = np.empty(rows[0].shape)
-        eps = np.asarray(eps, np.float64)
-        _offset_rows(*rows, eps if eps.ndim else np.full(len(out), eps), out)
+        _offset_rows(*rows, column(eps, len(out), np.float64), out)
         return out
 
 

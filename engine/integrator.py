@@ -23,7 +23,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from . import bsdf, kernels, pass_events
+from . import bsdf, kernels, nee, pass_events
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .hits import hit_geometry
 from .lights import POINT, SUN
@@ -468,19 +468,9 @@ def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u, ti
     f, pdf_b = bsdf.eval_pdf(lobes, wo_l, wi_l, *lobes_wo)
     if ctx.light_excludes:
         f = _visible_lobes_f(ctx, lobes, wo_l, wi_l, ls.wi, hit.ng, e, f)
-    # Lights behind the surface count for transmitting lobes (f is 0 below
-    # for the others); wi must be on the same side of both normals.
-    cos = np.abs(wi_l[:, 2])
-    p_light = p_sel * ls.pdf
-    ok = (ls.pdf > 0) & (cos > 0) & _same_side(ls.wi, hit.ng, wi_l)
-    if s.strategy == "mis":
-        w = np.where(ls.delta, 1.0, power_heuristic(p_light, pdf_b))
-    else:
-        w = np.ones(len(p_light))
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        scale = np.where(ok, cos * w / np.where(ok, p_light, 1.0), 0.0)
-    contrib = paths.beta * f * ls.Le * scale[:, None]
-    live = np.flatnonzero(row_any_positive(contrib))
+    contrib, w, live = nee.contribution(wi_l, ls.wi, hit.ng, ls.pdf, p_sel, pdf_b, ls.delta,
+                                        s.strategy == "mis", paths.beta, f, ls.Le)
+    live = np.flatnonzero(live)
     if len(live) == 0:
         return
     eps = hit.eps[live]

@@ -72,7 +72,7 @@ def _frame_rows(n, s, t):
 
 def frame(n):
     """Orthonormal tangents (s, t) for unit normals n (Duff et al. 2017)."""
-    n = np.asarray(n, np.float64)
+    n = _loopable(n)
     s, t = np.empty(n.shape), np.empty(n.shape)
     _frame_rows(n, s, t)
     return s, t
@@ -109,12 +109,26 @@ def rows3(*arrays):
     """The arrays as float64 rows of unit stride when all are (N, 3) of one
     N (the loops' case).  einsum sums in another order where an operand's
     rows are strided, so those are copied: both forms then agree."""
-    arrays = [np.asarray(a, np.float64) for a in arrays]
-    arrays = [a if a.ndim != 2 or a.strides[1] == 8 else np.ascontiguousarray(a) for a in arrays]
+    arrays = [_loopable(a) for a in arrays]
     shape = arrays[0].shape
     if len(shape) == 2 and shape[1] == 3 and all(a.shape == shape for a in arrays):
         return arrays
     return None
+
+
+def column(a, n, dtype):
+    """``a`` as a writable (n,) array of ``dtype`` (a scalar repeated)."""
+    a = np.asarray(a, dtype)
+    return a if a.shape == (n,) and a.flags.writeable else np.array(np.broadcast_to(a, (n,)))
+
+
+def _loopable(a):
+    """float64, rows of unit stride, writable (numba's signatures here take
+    no read-only arrays); a copy only where that is not so already."""
+    a = np.asarray(a, np.float64)
+    if a.ndim == 2 and (a.strides[1] != 8 or not a.flags.writeable):
+        return np.array(a, order="C")
+    return a
 
 
 def to_local(v, s, t, n):
