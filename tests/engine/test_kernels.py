@@ -304,3 +304,40 @@ def test_kernels_defined_after_a_compile_are_compiled_too(jit):
         assert_agree(*both_ways(late, x))
     finally:
         kernels.KERNELS.remove(late)
+
+
+def test_place_rows_agrees(jit):
+    """Edges, face normals, unit shading normals and the kept triangles of
+    flatten's compiled row loop against its NumPy form, bit for bit:
+    degenerate and non-finite triangles, zero and NaN shading normals, flat
+    rows in a smooth mesh, meshes without normals."""
+    from engine.geometry import _place_rows
+    rng = np.random.default_rng(21)
+    verts, tris = 3000, 70000   # more than one NumPy chunk
+    vertices = rng.normal(size=(verts, 3)) * 10.0
+    vertices[:3] = vertices[3]            # a degenerate triangle below
+    vertices[4] = np.nan
+    vertices[5] = np.inf
+    indices = rng.integers(8, verts, (tris, 3))
+    indices[0] = (0, 1, 2)
+    indices[1, 0], indices[2, 1] = 4, 5
+    indices[3] = (6, 7, 7)
+    smooth = rng.random(tris) < 0.8
+    ns0 = rng.normal(size=(tris, 3, 3))
+    ns0[10:20] = 0.0
+    ns0[20:30, 1] = np.nan
+    indices[100:110, 2] = indices[100:110, 0]   # degenerate
+
+    def run(has_ns):
+        outs = [np.empty((tris, 3)) for _ in range(4)] + [np.empty(tris)]
+        ns = ns0.copy() if has_ns else np.empty((0, 3, 3))
+        keep = np.empty(tris, bool)
+        _place_rows(vertices, indices, smooth, has_ns, *outs, ns, keep)
+        return (*outs, ns, keep)
+    for has_ns in (True, False):
+        plain, compiled = both_ways(run, has_ns)
+        assert_agree(plain, compiled)
+        a, b, c = indices.T
+        dropped = (a == b) | (b == c) | (a == c)        # rows 3, 100-109 and chance repeats
+        dropped[:3] = True                              # same points, NaN, inf
+        np.testing.assert_array_equal(plain[-1], ~dropped)
