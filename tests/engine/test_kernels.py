@@ -341,3 +341,53 @@ def test_place_rows_agrees(jit):
         dropped = (a == b) | (b == c) | (a == c)        # rows 3, 100-109 and chance repeats
         dropped[:3] = True                              # same points, NaN, inf
         np.testing.assert_array_equal(plain[-1], ~dropped)
+
+
+def test_frame_and_rotations_agree(jit):
+    """Shading frames, to_local / to_world and offset_origin: the compiled
+    row loops against their NumPy forms, bit for bit, on unit and odd
+    normals (poles, -0.0, NaN, zero), strided views and scalar eps."""
+    from engine import vec
+    from engine.accel import Accel
+    rng = np.random.default_rng(22)
+    n = 5000
+    normals = rng.normal(size=(n, 3))
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    normals[:4] = ((0, 0, 1), (0, 0, -1), (0.0, 0.0, -0.0), (0, 0, 0))
+    normals[4] = np.nan
+    wide = rng.normal(size=(n, 6))
+    v = wide[:, ::2]                                       # a strided view
+    assert not v.flags.c_contiguous
+    s, t = vec.frame(normals)
+    eps = rng.random(n) * 1e-4
+    assert_agree(*both_ways(vec.frame, normals))
+    assert_agree(*both_ways(vec.to_local, v, s, t, normals))
+    assert_agree(*both_ways(vec.to_world, v, s, t, normals))
+    for e in (eps, 1e-5):
+        assert_agree(*both_ways(Accel.offset_origin, None, wide[:, 1::2], normals, v, e))
+
+
+def test_one_process_at_a_time_fills_the_cache(tmp_path):
+    """Two processes compiling into one numba cache crashed the second (a
+    segfault loading a gufunc the first was writing): ``cache_lock`` lets
+    one in at a time; a waiter that is told to stop gives up at once."""
+    import subprocess
+    import sys
+    import time
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time; sys.path.insert(0, sys.argv[1]); from engine import kernels\n"
+         "with kernels.cache_lock(sys.argv[2]):\n    print('held', flush=True); time.sleep(1.5)",
+         root, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with kernels.cache_lock(str(tmp_path), give_up=lambda: True) as locked:
+            assert not locked
+        t0 = time.perf_counter()
+        with kernels.cache_lock(str(tmp_path)) as locked:
+            assert locked
+            waited = time.perf_counter() - t0
+            assert holder.poll() is not None or waited > 1.0
+    finally:
+        holder.wait(30)
+    assert waited > 0.5
