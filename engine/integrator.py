@@ -23,14 +23,14 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from . import bsdf, kernels, nee, pass_events
+from . import bsdf, kernels, nee, pass_events, throughput
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .hits import hit_geometry
 from .lights import POINT, SUN
 from .nodes import NodeRays, ShadingContext
 from .sampler import BSDF, CAMERA, KIND, LIGHT, emitter_set, vertex_set
 from .sampling import power_heuristic
-from .vec import dot, frame, row_all_finite, row_any_positive, row_max, to_local, to_world
+from .vec import dot, frame, row_any_positive, row_max, to_local, to_world
 
 
 @dataclass
@@ -537,14 +537,6 @@ def _orient(hit, lobes):
         lobes.back = back
 
 
-def _same_side(wi, ng, wi_l):
-    """wi is on the same side of the geometric and the shading surface:
-    a transmission (wi_l.z < 0) must leave through the back, a reflection
-    through the front (ng faces the incoming ray)."""
-    g = dot(wi, ng)
-    return (g != 0) & ((g > 0) == (wi_l[:, 2] > 0))
-
-
 def _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth):
     """Sample the BSDF and update the path state in place; returns which
     paths live on and which passed straight through a transparent lobe."""
@@ -552,17 +544,7 @@ def _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth):
     u = _uniforms(ctx, paths, vertex_set(depth, BSDF))
     wi_l, weight, pdf, delta = bsdf.sample(lobes, wo_l, u[:, 0], u[:, 1], u[:, 2], *lobes_wo)
     wi = to_world(wi_l, tt, bb, hit.ns)
-    # A reflection below the geometric surface (or a transmission above it)
-    # would leak light through the surface: absorb it, as Cycles does.
-    ok = _same_side(wi, hit.ng, wi_l) & row_all_finite(weight) & row_any_positive(weight)
-    beta = paths.beta * weight
-    rr = paths.bounce >= s.rr_depth
-    if rr.any():
-        q = np.where(rr, np.minimum(row_max(beta), 0.95), 1.0)
-        survive = u[:, 3] < q
-        beta = beta / np.where(survive, np.maximum(q, 1e-30), 1.0)[:, None]
-        ok &= survive
-    paths.beta = beta
+    ok, paths.beta = throughput.update(wi, hit.ng, wi_l, weight, paths.beta, paths.bounce, s.rr_depth, u[:, 3])
     through = _sampled_transparent(ctx, hit, delta, wi_l, wo_l)
     if through.any():
         # A transparent pass is not a vertex: the path keeps its direction,

@@ -421,3 +421,28 @@ def test_light_sample_contribution_agrees(jit):
             plain, compiled = both_ways(nee.contribution, *args)
             assert_agree(plain, compiled)
             assert plain[2].any() and not plain[2].all()
+
+
+def test_throughput_update_agrees(jit):
+    """The BSDF sample's throughput update with Russian roulette
+    (engine/throughput.py): compiled row loop against NumPy form, bit for
+    bit, with leaking directions, NaN / infinite / zero weights, paths
+    before and after the roulette depth, and none past it."""
+    from engine import throughput
+    rng = np.random.default_rng(24)
+    n = 20000
+    wi = rng.normal(size=(n, 3))
+    ng = rng.normal(size=(n, 6))[:, ::2]
+    wi_l = rng.normal(size=(n, 3))
+    weight = np.abs(rng.normal(size=(n, 3)))
+    weight[:20] = np.nan
+    weight[20:40, 1] = np.inf
+    weight[40:60] = 0.0
+    beta = np.abs(rng.normal(size=(n, 3)))
+    beta[60:70, 0] = np.nan
+    bounce = rng.integers(0, 8, n).astype(np.int32)
+    u = rng.random(n)
+    for depth in (3, 100):
+        plain, compiled = both_ways(throughput.update, wi, ng, wi_l, weight, beta, bounce, depth, u)
+        assert_agree(plain, compiled)
+        assert plain[0].any() and not plain[0].all()
