@@ -367,8 +367,9 @@ def _escaped(ctx, paths, i, tile):
     else:
         if np.any(ctx.world != 0):   # a black world adds nothing: skip the row gathers
             paths.L[sky] += paths.beta[sky] * ctx.world
-        pass_events.emitter(ctx, paths, sky, paths.beta[sky] * ctx.world, np.ones(len(sky)), tile,
-                            world=True, bsdf_only=True)
+        if pass_events.listening(tile):
+            pass_events.emitter(ctx, paths, sky, paths.beta[sky] * ctx.world, np.ones(len(sky)), tile,
+                                world=True, bsdf_only=True)
     for mask, emitter, Le, pdf in ctx.lights.sun_hits(paths.d[i], paths.ray[i] if ctx.track_rays else None):
         j = i[mask]
         if len(j):
