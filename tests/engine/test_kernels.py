@@ -461,3 +461,17 @@ def test_environment_lookup_agrees(jit):
     for channels in (3, 4):
         image = rng.random((32, 64, channels)).astype(np.float32) * 100.0
         assert_agree(*both_ways(lookup, image, u, v))
+
+
+def test_pixel_filter_sample_agrees(jit):
+    """The pixel filter's inverse CDF by guide table: compiled loop against
+    the NumPy form, bit for bit, for each filter (the Gaussian's tails put
+    many bins in one guide cell: the binary-search branch), at u = 0, 0.5
+    and just below 1."""
+    from engine.camera import PixelFilter
+    rng = np.random.default_rng(26)
+    u = rng.random(50000)
+    u[:3] = (0.0, 0.5, np.nextafter(1.0, 0.0))
+    for kind, width in (("BLACKMAN_HARRIS", 1.5), ("GAUSSIAN", 1.5), ("GAUSSIAN", 10.0), ("BOX", 1.0)):
+        pixel_filter = PixelFilter(kind, width)
+        assert_agree(*both_ways(pixel_filter.sample, u))
