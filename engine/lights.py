@@ -492,7 +492,7 @@ def _sun_sample_numpy(j, u1, u2, axes, one_minus_cos, delta, wi, pdf):
         wi[s] = to_world(local, tt, bb, axis[s])
 
 
-@loop_kernel("void(int64[::1], float64[::1], float64[::1], float64[:, ::1], float64[::1], boolean[::1], "
+@loop_kernel("void(int64[:], float64[:], float64[:], float64[:, ::1], float64[::1], boolean[::1], "
              "float64[:, ::1], float64[::1])", _sun_sample_numpy)
 def _sun_sample(j, u1, u2, axes, one_minus_cos, delta, wi, pdf):
     """Directions uniform in each sun's cone about its axis (delta suns: the

@@ -188,14 +188,31 @@ def renders():
     for jit in (False, True):
         settings = RenderSettings(samples=8, seed=11, max_bounces=4, use_jit=jit, threads=2)
         out[jit] = render(scene, settings).image
+        # Every other kind of light the loops handle: a sun with a disc, a
+        # sphere light, an HDRI seen through the open front; Gaussian filter.
+        settings = RenderSettings(samples=4, seed=12, max_bounces=3, use_jit=jit, threads=2,
+                                  filter_type="GAUSSIAN", filter_width=2.0)
+        out[jit, "lights"] = render(_open_scene_with_every_light(scene), settings).image
     kernels.configure(True)
     return out
 
 
-def test_fixed_seed_render_agrees_with_and_without_jit(renders):
+def _open_scene_with_every_light(scene):
+    import dataclasses
+    from engine.scene import EnvironmentTexture, PointLight, SunLight, World
+    rng = np.random.default_rng(28)
+    lights = list(scene.lights) + [SunLight((0.3, 0.4, -0.87), (2.0, 1.8, 1.5), angle=0.2),
+                                   PointLight((0.2, 0.3, 0.5), (5.0, 5.0, 5.0), radius=0.1)]
+    world = World(texture=EnvironmentTexture(rng.random((16, 32, 3)).astype(np.float32)))
+    return dataclasses.replace(scene, lights=lights, world=world)
+
+
+@pytest.mark.parametrize("which", [None, "lights"])
+def test_fixed_seed_render_agrees_with_and_without_jit(renders, which):
     require_numba()
-    plain, compiled = renders[False], renders[True]
-    assert np.isfinite(compiled).all()
+    key = (lambda jit: jit) if which is None else (lambda jit: (jit, which))
+    plain, compiled = renders[key(False)], renders[key(True)]
+    assert np.isfinite(compiled).all() and compiled.max() > 0
     # The same random numbers through the same maths, rounded the same way.
     np.testing.assert_array_equal(compiled, plain)
 
