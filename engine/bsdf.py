@@ -27,22 +27,17 @@ from typing import Optional
 
 import numpy as np
 
+from . import bsdf_loops as loops
 from . import microfacet as mf
-from .kernels import kernel, where
-from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_sample_vndf
+from .kernels import LoopKernel
+
+from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect, ggx_sample_vndf
 from .sampling import cosine_hemisphere, INV_PI, TWO_PI
 from .textures import MaterialTextures
-from .vec import count, luminance, subset
+from .vec import count, subset
 
-NONE, DIFFUSE, MIRROR, GLOSSY, GLASS, REFRACTION, TRANSLUCENT, TRANSPARENT, SHEEN = range(-1, 8)
-KIND_IDS = {"diffuse": DIFFUSE, "mirror": MIRROR, "glossy": GLOSSY, "glass": GLASS,
-            "refraction": REFRACTION, "translucent": TRANSLUCENT, "transparent": TRANSPARENT,
-            "sheen": SHEEN}
-F_NONE, F_SCHLICK, F_F82, F_DIELECTRIC = range(4)
-FRESNEL_IDS = {"none": F_NONE, "schlick": F_SCHLICK, "f82": F_F82, "dielectric": F_DIELECTRIC}
-# Below this alpha, GGX is numerically a mirror (glass: a smooth refractor);
-# Cycles switches to a singular lobe at alpha^2 <= 2e-10.
-MIN_ALPHA = 1e-3
+from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FRESNEL_IDS, GLASS, GLOSSY,  # noqa: F401
+                       KIND_IDS, MIN_ALPHA, MIRROR, NONE, REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
 
 
 _KIND_TABLES = {}
@@ -60,6 +55,23 @@ def kind_in(kind, kinds):
         table[np.asarray(kinds, np.int8).view(np.uint8)] = True
         _KIND_TABLES[kinds] = table
     return table.take(kind.view(np.uint8))
+
+
+# Row operations written out term by term (not einsum, mean, matmul): the
+# compiled per-ray forms (engine/bsdf_loops.py) add in the same order, so
+# both round alike.
+
+def _dot(a, b):
+    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+
+
+def _mean3(x):
+    return (x[:, 0] + x[:, 1] + x[:, 2]) / 3.0
+
+
+def _luminance(rgb):
+    """Rec.709 luminance, Blender's default scene-linear space."""
+    return 0.2126 * rgb[:, 0] + 0.7152 * rgb[:, 1] + 0.0722 * rgb[:, 2]
 
 
 @dataclass
@@ -278,7 +290,7 @@ def _coat_absorption(lobes, k, rows, mu):
     ior = np.maximum(lobes.ior[rows, k], 1.0)
     cos_t = np.sqrt(np.maximum(1.0 - (1.0 - mu * mu) / (ior * ior), 1e-12))
     tinted = np.power(np.maximum(absorb, 0.0), (1.0 / cos_t)[:, None])
-    w = lobes.color[rows, k].mean(axis=1)[:, None]
+    w = _mean3(lobes.color[rows, k])[:, None]
     return 1.0 + w * (tinted - 1.0)
 
 
@@ -287,6 +299,12 @@ def weights(lobes, wo):
     colour, energy compensation (Multiscatter GGX), and the attenuation of
     lobes lying under a layer (coat, sheen, Principled specular) by that
     layer's albedo, as Cycles' Principled BSDF."""
+    out = np.empty(lobes.kind.shape + (3,))
+    _weights_kernel(_lobe_arrays(lobes), _table_arrays(), _c(wo), out)
+    return out
+
+
+def _weights_numpy(lobes, wo):
     n, kk = lobes.kind.shape
     mu = np.clip(wo[:, 2], 0.0, 1.0)
     w = lobes.color * lobes.weight[:, :, None]
@@ -329,7 +347,7 @@ def _albedo_guess(lobes, k, mu):
     kind = lobes.kind[:, k]
     guess = np.ones(len(kind))
     gl = kind == GLOSSY
-    f0 = luminance(lobes.f0[:, k])
+    f0 = _luminance(lobes.f0[:, k])
     est = f0 + (1.0 - f0) * (1.0 - mu) ** 5
     guess = np.where(gl & (lobes.fresnel[:, k] != F_NONE) & (lobes.fresnel[:, k] != F_SCHLICK), est, guess)
     return np.where(kind == NONE, 0.0, guess)
@@ -339,6 +357,12 @@ def selection(lobes, wo, w=None):
     """(N, K) probability of sampling each lobe."""
     if w is None:
         w = weights(lobes, wo)
+    out = np.empty(lobes.kind.shape)
+    _selection_kernel(_lobe_arrays(lobes), _c(wo), _c(w), out)
+    return out
+
+
+def _selection_numpy(lobes, wo, w):
     cos_o = np.clip(wo[:, 2], 0.0, 1.0)
     sel = np.zeros(lobes.kind.shape)
     for k in range(lobes.kind.shape[1]):
@@ -346,9 +370,12 @@ def selection(lobes, wo, w=None):
         legacy = lobes.fresnel[:, k] == F_SCHLICK
         if legacy.any():
             col = np.where(legacy[:, None], schlick(lobes.color[:, k], cos_o) * w[:, k], col)
-        sel[:, k] = luminance(col) * _albedo_guess(lobes, k, cos_o)
+        sel[:, k] = _luminance(col) * _albedo_guess(lobes, k, cos_o)
     sel = np.maximum(sel, 0.0)
-    total = sel.sum(axis=1, keepdims=True)
+    total = sel[:, 0]
+    for k in range(1, sel.shape[1]):
+        total = total + sel[:, k]
+    total = total[:, None]
     return np.where(total > 0, sel / np.where(total > 0, total, 1.0), 0.0)
 
 
@@ -399,7 +426,7 @@ def _dielectric(lobes, rows, k, cos, eta):
     refl = np.where(refraction[:, None], 0.0, refl)
     trans = np.where(refraction[:, None], 1.0, 1.0 - refl) * lobes.transmission_tint[rows, k]
     trans = np.where((cos_t > 0)[:, None], trans, 0.0)
-    r, t = refl.mean(axis=1), trans.mean(axis=1)
+    r, t = _mean3(refl), _mean3(trans)
     p_refl = np.where(r + t > 0, r / np.where(r + t > 0, r + t, 1.0), 1.0)
     return refl, trans, p_refl, cos_t
 
@@ -413,28 +440,6 @@ def _ggx_reflect(wo, wi, alpha):
     return spec, pdf, np.stack([hx, hy, hz], axis=1)
 
 
-@kernel(7, 5)
-def ggx_reflect(wox, woy, woz, wix, wiy, wiz, alpha):
-    """Elementwise GGX reflection: D G2 / (4 cos_o cos_i), the VNDF pdf of
-    wi and the unit half vector (x, y, z); 0 below either horizon."""
-    hx = wox + wix
-    hy = woy + wiy
-    hz = woz + wiz
-    hl = np.sqrt(hx * hx + hy * hy + hz * hz)
-    inv = 1.0 / where(hl > 0, hl, 1.0)
-    hx = hx * inv
-    hy = hy * inv
-    hz = hz * inv
-    ok = (woz > COS_EPS) & (wiz > COS_EPS) & (hl > 0)
-    lo = ggx_lambda(woz, alpha)
-    li = ggx_lambda(wiz, alpha)
-    d = ggx_d(hz, alpha)
-    co = np.maximum(woz, COS_EPS)
-    spec = d / (4.0 * co * np.maximum(wiz, COS_EPS) * (1.0 + lo + li))
-    pdf = d / ((1.0 + lo) * 4.0 * co)
-    return where(ok, spec, 0.0), where(ok, pdf, 0.0), hx, hy, hz
-
-
 def ggx_pdf(wo, wi, alpha):
     """Solid-angle pdf of wi under VNDF sampling of the reflection."""
     _, pdf, h = _ggx_reflect(wo, wi, alpha)
@@ -443,7 +448,7 @@ def ggx_pdf(wo, wi, alpha):
 
 def _eval_glossy(lobes, rows, k, wo, wi):
     spec, pdf, h = _ggx_reflect(wo, wi, lobes.alpha[rows, k])
-    f = _fresnel(lobes, rows, k, np.einsum("ij,ij->i", wo, h)) * spec[:, None]
+    f = _fresnel(lobes, rows, k, _dot(wo, h)) * spec[:, None]
     return f, pdf
 
 
@@ -462,14 +467,14 @@ def _eval_glass(lobes, rows, k, wo, wi):
     if up.any():
         r = np.nonzero(up & ok_o)[0]
         spec, p, h = _ggx_reflect(wo[r], wi[r], alpha[r])
-        refl, _, p_refl, _ = _dielectric(lobes, rows[r], k, np.einsum("ij,ij->i", wo[r], h), eta[r])
+        refl, _, p_refl, _ = _dielectric(lobes, rows[r], k, _dot(wo[r], h), eta[r])
         f[r] = refl * spec[:, None]
         pdf[r] = p * p_refl
     if down.any():
         t = np.nonzero(down & ok_o)[0]
         h, length = mf.refraction_half(wo[t], wi[t], eta[t])
-        c_o = np.einsum("ij,ij->i", wo[t], h)
-        c_i = np.einsum("ij,ij->i", wi[t], h)
+        c_o = _dot(wo[t], h)
+        c_i = _dot(wi[t], h)
         # Only microfacets that face wo and refract into wi (pbrt's check).
         valid = (h[:, 2] > 0) & (c_o > 0) & (c_i < 0) & (length > 0)
         _, trans, p_refl, _ = _dielectric(lobes, rows[t], k, c_o, eta[t])
@@ -492,7 +497,7 @@ def _sheen_ltc(rough, mu):
 def _sheen_frame(wo):
     """Tangent towards wo (Cycles' make_orthonormals_safe_tangent)."""
     t = np.stack([wo[:, 0], wo[:, 1], np.zeros(len(wo))], axis=1)
-    length = np.linalg.norm(t, axis=1)
+    length = np.sqrt(_dot(t, t))
     flat = length < 1e-7
     t = np.where(flat[:, None], np.array([1.0, 0.0, 0.0]), t / np.where(flat, 1.0, length)[:, None])
     b = np.stack([-t[:, 1], t[:, 0], np.zeros(len(wo))], axis=1)   # z x t
@@ -509,7 +514,7 @@ def _eval_sheen(lobes, rows, k, wo, wi):
     weight), so f = pdf / cos."""
     a, b = _ltc(lobes, rows, k, wo)
     t, bt = _sheen_frame(wo)
-    x, y, z = np.einsum("ij,ij->i", wi, t), np.einsum("ij,ij->i", wi, bt), wi[:, 2]
+    x, y, z = _dot(wi, t), _dot(wi, bt), wi[:, 2]
     len_sq = (a * x + b * z) ** 2 + (a * y) ** 2 + z * z
     ok = (z > COS_EPS) & (wo[:, 2] > COS_EPS) & (np.abs(a) >= 1e-5)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -601,6 +606,15 @@ def eval_pdf(lobes, wo, wi, sel=None, w=None, sampled=False):
     diffuse_term, keep = bump_shadowing(lobes.smooth_n, lobes.bump_model, wi)
     if sel is None:
         sel = selection(lobes, wo, w)
+    f, pdf = np.empty((n, 3)), np.empty(n)
+    _eval_pdf_kernel(_lobe_arrays(lobes), _table_arrays(), _c(wo), _c(wi), _c(sel), _c(w),
+                     _NO_TERM if diffuse_term is None else _c(diffuse_term),
+                     _NO_KEEP if keep is None else np.ascontiguousarray(keep, bool), bool(sampled), f, pdf)
+    return f, pdf
+
+
+def _eval_pdf_numpy(lobes, wo, wi, sel, w, diffuse_term, keep, sampled):
+    n = len(wo)
     f = np.zeros((n, 3))
     pdf = np.zeros(n)
     front = wo[:, 2] > COS_EPS
@@ -628,6 +642,62 @@ def eval_pdf(lobes, wo, wi, sel=None, w=None, sampled=False):
         f = np.where(keep[:, None], f, 0.0)
         pdf = np.where(keep, pdf, 0.0)
     return f, pdf
+
+
+# ----------------------------------------------------------------------------
+# The compiled per-ray forms (engine/bsdf_loops.py) and their NumPy twins
+
+_NO_TERM, _NO_KEEP = np.empty(0), np.empty(0, bool)
+
+
+def _c(a):
+    return np.ascontiguousarray(a, np.float64)
+
+
+def _lobe_arrays(lobes):
+    return tuple(np.ascontiguousarray(getattr(lobes, name), dtype) for name, _, dtype in loops.LOBE_FIELDS)
+
+
+def _table_arrays():
+    t = mf.tables()
+    return tuple(t[name] for name, _ in loops.TABLES)
+
+
+def _lobes_of(arrays):
+    kind, color, alpha, fresnel, *rest = arrays
+    return Lobes(kind, color, alpha, fresnel == F_SCHLICK, fresnel, *rest)
+
+
+def _weights_twin(lobes, tables, wo, out):
+    out[:] = _weights_numpy(_lobes_of(lobes), wo)
+
+
+def _selection_twin(lobes, wo, w, out):
+    out[:] = _selection_numpy(_lobes_of(lobes), wo, w)
+
+
+def _eval_pdf_twin(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f, pdf):
+    bump = len(diffuse_term) > 0
+    f[:], pdf[:] = _eval_pdf_numpy(_lobes_of(lobes), wo, wi, sel, w, diffuse_term if bump else None,
+                                   keep if bump else None, sampled)
+
+
+class _Loop(LoopKernel):
+    def build(self, numba):
+        loops.register(numba)
+        return super().build(numba)
+
+
+_LOBES, _TABLES = loops.LOBES_SIGNATURE, loops.TABLES_SIGNATURE
+_weights_kernel = _Loop(loops.weights_loop, f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, :, ::1])",
+                             _weights_twin)
+_selection_kernel = _Loop(loops.selection_loop,
+                               f"void({_LOBES}, float64[:, ::1], float64[:, :, ::1], float64[:, ::1])",
+                               _selection_twin)
+_eval_pdf_kernel = _Loop(loops.eval_pdf_loop,
+                              f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, ::1], float64[:, ::1], "
+                              "float64[:, :, ::1], float64[::1], boolean[::1], boolean, float64[:, ::1], float64[::1])",
+                              _eval_pdf_twin)
 
 
 def _is_delta(lobes, k, rows):

@@ -14,7 +14,7 @@ import os
 
 import numpy as np
 
-from .kernels import helper
+from .kernels import helper, kernel, where
 
 COS_EPS = 1e-9
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "tables.npz")
@@ -35,6 +35,31 @@ def ggx_lambda(w_z, alpha):
     z2 = np.maximum(w_z * w_z, COS_EPS)
     tan2 = np.maximum(1.0 - z2, 0.0) / z2
     return 0.5 * (np.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
+
+
+@helper
+def ggx_reflect_terms(wox, woy, woz, wix, wiy, wiz, alpha):
+    """Elementwise GGX reflection: D G2 / (4 cos_o cos_i), the VNDF pdf of
+    wi and the unit half vector (x, y, z); 0 below either horizon."""
+    hx = wox + wix
+    hy = woy + wiy
+    hz = woz + wiz
+    hl = np.sqrt(hx * hx + hy * hy + hz * hz)
+    inv = 1.0 / where(hl > 0, hl, 1.0)
+    hx = hx * inv
+    hy = hy * inv
+    hz = hz * inv
+    ok = (woz > COS_EPS) & (wiz > COS_EPS) & (hl > 0)
+    lo = ggx_lambda(woz, alpha)
+    li = ggx_lambda(wiz, alpha)
+    d = ggx_d(hz, alpha)
+    co = np.maximum(woz, COS_EPS)
+    spec = d / (4.0 * co * np.maximum(wiz, COS_EPS) * (1.0 + lo + li))
+    pdf = d / ((1.0 + lo) * 4.0 * co)
+    return where(ok, spec, 0.0), where(ok, pdf, 0.0), hx, hy, hz
+
+
+ggx_reflect = kernel(7, 5)(ggx_reflect_terms)
 
 
 def ggx_sample_vndf(wo, alpha, u1, u2):
@@ -74,7 +99,7 @@ def refraction_half(wo, wi, eta):
     """Half vector of a refraction wo -> wi (Walter 2007), turned towards +Z,
     and the length of the unnormalised -(eta wi + wo)."""
     h = -(eta[:, None] * wi + wo)
-    length = np.linalg.norm(h, axis=1)
+    length = np.sqrt(h[:, 0] * h[:, 0] + h[:, 1] * h[:, 1] + h[:, 2] * h[:, 2])
     # Leaving a denser medium (eta < 1) the vector points down: flip it.
     h = h * (np.where(h[:, 2] < 0, -1.0, 1.0) / np.where(length > 0, length, 1.0))[:, None]
     return h, length

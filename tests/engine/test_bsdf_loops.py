@@ -1,0 +1,90 @@
+"""The layered BSDF's compiled per-ray loops (engine/bsdf_loops.py) against
+their NumPy twins (engine/bsdf.py), bit for bit, on random lobes of every
+kind: sheen, coats with absorption, glass and refraction (rough and smooth,
+back faces, IORs below 1), multiscatter GGX, every Fresnel mode, empty
+(NONE) slots, moved normals (bump shadowing), directions on both sides and
+grazing ones.  A render switches to the compiled form when it is ready, so
+both must round alike (see tests/engine/test_kernels.py).
+"""
+import numpy as np
+import pytest
+
+from engine import bsdf, kernels
+from engine.bsdf import (DIFFUSE, GLASS, GLOSSY, Lobes, MIN_ALPHA, MIRROR, NONE, REFRACTION, SHEEN,
+                         TRANSLUCENT, TRANSPARENT)
+from test_kernels import assert_agree, compiled_ready
+
+KINDS = np.array([NONE, DIFFUSE, MIRROR, GLOSSY, GLASS, REFRACTION, TRANSLUCENT, TRANSPARENT, SHEEN], np.int8)
+
+
+def random_lobes(rng, n, k=4, bump=False):
+    kind = rng.choice(KINDS, (n, k))
+    kind[: n // 4, 0] = GLOSSY       # a Principled-like stack on a quarter of the rays
+    kind[: n // 4, 1] = SHEEN
+    kind[: n // 4, 2] = DIFFUSE
+    layer = (kind == GLOSSY) | (kind == SHEEN)
+    covers = np.where(layer, rng.integers(0, k, (n, k)), 0).astype(np.int8)
+    covers = np.minimum(covers, k - 1 - np.arange(k)).astype(np.int8)
+    alpha = rng.random((n, k)) ** 2
+    alpha[rng.random((n, k)) < 0.1] = MIN_ALPHA
+    alpha = np.maximum(alpha, MIN_ALPHA)
+    multiscatter = rng.random((n, k)) < 0.4
+    lobes = Lobes(kind, rng.random((n, k, 3)) * 1.2, alpha, np.zeros((n, k), bool),
+                  fresnel=rng.integers(0, 4, (n, k)).astype(np.int8),
+                  ior=rng.uniform(0.4, 3.0, (n, k)), f0=rng.random((n, k, 3)),
+                  edge_tint=rng.random((n, k, 3)), transmission_tint=rng.random((n, k, 3)),
+                  multiscatter=multiscatter, covers=covers, absorb=rng.random((n, k, 3)),
+                  weight=rng.uniform(0.0, 1.2, (n, k)), back=rng.random(n) < 0.3)
+    if bump:
+        s = rng.normal(size=(n, 3)) + np.array([0.0, 0.0, 2.0])
+        lobes.smooth_n = s / np.linalg.norm(s, axis=1)[:, None]
+        lobes.bump_model = rng.integers(0, 2, n).astype(np.int8)
+    return lobes
+
+
+def directions(rng, n):
+    wo = rng.normal(size=(n, 3))
+    wo /= np.linalg.norm(wo, axis=1)[:, None]
+    wo[: n // 2, 2] = np.abs(wo[: n // 2, 2])         # mostly above the surface
+    wo[n // 2: n // 2 + 50] = (1.0, 0.0, 0.0)          # grazing
+    wo[n // 2 + 50: n // 2 + 60] = (0.0, 0.0, 1.0)     # normal incidence (flat sheen frame)
+    wi = rng.normal(size=(n, 3))
+    wi /= np.linalg.norm(wi, axis=1)[:, None]
+    mirror = rng.random(n) < 0.2                     # near the specular direction
+    wi[mirror] = wo[mirror] * (-1.0, -1.0, 1.0) + rng.normal(size=(mirror.sum(), 3)) * 0.05
+    wi /= np.linalg.norm(wi, axis=1)[:, None]
+    return wo, wi
+
+
+def both(fn, *args, **kw):
+    kernels.configure(False)
+    plain = fn(*args, **kw)
+    kernels.configure(True)
+    compiled = fn(*args, **kw)
+    plain = plain if isinstance(plain, tuple) else (plain,)
+    compiled = compiled if isinstance(compiled, tuple) else (compiled,)
+    return plain, compiled
+
+
+@pytest.fixture(scope="module")
+def jit():
+    compiled_ready()
+    yield
+    kernels.configure(True)
+
+
+@pytest.mark.parametrize("bump", [False, True])
+def test_weights_selection_eval_agree(jit, bump):
+    rng = np.random.default_rng(7 + bump)
+    n = 20000
+    lobes = random_lobes(rng, n, bump=bump)
+    wo, wi = directions(rng, n)
+    (w,), (w_c,) = both(bsdf.weights, lobes, wo)
+    assert_agree((w,), (w_c,))
+    assert np.isfinite(w).all() and (w >= 0).all()
+    assert_agree(*both(bsdf.selection, lobes, wo, w))
+    sel = bsdf.selection(lobes, wo, w)
+    for sampled in (False, True):
+        plain, compiled = both(bsdf.eval_pdf, lobes, wo, wi, sel, w, sampled=sampled)
+        assert_agree(plain, compiled)
+        assert (plain[1] > 0).sum() > n // 4   # the lobes were evaluated, not skipped
