@@ -61,8 +61,7 @@ def kind_in(kind, kinds):
 # compiled per-ray forms (engine/bsdf_loops.py) add in the same order, so
 # both round alike.
 
-def _dot(a, b):
-    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+_dot = mf.row_dot
 
 
 def _mean3(x):
@@ -530,7 +529,7 @@ def _sample_sheen(lobes, rows, k, wo, u1, u2):
     dx, dy = r * np.cos(phi), r * np.sin(phi)
     dz = np.sqrt(np.maximum(0.0, 1.0 - u1))
     local = np.stack([dx - dz * b, dy, dz * a], axis=1)
-    local /= np.maximum(np.linalg.norm(local, axis=1), 1e-30)[:, None]
+    local /= np.maximum(mf.row_norm(local), 1e-30)[:, None]
     t, bt = _sheen_frame(wo)
     return local[:, :1] * t + local[:, 1:2] * bt + local[:, 2:3] * np.array([0.0, 0.0, 1.0])
 
@@ -545,7 +544,7 @@ def _sample_glass(lobes, rows, k, wo, u_choice, u1, u2, singular):
     rough = ~singular
     if rough.any():
         h[rough] = ggx_sample_vndf(wo[rough], alpha[rough], u1[rough], u2[rough])
-    cos = np.einsum("ij,ij->i", wo, h)
+    cos = _dot(wo, h)
     _, _, p_refl, cos_t = _dielectric(lobes, rows, k, cos, eta)
     refract = u_choice >= p_refl
     wi = mf.reflect(wo, h)
@@ -688,6 +687,10 @@ class _Loop(LoopKernel):
         return super().build(numba)
 
 
+def _sample_twin(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delta, smooth):
+    wi[:], weight[:], pdf[:], delta[:], smooth[:] = _sample_numpy(_lobes_of(lobes), wo, u_lobe, u1, u2, sel, w)
+
+
 _LOBES, _TABLES = loops.LOBES_SIGNATURE, loops.TABLES_SIGNATURE
 _weights_kernel = _Loop(loops.weights_loop, f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, :, ::1])",
                              _weights_twin)
@@ -698,6 +701,10 @@ _eval_pdf_kernel = _Loop(loops.eval_pdf_loop,
                               f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, ::1], float64[:, ::1], "
                               "float64[:, :, ::1], float64[::1], boolean[::1], boolean, float64[:, ::1], float64[::1])",
                               _eval_pdf_twin)
+_sample_kernel = _Loop(loops.sample_loop,
+                       f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[::1], float64[::1], float64[::1], "
+                       "float64[:, ::1], float64[:, :, ::1], float64[:, ::1], float64[:, ::1], float64[::1], "
+                       "boolean[::1], boolean[::1])", _sample_twin)
 
 
 def _is_delta(lobes, k, rows):
@@ -721,6 +728,28 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
         w = weights(lobes, wo)
     if sel is None:
         sel = selection(lobes, wo, w)
+    wi, weight, pdf = np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
+    delta, smooth = np.empty(n, bool), np.empty(n, bool)
+    _sample_kernel(_lobe_arrays(lobes), _table_arrays(), _c(wo), _c(u_lobe), _c(u1), _c(u2), _c(sel), _c(w),
+                   wi, weight, pdf, delta, smooth)
+    smooth = np.nonzero(smooth)[0]
+    if 0 < len(smooth):
+        if len(smooth) == n:
+            smooth = slice(None)   # the usual case: no copies of the lobes
+        lobes_s = lobes if isinstance(smooth, slice) else _take(lobes, smooth)
+        fs, ps = eval_pdf(lobes_s, wo[smooth], wi[smooth], sel[smooth], w[smooth], sampled=True)
+        ok = ps > 0
+        weight[smooth] = np.where(ok[:, None], fs * (np.abs(wi[smooth, 2]) / np.where(ok, ps, 1.0))[:, None], 0.0)
+        pdf[smooth] = ps
+    weight[~(wo[:, 2] > COS_EPS)] = 0.0
+    return wi, weight, pdf, delta
+
+
+def _sample_numpy(lobes, wo, u_lobe, u1, u2, sel, w):
+    """The chosen lobe's direction for each ray; the weight and pdf of delta
+    samples (0 for the others), which samples are delta and which need
+    eval_pdf (smooth)."""
+    n = len(wo)
     cdf = np.cumsum(sel, axis=1)
     # u_lobe past a rounded CDF that ends an ulp below 1 belongs to the last
     # lobe with a selection probability, not to an unused slot after it.
@@ -738,7 +767,6 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
     delta = np.zeros(n, bool)
     weight = np.zeros((n, 3))
     pdf = np.zeros(n)
-    front = wo[:, 2] > COS_EPS
 
     for kind_id, flip in ((DIFFUSE, 1.0), (TRANSLUCENT, -1.0)):
         d = np.nonzero(kind == kind_id)[0]
@@ -783,18 +811,7 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
             weight[s] = w[s, k] * col / np.maximum(p * p_lobe[s], 1e-300)[:, None]
             delta[s] = True
             pdf[s] = p * p_lobe[s]
-
-    smooth = np.nonzero(~delta & (kind != NONE))[0]
-    if 0 < len(smooth):
-        if len(smooth) == n:
-            smooth = slice(None)   # the usual case: no copies of the lobes
-        lobes_s = lobes if isinstance(smooth, slice) else _take(lobes, smooth)
-        fs, ps = eval_pdf(lobes_s, wo[smooth], wi[smooth], sel[smooth], w[smooth], sampled=True)
-        ok = ps > 0
-        weight[smooth] = np.where(ok[:, None], fs * (np.abs(wi[smooth, 2]) / np.where(ok, ps, 1.0))[:, None], 0.0)
-        pdf[smooth] = ps
-    weight[~front] = 0.0
-    return wi, weight, pdf, delta
+    return wi, weight, pdf, delta, ~delta & (kind != NONE)
 
 
 def _take(lobes, rows):

@@ -15,8 +15,8 @@ tuple ``TABLES`` of Cycles' albedo tables (engine/microfacet.py).
 import numpy as np
 
 from .kernels import clip
-from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, MIN_ALPHA, NONE,
-                       REFRACTION, SHEEN, TRANSLUCENT)
+from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, MIN_ALPHA, MIRROR, NONE,
+                       REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
 from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect_terms
 
 LOBE_FIELDS = (("kind", "int8[:, ::1]", np.int8), ("color", "float64[:, :, ::1]", np.float64),
@@ -53,6 +53,7 @@ def register(numba):
 
 
 INV_PI = 1.0 / np.pi
+TWO_PI = 2.0 * np.pi
 # mf.f82_b's constants, computed as it does (Python's float pow).
 F82_F5 = (6.0 / 7.0) ** 5
 F82_SCALE = 7.0 / (F82_F5 * (6.0 / 7.0))
@@ -458,3 +459,184 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
         if bump and not sampled and not keep[i]:
             f_0 = f_1 = f_2 = p = 0.0
         f[i, 0], f[i, 1], f[i, 2], pdf[i] = f_0, f_1, f_2, p
+
+
+# ----------------------------------------------------------------------------
+# sample (bsdf.sample: the choice of lobe and its direction)
+
+@helper
+def _vndf(wox, woy, woz, alpha, u1, u2):
+    """microfacet.ggx_sample_vndf for one ray."""
+    vx, vy, vz = alpha * wox, alpha * woy, woz
+    length = np.sqrt(vx * vx + vy * vy + vz * vz)
+    vx, vy, vz = vx / length, vy / length, vz / length
+    lensq = vx * vx + vy * vy
+    if lensq > 0:
+        inv = 1.0 / np.sqrt(lensq)
+        t1x, t1y, t1z = -vy * inv, vx * inv, 0.0
+    else:
+        t1x, t1y, t1z = 1.0, 0.0, 0.0
+    t2x = vy * t1z - vz * t1y
+    t2y = vz * t1x - vx * t1z
+    t2z = vx * t1y - vy * t1x
+    r = np.sqrt(u1)
+    phi = 2.0 * np.pi * u2
+    p1 = r * np.cos(phi)
+    p2 = r * np.sin(phi)
+    s = 0.5 * (1.0 + vz)
+    p2 = (1.0 - s) * np.sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2
+    p3 = np.sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2))
+    nx = p1 * t1x + p2 * t2x + p3 * vx
+    ny = p1 * t1y + p2 * t2y + p3 * vy
+    nz = p1 * t1z + p2 * t2z + p3 * vz
+    ex, ey, ez = alpha * nx, alpha * ny, max(nz, 1e-12)
+    length = np.sqrt(ex * ex + ey * ey + ez * ez)
+    return ex / length, ey / length, ez / length
+
+
+@helper
+def _reflect(wox, woy, woz, hx, hy, hz):
+    c = 2.0 * (wox * hx + woy * hy + woz * hz)
+    return c * hx - wox, c * hy - woy, c * hz - woz
+
+
+@helper
+def _sample_sheen(t_sheen, rough, wox, woy, woz, u1, u2):
+    """bsdf._sample_sheen for one ray."""
+    mu = clip(woz, 0.0, 1.0)
+    a = _sheen_ltc(t_sheen, 0, rough, mu)
+    b = _sheen_ltc(t_sheen, 1, rough, mu)
+    r = np.sqrt(u1)
+    phi = TWO_PI * u2
+    dx, dy = r * np.cos(phi), r * np.sin(phi)
+    dz = np.sqrt(max(0.0, 1.0 - u1))
+    lx, ly, lz = dx - dz * b, dy, dz * a
+    length = max(np.sqrt(lx * lx + ly * ly + lz * lz), 1e-30)
+    lx, ly, lz = lx / length, ly / length, lz / length
+    length = np.sqrt(wox * wox + woy * woy + 0.0 * 0.0)
+    if length < 1e-7:
+        tx, ty = 1.0, 0.0
+    else:
+        tx, ty = wox / length, woy / length
+    return (lx * tx + ly * -ty + lz * 0.0, lx * ty + ly * tx + lz * 0.0,
+            lx * 0.0 + ly * 0.0 + lz * 1.0)
+
+
+def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delta, smooth):
+    """bsdf._sample_numpy into wi, weight, pdf, delta, smooth."""
+    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, lobe_weight, back = lobes
+    t_sheen = tables[7]
+    kk = kind.shape[1]
+    for i in range(len(wo)):
+        wox, woy, woz = wo[i, 0], wo[i, 1], wo[i, 2]
+        # The lobe: u_lobe against the running sum of the selection
+        # probabilities, never past the last lobe that has one.
+        cdf = 0.0
+        count = 0
+        last = kk - 1
+        for k in range(kk - 1, -1, -1):
+            if sel[i, k] > 0:
+                last = k
+                break
+        lo = 0.0
+        for k in range(kk):
+            cdf = sel[i, k] if k == 0 else cdf + sel[i, k]
+            if u_lobe[i] >= cdf:
+                count += 1
+        k = min(count, last)
+        total = cdf
+        cdf = 0.0
+        for j in range(k + 1):
+            cdf = sel[i, j] if j == 0 else cdf + sel[i, j]
+        kd = kind[i, k] if total > 0 else NONE
+        p_lobe = sel[i, k]
+        lo = cdf - p_lobe
+        u_sub = clip((u_lobe[i] - lo) / (p_lobe if p_lobe > 0 else 1.0), 0.0, 1.0 - 1e-12)
+        x, y, z = 0.0, 0.0, 1.0
+        r0 = r1 = r2 = p = 0.0
+        is_delta = False
+        if kd == DIFFUSE or kd == TRANSLUCENT:
+            r = np.sqrt(u1[i])
+            phi = TWO_PI * u2[i]
+            x, y, z = r * np.cos(phi), r * np.sin(phi), np.sqrt(max(0.0, 1.0 - u1[i]))
+            if kd == TRANSLUCENT:
+                z = z * -1.0
+        elif kd == GLOSSY:
+            hx, hy, hz = _vndf(wox, woy, woz, alpha[i, k], u1[i], u2[i])
+            x, y, z = _reflect(wox, woy, woz, hx, hy, hz)
+        elif kd == SHEEN:
+            x, y, z = _sample_sheen(t_sheen, np.sqrt(alpha[i, k]), wox, woy, woz, u1[i], u2[i])
+        elif kd == MIRROR:
+            x, y, z = wox * -1.0, woy * -1.0, woz * 1.0
+            code = fresnel[i, k]
+            s = _fresnel_s(code, ior[i, k], woz)
+            r0 = w[i, k, 0] * _fresnel(code, color[i, k, 0], f0[i, k, 0], edge[i, k, 0], s, woz) / p_lobe
+            r1 = w[i, k, 1] * _fresnel(code, color[i, k, 1], f0[i, k, 1], edge[i, k, 1], s, woz) / p_lobe
+            r2 = w[i, k, 2] * _fresnel(code, color[i, k, 2], f0[i, k, 2], edge[i, k, 2], s, woz) / p_lobe
+            is_delta = True
+            p = p_lobe
+        elif kd == TRANSPARENT:
+            x, y, z = -wox, -woy, -woz
+            r0, r1, r2 = w[i, k, 0] / p_lobe, w[i, k, 1] / p_lobe, w[i, k, 2] / p_lobe
+            is_delta = True
+            p = p_lobe
+        elif kd == GLASS or kd == REFRACTION:
+            # bsdf._sample_glass: reflect or refract through a visible
+            # microfacet (the normal itself when singular).
+            eta = _eta(ior[i, k], kd, back[i])
+            singular = alpha[i, k] <= MIN_ALPHA
+            if singular:
+                hx, hy, hz = 0.0, 0.0, 1.0
+            else:
+                hx, hy, hz = _vndf(wox, woy, woz, alpha[i, k], u1[i], u2[i])
+            cos = wox * hx + woy * hy + woz * hz
+            refraction = kd == REFRACTION
+            p_refl, cos_t = _glass_choice(refraction, f0[i, k, 0], f0[i, k, 1], f0[i, k, 2], trans_tint[i, k, 0],
+                                          trans_tint[i, k, 1], trans_tint[i, k, 2], cos, eta)
+            refract = u_sub >= p_refl
+            if refract:
+                inv = 1.0 / eta
+                c = inv * cos - cos_t
+                x, y, z = c * hx - inv * wox, c * hy - inv * woy, c * hz - inv * woz
+            else:
+                x, y, z = _reflect(wox, woy, woz, hx, hy, hz)
+            # A refraction that ends above the surface (or a reflection
+            # below) is absorbed, as Cycles does.
+            if refract != (z < 0):
+                kd = NONE
+            if singular:
+                s, cos_t = _schlick_s(woz, eta)
+                a0 = _dielectric_refl(refraction, f0[i, k, 0], s)
+                a1 = _dielectric_refl(refraction, f0[i, k, 1], s)
+                a2 = _dielectric_refl(refraction, f0[i, k, 2], s)
+                if refract:
+                    a0 = _dielectric_trans(refraction, a0, trans_tint[i, k, 0], cos_t)
+                    a1 = _dielectric_trans(refraction, a1, trans_tint[i, k, 1], cos_t)
+                    a2 = _dielectric_trans(refraction, a2, trans_tint[i, k, 2], cos_t)
+                    pk = 1.0 - p_refl
+                else:
+                    pk = p_refl
+                d = max(pk * p_lobe, 1e-300)
+                r0, r1, r2 = w[i, k, 0] * a0 / d, w[i, k, 1] * a1 / d, w[i, k, 2] * a2 / d
+                is_delta = True
+                p = pk * p_lobe
+        wi[i, 0], wi[i, 1], wi[i, 2] = x, y, z
+        weight[i, 0], weight[i, 1], weight[i, 2] = r0, r1, r2
+        pdf[i] = p
+        delta[i] = is_delta
+        smooth[i] = not is_delta and kd != NONE
+
+
+@helper
+def _glass_choice(refraction, f0r, f0g, f0b, ttr, ttg, ttb, cos, eta):
+    """The probability of reflecting and |cos| of the refracted angle (bsdf._dielectric)."""
+    s, cos_t = _schlick_s(cos, eta)
+    r0 = _dielectric_refl(refraction, f0r, s)
+    r1 = _dielectric_refl(refraction, f0g, s)
+    r2 = _dielectric_refl(refraction, f0b, s)
+    t0 = _dielectric_trans(refraction, r0, ttr, cos_t)
+    t1 = _dielectric_trans(refraction, r1, ttg, cos_t)
+    t2 = _dielectric_trans(refraction, r2, ttb, cos_t)
+    r = (r0 + r1 + r2) / 3.0
+    t = (t0 + t1 + t2) / 3.0
+    return (r / (r + t) if r + t > 0 else 1.0), cos_t

@@ -65,7 +65,7 @@ ggx_reflect = kernel(7, 5)(ggx_reflect_terms)
 def ggx_sample_vndf(wo, alpha, u1, u2):
     """Visible microfacet normal for wo (wo.z > 0), Heitz 2018."""
     vh = np.stack([alpha * wo[:, 0], alpha * wo[:, 1], wo[:, 2]], axis=1)
-    vh /= np.linalg.norm(vh, axis=1, keepdims=True)
+    vh /= row_norm(vh)[:, None]
     lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
     inv = np.where(lensq > 0, 1.0 / np.sqrt(np.where(lensq > 0, lensq, 1.0)), 0.0)
     t1 = np.stack([-vh[:, 1] * inv, vh[:, 0] * inv, np.zeros(len(vh))], axis=1)
@@ -80,18 +80,29 @@ def ggx_sample_vndf(wo, alpha, u1, u2):
     p3 = np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))
     nh = p1[:, None] * t1 + p2[:, None] * t2 + p3[:, None] * vh
     ne = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 1e-12)], axis=1)
-    return ne / np.linalg.norm(ne, axis=1, keepdims=True)
+    return ne / row_norm(ne)[:, None]
+
+
+# Dot products and norms written out term by term (not einsum, linalg.norm):
+# engine/bsdf_loops.py computes them ray by ray in the same order.
+
+def row_dot(a, b):
+    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+
+
+def row_norm(a):
+    return np.sqrt(row_dot(a, a))
 
 
 def reflect(wo, h):
-    return 2.0 * np.einsum("ij,ij->i", wo, h)[:, None] * h - wo
+    return 2.0 * row_dot(wo, h)[:, None] * h - wo
 
 
 def refract(wo, h, cos_t, eta):
     """Refracted direction through microfacet h; cos_t = |cos| of the
     transmitted angle (Cycles' refract_angle with its negative cos_t)."""
     inv = 1.0 / eta
-    c = np.einsum("ij,ij->i", wo, h)
+    c = row_dot(wo, h)
     return (inv * c - cos_t)[:, None] * h - inv[:, None] * wo
 
 
@@ -99,7 +110,7 @@ def refraction_half(wo, wi, eta):
     """Half vector of a refraction wo -> wi (Walter 2007), turned towards +Z,
     and the length of the unnormalised -(eta wi + wo)."""
     h = -(eta[:, None] * wi + wo)
-    length = np.sqrt(h[:, 0] * h[:, 0] + h[:, 1] * h[:, 1] + h[:, 2] * h[:, 2])
+    length = row_norm(h)
     # Leaving a denser medium (eta < 1) the vector points down: flip it.
     h = h * (np.where(h[:, 2] < 0, -1.0, 1.0) / np.where(length > 0, length, 1.0))[:, None]
     return h, length

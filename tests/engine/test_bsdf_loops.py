@@ -88,3 +88,20 @@ def test_weights_selection_eval_agree(jit, bump):
         plain, compiled = both(bsdf.eval_pdf, lobes, wo, wi, sel, w, sampled=sampled)
         assert_agree(plain, compiled)
         assert (plain[1] > 0).sum() > n // 4   # the lobes were evaluated, not skipped
+
+
+@pytest.mark.parametrize("bump", [False, True])
+def test_sample_agrees(jit, bump):
+    """The lobe choice, the sampled direction of every lobe kind (smooth
+    glass: delta samples), the weights and pdfs."""
+    rng = np.random.default_rng(17 + bump)
+    n = 20000
+    lobes = random_lobes(rng, n, bump=bump)
+    wo, _ = directions(rng, n)
+    u = rng.random((n, 3))
+    u[:100, 0] = 1.0 - 1e-16     # past a CDF rounded below 1
+    plain, compiled = both(bsdf.sample, lobes, wo, u[:, 0], u[:, 1], u[:, 2])
+    assert_agree(plain, compiled)
+    wi, weight, pdf, delta = plain
+    assert delta.sum() > n // 20 and (~delta & (pdf > 0)).sum() > n // 4
+    assert np.isfinite(weight).all() and np.isfinite(wi).all()
