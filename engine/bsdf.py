@@ -347,7 +347,7 @@ def _albedo_guess(lobes, k, mu):
     guess = np.ones(len(kind))
     gl = kind == GLOSSY
     f0 = _luminance(lobes.f0[:, k])
-    est = f0 + (1.0 - f0) * (1.0 - mu) ** 5
+    est = f0 + (1.0 - f0) * mf.pow5(1.0 - mu)
     guess = np.where(gl & (lobes.fresnel[:, k] != F_NONE) & (lobes.fresnel[:, k] != F_SCHLICK), est, guess)
     return np.where(kind == NONE, 0.0, guess)
 
@@ -383,7 +383,7 @@ def _selection_numpy(lobes, wo, w):
 
 def schlick(f0, cos):
     c = np.clip(1.0 - cos, 0.0, 1.0)
-    return f0 + (1.0 - f0) * (c ** 5)[:, None]
+    return f0 + (1.0 - f0) * mf.pow5(c)[:, None]
 
 
 def _fresnel(lobes, rows, k, cos):

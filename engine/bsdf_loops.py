@@ -6,8 +6,8 @@ rows.  Here the same maths runs ray by ray in one pass over the K slots,
 without temporaries; bsdf.py wraps each loop in a ``LoopKernel`` whose NumPy
 twin is its batch code, and tests/engine/test_bsdf_loops.py checks that both
 give the same numbers bit for bit on random lobes.  Every operation below
-follows its NumPy counterpart term by term (same order of additions, pow for
-``**`` with a float exponent, as NumPy's power) so that both round alike.
+follows its NumPy counterpart term by term (same order of additions and
+multiplications, pow where NumPy calls pow) so that both round alike.
 
 ``lobes`` is the tuple ``LOBE_FIELDS`` of per-ray arrays and ``tables`` the
 tuple ``TABLES`` of Cycles' albedo tables (engine/microfacet.py).
@@ -17,7 +17,7 @@ import numpy as np
 from .kernels import clip
 from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, MIN_ALPHA, MIRROR, NONE,
                        REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
-from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect_terms
+from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect_terms, pow5
 
 LOBE_FIELDS = (("kind", "int8[:, ::1]", np.int8), ("color", "float64[:, :, ::1]", np.float64),
                ("alpha", "float64[:, ::1]", np.float64), ("fresnel", "int8[:, ::1]", np.int8),
@@ -169,10 +169,10 @@ def _fresnel_s(code, ior, cos):
 def _fresnel(code, color, f0, tint, s, cos):
     """One channel of bsdf._fresnel given _fresnel_s's s."""
     if code == F_SCHLICK:
-        return color + (1.0 - color) * s ** 5.0
+        return color + (1.0 - color) * pow5(s)
     if code == F_F82:
         b = _f82_b(f0, tint)
-        s5 = s ** 5.0
+        s5 = pow5(s)
         return clip(f0 + (1.0 - f0) * s5 - b * cos * s5 * s, 0.0, 1.0)
     if code == F_DIELECTRIC:
         return f0 + (1.0 - f0) * s
@@ -243,6 +243,7 @@ def weights_loop(lobes, tables, wo, out):
     kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, weight, back = lobes
     t_e, t_eavg, t_ge, t_gie, t_geavg, t_gieavg, t_s, t_sheen = tables
     n, kk = kind.shape
+    energy = np.empty((2, 3))   # the multiscatter factor and darkening of one lobe, per channel
     for i in range(n):
         mu = clip(wo[i, 2], 0.0, 1.0)
         for k in range(kk):
@@ -255,7 +256,9 @@ def weights_loop(lobes, tables, wo, out):
                 albedo = _sheen_ltc(t_sheen, 2, rough, mu)
                 for c in range(3):
                     out[i, k, c] *= albedo
-            if multiscatter[i, k] and (kd == GLOSSY or kd == GLASS):
+            # Multiscatter GGX (bsdf._energy): scales the lobe, darkens a layer's albedo.
+            ms = multiscatter[i, k] and kd != SHEEN and (kd == GLOSSY or kd == GLASS or covers[i, k] > 0)
+            if ms:
                 glass = kd == GLASS
                 e, e_avg = _energy_tables(glass, _eta(ior[i, k], kd, back[i]), rough, mu,
                                           t_e, t_eavg, t_ge, t_gie, t_geavg, t_gieavg)
@@ -264,7 +267,10 @@ def weights_loop(lobes, tables, wo, out):
                         fss = color[i, k, c] * trans_tint[i, k, c]
                     else:
                         fss = _glossy_fss(fresnel[i, k], color[i, k, c], f0[i, k, c], edge[i, k, c], ior[i, k])
-                    out[i, k, c] *= _energy(fss, e, e_avg)[0]
+                    energy[0, c], energy[1, c] = _energy(fss, e, e_avg)
+                if kd == GLOSSY or glass:
+                    for c in range(3):
+                        out[i, k, c] *= energy[0, c]
             if covers[i, k] <= 0:
                 continue
             # The layer's albedo (bsdf._layer_albedo), its largest channel.
@@ -272,21 +278,14 @@ def weights_loop(lobes, tables, wo, out):
                 albedo = _sheen_ltc(t_sheen, 2, rough, mu)
             else:
                 s = _lookup3(t_s, rough, mu, _ior_z(max(ior[i, k], 1e-5)))
-                if multiscatter[i, k]:
-                    e, e_avg = _energy_tables(kd == GLASS, _eta(ior[i, k], kd, back[i]), rough, mu,
-                                              t_e, t_eavg, t_ge, t_gie, t_geavg, t_gieavg)
             a = 0.0
             for c in range(3):
                 if kd == SHEEN:
                     layer = color[i, k, c] * albedo
                 else:
                     est = f0[i, k, c] + (1.0 - f0[i, k, c]) * s
-                    if multiscatter[i, k]:
-                        if kd == GLASS:
-                            fss = color[i, k, c] * trans_tint[i, k, c]
-                        else:
-                            fss = _glossy_fss(fresnel[i, k], color[i, k, c], f0[i, k, c], edge[i, k, c], ior[i, k])
-                        est = est * _energy(fss, e, e_avg)[1]
+                    if ms:
+                        est = est * energy[1, c]
                     layer = color[i, k, c] * est
                 a = layer if c == 0 else max(a, layer)
             below = 1.0 - clip(a, 0.0, 1.0)
@@ -295,7 +294,10 @@ def weights_loop(lobes, tables, wo, out):
             cos_t = np.sqrt(max(1.0 - (1.0 - mu * mu) / (eta * eta), 1e-12))
             mean = (color[i, k, 0] + color[i, k, 1] + color[i, k, 2]) / 3.0
             for c in range(3):
-                tint = 1.0 + mean * (max(absorb[i, k, c], 0.0) ** (1.0 / cos_t) - 1.0)
+                tint = max(absorb[i, k, c], 0.0)
+                if tint != 1.0:   # pow(1, y) = 1: an untinted coat skips the pow
+                    tint = tint ** (1.0 / cos_t)
+                tint = 1.0 + mean * (tint - 1.0)
                 for j in range(k + 1, min(kk, k + 1 + covers[i, k])):
                     out[i, j, c] = out[i, j, c] * below * tint
         for k in range(kk):
@@ -321,7 +323,7 @@ def selection_loop(lobes, wo, w, out):
         for k in range(kk):
             code = fresnel[i, k]
             if code == F_SCHLICK:
-                s5 = clip(1.0 - cos_o, 0.0, 1.0) ** 5.0
+                s5 = pow5(clip(1.0 - cos_o, 0.0, 1.0))
                 r = (color[i, k, 0] + (1.0 - color[i, k, 0]) * s5) * w[i, k, 0]
                 g = (color[i, k, 1] + (1.0 - color[i, k, 1]) * s5) * w[i, k, 1]
                 b = (color[i, k, 2] + (1.0 - color[i, k, 2]) * s5) * w[i, k, 2]
@@ -333,7 +335,7 @@ def selection_loop(lobes, wo, w, out):
                 guess = 0.0
             elif kind[i, k] == GLOSSY and code != F_SCHLICK and code != F_NONE:
                 f0l = _luminance(f0[i, k, 0], f0[i, k, 1], f0[i, k, 2])
-                guess = f0l + (1.0 - f0l) * (1.0 - cos_o) ** 5.0
+                guess = f0l + (1.0 - f0l) * pow5(1.0 - cos_o)
             s = max(lum * guess, 0.0)
             out[i, k] = s
             total = s if k == 0 else total + s
@@ -412,31 +414,33 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
                 f_1 += w[i, k, 1] * s
                 f_2 += w[i, k, 2] * s
                 p += sel[i, k] * np.abs(wiz) * INV_PI
-            elif kd == GLOSSY and upper:
-                spec, pk, hx, hy, hz = ggx_reflect_terms(wox, woy, woz, wix, wiy, wiz, alpha[i, k])
-                cos = wox * hx + woy * hy + woz * hz
-                code = fresnel[i, k]
-                s = _fresnel_s(code, ior[i, k], cos)
-                f_0 += w[i, k, 0] * (_fresnel(code, color[i, k, 0], f0[i, k, 0], edge[i, k, 0], s, cos) * spec)
-                f_1 += w[i, k, 1] * (_fresnel(code, color[i, k, 1], f0[i, k, 1], edge[i, k, 1], s, cos) * spec)
-                f_2 += w[i, k, 2] * (_fresnel(code, color[i, k, 2], f0[i, k, 2], edge[i, k, 2], s, cos) * spec)
-                p += sel[i, k] * pk
             elif kd == SHEEN and upper:
                 v, pk = _eval_sheen(t_sheen, np.sqrt(alpha[i, k]), wox, woy, woz, wix, wiy, wiz)
                 f_0 += w[i, k, 0] * v
                 f_1 += w[i, k, 1] * v
                 f_2 += w[i, k, 2] * v
                 p += sel[i, k] * pk
-            elif (kd == GLASS or kd == REFRACTION) and alpha[i, k] > MIN_ALPHA and (upper or lower):
-                # bsdf._eval_glass: reflection above, refraction below.
-                eta = _eta(ior[i, k], kd, back[i])
-                refraction = kd == REFRACTION
+            elif (kd == GLOSSY and upper) or ((kd == GLASS or kd == REFRACTION) and alpha[i, k] > MIN_ALPHA
+                                               and (upper or lower)):
+                # GGX reflection (glossy, glass above), refraction (glass below).
+                common = 0.0
                 if upper:
                     spec, pk, hx, hy, hz = ggx_reflect_terms(wox, woy, woz, wix, wiy, wiz, alpha[i, k])
                     cos = wox * hx + woy * hy + woz * hz
                 else:
-                    spec, common, cos, pk = _refraction(alpha[i, k], eta, wox, woy, woz, wix, wiy, wiz)
-                s, cos_t = _schlick_s(cos, eta)
+                    spec, common, cos, pk = _refraction(alpha[i, k], _eta(ior[i, k], kd, back[i]),
+                                                        wox, woy, woz, wix, wiy, wiz)
+                if kd == GLOSSY:
+                    code = fresnel[i, k]
+                    s = _fresnel_s(code, ior[i, k], cos)
+                    f_0 += w[i, k, 0] * (_fresnel(code, color[i, k, 0], f0[i, k, 0], edge[i, k, 0], s, cos) * spec)
+                    f_1 += w[i, k, 1] * (_fresnel(code, color[i, k, 1], f0[i, k, 1], edge[i, k, 1], s, cos) * spec)
+                    f_2 += w[i, k, 2] * (_fresnel(code, color[i, k, 2], f0[i, k, 2], edge[i, k, 2], s, cos) * spec)
+                    p += sel[i, k] * pk
+                    continue
+                # bsdf._eval_glass: the dielectric Fresnel splits reflection and refraction.
+                refraction = kd == REFRACTION
+                s, cos_t = _schlick_s(cos, _eta(ior[i, k], kd, back[i]))
                 r0 = _dielectric_refl(refraction, f0[i, k, 0], s)
                 r1 = _dielectric_refl(refraction, f0[i, k, 1], s)
                 r2 = _dielectric_refl(refraction, f0[i, k, 2], s)

@@ -166,9 +166,17 @@ def f82_b(f0, tint):
     return schlick * (7.0 / (f5 * f)) * (1.0 - tint)
 
 
+@helper
+def pow5(x):
+    """x^5 by multiplication (several times cheaper than pow; the compiled
+    loops of engine/bsdf_loops.py multiply in the same order)."""
+    x2 = x * x
+    return x2 * x2 * x
+
+
 def f82(cos, f0, b):
     s = np.clip(1.0 - cos, 0.0, 1.0)[..., None]
-    s5 = s ** 5
+    s5 = pow5(s)
     return np.clip(f0 + (1.0 - f0) * s5 - b * cos[..., None] * s5 * s, 0.0, 1.0)
 
 
