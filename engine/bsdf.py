@@ -21,6 +21,11 @@ reflectance (one-sample MIS over lobes): for a non-delta lobe the returned
 f and pdf are the sums over all non-delta lobes, so ``eval``/``pdf`` and
 ``sample`` always agree.  Delta lobes (mirror, smooth glass, transparent)
 return their own weight.
+
+``weights``, ``selection``, ``eval_pdf`` and ``sample`` run as compiled
+per-ray loops over the lobe slots once numba has built them
+(engine/bsdf_loops.py); the batch NumPy code here is their twin (JIT off,
+or until compiled) and defines the result, bit for bit.
 """
 from dataclasses import dataclass
 from typing import Optional
@@ -30,14 +35,13 @@ import numpy as np
 from . import bsdf_loops as loops
 from . import microfacet as mf
 from .kernels import LoopKernel
-
+# The lobe codes live in lobe_ids (shared with bsdf_loops); bsdf.NONE etc. stay the public names.
+from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FRESNEL_IDS, GLASS, GLOSSY,  # noqa: F401
+                       KIND_IDS, MIN_ALPHA, MIRROR, NONE, REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
 from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect, ggx_sample_vndf
 from .sampling import cosine_hemisphere, INV_PI, TWO_PI
 from .textures import MaterialTextures
 from .vec import count, subset
-
-from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FRESNEL_IDS, GLASS, GLOSSY,  # noqa: F401
-                       KIND_IDS, MIN_ALPHA, MIRROR, NONE, REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
 
 
 _KIND_TABLES = {}

@@ -12,7 +12,7 @@ import pytest
 from engine import bsdf, kernels
 from engine.bsdf import (DIFFUSE, GLASS, GLOSSY, Lobes, MIN_ALPHA, MIRROR, NONE, REFRACTION, SHEEN,
                          TRANSLUCENT, TRANSPARENT)
-from test_kernels import assert_agree, compiled_ready
+from test_kernels import assert_agree, both_ways, compiled_ready
 
 KINDS = np.array([NONE, DIFFUSE, MIRROR, GLOSSY, GLASS, REFRACTION, TRANSLUCENT, TRANSPARENT, SHEEN], np.int8)
 
@@ -56,19 +56,11 @@ def directions(rng, n):
     return wo, wi
 
 
-def both(fn, *args, **kw):
-    kernels.configure(False)
-    plain = fn(*args, **kw)
-    kernels.configure(True)
-    compiled = fn(*args, **kw)
-    plain = plain if isinstance(plain, tuple) else (plain,)
-    compiled = compiled if isinstance(compiled, tuple) else (compiled,)
-    return plain, compiled
-
-
 @pytest.fixture(scope="module")
 def jit():
     compiled_ready()
+    loops = (bsdf._weights_kernel, bsdf._selection_kernel, bsdf._eval_pdf_kernel, bsdf._sample_kernel)
+    assert all(k.compiled is not None for k in loops)   # the compiled forms are what is compared
     yield
     kernels.configure(True)
 
@@ -79,13 +71,13 @@ def test_weights_selection_eval_agree(jit, bump):
     n = 20000
     lobes = random_lobes(rng, n, bump=bump)
     wo, wi = directions(rng, n)
-    (w,), (w_c,) = both(bsdf.weights, lobes, wo)
+    (w,), (w_c,) = both_ways(bsdf.weights, lobes, wo)
     assert_agree((w,), (w_c,))
     assert np.isfinite(w).all() and (w >= 0).all()
-    assert_agree(*both(bsdf.selection, lobes, wo, w))
+    assert_agree(*both_ways(bsdf.selection, lobes, wo, w))
     sel = bsdf.selection(lobes, wo, w)
     for sampled in (False, True):
-        plain, compiled = both(bsdf.eval_pdf, lobes, wo, wi, sel, w, sampled=sampled)
+        plain, compiled = both_ways(lambda *a: bsdf.eval_pdf(*a, sampled=sampled), lobes, wo, wi, sel, w)
         assert_agree(plain, compiled)
         assert (plain[1] > 0).sum() > n // 4   # the lobes were evaluated, not skipped
 
@@ -100,8 +92,34 @@ def test_sample_agrees(jit, bump):
     wo, _ = directions(rng, n)
     u = rng.random((n, 3))
     u[:100, 0] = 1.0 - 1e-16     # past a CDF rounded below 1
-    plain, compiled = both(bsdf.sample, lobes, wo, u[:, 0], u[:, 1], u[:, 2])
+    plain, compiled = both_ways(bsdf.sample, lobes, wo, u[:, 0], u[:, 1], u[:, 2])
     assert_agree(plain, compiled)
     wi, weight, pdf, delta = plain
     assert delta.sum() > n // 20 and (~delta & (pdf > 0)).sum() > n // 4
     assert np.isfinite(weight).all() and np.isfinite(wi).all()
+
+
+@pytest.mark.parametrize("kind", [DIFFUSE, MIRROR, GLOSSY, GLASS, REFRACTION, TRANSLUCENT, TRANSPARENT, SHEEN])
+def test_each_lobe_kind_agrees(jit, kind):
+    """One lobe kind at a time (the others emptied to NONE), so every branch
+    of the loops is reached: evaluated with a nonzero pdf, or sampled."""
+    rng = np.random.default_rng(30 + int(kind))
+    n = 5000
+    lobes = random_lobes(rng, n)
+    lobes.kind = np.where(lobes.kind == kind, kind, NONE).astype(np.int8)
+    lobes.kind[:, 0] = kind
+    wo, wi = directions(rng, n)
+    u = rng.random((n, 3))
+    w = bsdf.weights(lobes, wo)
+    sel = bsdf.selection(lobes, wo, w)
+    plain, compiled = both_ways(bsdf.eval_pdf, lobes, wo, wi, sel, w)
+    assert_agree(plain, compiled)
+    sampled = both_ways(bsdf.sample, lobes, wo, u[:, 0], u[:, 1], u[:, 2], sel, w)
+    assert_agree(*sampled)
+    wi_s, weight, pdf, delta = sampled[0]
+    if kind in (MIRROR, TRANSPARENT):
+        assert delta[wo[:, 2] > 0].all()
+    else:
+        assert (plain[1] > 0).sum() > n // 20 and (~delta & (pdf > 0)).sum() > n // 20
+    if kind in (GLASS, REFRACTION, TRANSLUCENT, TRANSPARENT):
+        assert (wi_s[:, 2] < 0).sum() > n // 20     # transmitted samples
