@@ -612,7 +612,7 @@ def eval_pdf(lobes, wo, wi, sel=None, w=None, sampled=False):
     f, pdf = np.empty((n, 3)), np.empty(n)
     _eval_pdf_kernel(_lobe_arrays(lobes), _table_arrays(), _c(wo), _c(wi), _c(sel), _c(w),
                      _NO_TERM if diffuse_term is None else _c(diffuse_term),
-                     _NO_KEEP if keep is None else np.ascontiguousarray(keep, bool), bool(sampled), f, pdf)
+                     _NO_KEEP if keep is None else _c(keep, bool), bool(sampled), f, pdf)
     return f, pdf
 
 
@@ -653,12 +653,15 @@ def _eval_pdf_numpy(lobes, wo, wi, sel, w, diffuse_term, keep, sampled):
 _NO_TERM, _NO_KEEP = np.empty(0), np.empty(0, bool)
 
 
-def _c(a):
-    return np.ascontiguousarray(a, np.float64)
+def _c(a, dtype=np.float64):
+    """C-contiguous and writable (numba's signatures take no read-only
+    arrays): a copy only where the array is not so already."""
+    a = np.ascontiguousarray(a, dtype)
+    return a if a.flags.writeable else a.copy()
 
 
 def _lobe_arrays(lobes):
-    return tuple(np.ascontiguousarray(getattr(lobes, name), dtype) for name, _, dtype in loops.LOBE_FIELDS)
+    return tuple(_c(getattr(lobes, name), dtype) for name, _, dtype in loops.LOBE_FIELDS)
 
 
 def _table_arrays():

@@ -568,6 +568,8 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
         elif kd == GLOSSY:
             hx, hy, hz = _vndf(wox, woy, woz, alpha[i, k], u1[i], u2[i])
             x, y, z = _reflect(wox, woy, woz, hx, hy, hz)
+            if z <= 0.0:   # a reflection below the surface is absorbed (as Cycles)
+                kd = NONE
         elif kd == SHEEN:
             x, y, z = _sample_sheen(t_sheen, np.sqrt(alpha[i, k]), wox, woy, woz, u1[i], u2[i])
         elif kd == MIRROR:

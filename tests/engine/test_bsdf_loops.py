@@ -123,3 +123,21 @@ def test_each_lobe_kind_agrees(jit, kind):
         assert (plain[1] > 0).sum() > n // 20 and (~delta & (pdf > 0)).sum() > n // 20
     if kind in (GLASS, REFRACTION, TRANSLUCENT, TRANSPARENT):
         assert (wi_s[:, 2] < 0).sum() > n // 20     # transmitted samples
+
+
+def test_read_only_and_strided_inputs(jit):
+    """Read-only lobe arrays and strided directions (a texture stage's or a
+    caller's views) are copied for the loops, not refused."""
+    rng = np.random.default_rng(40)
+    n = 2000
+    lobes = random_lobes(rng, n)
+    for name in ("kind", "color", "alpha", "f0", "back"):
+        getattr(lobes, name).setflags(write=False)
+    wo, wi = directions(rng, n)
+    wo6 = np.repeat(wo, 2, axis=1)[:, ::2]      # rows with a stride of 6 values
+    wo.setflags(write=False)
+    u = rng.random((n, 3))
+    assert_agree(*both_ways(bsdf.weights, lobes, wo6))
+    np.testing.assert_array_equal(bsdf.weights(lobes, wo6), bsdf.weights(lobes, wo))
+    assert_agree(*both_ways(bsdf.eval_pdf, lobes, wo, wi))
+    assert_agree(*both_ways(bsdf.sample, lobes, wo, u[:, 0], u[:, 1], u[:, 2]))
