@@ -737,19 +737,29 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
         sel = selection(lobes, wo, w)
     wi, weight, pdf = np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
     delta, smooth = np.empty(n, bool), np.empty(n, bool)
-    _sample_kernel(_lobe_arrays(lobes), _table_arrays(), _c(wo), _c(u_lobe), _c(u1), _c(u2), _c(sel), _c(w),
+    wo, sel, w = _c(wo), _c(sel), _c(w)
+    _sample_kernel(_lobe_arrays(lobes), _table_arrays(), wo, _c(u_lobe), _c(u1), _c(u2), sel, w,
                    wi, weight, pdf, delta, smooth)
-    smooth = np.nonzero(smooth)[0]
-    if 0 < len(smooth):
-        if len(smooth) == n:
-            smooth = slice(None)   # the usual case: no copies of the lobes
-        lobes_s = lobes if isinstance(smooth, slice) else _take(lobes, smooth)
-        fs, ps = eval_pdf(lobes_s, wo[smooth], wi[smooth], sel[smooth], w[smooth], sampled=True)
-        ok = ps > 0
-        weight[smooth] = np.where(ok[:, None], fs * (np.abs(wi[smooth, 2]) / np.where(ok, ps, 1.0))[:, None], 0.0)
-        pdf[smooth] = ps
-    weight[~(wo[:, 2] > COS_EPS)] = 0.0
+    # Every row evaluated (rarely not needed; no copies of the lobes), the
+    # smooth ones' weight and pdf taken from it.
+    fs, ps = eval_pdf(lobes, wo, wi, sel, w, sampled=True)
+    _finish_kernel(wo, wi, smooth, fs, ps, weight, pdf)
     return wi, weight, pdf, delta
+
+
+def _finish_numpy(wo, wi, smooth, fs, ps, weight, pdf):
+    """A smooth sample's weight f |cos| / pdf and pdf; no weight where wo
+    lies below the surface."""
+    ok = ps > 0
+    value = np.where(ok[:, None], fs * (np.abs(wi[:, 2]) / np.where(ok, ps, 1.0))[:, None], 0.0)
+    weight[:] = np.where(smooth[:, None], value, weight)
+    pdf[:] = np.where(smooth, ps, pdf)
+    weight[~(wo[:, 2] > COS_EPS)] = 0.0
+
+
+_finish_kernel = LoopKernel(loops.finish_sample_loop,
+                            "void(float64[:, ::1], float64[:, ::1], boolean[::1], float64[:, ::1], float64[::1], "
+                            "float64[:, ::1], float64[::1])", _finish_numpy)
 
 
 def _sample_numpy(lobes, wo, u_lobe, u1, u2, sel, w):
@@ -823,11 +833,6 @@ def _sample_numpy(lobes, wo, u_lobe, u1, u2, sel, w):
             delta[s] = True
             pdf[s] = p * p_lobe[s]
     return wi, weight, pdf, delta, ~delta & (kind != NONE)
-
-
-def _take(lobes, rows):
-    return Lobes(*(None if getattr(lobes, f) is None else np.take(getattr(lobes, f), rows, axis=0)
-                   for f in lobes.__dataclass_fields__))
 
 
 def _simple(lobes):

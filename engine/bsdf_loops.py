@@ -646,3 +646,18 @@ def _glass_choice(refraction, f0r, f0g, f0b, ttr, ttg, ttb, cos, eta):
     r = (r0 + r1 + r2) / 3.0
     t = (t0 + t1 + t2) / 3.0
     return (r / (r + t) if r + t > 0 else 1.0), cos_t
+
+
+def finish_sample_loop(wo, wi, smooth, fs, ps, weight, pdf):
+    """bsdf._finish_numpy: smooth samples' weight and pdf from eval_pdf's f, pdf."""
+    for i in range(len(wo)):
+        if smooth[i]:
+            p = ps[i]
+            if p > 0:
+                scale = np.abs(wi[i, 2]) / p
+                weight[i, 0], weight[i, 1], weight[i, 2] = fs[i, 0] * scale, fs[i, 1] * scale, fs[i, 2] * scale
+            else:
+                weight[i, 0] = weight[i, 1] = weight[i, 2] = 0.0
+            pdf[i] = p
+        if not wo[i, 2] > COS_EPS:
+            weight[i, 0] = weight[i, 1] = weight[i, 2] = 0.0

@@ -59,7 +59,8 @@ def directions(rng, n):
 @pytest.fixture(scope="module")
 def jit():
     compiled_ready()
-    loops = (bsdf._weights_kernel, bsdf._selection_kernel, bsdf._eval_pdf_kernel, bsdf._sample_kernel)
+    loops = (bsdf._weights_kernel, bsdf._selection_kernel, bsdf._eval_pdf_kernel, bsdf._sample_kernel,
+             bsdf._finish_kernel)
     assert all(k.compiled is not None for k in loops)   # the compiled forms are what is compared
     yield
     kernels.configure(True)
