@@ -195,9 +195,10 @@ class MaterialTable:
         """Per-ray lobe parameters for material ids ``mat`` at texture
         coordinates ``uv`` ((N, 2)): constants gathered, then the textured
         parameters of the rays' materials evaluated at their UVs."""
-        # np.take: rows copied several times faster than by fancy indexing.
-        lobes = Lobes(*(np.take(a, mat, axis=0) for a in (self.kind, self.color, self.alpha, self.schlick)),
-                      *(np.take(getattr(self, name), mat, axis=0) for name, _, _ in EXTRA_FIELDS))
+        tables = tuple(getattr(self, name) for name in _GATHERED)
+        out = tuple(np.empty((len(mat),) + a.shape[1:], a.dtype) for a in tables)
+        _gather_kernel(_c(mat, np.int64), tables, out)
+        lobes = Lobes(*out)
         if self.textures.any:
             self.textures.apply(mat, uv, lobes, MIN_ALPHA)
         return lobes
@@ -688,6 +689,12 @@ def _eval_pdf_twin(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f
                                    keep if bump else None, sampled)
 
 
+def _gather_numpy(mat, tables, out):
+    # np.take: rows copied several times faster than by fancy indexing.
+    for a, o in zip(tables, out):
+        np.take(a, mat, axis=0, out=o)
+
+
 class _Loop(LoopKernel):
     def build(self, numba):
         loops.register(numba)
@@ -699,6 +706,12 @@ def _sample_twin(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, del
 
 
 _LOBES, _TABLES = loops.LOBES_SIGNATURE, loops.TABLES_SIGNATURE
+# MaterialTable's per-lobe arrays in Lobes' field order, and their types.
+_GATHERED = ("kind", "color", "alpha", "schlick") + tuple(name for name, _, _ in EXTRA_FIELDS)
+_GATHER_TYPES = "Tuple((int8[:, ::1], float64[:, :, ::1], float64[:, ::1], boolean[:, ::1], int8[:, ::1], " \
+    "float64[:, ::1], float64[:, :, ::1], float64[:, :, ::1], float64[:, :, ::1], boolean[:, ::1], int8[:, ::1], " \
+    "float64[:, :, ::1], float64[:, ::1]))"
+_gather_kernel = LoopKernel(loops.gather_loop, f"void(int64[::1], {_GATHER_TYPES}, {_GATHER_TYPES})", _gather_numpy)
 _weights_kernel = _Loop(loops.weights_loop, f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, :, ::1])",
                              _weights_twin)
 _selection_kernel = _Loop(loops.selection_loop,

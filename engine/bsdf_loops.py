@@ -661,3 +661,30 @@ def finish_sample_loop(wo, wi, smooth, fs, ps, weight, pdf):
             pdf[i] = p
         if not wo[i, 2] > COS_EPS:
             weight[i, 0] = weight[i, 1] = weight[i, 2] = 0.0
+
+
+# ----------------------------------------------------------------------------
+# MaterialTable.gather: every lobe field of each ray's material in one pass
+
+def gather_loop(mat, tables, out):
+    """out[f][i] = tables[f][mat[i]] for the 13 fields of bsdf.Lobes (in
+    its order, kind to weight), as np.take does field by field."""
+    kind_t, color_t, alpha_t, schlick_t, fresnel_t, ior_t, f0_t, edge_t, tt_t, ms_t, covers_t, absorb_t, w_t = tables
+    kind, color, alpha, schlick, fresnel, ior, f0, edge, tt, ms, covers, absorb, weight = out
+    for i in range(len(mat)):
+        m = mat[i]
+        for k in range(kind.shape[1]):
+            kind[i, k] = kind_t[m, k]
+            alpha[i, k] = alpha_t[m, k]
+            schlick[i, k] = schlick_t[m, k]
+            fresnel[i, k] = fresnel_t[m, k]
+            ior[i, k] = ior_t[m, k]
+            ms[i, k] = ms_t[m, k]
+            covers[i, k] = covers_t[m, k]
+            weight[i, k] = w_t[m, k]
+            for c in range(3):
+                color[i, k, c] = color_t[m, k, c]
+                f0[i, k, c] = f0_t[m, k, c]
+                edge[i, k, c] = edge_t[m, k, c]
+                tt[i, k, c] = tt_t[m, k, c]
+                absorb[i, k, c] = absorb_t[m, k, c]

@@ -142,3 +142,24 @@ def test_read_only_and_strided_inputs(jit):
     np.testing.assert_array_equal(bsdf.weights(lobes, wo6), bsdf.weights(lobes, wo))
     assert_agree(*both_ways(bsdf.eval_pdf, lobes, wo, wi))
     assert_agree(*both_ways(bsdf.sample, lobes, wo, u[:, 0], u[:, 1], u[:, 2]))
+
+
+def test_gather_agrees(jit):
+    """MaterialTable.gather's compiled copy gives np.take's lobes."""
+    from engine.scene import Lobe, Material
+    materials = [Material("a", [Lobe("glossy", (0.8, 0.5, 0.2), 0.3, fresnel="f82", covers=1),
+                                Lobe("diffuse", (0.1, 0.2, 0.3), 0.0)]),
+                 Material("b", [Lobe("glass", (1.0, 1.0, 1.0), 0.1, ior=1.45, multiscatter=True)]),
+                 Material("c", [Lobe("sheen", (0.5, 0.5, 0.5), 0.5, covers=2), Lobe("glossy", (1, 1, 1), 0.2),
+                                Lobe("translucent", (0.3, 0.6, 0.9), 0.0, weight=0.5)])]
+    table = bsdf.MaterialTable(materials)
+    mat = np.random.default_rng(3).integers(0, 3, 5000)
+    plain, compiled = both_ways(table.gather, mat)
+    for name in plain[0].__dataclass_fields__:
+        a, b = getattr(plain[0], name), getattr(compiled[0], name)
+        if a is None:
+            assert b is None
+        else:
+            assert a.dtype == b.dtype
+            np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(compiled[0].covers[mat == 2, 0], 2)
