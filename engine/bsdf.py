@@ -713,24 +713,17 @@ _GATHER_TYPES = "Tuple((int8[:, ::1], float64[:, :, ::1], float64[:, ::1], boole
     "float64[:, :, ::1], float64[:, ::1]))"
 _gather_kernel = LoopKernel(loops.gather_loop, f"void(int64[::1], {_GATHER_TYPES}, {_GATHER_TYPES})", _gather_numpy)
 _weights_kernel = _Loop(loops.weights_loop, f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, :, ::1])",
-                             _weights_twin)
-_selection_kernel = _Loop(loops.selection_loop,
-                               f"void({_LOBES}, float64[:, ::1], float64[:, :, ::1], float64[:, ::1])",
-                               _selection_twin)
+                        _weights_twin)
+_selection_kernel = _Loop(loops.selection_loop, f"void({_LOBES}, float64[:, ::1], float64[:, :, ::1], float64[:, ::1])",
+                          _selection_twin)
 _eval_pdf_kernel = _Loop(loops.eval_pdf_loop,
-                              f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, ::1], float64[:, ::1], "
-                              "float64[:, :, ::1], float64[::1], boolean[::1], boolean, float64[:, ::1], float64[::1])",
-                              _eval_pdf_twin)
+                         f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, ::1], float64[:, ::1], "
+                         "float64[:, :, ::1], float64[::1], boolean[::1], boolean, float64[:, ::1], float64[::1])",
+                         _eval_pdf_twin)
 _sample_kernel = _Loop(loops.sample_loop,
                        f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[::1], float64[::1], float64[::1], "
                        "float64[:, ::1], float64[:, :, ::1], float64[:, ::1], float64[:, ::1], float64[::1], "
                        "boolean[::1], boolean[::1])", _sample_twin)
-
-
-def _is_delta(lobes, k, rows):
-    kind = lobes.kind[rows, k]
-    smooth = kind_in(kind, (GLASS, REFRACTION)) & (lobes.alpha[rows, k] <= MIN_ALPHA)
-    return (kind == MIRROR) | (kind == TRANSPARENT) | smooth
 
 
 def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):

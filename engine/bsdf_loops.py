@@ -10,7 +10,9 @@ follows its NumPy counterpart term by term (same order of additions and
 multiplications, pow where NumPy calls pow) so that both round alike.
 
 ``lobes`` is the tuple ``LOBE_FIELDS`` of per-ray arrays and ``tables`` the
-tuple ``TABLES`` of Cycles' albedo tables (engine/microfacet.py).
+tuple ``TABLES`` of Cycles' albedo tables (engine/microfacet.py).  Two
+plain row loops close the file: the end of ``sample`` (weights from
+eval_pdf) and ``MaterialTable.gather``'s copy of the lobe parameters.
 """
 import numpy as np
 
