@@ -21,28 +21,27 @@ reflectance (one-sample MIS over lobes): for a non-delta lobe the returned
 f and pdf are the sums over all non-delta lobes, so ``eval``/``pdf`` and
 ``sample`` always agree.  Delta lobes (mirror, smooth glass, transparent)
 return their own weight.
+
+``weights``, ``selection``, ``eval_pdf`` and ``sample`` run as compiled
+per-ray loops over the lobe slots once numba has built them
+(engine/bsdf_loops.py); the batch NumPy code here is their twin (JIT off,
+or until compiled) and defines the result, bit for bit.
 """
 from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 
+from . import bsdf_loops as loops
 from . import microfacet as mf
-from .kernels import kernel, where
-from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_sample_vndf
+from .kernels import LoopKernel
+# The lobe codes live in lobe_ids (shared with bsdf_loops); bsdf.NONE etc. stay the public names.
+from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FRESNEL_IDS, GLASS, GLOSSY,  # noqa: F401
+                       KIND_IDS, MIN_ALPHA, MIRROR, NONE, REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
+from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect, ggx_sample_vndf
 from .sampling import cosine_hemisphere, INV_PI, TWO_PI
 from .textures import MaterialTextures
-from .vec import count, luminance, subset
-
-NONE, DIFFUSE, MIRROR, GLOSSY, GLASS, REFRACTION, TRANSLUCENT, TRANSPARENT, SHEEN = range(-1, 8)
-KIND_IDS = {"diffuse": DIFFUSE, "mirror": MIRROR, "glossy": GLOSSY, "glass": GLASS,
-            "refraction": REFRACTION, "translucent": TRANSLUCENT, "transparent": TRANSPARENT,
-            "sheen": SHEEN}
-F_NONE, F_SCHLICK, F_F82, F_DIELECTRIC = range(4)
-FRESNEL_IDS = {"none": F_NONE, "schlick": F_SCHLICK, "f82": F_F82, "dielectric": F_DIELECTRIC}
-# Below this alpha, GGX is numerically a mirror (glass: a smooth refractor);
-# Cycles switches to a singular lobe at alpha^2 <= 2e-10.
-MIN_ALPHA = 1e-3
+from .vec import count, subset
 
 
 _KIND_TABLES = {}
@@ -60,6 +59,22 @@ def kind_in(kind, kinds):
         table[np.asarray(kinds, np.int8).view(np.uint8)] = True
         _KIND_TABLES[kinds] = table
     return table.take(kind.view(np.uint8))
+
+
+# Row operations written out term by term (not einsum, mean, matmul): the
+# compiled per-ray forms (engine/bsdf_loops.py) add in the same order, so
+# both round alike.
+
+_dot = mf.row_dot
+
+
+def _mean3(x):
+    return (x[:, 0] + x[:, 1] + x[:, 2]) / 3.0
+
+
+def _luminance(rgb):
+    """Rec.709 luminance, Blender's default scene-linear space."""
+    return 0.2126 * rgb[:, 0] + 0.7152 * rgb[:, 1] + 0.0722 * rgb[:, 2]
 
 
 @dataclass
@@ -180,9 +195,10 @@ class MaterialTable:
         """Per-ray lobe parameters for material ids ``mat`` at texture
         coordinates ``uv`` ((N, 2)): constants gathered, then the textured
         parameters of the rays' materials evaluated at their UVs."""
-        # np.take: rows copied several times faster than by fancy indexing.
-        lobes = Lobes(*(np.take(a, mat, axis=0) for a in (self.kind, self.color, self.alpha, self.schlick)),
-                      *(np.take(getattr(self, name), mat, axis=0) for name, _, _ in EXTRA_FIELDS))
+        tables = tuple(getattr(self, name) for name in _GATHERED)
+        out = tuple(np.empty((len(mat),) + a.shape[1:], a.dtype) for a in tables)
+        _gather_kernel(_c(mat, np.int64), tables, out)
+        lobes = Lobes(*out)
         if self.textures.any:
             self.textures.apply(mat, uv, lobes, MIN_ALPHA)
         return lobes
@@ -278,7 +294,7 @@ def _coat_absorption(lobes, k, rows, mu):
     ior = np.maximum(lobes.ior[rows, k], 1.0)
     cos_t = np.sqrt(np.maximum(1.0 - (1.0 - mu * mu) / (ior * ior), 1e-12))
     tinted = np.power(np.maximum(absorb, 0.0), (1.0 / cos_t)[:, None])
-    w = lobes.color[rows, k].mean(axis=1)[:, None]
+    w = _mean3(lobes.color[rows, k])[:, None]
     return 1.0 + w * (tinted - 1.0)
 
 
@@ -287,6 +303,12 @@ def weights(lobes, wo):
     colour, energy compensation (Multiscatter GGX), and the attenuation of
     lobes lying under a layer (coat, sheen, Principled specular) by that
     layer's albedo, as Cycles' Principled BSDF."""
+    out = np.empty(lobes.kind.shape + (3,))
+    _weights_kernel(_lobe_arrays(lobes), _table_arrays(), _c(wo), out)
+    return out
+
+
+def _weights_numpy(lobes, wo):
     n, kk = lobes.kind.shape
     mu = np.clip(wo[:, 2], 0.0, 1.0)
     w = lobes.color * lobes.weight[:, :, None]
@@ -329,8 +351,8 @@ def _albedo_guess(lobes, k, mu):
     kind = lobes.kind[:, k]
     guess = np.ones(len(kind))
     gl = kind == GLOSSY
-    f0 = luminance(lobes.f0[:, k])
-    est = f0 + (1.0 - f0) * (1.0 - mu) ** 5
+    f0 = _luminance(lobes.f0[:, k])
+    est = f0 + (1.0 - f0) * mf.pow5(1.0 - mu)
     guess = np.where(gl & (lobes.fresnel[:, k] != F_NONE) & (lobes.fresnel[:, k] != F_SCHLICK), est, guess)
     return np.where(kind == NONE, 0.0, guess)
 
@@ -339,6 +361,12 @@ def selection(lobes, wo, w=None):
     """(N, K) probability of sampling each lobe."""
     if w is None:
         w = weights(lobes, wo)
+    out = np.empty(lobes.kind.shape)
+    _selection_kernel(_lobe_arrays(lobes), _c(wo), _c(w), out)
+    return out
+
+
+def _selection_numpy(lobes, wo, w):
     cos_o = np.clip(wo[:, 2], 0.0, 1.0)
     sel = np.zeros(lobes.kind.shape)
     for k in range(lobes.kind.shape[1]):
@@ -346,9 +374,12 @@ def selection(lobes, wo, w=None):
         legacy = lobes.fresnel[:, k] == F_SCHLICK
         if legacy.any():
             col = np.where(legacy[:, None], schlick(lobes.color[:, k], cos_o) * w[:, k], col)
-        sel[:, k] = luminance(col) * _albedo_guess(lobes, k, cos_o)
+        sel[:, k] = _luminance(col) * _albedo_guess(lobes, k, cos_o)
     sel = np.maximum(sel, 0.0)
-    total = sel.sum(axis=1, keepdims=True)
+    total = sel[:, 0]
+    for k in range(1, sel.shape[1]):
+        total = total + sel[:, k]
+    total = total[:, None]
     return np.where(total > 0, sel / np.where(total > 0, total, 1.0), 0.0)
 
 
@@ -357,7 +388,7 @@ def selection(lobes, wo, w=None):
 
 def schlick(f0, cos):
     c = np.clip(1.0 - cos, 0.0, 1.0)
-    return f0 + (1.0 - f0) * (c ** 5)[:, None]
+    return f0 + (1.0 - f0) * mf.pow5(c)[:, None]
 
 
 def _fresnel(lobes, rows, k, cos):
@@ -399,7 +430,7 @@ def _dielectric(lobes, rows, k, cos, eta):
     refl = np.where(refraction[:, None], 0.0, refl)
     trans = np.where(refraction[:, None], 1.0, 1.0 - refl) * lobes.transmission_tint[rows, k]
     trans = np.where((cos_t > 0)[:, None], trans, 0.0)
-    r, t = refl.mean(axis=1), trans.mean(axis=1)
+    r, t = _mean3(refl), _mean3(trans)
     p_refl = np.where(r + t > 0, r / np.where(r + t > 0, r + t, 1.0), 1.0)
     return refl, trans, p_refl, cos_t
 
@@ -413,28 +444,6 @@ def _ggx_reflect(wo, wi, alpha):
     return spec, pdf, np.stack([hx, hy, hz], axis=1)
 
 
-@kernel(7, 5)
-def ggx_reflect(wox, woy, woz, wix, wiy, wiz, alpha):
-    """Elementwise GGX reflection: D G2 / (4 cos_o cos_i), the VNDF pdf of
-    wi and the unit half vector (x, y, z); 0 below either horizon."""
-    hx = wox + wix
-    hy = woy + wiy
-    hz = woz + wiz
-    hl = np.sqrt(hx * hx + hy * hy + hz * hz)
-    inv = 1.0 / where(hl > 0, hl, 1.0)
-    hx = hx * inv
-    hy = hy * inv
-    hz = hz * inv
-    ok = (woz > COS_EPS) & (wiz > COS_EPS) & (hl > 0)
-    lo = ggx_lambda(woz, alpha)
-    li = ggx_lambda(wiz, alpha)
-    d = ggx_d(hz, alpha)
-    co = np.maximum(woz, COS_EPS)
-    spec = d / (4.0 * co * np.maximum(wiz, COS_EPS) * (1.0 + lo + li))
-    pdf = d / ((1.0 + lo) * 4.0 * co)
-    return where(ok, spec, 0.0), where(ok, pdf, 0.0), hx, hy, hz
-
-
 def ggx_pdf(wo, wi, alpha):
     """Solid-angle pdf of wi under VNDF sampling of the reflection."""
     _, pdf, h = _ggx_reflect(wo, wi, alpha)
@@ -443,7 +452,7 @@ def ggx_pdf(wo, wi, alpha):
 
 def _eval_glossy(lobes, rows, k, wo, wi):
     spec, pdf, h = _ggx_reflect(wo, wi, lobes.alpha[rows, k])
-    f = _fresnel(lobes, rows, k, np.einsum("ij,ij->i", wo, h)) * spec[:, None]
+    f = _fresnel(lobes, rows, k, _dot(wo, h)) * spec[:, None]
     return f, pdf
 
 
@@ -462,14 +471,14 @@ def _eval_glass(lobes, rows, k, wo, wi):
     if up.any():
         r = np.nonzero(up & ok_o)[0]
         spec, p, h = _ggx_reflect(wo[r], wi[r], alpha[r])
-        refl, _, p_refl, _ = _dielectric(lobes, rows[r], k, np.einsum("ij,ij->i", wo[r], h), eta[r])
+        refl, _, p_refl, _ = _dielectric(lobes, rows[r], k, _dot(wo[r], h), eta[r])
         f[r] = refl * spec[:, None]
         pdf[r] = p * p_refl
     if down.any():
         t = np.nonzero(down & ok_o)[0]
         h, length = mf.refraction_half(wo[t], wi[t], eta[t])
-        c_o = np.einsum("ij,ij->i", wo[t], h)
-        c_i = np.einsum("ij,ij->i", wi[t], h)
+        c_o = _dot(wo[t], h)
+        c_i = _dot(wi[t], h)
         # Only microfacets that face wo and refract into wi (pbrt's check).
         valid = (h[:, 2] > 0) & (c_o > 0) & (c_i < 0) & (length > 0)
         _, trans, p_refl, _ = _dielectric(lobes, rows[t], k, c_o, eta[t])
@@ -492,7 +501,7 @@ def _sheen_ltc(rough, mu):
 def _sheen_frame(wo):
     """Tangent towards wo (Cycles' make_orthonormals_safe_tangent)."""
     t = np.stack([wo[:, 0], wo[:, 1], np.zeros(len(wo))], axis=1)
-    length = np.linalg.norm(t, axis=1)
+    length = np.sqrt(_dot(t, t))
     flat = length < 1e-7
     t = np.where(flat[:, None], np.array([1.0, 0.0, 0.0]), t / np.where(flat, 1.0, length)[:, None])
     b = np.stack([-t[:, 1], t[:, 0], np.zeros(len(wo))], axis=1)   # z x t
@@ -509,7 +518,7 @@ def _eval_sheen(lobes, rows, k, wo, wi):
     weight), so f = pdf / cos."""
     a, b = _ltc(lobes, rows, k, wo)
     t, bt = _sheen_frame(wo)
-    x, y, z = np.einsum("ij,ij->i", wi, t), np.einsum("ij,ij->i", wi, bt), wi[:, 2]
+    x, y, z = _dot(wi, t), _dot(wi, bt), wi[:, 2]
     len_sq = (a * x + b * z) ** 2 + (a * y) ** 2 + z * z
     ok = (z > COS_EPS) & (wo[:, 2] > COS_EPS) & (np.abs(a) >= 1e-5)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -525,7 +534,7 @@ def _sample_sheen(lobes, rows, k, wo, u1, u2):
     dx, dy = r * np.cos(phi), r * np.sin(phi)
     dz = np.sqrt(np.maximum(0.0, 1.0 - u1))
     local = np.stack([dx - dz * b, dy, dz * a], axis=1)
-    local /= np.maximum(np.linalg.norm(local, axis=1), 1e-30)[:, None]
+    local /= np.maximum(mf.row_norm(local), 1e-30)[:, None]
     t, bt = _sheen_frame(wo)
     return local[:, :1] * t + local[:, 1:2] * bt + local[:, 2:3] * np.array([0.0, 0.0, 1.0])
 
@@ -540,7 +549,7 @@ def _sample_glass(lobes, rows, k, wo, u_choice, u1, u2, singular):
     rough = ~singular
     if rough.any():
         h[rough] = ggx_sample_vndf(wo[rough], alpha[rough], u1[rough], u2[rough])
-    cos = np.einsum("ij,ij->i", wo, h)
+    cos = _dot(wo, h)
     _, _, p_refl, cos_t = _dielectric(lobes, rows, k, cos, eta)
     refract = u_choice >= p_refl
     wi = mf.reflect(wo, h)
@@ -601,6 +610,15 @@ def eval_pdf(lobes, wo, wi, sel=None, w=None, sampled=False):
     diffuse_term, keep = bump_shadowing(lobes.smooth_n, lobes.bump_model, wi)
     if sel is None:
         sel = selection(lobes, wo, w)
+    f, pdf = np.empty((n, 3)), np.empty(n)
+    _eval_pdf_kernel(_lobe_arrays(lobes), _table_arrays(), _c(wo), _c(wi), _c(sel), _c(w),
+                     _NO_TERM if diffuse_term is None else _c(diffuse_term),
+                     _NO_KEEP if keep is None else _c(keep, bool), bool(sampled), f, pdf)
+    return f, pdf
+
+
+def _eval_pdf_numpy(lobes, wo, wi, sel, w, diffuse_term, keep, sampled):
+    n = len(wo)
     f = np.zeros((n, 3))
     pdf = np.zeros(n)
     front = wo[:, 2] > COS_EPS
@@ -630,10 +648,82 @@ def eval_pdf(lobes, wo, wi, sel=None, w=None, sampled=False):
     return f, pdf
 
 
-def _is_delta(lobes, k, rows):
-    kind = lobes.kind[rows, k]
-    smooth = kind_in(kind, (GLASS, REFRACTION)) & (lobes.alpha[rows, k] <= MIN_ALPHA)
-    return (kind == MIRROR) | (kind == TRANSPARENT) | smooth
+# ----------------------------------------------------------------------------
+# The compiled per-ray forms (engine/bsdf_loops.py) and their NumPy twins
+
+_NO_TERM, _NO_KEEP = np.empty(0), np.empty(0, bool)
+
+
+def _c(a, dtype=np.float64):
+    """C-contiguous and writable (numba's signatures take no read-only
+    arrays): a copy only where the array is not so already."""
+    a = np.ascontiguousarray(a, dtype)
+    return a if a.flags.writeable else a.copy()
+
+
+def _lobe_arrays(lobes):
+    return tuple(_c(getattr(lobes, name), dtype) for name, _, dtype in loops.LOBE_FIELDS)
+
+
+def _table_arrays():
+    t = mf.tables()
+    return tuple(t[name] for name, _ in loops.TABLES)
+
+
+def _lobes_of(arrays):
+    kind, color, alpha, fresnel, *rest = arrays
+    return Lobes(kind, color, alpha, fresnel == F_SCHLICK, fresnel, *rest)
+
+
+def _weights_twin(lobes, tables, wo, out):
+    out[:] = _weights_numpy(_lobes_of(lobes), wo)
+
+
+def _selection_twin(lobes, wo, w, out):
+    out[:] = _selection_numpy(_lobes_of(lobes), wo, w)
+
+
+def _eval_pdf_twin(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f, pdf):
+    bump = len(diffuse_term) > 0
+    f[:], pdf[:] = _eval_pdf_numpy(_lobes_of(lobes), wo, wi, sel, w, diffuse_term if bump else None,
+                                   keep if bump else None, sampled)
+
+
+def _gather_numpy(mat, tables, out):
+    # np.take: rows copied several times faster than by fancy indexing.
+    for a, o in zip(tables, out):
+        np.take(a, mat, axis=0, out=o)
+
+
+class _Loop(LoopKernel):
+    def build(self, numba):
+        loops.register(numba)
+        return super().build(numba)
+
+
+def _sample_twin(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delta, smooth):
+    wi[:], weight[:], pdf[:], delta[:], smooth[:] = _sample_numpy(_lobes_of(lobes), wo, u_lobe, u1, u2, sel, w)
+
+
+_LOBES, _TABLES = loops.LOBES_SIGNATURE, loops.TABLES_SIGNATURE
+# MaterialTable's per-lobe arrays in Lobes' field order, and their types.
+_GATHERED = ("kind", "color", "alpha", "schlick") + tuple(name for name, _, _ in EXTRA_FIELDS)
+_GATHER_TYPES = "Tuple((int8[:, ::1], float64[:, :, ::1], float64[:, ::1], boolean[:, ::1], int8[:, ::1], " \
+    "float64[:, ::1], float64[:, :, ::1], float64[:, :, ::1], float64[:, :, ::1], boolean[:, ::1], int8[:, ::1], " \
+    "float64[:, :, ::1], float64[:, ::1]))"
+_gather_kernel = LoopKernel(loops.gather_loop, f"void(int64[::1], {_GATHER_TYPES}, {_GATHER_TYPES})", _gather_numpy)
+_weights_kernel = _Loop(loops.weights_loop, f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, :, ::1])",
+                        _weights_twin)
+_selection_kernel = _Loop(loops.selection_loop, f"void({_LOBES}, float64[:, ::1], float64[:, :, ::1], float64[:, ::1])",
+                          _selection_twin)
+_eval_pdf_kernel = _Loop(loops.eval_pdf_loop,
+                         f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, ::1], float64[:, ::1], "
+                         "float64[:, :, ::1], float64[::1], boolean[::1], boolean, float64[:, ::1], float64[::1])",
+                         _eval_pdf_twin)
+_sample_kernel = _Loop(loops.sample_loop,
+                       f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[::1], float64[::1], float64[::1], "
+                       "float64[:, ::1], float64[:, :, ::1], float64[:, ::1], float64[:, ::1], float64[::1], "
+                       "boolean[::1], boolean[::1])", _sample_twin)
 
 
 def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
@@ -651,6 +741,38 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
         w = weights(lobes, wo)
     if sel is None:
         sel = selection(lobes, wo, w)
+    wi, weight, pdf = np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
+    delta, smooth = np.empty(n, bool), np.empty(n, bool)
+    wo, sel, w = _c(wo), _c(sel), _c(w)
+    _sample_kernel(_lobe_arrays(lobes), _table_arrays(), wo, _c(u_lobe), _c(u1), _c(u2), sel, w,
+                   wi, weight, pdf, delta, smooth)
+    # Every row evaluated (rarely not needed; no copies of the lobes), the
+    # smooth ones' weight and pdf taken from it.
+    fs, ps = eval_pdf(lobes, wo, wi, sel, w, sampled=True)
+    _finish_kernel(wo, wi, smooth, fs, ps, weight, pdf)
+    return wi, weight, pdf, delta
+
+
+def _finish_numpy(wo, wi, smooth, fs, ps, weight, pdf):
+    """A smooth sample's weight f |cos| / pdf and pdf; no weight where wo
+    lies below the surface."""
+    ok = ps > 0
+    value = np.where(ok[:, None], fs * (np.abs(wi[:, 2]) / np.where(ok, ps, 1.0))[:, None], 0.0)
+    weight[:] = np.where(smooth[:, None], value, weight)
+    pdf[:] = np.where(smooth, ps, pdf)
+    weight[~(wo[:, 2] > COS_EPS)] = 0.0
+
+
+_finish_kernel = LoopKernel(loops.finish_sample_loop,
+                            "void(float64[:, ::1], float64[:, ::1], boolean[::1], float64[:, ::1], float64[::1], "
+                            "float64[:, ::1], float64[::1])", _finish_numpy)
+
+
+def _sample_numpy(lobes, wo, u_lobe, u1, u2, sel, w):
+    """The chosen lobe's direction for each ray; the weight and pdf of delta
+    samples (0 for the others), which samples are delta and which need
+    eval_pdf (smooth)."""
+    n = len(wo)
     cdf = np.cumsum(sel, axis=1)
     # u_lobe past a rounded CDF that ends an ulp below 1 belongs to the last
     # lobe with a selection probability, not to an unused slot after it.
@@ -668,7 +790,6 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
     delta = np.zeros(n, bool)
     weight = np.zeros((n, 3))
     pdf = np.zeros(n)
-    front = wo[:, 2] > COS_EPS
 
     for kind_id, flip in ((DIFFUSE, 1.0), (TRANSLUCENT, -1.0)):
         d = np.nonzero(kind == kind_id)[0]
@@ -717,23 +838,7 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
             weight[s] = w[s, k] * col / np.maximum(p * p_lobe[s], 1e-300)[:, None]
             delta[s] = True
             pdf[s] = p * p_lobe[s]
-
-    smooth = np.nonzero(~delta & (kind != NONE))[0]
-    if 0 < len(smooth):
-        if len(smooth) == n:
-            smooth = slice(None)   # the usual case: no copies of the lobes
-        lobes_s = lobes if isinstance(smooth, slice) else _take(lobes, smooth)
-        fs, ps = eval_pdf(lobes_s, wo[smooth], wi[smooth], sel[smooth], w[smooth], sampled=True)
-        ok = ps > 0
-        weight[smooth] = np.where(ok[:, None], fs * (np.abs(wi[smooth, 2]) / np.where(ok, ps, 1.0))[:, None], 0.0)
-        pdf[smooth] = ps
-    weight[~front] = 0.0
-    return wi, weight, pdf, delta
-
-
-def _take(lobes, rows):
-    return Lobes(*(None if getattr(lobes, f) is None else np.take(getattr(lobes, f), rows, axis=0)
-                   for f in lobes.__dataclass_fields__))
+    return wi, weight, pdf, delta, ~delta & (kind != NONE)
 
 
 def _simple(lobes):

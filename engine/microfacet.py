@@ -14,7 +14,7 @@ import os
 
 import numpy as np
 
-from .kernels import helper
+from .kernels import helper, kernel, where
 
 COS_EPS = 1e-9
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "tables.npz")
@@ -37,10 +37,35 @@ def ggx_lambda(w_z, alpha):
     return 0.5 * (np.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
 
 
+@helper
+def ggx_reflect_terms(wox, woy, woz, wix, wiy, wiz, alpha):
+    """Elementwise GGX reflection: D G2 / (4 cos_o cos_i), the VNDF pdf of
+    wi and the unit half vector (x, y, z); 0 below either horizon."""
+    hx = wox + wix
+    hy = woy + wiy
+    hz = woz + wiz
+    hl = np.sqrt(hx * hx + hy * hy + hz * hz)
+    inv = 1.0 / where(hl > 0, hl, 1.0)
+    hx = hx * inv
+    hy = hy * inv
+    hz = hz * inv
+    ok = (woz > COS_EPS) & (wiz > COS_EPS) & (hl > 0)
+    lo = ggx_lambda(woz, alpha)
+    li = ggx_lambda(wiz, alpha)
+    d = ggx_d(hz, alpha)
+    co = np.maximum(woz, COS_EPS)
+    spec = d / (4.0 * co * np.maximum(wiz, COS_EPS) * (1.0 + lo + li))
+    pdf = d / ((1.0 + lo) * 4.0 * co)
+    return where(ok, spec, 0.0), where(ok, pdf, 0.0), hx, hy, hz
+
+
+ggx_reflect = kernel(7, 5)(ggx_reflect_terms)
+
+
 def ggx_sample_vndf(wo, alpha, u1, u2):
     """Visible microfacet normal for wo (wo.z > 0), Heitz 2018."""
     vh = np.stack([alpha * wo[:, 0], alpha * wo[:, 1], wo[:, 2]], axis=1)
-    vh /= np.linalg.norm(vh, axis=1, keepdims=True)
+    vh /= row_norm(vh)[:, None]
     lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
     inv = np.where(lensq > 0, 1.0 / np.sqrt(np.where(lensq > 0, lensq, 1.0)), 0.0)
     t1 = np.stack([-vh[:, 1] * inv, vh[:, 0] * inv, np.zeros(len(vh))], axis=1)
@@ -55,18 +80,29 @@ def ggx_sample_vndf(wo, alpha, u1, u2):
     p3 = np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))
     nh = p1[:, None] * t1 + p2[:, None] * t2 + p3[:, None] * vh
     ne = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 1e-12)], axis=1)
-    return ne / np.linalg.norm(ne, axis=1, keepdims=True)
+    return ne / row_norm(ne)[:, None]
+
+
+# Dot products and norms written out term by term (not einsum, linalg.norm):
+# engine/bsdf_loops.py computes them ray by ray in the same order.
+
+def row_dot(a, b):
+    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+
+
+def row_norm(a):
+    return np.sqrt(row_dot(a, a))
 
 
 def reflect(wo, h):
-    return 2.0 * np.einsum("ij,ij->i", wo, h)[:, None] * h - wo
+    return 2.0 * row_dot(wo, h)[:, None] * h - wo
 
 
 def refract(wo, h, cos_t, eta):
     """Refracted direction through microfacet h; cos_t = |cos| of the
     transmitted angle (Cycles' refract_angle with its negative cos_t)."""
     inv = 1.0 / eta
-    c = np.einsum("ij,ij->i", wo, h)
+    c = row_dot(wo, h)
     return (inv * c - cos_t)[:, None] * h - inv[:, None] * wo
 
 
@@ -74,7 +110,7 @@ def refraction_half(wo, wi, eta):
     """Half vector of a refraction wo -> wi (Walter 2007), turned towards +Z,
     and the length of the unnormalised -(eta wi + wo)."""
     h = -(eta[:, None] * wi + wo)
-    length = np.linalg.norm(h, axis=1)
+    length = row_norm(h)
     # Leaving a denser medium (eta < 1) the vector points down: flip it.
     h = h * (np.where(h[:, 2] < 0, -1.0, 1.0) / np.where(length > 0, length, 1.0))[:, None]
     return h, length
@@ -130,9 +166,17 @@ def f82_b(f0, tint):
     return schlick * (7.0 / (f5 * f)) * (1.0 - tint)
 
 
+@helper
+def pow5(x):
+    """x^5 by multiplication (several times cheaper than pow; the compiled
+    loops of engine/bsdf_loops.py multiply in the same order)."""
+    x2 = x * x
+    return x2 * x2 * x
+
+
 def f82(cos, f0, b):
     s = np.clip(1.0 - cos, 0.0, 1.0)[..., None]
-    s5 = s ** 5
+    s5 = pow5(s)
     return np.clip(f0 + (1.0 - f0) * s5 - b * cos[..., None] * s5 * s, 0.0, 1.0)
 
 

@@ -1,0 +1,692 @@
+"""The layered BSDF's per-ray loops, compiled by numba (engine/kernels.py).
+
+engine/bsdf.py weighs, selects and evaluates lobes on whole batches with
+NumPy: a loop over the K lobe slots, each a few masked gathers over all
+rows.  Here the same maths runs ray by ray in one pass over the K slots,
+without temporaries; bsdf.py wraps each loop in a ``LoopKernel`` whose NumPy
+twin is its batch code, and tests/engine/test_bsdf_loops.py checks that both
+give the same numbers bit for bit on random lobes.  Every operation below
+follows its NumPy counterpart term by term (same order of additions and
+multiplications, pow where NumPy calls pow) so that both round alike.
+
+``lobes`` is the tuple ``LOBE_FIELDS`` of per-ray arrays and ``tables`` the
+tuple ``TABLES`` of Cycles' albedo tables (engine/microfacet.py).  Two
+plain row loops close the file: the end of ``sample`` (weights from
+eval_pdf) and ``MaterialTable.gather``'s copy of the lobe parameters.
+"""
+import numpy as np
+
+from .kernels import clip
+from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, MIN_ALPHA, MIRROR, NONE,
+                       REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
+from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect_terms, pow5
+
+LOBE_FIELDS = (("kind", "int8[:, ::1]", np.int8), ("color", "float64[:, :, ::1]", np.float64),
+               ("alpha", "float64[:, ::1]", np.float64), ("fresnel", "int8[:, ::1]", np.int8),
+               ("ior", "float64[:, ::1]", np.float64), ("f0", "float64[:, :, ::1]", np.float64),
+               ("edge_tint", "float64[:, :, ::1]", np.float64),
+               ("transmission_tint", "float64[:, :, ::1]", np.float64),
+               ("multiscatter", "boolean[:, ::1]", np.bool_), ("covers", "int8[:, ::1]", np.int8),
+               ("absorb", "float64[:, :, ::1]", np.float64), ("weight", "float64[:, ::1]", np.float64),
+               ("back", "boolean[::1]", np.bool_))
+TABLES = (("ggx_E", "float64[:, ::1]"), ("ggx_Eavg", "float64[::1]"), ("ggx_glass_E", "float64[:, :, ::1]"),
+          ("ggx_glass_inv_E", "float64[:, :, ::1]"), ("ggx_glass_Eavg", "float64[:, ::1]"),
+          ("ggx_glass_inv_Eavg", "float64[:, ::1]"), ("ggx_gen_schlick_ior_s", "float64[:, :, ::1]"),
+          ("sheen_ltc", "float64[:, :, ::1]"))
+LOBES_SIGNATURE = "Tuple((" + ", ".join(t for _, t, _ in LOBE_FIELDS) + "))"
+TABLES_SIGNATURE = "Tuple((" + ", ".join(t for _, t in TABLES) + "))"
+
+_HELPERS = []
+
+
+def helper(fn):
+    """A function the loops call, compiled as a function of its own (not
+    inlined as kernels.helper: the loops call the larger ones from several
+    places, and numba's inlining made them compile for minutes)."""
+    _HELPERS.append(fn)
+    return fn
+
+
+def register(numba):
+    """Make the helpers callable from compiled code (once, before the loops compile)."""
+    from numba.extending import register_jitable
+    while _HELPERS:
+        register_jitable(_HELPERS.pop(0))
+
+
+INV_PI = 1.0 / np.pi
+TWO_PI = 2.0 * np.pi
+# mf.f82_b's constants, computed as it does (Python's float pow).
+F82_F5 = (6.0 / 7.0) ** 5
+F82_SCALE = 7.0 / (F82_F5 * (6.0 / 7.0))
+
+
+# ----------------------------------------------------------------------------
+# Cycles' lookup_table_read_{1,2,3}D for one point (mf.lookup, same order)
+
+@helper
+def _axis(c, size):
+    x = clip(c, 0.0, 1.0) * (size - 1)
+    i = min(np.int64(x), size - 1)
+    return i, min(i + 1, size - 1), x - i
+
+
+@helper
+def _lookup1(t, x):
+    i0, i1, wx = _axis(x, t.shape[0])
+    return 0.0 + (1.0 - wx) * t[i0] + wx * t[i1]
+
+
+@helper
+def _lookup2(t, x, y):
+    i0, i1, wx = _axis(x, t.shape[1])
+    j0, j1, wy = _axis(y, t.shape[0])
+    out = 0.0 + (1.0 - wx) * (1.0 - wy) * t[j0, i0]
+    out = out + wx * (1.0 - wy) * t[j0, i1]
+    out = out + (1.0 - wx) * wy * t[j1, i0]
+    return out + wx * wy * t[j1, i1]
+
+
+@helper
+def _lookup3(t, x, y, z):
+    i0, i1, wx = _axis(x, t.shape[2])
+    j0, j1, wy = _axis(y, t.shape[1])
+    k0, k1, wz = _axis(z, t.shape[0])
+    out = 0.0 + (1.0 - wx) * (1.0 - wy) * (1.0 - wz) * t[k0, j0, i0]
+    out = out + wx * (1.0 - wy) * (1.0 - wz) * t[k0, j0, i1]
+    out = out + (1.0 - wx) * wy * (1.0 - wz) * t[k0, j1, i0]
+    out = out + wx * wy * (1.0 - wz) * t[k0, j1, i1]
+    out = out + (1.0 - wx) * (1.0 - wy) * wz * t[k1, j0, i0]
+    out = out + wx * (1.0 - wy) * wz * t[k1, j0, i1]
+    out = out + (1.0 - wx) * wy * wz * t[k1, j1, i0]
+    return out + wx * wy * wz * t[k1, j1, i1]
+
+
+@helper
+def _sheen_ltc(t, which, rough, mu):
+    return _lookup2(t[which], mu, clip(rough, 1e-3, 1.0))
+
+
+# ----------------------------------------------------------------------------
+# Fresnel (engine/microfacet.py, one value)
+
+@helper
+def _fresnel_dielectric(cos_i, eta):
+    c = np.abs(cos_i)
+    t2 = eta * eta - (1.0 - c * c)
+    if t2 <= 0:
+        return 1.0, 0.0
+    cos_t = np.sqrt(max(t2, 0.0)) / eta
+    rs = (c - eta * cos_t) / (c + eta * cos_t)
+    rp = (eta * c - cos_t) / (eta * c + cos_t)
+    f = 0.5 * (rs * rs + rp * rp)
+    if not np.isfinite(f):
+        f = 1.0
+    return f, cos_t
+
+
+@helper
+def _f0_from_ior(ior):
+    r = (ior - 1.0) / (ior + 1.0)
+    return r * r
+
+
+@helper
+def _schlick_s(cos, ior):
+    f, cos_t = _fresnel_dielectric(cos, ior)
+    f0 = _f0_from_ior(ior)
+    return clip((f - f0) / max(1.0 - f0, 1e-12), 0.0, 1.0), cos_t
+
+
+@helper
+def _ior_z(eta):
+    return np.sqrt(np.abs((eta - 1.0) / (eta + 1.0)))
+
+
+@helper
+def _eta(ior, kind, back):
+    """bsdf._eta: the IOR, inverted on back faces for refracting lobes."""
+    ior = max(ior, 1e-5)
+    if back and (kind == GLASS or kind == REFRACTION):
+        return 1.0 / ior
+    return ior
+
+
+@helper
+def _f82_b(f0, tint):
+    schlick = f0 + (1.0 - f0) * F82_F5
+    return schlick * F82_SCALE * (1.0 - tint)
+
+
+@helper
+def _fresnel_s(code, ior, cos):
+    """The angular term of bsdf._fresnel shared by the channels: (1 - cos)^5
+    (clamped) for Schlick and F82, the remapped real Fresnel for dielectric."""
+    if code == F_DIELECTRIC:
+        return _schlick_s(cos, max(ior, 1e-5))[0]
+    return clip(1.0 - cos, 0.0, 1.0)
+
+
+@helper
+def _fresnel(code, color, f0, tint, s, cos):
+    """One channel of bsdf._fresnel given _fresnel_s's s."""
+    if code == F_SCHLICK:
+        return color + (1.0 - color) * pow5(s)
+    if code == F_F82:
+        b = _f82_b(f0, tint)
+        s5 = pow5(s)
+        return clip(f0 + (1.0 - f0) * s5 - b * cos * s5 * s, 0.0, 1.0)
+    if code == F_DIELECTRIC:
+        return f0 + (1.0 - f0) * s
+    return 1.0
+
+
+@helper
+def _dielectric_refl(refraction, f0, s):
+    return 0.0 if refraction else f0 + (1.0 - f0) * s
+
+
+@helper
+def _dielectric_trans(refraction, refl, tint, cos_t):
+    return (1.0 if refraction else 1.0 - refl) * tint if cos_t > 0 else 0.0
+
+
+# ----------------------------------------------------------------------------
+# weights (bsdf.weights)
+
+@helper
+def _glossy_fss(code, color, f0, tint, ior):
+    """One channel of bsdf._glossy_fss."""
+    if code == F_SCHLICK:
+        return f0 + (1.0 - f0) / 21.0
+    if code == F_F82:
+        return f0 + (1.0 - f0) / 21.0 - _f82_b(f0, tint) / 126.0
+    if code == F_DIELECTRIC:
+        ior = max(ior, 1e-5)
+        f0_real = _f0_from_ior(ior)
+        if ior < 1.0:
+            fss = 0.997118 + ior * (0.1014 - ior * (0.965241 + ior * 0.130607))
+        else:
+            fss = (ior - 1.0) / (4.08567 + 1.00071 * ior)
+        s = clip((fss - f0_real) / max(1.0 - f0_real, 1e-12), 0.0, 1.0)
+        return f0 + (1.0 - f0) * s
+    return color
+
+
+@helper
+def _energy_tables(glass, eta, rough, mu, t_e, t_eavg, t_ge, t_gie, t_geavg, t_gieavg):
+    """E(mu) and E_avg of bsdf._energy (clamped E)."""
+    if glass:
+        if eta < 1.0:
+            z = _ior_z(1.0 / eta)
+            e = _lookup3(t_gie, rough, mu, z)
+            e_avg = _lookup2(t_gieavg, rough, z)
+        else:
+            z = _ior_z(eta)
+            e = _lookup3(t_ge, rough, mu, z)
+            e_avg = _lookup2(t_geavg, rough, z)
+    else:
+        e = _lookup2(t_e, rough, mu)
+        e_avg = _lookup1(t_eavg, rough)
+    return max(e, 1e-4), e_avg
+
+
+@helper
+def _energy(fss, e, e_avg):
+    """One channel of bsdf._energy: the multiscatter factor and the darkening alone."""
+    missing = (1.0 - e) / e
+    fms = fss * e_avg / max(1.0 - fss * (1.0 - e_avg), 1e-12)
+    factor = 1.0 + fms * missing
+    return factor, factor / (1.0 + missing)
+
+
+def weights_loop(lobes, tables, wo, out):
+    """bsdf.weights into out (N, K, 3)."""
+    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, weight, back = lobes
+    t_e, t_eavg, t_ge, t_gie, t_geavg, t_gieavg, t_s, t_sheen = tables
+    n, kk = kind.shape
+    energy = np.empty((2, 3))   # the multiscatter factor and darkening of one lobe, per channel
+    for i in range(n):
+        mu = clip(wo[i, 2], 0.0, 1.0)
+        for k in range(kk):
+            for c in range(3):
+                out[i, k, c] = weight[i, k] if fresnel[i, k] == F_SCHLICK else color[i, k, c] * weight[i, k]
+        for k in range(kk):
+            kd = kind[i, k]
+            rough = np.sqrt(alpha[i, k])
+            if kd == SHEEN:
+                albedo = _sheen_ltc(t_sheen, 2, rough, mu)
+                for c in range(3):
+                    out[i, k, c] *= albedo
+            # Multiscatter GGX (bsdf._energy): scales the lobe, darkens a layer's albedo.
+            ms = multiscatter[i, k] and kd != SHEEN and (kd == GLOSSY or kd == GLASS or covers[i, k] > 0)
+            if ms:
+                glass = kd == GLASS
+                e, e_avg = _energy_tables(glass, _eta(ior[i, k], kd, back[i]), rough, mu,
+                                          t_e, t_eavg, t_ge, t_gie, t_geavg, t_gieavg)
+                for c in range(3):
+                    if glass:
+                        fss = color[i, k, c] * trans_tint[i, k, c]
+                    else:
+                        fss = _glossy_fss(fresnel[i, k], color[i, k, c], f0[i, k, c], edge[i, k, c], ior[i, k])
+                    energy[0, c], energy[1, c] = _energy(fss, e, e_avg)
+                if kd == GLOSSY or glass:
+                    for c in range(3):
+                        out[i, k, c] *= energy[0, c]
+            if covers[i, k] <= 0:
+                continue
+            # The layer's albedo (bsdf._layer_albedo), its largest channel.
+            if kd == SHEEN:
+                albedo = _sheen_ltc(t_sheen, 2, rough, mu)
+            else:
+                s = _lookup3(t_s, rough, mu, _ior_z(max(ior[i, k], 1e-5)))
+            a = 0.0
+            for c in range(3):
+                if kd == SHEEN:
+                    layer = color[i, k, c] * albedo
+                else:
+                    est = f0[i, k, c] + (1.0 - f0[i, k, c]) * s
+                    if ms:
+                        est = est * energy[1, c]
+                    layer = color[i, k, c] * est
+                a = layer if c == 0 else max(a, layer)
+            below = 1.0 - clip(a, 0.0, 1.0)
+            # The coat's tint along the refracted view ray (bsdf._coat_absorption).
+            eta = max(ior[i, k], 1.0)
+            cos_t = np.sqrt(max(1.0 - (1.0 - mu * mu) / (eta * eta), 1e-12))
+            mean = (color[i, k, 0] + color[i, k, 1] + color[i, k, 2]) / 3.0
+            for c in range(3):
+                tint = max(absorb[i, k, c], 0.0)
+                if tint != 1.0:   # pow(1, y) = 1: an untinted coat skips the pow
+                    tint = tint ** (1.0 / cos_t)
+                tint = 1.0 + mean * (tint - 1.0)
+                for j in range(k + 1, min(kk, k + 1 + covers[i, k])):
+                    out[i, j, c] = out[i, j, c] * below * tint
+        for k in range(kk):
+            for c in range(3):
+                out[i, k, c] = max(out[i, k, c], 0.0)
+
+
+# ----------------------------------------------------------------------------
+# selection (bsdf.selection)
+
+@helper
+def _luminance(r, g, b):
+    return 0.2126 * r + 0.7152 * g + 0.0722 * b
+
+
+def selection_loop(lobes, wo, w, out):
+    """bsdf.selection into out (N, K)."""
+    kind, color, fresnel, f0 = lobes[0], lobes[1], lobes[3], lobes[5]
+    n, kk = kind.shape
+    for i in range(n):
+        cos_o = clip(wo[i, 2], 0.0, 1.0)
+        total = 0.0
+        for k in range(kk):
+            code = fresnel[i, k]
+            if code == F_SCHLICK:
+                s5 = pow5(clip(1.0 - cos_o, 0.0, 1.0))
+                r = (color[i, k, 0] + (1.0 - color[i, k, 0]) * s5) * w[i, k, 0]
+                g = (color[i, k, 1] + (1.0 - color[i, k, 1]) * s5) * w[i, k, 1]
+                b = (color[i, k, 2] + (1.0 - color[i, k, 2]) * s5) * w[i, k, 2]
+                lum = _luminance(r, g, b)
+            else:
+                lum = _luminance(w[i, k, 0], w[i, k, 1], w[i, k, 2])
+            guess = 1.0
+            if kind[i, k] == NONE:
+                guess = 0.0
+            elif kind[i, k] == GLOSSY and code != F_SCHLICK and code != F_NONE:
+                f0l = _luminance(f0[i, k, 0], f0[i, k, 1], f0[i, k, 2])
+                guess = f0l + (1.0 - f0l) * pow5(1.0 - cos_o)
+            s = max(lum * guess, 0.0)
+            out[i, k] = s
+            total = s if k == 0 else total + s
+        for k in range(kk):
+            out[i, k] = out[i, k] / total if total > 0 else 0.0
+
+
+# ----------------------------------------------------------------------------
+# eval_pdf (bsdf.eval_pdf)
+
+@helper
+def _eval_sheen(t_sheen, rough, wox, woy, woz, wix, wiy, wiz):
+    """bsdf._eval_sheen: f (one value for all channels) and pdf."""
+    mu = clip(woz, 0.0, 1.0)
+    a = _sheen_ltc(t_sheen, 0, rough, mu)
+    b = _sheen_ltc(t_sheen, 1, rough, mu)
+    length = np.sqrt(wox * wox + woy * woy + 0.0 * 0.0)
+    if length < 1e-7:
+        tx, ty = 1.0, 0.0
+    else:
+        tx, ty = wox / length, woy / length
+    x = wix * tx + wiy * ty + wiz * 0.0
+    y = wix * -ty + wiy * tx + wiz * 0.0
+    z = wiz
+    p = a * x + b * z
+    q = a * y
+    len_sq = p * p + q * q + z * z
+    r = a / len_sq
+    val = INV_PI * (r * r)
+    if not ((z > COS_EPS) and (woz > COS_EPS) and (np.abs(a) >= 1e-5) and np.isfinite(val)):
+        val = 0.0
+    return val, val * max(z, 0.0)
+
+
+@helper
+def _refraction(alpha, eta, wox, woy, woz, wix, wiy, wiz):
+    """The refraction half of bsdf._eval_glass: D G / ... (what multiplies
+    the transmittance in f, 0 where invalid), the pdf's common factor and
+    cos(wo, h)."""
+    hx = -(eta * wix + wox)
+    hy = -(eta * wiy + woy)
+    hz = -(eta * wiz + woz)
+    length = np.sqrt(hx * hx + hy * hy + hz * hz)
+    scale = (-1.0 if hz < 0 else 1.0) / (length if length > 0 else 1.0)
+    hx, hy, hz = hx * scale, hy * scale, hz * scale
+    c_o = wox * hx + woy * hy + woz * hz
+    c_i = wix * hx + wiy * hy + wiz * hz
+    if not ((hz > 0) and (c_o > 0) and (c_i < 0) and (length > 0)):
+        return 0.0, 0.0, c_o, 0.0
+    lo = ggx_lambda(woz, alpha)
+    li = ggx_lambda(wiz, alpha)
+    q = eta / length
+    common = ggx_d(hz, alpha) / max(woz, COS_EPS) * (q * q) * np.abs(c_o * c_i)
+    return common / ((1.0 + lo + li) * -wiz), common, c_o, 1.0 + lo
+
+
+def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f, pdf):
+    """bsdf.eval_pdf into f (N, 3) and pdf (N,); diffuse_term and keep
+    are bsdf.bump_shadowing's arrays, or empty without a moved normal."""
+    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, weight, back = lobes
+    t_sheen = tables[7]
+    bump = len(diffuse_term) > 0
+    for i in range(len(wo)):
+        wox, woy, woz, wix, wiy, wiz = wo[i, 0], wo[i, 1], wo[i, 2], wi[i, 0], wi[i, 1], wi[i, 2]
+        f_0 = f_1 = f_2 = p = 0.0
+        upper = woz > COS_EPS and wiz > COS_EPS
+        lower = woz > COS_EPS and wiz < -COS_EPS
+        for k in range(kind.shape[1]):
+            kd = kind[i, k]
+            if (kd == DIFFUSE and upper) or (kd == TRANSLUCENT and lower):
+                if bump and (kd == DIFFUSE or not sampled):
+                    s = INV_PI * diffuse_term[i]
+                else:
+                    s = INV_PI
+                f_0 += w[i, k, 0] * s
+                f_1 += w[i, k, 1] * s
+                f_2 += w[i, k, 2] * s
+                p += sel[i, k] * np.abs(wiz) * INV_PI
+            elif kd == SHEEN and upper:
+                v, pk = _eval_sheen(t_sheen, np.sqrt(alpha[i, k]), wox, woy, woz, wix, wiy, wiz)
+                f_0 += w[i, k, 0] * v
+                f_1 += w[i, k, 1] * v
+                f_2 += w[i, k, 2] * v
+                p += sel[i, k] * pk
+            elif (kd == GLOSSY and upper) or ((kd == GLASS or kd == REFRACTION) and alpha[i, k] > MIN_ALPHA
+                                               and (upper or lower)):
+                # GGX reflection (glossy, glass above), refraction (glass below).
+                common = 0.0
+                if upper:
+                    spec, pk, hx, hy, hz = ggx_reflect_terms(wox, woy, woz, wix, wiy, wiz, alpha[i, k])
+                    cos = wox * hx + woy * hy + woz * hz
+                else:
+                    spec, common, cos, pk = _refraction(alpha[i, k], _eta(ior[i, k], kd, back[i]),
+                                                        wox, woy, woz, wix, wiy, wiz)
+                if kd == GLOSSY:
+                    code = fresnel[i, k]
+                    s = _fresnel_s(code, ior[i, k], cos)
+                    f_0 += w[i, k, 0] * (_fresnel(code, color[i, k, 0], f0[i, k, 0], edge[i, k, 0], s, cos) * spec)
+                    f_1 += w[i, k, 1] * (_fresnel(code, color[i, k, 1], f0[i, k, 1], edge[i, k, 1], s, cos) * spec)
+                    f_2 += w[i, k, 2] * (_fresnel(code, color[i, k, 2], f0[i, k, 2], edge[i, k, 2], s, cos) * spec)
+                    p += sel[i, k] * pk
+                    continue
+                # bsdf._eval_glass: the dielectric Fresnel splits reflection and refraction.
+                refraction = kd == REFRACTION
+                s, cos_t = _schlick_s(cos, _eta(ior[i, k], kd, back[i]))
+                r0 = _dielectric_refl(refraction, f0[i, k, 0], s)
+                r1 = _dielectric_refl(refraction, f0[i, k, 1], s)
+                r2 = _dielectric_refl(refraction, f0[i, k, 2], s)
+                t0 = _dielectric_trans(refraction, r0, trans_tint[i, k, 0], cos_t)
+                t1 = _dielectric_trans(refraction, r1, trans_tint[i, k, 1], cos_t)
+                t2 = _dielectric_trans(refraction, r2, trans_tint[i, k, 2], cos_t)
+                r = (r0 + r1 + r2) / 3.0
+                t = (t0 + t1 + t2) / 3.0
+                p_refl = r / (r + t) if r + t > 0 else 1.0
+                if upper:
+                    f_0 += w[i, k, 0] * (r0 * spec)
+                    f_1 += w[i, k, 1] * (r1 * spec)
+                    f_2 += w[i, k, 2] * (r2 * spec)
+                    p += sel[i, k] * (pk * p_refl)
+                else:
+                    f_0 += w[i, k, 0] * (t0 * spec)
+                    f_1 += w[i, k, 1] * (t1 * spec)
+                    f_2 += w[i, k, 2] * (t2 * spec)
+                    p += sel[i, k] * (common * (1.0 - p_refl) / pk if pk > 0 else 0.0)
+        if bump and not sampled and not keep[i]:
+            f_0 = f_1 = f_2 = p = 0.0
+        f[i, 0], f[i, 1], f[i, 2], pdf[i] = f_0, f_1, f_2, p
+
+
+# ----------------------------------------------------------------------------
+# sample (bsdf.sample: the choice of lobe and its direction)
+
+@helper
+def _vndf(wox, woy, woz, alpha, u1, u2):
+    """microfacet.ggx_sample_vndf for one ray."""
+    vx, vy, vz = alpha * wox, alpha * woy, woz
+    length = np.sqrt(vx * vx + vy * vy + vz * vz)
+    vx, vy, vz = vx / length, vy / length, vz / length
+    lensq = vx * vx + vy * vy
+    if lensq > 0:
+        inv = 1.0 / np.sqrt(lensq)
+        t1x, t1y, t1z = -vy * inv, vx * inv, 0.0
+    else:
+        t1x, t1y, t1z = 1.0, 0.0, 0.0
+    t2x = vy * t1z - vz * t1y
+    t2y = vz * t1x - vx * t1z
+    t2z = vx * t1y - vy * t1x
+    r = np.sqrt(u1)
+    phi = 2.0 * np.pi * u2
+    p1 = r * np.cos(phi)
+    p2 = r * np.sin(phi)
+    s = 0.5 * (1.0 + vz)
+    p2 = (1.0 - s) * np.sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2
+    p3 = np.sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2))
+    nx = p1 * t1x + p2 * t2x + p3 * vx
+    ny = p1 * t1y + p2 * t2y + p3 * vy
+    nz = p1 * t1z + p2 * t2z + p3 * vz
+    ex, ey, ez = alpha * nx, alpha * ny, max(nz, 1e-12)
+    length = np.sqrt(ex * ex + ey * ey + ez * ez)
+    return ex / length, ey / length, ez / length
+
+
+@helper
+def _reflect(wox, woy, woz, hx, hy, hz):
+    c = 2.0 * (wox * hx + woy * hy + woz * hz)
+    return c * hx - wox, c * hy - woy, c * hz - woz
+
+
+@helper
+def _sample_sheen(t_sheen, rough, wox, woy, woz, u1, u2):
+    """bsdf._sample_sheen for one ray."""
+    mu = clip(woz, 0.0, 1.0)
+    a = _sheen_ltc(t_sheen, 0, rough, mu)
+    b = _sheen_ltc(t_sheen, 1, rough, mu)
+    r = np.sqrt(u1)
+    phi = TWO_PI * u2
+    dx, dy = r * np.cos(phi), r * np.sin(phi)
+    dz = np.sqrt(max(0.0, 1.0 - u1))
+    lx, ly, lz = dx - dz * b, dy, dz * a
+    length = max(np.sqrt(lx * lx + ly * ly + lz * lz), 1e-30)
+    lx, ly, lz = lx / length, ly / length, lz / length
+    length = np.sqrt(wox * wox + woy * woy + 0.0 * 0.0)
+    if length < 1e-7:
+        tx, ty = 1.0, 0.0
+    else:
+        tx, ty = wox / length, woy / length
+    return (lx * tx + ly * -ty + lz * 0.0, lx * ty + ly * tx + lz * 0.0,
+            lx * 0.0 + ly * 0.0 + lz * 1.0)
+
+
+def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delta, smooth):
+    """bsdf._sample_numpy into wi, weight, pdf, delta, smooth."""
+    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, lobe_weight, back = lobes
+    t_sheen = tables[7]
+    kk = kind.shape[1]
+    for i in range(len(wo)):
+        wox, woy, woz = wo[i, 0], wo[i, 1], wo[i, 2]
+        # The lobe: u_lobe against the running sum of the selection
+        # probabilities, never past the last lobe that has one.
+        cdf = 0.0
+        count = 0
+        last = kk - 1
+        for k in range(kk - 1, -1, -1):
+            if sel[i, k] > 0:
+                last = k
+                break
+        lo = 0.0
+        for k in range(kk):
+            cdf = sel[i, k] if k == 0 else cdf + sel[i, k]
+            if u_lobe[i] >= cdf:
+                count += 1
+        k = min(count, last)
+        total = cdf
+        cdf = 0.0
+        for j in range(k + 1):
+            cdf = sel[i, j] if j == 0 else cdf + sel[i, j]
+        kd = kind[i, k] if total > 0 else NONE
+        p_lobe = sel[i, k]
+        lo = cdf - p_lobe
+        u_sub = clip((u_lobe[i] - lo) / (p_lobe if p_lobe > 0 else 1.0), 0.0, 1.0 - 1e-12)
+        x, y, z = 0.0, 0.0, 1.0
+        r0 = r1 = r2 = p = 0.0
+        is_delta = False
+        if kd == DIFFUSE or kd == TRANSLUCENT:
+            r = np.sqrt(u1[i])
+            phi = TWO_PI * u2[i]
+            x, y, z = r * np.cos(phi), r * np.sin(phi), np.sqrt(max(0.0, 1.0 - u1[i]))
+            if kd == TRANSLUCENT:
+                z = z * -1.0
+        elif kd == GLOSSY:
+            hx, hy, hz = _vndf(wox, woy, woz, alpha[i, k], u1[i], u2[i])
+            x, y, z = _reflect(wox, woy, woz, hx, hy, hz)
+            if z <= 0.0:   # a reflection below the surface is absorbed (as Cycles)
+                kd = NONE
+        elif kd == SHEEN:
+            x, y, z = _sample_sheen(t_sheen, np.sqrt(alpha[i, k]), wox, woy, woz, u1[i], u2[i])
+        elif kd == MIRROR:
+            x, y, z = wox * -1.0, woy * -1.0, woz * 1.0
+            code = fresnel[i, k]
+            s = _fresnel_s(code, ior[i, k], woz)
+            r0 = w[i, k, 0] * _fresnel(code, color[i, k, 0], f0[i, k, 0], edge[i, k, 0], s, woz) / p_lobe
+            r1 = w[i, k, 1] * _fresnel(code, color[i, k, 1], f0[i, k, 1], edge[i, k, 1], s, woz) / p_lobe
+            r2 = w[i, k, 2] * _fresnel(code, color[i, k, 2], f0[i, k, 2], edge[i, k, 2], s, woz) / p_lobe
+            is_delta = True
+            p = p_lobe
+        elif kd == TRANSPARENT:
+            x, y, z = -wox, -woy, -woz
+            r0, r1, r2 = w[i, k, 0] / p_lobe, w[i, k, 1] / p_lobe, w[i, k, 2] / p_lobe
+            is_delta = True
+            p = p_lobe
+        elif kd == GLASS or kd == REFRACTION:
+            # bsdf._sample_glass: reflect or refract through a visible
+            # microfacet (the normal itself when singular).
+            eta = _eta(ior[i, k], kd, back[i])
+            singular = alpha[i, k] <= MIN_ALPHA
+            if singular:
+                hx, hy, hz = 0.0, 0.0, 1.0
+            else:
+                hx, hy, hz = _vndf(wox, woy, woz, alpha[i, k], u1[i], u2[i])
+            cos = wox * hx + woy * hy + woz * hz
+            refraction = kd == REFRACTION
+            p_refl, cos_t = _glass_choice(refraction, f0[i, k, 0], f0[i, k, 1], f0[i, k, 2], trans_tint[i, k, 0],
+                                          trans_tint[i, k, 1], trans_tint[i, k, 2], cos, eta)
+            refract = u_sub >= p_refl
+            if refract:
+                inv = 1.0 / eta
+                c = inv * cos - cos_t
+                x, y, z = c * hx - inv * wox, c * hy - inv * woy, c * hz - inv * woz
+            else:
+                x, y, z = _reflect(wox, woy, woz, hx, hy, hz)
+            # A refraction that ends above the surface (or a reflection
+            # below) is absorbed, as Cycles does.
+            if refract != (z < 0):
+                kd = NONE
+            if singular:
+                s, cos_t = _schlick_s(woz, eta)
+                a0 = _dielectric_refl(refraction, f0[i, k, 0], s)
+                a1 = _dielectric_refl(refraction, f0[i, k, 1], s)
+                a2 = _dielectric_refl(refraction, f0[i, k, 2], s)
+                if refract:
+                    a0 = _dielectric_trans(refraction, a0, trans_tint[i, k, 0], cos_t)
+                    a1 = _dielectric_trans(refraction, a1, trans_tint[i, k, 1], cos_t)
+                    a2 = _dielectric_trans(refraction, a2, trans_tint[i, k, 2], cos_t)
+                    pk = 1.0 - p_refl
+                else:
+                    pk = p_refl
+                d = max(pk * p_lobe, 1e-300)
+                r0, r1, r2 = w[i, k, 0] * a0 / d, w[i, k, 1] * a1 / d, w[i, k, 2] * a2 / d
+                is_delta = True
+                p = pk * p_lobe
+        wi[i, 0], wi[i, 1], wi[i, 2] = x, y, z
+        weight[i, 0], weight[i, 1], weight[i, 2] = r0, r1, r2
+        pdf[i] = p
+        delta[i] = is_delta
+        smooth[i] = not is_delta and kd != NONE
+
+
+@helper
+def _glass_choice(refraction, f0r, f0g, f0b, ttr, ttg, ttb, cos, eta):
+    """The probability of reflecting and |cos| of the refracted angle (bsdf._dielectric)."""
+    s, cos_t = _schlick_s(cos, eta)
+    r0 = _dielectric_refl(refraction, f0r, s)
+    r1 = _dielectric_refl(refraction, f0g, s)
+    r2 = _dielectric_refl(refraction, f0b, s)
+    t0 = _dielectric_trans(refraction, r0, ttr, cos_t)
+    t1 = _dielectric_trans(refraction, r1, ttg, cos_t)
+    t2 = _dielectric_trans(refraction, r2, ttb, cos_t)
+    r = (r0 + r1 + r2) / 3.0
+    t = (t0 + t1 + t2) / 3.0
+    return (r / (r + t) if r + t > 0 else 1.0), cos_t
+
+
+def finish_sample_loop(wo, wi, smooth, fs, ps, weight, pdf):
+    """bsdf._finish_numpy: smooth samples' weight and pdf from eval_pdf's f, pdf."""
+    for i in range(len(wo)):
+        if smooth[i]:
+            p = ps[i]
+            if p > 0:
+                scale = np.abs(wi[i, 2]) / p
+                weight[i, 0], weight[i, 1], weight[i, 2] = fs[i, 0] * scale, fs[i, 1] * scale, fs[i, 2] * scale
+            else:
+                weight[i, 0] = weight[i, 1] = weight[i, 2] = 0.0
+            pdf[i] = p
+        if not wo[i, 2] > COS_EPS:
+            weight[i, 0] = weight[i, 1] = weight[i, 2] = 0.0
+
+
+# ----------------------------------------------------------------------------
+# MaterialTable.gather: every lobe field of each ray's material in one pass
+
+def gather_loop(mat, tables, out):
+    """out[f][i] = tables[f][mat[i]] for the 13 fields of bsdf.Lobes (in
+    its order, kind to weight), as np.take does field by field."""
+    kind_t, color_t, alpha_t, schlick_t, fresnel_t, ior_t, f0_t, edge_t, tt_t, ms_t, covers_t, absorb_t, w_t = tables
+    kind, color, alpha, schlick, fresnel, ior, f0, edge, tt, ms, covers, absorb, weight = out
+    for i in range(len(mat)):
+        m = mat[i]
+        for k in range(kind.shape[1]):
+            kind[i, k] = kind_t[m, k]
+            alpha[i, k] = alpha_t[m, k]
+            schlick[i, k] = schlick_t[m, k]
+            fresnel[i, k] = fresnel_t[m, k]
+            ior[i, k] = ior_t[m, k]
+            ms[i, k] = ms_t[m, k]
+            covers[i, k] = covers_t[m, k]
+            weight[i, k] = w_t[m, k]
+            for c in range(3):
+                color[i, k, c] = color_t[m, k, c]
+                f0[i, k, c] = f0_t[m, k, c]
+                edge[i, k, c] = edge_t[m, k, c]
+                tt[i, k, c] = tt_t[m, k, c]
+                absorb[i, k, c] = absorb_t[m, k, c]
