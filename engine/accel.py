@@ -15,8 +15,8 @@ import time
 
 import numpy as np
 
-from . import embree_upload
-from .vec import row_max
+from . import embree_upload, kernels
+from .vec import column, row_max, rows3
 
 
 def _import_embreex():
@@ -121,5 +121,26 @@ class Accel:
         """Move p off its surface to the side ``direction`` leaves through."""
         if eps is None:
             eps = self.offset_scale(p)
-        side = np.where(np.einsum("ij,ij->i", ng, direction) < 0, -eps, eps)
-        return p + ng * side[:, None]
+        rows = rows3(p, ng, direction)
+        if rows is None:
+            side = np.where(np.einsum("ij,ij->i", ng, direction) < 0, -eps, eps)
+            return p + ng * side[:, None]
+        out = np.empty(rows[0].shape)
+        _offset_rows(*rows, column(eps, len(out), np.float64), out)
+        return out
+
+
+def _offset_numpy(p, ng, direction, eps, out):
+    side = np.where(np.einsum("ij,ij->i", ng, direction) < 0, -eps, eps)
+    out[:] = p + ng * side[:, None]
+
+
+@kernels.loop_kernel("void(float64[:, :], float64[:, :], float64[:, :], float64[:], float64[:, ::1])",
+                     _offset_numpy)
+def _offset_rows(p, ng, direction, eps, out):
+    for i in range(len(p)):
+        # einsum's order: x0 + x2, then x1 (engine/vec.py)
+        d = (ng[i, 0] * direction[i, 0] + ng[i, 2] * direction[i, 2]) + ng[i, 1] * direction[i, 1]
+        side = -eps[i] if d < 0 else eps[i]
+        for k in range(3):
+            out[i, k] = p[i, k] + ng[i, k] * side

@@ -678,6 +678,10 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
     if len(g):
         h = ggx_sample_vndf(wo[g], lobes.alpha[g, chosen[g]], u1[g], u2[g])
         wi[g] = mf.reflect(wo[g], h)
+        # A reflection below the surface is absorbed, as in Cycles
+        # (bsdf_microfacet_sample): eval_pdf would hand it to a transmitting
+        # lobe whose pdf leaves out this sampler's density there (biased).
+        kind[g[wi[g, 2] <= 0.0]] = NONE
     sh = np.nonzero(kind == SHEEN)[0]
     for k in np.unique(chosen[sh]):
         r = sh[chosen[sh] == k]

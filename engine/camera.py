@@ -8,7 +8,9 @@ the view axis as Cycles does.
 """
 import numpy as np
 
+from . import kernels
 from .sampling import concentric_disk
+from .vec import column
 
 FILTER_TABLE_SIZE = 4096
 
@@ -16,6 +18,51 @@ FILTER_TABLE_SIZE = 4096
 def _blackman_harris(v, width):
     x = 2.0 * np.pi * (v / width + 0.5)
     return 0.35875 - 0.48829 * np.cos(x) + 0.14128 * np.cos(2 * x) - 0.01168 * np.cos(3 * x)
+
+
+def _filter_sample_numpy(u, guide, cdf, slope, edges, out):
+    sign = np.where(u < 0.5, -1.0, 1.0)
+    v = np.where(u < 0.5, 2.0 * u, 2.0 * u - 1.0)
+    cell = np.minimum((v * FILTER_TABLE_SIZE).astype(np.int64), FILTER_TABLE_SIZE - 1)
+    j = guide[cell]
+    span = guide[cell + 1] - j
+    j = np.minimum(j + ((span == 1) & (cdf[np.minimum(j + 1, FILTER_TABLE_SIZE)] <= v)), FILTER_TABLE_SIZE - 1)
+    wide = np.flatnonzero(span > 1)   # cells across many tiny bins (filter tails): rare
+    if len(wide):
+        j[wide] = _last_bin_at_most(cdf, v[wide])
+    out[:] = sign * (slope[j] * (v - cdf[j]) + edges[j])
+
+
+def _last_bin_at_most(cdf, v):
+    """The last bin j with cdf[j] <= v (the bin np.interp uses)."""
+    return np.minimum(np.searchsorted(cdf, v, side="right") - 1, FILTER_TABLE_SIZE - 1)
+
+
+@kernels.loop_kernel("void(float64[:], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1])",
+                     _filter_sample_numpy)
+def _filter_sample(u, guide, cdf, slope, edges, out):
+    last = FILTER_TABLE_SIZE - 1
+    for i in range(len(u)):
+        x = u[i]
+        sign = -1.0 if x < 0.5 else 1.0
+        v = 2.0 * x if x < 0.5 else 2.0 * x - 1.0
+        cell = min(np.int64(v * FILTER_TABLE_SIZE), last)
+        j = guide[cell]
+        span = guide[cell + 1] - j
+        if span > 1:
+            lo, hi = 0, len(cdf)   # searchsorted(side="right"): the first k with cdf[k] > v
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if cdf[mid] <= v:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            j = min(lo - 1, last)
+        elif span == 1 and cdf[min(j + 1, FILTER_TABLE_SIZE)] <= v:
+            j = min(j + 1, last)
+        else:
+            j = min(j, last)
+        out[i] = sign * (slope[j] * (v - cdf[j]) + edges[j])
 
 
 class PixelFilter:
@@ -56,25 +103,17 @@ class PixelFilter:
         self.guide = self._bin(np.arange(FILTER_TABLE_SIZE + 1) / FILTER_TABLE_SIZE)
 
     def _bin(self, v):
-        """The last bin j with cdf[j] <= v (the bin np.interp uses)."""
-        return np.minimum(np.searchsorted(self.cdf, v, side="right") - 1, FILTER_TABLE_SIZE - 1)
+        return _last_bin_at_most(self.cdf, v)
 
     def sample(self, u):
         """Offsets in pixels from one uniform per sample (sign from its low
         bit).  The inverse CDF as np.interp(v, cdf, edges) computes it, bit
         for bit, but the bin comes from the guide table: one comparison for
         nearly every v instead of a binary search over 4096 bins."""
-        sign = np.where(u < 0.5, -1.0, 1.0)
-        v = np.where(u < 0.5, 2.0 * u, 2.0 * u - 1.0)
-        cell = np.minimum((v * FILTER_TABLE_SIZE).astype(np.int64), FILTER_TABLE_SIZE - 1)
-        j = self.guide[cell]
-        span = self.guide[cell + 1] - j
-        j = np.minimum(j + ((span == 1) & (self.cdf[np.minimum(j + 1, FILTER_TABLE_SIZE)] <= v)),
-                       FILTER_TABLE_SIZE - 1)
-        wide = np.flatnonzero(span > 1)   # cells across many tiny bins (filter tails): rare
-        if len(wide):
-            j[wide] = self._bin(v[wide])
-        return sign * (self.slope[j] * (v - self.cdf[j]) + self.edges[j])
+        u = column(np.atleast_1d(u), len(np.atleast_1d(u)), np.float64)
+        out = np.empty(len(u))
+        _filter_sample(u, self.guide, self.cdf, self.slope, self.edges, out)
+        return out
 
     def pdf(self, x):
         """Density of ``sample`` at offset x (1D)."""

@@ -31,8 +31,9 @@ weight 1, one-sample MIS over the two (the pdf is their mixture).
 """
 import numpy as np
 
+from . import kernels
 from .sampling import Distribution2D, uniform_cone
-from .vec import frame, luminance, to_world
+from .vec import column, frame, luminance, to_world
 
 TWO_PI_SQ = 2.0 * np.pi * np.pi
 # Wider textures are summed into blocks for the sampling table (Cycles'
@@ -65,12 +66,22 @@ def lookup(image, u, v, closest=False):
     """Cycles' image lookup at (u, v) of an (H, W, C) image whose row 0 is
     the bottom (v = 0); periodic wrap in both axes."""
     h, w = image.shape[:2]
-    x = np.asarray(u, np.float64) * w
-    y = np.asarray(v, np.float64) * h
     if closest:
-        ix = np.floor(x).astype(np.int64) % w
-        iy = np.floor(y).astype(np.int64) % h
+        ix = np.floor(np.asarray(u, np.float64) * w).astype(np.int64) % w
+        iy = np.floor(np.asarray(v, np.float64) * h).astype(np.int64) % h
         return image[iy, ix].astype(np.float64)
+    u, v = (column(a, len(a), np.float64) for a in (np.atleast_1d(u), np.atleast_1d(v)))
+    out = np.empty((len(u), image.shape[2]))
+    if image.dtype == np.float32 and image.flags.c_contiguous:
+        _bilinear(image, u, v, out)
+    else:
+        _bilinear_numpy(image, u, v, out)
+    return out
+
+
+def _bilinear_numpy(image, u, v, out):
+    h, w = image.shape[:2]
+    x, y = u * w, v * h
     # Pixel centres at i + 0.5: interpolate between the two nearest.
     fx, fy = np.floor(x - 0.5), np.floor(y - 0.5)
     tx, ty = (x - 0.5 - fx)[:, None], (y - 0.5 - fy)[:, None]
@@ -78,7 +89,22 @@ def lookup(image, u, v, closest=False):
     nix, niy = (ix + 1) % w, (iy + 1) % h
     bottom = (1.0 - tx) * image[iy, ix] + tx * image[iy, nix]
     top = (1.0 - tx) * image[niy, ix] + tx * image[niy, nix]
-    return (1.0 - ty) * bottom + ty * top
+    out[:] = (1.0 - ty) * bottom + ty * top
+
+
+@kernels.loop_kernel("void(float32[:, :, ::1], float64[:], float64[:], float64[:, ::1])", _bilinear_numpy)
+def _bilinear(image, u, v, out):
+    h, w = image.shape[0], image.shape[1]
+    for i in range(len(u)):
+        x, y = u[i] * w, v[i] * h
+        fx, fy = np.floor(x - 0.5), np.floor(y - 0.5)
+        tx, ty = x - 0.5 - fx, y - 0.5 - fy
+        ix, iy = np.int64(fx) % w, np.int64(fy) % h
+        nix, niy = (ix + 1) % w, (iy + 1) % h
+        for c in range(image.shape[2]):
+            bottom = (1.0 - tx) * np.float64(image[iy, ix, c]) + tx * np.float64(image[iy, nix, c])
+            top = (1.0 - tx) * np.float64(image[niy, ix, c]) + tx * np.float64(image[niy, nix, c])
+            out[i, c] = (1.0 - ty) * bottom + ty * top
 
 
 class EnvironmentMap:

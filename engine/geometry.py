@@ -11,6 +11,7 @@ from typing import Optional
 
 import numpy as np
 
+from . import kernels
 from .scene import DEFAULT_MATERIAL, Bump, NormalMap
 from .vec import frame
 
@@ -171,7 +172,7 @@ def _place(placed, n_mat):
     """Triangles of every (index, instance, mesh arrays) in ``placed``.
     Per instance only what differs between instances is computed
     (vertices, normals, materials), for the instances of one mesh at once;
-    edges, face normals and unit shading normals then over row chunks."""
+    edges, face normals and unit shading normals then row by row."""
     if not placed:
         empty3 = np.zeros((0, 3))
         return Triangles(empty3, empty3, empty3, empty3, None, np.zeros(0, bool), None,
@@ -189,9 +190,10 @@ def _place(placed, n_mat):
         for lo in range(0, len(numbers), step):
             some = np.array(numbers[lo:lo + step])
             _place_instances(out, arrays, [placed[n][1] for n in some], first_row[some], first_vertex[some], n_mat)
-    for lo in range(0, len(out.p0), CHUNK_ROWS):
-        _place_rows(out, slice(lo, lo + CHUNK_ROWS))
-    keep = np.isfinite(out.clen) & (out.clen > 1e-12 * (1.0 + np.abs(out.p0).max(axis=1)) ** 2)
+    keep = np.empty(len(out.p0), bool)
+    ns = out.ns if out.ns is not None else np.empty((0, 3, 3))
+    _place_rows(out.vertices, out.indices, out.smooth, out.ns is not None,
+                out.p0, out.e1, out.e2, out.ng, out.clen, ns, keep)
     dropped = int(len(keep) - np.count_nonzero(keep))
     keep = None if dropped == 0 else keep
 
@@ -255,18 +257,51 @@ def _materials(slots, n, insts, n_mat):
     return padded[np.arange(len(tables))[:, None], np.minimum(slots[None, :], last[:, None])]
 
 
-def _place_rows(out, rows):
-    """Edges, face normals, lengths and unit shading normals of ``rows``."""
-    tri = out.indices[rows]
-    p0 = out.p0[rows] = out.vertices[tri[:, 0]]
-    e1 = out.e1[rows] = out.vertices[tri[:, 1]] - p0
-    e2 = out.e2[rows] = out.vertices[tri[:, 2]] - p0
-    c = np.cross(e1, e2)
-    clen = out.clen[rows] = _row_norm(c)
-    with np.errstate(divide="ignore", invalid="ignore"):  # degenerate rows are dropped later
-        ng = out.ng[rows] = c / clen[:, None]
-    if out.ns is not None:
-        out.ns[rows] = _unit_normals(out.ns[rows], ng, out.smooth[rows])
+def _place_rows_numpy(vertices, indices, smooth, has_ns, p0, e1, e2, ng, clen, ns, keep):
+    """Edges, face normals and their lengths, unit shading normals (in place,
+    when ``has_ns``) and which triangles to keep (finite, not degenerate)."""
+    with np.errstate(all="ignore"):   # degenerate and non-finite rows are dropped
+        for lo in range(0, len(indices), CHUNK_ROWS):
+            rows = slice(lo, lo + CHUNK_ROWS)
+            tri = indices[rows]
+            a = p0[rows] = vertices[tri[:, 0]]
+            b = e1[rows] = vertices[tri[:, 1]] - a
+            c = e2[rows] = vertices[tri[:, 2]] - a
+            cross = np.cross(b, c)
+            length = clen[rows] = _row_norm(cross)
+            face = ng[rows] = cross / length[:, None]
+            if has_ns:
+                ns[rows] = _unit_normals(ns[rows], face, smooth[rows])
+        keep[:] = np.isfinite(clen) & (clen > 1e-12 * (1.0 + np.abs(p0).max(axis=1)) ** 2)
+
+
+@kernels.loop_kernel("void(float64[:, ::1], int64[:, ::1], boolean[::1], boolean, float64[:, ::1], "
+                     "float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64[:, :, ::1], "
+                     "boolean[::1])", _place_rows_numpy)
+def _place_rows(vertices, indices, smooth, has_ns, p0, e1, e2, ng, clen, ns, keep):
+    for i in range(len(indices)):
+        a, b, c = indices[i, 0], indices[i, 1], indices[i, 2]
+        for k in range(3):
+            p0[i, k] = vertices[a, k]
+            e1[i, k] = vertices[b, k] - vertices[a, k]
+            e2[i, k] = vertices[c, k] - vertices[a, k]
+        cx = e1[i, 1] * e2[i, 2] - e1[i, 2] * e2[i, 1]
+        cy = e1[i, 2] * e2[i, 0] - e1[i, 0] * e2[i, 2]
+        cz = e1[i, 0] * e2[i, 1] - e1[i, 1] * e2[i, 0]
+        length = np.sqrt((cx * cx + cy * cy) + cz * cz)
+        clen[i] = length
+        ng[i, 0], ng[i, 1], ng[i, 2] = cx / length, cy / length, cz / length
+        if has_ns:
+            for j in range(3):
+                nx, ny, nz = ns[i, j, 0], ns[i, j, 1], ns[i, j, 2]
+                ln = np.sqrt((nx * nx + ny * ny) + nz * nz)
+                if not np.isfinite(ln) or ln < 1e-12 or not smooth[i]:
+                    ns[i, j, 0], ns[i, j, 1], ns[i, j, 2] = ng[i, 0], ng[i, 1], ng[i, 2]
+                else:
+                    ns[i, j, 0], ns[i, j, 1], ns[i, j, 2] = nx / ln, ny / ln, nz / ln
+        m = max(abs(p0[i, 0]), abs(p0[i, 1]), abs(p0[i, 2]))
+        q = 1.0 + m
+        keep[i] = np.isfinite(length) and length > 1e-12 * (q * q)
 
 
 def _scene_shading(scene, instance, local):

@@ -23,14 +23,14 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from . import bsdf, kernels, pass_events
+from . import bsdf, kernels, nee, pass_events, throughput
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .hits import hit_geometry
 from .lights import POINT, SUN
 from .nodes import NodeRays, ShadingContext
 from .sampler import BSDF, CAMERA, KIND, LIGHT, emitter_set, vertex_set
 from .sampling import power_heuristic
-from .vec import dot, frame, row_all_finite, row_any_positive, row_max, to_local, to_world
+from .vec import dot, frame, row_any_positive, row_max, to_local, to_world
 
 
 @dataclass
@@ -367,8 +367,9 @@ def _escaped(ctx, paths, i, tile):
     else:
         if np.any(ctx.world != 0):   # a black world adds nothing: skip the row gathers
             paths.L[sky] += paths.beta[sky] * ctx.world
-        pass_events.emitter(ctx, paths, sky, paths.beta[sky] * ctx.world, np.ones(len(sky)), tile,
-                            world=True, bsdf_only=True)
+        if pass_events.listening(tile):
+            pass_events.emitter(ctx, paths, sky, paths.beta[sky] * ctx.world, np.ones(len(sky)), tile,
+                                world=True, bsdf_only=True)
     for mask, emitter, Le, pdf in ctx.lights.sun_hits(paths.d[i], paths.ray[i] if ctx.track_rays else None):
         j = i[mask]
         if len(j):
@@ -468,19 +469,9 @@ def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u, ti
     f, pdf_b = bsdf.eval_pdf(lobes, wo_l, wi_l, *lobes_wo)
     if ctx.light_excludes:
         f = _visible_lobes_f(ctx, lobes, wo_l, wi_l, ls.wi, hit.ng, e, f)
-    # Lights behind the surface count for transmitting lobes (f is 0 below
-    # for the others); wi must be on the same side of both normals.
-    cos = np.abs(wi_l[:, 2])
-    p_light = p_sel * ls.pdf
-    ok = (ls.pdf > 0) & (cos > 0) & _same_side(ls.wi, hit.ng, wi_l)
-    if s.strategy == "mis":
-        w = np.where(ls.delta, 1.0, power_heuristic(p_light, pdf_b))
-    else:
-        w = np.ones(len(p_light))
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        scale = np.where(ok, cos * w / np.where(ok, p_light, 1.0), 0.0)
-    contrib = paths.beta * f * ls.Le * scale[:, None]
-    live = np.flatnonzero(row_any_positive(contrib))
+    contrib, w, live = nee.contribution(wi_l, ls.wi, hit.ng, ls.pdf, p_sel, pdf_b, ls.delta,
+                                        s.strategy == "mis", paths.beta, f, ls.Le)
+    live = np.flatnonzero(live)
     if len(live) == 0:
         return
     eps = hit.eps[live]
@@ -547,14 +538,6 @@ def _orient(hit, lobes):
         lobes.back = back
 
 
-def _same_side(wi, ng, wi_l):
-    """wi is on the same side of the geometric and the shading surface:
-    a transmission (wi_l.z < 0) must leave through the back, a reflection
-    through the front (ng faces the incoming ray)."""
-    g = dot(wi, ng)
-    return (g != 0) & ((g > 0) == (wi_l[:, 2] > 0))
-
-
 def _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth):
     """Sample the BSDF and update the path state in place; returns which
     paths live on and which passed straight through a transparent lobe."""
@@ -562,17 +545,7 @@ def _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth):
     u = _uniforms(ctx, paths, vertex_set(depth, BSDF))
     wi_l, weight, pdf, delta = bsdf.sample(lobes, wo_l, u[:, 0], u[:, 1], u[:, 2], *lobes_wo)
     wi = to_world(wi_l, tt, bb, hit.ns)
-    # A reflection below the geometric surface (or a transmission above it)
-    # would leak light through the surface: absorb it, as Cycles does.
-    ok = _same_side(wi, hit.ng, wi_l) & row_all_finite(weight) & row_any_positive(weight)
-    beta = paths.beta * weight
-    rr = paths.bounce >= s.rr_depth
-    if rr.any():
-        q = np.where(rr, np.minimum(row_max(beta), 0.95), 1.0)
-        survive = u[:, 3] < q
-        beta = beta / np.where(survive, np.maximum(q, 1e-30), 1.0)[:, None]
-        ok &= survive
-    paths.beta = beta
+    ok, paths.beta = throughput.update(wi, hit.ng, wi_l, weight, paths.beta, paths.bounce, s.rr_depth, u[:, 3])
     through = _sampled_transparent(ctx, hit, delta, wi_l, wo_l)
     if through.any():
         # A transparent pass is not a vertex: the path keeps its direction,

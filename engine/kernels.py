@@ -20,11 +20,13 @@ alike, bit for bit (IEEE arithmetic and the same libm; checked by
 tests/engine/test_kernels.py), so a render may mix them and a seed's image
 does not depend on when compilation finished.
 The cache is ``NUMBA_CACHE_DIR`` or ``~/.cache/ember/numba`` (XDG_CACHE_HOME
-respected), one sub-folder per version of the engine's sources.  The JIT is
+respected), one sub-folder per version of the engine's sources, filled by
+one process at a time (``cache_lock``).  The JIT is
 off with ``RenderSettings.use_jit = False``, with ``EMBER_JIT=0``, or when
 numba does not import.
 """
 import atexit
+import contextlib
 import hashlib
 import importlib.util
 import inspect
@@ -33,6 +35,13 @@ import threading
 import time
 
 import numpy as np
+
+try:
+    import fcntl
+    msvcrt = None
+except ImportError:   # Windows
+    import msvcrt
+    fcntl = None
 
 
 def source_hash():
@@ -228,20 +237,62 @@ def stop():
 def _compile_all():
     try:
         numba = _import_numba()
-        while not _state.get("stop"):
-            todo = _pending()
-            if not todo:
-                break
-            _register_helpers(numba)
-            for k in todo:
-                if _state.get("stop"):
+        with cache_lock(cache_dir(), lambda: _state.get("stop")) as locked:
+            while locked and not _state.get("stop"):
+                todo = _pending()
+                if not todo:
                     break
-                _compile(numba, k)
+                _register_helpers(numba)
+                for k in todo:
+                    if _state.get("stop"):
+                        break
+                    _compile(numba, k)
     except Exception as exc:  # noqa: BLE001 - the NumPy path keeps working
         global UNAVAILABLE
         UNAVAILABLE = f"numba failed: {type(exc).__name__}: {exc}"
     finally:
         _state["finished"] = time.perf_counter()
+
+
+@contextlib.contextmanager
+def cache_lock(folder, give_up=lambda: False, poll=0.1):
+    """Hold ``folder``'s lock file while compiling into it.  Two processes
+    filling one numba cache at once (two Blenders, farm workers on one
+    machine) can leave an index pointing at the other's machine code, and
+    the next process to load it crashes (seen: a segfault loading a gufunc).
+    The later process waits here, then loads what the first one wrote.
+    Yields False when ``give_up()`` turned true while waiting."""
+    os.makedirs(folder, exist_ok=True)
+    with open(os.path.join(folder, ".lock"), "a+b") as handle:
+        while not _try_lock(handle):
+            if give_up():
+                yield False
+                return
+            time.sleep(poll)
+        try:
+            yield True
+        finally:
+            _unlock(handle)
+
+
+def _try_lock(handle):
+    try:
+        if fcntl is not None:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        else:
+            handle.seek(0)
+            msvcrt.locking(handle.fileno(), msvcrt.LK_NBLCK, 1)
+        return True
+    except OSError:
+        return False
+
+
+def _unlock(handle):
+    if fcntl is not None:
+        fcntl.flock(handle, fcntl.LOCK_UN)
+    else:
+        handle.seek(0)
+        msvcrt.locking(handle.fileno(), msvcrt.LK_UNLCK, 1)
 
 
 def _compile(numba, k):

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kernels import helper, kernel, loop_kernel, where
+from .sampling import TWO_PI
 from .sampling import (Distribution1D, concentric_disk, rectangle_frame, rectangle_solid_angle,
                        sin_sq_to_one_minus_cos, spherical_rectangle_warp, spherical_triangle,
                        triangle_solid_angle, uniform_cone, uniform_cone_pdf, uniform_triangle)
@@ -30,7 +31,7 @@ from .geometry import VIS_ALL, visibility_bits
 from .lightproxy import LightProxies
 from .lighttree import LightTree, emitter_bounds, triangle_tree
 from .scene import AreaLight, PointLight, SpotLight, SunLight
-from .vec import count, dot, frame, subset, to_world
+from .vec import column, count, dot, frame, subset, to_world
 
 POINT, SUN, AREA, MESH, ENV = 0, 1, 2, 3, 4
 
@@ -463,14 +464,10 @@ class _SunLights:
         return selection_power(self.E) * np.pi * radius ** 2 if self.count else []
 
     def sample(self, out, idx, j, p, u1, u2, u3):
-        axis = -self.dir[j]
-        wi = axis.copy()
-        pdf = np.ones(len(p))
-        s = np.nonzero(~self.delta[j])[0]
-        if len(s):
-            local, pdf[s] = uniform_cone(u1[s], u2[s], self.one_minus_cos[j[s]])
-            tt, bb = frame(axis[s])
-            wi[s] = to_world(local, tt, bb, axis[s])
+        n = len(p)
+        wi, pdf = np.empty((n, 3)), np.empty(n)
+        _sun_sample(column(j, n, np.int64), column(u1, n, np.float64), column(u2, n, np.float64),
+                    -self.dir, self.one_minus_cos, self.delta, wi, pdf)
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, np.inf, self.L[j]
         out.pdf[idx], out.delta[idx] = pdf, self.delta[j]
 
@@ -482,6 +479,45 @@ class _SunLights:
         diff = d + self.dir[j]
         mask = 0.5 * np.einsum("ij,ij->i", diff, diff) <= omc
         return mask, self.L[j], uniform_cone_pdf(omc)
+
+
+def _sun_sample_numpy(j, u1, u2, axes, one_minus_cos, delta, wi, pdf):
+    axis = axes[j]
+    wi[:] = axis
+    pdf[:] = 1.0
+    s = np.nonzero(~delta[j])[0]
+    if len(s):
+        local, pdf[s] = uniform_cone(u1[s], u2[s], one_minus_cos[j[s]])
+        tt, bb = frame(axis[s])
+        wi[s] = to_world(local, tt, bb, axis[s])
+
+
+@loop_kernel("void(int64[:], float64[:], float64[:], float64[:, ::1], float64[::1], boolean[::1], "
+             "float64[:, ::1], float64[::1])", _sun_sample_numpy)
+def _sun_sample(j, u1, u2, axes, one_minus_cos, delta, wi, pdf):
+    """Directions uniform in each sun's cone about its axis (delta suns: the
+    axis), as uniform_cone, vec.frame and vec.to_world compute them."""
+    for i in range(len(j)):
+        k = j[i]
+        n0, n1, n2 = axes[k, 0], axes[k, 1], axes[k, 2]
+        if delta[k]:
+            wi[i, 0], wi[i, 1], wi[i, 2] = n0, n1, n2
+            pdf[i] = 1.0
+            continue
+        omc = u1[i] * one_minus_cos[k]
+        cos_t = 1.0 - omc
+        sin_t = np.sqrt(max(0.0, omc * (2.0 - omc)))
+        phi = TWO_PI * u2[i]
+        x, y = sin_t * np.cos(phi), sin_t * np.sin(phi)
+        sign = 1.0 if n2 >= 0 else -1.0
+        a = -1.0 / (sign + n2)
+        b = n0 * n1 * a
+        s0, s1, s2 = 1.0 + sign * (n0 * n0) * a, sign * b, -sign * n0
+        t0, t1, t2 = b, sign + (n1 * n1) * a, -n1
+        wi[i, 0] = (x * s0 + y * t0) + cos_t * n0
+        wi[i, 1] = (x * s1 + y * t1) + cos_t * n1
+        wi[i, 2] = (x * s2 + y * t2) + cos_t * n2
+        pdf[i] = 1.0 / (TWO_PI * one_minus_cos[k])
 
 
 class _AreaLights:

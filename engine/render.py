@@ -21,7 +21,7 @@ from .accel import Accel
 from .blas import single_threaded_blas
 from .bsdf import MaterialTable, bump_model
 from .camera import CameraModel, PixelFilter
-from . import pass_events
+from . import kernels, pass_events
 from .film import Film
 from .geometry import flatten, material_table
 from .integrator import Context, trace_batch
@@ -72,6 +72,7 @@ class RenderResult:
 
 def prepare(scene, settings):
     """Validate and compile a Scene into the read-only Context batches share."""
+    kernels.configure(getattr(settings, "use_jit", True))   # flatten has a kernel too
     scene.validate()
     validate_settings(settings)
     tris = flatten(scene, with_instance=bool(settings.passes))

@@ -5,7 +5,8 @@ Directions are in a local frame whose +Z is the pole (normal, cone axis).
 """
 import numpy as np
 
-from .kernels import clip, helper, kernel, where
+from .kernels import clip, helper, kernel, loop_kernel, where
+from .vec import column
 
 TWO_PI = 2.0 * np.pi
 INV_PI = 1.0 / np.pi
@@ -250,6 +251,35 @@ def spherical_triangle(p, v0, v1, v2, u1, u2):
     return _unit_rows(d), solid_angle
 
 
+def _search_rows_numpy(flat_cdf, row, key, cols, out):
+    out[:] = np.searchsorted(flat_cdf, key, side="right")
+
+
+@loop_kernel("void(float64[::1], int64[:], float64[:], int64, int64[::1])", _search_rows_numpy)
+def _search_rows(flat_cdf, row, key, cols, out):
+    """searchsorted(flat_cdf, key, side="right") where key lies in row
+    ``row``'s span [row, row + 1): entries before the row are <= row <= key
+    and its last entry (row + 1) is > key, so the answer lies in the row
+    and a binary search over its ``cols`` entries finds the same index
+    (11 steps in L1 instead of 20 across the whole map)."""
+    for i in range(len(key)):
+        lo = row[i] * cols
+        hi = lo + cols
+        v = key[i]
+        if v != v:   # NaN sorts last, as in NumPy
+            out[i] = len(flat_cdf)
+            continue
+        if not (0 <= lo < len(flat_cdf) and flat_cdf[hi - 1] > v and (lo == 0 or flat_cdf[lo - 1] <= v)):
+            lo, hi = 0, len(flat_cdf)   # outside its row (never for keys made by sample): search all
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if flat_cdf[mid] <= v:
+                lo = mid + 1
+            else:
+                hi = mid
+        out[i] = lo
+
+
 class Distribution2D:
     """Piecewise-constant density on the unit square from a (rows, cols) grid
     of non-negative weights: a marginal distribution over rows and a
@@ -257,7 +287,8 @@ class Distribution2D:
 
     Coordinates are (x, y) in [0, 1)^2: x along columns, y along rows (row 0
     covers y in [0, 1/rows)).  Sampling is by inverse CDF with binary search,
-    one ``searchsorted`` for the whole batch of rows and one for the columns.
+    one ``searchsorted`` for the whole batch of rows, and for the columns one
+    within each row (``_search_rows``).
     """
 
     def __init__(self, weights):
@@ -283,7 +314,9 @@ class Distribution2D:
         row, p_row, du_row = self.marginal.sample_continuous(u_row)
         u_col = np.asarray(u_col, dtype=np.float64)
         key = row + np.minimum(u_col, np.nextafter(1.0, 0.0))
-        k = np.searchsorted(self.flat_cdf, key, side="right")
+        k = np.empty(len(key), np.int64)
+        _search_rows(self.flat_cdf, column(row, len(key), np.int64), column(key, len(key), np.float64),
+                     self.cols, k)
         col = np.clip(k - row * self.cols, 0, self.cols - 1)
         p_col = self.pmf[row, col]
         lo = np.where(col > 0, self.flat_cdf[row * self.cols + np.maximum(col - 1, 0)] - row, 0.0)

@@ -10,7 +10,8 @@ engine.render.prepare: the two before plus lights, camera, materials).
 Each shows wall seconds and process CPU seconds (all threads: Embree's
 commit runs on TBB's).  On a shared machine compare CPU seconds, and run
 the versions to compare alternately.  ``--profile`` prints cProfile's
-top functions of one prepare instead.
+top functions of one prepare instead.  The compiled kernels are ready
+first, as in any render after Blender's first (``--no-jit``: NumPy forms).
 """
 import argparse
 import cProfile
@@ -59,12 +60,17 @@ def main(argv=None):
     parser.add_argument('--scene', default='instanced')
     parser.add_argument('--repeat', type=int, default=3)
     parser.add_argument('--profile', action='store_true', help="cProfile one prepare instead")
+    parser.add_argument('--no-jit', action='store_true', help="NumPy forms of the kernels (as EMBER_JIT=0)")
     args = parser.parse_args(argv)
     scene = setup(args.scene)
+    from engine import kernels, render  # noqa: F401 - every kernel defined before compiling
+    # As a render after the first: the compiled kernels ready (flatten has one).
+    print(f"compiled kernels: {kernels.configure(not args.no_jit) and kernels.wait(900)}")
     import bpy
     from addon.export import scene as scene_export
     depsgraph = bpy.context.evaluated_depsgraph_get()
     settings = scene_export.render_settings(scene)
+    settings.use_jit = not args.no_jit   # prepare configures the kernels from the settings
     if args.profile:
         from engine import render
         from engine.blas import single_threaded_blas

@@ -226,19 +226,7 @@ def reference_scene(name, folder=None):
     return scene, bounces
 
 
-# Found by the converged reference (issue 12), left to the lead: the 'Leaf'
-# sphere, Mix Shader (Fac 0.3) of a Translucent (0.3, 0.8, 0.2) and a GGX
-# Glossy (roughness 0.5), renders brighter than Cycles: top-left quadrant
-# +0.46 % +- 0.09 % (t 5.0) at 256 samples, +0.43 % +- 0.05 % at 1024 (seed 7);
-# the sphere alone under the light, 2048 samples against 4 x 1024 Cycles
-# samples: green +1.41 % +- 0.09 %, red +0.26 %, blue +0.14 %, while the
-# Translucent alone and the Glossy alone agree within 0.1 %.  Strict: an
-# XPASS (the bias fixed) fails until this mark goes.
-MIX_BIAS = pytest.mark.xfail(strict=True, reason="Mix(Translucent, Glossy) 1.4 % brighter (green) than "
-                                                 "converged Cycles (docs/testing.md)")
-
-
-@pytest.mark.parametrize("name", [pytest.param(n, marks=MIX_BIAS) if n == 'mix' else n for n in sorted(SCENES)])
+@pytest.mark.parametrize("name", sorted(SCENES))
 def test_material_parity_with_cycles(name, tmp_path, tapped_engine):
     scene, bounces = reference_scene(name)
     image, var = render_for_reference(scene, tmp_path, name, tapped_engine, EMBER_SPP, 1, bounces)

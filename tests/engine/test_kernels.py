@@ -188,14 +188,31 @@ def renders():
     for jit in (False, True):
         settings = RenderSettings(samples=8, seed=11, max_bounces=4, use_jit=jit, threads=2)
         out[jit] = render(scene, settings).image
+        # Every other kind of light the loops handle: a sun with a disc, a
+        # sphere light, an HDRI seen through the open front; Gaussian filter.
+        settings = RenderSettings(samples=4, seed=12, max_bounces=3, use_jit=jit, threads=2,
+                                  filter_type="GAUSSIAN", filter_width=2.0)
+        out[jit, "lights"] = render(_open_scene_with_every_light(scene), settings).image
     kernels.configure(True)
     return out
 
 
-def test_fixed_seed_render_agrees_with_and_without_jit(renders):
+def _open_scene_with_every_light(scene):
+    import dataclasses
+    from engine.scene import EnvironmentTexture, PointLight, SunLight, World
+    rng = np.random.default_rng(28)
+    lights = list(scene.lights) + [SunLight((0.3, 0.4, -0.87), (2.0, 1.8, 1.5), angle=0.2),
+                                   PointLight((0.2, 0.3, 0.5), (5.0, 5.0, 5.0), radius=0.1)]
+    world = World(texture=EnvironmentTexture(rng.random((16, 32, 3)).astype(np.float32)))
+    return dataclasses.replace(scene, lights=lights, world=world)
+
+
+@pytest.mark.parametrize("which", [None, "lights"])
+def test_fixed_seed_render_agrees_with_and_without_jit(renders, which):
     require_numba()
-    plain, compiled = renders[False], renders[True]
-    assert np.isfinite(compiled).all()
+    key = (lambda jit: jit) if which is None else (lambda jit: (jit, which))
+    plain, compiled = renders[key(False)], renders[key(True)]
+    assert np.isfinite(compiled).all() and compiled.max() > 0
     # The same random numbers through the same maths, rounded the same way.
     np.testing.assert_array_equal(compiled, plain)
 
@@ -304,3 +321,222 @@ def test_kernels_defined_after_a_compile_are_compiled_too(jit):
         assert_agree(*both_ways(late, x))
     finally:
         kernels.KERNELS.remove(late)
+
+
+def test_place_rows_agrees(jit):
+    """Edges, face normals, unit shading normals and the kept triangles of
+    flatten's compiled row loop against its NumPy form, bit for bit:
+    degenerate and non-finite triangles, zero and NaN shading normals, flat
+    rows in a smooth mesh, meshes without normals."""
+    from engine.geometry import _place_rows
+    rng = np.random.default_rng(21)
+    verts, tris = 3000, 70000   # more than one NumPy chunk
+    vertices = rng.normal(size=(verts, 3)) * 10.0
+    vertices[:3] = vertices[3]            # a degenerate triangle below
+    vertices[4] = np.nan
+    vertices[5] = np.inf
+    indices = rng.integers(8, verts, (tris, 3))
+    indices[0] = (0, 1, 2)
+    indices[1, 0], indices[2, 1] = 4, 5
+    indices[3] = (6, 7, 7)
+    smooth = rng.random(tris) < 0.8
+    ns0 = rng.normal(size=(tris, 3, 3))
+    ns0[10:20] = 0.0
+    ns0[20:30, 1] = np.nan
+    indices[100:110, 2] = indices[100:110, 0]   # degenerate
+
+    def run(has_ns):
+        outs = [np.empty((tris, 3)) for _ in range(4)] + [np.empty(tris)]
+        ns = ns0.copy() if has_ns else np.empty((0, 3, 3))
+        keep = np.empty(tris, bool)
+        _place_rows(vertices, indices, smooth, has_ns, *outs, ns, keep)
+        return (*outs, ns, keep)
+    for has_ns in (True, False):
+        plain, compiled = both_ways(run, has_ns)
+        assert_agree(plain, compiled)
+        a, b, c = indices.T
+        dropped = (a == b) | (b == c) | (a == c)        # rows 3, 100-109 and chance repeats
+        dropped[:3] = True                              # same points, NaN, inf
+        np.testing.assert_array_equal(plain[-1], ~dropped)
+
+
+def test_frame_and_rotations_agree(jit):
+    """Shading frames, to_local / to_world and offset_origin: the compiled
+    row loops against their NumPy forms, bit for bit, on unit and odd
+    normals (poles, -0.0, NaN, zero), strided views and scalar eps."""
+    from engine import vec
+    from engine.accel import Accel
+    rng = np.random.default_rng(22)
+    n = 5000
+    normals = rng.normal(size=(n, 3))
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    normals[:4] = ((0, 0, 1), (0, 0, -1), (0.0, 0.0, -0.0), (0, 0, 0))
+    normals[4] = np.nan
+    wide = rng.normal(size=(n, 6))
+    v = wide[:, ::2]                                       # a strided view
+    assert not v.flags.c_contiguous
+    s, t = vec.frame(normals)
+    eps = rng.random(n) * 1e-4
+    assert_agree(*both_ways(vec.frame, normals))
+    assert_agree(*both_ways(vec.to_local, v, s, t, normals))
+    assert_agree(*both_ways(vec.to_world, v, s, t, normals))
+    for e in (eps, 1e-5):
+        assert_agree(*both_ways(Accel.offset_origin, None, wide[:, 1::2], normals, v, e))
+
+
+def test_one_process_at_a_time_fills_the_cache(tmp_path):
+    """Two processes compiling into one numba cache crashed the second (a
+    segfault loading a gufunc the first was writing): ``cache_lock`` lets
+    one in at a time; a waiter that is told to stop gives up at once."""
+    import subprocess
+    import sys
+    import time
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time; sys.path.insert(0, sys.argv[1]); from engine import kernels\n"
+         "with kernels.cache_lock(sys.argv[2]):\n    print('held', flush=True); time.sleep(1.5)",
+         root, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with kernels.cache_lock(str(tmp_path), give_up=lambda: True) as locked:
+            assert not locked
+        t0 = time.perf_counter()
+        with kernels.cache_lock(str(tmp_path)) as locked:
+            assert locked
+            waited = time.perf_counter() - t0
+            assert holder.poll() is not None or waited > 1.0
+    finally:
+        holder.wait(30)
+    assert waited > 0.5
+
+
+def test_light_sample_contribution_agrees(jit):
+    """NEE's MIS weight, contribution and live rows (engine/nee.py): the
+    compiled row loop against the NumPy form, bit for bit, with delta
+    lights, zero, infinite and NaN pdfs, directions below either surface
+    and strided rows; with MIS and without."""
+    from engine import nee
+    rng = np.random.default_rng(23)
+    n = 20000
+    wi = rng.normal(size=(n, 3))
+    wi /= np.linalg.norm(wi, axis=1)[:, None]
+    ng = rng.normal(size=(n, 6))[:, ::2]
+    wi_l = rng.normal(size=(n, 3))
+    wi_l[:50, 2] = 0.0
+    light_pdf = np.abs(rng.normal(size=n))
+    light_pdf[50:100] = 0.0
+    light_pdf[100:110] = np.inf
+    pdf_b = np.abs(rng.normal(size=n))
+    pdf_b[110:120] = np.nan
+    pdf_b[120:130] = np.inf
+    delta = rng.random(n) < 0.2
+    beta, f, le = (np.abs(rng.normal(size=(n, 3))) for _ in range(3))
+    f[130:140] = 0.0
+    for mis in (True, False):
+        for p_sel in (rng.random(n), np.ones(n)):
+            args = (wi_l, wi, ng, light_pdf, p_sel, pdf_b, delta, mis, beta, f, le)
+            plain, compiled = both_ways(nee.contribution, *args)
+            assert_agree(plain, compiled)
+            assert plain[2].any() and not plain[2].all()
+
+
+def test_throughput_update_agrees(jit):
+    """The BSDF sample's throughput update with Russian roulette
+    (engine/throughput.py): compiled row loop against NumPy form, bit for
+    bit, with leaking directions, NaN / infinite / zero weights, paths
+    before and after the roulette depth, and none past it."""
+    from engine import throughput
+    rng = np.random.default_rng(24)
+    n = 20000
+    wi = rng.normal(size=(n, 3))
+    ng = rng.normal(size=(n, 6))[:, ::2]
+    wi_l = rng.normal(size=(n, 3))
+    weight = np.abs(rng.normal(size=(n, 3)))
+    weight[:20] = np.nan
+    weight[20:40, 1] = np.inf
+    weight[40:60] = 0.0
+    beta = np.abs(rng.normal(size=(n, 3)))
+    beta[60:70, 0] = np.nan
+    bounce = rng.integers(0, 8, n).astype(np.int32)
+    u = rng.random(n)
+    for depth in (3, 100):
+        plain, compiled = both_ways(throughput.update, wi, ng, wi_l, weight, beta, bounce, depth, u)
+        assert_agree(plain, compiled)
+        assert plain[0].any() and not plain[0].all()
+
+
+def test_environment_lookup_agrees(jit):
+    """The environment map's bilinear lookup: compiled loop against the
+    NumPy form, bit for bit, across the wrap in both axes and outside
+    [0, 1], for RGB and RGBA float32 images."""
+    from engine.environment import lookup
+    rng = np.random.default_rng(25)
+    n = 20000
+    u = rng.random(n) * 3.0 - 1.0
+    v = rng.random(n) * 3.0 - 1.0
+    u[:4] = (0.0, 1.0, 0.5 / 64, 1.0 - 1e-17)
+    for channels in (3, 4):
+        image = rng.random((32, 64, channels)).astype(np.float32) * 100.0
+        assert_agree(*both_ways(lookup, image, u, v))
+
+
+def test_pixel_filter_sample_agrees(jit):
+    """The pixel filter's inverse CDF by guide table: compiled loop against
+    the NumPy form, bit for bit, for each filter (the Gaussian's tails put
+    many bins in one guide cell: the binary-search branch), at u = 0, 0.5
+    and just below 1."""
+    from engine.camera import PixelFilter
+    rng = np.random.default_rng(26)
+    u = rng.random(50000)
+    u[:3] = (0.0, 0.5, np.nextafter(1.0, 0.0))
+    for kind, width in (("BLACKMAN_HARRIS", 1.5), ("GAUSSIAN", 1.5), ("GAUSSIAN", 10.0), ("BOX", 1.0)):
+        pixel_filter = PixelFilter(kind, width)
+        assert_agree(*both_ways(pixel_filter.sample, u))
+
+
+def test_sun_sample_agrees(jit):
+    """Sun directions in their cones (engine/lights.py): the compiled loop
+    against the NumPy form, bit for bit, for a half-degree and a wide sun,
+    a delta sun and axes at the poles."""
+    from engine.lights import _sun_sample
+    rng = np.random.default_rng(27)
+    n = 20000
+    axes = np.array([(0.3, -0.5, -0.81), (0.0, 0.0, 1.0), (0.0, 0.0, -1.0), (0.6, 0.0, 0.8)])
+    axes /= np.linalg.norm(axes, axis=1)[:, None]
+    one_minus_cos = np.array([2.0 * np.sin(np.radians(0.25)) ** 2, 0.3, 0.01, 1.0])
+    delta = np.array([False, False, False, True])
+    j = rng.integers(0, 4, n)
+    u1, u2 = rng.random(n), rng.random(n)
+
+    def run():
+        wi, pdf = np.empty((n, 3)), np.empty(n)
+        _sun_sample(j, u1, u2, axes, one_minus_cos, delta, wi, pdf)
+        return wi, pdf
+    assert_agree(*both_ways(run))
+
+
+def test_distribution2d_row_search_agrees(jit):
+    """The column search of Distribution2D within the sampled row: the
+    compiled loop against np.searchsorted over the whole flat CDF, bit for
+    bit, with empty rows and columns, keys at row boundaries, NaN and keys
+    outside their row."""
+    from engine.sampling import Distribution2D, _search_rows
+    rng = np.random.default_rng(29)
+    w = rng.random((40, 70)) ** 4
+    w[5] = 0.0
+    w[:, 10:20] = 0.0
+    dist = Distribution2D(w)
+    n = 30000
+    row = rng.integers(0, 40, n)
+    key = row + np.minimum(rng.random(n), np.nextafter(1.0, 0.0))
+    key[:5] = row[:5]
+    key[5] = np.nan
+    key[6:10] = row[6:10] + 2.5                        # not in its row: the whole-CDF fallback
+
+    def run():
+        out = np.empty(n, np.int64)
+        _search_rows(dist.flat_cdf, row, key, dist.cols, out)
+        return out
+    plain, compiled = both_ways(run)
+    assert_agree(plain, compiled)
+    assert_agree(*both_ways(dist.sample, rng.random(n), rng.random(n)))

@@ -1,0 +1,67 @@
+"""The arithmetic of a light sample's contribution (next-event estimation),
+between the BSDF evaluation and the shadow ray, in one pass over the rows.
+
+``contribution`` gives, per shading point: the MIS weight of the light
+sample (power heuristic against the BSDF's pdf; 1 for delta lights and
+without MIS), the radiance it adds if unoccluded, beta f Le |cos| w /
+(p_select p_light), and whether that is positive anywhere (the rows that
+need a shadow ray).  A sample counts where its pdf is positive and its
+direction leaves on the same side of the geometric and the shading surface
+(lights behind the surface count for transmitting lobes, whose f is 0
+otherwise).  The compiled row loop and the NumPy form agree bit for bit.
+"""
+import numpy as np
+
+from . import kernels
+from .sampling import power_heuristic
+from .vec import column, dot, row_any_positive, rows3
+
+
+def _contribution_numpy(wi_l, wi, ng, light_pdf, p_sel, pdf_b, delta, mis, beta, f, le, contrib, w, live):
+    cos = np.abs(wi_l[:, 2])
+    p_light = p_sel * light_pdf
+    g = dot(wi, ng)
+    ok = (light_pdf > 0) & (cos > 0) & (g != 0) & ((g > 0) == (wi_l[:, 2] > 0))
+    w[:] = np.where(delta, 1.0, power_heuristic(p_light, pdf_b)) if mis else 1.0
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        scale = np.where(ok, cos * w / np.where(ok, p_light, 1.0), 0.0)
+        contrib[:] = beta * f * le * scale[:, None]
+    live[:] = row_any_positive(contrib)
+
+
+@kernels.loop_kernel("void(float64[:, :], float64[:, :], float64[:, :], float64[:], float64[:], float64[:], "
+                     "boolean[:], boolean, float64[:, :], float64[:, :], float64[:, :], float64[:, ::1], "
+                     "float64[::1], boolean[::1])", _contribution_numpy)
+def _contribution_rows(wi_l, wi, ng, light_pdf, p_sel, pdf_b, delta, mis, beta, f, le, contrib, w, live):
+    for i in range(len(wi_l)):
+        z = wi_l[i, 2]
+        cos = abs(z)
+        p_light = p_sel[i] * light_pdf[i]
+        g = (wi[i, 0] * ng[i, 0] + wi[i, 2] * ng[i, 2]) + wi[i, 1] * ng[i, 1]   # einsum's order
+        ok = light_pdf[i] > 0 and cos > 0 and g != 0 and (g > 0) == (z > 0)
+        weight = 1.0
+        if mis and not delta[i]:
+            a2 = p_light * p_light
+            b = pdf_b[i]
+            weight = a2 / (a2 + b * b)
+            if not np.isfinite(weight):   # sampling.power_heuristic's rule
+                weight = 1.0 if np.isinf(p_light) and np.isfinite(b) else 0.0
+        w[i] = weight
+        scale = cos * weight / p_light if ok else 0.0
+        any_positive = False
+        for k in range(3):
+            c = beta[i, k] * f[i, k] * le[i, k] * scale
+            contrib[i, k] = c
+            any_positive = any_positive or c > 0
+        live[i] = any_positive
+
+
+def contribution(wi_l, wi, ng, light_pdf, p_sel, pdf_b, delta, mis, beta, f, le):
+    """(contrib (N, 3), MIS weight (N,), live (N,) bool) of light samples."""
+    n = len(wi_l)
+    wi_l, wi, ng = rows3(wi_l, wi, ng)
+    contrib, w, live = np.empty((n, 3)), np.empty(n), np.empty(n, bool)
+    columns = [column(a, n, np.float64) for a in (light_pdf, p_sel, pdf_b)]
+    _contribution_rows(wi_l, wi, ng, *columns, column(delta, n, bool), bool(mis), *rows3(beta, f, le),
+                       contrib, w, live)
+    return contrib, w, live
