@@ -11,8 +11,12 @@ and prints the standard error of the whole-image figure over the seeds.
 
 bench_cycles takes its variance per sample from ONE render per engine: in
 veach_mis nearly all of it (97-99 %) comes from a few dozen pixels (the highlights of
-the small lights on the smooth plates), whose squared error varies by 2-3x
-from seed to seed, so a single render's ratio moves by tens of percent.
+the small lights on the smooth plates; four pixels of the smallest light's
+highlight on the smoothest plate hold about 40 %), whose squared error varies by 2-3x
+from seed to seed, so a single render's ratio moves by tens of percent: at 128 spp
+one seed's figure ranged 0.6-2.4 for Ember and 0.5-2.0 for Cycles, and bench_cycles'
+1.91x (Ember seed 20 against Cycles seed 19) came out 1.04 +- 0.09 over 64 Ember
+and 48 Cycles seeds (2026-11-26).  Hence the ratio's standard error below.
 """
 import argparse
 import os
@@ -64,6 +68,28 @@ def variance_map(name, engine, cfg, ref, args, folder):
     return total / args.seeds, np.array(per_seed)
 
 
+def standard_error(per_seed):
+    return per_seed.std(ddof=1) / np.sqrt(len(per_seed)) if len(per_seed) > 1 else float('nan')
+
+
+def ratio_error(ember, cycles):
+    """Ratio of the mean per-seed figures and its standard error (first-order
+    propagation; the two engines' seeds are independent)."""
+    e, c = ember.mean(), cycles.mean()
+    ratio = e / max(c, 1e-30)
+    relative = np.hypot(standard_error(ember) / max(e, 1e-30), standard_error(cycles) / max(c, 1e-30))
+    return ratio, ratio * relative
+
+
+def pixels_holding(vmap, share):
+    """How many of the worst pixels hold ``share`` of the image's total."""
+    values = np.sort(vmap.ravel())[::-1]
+    total = values.sum()
+    if total <= 0:
+        return 0
+    return int(np.searchsorted(np.cumsum(values), share * total) + 1)
+
+
 def main(argv=None):
     args = parse_args(argv)
     cfg = dict(bench_cycles.FULL, size=args.size, bounces=args.bounces)
@@ -77,8 +103,10 @@ def main(argv=None):
     print(f"\n{args.scene}, {args.samples} spp, {args.seeds} seeds: variance per sample "
           "(image mean of squared error x spp; share of the image's total in brackets)")
     for engine, (vmap, per_seed) in maps.items():
-        spread = per_seed.std(ddof=1) / np.sqrt(len(per_seed)) if len(per_seed) > 1 else float('nan')
-        print(f"  {engine.lower():6s} whole image {vmap.mean():.4f} +- {spread:.4f} (standard error over seeds)")
+        print(f"  {engine.lower():6s} whole image {vmap.mean():.4f} +- {standard_error(per_seed):.4f} "
+              f"(standard error over seeds); half of it in the {pixels_holding(vmap, 0.5)} worst pixels")
+    ratio, error = ratio_error(maps['EMBER'][1], maps['CYCLES'][1])
+    print(f"  ratio Ember / Cycles {ratio:.2f} +- {error:.2f} (one render's ratio scatters far more)")
     for label, mask in masks.items():
         e, c = (maps[k][0][mask].sum() / pixels for k in ('EMBER', 'CYCLES'))
         print(f"  {label:24s} [{mask.sum():6d} px]: Ember {e:.4f} ({e / maps['EMBER'][0].mean():4.0%}), "

@@ -1,0 +1,124 @@
+"""Ember's variance per sample of a yardstick scene over many seeds, without Blender.
+
+    .venv/bin/python -P tools/variance_seeds.py veach_mis --samples 128 --seeds 64
+    .venv/bin/python -P tools/variance_seeds.py veach_mis --selection all tree --samples 32 --seeds 16
+
+Renders the scene exported by tools/profile_scene.py (cached pickle, 256 px,
+8 bounces) with the engine alone, each seed at the same sample count, and
+prints the variance per sample (per-pixel variance across seeds of the pixel
+means, times the sample count, averaged over the image and the channels),
+its standard error over the seeds, and the thread CPU seconds per 65,536
+paths: their product compares settings by time at equal error.
+
+--bright renders only the pixels where bench_cycles' cached Cycles reference
+is brighter than 1 (veach_mis: 1,172 pixels hold 99 % of the error), which
+makes 64 seeds at 128 spp a minute's work; the figure stays per image pixel.
+Pixel samples never leave their pixel (the filter is importance sampled), so
+a subset of pixels renders exactly as in the full image (its CPU figure is
+that of those pixels' paths, not the image's).
+
+This measures Ember's own spread, the reference's noise and any bias left
+out; tools/variance_regions.py compares with Cycles through Blender (slow:
+eight seeds give a ratio only to +-15-20 % in veach_mis, where a few pixels'
+rare bright samples dominate).
+"""
+import argparse
+import glob
+import os
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, 'tools'))
+REFS = os.path.join(ROOT, 'build', 'bench_refs')
+BATCH = 65536
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('scene', help="a tools/bench_scenes.py name")
+    parser.add_argument('--samples', type=int, default=128)
+    parser.add_argument('--seeds', type=int, default=32)
+    parser.add_argument('--first-seed', type=int, default=1000)
+    parser.add_argument('--selection', nargs='+', default=[None],
+                        help="light selections to compare (uniform, power, tree, all); default: the scene's")
+    parser.add_argument('--bright', action='store_true', help="only pixels the reference shows brighter than 1")
+    return parser.parse_args(argv)
+
+
+def bright_pixels(name, width, height):
+    """Film indices (row 0 at the top) of the pixels above 1 in the cached
+    256-px Cycles reference (stored bottom row first, as Blender's pixels)."""
+    found = sorted(glob.glob(os.path.join(REFS, f'{name}-*-{width}px-8b-*.npy')))
+    if not found:
+        raise SystemExit(f"no cached {width}-px Cycles reference of {name} in {REFS} (tools/bench_cycles.py makes it)")
+    ref = np.load(found[-1])[::-1].reshape(-1, 3)
+    assert len(ref) == width * height
+    return np.flatnonzero(ref.mean(axis=1) > 1.0)
+
+
+def render_seeds(ctx, pixels, samples, seeds, first_seed):
+    """Pixel means (seeds, len(pixels), 3) and the thread CPU seconds spent tracing."""
+    from engine.film import Film
+    from engine.integrator import trace_batch
+    from engine.sampler import Sampler
+    width, height = ctx.camera.width, ctx.camera.height
+    means = np.empty((seeds, len(pixels), 3))
+    cpu = 0.0
+    # Batches of about BATCH paths, whole sample passes each (the renderer's own batch size).
+    passes = max(1, BATCH // len(pixels))
+    for k in range(seeds):
+        ctx.sampler = Sampler(first_seed + k, ctx.settings.sampling_pattern)
+        film = Film(width, height, ())
+        for start in range(0, samples, passes):
+            sample = np.arange(start, min(start + passes, samples), dtype=np.uint32)
+            tile = film.new_tile(int(pixels.min()), int(pixels.max()) + 1)
+            t0 = time.thread_time()
+            trace_batch(ctx, np.tile(pixels, len(sample)), np.repeat(sample, len(pixels)), tile)
+            cpu += time.thread_time() - t0
+            film.merge(tile)
+        means[k] = film.mean[pixels]
+    return means, cpu
+
+
+def summary(means, samples, image_pixels):
+    """Variance per sample of the image and its standard error over seeds."""
+    seeds = len(means)
+    per_seed = ((means - means.mean(axis=0)) ** 2).mean(axis=2).sum(axis=1) * samples / image_pixels
+    per_seed *= seeds / (seeds - 1)   # deviations from the seeds' own mean
+    return per_seed.mean(), per_seed.std(ddof=1) / np.sqrt(seeds)
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    if args.seeds < 2:
+        raise SystemExit("--seeds must be at least 2 (the variance is taken across seeds)")
+    sys.path.insert(0, ROOT)
+    from dataclasses import replace
+    from engine import kernels
+    from engine.blas import single_threaded_blas
+    from engine.render import prepare
+    from profile_scene import load
+    scene, settings = load(args.scene)
+    kernels.configure(True)
+    kernels.wait(900)
+    for selection in args.selection:
+        chosen = replace(settings, light_selection=selection) if selection else settings
+        ctx = prepare(scene, chosen)
+        image_pixels = ctx.camera.width * ctx.camera.height
+        pixels = (bright_pixels(args.scene, ctx.camera.width, ctx.camera.height) if args.bright
+                  else np.arange(image_pixels))
+        with single_threaded_blas():
+            means, cpu = render_seeds(ctx, pixels, args.samples, args.seeds, args.first_seed)
+        v, error = summary(means, args.samples, image_pixels)
+        per_64k = cpu / (args.seeds * args.samples * len(pixels)) * 65536
+        print(f"{args.scene} ({chosen.light_selection}, {args.samples} spp, {args.seeds} seeds, "
+              f"{len(pixels)} px): variance per sample {v:.4f} +- {error:.4f}, "
+              f"{per_64k:.3f} CPU-s per 64k paths, product {v * per_64k:.4f}", flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
