@@ -12,7 +12,9 @@ converged Cycles reference rendered once and cached in build/bench_refs/
 Model per engine and scene (adaptive sampling off): wall time t(n) = t0 + s n
 (least squares over the sample counts: s = seconds per sample pass) and mean
 squared error against the reference MSE(n) = v / n (v = variance per sample,
-after removing the reference's own noise).  "time at equal RMSE" is the time
+after removing the reference's own noise, from the mean MSE of ``--seeds``
+renders at the largest count: one render's is noisy where few pixels hold
+most of the error).  "time at equal RMSE" is the time
 Ember's model needs to reach the MSE Cycles reaches at its largest sample
 count, divided by Cycles' time for that count.  With adaptive sampling on (for
 both, at Cycles' defaults; Ember only when it has ``use_adaptive_sampling``)
@@ -61,6 +63,8 @@ def parse_args(argv):
                         help="write the tables into docs/benchmarks.md (default for full runs)")
     parser.add_argument('--no-docs', dest='docs', action='store_false')
     parser.add_argument('--json', help="also write the raw measurements here")
+    parser.add_argument('--seeds', type=int, default=None,
+                        help="renders (seeds) at the largest count, adaptive off (default 3, quick 1)")
     return parser.parse_args(argv)
 
 
@@ -215,18 +219,30 @@ def reference(name, cfg, folder):
 # ----------------------------------------------------------------------------
 # measuring one engine
 
-def measure(name, engine, counts, cfg, folder, ref, adaptive):
+def measure(name, engine, counts, cfg, folder, ref, adaptive, seeds=1):
+    """Renders at each count; the largest ``seeds`` times (other seeds):
+    one render's MSE is a noisy estimate where a few pixels hold most of
+    the error (Veach MIS: a single 128-spp render's variance per sample
+    ranged 0.6-2.4x its mean over 64 seeds, tools/variance_seeds.py), so
+    the largest count keeps the mean MSE and wall time of its renders."""
     import bench_scenes
     runs = []
     for i, n in enumerate(counts):
-        scene = bench_scenes.SCENES[name][1]()
-        configure(scene, engine, n, 17 + i, cfg, adaptive)
-        image, wall, cpu, stats = render(scene, folder)
-        mse = float(np.mean((image - ref) ** 2))
-        runs.append(dict(samples=n, wall=wall, cpu=cpu, mse=mse, stats=stats,
-                         finite=bool(np.isfinite(image).all())))
-        print(f"  {engine.lower():6s} {n:5d} spp: {wall:7.2f} s, RMSE {mse ** 0.5:.5f}, "
-              f"{cpu / wall:.2f} cores", flush=True)
+        repeats = seeds if i == len(counts) - 1 else 1
+        done = []
+        for k in range(repeats):
+            scene = bench_scenes.SCENES[name][1]()
+            configure(scene, engine, n, 17 + i + 1000 * k, cfg, adaptive)
+            image, wall, cpu, stats = render(scene, folder)
+            mse = float(np.mean((image - ref) ** 2))
+            done.append(dict(samples=n, wall=wall, cpu=cpu, mse=mse, stats=stats,
+                             finite=bool(np.isfinite(image).all())))
+            print(f"  {engine.lower():6s} {n:5d} spp: {wall:7.2f} s, RMSE {mse ** 0.5:.5f}, "
+                  f"{cpu / wall:.2f} cores", flush=True)
+        run = dict(done[0], mse_seeds=[d['mse'] for d in done], finite=all(d['finite'] for d in done))
+        for key in ('wall', 'cpu', 'mse'):
+            run[key] = float(np.mean([d[key] for d in done]))
+        runs.append(run)
     return runs
 
 
@@ -263,7 +279,18 @@ def summarise(name, ember_runs, cycles_runs, ref_spp, cfg):
     ember_time = fe['t0'] + fe['s'] * ember_n
     return row(name, ember_runs, cycles_runs, cfg,
                time_ratio=ember_time / last['wall'], spp_ratio=fe['s'] / max(fc['s'], 1e-9),
-               var_ratio=fe['v'] / fc['v'], ember_spp_needed=ember_n)
+               var_ratio=fe['v'] / fc['v'], var_ratio_se=ratio_se(ember_runs[-1], cycles_runs[-1]),
+               ember_spp_needed=ember_n)
+
+
+def ratio_se(ember, cycles):
+    """Standard error of mean(Ember's MSE) / mean(Cycles' MSE) at the
+    largest count, from the spread over seeds (None with one seed each)."""
+    e, c = np.array(ember.get('mse_seeds', [])), np.array(cycles.get('mse_seeds', []))
+    if len(e) < 2 or len(c) < 2:
+        return None
+    rel = e.var(ddof=1) / len(e) / e.mean() ** 2 + c.var(ddof=1) / len(c) / c.mean() ** 2
+    return float(e.mean() / c.mean() * np.sqrt(rel))
 
 
 def summarise_adaptive(name, ember_runs, cycles_runs, ref_spp, cfg):
@@ -317,7 +344,8 @@ def table(rows, adaptive):
         if not adaptive:
             # A slope lost in the fixed cost (tiny frames, busy machine) has no ratio.
             spp = f"{r['spp_ratio']:.1f}x" if 0 < r['spp_ratio'] < 1e3 else "-"
-            cells += [spp, f"{r['var_ratio']:.2f}x"]
+            se = r.get('var_ratio_se')
+            cells += [spp, f"{r['var_ratio']:.2f}x" + (f" +- {se:.2f}" if se is not None else "")]
         cells += [f"{r['ember_cores']:.2f} ({r['cycles_cores']:.2f})",
                   f"{r['ember_paths_per_second'] / 1e6:.3f} M ({r['cycles_paths_per_second'] / 1e6:.2f} M)",
                   f"{100 * r['embree_share']:.0f} %"]
@@ -341,7 +369,7 @@ def write_docs(text):
         handle.write(doc)
 
 
-def report(rows, adaptive_rows, cfg, quick, adaptive_note, jit_note):
+def report(rows, adaptive_rows, cfg, quick, adaptive_note, jit_note, seeds=1):
     import bpy
     import numpy
     when = time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())
@@ -351,7 +379,9 @@ def report(rows, adaptive_rows, cfg, quick, adaptive_note, jit_note):
              f"default light selection; Ember at {', '.join(map(str, cfg['ember']))} spp, Cycles at "
              f"{', '.join(map(str, cfg['cycles']))} spp, reference Cycles {cfg['reference']} spp. "
              f"Times are the wall time of `bpy.ops.render.render()` (export/sync included). {jit_note}.",
-             "", "Adaptive sampling off:", "", table(rows, False)]
+             "", f"Adaptive sampling off ({seeds} render{'s' if seeds > 1 else ''} of each engine at the "
+             f"largest count, their mean MSE; +- the variance ratio's standard error over those seeds):",
+             "", table(rows, False)]
     if adaptive_rows:
         lines += ["", "Adaptive sampling on for both (Cycles' defaults: threshold 0.01, min samples auto):",
                   "", table(adaptive_rows, True)]
@@ -386,8 +416,9 @@ def main(argv=None):
         for name in names:
             print(f"{name}:", flush=True)
             ref, ref_spp = reference(name, cfg, folder)
-            ember = measure(name, 'EMBER', cfg['ember'], cfg, folder, ref, False)
-            cycles = measure(name, 'CYCLES', cfg['cycles'], cfg, folder, ref, False)
+            seeds = args.seeds or (1 if args.quick else 3)
+            ember = measure(name, 'EMBER', cfg['ember'], cfg, folder, ref, False, seeds)
+            cycles = measure(name, 'CYCLES', cfg['cycles'], cfg, folder, ref, False, seeds)
             rows.append(summarise(name, ember, cycles, ref_spp, cfg))
             raw[name] = dict(ember=ember, cycles=cycles)
             if adaptive:
@@ -399,7 +430,7 @@ def main(argv=None):
     # Other jobs on the machine skew wall times and "cores used": say how busy it was.
     jit_note += (f". Load average {load_start:.1f} at the start, {os.getloadavg()[0]:.1f} at the end "
                  f"(on {os.cpu_count()} cores; above that, both engines shared the CPU with other jobs)")
-    text = report(rows, adaptive_rows, cfg, args.quick, note, jit_note)
+    text = report(rows, adaptive_rows, cfg, args.quick, note, jit_note, args.seeds or (1 if args.quick else 3))
     print()
     print(text)
     if args.docs if args.docs is not None else not args.quick:
