@@ -31,7 +31,7 @@ from .geometry import VIS_ALL, visibility_bits
 from .lightproxy import LightProxies
 from .lighttree import LightTree, emitter_bounds, triangle_tree
 from .scene import AreaLight, PointLight, SpotLight, SunLight
-from .vec import column, count, dot, frame, subset, to_world
+from .vec import column, count, dot, frame, rows3, subset, to_world
 
 POINT, SUN, AREA, MESH, ENV = 0, 1, 2, 3, 4
 
@@ -311,41 +311,12 @@ class _PointLights:
         return np.where(self.spot[j], smoothstep(x), 1.0)
 
     def sample(self, out, idx, j, p, u1, u2, u3):
-        c = self.pos[j]
-        r = self.radius[j]
-        dvec = p - c
-        d2 = dot(dvec, dvec)
-        dist = np.sqrt(d2)
-        light_n = dvec / np.maximum(dist, 1e-30)[:, None]
-        wi = -light_n
-        t = dist.copy()
-        pdf = np.ones(len(p))
-        delta = r <= 0
-        Le = self.L[j] / np.where(delta, np.maximum(d2, 1e-30), 1.0)[:, None]
-
-        sph = self.sphere[j] & ~delta
-        inside = sph & (d2 <= r * r)
-        s = np.nonzero(sph & ~inside)[0]
-        if len(s):
-            omc = sin_sq_to_one_minus_cos(r[s] ** 2 / d2[s])
-            local, pdf[s] = uniform_cone(u1[s], u2[s], omc)
-            tt, bb = frame(-light_n[s])
-            wi[s] = to_world(local, tt, bb, -light_n[s])
-            cos_t = local[:, 2]
-            t[s] = dist[s] * cos_t - np.sqrt(np.maximum(0.0, r[s] ** 2 - d2[s] * (1.0 - cos_t ** 2)))
-        dsk = np.nonzero(~self.sphere[j] & ~delta)[0]
-        if len(dsk):
-            x, y = concentric_disk(u1[dsk], u2[dsk])
-            tt, bb = frame(light_n[dsk])
-            q = c[dsk] + (x[:, None] * tt + y[:, None] * bb) * r[dsk, None]
-            v = q - p[dsk]
-            t[dsk] = np.linalg.norm(v, axis=1)
-            wi[dsk] = v / np.maximum(t[dsk], 1e-30)[:, None]
-            cos_l = np.abs(dot(light_n[dsk], -wi[dsk]))
-            pdf[dsk] = t[dsk] ** 2 / (np.pi * r[dsk] ** 2 * np.maximum(cos_l, 1e-30))
-        pdf[inside] = 0.0
-        Le *= self._spot_factor(j, -wi)[:, None]
-        out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, Le
+        n = len(p)
+        wi, t, le, pdf, delta = np.empty((n, 3)), np.empty(n), np.empty((n, 3)), np.empty(n), np.empty(n, bool)
+        _point_sample(column(j, n, np.int64), rows3(p, p)[0] if n else np.empty((0, 3)),
+                      column(u1, n, np.float64), column(u2, n, np.float64), self.pos, self.radius, self.sphere,
+                      self.L, self.spot, self.dir, self.cos_half, self.smooth, wi, t, le, pdf, delta)
+        out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, le
         out.pdf[idx], out.delta[idx] = pdf, delta
 
     def nearest(self, o, d, t, ray_bits, light_bits):
@@ -363,6 +334,130 @@ class _PointLights:
             j = index[rows]
             Le[rows] = self.L[j] * self._spot_factor(j, -d[rows])[:, None]
         return hit_t, index, Le, pdf
+
+
+def _point_sample_numpy(j, p, u1, u2, pos, radius, sphere, L, spot, sdir, cos_half, smooth,
+                        wi_out, t_out, le_out, pdf_out, delta_out):
+    c = pos[j]
+    r = radius[j]
+    dvec = p - c
+    d2 = dot(dvec, dvec)
+    dist = np.sqrt(d2)
+    light_n = dvec / np.maximum(dist, 1e-30)[:, None]
+    wi = -light_n
+    t = dist.copy()
+    pdf = np.ones(len(p))
+    delta = r <= 0
+    Le = L[j] / np.where(delta, np.maximum(d2, 1e-30), 1.0)[:, None]
+    sph = sphere[j] & ~delta
+    inside = sph & (d2 <= r * r)
+    s = np.nonzero(sph & ~inside)[0]
+    if len(s):
+        omc = sin_sq_to_one_minus_cos(r[s] ** 2 / d2[s])
+        local, pdf[s] = uniform_cone(u1[s], u2[s], omc)
+        tt, bb = frame(-light_n[s])
+        wi[s] = to_world(local, tt, bb, -light_n[s])
+        cos_t = local[:, 2]
+        t[s] = dist[s] * cos_t - np.sqrt(np.maximum(0.0, r[s] ** 2 - d2[s] * (1.0 - cos_t ** 2)))
+    dsk = np.nonzero(~sphere[j] & ~delta)[0]
+    if len(dsk):
+        x, y = concentric_disk(u1[dsk], u2[dsk])
+        tt, bb = frame(light_n[dsk])
+        q = c[dsk] + (x[:, None] * tt + y[:, None] * bb) * r[dsk, None]
+        v = q - p[dsk]
+        t[dsk] = np.linalg.norm(v, axis=1)
+        wi[dsk] = v / np.maximum(t[dsk], 1e-30)[:, None]
+        cos_l = np.abs(dot(light_n[dsk], -wi[dsk]))
+        pdf[dsk] = t[dsk] ** 2 / (np.pi * r[dsk] ** 2 * np.maximum(cos_l, 1e-30))
+    pdf[inside] = 0.0
+    # Spot attenuation towards the point (vec.dot's order on unit-stride rows).
+    with np.errstate(invalid="ignore"):
+        x = (dot(-wi, sdir[j]) - cos_half[j]) * smooth[j]   # inf * 0 at a hard edge
+    x = np.where(np.isnan(x), 0.0, x)
+    Le *= np.where(spot[j], smoothstep(x), 1.0)[:, None]
+    wi_out[:], t_out[:], le_out[:], pdf_out[:], delta_out[:] = wi, t, Le, pdf, delta
+
+
+@loop_kernel("void(int64[:], float64[:, :], float64[:], float64[:], float64[:, ::1], float64[::1], boolean[::1], "
+             "float64[:, ::1], boolean[::1], float64[:, ::1], float64[::1], float64[::1], float64[:, ::1], "
+             "float64[::1], float64[:, ::1], float64[::1], boolean[::1])", _point_sample_numpy)
+def _point_sample(j, p, u1, u2, pos, radius, sphere, L, spot, sdir, cos_half, smooth,
+                  wi_out, t_out, le_out, pdf_out, delta_out):
+    """A point on each ray's point or spot light: the cone of a sphere
+    light seen from p, the disk facing p (soft falloff), or the centre
+    (radius 0: delta), as the NumPy form computes it term by term."""
+    for i in range(len(j)):
+        k = j[i]
+        r = radius[k]
+        dx, dy, dz = p[i, 0] - pos[k, 0], p[i, 1] - pos[k, 1], p[i, 2] - pos[k, 2]
+        d2 = (dx * dx + dz * dz) + dy * dy
+        dist = np.sqrt(d2)
+        m = max(dist, 1e-30)
+        n0, n1, n2 = dx / m, dy / m, dz / m                  # light_n: from the light to p
+        w0, w1, w2 = -n0, -n1, -n2
+        t = dist
+        pdf = 1.0
+        delta = r <= 0
+        scale = max(d2, 1e-30) if delta else 1.0
+        le0, le1, le2 = L[k, 0] / scale, L[k, 1] / scale, L[k, 2] / scale
+        if sphere[k] and not delta:
+            if d2 <= r * r:
+                pdf = 0.0                                     # inside the sphere
+            else:
+                x = r * r / d2
+                omc = 0.5 * x + 0.125 * x * x if x < 0.0004 else 1.0 - np.sqrt(max(0.0, 1.0 - x))
+                omcu = u1[i] * omc
+                cos_t = 1.0 - omcu
+                sin_t = np.sqrt(max(0.0, omcu * (2.0 - omcu)))
+                phi = TWO_PI * u2[i]
+                lx, ly = sin_t * np.cos(phi), sin_t * np.sin(phi)
+                pdf = 1.0 / (TWO_PI * omc)
+                a0, a1, a2 = -n0, -n1, -n2                    # the cone's axis: towards the light
+                sign = 1.0 if a2 >= 0 else -1.0
+                fa = -1.0 / (sign + a2)
+                fb = a0 * a1 * fa
+                s0, s1, s2 = 1.0 + sign * (a0 * a0) * fa, sign * fb, -sign * a0
+                t0, t1, t2 = fb, sign + (a1 * a1) * fa, -a1
+                w0 = (lx * s0 + ly * t0) + cos_t * a0
+                w1 = (lx * s1 + ly * t1) + cos_t * a1
+                w2 = (lx * s2 + ly * t2) + cos_t * a2
+                t = dist * cos_t - np.sqrt(max(0.0, r * r - d2 * (1.0 - cos_t * cos_t)))
+        elif not sphere[k] and not delta:
+            a = 2.0 * u1[i] - 1.0
+            b = 2.0 * u2[i] - 1.0
+            if a == 0 and b == 0:
+                rr, phi = b, 0.0
+            elif abs(a) > abs(b):
+                rr, phi = a, (np.pi / 4) * (b / a)
+            else:
+                rr, phi = b, np.pi / 2 - (np.pi / 4) * (a / b)
+            x, y = rr * np.cos(phi), rr * np.sin(phi)
+            sign = 1.0 if n2 >= 0 else -1.0
+            fa = -1.0 / (sign + n2)
+            fb = n0 * n1 * fa
+            s0, s1, s2 = 1.0 + sign * (n0 * n0) * fa, sign * fb, -sign * n0
+            t0, t1, t2 = fb, sign + (n1 * n1) * fa, -n1
+            v0 = (pos[k, 0] + (x * s0 + y * t0) * r) - p[i, 0]
+            v1 = (pos[k, 1] + (x * s1 + y * t1) * r) - p[i, 1]
+            v2 = (pos[k, 2] + (x * s2 + y * t2) * r) - p[i, 2]
+            t = np.sqrt((v0 * v0 + v1 * v1) + v2 * v2)
+            mt = max(t, 1e-30)
+            w0, w1, w2 = v0 / mt, v1 / mt, v2 / mt
+            cos_l = abs((n0 * -w0 + n2 * -w2) + n1 * -w1)
+            pdf = t * t / (np.pi * (r * r) * max(cos_l, 1e-30))
+        fac = 1.0
+        if spot[k]:
+            cos = (-w0 * sdir[k, 0] + -w2 * sdir[k, 2]) + -w1 * sdir[k, 1]
+            x = (cos - cos_half[k]) * smooth[k]
+            if x != x:
+                x = 0.0
+            x = min(max(x, 0.0), 1.0)
+            fac = x * x * (3.0 - 2.0 * x)
+        wi_out[i, 0], wi_out[i, 1], wi_out[i, 2] = w0, w1, w2
+        t_out[i] = t
+        le_out[i, 0], le_out[i, 1], le_out[i, 2] = le0 * fac, le1 * fac, le2 * fac
+        pdf_out[i] = pdf
+        delta_out[i] = delta
 
 
 def _point_hit(o, d, c, r, sphere):
