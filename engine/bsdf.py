@@ -849,7 +849,26 @@ def _simple(lobes):
 
 def _sample_single(lobes, wo, u1, u2):
     """``sample`` for one-lobe materials: the weight in closed form, without
-    evaluating the BSDF again (diffuse: colour; GGX: F G2 / G1(wo))."""
+    evaluating the BSDF again (diffuse: colour; GGX: F G2 / G1(wo)); a row
+    loop where no normal was moved (bump shadowing stays NumPy)."""
+    if lobes.smooth_n is not None:
+        return _sample_single_numpy(lobes, wo, u1, u2)
+    n = len(wo)
+    wi, weight, pdf, delta = np.empty((n, 3)), np.empty((n, 3)), np.empty(n), np.empty(n, bool)
+    _single_kernel(_lobe_arrays(lobes), _c(wo), _c(u1), _c(u2), wi, weight, pdf, delta)
+    return wi, weight, pdf, delta
+
+
+def _single_twin(lobes, wo, u1, u2, wi, weight, pdf, delta):
+    wi[:], weight[:], pdf[:], delta[:] = _sample_single_numpy(_lobes_of(lobes), wo, u1, u2)
+
+
+_single_kernel = _Loop(loops.single_sample_loop,
+                       f"void({_LOBES}, float64[:, ::1], float64[::1], float64[::1], float64[:, ::1], "
+                       "float64[:, ::1], float64[::1], boolean[::1])", _single_twin)
+
+
+def _sample_single_numpy(lobes, wo, u1, u2):
     n = len(wo)
     kind, color = lobes.kind[:, 0], lobes.color[:, 0]
     wi = np.zeros((n, 3))

@@ -650,6 +650,60 @@ def _glass_choice(refraction, f0r, f0g, f0b, ttr, ttg, ttb, cos, eta):
     return (r / (r + t) if r + t > 0 else 1.0), cos_t
 
 
+def single_sample_loop(lobes, wo, u1, u2, wi, weight, pdf, delta):
+    """bsdf._sample_single (one diffuse, glossy or mirror lobe, no moved
+    normal) into wi, weight, pdf, delta: the weight in closed form."""
+    kind, color, alpha, fresnel, ior, f0, edge = lobes[0], lobes[1], lobes[2], lobes[3], lobes[4], lobes[5], lobes[6]
+    for i in range(len(wo)):
+        wox, woy, woz = wo[i, 0], wo[i, 1], wo[i, 2]
+        kd = kind[i, 0]
+        up = woz > COS_EPS
+        wx, wy, wz = 0.0, 0.0, 1.0
+        w0, w1, w2 = 0.0, 0.0, 0.0
+        p = 0.0
+        if up and kd == DIFFUSE:
+            r = np.sqrt(u1[i])
+            phi = TWO_PI * u2[i]
+            wx, wy, wz = r * np.cos(phi), r * np.sin(phi), np.sqrt(max(0.0, 1.0 - u1[i]))
+            p = wz * INV_PI
+            if p > 0:
+                w0, w1, w2 = color[i, 0, 0], color[i, 0, 1], color[i, 0, 2]
+        elif up and kd == GLOSSY:
+            a = alpha[i, 0]
+            hx, hy, hz = _vndf(wox, woy, woz, a, u1[i], u2[i])
+            cos_oh = (wox * hx + woz * hz) + woy * hy        # einsum's order
+            wx, wy, wz = 2.0 * cos_oh * hx - wox, 2.0 * cos_oh * hy - woy, 2.0 * cos_oh * hz - woz
+            ok = wz > COS_EPS
+            lam_o = ggx_lambda(woz, a)
+            g1 = 1.0 / (1.0 + lam_o)
+            g2 = 1.0 / (1.0 + lam_o + ggx_lambda(wz, a))
+            p = ggx_d(hz, a) * g1 / (4.0 * woz) if ok else 0.0
+            ratio = g2 / g1 if ok else 0.0
+            w0, w1, w2 = _single_fresnel(i, fresnel, color, f0, edge, ior, cos_oh, ratio)
+        elif up and kd == MIRROR:
+            wx, wy, wz = wox * -1.0, woy * -1.0, woz * 1.0
+            w0, w1, w2 = _single_fresnel(i, fresnel, color, f0, edge, ior, woz, 1.0)
+            p = 1.0
+        wi[i, 0], wi[i, 1], wi[i, 2] = wx, wy, wz
+        weight[i, 0], weight[i, 1], weight[i, 2] = w0, w1, w2
+        pdf[i] = p
+        delta[i] = up and kd == MIRROR
+
+
+@helper
+def _single_fresnel(i, fresnel, color, f0, edge, ior, cos, ratio):
+    """col F(cos) ratio per channel, col = 1 for the legacy Schlick mode
+    (its colour is F0), as bsdf._sample_single."""
+    code = fresnel[i, 0]
+    s = _fresnel_s(code, ior[i, 0], cos)
+    out0 = _fresnel(code, color[i, 0, 0], f0[i, 0, 0], edge[i, 0, 0], s, cos)
+    out1 = _fresnel(code, color[i, 0, 1], f0[i, 0, 1], edge[i, 0, 1], s, cos)
+    out2 = _fresnel(code, color[i, 0, 2], f0[i, 0, 2], edge[i, 0, 2], s, cos)
+    if code == F_SCHLICK:
+        return 1.0 * out0 * ratio, 1.0 * out1 * ratio, 1.0 * out2 * ratio
+    return color[i, 0, 0] * out0 * ratio, color[i, 0, 1] * out1 * ratio, color[i, 0, 2] * out2 * ratio
+
+
 def finish_sample_loop(wo, wi, smooth, fs, ps, weight, pdf):
     """bsdf._finish_numpy: smooth samples' weight and pdf from eval_pdf's f, pdf."""
     for i in range(len(wo)):
