@@ -100,17 +100,15 @@ class PixelFilter:
         self.slope = np.diff(self.edges) / np.where(np.diff(self.cdf) > 0, np.diff(self.cdf), 1.0)
         # Guide table: the bin holding v = g / FILTER_TABLE_SIZE.  A v in
         # cell g lies in bin guide[g] or a later one up to guide[g + 1].
-        self.guide = self._bin(np.arange(FILTER_TABLE_SIZE + 1) / FILTER_TABLE_SIZE)
-
-    def _bin(self, v):
-        return _last_bin_at_most(self.cdf, v)
+        self.guide = _last_bin_at_most(self.cdf, np.arange(FILTER_TABLE_SIZE + 1) / FILTER_TABLE_SIZE)
 
     def sample(self, u):
         """Offsets in pixels from one uniform per sample (sign from its low
         bit).  The inverse CDF as np.interp(v, cdf, edges) computes it, bit
         for bit, but the bin comes from the guide table: one comparison for
         nearly every v instead of a binary search over 4096 bins."""
-        u = column(np.atleast_1d(u), len(np.atleast_1d(u)), np.float64)
+        u = np.atleast_1d(u)
+        u = column(u, len(u), np.float64)
         out = np.empty(len(u))
         _filter_sample(u, self.guide, self.cdf, self.slope, self.edges, out)
         return out
