@@ -9,7 +9,7 @@ the view axis as Cycles does.
 import numpy as np
 
 from . import kernels
-from .sampling import concentric_disk
+from .sampling import concentric_disk, upper_bound
 from .vec import column
 
 FILTER_TABLE_SIZE = 4096
@@ -50,14 +50,7 @@ def _filter_sample(u, guide, cdf, slope, edges, out):
         j = guide[cell]
         span = guide[cell + 1] - j
         if span > 1:
-            lo, hi = 0, len(cdf)   # searchsorted(side="right"): the first k with cdf[k] > v
-            while lo < hi:
-                mid = (lo + hi) // 2
-                if cdf[mid] <= v:
-                    lo = mid + 1
-                else:
-                    hi = mid
-            j = min(lo - 1, last)
+            j = min(upper_bound(cdf, v, 0, len(cdf)) - 1, last)
         elif span == 1 and cdf[min(j + 1, FILTER_TABLE_SIZE)] <= v:
             j = min(j + 1, last)
         else:

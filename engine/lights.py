@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kernels import helper, kernel, loop_kernel, where
-from .sampling import TWO_PI
+from .sampling import TWO_PI, cone_point
 from .sampling import (Distribution1D, concentric_disk, rectangle_frame, rectangle_solid_angle,
                        sin_sq_to_one_minus_cos, spherical_rectangle_warp, spherical_triangle,
                        triangle_solid_angle, uniform_cone, uniform_cone_pdf, uniform_triangle)
@@ -31,7 +31,7 @@ from .geometry import VIS_ALL, visibility_bits
 from .lightproxy import LightProxies
 from .lighttree import LightTree, emitter_bounds, triangle_tree
 from .scene import AreaLight, PointLight, SpotLight, SunLight
-from .vec import column, count, dot, frame, rows3, subset, to_world
+from .vec import column, count, dot, frame, frame_of, rows3, subset, to_world
 
 POINT, SUN, AREA, MESH, ENV = 0, 1, 2, 3, 4
 
@@ -406,18 +406,10 @@ def _point_sample(j, p, u1, u2, pos, radius, sphere, L, spot, sdir, cos_half, sm
             else:
                 x = r * r / d2
                 omc = 0.5 * x + 0.125 * x * x if x < 0.0004 else 1.0 - np.sqrt(max(0.0, 1.0 - x))
-                omcu = u1[i] * omc
-                cos_t = 1.0 - omcu
-                sin_t = np.sqrt(max(0.0, omcu * (2.0 - omcu)))
-                phi = TWO_PI * u2[i]
-                lx, ly = sin_t * np.cos(phi), sin_t * np.sin(phi)
+                lx, ly, cos_t = cone_point(u1[i], u2[i], omc)
                 pdf = 1.0 / (TWO_PI * omc)
                 a0, a1, a2 = -n0, -n1, -n2                    # the cone's axis: towards the light
-                sign = 1.0 if a2 >= 0 else -1.0
-                fa = -1.0 / (sign + a2)
-                fb = a0 * a1 * fa
-                s0, s1, s2 = 1.0 + sign * (a0 * a0) * fa, sign * fb, -sign * a0
-                t0, t1, t2 = fb, sign + (a1 * a1) * fa, -a1
+                s0, s1, s2, t0, t1, t2 = frame_of(a0, a1, a2)
                 w0 = (lx * s0 + ly * t0) + cos_t * a0
                 w1 = (lx * s1 + ly * t1) + cos_t * a1
                 w2 = (lx * s2 + ly * t2) + cos_t * a2
@@ -432,11 +424,7 @@ def _point_sample(j, p, u1, u2, pos, radius, sphere, L, spot, sdir, cos_half, sm
             else:
                 rr, phi = b, np.pi / 2 - (np.pi / 4) * (a / b)
             x, y = rr * np.cos(phi), rr * np.sin(phi)
-            sign = 1.0 if n2 >= 0 else -1.0
-            fa = -1.0 / (sign + n2)
-            fb = n0 * n1 * fa
-            s0, s1, s2 = 1.0 + sign * (n0 * n0) * fa, sign * fb, -sign * n0
-            t0, t1, t2 = fb, sign + (n1 * n1) * fa, -n1
+            s0, s1, s2, t0, t1, t2 = frame_of(n0, n1, n2)
             v0 = (pos[k, 0] + (x * s0 + y * t0) * r) - p[i, 0]
             v1 = (pos[k, 1] + (x * s1 + y * t1) * r) - p[i, 1]
             v2 = (pos[k, 2] + (x * s2 + y * t2) * r) - p[i, 2]
@@ -599,16 +587,8 @@ def _sun_sample(j, u1, u2, axes, one_minus_cos, delta, wi, pdf):
             wi[i, 0], wi[i, 1], wi[i, 2] = n0, n1, n2
             pdf[i] = 1.0
             continue
-        omc = u1[i] * one_minus_cos[k]
-        cos_t = 1.0 - omc
-        sin_t = np.sqrt(max(0.0, omc * (2.0 - omc)))
-        phi = TWO_PI * u2[i]
-        x, y = sin_t * np.cos(phi), sin_t * np.sin(phi)
-        sign = 1.0 if n2 >= 0 else -1.0
-        a = -1.0 / (sign + n2)
-        b = n0 * n1 * a
-        s0, s1, s2 = 1.0 + sign * (n0 * n0) * a, sign * b, -sign * n0
-        t0, t1, t2 = b, sign + (n1 * n1) * a, -n1
+        x, y, cos_t = cone_point(u1[i], u2[i], one_minus_cos[k])
+        s0, s1, s2, t0, t1, t2 = frame_of(n0, n1, n2)
         wi[i, 0] = (x * s0 + y * t0) + cos_t * n0
         wi[i, 1] = (x * s1 + y * t1) + cos_t * n1
         wi[i, 2] = (x * s2 + y * t2) + cos_t * n2

@@ -271,13 +271,29 @@ def _search_rows(flat_cdf, row, key, cols, out):
             continue
         if not (0 <= lo < len(flat_cdf) and flat_cdf[hi - 1] > v and (lo == 0 or flat_cdf[lo - 1] <= v)):
             lo, hi = 0, len(flat_cdf)   # outside its row (never for keys made by sample): search all
-        while lo < hi:
-            mid = (lo + hi) // 2
-            if flat_cdf[mid] <= v:
-                lo = mid + 1
-            else:
-                hi = mid
-        out[i] = lo
+        out[i] = upper_bound(flat_cdf, v, lo, hi)
+
+
+@helper
+def upper_bound(a, v, lo, hi):
+    """np.searchsorted(a, v, side="right") within a[lo:hi] (sorted): the
+    first k in [lo, hi) with a[k] > v, hi if none."""
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if a[mid] <= v:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@helper
+def cone_point(u1, u2, one_minus_cos_max):
+    """``uniform_cone``'s direction (x, y, cos) for one sample in compiled loops."""
+    omc = u1 * one_minus_cos_max
+    sin_t = np.sqrt(max(0.0, omc * (2.0 - omc)))
+    phi = TWO_PI * u2
+    return sin_t * np.cos(phi), sin_t * np.sin(phi), 1.0 - omc
 
 
 class Distribution2D:

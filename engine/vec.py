@@ -59,15 +59,20 @@ def _frame_numpy(n, s, t):
 # values as their NumPy forms, bit for bit (einsum sums x0 + x2 first, then
 # x1, where rows have unit stride: the loops add in that order), without an (N,) temporary per product.
 
+@kernels.helper
+def frame_of(n0, n1, n2):
+    """``frame`` of one unit normal in compiled loops: s0, s1, s2, t0, t1, t2,
+    rounded as _frame_numpy rounds them."""
+    sign = 1.0 if n2 >= 0 else -1.0
+    a = -1.0 / (sign + n2)
+    b = n0 * n1 * a
+    return 1.0 + sign * (n0 * n0) * a, sign * b, -sign * n0, b, sign + (n1 * n1) * a, -n1
+
+
 @kernels.loop_kernel("void(float64[:, :], float64[:, ::1], float64[:, ::1])", _frame_numpy)
 def _frame_rows(n, s, t):
     for i in range(len(n)):
-        n0, n1, n2 = n[i, 0], n[i, 1], n[i, 2]
-        sign = 1.0 if n2 >= 0 else -1.0
-        a = -1.0 / (sign + n2)
-        b = n0 * n1 * a
-        s[i, 0], s[i, 1], s[i, 2] = 1.0 + sign * (n0 * n0) * a, sign * b, -sign * n0
-        t[i, 0], t[i, 1], t[i, 2] = b, sign + (n1 * n1) * a, -n1
+        s[i, 0], s[i, 1], s[i, 2], t[i, 0], t[i, 1], t[i, 2] = frame_of(n[i, 0], n[i, 1], n[i, 2])
 
 
 def frame(n):
