@@ -313,7 +313,7 @@ class _PointLights:
     def sample(self, out, idx, j, p, u1, u2, u3):
         n = len(p)
         wi, t, le, pdf, delta = np.empty((n, 3)), np.empty(n), np.empty((n, 3)), np.empty(n), np.empty(n, bool)
-        _point_sample(column(j, n, np.int64), rows3(p, p)[0] if n else np.empty((0, 3)),
+        _point_sample(column(j, n, np.int64), rows3(p)[0],
                       column(u1, n, np.float64), column(u2, n, np.float64), self.pos, self.radius, self.sphere,
                       self.L, self.spot, self.dir, self.cos_half, self.smooth, wi, t, le, pdf, delta)
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, le
