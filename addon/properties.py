@@ -7,14 +7,19 @@ own ``scene.render.film_transparent`` and is not duplicated here.
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
 
-# The light tree is the default, as in Cycles: with one light it costs
-# nothing, with many it lowers the noise several times.
+# Automatic is the default: every light at every vertex with a few lights
+# (on glossy surfaces far less noise for a few more shadow rays), the light
+# tree otherwise, as Cycles (with one light the tree costs nothing, with many
+# it lowers the noise several times).  Numbered: files store the number, and
+# AUTO came last.
 LIGHT_SELECTION_ITEMS = (
+    ('AUTO', "Automatic", "Every light at every vertex with 2 to 4 lights and no emissive mesh, "
+     "else the light tree", 4),
     ('TREE', "Light Tree", "Pick one light per vertex by its estimated contribution there "
-     "(power, distance and orientation): far less noise with many lights"),
-    ('POWER', "Power", "Pick one light per vertex, proportional to its power"),
-    ('UNIFORM', "Uniform", "Pick one light per vertex, every light equally likely"),
-    ('ALL', "All Lights", "Sample every light at every vertex (slower, less noise with few lights)"),
+     "(power, distance and orientation): far less noise with many lights", 0),
+    ('POWER', "Power", "Pick one light per vertex, proportional to its power", 1),
+    ('UNIFORM', "Uniform", "Pick one light per vertex, every light equally likely", 2),
+    ('ALL', "All Lights", "Sample every light at every vertex (slower, less noise with few lights)", 3),
 )
 
 STRATEGY_ITEMS = (
@@ -85,7 +90,7 @@ class EmberRenderSettings(bpy.types.PropertyGroup):
         default=8, min=0, max=1024)
     light_selection: EnumProperty(
         name="Light Selection", description="How a light is chosen for next-event estimation",
-        items=LIGHT_SELECTION_ITEMS, default='TREE')
+        items=LIGHT_SELECTION_ITEMS, default='AUTO')
     mis_compensation: BoolProperty(
         name="World MIS Compensation",
         description="Sample an HDRI world by its radiance above the mean (Karlik et al. 2019): "

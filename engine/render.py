@@ -10,6 +10,7 @@ whatever the resolution.  Passes overlap (a thread that ends one early starts
 the next) and tiles merge in planned order, so images do not depend on timing.
 """
 import collections
+import dataclasses
 import os
 import threading
 import time
@@ -79,6 +80,8 @@ def prepare(scene, settings):
     materials = MaterialTable(material_table(scene))
     lights = LightSet(scene, tris, materials, settings.light_selection,
                       env_compensation=settings.mis_compensation and settings.strategy == "mis")
+    # 'auto' becomes the selection the lights chose, for the integrator.
+    settings = dataclasses.replace(settings, light_selection=lights.strategy)
     try:
         camera = CameraModel(scene.camera, PixelFilter(settings.filter_type, settings.filter_width))
     except ValueError as exc:

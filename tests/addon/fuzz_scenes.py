@@ -461,7 +461,7 @@ def many_lights(scene, rng, folder, count=10_000):
         obj.location = positions[k]
         collection.objects.link(obj)
     scene.ember.samples = 1
-    scene.ember.light_selection = str(rng.choice(['POWER', 'TREE', 'UNIFORM']))
+    scene.ember.light_selection = str(rng.choice(['AUTO', 'POWER', 'TREE', 'UNIFORM']))
     return []
 
 

@@ -50,6 +50,7 @@ def test_blender_panels_show_for_ember(factory_scene):
 
 def test_render_settings_follow_scene(factory_scene):
     ember = factory_scene.ember
+    assert scene_export.render_settings(factory_scene).light_selection == 'auto'   # the default
     ember.samples, ember.seed, ember.max_bounces, ember.clamp = 7, 3, 4, 2.5
     ember.light_selection, ember.strategy, ember.filter_type = 'ALL', 'BSDF', 'BOX'
     ember.filter_width, ember.time_limit = 0.5, 12.0

@@ -125,7 +125,7 @@ def test_mutation_dropped_cosine_is_caught(monkeypatch):
         test_disk_light_irradiance("light")
 
 
-@pytest.mark.parametrize("selection", ["power", "uniform", "all"])
+@pytest.mark.parametrize("selection", ["power", "uniform", "all", "auto"])
 def test_sphere_light_irradiance(selection):
     r_light, d, P = 0.25, 1.0, 30.0
     light = PointLight((0, 0, d), (P, P, P), radius=r_light, soft_falloff=False)

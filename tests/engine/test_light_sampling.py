@@ -382,6 +382,27 @@ def tree_set(count=300):
     return make_light_set(lts, meshes, instances, materials, "tree")[0]
 
 
+def test_auto_selection_samples_every_light_only_when_few_and_no_mesh():
+    """'auto': every light per vertex with 2-4 lights and no emissive mesh,
+    else the light tree; prepare() hands the integrator the resolved choice."""
+    from engine.render import prepare
+    from engine.testscenes import look_at, quad
+    def point(k):
+        return S.PointLight((k, 0.0, 3.0), (10.0, 10.0, 10.0), radius=0.1)
+    for n, expected in ((1, "tree"), (2, "all"), (4, "all"), (5, "tree"), (64, "tree")):
+        ls, _, _ = make_light_set([point(k) for k in range(n)], strategy="auto")
+        assert ls.strategy == expected, (n, ls.strategy)
+    assert lights.resolve_selection("power", 3, 0) == "power"
+    mats = [S.Material("floor"), S.Material("emit", emission=(2.0, 2.0, 2.0))]
+    cam = S.Camera(look_at((0, 0, 5), (0, 0, 0), (0, 1, 0)), resolution=(8, 8))
+    for emit, expected in ((1, "tree"), (0, "all")):
+        floor = quad([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
+        scene = S.Scene([floor], [S.Instance(0, materials=[emit])], mats, [point(0), point(1)],
+                        S.World((0.0, 0.0, 0.0)), cam)
+        ctx = prepare(scene, S.RenderSettings(light_selection="auto"))
+        assert ctx.settings.light_selection == ctx.lights.strategy == expected, emit
+
+
 def test_light_tree_pmf():
     """At random shading points (with and without a normal) the selection
     pmf sums to 1, ``select`` returns exactly ``selection_pdf`` of its pick,
