@@ -24,6 +24,7 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from . import bsdf, kernels, nee, pass_events, throughput
+from .accel import shadow_rays, shadow_rays_f32
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .hits import hit_geometry
 from .lights import POINT, SUN
@@ -474,30 +475,14 @@ def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u, ti
     live = np.flatnonzero(live)
     if len(live) == 0:
         return
-    eps = hit.eps[live]
-    origin = ctx.accel.offset_origin(hit.p[live], hit.ng[live], ls.wi[live], eps)
-    dist = ls.dist[live]
-    wi = ls.wi[live]
-    on = ls.on_surface[live]
-    if on.any():
-        # Aim from the offset origin at the sampled point itself: parallel to
-        # wi, a ray raised by eps meets a grazing emitter's plane eps / sin
-        # before the point, past any shortening, and is blocked by it.
-        q = hit.p[live[on]] + wi[on] * dist[on, None]
-        v = q - origin[on]
-        dist = dist.copy()
-        dist[on] = np.linalg.norm(v, axis=1)
-        wi = wi.copy()
-        wi[on] = v / np.maximum(dist[on], 1e-30)[:, None]
-    # Points on triangles would block their own shadow ray: stop short.
-    shorten = np.where(on, 10.0 * eps, 0.0)
-    tmax = np.where(np.isfinite(dist), dist * (1.0 - 1e-6) - shorten, 1e37)
     if ctx.transparent_shadows:
+        origin, wi, tmax = shadow_rays(hit.p, hit.ng, ls.wi, ls.dist, ls.on_surface, hit.eps, live)
         added = contrib[live] * _transmittance(ctx, origin, wi, tmax, e[live], paths.tbounce[live])
         paths.L[live] += added
         free = live
     else:
-        free = live[~_occluded(ctx, origin, wi, tmax, e[live])]
+        o, d, tfar = shadow_rays_f32(hit.p, hit.ng, ls.wi, ls.dist, ls.on_surface, hit.eps, live)
+        free = live[~_occluded(ctx, o, d, tfar, e[live])]
         _add_rows(paths.L, free, contrib)
         added = None
     if pass_events.listening(tile):
@@ -508,15 +493,29 @@ def _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u, ti
 
 
 def _add_rows(L, rows, values):
-    """L[rows] += values[rows] (rows unique).  A dense masked add when rows
-    are most of L: row-wise fancy indexing of (N, 3) arrays costs several
-    times a pass over the whole array."""
+    """L[rows] += values[rows] (rows unique), in one compiled loop."""
+    if L.flags.c_contiguous and values.flags.c_contiguous and values.dtype == L.dtype == np.float64:
+        _add_rows_loop(L, np.ascontiguousarray(rows, np.int64), values)
+    else:
+        _add_rows_numpy(L, rows, values)
+
+
+def _add_rows_numpy(L, rows, values):
+    """A dense masked add when rows are most of L: row-wise fancy indexing
+    of (N, 3) arrays costs several times a pass over the whole array."""
     if len(rows) * 4 < len(L):
         L[rows] += np.take(values, rows, axis=0)
         return
     use = np.zeros(len(L), bool)
     use[rows] = True
     L += np.where(use[:, None], values, 0.0)
+
+
+@kernels.loop_kernel("void(float64[:, ::1], int64[::1], float64[:, ::1])", _add_rows_numpy)
+def _add_rows_loop(L, rows, values):
+    for r in rows:
+        for k in range(3):
+            L[r, k] += values[r, k]
 
 
 def _bump_shadowing_setup(ctx, lobes, smooth, ns, tt, bb):
@@ -623,6 +622,8 @@ def _continue_past(ctx, o, d, tmax, t, prim):
 def _occluded(ctx, origin, wi, tmax, emitter):
     """Shadow test: lights with visible_shadow off (Cycles' Cast Shadow) are
     never blocked; objects with visible_shadow off never block."""
+    if not ctx.light_no_shadow and not ctx.shadow_skips:
+        return ctx.accel.occluded(origin, wi, tmax)
     blocked = np.zeros(len(origin), bool)
     test = np.ones(len(origin), bool)
     if ctx.light_no_shadow:

@@ -598,3 +598,60 @@ def test_single_lobe_sample_agrees(jit):
     plain, compiled = both_ways(bsdf._sample_single, lobes, wo, u1, u2)
     assert_agree(plain, compiled)
     assert plain[3].any() and (plain[2] > 0).mean() > 0.3
+
+
+def test_shadow_rays_agree(jit):
+    """Shadow rays for NEE (engine/accel.py): the compiled gather of origin,
+    direction and tfar in float32 against the NumPy form, bit for bit, with
+    suns (infinite distance), points on triangles (re-aimed and shortened),
+    a zero distance and strided inputs; and the float64 form it casts."""
+    from engine.accel import shadow_rays, shadow_rays_f32
+    rng = np.random.default_rng(29)
+    n = 20000
+    p = rng.normal(size=(n, 6))[:, ::2] * 10.0
+    ng = rng.normal(size=(n, 3))
+    ng /= np.linalg.norm(ng, axis=1)[:, None]
+    wi = rng.normal(size=(n, 3))
+    wi /= np.linalg.norm(wi, axis=1)[:, None]
+    dist = np.abs(rng.normal(size=n)) * 5.0
+    dist[:100] = np.inf
+    dist[100:110] = 0.0
+    on = rng.random(n) < 0.3
+    on[:100] = False
+    eps = 1e-5 * (1.0 + np.abs(p).max(axis=1))
+    rows = np.sort(rng.choice(n, n // 2, replace=False))
+    plain, compiled = both_ways(shadow_rays_f32, p, ng, wi, dist, on, eps, rows)
+    assert_agree(plain, compiled)
+    assert all(a.dtype == np.float32 for a in compiled)
+    origin, w, tmax = shadow_rays(p, ng, wi, dist, on, eps, rows)
+    assert_agree(compiled, (origin.astype(np.float32), w.astype(np.float32),
+                            np.maximum(tmax, 0.0).astype(np.float32)))
+    # Re-aimed rays end 10 eps short of the sampled point; suns go on.
+    aimed = np.flatnonzero(on[rows] & (dist[rows] > 0.01))
+    end = origin[aimed] + w[aimed] * tmax[aimed, None]
+    target = p[rows][aimed] + wi[rows][aimed] * dist[rows][aimed, None]
+    reach = np.linalg.norm(target - origin[aimed], axis=1)
+    assert np.allclose(np.linalg.norm(target - end, axis=1), 10.0 * eps[rows][aimed] + 1e-6 * reach,
+                       rtol=1e-6, atol=1e-12)
+    assert (tmax[dist[rows] == np.inf] == 1e37).all()
+
+
+def test_add_rows_agrees(jit):
+    """NEE's radiance added to the rows whose shadow ray is free: compiled
+    loop against both NumPy forms (few rows: gather; most: masked add)."""
+    from engine.integrator import _add_rows
+    rng = np.random.default_rng(31)
+    n = 5000
+    for share in (0.1, 0.9):
+        rows = np.sort(rng.choice(n, int(n * share), replace=False))
+        values = rng.random((n, 3))
+        out = []
+        for on in (False, True):
+            kernels.configure(on)
+            L = rng.random((n, 3)) if not out else out[0][0].copy()
+            start = L.copy()
+            _add_rows(L, rows, values)
+            out.append((start, L))
+        assert_agree((out[0][1],), (out[1][1],))
+        changed = np.flatnonzero((out[0][1] != out[0][0]).any(axis=1))
+        assert set(changed) <= set(rows) and len(changed) > 0.9 * len(rows)
