@@ -6,6 +6,8 @@ instance), which Embree takes as they are.  Per-mesh conversions are done
 once per mesh; each instance's rows are computed in its own slice of the
 output, so temporaries stay the size of one instance.
 """
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Optional
 
@@ -184,16 +186,24 @@ def _place(placed, n_mat):
     groups = {}
     for number, (_, _, arrays) in enumerate(placed):
         groups.setdefault(id(arrays), []).append(number)
+    jobs = []
     for numbers in groups.values():
         arrays = placed[numbers[0]][2]
         step = max(1, CHUNK_ROWS // arrays.count)
         for lo in range(0, len(numbers), step):
             some = np.array(numbers[lo:lo + step])
-            _place_instances(out, arrays, [placed[n][1] for n in some], first_row[some], first_vertex[some], n_mat)
+            jobs.append((arrays, [placed[n][1] for n in some], first_row[some], first_vertex[some]))
     keep = np.empty(len(out.p0), bool)
     ns = out.ns if out.ns is not None else np.empty((0, 3, 3))
-    _place_rows(out.vertices, out.indices, out.smooth, out.ns is not None,
-                out.p0, out.e1, out.e2, out.ng, out.clen, ns, keep)
+
+    def place_rows(lo, hi):
+        _place_rows(out.vertices, out.indices[lo:hi], out.smooth[lo:hi], out.ns is not None, out.p0[lo:hi],
+                    out.e1[lo:hi], out.e2[lo:hi], out.ng[lo:hi], out.clen[lo:hi],
+                    ns[lo:hi] if out.ns is not None else ns, keep[lo:hi])
+    with _Workers(len(keep)) as run:
+        # Jobs write disjoint rows; NumPy and the compiled loop release the GIL.
+        run(lambda job: _place_instances(out, *job, n_mat), jobs)
+        run(lambda bounds: place_rows(*bounds), _ranges(len(keep), run.threads))
     dropped = int(len(keep) - np.count_nonzero(keep))
     keep = None if dropped == 0 else keep
 
@@ -207,6 +217,40 @@ def _place(placed, n_mat):
     tris.indices = kept(out.indices.astype(np.int32) if len(out.vertices) < 2 ** 31 else out.indices)
     tris.kept = keep
     return tris
+
+
+# Triangles from which flatten runs on every core (a big scene's preparation
+# is otherwise one core's work before the render starts).
+PARALLEL_ROWS = 1 << 18
+
+
+class _Workers:
+    """``run(fn, items)``: fn over items on every core for big scenes, in
+    this thread for small ones (a pool costs more than it saves there)."""
+
+    def __init__(self, rows):
+        self.threads = min(os.cpu_count() or 1, 8) if rows >= PARALLEL_ROWS else 1
+        self.pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+
+    def __enter__(self):
+        return self
+
+    def __call__(self, fn, items):
+        if self.pool is None:
+            for item in items:
+                fn(item)
+        else:
+            list(self.pool.map(fn, items))   # list(): raises a job's exception here
+
+    def __exit__(self, *exc):
+        if self.pool is not None:
+            self.pool.shutdown()
+
+
+def _ranges(n, parts):
+    """``parts`` (lo, hi) row ranges covering 0..n."""
+    cut = np.linspace(0, n, parts + 1).astype(np.int64)
+    return list(zip(cut[:-1], cut[1:]))
 
 
 def _rows_of(first, count):

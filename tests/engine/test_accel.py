@@ -81,6 +81,19 @@ def test_flatten_matches_the_corner_soup(triangles, scene):
         np.testing.assert_array_equal(getattr(triangles, name), expected, err_msg=name)
 
 
+def test_flatten_on_several_threads_is_the_same(triangles, scene, monkeypatch):
+    """Big scenes flatten on every core (jobs write disjoint rows): forced
+    here onto three threads, every array is the one-thread result."""
+    from engine import geometry
+    monkeypatch.setattr(geometry, "PARALLEL_ROWS", 1)
+    monkeypatch.setattr(geometry.os, "cpu_count", lambda: 3)
+    assert geometry._Workers(1).threads == 3
+    threaded = flatten(scene, with_instance=True)
+    for name in ("p0", "e1", "e2", "ng", "ns", "area", "material", "smooth", "visibility", "instance",
+                 "vertices", "indices", "kept"):
+        np.testing.assert_array_equal(getattr(threaded, name), getattr(triangles, name), err_msg=name)
+
+
 def test_flatten_per_triangle_instance_data(triangles, scene):
     """Materials (each instance's slot table), visibility, instance and
     triangle-in-mesh indices, as one instance at a time would give them."""
