@@ -7,14 +7,13 @@ own ``scene.render.film_transparent`` and is not duplicated here.
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
 
-# Automatic is the default: every light at every vertex with a few lights
-# (on glossy surfaces far less noise for a few more shadow rays), the light
-# tree otherwise, as Cycles (with one light the tree costs nothing, with many
-# it lowers the noise several times).  Numbered: files store the number, and
-# AUTO came last.
+# Automatic is the default: the light tree, as Cycles (with one light it
+# costs nothing, with many it lowers the noise several times), but every light
+# at glossy vertices when there are a few (the tree does not see the BSDF's
+# lobe).  Numbered: files store the number, and AUTO came last.
 LIGHT_SELECTION_ITEMS = (
-    ('AUTO', "Automatic", "Every light at every vertex with 2 to 4 lights and no emissive mesh, "
-     "else the light tree", 4),
+    ('AUTO', "Automatic", "The light tree; with 2 to 4 lights and no emissive mesh, every light at "
+     "glossy surfaces (roughness up to 0.5)", 4),
     ('TREE', "Light Tree", "Pick one light per vertex by its estimated contribution there "
      "(power, distance and orientation): far less noise with many lights", 0),
     ('POWER', "Power", "Pick one light per vertex, proportional to its power", 1),

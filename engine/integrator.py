@@ -25,6 +25,7 @@ import numpy as np
 
 from . import bsdf, kernels, nee, pass_events, throughput
 from .accel import shadow_rays, shadow_rays_f32
+from .pass_events import lobe_rows as _lobe_rows
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .hits import hit_geometry
 from .lights import POINT, SUN
@@ -77,6 +78,9 @@ class Paths:
     # selection probability at that vertex weighs emitters hit by MIS.
     prev_p: np.ndarray
     prev_n: np.ndarray
+    # NEE sampled every light at the previous vertex (light selection
+    # 'auto' at a glossy vertex): its selection probability is 1 there.
+    prev_every: np.ndarray
     # VIS_* bit of the ray: camera, or the kind of the bounce that cast it
     # (tracked only when something in the scene is invisible to some rays).
     ray: np.ndarray
@@ -141,7 +145,8 @@ def trace_batch(ctx, pix, sample, tile):
     u = ctx.sampler.get(pseed, sample, CAMERA)
     o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3])
     paths = Paths(pix, o, d, tmax, np.ones((n, 3)), np.zeros((n, 3)),
-                  np.ones(n), np.ones(n, bool), o, np.zeros((n, 3)), np.full(n, VIS_CAMERA, np.uint8),
+                  np.ones(n), np.ones(n, bool), o, np.zeros((n, 3)), np.zeros(n, bool),
+                  np.full(n, VIS_CAMERA, np.uint8),
                   o, np.zeros(n, np.int32), np.zeros(n, np.int32), pseed, sample,
                   np.zeros((n, pass_events.aux_width(ctx.settings)), np.float32))
     pass_events.start(ctx, paths, tile)
@@ -250,13 +255,15 @@ def _bounce(ctx, paths, depth, tile):
     w = bsdf.weights(lobes, wo_l)
     lobes_wo = (bsdf.selection(lobes, wo_l, w), w)
     pass_events.vertex(ctx, paths, hit, lobes, w, tt, bb, depth, tile)
-    _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth, tile)
+    every = _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth, tile)
     ray = paths.ray
     alive, through = _scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth)
     pass_events.after_scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, through, tile)
     # For the light tree's MIS pdf; a transparent pass keeps the vertex.
     paths.prev_p = _unless(through, paths.prev_p, hit.p)
     paths.prev_n = _unless(through, paths.prev_n, hit.ng)
+    if every is not None:
+        paths.prev_every = _unless(through, paths.prev_every, every)
     if ctx.track_rays:
         paths.ray = _unless(through, ray, _ray_kind(ctx, hit, lobes, wo_l, tt, bb, paths, depth))
     elif ctx.triangles.visibility is not None:
@@ -345,7 +352,8 @@ def _mis_hit(ctx, paths, i, emitter, pdf_light):
         return np.ones(len(i))
     if s.strategy == "light":
         return prev_delta.astype(np.float64)
-    p_light = ctx.lights.selection_pdf(emitter, paths.prev_p[i], paths.prev_n[i]) * pdf_light
+    every = paths.prev_every[i] if ctx.lights.every_at_glossy else None
+    p_light = ctx.lights.selection_pdf(emitter, paths.prev_p[i], paths.prev_n[i], every) * pdf_light
     return np.where(prev_delta, 1.0, power_heuristic(paths.prev_pdf[i], p_light))
 
 
@@ -439,6 +447,8 @@ def _nee_emitters(ctx):
         return "list", ctx.delta_emitters
     if s.light_selection == "all":
         return "list", ctx.all_emitters
+    if s.light_selection == "auto":
+        return "auto", ctx.all_emitters
     return "select", None
 
 
@@ -448,16 +458,58 @@ def _uniforms(ctx, paths, dim_set):
 
 
 def _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth, tile=None):
+    """Light sampling at every path's vertex.  Returns, for light selection
+    'auto', which vertices sampled every light (else None)."""
     lt = ctx.lights
     n = len(paths.pix)
     if lt.count == 0 or n == 0:
-        return
+        return None
     mode, emitters = _nee_emitters(ctx)
+    args = (ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth, tile)
     if mode == "select":
-        u = _uniforms(ctx, paths, vertex_set(depth, LIGHT))
-        e, p_sel = lt.select(u[:, 0], hit.p, hit.ng)
-        _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u[:, 1:], tile)
-        return
+        _nee_select(*args)
+        return None
+    if mode == "list":
+        _nee_each(*args, emitters)
+        return None
+    every = _every_light(lobes, lobes_wo[0])
+    if every.all():
+        _nee_each(*args, emitters)
+    elif not every.any():
+        _nee_select(*args)
+    else:
+        for rows in (np.flatnonzero(~every), np.flatnonzero(every)):
+            sub = paths.take(rows)
+            sub_args = (ctx, sub, _take_hit(hit, rows), _lobe_rows(lobes, rows),
+                        (lobes_wo[0][rows], lobes_wo[1][rows]), tt[rows], bb[rows], wo_l[rows], depth, tile)
+            if every[rows[0]]:
+                _nee_each(*sub_args, emitters)
+            else:
+                _nee_select(*sub_args)
+            paths.L[rows] = sub.L
+    return every
+
+
+# Light selection 'auto' samples every light at vertices where lobes this
+# narrow (GGX alpha, roughness 0.5) take most of the BSDF's sampling weight.
+EVERY_LIGHT_ALPHA = 0.25
+
+
+def _every_light(lobes, selection):
+    """Vertices whose BSDF is mostly narrow glossy reflection, where one
+    light picked without regard to the lobe is often outside it."""
+    narrow = (lobes.kind == bsdf.GLOSSY) & (lobes.alpha <= EVERY_LIGHT_ALPHA)
+    return np.where(narrow, selection, 0.0).sum(axis=1) > 0.5
+
+
+def _nee_select(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth, tile):
+    u = _uniforms(ctx, paths, vertex_set(depth, LIGHT))
+    e, p_sel = ctx.lights.select(u[:, 0], hit.p, hit.ng)
+    _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, e, p_sel, u[:, 1:], tile)
+
+
+def _nee_each(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth, tile, emitters):
+    n = len(paths.pix)
     for e in emitters:
         u = _uniforms(ctx, paths, emitter_set(depth, e))[:, :3]
         _shade_light(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, np.full(n, e), np.ones(n), u, tile)

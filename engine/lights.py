@@ -45,25 +45,29 @@ MAX_SPHERICAL = 6.22
 # Emissive triangles of one material up to which the light-tree strategy
 # picks them by importance (a tree over them); above, by area.
 MAX_TREE_TRIANGLES = 16384
-# Light selection 'auto' samples every light at every vertex up to this many
-# lights (none an emissive mesh), else picks one by the light tree.  A light
-# tree weighs lights by power, distance and orientation but not by the BSDF,
-# so on glossy surfaces it often picks a light outside the lobe.  On Veach's
-# MIS scene (4 sphere lights over GGX plates) every light per vertex gave 5.7x
-# less variance for 1.5x the CPU per path: 3.9x less time to equal error.
-# On 3 emissive meshes it gave 10 % less variance for 1.4x the CPU (each
-# mesh's sample descends its own triangle tree), and on 64 lights the shadow
-# rays alone cost far more (tools/variance_seeds.py --selection tree all).
+# Light selection 'auto' picks one light by the light tree, except at
+# vertices whose BSDF is mostly a narrow glossy lobe (integrator
+# _every_light), where it samples every light, in scenes of 2 to this many
+# lights none of which is an emissive mesh.  The tree weighs lights by power,
+# distance and orientation but not by the BSDF, so over a glossy surface it
+# often picks a light outside the lobe.  Every light at every vertex, measured
+# with tools/variance_seeds.py (tree / all, 16 spp, 8-12 seeds): Veach's MIS
+# scene (4 sphere lights over GGX plates) 5.7x less variance for 1.5x the CPU
+# per path, 3.9x less time to equal error; but a diffuse Cornell box with 3
+# area lights 10 % less variance for 1.5x the CPU, 3 emissive meshes 10 % for
+# 1.4x (each mesh's sample descends its own triangle tree), and 64 lights'
+# shadow rays cost far more.
 AUTO_ALL_LIGHTS = 4
 
 
 def resolve_selection(strategy, lights, mesh_emitters):
-    """The light selection 'auto' stands for: 'all' with 2 to AUTO_ALL_LIGHTS
-    emitters and no emissive mesh among them, else 'tree'.  Other
-    selections stand for themselves."""
+    """(the selection a LightSet builds for, whether NEE samples every light
+    at glossy vertices): 'auto' is the light tree, with every light at glossy
+    vertices when there are 2 to AUTO_ALL_LIGHTS emitters, none an emissive
+    mesh.  Other selections stand for themselves."""
     if strategy != "auto":
-        return strategy
-    return "all" if mesh_emitters == 0 and 2 <= lights <= AUTO_ALL_LIGHTS else "tree"
+        return strategy, False
+    return "tree", mesh_emitters == 0 and 2 <= lights <= AUTO_ALL_LIGHTS
 
 
 @dataclass
@@ -86,6 +90,10 @@ def selection_power(rgb):
     return np.abs(np.asarray(rgb, float).mean(axis=-1))
 
 
+def _rows(a, rows):
+    return None if a is None else a[rows]
+
+
 def smoothstep(x):
     x = np.clip(x, 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
@@ -103,7 +111,9 @@ class LightSet:
         self.env = _EnvironmentLight(scene.world.texture, env_compensation)
         self.meshes = _MeshLights(triangles, materials, by_importance=strategy in ("tree", "auto"))
         analytic = self.points.count + self.suns.count + self.areas.count + self.env.count
-        self.strategy = strategy = resolve_selection(strategy, analytic + self.meshes.count, self.meshes.count)
+        strategy, self.every_at_glossy = resolve_selection(strategy, analytic + self.meshes.count,
+                                                           self.meshes.count)
+        self.strategy = strategy
         radius = _scene_radius(triangles)
         # Emitter index -> (type, index within type).  Meshes stay last
         # (mesh_emitter below counts from the end).
@@ -137,10 +147,17 @@ class LightSet:
             return self.tree.select(u, p, _normals(n, len(u)))
         return self.dist.sample(u)
 
-    def selection_pdf(self, emitter, p=None, n=None):
-        """Probability that ``select`` at p (normal n) picks ``emitter``."""
+    def selection_pdf(self, emitter, p=None, n=None, every=None):
+        """Probability that ``select`` at p (normal n) picks ``emitter``; 1
+        where ``every`` (per row: NEE sampled every light there)."""
         if self.strategy == "all":
             return np.ones(len(emitter))
+        if every is not None and every.any():
+            out = np.ones(len(emitter))
+            some = np.flatnonzero(~every)
+            if len(some):
+                out[some] = self.selection_pdf(emitter[some], _rows(p, some), _rows(n, some))
+            return out
         if self.tree is not None:
             return self.tree.pmf(emitter, p, _normals(n, len(emitter)))
         return self.dist.pmf[emitter]

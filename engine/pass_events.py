@@ -410,7 +410,7 @@ def after_scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, through, tile)
     rows = np.nonzero((paths.bounce == 1) & ~through)[0]
     if len(rows) == 0:
         return
-    sub = _lobe_rows(lobes, rows)
+    sub = lobe_rows(lobes, rows)
     wi_l = to_local(paths.d[rows], tt[rows], bb[rows], hit.ns[rows])
     sel, w = lobes_wo[0][rows], lobes_wo[1][rows]
     f = bsdf.eval_pdf(sub, wo_l[rows], wi_l, sel, w)[0]
@@ -418,7 +418,8 @@ def after_scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, through, tile)
                                            paths.prev_delta[rows]).reshape(len(rows), 9)
 
 
-def _lobe_rows(lobes, rows):
+def lobe_rows(lobes, rows):
+    """The lobes of ``rows`` (every per-ray array taken)."""
     from dataclasses import fields, replace
     n = len(lobes.kind)
     return replace(lobes, **{f.name: getattr(lobes, f.name)[rows] for f in fields(lobes)
@@ -466,7 +467,7 @@ def nee(ctx, paths, rows, contrib, w, delta, lobes, lobes_wo, wo_l, wi_l, f, til
         shares = paths.aux[rows][:, SHARES].reshape(len(rows), 3, 3).copy()
         d = np.nonzero(direct)[0]
         if len(d):
-            sub = _lobe_rows(lobes, rows[d])
+            sub = lobe_rows(lobes, rows[d])
             shares[d] = _class_split(ctx, sub, (lobes_wo[0][rows[d]], lobes_wo[1][rows[d]]),
                                      wo_l[rows[d]], wi_l[d], f[d])
         _add_light_classes(paths, rows, contrib, direct, tile, shares)

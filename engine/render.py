@@ -80,8 +80,9 @@ def prepare(scene, settings):
     materials = MaterialTable(material_table(scene))
     lights = LightSet(scene, tris, materials, settings.light_selection,
                       env_compensation=settings.mis_compensation and settings.strategy == "mis")
-    # 'auto' becomes the selection the lights chose, for the integrator.
-    settings = dataclasses.replace(settings, light_selection=lights.strategy)
+    # 'auto' stays only where it samples every light at glossy vertices;
+    # else it is the light tree.
+    settings = dataclasses.replace(settings, light_selection="auto" if lights.every_at_glossy else lights.strategy)
     try:
         camera = CameraModel(scene.camera, PixelFilter(settings.filter_type, settings.filter_width))
     except ValueError as exc:

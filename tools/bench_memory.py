@@ -81,6 +81,12 @@ def after_frame(*_):
     rss.append(status('VmRSS'))
 bpy.app.handlers.render_post.append(after_frame)
 
+if FRAMES > 1:
+    # Growth per frame, not the compiler's: with a cold kernel cache (a new
+    # Ember version) the kernels would compile during the first frames.
+    kernels = backend.load('kernels')
+    kernels.configure(True)
+    kernels.wait(900)
 baseline = status('VmRSS')
 tracemalloc.start()
 if FRAMES > 1:
