@@ -226,3 +226,22 @@ def test_shader_aovs_hold_each_materials_value():
     assert full.sum() > 5 and np.allclose(colour[full][:, :3], (0.2, 0.4, 0.6), atol=1e-6)
     assert np.allclose(value[full], 0.5, atol=1e-6)
     assert (colour[written == 0] == 0).all() and (written == 0).sum() > 100
+
+
+def test_passes_add_up_with_auto_light_selection():
+    """Light selection 'auto' samples every light at the sharp plates and one
+    by the tree at the rough plate and the floor, each on its own subset of
+    the rows: the strategy passes still add up to Combined."""
+    import sys
+    sys.path.insert(0, __file__.rsplit("/", 1)[0])
+    from test_light_sampling import glossy_plates_over_floor
+    scene, _ = glossy_plates_over_floor("auto", 5)
+    scene.camera.resolution = (32, 24)
+    names = STRATEGY + LIGHT
+    r = render(scene, RenderSettings(samples=8, samples_per_pass=8, seed=5, max_bounces=2, passes=names,
+                                     light_selection="auto"))
+    p = r.passes
+    total = p["Strategy Light"] + p["Strategy BSDF"] + p["Emission"] + p["Environment"]
+    print(np.abs(total - r.image[..., :3]).max())
+    assert _close(total, r.image[..., :3])
+    assert p["Glossy Direct"].max() > 0 and p["Diffuse Direct"].max() > 0
