@@ -479,8 +479,8 @@ def _next_event(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, depth, tile=None
         _nee_select(*args)
     else:
         for rows in (np.flatnonzero(~every), np.flatnonzero(every)):
-            sub = _RowView(paths, rows)
-            sub_args = (ctx, sub, _RowView(hit, rows), _lobe_rows(lobes, rows),
+            sub = _RowView(paths, rows, n)
+            sub_args = (ctx, sub, _RowView(hit, rows, n), _lobe_rows(lobes, rows),
                         (lobes_wo[0][rows], lobes_wo[1][rows]), tt[rows], bb[rows], wo_l[rows], depth, tile)
             if every[rows[0]]:
                 _nee_each(*sub_args, emitters)
@@ -494,8 +494,8 @@ class _RowView:
     """The rows ``rows`` of an object's per-row arrays, each taken when
     first read (light sampling reads a few of the path's and hit's dozen)."""
 
-    def __init__(self, obj, rows):
-        self._obj, self._rows, self._n = obj, rows, len(obj.pix if hasattr(obj, "pix") else obj.p)
+    def __init__(self, obj, rows, n):
+        self._obj, self._rows, self._n = obj, rows, n   # n: the object's row count
 
     def __getattr__(self, name):
         value = getattr(self._obj, name)
