@@ -102,9 +102,10 @@ def _slot_table(inst, n_materials):
     return np.array(ids + [default], dtype=np.int32)
 
 
-def flatten(scene, with_instance=False):
+def flatten(scene, with_instance=False, threads=0):
     """Build Triangles for every instance; degenerate triangles are dropped.
-    with_instance: also record each triangle's instance index (passes)."""
+    with_instance: also record each triangle's instance index (passes);
+    threads: at most this many for a big scene (0: every core)."""
     mesh_cache = {}
     placed = []   # (instance index, instance, its mesh's arrays)
     for index, inst in enumerate(scene.instances):
@@ -114,7 +115,7 @@ def flatten(scene, with_instance=False):
         if inst.mesh not in mesh_cache:
             mesh_cache[inst.mesh] = _MeshArrays.of(mesh)
         placed.append((index, inst, mesh_cache[inst.mesh]))
-    tris = _place(placed, len(scene.materials))
+    tris = _place(placed, len(scene.materials), threads)
     counts = np.array([arrays.count for _, _, arrays in placed], np.int64)
     owner = np.repeat(np.array([index for index, _, _ in placed], np.int64), counts)
     first_row = np.cumsum(counts) - counts
@@ -170,7 +171,7 @@ class _Out:
 CHUNK_ROWS = 1 << 16
 
 
-def _place(placed, n_mat):
+def _place(placed, n_mat, threads=0):
     """Triangles of every (index, instance, mesh arrays) in ``placed``.
     Per instance only what differs between instances is computed
     (vertices, normals, materials), for the instances of one mesh at once;
@@ -200,7 +201,7 @@ def _place(placed, n_mat):
         _place_rows(out.vertices, out.indices[lo:hi], out.smooth[lo:hi], out.ns is not None, out.p0[lo:hi],
                     out.e1[lo:hi], out.e2[lo:hi], out.ng[lo:hi], out.clen[lo:hi],
                     ns[lo:hi] if out.ns is not None else ns, keep[lo:hi])
-    with _Workers(len(keep)) as run:
+    with _Workers(len(keep), threads) as run:
         # Jobs write disjoint rows; NumPy and the compiled loop release the GIL.
         run(lambda job: _place_instances(out, *job, n_mat), jobs)
         run(lambda bounds: place_rows(*bounds), _ranges(len(keep), run.threads))
@@ -228,8 +229,9 @@ class _Workers:
     """``run(fn, items)``: fn over items on every core for big scenes, in
     this thread for small ones (a pool costs more than it saves there)."""
 
-    def __init__(self, rows):
-        self.threads = min(os.cpu_count() or 1, 8) if rows >= PARALLEL_ROWS else 1
+    def __init__(self, rows, threads=0):
+        cores = min(threads or os.cpu_count() or 1, 8)
+        self.threads = cores if rows >= PARALLEL_ROWS else 1
         self.pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
 
     def __enter__(self):

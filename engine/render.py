@@ -76,7 +76,7 @@ def prepare(scene, settings):
     kernels.configure(getattr(settings, "use_jit", True))   # flatten has a kernel too
     scene.validate()
     validate_settings(settings)
-    tris = flatten(scene, with_instance=bool(settings.passes))
+    tris = flatten(scene, with_instance=bool(settings.passes), threads=settings.threads)
     materials = MaterialTable(material_table(scene))
     lights = LightSet(scene, tris, materials, settings.light_selection,
                       env_compensation=settings.mis_compensation and settings.strategy == "mis")

@@ -87,7 +87,7 @@ def test_flatten_on_several_threads_is_the_same(triangles, scene, monkeypatch):
     from engine import geometry
     monkeypatch.setattr(geometry, "PARALLEL_ROWS", 1)
     monkeypatch.setattr(geometry.os, "cpu_count", lambda: 3)
-    assert geometry._Workers(1).threads == 3
+    assert geometry._Workers(1).threads == 3 and geometry._Workers(1, threads=1).threads == 1
     threaded = flatten(scene, with_instance=True)
     for name in ("p0", "e1", "e2", "ng", "ns", "area", "material", "smooth", "visibility", "instance",
                  "vertices", "indices", "kept"):
