@@ -135,15 +135,20 @@ def _offset_numpy(p, ng, direction, eps, out):
     out[:] = p + ng * side[:, None]
 
 
+@kernels.helper
+def _lifted(p, ng, direction, r, eps):
+    """Row r of ``_offset_numpy``'s result in compiled loops: x, y, z."""
+    # einsum's order: x0 + x2, then x1 (engine/vec.py)
+    d = (ng[r, 0] * direction[r, 0] + ng[r, 2] * direction[r, 2]) + ng[r, 1] * direction[r, 1]
+    side = -eps if d < 0 else eps
+    return p[r, 0] + ng[r, 0] * side, p[r, 1] + ng[r, 1] * side, p[r, 2] + ng[r, 2] * side
+
+
 @kernels.loop_kernel("void(float64[:, :], float64[:, :], float64[:, :], float64[:], float64[:, ::1])",
                      _offset_numpy)
 def _offset_rows(p, ng, direction, eps, out):
     for i in range(len(p)):
-        # einsum's order: x0 + x2, then x1 (engine/vec.py)
-        d = (ng[i, 0] * direction[i, 0] + ng[i, 2] * direction[i, 2]) + ng[i, 1] * direction[i, 1]
-        side = -eps[i] if d < 0 else eps[i]
-        for k in range(3):
-            out[i, k] = p[i, k] + ng[i, k] * side
+        out[i, 0], out[i, 1], out[i, 2] = _lifted(p, ng, direction, i, eps[i])
 
 
 # -- shadow rays ---------------------------------------------------------------
@@ -160,8 +165,8 @@ def shadow_rays(p, ng, wi, dist, on, eps, rows):
     ray, so the ray stops 10 eps short of it; eps: each row's origin offset."""
     e = eps[rows]
     pr, wr = p[rows], wi[rows]
-    side = np.where(np.einsum("ij,ij->i", ng[rows], wr) < 0, -e, e)
-    origin = pr + ng[rows] * side[:, None]
+    origin = np.empty(pr.shape)
+    _offset_numpy(pr, ng[rows], wr, e, origin)
     d, w, onr = dist[rows], wr, on[rows]
     if onr.any():
         # Aim from the offset origin at the sampled point itself: parallel to
@@ -188,12 +193,7 @@ def _shadow_rays_loop(p, ng, wi, dist, on, eps, rows, o, d, tfar):
     for i in range(len(rows)):
         r = rows[i]
         e = eps[r]
-        # einsum's order: x0 + x2, then x1 (engine/vec.py)
-        c = (ng[r, 0] * wi[r, 0] + ng[r, 2] * wi[r, 2]) + ng[r, 1] * wi[r, 1]
-        side = -e if c < 0 else e
-        ox = p[r, 0] + ng[r, 0] * side
-        oy = p[r, 1] + ng[r, 1] * side
-        oz = p[r, 2] + ng[r, 2] * side
+        ox, oy, oz = _lifted(p, ng, wi, r, e)
         t = dist[r]
         wx, wy, wz = wi[r, 0], wi[r, 1], wi[r, 2]
         shorten = 0.0

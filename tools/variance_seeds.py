@@ -43,7 +43,7 @@ def parse_args(argv):
     parser.add_argument('--seeds', type=int, default=32)
     parser.add_argument('--first-seed', type=int, default=1000)
     parser.add_argument('--selection', nargs='+', default=[None],
-                        help="light selections to compare (uniform, power, tree, all); default: the scene's")
+                        help="light selections to compare (auto, tree, power, uniform, all); default: the scene's")
     parser.add_argument('--bright', action='store_true', help="only pixels the reference shows brighter than 1")
     return parser.parse_args(argv)
 
