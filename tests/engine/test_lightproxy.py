@@ -1,8 +1,11 @@
 """The light proxies (engine/lightproxy.py) only choose which rays are
 tested against lights exactly: with them, LightSet.intersect returns what
-the exact tests on every ray return, bit for bit, for every light shape and
-for rays that start inside, beside or on the lights, graze them, or stop
-just short of or just past them."""
+the exact tests on every ray return, for every light shape and for rays
+that start inside, beside or on the lights, graze them, or stop just short
+of or just past them.  Not bit for bit: the exact test on a subset of rows
+and on all rows may round differently (a BLAS dot product's kernel depends
+on the CPU and the row count), and a ray that grazes a light's edge may
+then hit on one side and miss on the other."""
 import numpy as np
 
 from engine import bsdf
@@ -53,8 +56,31 @@ def test_proxies_change_no_result():
     for camera in (False, True):
         fast = lights.intersect(o, d, tmax, camera=camera)
         exact = lights._intersect_exact(o, d, tmax, camera, None)
-        for a, b in zip(fast, exact):
-            np.testing.assert_array_equal(a, b)
+        assert_same_hits(fast, exact)
     hits = np.isfinite(fast[0])
     # The test means something: many rays meet lights, of every kind.
     assert hits.mean() > 0.05 and len(np.unique(fast[1][hits])) == len(scene.lights) - 1
+
+
+# Rays whose hit may flip with the last bits of a dot product: rays aimed at
+# random points around the lights graze an edge within rounding about once
+# in 10^6; a proxy bound 1% too tight drops thousands of the 200,000.
+EDGE_SHARE = 5e-5
+# Distances and pdfs from a few dot products, a division and a square: a
+# few tens of roundings (the solid-angle pdf's asin terms are computed
+# from the same distance, and stay within the same relative error unless
+# grazing, where the edge share covers them).
+RTOL = 1e3 * np.finfo(float).eps
+
+
+def assert_same_hits(fast, exact):
+    t_f, e_f, le_f, pdf_f = fast
+    t_e, e_e, le_e, pdf_e = exact
+    flipped = e_f != e_e
+    assert flipped.sum() <= EDGE_SHARE * len(e_f), f"{flipped.sum()} rays meet another light or none"
+    same = ~flipped & np.isfinite(t_e)
+    np.testing.assert_array_equal(np.isfinite(t_f[~flipped]), np.isfinite(t_e[~flipped]))
+    np.testing.assert_allclose(t_f[same], t_e[same], rtol=RTOL, atol=0)
+    np.testing.assert_array_equal(le_f[same], le_e[same])
+    close = np.isclose(pdf_f[same], pdf_e[same], rtol=RTOL, atol=0)
+    assert (~close).sum() <= EDGE_SHARE * len(e_f), f"{(~close).sum()} pdfs differ beyond rounding"
