@@ -7,6 +7,7 @@ Exceptions never escape: Blender would print them and keep a black image, so
 they are reported with ``self.report({'ERROR'}, ...)`` and recorded in
 ``RENDER_LOG`` (which tests and the benchmark read).
 """
+import threading
 import time
 import traceback
 
@@ -135,6 +136,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
                 writer.write(image, extra)  # else the last pass written is the image
             writer.add_metadata(render_passes.crypto_metadata(
                 depsgraph.view_layer, getattr(result, 'pass_metadata', None) or {}))
+            writer.add_metadata(_kernel_metadata(result))
         finally:
             writer.finish()
         info.update(samples=getattr(result, 'samples', progress.samples_done),
@@ -179,6 +181,13 @@ def _settle_compiler():
         pass
 
 
+def _kernel_metadata(result):
+    """Which kernels rendered the image (compiled or NumPy: they round
+    differently), in the result's metadata as 'Ember Kernels'."""
+    mode = (getattr(result, 'stats', None) or {}).get('kernels')
+    return {'Ember Kernels': mode} if mode else {}
+
+
 def _extra_passes(result, view_layer, samples):
     """{Blender pass name: image} (the engine's Cycles-named passes)."""
     return render_passes.blender_images(view_layer, getattr(result, 'passes', None) or {}, samples)
@@ -207,6 +216,32 @@ classes = (EmberRenderEngine,)
 def register():
     for cls in classes:
         bpy.utils.register_class(cls)
+    if not bpy.app.background:
+        bpy.app.timers.register(_warm_kernels, first_interval=2.0)
+
+
+def _warm_kernels():
+    """Once per Ember version (after an install or update), compile the
+    kernels in the background soon after the add-on is enabled, so that the
+    first F12 does not wait for them ('Compiling kernels' in the status bar
+    while it does).  Later starts find the cache complete and do nothing."""
+    try:
+        kernels = backend.load('kernels')
+        if kernels.cache_complete() or not kernels.AVAILABLE:
+            return None
+        backend.load('render')     # embreex with its own Embree, in this thread
+        kernels.import_all()
+        threading.Thread(target=_warm_quietly, args=(kernels,), name="ember-warm", daemon=True).start()
+    except Exception as err:  # noqa: BLE001 - a render compiles them anyway, and says so
+        print(f"Ember: kernels not compiled ahead: {_message(err)}")
+    return None
+
+
+def _warm_quietly(kernels):
+    try:
+        kernels.warm_cache()
+    except Exception as err:  # noqa: BLE001 - a render compiles them anyway, and says so
+        print(f"Ember: kernels not compiled ahead: {_message(err)}")
 
 
 def unregister():

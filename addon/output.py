@@ -181,6 +181,11 @@ class Progress:
         for listener in progress_listeners:
             listener(samples_done, total, stats)
 
+    def on_status(self, text, fraction):
+        """Work before the first pass (the kernel compile) in the status bar."""
+        self.engine.update_stats("", "Ember: " + text)
+        self.engine.update_progress(min(max(fraction, 0.0), 1.0))
+
     def _monotone(self, stats):
         """The status bar's time left never goes up (a slower pass would
         otherwise raise the estimate): show the smallest estimate so far."""

@@ -24,6 +24,10 @@ class ConsoleProgress:
                          f"{stats['seconds_left']:5.1f} s left ")
         sys.stderr.flush()
 
+    def on_status(self, text, fraction):
+        sys.stderr.write(f"\r{text}   ")
+        sys.stderr.flush()
+
     def should_stop(self):
         return False
 
@@ -59,7 +63,8 @@ def main(argv=None):
         write_image(args.output + ext, result.image)
     s = result.stats
     print(f"wrote {args.output}.exr and .png: {result.samples} spp in {s['seconds']:.2f} s, "
-          f"{s['paths_per_second'] / 1e6:.3f} Mpaths/s, {s['rays_per_second'] / 1e6:.2f} Mrays/s")
+          f"{s['paths_per_second'] / 1e6:.3f} Mpaths/s, {s['rays_per_second'] / 1e6:.2f} Mrays/s, "
+          f"{s['kernels']} kernels")
     for w in result.warnings:
         print(f"warning: {w}", file=sys.stderr)
     return 0

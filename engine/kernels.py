@@ -7,23 +7,33 @@ NumPy code (a temporary array per operation).  With the JIT on, the very same
 function is compiled by numba into a generalized ufunc that runs the whole
 body per element in one loop: no temporaries, one pass over memory.  A kernel
 may return one value or a tuple; the compiled form returns the same.
+``@loop_kernel`` is an explicit row loop for work that is not elementwise
+arithmetic, next to a NumPy reference form of the same computation.
+
+The two forms are not bit-identical twins: numba calls libm, NumPy may run
+its own SIMD transcendentals (AVX-512), so the last bits differ between
+CPUs.  tests/engine/test_kernels.py holds them to a tolerance derived from
+that rounding.  A render therefore never mixes them: ``for_render`` makes
+the choice once per render (compiled, after waiting for the compile with
+progress shown and cancel honoured; or NumPy with the JIT off) and the
+render records it (``stats["kernels"]``).  A kernel first called while the
+JIT is on but not compiled yet waits for the compile instead of running its
+NumPy form.
 
 The compiled loops are serial and release the GIL (NumPy runs ufunc loops
 without it), so Ember's own thread pool (engine/render.py) keeps the cores
 busy; numba's threading layer is never started (``parallel=True`` makes
 Debian's Blender 3.4 crash at exit).
 
-Compilation never delays a render: ``configure(True)`` starts one background
-thread that imports numba and compiles every kernel (or loads it from the
-disk cache); until a kernel is ready its NumPy form runs.  Both round
-alike, bit for bit (IEEE arithmetic and the same libm; checked by
-tests/engine/test_kernels.py), so a render may mix them and a seed's image
-does not depend on when compilation finished.
+``configure(True)`` starts one background thread that imports numba and
+compiles every kernel (or loads it from the disk cache): ``make setup`` and
+the add-on (when it is enabled) start it early, so the cache is warm before
+the first render.  ``python -m engine.kernels`` fills the cache and waits.
 The cache is ``NUMBA_CACHE_DIR`` or ``~/.cache/ember/numba`` (XDG_CACHE_HOME
 respected), one sub-folder per version of the engine's sources, filled by
-one process at a time (``cache_lock``).  The JIT is
-off with ``RenderSettings.use_jit = False``, with ``EMBER_JIT=0``, or when
-numba does not import.
+one process at a time (``cache_lock``).  The JIT is off with
+``RenderSettings.use_jit = False``, with ``EMBER_JIT=0``, or when numba does
+not import.
 """
 import atexit
 import contextlib
@@ -42,6 +52,9 @@ try:
 except ImportError:   # Windows
     import msvcrt
     fcntl = None
+
+
+_ENGINE_DIR = os.path.dirname(os.path.abspath(__file__))
 
 
 def source_hash():
@@ -104,6 +117,51 @@ def wait(timeout=None):
     return all(k.compiled is not None for k in KERNELS)
 
 
+class CompileCancelled(Exception):
+    """``for_render`` was told to stop while waiting for the compile."""
+
+
+def for_render(use_jit, progress=None, poll=0.1):
+    """The kernels the next render runs, chosen once for all of it:
+    'compiled' (after the background compile finished; ``progress.on_status
+    (text, fraction)`` hears how far it is, ``progress.should_stop()`` may
+    end the wait with ``CompileCancelled``) or 'numpy' (JIT off, numba
+    missing, or its compile failed)."""
+    if not configure(use_jit):
+        return "numpy"
+    while not wait(poll):
+        if not _compiling():
+            break   # finished, some kernels failed: UNAVAILABLE says why
+        if progress is not None:
+            on_status = getattr(progress, "on_status", None)
+            if on_status is not None:
+                done = sum(k.compiled is not None for k in KERNELS)
+                on_status(f"Compiling kernels ({done}/{len(KERNELS)})", done / max(len(KERNELS), 1))
+            should_stop = getattr(progress, "should_stop", None)
+            if should_stop is not None and should_stop():
+                raise CompileCancelled("stopped while compiling kernels")
+    if all(k.compiled is not None for k in KERNELS):
+        return "compiled"
+    configure(False)
+    return "numpy"
+
+
+def _compiling():
+    thread = _state["thread"]
+    return thread is not None and thread.is_alive()
+
+
+def _wait_for(k):
+    """A kernel called with the JIT on before it was compiled (defined by a
+    module imported late): compile it rather than run its NumPy form in a
+    render that runs compiled."""
+    _start()
+    wait()
+    if k.compiled is None:
+        raise RuntimeError(f"kernel {k.__name__} did not compile: {UNAVAILABLE}")
+    return k.compiled
+
+
 def warm_up_seconds():
     """Seconds the background compile took (None while it runs)."""
     if _state["finished"] is None:
@@ -147,13 +205,12 @@ class Kernel:
         KERNELS.append(self)
 
     def __call__(self, *args):
-        compiled = self.compiled if _state["enabled"] else None
         # Each kernel defines its result where intermediates overflow or are
         # not numbers: no floating-point warnings, run either way.
         with np.errstate(all="ignore"):
-            if compiled is None:
+            if not _state["enabled"]:
                 return self.fn(*args)
-            return compiled(*args)
+            return (self.compiled or _wait_for(self))(*args)
 
 
 def kernel(inputs, outputs=1):
@@ -166,11 +223,11 @@ def kernel(inputs, outputs=1):
 class LoopKernel:
     """An explicit loop over arrays (for work that is not elementwise float
     arithmetic: integer hashing with table lookups), compiled by numba with
-    ``signature``, next to the vectorized NumPy function ``numpy_fn`` that
-    defines the result.  Both take the same arguments and fill ``out`` (the
-    last argument) with identical values (tests/engine/test_kernels.py).
-    The loop is never run by the interpreter: until it is compiled, and
-    with the JIT off, ``numpy_fn`` runs."""
+    ``signature``, next to the vectorized NumPy reference ``numpy_fn``.
+    Both take the same arguments and fill ``out`` (the last argument) with
+    the same values within rounding (tests/engine/test_kernels.py).  The
+    loop is never run by the interpreter: with the JIT off ``numpy_fn``
+    runs."""
 
     def __init__(self, fn, signature, numpy_fn):
         self.fn = fn
@@ -181,10 +238,9 @@ class LoopKernel:
         KERNELS.append(self)
 
     def __call__(self, *args):
-        compiled = self.compiled if _state["enabled"] else None
-        if compiled is None:
+        if not _state["enabled"]:
             return self.numpy_fn(*args)
-        return compiled(*args)
+        return (self.compiled or _wait_for(self))(*args)
 
     def build(self, numba):
         # NumPy's floating-point rules (x / 0 is inf or NaN, no exception).
@@ -203,8 +259,8 @@ def loop_kernel(signature, numpy_fn):
 
 def _start():
     """Compile, in one background thread, every kernel not compiled yet.
-    Kernels of modules imported later (node modules, a render that starts
-    after an early ``configure``) start a new thread at the next call."""
+    Kernels of modules imported later start a new thread at the next
+    ``configure`` or at their first call."""
     with _lock:
         thread = _state["thread"]
         if thread is not None and thread.is_alive():
@@ -225,9 +281,9 @@ def _pending():
 
 def stop():
     """Let the compile thread finish its current kernel, start no other,
-    and end (the kernels compiled so far stay in use, the rest run as
-    NumPy).  Also run at exit: a thread killed inside LLVM could crash the
-    exit of a command-line render."""
+    and end (renders after this run on NumPy unless every kernel was
+    compiled).  Also run at exit: a thread killed inside LLVM could crash
+    the exit of a command-line render."""
     _state["stop"] = True
     thread = _state["thread"]
     if thread is not None:
@@ -356,3 +412,49 @@ def _gufunc(numba, fn, inputs, outputs):
     wrapper.__module__ = fn.__module__
     wrapper.__qualname__ = fn.__name__ + "_gufunc"
     return numba.guvectorize([signature], layout, nopython=True, cache=True)(wrapper)
+
+
+def import_all():
+    """Import every engine module, so that every kernel is defined."""
+    import importlib
+    import pkgutil
+    package = __package__ or __name__.rpartition(".")[0]
+    for info in pkgutil.walk_packages([_ENGINE_DIR], package + "."):
+        if not info.name.endswith("__main__"):
+            importlib.import_module(info.name)
+
+
+def _complete_marker():
+    """numba keys its cache by the source files' folder, so a copy of the
+    engine elsewhere (the add-on's vendored one) has a cache of its own."""
+    where = hashlib.sha1(_ENGINE_DIR.encode()).hexdigest()[:12]
+    return os.path.join(cache_dir(), f".complete-{where}")
+
+
+def cache_complete():
+    """True once every kernel of this engine copy is in the disk cache."""
+    return os.path.exists(_complete_marker())
+
+
+def warm_cache():
+    """Import every engine module, compile all kernels into the disk cache
+    and return the seconds it took (``make setup``, the add-on on enable)."""
+    import_all()
+    t0 = time.perf_counter()
+    if not configure(True):
+        raise RuntimeError(f"compiled kernels unavailable: {UNAVAILABLE}")
+    wait()
+    missing = [k.__name__ for k in KERNELS if k.compiled is None]
+    if missing:
+        raise RuntimeError(f"{len(missing)} kernels did not compile ({UNAVAILABLE}): {', '.join(missing[:5])}")
+    with open(_complete_marker(), "w"):
+        pass
+    return time.perf_counter() - t0
+
+
+if __name__ == "__main__":
+    import importlib as _importlib
+    # Run as a script this file is __main__; the kernels live in the package's module.
+    _module = _importlib.import_module(__package__ + ".kernels")
+    _seconds = _module.warm_cache()
+    print(f"ember: {len(_module.KERNELS)} kernels compiled or loaded in {_seconds:.1f} s ({_module.cache_dir()})")

@@ -96,6 +96,16 @@ def prepare(scene, settings):
     return ctx
 
 
+def _choose_kernels(settings, progress):
+    """Compiled or NumPy kernels for the whole render (engine/kernels.py):
+    a render waits for the compile rather than start on NumPy and switch
+    half-way, so a seed's image depends on the choice only, not on timing."""
+    try:
+        return kernels.for_render(getattr(settings, "use_jit", True), progress)
+    except kernels.CompileCancelled as exc:
+        raise Cancelled(str(exc)) from None
+
+
 def prepare_interruptibly(scene, settings, progress, poll=0.05):
     """``prepare`` (flattening, light set, BVH build: seconds on millions of
     triangles, none of it interruptible) in a daemon thread, asking
@@ -236,13 +246,16 @@ def render(scene, settings=None, progress=None):
 
 def _render(scene, settings, progress):
     t_start = time.perf_counter()
+    kernel_mode = _choose_kernels(settings, progress)
+    compile_wait = time.perf_counter() - t_start
     ctx = prepare_interruptibly(scene, settings, progress)
     cam = ctx.camera
     adaptive = _Adaptive(settings, cam.width * cam.height)
     film = Film(cam.width, cam.height, settings.aovs, adaptive.params is not None, settings.passes,
                 ctx.pass_config.crypto_levels)
     threads = settings.threads or os.cpu_count() or 1
-    stats = {"samples": 0, "samples_total": settings.samples, "prepare_seconds": time.perf_counter() - t_start}
+    stats = {"samples": 0, "samples_total": settings.samples, "kernels": kernel_mode,
+             "compile_wait_seconds": compile_wait, "prepare_seconds": time.perf_counter() - t_start - compile_wait}
     t_trace = time.perf_counter()
     image = None  # the last pass's image: the film does not change after it
     with _AbandonablePool(threads, film) as pool:

@@ -55,15 +55,16 @@ def _frame_numpy(n, s, t):
     t[:] = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
 
 
-# The per-row loops below run where the compiled kernels are on: the same
-# values as their NumPy forms, bit for bit (einsum sums x0 + x2 first, then
-# x1, where rows have unit stride: the loops add in that order), without an (N,) temporary per product.
+# The per-row loops below run where the compiled kernels are on: the values
+# of their NumPy forms within rounding, without an (N,) temporary per product.
 
 @kernels.helper
 def frame_of(n0, n1, n2):
-    """``frame`` of one unit normal in compiled loops: s0, s1, s2, t0, t1, t2,
-    rounded as _frame_numpy rounds them."""
-    sign = 1.0 if n2 >= 0 else -1.0
+    """``frame`` of one unit normal in compiled loops: s0, s1, s2, t0, t1, t2.
+    The sign is arithmetic, not a conditional expression: inlined into
+    loops that branch, a conditional's phi node tripped numba's SSA check
+    (NumbaIRAssumptionWarning: variable not in scope)."""
+    sign = 2.0 * (n2 >= 0.0) - 1.0
     a = -1.0 / (sign + n2)
     b = n0 * n1 * a
     return 1.0 + sign * (n0 * n0) * a, sign * b, -sign * n0, b, sign + (n1 * n1) * a, -n1

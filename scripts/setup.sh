@@ -30,3 +30,9 @@ if [ "${EMBER_WITH_BLENDER:-0}" = 1 ] && ! command -v blender >/dev/null 2>&1; t
     echo "warning: Debian's blender is not installed and we are not root; the real-binary test will fail under CI=true" >&2
   fi
 fi
+# Compile Ember's kernels into numba's disk cache now (once per version of the
+# engine's sources; seconds when already done), so that no render waits for
+# them or runs on NumPy for lack of them.
+if [ "${EMBER_JIT:-1}" != 0 ]; then
+  PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" .venv/bin/python -m engine.kernels
+fi

@@ -693,3 +693,49 @@ def test_add_rows_agrees(jit):
         assert_agree((out[0][1],), (out[1][1],))
         changed = np.flatnonzero((out[0][1] != out[0][0]).any(axis=1))
         assert set(changed) <= set(rows) and len(changed) > 0.9 * len(rows)
+
+
+def test_a_kernel_called_before_it_compiled_waits_for_the_compile(jit):
+    """With the JIT on, a kernel not compiled yet (a module imported late)
+    compiles when first called: a render never mixes the two forms."""
+    late = kernels.Kernel(_double_plus_one, 1, 1)
+    try:
+        assert kernels.enabled() and late.compiled is None
+        np.testing.assert_array_equal(late(np.array([1.0, 2.0])), [3.0, 5.0])
+        assert late.compiled is not None     # it ran compiled (the NumPy form compiles nothing)
+    finally:
+        kernels.KERNELS.remove(late)
+
+
+class _Watcher:
+    def __init__(self, stop):
+        self.stop, self.status = stop, []
+
+    def on_status(self, text, fraction):
+        self.status.append((text, fraction))
+
+    def should_stop(self):
+        return self.stop
+
+
+def test_for_render_shows_the_compile_and_can_be_cancelled(jit):
+    late = kernels.Kernel(_double_plus_one, 1, 1)
+    try:
+        with pytest.raises(kernels.CompileCancelled):
+            kernels.for_render(True, _Watcher(stop=True), poll=0.001)
+        watcher = _Watcher(stop=False)
+        assert kernels.for_render(True, watcher, poll=0.001) == "compiled"
+        assert late.compiled is not None
+        assert all(text.startswith("Compiling kernels") and 0 <= f <= 1 for text, f in watcher.status)
+    finally:
+        kernels.KERNELS.remove(late)
+    assert kernels.for_render(False) == "numpy" and not kernels.enabled()
+    kernels.configure(True)
+
+
+@pytest.mark.parametrize("use_jit", [True, False])
+def test_a_render_records_its_kernels(jit, use_jit):
+    result = render(cornell_spheres(8, 8, grid=1), RenderSettings(samples=1, use_jit=use_jit, threads=1))
+    assert result.stats["kernels"] == ("compiled" if use_jit else "numpy")
+    assert result.stats["compile_wait_seconds"] >= 0
+    kernels.configure(True)
