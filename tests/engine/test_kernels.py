@@ -721,7 +721,9 @@ class _Watcher:
 def test_for_render_shows_the_compile_and_can_be_cancelled(jit):
     late = kernels.Kernel(_double_plus_one, 1, 1)
     try:
-        with pytest.raises(kernels.CompileCancelled):
+        # Holding the cache's lock keeps the compile waiting, so the stop
+        # request meets it still running.
+        with kernels.cache_lock(kernels.cache_dir()), pytest.raises(kernels.CompileCancelled):
             kernels.for_render(True, _Watcher(stop=True), poll=0.001)
         watcher = _Watcher(stop=False)
         assert kernels.for_render(True, watcher, poll=0.001) == "compiled"
