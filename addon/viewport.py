@@ -405,6 +405,9 @@ class _ThreadProgress:
         else:
             self.thread.status = f"Sample {samples_done}/{self.samples_total}"
 
+    def on_status(self, text, fraction):
+        self.thread.status = text      # "Compiling kernels (n/N)" before the first image
+
     def should_stop(self):
         return self.thread._stale(self.generation)
 
