@@ -87,7 +87,7 @@ class LightSet:
         self.visibility = np.concatenate([g.table.visibility() for g in self.groups]).astype(np.uint8)
         self.delta = np.concatenate([np.asarray(g.table.is_delta(), bool) for g in self.groups])
         # Light tree (strategy 'tree'): built over every emitter's bounds and power.
-        self.tree = LightTree(self._bounds()) if strategy == "tree" and self.count else None
+        self.tree = LightTree(self.emitter_bounds()) if strategy == "tree" and self.count else None
         self.proxies = LightProxies.for_lights([g.table for g in self.groups if g.definition.hit == RAY])
         self._surface = self._only(SURFACE)
         self._world = self._only(WORLD)
@@ -108,7 +108,7 @@ class LightSet:
             raise RuntimeError(f"exactly one light type must have hit {hit!r}, found {len(found)}")
         return found[0]
 
-    def _bounds(self):
+    def emitter_bounds(self):
         """lightbounds.Bounds per emitter (None: no position), for the tree."""
         return [g.table.bounds(e - g.base, self.power[e]) for g in self.groups for e in range(g.base, g.stop)]
 
