@@ -12,5 +12,5 @@ from .registry import REGISTRY, LightDef, definition_of, ordered, scene_lights_i
 from .sun import SUN, SunLights, _sun_sample
 from .world import ENV, EnvironmentLight
 
-# The tables' former private names (tests/engine/test_kernels.py).
-_PointLights, _SunLights, _AreaLights, _MeshLights = PointLights, SunLights, AreaLights, MeshLights
+# The point table's former private name (tests/engine/test_kernels.py).
+_PointLights = PointLights

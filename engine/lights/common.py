@@ -110,7 +110,8 @@ def check_size(value, what, low=0.0, high=np.inf):
     except (TypeError, ValueError):
         raise SceneError(f"{what}: expected a number, got {value!r}") from None
     if not (np.isfinite(x) and low <= x <= high):
-        raise SceneError(f"{what} must be a finite number in [{low}, {high}], got {value}")
+        bound = f">= {low:g}" if high == np.inf else f"in [{low:g}, {high:g}]"
+        raise SceneError(f"{what} must be a finite number {bound}, got {value}")
     return x
 
 
