@@ -332,7 +332,8 @@ def _examples():
     P, d, r = np.array([30.0, 20.0, 10.0]), 2.0, 0.3
 
     def scene(**kw):
-        return lambda: Scene(lights=[(SpotLight if "direction" in kw else PointLight)((0.0, 0.0, d), tuple(P), **kw)])
+        kind = SpotLight if "direction" in kw else PointLight
+        return lambda: Scene(lights=[kind((0.0, 0.0, d), tuple(P), **kw)])
     delta = tuple(P / (4 * np.pi * d * d))
     cone = 2 * np.pi * (1 - np.sqrt(1 - r * r / (d * d)))
     disk = 2 * np.pi * (1 - d / np.hypot(d, r))
@@ -347,7 +348,8 @@ def _examples():
                      solid_angle=2 * np.pi * (1 - np.sqrt(1 - 0.01 / (d * d))), irradiance=delta),
         # Light Falloff: the intensity P / (4 pi) at distance d times d (Linear),
         # d^2 (Constant), and d^2 / (smooth + d^2).
-        LightExample("delta linear", scene(radius=0.0, falloff="LINEAR"), (0, 0, 0), irradiance=tuple(np.array(delta) * d)),
+        LightExample("delta linear", scene(radius=0.0, falloff="LINEAR"), (0, 0, 0),
+                     irradiance=tuple(np.array(delta) * d)),
         LightExample("delta constant smooth", scene(radius=0.0, falloff="CONSTANT", falloff_smooth=1.5), (0, 0, 0),
                      irradiance=tuple(np.array(delta) * d * d * d * d / (1.5 + d * d))),
         LightExample("sphere linear", scene(radius=r, falloff="LINEAR"), (0, 0, 0), solid_angle=cone),
@@ -356,6 +358,11 @@ def _examples():
 
 def _set(field, value):
     return lambda s: setattr(s.lights[0], field, value)
+
+
+def _spot(**kw):
+    """Replace the example's light by a spot with these fields."""
+    return lambda s: s.lights.__setitem__(0, SpotLight((0.0, 0.0, 1.0), (1.0, 1.0, 1.0), **kw))
 
 
 register(LightDef(
@@ -368,10 +375,6 @@ register(LightDef(
              ("NaN radius", _set("radius", np.nan), "radius"),
              ("unknown falloff", _set("falloff", "CUBIC"), "falloff"),
              ("negative smooth", _set("falloff_smooth", -1.0), "smooth"),
-             ("zero spot size", lambda s: s.lights.__setitem__(0, SpotLight((0, 0, 1), (1, 1, 1), spot_size=0.0)),
-              "spot_size"),
-             ("zero spot direction", lambda s: s.lights.__setitem__(0, SpotLight((0, 0, 1), (1, 1, 1),
-                                                                                 direction=(0, 0, 0))),
-              "direction"),
-             ("spot blend above 1", lambda s: s.lights.__setitem__(0, SpotLight((0, 0, 1), (1, 1, 1), spot_blend=2.0)),
-              "spot_blend"))))
+             ("zero spot size", _spot(spot_size=0.0), "spot_size"),
+             ("zero spot direction", _spot(direction=(0.0, 0.0, 0.0)), "direction"),
+             ("spot blend above 1", _spot(spot_blend=2.0), "spot_blend"))))
