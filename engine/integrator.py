@@ -28,7 +28,6 @@ from .accel import shadow_rays, shadow_rays_f32
 from .pass_events import lobe_rows as _lobe_rows
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .hits import hit_geometry
-from .lights import POINT, SUN
 from .nodes import NodeRays, ShadingContext
 from .sampler import BSDF, CAMERA, KIND, LIGHT, emitter_set, vertex_set
 from .sampling import power_heuristic
@@ -52,13 +51,7 @@ class Context:
         # serves contexts built directly.
         self.bump_model = bsdf.BUMP_GGX
         lt = self.lights
-        delta = np.zeros(lt.count, bool)
-        if lt.count:
-            pts = lt.kind == POINT
-            delta[pts] = lt.points.radius[lt.local[pts]] <= 0
-            suns = lt.kind == SUN
-            delta[suns] = lt.suns.delta[lt.local[suns]]
-        self.delta_emitters = np.nonzero(delta)[0]
+        self.delta_emitters = np.nonzero(lt.delta)[0]   # each light type says which it has
         self.all_emitters = np.arange(lt.count)
         _visibility_setup(self)
         _transparency_setup(self)

@@ -1,4 +1,5 @@
-"""Broad phase for BSDF rays meeting analytic lights (point, spot, area).
+"""Broad phase for BSDF rays meeting analytic lights (point, spot, area:
+each light type's ``proxy_boxes`` says where its lights are).
 
 ``LightSet.intersect`` tests every ray against every light, exactly, in
 float64: one light at a time over all rays, so its cost grows with rays x
@@ -25,52 +26,15 @@ _FACES = np.array([
     (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)])
 
 
-def _box_corners(centre, axes):
+def box_corners(centre, axes):
     """(8, 3) corners centre +- a0 +- a1 +- a2 (axes: (3, 3) half-edge rows)."""
     signs = np.array([[(k >> 2) & 1, (k >> 1) & 1, k & 1] for k in range(8)], float) * 2.0 - 1.0
     return centre + signs @ axes
 
 
-def _margin(centre, size):
+def proxy_margin(centre, size):
+    """How much a box around a light of this size at centre grows."""
     return GROW * size + 1e-5 * (1.0 + np.abs(centre).max())
-
-
-def point_light_boxes(points):
-    """Boxes around sphere and disk lights (a disk faces the shading point,
-    so it lies in the sphere of its radius too); lights of radius 0 cannot
-    be hit and get none."""
-    boxes = []
-    for j in range(points.count):
-        r = points.radius[j]
-        if r > 0:
-            half = r + _margin(points.pos[j], r)
-            boxes.append(_box_corners(points.pos[j], np.eye(3) * half))
-    return boxes
-
-
-def area_light_boxes(areas):
-    """Thin boxes around rectangles, squares, disks and ellipses.  The exact
-    test (lights._AreaLights.intersect) meets the plane through c normal to
-    the light's n, and accepts a point q when its projections on the unit
-    axes of u and v stay within half their lengths: the parallelogram
-    +-a e1 +-b e2 of that plane, with (e1, e2) dual to those axes (u x v
-    itself unless the light's matrix is sheared).  Ellipses lie inside it."""
-    boxes = []
-    for j in range(areas.count):
-        u, v, c, n = areas.u[j], areas.v[j], areas.c[j], areas.n[j]
-        lu, lv = np.linalg.norm(u), np.linalg.norm(v)
-        frame = np.array([u / max(lu, 1e-300), v / max(lv, 1e-300), n])
-        if lu <= 0 or lv <= 0 or abs(np.linalg.det(frame)) < 1e-9:
-            continue   # degenerate: the exact test finds no hit either
-        dual = np.linalg.inv(frame)   # columns e1, e2 (in the plane) and n'
-        corners = np.array([s * 0.5 * lu * dual[:, 0] + t * 0.5 * lv * dual[:, 1]
-                            for s in (-1, 1) for t in (-1, 1)])
-        ax = dual[:, 0] / np.linalg.norm(dual[:, 0])
-        ay = np.cross(n, ax)
-        half_x, half_y = np.abs(corners @ ax).max(), np.abs(corners @ ay).max()
-        pad = _margin(c, max(half_x, half_y))
-        boxes.append(_box_corners(c, np.array([ax * (half_x + pad), ay * (half_y + pad), n * pad])))
-    return boxes
 
 
 class LightProxies:
@@ -88,9 +52,10 @@ class LightProxies:
         self.scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32))  # build now
 
     @classmethod
-    def for_lights(cls, points, areas):
-        """Proxies when there are enough lights to pay for them, else None."""
-        boxes = point_light_boxes(points) + area_light_boxes(areas)
+    def for_lights(cls, tables):
+        """Proxies around every light of the light tables (each type's
+        ``proxy_boxes``) when there are enough to pay for them, else None."""
+        boxes = [box for table in tables for box in table.proxy_boxes()]
         return cls(boxes) if len(boxes) >= MIN_LIGHTS else None
 
     def candidates(self, o, d, tmax):

@@ -15,142 +15,25 @@ probability proportional to the child's importance
 cone and the direction to p, widened by the angle the box subtends, and
 theta_i' likewise for the receiver's normal.  The bounds are conservative, so
 an emitter that can light p never gets probability 0.  Emitters without a
-position (suns, and any type the tree does not know) are picked uniformly
+position (suns, the world: their bounds are None) are picked uniformly
 with probability n_inf / (n_inf + 1), the tree with the rest (pbrt-v4).
+
+The tree reads only ``lightbounds.Bounds``: each light type computes its own
+(engine/lights/*.py ``bounds``), so the tree knows no light type and no
+light module imports the tree.
 
 ``select`` and ``pmf`` evaluate the same products in the same order, so the
 selection probability MIS uses is exactly the one NEE sampled with.
 """
-import math
-
 import numpy as np
 
 from .kernels import helper, kernel, loop_kernel, where
-from .vec import dot
+from .lightbounds import Bounds, union  # noqa: F401  (the tree's input type, importable from here)
 
-# Half-angle of emission beyond a spot cone: its light ends at the cone edge.
-SPOT_MARGIN = 1e-3
-
-
-class Bounds:
-    """Light bounds of one emitter or node (pbrt-v4 LightBounds)."""
-
-    def __init__(self, lo, hi, phi, w, cos_o, cos_e, two_sided):
-        self.lo, self.hi = np.asarray(lo, float), np.asarray(hi, float)
-        self.phi = float(phi)
-        self.w = np.asarray(w, float)
-        self.cos_o, self.cos_e, self.two_sided = float(cos_o), float(cos_e), bool(two_sided)
-        self.center = 0.5 * (self.lo + self.hi)
-
-    def centroid(self):
-        return self.center
-
-
-def union(a, b):
-    if a.phi <= 0:
-        return b
-    if b.phi <= 0:
-        return a
-    w, cos_o = _cone_union(a.w, a.cos_o, b.w, b.cos_o)
-    return Bounds(np.minimum(a.lo, b.lo), np.maximum(a.hi, b.hi), a.phi + b.phi, w, cos_o,
-                  min(a.cos_e, b.cos_e), a.two_sided or b.two_sided)
-
-
-def _cone_union(wa, cos_a, wb, cos_b):
-    """Smallest cone holding two direction cones (pbrt-v4 DirectionCone Union).
-    Scalar maths: called once per tree node, where NumPy's per-call cost
-    on 3-vectors would dominate building trees over many triangles."""
-    ax, ay, az = float(wa[0]), float(wa[1]), float(wa[2])
-    bx, by, bz = float(wb[0]), float(wb[1]), float(wb[2])
-    theta_a, theta_b = math.acos(min(max(cos_a, -1.0), 1.0)), math.acos(min(max(cos_b, -1.0), 1.0))
-    theta_d = math.acos(min(max(ax * bx + ay * by + az * bz, -1.0), 1.0))
-    if min(theta_d + theta_b, math.pi) <= theta_a:
-        return wa, cos_a
-    if min(theta_d + theta_a, math.pi) <= theta_b:
-        return wb, cos_b
-    theta_o = 0.5 * (theta_a + theta_d + theta_b)
-    cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-    length = math.sqrt(cx * cx + cy * cy + cz * cz)
-    if theta_o >= math.pi or length == 0:
-        return wa, -1.0
-    cx, cy, cz = cx / length, cy / length, cz / length
-    theta_r = theta_o - theta_a
-    # Rodrigues: rotate wa by theta_r about the axis (perpendicular to wa).
-    c, sn = math.cos(theta_r), math.sin(theta_r)
-    w = np.array([ax * c + (cy * az - cz * ay) * sn, ay * c + (cz * ax - cx * az) * sn,
-                  az * c + (cx * ay - cy * ax) * sn])
-    return w / math.sqrt(w @ w), math.cos(theta_o)
-
-
-def emitter_bounds(lights):
-    """Bounds per emitter of a LightSet (None: no position, i.e. infinite)."""
-    from .lights import AREA, MESH, POINT
-    out = []
-    power = lights.power
-    for e in range(lights.count):
-        kind, j = lights.kind[e], lights.local[e]
-        if kind == POINT:
-            out.append(_point_bounds(lights.points, j, power[e]))
-        elif kind == AREA:
-            out.append(_area_bounds(lights.areas, j, power[e]))
-        elif kind == MESH:
-            out.append(_mesh_bounds(lights.meshes, j, power[e]))
-        else:
-            out.append(None)
-    return out
-
-
-def _point_bounds(points, j, phi):
-    r = points.radius[j]
-    c = points.pos[j]
-    if points.spot[j]:
-        # Emission inside the cone only, from anywhere on the sphere/disk:
-        # the box's angular size adds that spread at the shading point.
-        return Bounds(c - r, c + r, phi, points.dir[j], points.cos_half[j], np.cos(SPOT_MARGIN), False)
-    return Bounds(c - r, c + r, phi, (0.0, 0.0, 1.0), -1.0, 0.0, False)
-
-
-def _area_bounds(areas, j, phi):
-    c, u, v = areas.c[j], areas.u[j], areas.v[j]
-    corners = c + 0.5 * np.array([u + v, u - v, -u + v, -u - v])
-    # One-sided Lambertian: normals all equal (theta_o = 0), emission up to 90 degrees.
-    return Bounds(corners.min(axis=0), corners.max(axis=0), phi, areas.n[j], 1.0, 0.0, False)
-
-
-def _mesh_bounds(meshes, j, phi):
-    tr = meshes.tris
-    members = meshes.members[j]
-    corners = np.concatenate([tr.p0[members], tr.p0[members] + tr.e1[members],
-                              tr.p0[members] + tr.e2[members]])
-    ng = tr.ng[members]
-    # Two-sided emitters: a cone around +-w holding every normal.
-    ref = ng[np.argmax(tr.area[members])]
-    signed = ng * np.where(ng @ ref < 0, -1.0, 1.0)[:, None]
-    w = (signed * tr.area[members, None]).sum(axis=0)
-    length = np.linalg.norm(w)
-    if length > 1e-12:
-        w = w / length
-        cos_o = float(np.min(np.abs(ng @ w)))
-    else:
-        w, cos_o = ref, -1.0
-    return Bounds(corners.min(axis=0), corners.max(axis=0), phi, w, cos_o, 0.0, True)
-
-
-def triangle_tree(tris, members):
-    """A LightTree over emissive triangles (one group's members; leaf k is
-    members[k]): power by area (a group shares its emission), two-sided
-    Lambertian emission about each normal."""
-    p0 = tris.p0[members]
-    p1, p2 = p0 + tris.e1[members], p0 + tris.e2[members]
-    lo = np.minimum(np.minimum(p0, p1), p2)
-    hi = np.maximum(np.maximum(p0, p1), p2)
-    area, ng = tris.area[members], tris.ng[members]
-    return LightTree([Bounds(lo[k], hi[k], area[k], ng[k], 1.0, 0.0, True) for k in range(len(members))])
-
-
-# ----------------------------------------------------------------------------
 
 class LightTree:
+    """bounds: one ``Bounds`` per emitter (None: no position)."""
+
     def __init__(self, bounds):
         self.count = len(bounds)
         self.infinite = np.array([e for e, b in enumerate(bounds) if b is None], np.int64)

@@ -29,6 +29,7 @@ import threading
 import numpy as np
 
 from . import bsdf
+from .lights import scene_lights_in_order
 from .passes import (AOV_COLOR, CRYPTO, LIGHT_CLASSES, STRATEGY, PassConfig, crypto_manifest, is_aov,
                      light_groups)
 from .sampling import cosine_hemisphere
@@ -83,26 +84,22 @@ def _aov_tables(materials, names):
 
 
 def _group_parts(scene, materials, cfg, names):
-    """Light-group ids (-1 = none) of the emitters, by kind, in LightSet's
-    order: point and spot lights, suns, area lights, the world (HDRI, or the
-    constant world BSDF sampling finds), emissive materials (the group of
-    the first grouped object using the material: Ember's emissive meshes
-    are one emitter per material)."""
-    from .scene import AreaLight, PointLight, SunLight
+    """Light-group ids (-1 = none) of the emitters' sources: the scene's
+    lights in LightSet's order (registry.scene_lights_in_order), the world
+    (HDRI, or the constant world BSDF sampling finds), emissive materials
+    (the group of the first grouped object using the material: Ember's
+    emissive meshes are one emitter per material)."""
     groups = {g: i for i, g in enumerate(light_groups(names))}
     if not groups:
         return None
     of = cfg.lightgroup_of
-
-    def ids(kind):
-        return [groups.get(of.get(l.name, ""), -1) for l in scene.lights if isinstance(l, kind)]
     material = np.full(len(materials), -1, np.int64)
     for inst in scene.instances:
         g = groups.get(of.get(inst.name, ""), -1)
         for m in inst.materials:
             if g >= 0 and 0 <= m < len(material) and material[m] < 0:
                 material[m] = g
-    return {"lights": ids(PointLight) + ids(SunLight) + ids(AreaLight),
+    return {"lights": [groups.get(of.get(l.name, ""), -1) for l in scene_lights_in_order(scene.lights)],
             "world": groups.get(cfg.world_lightgroup, -1), "material": material, "count": len(groups),
             "names": tuple(groups)}
 
@@ -112,9 +109,8 @@ def _emitter_groups(ctx):
     cached = ctx.__dict__.get("_pass_emitter_groups")
     if cached is None:
         parts = ctx.pass_config.group_parts
-        lt = ctx.lights
-        env = [parts["world"]] * lt.env.count
-        cached = np.array(parts["lights"] + env + list(parts["material"][lt.meshes.material]) + [-1], np.int64)
+        emitters = ctx.lights.per_emitter(parts["lights"], parts["world"], parts["material"])
+        cached = np.array(list(emitters) + [-1], np.int64)
         ctx._pass_emitter_groups = cached
     return cached
 

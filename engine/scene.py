@@ -299,7 +299,14 @@ Scalar = Union[float, Texture]
 
 
 # ----------------------------------------------------------------------------
-# Lights (Cycles units)
+# Lights (Cycles units).  Each class is one light type's scene data; the type
+# itself (validation, sampling, bounds, ...) is its entry in
+# engine/lights/registry.py.
+
+# Cycles' Light Falloff node outputs, in the power of the distance they
+# multiply the emission by (engine/lights/common.py Falloff).
+FALLOFFS = ("QUADRATIC", "LINEAR", "CONSTANT")
+
 
 @dataclass
 class PointLight:
@@ -315,6 +322,10 @@ class PointLight:
     soft_falloff=False: a sphere of radius ``radius`` with radiance
     P / (4 pi^2 r^2).  soft_falloff=True (Blender 4.0+ default): Cycles' disk of
     radius ``radius`` that always faces the shading point, same radiance.
+
+    falloff / falloff_smooth: the light's node tree feeds its Emission
+    Strength through a Light Falloff node ('QUADRATIC' = none, 'LINEAR',
+    'CONSTANT') with that Smooth; ``power`` then holds the node's Strength.
     """
     position: Sequence[float]
     power: RGB
@@ -326,6 +337,8 @@ class PointLight:
     visible_glossy: bool = True
     visible_transmission: bool = True
     visible_shadow: bool = True
+    falloff: str = "QUADRATIC"
+    falloff_smooth: float = 0.0
 
 
 @dataclass
@@ -342,7 +355,9 @@ class SpotLight(PointLight):
 class SunLight:
     """A distant light.  ``direction`` is where the light travels (object -Z);
     ``strength`` = colour * irradiance (W/m^2) on a surface facing the sun;
-    ``angle`` is the full angular diameter in radians."""
+    ``angle`` is the full angular diameter in radians.  No falloff: Cycles
+    ignores a Light Falloff node on distant lights (its ray_length is
+    FLT_MAX)."""
     direction: Sequence[float]
     strength: RGB
     angle: float = 0.0
@@ -365,6 +380,7 @@ class AreaLight:
     size_x by size_y in local X/Y (SQUARE and DISK use size_x for both;
     DISK/ELLIPSE sizes are diameters).  ``power`` = colour * watts; with
     ``normalize`` (Cycles' default) radiance = power / (pi * area).
+    falloff / falloff_smooth as for PointLight.
     """
     matrix: np.ndarray
     power: RGB
@@ -378,6 +394,8 @@ class AreaLight:
     visible_glossy: bool = True
     visible_transmission: bool = True
     visible_shadow: bool = True
+    falloff: str = "QUADRATIC"
+    falloff_smooth: float = 0.0
 
 
 Light = Union[PointLight, SpotLight, SunLight, AreaLight]
@@ -483,7 +501,7 @@ class RenderSettings:
     'power', 'all', 'tree' (a light tree: by each light's estimated
     contribution at the shading point; for scenes with many lights) or 'auto'
     (the tree, and every light at glossy vertices with 2-4 lights and no
-    emissive mesh: engine/lights.py resolve_selection).  strategy: 'mis', 'light' (NEE only) or 'bsdf'.
+    emissive mesh: engine/lights/lightset.py resolve_selection).  strategy: 'mis', 'light' (NEE only) or 'bsdf'.
     clamp: 0 disables clamping of a sample's radiance.  max_paths bounds the
     number of paths in flight (memory); threads 0 = every core.
     time_limit: seconds (0 = none); stops after the pass that crosses it.

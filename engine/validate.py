@@ -1,8 +1,8 @@
 """Input checks with messages a user can act on (raised as SceneError)."""
 import numpy as np
 
-from .scene import (AREA_SHAPES, ENV_INTERPOLATIONS, LOBE_KINDS, AreaLight, PointLight,
-                    SceneError, SpotLight, SunLight)
+from .lights import validate_light   # each light type validates its own (engine/lights/)
+from .scene import ENV_INTERPOLATIONS, LOBE_KINDS, SceneError
 
 from . import scene as _scene
 from .textures import is_texture
@@ -159,43 +159,6 @@ def _validate_lobe_extras(lobe, k, what, n_lobes):
     if not 0 <= covers < n_lobes - k:
         raise SceneError(f"{what}: lobe {k} covers {covers} lobes, but only "
                          f"{n_lobes - k - 1} follow it")
-
-
-def validate_light(light, index):
-    what = f"light {index} ({light.name!r})"
-    if isinstance(light, SunLight):
-        _rgb(light.strength, f"{what} strength")
-        d = _rgb(light.direction, f"{what} direction")
-        if np.linalg.norm(d) == 0:
-            raise SceneError(f"{what}: direction is zero")
-        if not 0 <= light.angle <= np.pi:
-            raise SceneError(f"{what}: angle {light.angle} outside [0, pi]")
-    elif isinstance(light, AreaLight):
-        _rgb(light.power, f"{what} power")
-        m = np.asarray(light.matrix, dtype=np.float64)
-        if m.shape != (4, 4):
-            raise SceneError(f"{what}: matrix must be 4x4")
-        _finite(m, f"{what} matrix")
-        if light.shape not in AREA_SHAPES:
-            raise SceneError(f"{what}: unknown shape {light.shape!r}")
-        for name in ("size_x", "size_y"):
-            size = getattr(light, name)
-            if not (np.isfinite(size) and size >= 0):
-                raise SceneError(f"{what}: {name} must be a finite size >= 0, got {size}")
-    elif isinstance(light, PointLight):
-        _rgb(light.power, f"{what} power")
-        _rgb(light.position, f"{what} position")
-        if light.radius < 0 or not np.isfinite(light.radius):
-            raise SceneError(f"{what}: radius must be >= 0")
-        if isinstance(light, SpotLight):
-            d = _rgb(light.direction, f"{what} direction")
-            if np.linalg.norm(d) == 0:
-                raise SceneError(f"{what}: direction is zero")
-            for name in ("spot_size", "spot_blend"):
-                if not np.isfinite(getattr(light, name)):
-                    raise SceneError(f"{what}: {name} is not finite")
-    else:
-        raise SceneError(f"{what}: unknown light type {type(light).__name__}")
 
 
 def validate_world(world):

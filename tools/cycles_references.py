@@ -40,6 +40,7 @@ for _scene in ('veach_mis', 'instances_lights'):
 for _scene in ('rect_close', 'light_over_lit_world', 'big_triangle', 'spot_blend', 'shadow_invisible',
                'glossy_invisible_light', 'diffuse_camera_invisible'):
     REFERENCES['light_' + _scene] = ('test_light_parity', _scene, 2048)
+REFERENCES['light_falloff'] = ('test_light_falloff_parity', 'falloff', 2048)
 for _scene in ('point_light', 'area_light'):
     REFERENCES['transparency_' + _scene] = ('test_transparency_parity', _scene, 2048)
 for _scene in ('glass', 'principled', 'mix', 'furnace'):

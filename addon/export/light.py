@@ -5,7 +5,9 @@ strength [W/m^2]; Blender 4.0+ light exposure multiplies both by 2^exposure.
 Light node trees (Cycles-only) are read through the shader-node registry
 (nodes.SocketReader): an Emission node's Color x Strength that is the same
 at every point (e.g. a Blackbody of a fixed temperature) scales the light;
-one that varies per point is reported and its mean is used.
+one that varies per point is reported and its mean is used.  A Light
+Falloff node on the Strength (Quadratic, Linear or Constant output, Smooth)
+becomes the engine light's ``falloff`` / ``falloff_smooth``.
 
 Blender 3.x lights follow older conventions, converted here the way Blender
 4.0 converts a 3.x file when it opens it (measured: the same Cornell box
@@ -155,7 +157,9 @@ def _nonfinite_field(light):
 
 def _with_node_tree(light, data):
     """The light scaled by its node tree's emission (Color x Strength of the
-    Emission node feeding the Light Output), and a note or None."""
+    Emission node feeding the Light Output), and a note or None.  A Light
+    Falloff node on the Strength gives the light its falloff (the node's
+    Strength scales the light, its output and Smooth go to the engine)."""
     from . import nodes
     output = nodes.output_node(data.node_tree, 'OUTPUT_LIGHT')
     if output is None:
@@ -166,16 +170,42 @@ def _with_node_tree(light, data):
         name = 'nothing' if source is None else f"'{source.name}'"
         return light, f"light nodes ({name} at the output) are ignored"
     color = reader.input(source, 'Color')
-    strength = reader.input(source, 'Strength')
+    strength, falloff, notes = _strength_and_falloff(reader, source, light)
     if reader.unsupported:
         return light, "light nodes " + ", ".join(reader.unsupported) + " are ignored"
     factor, varies = _constant_rgb(nodes._as_color(color), strength)
-    note = "the light's node tree varies over the light: its mean is used" if varies else None
+    if varies:
+        notes.append("the light's node tree varies over the light: its mean is used")
+    light = dataclasses.replace(light, **falloff)
+    note = "; ".join(notes) or None
     for name in ('power', 'strength'):
         value = getattr(light, name, None)
         if value is not None:
             return dataclasses.replace(light, **{name: tuple(v * f for v, f in zip(value, factor))}), note
     return light, note
+
+
+def _strength_and_falloff(reader, emission, light):
+    """The Emission's Strength and the engine light's falloff fields: a
+    Light Falloff node feeding Strength contributes its own Strength, and
+    its output (Quadratic, Linear, Constant) and Smooth become the light's
+    falloff (Cycles' svm_node_light_falloff, evaluated per light sample at
+    its distance).  Suns have none: Cycles ignores the node on distant
+    lights.  Returns (strength, fields, notes)."""
+    from . import nodes
+    node, out = reader.linked_node(emission.inputs['Strength'])
+    if node is None or node.type != 'LIGHT_FALLOFF' or node.mute:
+        return reader.input(emission, 'Strength'), {}, []
+    strength = reader.input(node, 'Strength')
+    names = {f.name for f in dataclasses.fields(light)}
+    if 'falloff' not in names:
+        return strength, {}, []
+    smooth, varies = _constant_rgb((1.0, 1.0, 1.0), reader.input(node, 'Smooth'))
+    notes = ["the Light Falloff's Smooth varies over the light: its mean is used"] if varies else []
+    kind = out.name.upper()
+    if kind not in _scene().FALLOFFS:
+        return strength, {}, [f"Light Falloff output '{out.name}' is not rendered"]
+    return strength, {'falloff': kind, 'falloff_smooth': max(0.0, smooth[0])}, notes
 
 
 def _constant_rgb(color, strength):

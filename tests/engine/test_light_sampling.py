@@ -117,12 +117,12 @@ def test_spherical_rectangle(name):
 
 def area_sampled_inverse_pdf(light, p, seed, n=N):
     ls, _, _ = make_light_set([light])
-    saved = lights.MIN_SPHERICAL
-    lights.MIN_SPHERICAL = np.inf
+    saved = lights.common.MIN_SPHERICAL
+    lights.common.MIN_SPHERICAL = np.inf
     try:
         s = ls.sample(np.zeros(n, int), np.tile(p, (n, 1)), *uniforms(seed, 3, n))
     finally:
-        lights.MIN_SPHERICAL = saved
+        lights.common.MIN_SPHERICAL = saved
     return np.where(s.pdf > 0, 1.0 / np.where(s.pdf > 0, s.pdf, 1.0), 0.0)
 
 
@@ -161,12 +161,12 @@ def test_spherical_rectangle_lowers_variance():
     u = uniforms(40, 3)
     s = ls.sample(np.zeros(n, int), P, *u)
     e_sph = s.Le[:, 0] * s.wi[:, 2] / s.pdf
-    saved = lights.MIN_SPHERICAL
-    lights.MIN_SPHERICAL = np.inf
+    saved = lights.common.MIN_SPHERICAL
+    lights.common.MIN_SPHERICAL = np.inf
     try:
         s = ls.sample(np.zeros(n, int), P, *u)
     finally:
-        lights.MIN_SPHERICAL = saved
+        lights.common.MIN_SPHERICAL = saved
     ok = s.pdf > 0
     e_area = np.where(ok, s.Le[:, 0] * s.wi[:, 2] / np.where(ok, s.pdf, 1.0), 0.0)
     # Four corner rectangles 1 x 1 at height h: the differential form factor.
@@ -228,12 +228,12 @@ def test_spherical_triangle(name):
 
 
 def area_sampled_triangle_inverse_pdf(ls, p, seed, n=N):
-    saved = lights.MIN_SPHERICAL
-    lights.MIN_SPHERICAL = np.inf
+    saved = lights.common.MIN_SPHERICAL
+    lights.common.MIN_SPHERICAL = np.inf
     try:
         s = ls.sample(np.zeros(n, int), np.tile(p, (n, 1)), *uniforms(seed, 3, n))
     finally:
-        lights.MIN_SPHERICAL = saved
+        lights.common.MIN_SPHERICAL = saved
     return 1.0 / s.pdf
 
 

@@ -1,0 +1,257 @@
+"""Area lights: one-sided squares, rectangles, disks and ellipses emitting
+along their local -Z, radiance P / (pi A) (normalize on) or P / pi.
+Rectangles seen under enough solid angle are sampled by it (Urena et al.),
+the rest by area."""
+import numpy as np
+
+from ..geometry import visibility_bits
+from ..kernels import helper, kernel, where
+from ..lightbounds import Bounds
+from ..lightproxy import box_corners, proxy_margin
+from ..sampling import concentric_disk, rectangle_frame, rectangle_solid_angle, spherical_rectangle_warp
+from ..scene import AREA_SHAPES, AreaLight, Scene, SceneError
+from . import common
+from .common import Falloff, check_falloff, check_rgb, check_size, selection_power, uniform_index, unit
+from .registry import RAY, LightDef, LightExample, LightTable, register
+
+AREA = 2
+
+
+class AreaLights(LightTable):
+    def __init__(self, lights):
+        self.count = len(lights)
+        self.lights = list(lights)
+        self.falloff = Falloff.of(lights)
+        u, v, c, n, area, ell = [], [], [], [], [], []
+        for l in lights:
+            m = np.asarray(l.matrix, float)
+            sy = l.size_x if l.shape in ("SQUARE", "DISK") else l.size_y
+            u.append(m[:3, 0] * l.size_x)
+            v.append(m[:3, 1] * sy)
+            c.append(m[:3, 3])
+            n.append(unit(-m[:3, 2]))
+            ellipse = l.shape in ("DISK", "ELLIPSE")
+            a = np.linalg.norm(u[-1]) * np.linalg.norm(v[-1]) * (np.pi / 4 if ellipse else 1.0)
+            area.append(a)
+            ell.append(ellipse)
+        self.u = np.array(u, float).reshape(-1, 3)
+        self.v = np.array(v, float).reshape(-1, 3)
+        self.c = np.array(c, float).reshape(-1, 3)
+        self.n = np.array(n, float).reshape(-1, 3)
+        self.area = np.array(area, float)
+        self.ellipse = np.array(ell, bool)
+        self.visible_camera = [l.visible_camera for l in lights]
+        pw = np.array([l.power for l in lights], float).reshape(-1, 3)
+        norm = np.array([l.normalize for l in lights], bool)
+        self.power_rgb = pw
+        inv_area = np.where(norm & (self.area > 0), 1.0 / np.maximum(self.area, 1e-300), 1.0)
+        self.L = pw * (inv_area / np.pi)[:, None]
+        # Projections onto the light's axes: local coords in [-0.5, 0.5].
+        self.du = self.u / np.maximum(np.sum(self.u ** 2, axis=1), 1e-300)[:, None]
+        self.dv = self.v / np.maximum(np.sum(self.v ** 2, axis=1), 1e-300)[:, None]
+        # Rectangles (not sheared by the matrix) are sampled by solid angle.
+        self.len_u = np.linalg.norm(self.u, axis=1)
+        self.len_v = np.linalg.norm(self.v, axis=1)
+        self.ex = self.u / np.maximum(self.len_u, 1e-300)[:, None]
+        self.ey = self.v / np.maximum(self.len_v, 1e-300)[:, None]
+        skew = np.abs(np.sum(self.ex * self.ey, axis=1))
+        self.rect = ~self.ellipse & (self.area > 0) & (skew < 1e-9)
+
+    def power(self, radius):
+        return selection_power(self.L) * np.pi * self.area if self.count else []
+
+    def visibility(self):
+        return np.array([visibility_bits(l) for l in self.lights], np.uint8)
+
+    def bounds(self, j, phi):
+        c, u, v = self.c[j], self.u[j], self.v[j]
+        corners = c + 0.5 * np.array([u + v, u - v, -u + v, -u - v])
+        # One-sided Lambertian: normals all equal (theta_o = 0), emission up to 90 degrees.
+        return Bounds(corners.min(axis=0), corners.max(axis=0), phi, self.n[j], 1.0, 0.0, False)
+
+    def proxy_boxes(self):
+        """Thin boxes around rectangles, squares, disks and ellipses.  The exact
+        test (``intersect``) meets the plane through c normal to the light's
+        n, and accepts a point q when its projections on the unit axes of u
+        and v stay within half their lengths: the parallelogram +-a e1 +-b e2
+        of that plane, with (e1, e2) dual to those axes (u x v itself unless
+        the light's matrix is sheared).  Ellipses lie inside it."""
+        boxes = []
+        for j in range(self.count):
+            u, v, c, n = self.u[j], self.v[j], self.c[j], self.n[j]
+            lu, lv = np.linalg.norm(u), np.linalg.norm(v)
+            frame = np.array([u / max(lu, 1e-300), v / max(lv, 1e-300), n])
+            if lu <= 0 or lv <= 0 or abs(np.linalg.det(frame)) < 1e-9:
+                continue   # degenerate: the exact test finds no hit either
+            dual = np.linalg.inv(frame)   # columns e1, e2 (in the plane) and n'
+            corners = np.array([s * 0.5 * lu * dual[:, 0] + t * 0.5 * lv * dual[:, 1]
+                                for s in (-1, 1) for t in (-1, 1)])
+            ax = dual[:, 0] / np.linalg.norm(dual[:, 0])
+            ay = np.cross(n, ax)
+            half_x, half_y = np.abs(corners @ ax).max(), np.abs(corners @ ay).max()
+            pad = proxy_margin(c, max(half_x, half_y))
+            boxes.append(box_corners(c, np.array([ax * (half_x + pad), ay * (half_y + pad), n * pad])))
+        return boxes
+
+    def nearest(self, o, d, t, ray, bits, camera):
+        """As PointLights.nearest, one light at a time."""
+        n = len(o)
+        hit_t = np.full(n, np.inf)
+        index = np.full(n, -1, np.int64)
+        Le = np.zeros((n, 3))
+        pdf = np.zeros(n)
+        for j in range(self.count):
+            if camera and not self.visible_camera[j]:
+                continue
+            sees = True if ray is None else (ray & bits[j]) != 0
+            if not np.any(sees):
+                continue
+            th, le, pw = self.intersect(j, o, d)
+            closer = (th < t) & sees
+            if closer.any():
+                t[closer] = th[closer]
+                hit_t[closer] = th[closer]
+                index[closer] = j
+                Le[closer] = le[closer]
+                pdf[closer] = pw[closer]
+        return hit_t, index, Le, pdf
+
+    def sample(self, out, idx, j, p, u1, u2, u3, n=None):
+        j = uniform_index(j)
+        x, y = u1 - 0.5, u2 - 0.5
+        e = self.ellipse[j]
+        if np.any(e):
+            e = np.broadcast_to(e, x.shape)
+            dx, dy = concentric_disk(u1[e], u2[e])
+            x[e], y[e] = 0.5 * dx, 0.5 * dy
+        c, ex, ey, n = self.c[j], self.ex[j], self.ey[j], self.n[j]
+        wx, wy, wz, t, pdf = _area_light_sample(
+            p[:, 0], p[:, 1], p[:, 2], c[..., 0], c[..., 1], c[..., 2], ex[..., 0], ex[..., 1], ex[..., 2],
+            ey[..., 0], ey[..., 1], ey[..., 2], self.len_u[j], self.len_v[j], n[..., 0], n[..., 1], n[..., 2],
+            self.area[j], self.rect[j].astype(np.float64), x, y, u1, u2, common.MIN_SPHERICAL)
+        out.wi[idx], out.dist[idx], out.Le[idx] = np.stack([wx, wy, wz], axis=1), t, self.L[j]
+        out.pdf[idx] = pdf
+
+    def _solid_angle_pdf(self, j, o):
+        """Which rays from o NEE samples by solid angle, and that pdf."""
+        c, ex, ey = self.c[j], self.ex[j], self.ey[j]
+        s, min_nz2 = rectangle_solid_angle(o[:, 0], o[:, 1], o[:, 2], *c, *ex, *ey, self.len_u[j], self.len_v[j])
+        use = (s >= common.MIN_SPHERICAL) & (min_nz2 < 1.0 - 1e-8)
+        return use, 1.0 / np.maximum(s, 1e-300)
+
+    def intersect(self, j, o, d):
+        n = len(o)
+        t = np.full(n, np.inf)
+        pdf = np.zeros(n)
+        normal = self.n[j]
+        denom = d @ normal
+        front = denom < -1e-12  # emits along its normal: seen from the front only
+        with np.errstate(divide="ignore", invalid="ignore"):
+            th = ((self.c[j] - o) @ normal) / denom
+        q = o + d * th[:, None] - self.c[j]
+        a = q @ self.du[j]
+        b = q @ self.dv[j]
+        if self.ellipse[j]:
+            inside = 4.0 * (a * a + b * b) <= 1.0
+        else:
+            inside = (np.abs(a) <= 0.5) & (np.abs(b) <= 0.5)
+        ok = front & (th > 0) & inside & (self.area[j] > 0)
+        t[ok] = th[ok]
+        pdf[ok] = th[ok] ** 2 / (-denom[ok] * self.area[j])
+        if self.rect[j] and ok.any():
+            # The pdf NEE has for this point: the same choice of strategy.
+            sph, solid_angle_pdf = self._solid_angle_pdf(j, o[ok])
+            pdf[ok] = np.where(sph, solid_angle_pdf, pdf[ok])
+        return t, np.tile(self.L[j], (n, 1)), pdf
+
+
+@kernel(24, 5)
+def _area_light_sample(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, len_u, len_v, nx, ny, nz,
+                       area, rect, x, y, u1, u2, min_spherical):
+    """Direction (x, y, z), distance and solid-angle pdf towards a point of
+    an area light: the point (x, y) of the shape in its axes (area
+    sampling), or for rectangles seen under at least ``min_spherical`` sr a
+    point uniform in their solid angle (Urena et al.; tiny or grazing ones,
+    where the warp loses precision, keep area sampling as Cycles' area.h)."""
+    ax, ay = x * len_u, y * len_v
+    qx = cx + ax * exx + ay * eyx
+    qy = cy + ax * exy + ay * eyy
+    qz = cz + ax * exz + ay * eyz
+    xc, yc, z0, zx, zy, zz = rectangle_frame(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz)
+    xu, yv, solid_angle, min_nz2 = _rectangle_warp(xc, yc, where(z0 > 0, -z0, z0), len_u, len_v, u1, u2)
+    use = (rect > 0.0) & (solid_angle >= min_spherical) & (min_nz2 < 1.0 - 1e-8)
+    qx = where(use, px + xu * exx + yv * eyx + z0 * zx, qx)
+    qy = where(use, py + xu * exy + yv * eyy + z0 * zy, qy)
+    qz = where(use, pz + xu * exz + yv * eyz + z0 * zz, qz)
+    vx, vy, vz = qx - px, qy - py, qz - pz
+    t = np.sqrt(vx * vx + vy * vy + vz * vz)
+    inv = 1.0 / np.maximum(t, 1e-30)
+    wx, wy, wz = vx * inv, vy * inv, vz * inv
+    cos_l = -(wx * nx + wy * ny + wz * nz)
+    ok = (cos_l > 1e-12) & (t > 0.0) & (area > 0.0)
+    pdf = where(ok, t * t / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
+    pdf = where(ok & use, 1.0 / np.maximum(solid_angle, 1e-300), pdf)
+    return wx, wy, wz, t, pdf
+
+
+_rectangle_warp = helper(spherical_rectangle_warp.fn)
+
+
+
+def validate(light, what):
+    check_rgb(light.power, f"{what} power", nonnegative=True)
+    m = np.asarray(light.matrix, dtype=np.float64)
+    if m.shape != (4, 4):
+        raise SceneError(f"{what}: matrix must be 4x4")
+    if not np.all(np.isfinite(m)):
+        raise SceneError(f"{what}: matrix has NaN or infinite values")
+    if light.shape not in AREA_SHAPES:
+        raise SceneError(f"{what}: unknown shape {light.shape!r}")
+    for name in ("size_x", "size_y"):
+        # 0 is allowed: a light without area emits nothing (rendered as such).
+        check_size(getattr(light, name), f"{what}: {name}")
+    check_falloff(light, what)
+
+
+def _facing_down(height):
+    m = np.diag([1.0, 1.0, 1.0, 1.0])   # emits along -Z: down onto the origin
+    m[2, 3] = height
+    return m
+
+
+def _examples():
+    P, h = np.array([40.0, 30.0, 20.0]), 2.0
+
+    def scene(shape, sx, sy=1.0, **kw):
+        return lambda: Scene(lights=[AreaLight(_facing_down(h), tuple(P), shape, sx, sy, **kw)])
+    R = 0.75
+    L_disk = P / (np.pi * np.pi * R * R)
+    a, b = 1.0, 0.6                              # rectangle half sizes 0.5 x 0.3
+    half_x, half_y = 0.5 * a, 0.5 * b
+    rect_sa = 4 * np.arcsin(half_x * half_y / np.sqrt((half_x ** 2 + h * h) * (half_y ** 2 + h * h)))
+    return [
+        # A disk of radiance L, radius R at height h, on its axis: E = pi L R^2 / (h^2 + R^2).
+        LightExample("disk", scene("DISK", 2 * R), (0, 0, 0), solid_angle=2 * np.pi * (1 - h / np.hypot(h, R)),
+                     irradiance=tuple(np.pi * L_disk * R * R / (h * h + R * R))),
+        LightExample("rectangle", scene("RECTANGLE", a, b), (0, 0, 0), solid_angle=rect_sa),
+        LightExample("square near", scene("SQUARE", 3.0), (0.2, 0.1, 1.5)),
+        LightExample("ellipse", scene("ELLIPSE", 1.2, 0.5, normalize=False), (0.3, 0, 0)),
+        LightExample("disk linear", scene("DISK", 2 * R, falloff="LINEAR", falloff_smooth=0.5), (0, 0, 0)),
+    ]
+
+
+def _set(field, value):
+    return lambda s: setattr(s.lights[0], field, value)
+
+
+register(LightDef(
+    "area", AREA, 2, lambda inputs: AreaLights(inputs.lights), RAY, "areas", scene_types=(AreaLight,),
+    validate=validate, examples=_examples,
+    hostile=(("NaN power", _set("power", (1.0, 1.0, np.nan)), "power"),
+             ("negative power", _set("power", (1.0, -1.0, 1.0)), "power"),
+             ("NaN matrix", _set("matrix", np.full((4, 4), np.nan)), "matrix"),
+             ("3x3 matrix", _set("matrix", np.eye(3)), "matrix"),
+             ("unknown shape", _set("shape", "STAR"), "shape"),
+             ("negative size", _set("size_x", -1.0), "size_x"),
+             ("NaN size", _set("size_y", np.nan), "size_y"),
+             ("unknown falloff", _set("falloff", "INVERSE"), "falloff"))))
