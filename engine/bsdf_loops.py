@@ -17,18 +17,31 @@ eval_pdf) and ``MaterialTable.gather``'s copy of the lobe parameters.
 import numpy as np
 
 from .kernels import clip
+from .lobes import EXTRA_PARAMS, PARAMS
 from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, MIN_ALPHA, MIRROR, NONE,
                        REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
 from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect_terms, pow5
 
-LOBE_FIELDS = (("kind", "int8[:, ::1]", np.int8), ("color", "float64[:, :, ::1]", np.float64),
-               ("alpha", "float64[:, ::1]", np.float64), ("fresnel", "int8[:, ::1]", np.int8),
-               ("ior", "float64[:, ::1]", np.float64), ("f0", "float64[:, :, ::1]", np.float64),
-               ("edge_tint", "float64[:, :, ::1]", np.float64),
-               ("transmission_tint", "float64[:, :, ::1]", np.float64),
-               ("multiscatter", "boolean[:, ::1]", np.bool_), ("covers", "int8[:, ::1]", np.int8),
-               ("absorb", "float64[:, :, ::1]", np.float64), ("weight", "float64[:, ::1]", np.float64),
-               ("back", "boolean[::1]", np.bool_))
+_NUMBA_TYPES = {np.dtype(np.int8): "int8", np.dtype(np.float64): "float64", np.dtype(np.bool_): "boolean"}
+
+
+def array_type(dtype, ndim):
+    """numba's name for a C-contiguous array type."""
+    return _NUMBA_TYPES[np.dtype(dtype)] + "[" + ":, " * (ndim - 1) + "::1]"
+
+
+# The per-ray lobe arrays the loops read (bsdf.Lobes without the legacy
+# schlick flag), in the registry's parameter order, then back.  The loops
+# unpack the first twelve by position and back as the last: a parameter
+# appended to the registry needs no edit here.
+LOBE_FIELDS = ((("kind", array_type(np.int8, 2), np.int8),)
+               + tuple((p.field, array_type(p.dtype, 2 + len(p.tail)), p.dtype) for p in PARAMS)
+               + (("back", array_type(np.bool_, 1), np.bool_),))
+# MaterialTable's arrays gathered per ray (bsdf.Lobes' fields up to back).
+GATHER_FIELDS = (("kind", np.int8, ()), ("color", np.float64, (3,)), ("alpha", np.float64, ()),
+                 ("schlick", np.bool_, ())) + tuple((p.field, p.dtype, p.tail) for p in EXTRA_PARAMS)
+GATHER_SIGNATURE = "Tuple((" + ", ".join(
+    "Tuple(({0}, {0}))".format(array_type(dtype, 2 + len(tail))) for _, dtype, tail in GATHER_FIELDS) + "))"
 TABLES = (("ggx_E", "float64[:, ::1]"), ("ggx_Eavg", "float64[::1]"), ("ggx_glass_E", "float64[:, :, ::1]"),
           ("ggx_glass_inv_E", "float64[:, :, ::1]"), ("ggx_glass_Eavg", "float64[:, ::1]"),
           ("ggx_glass_inv_Eavg", "float64[:, ::1]"), ("ggx_gen_schlick_ior_s", "float64[:, :, ::1]"),
@@ -48,8 +61,11 @@ def helper(fn):
 
 
 def register(numba):
-    """Make the helpers callable from compiled code (once, before the loops compile)."""
+    """Make the helpers callable from compiled code (once, before the loops
+    compile), and literal_unroll numba's."""
     from numba.extending import register_jitable
+    global literal_unroll
+    literal_unroll = numba.literal_unroll
     while _HELPERS:
         register_jitable(_HELPERS.pop(0))
 
@@ -242,7 +258,8 @@ def _energy(fss, e, e_avg):
 
 def weights_loop(lobes, tables, wo, out):
     """bsdf.weights into out (N, K, 3)."""
-    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, weight, back = lobes
+    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, weight = lobes[:12]
+    back = lobes[-1]
     t_e, t_eavg, t_ge, t_gie, t_geavg, t_gieavg, t_s, t_sheen = tables
     n, kk = kind.shape
     energy = np.empty((2, 3))   # the multiscatter factor and darkening of one lobe, per channel
@@ -397,7 +414,8 @@ def _refraction(alpha, eta, wox, woy, woz, wix, wiy, wiz):
 def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f, pdf):
     """bsdf.eval_pdf into f (N, 3) and pdf (N,); diffuse_term and keep
     are bsdf.bump_shadowing's arrays, or empty without a moved normal."""
-    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, weight, back = lobes
+    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, weight = lobes[:12]
+    back = lobes[-1]
     t_sheen = tables[7]
     bump = len(diffuse_term) > 0
     for i in range(len(wo)):
@@ -530,7 +548,8 @@ def _sample_sheen(t_sheen, rough, wox, woy, woz, u1, u2):
 
 def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delta, smooth):
     """bsdf._sample_numpy into wi, weight, pdf, delta, smooth."""
-    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, lobe_weight, back = lobes
+    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, lobe_weight = lobes[:12]
+    back = lobes[-1]
     t_sheen = tables[7]
     kk = kind.shape[1]
     for i in range(len(wo)):
@@ -722,25 +741,16 @@ def finish_sample_loop(wo, wi, smooth, fs, ps, weight, pdf):
 # ----------------------------------------------------------------------------
 # MaterialTable.gather: every lobe field of each ray's material in one pass
 
-def gather_loop(mat, tables, out):
-    """out[f][i] = tables[f][mat[i]] for the 13 fields of bsdf.Lobes (in
-    its order, kind to weight), as np.take does field by field."""
-    kind_t, color_t, alpha_t, schlick_t, fresnel_t, ior_t, f0_t, edge_t, tt_t, ms_t, covers_t, absorb_t, w_t = tables
-    kind, color, alpha, schlick, fresnel, ior, f0, edge, tt, ms, covers, absorb, weight = out
-    for i in range(len(mat)):
-        m = mat[i]
-        for k in range(kind.shape[1]):
-            kind[i, k] = kind_t[m, k]
-            alpha[i, k] = alpha_t[m, k]
-            schlick[i, k] = schlick_t[m, k]
-            fresnel[i, k] = fresnel_t[m, k]
-            ior[i, k] = ior_t[m, k]
-            ms[i, k] = ms_t[m, k]
-            covers[i, k] = covers_t[m, k]
-            weight[i, k] = w_t[m, k]
-            for c in range(3):
-                color[i, k, c] = color_t[m, k, c]
-                f0[i, k, c] = f0_t[m, k, c]
-                edge[i, k, c] = edge_t[m, k, c]
-                tt[i, k, c] = tt_t[m, k, c]
-                absorb[i, k, c] = absorb_t[m, k, c]
+def literal_unroll(items):
+    """numba.literal_unroll once ``register`` ran; the loop over a tuple of
+    differently typed arrays in plain Python before."""
+    return items
+
+
+def gather_loop(mat, pairs):
+    """out[i] = table[mat[i]] for each (table, out) pair of bsdf.Lobes'
+    fields (GATHER_FIELDS), as np.take does field by field."""
+    for pair in literal_unroll(pairs):
+        table, out = pair
+        for i in range(len(mat)):
+            out[i] = table[mat[i]]
