@@ -48,7 +48,7 @@ from .lobes.glass import dielectric as _dielectric, eta_of as _eta, mean3 as _me
 from .lobes.glass import eval_glass_f as _eval_glass, sample_glass_dir as _sample_glass  # noqa: F401
 from .lobes.sheen import eval_sheen_f as _eval_sheen, sample_sheen_dir as _sample_sheen  # noqa: F401
 from .lobes.sheen import ltc as _ltc, sheen_frame as _sheen_frame, sheen_ltc as _sheen_ltc  # noqa: F401
-from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_sample_vndf
+from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect, ggx_sample_vndf  # noqa: F401
 from .sampling import cosine_hemisphere
 from .textures import MaterialTextures
 from .vec import count, subset
