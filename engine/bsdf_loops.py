@@ -5,14 +5,15 @@ NumPy: a loop over the K lobe slots, each a few masked gathers over all
 rows.  Here the same maths runs ray by ray in one pass over the K slots,
 without temporaries; bsdf.py wraps each loop in a ``LoopKernel`` whose NumPy
 twin is its batch code, and tests/engine/test_bsdf_loops.py checks that both
-give the same numbers bit for bit on random lobes.  Every operation below
-follows its NumPy counterpart term by term (same order of additions and
-multiplications, pow where NumPy calls pow) so that both round alike.
+agree to float64 rounding on random lobes.  Each lobe kind is one branch of
+the eval, sample (and, for layers, weights) loops, the compiled form of its
+registry entry's kernels (engine/lobes/).
 
-``lobes`` is the tuple ``LOBE_FIELDS`` of per-ray arrays and ``tables`` the
-tuple ``TABLES`` of Cycles' albedo tables (engine/microfacet.py).  Two
-plain row loops close the file: the end of ``sample`` (weights from
-eval_pdf) and ``MaterialTable.gather``'s copy of the lobe parameters.
+``lobes`` is the tuple ``LOBE_FIELDS`` of per-ray arrays (derived from the
+registry's parameters) and ``tables`` the tuple ``TABLES`` of Cycles' albedo
+tables (engine/microfacet.py).  Two plain row loops close the file: the end
+of ``sample`` (weights from eval_pdf) and ``MaterialTable.gather``'s copy of
+the lobe parameters.
 """
 import numpy as np
 
