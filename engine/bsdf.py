@@ -152,7 +152,7 @@ class MaterialTable:
         parameters of the rays' materials evaluated at their UVs."""
         tables = tuple(getattr(self, name) for name in _GATHERED)
         out = tuple(np.empty((len(mat),) + a.shape[1:], a.dtype) for a in tables)
-        _gather_kernel(_c(mat, np.int64), tuple(zip(tables, out)))
+        _gather_kernel(_c(mat, np.int64), *_gather_groups(tables, out))
         lobes = Lobes(*out)
         if self.textures.any:
             self.textures.apply(mat, uv, lobes, MIN_ALPHA)
@@ -476,10 +476,25 @@ def _eval_pdf_twin(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f
                                    keep if bump else None, sampled)
 
 
-def _gather_numpy(mat, pairs):
+def _gather_numpy(mat, *groups):
     # np.take: rows copied several times faster than by fancy indexing.
-    for a, o in pairs:
-        np.take(a, mat, axis=0, out=o)
+    for tables, out in zip(groups[::2], groups[1::2]):
+        for a, o in zip(tables, out):
+            np.take(a, mat, axis=0, out=o)
+
+
+def _gather_groups(tables, out):
+    """gather_loop's arguments: (tables, outputs) of each dtype of
+    loops.GATHER_DTYPES, as 2D views."""
+    groups = []
+    for dtype in loops.GATHER_DTYPES:
+        pick = [j for j, a in enumerate(tables) if a.dtype == dtype]
+        groups += [tuple(_flat2d(tables[j]) for j in pick), tuple(_flat2d(out[j]) for j in pick)]
+    return groups
+
+
+def _flat2d(a):
+    return a.reshape(a.shape[0], int(np.prod(a.shape[1:])))
 
 
 class _Loop(LoopKernel):
@@ -495,7 +510,7 @@ def _sample_twin(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, del
 _LOBES, _TABLES = loops.LOBES_SIGNATURE, loops.TABLES_SIGNATURE
 # MaterialTable's per-lobe arrays in Lobes' field order, and their types.
 _GATHERED = ("kind", "color", "alpha", "schlick") + tuple(name for name, _, _ in EXTRA_FIELDS)
-_gather_kernel = _Loop(loops.gather_loop, f"void(int64[::1], {loops.GATHER_SIGNATURE})", _gather_numpy)
+_gather_kernel = _Loop(loops.gather_loop, loops.GATHER_SIGNATURE, _gather_numpy)
 _weights_kernel = _Loop(loops.weights_loop, f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, :, ::1])",
                         _weights_twin)
 _selection_kernel = _Loop(loops.selection_loop, f"void({_LOBES}, float64[:, ::1], float64[:, :, ::1], float64[:, ::1])",

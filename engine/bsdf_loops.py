@@ -41,8 +41,16 @@ LOBE_FIELDS = ((("kind", array_type(np.int8, 2), np.int8),)
 # MaterialTable's arrays gathered per ray (bsdf.Lobes' fields up to back).
 GATHER_FIELDS = (("kind", np.int8, ()), ("color", np.float64, (3,)), ("alpha", np.float64, ()),
                  ("schlick", np.bool_, ())) + tuple((p.field, p.dtype, p.tail) for p in EXTRA_PARAMS)
-GATHER_SIGNATURE = "Tuple((" + ", ".join(
-    "Tuple(({0}, {0}))".format(array_type(dtype, 2 + len(tail))) for _, dtype, tail in GATHER_FIELDS) + "))"
+GATHER_DTYPES = (np.dtype(np.float64), np.dtype(np.int8), np.dtype(np.bool_))
+
+
+def _gather_group(dtype):
+    count = sum(np.dtype(d) == dtype for _, d, _ in GATHER_FIELDS)
+    return f"UniTuple({array_type(dtype, 2)}, {count})"
+
+
+GATHER_SIGNATURE = "void(int64[::1], " + ", ".join(
+    f"{_gather_group(d)}, {_gather_group(d)}" for d in GATHER_DTYPES) + ")"
 TABLES = (("ggx_E", "float64[:, ::1]"), ("ggx_Eavg", "float64[::1]"), ("ggx_glass_E", "float64[:, :, ::1]"),
           ("ggx_glass_inv_E", "float64[:, :, ::1]"), ("ggx_glass_Eavg", "float64[:, ::1]"),
           ("ggx_glass_inv_Eavg", "float64[:, ::1]"), ("ggx_gen_schlick_ior_s", "float64[:, :, ::1]"),
@@ -62,11 +70,8 @@ def helper(fn):
 
 
 def register(numba):
-    """Make the helpers callable from compiled code (once, before the loops
-    compile), and literal_unroll numba's."""
+    """Make the helpers callable from compiled code (once, before the loops compile)."""
     from numba.extending import register_jitable
-    global literal_unroll
-    literal_unroll = numba.literal_unroll
     while _HELPERS:
         register_jitable(_HELPERS.pop(0))
 
@@ -742,16 +747,23 @@ def finish_sample_loop(wo, wi, smooth, fs, ps, weight, pdf):
 # ----------------------------------------------------------------------------
 # MaterialTable.gather: every lobe field of each ray's material in one pass
 
-def literal_unroll(items):
-    """numba.literal_unroll once ``register`` ran; the loop over a tuple of
-    differently typed arrays in plain Python before."""
-    return items
+def gather_loop(mat, floats, float_out, ints, int_out, flags, flag_out):
+    """out[i] = table[mat[i]] for bsdf.Lobes' fields (GATHER_FIELDS), as
+    np.take does field by field: the tables and outputs come as 2D views
+    (RGB fields flattened to K * 3 columns), grouped by dtype so that each
+    group is a tuple of one array type."""
+    for j in range(len(floats)):
+        _take_rows(mat, floats[j], float_out[j])
+    for j in range(len(ints)):
+        _take_rows(mat, ints[j], int_out[j])
+    for j in range(len(flags)):
+        _take_rows(mat, flags[j], flag_out[j])
 
 
-def gather_loop(mat, pairs):
-    """out[i] = table[mat[i]] for each (table, out) pair of bsdf.Lobes'
-    fields (GATHER_FIELDS), as np.take does field by field."""
-    for pair in literal_unroll(pairs):
-        table, out = pair
-        for i in range(len(mat)):
-            out[i] = table[mat[i]]
+@helper
+def _take_rows(mat, table, out):
+    width = table.shape[1]
+    for i in range(len(mat)):
+        m = mat[i]
+        for c in range(width):
+            out[i, c] = table[m, c]
