@@ -19,8 +19,8 @@ import numpy as np
 
 from .kernels import clip
 from .lobes import EXTRA_PARAMS, PARAMS
-from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, MIN_ALPHA, MIRROR, NONE,
-                       REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
+from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, GLOSSY_ANISOTROPIC, MIN_ALPHA,
+                       MIRROR, NONE, REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
 from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect_terms, pow5
 
 _NUMBA_TYPES = {np.dtype(np.int8): "int8", np.dtype(np.float64): "float64", np.dtype(np.bool_): "boolean"}
@@ -38,6 +38,7 @@ def array_type(dtype, ndim):
 LOBE_FIELDS = ((("kind", array_type(np.int8, 2), np.int8),)
                + tuple((p.field, array_type(p.dtype, 2 + len(p.tail)), p.dtype) for p in PARAMS)
                + (("back", array_type(np.bool_, 1), np.bool_),))
+ANISOTROPY = [name for name, _, _ in LOBE_FIELDS].index("anisotropy")   # the glossy_anisotropic lobe's array
 # MaterialTable's arrays gathered per ray (bsdf.Lobes' fields up to back).
 GATHER_FIELDS = (("kind", np.int8, ()), ("color", np.float64, (3,)), ("alpha", np.float64, ()),
                  ("schlick", np.bool_, ())) + tuple((p.field, p.dtype, p.tail) for p in EXTRA_PARAMS)
@@ -417,6 +418,29 @@ def _refraction(alpha, eta, wox, woy, woz, wix, wiy, wiz):
     return common / ((1.0 + lo + li) * -wiz), common, c_o, 1.0 + lo
 
 
+@helper
+def _aniso_alphas(alpha, anisotropy):
+    """engine/lobes/anisotropic.alphas for one lobe."""
+    aspect = np.sqrt(1.0 - clip(anisotropy, 0.0, 1.0) * 0.9)
+    return max(alpha / aspect, MIN_ALPHA), max(alpha * aspect, MIN_ALPHA)
+
+
+@helper
+def _ggx_aniso(ax, ay, wox, woy, woz, wix, wiy, wiz):
+    """engine/lobes/anisotropic.eval_f without the Fresnel: D G2 / (4 cos_o
+    cos_i), the VNDF pdf and cos(wo, h)."""
+    hx, hy, hz = wox + wix, woy + wiy, woz + wiz
+    length = np.sqrt(hx * hx + hy * hy + hz * hz)
+    hx, hy, hz = hx / length, hy / length, hz / length
+    x, y = hx / ax, hy / ay
+    q = x * x + y * y + hz * hz
+    d = 1.0 / (np.pi * ax * ay * q * q)
+    lo = 0.5 * (np.sqrt(1.0 + (ax * ax * wox * wox + ay * ay * woy * woy) / (woz * woz)) - 1.0)
+    li = 0.5 * (np.sqrt(1.0 + (ax * ax * wix * wix + ay * ay * wiy * wiy) / (wiz * wiz)) - 1.0)
+    spec = d / ((1.0 + lo + li) * 4.0 * woz * wiz)
+    return spec, d / ((1.0 + lo) * 4.0 * woz), wox * hx + woy * hy + woz * hz
+
+
 def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f, pdf):
     """bsdf.eval_pdf into f (N, 3) and pdf (N,); diffuse_term and keep
     are bsdf.bump_shadowing's arrays, or empty without a moved normal."""
@@ -445,6 +469,15 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
                 f_0 += w[i, k, 0] * v
                 f_1 += w[i, k, 1] * v
                 f_2 += w[i, k, 2] * v
+                p += sel[i, k] * pk
+            elif kd == GLOSSY_ANISOTROPIC and upper:
+                ax, ay = _aniso_alphas(alpha[i, k], lobes[ANISOTROPY][i, k])
+                spec, pk, cos = _ggx_aniso(ax, ay, wox, woy, woz, wix, wiy, wiz)
+                code = fresnel[i, k]
+                s = _fresnel_s(code, ior[i, k], cos)
+                f_0 += w[i, k, 0] * (_fresnel(code, color[i, k, 0], f0[i, k, 0], edge[i, k, 0], s, cos) * spec)
+                f_1 += w[i, k, 1] * (_fresnel(code, color[i, k, 1], f0[i, k, 1], edge[i, k, 1], s, cos) * spec)
+                f_2 += w[i, k, 2] * (_fresnel(code, color[i, k, 2], f0[i, k, 2], edge[i, k, 2], s, cos) * spec)
                 p += sel[i, k] * pk
             elif (kd == GLOSSY and upper) or ((kd == GLASS or kd == REFRACTION) and alpha[i, k] > MIN_ALPHA
                                                and (upper or lower)):
@@ -497,7 +530,13 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
 @helper
 def _vndf(wox, woy, woz, alpha, u1, u2):
     """microfacet.ggx_sample_vndf for one ray."""
-    vx, vy, vz = alpha * wox, alpha * woy, woz
+    return _vndf_aniso(wox, woy, woz, alpha, alpha, u1, u2)
+
+
+@helper
+def _vndf_aniso(wox, woy, woz, ax, ay, u1, u2):
+    """microfacet.ggx_sample_vndf for one ray, roughness ax along x, ay along y."""
+    vx, vy, vz = ax * wox, ay * woy, woz
     length = np.sqrt(vx * vx + vy * vy + vz * vz)
     vx, vy, vz = vx / length, vy / length, vz / length
     lensq = vx * vx + vy * vy
@@ -519,7 +558,7 @@ def _vndf(wox, woy, woz, alpha, u1, u2):
     nx = p1 * t1x + p2 * t2x + p3 * vx
     ny = p1 * t1y + p2 * t2y + p3 * vy
     nz = p1 * t1z + p2 * t2z + p3 * vz
-    ex, ey, ez = alpha * nx, alpha * ny, max(nz, 1e-12)
+    ex, ey, ez = ax * nx, ay * ny, max(nz, 1e-12)
     length = np.sqrt(ex * ex + ey * ey + ez * ez)
     return ex / length, ey / length, ez / length
 
@@ -596,6 +635,12 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
             hx, hy, hz = _vndf(wox, woy, woz, alpha[i, k], u1[i], u2[i])
             x, y, z = _reflect(wox, woy, woz, hx, hy, hz)
             if z <= 0.0:   # a reflection below the surface is absorbed (as Cycles)
+                kd = NONE
+        elif kd == GLOSSY_ANISOTROPIC:
+            ax, ay = _aniso_alphas(alpha[i, k], lobes[ANISOTROPY][i, k])
+            hx, hy, hz = _vndf_aniso(wox, woy, woz, ax, ay, u1[i], u2[i])
+            x, y, z = _reflect(wox, woy, woz, hx, hy, hz)
+            if z <= 0.0:
                 kd = NONE
         elif kd == SHEEN:
             x, y, z = _sample_sheen(t_sheen, np.sqrt(alpha[i, k]), wox, woy, woz, u1[i], u2[i])

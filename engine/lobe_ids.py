@@ -3,6 +3,7 @@ compiled per-ray form (engine/bsdf_loops.py).  Each kind's id is declared
 once, in its module under engine/lobes/ (its registry entry); they are
 re-exported here under the names the engine has always used."""
 from .lobes import NONE, kind_ids
+from .lobes.anisotropic import GLOSSY_ANISOTROPIC  # noqa: F401
 from .lobes.diffuse import DIFFUSE, TRANSLUCENT  # noqa: F401
 from .lobes.ggx import GLOSSY, MIRROR  # noqa: F401
 from .lobes.glass import GLASS, REFRACTION  # noqa: F401

@@ -125,6 +125,8 @@ PARAMS = (
     Param("weight", float, 1.0, np.float64, (), "scalar factor from Mix/Add shaders and Principled mixing; "
           "unlike colour it does not enter Fresnel, energy or layering estimates.",
           to_table=lambda lobe: max(float(getattr(lobe, "weight", 1.0)), 0.0)),
+    Param("anisotropy", float, 0.0, np.float64, (), "Anisotropy in [0, 1] (glossy_anisotropic): alpha_x = "
+          "alpha / aspect, alpha_y = alpha aspect with aspect = sqrt(1 - 0.9 anisotropy), as Cycles' Principled."),
 )
 PARAM = {p.name: p for p in PARAMS}
 # The per-lobe table arrays beside kind / color / alpha / schlick, in order.
