@@ -218,10 +218,17 @@ def kind_ids():
     return {d.name: d.id for d in REGISTRY.values()}
 
 
+_CLASS_IDS = {}
+
+
 def kinds_of_class(pass_class):
-    """The ids of the lobes of one light class, e.g. ``kinds_of_class('diffuse')``."""
-    assert pass_class in PASS_CLASSES, pass_class
-    return tuple(sorted(d.id for d in REGISTRY.values() if d.pass_class == pass_class))
+    """The ids of the lobes of one light class, e.g. ``kinds_of_class('diffuse')``
+    (memoized per registry size: the integrator asks every bounce)."""
+    key = (pass_class, len(REGISTRY))
+    if key not in _CLASS_IDS:
+        assert pass_class in PASS_CLASSES, pass_class
+        _CLASS_IDS[key] = tuple(sorted(d.id for d in REGISTRY.values() if d.pass_class == pass_class))
+    return _CLASS_IDS[key]
 
 
 def with_flag(flag):
