@@ -8,8 +8,9 @@ pbrt-v4's ``BSDFSample.flags``), its NumPy kernels (eval / sample / albedo
 guess, called by engine/bsdf.py) and the cases its tests render.  The
 parameters of every lobe are one table, ``PARAMS``: ``scene.Lobe``,
 ``bsdf.Lobes``, ``bsdf.EXTRA_FIELDS`` and ``bsdf_loops.LOBE_FIELDS`` are
-derived from it.  engine/validate.py, the integrator's visibility classes,
-the passes and tests/engine/test_lobe_registry.py iterate over ``REGISTRY``.
+derived from it.  The kinds validation accepts (``scene.LOBE_KINDS``), the
+diffuse class of ray visibility and the passes (``kinds_of_class``), bsdf's
+NumPy dispatch and tests/engine/test_lobe_registry.py read ``REGISTRY``.
 
 Kernel conventions (directions in the shading frame, wo.z > 0):
 
