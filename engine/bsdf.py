@@ -22,24 +22,34 @@ f and pdf are the sums over all non-delta lobes, so ``eval``/``pdf`` and
 ``sample`` always agree.  Delta lobes (mirror, smooth glass, transparent)
 return their own weight.
 
+Each lobe kind is an entry of the registry engine/lobes/ (its parameters,
+light class, sample flags, NumPy kernels and test cases): the batch code
+here dispatches to the registry's kernels, grouped by kernel, slot by slot.
 ``weights``, ``selection``, ``eval_pdf`` and ``sample`` run as compiled
 per-ray loops over the lobe slots once numba has built them
-(engine/bsdf_loops.py); the batch NumPy code here is their twin (JIT off,
-or until compiled) and defines the result, bit for bit.
+(engine/bsdf_loops.py); the batch NumPy code here is their twin (JIT off),
+equal to float64 rounding.
 """
-from dataclasses import dataclass
+from dataclasses import field, make_dataclass
 from typing import Optional
 
 import numpy as np
 
 from . import bsdf_loops as loops
+from . import lobes as registry
 from . import microfacet as mf
 from .kernels import LoopKernel
 # The lobe codes live in lobe_ids (shared with bsdf_loops); bsdf.NONE etc. stay the public names.
 from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FRESNEL_IDS, GLASS, GLOSSY,  # noqa: F401
                        KIND_IDS, MIN_ALPHA, MIRROR, NONE, REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
-from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect, ggx_sample_vndf
-from .sampling import cosine_hemisphere, INV_PI, TWO_PI
+from .lobes.ggx import fresnel as _fresnel, fresnel_of as _fresnel_of, ggx_pdf, schlick  # noqa: F401
+from .lobes.ggx import eval_glossy_f as _eval_glossy, ggx_reflect_rows as _ggx_reflect  # noqa: F401
+from .lobes.glass import dielectric as _dielectric, eta_of as _eta, mean3 as _mean3  # noqa: F401
+from .lobes.glass import eval_glass_f as _eval_glass, sample_glass_dir as _sample_glass  # noqa: F401
+from .lobes.sheen import eval_sheen_f as _eval_sheen, sample_sheen_dir as _sample_sheen  # noqa: F401
+from .lobes.sheen import ltc as _ltc, sheen_frame as _sheen_frame, sheen_ltc as _sheen_ltc  # noqa: F401
+from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect, ggx_sample_vndf  # noqa: F401
+from .sampling import cosine_hemisphere
 from .textures import MaterialTextures
 from .vec import count, subset
 
@@ -61,102 +71,47 @@ def kind_in(kind, kinds):
     return table.take(kind.view(np.uint8))
 
 
-# Row operations written out term by term (not einsum, mean, matmul): the
-# compiled per-ray forms (engine/bsdf_loops.py) add in the same order, so
-# both round alike.
-
-_dot = mf.row_dot
-
-
-def _mean3(x):
-    return (x[:, 0] + x[:, 1] + x[:, 2]) / 3.0
-
-
 def _luminance(rgb):
     """Rec.709 luminance, Blender's default scene-linear space."""
     return 0.2126 * rgb[:, 0] + 0.7152 * rgb[:, 1] + 0.0722 * rgb[:, 2]
 
 
-@dataclass
-class Lobes:
-    """Per-ray lobe parameters, one array per ``scene.Lobe`` field (N rays,
-    K lobe slots); a texture stage may overwrite any of them after gather:
+def _lobes_post_init(self):
+    # Defaults for lobes built from the four original fields (registry.Param.fill).
+    for param in registry.EXTRA_PARAMS:
+        if getattr(self, param.field) is None:
+            setattr(self, param.field, registry.fill_array(param, self))
+    if self.back is None:
+        self.back = np.zeros(len(self.kind), bool)
+
+
+_LOBES_DOC = """Per-ray lobe parameters, one array per ``scene.Lobe`` field (N rays,
+    K lobe slots; engine/lobes/registry.py PARAMS); a texture stage may
+    overwrite any of them after gather:
 
     kind (N, K) int8, color (N, K, 3), alpha (N, K) = roughness^2,
-    schlick (N, K) bool (legacy: fresnel == 'schlick'), fresnel (N, K) int8,
-    ior (N, K), f0 (N, K, 3), edge_tint (N, K, 3), transmission_tint (N, K, 3),
-    multiscatter (N, K) bool, covers (N, K) int8, absorb (N, K, 3),
-    weight (N, K); back (N,) bool: the ray arrived on the back face (set by
-    the integrator; inverts the IOR of refracting lobes); smooth_n (N, 3):
-    where a normal map, bump or Bevel moved the shading normal, the smooth
-    normal in the shading frame, and bump_model (N,) int8 which of Cycles'
-    bump shadowing terms applies (BUMP_CHIANG, BUMP_GGX); None without.
+    schlick (N, K) bool (legacy: fresnel == 'schlick'), then one array per
+    further parameter (fresnel int8, ior, f0 (N, K, 3), ...; a parameter left
+    out gets its Param.fill); back (N,) bool: the ray arrived on the back face
+    (set by the integrator; inverts the IOR of refracting lobes); smooth_n
+    (N, 3): where a normal map, bump or Bevel moved the shading normal, the
+    smooth normal in the shading frame, and bump_model (N,) int8 which of
+    Cycles' bump shadowing terms applies (BUMP_CHIANG, BUMP_GGX); None without.
     """
-    kind: np.ndarray
-    color: np.ndarray
-    alpha: np.ndarray
-    schlick: np.ndarray
-    fresnel: Optional[np.ndarray] = None
-    ior: Optional[np.ndarray] = None
-    f0: Optional[np.ndarray] = None
-    edge_tint: Optional[np.ndarray] = None
-    transmission_tint: Optional[np.ndarray] = None
-    multiscatter: Optional[np.ndarray] = None
-    covers: Optional[np.ndarray] = None
-    absorb: Optional[np.ndarray] = None
-    weight: Optional[np.ndarray] = None
-    back: Optional[np.ndarray] = None
-    smooth_n: Optional[np.ndarray] = None
-    bump_model: Optional[np.ndarray] = None
-
-    def __post_init__(self):
-        # Defaults for lobes built from the four original fields.
-        shape, rgb = self.kind.shape, self.kind.shape + (3,)
-        if self.fresnel is None:
-            self.fresnel = np.where(self.schlick, F_SCHLICK, F_NONE).astype(np.int8)
-        if self.ior is None:
-            self.ior = np.full(shape, 1.5)
-        if self.f0 is None:
-            self.f0 = np.array(self.color, dtype=np.float64)
-        for name in ("edge_tint", "transmission_tint", "absorb"):
-            if getattr(self, name) is None:
-                setattr(self, name, np.ones(rgb))
-        if self.multiscatter is None:
-            self.multiscatter = np.zeros(shape, bool)
-        if self.covers is None:
-            self.covers = np.zeros(shape, np.int8)
-        if self.weight is None:
-            self.weight = np.ones(shape)
-        if self.back is None:
-            self.back = np.zeros(len(self.kind), bool)
-
-    def __len__(self):
-        return len(self.kind)
-
+Lobes = make_dataclass(
+    "Lobes", [("kind", np.ndarray), ("color", np.ndarray), ("alpha", np.ndarray), ("schlick", np.ndarray)]
+    + [(p.field, Optional[np.ndarray], field(default=None)) for p in registry.EXTRA_PARAMS]
+    + [(name, Optional[np.ndarray], field(default=None)) for name in ("back", "smooth_n", "bump_model")],
+    namespace={"__post_init__": _lobes_post_init, "__len__": lambda self: len(self.kind), "__doc__": _LOBES_DOC})
+Lobes.__module__ = __name__
 
 # Per-lobe table arrays beside kind/color/alpha/schlick: (name, trailing shape, dtype).
-EXTRA_FIELDS = (("fresnel", (), np.int8), ("ior", (), np.float64), ("f0", (3,), np.float64),
-                ("edge_tint", (3,), np.float64), ("transmission_tint", (3,), np.float64),
-                ("multiscatter", (), bool), ("covers", (), np.int8), ("absorb", (3,), np.float64),
-                ("weight", (), np.float64))
+EXTRA_FIELDS = tuple((p.field, p.tail, p.dtype) for p in registry.EXTRA_PARAMS)
 
 
 def _lobe_extras(lobe):
-    """The extra table values of one scene.Lobe (f0 defaults: the real
-    dielectric F0 of the IOR for 'dielectric' and glass, else the colour)."""
-    ior = float(getattr(lobe, "ior", 1.5))
-    fresnel = getattr(lobe, "fresnel", "none")
-    f0 = getattr(lobe, "f0", None)
-    if f0 is None:
-        dielectric = fresnel == "dielectric" or lobe.kind in ("glass", "refraction")
-        f0 = (float(mf.f0_from_ior(ior)),) * 3 if dielectric else lobe.color
-    return {"fresnel": FRESNEL_IDS.get(fresnel, F_NONE), "ior": ior, "f0": np.maximum(f0, 0.0),
-            "edge_tint": getattr(lobe, "edge_tint", (1.0, 1.0, 1.0)),
-            "transmission_tint": np.maximum(getattr(lobe, "transmission_tint", (1.0, 1.0, 1.0)), 0.0),
-            "multiscatter": bool(getattr(lobe, "multiscatter", False)),
-            "covers": int(getattr(lobe, "covers", 0)),
-            "absorb": getattr(lobe, "absorb", (1.0, 1.0, 1.0)),
-            "weight": max(float(getattr(lobe, "weight", 1.0)), 0.0)}
+    """The extra table values of one scene.Lobe (registry.Param.to_table)."""
+    return {p.field: registry.table_value(p, lobe) for p in registry.EXTRA_PARAMS}
 
 
 class MaterialTable:
@@ -197,7 +152,7 @@ class MaterialTable:
         parameters of the rays' materials evaluated at their UVs."""
         tables = tuple(getattr(self, name) for name in _GATHERED)
         out = tuple(np.empty((len(mat),) + a.shape[1:], a.dtype) for a in tables)
-        _gather_kernel(_c(mat, np.int64), tables, out)
+        _gather_kernel(_c(mat, np.int64), *_gather_groups(tables, out))
         lobes = Lobes(*out)
         if self.textures.any:
             self.textures.apply(mat, uv, lobes, MIN_ALPHA)
@@ -209,14 +164,6 @@ class MaterialTable:
 
 def _rough(lobes, k):
     return np.sqrt(lobes.alpha[:, k])
-
-
-def _eta(lobes, k):
-    """Relative IOR seen from the side of wo: Cycles inverts it on back faces
-    for the lobes that refract (a coat or specular layer keeps its IOR)."""
-    ior = np.maximum(lobes.ior[:, k], 1e-5)
-    refracts = (lobes.kind[:, k] == GLASS) | (lobes.kind[:, k] == REFRACTION)
-    return np.where(lobes.back & refracts, 1.0 / ior, ior)
 
 
 def _glossy_fss(lobes, k, rows):
@@ -347,14 +294,34 @@ def transparency(lobes):
 
 def _albedo_guess(lobes, k, mu):
     """Cheap estimate of a lobe's albedo for choosing lobes (any positive
-    guess is unbiased: it only moves variance)."""
+    guess is unbiased: it only moves variance): the registry's albedo_guess,
+    else 1; 0 for an empty slot."""
     kind = lobes.kind[:, k]
     guess = np.ones(len(kind))
-    gl = kind == GLOSSY
-    f0 = _luminance(lobes.f0[:, k])
-    est = f0 + (1.0 - f0) * mf.pow5(1.0 - mu)
-    guess = np.where(gl & (lobes.fresnel[:, k] != F_NONE) & (lobes.fresnel[:, k] != F_SCHLICK), est, guess)
+    for fn, ids in _groups("albedo_guess"):
+        guess = np.where(kind_in(kind, ids), fn(lobes, k, mu), guess)
     return np.where(kind == NONE, 0.0, guess)
+
+
+_GROUPS = {}
+
+
+def _groups(kernel):
+    """[(the kernel, the ids of the lobes sharing it)] for one kernel kind of
+    the registry ('eval', 'sample', 'albedo_guess'); eval groups also by side
+    and ``evaluates``.  Lobes sharing a kernel (glass and refraction) run as
+    one batch."""
+    key = (kernel, len(registry.REGISTRY))
+    if key not in _GROUPS:
+        groups = {}
+        for d in registry.BY_ID.values():
+            fn = getattr(d, kernel)
+            if fn is not None:
+                extra = (d.side, d.evaluates) if kernel == "eval" else ()
+                groups.setdefault((fn,) + extra, []).append(d.id)
+        _GROUPS[key] = [k + (tuple(sorted(ids)),) if kernel == "eval" else (k[0], tuple(sorted(ids)))
+                        for k, ids in groups.items()]
+    return _GROUPS[key]
 
 
 def selection(lobes, wo, w=None):
@@ -381,181 +348,6 @@ def _selection_numpy(lobes, wo, w):
         total = total + sel[:, k]
     total = total[:, None]
     return np.where(total > 0, sel / np.where(total > 0, total, 1.0), 0.0)
-
-
-# ----------------------------------------------------------------------------
-# Fresnel of the reflecting lobes
-
-def schlick(f0, cos):
-    c = np.clip(1.0 - cos, 0.0, 1.0)
-    return f0 + (1.0 - f0) * mf.pow5(c)[:, None]
-
-
-def _fresnel(lobes, rows, k, cos):
-    """(n, 3) reflectance of a glossy or mirror lobe at cos(wo, h)."""
-    code = lobes.fresnel[rows, k]
-    if len(code) and code.min() == code.max():
-        return _fresnel_of(int(code[0]), lobes, rows, k, cos)   # one kind: no masked copies
-    out = np.ones((len(code), 3))
-    for kind in (F_SCHLICK, F_F82, F_DIELECTRIC):
-        m = np.flatnonzero(code == kind)
-        if len(m):
-            out[m] = _fresnel_of(kind, lobes, rows[m], k, cos[m])
-    return out
-
-
-def _fresnel_of(code, lobes, rows, k, cos):
-    """``_fresnel`` for lobes that all have Fresnel mode ``code``."""
-    if code == F_SCHLICK:
-        return schlick(lobes.color[rows, k], cos)
-    if code == F_F82:
-        f0 = lobes.f0[rows, k]
-        return mf.f82(cos, f0, mf.f82_b(f0, lobes.edge_tint[rows, k]))
-    if code == F_DIELECTRIC:
-        f0 = lobes.f0[rows, k]
-        s, _ = mf.schlick_s(cos, np.maximum(lobes.ior[rows, k], 1e-5))
-        return f0 + (1.0 - f0) * s[:, None]
-    return np.ones((len(rows), 3))
-
-
-def _dielectric(lobes, rows, k, cos, eta):
-    """Glass: reflectance (n, 3), transmittance (n, 3), probability of
-    reflecting, |cos| of the refracted angle (0 under total internal
-    reflection).  Principled/Glass BSDF: F = mix(f0, 1, s) with s the real
-    Fresnel remapped; Refraction BSDF: no reflection, T = 1 unless TIR."""
-    s, cos_t = mf.schlick_s(cos, eta)
-    f0 = lobes.f0[rows, k]
-    refl = f0 + (1.0 - f0) * s[:, None]
-    refraction = lobes.kind[rows, k] == REFRACTION
-    refl = np.where(refraction[:, None], 0.0, refl)
-    trans = np.where(refraction[:, None], 1.0, 1.0 - refl) * lobes.transmission_tint[rows, k]
-    trans = np.where((cos_t > 0)[:, None], trans, 0.0)
-    r, t = _mean3(refl), _mean3(trans)
-    p_refl = np.where(r + t > 0, r / np.where(r + t > 0, r + t, 1.0), 1.0)
-    return refl, trans, p_refl, cos_t
-
-
-# ----------------------------------------------------------------------------
-# Lobe evaluation: f (without the lobe's weight) and the solid-angle pdf
-
-def _ggx_reflect(wo, wi, alpha):
-    """D G2 / (4 cos_o cos_i), the VNDF pdf of wi, and the half vector."""
-    spec, pdf, hx, hy, hz = ggx_reflect(wo[:, 0], wo[:, 1], wo[:, 2], wi[:, 0], wi[:, 1], wi[:, 2], alpha)
-    return spec, pdf, np.stack([hx, hy, hz], axis=1)
-
-
-def ggx_pdf(wo, wi, alpha):
-    """Solid-angle pdf of wi under VNDF sampling of the reflection."""
-    _, pdf, h = _ggx_reflect(wo, wi, alpha)
-    return pdf, h
-
-
-def _eval_glossy(lobes, rows, k, wo, wi):
-    spec, pdf, h = _ggx_reflect(wo, wi, lobes.alpha[rows, k])
-    f = _fresnel(lobes, rows, k, _dot(wo, h)) * spec[:, None]
-    return f, pdf
-
-
-def _eval_glass(lobes, rows, k, wo, wi):
-    """Rough dielectric (Walter et al. 2007, as Cycles): reflection above,
-    refraction below the surface; pdf includes the reflect/refract choice."""
-    alpha = lobes.alpha[rows, k]
-    eta = _eta(lobes, k)[rows]
-    n = len(rows)
-    f = np.zeros((n, 3))
-    pdf = np.zeros(n)
-    up = wi[:, 2] > COS_EPS
-    down = wi[:, 2] < -COS_EPS
-    co = np.maximum(wo[:, 2], COS_EPS)
-    ok_o = wo[:, 2] > COS_EPS
-    if up.any():
-        r = np.nonzero(up & ok_o)[0]
-        spec, p, h = _ggx_reflect(wo[r], wi[r], alpha[r])
-        refl, _, p_refl, _ = _dielectric(lobes, rows[r], k, _dot(wo[r], h), eta[r])
-        f[r] = refl * spec[:, None]
-        pdf[r] = p * p_refl
-    if down.any():
-        t = np.nonzero(down & ok_o)[0]
-        h, length = mf.refraction_half(wo[t], wi[t], eta[t])
-        c_o = _dot(wo[t], h)
-        c_i = _dot(wi[t], h)
-        # Only microfacets that face wo and refract into wi (pbrt's check).
-        valid = (h[:, 2] > 0) & (c_o > 0) & (c_i < 0) & (length > 0)
-        _, trans, p_refl, _ = _dielectric(lobes, rows[t], k, c_o, eta[t])
-        a = alpha[t]
-        lo, li = ggx_lambda(wo[t, 2], a), ggx_lambda(wi[t, 2], a)
-        common = (ggx_d(h[:, 2], a) / co[t] * (eta[t] / np.where(length > 0, length, 1.0)) ** 2
-                  * np.abs(c_o * c_i))
-        f[t] = np.where(valid[:, None], trans * (common / ((1.0 + lo + li) * -wi[t, 2]))[:, None], 0.0)
-        pdf[t] = np.where(valid, common * (1.0 - p_refl) / (1.0 + lo), 0.0)
-    return f, pdf
-
-
-def _sheen_ltc(rough, mu):
-    """Cycles' sheen LTC coefficients a, b and albedo for (roughness, cos)."""
-    t = mf.tables()["sheen_ltc"]
-    r = np.clip(rough, 1e-3, 1.0)
-    return tuple(mf.lookup(t[i], mu, r) for i in range(3))
-
-
-def _sheen_frame(wo):
-    """Tangent towards wo (Cycles' make_orthonormals_safe_tangent)."""
-    t = np.stack([wo[:, 0], wo[:, 1], np.zeros(len(wo))], axis=1)
-    length = np.sqrt(_dot(t, t))
-    flat = length < 1e-7
-    t = np.where(flat[:, None], np.array([1.0, 0.0, 0.0]), t / np.where(flat, 1.0, length)[:, None])
-    b = np.stack([-t[:, 1], t[:, 0], np.zeros(len(wo))], axis=1)   # z x t
-    return t, b
-
-
-def _ltc(lobes, rows, k, wo):
-    a, b, _ = _sheen_ltc(np.sqrt(lobes.alpha[rows, k]), np.clip(wo[:, 2], 0.0, 1.0))
-    return a, b
-
-
-def _eval_sheen(lobes, rows, k, wo, wi):
-    """Zeltner et al. 2022 LTC sheen; f * cos = pdf (the albedo sits in the
-    weight), so f = pdf / cos."""
-    a, b = _ltc(lobes, rows, k, wo)
-    t, bt = _sheen_frame(wo)
-    x, y, z = _dot(wi, t), _dot(wi, bt), wi[:, 2]
-    len_sq = (a * x + b * z) ** 2 + (a * y) ** 2 + z * z
-    ok = (z > COS_EPS) & (wo[:, 2] > COS_EPS) & (np.abs(a) >= 1e-5)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        val = INV_PI * (a / len_sq) ** 2
-    val = np.where(ok & np.isfinite(val), val, 0.0)
-    return np.repeat(val[:, None], 3, axis=1), val * np.maximum(z, 0.0)
-
-
-def _sample_sheen(lobes, rows, k, wo, u1, u2):
-    a, b = _ltc(lobes, rows, k, wo)
-    r = np.sqrt(u1)
-    phi = TWO_PI * u2
-    dx, dy = r * np.cos(phi), r * np.sin(phi)
-    dz = np.sqrt(np.maximum(0.0, 1.0 - u1))
-    local = np.stack([dx - dz * b, dy, dz * a], axis=1)
-    local /= np.maximum(mf.row_norm(local), 1e-30)[:, None]
-    t, bt = _sheen_frame(wo)
-    return local[:, :1] * t + local[:, 1:2] * bt + local[:, 2:3] * np.array([0.0, 0.0, 1.0])
-
-
-def _sample_glass(lobes, rows, k, wo, u_choice, u1, u2, singular):
-    """Reflect or refract through a visible microfacet (the normal itself
-    when singular); returns wi and whether it refracted."""
-    alpha = lobes.alpha[rows, k]
-    eta = _eta(lobes, k)[rows]
-    h = np.zeros((len(rows), 3))
-    h[:, 2] = 1.0
-    rough = ~singular
-    if rough.any():
-        h[rough] = ggx_sample_vndf(wo[rough], alpha[rough], u1[rough], u2[rough])
-    cos = _dot(wo, h)
-    _, _, p_refl, cos_t = _dielectric(lobes, rows, k, cos, eta)
-    refract = u_choice >= p_refl
-    wi = mf.reflect(wo, h)
-    if refract.any():
-        wi[refract] = mf.refract(wo[refract], h[refract], cos_t[refract], eta[refract])
-    return wi, refract, p_refl
 
 
 # ----------------------------------------------------------------------------
@@ -624,24 +416,19 @@ def _eval_pdf_numpy(lobes, wo, wi, sel, w, diffuse_term, keep, sampled):
     front = wo[:, 2] > COS_EPS
     upper = front & (wi[:, 2] > COS_EPS)
     lower = front & (wi[:, 2] < -COS_EPS)
+    sides = {"upper": upper, "lower": lower, "both": front}
     for k in range(lobes.kind.shape[1]):
         kind = lobes.kind[:, k]
-        for mask, softened in (((kind == DIFFUSE) & upper, True), ((kind == TRANSLUCENT) & lower, not sampled)):
+        for fn, side, evaluates, ids in _groups("eval"):
+            mask = kind_in(kind, ids) & sides[side]
+            if evaluates is not None:
+                mask &= evaluates(lobes, k)
             d = subset(mask)
             if count(d, n):
-                if diffuse_term is not None and softened:
-                    f[d] += w[d, k] * (INV_PI * diffuse_term[d])[:, None]
-                else:
-                    f[d] += w[d, k] * INV_PI
-                pdf[d] += sel[d, k] * np.abs(wi[d, 2]) * INV_PI
-        for mask, fn in (((kind == GLOSSY) & upper, _eval_glossy), ((kind == SHEEN) & upper, _eval_sheen),
-                         (kind_in(kind, (GLASS, REFRACTION)) & front
-                          & (lobes.alpha[:, k] > MIN_ALPHA), _eval_glass)):
-            g = np.nonzero(mask)[0]
-            if len(g):
-                fg, pg = fn(lobes, g, k, wo[g], wi[g])
-                f[g] += w[g, k] * fg
-                pdf[g] += sel[g, k] * pg
+                term = None if diffuse_term is None else diffuse_term[d]
+                fd, pd = fn(lobes, d, k, wo[d], wi[d], w[d, k], sel[d, k], term, sampled)
+                f[d] += fd
+                pdf[d] += pd
     if keep is not None and not sampled:
         f = np.where(keep[:, None], f, 0.0)
         pdf = np.where(keep, pdf, 0.0)
@@ -689,10 +476,25 @@ def _eval_pdf_twin(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f
                                    keep if bump else None, sampled)
 
 
-def _gather_numpy(mat, tables, out):
+def _gather_numpy(mat, *groups):
     # np.take: rows copied several times faster than by fancy indexing.
-    for a, o in zip(tables, out):
-        np.take(a, mat, axis=0, out=o)
+    for tables, out in zip(groups[::2], groups[1::2]):
+        for a, o in zip(tables, out):
+            np.take(a, mat, axis=0, out=o)
+
+
+def _gather_groups(tables, out):
+    """gather_loop's arguments: (tables, outputs) of each dtype of
+    loops.GATHER_DTYPES, as 2D views."""
+    groups = []
+    for dtype in loops.GATHER_DTYPES:
+        pick = [j for j, a in enumerate(tables) if a.dtype == dtype]
+        groups += [tuple(_flat2d(tables[j]) for j in pick), tuple(_flat2d(out[j]) for j in pick)]
+    return groups
+
+
+def _flat2d(a):
+    return a.reshape(a.shape[0], int(np.prod(a.shape[1:])))
 
 
 class _Loop(LoopKernel):
@@ -708,10 +510,7 @@ def _sample_twin(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, del
 _LOBES, _TABLES = loops.LOBES_SIGNATURE, loops.TABLES_SIGNATURE
 # MaterialTable's per-lobe arrays in Lobes' field order, and their types.
 _GATHERED = ("kind", "color", "alpha", "schlick") + tuple(name for name, _, _ in EXTRA_FIELDS)
-_GATHER_TYPES = "Tuple((int8[:, ::1], float64[:, :, ::1], float64[:, ::1], boolean[:, ::1], int8[:, ::1], " \
-    "float64[:, ::1], float64[:, :, ::1], float64[:, :, ::1], float64[:, :, ::1], boolean[:, ::1], int8[:, ::1], " \
-    "float64[:, :, ::1], float64[:, ::1]))"
-_gather_kernel = LoopKernel(loops.gather_loop, f"void(int64[::1], {_GATHER_TYPES}, {_GATHER_TYPES})", _gather_numpy)
+_gather_kernel = _Loop(loops.gather_loop, loops.GATHER_SIGNATURE, _gather_numpy)
 _weights_kernel = _Loop(loops.weights_loop, f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, :, ::1])",
                         _weights_twin)
 _selection_kernel = _Loop(loops.selection_loop, f"void({_LOBES}, float64[:, ::1], float64[:, :, ::1], float64[:, ::1])",
@@ -787,57 +586,13 @@ def _sample_numpy(lobes, wo, u_lobe, u1, u2, sel, w):
     u_sub = np.clip((u_lobe - lo) / np.where(p_lobe > 0, p_lobe, 1.0), 0.0, 1.0 - 1e-12)
     wi = np.zeros((n, 3))
     wi[:, 2] = 1.0
-    delta = np.zeros(n, bool)
-    weight = np.zeros((n, 3))
-    pdf = np.zeros(n)
-
-    for kind_id, flip in ((DIFFUSE, 1.0), (TRANSLUCENT, -1.0)):
-        d = np.nonzero(kind == kind_id)[0]
-        if len(d):
-            wi[d] = cosine_hemisphere(u1[d], u2[d])[0] * np.array([1.0, 1.0, flip])
-    g = np.nonzero(kind == GLOSSY)[0]
-    if len(g):
-        h = ggx_sample_vndf(wo[g], lobes.alpha[g, chosen[g]], u1[g], u2[g])
-        wi[g] = mf.reflect(wo[g], h)
-        # A reflection below the surface is absorbed, as in Cycles
-        # (bsdf_microfacet_sample): eval_pdf would hand it to a transmitting
-        # lobe whose pdf leaves out this sampler's density there (biased).
-        kind[g[wi[g, 2] <= 0.0]] = NONE
-    sh = np.nonzero(kind == SHEEN)[0]
-    for k in np.unique(chosen[sh]):
-        r = sh[chosen[sh] == k]
-        wi[r] = _sample_sheen(lobes, r, k, wo[r], u1[r], u2[r])
-    m = np.nonzero(kind == MIRROR)[0]
-    if len(m):
-        wi[m] = wo[m] * np.array([-1.0, -1.0, 1.0])
-        for k in np.unique(chosen[m]):
-            r = m[chosen[m] == k]
-            weight[r] = w[r, k] * _fresnel(lobes, r, k, wo[r, 2]) / p_lobe[r, None]
-        delta[m] = True
-        pdf[m] = p_lobe[m]
-    t = np.nonzero(kind == TRANSPARENT)[0]
-    if len(t):
-        wi[t] = -wo[t]
-        weight[t] = w[t, chosen[t]] / p_lobe[t, None]
-        delta[t] = True
-        pdf[t] = p_lobe[t]
-    gl = np.nonzero(kind_in(kind, (GLASS, REFRACTION)))[0]
-    for k in np.unique(chosen[gl]):
-        r = gl[chosen[gl] == k]
-        singular = lobes.alpha[r, k] <= MIN_ALPHA
-        wi[r], refract, p_refl = _sample_glass(lobes, r, k, wo[r], u_sub[r], u1[r], u2[r], singular)
-        # A refraction that ends above the surface (or a reflection below)
-        # is absorbed, as Cycles does: eval would read it as the other branch.
-        kind[r[refract != (wi[r, 2] < 0)]] = NONE
-        s = r[singular]
-        if len(s):
-            refl, trans, _, _ = _dielectric(lobes, s, k, wo[s, 2], _eta(lobes, k)[s])
-            rs = refract[singular]
-            p = np.where(rs, 1.0 - p_refl[singular], p_refl[singular])
-            col = np.where(rs[:, None], trans, refl)
-            weight[s] = w[s, k] * col / np.maximum(p * p_lobe[s], 1e-300)[:, None]
-            delta[s] = True
-            pdf[s] = p * p_lobe[s]
+    batch = registry.SampleBatch(wo, chosen, p_lobe, u_sub, u1, u2, w, wi, np.zeros((n, 3)), np.zeros(n),
+                                 np.zeros(n, bool), kind)
+    for fn, ids in _groups("sample"):
+        rows = np.nonzero(kind_in(kind, ids))[0]
+        if len(rows):
+            fn(lobes, rows, batch)
+    weight, pdf, delta = batch.weight, batch.pdf, batch.delta
     return wi, weight, pdf, delta, ~delta & (kind != NONE)
 
 

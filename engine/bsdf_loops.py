@@ -5,30 +5,53 @@ NumPy: a loop over the K lobe slots, each a few masked gathers over all
 rows.  Here the same maths runs ray by ray in one pass over the K slots,
 without temporaries; bsdf.py wraps each loop in a ``LoopKernel`` whose NumPy
 twin is its batch code, and tests/engine/test_bsdf_loops.py checks that both
-give the same numbers bit for bit on random lobes.  Every operation below
-follows its NumPy counterpart term by term (same order of additions and
-multiplications, pow where NumPy calls pow) so that both round alike.
+agree to float64 rounding on random lobes.  Each lobe kind is one branch of
+the eval, sample (and, for layers, weights) loops, the compiled form of its
+registry entry's kernels (engine/lobes/).
 
-``lobes`` is the tuple ``LOBE_FIELDS`` of per-ray arrays and ``tables`` the
-tuple ``TABLES`` of Cycles' albedo tables (engine/microfacet.py).  Two
-plain row loops close the file: the end of ``sample`` (weights from
-eval_pdf) and ``MaterialTable.gather``'s copy of the lobe parameters.
+``lobes`` is the tuple ``LOBE_FIELDS`` of per-ray arrays (derived from the
+registry's parameters) and ``tables`` the tuple ``TABLES`` of Cycles' albedo
+tables (engine/microfacet.py).  Two plain row loops close the file: the end
+of ``sample`` (weights from eval_pdf) and ``MaterialTable.gather``'s copy of
+the lobe parameters.
 """
 import numpy as np
 
 from .kernels import clip
-from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, MIN_ALPHA, MIRROR, NONE,
-                       REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
+from .lobes import EXTRA_PARAMS, PARAMS
+from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, GLOSSY_ANISOTROPIC, MIN_ALPHA,
+                       MIRROR, NONE, REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
 from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect_terms, pow5
 
-LOBE_FIELDS = (("kind", "int8[:, ::1]", np.int8), ("color", "float64[:, :, ::1]", np.float64),
-               ("alpha", "float64[:, ::1]", np.float64), ("fresnel", "int8[:, ::1]", np.int8),
-               ("ior", "float64[:, ::1]", np.float64), ("f0", "float64[:, :, ::1]", np.float64),
-               ("edge_tint", "float64[:, :, ::1]", np.float64),
-               ("transmission_tint", "float64[:, :, ::1]", np.float64),
-               ("multiscatter", "boolean[:, ::1]", np.bool_), ("covers", "int8[:, ::1]", np.int8),
-               ("absorb", "float64[:, :, ::1]", np.float64), ("weight", "float64[:, ::1]", np.float64),
-               ("back", "boolean[::1]", np.bool_))
+_NUMBA_TYPES = {np.dtype(np.int8): "int8", np.dtype(np.float64): "float64", np.dtype(np.bool_): "boolean"}
+
+
+def array_type(dtype, ndim):
+    """numba's name for a C-contiguous array type."""
+    return _NUMBA_TYPES[np.dtype(dtype)] + "[" + ":, " * (ndim - 1) + "::1]"
+
+
+# The per-ray lobe arrays the loops read (bsdf.Lobes without the legacy
+# schlick flag), in the registry's parameter order, then back.  The loops
+# unpack the first twelve by position and back as the last: a parameter
+# appended to the registry needs no edit here.
+LOBE_FIELDS = ((("kind", array_type(np.int8, 2), np.int8),)
+               + tuple((p.field, array_type(p.dtype, 2 + len(p.tail)), p.dtype) for p in PARAMS)
+               + (("back", array_type(np.bool_, 1), np.bool_),))
+ANISOTROPY = [name for name, _, _ in LOBE_FIELDS].index("anisotropy")   # the glossy_anisotropic lobe's array
+# MaterialTable's arrays gathered per ray (bsdf.Lobes' fields up to back).
+GATHER_FIELDS = (("kind", np.int8, ()), ("color", np.float64, (3,)), ("alpha", np.float64, ()),
+                 ("schlick", np.bool_, ())) + tuple((p.field, p.dtype, p.tail) for p in EXTRA_PARAMS)
+GATHER_DTYPES = (np.dtype(np.float64), np.dtype(np.int8), np.dtype(np.bool_))
+
+
+def _gather_group(dtype):
+    count = sum(np.dtype(d) == dtype for _, d, _ in GATHER_FIELDS)
+    return f"UniTuple({array_type(dtype, 2)}, {count})"
+
+
+GATHER_SIGNATURE = "void(int64[::1], " + ", ".join(
+    f"{_gather_group(d)}, {_gather_group(d)}" for d in GATHER_DTYPES) + ")"
 TABLES = (("ggx_E", "float64[:, ::1]"), ("ggx_Eavg", "float64[::1]"), ("ggx_glass_E", "float64[:, :, ::1]"),
           ("ggx_glass_inv_E", "float64[:, :, ::1]"), ("ggx_glass_Eavg", "float64[:, ::1]"),
           ("ggx_glass_inv_Eavg", "float64[:, ::1]"), ("ggx_gen_schlick_ior_s", "float64[:, :, ::1]"),
@@ -242,7 +265,8 @@ def _energy(fss, e, e_avg):
 
 def weights_loop(lobes, tables, wo, out):
     """bsdf.weights into out (N, K, 3)."""
-    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, weight, back = lobes
+    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, weight = lobes[:12]
+    back = lobes[-1]
     t_e, t_eavg, t_ge, t_gie, t_geavg, t_gieavg, t_s, t_sheen = tables
     n, kk = kind.shape
     energy = np.empty((2, 3))   # the multiscatter factor and darkening of one lobe, per channel
@@ -394,10 +418,34 @@ def _refraction(alpha, eta, wox, woy, woz, wix, wiy, wiz):
     return common / ((1.0 + lo + li) * -wiz), common, c_o, 1.0 + lo
 
 
+@helper
+def _aniso_alphas(alpha, anisotropy):
+    """engine/lobes/anisotropic.alphas for one lobe."""
+    aspect = np.sqrt(1.0 - clip(anisotropy, 0.0, 1.0) * 0.9)
+    return max(alpha / aspect, MIN_ALPHA), max(alpha * aspect, MIN_ALPHA)
+
+
+@helper
+def _ggx_aniso(ax, ay, wox, woy, woz, wix, wiy, wiz):
+    """engine/lobes/anisotropic.eval_f without the Fresnel: D G2 / (4 cos_o
+    cos_i), the VNDF pdf and cos(wo, h)."""
+    hx, hy, hz = wox + wix, woy + wiy, woz + wiz
+    length = np.sqrt(hx * hx + hy * hy + hz * hz)
+    hx, hy, hz = hx / length, hy / length, hz / length
+    x, y = hx / ax, hy / ay
+    q = x * x + y * y + hz * hz
+    d = 1.0 / (np.pi * ax * ay * q * q)
+    lo = 0.5 * (np.sqrt(1.0 + (ax * ax * wox * wox + ay * ay * woy * woy) / (woz * woz)) - 1.0)
+    li = 0.5 * (np.sqrt(1.0 + (ax * ax * wix * wix + ay * ay * wiy * wiy) / (wiz * wiz)) - 1.0)
+    spec = d / ((1.0 + lo + li) * 4.0 * woz * wiz)
+    return spec, d / ((1.0 + lo) * 4.0 * woz), wox * hx + woy * hy + woz * hz
+
+
 def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f, pdf):
     """bsdf.eval_pdf into f (N, 3) and pdf (N,); diffuse_term and keep
     are bsdf.bump_shadowing's arrays, or empty without a moved normal."""
-    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, weight, back = lobes
+    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, weight = lobes[:12]
+    back = lobes[-1]
     t_sheen = tables[7]
     bump = len(diffuse_term) > 0
     for i in range(len(wo)):
@@ -421,6 +469,15 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
                 f_0 += w[i, k, 0] * v
                 f_1 += w[i, k, 1] * v
                 f_2 += w[i, k, 2] * v
+                p += sel[i, k] * pk
+            elif kd == GLOSSY_ANISOTROPIC and upper:
+                ax, ay = _aniso_alphas(alpha[i, k], lobes[ANISOTROPY][i, k])
+                spec, pk, cos = _ggx_aniso(ax, ay, wox, woy, woz, wix, wiy, wiz)
+                code = fresnel[i, k]
+                s = _fresnel_s(code, ior[i, k], cos)
+                f_0 += w[i, k, 0] * (_fresnel(code, color[i, k, 0], f0[i, k, 0], edge[i, k, 0], s, cos) * spec)
+                f_1 += w[i, k, 1] * (_fresnel(code, color[i, k, 1], f0[i, k, 1], edge[i, k, 1], s, cos) * spec)
+                f_2 += w[i, k, 2] * (_fresnel(code, color[i, k, 2], f0[i, k, 2], edge[i, k, 2], s, cos) * spec)
                 p += sel[i, k] * pk
             elif (kd == GLOSSY and upper) or ((kd == GLASS or kd == REFRACTION) and alpha[i, k] > MIN_ALPHA
                                                and (upper or lower)):
@@ -473,7 +530,13 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
 @helper
 def _vndf(wox, woy, woz, alpha, u1, u2):
     """microfacet.ggx_sample_vndf for one ray."""
-    vx, vy, vz = alpha * wox, alpha * woy, woz
+    return _vndf_aniso(wox, woy, woz, alpha, alpha, u1, u2)
+
+
+@helper
+def _vndf_aniso(wox, woy, woz, ax, ay, u1, u2):
+    """microfacet.ggx_sample_vndf for one ray, roughness ax along x, ay along y."""
+    vx, vy, vz = ax * wox, ay * woy, woz
     length = np.sqrt(vx * vx + vy * vy + vz * vz)
     vx, vy, vz = vx / length, vy / length, vz / length
     lensq = vx * vx + vy * vy
@@ -495,7 +558,7 @@ def _vndf(wox, woy, woz, alpha, u1, u2):
     nx = p1 * t1x + p2 * t2x + p3 * vx
     ny = p1 * t1y + p2 * t2y + p3 * vy
     nz = p1 * t1z + p2 * t2z + p3 * vz
-    ex, ey, ez = alpha * nx, alpha * ny, max(nz, 1e-12)
+    ex, ey, ez = ax * nx, ay * ny, max(nz, 1e-12)
     length = np.sqrt(ex * ex + ey * ey + ez * ez)
     return ex / length, ey / length, ez / length
 
@@ -530,7 +593,8 @@ def _sample_sheen(t_sheen, rough, wox, woy, woz, u1, u2):
 
 def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delta, smooth):
     """bsdf._sample_numpy into wi, weight, pdf, delta, smooth."""
-    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, lobe_weight, back = lobes
+    kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, lobe_weight = lobes[:12]
+    back = lobes[-1]
     t_sheen = tables[7]
     kk = kind.shape[1]
     for i in range(len(wo)):
@@ -571,6 +635,12 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
             hx, hy, hz = _vndf(wox, woy, woz, alpha[i, k], u1[i], u2[i])
             x, y, z = _reflect(wox, woy, woz, hx, hy, hz)
             if z <= 0.0:   # a reflection below the surface is absorbed (as Cycles)
+                kd = NONE
+        elif kd == GLOSSY_ANISOTROPIC:
+            ax, ay = _aniso_alphas(alpha[i, k], lobes[ANISOTROPY][i, k])
+            hx, hy, hz = _vndf_aniso(wox, woy, woz, ax, ay, u1[i], u2[i])
+            x, y, z = _reflect(wox, woy, woz, hx, hy, hz)
+            if z <= 0.0:
                 kd = NONE
         elif kd == SHEEN:
             x, y, z = _sample_sheen(t_sheen, np.sqrt(alpha[i, k]), wox, woy, woz, u1[i], u2[i])
@@ -722,25 +792,23 @@ def finish_sample_loop(wo, wi, smooth, fs, ps, weight, pdf):
 # ----------------------------------------------------------------------------
 # MaterialTable.gather: every lobe field of each ray's material in one pass
 
-def gather_loop(mat, tables, out):
-    """out[f][i] = tables[f][mat[i]] for the 13 fields of bsdf.Lobes (in
-    its order, kind to weight), as np.take does field by field."""
-    kind_t, color_t, alpha_t, schlick_t, fresnel_t, ior_t, f0_t, edge_t, tt_t, ms_t, covers_t, absorb_t, w_t = tables
-    kind, color, alpha, schlick, fresnel, ior, f0, edge, tt, ms, covers, absorb, weight = out
+def gather_loop(mat, floats, float_out, ints, int_out, flags, flag_out):
+    """out[i] = table[mat[i]] for bsdf.Lobes' fields (GATHER_FIELDS), as
+    np.take does field by field: the tables and outputs come as 2D views
+    (RGB fields flattened to K * 3 columns), grouped by dtype so that each
+    group is a tuple of one array type."""
+    for j in range(len(floats)):
+        _take_rows(mat, floats[j], float_out[j])
+    for j in range(len(ints)):
+        _take_rows(mat, ints[j], int_out[j])
+    for j in range(len(flags)):
+        _take_rows(mat, flags[j], flag_out[j])
+
+
+@helper
+def _take_rows(mat, table, out):
+    width = table.shape[1]
     for i in range(len(mat)):
         m = mat[i]
-        for k in range(kind.shape[1]):
-            kind[i, k] = kind_t[m, k]
-            alpha[i, k] = alpha_t[m, k]
-            schlick[i, k] = schlick_t[m, k]
-            fresnel[i, k] = fresnel_t[m, k]
-            ior[i, k] = ior_t[m, k]
-            ms[i, k] = ms_t[m, k]
-            covers[i, k] = covers_t[m, k]
-            weight[i, k] = w_t[m, k]
-            for c in range(3):
-                color[i, k, c] = color_t[m, k, c]
-                f0[i, k, c] = f0_t[m, k, c]
-                edge[i, k, c] = edge_t[m, k, c]
-                tt[i, k, c] = tt_t[m, k, c]
-                absorb[i, k, c] = absorb_t[m, k, c]
+        for c in range(width):
+            out[i, c] = table[m, c]

@@ -28,6 +28,7 @@ from .accel import shadow_rays, shadow_rays_f32
 from .pass_events import lobe_rows as _lobe_rows
 from .geometry import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from .hits import hit_geometry
+from .lobes import kinds_of_class
 from .nodes import NodeRays, ShadingContext
 from .sampler import BSDF, CAMERA, KIND, LIGHT, emitter_set, vertex_set
 from .sampling import power_heuristic
@@ -724,9 +725,9 @@ def _ray_kind(ctx, hit, lobes, wo_l, tt, bb, paths, depth):
 
 
 def _diffuse_lobe(kind):
-    """Lobes Cycles counts as diffuse closures (diffuse, translucent, sheen);
-    the others reflect as glossy (transmission is told by direction)."""
-    return bsdf.kind_in(kind, (bsdf.DIFFUSE, bsdf.TRANSLUCENT, bsdf.SHEEN))
+    """Lobes Cycles counts as diffuse closures (the registry's 'diffuse'
+    class); the others reflect as glossy (transmission is told by direction)."""
+    return bsdf.kind_in(kind, kinds_of_class("diffuse"))
 
 
 def _lobes_where(lobes, drop, rows):

@@ -1,12 +1,15 @@
 """Lobe kind and Fresnel mode codes shared by engine/bsdf.py and its
-compiled per-ray form (engine/bsdf_loops.py)."""
+compiled per-ray form (engine/bsdf_loops.py).  Each kind's id is declared
+once, in its module under engine/lobes/ (its registry entry); they are
+re-exported here under the names the engine has always used."""
+from .lobes import NONE, kind_ids
+from .lobes.anisotropic import GLOSSY_ANISOTROPIC  # noqa: F401
+from .lobes.diffuse import DIFFUSE, TRANSLUCENT  # noqa: F401
+from .lobes.ggx import GLOSSY, MIRROR  # noqa: F401
+from .lobes.glass import GLASS, REFRACTION  # noqa: F401
+from .lobes.registry import F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FRESNEL_IDS, MIN_ALPHA  # noqa: F401
+from .lobes.sheen import SHEEN  # noqa: F401
+from .lobes.transparent import TRANSPARENT  # noqa: F401
 
-NONE, DIFFUSE, MIRROR, GLOSSY, GLASS, REFRACTION, TRANSLUCENT, TRANSPARENT, SHEEN = range(-1, 8)
-KIND_IDS = {"diffuse": DIFFUSE, "mirror": MIRROR, "glossy": GLOSSY, "glass": GLASS,
-            "refraction": REFRACTION, "translucent": TRANSLUCENT, "transparent": TRANSPARENT,
-            "sheen": SHEEN}
-F_NONE, F_SCHLICK, F_F82, F_DIELECTRIC = range(4)
-FRESNEL_IDS = {"none": F_NONE, "schlick": F_SCHLICK, "f82": F_F82, "dielectric": F_DIELECTRIC}
-# Below this alpha, GGX is numerically a mirror (glass: a smooth refractor);
-# Cycles switches to a singular lobe at alpha^2 <= 2e-10.
-MIN_ALPHA = 1e-3
+assert NONE == -1
+KIND_IDS = kind_ids()

@@ -62,9 +62,11 @@ def ggx_reflect_terms(wox, woy, woz, wix, wiy, wiz, alpha):
 ggx_reflect = kernel(7, 5)(ggx_reflect_terms)
 
 
-def ggx_sample_vndf(wo, alpha, u1, u2):
-    """Visible microfacet normal for wo (wo.z > 0), Heitz 2018."""
-    vh = np.stack([alpha * wo[:, 0], alpha * wo[:, 1], wo[:, 2]], axis=1)
+def ggx_sample_vndf(wo, alpha, u1, u2, alpha_y=None):
+    """Visible microfacet normal for wo (wo.z > 0), Heitz 2018; anisotropic
+    with roughness alpha along x and alpha_y along y when alpha_y is given."""
+    ay = alpha if alpha_y is None else alpha_y
+    vh = np.stack([alpha * wo[:, 0], ay * wo[:, 1], wo[:, 2]], axis=1)
     vh /= row_norm(vh)[:, None]
     lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
     inv = np.where(lensq > 0, 1.0 / np.sqrt(np.where(lensq > 0, lensq, 1.0)), 0.0)
@@ -79,7 +81,7 @@ def ggx_sample_vndf(wo, alpha, u1, u2):
     p2 = (1.0 - s) * np.sqrt(np.maximum(0.0, 1.0 - p1 * p1)) + s * p2
     p3 = np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))
     nh = p1[:, None] * t1 + p2[:, None] * t2 + p3[:, None] * vh
-    ne = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 1e-12)], axis=1)
+    ne = np.stack([alpha * nh[:, 0], ay * nh[:, 1], np.maximum(nh[:, 2], 1e-12)], axis=1)
     return ne / row_norm(ne)[:, None]
 
 

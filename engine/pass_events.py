@@ -30,6 +30,7 @@ import numpy as np
 
 from . import bsdf
 from .lights import scene_lights_in_order
+from .lobes import kinds_of_class
 from .passes import (AOV_COLOR, CRYPTO, LIGHT_CLASSES, STRATEGY, PassConfig, crypto_manifest, is_aov,
                      light_groups)
 from .sampling import cosine_hemisphere
@@ -43,7 +44,7 @@ SHARES, PENDING, FEATURE_TP = slice(0, 9), 9, slice(10, 13)
 AUX_WIDTH = 13
 _CENTRE_LOCK = threading.Lock()
 SPECULAR_ALPHA = 0.075  # Cycles: roughness^2 below this is specular for denoising features
-DIFFUSE_KINDS = tuple(getattr(bsdf, k) for k in ("DIFFUSE", "TRANSLUCENT", "SHEEN") if hasattr(bsdf, k))
+DIFFUSE_KINDS = kinds_of_class("diffuse")
 
 
 def configure(scene, settings):

@@ -16,10 +16,12 @@ raises ``SceneError`` with a message that names the offending item.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, make_dataclass
 from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
+
+from . import lobes as _lobes
 
 RGB = Tuple[float, float, float]
 
@@ -103,56 +105,20 @@ class Instance:
 # ----------------------------------------------------------------------------
 # Materials
 
-@dataclass
-class Lobe:
-    """One BSDF lobe of a material (Cycles' closures, see engine.bsdf).
-
-    kind: 'diffuse' (Lambert), 'mirror' (perfect specular reflection),
-          'glossy' (GGX microfacet reflection, alpha = roughness^2),
-          'glass' (GGX dielectric: reflection and refraction; smooth below
-          roughness ~0.03), 'refraction' (Refraction BSDF: refraction only),
-          'translucent' (Lambert on the other side), 'transparent' (straight
-          through) or 'sheen' (Cycles' LTC sheen, Zeltner et al. 2022).
-    color: RGB colour of the lobe (for glass it tints reflection and
-        refraction; for a layer, see covers).
-    roughness: Blender roughness in [0, 1] (glossy, glass, refraction, sheen).
-    fresnel (glossy and mirror): 'none' (Glossy BSDF: colour times the
-        microfacet term), 'schlick' (legacy: colour is F0), 'f82' (Principled
-        metal: F82-tint with F0 = ``f0`` and ``edge_tint``), 'dielectric'
-        (the Principled BSDF's Fresnel: mix(f0, 1, s) with s the real
-        Fresnel curve of ``ior`` remapped to [0, 1]; f0 None = F0 of ior).
-        Glass and refraction always use the dielectric Fresnel of ``ior``.
-    ior: index of refraction (relative to the outside; inverted automatically
-        when a ray arrives from the back face of a glass or refraction lobe).
-    f0: RGB reflectance at normal incidence ('f82', 'dielectric', glass).
-    edge_tint: RGB F82 tint ('f82').
-    transmission_tint: RGB factor on the refracted part only (glass).
-    multiscatter: Multiscatter GGX energy compensation (glossy, glass).
-    covers: this lobe is a layer over the next ``covers`` lobes of the
-        material, which are weighed down by (1 - its albedo estimate), as
-        Cycles layers the Principled BSDF; colour is then the layer's weight
-        relative to what it covers (coat weight, sheen weight x tint).
-    absorb: RGB coat tint applied to the covered lobes (Beer-Lambert along
-        the refracted view ray, mixed in by the colour).
-    weight: scalar factor from Mix/Add shaders and Principled mixing; unlike
-        colour it does not enter Fresnel, energy or layering estimates.
-    """
-    kind: str
-    color: RGB = (0.8, 0.8, 0.8)
-    roughness: float = 0.5
-    fresnel: str = "none"
-    ior: float = 1.5
-    f0: Optional[RGB] = None
-    edge_tint: RGB = (1.0, 1.0, 1.0)
-    transmission_tint: RGB = (1.0, 1.0, 1.0)
-    multiscatter: bool = False
-    covers: int = 0
-    absorb: RGB = (1.0, 1.0, 1.0)
-    weight: float = 1.0
+def _lobe_doc():
+    kinds = "; ".join(f"'{d.name}' ({d.doc})" for d in _lobes.REGISTRY.values())
+    params = "\n".join(f"    {p.name}: {p.doc}" for p in _lobes.PARAMS)
+    return (f"One BSDF lobe of a material (Cycles' closures, see engine.bsdf and the\n"
+            f"registry engine/lobes/, from which these fields are derived).\n\n"
+            f"    kind: {kinds}.\n{params}\n")
 
 
-LOBE_KINDS = ("diffuse", "mirror", "glossy", "glass", "refraction", "translucent", "transparent",
-              "sheen")
+Lobe = make_dataclass("Lobe", [("kind", str)] + [(p.name, p.hint, field(default=p.default))
+                                                 for p in _lobes.PARAMS])
+Lobe.__module__, Lobe.__doc__ = __name__, _lobe_doc()
+
+
+LOBE_KINDS = _lobes.kinds()
 FRESNEL_MODES = ("none", "schlick", "f82", "dielectric")
 
 

@@ -1,0 +1,115 @@
+"""GGX reflection (Glossy BSDF, Principled metal / specular / coat) and the
+perfect mirror a glossy lobe becomes below MIN_ALPHA; their Fresnel modes."""
+import numpy as np
+
+from .. import microfacet as mf
+from ..microfacet import ggx_reflect, ggx_sample_vndf
+from .registry import (DELTA, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, NONE, REFLECTION, LobeDef, register)
+
+MIRROR = 1
+GLOSSY = 2
+
+
+def luminance(rgb):
+    """Rec.709 luminance, Blender's default scene-linear space."""
+    return 0.2126 * rgb[:, 0] + 0.7152 * rgb[:, 1] + 0.0722 * rgb[:, 2]
+
+
+def schlick(f0, cos):
+    c = np.clip(1.0 - cos, 0.0, 1.0)
+    return f0 + (1.0 - f0) * mf.pow5(c)[:, None]
+
+
+def fresnel(lobes, rows, k, cos):
+    """(n, 3) reflectance of a glossy or mirror lobe at cos(wo, h)."""
+    code = lobes.fresnel[rows, k]
+    if len(code) and code.min() == code.max():
+        return fresnel_of(int(code[0]), lobes, rows, k, cos)   # one kind: no masked copies
+    rows = np.arange(len(lobes))[rows]
+    out = np.ones((len(code), 3))
+    for kind in (F_SCHLICK, F_F82, F_DIELECTRIC):
+        m = np.flatnonzero(code == kind)
+        if len(m):
+            out[m] = fresnel_of(kind, lobes, rows[m], k, cos[m])
+    return out
+
+
+def fresnel_of(code, lobes, rows, k, cos):
+    """``fresnel`` for lobes that all have Fresnel mode ``code``."""
+    if code == F_SCHLICK:
+        return schlick(lobes.color[rows, k], cos)
+    if code == F_F82:
+        f0 = lobes.f0[rows, k]
+        return mf.f82(cos, f0, mf.f82_b(f0, lobes.edge_tint[rows, k]))
+    if code == F_DIELECTRIC:
+        f0 = lobes.f0[rows, k]
+        s, _ = mf.schlick_s(cos, np.maximum(lobes.ior[rows, k], 1e-5))
+        return f0 + (1.0 - f0) * s[:, None]
+    return np.ones((len(cos), 3))
+
+
+def ggx_reflect_rows(wo, wi, alpha):
+    """D G2 / (4 cos_o cos_i), the VNDF pdf of wi, and the half vector."""
+    spec, pdf, hx, hy, hz = ggx_reflect(wo[:, 0], wo[:, 1], wo[:, 2], wi[:, 0], wi[:, 1], wi[:, 2], alpha)
+    return spec, pdf, np.stack([hx, hy, hz], axis=1)
+
+
+def ggx_pdf(wo, wi, alpha):
+    """Solid-angle pdf of wi under VNDF sampling of the reflection."""
+    _, pdf, h = ggx_reflect_rows(wo, wi, alpha)
+    return pdf, h
+
+
+def eval_glossy_f(lobes, rows, k, wo, wi):
+    """f (without the weight) and pdf of GGX reflection."""
+    spec, pdf, h = ggx_reflect_rows(wo, wi, lobes.alpha[rows, k])
+    f = fresnel(lobes, rows, k, mf.row_dot(wo, h)) * spec[:, None]
+    return f, pdf
+
+
+def eval_glossy(lobes, rows, k, wo, wi, w, sel, term, sampled):
+    f, pdf = eval_glossy_f(lobes, rows, k, wo, wi)
+    return w * f, sel * pdf
+
+
+def sample_glossy(lobes, rows, s):
+    h = ggx_sample_vndf(s.wo[rows], lobes.alpha[rows, s.chosen[rows]], s.u1[rows], s.u2[rows])
+    s.wi[rows] = mf.reflect(s.wo[rows], h)
+    # A reflection below the surface is absorbed, as in Cycles
+    # (bsdf_microfacet_sample): eval_pdf would hand it to a transmitting
+    # lobe whose pdf leaves out this sampler's density there (biased).
+    s.kind[rows[s.wi[rows, 2] <= 0.0]] = NONE
+
+
+def sample_mirror(lobes, rows, s):
+    s.wi[rows] = s.wo[rows] * np.array([-1.0, -1.0, 1.0])
+    for k in np.unique(s.chosen[rows]):
+        r = rows[s.chosen[rows] == k]
+        s.weight[r] = s.w[r, k] * fresnel(lobes, r, k, s.wo[r, 2]) / s.p_lobe[r, None]
+    s.delta[rows] = True
+    s.pdf[rows] = s.p_lobe[rows]
+
+
+def albedo_guess_glossy(lobes, k, mu):
+    """The Fresnel at the view angle for F82 and dielectric lobes (their
+    colour does not hold it); 1 for the others."""
+    f0 = luminance(lobes.f0[:, k])
+    est = f0 + (1.0 - f0) * mf.pow5(1.0 - mu)
+    return np.where((lobes.fresnel[:, k] != F_NONE) & (lobes.fresnel[:, k] != F_SCHLICK), est, 1.0)
+
+
+_FRESNEL = ("fresnel", "ior", "f0", "edge_tint")
+register(LobeDef(MIRROR, "mirror", "glossy", REFLECTION | DELTA, sample_mirror, params=_FRESNEL,
+                 doc="perfect specular reflection (a glossy lobe below MIN_ALPHA becomes one)",
+                 cases=[dict(color=(0.9, 0.8, 0.7)), dict(color=(1, 1, 1), fresnel="f82", f0=(0.9, 0.6, 0.3),
+                                                           edge_tint=(0.9, 0.9, 0.5))]))
+register(LobeDef(GLOSSY, "glossy", "glossy", REFLECTION, sample_glossy, eval_glossy, "upper",
+                 albedo_guess=albedo_guess_glossy, params=("roughness", "multiscatter") + _FRESNEL,
+                 doc="GGX microfacet reflection, alpha = roughness^2 (Walter et al. 2007, VNDF sampling)",
+                 cases=[dict(color=(0.8, 0.7, 0.6), roughness=0.5),
+                        dict(color=(0.9, 0.9, 0.9), roughness=0.15),
+                        dict(color=(0.04, 0.04, 0.04), roughness=0.4, fresnel="schlick"),
+                        dict(color=(1, 1, 1), roughness=0.3, fresnel="f82", f0=(0.9, 0.6, 0.3),
+                             edge_tint=(0.9, 0.9, 0.5)),
+                        dict(color=(1, 1, 1), roughness=0.6, fresnel="dielectric", ior=1.45),
+                        dict(color=(0.8, 0.8, 0.8), roughness=0.4, multiscatter=True)]))
