@@ -58,15 +58,18 @@ _ENGINE_DIR = os.path.dirname(os.path.abspath(__file__))
 
 
 def source_hash():
-    """Hash of the engine's sources: numba invalidates a cached kernel only
-    when its own file changes, not when a helper it inlines (in another
-    module) does, so each version of the engine gets its own cache folder."""
+    """Hash of the engine's sources, sub-packages included: numba
+    invalidates a cached kernel only when its own file changes, not when a
+    helper or a constant it inlines (in another module) does, so each
+    version of the engine gets its own cache folder."""
     digest = hashlib.sha1()
-    folder = os.path.dirname(os.path.abspath(__file__))
-    for name in sorted(os.listdir(folder)):
-        if name.endswith(".py"):
-            with open(os.path.join(folder, name), "rb") as handle:
-                digest.update(name.encode() + handle.read())
+    for root, dirs, files in os.walk(_ENGINE_DIR):
+        dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+        for name in sorted(files):
+            if name.endswith(".py"):
+                path = os.path.join(root, name)
+                with open(path, "rb") as handle:
+                    digest.update(os.path.relpath(path, _ENGINE_DIR).encode() + handle.read())
     return digest.hexdigest()[:12]
 
 
