@@ -9,6 +9,7 @@ need a shadow ray).  A sample counts where its pdf is positive and its
 direction leaves on the same side of the geometric and the shading surface
 (lights behind the surface count for transmitting lobes, whose f is 0
 otherwise).  The compiled row loop and the NumPy form agree bit for bit.
+``add_rows`` adds the light of the samples whose shadow rays are free.
 """
 import numpy as np
 

@@ -28,6 +28,7 @@ brings: it converges to the share of the direct light MIS takes from light
 sampling (see _add_light_weight).
 """
 import threading
+from dataclasses import fields, replace
 
 import numpy as np
 
@@ -52,7 +53,6 @@ def configure(scene, settings):
     cfg = settings.pass_config if settings.pass_config is not None else PassConfig()
     if not settings.passes:
         return cfg
-    from dataclasses import replace
     from .scene import DEFAULT_MATERIAL
     mats = list(scene.materials) + [DEFAULT_MATERIAL]
     return replace(
@@ -223,7 +223,6 @@ def _vertex(ctx, paths, hit, lobes, w, tt, bb, depth, tile):
 def _closure_weights(lobes, hit, tt, bb):
     """Lobe colours as Cycles' closure weights: with layering, without the
     multiscatter energy compensation (Cycles keeps that in energy_scale)."""
-    from dataclasses import replace
     plain = replace(lobes, multiscatter=np.zeros_like(lobes.multiscatter))
     return bsdf.weights(plain, to_local(hit.wo, tt, bb, hit.ns))
 
@@ -388,7 +387,6 @@ def _ambient_occlusion(ctx, cfg, hit, tt, bb, pix, tile):
 
 def _class_split(ctx, lobes, lobes_wo, wo_l, wi_l, f, delta=None):
     """(N, 3, 3) share of f in each light class for direction wi_l."""
-    from dataclasses import replace
     cls = _class_of(lobes)
     diffuse_only = replace(lobes, kind=np.where(cls == 0, lobes.kind, bsdf.NONE).astype(lobes.kind.dtype))
     f_d = bsdf.eval_pdf(diffuse_only, wo_l, wi_l, *lobes_wo)[0]
@@ -424,7 +422,6 @@ def _after_scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, through, tile
 
 def lobe_rows(lobes, rows):
     """The lobes of ``rows`` (every per-ray array taken)."""
-    from dataclasses import fields, replace
     n = len(lobes.kind)
     return replace(lobes, **{f.name: getattr(lobes, f.name)[rows] for f in fields(lobes)
                              if isinstance(getattr(lobes, f.name), np.ndarray)

@@ -65,28 +65,29 @@ def trace_batch(ctx, pix, sample, tile):
 
 
 def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
-    """One wavefront step of the live paths; returns the paths that go on."""
-    found = stages.intersect(ctx, paths)
+    """One wavefront step of the live paths; returns the paths that go on.
+    Each line is a stage (stages.py) or bookkeeping (below)."""
+    found = stages.intersect(ctx, paths)                         # RayHits
     if depth == 0:
         stages.camera_aovs(ctx, paths, found, tile)
-    ended = stages.emitters(ctx, paths, found, obs)
+    ended = stages.emitters(ctx, paths, found, obs)              # lights on the ray
     stages.escaped(ctx, paths, np.flatnonzero((found.prim < 0) & ~ended), tile, obs)
     paths, found = _compact(ctx, paths, found, (found.prim >= 0) & ~ended, tile)
     if len(paths.pix) == 0:
         return paths
-    hit = stages.interaction(ctx, paths, found.t, found.prim, found.bu, found.bv)
+    hit = stages.interaction(ctx, paths, found.t, found.prim, found.bu, found.bv)   # Hit
     stages.surface_emission(ctx, paths, hit, depth, obs)
     paths, hit, carried = _past_last_vertex(ctx, paths, hit, tile)
     if len(paths.pix) == 0:
         return paths if carried is None else carried
-    v = stages.shade(ctx, paths, hit, depth)
+    v = stages.shade(ctx, paths, hit, depth)                     # Vertex
     obs.vertex(paths, v, depth)
     every = stages.sampling_every_light(ctx, v)
-    for batch in stages.light_samples(ctx, paths, v, depth, every):   # nee
+    for batch in stages.light_samples(ctx, paths, v, depth, every):   # nee: ShadowBatch
         stages.trace_shadows(ctx, paths, batch)
         obs.light_sample(paths, batch)
     ray = paths.ray
-    alive, through = stages.scatter(ctx, paths, v, depth)
+    alive, through = stages.scatter(ctx, paths, v, depth)       # BSDF sample, throughput, roulette
     obs.after_scatter(paths, v, through)
     stages.remember_vertex(ctx, paths, v, through, every, ray, depth)
     paths = _end(ctx, paths, alive, tile)
