@@ -31,11 +31,10 @@ from . import stages, transparency
 from .context import Context
 from .records import Hit, LightSample, Paths, RayHits, ShadowBatch, Vertex, rows_of
 from .stages import every_light as _every_light, interaction as _interaction
-from .transparency import transmittance as _transmittance
 from .visibility import _diffuse_lobe
 
 __all__ = ["Context", "Hit", "LightSample", "Paths", "RayHits", "ShadowBatch", "Vertex", "rows_of",
-           "trace_batch", "_add_rows", "_diffuse_lobe", "_every_light", "_interaction", "_transmittance"]
+           "trace_batch", "_add_rows", "_diffuse_lobe", "_every_light", "_interaction"]
 
 
 def trace_batch(ctx, pix, sample, tile):
@@ -72,10 +71,10 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
         stages.camera_aovs(ctx, paths, found, tile)
     ended = stages.emitters(ctx, paths, found, obs)              # lights on the ray
     stages.escaped(ctx, paths, np.flatnonzero((found.prim < 0) & ~ended), tile, obs)
-    paths, found = _compact(ctx, paths, found, (found.prim >= 0) & ~ended, tile)
+    paths, surface = _compact(ctx, paths, found.surface, (found.prim >= 0) & ~ended, tile)
     if len(paths.pix) == 0:
         return paths
-    hit = stages.interaction(ctx, paths, found.t, found.prim, found.bu, found.bv)   # Hit
+    hit = stages.interaction(ctx, paths, *surface)               # Hit
     stages.surface_emission(ctx, paths, hit, depth, obs)
     paths, hit, carried = _past_last_vertex(ctx, paths, hit, tile)
     if len(paths.pix) == 0:
@@ -94,14 +93,14 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
     return paths if carried is None or len(carried.pix) == 0 else paths.concat(carried)
 
 
-def _compact(ctx, paths, found, go_on, tile):
-    """End the paths not ``go_on`` and keep the others (dense arrays for
-    every stage after, with no index indirection)."""
+def _compact(ctx, paths, arrays, go_on, tile):
+    """End the paths not ``go_on`` and keep the others, and those rows of
+    ``arrays``: dense arrays for every stage after, no index indirection."""
     if go_on.all():
-        return paths, found
+        return paths, arrays
     stages.finish(ctx, paths, tile, ~go_on)
     rows = np.flatnonzero(go_on)
-    return paths.take(rows), found.take(rows)
+    return paths.take(rows), tuple(a.take(rows) for a in arrays)
 
 
 def _end(ctx, paths, alive, tile):

@@ -102,6 +102,11 @@ class RayHits:
     def light(self):
         return self.light_t < np.inf
 
+    @property
+    def surface(self):
+        """(t, prim, bu, bv): what the surface stages read."""
+        return self.t, self.prim, self.bu, self.bv
+
     def take(self, keep):
         return take_arrays(self, keep)
 
