@@ -175,7 +175,7 @@ class Vertex:
     def take(self, rows):
         """The vertices ``rows`` (indices), remembering which paths they are."""
         n = len(self)
-        return Vertex(_RowView(self.hit, rows, n), self.tt[rows], self.bb[rows], self.wo_l[rows],
+        return Vertex(RowView(self.hit, rows, n), self.tt[rows], self.bb[rows], self.wo_l[rows],
                       take_arrays(self.lobes, rows, n), self.weights[rows], self.selection[rows],
                       rows if self.path_rows is None else self.path_rows[rows])
 
@@ -184,8 +184,8 @@ class Vertex:
 class LightSample:
     """One light sample at each of N vertices (one emitter each): the
     direction (world and shading frame), the BSDF's value there, the MIS
-    weight, whether the light is a delta light, the radiance it brings if
-    unblocked (0 where it brings none) and the shadow rays' inputs."""
+    weight, whether the light is a delta light (per vertex, or one bool for
+    all) and the radiance it brings if unblocked (0 where it brings none)."""
     emitter: np.ndarray
     wi: np.ndarray
     wi_l: np.ndarray
@@ -211,7 +211,7 @@ class ShadowBatch:
     added: object = None
 
 
-class _RowView:
+class RowView:
     """The rows ``rows`` of an object's per-row arrays, each taken when
     first read (light sampling reads a few of the path's and hit's dozen)."""
 

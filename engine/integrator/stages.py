@@ -16,7 +16,7 @@ from ..sampler import BSDF, LIGHT, emitter_set, vertex_set
 from ..sampling import power_heuristic
 from ..vec import dot, frame, row_any_positive, row_max, to_local
 from . import transparency, visibility
-from .records import Hit, LightSample, RayHits, ShadowBatch, Vertex, _RowView
+from .records import Hit, LightSample, RayHits, ShadowBatch, Vertex, RowView
 from .visibility import VIS_INDIRECT
 
 
@@ -276,21 +276,21 @@ def light_samples(ctx, paths, v, depth, every):
     ShadowBatches (one per round, made when the previous one is traced)."""
     for at, mode, emitters in nee_rounds(ctx, v, every):
         rows = at.path_rows
-        on = paths if rows is None else _RowView(paths, rows, len(paths.pix))
+        on = paths if rows is None else RowView(paths, rows, len(paths.pix))
         n = len(at)
         if mode == "select":
-            u = on_uniforms(ctx, on, vertex_set(depth, LIGHT))
+            u = uniforms(ctx, on, vertex_set(depth, LIGHT))
             e, p_sel = ctx.lights.select(u[:, 0], at.hit.p, at.hit.ng)
             batches = [light_sample(ctx, on, at, e, p_sel, u[:, 1:])]
         else:
             batches = (light_sample(ctx, on, at, np.full(n, e), np.ones(n),
-                                    on_uniforms(ctx, on, emitter_set(depth, e))[:, :3]) for e in emitters)
+                                    uniforms(ctx, on, emitter_set(depth, e))[:, :3]) for e in emitters)
         for batch in batches:
             if batch is not None:
                 yield batch
 
 
-def on_uniforms(ctx, paths, dim_set):
+def uniforms(ctx, paths, dim_set):
     """(N, 4) sample values of one dimension set for the paths."""
     return ctx.sampler.get(paths.pseed, paths.sample, dim_set)
 
@@ -327,11 +327,11 @@ def trace_shadows(ctx, paths, batch):
     contrib = batch.sample.contrib
     path_rows = batch.at.path_rows
     if ctx.transparent_shadows:
-        tbounce = paths.tbounce[batch.rows if path_rows is None else path_rows[batch.rows]]
+        rows = batch.rows if path_rows is None else path_rows[batch.rows]
         added = contrib[batch.rows] * transparency.transmittance(ctx, batch.origin, batch.direction, batch.tmax,
-                                                                 e, tbounce)
+                                                                 e, paths.tbounce[rows])
         batch.free, batch.added = batch.rows, added
-        paths.L[batch.rows if path_rows is None else path_rows[batch.rows]] += added
+        paths.L[rows] += added
         return
     batch.free = batch.rows[~visibility.occluded(ctx, batch.origin, batch.direction, batch.tmax, e)]
     if path_rows is None:
@@ -350,7 +350,7 @@ def scatter(ctx, paths, v, depth):
     transparent lobe)."""
     s = ctx.settings
     hit = v.hit
-    u = on_uniforms(ctx, paths, vertex_set(depth, BSDF))
+    u = uniforms(ctx, paths, vertex_set(depth, BSDF))
     wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u[:, 0], u[:, 1], u[:, 2], *v.lobes_wo)
     wi = v.world(wi_l)
     ok, paths.beta = throughput.update(wi, hit.ng, wi_l, weight, paths.beta, paths.bounce, s.rr_depth, u[:, 3])
