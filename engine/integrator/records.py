@@ -87,20 +87,16 @@ class Paths:
 class RayHits:
     """What each path's ray meets before its tmax: the closest triangle
     visible to the ray's kind (prim -1: none; Embree's float32 t and
-    barycentrics) and the first analytic light on the way (light_t inf:
-    none; its LightSet index, radiance and MIS pdf)."""
+    barycentrics) and whether an analytic light comes first (its LightSet
+    index, radiance and MIS pdf)."""
     t: np.ndarray
     prim: np.ndarray
     bu: np.ndarray
     bv: np.ndarray
-    light_t: np.ndarray
+    light: np.ndarray
     emitter: np.ndarray
     Le: np.ndarray
     pdf: np.ndarray
-
-    @property
-    def light(self):
-        return self.light_t < np.inf
 
     @property
     def surface(self):

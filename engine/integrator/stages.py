@@ -28,7 +28,8 @@ def intersect(ctx, paths):
     t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax)
     if ctx.triangles.visibility is not None:
         t, prim, bu, bv = visibility.skip_invisible(ctx, paths.o, paths.d, paths.tmax, paths.ray, t, prim, bu, bv)
-    return RayHits(t, prim, bu, bv, *_lights_along(ctx, paths, np.minimum(t, paths.tmax)))
+    light_t, emitter, Le, pdf = _lights_along(ctx, paths, np.minimum(t, paths.tmax))
+    return RayHits(t, prim, bu, bv, light_t < np.inf, emitter, Le, pdf)
 
 
 def _lights_along(ctx, paths, tmax):
@@ -118,6 +119,8 @@ def emitters(ctx, paths, found, obs):
 def escaped(ctx, paths, i, tile, obs):
     """Paths ``i`` left the scene: the world (an HDRI by MIS, a constant one
     unweighted) and the suns in their direction."""
+    if len(i) == 0:
+        return
     sky = i
     if ctx.settings.transparent:
         # With a transparent film camera rays (also through transparent
