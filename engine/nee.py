@@ -9,6 +9,7 @@ need a shadow ray).  A sample counts where its pdf is positive and its
 direction leaves on the same side of the geometric and the shading surface
 (lights behind the surface count for transmitting lobes, whose f is 0
 otherwise).  The compiled row loop and the NumPy form agree bit for bit.
+``add_rows`` adds the light of the samples whose shadow rays are free.
 """
 import numpy as np
 
@@ -65,3 +66,30 @@ def contribution(wi_l, wi, ng, light_pdf, p_sel, pdf_b, delta, mis, beta, f, le)
     _contribution_rows(wi_l, wi, ng, *columns, column(delta, n, bool), bool(mis), *rows3(beta, f, le),
                        contrib, w, live)
     return contrib, w, live
+
+
+def add_rows(L, rows, values):
+    """L[rows] += values[rows] (rows unique): the light of the samples
+    whose shadow rays are free, in one compiled loop."""
+    if L.flags.c_contiguous and values.flags.c_contiguous and values.dtype == L.dtype == np.float64:
+        _add_rows_loop(L, np.ascontiguousarray(rows, np.int64), values)
+    else:
+        _add_rows_numpy(L, rows, values)
+
+
+def _add_rows_numpy(L, rows, values):
+    """A dense masked add when rows are most of L: row-wise fancy indexing
+    of (N, 3) arrays costs several times a pass over the whole array."""
+    if len(rows) * 4 < len(L):
+        L[rows] += np.take(values, rows, axis=0)
+        return
+    use = np.zeros(len(L), bool)
+    use[rows] = True
+    L += np.where(use[:, None], values, 0.0)
+
+
+@kernels.loop_kernel("void(float64[:, ::1], int64[::1], float64[:, ::1])", _add_rows_numpy)
+def _add_rows_loop(L, rows, values):
+    for r in rows:
+        for k in range(3):
+            L[r, k] += values[r, k]

@@ -1,8 +1,11 @@
 """What the integrator tells the extra passes, and what each pass adds.
 
-The integrator calls these at the few points where it adds light or leaves
-the first surface; each returns at once when no pass listens, so the
-physics stays in integrator.py and the passes stay here.
+The integrator reports to one observer per batch (``observer(ctx, tile)``
+at the end of this file): the bounce's stages hand it their records (a
+Vertex, a traced ShadowBatch, the rows that met an emitter) where they add
+light or leave a surface.  Without extra passes the observer is NO_PASSES,
+whose hooks do nothing, so the physics stays in engine/integrator/ and the
+passes stay here.
 
 Vertices: vertex 0 is the first surface a camera path scatters at
 (``paths.bounce`` counts scattering vertices; transparent passes are not
@@ -25,6 +28,7 @@ brings: it converges to the share of the direct light MIS takes from light
 sampling (see _add_light_weight).
 """
 import threading
+from dataclasses import fields, replace
 
 import numpy as np
 
@@ -42,7 +46,6 @@ from .vec import dot, luminance, to_local, to_world
 # still to be written, and their throughput (Cycles').
 SHARES, PENDING, FEATURE_TP = slice(0, 9), 9, slice(10, 13)
 AUX_WIDTH = 13
-_CENTRE_LOCK = threading.Lock()
 SPECULAR_ALPHA = 0.075  # Cycles: roughness^2 below this is specular for denoising features
 DIFFUSE_KINDS = kinds_of_class("diffuse")
 
@@ -52,7 +55,6 @@ def configure(scene, settings):
     cfg = settings.pass_config if settings.pass_config is not None else PassConfig()
     if not settings.passes:
         return cfg
-    from dataclasses import replace
     from .scene import DEFAULT_MATERIAL
     mats = list(scene.materials) + [DEFAULT_MATERIAL]
     return replace(
@@ -105,15 +107,34 @@ def _group_parts(scene, materials, cfg, names):
             "names": tuple(groups)}
 
 
-def _emitter_groups(ctx):
-    """(emitters,) light-group id per LightSet emitter, built once."""
-    cached = ctx.__dict__.get("_pass_emitter_groups")
-    if cached is None:
-        parts = ctx.pass_config.group_parts
-        emitters = ctx.lights.per_emitter(parts["lights"], parts["world"], parts["material"])
-        cached = np.array(list(emitters) + [-1], np.int64)
-        ctx._pass_emitter_groups = cached
-    return cached
+def emitter_groups(config, lights):
+    """(emitters,) light-group id per LightSet emitter (None without light
+    groups): built once per render, into the Context."""
+    parts = config.group_parts
+    if parts is None:
+        return None
+    emitters = lights.per_emitter(parts["lights"], parts["world"], parts["material"])
+    return np.array(list(emitters) + [-1], np.int64)
+
+
+class CentreRecord:
+    """Which pixels' centre rays (the FIRST passes) are traced already: the
+    first batch to reach a pixel claims it.  Shared by the render's batches,
+    behind a lock."""
+
+    def __init__(self, pixels):
+        self._pixels = pixels
+        self._done = None   # allocated by the first claim (renders without FIRST passes never claim)
+        self._lock = threading.Lock()
+
+    def claim(self, pix):
+        """The pixels of ``pix`` (unique) not claimed before; claims them."""
+        with self._lock:
+            if self._done is None:
+                self._done = np.zeros(self._pixels, bool)
+            pix = pix[~self._done[pix]]
+            self._done[pix] = True
+            return pix
 
 
 def _add_light_groups(ctx, pix, contrib, emitters, tile, world=False):
@@ -126,7 +147,7 @@ def _add_light_groups(ctx, pix, contrib, emitters, tile, world=False):
     if emitters is None:
         gid = np.full(len(pix), parts["world"] if world else -1)
     else:
-        gid = _emitter_groups(ctx)[np.asarray(emitters, np.int64)]
+        gid = ctx.emitter_groups[np.asarray(emitters, np.int64)]
     for g, name in enumerate(parts["names"]):
         sel = gid == g
         if sel.any():
@@ -141,30 +162,16 @@ def aux_width(settings):
     return AUX_WIDTH if settings.passes else 0
 
 
-def start(ctx, paths, tile):
+def _start(ctx, paths, tile):
     """New camera paths: reset their pass state; the first batch to reach a
     pixel also traces its centre ray for the FIRST passes."""
-    if not listening(tile):
-        return
     if paths.aux.shape[1]:
         paths.aux[:, PENDING] = 1.0
         paths.aux[:, FEATURE_TP] = 1.0
     if tile.extra.first:
-        pix = _claim_centres(ctx, paths)
+        pix = ctx.centres.claim(np.unique(paths.pix))
         if len(pix):
             _centre_rays(ctx, pix, tile)
-
-
-def _claim_centres(ctx, paths):
-    """The batch's pixels whose centre ray is not traced yet (claimed now)."""
-    with _CENTRE_LOCK:
-        done = ctx.__dict__.get("_pass_centres")
-        if done is None:
-            done = ctx._pass_centres = np.zeros(ctx.camera.width * ctx.camera.height, bool)
-        pix = np.unique(paths.pix)
-        pix = pix[~done[pix]]
-        done[pix] = True
-        return pix
 
 
 def _centre_rays(ctx, pix, tile):
@@ -198,11 +205,9 @@ def listening(tile):
 # ----------------------------------------------------------------------------
 # Vertex 0: data passes (Cycles' data_passes.h), colours, Cryptomatte, AO
 
-def vertex(ctx, paths, hit, lobes, w, tt, bb, depth, tile):
+def _vertex(ctx, paths, hit, lobes, w, tt, bb, depth, tile):
     """Paths at a surface that scatters: the first one's data passes, and
     the denoising features of paths still looking for a non-specular one."""
-    if not listening(tile):
-        return
     features = tile.wants("Denoising Albedo") or tile.wants("Denoising Normal")
     colours = depth == 0 and any(tile.wants(c + " Color") for c in LIGHT_CLASSES)
     if features or colours:
@@ -216,7 +221,6 @@ def vertex(ctx, paths, hit, lobes, w, tt, bb, depth, tile):
 def _closure_weights(lobes, hit, tt, bb):
     """Lobe colours as Cycles' closure weights: with layering, without the
     multiscatter energy compensation (Cycles keeps that in energy_scale)."""
-    from dataclasses import replace
     plain = replace(lobes, multiscatter=np.zeros_like(lobes.multiscatter))
     return bsdf.weights(plain, to_local(hit.wo, tt, bb, hit.ns))
 
@@ -381,7 +385,6 @@ def _ambient_occlusion(ctx, cfg, hit, tt, bb, pix, tile):
 
 def _class_split(ctx, lobes, lobes_wo, wo_l, wi_l, f, delta=None):
     """(N, 3, 3) share of f in each light class for direction wi_l."""
-    from dataclasses import replace
     cls = _class_of(lobes)
     diffuse_only = replace(lobes, kind=np.where(cls == 0, lobes.kind, bsdf.NONE).astype(lobes.kind.dtype))
     f_d = bsdf.eval_pdf(diffuse_only, wo_l, wi_l, *lobes_wo)[0]
@@ -399,10 +402,10 @@ def _class_split(ctx, lobes, lobes_wo, wo_l, wi_l, f, delta=None):
     return out
 
 
-def after_scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, through, tile):
+def _after_scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, through, tile):
     """Remember, for paths that just left vertex 0, which light class their
     BSDF sample belongs to (Cycles' pass_diffuse_weight / glossy_weight)."""
-    if not listening(tile) or not _light_passes(tile):
+    if not _light_passes(tile):
         return
     rows = np.nonzero((paths.bounce == 1) & ~through)[0]
     if len(rows) == 0:
@@ -417,7 +420,6 @@ def after_scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, through, tile)
 
 def lobe_rows(lobes, rows):
     """The lobes of ``rows`` (every per-ray array taken)."""
-    from dataclasses import fields, replace
     n = len(lobes.kind)
     return replace(lobes, **{f.name: getattr(lobes, f.name)[rows] for f in fields(lobes)
                              if isinstance(getattr(lobes, f.name), np.ndarray)
@@ -439,15 +441,16 @@ def _add_light_classes(paths, rows, contrib, direct, tile, shares=None):
                 tile.add_pass(name + suffix, paths.pix[rows[sel]], part[sel])
 
 
-def nee(ctx, paths, rows, contrib, w, delta, lobes, lobes_wo, wo_l, wi_l, f, tile, emitters=None):
+def _nee(ctx, paths, prows, rows, contrib, w, delta, lobes, lobes_wo, wo_l, wi_l, f, tile, emitters=None):
     """Light sampling added ``contrib`` (MIS-weighted, after the shadow test)
-    to paths ``rows``; w is its MIS weight, delta marks delta lights,
-    emitters the lights sampled."""
-    if not listening(tile) or len(rows) == 0:
+    to paths ``prows``, the vertices ``rows`` of lobes, lobes_wo and wo_l;
+    w is its MIS weight, delta marks delta lights, emitters the lights
+    sampled."""
+    if len(rows) == 0:
         return
     cfg = ctx.pass_config
-    vertex = paths.bounce[rows]
-    pix = paths.pix[rows]
+    vertex = paths.bounce[prows]
+    pix = paths.pix[prows]
     _add_light_groups(ctx, pix, contrib, emitters, tile)
     if _wants_strategy(tile):
         on = vertex == 0 if cfg.strategy_first_vertex else np.ones(len(rows), bool)
@@ -461,13 +464,13 @@ def nee(ctx, paths, rows, contrib, w, delta, lobes, lobes_wo, wo_l, wi_l, f, til
             _add_light_weight(tile, pix[first], w[first], luminance(contrib[first]) / w[first])
     if _light_passes(tile):
         direct = vertex == 0
-        shares = paths.aux[rows][:, SHARES].reshape(len(rows), 3, 3).copy()
+        shares = paths.aux[prows][:, SHARES].reshape(len(rows), 3, 3).copy()
         d = np.nonzero(direct)[0]
         if len(d):
             sub = lobe_rows(lobes, rows[d])
             shares[d] = _class_split(ctx, sub, (lobes_wo[0][rows[d]], lobes_wo[1][rows[d]]),
                                      wo_l[rows[d]], wi_l[d], f[d])
-        _add_light_classes(paths, rows, contrib, direct, tile, shares)
+        _add_light_classes(paths, prows, contrib, direct, tile, shares)
 
 
 def _add_light_weight(tile, pix, w_light, brings):
@@ -483,12 +486,12 @@ def _wants_strategy(tile):
     return any(tile.wants(n) for n in STRATEGY)
 
 
-def emitter(ctx, paths, rows, unweighted, w, tile, world=False, bsdf_only=False, emitters=None):
+def _emitter(ctx, paths, rows, unweighted, w, tile, world=False, bsdf_only=False, emitters=None):
     """An emitter (or the world) seen along the paths ``rows``: added
     unweighted * w.  bsdf_only: light that NEE never samples (a constant
     world); emitters: LightSet indices (None: the constant world or a
     light the passes do not group)."""
-    if not listening(tile) or len(rows) == 0:
+    if len(rows) == 0:
         return
     contrib = unweighted * w[:, None]
     bounce = paths.bounce[rows]
@@ -510,3 +513,67 @@ def emitter(ctx, paths, rows, unweighted, w, tile, world=False, bsdf_only=False,
         lit = np.nonzero(~camera)[0]
         _add_light_classes(paths, rows[lit], contrib[lit], bounce[lit] == 1, tile)
     _features_at_emitter(paths, rows, unweighted, world, tile)
+
+
+# ----------------------------------------------------------------------------
+# The integrator's observer: one per batch, receiving the bounce's records
+
+class NoPasses:
+    """The observer of a batch without extra passes: every hook does
+    nothing (``active`` False: the integrator skips what only the passes
+    would read)."""
+    active = False
+
+    def start(self, paths):
+        """New camera paths."""
+
+    def vertex(self, paths, v, depth):
+        """Paths at the vertices ``v`` (an integrator Vertex), before they scatter."""
+
+    def emitter(self, paths, rows, unweighted, w, world=False, bsdf_only=False, emitters=None):
+        """Paths ``rows`` met an emitter (or the world): added unweighted * w."""
+
+    def light_sample(self, paths, batch):
+        """A traced ShadowBatch added its light to the paths it reached."""
+
+    def after_scatter(self, paths, v, through):
+        """The paths left the vertices ``v`` (``through``: by a transparent pass)."""
+
+
+NO_PASSES = NoPasses()
+
+
+def observer(ctx, tile):
+    """The observer of a batch writing ``tile``: NO_PASSES unless the
+    render asks for extra passes."""
+    return PassObserver(ctx, tile) if listening(tile) else NO_PASSES
+
+
+class PassObserver(NoPasses):
+    """Writes the extra passes of one batch's tile from what the bounce's
+    stages report."""
+    active = True
+
+    def __init__(self, ctx, tile):
+        self.ctx, self.tile = ctx, tile
+
+    def start(self, paths):
+        _start(self.ctx, paths, self.tile)
+
+    def vertex(self, paths, v, depth):
+        _vertex(self.ctx, paths, v.hit, v.lobes, v.weights, v.tt, v.bb, depth, self.tile)
+
+    def emitter(self, paths, rows, unweighted, w, world=False, bsdf_only=False, emitters=None):
+        _emitter(self.ctx, paths, rows, unweighted, w, self.tile, world, bsdf_only, emitters)
+
+    def light_sample(self, paths, batch):
+        free, s, at = batch.free, batch.sample, batch.at
+        if len(free) == 0:
+            return
+        added = np.take(s.contrib, free, axis=0) if batch.added is None else batch.added
+        prows = free if at.path_rows is None else at.path_rows[free]
+        _nee(self.ctx, paths, prows, free, added, s.w[free], np.broadcast_to(s.delta, s.w.shape)[free],
+             at.lobes, at.lobes_wo, at.wo_l, s.wi_l[free], s.f[free], self.tile, emitters=s.emitter[free])
+
+    def after_scatter(self, paths, v, through):
+        _after_scatter(self.ctx, paths, v.hit, v.lobes, v.lobes_wo, v.tt, v.bb, v.wo_l, through, self.tile)

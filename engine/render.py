@@ -89,11 +89,10 @@ def prepare(scene, settings):
         raise SceneError(f"camera: {exc}") from None
     accel = Accel(tris)
     world = np.asarray(scene.world.color, dtype=np.float64)
-    ctx = Context(accel, tris, materials, lights, camera, world, settings)
-    ctx.sampler = Sampler(settings.seed, settings.sampling_pattern)
-    ctx.bump_model = bump_model(getattr(scene, "cycles_version", (5, 0, 0)))
-    ctx.pass_config = pass_events.configure(scene, settings)
-    return ctx
+    return Context.build(accel, tris, materials, lights, camera, world, settings,
+                         sampler=Sampler(settings.seed, settings.sampling_pattern),
+                         bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
+                         pass_config=pass_events.configure(scene, settings))
 
 
 def _choose_kernels(settings, progress):

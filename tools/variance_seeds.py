@@ -23,6 +23,7 @@ eight seeds give a ratio only to +-15-20 % in veach_mis, where a few pixels'
 rare bright samples dominate).
 """
 import argparse
+import dataclasses
 import glob
 import os
 import sys
@@ -70,13 +71,13 @@ def render_seeds(ctx, pixels, samples, seeds, first_seed):
     # Batches of about BATCH paths, whole sample passes each (the renderer's own batch size).
     passes = max(1, BATCH // len(pixels))
     for k in range(seeds):
-        ctx.sampler = Sampler(first_seed + k, ctx.settings.sampling_pattern)
+        seeded = dataclasses.replace(ctx, sampler=Sampler(first_seed + k, ctx.settings.sampling_pattern))
         film = Film(width, height, ())
         for start in range(0, samples, passes):
             sample = np.arange(start, min(start + passes, samples), dtype=np.uint32)
             tile = film.new_tile(int(pixels.min()), int(pixels.max()) + 1)
             t0 = time.thread_time()
-            trace_batch(ctx, np.tile(pixels, len(sample)), np.repeat(sample, len(pixels)), tile)
+            trace_batch(seeded, np.tile(pixels, len(sample)), np.repeat(sample, len(pixels)), tile)
             cpu += time.thread_time() - t0
             film.merge(tile)
         means[k] = film.mean[pixels]

@@ -187,9 +187,9 @@ def test_transparent_film_alpha_through_plate():
 
 def test_opaque_scenes_keep_plain_shadow_rays(monkeypatch):
     """Scenes without a transparent lobe never trace transparent shadows."""
-    from engine import integrator
+    from engine.integrator import transparency
     calls = []
-    monkeypatch.setattr(integrator, "_transmittance", lambda *a: calls.append(a))
+    monkeypatch.setattr(transparency, "transmittance", lambda *a: calls.append(a))
     h, P = 2.0, 30.0
     scene = plate_scene(PointLight((0, 0, h), (P, P, P), radius=0.0), [(1.0, 0.6)], FLOOR)
     render(scene, settings(samples=2, samples_per_pass=2))

@@ -1,0 +1,131 @@
+"""Wavefront path tracer: next-event estimation and BSDF sampling combined by
+multiple importance sampling (power heuristic), as pbrt-v4's PathIntegrator
+and Mitsuba 3's path.cpp, but on arrays of paths.
+
+Path state is a struct of arrays indexed by live path; dead paths are
+removed by compaction after every bounce, so every NumPy operation works on
+live lanes only.  ``trace_batch`` runs one batch of camera samples for a
+contiguous range of pixels and returns a ``film.Tile``; ``_bounce`` is one
+wavefront step, a list of named stages (engine/integrator/stages.py) over
+the records of records.py, as pbrt-v4's wavefront loop.
+
+Conventions (Cycles, measured against it): max_bounces = N means light
+sampling at path vertices 0..N (vertex 0 = the first hit), and vertex N + 1
+only collects emission, so N = 0 is direct lighting.  A constant world is not
+light sampled (BSDF sampling only, as Cycles does); delta lights cannot be hit
+by BSDF rays, so they are always light sampled, in every strategy.
+
+Transparent surfaces (Cycles' transparent bounces and shadows): a pass
+straight through a sampled transparent lobe is not a vertex; it keeps the
+ray's start, MIS state and kind and counts towards ``transparent_max_bounces``
+instead of max_bounces.  Shadow rays cross transparent surfaces, attenuated
+by their transparency (transparency.py).  Ray visibility: visibility.py.
+"""
+import numpy as np
+
+from .. import pass_events
+from ..geometry import VIS_CAMERA
+from ..nee import add_rows as _add_rows
+from ..sampler import CAMERA
+from . import stages, transparency
+from .context import Context
+from .records import Hit, LightSample, Paths, RayHits, ShadowBatch, Vertex, rows_of
+from .stages import every_light as _every_light, interaction as _interaction
+from .visibility import _diffuse_lobe
+
+__all__ = ["Context", "Hit", "LightSample", "Paths", "RayHits", "ShadowBatch", "Vertex", "rows_of",
+           "trace_batch", "_add_rows", "_diffuse_lobe", "_every_light", "_interaction"]
+
+
+def trace_batch(ctx, pix, sample, tile):
+    """Trace camera sample ``sample[i]`` of pixel ``pix[i]`` for every i and
+    add them to ``tile``."""
+    n = len(pix)
+    pseed = ctx.sampler.pixel_seeds(pix)
+    sample = np.asarray(sample, np.uint32)
+    u = ctx.sampler.get(pseed, sample, CAMERA)
+    o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3])
+    paths = Paths(pix, o, d, tmax, np.ones((n, 3)), np.zeros((n, 3)),
+                  np.ones(n), np.ones(n, bool), o, np.zeros((n, 3)), np.zeros(n, bool),
+                  np.full(n, VIS_CAMERA, np.uint8),
+                  o, np.zeros(n, np.int32), np.zeros(n, np.int32), pseed, sample,
+                  np.zeros((n, pass_events.aux_width(ctx.settings)), np.float32))
+    obs = pass_events.observer(ctx, tile)
+    obs.start(paths)
+    # Every step raises a live path's bounce or its transparent bounce
+    # count, both bounded: max_bounces + 1 vertices scatter, one more only
+    # collects emission, and transparent passes end at transparent_limit.
+    for depth in range(ctx.settings.max_bounces + 2 + ctx.transparent_limit):
+        if len(paths.pix) == 0:
+            break
+        paths = _bounce(ctx, paths, depth, tile, obs)
+    if len(paths.pix):
+        stages.finish(ctx, paths, tile)
+
+
+def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
+    """One wavefront step of the live paths; returns the paths that go on.
+    Each line is a stage (stages.py) or bookkeeping (below)."""
+    found = stages.intersect(ctx, paths)                         # RayHits
+    if depth == 0:
+        stages.camera_aovs(ctx, paths, found, tile)
+    ended = stages.emitters(ctx, paths, found, obs)              # lights on the ray
+    stages.escaped(ctx, paths, np.flatnonzero((found.prim < 0) & ~ended), tile, obs)
+    paths, surface = _compact(ctx, paths, found.surface, (found.prim >= 0) & ~ended, tile)
+    if len(paths.pix) == 0:
+        return paths
+    hit = stages.interaction(ctx, paths, *surface)               # Hit
+    stages.surface_emission(ctx, paths, hit, depth, obs)
+    paths, hit, carried = _past_last_vertex(ctx, paths, hit, tile)
+    if len(paths.pix) == 0:
+        return paths if carried is None else carried
+    v = stages.shade(ctx, paths, hit, depth)                     # Vertex
+    obs.vertex(paths, v, depth)
+    every = stages.sampling_every_light(ctx, v)
+    for batch in stages.light_samples(ctx, paths, v, depth, every):   # nee: ShadowBatch
+        stages.trace_shadows(ctx, paths, batch)
+        obs.light_sample(paths, batch)
+    ray = paths.ray
+    alive, through = stages.scatter(ctx, paths, v, depth)       # BSDF sample, throughput, roulette
+    obs.after_scatter(paths, v, through)
+    stages.remember_vertex(ctx, paths, v, through, every, ray, depth)
+    paths = _end(ctx, paths, alive, tile)
+    return paths if carried is None or len(carried.pix) == 0 else paths.concat(carried)
+
+
+def _compact(ctx, paths, arrays, go_on, tile):
+    """End the paths not ``go_on`` and keep the others, and those rows of
+    ``arrays``: dense arrays for every stage after, no index indirection."""
+    if go_on.all():
+        return paths, arrays
+    stages.finish(ctx, paths, tile, ~go_on)
+    rows = np.flatnonzero(go_on)
+    return paths.take(rows), tuple(a.take(rows) for a in arrays)
+
+
+def _end(ctx, paths, alive, tile):
+    """End the paths absorbed or stopped by Russian roulette."""
+    if alive.all():
+        return paths
+    stages.finish(ctx, paths, tile, ~alive)
+    return paths.take(alive)
+
+
+def _past_last_vertex(ctx, paths, hit, tile):
+    """Split off the paths at a vertex that only collects emission: those
+    crossing a transparent surface go on (``carried``, joined to the paths
+    after this bounce; None when none), the others end.  Returns (paths,
+    hit, carried)."""
+    last = transparency.last_vertices(ctx, paths)
+    if not last.any():
+        return paths, hit, None
+    if last.all() and not ctx.transparent_shadows:
+        stages.finish(ctx, paths, tile)
+        return paths.take(np.zeros(len(paths.pix), bool)), hit, None
+    carried, at = paths.take(last), hit.take(last)
+    go = transparency.pass_last(ctx, carried, at, lambda h: stages.shading(ctx, h))
+    if not go.all():
+        stages.finish(ctx, carried, tile, ~go)
+        carried, at = carried.take(go), at.take(go)
+    transparency.step_through(ctx, carried, at)
+    return paths.take(~last), hit.take(~last), carried

@@ -1,0 +1,91 @@
+"""The render's read-only Context: every field declared, built once by
+``Context.build`` (engine.render.prepare calls it), frozen for the render.
+
+Besides the scene's compiled parts it holds what the bounce decides once per
+render: which emitters light sampling visits in each strategy, whether
+paths track their ray kind (visibility), whether shadow rays cross
+transparent surfaces, and the extra passes' per-render tables.  The one
+thing that changes while batches run is inside ``centres``, the extra
+passes' record of which pixels' centre rays are traced (behind its lock).
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import bsdf, kernels, pass_events
+from ..geometry import VIS_SHADOW
+from ..sampler import Sampler
+from .visibility import VIS_INDIRECT
+
+
+@dataclass(frozen=True)
+class Context:
+    """Everything a batch needs, shared read-only between threads."""
+    accel: object
+    triangles: object
+    materials: object
+    lights: object
+    camera: object
+    world: np.ndarray
+    settings: object
+    sampler: Sampler
+    # Cycles' bump shadowing term of the Blender version the scene comes from.
+    bump_model: int
+    jit: bool                    # compiled kernels on for this render
+    # LightSet indices of the delta lights (BSDF sampling cannot find them)
+    # and of every emitter.
+    delta_emitters: np.ndarray
+    all_emitters: np.ndarray
+    # Visibility: some light is invisible to some bounce kind; some light
+    # casts no shadow; paths track their VIS_* ray kind; some object casts
+    # no shadow.  All False in the common scene, which pays nothing.
+    light_excludes: bool
+    light_no_shadow: bool
+    track_rays: bool
+    shadow_skips: bool
+    # Transparency: which materials have a transparent lobe; whether any
+    # does (shadow rays then cross them); the transparent passes after
+    # which the next surface ends a path (Cycles lets a path cross one
+    # even when transparent_max_bounces is 0).
+    transparent_mat: np.ndarray
+    transparent_shadows: bool
+    transparent_limit: int
+    # Extra passes: their PassConfig, the light group of each emitter (None
+    # without light groups) and the centre-ray record.
+    pass_config: object
+    emitter_groups: object
+    centres: object
+
+    @classmethod
+    def build(cls, accel, triangles, materials, lights, camera, world, settings, sampler=None,
+              bump_model=bsdf.BUMP_GGX, pass_config=None):
+        """The Context of a render; ``sampler`` defaults to the settings'
+        seed and pattern, ``pass_config`` to no extra passes."""
+        if sampler is None:
+            sampler = Sampler(settings.seed, settings.sampling_pattern)
+        if pass_config is None:
+            pass_config = pass_events.PassConfig()
+        transparent_mat = np.any(materials.kind == bsdf.TRANSPARENT, axis=1)
+        return cls(accel, triangles, materials, lights, camera, world, settings, sampler, bump_model,
+                   kernels.enabled(), _delta_emitters(lights), np.arange(lights.count),
+                   **_visibility(lights, triangles),
+                   transparent_mat=transparent_mat, transparent_shadows=bool(transparent_mat.any()),
+                   transparent_limit=max(int(settings.transparent_max_bounces), 1),
+                   pass_config=pass_config, emitter_groups=pass_events.emitter_groups(pass_config, lights),
+                   centres=pass_events.CentreRecord(camera.width * camera.height))
+
+
+def _delta_emitters(lights):
+    """LightSet indices of the lights only light sampling can find (each
+    light type says which of its lights are delta)."""
+    return np.nonzero(lights.delta)[0]
+
+
+def _visibility(lights, triangles):
+    """The visibility flags of a scene (Blender's Ray Visibility)."""
+    vis = lights.visibility
+    light_excludes = bool(np.any((vis & VIS_INDIRECT) != VIS_INDIRECT))
+    tv = triangles.visibility
+    return dict(light_excludes=light_excludes, light_no_shadow=bool(np.any((vis & VIS_SHADOW) == 0)),
+                track_rays=light_excludes or (tv is not None and bool(np.any((tv & VIS_INDIRECT) != VIS_INDIRECT))),
+                shadow_skips=tv is not None and bool(np.any((tv & VIS_SHADOW) == 0)))

@@ -1,0 +1,222 @@
+"""The records the bounce's stages pass each other (struct of arrays, one
+row per path), each with one ``take(rows)``.
+
+``Paths``: the state a path carries from bounce to bounce.  ``RayHits``:
+what each path's ray met (the closest triangle it may see and the analytic
+lights before it).  ``Hit``: the surface point.  ``Vertex``: a hit that
+scatters, with its shading frame, its lobes and their wo-only weights.
+``LightSample`` and ``ShadowBatch``: one round of next-event estimation
+and the shadow rays it needs.
+"""
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+
+from ..vec import to_local, to_world
+
+
+def rows_of(keep):
+    """Indices of a boolean mask (indices pass through)."""
+    keep = np.asarray(keep)
+    return np.flatnonzero(keep) if keep.dtype == bool else keep
+
+
+def take_arrays(record, keep, n=None):
+    """``record`` (a dataclass) with the rows ``keep`` of every per-row
+    array field taken (fields of another length, and non-arrays, stay);
+    ``n``: the row count (every array field counts when None)."""
+    idx = rows_of(keep)
+    return replace(record, **{f.name: np.take(getattr(record, f.name), idx, axis=0) for f in fields(record)
+                              if isinstance(getattr(record, f.name), np.ndarray)
+                              and (n is None or len(getattr(record, f.name)) == n)})
+
+
+@dataclass
+class Paths:
+    pix: np.ndarray
+    o: np.ndarray
+    d: np.ndarray
+    tmax: np.ndarray
+    beta: np.ndarray
+    L: np.ndarray
+    prev_pdf: np.ndarray
+    prev_delta: np.ndarray
+    # The previous path vertex and its geometric normal: the light tree's
+    # selection probability at that vertex weighs emitters hit by MIS.
+    prev_p: np.ndarray
+    prev_n: np.ndarray
+    # NEE sampled every light at the previous vertex (light selection
+    # 'auto' at a glossy vertex): its selection probability is 1 there.
+    prev_every: np.ndarray
+    # VIS_* bit of the ray: camera, or the kind of the bounce that cast it
+    # (tracked only when something in the scene is invisible to some rays).
+    ray: np.ndarray
+    # Where the ray's straight line started (the last vertex; transparent
+    # passes move o, not this): lights hit are weighed by MIS from here.
+    mis_o: np.ndarray
+    bounce: np.ndarray    # vertices scattered so far (0 = camera ray)
+    tbounce: np.ndarray   # transparent surfaces passed so far
+    # The sample's address for the sampler: pixel scramble seed and sample
+    # index (uint32), so every random number is fixed by (seed, pixel,
+    # sample index, dimension), whatever the batching.
+    pseed: np.ndarray
+    sample: np.ndarray
+    aux: np.ndarray       # (N, k) per-path state of the extra passes (k = 0 without)
+
+    def __len__(self):
+        return len(self.pix)
+
+    def take(self, keep):
+        """The paths where ``keep`` (a mask or indices).  np.take with
+        indices copies rows 4-5x faster than boolean indexing."""
+        idx = rows_of(keep)
+        return Paths(*(np.take(getattr(self, f), idx, axis=0) for f in self.__dataclass_fields__))
+
+    def finish_rows(self, keep):
+        """Pixel, radiance and sample index of the paths where ``keep``: all
+        that ending a path needs."""
+        idx = rows_of(keep)
+        return np.take(self.pix, idx), np.take(self.L, idx, axis=0), np.take(self.sample, idx)
+
+    def concat(self, other):
+        return Paths(*(np.concatenate([getattr(self, f), getattr(other, f)])
+                       for f in self.__dataclass_fields__))
+
+
+@dataclass
+class RayHits:
+    """What each path's ray meets before its tmax: the closest triangle
+    visible to the ray's kind (prim -1: none; Embree's float32 t and
+    barycentrics) and whether an analytic light comes first (its LightSet
+    index, radiance and MIS pdf)."""
+    t: np.ndarray
+    prim: np.ndarray
+    bu: np.ndarray
+    bv: np.ndarray
+    light: np.ndarray
+    emitter: np.ndarray
+    Le: np.ndarray
+    pdf: np.ndarray
+
+    @property
+    def surface(self):
+        """(t, prim, bu, bv): what the surface stages read."""
+        return self.t, self.prim, self.bu, self.bv
+
+    def take(self, keep):
+        return take_arrays(self, keep)
+
+
+@dataclass
+class Hit:
+    """Surface interaction at the closest hit, in world space."""
+    p: np.ndarray
+    ng: np.ndarray   # geometric normal facing the incoming ray
+    ns: np.ndarray   # shading normal on the same side
+    wo: np.ndarray
+    mat: np.ndarray
+    prim: np.ndarray
+    eps: np.ndarray  # ray-origin offset for this point
+    uv: np.ndarray   # (N, 2) interpolated texture coordinates (0 without UVs)
+    # For normal maps: interpolated world tangent (N, 3) and bitangent sign
+    # (N,), or None; back: the ray hit the triangle's back face.
+    tangent: object = None
+    tangent_sign: object = None
+    back: object = None
+    # For shader nodes (engine.nodes.ShadingContext): barycentrics (N, 2),
+    # bounces before this hit and the VIS_* bit of the ray that found it.
+    bary: object = None
+    depth: object = None
+    ray: object = None
+    # The ShadingContext of these points, made on first use
+    # (ShadingContext.of_hit); a taken Hit makes its own.
+    shading: object = None
+
+    def take(self, keep):
+        return replace(take_arrays(self, keep), shading=None)
+
+
+@dataclass
+class Vertex:
+    """A path vertex that scatters: the hit (its ``ns`` the shading normal
+    after normal maps and bump), the shading frame (tt, bb, ns), the
+    direction to the viewer in that frame, the lobes and their weights and
+    selection probabilities, which depend on wo only and so serve light
+    sampling and BSDF sampling alike."""
+    hit: Hit
+    tt: np.ndarray
+    bb: np.ndarray
+    wo_l: np.ndarray
+    lobes: object        # bsdf.Lobes
+    weights: np.ndarray  # (N, K, 3) bsdf.weights
+    selection: np.ndarray  # (N, K) bsdf.selection
+    # Rows of the batch's paths these vertices are (None: all, in order):
+    # set on the row subsets light sampling makes.
+    path_rows: object = None
+
+    def __len__(self):
+        return len(self.wo_l)
+
+    @property
+    def lobes_wo(self):
+        """(selection, weights): the per-vertex arguments of bsdf.eval_pdf and bsdf.sample."""
+        return self.selection, self.weights
+
+    def local(self, v):
+        return to_local(v, self.tt, self.bb, self.hit.ns)
+
+    def world(self, v_l):
+        return to_world(v_l, self.tt, self.bb, self.hit.ns)
+
+    def take(self, rows):
+        """The vertices ``rows`` (indices), remembering which paths they are."""
+        n = len(self)
+        return Vertex(RowView(self.hit, rows, n), self.tt[rows], self.bb[rows], self.wo_l[rows],
+                      take_arrays(self.lobes, rows, n), self.weights[rows], self.selection[rows],
+                      rows if self.path_rows is None else self.path_rows[rows])
+
+
+@dataclass
+class LightSample:
+    """One light sample at each of N vertices (one emitter each): the
+    direction (world and shading frame), the BSDF's value there, the MIS
+    weight, whether the light is a delta light (per vertex, or one bool for
+    all) and the radiance it brings if unblocked (0 where it brings none)."""
+    emitter: np.ndarray
+    wi: np.ndarray
+    wi_l: np.ndarray
+    f: np.ndarray
+    w: np.ndarray
+    delta: np.ndarray
+    contrib: np.ndarray
+
+
+@dataclass
+class ShadowBatch:
+    """The shadow rays of one LightSample: ``rows`` are the sampled
+    vertices whose sample brings light (one ray each), with the ray, its
+    emitter, and, once traced, the vertices the light reached (``free``,
+    a subset of rows) and what it added there (``added``, per free row)."""
+    at: Vertex
+    sample: LightSample
+    rows: np.ndarray
+    origin: np.ndarray
+    direction: np.ndarray
+    tmax: np.ndarray
+    free: object = None
+    added: object = None
+
+
+class RowView:
+    """The rows ``rows`` of an object's per-row arrays, each taken when
+    first read (light sampling reads a few of the path's and hit's dozen)."""
+
+    def __init__(self, obj, rows, n):
+        self._obj, self._rows, self._n = obj, rows, n   # n: the object's row count
+
+    def __getattr__(self, name):
+        value = getattr(self._obj, name)
+        if isinstance(value, np.ndarray) and value.ndim and len(value) == self._n:
+            value = np.take(value, self._rows, axis=0)
+        setattr(self, name, value)
+        return value

@@ -1,0 +1,418 @@
+"""The stages of a bounce (engine.integrator._bounce lists them in order).
+
+Each stage is a function of the Context, the live ``Paths`` and the records
+of engine/integrator/records.py it names; it updates the paths in place
+(radiance, throughput, the next ray) or returns a new record.  Light added
+to a path is reported to the pass observer (engine.pass_events) with the
+record it came from.
+"""
+import numpy as np
+
+from .. import bsdf, nee, throughput
+from ..accel import shadow_rays, shadow_rays_f32
+from ..hits import hit_geometry
+from ..nodes import NodeRays, ShadingContext
+from ..sampler import BSDF, LIGHT, emitter_set, vertex_set
+from ..sampling import power_heuristic
+from ..vec import dot, frame, row_any_positive, row_max, to_local
+from . import transparency, visibility
+from .records import Hit, LightSample, RayHits, ShadowBatch, Vertex, RowView
+from .visibility import VIS_INDIRECT
+
+
+# ----------------------------------------------------------------------------
+# intersect
+
+def intersect(ctx, paths):
+    """The closest surface each ray may see and the analytic lights before it."""
+    t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax)
+    if ctx.triangles.visibility is not None:
+        t, prim, bu, bv = visibility.skip_invisible(ctx, paths.o, paths.d, paths.tmax, paths.ray, t, prim, bu, bv)
+    light_t, emitter, Le, pdf = _lights_along(ctx, paths, np.minimum(t, paths.tmax))
+    return RayHits(t, prim, bu, bv, light_t < np.inf, emitter, Le, pdf)
+
+
+def _lights_along(ctx, paths, tmax):
+    """Analytic lights on each ray before tmax, seen from where its straight
+    line started (before any transparent pass, as Cycles keeps the ray's
+    origin), so MIS weighs them with the pdf NEE had at that vertex.  Camera
+    rays (bounce 0) see only camera-visible lights."""
+    ray = paths.ray if ctx.track_rays else None
+    o = paths.o
+    if ctx.transparent_shadows:
+        o = paths.mis_o
+        tmax = tmax + dot(paths.o - o, paths.d)
+    camera = paths.bounce == 0
+    if camera.all() or not camera.any():
+        return ctx.lights.intersect(o, paths.d, tmax, camera=bool(camera.all()), ray=ray)
+    n = len(o)
+    out = (np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros((n, 3)), np.zeros(n))
+    for rows in (np.nonzero(camera)[0], np.nonzero(~camera)[0]):
+        res = ctx.lights.intersect(o[rows], paths.d[rows], tmax[rows], camera=bool(camera[rows[0]]),
+                                   ray=None if ray is None else ray[rows])
+        for a, r in zip(out, res):
+            a[rows] = r
+    return out
+
+
+def camera_aovs(ctx, paths, found, tile):
+    """Alpha, and the first-hit AOVs the film keeps (none by default: the
+    denoiser asks for normal and albedo)."""
+    prim, t = found.prim, found.t
+    hit_light = found.light
+    hit_surf = (prim >= 0) & ~hit_light
+    alpha = (hit_light | hit_surf).astype(np.float64)
+    kept = getattr(tile, "aovs", None)
+    depth = normal = albedo = None
+    if kept is None or "depth" in kept:
+        # Z depth along the view axis, counted from the camera (rays start at clip start).
+        cos = np.maximum(dot(paths.d, np.broadcast_to(ctx.camera.forward, paths.d.shape)), 0.0)
+        depth = np.where(hit_surf, t * cos + ctx.camera.cam.clip_start, 0.0)
+    hs = np.nonzero(hit_surf)[0]
+    if kept is None or "normal" in kept:
+        normal = np.zeros((len(paths.pix), 3))
+        normal[hs] = ctx.triangles.ng[prim[hs]]
+    if kept is None or "albedo" in kept:
+        albedo = np.zeros((len(paths.pix), 3))
+        m = ctx.triangles.material[prim[hs]]
+        col = ctx.materials.color[m] * ctx.materials.weight[m][..., None]
+        albedo[hs] = np.clip(col.sum(axis=1), 0.0, 1.0)
+    tile.add_camera(paths.pix, alpha, depth, normal, albedo)
+
+
+# ----------------------------------------------------------------------------
+# emitters: lights, the world and emissive surfaces met by the rays
+
+def mis_hit(ctx, paths, i, emitter, pdf_light):
+    """MIS weight for emitters found by BSDF sampling."""
+    s = ctx.settings
+    prev_delta = paths.prev_delta[i]
+    if s.strategy == "bsdf":
+        return np.ones(len(i))
+    if s.strategy == "light":
+        return prev_delta.astype(np.float64)
+    every = paths.prev_every[i] if ctx.lights.every_at_glossy else None
+    p_light = ctx.lights.selection_pdf(emitter, paths.prev_p[i], paths.prev_n[i], every) * pdf_light
+    return np.where(prev_delta, 1.0, power_heuristic(paths.prev_pdf[i], p_light))
+
+
+def _collect(paths, i, unweighted, w):
+    paths.L[i] += unweighted * w[:, None]
+
+
+def emitters(ctx, paths, found, obs):
+    """Analytic lights met before the surface: their MIS-weighted radiance;
+    the paths go on through them (a transparent bounce).  Returns which
+    paths end at a light."""
+    ended = np.zeros(len(found.prim), bool)
+    hit_light = found.light
+    if hit_light.any():
+        i = np.nonzero(hit_light)[0]
+        w = mis_hit(ctx, paths, i, found.emitter[i], found.pdf[i])
+        unweighted = paths.beta[i] * found.Le[i]
+        _collect(paths, i, unweighted, w)
+        obs.emitter(paths, i, unweighted, w, emitters=found.emitter[i])
+        ended[i] = transparency.pass_light(ctx, paths, i)
+    return ended
+
+
+def escaped(ctx, paths, i, tile, obs):
+    """Paths ``i`` left the scene: the world (an HDRI by MIS, a constant one
+    unweighted) and the suns in their direction."""
+    if len(i) == 0:
+        return
+    sky = i
+    if ctx.settings.transparent:
+        # With a transparent film camera rays (also through transparent
+        # surfaces, which keep the ray's kind) see no world.
+        camera = paths.bounce[i] == 0
+        transparency.film_alpha_through(paths, i[camera & (paths.tbounce[i] > 0)], tile)
+        sky = i[~camera]
+    env = ctx.lights.environment_hits(paths.d[sky]) if len(sky) else None
+    if env is not None:
+        # An HDRI world is an emitter NEE samples: weigh it by MIS.
+        emitter, Le, pdf = env
+        w = mis_hit(ctx, paths, sky, np.full(len(sky), emitter), pdf)
+        unweighted = paths.beta[sky] * Le
+        _collect(paths, sky, unweighted, w)
+        obs.emitter(paths, sky, unweighted, w, world=True, emitters=np.full(len(sky), emitter))
+    else:
+        if np.any(ctx.world != 0):   # a black world adds nothing: skip the row gathers
+            paths.L[sky] += paths.beta[sky] * ctx.world
+        if obs.active:
+            obs.emitter(paths, sky, paths.beta[sky] * ctx.world, np.ones(len(sky)), world=True, bsdf_only=True)
+    for mask, emitter, Le, pdf in ctx.lights.sun_hits(paths.d[i], paths.ray[i] if ctx.track_rays else None):
+        j = i[mask]
+        if len(j):
+            w = mis_hit(ctx, paths, j, np.full(len(j), emitter), np.full(len(j), pdf))
+            unweighted = paths.beta[j] * Le
+            _collect(paths, j, unweighted, w)
+            obs.emitter(paths, j, unweighted, w, emitters=np.full(len(j), emitter))
+
+
+def surface_emission(ctx, paths, hit, depth, obs):
+    """Emissive surfaces hit: their radiance, MIS-weighted against the
+    light sample the previous vertex could have taken of them."""
+    emission = ctx.materials.emission[hit.mat]
+    if ctx.materials.textures.emission:
+        emission = ctx.materials.textures.emission_at(hit.mat, shading(ctx, hit, paths, depth), emission)
+    em = np.flatnonzero(row_any_positive(emission))
+    if len(em) == 0:
+        return
+    if ctx.settings.strategy == "mis":
+        emitter = ctx.lights.emitter_of_triangle(hit.mat[em])
+        pdf = ctx.lights.triangle_pdf(hit.prim[em], paths.mis_o[em], hit.p[em], hit.ng[em])
+        w = mis_hit(ctx, paths, em, emitter, pdf)
+    else:
+        w = mis_hit(ctx, paths, em, None, None)
+    unweighted = paths.beta[em] * emission[em]
+    _collect(paths, em, unweighted, w)
+    obs.emitter(paths, em, unweighted, w, emitters=ctx.lights.emitter_of_triangle(hit.mat[em]))
+
+
+# ----------------------------------------------------------------------------
+# the surface: hit geometry, then the vertex (lobes, frame, weights)
+
+def interaction(ctx, paths, t, prim, bu, bv):
+    """The Hit of rays (paths.o, paths.d) on triangles ``prim``."""
+    tr = ctx.triangles
+    d = paths.d
+    p, ng, ns, back = hit_geometry(tr, paths.o, d, t, prim, bu, bv)
+    uv = _hit_uv(tr, prim, bu, bv)
+    hit = Hit(p, ng, ns, -d, np.take(tr.material, prim), prim, ctx.accel.offset_scale(p), uv, back=back,
+              bary=np.stack([bu, bv], axis=1), depth=getattr(paths, "bounce", None),
+              ray=getattr(paths, "ray", None))
+    if getattr(tr, "tangent", None) is not None:
+        w = np.stack([1.0 - bu - bv, bu, bv], axis=1)
+        # Unnormalised, as Cycles interpolates its tangent attribute.
+        hit.tangent = np.einsum("nk,nkj->nj", w, tr.tangent[prim])
+        hit.tangent_sign = np.where(np.einsum("nk,nk->n", w, tr.tangent_sign[prim]) < 0, -1.0, 1.0)
+    return hit
+
+
+def _hit_uv(tr, prim, bu, bv):
+    """Interpolated texture coordinates (0 without a UV map)."""
+    if tr.uv is None:
+        return np.zeros((len(prim), 2))
+    c = np.take(tr.uv, prim, axis=0)
+    return (1.0 - bu - bv)[:, None] * c[:, 0] + bu[:, None] * c[:, 1] + bv[:, None] * c[:, 2]
+
+
+def shading(ctx, hit, paths=None, step=None):
+    """The hit's shading context for texture and shader-node evaluation;
+    given the paths, nodes may cast rays from it (AO, Bevel)."""
+    sc = ShadingContext.of_hit(ctx.triangles, hit)
+    if paths is not None and sc.rays is None:
+        sc.rays = NodeRays.of_paths(ctx, paths, step)
+    return sc
+
+
+def shade(ctx, paths, hit, depth):
+    """The Vertex of each hit: its material's lobes gathered at the point,
+    the shading normal after normal maps and bump, the shading frame, and
+    the lobe weights and selection (wo only: once per vertex)."""
+    lobes = ctx.materials.gather(hit.mat, shading(ctx, hit, paths, depth))
+    if hit.back is not None:
+        # Refraction inverts the relative IOR on back faces (leaving the medium).
+        lobes.back = hit.back
+    smooth = None
+    if ctx.materials.textures.normals:
+        smooth = hit.ns
+        hit.ns = ctx.materials.textures.perturb(hit, ctx.triangles)
+    tt, bb = frame(hit.ns)
+    wo_l = to_local(hit.wo, tt, bb, hit.ns)
+    if smooth is not None and not np.array_equal(smooth, hit.ns):
+        # Cycles' bump shadowing term (bsdf.bump_shadowing) needs the smooth
+        # normal in the shading frame, in the scene's Blender version's form.
+        lobes.smooth_n = to_local(smooth, tt, bb, hit.ns)
+        lobes.bump_model = np.full(len(hit.ns), ctx.bump_model, np.int8)
+    w = bsdf.weights(lobes, wo_l)
+    return Vertex(hit, tt, bb, wo_l, lobes, w, bsdf.selection(lobes, wo_l, w))
+
+
+# ----------------------------------------------------------------------------
+# nee: one light sample per vertex (per emitter in the 'list' modes)
+
+def sampling_every_light(ctx, v):
+    """For light selection 'auto': which vertices sample every light
+    (mostly narrow glossy ones); None in the other modes."""
+    s = ctx.settings
+    if ctx.lights.count == 0 or s.strategy == "bsdf" or s.light_selection != "auto":
+        return None
+    return every_light(v.lobes, v.selection)
+
+
+def nee_rounds(ctx, v, every):
+    """The light-sampling rounds at vertices ``v``: (vertices, mode,
+    emitters) with mode 'select' (one light picked per vertex) or 'each'
+    (one round per emitter).  Light selection 'auto' samples every light at
+    the vertices ``every`` and picks one at the others."""
+    s = ctx.settings
+    if ctx.lights.count == 0 or len(v) == 0:
+        return []
+    if s.strategy == "bsdf":
+        return [(v, "each", ctx.delta_emitters)]
+    if s.light_selection == "all":
+        return [(v, "each", ctx.all_emitters)]
+    if every is None or not every.any():
+        return [(v, "select", None)]
+    if every.all():
+        return [(v, "each", ctx.all_emitters)]
+    return [(v.take(np.flatnonzero(~every)), "select", None),
+            (v.take(np.flatnonzero(every)), "each", ctx.all_emitters)]
+
+
+# Light selection 'auto' samples every light at vertices where lobes this
+# narrow (GGX alpha, roughness 0.5) take most of the BSDF's sampling weight.
+EVERY_LIGHT_ALPHA = 0.25
+
+
+def every_light(lobes, selection):
+    """Vertices whose BSDF is mostly narrow glossy reflection, where one
+    light picked without regard to the lobe is often outside it."""
+    narrow = (lobes.kind == bsdf.GLOSSY) & (lobes.alpha <= EVERY_LIGHT_ALPHA)
+    return np.where(narrow, selection, 0.0).sum(axis=1) > 0.5
+
+
+def light_samples(ctx, paths, v, depth, every):
+    """Every light sample of the vertices ``v`` that brings light, as
+    ShadowBatches (one per round, made when the previous one is traced)."""
+    for at, mode, emitters in nee_rounds(ctx, v, every):
+        rows = at.path_rows
+        on = paths if rows is None else RowView(paths, rows, len(paths.pix))
+        n = len(at)
+        if mode == "select":
+            u = uniforms(ctx, on, vertex_set(depth, LIGHT))
+            e, p_sel = ctx.lights.select(u[:, 0], at.hit.p, at.hit.ng)
+            batches = [light_sample(ctx, on, at, e, p_sel, u[:, 1:])]
+        else:
+            batches = (light_sample(ctx, on, at, np.full(n, e), np.ones(n),
+                                    uniforms(ctx, on, emitter_set(depth, e))[:, :3]) for e in emitters)
+        for batch in batches:
+            if batch is not None:
+                yield batch
+
+
+def uniforms(ctx, paths, dim_set):
+    """(N, 4) sample values of one dimension set for the paths."""
+    return ctx.sampler.get(paths.pseed, paths.sample, dim_set)
+
+
+def light_sample(ctx, paths, v, e, p_sel, u):
+    """A sample of emitter e[i] (picked with probability p_sel[i]) at each
+    vertex: its MIS-weighted contribution and the shadow rays of the
+    vertices it brings light to (None when none)."""
+    hit = v.hit
+    ls = ctx.lights.sample(e, hit.p, u[:, 0], u[:, 1], u[:, 2])
+    wi_l = v.local(ls.wi)
+    f, pdf_b = bsdf.eval_pdf(v.lobes, v.wo_l, wi_l, *v.lobes_wo)
+    if ctx.light_excludes:
+        f = visibility.visible_lobes_f(ctx, v, wi_l, ls.wi, e, f)
+    contrib, w, live = nee.contribution(wi_l, ls.wi, hit.ng, ls.pdf, p_sel, pdf_b, ls.delta,
+                                        ctx.settings.strategy == "mis", paths.beta, f, ls.Le)
+    live = np.flatnonzero(live)
+    if len(live) == 0:
+        return None
+    rays = shadow_rays if ctx.transparent_shadows else shadow_rays_f32
+    origin, direction, tmax = rays(hit.p, hit.ng, ls.wi, ls.dist, ls.on_surface, hit.eps, live)
+    sample = LightSample(e, ls.wi, wi_l, f, w, ls.delta, contrib)
+    return ShadowBatch(v, sample, live, origin, direction, tmax)
+
+
+# ----------------------------------------------------------------------------
+# trace shadows
+
+def trace_shadows(ctx, paths, batch):
+    """Trace a batch's shadow rays and add the light that arrives; sets
+    ``batch.free`` (the rows it reached) and, with transparent shadows,
+    ``batch.added`` (what it brought through them)."""
+    e = batch.sample.emitter[batch.rows]
+    contrib = batch.sample.contrib
+    path_rows = batch.at.path_rows
+    if ctx.transparent_shadows:
+        rows = batch.rows if path_rows is None else path_rows[batch.rows]
+        added = contrib[batch.rows] * transparency.transmittance(ctx, batch.origin, batch.direction, batch.tmax,
+                                                                 e, paths.tbounce[rows])
+        batch.free, batch.added = batch.rows, added
+        paths.L[rows] += added
+        return
+    batch.free = batch.rows[~visibility.occluded(ctx, batch.origin, batch.direction, batch.tmax, e)]
+    if path_rows is None:
+        nee.add_rows(paths.L, batch.free, contrib)
+    else:
+        paths.L[path_rows[batch.free]] += np.take(contrib, batch.free, axis=0)
+
+
+# ----------------------------------------------------------------------------
+# scatter: the BSDF sample, the throughput (Russian roulette included: one
+# compiled pass, engine/throughput.py) and the next ray
+
+def scatter(ctx, paths, v, depth):
+    """Sample the BSDF at the vertices and move the paths on in place;
+    returns (which paths live on, which passed straight through a
+    transparent lobe)."""
+    s = ctx.settings
+    hit = v.hit
+    u = uniforms(ctx, paths, vertex_set(depth, BSDF))
+    wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u[:, 0], u[:, 1], u[:, 2], *v.lobes_wo)
+    wi = v.world(wi_l)
+    ok, paths.beta = throughput.update(wi, hit.ng, wi_l, weight, paths.beta, paths.bounce, s.rr_depth, u[:, 3])
+    through = transparency.sampled_transparent(ctx, hit, delta, wi_l, v.wo_l)
+    if through.any():
+        # A transparent pass is not a vertex: the path keeps its direction,
+        # MIS pdf and segment start (Cycles moves only the ray's tmin).
+        wi[through] = paths.d[through]
+        pdf = np.where(through, paths.prev_pdf, pdf)
+        delta = np.where(through, paths.prev_delta, delta)
+    o = ctx.accel.offset_origin(hit.p, hit.ng, wi, hit.eps)
+    paths.tmax = unless(through, paths.tmax - dot(o - paths.o, wi), np.full(len(wi), np.inf))
+    paths.mis_o = unless(through, paths.mis_o, o)
+    paths.o = o
+    paths.d = wi
+    paths.prev_pdf = pdf
+    paths.prev_delta = delta
+    paths.bounce = paths.bounce + ~through
+    paths.tbounce = paths.tbounce + through
+    return ok, through
+
+
+def remember_vertex(ctx, paths, v, through, every, ray, depth):
+    """What the next bounce's MIS and visibility need of this vertex (a
+    transparent pass keeps the previous one): its point and normal for the
+    light tree's selection pdf, whether it sampled every light, and the kind
+    of the ray it cast (``ray``: the kind before this bounce)."""
+    hit = v.hit
+    paths.prev_p = unless(through, paths.prev_p, hit.p)
+    paths.prev_n = unless(through, paths.prev_n, hit.ng)
+    if every is not None:
+        paths.prev_every = unless(through, paths.prev_every, every)
+    if ctx.track_rays:
+        paths.ray = unless(through, ray, visibility.ray_kind(ctx, v, paths, depth))
+    elif ctx.triangles.visibility is not None:
+        # Only camera (or shadow) visibility differs: any indirect kind sees
+        # the same triangles, but no longer as a camera ray.
+        paths.ray = unless(through, ray, np.full(len(ray), VIS_INDIRECT, np.uint8))
+
+
+def unless(mask, old, new):
+    """new, but old where mask (per ray); new itself when mask is empty."""
+    if not mask.any():
+        return new
+    return np.where(mask.reshape((-1,) + (1,) * (new.ndim - 1)), old, new)
+
+
+# ----------------------------------------------------------------------------
+# ending paths
+
+def finish(ctx, paths, tile, keep=None):
+    """Add the radiance of the paths (those where ``keep``, if given) to the tile."""
+    if keep is None:
+        pix, L, sample = paths.pix, paths.L, paths.sample
+    else:
+        pix, L, sample = paths.finish_rows(keep)
+    L = np.where(np.isfinite(L), L, 0.0)
+    clamp = ctx.settings.clamp
+    if clamp > 0:
+        m = row_max(L)
+        L = L * np.where(m > clamp, clamp / np.maximum(m, 1e-30), 1.0)[:, None]
+    tile.add_radiance(pix, L, sample)

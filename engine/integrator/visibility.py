@@ -1,0 +1,126 @@
+"""Ray visibility (Blender's Object > Visibility > Ray Visibility, as
+Cycles): rays pass triangles invisible to their kind, lights skip the lobes
+of bounce kinds they are hidden from, and each bounce's ray kind is drawn as
+Cycles' closure kind.  Bookkeeping only: scenes where everything is visible
+to everything never call it (Context.track_rays, shadow_skips, ...)."""
+from dataclasses import fields, replace
+
+import numpy as np
+
+from .. import bsdf
+from ..lobes import kinds_of_class
+from ..geometry import VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
+from ..sampler import KIND, vertex_set
+from ..vec import dot, to_local
+
+MAX_SKIPS = 16   # invisible surfaces a ray may pass before it counts as a miss
+VIS_INDIRECT = VIS_DIFFUSE | VIS_GLOSSY | VIS_TRANSMISSION
+
+
+def skip_invisible(ctx, o, d, tmax, ray, t, prim, bu, bv):
+    """Closest hit among triangles visible to each ray's kind: embreex has no
+    ray masks, so rays that hit an invisible triangle continue past it."""
+    vis = ctx.triangles.visibility
+    t, prim, bu, bv = t.copy(), prim.copy(), bu.copy(), bv.copy()
+    for _ in range(MAX_SKIPS):
+        again = np.nonzero((prim >= 0) & ((vis[np.maximum(prim, 0)] & ray) == 0))[0]
+        if len(again) == 0:
+            return t, prim, bu, bv
+        tn, pn, un, vn = _continue_past(ctx, o[again], d[again], tmax[again], t[again], prim[again])
+        t[again], prim[again], bu[again], bv[again] = tn, pn, un, vn
+    miss = (prim >= 0) & ((vis[np.maximum(prim, 0)] & ray) == 0)
+    t[miss], prim[miss] = np.inf, -1
+    return t, prim, bu, bv
+
+
+def _continue_past(ctx, o, d, tmax, t, prim):
+    """Intersect again from just behind the hit triangle; t stays measured
+    from the original origin o."""
+    p = o + d * t[:, None]
+    start = ctx.accel.offset_origin(p, ctx.triangles.ng[prim], d)
+    t0 = dot(start - o, d)
+    tn, pn, un, vn = ctx.accel.intersect(start, d, np.maximum(tmax - t0, 0.0))
+    return np.where(pn >= 0, tn + t0, np.inf), pn, un, vn
+
+
+def occluded(ctx, origin, wi, tmax, emitter):
+    """Shadow test: lights with visible_shadow off (Cycles' Cast Shadow) are
+    never blocked; objects with visible_shadow off never block."""
+    if not ctx.light_no_shadow and not ctx.shadow_skips:
+        return ctx.accel.occluded(origin, wi, tmax)
+    blocked = np.zeros(len(origin), bool)
+    test = np.ones(len(origin), bool)
+    if ctx.light_no_shadow:
+        test = (ctx.lights.visibility[emitter] & VIS_SHADOW) != 0
+    idx = np.nonzero(test)[0]
+    if not ctx.shadow_skips:
+        blocked[idx] = ctx.accel.occluded(origin[idx], wi[idx], tmax[idx])
+        return blocked
+    t, prim, _, _ = ctx.accel.intersect(origin[idx], wi[idx], tmax[idx])
+    ray = np.full(len(idx), VIS_SHADOW, np.uint8)
+    t, prim, _, _ = skip_invisible(ctx, origin[idx], wi[idx], tmax[idx], ray, t, prim, t, t)
+    blocked[idx] = prim >= 0
+    return blocked
+
+
+def ray_kind(ctx, v, paths, depth):
+    """VIS_* bit of the bounce just sampled at vertices ``v``, distributed as
+    Cycles' (the kind of the closure it sampled): below the surface =
+    transmission; after a delta (mirror) sample = glossy; else diffuse with
+    the probability that the diffuse lobes produced this direction,
+    sel_d pdf_d / pdf."""
+    lobes, hit = v.lobes, v.hit
+    n = len(paths.pix)
+    kind = np.full(n, VIS_GLOSSY, np.uint8)
+    diffuse = _diffuse_lobe(lobes.kind)
+    other = ~diffuse & (lobes.kind != bsdf.NONE)
+    kind[diffuse.any(axis=1) & ~other.any(axis=1)] = VIS_DIFFUSE
+    mixed = np.nonzero(diffuse.any(axis=1) & other.any(axis=1) & ~paths.prev_delta)[0]
+    if len(mixed):
+        wi_l = to_local(paths.d[mixed], v.tt[mixed], v.bb[mixed], hit.ns[mixed])
+        only_d = lobes_where(lobes, ~diffuse, mixed)
+        sel = bsdf.selection(lobes_where(lobes, np.zeros_like(diffuse), mixed), v.wo_l[mixed])
+        _, pdf_d = bsdf.eval_pdf(only_d, v.wo_l[mixed], wi_l, sel)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            p_d = np.where(paths.prev_pdf[mixed] > 0, pdf_d / paths.prev_pdf[mixed], 0.0)
+        u = ctx.sampler.get(paths.pseed[mixed], paths.sample[mixed], vertex_set(depth, KIND))[:, 0]
+        kind[mixed] = np.where(u < p_d, VIS_DIFFUSE, VIS_GLOSSY)
+    kind[dot(paths.d, hit.ng) < 0] = VIS_TRANSMISSION
+    return kind
+
+
+def _diffuse_lobe(kind):
+    """Lobes Cycles counts as diffuse closures (the registry's 'diffuse'
+    class); the others reflect as glossy (transmission is told by direction)."""
+    return bsdf.kind_in(kind, kinds_of_class("diffuse"))
+
+
+def lobes_where(lobes, drop, rows):
+    """The lobes of ``rows`` with the ``drop`` (N, K) entries switched off."""
+    per_ray = {f.name: getattr(lobes, f.name) for f in fields(lobes)}
+    sub = replace(lobes, **{k: v[rows] for k, v in per_ray.items()
+                            if isinstance(v, np.ndarray) and len(v) == len(lobes)})
+    return replace(sub, kind=np.where(drop[rows], bsdf.NONE, sub.kind).astype(lobes.kind.dtype))
+
+
+def visible_lobes_f(ctx, v, wi_l, wi, emitter, f):
+    """BSDF value for NEE at vertices ``v`` with lights that are invisible
+    to some bounce kinds: as Cycles, the excluded lobes' f is dropped (the
+    pdf, for MIS, keeps every lobe)."""
+    lobes, wo_l = v.lobes, v.wo_l
+    vis = ctx.lights.visibility[emitter]
+    no_d = (vis & VIS_DIFFUSE) == 0
+    no_g = (vis & VIS_GLOSSY) == 0
+    rows = np.nonzero(no_d | no_g)[0]
+    if len(rows) == 0:
+        return f
+    kind = lobes.kind[rows]
+    drop = np.zeros(lobes.kind.shape, bool)
+    diffuse = _diffuse_lobe(kind)
+    drop[rows] = (diffuse & no_d[rows, None]) | (~diffuse & (kind != bsdf.NONE) & no_g[rows, None])
+    sel = bsdf.selection(lobes_where(lobes, np.zeros_like(drop), rows), wo_l[rows])
+    f = f.copy()
+    f[rows] = bsdf.eval_pdf(lobes_where(lobes, drop, rows), wo_l[rows], wi_l[rows], sel)[0]
+    no_t = np.nonzero((vis & VIS_TRANSMISSION) == 0)[0]
+    f[no_t[dot(wi[no_t], v.hit.ng[no_t]) < 0]] = 0.0
+    return f
