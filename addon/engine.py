@@ -7,12 +7,13 @@ Exceptions never escape: Blender would print them and keep a black image, so
 they are reported with ``self.report({'ERROR'}, ...)`` and recorded in
 ``RENDER_LOG`` (which tests and the benchmark read).
 """
+import dataclasses
 import time
 import traceback
 
 import bpy
 
-from . import backend, output, shards
+from . import backend, denoise, output, shards, viewport
 from . import passes as render_passes
 from .export import camera as camera_export
 from .export import scene as scene_export
@@ -48,7 +49,6 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             viewport_session.close()
 
     def view_update(self, context, depsgraph):
-        from . import viewport
         try:
             if self.viewport is None:
                 self.viewport = viewport.ViewportSession(self)
@@ -111,7 +111,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
         if not self.is_preview:
             settings = _with_passes(settings, scene, depsgraph.view_layer)
         _, _, width, height = camera_export.border_window(scene.render)
-        render = shards.wrap(backend.render_function(), scene, depsgraph.view_layer.name, self.is_preview)
+        render = shards.wrap(backend.engine().render, scene, depsgraph.view_layer.name, self.is_preview)
         if self.test_break():
             info['cancelled'] = True   # Esc between export and the first pass
             return
@@ -120,10 +120,10 @@ class EmberRenderEngine(bpy.types.RenderEngine):
         writer = output.ResultWriter(self, width, height, depsgraph.view_layer.name)
         progress = output.Progress(self, writer, settings.samples, info)
         try:
-            exported.scene.validate()
+            backend.engine().validate_scene(exported.scene)
             try:
                 result = render(exported.scene, settings, progress)
-            except backend.scene_module().Cancelled:  # Esc before the first pass
+            except backend.engine().Cancelled:  # Esc before the first pass
                 info['cancelled'] = True
                 return
             # A stopped render returns its partial image: write it either way.
@@ -151,7 +151,6 @@ class EmberRenderEngine(bpy.types.RenderEngine):
     def _denoised(self, result, extra, info):
         """Combined denoised (alpha kept), the raw image as Noisy Image.  A
         denoiser failure keeps the noisy image and says why."""
-        from . import denoise
         self.update_stats("", "Ember: denoising")
         start = time.perf_counter()
         try:
@@ -174,7 +173,7 @@ def _settle_compiler():
     (addon_utils.disable_all) and fails with "dictionary changed size
     during iteration" if that thread is still importing numba."""
     try:
-        backend.load('kernels').stop()
+        backend.engine().stop_kernels()
     except ImportError:
         pass
 
@@ -186,11 +185,10 @@ def _extra_passes(result, view_layer, samples):
 
 def _with_passes(settings, scene, view_layer):
     """The render settings with the passes this view layer asks for."""
-    import dataclasses
     names = render_passes.engine_passes(view_layer)
     if not names or not hasattr(settings, 'passes'):
         return settings
-    config = render_passes.pass_config(scene, view_layer, backend.load('passes').PassConfig)
+    config = render_passes.pass_config(scene, view_layer, backend.engine().PassConfig)
     return dataclasses.replace(settings, passes=names, pass_config=config)
 
 

@@ -86,8 +86,8 @@ def scripted(monkeypatch):
     engine.validate, which belongs to the engine's own tests)."""
     def install(**kwargs):
         renderer = ScriptedRenderer(**kwargs)
-        monkeypatch.setattr(backend, 'render_function', lambda: renderer)
-        monkeypatch.setattr(backend.scene_module().Scene, 'validate', lambda self: None)
+        monkeypatch.setattr(backend.engine(), 'render', renderer)
+        monkeypatch.setattr(backend.engine(), 'validate_scene', lambda scene: None)
         return renderer
     return install
 
@@ -154,7 +154,7 @@ def test_error_is_reported_not_swallowed(small, scripted):
 def test_missing_renderer_is_reported(small, monkeypatch):
     def missing():
         raise ImportError("Ember needs the 'embreex' package (test)")
-    monkeypatch.setattr(backend, 'render_function', missing)
+    monkeypatch.setattr(backend, 'engine', missing)
     with pytest.raises(RuntimeError, match="embreex"):
         bpy.ops.render.render()
 

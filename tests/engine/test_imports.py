@@ -92,9 +92,24 @@ def imports(module):
     return out
 
 
+def _targets(module, name):
+    """The project modules importing ``name`` runs from ``module``: its own
+    module and the packages above it (``a.b.c`` runs ``a/b/__init__.py``),
+    except those above ``module`` itself (already running)."""
+    target = _project(name)
+    if target is None:
+        return set()
+    out, parts = {target}, target.split(".")
+    mine = module.split(".")
+    for i in range(1, len(parts)):
+        if parts[:i] != mine[:i]:
+            out.add(".".join(parts[:i]))
+    return out
+
+
 def graph():
-    """{module: {project module it imports}} (a module importing itself included)."""
-    return {m: {_project(name) for name, _ in imports(m) if _project(name)} for m in SOURCES}
+    """{module: {project modules it imports}} (a module importing itself included)."""
+    return {m: set().union(*(_targets(m, name) for name, _ in imports(m))) for m in SOURCES}
 
 
 def cycles(edges):
@@ -172,14 +187,22 @@ def test_addon_reaches_the_engine_only_through_its_surface():
 
 def engine_attributes(module):
     """[(attribute, line)] the module reads from the engine package: on
-    ``backend.engine()`` itself and on names bound to it (``ember = backend.engine()``)."""
+    ``backend.engine()`` itself, on calls of the module's functions that
+    return it (``def _scene(): return backend.engine()``) and on names bound
+    to either (``renderer = backend.engine()``)."""
     tree = TREES[module]
-    bound = {t.id for node in ast.walk(tree) if isinstance(node, ast.Assign)
-             and _is_backend_call(node.value, module, "engine")
+    wrappers = {node.name for node in tree.body if isinstance(node, ast.FunctionDef)
+                and isinstance(node.body[-1], ast.Return)
+                and _is_backend_call(node.body[-1].value, module, "engine")}
+
+    def is_engine(node):
+        return _is_backend_call(node, module, "engine") or (
+            isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in wrappers)
+
+    bound = {t.id for node in ast.walk(tree) if isinstance(node, ast.Assign) and is_engine(node.value)
              for t in node.targets if isinstance(t, ast.Name)}
     return [(node.attr, node.lineno) for node in ast.walk(tree) if isinstance(node, ast.Attribute)
-            and (_is_backend_call(node.value, module, "engine")
-                 or isinstance(node.value, ast.Name) and node.value.id in bound)]
+            and (is_engine(node.value) or isinstance(node.value, ast.Name) and node.value.id in bound)]
 
 
 def test_the_surface_exists():
@@ -195,14 +218,27 @@ def test_the_graph_sees_what_it_must():
     source = ("from . import backend\n"
               "def f():\n"
               "    from .export import nodes\n"
-              "    return backend.load('scene'), backend.engine().render\n")
+              "    return backend.load('scene'), backend.engine().render\n"
+              "def _engine():\n"
+              "    return backend.engine()\n"
+              "renderer = _engine()\n"
+              "renderer.Scene, _engine().Mesh\n")
     TREES["addon.probe_"] = ast.parse(source)
     SOURCES["addon.probe_"] = ("probe_.py", False)
     try:
         names = {name for name, _ in imports("addon.probe_")}
         assert names == {"addon.backend", "addon.export.nodes", "engine.scene", "engine"}
-        assert engine_attributes("addon.probe_") == [("render", 4)]
+        assert sorted(engine_attributes("addon.probe_")) == [("Mesh", 8), ("Scene", 8), ("render", 4)]
     finally:
         del TREES["addon.probe_"], SOURCES["addon.probe_"]
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"d"}, "e": {"a"}}) == \
         [frozenset("abc"), frozenset("d")]
+
+
+def test_the_addon_version_agrees_with_bl_info():
+    """bl_info stays a literal Blender reads without importing the package;
+    addon/version.py gives the same number to the modules that record it."""
+    bl_info = next(node.value for node in TREES["addon"].body if isinstance(node, ast.Assign)
+                   and getattr(node.targets[0], "id", None) == "bl_info")
+    version = next(node.value for node in TREES["addon.version"].body if isinstance(node, ast.Assign))
+    assert ast.literal_eval(bl_info)["version"] == ast.literal_eval(version)
