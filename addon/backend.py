@@ -60,13 +60,23 @@ def _package_name():
 @functools.lru_cache(maxsize=None)
 def engine():
     """The renderer package (vendored or not): the add-on uses only the names
-    its ``__all__`` declares.  Imported on first use, never at registration;
-    embreex first, with RTLD_DEEPBIND."""
+    its ``__all__`` declares.  Imported on first use, never at registration,
+    after embreex (with RTLD_DEEPBIND) where embreex is installed: exporting
+    needs no ray tracer, rendering does (``require_ray_tracer``)."""
     _add_bundled_site()
+    try:
+        _import_embreex()
+    except ImportError:
+        pass   # require_ray_tracer() says why, when a render starts
+    return importlib.import_module(_package_name())
+
+
+def require_ray_tracer():
+    """Before a render: ImportError saying how to install embreex if it is missing."""
+    engine()
     try:
         _import_embreex()
     except ImportError as err:
         raise ImportError(
             f"Ember needs the 'embreex' package ({err}); install the Ember "
             "extension zip, or pip install embreex into Blender's Python") from err
-    return importlib.import_module(_package_name())

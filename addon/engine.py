@@ -111,6 +111,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
         if not self.is_preview:
             settings = _with_passes(settings, scene, depsgraph.view_layer)
         _, _, width, height = camera_export.border_window(scene.render)
+        backend.require_ray_tracer()
         render = shards.wrap(backend.engine().render, scene, depsgraph.view_layer.name, self.is_preview)
         if self.test_break():
             info['cancelled'] = True   # Esc between export and the first pass

@@ -345,6 +345,7 @@ class RenderThread:
         return self.closed or self.generation != generation
 
     def _run(self, job, generation):
+        backend.require_ray_tracer()
         render = backend.engine().render
         self.error = None
         camera = job.scene.camera
