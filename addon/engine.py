@@ -13,7 +13,7 @@ import traceback
 
 import bpy
 
-from . import backend, denoise, output, shards, viewport
+from . import backend, output, shards
 from . import passes as render_passes
 from .export import camera as camera_export
 from .export import scene as scene_export
@@ -49,6 +49,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             viewport_session.close()
 
     def view_update(self, context, depsgraph):
+        from . import viewport  # lazy: only for the Rendered viewport (keeps registration at ~30 ms)
         try:
             if self.viewport is None:
                 self.viewport = viewport.ViewportSession(self)
@@ -152,6 +153,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
     def _denoised(self, result, extra, info):
         """Combined denoised (alpha kept), the raw image as Noisy Image.  A
         denoiser failure keeps the noisy image and says why."""
+        from . import denoise  # lazy: only when denoising (subprocess, ctypes: keeps registration cheap)
         self.update_stats("", "Ember: denoising")
         start = time.perf_counter()
         try:
