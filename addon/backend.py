@@ -15,6 +15,7 @@ package is the RenderEngine.  Nothing is imported at add-on registration: a
 missing wheel must not stop Blender from starting, only show an error when a
 render starts.
 """
+import functools
 import importlib
 import os
 import sys
@@ -22,8 +23,6 @@ import sys
 _HERE = os.path.dirname(os.path.abspath(__file__))
 _VENDOR = os.path.join(_HERE, 'vendor')
 _SITE = os.path.join(_VENDOR, 'site')
-
-_modules = {}
 
 
 def _add_bundled_site():
@@ -58,24 +57,26 @@ def _package_name():
     return 'engine'
 
 
-def load(name):
-    """Import ``engine.<name>`` (e.g. 'scene', 'render') from the right place."""
-    if name not in _modules:
-        _add_bundled_site()
-        if name == 'render':
-            try:
-                _import_embreex()
-            except ImportError as err:
-                raise ImportError(
-                    f"Ember needs the 'embreex' package ({err}); install the Ember "
-                    "extension zip, or pip install embreex into Blender's Python") from err
-        _modules[name] = importlib.import_module(_package_name() + '.' + name)
-    return _modules[name]
+@functools.lru_cache(maxsize=None)
+def engine():
+    """The renderer package (vendored or not): the add-on uses only the names
+    its ``__all__`` declares.  Imported on first use, never at registration,
+    after embreex (with RTLD_DEEPBIND) where embreex is installed: exporting
+    needs no ray tracer, rendering does (``require_ray_tracer``)."""
+    _add_bundled_site()
+    try:
+        _import_embreex()
+    except ImportError:
+        pass   # require_ray_tracer() says why, when a render starts
+    return importlib.import_module(_package_name())
 
 
-def scene_module():
-    return load('scene')
-
-
-def render_function():
-    return load('render').render
+def require_ray_tracer():
+    """Before a render: ImportError saying how to install embreex if it is missing."""
+    engine()
+    try:
+        _import_embreex()
+    except ImportError as err:
+        raise ImportError(
+            f"Ember needs the 'embreex' package ({err}); install the Ember "
+            "extension zip, or pip install embreex into Blender's Python") from err

@@ -7,6 +7,7 @@ Exceptions never escape: Blender would print them and keep a black image, so
 they are reported with ``self.report({'ERROR'}, ...)`` and recorded in
 ``RENDER_LOG`` (which tests and the benchmark read).
 """
+import dataclasses
 import threading
 import time
 import traceback
@@ -49,7 +50,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             viewport_session.close()
 
     def view_update(self, context, depsgraph):
-        from . import viewport
+        from . import viewport  # lazy: only for the Rendered viewport (keeps registration at ~30 ms)
         try:
             if self.viewport is None:
                 self.viewport = viewport.ViewportSession(self)
@@ -112,7 +113,8 @@ class EmberRenderEngine(bpy.types.RenderEngine):
         if not self.is_preview:
             settings = _with_passes(settings, scene, depsgraph.view_layer)
         _, _, width, height = camera_export.border_window(scene.render)
-        render = shards.wrap(backend.render_function(), scene, depsgraph.view_layer.name, self.is_preview)
+        backend.require_ray_tracer()
+        render = shards.wrap(backend.engine().render, scene, depsgraph.view_layer.name, self.is_preview)
         if self.test_break():
             info['cancelled'] = True   # Esc between export and the first pass
             return
@@ -121,10 +123,10 @@ class EmberRenderEngine(bpy.types.RenderEngine):
         writer = output.ResultWriter(self, width, height, depsgraph.view_layer.name)
         progress = output.Progress(self, writer, settings.samples, info)
         try:
-            exported.scene.validate()
+            backend.engine().validate_scene(exported.scene)
             try:
                 result = render(exported.scene, settings, progress)
-            except backend.scene_module().Cancelled:  # Esc before the first pass
+            except backend.engine().Cancelled:  # Esc before the first pass
                 info['cancelled'] = True
                 return
             # A stopped render returns its partial image: write it either way.
@@ -153,7 +155,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
     def _denoised(self, result, extra, info):
         """Combined denoised (alpha kept), the raw image as Noisy Image.  A
         denoiser failure keeps the noisy image and says why."""
-        from . import denoise
+        from . import denoise  # lazy: only when denoising (subprocess, ctypes: keeps registration cheap)
         self.update_stats("", "Ember: denoising")
         start = time.perf_counter()
         try:
@@ -176,7 +178,7 @@ def _settle_compiler():
     (addon_utils.disable_all) and fails with "dictionary changed size
     during iteration" if that thread is still importing numba."""
     try:
-        backend.load('kernels').stop()
+        backend.engine().stop_kernels()
     except ImportError:
         pass
 
@@ -195,11 +197,10 @@ def _extra_passes(result, view_layer, samples):
 
 def _with_passes(settings, scene, view_layer):
     """The render settings with the passes this view layer asks for."""
-    import dataclasses
     names = render_passes.engine_passes(view_layer)
     if not names or not hasattr(settings, 'passes'):
         return settings
-    config = render_passes.pass_config(scene, view_layer, backend.load('passes').PassConfig)
+    config = render_passes.pass_config(scene, view_layer, backend.engine().PassConfig)
     return dataclasses.replace(settings, passes=names, pass_config=config)
 
 
@@ -226,20 +227,19 @@ def _warm_kernels():
     first F12 does not wait for them ('Compiling kernels' in the status bar
     while it does).  Later starts find the cache complete and do nothing."""
     try:
-        kernels = backend.load('kernels')
-        if kernels.cache_complete() or not kernels.AVAILABLE:
+        renderer = backend.engine()
+        if renderer.kernel_cache_complete():
             return None
-        backend.load('render')     # embreex with its own Embree, in this thread
-        kernels.import_all()
-        threading.Thread(target=_warm_quietly, args=(kernels,), name="ember-warm", daemon=True).start()
+        backend.require_ray_tracer()   # embreex with its own Embree, in this thread
+        threading.Thread(target=_warm_quietly, args=(renderer,), name="ember-warm", daemon=True).start()
     except Exception as err:  # noqa: BLE001 - a render compiles them anyway, and says so
         print(f"Ember: kernels not compiled ahead: {_message(err)}")
     return None
 
 
-def _warm_quietly(kernels):
+def _warm_quietly(renderer):
     try:
-        kernels.warm_cache()
+        renderer.warm_kernel_cache()
     except Exception as err:  # noqa: BLE001 - a render compiles them anyway, and says so
         print(f"Ember: kernels not compiled ahead: {_message(err)}")
 

@@ -8,7 +8,11 @@ Generic passes use the View Layer checkboxes Cycles uses
 (``view_layer.use_pass_mist`` ...); Cycles-only ones (Denoising Data, Sample
 Count) and Ember's own (strategy passes, Variance) are on ``view_layer.ember``.
 """
+import json
+
 import bpy
+
+from . import backend
 
 # engine name, legacy (< 5.0) name, channels, chan_id, type, enabled by
 # (a view_layer property, or "ember.<property>" on view_layer.ember).
@@ -158,40 +162,13 @@ def blender_images(view_layer, engine_images, samples=1):
 def crypto_metadata(view_layer, manifests):
     """Render-result metadata the Cryptomatte node reads, as Cycles writes it:
     cryptomatte/<7 hex of the layer name's hash>/{name, hash, conversion, manifest}."""
-    import json
-    from . import backend
-    passes = backend.load('passes')
+    renderer = backend.engine()
     fields = {}
     for kind, manifest in manifests.items():
         layer = f"{view_layer.name}.{kind}"
-        key = f"cryptomatte/{passes.murmur3_32(layer):08x}"[:len("cryptomatte/") + 7]
+        key = f"cryptomatte/{renderer.murmur3_32(layer):08x}"[:len("cryptomatte/") + 7]
         fields[key + "/name"] = layer
         fields[key + "/hash"] = "MurmurHash3_32"
         fields[key + "/conversion"] = "uint32_to_float32"
         fields[key + "/manifest"] = json.dumps(manifest, separators=(",", ":"))
     return fields
-
-
-def material_aovs(material):
-    """{AOV name: ((r, g, b), value)} from a material's AOV Output nodes.
-    Constants only: a linked input is read as far as the shader translator
-    reads constants, else as the socket's own value."""
-    tree = getattr(material, "node_tree", None)
-    if tree is None:
-        return {}
-    from .export import material as material_export
-    from .export import nodes
-    translator = material_export.NodeTranslator(material.name)
-    out = {}
-    for node in tree.nodes:
-        if node.bl_idname != 'ShaderNodeOutputAOV' or node.mute:
-            continue
-        name = getattr(node, "aov_name", "") or node.name
-        colour = translator.color(node, 'Color', (0.0, 0.0, 0.0))
-        value = translator.value(node, 'Value', 0.0)
-        if nodes.is_expr(colour):
-            colour = tuple(node.inputs['Color'].default_value)[:3]
-        if nodes.is_expr(value):
-            value = float(node.inputs['Value'].default_value)
-        out[name] = (tuple(float(c) for c in colour[:3]), float(value))
-    return out

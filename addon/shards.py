@@ -21,7 +21,10 @@ import os
 import socket
 import time
 
+import bpy
 import numpy as np
+
+from .version import VERSION
 
 ENV_DIR = 'EMBER_SHARD_DIR'
 ENV_START = 'EMBER_SHARD_START'
@@ -55,7 +58,6 @@ def file_sha256(path):
 
 def _request(scene, layer):
     """The shard asked for by the environment, or None; reads bpy (main thread)."""
-    import bpy
     folder = os.environ.get(ENV_DIR)
     if not folder:
         return None
@@ -69,12 +71,11 @@ def _request(scene, layer):
     blend = bpy.data.filepath
     if not blend:
         raise ValueError("a render-farm shard needs a saved .blend file")
-    from . import bl_info
     return {'folder': folder, 'start': start, 'samples': samples, 'frame': scene.frame_current,
             # Denoising waits for the merge (the film keeps albedo and normal for it).
             'denoise': bool(getattr(scene.ember, 'use_denoising', False)),
             'layer': layer, 'blend_path': blend, 'blend_sha256': file_sha256(blend),
-            'ember_version': '.'.join(map(str, bl_info['version']))}
+            'ember_version': '.'.join(map(str, VERSION))}
 
 
 def wrap(render, scene, layer, is_preview=False):

@@ -20,9 +20,10 @@ import weakref
 import time
 import traceback
 
+import bpy
 import numpy as np
 
-from . import backend
+from . import backend, denoise
 from .export import camera as camera_export
 from .export import instances as instance_export
 from .export import light as light_export
@@ -179,11 +180,10 @@ class SceneCache:
 
     def scene(self, camera):
         """An engine Scene with only the meshes in use (indices remapped)."""
-        engine_scene = backend.scene_module()
         used = sorted({inst.mesh for inst in self.instances})
         remap = {old: new for new, old in enumerate(used)}
         instances = [dataclasses.replace(inst, mesh=remap[inst.mesh]) for inst in self.instances]
-        return engine_scene.Scene(
+        return backend.engine().Scene(
             meshes=[self.meshes[i] for i in used], instances=instances,
             materials=list(self.materials.materials), lights=list(self.lights),
             world=self.world, camera=camera)
@@ -217,7 +217,7 @@ def viewport_camera(context, depsgraph, pixel_size=1):
     if rv3d.view_perspective == 'CAMERA' and camera_obj is not None and camera_obj.type == 'CAMERA':
         base = _depth_of_field(camera_obj.evaluated_get(depsgraph), depsgraph.scene.render)
     fields = frustum(window, to_world)
-    return backend.scene_module().Camera(
+    return backend.engine().Camera(
         resolution=(width, height), sensor_width=36.0, sensor_height=36.0 * height / width,
         sensor_fit='HORIZONTAL', **fields, **base)
 
@@ -345,7 +345,8 @@ class RenderThread:
         return self.closed or self.generation != generation
 
     def _run(self, job, generation):
-        render = backend.render_function()
+        backend.require_ray_tracer()
+        render = backend.engine().render
         self.error = None
         camera = job.scene.camera
         width, height = camera.resolution
@@ -371,7 +372,6 @@ class RenderThread:
         self.finished_job = generation
 
     def _denoise(self, result, generation):
-        from . import denoise
         self.status = "Denoising"
         rgb = denoise.denoise(result.image[..., :3], result.albedo, result.normal, quality='fast')
         if not self._stale(generation):
@@ -427,14 +427,14 @@ class DrawData:
     """The latest image as a GPU texture, drawn over the whole region."""
 
     def __init__(self, image):
-        import gpu
+        import gpu  # lazy: only where a window draws, never in background renders
         height, width = image.shape[:2]
         pixels = display_pixels(image)
         buffer = gpu.types.Buffer('FLOAT', pixels.size, pixels)
         self.texture = gpu.types.GPUTexture((width, height), format='RGBA16F', data=buffer)
 
     def draw(self, width, height):
-        from gpu_extras.presets import draw_texture_2d
+        from gpu_extras.presets import draw_texture_2d  # lazy: as gpu above
         draw_texture_2d(self.texture, (0, 0), width, height)
 
 
@@ -495,7 +495,7 @@ class ViewportSession:
                 STATS['first_draw_seconds'].append(time.perf_counter() - self.job_changed_at)
                 self.job_changed_at = None
         if self.draw_data is not None:
-            import gpu
+            import gpu  # lazy: as in DrawData
             gpu.state.blend_set('ALPHA_PREMULT')
             self.engine.bind_display_space_shader(depsgraph.scene)
             self.draw_data.draw(*size)
@@ -545,7 +545,6 @@ class ViewportSession:
     def _ensure_timer(self):
         if self.timer is not None:
             return
-        import bpy
 
         def tick():
             if self.closed:

@@ -32,7 +32,9 @@ weight 1, one-sample MIS over the two (the pdf is their mixture).
 import numpy as np
 
 from . import kernels
+from .nodes.context import ShadingContext
 from .sampling import Distribution2D, uniform_cone
+from .textures import Compiler
 from .vec import column, frame, luminance, to_world
 
 TWO_PI_SQ = 2.0 * np.pi * np.pi
@@ -60,6 +62,22 @@ def equirect_to_direction(u, v):
     theta = np.pi * (1.0 - v)
     s = np.sin(theta)
     return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=1)
+
+
+def bake(expression, width, height, importance_bake=False):
+    """A world colour expression as (height, width, 3) float32 equirectangular
+    pixels (row 0 = +Z), each texel centre's direction shaded as a camera ray
+    of Cycles' background (P = Generated = d, N = incoming = -d), negative
+    values clamped.  importance_bake: Cycles' PATH_RAY_IMPORTANCE_BAKE (a
+    guided sky's sun disc stays out of the table)."""
+    u = (np.arange(width) + 0.5) / width
+    v = 1.0 - (np.arange(height) + 0.5) / height      # row 0 is the top (+Z)
+    uu, vv = np.meshgrid(u, v)
+    d = equirect_to_direction(uu.reshape(-1), vv.reshape(-1))
+    ctx = ShadingContext(len(d), p=d, ng=-d, ns=-d, wo=-d)
+    ctx.importance_bake = importance_bake
+    rgb = Compiler().color(expression)(ctx)
+    return np.ascontiguousarray(np.maximum(rgb, 0.0).reshape(height, width, 3), dtype=np.float32)
 
 
 def lookup(image, u, v, closest=False):
@@ -224,8 +242,6 @@ def _compile(expression):
     """A world colour expression as a function of directions (N, 3): the
     shading context Cycles gives the background (P = Generated = the
     direction, N = incoming = -direction, a camera ray)."""
-    from .nodes.context import ShadingContext
-    from .textures import Compiler
     color = Compiler().color(expression)
 
     def shade(d):

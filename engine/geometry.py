@@ -14,6 +14,7 @@ from typing import Optional
 import numpy as np
 
 from . import kernels
+from .nodes import SceneShading
 from .scene import DEFAULT_MATERIAL, Bump, NormalMap
 from .vec import frame
 
@@ -353,7 +354,6 @@ def _place_rows(vertices, indices, smooth, has_ns, p0, e1, e2, ng, clen, ns, kee
 def _scene_shading(scene, instance, local):
     """SceneShading (shader-node data) of the kept triangles: each one's
     instance and index in its mesh."""
-    from .nodes import SceneShading
     return SceneShading(scene, instance, local)
 
 

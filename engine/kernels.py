@@ -435,8 +435,9 @@ def _complete_marker():
 
 
 def cache_complete():
-    """True once every kernel of this engine copy is in the disk cache."""
-    return os.path.exists(_complete_marker())
+    """True once every kernel of this engine copy is in the disk cache (or
+    when there is nothing to compile: the JIT is off or numba missing)."""
+    return not AVAILABLE or os.path.exists(_complete_marker())
 
 
 def warm_cache():

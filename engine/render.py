@@ -29,7 +29,7 @@ from .integrator import Context, trace_batch
 from .lights import LightSet
 from .sampler import Sampler
 from .scene import Cancelled, RenderSettings, SceneError
-from .validate import validate_settings
+from .validate import validate_scene, validate_settings
 
 
 class RenderResult:
@@ -74,7 +74,7 @@ class RenderResult:
 def prepare(scene, settings):
     """Validate and compile a Scene into the read-only Context batches share."""
     kernels.configure(getattr(settings, "use_jit", True))   # flatten has a kernel too
-    scene.validate()
+    validate_scene(scene)
     validate_settings(settings)
     tris = flatten(scene, with_instance=bool(settings.passes), threads=settings.threads)
     materials = MaterialTable(material_table(scene))

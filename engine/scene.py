@@ -11,8 +11,9 @@ exporter only copies numbers:
   in watts times colour, sun ``strength`` is irradiance in W/m^2 times colour;
 * colours are linear scene-referred RGB.
 
-``Scene.validate()`` checks shapes, dtypes, finiteness and index ranges and
-raises ``SceneError`` with a message that names the offending item.
+The data does not check itself: ``engine.validate.validate_scene(scene)``
+reads it and checks shapes, dtypes, finiteness and index ranges, raising
+``SceneError`` with a message that names the offending item.
 """
 from __future__ import annotations
 
@@ -531,7 +532,3 @@ class Scene:
     # The Blender version the scene comes from: where Cycles changed between
     # versions (its bump shadowing term), Ember renders as that version's.
     cycles_version: tuple = (5, 0, 0)
-
-    def validate(self) -> None:
-        from .validate import validate_scene
-        validate_scene(self)

@@ -20,6 +20,7 @@ import dataclasses
 import numpy as np
 
 from .nodes import REGISTRY, ShadingContext, as_context
+from .nodes.color_math import EXTRA_BLENDS
 from .scene import (TEXTURE_TYPES, Bump, ImageTexture, Math, MixColor, NodeOutput, NormalMap)
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
@@ -337,7 +338,6 @@ def mix_colors(blend, t, a, b):
         return tm * a + t * np.minimum(a, b)
     if blend == "LIGHTEN":
         return tm * a + t * np.maximum(a, b)
-    from .nodes.color_math import EXTRA_BLENDS
     if blend in EXTRA_BLENDS:
         t = np.broadcast_to(t, np.broadcast_shapes(np.shape(t), np.shape(a), np.shape(b))[:-1] + (1,))
         a, b = (np.broadcast_to(x, t.shape[:-1] + (3,)).astype(np.float64) for x in (a, b))

@@ -5,6 +5,8 @@ from .lights import validate_light   # each light type validates its own (engine
 from .scene import ENV_INTERPOLATIONS, LOBE_KINDS, SceneError
 
 from . import scene as _scene
+from .nodes import REGISTRY
+from .passes import unknown as unknown_passes
 from .textures import is_texture
 
 
@@ -243,8 +245,7 @@ def validate_settings(s):
 
 
 def _validate_passes(s):
-    from .passes import unknown
-    bad = unknown(getattr(s, "passes", ()) or ())
+    bad = unknown_passes(getattr(s, "passes", ()) or ())
     if bad:
         raise SceneError(f"settings: unknown render passes {bad}")
 
@@ -319,7 +320,6 @@ def validate_texture(expr, what):
 
 
 def _node_def(call, what):
-    from .nodes import REGISTRY
     entry = REGISTRY.get(call.idname)
     if entry is None:
         raise SceneError(f"{what}: unknown shader node {call.idname!r}")

@@ -68,7 +68,7 @@ def timed(module, name, label):
 
 timed(exp, 'export_scene', 'export')
 backend = importlib.import_module(pkg + '.backend')
-render_module = backend.load('render')
+render_module = importlib.import_module(backend.engine().__name__ + '.render')  # the module
 timed(render_module, 'prepare', 'prepare')
 real_on_pass = out.Progress.on_pass
 def on_pass(self, image, samples_done, stats):

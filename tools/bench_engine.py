@@ -10,6 +10,7 @@ for two frame sizes with the same ``max_paths`` (memory is bounded by paths
 in flight, not by pixels).
 """
 import argparse
+import importlib
 import os
 import resource
 import subprocess
@@ -91,7 +92,7 @@ def main(argv=None):
     ap.add_argument("--scene", default="cornell", choices=sorted(SCENES))
     args = ap.parse_args(argv)
 
-    import engine.render as render_mod
+    render_mod = importlib.import_module("engine.render")   # the module: engine.render is the function
     made = []
     original = render_mod.Accel
 

@@ -91,7 +91,7 @@ def bench_first_pass(samples=16):
     from addon import backend
     from addon import engine as ember_engine
     try:
-        backend.render_function()
+        backend.require_ray_tracer()
     except ImportError as err:
         return {'first_pass_error': f"engine.render unavailable: {err}"}
     bpy.ops.wm.open_mainfile(filepath=os.path.join(ROOT, 'blend_scenes', 'cornell.blend'))

@@ -45,7 +45,7 @@ for _ in range(2):
 # Fill the cache before leaving (a cold process would otherwise stop the
 # background compile at exit, and the "warm" run would go on with it).
 from addon import backend
-backend.load('kernels').wait(900)
+backend.engine().wait_for_kernels(900)
 print('RESULT ' + json.dumps(out))
 '''
 

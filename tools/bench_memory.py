@@ -27,7 +27,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MIB = 1024 * 1024
 
 CHILD = r'''
-import json, os, sys, time, tracemalloc
+import importlib, json, os, sys, time, tracemalloc
 sys.path.insert(0, ROOT)
 os.environ.setdefault('BLENDER_USER_RESOURCES', tempfile.mkdtemp())
 import bpy, numpy as np
@@ -68,7 +68,7 @@ if IMAGE:
     node.image.buffers_free()  # Blender loaded nothing yet: only Ember's copy counts
 
 film_bytes = []
-render_module = backend.load('render')
+render_module = importlib.import_module(backend.engine().__name__ + '.render')  # the module
 RealFilm = render_module.Film
 class MeasuredFilm(RealFilm):
     def __init__(self, *args, **kwargs):
@@ -84,9 +84,8 @@ bpy.app.handlers.render_post.append(after_frame)
 if FRAMES > 1:
     # Growth per frame, not the compiler's: with a cold kernel cache (a new
     # Ember version) the kernels would compile during the first frames.
-    kernels = backend.load('kernels')
-    kernels.configure(True)
-    kernels.wait(900)
+    backend.engine().configure_kernels(True)
+    backend.engine().wait_for_kernels(900)
 baseline = status('VmRSS')
 tracemalloc.start()
 if FRAMES > 1:

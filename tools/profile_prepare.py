@@ -43,7 +43,7 @@ def timed(function, *args):
 
 def stages(depsgraph, settings):
     from addon.export import scene as scene_export
-    from engine import accel, geometry, render
+    from engine import accel, geometry, prepare
     from engine.blas import single_threaded_blas
     out = {}
     with single_threaded_blas():   # as engine.render.render runs prepare
@@ -51,7 +51,7 @@ def stages(depsgraph, settings):
         tris, *out['flatten'] = timed(geometry.flatten, exported.scene)
         _, *out['accel'] = timed(accel.Accel, tris)
         del tris
-        _, *out['prepare'] = timed(render.prepare, exported.scene, settings)
+        _, *out['prepare'] = timed(prepare, exported.scene, settings)
     return out
 
 
@@ -72,12 +72,12 @@ def main(argv=None):
     settings = scene_export.render_settings(scene)
     settings.use_jit = not args.no_jit   # prepare configures the kernels from the settings
     if args.profile:
-        from engine import render
+        from engine import prepare
         from engine.blas import single_threaded_blas
         exported = scene_export.export_scene(depsgraph)
         profile = cProfile.Profile()
         with single_threaded_blas():
-            profile.runcall(render.prepare, exported.scene, settings)
+            profile.runcall(prepare, exported.scene, settings)
         pstats.Stats(profile).sort_stats('tottime').print_stats(25)
         return
     for _ in range(args.repeat):

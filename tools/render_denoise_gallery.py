@@ -35,7 +35,7 @@ def main(argv=None):
     scene.render.resolution_x = scene.render.resolution_y = args.size
     scene.render.resolution_percentage = 100
     exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
-    render = backend.render_function()
+    render = backend.engine().render
     panels = []
     for samples in (16, 128):
         settings = scene_export.render_settings(scene)

@@ -6,6 +6,8 @@ Cycles' exactly.
 """
 import numpy as np
 
+from .. import backend
+
 
 def frame_size(render):
     """Full frame in pixels: resolution times percentage, as Blender rounds it."""
@@ -57,8 +59,7 @@ def focus_distance(cam_obj, matrix):
 
 def camera_from_blender(cam_obj, render):
     """Returns (engine Camera, warnings)."""
-    from .. import backend
-    scene = backend.scene_module()
+    renderer = backend.engine()
     warnings = []
     data = cam_obj.data
     matrix = _without_scale(cam_obj.matrix_world)
@@ -77,7 +78,7 @@ def camera_from_blender(cam_obj, render):
     if fstop > 0.0:
         # Cycles: aperture radius = focal length / (2 f-stop); 1/(2 f) for ortho.
         aperture = (data.lens * 1e-3 if kind == 'PERSP' else 1.0) / (2.0 * max(fstop, 1e-5))
-    camera = scene.Camera(
+    camera = renderer.Camera(
         matrix=matrix, kind=kind, lens=float(data.lens),
         sensor_width=float(data.sensor_width), sensor_height=float(data.sensor_height),
         sensor_fit=data.sensor_fit, shift_x=float(data.shift_x), shift_y=float(data.shift_y),

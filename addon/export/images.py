@@ -10,6 +10,7 @@ missing-texture magenta (1, 0, 1) and a warning, never an error.
 """
 import os
 
+import bpy
 import numpy as np
 
 MAGENTA = np.array([[[1.0, 0.0, 1.0, 1.0]]], np.float32)
@@ -37,7 +38,6 @@ def srgb_to_linear(c):
 
 
 def _external_path(bpy_image):
-    import bpy
     if bpy_image.source != 'FILE' or bpy_image.packed_file is not None:
         return None
     return bpy.path.abspath(bpy_image.filepath, library=bpy_image.library)
@@ -46,7 +46,7 @@ def _external_path(bpy_image):
 def _read_oiio(path):
     """(H, W, C) float32 straight-alpha pixels, or None without OpenImageIO."""
     try:
-        import OpenImageIO as oiio
+        import OpenImageIO as oiio  # lazy: optional (and slow to load); Blender's pixels without it
     except ImportError:
         return None
     config = oiio.ImageSpec()
@@ -121,7 +121,7 @@ def is_missing(pixels, warnings):
 
 def _file_is_float(path):
     try:
-        import OpenImageIO as oiio
+        import OpenImageIO as oiio  # lazy: optional (and slow to load); Blender's pixels without it
     except ImportError:
         return False
     inp = oiio.ImageInput.open(path)

@@ -8,6 +8,7 @@ data block of their own, so they are never merged by mistake).
 """
 import numpy as np
 
+from .. import backend
 from . import mesh as mesh_export
 
 
@@ -41,7 +42,7 @@ class InstanceCollector:
             self._warn_once(('matrix', obj.name),
                             f"Object '{obj.name}' skipped: its transform is NaN or infinite")
             return
-        self.instances.append(_scene().Instance(
+        self.instances.append(backend.engine().Instance(
             mesh=mesh_id,
             matrix=matrix,
             materials=self.material_index(obj),
@@ -108,8 +109,7 @@ def object_info(inst):
         h = 0
         for ch in obj.name.encode('utf-8'):
             h = (h * 37 + ch) & 0xFFFFFFFF
-        from .. import backend
-        rid = int(backend.load('nodes.hashing').hash_uint(np.uint32(h), np.uint32(0)))
+        rid = int(backend.engine().hash_uint(np.uint32(h), np.uint32(0)))
     random = float(np.float32(rid) * np.float32(1.0 / 4294967296.0))
     return {'color': tuple(float(c) for c in tuple(getattr(obj, 'color', (1.0, 1.0, 1.0)))[:3]),
             'random': random}
@@ -132,11 +132,6 @@ def collect_instances(depsgraph, material_index, check=None):
     warnings = collector.warnings + [f"Ember skips {kind.lower()} objects (not supported yet)"
                 for kind in sorted(collector.skipped_types)]
     return collector.meshes, collector.instances, warnings
-
-
-def _scene():
-    from .. import backend
-    return backend.scene_module()
 
 
 def _pass_fields(inst):

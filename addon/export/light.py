@@ -22,6 +22,9 @@ import math
 import bpy
 import numpy as np
 
+from .. import backend
+from . import nodes
+
 LEGACY_LIGHT_UNITS = bpy.app.version < (4, 0, 0)
 LEGACY_AREA_SCALE = math.pi / 4.0
 
@@ -160,7 +163,6 @@ def _with_node_tree(light, data):
     Emission node feeding the Light Output), and a note or None.  A Light
     Falloff node on the Strength gives the light its falloff (the node's
     Strength scales the light, its output and Smooth go to the engine)."""
-    from . import nodes
     output = nodes.output_node(data.node_tree, 'OUTPUT_LIGHT')
     if output is None:
         return light, None
@@ -211,18 +213,16 @@ def _strength_and_falloff(reader, emission, light):
 def _constant_rgb(color, strength):
     """(rgb, varies): the expression color * strength evaluated at random
     shading points; varies when they disagree (then the mean)."""
-    from .. import backend
-    from . import nodes
     expr = nodes.scale(color, strength)
     if not nodes.is_expr(expr):
         return tuple(float(c) for c in expr), False
-    context = backend.load('nodes.context')
+    renderer = backend.engine()
     rng = np.random.default_rng(0)
     n = 64
     d = rng.normal(size=(n, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    ctx = context.ShadingContext(n, p=rng.uniform(-1.0, 1.0, (n, 3)), ng=d, ns=d, wo=d, uv=rng.random((n, 2)))
-    values = backend.load('textures').Compiler().color(expr)(ctx)
+    ctx = renderer.ShadingContext(n, p=rng.uniform(-1.0, 1.0, (n, 3)), ng=d, ns=d, wo=d, uv=rng.random((n, 2)))
+    values = renderer.TextureCompiler().color(expr)(ctx)
     mean = values.mean(axis=0)
     varies = bool(np.abs(values - mean).max() > 1e-6 * max(1.0, float(np.abs(mean).max())))
     return tuple(float(c) for c in np.maximum(mean, 0.0)), varies
@@ -239,7 +239,6 @@ def _has_light_nodes(light):
 
 
 def _scene():
-    from .. import backend
-    return backend.scene_module()
+    return backend.engine()
 
 

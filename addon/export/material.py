@@ -14,6 +14,9 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
+import bpy
+
+from .. import backend
 from . import nodes
 
 GREY = (0.8, 0.8, 0.8)
@@ -495,8 +498,7 @@ class MaterialTable:
             if getattr(material, 'pass_index', 0) and hasattr(translated, 'pass_index'):
                 translated.pass_index = int(material.pass_index)  # Material Index pass
             if hasattr(translated, 'aovs'):
-                from .. import passes as render_passes
-                translated.aovs = render_passes.material_aovs(material)  # Shader AOV passes
+                translated.aovs = material_aovs(material)  # Shader AOV passes
             self.index_of[key] = len(self.materials)
             self.materials.append(translated)
             if warning:
@@ -518,13 +520,34 @@ class MaterialTable:
 
 
 def _scene():
-    from .. import backend
-    return backend.scene_module()
+    return backend.engine()
+
+
+def material_aovs(material):
+    """{AOV name: ((r, g, b), value)} from a material's AOV Output nodes.
+    Constants only: a linked input is read as far as the shader translator
+    reads constants, else as the socket's own value."""
+    tree = getattr(material, "node_tree", None)
+    if tree is None:
+        return {}
+    translator = NodeTranslator(material.name)
+    out = {}
+    for node in tree.nodes:
+        if node.bl_idname != 'ShaderNodeOutputAOV' or node.mute:
+            continue
+        name = getattr(node, "aov_name", "") or node.name
+        colour = translator.color(node, 'Color', (0.0, 0.0, 0.0))
+        value = translator.value(node, 'Value', 0.0)
+        if nodes.is_expr(colour):
+            colour = tuple(node.inputs['Color'].default_value)[:3]
+        if nodes.is_expr(value):
+            value = float(node.inputs['Value'].default_value)
+        out[name] = (tuple(float(c) for c in colour[:3]), float(value))
+    return out
 
 
 def _uses_nodes(datablock):
     """Blender 5.0 always uses nodes and deprecates the ``use_nodes`` switch."""
-    import bpy
     if bpy.app.version >= (5, 0, 0):
         return True
     return bool(getattr(datablock, 'use_nodes', False))

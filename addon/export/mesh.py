@@ -5,6 +5,8 @@ Python loop over vertices would cost seconds on a million triangles.
 """
 import numpy as np
 
+from .. import backend
+
 # Object types whose evaluated geometry ``to_mesh`` can triangulate.
 MESHABLE_TYPES = {'MESH', 'CURVE', 'SURFACE', 'FONT', 'META'}
 
@@ -97,7 +99,7 @@ def mesh_from_blender(mesh, name, tangents=False, check=None):
     tri_count = len(mesh.loop_triangles)
     if tri_count == 0:
         return None
-    scene = _scene_module()
+    renderer = backend.engine()
     check()
     positions = _get(mesh.vertices, 'co', len(mesh.vertices), 3, np.float32)
     triangles = _get(mesh.loop_triangles, 'vertices', tri_count, 3, np.int32)
@@ -109,7 +111,7 @@ def mesh_from_blender(mesh, name, tangents=False, check=None):
     corner_tangents, signs = _corner_tangents(mesh, loops) if tangents else (None, None)
     normals = _corner_normals(mesh, tri_count)
     check()
-    return scene.Mesh(
+    return renderer.Mesh(
         positions=positions,
         triangles=triangles,
         normals=normals,
@@ -199,8 +201,3 @@ def mesh_from_object(obj, name, check=None):
         return mesh_from_blender(mesh, name, needs_tangents(obj), check)
     finally:
         obj.to_mesh_clear()
-
-
-def _scene_module():
-    from .. import backend
-    return backend.scene_module()

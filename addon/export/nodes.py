@@ -10,6 +10,9 @@ input in its warning.  ``scale``, ``add``, ``mix``, ``clamp01``, ``math``,
 closure weighting works on both; ``may_exceed`` / ``may_be_below`` decide
 from an expression's range whether a lobe can be present.
 """
+import bpy
+
+from .. import backend
 from . import images
 
 LUMA = (0.2126, 0.7152, 0.0722)
@@ -17,13 +20,8 @@ LUMA = (0.2126, 0.7152, 0.0722)
 CUBIC = ('Cubic', 'Smart')
 
 
-def _scene():
-    from .. import backend
-    return backend.scene_module()
-
-
 def is_expr(value):
-    return isinstance(value, _scene().TEXTURE_TYPES)
+    return isinstance(value, backend.engine().TEXTURE_TYPES)
 
 
 def luminance(color):
@@ -35,25 +33,25 @@ def luminance(color):
 
 def scale(color, weight):
     if is_expr(color) or is_expr(weight):
-        return _scene().MixColor('MULTIPLY', 1.0, color, weight, clamp_factor=False)
+        return backend.engine().MixColor('MULTIPLY', 1.0, color, weight, clamp_factor=False)
     return tuple(float(c) * float(weight) for c in color)
 
 
 def add(a, b):
     if is_expr(a) or is_expr(b):
-        return _scene().MixColor('ADD', 1.0, a, b, clamp_factor=False)
+        return backend.engine().MixColor('ADD', 1.0, a, b, clamp_factor=False)
     return tuple(float(x) + float(y) for x, y in zip(a, b))
 
 
 def mix(a, b, t):
     if is_expr(a) or is_expr(b) or is_expr(t):
-        return _scene().MixColor('MIX', t, a, b, clamp_factor=False)
+        return backend.engine().MixColor('MIX', t, a, b, clamp_factor=False)
     return tuple((1.0 - t) * float(x) + t * float(y) for x, y in zip(a, b))
 
 
 def clamp01(value):
     if is_expr(value):
-        return _scene().Math('ADD', value, 0.0, clamp=True)
+        return backend.engine().Math('ADD', value, 0.0, clamp=True)
     return min(max(float(value), 0.0), 1.0)
 
 
@@ -69,7 +67,7 @@ _FLOAT_OPS = {
 
 def math(op, a, b=0.0):
     if is_expr(a) or is_expr(b):
-        return _scene().Math(op, a, b)
+        return backend.engine().Math(op, a, b)
     return _FLOAT_OPS[op](float(a), float(b))
 
 
@@ -94,16 +92,15 @@ def as_value(value):
     """A colour expression used as a float input: its luminance (Cycles'
     colour-to-float conversion), made explicit so that a float lobe field
     (e.g. a coat weight stored as a grey colour) does not keep the hue."""
-    scene = _scene()
-    colour = isinstance(value, scene.MixColor) or (
-        isinstance(value, scene.ImageTexture) and value.output == 'Color')
-    return scene.Math('ADD', value, 0.0) if colour else value
+    renderer = backend.engine()
+    colour = isinstance(value, renderer.MixColor) or (
+        isinstance(value, renderer.ImageTexture) and value.output == 'Color')
+    return renderer.Math('ADD', value, 0.0) if colour else value
 
 
 def value_range(value):
     """(lo, hi) a constant or expression can take (engine.textures)."""
-    from .. import backend
-    return backend.load('textures').value_range(value)
+    return backend.engine().value_range(value)
 
 
 def may_exceed(value, level):
@@ -312,7 +309,7 @@ class SocketReader:
         used = call.props.setdefault('_outputs', [])
         if output not in used:
             used.append(output)
-        return _scene().NodeOutput(call, output)
+        return backend.engine().NodeOutput(call, output)
 
     def _call(self, node, entry):
         inputs = {}
@@ -332,7 +329,7 @@ class SocketReader:
         mapping = _texture_mapping(node, entry, inputs.get('Vector'))
         if mapping is not None:
             inputs['Vector'] = mapping
-        return _scene().NodeCall(node.bl_idname, inputs, props)
+        return backend.engine().NodeCall(node.bl_idname, inputs, props)
 
     def _source_is_vector(self, socket):
         source, out = self.linked_node(socket)
@@ -359,7 +356,7 @@ class SocketReader:
         return float(out.default_value)
 
     def _node_tex_image(self, node, out):
-        scene = _scene()
+        renderer = backend.engine()
         if getattr(node, 'projection', 'FLAT') != 'FLAT':
             return self._unsupported(node)
         image = self._image(node)
@@ -372,7 +369,7 @@ class SocketReader:
         alpha_out = node.outputs.get('Alpha')
         unassociate = bool(alpha_out is not None and alpha_out.is_linked and not image.data
                            and image.alpha_mode not in ('CHANNEL_PACKED', 'NONE'))
-        return scene.ImageTexture(image, interpolation, node.extension,
+        return renderer.ImageTexture(image, interpolation, node.extension,
                                   'Alpha' if out.name == 'Alpha' else 'Color', unassociate,
                                   self._vector(node))
 
@@ -395,7 +392,7 @@ class SocketReader:
     def _image(self, node):
         """engine TextureImage for the node's image (loaded once per image),
         or None for none or a missing file (magenta, as Cycles)."""
-        scene = _scene()
+        renderer = backend.engine()
         bpy_image = node.image
         if bpy_image is None:
             self._note(f"'{node.name}' has no image: rendered magenta")
@@ -406,7 +403,7 @@ class SocketReader:
             if images.is_missing(pixels, warnings):
                 self.images[key] = (None, warnings)
             else:
-                self.images[key] = (scene.TextureImage(
+                self.images[key] = (renderer.TextureImage(
                     pixels, bpy_image.name, images.srgb_filtered(bpy_image),
                     _alpha_mode(bpy_image), images.is_data(bpy_image)), warnings)
         image, warnings = self.images[key]
@@ -430,26 +427,26 @@ class SocketReader:
         else:
             return self._registered(node, out, _registry()['ShaderNodeMix'])
         blend = node.blend_type if data_type == 'RGBA' else 'MIX'
-        if blend not in _scene().MIX_BLENDS:
+        if blend not in backend.engine().MIX_BLENDS:
             return self._unsupported(node)
         return self._mix_color(blend, self.input(node, 'Factor_Float'), a, b,
                                node.clamp_factor, data_type == 'RGBA' and node.clamp_result)
 
     def _node_mix_rgb(self, node, out):
         """The legacy MixRGB node: the factor is always clamped."""
-        if node.blend_type not in _scene().MIX_BLENDS:
+        if node.blend_type not in backend.engine().MIX_BLENDS:
             return self._unsupported(node)
         return self._mix_color(node.blend_type, self.input(node, 'Fac'), self.input(node, 'Color1'),
                                self.input(node, 'Color2'), True, node.use_clamp)
 
     def _mix_color(self, blend, fac, a, b, clamp_factor, clamp_result):
-        return _scene().MixColor(blend, fac, _as_color(a), _as_color(b), clamp_factor, clamp_result)
+        return backend.engine().MixColor(blend, fac, _as_color(a), _as_color(b), clamp_factor, clamp_result)
 
     def _node_math(self, node, out):
-        if node.operation not in _scene().MATH_OPERATIONS:
+        if node.operation not in backend.engine().MATH_OPERATIONS:
             return self._unsupported(node)
         a, b, c = (self.input(node, i) for i in range(3))
-        return _scene().Math(node.operation, _as_value(a), _as_value(b), _as_value(c), node.use_clamp)
+        return backend.engine().Math(node.operation, _as_value(a), _as_value(b), _as_value(c), node.use_clamp)
 
     # -- normals ---------------------------------------------------------------
 
@@ -458,32 +455,30 @@ class SocketReader:
         node, _ = self.linked_node(socket)
         if node is None:
             return None
-        scene = _scene()
+        renderer = backend.engine()
         if node.type == 'NORMAL_MAP' and not node.mute:
             if node.space == 'TANGENT' and node.uv_map:
                 self._note(f"'{node.name}' UV map '{node.uv_map}' read as the active UV map")
-            return scene.NormalMap(self.input(node, 'Color'), _as_value(self.input(node, 'Strength')),
+            return renderer.NormalMap(self.input(node, 'Color'), _as_value(self.input(node, 'Strength')),
                                    node.space)
         if node.type == 'BUMP' and not node.mute:
             inner = self.normal(node.inputs['Normal']) if node.inputs['Normal'].is_linked else None
-            return scene.Bump(_as_value(self.input(node, 'Height')),
+            return renderer.Bump(_as_value(self.input(node, 'Height')),
                               _as_value(self.input(node, 'Strength')),
                               _as_value(self.input(node, 'Distance')), bool(node.invert), inner)
         value = self.read(socket)
-        if isinstance(value, scene.NodeOutput) and _registry()[value.call.idname].output_kind(value.output) == 'vector':
+        if isinstance(value, renderer.NodeOutput) and _registry()[value.call.idname].output_kind(value.output) == 'vector':
             return value   # a vector node (e.g. Bevel): the normal itself, normalized by the engine
         self._unsupported(node)
         return None
 
 
 def _blender_version():
-    import bpy
     return tuple(bpy.app.version)
 
 
 def _registry():
-    from .. import backend
-    return backend.load('nodes').REGISTRY
+    return backend.engine().NODE_REGISTRY
 
 
 def _zero(socket):
@@ -547,15 +542,15 @@ def _texture_mapping(node, entry, vector):
                 and (tm.mapping_x, tm.mapping_y, tm.mapping_z) == ('X', 'Y', 'Z'))
     if identity:
         return None
-    scene = _scene()
+    renderer = backend.engine()
     if vector is None:
         coords = getattr(entry, 'coords', None) or 'uv'
         if coords == 'position':
-            vector = scene.NodeOutput(scene.NodeCall('ShaderNodeNewGeometry', {}), 'Position')
+            vector = renderer.NodeOutput(renderer.NodeCall('ShaderNodeNewGeometry', {}), 'Position')
         else:
-            vector = scene.NodeOutput(scene.NodeCall('ShaderNodeTexCoord', {}),
+            vector = renderer.NodeOutput(renderer.NodeCall('ShaderNodeTexCoord', {}),
                                       'Generated' if coords == 'generated' else 'UV')
-    return scene.NodeOutput(scene.NodeCall('ShaderNodeMapping', {
+    return renderer.NodeOutput(renderer.NodeCall('ShaderNodeMapping', {
         'Vector': vector, 'Location': tuple(tm.translation), 'Rotation': tuple(tm.rotation),
         'Scale': tuple(tm.scale)}, {'vector_type': tm.vector_type}), 'Vector')
 

@@ -4,6 +4,7 @@ from dataclasses import dataclass, field
 
 import bpy
 
+from .. import backend
 from . import camera as camera_export
 from . import instances as instance_export
 from . import light as light_export
@@ -54,9 +55,8 @@ def export_scene(depsgraph, camera_override=None, should_stop=None):
     ``should_stop()`` is asked between objects and between the arrays of a
     mesh; once true, ExportCancelled is raised."""
     check = stop_checker(should_stop)
-    from .. import backend
     start = time.perf_counter()
-    engine_scene = backend.scene_module()
+    renderer = backend.engine()
     scene = depsgraph.scene
     override = getattr(depsgraph.view_layer, 'material_override', None)
     materials = material_export.MaterialTable(override)
@@ -67,11 +67,11 @@ def export_scene(depsgraph, camera_override=None, should_stop=None):
     camera_object = scene_camera(depsgraph, camera_override)
     try:
         camera, camera_warnings = camera_export.camera_from_blender(camera_object, scene.render)
-        backend.load('validate').validate_camera(camera)
+        renderer.validate_camera(camera)
     except ValueError as err:  # engine.scene.SceneError is a ValueError
         message = str(err).removeprefix('camera: ')
         raise ExportError(f"Camera '{camera_object.name}': {message}") from err
-    result = engine_scene.Scene(
+    result = renderer.Scene(
         meshes=meshes, instances=instances, materials=materials.materials,
         lights=lights, world=world, camera=camera, cycles_version=tuple(bpy.app.version))
     warnings = materials.warnings + warnings + light_warnings + camera_warnings
@@ -88,9 +88,8 @@ PREVIEW_MAX_BOUNCES = 4
 
 def render_settings(scene, is_preview=False):
     """engine.scene.RenderSettings from the scene's Ember and Blender settings."""
-    from .. import backend
     settings = scene.ember
-    return backend.scene_module().RenderSettings(
+    return backend.engine().RenderSettings(
         samples=settings.preview_samples if is_preview else settings.samples,
         max_bounces=min(settings.max_bounces, PREVIEW_MAX_BOUNCES) if is_preview else settings.max_bounces,
         transparent_max_bounces=settings.transparent_max_bounces,

@@ -18,8 +18,10 @@ sky are shaded per direction and its sun disc sampled by its cone (Cycles'
 sun guiding).  Anything else is read as the Background's constant colour and
 reported.
 """
+import bpy
 import numpy as np
 
+from .. import backend
 from . import images, nodes
 
 BLACK = (0.0, 0.0, 0.0)
@@ -70,13 +72,12 @@ class _Notes:
 
 def world_from_blender(world):
     """Returns (engine World, warning or None)."""
-    from .. import backend
-    scene = backend.scene_module()
+    renderer = backend.engine()
     if world is None:
-        return scene.World(color=BLACK), None
+        return renderer.World(color=BLACK), None
     notes = _Notes(world)
     color, texture = _translate(world, notes)
-    return scene.World(color=color, texture=texture), notes.message()
+    return renderer.World(color=color, texture=texture), notes.message()
 
 
 def _translate(world, notes):
@@ -121,7 +122,6 @@ def _bake_node_tree(socket, strength, notes):
     Object = the ray direction, N = incoming = -direction, camera rays) and
     baked into an equirectangular EnvironmentTexture.  None if a node in it
     is not evaluated (the caller falls back to the constant colour)."""
-    from .. import backend
     reader = nodes.SocketReader()
     expr = reader.read(socket)
     if expr is None or reader.unsupported:
@@ -133,25 +133,14 @@ def _bake_node_tree(socket, strength, notes):
     if not nodes.is_expr(expr):
         value = expr if isinstance(expr, tuple) else (float(expr),) * 3
         return tuple(float(c) * strength for c in value), None
-    env = backend.load('environment')
-    context = backend.load('nodes.context')
+    renderer = backend.engine()
     skies = _sky_calls(expr)
     sun = _sun_guide(skies)
-    width, height = BAKE_SIZE
-    u = (np.arange(width) + 0.5) / width
-    v = 1.0 - (np.arange(height) + 0.5) / height      # row 0 is the top (+Z)
-    uu, vv = np.meshgrid(u, v)
-    d = env.equirect_to_direction(uu.reshape(-1), vv.reshape(-1))
-    ctx = context.ShadingContext(len(d), p=d, ng=-d, ns=-d, wo=-d)
-    # Cycles' PATH_RAY_IMPORTANCE_BAKE: with sun guiding the disc stays out
-    # of the table (its cone is sampled instead).
-    ctx.importance_bake = sun is not None
-    rgb = backend.load('textures').Compiler().color(expr)(ctx)
-    pixels = np.ascontiguousarray(np.maximum(rgb, 0.0).reshape(height, width, 3), dtype=np.float32)
-    scene = backend.scene_module()
+    # With sun guiding the disc stays out of the table (its cone is sampled instead).
+    pixels = renderer.bake_environment(expr, *BAKE_SIZE, importance_bake=sun is not None)
     # A sky's sun disc is smaller than a texel: such worlds are shaded per
     # direction (the bake only builds the sampling table).
-    texture = scene.EnvironmentTexture(pixels, strength, np.eye(3), 'Linear', name='baked world nodes',
+    texture = renderer.EnvironmentTexture(pixels, strength, np.eye(3), 'Linear', name='baked world nodes',
                                        shader=expr if skies else None, sun=sun)
     mean = tuple(float(c) * strength for c in pixels.reshape(-1, 3).mean(axis=0))
     return mean, texture
@@ -183,8 +172,6 @@ def _sun_guide(skies):
     the guide is the disc's direction mapped back; Cycles instead falls back
     to a 4096 x 2048 table there).  Otherwise None: the disc stays in the
     baked table, found by BSDF sampling."""
-    from .. import backend
-    scene = backend.scene_module()
     # Preetham has no disc (Cycles 5.0 would still aim at the Nishita sun).
     with_disc = [c for c in skies if c.props.get('sun_disc', True) and c.props.get('sky_type') != 'PREETHAM']
     if len(with_disc) != 1:
@@ -193,13 +180,7 @@ def _sun_guide(skies):
     matrix = _direction_matrix(call.inputs.get('Vector'))
     if matrix is None or abs(np.linalg.det(matrix)) < 1e-12:
         return None
-    sky = backend.load('nodes.sky')
-    k = sky.kernel_params(call.props)
-    if not k['diameter'] > 0 or not sky.disc_visible(k):
-        return None      # nothing to guide to (Cycles would aim at the hidden disc)
-    direction = np.linalg.solve(matrix, sky.sun_direction(k))
-    direction /= np.linalg.norm(direction)
-    return scene.SunGuide(tuple(float(c) for c in direction), 0.5 * k['diameter'], sky.sun_luminance_integral(k))
+    return backend.engine().sky_sun_guide(call.props, matrix)
 
 
 def _direction_matrix(vector):
@@ -238,8 +219,7 @@ def _direction_matrix(vector):
 
 def _environment(node, strength, fallback, notes):
     """The Environment Texture as (constant rgb, EnvironmentTexture or None)."""
-    from .. import backend
-    scene = backend.scene_module()
+    renderer = backend.engine()
     if node.projection != 'EQUIRECTANGULAR':
         notes.add(f"'{node.name}' {node.projection} projection is not supported: the "
                   "Background's constant colour is used")
@@ -255,10 +235,9 @@ def _environment(node, strength, fallback, notes):
     mean = tuple(float(c) * strength for c in pixels.reshape(-1, 3).mean(axis=0))
     if matrix is None:
         # Cycles looks up the zero vector: (u, v) = (0, 0), one colour.
-        env = backend.load('environment')
-        value = env.lookup(pixels[::-1], np.zeros(1), np.zeros(1), interpolation == 'Closest')[0]
+        value = renderer.environment_lookup(pixels[::-1], np.zeros(1), np.zeros(1), interpolation == 'Closest')[0]
         return tuple(float(c) * strength for c in value), None
-    texture = scene.EnvironmentTexture(pixels, strength, matrix, interpolation, name=node.image.name)
+    texture = renderer.EnvironmentTexture(pixels, strength, matrix, interpolation, name=node.image.name)
     return mean, texture
 
 
@@ -361,7 +340,6 @@ def _object_rotation(obj, notes):
 
 def _uses_nodes(datablock):
     """Blender 5.0 always uses nodes and deprecates the ``use_nodes`` switch."""
-    import bpy
     if bpy.app.version >= (5, 0, 0):
         return True
     return bool(getattr(datablock, 'use_nodes', False))

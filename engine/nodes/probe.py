@@ -10,6 +10,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..integrator import _interaction
+from ..render import prepare
+from ..scene import RenderSettings
 from .context import ShadingContext
 
 
@@ -18,9 +21,6 @@ def emission_at_pixel_centres(scene, offset=(0.0, 0.0)):
     the top), and the (H, W) material index hit (-1 for none).  offset:
     a shift of every sample in pixels (x right, y up), e.g. where Cycles'
     filter table puts its first sample."""
-    from ..integrator import _interaction
-    from ..render import prepare
-    from ..scene import RenderSettings
     ctx = prepare(scene, RenderSettings(samples=1, filter_type="BOX", filter_width=1.0, max_bounces=0))
     cam = ctx.camera
     npix = cam.width * cam.height

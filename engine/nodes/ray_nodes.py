@@ -5,6 +5,8 @@ Both read ``ctx.rays`` (engine.nodes.rays.NodeRays); without it they return
 what Cycles returns where it does not ray-trace in shaders: AO 1 (Color
 unchanged) and the shading normal.
 """
+import sys
+
 import numpy as np
 
 from .rays import AO, BEVEL, concentric_disk, make_orthonormals
@@ -33,7 +35,6 @@ def _global_distance(bpy_node):
     socket = bpy_node.inputs.get("Distance")
     if socket is None or socket.is_linked or float(socket.default_value) != 0.0:
         return {"global_distance": None}
-    import sys
     bpy = sys.modules.get("bpy")
     world = getattr(getattr(getattr(bpy, "context", None), "scene", None), "world", None)
     distance = DEFAULT_WORLD_AO_DISTANCE if world is None else float(world.light_settings.distance)

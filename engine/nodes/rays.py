@@ -21,6 +21,8 @@ import weakref
 
 import numpy as np
 
+from ..accel import Accel
+
 VIS_SHADOW = 16
 # Dimension sets: disjoint from the integrator's (1 + 4 step + k, small)
 # and from the all-lights sets (bit 30).
@@ -221,7 +223,6 @@ def local_accel(accel, triangles, instance):
         per_scene = _LOCAL.setdefault(accel, {})
         entry = per_scene.get(instance)
         if entry is None:
-            from ..accel import Accel
             order, starts = per_scene.get("order") or per_scene.setdefault("order", _by_instance(triangles))
             prims = order[starts[instance]:starts[instance + 1]]
             entry = (Accel(_Part(triangles, prims)), prims)

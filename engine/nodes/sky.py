@@ -30,6 +30,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..scene import SunGuide
 from .registry import node
 from . import sky_multiple, sky_preetham
 from .sky_multiple import in_threads
@@ -445,6 +446,18 @@ def sun_luminance_integral(k):
     lum = float(rgb @ np.array([0.2126, 0.7152, 0.0722]))
     half = 0.5 * k["diameter"]
     return lum * 2.0 * np.pi * (1.0 - np.cos(half)) * 0.8
+
+
+def sun_guide(props, matrix):
+    """The SunGuide of a Sky Texture's disc (Cycles' sun guiding) for a sky
+    looked up at M d (``matrix`` M, world direction d), or None where no disc
+    is seen (Cycles would aim at the hidden disc: nothing to guide to)."""
+    k = kernel_params(props)
+    if not k["diameter"] > 0 or not disc_visible(k):
+        return None
+    direction = np.linalg.solve(matrix, sun_direction(k))
+    direction /= np.linalg.norm(direction)
+    return SunGuide(tuple(float(c) for c in direction), 0.5 * k["diameter"], sun_luminance_integral(k))
 
 
 # ----------------------------------------------------------------------------

@@ -14,6 +14,7 @@ sign(l) l^2 pi / 2, l = 2 (y + 0.5) / 256 - 1; rays towards the ground stop
 there.  Computed in float32 with Cycles' operation order, vectorized.
 """
 import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -235,7 +236,6 @@ class Atmosphere:
 
 def in_threads(fn, chunks):
     """fn over chunks on the machine's cores (NumPy releases the GIL), in order."""
-    from concurrent.futures import ThreadPoolExecutor
     workers = max(1, min(len(chunks), os.cpu_count() or 1))
     if workers == 1:
         return [fn(c) for c in chunks]

@@ -72,7 +72,7 @@ def tapped_engine(monkeypatch, needs_engine):
     """Record Ember's progressive images, and its result, while rendering
     through Blender."""
     import dataclasses
-    real = backend.render_function()
+    real = backend.engine().render
     taps = Taps()
 
     def render(scene, settings, progress=None):
@@ -82,5 +82,5 @@ def tapped_engine(monkeypatch, needs_engine):
             settings = dataclasses.replace(settings, samples_per_pass=taps.samples_per_pass)
         tap.result = real(scene, settings, tap)
         return tap.result
-    monkeypatch.setattr(backend, 'render_function', lambda: render)
+    monkeypatch.setattr(backend.engine(), 'render', render)
     return taps

@@ -15,7 +15,7 @@ def engine_available():
     """True once the renderer exposes engine.render.render."""
     try:
         from addon import backend
-        backend.render_function()
+        backend.require_ray_tracer()
     except ImportError as err:
         return False, str(err)
     return True, ""

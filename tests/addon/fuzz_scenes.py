@@ -565,8 +565,9 @@ def run_case(hazards, seed, folder):
     for hazard in hazards:
         names += HAZARDS[hazard][0](scene, rng, folder)
     check = PassCheck()
-    real = backend.render_function
-    backend.render_function = lambda: check.wrap(real())
+    renderer = backend.engine()
+    real = renderer.render
+    renderer.render = check.wrap(real)
     before = len(ember_engine.RENDER_LOG) and ember_engine.RENDER_LOG[-1]
     start = time.perf_counter()
     try:
@@ -574,7 +575,7 @@ def run_case(hazards, seed, folder):
     except RuntimeError:
         pass  # self.report({'ERROR'}) makes the operator raise: the log has the message
     finally:
-        backend.render_function = real
+        renderer.render = real
     log = ember_engine.RENDER_LOG[-1] if ember_engine.RENDER_LOG and ember_engine.RENDER_LOG[-1] is not before else None
     outcome, detail = classify(log, names, check.nonfinite)
     if log is not None and 'export_seconds' in log:

@@ -42,11 +42,12 @@ def test_committed_scene_matches_builder(name, registered_addon):
 def test_scene_opens_with_ember(name, registered_addon):
     """The committed file opens, has a camera, and Ember's export translates
     all of it: no warning (every node known) and a scene that validates."""
+    from addon import backend
     from addon.export import scene as scene_export
     scene = open_scene(name)
     assert scene.camera is not None
     assert bpy.data.filepath.endswith(name + '.blend')
     exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
     assert exported.warnings == [], exported.warnings
-    exported.scene.validate()
+    backend.engine().validate_scene(exported.scene)
     assert exported.triangles > 0 and exported.scene.lights, "no geometry or no lights exported"

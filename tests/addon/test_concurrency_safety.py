@@ -43,7 +43,7 @@ def test_final_render_while_the_viewport_renders(tmp_path, needs_engine):
     view_settings = dataclasses.replace(scene_export.render_settings(scene), samples=12, seed=9)
     # Alone with the viewport's own pass schedule (one sample a pass): the
     # film's rounding depends on how samples are grouped into passes.
-    view_alone = backend.render_function()(view_scene, dataclasses.replace(view_settings,
+    view_alone = backend.engine().render(view_scene, dataclasses.replace(view_settings,
                                                                            samples_per_pass=1)).image
     thread = viewport.RenderThread()
     try:
@@ -90,9 +90,9 @@ def test_two_engine_renders_in_parallel_threads(needs_engine):
     RenderEngine instances do) gives each scene its solo pixels."""
     from addon import backend
     from engine import testscenes
-    render = backend.render_function()
+    render = backend.engine().render
     scenes = [testscenes.cornell_box(24, 24), testscenes.cornell_box(16, 20, light_power=40.0)]
-    settings = [backend.scene_module().RenderSettings(samples=4, seed=s, threads=2) for s in (1, 2)]
+    settings = [backend.engine().RenderSettings(samples=4, seed=s, threads=2) for s in (1, 2)]
     solo = [render(s, r).image for s, r in zip(scenes, settings)]
     out = [None, None]
 

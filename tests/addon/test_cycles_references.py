@@ -49,7 +49,7 @@ def ember_render(refs, name, spp, seed, light_scale=1.0):
         light.energy *= light_scale
     exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
     settings = dataclasses.replace(scene_export.render_settings(scene), samples_per_pass=spp)
-    result = backend.render_function()(exported.scene, settings)
+    result = backend.engine().render(exported.scene, settings)
     image = result.image[..., :3].astype(np.float64)
     assert image.shape == (height, width, 3) and np.isfinite(image).all()
     return image, result.variance.astype(np.float64), scene, bounces

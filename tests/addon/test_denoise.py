@@ -62,7 +62,7 @@ def renders(registered_addon, tmp_path_factory):
     setup_ember(scene, 16, 1, 4)
     exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
     exported.scene.camera = dataclasses.replace(exported.scene.camera, border=BORDER)
-    render = backend.render_function()
+    render = backend.engine().render
     out = {}
     for name, samples, seed in (('16', 16, 1), ('128', 128, 2), ('reference', 512, 3)):
         settings = scene_export.render_settings(scene)

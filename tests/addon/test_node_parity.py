@@ -406,7 +406,7 @@ def parity(registered_addon, tmp_path_factory):
     """(cases, Cycles image, Ember image, warnings) of the one shared scene."""
     from addon import backend
     from addon.export.scene import export_scene
-    probe = backend.load('nodes.probe')
+    from engine.nodes import probe   # the repository's engine, which the add-on loads here
     bpy.ops.wm.read_factory_settings()
     cases = quad_cases() + [(name, 0, {}, 'Color') for name in STRUCTURES]
     scene = build_scene(cases)
@@ -496,7 +496,7 @@ def test_unevaluated_node_variants_fall_back_with_one_warning(registered_addon):
     assert warning is not None and warning.count("'Unrendered'") == 1, warning
     assert attribute.name in warning and geometry.name in warning and "'OBJECT'" in warning
     from addon import backend
-    textures = backend.scene_module().TEXTURE_TYPES
+    textures = backend.engine().TEXTURE_TYPES
     assert translated.lobes
     assert not [lobe for lobe in translated.lobes
                 if isinstance(lobe.roughness, textures) or isinstance(lobe.weight, textures)]
@@ -508,7 +508,7 @@ def test_displacement_output_becomes_bump_only(registered_addon):
     over the BSDF's own normal map."""
     from addon.export import material as material_export
     from addon import backend
-    scene = backend.scene_module()
+    scene = backend.engine()
     bpy.ops.wm.read_factory_settings()
     mat = bpy.data.materials.new("Displaced")
     mat.use_nodes = True

@@ -82,8 +82,8 @@ def test_cryptomatte_manifest_in_metadata(recorded):
     names = [v for k, v in fields.items() if k.endswith('/name')]
     assert names == [f"{bpy.context.view_layer.name}.CryptoObject"]
     manifest = json.loads(next(v for k, v in fields.items() if k.endswith('/manifest')))
-    from addon import backend
-    assert manifest["Cube"] == f"{backend.load('passes').crypto_hash('Cube'):08x}"
+    from engine.passes import crypto_hash
+    assert manifest["Cube"] == f"{crypto_hash('Cube'):08x}"
 
 
 def test_engine_names_are_registered_once(factory_scene):

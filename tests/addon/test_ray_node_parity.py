@@ -121,7 +121,7 @@ def test_export_reads_the_world_ao_distance_and_a_bevel_normal(registered_addon)
     distance; a Bevel on a BSDF's Normal is the material's normal."""
     from addon import backend
     from addon.export import material as material_export
-    scene_module = backend.scene_module()
+    scene_module = backend.engine()
     bpy.ops.wm.read_factory_settings()
     bpy.context.scene.world.light_settings.distance = 3.5
     mat = ao_floor_material(distance=0.0)

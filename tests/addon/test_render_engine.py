@@ -86,8 +86,9 @@ def scripted(monkeypatch):
     engine.validate, which belongs to the engine's own tests)."""
     def install(**kwargs):
         renderer = ScriptedRenderer(**kwargs)
-        monkeypatch.setattr(backend, 'render_function', lambda: renderer)
-        monkeypatch.setattr(backend.scene_module().Scene, 'validate', lambda self: None)
+        monkeypatch.setattr(backend, 'require_ray_tracer', lambda: None)   # it traces no rays
+        monkeypatch.setattr(backend.engine(), 'render', renderer)
+        monkeypatch.setattr(backend.engine(), 'validate_scene', lambda scene: None)
         return renderer
     return install
 
@@ -154,7 +155,7 @@ def test_error_is_reported_not_swallowed(small, scripted):
 def test_missing_renderer_is_reported(small, monkeypatch):
     def missing():
         raise ImportError("Ember needs the 'embreex' package (test)")
-    monkeypatch.setattr(backend, 'render_function', missing)
+    monkeypatch.setattr(backend, 'require_ray_tracer', missing)
     with pytest.raises(RuntimeError, match="embreex"):
         bpy.ops.render.render()
 

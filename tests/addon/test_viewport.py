@@ -254,8 +254,7 @@ def test_incremental_export(cornell, needs_engine):
 
 
 def _rays(camera, width, height):
-    from addon import backend
-    camera_module = backend.load('camera')
+    from engine import camera as camera_module
     model = camera_module.CameraModel(camera, camera_module.PixelFilter('BOX', 1e-6))
     pixels = np.arange(width * height)
     half = np.full(len(pixels), 0.5)

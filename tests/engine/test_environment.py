@@ -5,6 +5,7 @@ right whatever the strategy (furnace, analytic irradiance, agreement).
 Statistical tests form one family (ember_stats.family_level, Sidak over N_TESTS);
 deterministic checks use rounding tolerances.
 """
+import importlib
 import math
 import os
 import sys
@@ -21,7 +22,7 @@ for _path in (ROOT, HERE):
 import chi2 as C  # noqa: E402
 import ember_stats
 from engine import lights as lights_module  # noqa: E402
-from engine import render as render_module  # noqa: E402
+render_module = importlib.import_module("engine.render")  # the module: engine.render is the function
 from engine.environment import (EnvironmentMap, direction_to_equirect,  # noqa: E402
                                 equirect_to_direction)
 from engine.render import render  # noqa: E402

@@ -11,6 +11,7 @@ from engine.nodes.hashing import hash_float, hash_int_to_floats, hash_uint
 from engine.render import prepare
 from engine.scene import (Camera, Instance, Material, Mesh, NodeCall, NodeOutput, RenderSettings, Scene,
                           SceneError)
+from engine.validate import validate_scene
 
 
 def _call(idname, case):
@@ -127,7 +128,7 @@ def test_unknown_node_and_input_are_scene_errors():
                          (NodeOutput(NodeCall("ShaderNodeInvert", {}), "Fac"), "no output")):
         scene = Scene([quad], [Instance(0, materials=[0])], [Material("m", emission=bad)], camera=Camera())
         with pytest.raises(SceneError, match=message):
-            scene.validate()
+            validate_scene(scene)
 
 
 def quad_scene(material, matrix=None, mesh=None):
@@ -236,7 +237,7 @@ def test_unevaluated_properties_are_rejected_by_validation():
     attr = NodeOutput(NodeCall("ShaderNodeAttribute", {}, {"attribute_type": "VIEW_LAYER"}), "Fac")
     scene = Scene([quad], [Instance(0, materials=[0])], [Material("m", emission=attr)], camera=Camera())
     with pytest.raises(SceneError, match="VIEW_LAYER"):
-        scene.validate()
+        validate_scene(scene)
 
 
 def test_context_subsets_keep_missing_attributes_missing():

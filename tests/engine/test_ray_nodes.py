@@ -15,6 +15,7 @@ from engine.render import prepare, render
 from engine.sampler import Sampler
 from engine.scene import (Camera, Instance, Material, Mesh, NodeCall, NodeOutput, RenderSettings, Scene,
                           World)
+from engine.validate import validate_scene
 
 
 def quad(corners):
@@ -203,7 +204,7 @@ def test_a_bevel_output_as_the_material_normal():
     from types import SimpleNamespace
     bevel = NodeOutput(NodeCall("ShaderNodeBevel", {"Radius": 0.2}, {"samples": 4}), "Normal")
     scene = scene_of([cube_mesh()], Material("bevelled", normal=bevel))
-    scene.validate()
+    validate_scene(scene)
     ctx = points_context(scene, [(0.97, 0.0), (0.0, 0.0)], 64)
     tex = textures.MaterialTextures(scene.materials)
     hit = SimpleNamespace(ns=ctx.ns, ng=ctx.ng, wo=ctx.wo, mat=np.zeros(len(ctx), int), back=ctx.back,

@@ -10,6 +10,7 @@ from engine.render import render
 from engine.scene import (Camera, ImageTexture, Instance, Lobe, Material, Math, Mesh, MixColor,
                           RenderSettings, Scene, SceneError, TextureImage, World)
 from engine.testscenes import look_at
+from engine.validate import validate_scene
 
 N = 4                       # checker cells per side
 SIZE = 16                   # pixels per side: 4 x 4 per cell
@@ -124,9 +125,9 @@ def test_negative_textured_weights_clamp_to_zero():
 def test_textured_weight_and_ior_are_validated():
     bad = Lobe("glass", ior=Math("HYPOT", CHECKER, 1.0))
     with pytest.raises(SceneError, match="lobe 0 ior"):
-        quad_scene(Material("bad", (bad,))).validate()
+        validate_scene(quad_scene(Material("bad", (bad,))))
     with pytest.raises(SceneError, match="lobe 0 weight"):
-        quad_scene(Material("bad", (Lobe("diffuse", weight=MixColor("BLUR", 0.5, 1.0, 0.0)),))).validate()
+        validate_scene(quad_scene(Material("bad", (Lobe("diffuse", weight=MixColor("BLUR", 0.5, 1.0, 0.0)),))))
 
 
 # ----------------------------------------------------------------------------

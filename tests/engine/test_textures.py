@@ -10,6 +10,7 @@ from engine.render import prepare, render
 from engine.scene import (Bump, Camera, ImageTexture, Instance, Lobe, Material, Math, Mesh, MixColor,
                           NormalMap, RenderSettings, Scene, SceneError, TextureImage, World)
 from engine.testscenes import look_at
+from engine.validate import validate_scene
 
 # A 2 x 2 image, row 0 at the TOP: (top-left, top-right; bottom-left, bottom-right).
 TL, TR, BL, BR = (0.1, 0.2, 0.3), (0.4, 0.5, 0.6), (0.7, 0.8, 0.9), (1.0, 0.0, 0.5)
@@ -278,7 +279,7 @@ def test_normal_map_without_uvs_keeps_the_normal():
 def test_bad_textures_raise_scene_errors_naming_the_material(bad, message):
     scene = ortho_scene(Material("broken", (Lobe("diffuse", bad),)))
     with pytest.raises(SceneError, match="broken") as err:
-        scene.validate()
+        validate_scene(scene)
     assert message in str(err.value)
 
 
