@@ -2,6 +2,7 @@
 and stays as built through a render, and the pass observer is told of every
 bit of light the stages add."""
 import dataclasses
+import importlib
 import threading
 from dataclasses import replace
 
@@ -9,13 +10,15 @@ import numpy as np
 import pytest
 
 from engine import pass_events
-from engine import render as render_module
 from engine.film import Film
 from engine.integrator import Context, ShadowBatch, Vertex
 from engine.passes import PassConfig
 from engine.render import prepare, render
 from engine.scene import Lobe, Material, PointLight, RenderSettings
 from engine.testscenes import cornell_box
+
+# engine.render is the render function (engine/__init__.py); the module by path.
+render_module = importlib.import_module("engine.render")
 
 
 def glowing_box(size=12, emission=(2.0, 1.0, 0.5)):
