@@ -144,12 +144,15 @@ def validate_material(mat, index):
 
 def _validate_lobe_extras(lobe, k, what, n_lobes):
     """The Fresnel, IOR, layering and weight parameters of a lobe."""
-    for name in ("ior", "weight"):
+    for name in ("ior", "weight", "anisotropy"):
         value = getattr(lobe, name, None)
         if is_texture(value):
             validate_texture(value, f"{what} lobe {k} {name}")
         elif value is not None and not np.isfinite(value):
             raise SceneError(f"{what}: lobe {k} {name} is not finite")
+    anisotropy = getattr(lobe, "anisotropy", 0.0)
+    if not is_texture(anisotropy) and not -1.0 <= anisotropy <= 1.0:   # the Glossy node's range
+        raise SceneError(f"{what}: lobe {k} anisotropy must be in [-1, 1], got {anisotropy}")
     ior = getattr(lobe, "ior", 1.5)
     if not is_texture(ior) and ior <= 0:
         raise SceneError(f"{what}: lobe {k} IOR must be > 0, got {ior}")

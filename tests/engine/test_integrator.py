@@ -258,6 +258,10 @@ def test_grazing_camera_is_finite():
     (lambda s: setattr(s.instances[0], "materials", [5]), "material"),
     (lambda s: setattr(s.camera, "resolution", (0, 10)), "resolution"),
     (lambda s: setattr(s.lights[0], "radius", -1.0), "radius"),
+    (lambda s: setattr(s.materials[0], "lobes", (Lobe("glossy_anisotropic", (1, 1, 1), 0.3, anisotropy=np.nan),)),
+     "anisotropy"),
+    (lambda s: setattr(s.materials[0], "lobes", (Lobe("glossy_anisotropic", (1, 1, 1), 0.3, anisotropy=3.0),)),
+     "anisotropy"),
 ])
 def test_bad_input_is_a_clear_error(mutate, message):
     mesh, inst = big_plane()
