@@ -1,6 +1,7 @@
 """Render an engine-native test scene without Blender.
 
     python -m engine [--scene cornell] [--size 512 512] [--samples 64] [-o out/cornell]
+    python -m engine --compile-kernels
 
 Writes <out>.exr (linear) and <out>.png (sRGB) through OpenImageIO and prints
 progress and throughput; useful to profile the engine alone.
@@ -9,6 +10,7 @@ import argparse
 import os
 import sys
 
+from . import kernels
 from .imageio import write_image
 from .render import render
 from .scene import RenderSettings, SceneError
@@ -45,7 +47,13 @@ def main(argv=None):
     ap.add_argument("--max-paths", type=int, default=1 << 18)
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("-o", "--output", default=os.path.join("out", "engine_cornell"))
+    ap.add_argument("--compile-kernels", action="store_true",
+                    help="only compile every kernel into the disk cache (make setup does this), then exit")
     args = ap.parse_args(argv)
+    if args.compile_kernels:
+        seconds = kernels.warm_cache()
+        print(f"ember: {len(kernels.KERNELS)} kernels compiled or loaded in {seconds:.1f} s ({kernels.cache_dir()})")
+        return 0
 
     scene = SCENES[args.scene](*args.size)
     settings = RenderSettings(samples=args.samples, samples_per_pass=args.samples_per_pass,

@@ -28,7 +28,7 @@ Debian's Blender 3.4 crash at exit).
 ``configure(True)`` starts one background thread that imports numba and
 compiles every kernel (or loads it from the disk cache): ``make setup`` and
 the add-on (when it is enabled) start it early, so the cache is warm before
-the first render.  ``python -m engine.kernels`` fills the cache and waits.
+the first render.  ``python -m engine --compile-kernels`` fills the cache and waits.
 The cache is ``NUMBA_CACHE_DIR`` or ``~/.cache/ember/numba`` (XDG_CACHE_HOME
 respected), one sub-folder per version of the engine's sources, filled by
 one process at a time (``cache_lock``).  The JIT is off with
@@ -455,10 +455,3 @@ def warm_cache():
         pass
     return time.perf_counter() - t0
 
-
-if __name__ == "__main__":
-    import importlib as _importlib
-    # Run as a script this file is __main__; the kernels live in the package's module.
-    _module = _importlib.import_module(__package__ + ".kernels")
-    _seconds = _module.warm_cache()
-    print(f"ember: {len(_module.KERNELS)} kernels compiled or loaded in {_seconds:.1f} s ({_module.cache_dir()})")

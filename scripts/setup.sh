@@ -34,5 +34,5 @@ fi
 # engine's sources; seconds when already done), so that no render waits for
 # them or runs on NumPy for lack of them.
 if [ "${EMBER_JIT:-1}" != 0 ]; then
-  PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" .venv/bin/python -m engine.kernels
+  PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" .venv/bin/python -m engine --compile-kernels
 fi
