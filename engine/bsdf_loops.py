@@ -191,6 +191,16 @@ def _fresnel_s(code, ior, cos):
 
 
 @helper
+def _add_specular(f_0, f_1, f_2, w, code, ior, color, f0, tint, cos, spec):
+    """f plus one Fresnel-weighted specular lobe (w, color, f0, tint: the
+    lobe's RGB rows)."""
+    s = _fresnel_s(code, ior, cos)
+    return (f_0 + w[0] * (_fresnel(code, color[0], f0[0], tint[0], s, cos) * spec),
+            f_1 + w[1] * (_fresnel(code, color[1], f0[1], tint[1], s, cos) * spec),
+            f_2 + w[2] * (_fresnel(code, color[2], f0[2], tint[2], s, cos) * spec))
+
+
+@helper
 def _fresnel(code, color, f0, tint, s, cos):
     """One channel of bsdf._fresnel given _fresnel_s's s."""
     if code == F_SCHLICK:
@@ -473,11 +483,8 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
             elif kd == GLOSSY_ANISOTROPIC and upper:
                 ax, ay = _aniso_alphas(alpha[i, k], lobes[ANISOTROPY][i, k])
                 spec, pk, cos = _ggx_aniso(ax, ay, wox, woy, woz, wix, wiy, wiz)
-                code = fresnel[i, k]
-                s = _fresnel_s(code, ior[i, k], cos)
-                f_0 += w[i, k, 0] * (_fresnel(code, color[i, k, 0], f0[i, k, 0], edge[i, k, 0], s, cos) * spec)
-                f_1 += w[i, k, 1] * (_fresnel(code, color[i, k, 1], f0[i, k, 1], edge[i, k, 1], s, cos) * spec)
-                f_2 += w[i, k, 2] * (_fresnel(code, color[i, k, 2], f0[i, k, 2], edge[i, k, 2], s, cos) * spec)
+                f_0, f_1, f_2 = _add_specular(f_0, f_1, f_2, w[i, k], fresnel[i, k], ior[i, k], color[i, k],
+                                              f0[i, k], edge[i, k], cos, spec)
                 p += sel[i, k] * pk
             elif (kd == GLOSSY and upper) or ((kd == GLASS or kd == REFRACTION) and alpha[i, k] > MIN_ALPHA
                                                and (upper or lower)):
@@ -490,11 +497,8 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
                     spec, common, cos, pk = _refraction(alpha[i, k], _eta(ior[i, k], kd, back[i]),
                                                         wox, woy, woz, wix, wiy, wiz)
                 if kd == GLOSSY:
-                    code = fresnel[i, k]
-                    s = _fresnel_s(code, ior[i, k], cos)
-                    f_0 += w[i, k, 0] * (_fresnel(code, color[i, k, 0], f0[i, k, 0], edge[i, k, 0], s, cos) * spec)
-                    f_1 += w[i, k, 1] * (_fresnel(code, color[i, k, 1], f0[i, k, 1], edge[i, k, 1], s, cos) * spec)
-                    f_2 += w[i, k, 2] * (_fresnel(code, color[i, k, 2], f0[i, k, 2], edge[i, k, 2], s, cos) * spec)
+                    f_0, f_1, f_2 = _add_specular(f_0, f_1, f_2, w[i, k], fresnel[i, k], ior[i, k], color[i, k],
+                                                  f0[i, k], edge[i, k], cos, spec)
                     p += sel[i, k] * pk
                     continue
                 # bsdf._eval_glass: the dielectric Fresnel splits reflection and refraction.

@@ -70,15 +70,23 @@ def test_sphere_light_falloff_every_strategy(strategy):
     r_light, h, P, kind, smooth = 0.4, 1.0, 30.0, "LINEAR", 0.3
     light = PointLight((0, 0, h), (P, P, P), radius=r_light, falloff=kind, falloff_smooth=smooth)
     scene, rho = analytic_scene(light)
+    r, radial, unique, back = render_plane(scene, strategy, seed=13)
+    L = P / (4 * np.pi ** 2 * r_light ** 2)
+    expected = rho / np.pi * sphere_irradiance(unique, h, r_light, L, kind, smooth)[back].reshape(radial.shape)
+    check_against(r, expected, radial > r_light + 0.15, f"sphere light, {kind} falloff ({strategy})")
+
+
+def render_plane(scene, strategy, seed):
+    """The plane under the light (box filter at pixel centres), each
+    pixel's distance from the point below the light, and those distances
+    once each (``unique[back]`` is ``radial``)."""
     spp = 1024 if strategy == "bsdf" else 64
-    r = render(scene, RenderSettings(samples=spp, samples_per_pass=spp, seed=13, strategy=strategy,
+    r = render(scene, RenderSettings(samples=spp, samples_per_pass=spp, seed=seed, strategy=strategy,
                                      filter_type="BOX", filter_width=1e-3))
     x, y = pixel_centres(40, 4.0)
     radial = np.hypot(x, y)
     unique, back = np.unique(np.round(radial, 12), return_inverse=True)
-    L = P / (4 * np.pi ** 2 * r_light ** 2)
-    expected = rho / np.pi * sphere_irradiance(unique, h, r_light, L, kind, smooth)[back].reshape(radial.shape)
-    check_against(r, expected, radial > r_light + 0.15, f"sphere light, {kind} falloff ({strategy})")
+    return r, radial, unique, back
 
 
 def test_quadrature_is_the_sphere_formula():
@@ -102,12 +110,7 @@ def test_area_light_constant_falloff(strategy):
     m = np.eye(4)
     m[:3, 3] = (0, 0, h)
     scene, rho = analytic_scene(AreaLight(m, (P, P, P), "DISK", 2 * R, falloff="CONSTANT"))
-    spp = 1024 if strategy == "bsdf" else 64
-    r = render(scene, RenderSettings(samples=spp, samples_per_pass=spp, seed=17, strategy=strategy,
-                                     filter_type="BOX", filter_width=1e-3))
-    x, y = pixel_centres(40, 4.0)
-    radial = np.hypot(x, y)
-    unique, back = np.unique(np.round(radial, 12), return_inverse=True)
+    r, radial, unique, back = render_plane(scene, strategy, seed=17)
     L = P / (np.pi * np.pi * R * R)
     k = (np.arange(512) + 0.5) / 512
     rr, ph = R * np.sqrt(k)[:, None], (k * 2 * np.pi)[None, :]   # uniform in area: dA = pi R^2 / n^2
