@@ -23,6 +23,13 @@ if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ]; then
   .venv/bin/python -m pip install -q -r requirements.txt
   touch "$stamp"
 fi
+# The checkout on the venv's path (a .pth file, as Makefile's PYTHONPATH):
+# engine/ and farm/ then import in every process of the venv, among them a
+# `dask scheduler` started from any folder, which unpickles the farm's tasks
+# and must import the module they name.  (An editable pip install would do
+# the same through a build backend and its own downloads; this needs none.)
+site=$(.venv/bin/python -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
+printf '%s\n' "$PWD" > "$site/ember-checkout.pth"
 if [ "${EMBER_WITH_BLENDER:-0}" = 1 ] && ! command -v blender >/dev/null 2>&1; then
   if [ "$(id -u)" = 0 ]; then
     apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q blender python3-numpy
