@@ -28,7 +28,7 @@ brings: it converges to the share of the direct light MIS takes from light
 sampling (see _add_light_weight).
 """
 import threading
-from dataclasses import fields, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -37,6 +37,7 @@ from .lights import scene_lights_in_order
 from .lobes import kinds_of_class
 from .passes import (AOV_COLOR, CRYPTO, LIGHT_CLASSES, STRATEGY, PassConfig, crypto_manifest, is_aov,
                      light_groups)
+from .rows import take_arrays
 from .sampling import cosine_hemisphere
 from .vec import dot, luminance, to_local, to_world
 
@@ -420,10 +421,7 @@ def _after_scatter(ctx, paths, hit, lobes, lobes_wo, tt, bb, wo_l, through, tile
 
 def lobe_rows(lobes, rows):
     """The lobes of ``rows`` (every per-ray array taken)."""
-    n = len(lobes.kind)
-    return replace(lobes, **{f.name: getattr(lobes, f.name)[rows] for f in fields(lobes)
-                             if isinstance(getattr(lobes, f.name), np.ndarray)
-                             and len(getattr(lobes, f.name)) == n})
+    return take_arrays(lobes, rows, len(lobes.kind))
 
 
 def _light_passes(tile):

@@ -8,27 +8,12 @@ scatters, with its shading frame, its lobes and their wo-only weights.
 ``LightSample`` and ``ShadowBatch``: one round of next-event estimation
 and the shadow rays it needs.
 """
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..rows import rows_of, take_arrays
 from ..vec import to_local, to_world
-
-
-def rows_of(keep):
-    """Indices of a boolean mask (indices pass through)."""
-    keep = np.asarray(keep)
-    return np.flatnonzero(keep) if keep.dtype == bool else keep
-
-
-def take_arrays(record, keep, n=None):
-    """``record`` (a dataclass) with the rows ``keep`` of every per-row
-    array field taken (fields of another length, and non-arrays, stay);
-    ``n``: the row count (every array field counts when None)."""
-    idx = rows_of(keep)
-    return replace(record, **{f.name: np.take(getattr(record, f.name), idx, axis=0) for f in fields(record)
-                              if isinstance(getattr(record, f.name), np.ndarray)
-                              and (n is None or len(getattr(record, f.name)) == n)})
 
 
 @dataclass
