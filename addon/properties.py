@@ -87,6 +87,15 @@ class EmberRenderSettings(bpy.types.PropertyGroup):
         description="Transparent surfaces (Transparent BSDF, Principled Alpha) a path or shadow ray "
                     "may pass through, counted apart from Max Bounces; as Cycles' (default 8)",
         default=8, min=0, max=1024)
+    diffuse_bounces: IntProperty(
+        name="Diffuse Bounces", description="Diffuse bounces a path may take (within Max Bounces); "
+        "as Cycles' (default 4)", default=4, min=0, max=1024)
+    glossy_bounces: IntProperty(
+        name="Glossy Bounces", description="Glossy and mirror reflections a path may take (within Max "
+        "Bounces); as Cycles' (default 4)", default=4, min=0, max=1024)
+    transmission_bounces: IntProperty(
+        name="Transmission Bounces", description="Refractions and other transmissions a path may take "
+        "(within Max Bounces); as Cycles' (default 12)", default=12, min=0, max=1024)
     light_selection: EnumProperty(
         name="Light Selection", description="How a light is chosen for next-event estimation",
         items=LIGHT_SELECTION_ITEMS, default='AUTO')

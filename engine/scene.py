@@ -493,6 +493,13 @@ class RenderSettings:
     threads: int = 0
     time_limit: float = 0.0
     transparent_max_bounces: int = 8
+    # Cycles' Light Paths > Max Bounces by kind: after more than this many
+    # bounces of a kind the next vertex only adds its emission (as after
+    # max_bounces).  The engine's defaults leave max_bounces alone; the
+    # add-on's are Cycles' (4, 4, 12).
+    diffuse_bounces: int = 1024
+    glossy_bounces: int = 1024
+    transmission_bounces: int = 1024
     # Sample an HDRI world by max(L - mean, 0) instead of L (MIS compensation,
     # Karlik et al. 2019): BSDF sampling covers the dim parts, NEE spends its
     # samples on what stands out.  Only with strategy 'mis' (NEE alone would

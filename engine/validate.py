@@ -233,6 +233,9 @@ def validate_settings(s):
         raise SceneError("settings: max bounces must be >= 0")
     if s.transparent_max_bounces < 0:
         raise SceneError("settings: transparent max bounces must be >= 0")
+    for kind in ("diffuse", "glossy", "transmission"):
+        if getattr(s, kind + "_bounces") < 0:
+            raise SceneError(f"settings: {kind} bounces must be >= 0")
     if s.max_paths < 1024:
         raise SceneError("settings: max_paths must be >= 1024")
     if s.sample_start < 0 or s.sample_start + s.samples > 2 ** 32:

@@ -131,6 +131,7 @@ def configure_ember(scene, samples, seed, bounces, adaptive):
     e.seed = seed
     e.max_bounces = bounces
     e.transparent_max_bounces = bounces
+    e.diffuse_bounces = e.glossy_bounces = e.transmission_bounces = bounces
     e.clamp = 0.0
     e.time_limit = 0.0
     e.filter_type = 'BLACKMAN_HARRIS'

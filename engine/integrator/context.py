@@ -50,6 +50,10 @@ class Context:
     transparent_mat: np.ndarray
     transparent_shadows: bool
     transparent_limit: int
+    # Cycles' per-kind bounce limits (diffuse, glossy, transmission): paths
+    # count their bounces by kind only when some limit is below max_bounces.
+    count_kinds: bool
+    kind_limits: np.ndarray
     # Extra passes: their PassConfig, the light group of each emitter (None
     # without light groups) and the centre-ray record.
     pass_config: object
@@ -71,6 +75,7 @@ class Context:
                    **_visibility(lights, triangles),
                    transparent_mat=transparent_mat, transparent_shadows=bool(transparent_mat.any()),
                    transparent_limit=max(int(settings.transparent_max_bounces), 1),
+                   **_kind_limits(settings),
                    pass_config=pass_config, emitter_groups=pass_events.emitter_groups(pass_config, lights),
                    centres=pass_events.CentreRecord(camera.width * camera.height))
 
@@ -79,6 +84,13 @@ def _delta_emitters(lights):
     """LightSet indices of the lights only light sampling can find (each
     light type says which of its lights are delta)."""
     return np.nonzero(lights.delta)[0]
+
+
+def _kind_limits(settings):
+    """The diffuse, glossy and transmission limits; counting them costs a
+    ray-kind draw per bounce, so only when one of them can end a path first."""
+    limits = np.array([settings.diffuse_bounces, settings.glossy_bounces, settings.transmission_bounces])
+    return dict(count_kinds=bool(np.any(limits < settings.max_bounces)), kind_limits=limits)
 
 
 def _visibility(lights, triangles):

@@ -47,6 +47,10 @@ class Paths:
     pseed: np.ndarray
     sample: np.ndarray
     aux: np.ndarray       # (N, k) per-path state of the extra passes (k = 0 without)
+    # Bounces so far by Cycles' kind (KIND_DIFFUSE, KIND_GLOSSY,
+    # KIND_TRANSMISSION columns), for the per-kind limits and the Light Path
+    # node's depths; (N, 0) when neither needs them.
+    kinds: np.ndarray
 
     def __len__(self):
         return len(self.pix)

@@ -17,6 +17,7 @@ from ..sampling import power_heuristic
 from ..vec import dot, frame, row_any_positive, row_max, to_local
 from . import transparency, visibility
 from .records import Hit, LightSample, RayHits, ShadowBatch, Vertex, RowView
+from ..geometry import VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION
 from .visibility import VIS_INDIRECT
 
 
@@ -386,12 +387,27 @@ def remember_vertex(ctx, paths, v, through, every, ray, depth):
     paths.prev_n = unless(through, paths.prev_n, hit.ng)
     if every is not None:
         paths.prev_every = unless(through, paths.prev_every, every)
+    if ctx.track_rays or ctx.count_kinds:
+        kind = visibility.ray_kind(ctx, v, paths, depth)
+        if ctx.count_kinds:
+            count_kind(paths, kind, through)
     if ctx.track_rays:
-        paths.ray = unless(through, ray, visibility.ray_kind(ctx, v, paths, depth))
+        paths.ray = unless(through, ray, kind)
     elif ctx.triangles.visibility is not None:
         # Only camera (or shadow) visibility differs: any indirect kind sees
         # the same triangles, but no longer as a camera ray.
         paths.ray = unless(through, ray, np.full(len(ray), VIS_INDIRECT, np.uint8))
+
+
+KIND_COLUMNS = (VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION)   # Paths.kinds columns
+
+
+def count_kind(paths, kind, through):
+    """One more bounce of its ``kind`` (VIS_* bit, Cycles' closure kind) for
+    each path that scattered (a transparent pass is not a bounce)."""
+    scattered = ~through
+    for column, bit in enumerate(KIND_COLUMNS):
+        paths.kinds[:, column] += (kind == bit) & scattered
 
 
 def unless(mask, old, new):

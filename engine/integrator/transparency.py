@@ -35,6 +35,8 @@ def last_vertices(ctx, paths):
     max_bounces, or (Cycles' TERMINATE_ON_NEXT_SURFACE) past the last
     transparent pass."""
     last = paths.bounce > ctx.settings.max_bounces
+    if ctx.count_kinds:
+        last |= np.any(paths.kinds > ctx.kind_limits, axis=1)
     if ctx.transparent_shadows:
         last |= paths.tbounce >= ctx.transparent_limit
     return last

@@ -95,6 +95,8 @@ def setup_ember(scene, samples, seed, max_bounces, filter_type='BLACKMAN_HARRIS'
     ember.seed = seed
     ember.max_bounces = max_bounces
     ember.transparent_max_bounces = max_bounces   # as setup_cycles
+    for name in ('diffuse_bounces', 'glossy_bounces', 'transmission_bounces'):
+        setattr(ember, name, max_bounces)         # as setup_cycles
     ember.clamp = 0.0
     ember.time_limit = 0.0
     ember.filter_type = filter_type
@@ -366,10 +368,13 @@ def load_reference(name, scene=None, bounces=None):
     return pixels[..., :3], pixels[..., 3:], header
 
 
-def render_for_reference(scene, tmp_path, name, taps, spp, seed, bounces):
+def render_for_reference(scene, tmp_path, name, taps, spp, seed, bounces, configure=None):
     """Ember's render through Blender (one pass) and the variance of each
-    pixel's mean (tapped_engine keeps the engine's result)."""
+    pixel's mean (tapped_engine keeps the engine's result); ``configure``
+    (scene.ember -> None) changes settings after setup_ember."""
     setup_ember(scene, spp, seed=seed, max_bounces=bounces)
+    if configure is not None:
+        configure(scene.ember)
     taps.samples_per_pass = spp
     image = render_array(scene, tmp_path, "ember_" + name)
     from addon import engine as ember_engine
