@@ -405,6 +405,18 @@ def _math_raw(op, a, b, c):
     raise ValueError(f"unknown math operation {op!r}")
 
 
+def possible_emission(expr):
+    """The constant standing for an emission whose mean over UVs is 0 but
+    which may emit elsewhere (a Light Path output, a texture dark where the
+    grid samples it): as Cycles' emission estimate, which takes 1 for what it
+    cannot fold, it keeps the mesh a light; its upper bound where finite."""
+    lo, hi = value_range(expr)
+    if not hi > 0:
+        return (0.0, 0.0, 0.0)
+    v = float(hi) if np.isfinite(hi) else 1.0
+    return (v, v, v)
+
+
 def constant_of(fn, is_color):
     """A representative constant of an expression: its mean over a UV grid
     (used where one number per material is needed, e.g. the albedo AOV)."""
@@ -559,6 +571,9 @@ class MaterialTextures:
         self.normals = {}        # material -> NormalMap | Bump
         self.constants = [self._constant_material(i, m) for i, m in enumerate(materials)]
         self.any = bool(self.lobe_fields or self.emission)
+        # A Light Path node reads the ray's kind and the path's depths: the
+        # integrator then tracks them (Context.light_path).
+        self.light_path = any(call.idname == "ShaderNodeLightPath" for call, _ in self.compiler.calls.values())
 
     def _constant_material(self, i, mat):
         lobes = [self._constant_lobe(i, j, lobe) for j, lobe in enumerate(mat.lobes)]
@@ -567,6 +582,8 @@ class MaterialTextures:
             fn = self.compiler.color(emission)
             self.emission[i] = fn
             emission = constant_of(fn, True)
+            if max(emission) <= 0:
+                emission = possible_emission(mat.emission)
         normal = getattr(mat, "normal", None)
         if normal is not None:
             self.normals[i] = self._compile_normal(normal)

@@ -54,6 +54,9 @@ class Context:
     # count their bounces by kind only when some limit is below max_bounces.
     count_kinds: bool
     kind_limits: np.ndarray
+    # Some material reads a Light Path node: paths track their ray kind and
+    # count their bounces by kind, and hits carry the node's path columns.
+    light_path: bool
     # Extra passes: their PassConfig, the light group of each emitter (None
     # without light groups) and the centre-ray record.
     pass_config: object
@@ -70,12 +73,13 @@ class Context:
         if pass_config is None:
             pass_config = pass_events.PassConfig()
         transparent_mat = np.any(materials.kind == bsdf.TRANSPARENT, axis=1)
+        light_path = bool(getattr(materials.textures, "light_path", False))
         return cls(accel, triangles, materials, lights, camera, world, settings, sampler, bump_model,
                    kernels.enabled(), _delta_emitters(lights), np.arange(lights.count),
-                   **_visibility(lights, triangles),
+                   **_visibility(lights, triangles, light_path),
                    transparent_mat=transparent_mat, transparent_shadows=bool(transparent_mat.any()),
                    transparent_limit=max(int(settings.transparent_max_bounces), 1),
-                   **_kind_limits(settings),
+                   **_kind_limits(settings, light_path), light_path=light_path,
                    pass_config=pass_config, emitter_groups=pass_events.emitter_groups(pass_config, lights),
                    centres=pass_events.CentreRecord(camera.width * camera.height))
 
@@ -86,18 +90,19 @@ def _delta_emitters(lights):
     return np.nonzero(lights.delta)[0]
 
 
-def _kind_limits(settings):
+def _kind_limits(settings, light_path=False):
     """The diffuse, glossy and transmission limits; counting them costs a
     ray-kind draw per bounce, so only when one of them can end a path first."""
     limits = np.array([settings.diffuse_bounces, settings.glossy_bounces, settings.transmission_bounces])
-    return dict(count_kinds=bool(np.any(limits < settings.max_bounces)), kind_limits=limits)
+    return dict(count_kinds=light_path or bool(np.any(limits < settings.max_bounces)), kind_limits=limits)
 
 
-def _visibility(lights, triangles):
-    """The visibility flags of a scene (Blender's Ray Visibility)."""
+def _visibility(lights, triangles, light_path=False):
+    """The visibility flags of a scene (Blender's Ray Visibility); a Light
+    Path node needs the ray kinds too."""
     vis = lights.visibility
     light_excludes = bool(np.any((vis & VIS_INDIRECT) != VIS_INDIRECT))
     tv = triangles.visibility
     return dict(light_excludes=light_excludes, light_no_shadow=bool(np.any((vis & VIS_SHADOW) == 0)),
-                track_rays=light_excludes or (tv is not None and bool(np.any((tv & VIS_INDIRECT) != VIS_INDIRECT))),
+                track_rays=light_excludes or light_path or (tv is not None and bool(np.any((tv & VIS_INDIRECT) != VIS_INDIRECT))),
                 shadow_skips=tv is not None and bool(np.any((tv & VIS_SHADOW) == 0)))

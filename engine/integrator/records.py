@@ -117,6 +117,9 @@ class Hit:
     bary: object = None
     depth: object = None
     ray: object = None
+    # The Light Path node's path columns (nodes.context.PATH_COLUMNS), only
+    # when some material reads that node (Context.light_path).
+    path: object = None
     # The ShadingContext of these points, made on first use
     # (ShadingContext.of_hit); a taken Hit makes its own.
     shading: object = None

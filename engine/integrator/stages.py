@@ -12,6 +12,7 @@ from .. import bsdf, nee, throughput
 from ..accel import shadow_rays, shadow_rays_f32
 from ..hits import hit_geometry
 from ..nodes import NodeRays, ShadingContext
+from ..nodes.context import PATH_COLUMNS
 from ..sampler import BSDF, LIGHT, emitter_set, vertex_set
 from ..sampling import power_heuristic
 from ..vec import dot, frame, row_any_positive, row_max, to_local
@@ -162,8 +163,14 @@ def surface_emission(ctx, paths, hit, depth, obs):
         return
     if ctx.settings.strategy == "mis":
         emitter = ctx.lights.emitter_of_triangle(hit.mat[em])
-        pdf = ctx.lights.triangle_pdf(hit.prim[em], paths.mis_o[em], hit.p[em], hit.ng[em])
-        w = mis_hit(ctx, paths, em, emitter, pdf)
+        w = np.ones(len(em))
+        # A surface that is no light (its emission's estimate is 0) is found
+        # by BSDF rays alone: weight 1.
+        lit = np.flatnonzero(emitter >= 0)
+        if len(lit):
+            rows = em[lit]
+            pdf = ctx.lights.triangle_pdf(hit.prim[rows], paths.mis_o[rows], hit.p[rows], hit.ng[rows])
+            w[lit] = mis_hit(ctx, paths, rows, emitter[lit], pdf)
     else:
         w = mis_hit(ctx, paths, em, None, None)
     unweighted = paths.beta[em] * emission[em]
@@ -183,12 +190,36 @@ def interaction(ctx, paths, t, prim, bu, bv):
     hit = Hit(p, ng, ns, -d, np.take(tr.material, prim), prim, ctx.accel.offset_scale(p), uv, back=back,
               bary=np.stack([bu, bv], axis=1), depth=getattr(paths, "bounce", None),
               ray=getattr(paths, "ray", None))
+    if ctx.light_path:
+        hit.path = path_columns(paths, p)
     if getattr(tr, "tangent", None) is not None:
         w = np.stack([1.0 - bu - bv, bu, bv], axis=1)
         # Unnormalised, as Cycles interpolates its tangent attribute.
         hit.tangent = np.einsum("nk,nkj->nj", w, tr.tangent[prim])
         hit.tangent_sign = np.where(np.einsum("nk,nk->n", w, tr.tangent_sign[prim]) < 0, -1.0, 1.0)
     return hit
+
+
+def path_columns(paths, p):
+    """The Light Path node's PATH_COLUMNS at hits p: bounces by kind,
+    transparent passes, the ray's length from its last vertex (Cycles
+    passes transparent surfaces by moving tmin) and whether the last bounce
+    was singular (a camera ray is not)."""
+    length = np.linalg.norm(p - paths.mis_o, axis=1)
+    singular = paths.prev_delta & (paths.bounce > 0)
+    return np.column_stack([paths.kinds, paths.tbounce, length, singular]).astype(np.float64)
+
+
+def light_sample_path(ctx, paths, hit):
+    """What a Light Path node in a light sample's emission reads (None when
+    no material has one): as Cycles' light_path.h for PATH_RAY_EMISSION, the
+    depth one bounce further than the vertex, its bounces by kind and
+    transparent passes, not singular; the ray length is the sample's."""
+    if not ctx.light_path:
+        return None
+    columns = path_columns(paths, hit.p)
+    columns[:, PATH_COLUMNS.index("Is Singular Ray")] = 0.0
+    return paths.bounce + 1, columns
 
 
 def _hit_uv(tr, prim, bu, bv):
@@ -304,7 +335,7 @@ def light_sample(ctx, paths, v, e, p_sel, u):
     vertex: its MIS-weighted contribution and the shadow rays of the
     vertices it brings light to (None when none)."""
     hit = v.hit
-    ls = ctx.lights.sample(e, hit.p, u[:, 0], u[:, 1], u[:, 2])
+    ls = ctx.lights.sample(e, hit.p, u[:, 0], u[:, 1], u[:, 2], path=light_sample_path(ctx, paths, hit))
     wi_l = v.local(ls.wi)
     f, pdf_b = bsdf.eval_pdf(v.lobes, v.wo_l, wi_l, *v.lobes_wo)
     if ctx.light_excludes:

@@ -26,6 +26,9 @@ class LightSample:
     pdf: np.ndarray       # (N,) solid-angle pdf, 0 = no sample
     delta: np.ndarray     # (N,) bool
     on_surface: np.ndarray  # (N,) bool: the point lies on a triangle (shorten the shadow ray)
+    # What a Light Path node in an emission reads of the sampling path:
+    # (depth (N,), PATH_COLUMNS (N, 6)) or None (see LightSet.sample).
+    path: object = None
 
 
 def selection_power(rgb):

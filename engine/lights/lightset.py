@@ -156,13 +156,14 @@ class LightSet:
         return self.dist.pmf[emitter]
 
     # -- NEE ----------------------------------------------------------------
-    def sample(self, emitter, p, u1, u2, u3, n=None):
+    def sample(self, emitter, p, u1, u2, u3, n=None, path=None):
         """Sample a point on each ray's emitter as seen from p (normal n: a
         mesh group picks its triangle by importance there, the light tree
-        strategy only)."""
+        strategy only).  ``path``: (depth, PATH_COLUMNS) of the sampling
+        paths, for emissions that read a Light Path node (None: none does)."""
         m = len(p)
         out = LightSample(np.zeros((m, 3)), np.full(m, np.inf), np.zeros((m, 3)),
-                          np.zeros(m), np.zeros(m, bool), np.zeros(m, bool))
+                          np.zeros(m), np.zeros(m, bool), np.zeros(m, bool), path)
         kind = self.kind[emitter]
         local = self.local[emitter]
         for g in self.groups:

@@ -7,6 +7,7 @@ import numpy as np
 from .. import testscenes
 from ..lightbounds import Bounds, triangle_bounds
 from ..nodes import ShadingContext
+from ..nodes.context import PATH_COLUMNS
 from ..sampling import Distribution1D, spherical_triangle, triangle_solid_angle, uniform_triangle
 from ..scene import Instance, Lobe, Material, Scene
 from ..vec import dot
@@ -97,7 +98,8 @@ class MeshLights(LightTable):
         t = np.linalg.norm(v, axis=1)
         wi = v / np.maximum(t, 1e-30)[:, None]
         cos_l = np.abs(dot(wi, tr.ng[tri]))
-        out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, self._radiance(tri, q, self.L[j])
+        path = None if out.path is None else (out.path[0][idx], out.path[1][idx])
+        out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, self._radiance(tri, q, self.L[j], path, t)
         out.pdf[idx] = self._pdf(tri, p_tri, t * t, cos_l, sph, solid_angle)
         out.on_surface[idx] = True
 
@@ -140,9 +142,11 @@ class MeshLights(LightTable):
             pdf = np.where(ok & sph, p_tri / solid_angle, pdf)
         return np.where(np.isfinite(pdf), pdf, 0.0)
 
-    def _radiance(self, tri, q, L):
+    def _radiance(self, tri, q, L, path=None, t=None):
         """Emission at points q on triangles tri: the constant, or the
-        material's emission texture evaluated at q's UVs."""
+        material's emission texture evaluated at q's UVs (and, for a Light
+        Path node, ``path`` = (depth, columns) of the sampling paths at
+        distance t)."""
         if not self.textures.emission:
             return L
         tr = self.tris
@@ -153,7 +157,12 @@ class MeshLights(LightTable):
         denom = np.where(d00 * d11 - d01 * d01 > 0, d00 * d11 - d01 * d01, 1.0)
         b1 = (d11 * d20 - d01 * d21) / denom
         b2 = (d00 * d21 - d01 * d20) / denom
-        shading = ShadingContext.at(tr, tri, b1, b2)
+        # No ray kind: Cycles evaluates a light sample's emission with
+        # PATH_RAY_EMISSION, so Light Path's 'Is ... Ray' outputs read 0.
+        shading = ShadingContext.at(tr, tri, b1, b2, ray=np.zeros(len(tri), np.uint8))
+        if path is not None:
+            shading.depth, shading.path = path[0], path[1].copy()
+            shading.path[:, PATH_COLUMNS.index("Ray Length")] = t
         return self.textures.emission_at(tr.material[tri], shading, np.broadcast_to(L, q.shape))
 
     def _spherical(self, tri, p):

@@ -18,6 +18,10 @@ included, moves consistently with the position.
 import numpy as np
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
+# What the Light Path node reads of the path besides its ray kind and depth
+# (ShadingContext.path, filled by the integrator where a material uses it).
+PATH_COLUMNS = ("Diffuse Depth", "Glossy Depth", "Transmission Depth", "Transparent Depth", "Ray Length",
+                "Is Singular Ray")
 
 
 class SceneShading:
@@ -125,7 +129,9 @@ class ShadingContext:
     geometric normal and ns (N, 3) shading normal facing the incoming ray,
     wo (N, 3) unit direction back along the ray, back (N,) hit the back
     face, depth (N,) bounces before this hit (0: camera ray), ray (N,)
-    VIS_* bit of the ray (camera, diffuse, glossy, transmission, shadow).
+    VIS_* bit of the ray (camera, diffuse, glossy, transmission, shadow;
+    0 where Cycles evaluates with PATH_RAY_EMISSION: a light sample's
+    emission), path (N, 6) or None: the Light Path node's PATH_COLUMNS.
     prim/bary locate the point on the scene's triangles (None for a context
     made from UVs alone).  rays: the renderer's handle for nodes that cast
     rays from the points (engine.nodes.rays.NodeRays: AO, Bevel), or None
@@ -133,7 +139,7 @@ class ShadingContext:
     worlds): those nodes then return their no-ray value."""
 
     def __init__(self, n, tris=None, prim=None, bary=None, p=None, ng=None, ns=None, wo=None,
-                 back=None, depth=None, ray=None, uv=None):
+                 back=None, depth=None, ray=None, uv=None, path=None):
         self.n = n
         self.tris = tris
         self.prim = prim
@@ -145,6 +151,7 @@ class ShadingContext:
         self.back = np.zeros(n, bool) if back is None else back
         self.depth = np.zeros(n, np.int32) if depth is None else depth
         self.ray = np.ones(n, np.uint8) if ray is None else ray
+        self.path = path
         self.rays = None
         self._cache = {}
         if uv is not None:
@@ -168,7 +175,7 @@ class ShadingContext:
             bary = getattr(hit, "bary", None)
             ctx = cls(len(hit.p), tris, hit.prim, bary, hit.p, hit.ng, hit.ns, hit.wo,
                       getattr(hit, "back", None), getattr(hit, "depth", None), getattr(hit, "ray", None),
-                      uv=None if bary is not None else hit.uv)
+                      uv=None if bary is not None else hit.uv, path=getattr(hit, "path", None))
             hit.shading = ctx
         return ctx
 
@@ -195,7 +202,7 @@ class ShadingContext:
         out = ShadingContext.__new__(ShadingContext)
         out.n = len(rows)
         out.tris = self.tris
-        for name in ("prim", "bary", "p", "ng", "ns", "wo", "back", "depth", "ray"):
+        for name in ("prim", "bary", "p", "ng", "ns", "wo", "back", "depth", "ray", "path"):
             value = getattr(self, name)
             setattr(out, name, None if value is None else value[rows])
         out.rays = None if self.rays is None else self.rays.take(rows)
@@ -206,7 +213,7 @@ class ShadingContext:
         """The same points moved by world offsets dp (N, 3) within their
         triangles' planes; interpolated attributes move with them."""
         out = ShadingContext(self.n, self.tris, self.prim, None, self.p + dp, self.ng, self.ns, self.wo,
-                             self.back, self.depth, self.ray)
+                             self.back, self.depth, self.ray, path=self.path)
         out.rays = self.rays
         if self.bary is not None and self.tris is not None:
             d = _bary_of_offset(self.tris, self.prim, dp)

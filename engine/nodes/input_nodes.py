@@ -3,6 +3,7 @@ Fresnel / Layer Weight, and Mapping (kernel/svm/tex_coord.h, geometry.h,
 fresnel.h, attribute.h, light_path.h, mapping_util.h)."""
 import numpy as np
 
+from .context import PATH_COLUMNS
 from .registry import node, one_of
 
 VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION, VIS_SHADOW = 1, 2, 4, 8, 16
@@ -118,17 +119,24 @@ def color_attribute(ctx, i, p):
 @node("ShaderNodeLightPath",
       outputs=(("Is Camera Ray", "float"), ("Is Shadow Ray", "float"), ("Is Diffuse Ray", "float"),
                ("Is Glossy Ray", "float"), ("Is Reflection Ray", "float"), ("Is Transmission Ray", "float"),
-               ("Ray Depth", "float")),
-      unsupported_outputs=("Is Singular Ray", "Is Volume Scatter Ray", "Ray Length", "Diffuse Depth",
-                           "Glossy Depth", "Transparent Depth", "Transmission Depth", "Portal Depth"),
+               ("Ray Depth", "float")) + tuple((name, "float") for name in PATH_COLUMNS),
+      unsupported_outputs=("Is Volume Scatter Ray", "Portal Depth"),
       cases=[{}])
 def light_path(ctx, i, p):
+    """Cycles' light_path.h.  The path columns come from the integrator
+    (ShadingContext.path); where it evaluates no path (a light sample's
+    emission, a world, a bake) they read 0, as Cycles' PATH_RAY_EMISSION
+    evaluation reads no ray kind."""
     ray = ctx.ray.astype(np.int64)
     flag = lambda bits: ((ray & bits) != 0).astype(np.float64)
-    return {"Is Camera Ray": flag(VIS_CAMERA), "Is Shadow Ray": flag(VIS_SHADOW),
-            "Is Diffuse Ray": flag(VIS_DIFFUSE), "Is Glossy Ray": flag(VIS_GLOSSY),
-            "Is Reflection Ray": flag(VIS_DIFFUSE | VIS_GLOSSY), "Is Transmission Ray": flag(VIS_TRANSMISSION),
-            "Ray Depth": ctx.depth.astype(np.float64)}
+    out = {"Is Camera Ray": flag(VIS_CAMERA), "Is Shadow Ray": flag(VIS_SHADOW),
+           "Is Diffuse Ray": flag(VIS_DIFFUSE), "Is Glossy Ray": flag(VIS_GLOSSY),
+           "Is Reflection Ray": flag(VIS_DIFFUSE | VIS_GLOSSY), "Is Transmission Ray": flag(VIS_TRANSMISSION),
+           "Ray Depth": ctx.depth.astype(np.float64)}
+    path = ctx.path if ctx.path is not None else np.zeros((ctx.n, len(PATH_COLUMNS)))
+    for column, name in enumerate(PATH_COLUMNS):
+        out[name] = path[:, column].astype(np.float64)
+    return out
 
 
 # ----------------------------------------------------------------------------

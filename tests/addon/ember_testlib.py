@@ -385,6 +385,21 @@ def render_for_reference(scene, tmp_path, name, taps, spp, seed, bounces, config
     return image, var
 
 
+def live_cycles_reference(scene, tmp_path, name, seeds, spp, bounces, configure=None):
+    """A Cycles reference rendered now (for settings no stored reference has):
+    the mean of ``seeds`` renders, the variance of that mean per pixel from
+    their scatter, and the header ReferenceCheck reads; ``configure``
+    (scene.cycles -> None) changes settings after setup_cycles."""
+    images = []
+    for seed in range(seeds):
+        setup_cycles(scene, spp, seed, bounces)
+        if configure is not None:
+            configure(scene.cycles)
+        images.append(render_array(scene, tmp_path, f"cycles_{name}_{seed}")[..., :3])
+    images = np.array(images, np.float64)
+    return images.mean(axis=0), images.var(axis=0, ddof=1) / seeds, {'seeds': seeds, 'samples': spp}
+
+
 class ReferenceCheck:
     """Ember (image, per-pixel variance of the mean, spp samples) against a
     converged Cycles reference: the image and region totals

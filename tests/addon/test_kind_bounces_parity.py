@@ -13,8 +13,8 @@ import bpy
 import numpy as np
 
 from parity_scenes import light, material, mesh_object, plane
-from ember_testlib import (ReferenceCheck, empty_factory_scene, render_array, render_for_reference,
-                           setup_cycles, small_resolution)
+from ember_testlib import (ReferenceCheck, empty_factory_scene, live_cycles_reference, render_for_reference,
+                           small_resolution)
 
 SIZE = 32
 BLOCK = 8
@@ -67,21 +67,11 @@ def _limits(settings, limits):
         setattr(settings, name, value)
 
 
-def cycles_reference(scene, tmp_path):
-    images = []
-    for seed in range(CYCLES_SEEDS):
-        setup_cycles(scene, CYCLES_SPP, seed, MAX_BOUNCES)
-        _limits(scene.cycles, LIMITS)
-        images.append(render_array(scene, tmp_path, f"cycles_kinds_{seed}")[..., :3])
-    images = np.array(images, np.float64)
-    header = {'seeds': CYCLES_SEEDS, 'samples': CYCLES_SPP}
-    return images.mean(axis=0), images.var(axis=0, ddof=1) / CYCLES_SEEDS, header
-
-
 def test_kind_limits_match_cycles(tmp_path, tapped_engine):
     scene = empty_factory_scene()
     room(scene)
-    ref, ref_var, header = cycles_reference(scene, tmp_path)
+    ref, ref_var, header = live_cycles_reference(scene, tmp_path, 'kinds', CYCLES_SEEDS, CYCLES_SPP, MAX_BOUNCES,
+                                                 configure=lambda cycles: _limits(cycles, LIMITS))
     image, var = render_for_reference(scene, tmp_path, 'kinds', tapped_engine, EMBER_SPP, 5, MAX_BOUNCES,
                                       configure=lambda ember: _limits(ember, LIMITS))
     check = ReferenceCheck('kind_bounces', image[..., :3].astype(np.float64), var, EMBER_SPP, ref, ref_var,
