@@ -478,9 +478,11 @@ def _accepts(props):
     if kind == "HOSEK_WILKIE":
         # Cycles' Hosek-Wilkie sky is undefined here (NaN, or a table read
         # out of bounds): named rather than guessed.
-        for name in ("turbidity", "ground_albedo"):
-            if not np.isfinite(_number(props.get(name, 0.0))):
-                return f"Hosek-Wilkie {name.replace('_', ' ')} {props.get(name)!r} is not a number"
+        turbidity, albedo = _number(props.get("turbidity", 2.2)), _number(props.get("ground_albedo", 0.3))
+        if np.isnan(turbidity):        # an infinite one clamps to 10, as in Cycles
+            return f"Hosek-Wilkie turbidity {props.get('turbidity')!r} is not a number"
+        if not 0.0 <= albedo <= 1.0:   # Blender's range; Cycles would extrapolate the fits
+            return f"Hosek-Wilkie ground albedo {props.get('ground_albedo')!r} is outside 0..1"
     return None
 
 

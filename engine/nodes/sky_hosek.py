@@ -11,7 +11,8 @@ Per direction (theta from the zenith, gamma from the sun):
         (C + D exp(E gamma) + F cos^2 gamma + G chi(H, gamma) + I sqrt(cos theta)),
     chi = (1 + cos^2 gamma) / (1 + H^2 - 2 H cos gamma)^1.5,
 
-theta clamped just above the horizon (below it the horizon's values are
+(the fits store the parameters in the order A..G, I, H), theta clamped just
+above the horizon (below it the horizon's values are
 repeated, with gamma of the true direction).  X, Y, Z = F x radiance, to
 linear Rec.709 clamped at zero, times 2 pi / 683 (Cycles' strength).  No sun
 disc.  As Cycles: the host precompute (scene/shader_nodes.cpp,
@@ -22,9 +23,9 @@ Out-of-range inputs follow Cycles' arithmetic where it is defined: the sun
 direction is normalized (Blender's sync does), a zero or NaN one puts the sun
 at the zenith (Cycles' clamp of a NaN angle gives 0) and makes every gamma pi
 (its safe_acosf of NaN); turbidity clamps to 1..10 (Cycles clamps to 0..10 and reads before its
-table below 1; Blender's property stops at 1); a ground albedo beyond 0..1
-extrapolates.  The registry entry (sky.py) refuses a NaN turbidity or
-albedo, where Cycles' sky is undefined.
+table below 1; Blender's property stops at 1).  The registry entry (sky.py)
+refuses a NaN turbidity and an albedo outside Blender's 0..1 (NaN included),
+where Cycles' sky is undefined or extrapolated to nonsense.
 """
 import os
 from functools import lru_cache
@@ -89,7 +90,7 @@ def precompute(sun_direction, turbidity, albedo):
     """(sun theta, sun phi, configs (3, 9), radiances (3,)) float32 as
     Cycles' sky_texture_precompute_hosek."""
     d = np.asarray(sun_direction, F)
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(all="ignore"):      # overflow and NaN as in Cycles' float32
         d = d / np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])   # Blender's sync normalizes it
         theta = np.arccos(d[2])
         phi = np.arctan2(d[0], d[1])

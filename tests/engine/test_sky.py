@@ -240,3 +240,107 @@ def test_bad_sun_guides_are_refused():
         with pytest.raises(SceneError, match="sun"):
             validate_world(World(texture=EnvironmentTexture(pixels, sun=guide)))
     validate_world(World(texture=EnvironmentTexture(pixels, sun=SunGuide((0.0, 0.0, 1.0), 0.01, 3.0))))
+
+
+# ----------------------------------------------------------------------------
+# Hosek-Wilkie (engine/nodes/sky_hosek.py, engine/data/hosek_xyz.npz); its
+# pixels against Cycles are in test_sky_matches_cycles_per_pixel above.
+
+def test_hosek_tables_are_the_published_data():
+    """Shape and spot values of ArHosekSkyModelData_CIEXYZ.h (v1.4a), as
+    Blender's intern/sky carries it."""
+    table, radiance = sky.sky_hosek.tables()
+    assert table.shape == (3, 2, 10, 6, 9) and radiance.shape == (3, 2, 10, 6)
+    np.testing.assert_array_equal(table[0, 0, 0, 0, :4], [-1.117001, -1.867262e-1, -1.113505e1, 1.259865e1])
+    assert table[0, 1, 9, 5, 8] == 6.232887e-1          # datasetXYZ1's last number
+    assert table[1, 1, 9, 5, 8] == 6.118645e-1          # datasetXYZ2's
+    assert table[2, 1, 0, 0, 0] == -1.279730            # datasetXYZ3: albedo 1, turbidity 1
+    np.testing.assert_array_equal(radiance[1, 1, 0], [1.745162, 1.639467, 1.342721, 1.166033e1, 1.490124e1,
+                                                      1.774031e1])
+    np.testing.assert_array_equal(radiance[2, 1, 9], [8.640731e-1, 9.858301e-1, 1.854956, -6.798097,
+                                                      5.936468e1, 3.110255e1])
+
+
+def hosek_by_hand(d, sun, config, radiance, xyz_to_rgb):
+    """The model in float64 from one control point of the tables."""
+    theta = np.minimum(np.arccos(d[:, 2]), np.pi / 2 - 0.001)
+    gamma = np.arccos(np.clip(d @ sun, -1.0, 1.0))
+    out = []
+    for c in range(3):
+        a, b, cc, dd, e, f, g, i, h = config[c]      # the fits store I before H
+        chi = (1 + np.cos(gamma) ** 2) / (1 + h * h - 2 * h * np.cos(gamma)) ** 1.5
+        value = (1 + a * np.exp(b / (np.cos(theta) + 0.01))) * (
+            cc + dd * np.exp(e * gamma) + f * np.cos(gamma) ** 2 + g * chi + i * np.sqrt(np.cos(theta)))
+        out.append(value * radiance[c])
+    return np.maximum(np.stack(out, axis=1) @ xyz_to_rgb.T, 0.0) * 2 * np.pi / 683
+
+
+@pytest.mark.parametrize("sun,turbidity,albedo,point", [
+    ((0.0, 0.0, 1.0), 3.0, 0.0, 5),      # the sun at the zenith: the last control point
+    ((0.0, 1.0, 0.0), 10.0, 1.0, 0)])    # on the horizon: the first (turbidity 10: no upper fit)
+def test_hosek_at_a_control_point_equals_the_tables(sun, turbidity, albedo, point):
+    """Where the Bezier weights are 0 or 1 and turbidity and albedo sit on a
+    fit, the sky is the formula evaluated with that fit's numbers."""
+    table, radiance = sky.sky_hosek.tables()
+    t, a = int(turbidity) - 1, int(albedo)
+    props = dict(sky_type="HOSEK_WILKIE", sun_direction=sun, turbidity=turbidity, ground_albedo=albedo,
+                 _blender_version=[5, 0, 1])
+    d = np.array([[0.0, 0.0, 1.0], [0.5, -0.3, 0.4], [0.0, 0.8, 0.15], [-0.9, 0.1, 0.05]])
+    d = (d / np.linalg.norm(d, axis=1)[:, None]).astype(np.float32)
+    ember = sky.sky_texture(None, {"Vector": d}, props)["Color"]
+    expected = hosek_by_hand(d.astype(np.float64), np.array(sun), table[:, a, t, point], radiance[:, a, t, point],
+                             sky.XYZ_TO_REC709.astype(np.float64))
+    print(f"\nHosek-Wilkie by hand {expected.round(4).tolist()}")
+    assert expected.min() > 1e-3
+    np.testing.assert_allclose(ember, expected, rtol=2e-5)     # float32 against float64
+
+
+def test_hosek_interpolates_linearly_in_turbidity_and_albedo():
+    cook = sky.sky_hosek.cook
+    elevation = 0.4
+    mid = cook(3.25, 0.6, elevation)
+    corners = [(0.75 * 0.4, cook(3.0, 0.0, elevation)), (0.75 * 0.6, cook(3.0, 1.0, elevation)),
+               (0.25 * 0.4, cook(4.0, 0.0, elevation)), (0.25 * 0.6, cook(4.0, 1.0, elevation))]
+    for k in range(2):
+        np.testing.assert_allclose(mid[k], sum(w * c[k] for w, c in corners), rtol=1e-12, atol=1e-12)
+
+
+def test_hosek_wrong_albedo_misses_cycles():
+    """The per-pixel check can fail: the ground albedo mixed the wrong way
+    round misses Cycles' 'hosek_low' sky (albedo 0.85) far beyond
+    RTOL_ANALYTIC."""
+    data, meta = references("50")
+    props = dict(meta["cases"]["hosek_low"])
+    props["ground_albedo"] = 1.0 - props["ground_albedo"]
+    d, cycles = data["hosek_low/horizon/dirs"], data["hosek_low/horizon/rgb"]
+    ember = sky.sky_texture(None, {"Vector": d}, props)["Color"]
+    rel = np.abs(ember - cycles) / np.maximum(np.abs(cycles), 1e-3 * cycles.max())
+    assert rel.max() > 100 * RTOL_ANALYTIC
+
+
+def test_hosek_hostile_values_give_finite_pixels_or_a_message():
+    rng = np.random.default_rng(4)
+    d = rng.normal(size=(300, 3))
+    d = np.concatenate([d / np.linalg.norm(d, axis=1)[:, None], np.zeros((1, 3)), rng.normal(size=(10, 3)) * 1e6,
+                        [[0.0, 0.0, -1.0], [np.nan, 0.0, 1.0]]]).astype(np.float32)
+    nan, inf = float("nan"), float("inf")
+    base = dict(sky_type="HOSEK_WILKIE", sun_direction=(0.3, 0.2, 0.5), turbidity=3.0, ground_albedo=0.3)
+    hostile = [dict(turbidity=t) for t in (-5.0, 0.0, 0.5, 10.5, 1e9, inf, -inf)]
+    hostile += [dict(sun_direction=s) for s in ((nan, nan, nan), (0.0, 0.0, 0.0), (inf, 0.0, 1.0), (nan, 0.3, 0.9),
+                                                (1e30, 1e30, 1e30), (0.0, 0.0, -1.0), (1e-30, 0.0, 1e-30))]
+    for changes in hostile:
+        props = dict(base, **changes)
+        assert sky._accepts(props) is None, changes
+        value = sky.sky_texture(None, {"Vector": d}, props)["Color"]
+        assert np.isfinite(value).all() and (value >= 0).all(), changes
+        assert value.max() > 0, changes      # not silently black
+    # Blender's turbidity stops at 1 and 10 (Cycles reads before its table below 1).
+    ok = sky.sky_texture(None, {"Vector": d[:300]}, dict(base, turbidity=1.0))["Color"]
+    low = sky.sky_texture(None, {"Vector": d[:300]}, dict(base, turbidity=0.2))["Color"]
+    np.testing.assert_array_equal(ok, low)
+    # Where Cycles' sky is undefined (NaN parameters) or the albedo is beyond
+    # Blender's range (its extrapolated fits go negative) the node is refused by name.
+    for changes in (dict(turbidity=nan), dict(ground_albedo=nan), dict(ground_albedo=-inf), dict(turbidity="x"),
+                    dict(ground_albedo=7.0), dict(ground_albedo=-3.0), dict(ground_albedo=1e6)):
+        reason = sky._accepts(dict(base, **changes))
+        assert reason is not None and "Hosek-Wilkie" in reason, changes
