@@ -1,8 +1,9 @@
 """Sky Texture worlds through the add-on, against Cycles (bpy 5.0).
 
 Two scenes: a diffuse plane lit by the sky and its sun (the disc out of
-view), the sky above it seen directly; the same under a Hosek-Wilkie sky.  Ember renders it with the filter and
-bounces of a converged Cycles reference (tests/data/cycles_sky_plane.exr,
+view), the sky above it seen directly; the same under a Hosek-Wilkie sky.
+Ember renders each with the filter and bounces of a converged Cycles
+reference (tests/data/cycles_sky_plane.exr and cycles_sky_hosek.exr,
 tools/cycles_references.py); image / quadrant means and blocks are compared
 with their power asserted (ember_testlib.check_against_reference, one family
 each).  The sky's per-pixel
