@@ -131,3 +131,27 @@ def test_hosek_sky_lit_plane_matches_cycles(tmp_path, tapped_engine):
     image, var = render_for_reference(scene, tmp_path, "hosek", tapped_engine, SKY_SPP, 7, bounces)
     check = check_against_reference('sky_hosek', scene, bounces, image, var, SKY_SPP, SKY_BLOCK)
     check.assert_agrees(IMAGE_POWER, BLOCK_POWER)
+
+
+def test_hosek_sky_with_hostile_values_renders_finite_or_is_named(tmp_path, needs_engine):
+    """Values Blender lets through (its ranges clamp turbidity and albedo but
+    not NaN; the sun direction is free): finite, non-black pixels as Cycles'
+    arithmetic gives them, or the constant colour with the value named."""
+    from addon import engine as ember_engine
+    from addon.export import scene as scene_export
+    from ember_testlib import render_array, setup_ember
+    nan = float('nan')
+    for props, named in ((dict(sun_direction=(nan, nan, nan)), None), (dict(sun_direction=(0.0, 0.0, 0.0)), None),
+                         (dict(sun_direction=(1e30, -1e30, 1e30)), None), (dict(turbidity=1e30), None),
+                         (dict(ground_albedo=nan), 'Hosek-Wilkie ground albedo'),
+                         (dict(turbidity=nan), 'Hosek-Wilkie turbidity')):
+        bpy.ops.wm.read_factory_settings()
+        scene = bpy.context.scene
+        sky_world(scene, 'HOSEK_WILKIE', strength=1.0, **props)
+        small_resolution(scene, 12, 8)
+        warnings = scene_export.export_scene(bpy.context.evaluated_depsgraph_get()).warnings
+        assert [w for w in warnings if named and named in w] if named else not warnings, (props, warnings)
+        setup_ember(scene, 2, seed=1, max_bounces=1)
+        image = render_array(scene, tmp_path, "hostile")
+        assert ember_engine.RENDER_LOG[-1]['error'] is None, props
+        assert np.isfinite(image).all() and image[..., :3].max() > 0, props
