@@ -2,9 +2,12 @@
 and the sun-guided sampling of sky worlds (engine/environment.py).
 
 * Cycles' own sky, stored small (tools/sky_references.py, one file per
-  Blender: 3.4 binary, bpy 4.2, bpy 5.0): per pixel, the direction of Cycles'
-  first sample and its value; Ember evaluates the node with the properties
-  the exporter read in that Blender.  Deterministic on both sides.
+  Blender: 3.4 binary, bpy 4.2, bpy 5.0; Nishita, Preetham and Hosek-Wilkie
+  cases): per pixel, the direction of Cycles' first sample and its value;
+  Ember evaluates the node with the properties the exporter read in that
+  Blender.  Deterministic on both sides.
+* Hosek-Wilkie's tables: the published numbers, and the sky at a control
+  point against the formula by hand; hostile values.
 * Analytic limits: an empty atmosphere scatters nothing and leaves the sun
   unattenuated (the solar spectrum / the disc's solid angle).
 * Sampling: the disc's cone mixed with the table (Cycles' weights 4 : 1):
@@ -35,7 +38,8 @@ VERSIONS = ("34", "42", "50")
 # Per pixel |Ember - Cycles| <= tolerance * max(|Cycles|, 1e-3 * the view's
 # maximum).  Both sides compute in float32 with the same operation order but
 # different libm exp / pow / atan2 and summation order.  Measured: Preetham
-# (analytic, no table) 4e-6 - 3e-5; the tables' Nishita / Single Scattering
+# (analytic, no table) 4e-6 - 3e-5, Hosek-Wilkie (analytic) 1.5e-6 - 2.7e-5;
+# the tables' Nishita / Single Scattering
 # 1e-4 - 4e-4 (32 ray-march steps x 21 wavelengths), Multiple Scattering
 # 2e-5 - 2e-4, and 1.6e-3 at the limb of a disc straddling the horizon (its
 # elevation interpolation amplifies last bits).  The tolerances are 1.5 - 3x
