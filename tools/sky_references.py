@@ -8,6 +8,7 @@ Run once per Blender version (each writes tests/data/sky_<major><minor>.npz):
 
 A world of one Sky Texture (the version's Nishita models) is rendered by Cycles
 with one sample, which sits at each pixel centre, for a few parameter cases
+(the Nishita models, Preetham and Hosek-Wilkie)
 and camera views (the horizon with the ground below it, the zenith, the sun
 disc close up).  The file holds, per pixel, the world direction through the
 pixel centre (from the camera's view frame, as Cycles' raster-to-camera
@@ -49,14 +50,36 @@ PREETHAM = ("preetham", dict(sun_elevation=math.radians(25.0), sun_rotation=math
                                             math.sin(math.radians(25.0)))))
 
 
+def sun_props(elevation, rotation, **props):
+    """Properties with the sun both as elevation / rotation (aimed at by the
+    view 'sun') and as the direction the analytic models read."""
+    e, r = math.radians(elevation), math.radians(rotation)
+    return dict(props, sun_elevation=e, sun_rotation=r,
+                sun_direction=(math.cos(e) * math.sin(r), math.cos(e) * math.cos(r), math.sin(e)))
+
+
+# Hosek-Wilkie: turbidities between and at the fits (3.4, 7.6, 10), albedos
+# 0.3 - 1, the sun high and 4 degrees up; then a sun direction that is not
+# unit (Blender's sync normalizes it) and one with a NaN (Cycles' NaN angles
+# clamp: the sun at the zenith, every angle to it pi).
+HOSEK = [("hosek", sun_props(25.0, 60.0, turbidity=3.4, ground_albedo=0.3)),
+         ("hosek_low", sun_props(4.0, -100.0, turbidity=7.6, ground_albedo=0.85)),
+         ("hosek_hazy", sun_props(70.0, 200.0, turbidity=10.0, ground_albedo=1.0)),
+         ("hosek_long", dict(sun_props(30.0, 20.0, turbidity=2.0, ground_albedo=0.1),
+                             sun_direction=(0.2, 0.1, 3.0))),
+         ("hosek_nan", dict(sun_props(30.0, 20.0, turbidity=5.0, ground_albedo=0.5),
+                            sun_direction=(float('nan'), 0.3, 0.9)))]
+
+
 def cases():
     """(name, sky type, properties): the version's Nishita model (in 5.0
-    Single and Multiple Scattering) and Preetham."""
-    preetham = [(PREETHAM[0], 'PREETHAM', PREETHAM[1])]
+    Single and Multiple Scattering), Preetham and Hosek-Wilkie."""
+    analytic = ([(PREETHAM[0], 'PREETHAM', PREETHAM[1])]
+                + [(name, 'HOSEK_WILKIE', props) for name, props in HOSEK])
     if bpy.app.version < (5, 0, 0):
-        return [(name, 'NISHITA', props) for name, props in CASES] + preetham
+        return [(name, 'NISHITA', props) for name, props in CASES] + analytic
     return ([(name, 'SINGLE_SCATTERING', props) for name, props in CASES]
-            + [(name + '_ms', 'MULTIPLE_SCATTERING', props) for name, props in CASES] + preetham)
+            + [(name + '_ms', 'MULTIPLE_SCATTERING', props) for name, props in CASES] + analytic)
 
 
 def sky_world(scene, props, sky_type):

@@ -172,8 +172,10 @@ def _sun_guide(skies):
     the guide is the disc's direction mapped back; Cycles instead falls back
     to a 4096 x 2048 table there).  Otherwise None: the disc stays in the
     baked table, found by BSDF sampling."""
-    # Preetham has no disc (Cycles 5.0 would still aim at the Nishita sun).
-    with_disc = [c for c in skies if c.props.get('sun_disc', True) and c.props.get('sky_type') != 'PREETHAM']
+    # Preetham and Hosek-Wilkie have no disc (Cycles 5.0 would still aim at
+    # the Nishita sun of the hidden properties: a variance, not a bias).
+    with_disc = [c for c in skies if c.props.get('sun_disc', True)
+                 and c.props.get('sky_type') not in ('PREETHAM', 'HOSEK_WILKIE')]
     if len(with_disc) != 1:
         return None
     call = with_disc[0]

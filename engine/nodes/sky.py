@@ -22,9 +22,8 @@ ground a fade of the horizon row, the disc replacing the sky.  Blender 5.0
 ('SINGLE_SCATTERING'): 512 x 256 texels over -90 to 90 degrees (the lower
 half the horizon row faded), the disc added to the sky.  Blender 5.0
 'MULTIPLE_SCATTERING': its own table (sky_multiple.py) and sun, looked up by
-the same 5.0 kernel.  'PREETHAM' is analytic (sky_preetham.py).
-'HOSEK_WILKIE' is not evaluated (the registry entry refuses it): its model
-is a table of fitted coefficients Ember does not carry.
+the same 5.0 kernel.  'PREETHAM' (sky_preetham.py) and 'HOSEK_WILKIE'
+(sky_hosek.py, from the published coefficient tables) are analytic.
 """
 from functools import lru_cache
 
@@ -32,7 +31,7 @@ import numpy as np
 
 from ..scene import SunGuide
 from .registry import node
-from . import sky_multiple, sky_preetham
+from . import sky_hosek, sky_multiple, sky_preetham
 from .sky_multiple import in_threads
 
 F = np.float32
@@ -463,7 +462,7 @@ def sun_guide(props, matrix):
 # ----------------------------------------------------------------------------
 # The registry entry
 
-SKY_TYPES = ("NISHITA", "SINGLE_SCATTERING", "MULTIPLE_SCATTERING", "PREETHAM")
+SKY_TYPES = ("NISHITA", "SINGLE_SCATTERING", "MULTIPLE_SCATTERING", "PREETHAM", "HOSEK_WILKIE")
 
 
 def _translate(node):
@@ -475,8 +474,23 @@ def _translate(node):
 def _accepts(props):
     kind = props.get("sky_type")
     if kind not in SKY_TYPES:
-        return f"sky type {kind!r} is not rendered yet (Hosek-Wilkie's data tables are not in Ember)"
+        return f"sky type {kind!r} is not rendered yet"
+    if kind == "HOSEK_WILKIE":
+        # Cycles' Hosek-Wilkie sky is undefined here (NaN, or a table read
+        # out of bounds): named rather than guessed.
+        turbidity, albedo = _number(props.get("turbidity", 2.2)), _number(props.get("ground_albedo", 0.3))
+        if np.isnan(turbidity):        # an infinite one clamps to 10, as in Cycles
+            return f"Hosek-Wilkie turbidity {props.get('turbidity')!r} is not a number"
+        if not 0.0 <= albedo <= 1.0:   # Blender's range; Cycles would extrapolate the fits
+            return f"Hosek-Wilkie ground albedo {props.get('ground_albedo')!r} is outside 0..1"
     return None
+
+
+def _number(value):
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return float("nan")
 
 
 @node("ShaderNodeTexSky", inputs=(("Vector", "vector"),), outputs=(("Color", "color"),),
@@ -493,10 +507,14 @@ def _accepts(props):
               "air_density": 2.0, "ozone_density": 3.0, "sun_intensity": 1e-5},
              {"sky_type": "MULTIPLE_SCATTERING", "sun_size": 0.3, "sun_elevation": 0.4, "sun_rotation": 2.0,
               "aerosol_density": 3.0, "sun_intensity": 1e-5},
-             {"sky_type": "PREETHAM", "sun_direction": (0.3, -0.5, 0.6), "turbidity": 3.5}])
+             {"sky_type": "PREETHAM", "sun_direction": (0.3, -0.5, 0.6), "turbidity": 3.5},
+             {"sky_type": "HOSEK_WILKIE", "sun_direction": (-0.4, 0.2, 0.5), "turbidity": 4.5,
+              "ground_albedo": 0.6}])
 def sky_texture(ctx, i, p):
     if p.get("sky_type") == "PREETHAM":
         return {"Color": sky_preetham.evaluate(i["Vector"], p, xyz_to_rgb_matrix(p)).astype(np.float64)}
+    if p.get("sky_type") == "HOSEK_WILKIE":
+        return {"Color": sky_hosek.evaluate(i["Vector"], p, xyz_to_rgb_matrix(p)).astype(np.float64)}
     k = kernel_params(p)
     include_sun = not getattr(ctx, "importance_bake", False)
     return {"Color": evaluate(np.asarray(i["Vector"], F), k, include_sun).astype(np.float64)}

@@ -1,6 +1,7 @@
 """Run inside a Blender binary with Ember installed (test_other_blenders.py):
-a diffuse plane under the version's Nishita sky, rendered by Ember and by
-Cycles with several seeds each; EXRs written to the folder given after '--'.
+a diffuse plane under the version's Nishita sky (or, given 'HOSEK_WILKIE'
+after the folder, a Hosek-Wilkie sky), rendered by Ember and by Cycles with
+several seeds each; EXRs written to the folder given after '--'.
 """
 import math
 import os
@@ -12,7 +13,20 @@ EMBER_SEEDS, EMBER_SPP = 4, 32
 CYCLES_SEEDS, CYCLES_SPP = 6, 16
 
 
-def build(scene):
+def sky_node(tree, sky_type):
+    sky = tree.nodes.new('ShaderNodeTexSky')
+    sky.sky_type = sky_type
+    if sky_type == 'HOSEK_WILKIE':
+        sky.sun_direction = (-0.3, 0.85, 0.4)
+        sky.turbidity, sky.ground_albedo = 6.7, 0.2
+    else:
+        sky.sun_elevation = math.radians(30.0)
+        sky.sun_rotation = math.radians(160.0)
+        sky.altitude = 300.0
+    return sky
+
+
+def build(scene, sky_type):
     for obj in list(bpy.data.objects):
         if obj.type != 'CAMERA':
             bpy.data.objects.remove(obj)
@@ -23,12 +37,8 @@ def build(scene):
     tree.nodes.clear()
     out = tree.nodes.new('ShaderNodeOutputWorld')
     background = tree.nodes.new('ShaderNodeBackground')
-    background.inputs['Strength'].default_value = 0.05
-    sky = tree.nodes.new('ShaderNodeTexSky')
-    sky.sky_type = 'NISHITA'
-    sky.sun_elevation = math.radians(30.0)
-    sky.sun_rotation = math.radians(160.0)
-    sky.altitude = 300.0
+    background.inputs['Strength'].default_value = 1.0 if sky_type == 'HOSEK_WILKIE' else 0.05
+    sky = sky_node(tree, sky_type)
     tree.links.new(sky.outputs['Color'], background.inputs['Color'])
     tree.links.new(background.outputs[0], out.inputs['Surface'])
     bpy.ops.mesh.primitive_plane_add(size=6.0)
@@ -43,9 +53,10 @@ def build(scene):
 
 
 def main():
-    folder = sys.argv[sys.argv.index('--') + 1]
+    args = sys.argv[sys.argv.index('--') + 1:]
+    folder, sky_type = args[0], (args[1:] or ['NISHITA'])[0]
     scene = bpy.context.scene
-    build(scene)
+    build(scene, sky_type)
     scene.render.engine = 'EMBER'
     for seed in range(EMBER_SEEDS):
         e = scene.ember

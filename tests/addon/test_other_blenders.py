@@ -220,18 +220,20 @@ def test_legacy_zip_denoises_in_blender_34(tmp_path, legacy_zip):
     assert after < 0.5 * before, line
 
 
-def test_nishita_sky_in_blender_34_matches_its_cycles(tmp_path, legacy_zip, needs_engine):
+@pytest.mark.parametrize('sky_type', ['NISHITA', 'HOSEK_WILKIE'])
+def test_sky_in_blender_34_matches_its_cycles(tmp_path, legacy_zip, needs_engine, sky_type):
     """Blender 3.4's Nishita sky (the 3.x / 4.x table layout, ground fade and
-    disc) lighting a plane, through the legacy zip in the real binary,
-    against that binary's Cycles: blocks and image / quadrant means
-    (tests/addon/sky_scene_34.py renders both; the sky's own pixels are
-    checked against 3.4's Cycles in tests/engine/test_sky.py)."""
+    disc) and its Hosek-Wilkie sky, each lighting a plane and seen above it,
+    through the legacy zip in the real binary, against that binary's Cycles:
+    blocks and image / quadrant means (tests/addon/sky_scene_34.py renders
+    both; the skies' own pixels are checked against 3.4's Cycles in
+    tests/engine/test_sky.py)."""
     version = blender_version()
     require(version is not None and version.startswith('Blender 3.4'),
             f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
     scripts = install_legacy(legacy_zip, tmp_path)
     code, out = run([BLENDER, '-b', '--factory-startup', '--addons', 'ember', '--python',
-                     os.path.join(ROOT, 'tests', 'addon', 'sky_scene_34.py'), '--', str(tmp_path)],
+                     os.path.join(ROOT, 'tests', 'addon', 'sky_scene_34.py'), '--', str(tmp_path), sky_type],
                     env={'BLENDER_USER_SCRIPTS': scripts})
     assert code == 0 and 'SKY SCENE DONE' in out, out[-4000:]
     assert 'Error' not in out, out[-4000:]
@@ -239,5 +241,5 @@ def test_nishita_sky_in_blender_34_matches_its_cycles(tmp_path, legacy_zip, need
     ember = np.array([load_exr(str(tmp_path / f'ember_{s}.exr'))[..., :3] for s in range(4)], np.float64)
     cycles = np.array([load_exr(str(tmp_path / f'cycles_{s}.exr'))[..., :3] for s in range(6)], np.float64)
     assert np.isfinite(ember).all() and ember.mean() > 0.05
-    failures, details, _, _ = compare_with_cycles("Blender 3.4 sky plane", ember, cycles, 4)
+    failures, details, _, _ = compare_with_cycles(f"Blender 3.4 {sky_type} sky plane", ember, cycles, 4)
     assert_no_failing_blocks(failures, details)

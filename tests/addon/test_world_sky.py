@@ -1,8 +1,9 @@
 """Sky Texture worlds through the add-on, against Cycles (bpy 5.0).
 
-One scene: a diffuse plane lit by the sky and its sun (the disc out of
-view), the sky above it seen directly.  Ember renders it with the filter and
-bounces of a converged Cycles reference (tests/data/cycles_sky_plane.exr,
+Two scenes: a diffuse plane lit by the sky and its sun (the disc out of
+view), the sky above it seen directly; the same under a Hosek-Wilkie sky.
+Ember renders each with the filter and bounces of a converged Cycles
+reference (tests/data/cycles_sky_plane.exr and cycles_sky_hosek.exr,
 tools/cycles_references.py); image / quadrant means and blocks are compared
 with their power asserted (ember_testlib.check_against_reference, one family
 each).  The sky's per-pixel
@@ -83,21 +84,32 @@ def test_export_sky_world_is_shaded_per_direction_with_a_sun_guide(factory_scene
     # A sun below the horizon is not guided to.
     sky = sky_world(factory_scene, sun_elevation=math.radians(-5.0))
     assert scene_export.export_scene(bpy.context.evaluated_depsgraph_get()).scene.world.texture.sun is None
-    # Hosek-Wilkie is not evaluated: the constant colour, named.
+    # Hosek-Wilkie is shaded per direction too, without a guide (it has no disc).
     sky.sky_type = 'HOSEK_WILKIE'
     exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
+    tex = exported.scene.world.texture
+    assert tex is not None and tex.shader is not None and tex.sun is None
+    assert not [w for w in exported.warnings if 'World' in w]
+    # A NaN turbidity (Cycles' sky is undefined there): the constant colour, named.
+    sky.turbidity = float('nan')
+    exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
     assert exported.scene.world.texture is None
-    assert any('HOSEK_WILKIE' in w for w in exported.warnings)
+    assert any('Hosek-Wilkie turbidity' in w for w in exported.warnings), exported.warnings
 
 
 def reference_scene(name='plane', folder=None):
-    """Blender 5.0's default sky (Multiple Scattering), turned by its texture
-    mapping, over the plane; and its bounces (as tools/cycles_references.py
-    renders it)."""
+    """'plane': Blender 5.0's default sky (Multiple Scattering), turned by its
+    texture mapping, over the plane; 'hosek': a Hosek-Wilkie sky (turbidity
+    and albedo between the fits, the bright sky round the sun in view) over
+    it.  And the bounces (as tools/cycles_references.py renders them)."""
     bpy.ops.wm.read_factory_settings()
     scene = bpy.context.scene
-    sky_world(scene, 'MULTIPLE_SCATTERING', sun_elevation=math.radians(35.0),
-              sun_rotation=math.radians(200.0), altitude=300.0, rotation=(0.0, 0.0, 0.7))
+    if name == 'hosek':
+        sky_world(scene, 'HOSEK_WILKIE', strength=1.0, sun_direction=(0.35, 0.8, 0.45), turbidity=4.3,
+                  ground_albedo=0.4)
+    else:
+        sky_world(scene, 'MULTIPLE_SCATTERING', sun_elevation=math.radians(35.0),
+                  sun_rotation=math.radians(200.0), altitude=300.0, rotation=(0.0, 0.0, 0.7))
     plane_under_sky(scene)
     small_resolution(scene, 40, 30)
     return scene, 1
@@ -110,3 +122,36 @@ def test_sky_lit_plane_matches_cycles(tmp_path, tapped_engine):
     image, var = render_for_reference(scene, tmp_path, "sky", tapped_engine, SKY_SPP, 5, bounces)
     check = check_against_reference('sky_plane', scene, bounces, image, var, SKY_SPP, SKY_BLOCK)
     check.assert_agrees(IMAGE_POWER, BLOCK_POWER)
+
+
+def test_hosek_sky_lit_plane_matches_cycles(tmp_path, tapped_engine):
+    """The Hosek-Wilkie sky seen directly above the horizon (per block) and
+    lighting the plane through the baked table's importance sampling."""
+    scene, bounces = reference_scene('hosek')
+    image, var = render_for_reference(scene, tmp_path, "hosek", tapped_engine, SKY_SPP, 7, bounces)
+    check = check_against_reference('sky_hosek', scene, bounces, image, var, SKY_SPP, SKY_BLOCK)
+    check.assert_agrees(IMAGE_POWER, BLOCK_POWER)
+
+
+def test_hosek_sky_with_hostile_values_renders_finite_or_is_named(tmp_path, needs_engine):
+    """Values Blender lets through (its ranges clamp turbidity and albedo but
+    not NaN; the sun direction is free): finite, non-black pixels as Cycles'
+    arithmetic gives them, or the constant colour with the value named."""
+    from addon import engine as ember_engine
+    from addon.export import scene as scene_export
+    from ember_testlib import render_array, setup_ember
+    nan = float('nan')
+    for props, named in ((dict(sun_direction=(nan, nan, nan)), None), (dict(sun_direction=(0.0, 0.0, 0.0)), None),
+                         (dict(sun_direction=(1e30, -1e30, 1e30)), None), (dict(turbidity=1e30), None),
+                         (dict(ground_albedo=nan), 'Hosek-Wilkie ground albedo'),
+                         (dict(turbidity=nan), 'Hosek-Wilkie turbidity')):
+        bpy.ops.wm.read_factory_settings()
+        scene = bpy.context.scene
+        sky_world(scene, 'HOSEK_WILKIE', strength=1.0, **props)
+        small_resolution(scene, 12, 8)
+        warnings = scene_export.export_scene(bpy.context.evaluated_depsgraph_get()).warnings
+        assert [w for w in warnings if named and named in w] if named else not warnings, (props, warnings)
+        setup_ember(scene, 2, seed=1, max_bounces=1)
+        image = render_array(scene, tmp_path, "hostile")
+        assert ember_engine.RENDER_LOG[-1]['error'] is None, props
+        assert np.isfinite(image).all() and image[..., :3].max() > 0, props

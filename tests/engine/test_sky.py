@@ -2,9 +2,12 @@
 and the sun-guided sampling of sky worlds (engine/environment.py).
 
 * Cycles' own sky, stored small (tools/sky_references.py, one file per
-  Blender: 3.4 binary, bpy 4.2, bpy 5.0): per pixel, the direction of Cycles'
-  first sample and its value; Ember evaluates the node with the properties
-  the exporter read in that Blender.  Deterministic on both sides.
+  Blender: 3.4 binary, bpy 4.2, bpy 5.0; Nishita, Preetham and Hosek-Wilkie
+  cases): per pixel, the direction of Cycles' first sample and its value;
+  Ember evaluates the node with the properties the exporter read in that
+  Blender.  Deterministic on both sides.
+* Hosek-Wilkie's tables: the published numbers, and the sky at a control
+  point against the formula by hand; hostile values.
 * Analytic limits: an empty atmosphere scatters nothing and leaves the sun
   unattenuated (the solar spectrum / the disc's solid angle).
 * Sampling: the disc's cone mixed with the table (Cycles' weights 4 : 1):
@@ -35,7 +38,8 @@ VERSIONS = ("34", "42", "50")
 # Per pixel |Ember - Cycles| <= tolerance * max(|Cycles|, 1e-3 * the view's
 # maximum).  Both sides compute in float32 with the same operation order but
 # different libm exp / pow / atan2 and summation order.  Measured: Preetham
-# (analytic, no table) 4e-6 - 3e-5; the tables' Nishita / Single Scattering
+# (analytic, no table) 4e-6 - 3e-5, Hosek-Wilkie (analytic) 1.5e-6 - 2.7e-5;
+# the tables' Nishita / Single Scattering
 # 1e-4 - 4e-4 (32 ray-march steps x 21 wavelengths), Multiple Scattering
 # 2e-5 - 2e-4, and 1.6e-3 at the limb of a disc straddling the horizon (its
 # elevation interpolation amplifies last bits).  The tolerances are 1.5 - 3x
@@ -60,7 +64,7 @@ def test_sky_matches_cycles_per_pixel(version):
     data, meta = references(version)
     worst = []
     for case, props in meta["cases"].items():
-        rtol = RTOL_ANALYTIC if props["sky_type"] == "PREETHAM" else RTOL_TABLE
+        rtol = RTOL_ANALYTIC if props["sky_type"] in ("PREETHAM", "HOSEK_WILKIE") else RTOL_TABLE
         for view in ("horizon", "zenith", "sun"):
             d, cycles = data[f"{case}/{view}/dirs"], data[f"{case}/{view}/rgb"].astype(np.float64)
             ember = sky.sky_texture(None, {"Vector": d}, props)["Color"]
@@ -240,3 +244,107 @@ def test_bad_sun_guides_are_refused():
         with pytest.raises(SceneError, match="sun"):
             validate_world(World(texture=EnvironmentTexture(pixels, sun=guide)))
     validate_world(World(texture=EnvironmentTexture(pixels, sun=SunGuide((0.0, 0.0, 1.0), 0.01, 3.0))))
+
+
+# ----------------------------------------------------------------------------
+# Hosek-Wilkie (engine/nodes/sky_hosek.py, engine/data/hosek_xyz.npz); its
+# pixels against Cycles are in test_sky_matches_cycles_per_pixel above.
+
+def test_hosek_tables_are_the_published_data():
+    """Shape and spot values of ArHosekSkyModelData_CIEXYZ.h (v1.4a), as
+    Blender's intern/sky carries it."""
+    table, radiance = sky.sky_hosek.tables()
+    assert table.shape == (3, 2, 10, 6, 9) and radiance.shape == (3, 2, 10, 6)
+    np.testing.assert_array_equal(table[0, 0, 0, 0, :4], [-1.117001, -1.867262e-1, -1.113505e1, 1.259865e1])
+    assert table[0, 1, 9, 5, 8] == 6.232887e-1          # datasetXYZ1's last number
+    assert table[1, 1, 9, 5, 8] == 6.118645e-1          # datasetXYZ2's
+    assert table[2, 1, 0, 0, 0] == -1.279730            # datasetXYZ3: albedo 1, turbidity 1
+    np.testing.assert_array_equal(radiance[1, 1, 0], [1.745162, 1.639467, 1.342721, 1.166033e1, 1.490124e1,
+                                                      1.774031e1])
+    np.testing.assert_array_equal(radiance[2, 1, 9], [8.640731e-1, 9.858301e-1, 1.854956, -6.798097,
+                                                      5.936468e1, 3.110255e1])
+
+
+def hosek_by_hand(d, sun, config, radiance, xyz_to_rgb):
+    """The model in float64 from one control point of the tables."""
+    theta = np.minimum(np.arccos(d[:, 2]), np.pi / 2 - 0.001)
+    gamma = np.arccos(np.clip(d @ sun, -1.0, 1.0))
+    out = []
+    for c in range(3):
+        a, b, cc, dd, e, f, g, i, h = config[c]      # the fits store I before H
+        chi = (1 + np.cos(gamma) ** 2) / (1 + h * h - 2 * h * np.cos(gamma)) ** 1.5
+        value = (1 + a * np.exp(b / (np.cos(theta) + 0.01))) * (
+            cc + dd * np.exp(e * gamma) + f * np.cos(gamma) ** 2 + g * chi + i * np.sqrt(np.cos(theta)))
+        out.append(value * radiance[c])
+    return np.maximum(np.stack(out, axis=1) @ xyz_to_rgb.T, 0.0) * 2 * np.pi / 683
+
+
+@pytest.mark.parametrize("sun,turbidity,albedo,point", [
+    ((0.0, 0.0, 1.0), 3.0, 0.0, 5),      # the sun at the zenith: the last control point
+    ((0.0, 1.0, 0.0), 10.0, 1.0, 0)])    # on the horizon: the first (turbidity 10: no upper fit)
+def test_hosek_at_a_control_point_equals_the_tables(sun, turbidity, albedo, point):
+    """Where the Bezier weights are 0 or 1 and turbidity and albedo sit on a
+    fit, the sky is the formula evaluated with that fit's numbers."""
+    table, radiance = sky.sky_hosek.tables()
+    t, a = int(turbidity) - 1, int(albedo)
+    props = dict(sky_type="HOSEK_WILKIE", sun_direction=sun, turbidity=turbidity, ground_albedo=albedo,
+                 _blender_version=[5, 0, 1])
+    d = np.array([[0.0, 0.0, 1.0], [0.5, -0.3, 0.4], [0.0, 0.8, 0.15], [-0.9, 0.1, 0.05]])
+    d = (d / np.linalg.norm(d, axis=1)[:, None]).astype(np.float32)
+    ember = sky.sky_texture(None, {"Vector": d}, props)["Color"]
+    expected = hosek_by_hand(d.astype(np.float64), np.array(sun), table[:, a, t, point], radiance[:, a, t, point],
+                             sky.XYZ_TO_REC709.astype(np.float64))
+    print(f"\nHosek-Wilkie by hand {expected.round(4).tolist()}")
+    assert expected.min() > 1e-3
+    np.testing.assert_allclose(ember, expected, rtol=2e-5)     # float32 against float64
+
+
+def test_hosek_interpolates_linearly_in_turbidity_and_albedo():
+    cook = sky.sky_hosek.cook
+    elevation = 0.4
+    mid = cook(3.25, 0.6, elevation)
+    corners = [(0.75 * 0.4, cook(3.0, 0.0, elevation)), (0.75 * 0.6, cook(3.0, 1.0, elevation)),
+               (0.25 * 0.4, cook(4.0, 0.0, elevation)), (0.25 * 0.6, cook(4.0, 1.0, elevation))]
+    for k in range(2):
+        np.testing.assert_allclose(mid[k], sum(w * c[k] for w, c in corners), rtol=1e-12, atol=1e-12)
+
+
+def test_hosek_wrong_albedo_misses_cycles():
+    """The per-pixel check can fail: the ground albedo mixed the wrong way
+    round misses Cycles' 'hosek_low' sky (albedo 0.85) far beyond
+    RTOL_ANALYTIC."""
+    data, meta = references("50")
+    props = dict(meta["cases"]["hosek_low"])
+    props["ground_albedo"] = 1.0 - props["ground_albedo"]
+    d, cycles = data["hosek_low/horizon/dirs"], data["hosek_low/horizon/rgb"]
+    ember = sky.sky_texture(None, {"Vector": d}, props)["Color"]
+    rel = np.abs(ember - cycles) / np.maximum(np.abs(cycles), 1e-3 * cycles.max())
+    assert rel.max() > 100 * RTOL_ANALYTIC
+
+
+def test_hosek_hostile_values_give_finite_pixels_or_a_message():
+    rng = np.random.default_rng(4)
+    d = rng.normal(size=(300, 3))
+    d = np.concatenate([d / np.linalg.norm(d, axis=1)[:, None], np.zeros((1, 3)), rng.normal(size=(10, 3)) * 1e6,
+                        [[0.0, 0.0, -1.0], [np.nan, 0.0, 1.0]]]).astype(np.float32)
+    nan, inf = float("nan"), float("inf")
+    base = dict(sky_type="HOSEK_WILKIE", sun_direction=(0.3, 0.2, 0.5), turbidity=3.0, ground_albedo=0.3)
+    hostile = [dict(turbidity=t) for t in (-5.0, 0.0, 0.5, 10.5, 1e9, inf, -inf)]
+    hostile += [dict(sun_direction=s) for s in ((nan, nan, nan), (0.0, 0.0, 0.0), (inf, 0.0, 1.0), (nan, 0.3, 0.9),
+                                                (1e30, 1e30, 1e30), (0.0, 0.0, -1.0), (1e-30, 0.0, 1e-30))]
+    for changes in hostile:
+        props = dict(base, **changes)
+        assert sky._accepts(props) is None, changes
+        value = sky.sky_texture(None, {"Vector": d}, props)["Color"]
+        assert np.isfinite(value).all() and (value >= 0).all(), changes
+        assert value.max() > 0, changes      # not silently black
+    # Blender's turbidity stops at 1 and 10 (Cycles reads before its table below 1).
+    ok = sky.sky_texture(None, {"Vector": d[:300]}, dict(base, turbidity=1.0))["Color"]
+    low = sky.sky_texture(None, {"Vector": d[:300]}, dict(base, turbidity=0.2))["Color"]
+    np.testing.assert_array_equal(ok, low)
+    # Where Cycles' sky is undefined (NaN parameters) or the albedo is beyond
+    # Blender's range (its extrapolated fits go negative) the node is refused by name.
+    for changes in (dict(turbidity=nan), dict(ground_albedo=nan), dict(ground_albedo=-inf), dict(turbidity="x"),
+                    dict(ground_albedo=7.0), dict(ground_albedo=-3.0), dict(ground_albedo=1e6)):
+        reason = sky._accepts(dict(base, **changes))
+        assert reason is not None and "Hosek-Wilkie" in reason, changes
