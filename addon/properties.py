@@ -96,6 +96,9 @@ class EmberRenderSettings(bpy.types.PropertyGroup):
     transmission_bounces: IntProperty(
         name="Transmission Bounces", description="Refractions and other transmissions a path may take "
         "(within Max Bounces); as Cycles' (default 12)", default=12, min=0, max=1024)
+    filter_glossy: FloatProperty(
+        name="Filter Glossy", description="Blur glossy reflections after blurry bounces to cut caustic "
+        "fireflies, at the cost of accuracy; as Cycles' (default 1.0, 0 = off)", default=1.0, min=0.0, soft_max=10.0)
     light_selection: EnumProperty(
         name="Light Selection", description="How a light is chosen for next-event estimation",
         items=LIGHT_SELECTION_ITEMS, default='AUTO')

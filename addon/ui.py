@@ -113,6 +113,12 @@ class RENDER_PT_ember_light_paths(EmberPanel, bpy.types.Panel):
              ("transmission_bounces", "Transmission"), ("transparent_max_bounces", "Transparent"))
 
 
+class RENDER_PT_ember_light_paths_caustics(EmberPanel, bpy.types.Panel):
+    bl_label = "Caustics"
+    bl_parent_id = 'RENDER_PT_ember_light_paths'
+    PROPS = (("filter_glossy", None),)
+
+
 class RENDER_PT_ember_light_paths_clamping(EmberPanel, bpy.types.Panel):
     bl_label = "Clamping"
     bl_parent_id = 'RENDER_PT_ember_light_paths'
@@ -270,6 +276,7 @@ classes = (
     RENDER_PT_ember_sampling_advanced,
     RENDER_PT_ember_light_paths,
     RENDER_PT_ember_light_paths_clamping,
+    RENDER_PT_ember_light_paths_caustics,
     RENDER_PT_ember_film,
     VIEWLAYER_PT_ember_passes,
     VIEWLAYER_PT_ember_passes_data,

@@ -40,6 +40,7 @@ from . import lobes as registry
 from . import microfacet as mf
 from .kernels import LoopKernel
 # The lobe codes live in lobe_ids (shared with bsdf_loops); bsdf.NONE etc. stay the public names.
+from .lobe_ids import GLOSSY_ANISOTROPIC  # noqa: E402
 from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FRESNEL_IDS, GLASS, GLOSSY,  # noqa: F401
                        KIND_IDS, MIN_ALPHA, MIRROR, NONE, REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
 from .lobes.ggx import fresnel as _fresnel, fresnel_of as _fresnel_of, ggx_pdf, schlick  # noqa: F401
@@ -658,3 +659,31 @@ def _sample_single_numpy(lobes, wo, u1, u2):
         weight[m] = col * _fresnel(lobes, m, 0, wo[m, 2])
         pdf[m] = 1.0
     return wi, weight, pdf, (kind == MIRROR) & up
+
+
+# Cycles' Filter Glossy: the lobes bsdf_blur widens (microfacet ones; a
+# mirror becomes a glossy lobe).
+BLURRED_KINDS = (GLOSSY, GLOSSY_ANISOTROPIC, GLASS, REFRACTION)
+
+
+def blur(lobes, rows, roughness):
+    """Cycles' bsdf_blur with Filter Glossy's blur_roughness at ``rows``:
+    every microfacet lobe's alpha raised to at least ``roughness`` (as
+    Cycles compares them: alpha, not roughness^2), a mirror turned into a
+    glossy lobe that rough.  In place.
+
+    Cycles keeps the multiscatter energy scale of the closure's own alpha,
+    which is 1 for a smooth one: a smooth lobe blurred loses its
+    multiscatter compensation (exact); a rough one keeps Ember's, computed
+    at the blurred alpha (slightly brighter than Cycles' where the blur
+    exceeds the lobe's own roughness)."""
+    kind = lobes.kind[rows]
+    r = roughness[:, None]
+    mirror = kind == MIRROR
+    widen = np.isin(kind, BLURRED_KINDS) | mirror
+    alpha = lobes.alpha[rows]
+    lobes.alpha[rows] = np.where(widen, np.maximum(alpha, np.where(mirror, np.maximum(r, MIN_ALPHA), r)), alpha)
+    lobes.kind[rows] = np.where(mirror & (r > MIN_ALPHA), GLOSSY, kind).astype(lobes.kind.dtype)
+    if lobes.multiscatter is not None:
+        smooth = widen & (alpha <= MIN_ALPHA) & (r > alpha)
+        lobes.multiscatter[rows] = lobes.multiscatter[rows] & ~smooth

@@ -498,6 +498,9 @@ class RenderSettings:
     # max_bounces).  The engine's defaults leave max_bounces alone; the
     # add-on's are Cycles' (4, 4, 12).
     diffuse_bounces: int = 1024
+    # Cycles' Filter Glossy (its blur_glossy; 0 = off, the engine's default;
+    # the add-on's is Cycles' 1.0): engine/integrator/stages.filter_glossy.
+    filter_glossy: float = 0.0
     glossy_bounces: int = 1024
     transmission_bounces: int = 1024
     # Sample an HDRI world by max(L - mean, 0) instead of L (MIS compensation,

@@ -233,6 +233,8 @@ def validate_settings(s):
         raise SceneError("settings: max bounces must be >= 0")
     if s.transparent_max_bounces < 0:
         raise SceneError("settings: transparent max bounces must be >= 0")
+    if not s.filter_glossy >= 0:
+        raise SceneError("settings: filter glossy must be >= 0")
     for kind in ("diffuse", "glossy", "transmission"):
         if getattr(s, kind + "_bounces") < 0:
             raise SceneError(f"settings: {kind} bounces must be >= 0")

@@ -132,6 +132,7 @@ def configure_ember(scene, samples, seed, bounces, adaptive):
     e.max_bounces = bounces
     e.transparent_max_bounces = bounces
     e.diffuse_bounces = e.glossy_bounces = e.transmission_bounces = bounces
+    e.filter_glossy = 0.0
     e.clamp = 0.0
     e.time_limit = 0.0
     e.filter_type = 'BLACKMAN_HARRIS'

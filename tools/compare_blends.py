@@ -103,6 +103,7 @@ def _same_settings(scene, width):
     ember.max_bounces = cycles.max_bounces
     for name in ('transparent_max_bounces', 'diffuse_bounces', 'glossy_bounces', 'transmission_bounces'):
         setattr(ember, name, getattr(cycles, name))
+    ember.filter_glossy = cycles.blur_glossy
     filt = getattr(cycles, 'pixel_filter_type', 'BLACKMAN_HARRIS')
     ember.filter_type = filt if filt in ('BLACKMAN_HARRIS', 'GAUSSIAN', 'BOX') else 'BLACKMAN_HARRIS'
     ember.filter_width = getattr(cycles, 'filter_width', 1.5)

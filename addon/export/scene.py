@@ -96,6 +96,7 @@ def render_settings(scene, is_preview=False):
         diffuse_bounces=settings.diffuse_bounces,
         glossy_bounces=settings.glossy_bounces,
         transmission_bounces=settings.transmission_bounces,
+        filter_glossy=settings.filter_glossy,
         seed=settings.seed,
         light_selection=settings.light_selection.lower(),
         strategy=settings.strategy.lower(),

@@ -51,6 +51,9 @@ class Paths:
     # KIND_TRANSMISSION columns), for the per-kind limits and the Light Path
     # node's depths; (N, 0) when neither needs them.
     kinds: np.ndarray
+    # The smallest pdf of the path's non-singular bounces (inf: none yet),
+    # Cycles' min_ray_pdf: Filter Glossy blurs by it.
+    min_pdf: np.ndarray
 
     def __len__(self):
         return len(self.pix)

@@ -244,6 +244,8 @@ def shade(ctx, paths, hit, depth):
     the shading normal after normal maps and bump, the shading frame, and
     the lobe weights and selection (wo only: once per vertex)."""
     lobes = ctx.materials.gather(hit.mat, shading(ctx, hit, paths, depth))
+    if ctx.settings.filter_glossy > 0:
+        filter_glossy(ctx, paths, lobes)
     if hit.back is not None:
         # Refraction inverts the relative IOR on back faces (leaving the medium).
         lobes.back = hit.back
@@ -260,6 +262,17 @@ def shade(ctx, paths, hit, depth):
         lobes.bump_model = np.full(len(hit.ns), ctx.bump_model, np.int8)
     w = bsdf.weights(lobes, wo_l)
     return Vertex(hit, tt, bb, wo_l, lobes, w, bsdf.selection(lobes, wo_l, w))
+
+
+def filter_glossy(ctx, paths, lobes):
+    """Cycles' Filter Glossy: after a bounce as unlikely as pdf p (the
+    path's smallest), microfacet lobes are blurred to a roughness of
+    sqrt(1 - p / filter) / 2 where p < filter (Cycles' blur_pdf < 1): fewer
+    caustic fireflies, a bias Cycles accepts by default (filter 1)."""
+    blur_pdf = paths.min_pdf / ctx.settings.filter_glossy
+    rows = np.flatnonzero(blur_pdf < 1.0)
+    if len(rows):
+        bsdf.blur(lobes, rows, np.sqrt(1.0 - blur_pdf[rows]) * 0.5)
 
 
 # ----------------------------------------------------------------------------
@@ -403,6 +416,7 @@ def scatter(ctx, paths, v, depth):
     paths.d = wi
     paths.prev_pdf = pdf
     paths.prev_delta = delta
+    paths.min_pdf = np.where(delta, paths.min_pdf, np.minimum(paths.min_pdf, pdf))
     paths.bounce = paths.bounce + ~through
     paths.tbounce = paths.tbounce + through
     return ok, through

@@ -97,6 +97,7 @@ def setup_ember(scene, samples, seed, max_bounces, filter_type='BLACKMAN_HARRIS'
     ember.transparent_max_bounces = max_bounces   # as setup_cycles
     for name in ('diffuse_bounces', 'glossy_bounces', 'transmission_bounces'):
         setattr(ember, name, max_bounces)         # as setup_cycles
+    ember.filter_glossy = 0.0                     # as setup_cycles' blur_glossy
     ember.clamp = 0.0
     ember.time_limit = 0.0
     ember.filter_type = filter_type

@@ -79,3 +79,22 @@ def test_transmission_bounces_end_paths_inside_glass():
     # Through a pane: (1 - F)^2 = 0.92 at normal incidence; none at all with 0.
     assert 0.85 < seen < 0.97, seen
     assert blocked < 0.01, blocked
+
+
+def test_filter_glossy_blurs_microfacet_lobes_only():
+    """Cycles' bsdf_blur (Filter Glossy): microfacet alphas raised to the
+    blur roughness, a mirror made a glossy lobe that rough, other lobes
+    and rows untouched."""
+    from engine import bsdf
+    from engine.lobe_ids import DIFFUSE, GLASS, GLOSSY, MIRROR, NONE
+    mats = bsdf.MaterialTable([Material("m", (Lobe("diffuse"), Lobe("glossy", roughness=0.0),
+                                              Lobe("glossy", roughness=0.8), Lobe("glass", roughness=0.0)))])
+    lobes = mats.gather(np.zeros(3, np.int64))
+    assert list(lobes.kind[0]) == [DIFFUSE, MIRROR, GLOSSY, GLASS]
+    before = lobes.alpha.copy()
+    bsdf.blur(lobes, np.array([0, 2]), np.array([0.3, 0.1]))
+    assert list(lobes.kind[0]) == [DIFFUSE, GLOSSY, GLOSSY, GLASS] and lobes.kind[1, 1] == MIRROR
+    np.testing.assert_allclose(lobes.alpha[0], [before[0, 0], 0.3, 0.64, 0.3])
+    np.testing.assert_allclose(lobes.alpha[2], [before[2, 0], 0.1, 0.64, 0.1])
+    np.testing.assert_array_equal(lobes.alpha[1], before[1])
+    assert NONE not in lobes.kind[0]
