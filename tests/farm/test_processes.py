@@ -90,8 +90,9 @@ class Farm:
 
 
 @pytest.fixture(scope='module')
-def farm(animated_blend, tmp_path_factory):
-    """Scheduler and two workers started by the README's commands."""
+def farm(animated_blend, local, tmp_path_factory):
+    """Scheduler and two workers started by the README's commands (after the
+    local reference render has started: both run at once)."""
     _distributed()
     farm = Farm(tmp_path_factory.mktemp('farm'), animated_blend)
     try:
@@ -115,22 +116,41 @@ bpy.app.handlers.render_pre.append(_ember_test_next_shard)
 """
 
 
+class LocalRender:
+    """What one machine renders without the farm, with the workers' settings,
+    in one bpy process started at once and waited for when first needed
+    (it renders while the farm starts): frames 1-3 and the still's shards,
+    the shards merged by the farm's merge."""
+
+    def __init__(self, blend, tmp):
+        from farm.commands import BPY_RENDER, setup_code
+        self.tmp, self.folder = tmp, str(tmp / 'shards')
+        self.ranges = plan.sample_ranges(SAMPLES, SPLIT)
+        code = setup_code(SAMPLES, 0) + LOCAL_PLAN.format(shards=[(self.folder, a, b - a) for a, b in self.ranges])
+        argv = [sys.executable, '-P', BPY_RENDER, blend, '-o', str(tmp / 'frame_####'), '--python-expr', code,
+                '-f', '1..3' + f",{STILL}" * SPLIT]
+        self.procs = Processes(tmp, checkout_env())
+        self.proc = self.procs.start('local', argv)
+        self.done = None
+
+    def result(self):
+        """({frame: image} of frames 1-3, the still's merged image, its shard folder)."""
+        from farm.merge import final_image, merge_files
+        if self.done is None:
+            assert self.proc.wait(timeout=300) == 0, self.procs.log('local')[-3000:]
+            film, meta = merge_files(sorted(glob.glob(os.path.join(self.folder, '*.npz'))), plan=self.ranges)
+            frames = {f: read_exr(self.tmp / f"frame_{f:04d}.exr") for f in range(1, 4)}
+            self.done = frames, final_image(film, meta), self.folder
+        return self.done
+
+
 @pytest.fixture(scope='module')
 def local(animated_blend, tmp_path_factory):
-    """What one machine renders without the farm, with the workers' settings:
-    ({frame: image} of frames 1-3, the still's shards merged by the farm's
-    merge, the folder of those shards)."""
-    from farm.commands import BPY_RENDER, setup_code
-    from farm.merge import final_image, merge_files
-    tmp = tmp_path_factory.mktemp('local')
-    folder = str(tmp / 'shards')
-    ranges = plan.sample_ranges(SAMPLES, SPLIT)
-    code = setup_code(SAMPLES, 0) + LOCAL_PLAN.format(shards=[(folder, a, b - a) for a, b in ranges])
-    frames = '1..3' + f",{STILL}" * SPLIT
-    _run([sys.executable, '-P', BPY_RENDER, animated_blend, '-o', str(tmp / 'frame_####'), '--python-expr', code,
-          '-f', frames], timeout=300)
-    film, meta = merge_files(sorted(glob.glob(os.path.join(folder, '*.npz'))), plan=ranges)
-    return {f: read_exr(tmp / f"frame_{f:04d}.exr") for f in range(1, 4)}, final_image(film, meta), folder
+    render = LocalRender(animated_blend, tmp_path_factory.mktemp('local'))
+    try:
+        yield render
+    finally:
+        render.procs.close()
 
 
 def _same_shards(farm_folder, local_folder):
@@ -149,9 +169,9 @@ def test_readme_commands_render_what_one_machine_renders(farm, local):
     for name, proc in zip(('animation', 'still'), jobs):
         assert proc.wait(timeout=TIMEOUT) == 0, farm.procs.log(name)[-3000:]
     for frame in (1, 2):
-        np.testing.assert_array_equal(read_exr(plan.frame_path(f"{tmp}/shot", frame)), local[0][frame],
+        np.testing.assert_array_equal(read_exr(plan.frame_path(f"{tmp}/shot", frame)), local.result()[0][frame],
                                       err_msg=f"frame {frame}")
-    _, image, local_shards = local
+    _, image, local_shards = local.result()
     _same_shards(plan.shard_dir(f"{tmp}/still"), local_shards)
     np.testing.assert_array_equal(read_exr(plan.frame_path(f"{tmp}/still", STILL)), image)
     _run(readme['merge'])
@@ -191,9 +211,10 @@ def test_worker_killed_mid_task_and_a_late_worker_finish_the_job(animated_blend,
     job waits, `farm status` shows it stalled, a worker that joins late
     renders the lost shard again and the rest, and the frame is exact."""
     _distributed()
-    farm = Farm(tmp_path, animated_blend).start(['victim'])
+    farm = Farm(tmp_path, animated_blend).start([])
     out = str(tmp_path / 'out')
     try:
+        farm.start_worker('victim')  # the client starts meanwhile: its tasks wait for a worker
         client = farm.procs.start('client', farm.render('--frames', STILL, '--samples', SAMPLES,
                                                         '--split-samples', SPLIT, '-o', out))
         lost = wait_for(lambda: _running_marker(out), TIMEOUT, "a shard to start")
@@ -211,7 +232,7 @@ def test_worker_killed_mid_task_and_a_late_worker_finish_the_job(animated_blend,
         farm.close()
     with open(os.path.join(out, plan.STATE_DIR, 'logs', f"{lost['task']}.log")) as handle:
         assert handle.readline().startswith(f"# {lost['task']} on worker late "), "the lost shard was not rerun"
-    _, image, local_shards = local
+    _, image, local_shards = local.result()
     _same_shards(plan.shard_dir(out), local_shards)
     np.testing.assert_array_equal(read_exr(plan.frame_path(out, STILL)), image)
     assert not os.path.exists(os.path.join(out, plan.STATE_DIR, 'tmp')), "scratch folders left behind"
@@ -252,7 +273,7 @@ def test_client_killed_then_resume_renders_only_missing_frames(farm, local):
     assert line.split(': ', 2)[2].split() == [f"ember-chunk-{f}-{f}" for f in missing], line
     assert {path: os.stat(path).st_mtime_ns for path in done} == done, "a frame on disk was rendered again"
     for frame in range(1, 4):
-        np.testing.assert_array_equal(read_exr(plan.frame_path(out, frame)), local[0][frame],
+        np.testing.assert_array_equal(read_exr(plan.frame_path(out, frame)), local.result()[0][frame],
                                       err_msg=f"frame {frame}")
 
 
