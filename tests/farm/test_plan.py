@@ -15,6 +15,8 @@ def test_frames_chunks_and_ranges():
             plan.parse_frames(bad)
     assert plan.chunks([1, 2, 3, 4, 7, 9, 10], 3) == [[1, 2, 3], [4], [7], [9, 10]]
     assert plan.sample_ranges(10, 3) == [(0, 3), (3, 6), (6, 10)]
+    assert plan.format_frames([1, 2, 3, 4, 7, 9, 10]) == '1-4,7,9-10'   # farm status shows jobs so
+    assert plan.parse_frames(plan.format_frames([120])) == [120]
     with pytest.raises(ValueError):
         plan.sample_ranges(2, 3)
 
@@ -104,3 +106,22 @@ def test_bad_render_arguments_get_a_clear_message(tmp_path, argv, message):
     args = parse(['render'] + [str(blend) if a == 'BLEND' else a for a in argv])
     with pytest.raises(SystemExit, match=message):
         make_job(args)
+
+
+def test_worker_check_names_what_differs(tmp_path):
+    """A task planned for another Ember, Blender or scene is refused before
+    Blender starts, with both values in the message (farm/versions.py)."""
+    from farm import versions
+    blend = tmp_path / 'x.blend'
+    blend.write_bytes(b'BLENDER scene')
+    job = plan.Job(blend=str(blend), out_dir=str(tmp_path), frames=[1], blend_sha256=client.blend_hash(str(blend)),
+                   ember_version=versions.ember_version(), blender_version='bpy 0.0.1')
+    with pytest.raises(versions.WorkerMismatch, match=r"refuses shard-1: Blender here is 'bpy [0-9.]+', "
+                                                       r"the job was planned with 'bpy 0.0.1'"):
+        versions.check_worker(job, 'shard-1')
+    versions.check_worker(job, 'merge-1', renders=False)     # a merge runs no Blender
+    job.blender_version = versions.blender_version('', job.python)
+    versions.check_worker(job, 'shard-1')
+    blend.write_bytes(b'BLENDER another scene')
+    with pytest.raises(versions.WorkerMismatch, match="scene hash here is .* is the shared storage in sync"):
+        versions.check_worker(job, 'shard-1')

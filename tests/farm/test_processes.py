@@ -222,7 +222,7 @@ def test_worker_killed_mid_task_and_a_late_worker_finish_the_job(animated_blend,
         farm.procs.kill('victim')
         wait_for(lambda: not workers_by_name(farm.client), TIMEOUT, "the scheduler to drop the killed worker")
         assert not _alive(lost['child_pid']), "the killed worker's render is still running"
-        stalled = farm.status()
+        stalled = wait_for(lambda: (lambda s: s['jobs'] and s)(farm.status()), TIMEOUT, "the job's record")
         (job,) = stalled['jobs']
         assert stalled['workers'] == [] and job['state'] == 'running', stalled
         assert job['live'] == {'waiting': SPLIT + 1, 'running': 0, 'done': 0, 'failed': 0}, job
