@@ -28,7 +28,10 @@ def checkout_env():
     import site
     pth = [os.path.join(d, 'ember-checkout.pth') for d in site.getsitepackages()]
     on_path = any(os.path.isfile(p) and open(p).read().strip() == ROOT for p in pth)
-    env = dict(os.environ)
+    # NumPy kernels in these Blenders: what runs here is the farm's own code
+    # (the kernels are the same either way and tested in tests/engine), and
+    # loading numba costs about 1.5 CPU-s in each of the ~10 Blender processes.
+    env = dict(os.environ, EMBER_JIT='0')
     if not on_path:
         env['PYTHONPATH'] = os.pathsep.join(p for p in (ROOT, env.get('PYTHONPATH')) if p)
     return env

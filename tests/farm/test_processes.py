@@ -218,7 +218,7 @@ def test_worker_killed_mid_task_and_a_late_worker_finish_the_job(animated_blend,
         client = farm.procs.start('client', farm.render('--frames', STILL, '--samples', SAMPLES,
                                                         '--split-samples', SPLIT, '-o', out))
         lost = wait_for(lambda: _running_marker(out), TIMEOUT, "a shard to start")
-        time.sleep(0.5)  # mid-task: the render has started
+        time.sleep(0.2)  # mid-task: its Blender has started
         farm.procs.kill('victim')
         wait_for(lambda: not workers_by_name(farm.client), TIMEOUT, "the scheduler to drop the killed worker")
         assert not _alive(lost['child_pid']), "the killed worker's render is still running"
