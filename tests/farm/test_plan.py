@@ -125,3 +125,46 @@ def test_worker_check_names_what_differs(tmp_path):
     blend.write_bytes(b'BLENDER another scene')
     with pytest.raises(versions.WorkerMismatch, match="scene hash here is .* is the shared storage in sync"):
         versions.check_worker(job, 'shard-1')
+
+
+def test_status_counts_tasks_and_gives_an_eta(monkeypatch):
+    """`farm status` from a scheduler's task table and a job's record: the
+    tasks of each job by state, who runs what, the ETA from the work done,
+    and a job whose client is gone shown as interrupted."""
+    import time
+    from types import SimpleNamespace as NS
+    from farm import status
+    now = time.time()
+    worker = NS(name='ember-a')
+    tasks = {'ember-shard-1-s0-4-aaaa': NS(state='memory', processing_on=None),
+             'ember-shard-1-s4-8-aaaa': NS(state='processing', processing_on=worker),
+             'ember-merge-1-aaaa': NS(state='waiting', processing_on=None),
+             'other-key': NS(state='processing', processing_on=worker)}
+    jobs = {'aaaa': dict(token='aaaa', blend='/s/x.blend', out_dir='/s/out', frames='1', tasks=3, done=1,
+                         failed=0, work=8, work_done=2, started=now - 10, state='running'),
+            'bbbb': dict(token='bbbb', blend='/s/y.blend', out_dir='/s/old', frames='1-3', tasks=3, done=1,
+                         failed=0, work=3, work_done=1, started=now - 100, updated=now - 90, state='running')}
+
+    class Client:
+        def scheduler_info(self):
+            return {'address': 'tcp://10.0.0.5:8786', 'services': {'dashboard': 8787},
+                    'workers': {'tcp://10.0.0.6:4000': {'name': 'ember-a', 'nthreads': 1}}}
+
+        def run_on_scheduler(self, function):
+            return function(dask_scheduler=NS(tasks=tasks))
+
+        def get_metadata(self, keys, default=None):
+            assert keys == ['ember-farm', 'jobs']
+            return jobs
+
+    monkeypatch.setattr(status.time, 'time', lambda: now)
+    data = status.gather(Client())
+    assert data['dashboard'] == 'http://10.0.0.5:8787/status'
+    assert data['workers'] == [{'name': 'ember-a', 'address': 'tcp://10.0.0.6:4000', 'threads': 1,
+                                'running': ['ember-shard-1-s4-8-aaaa']}]
+    old, live = data['jobs']                       # oldest first
+    assert old['state'] == 'interrupted' and old['eta'] is None
+    assert live['live'] == {'waiting': 1, 'running': 1, 'done': 1, 'failed': 0}
+    assert live['eta'] == pytest.approx(30)        # 10 s for a quarter of the work
+    shown = status.format_status(data)
+    assert 'ETA 0:00:30' in shown and 'bbbb  interrupted' in shown and 'ember-a  tcp://10.0.0.6:4000' in shown
