@@ -128,6 +128,11 @@ def run_shard(job, frame, start, end):
         if meta.get('blend_sha256') != job.blend_sha256:
             raise TaskFailed(f"{key}: the worker rendered a different {job.blend} (hash "
                              f"{meta.get('blend_sha256')}, job {job.blend_sha256}): is the shared storage in sync?")
+        if job.ember_version and meta.get('ember_version') != job.ember_version:
+            # A Blender binary renders with its installed add-on, which may not be the checkout's.
+            raise TaskFailed(f"{key}: rendered by Ember {meta.get('ember_version')} on {socket.gethostname()}, "
+                             f"the job was planned with Ember {job.ember_version} (update the add-on "
+                             f"installed in {job.blender or 'the bpy module'})")
     return files
 
 
@@ -144,8 +149,9 @@ def run_merge(job, frame, *_shards):
     if not layers:
         raise TaskFailed(f"merge of frame {frame}: no shards found")
     written = []
+    expect = {'blend_sha256': job.blend_sha256, 'frame': frame, 'ember_version': job.ember_version or None}
     for layer, paths in sorted(layers.items()):
         target = plan.frame_path(job.out_dir, frame, layer if len(layers) > 1 else None)
-        merge_to_image(paths, target, plan=ranges, expect={'blend_sha256': job.blend_sha256, 'frame': frame})
+        merge_to_image(paths, target, plan=ranges, expect=expect)
         written.append(target)
     return written

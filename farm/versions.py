@@ -4,7 +4,10 @@ scene's hash.  The client records them in the Job; every task checks them on
 its worker before it starts Blender, so a machine with another checkout,
 another Blender or an out-of-sync copy of the .blend refuses the task with a
 message that names both values, instead of rendering frames (or shards) that
-do not belong together.  The merge checks the shards' metadata again."""
+do not belong together.  The Ember version checked first is the worker's
+checkout's; a Blender binary renders with its installed add-on instead, so
+each shard's recorded version is checked again after the render and by the
+merge (a whole frame rendered by a binary carries no version to check)."""
 import functools
 import hashlib
 import os

@@ -166,3 +166,18 @@ def test_adaptive_split_frame_stops_each_shard_on_its_own_samples(scene):
           f"fewest per pixel: {one.min()} vs {split.min()}")
     assert split.min() >= 3 * 16 and one.min() == 16
     assert split.sum() > one.sum()
+
+
+def test_merge_task_refuses_shards_of_another_ember_version(scene, tmp_path, monkeypatch):
+    """Shards rendered by another Ember (a Blender binary's installed add-on
+    can differ from the checkout the job was planned with) are refused, also
+    by a worker whose checkout matches the job."""
+    from farm import plan, tasks, versions
+    monkeypatch.setattr(versions, 'ember_version', lambda: '0.2.0')
+    states = shard_states(scene, settings(), 2)
+    job = plan.Job(blend='scene.blend', out_dir=str(tmp_path), frames=[5], samples=12, split=2, blend_sha256='abc',
+                   ember_version='0.2.0')
+    for (a, b), state in zip(sample_ranges(12, 2), states):
+        _write_shard(tmp_path / 'shards', 5, a, b, 'ViewLayer', state)      # written by Ember 0.1.0
+    with pytest.raises(shardfile.ShardError, match="ember_version is '0.1.0', the job expects '0.2.0'"):
+        tasks.run_merge(job, 5)
