@@ -65,8 +65,10 @@ def check_manifest(job, resume):
     if resume and os.path.isfile(path):
         with open(path) as handle:
             old = json.load(handle)
-        if old != job.fingerprint():
-            changed = sorted(k for k in old if old.get(k) != job.fingerprint().get(k))
+        new = job.fingerprint()
+        # Keys an older manifest lacks (the versions, before issue 28) are not compared.
+        changed = sorted(k for k in old if k in new and old[k] != new[k])
+        if changed:
             raise SystemExit(f"--resume: {job.out_dir} holds a different job (changed: {', '.join(changed)}); "
                              "use another output folder or drop --resume")
     os.makedirs(os.path.dirname(path), exist_ok=True)

@@ -88,6 +88,13 @@ def test_resume_refuses_another_jobs_folder(tmp_path):
     with pytest.raises(SystemExit, match="changed: samples"):
         client.check_manifest(other, resume=True)
     client.check_manifest(other, resume=False)        # a fresh job takes the folder over
+    upgraded = _job(tmp_path, samples=16, ember_version='0.2.0')
+    with pytest.raises(SystemExit, match="changed: ember_version"):
+        client.check_manifest(upgraded, resume=True)  # frames of two Embers in one job: no
+    import json
+    with open(client.manifest_path(other), 'w') as handle:  # a manifest written before the versions
+        json.dump({'blend_sha256': 'abc', 'samples': 16, 'split': 1}, handle)
+    client.check_manifest(upgraded, resume=True)
 
 
 @pytest.mark.parametrize('argv, message', [
