@@ -80,14 +80,27 @@ def gather(client):
         jobs.append(dict(record, state=state, live=counts, elapsed=elapsed, eta=eta))
     dashboard = info.get('services', {}).get('dashboard')
     host = urlparse(info.get('address', '')).hostname or 'SCHEDULER'
-    return {'scheduler': info.get('address'), 'workers': workers, 'jobs': jobs,
-            'dashboard': f"http://{host}:{dashboard}/status" if dashboard else None}
+    url = f"http://{host}:{dashboard}/status" if dashboard else None
+    return {'scheduler': info.get('address'), 'workers': workers, 'jobs': jobs, 'dashboard': url,
+            'dashboard_note': _dashboard_note(url) if url else ''}
+
+
+def _dashboard_note(url, timeout=2.0):
+    """'' if the dashboard draws, else why not: without bokeh the scheduler's
+    page only says how to install it."""
+    from urllib.request import urlopen
+    try:
+        with urlopen(url, timeout=timeout) as page:
+            text = page.read(4000).decode('utf-8', 'replace')
+    except OSError as err:
+        return f" (not reachable from here: {err})"
+    return " (the scheduler has no bokeh: pip install bokeh there)" if 'needs bokeh' in text else ''
 
 
 def format_status(data):
     from .client import _clock
     lines = [f"scheduler {data['scheduler']}",
-             f"dashboard {data['dashboard'] or 'off (the scheduler has no bokeh: pip install bokeh)'}",
+             f"dashboard {data['dashboard'] or 'off'}{data.get('dashboard_note', '')}",
              f"workers: {len(data['workers'])}"]
     for w in data['workers']:
         doing = ', '.join(w['running']) or 'idle'
