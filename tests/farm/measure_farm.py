@@ -11,7 +11,6 @@ import argparse
 import glob
 import json
 import os
-import signal
 import sys
 import tempfile
 import time
