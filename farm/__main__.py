@@ -35,6 +35,10 @@ def parse(argv):
     worker.add_argument('--render-threads', type=int, default=0, help="threads per render (0 = all cores)")
     worker.add_argument('--local-directory')
 
+    state = sub.add_parser('status', help="workers, jobs, tasks and ETA of a running farm")
+    state.add_argument('--scheduler', required=True, help="tcp://HOST:8786")
+    state.add_argument('--json', action='store_true', help="print the same as JSON")
+
     merge = sub.add_parser('merge', help="merge shard files of one frame into an image")
     merge.add_argument('shards', nargs='+', help="shard files (patterns with * are expanded)")
     merge.add_argument('--plan', help="the planned sample ranges, e.g. 0-32,32-64: exactly these are "
@@ -45,6 +49,7 @@ def parse(argv):
 
 def make_job(args):
     from .client import blend_hash
+    from .versions import WorkerMismatch, blender_version, ember_version
     blend = os.path.abspath(args.blend)
     if not os.path.isfile(blend):
         raise SystemExit(f"no such .blend file: {blend}")
@@ -58,10 +63,14 @@ def make_job(args):
         frames = plan.parse_frames(args.frames)
     except ValueError as err:
         raise SystemExit(str(err)) from None
+    try:
+        versions = {'ember_version': ember_version(), 'blender_version': blender_version(args.blender, sys.executable)}
+    except WorkerMismatch as err:
+        raise SystemExit(f"this machine cannot plan the job: {err}") from None
     threads = args.threads or (max(1, (os.cpu_count() or 1) // args.local) if args.local else 0)
     return plan.Job(blend=blend, out_dir=os.path.abspath(args.output), frames=frames, samples=args.samples,
                     split=max(1, args.split_samples), chunk=args.chunk, blender=args.blender,
-                    python=sys.executable, threads=threads, blend_sha256=blend_hash(blend))
+                    python=sys.executable, threads=threads, blend_sha256=blend_hash(blend), **versions)
 
 
 def cmd_render(args):
@@ -114,6 +123,9 @@ def main(argv=None):
         return cmd_render(args)
     if args.command == 'merge':
         return cmd_merge(args)
+    if args.command == 'status':
+        from .status import main as status_main
+        return status_main(args.scheduler, args.json)
     from .worker import main as worker_main
     worker_main(args.scheduler, args.name, args.render_threads, args.local_directory)
     return 0

@@ -12,7 +12,7 @@ import sys
 import time
 import uuid
 
-from . import plan, shardfile
+from . import plan, shardfile, status
 
 RETRIES = 2
 
@@ -65,8 +65,10 @@ def check_manifest(job, resume):
     if resume and os.path.isfile(path):
         with open(path) as handle:
             old = json.load(handle)
-        if old != job.fingerprint():
-            changed = sorted(k for k in old if old.get(k) != job.fingerprint().get(k))
+        new = job.fingerprint()
+        # Keys an older manifest lacks (the versions, before issue 28) are not compared.
+        changed = sorted(k for k in old if k in new and old[k] != new[k])
+        if changed:
             raise SystemExit(f"--resume: {job.out_dir} holds a different job (changed: {', '.join(changed)}); "
                              "use another output folder or drop --resume")
     os.makedirs(os.path.dirname(path), exist_ok=True)
@@ -76,10 +78,11 @@ def check_manifest(job, resume):
     os.replace(tmp, path)
 
 
-def submit(client, job, todo, retries=RETRIES):
-    """Futures of the tasks, merges depending on their frame's shards."""
+def submit(client, job, todo, retries=RETRIES, token=None):
+    """Futures of the tasks, merges depending on their frame's shards.  Keys
+    end in the job's ``token`` (``python -m farm status`` groups by it)."""
     from . import tasks as run
-    token = uuid.uuid4().hex[:8]
+    token = token or uuid.uuid4().hex[:8]
     futures, shards = [], {}
     for task in todo:
         key = f"{task.key}-{token}"
@@ -141,9 +144,12 @@ def run(client, job, resume=False, stream=sys.stderr, retries=RETRIES):
           file=stream, flush=True)
     if todo and not client.scheduler_info().get('workers'):
         print("farm: no workers yet: start some with `python -m farm worker ADDRESS`", file=stream, flush=True)
-    futures = submit(client, job, todo, retries)
+    token = uuid.uuid4().hex[:8]
+    futures = submit(client, job, todo, retries, token)
     by_future = {fut.key: task for task, fut in futures}
     bar = ProgressBar(len(futures), sum(weight(job, t) for t, _ in futures), stream)
+    record = status.job_record(job, token, bar.total_tasks, bar.total_work)
+    status.publish(client, token, record)
     written, failures = [], []
     for fut in as_completed([f for _, f in futures]):
         task = by_future[fut.key]
@@ -153,6 +159,10 @@ def run(client, job, resume=False, stream=sys.stderr, retries=RETRIES):
         else:
             failures.append(f"{task.key}: {fut.exception()}")
         bar.update(weight(job, task))
+        record.update(done=bar.tasks, failed=len(failures), work_done=bar.work)
+        status.publish(client, token, record)
+    record['state'] = 'failed' if failures else 'done'
+    status.publish(client, token, record)
     if not failures:
         # Scratch folders and markers of tasks killed on the way.
         for name in ('tmp', 'running'):

@@ -24,6 +24,11 @@ def parse_frames(text):
     return sorted(frames)
 
 
+def format_frames(frames):
+    """[1, 2, 3, 7] -> '1-3,7' (the inverse of parse_frames)."""
+    return ",".join(f"{run[0]}-{run[-1]}" if len(run) > 1 else str(run[0]) for run in chunks(frames, len(frames)))
+
+
 def chunks(frames, size):
     """Runs of consecutive frames, at most ``size`` long (one Blender start each)."""
     if size < 1:
@@ -67,11 +72,14 @@ class Job:
     python: str = ''                 # interpreter with bpy (bpy-module mode)
     threads: int = 0                 # render threads per task (0 = all cores)
     blend_sha256: str = ''
+    ember_version: str = ''          # what the client has (farm/versions.py);
+    blender_version: str = ''        # '' skips that check on the workers
     extra_env: dict = field(default_factory=dict)
 
     def fingerprint(self):
         """What must not change between a job and its --resume."""
-        return {'blend_sha256': self.blend_sha256, 'samples': self.samples, 'split': self.split}
+        return {'blend_sha256': self.blend_sha256, 'samples': self.samples, 'split': self.split,
+                'ember_version': self.ember_version, 'blender_version': self.blender_version}
 
 
 @dataclass(frozen=True)

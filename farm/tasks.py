@@ -20,6 +20,7 @@ import uuid
 from . import plan, shardfile
 from .commands import ROOT, render_command
 from .merge import merge_to_image
+from .versions import check_worker, worker_label
 
 # One render owns the machine's cores through Ember's own thread pool:
 # keep BLAS pools in the child from multiplying it.
@@ -62,6 +63,8 @@ def run_blender(job, key, frames, out_pattern, shard=None):
     log_path = _state_path(job, 'logs', f"{key}.log")
     running = _state_path(job, 'running', f"{key}.{socket.gethostname()}.{os.getpid()}.json")
     with open(log_path, 'w') as log:
+        log.write(f"# {key} on {worker_label()}\n")
+        log.flush()
         proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=ROOT,
                                 preexec_fn=_die_with_parent)
         with open(running, 'w') as marker:
@@ -90,6 +93,7 @@ def _scratch(job, key):
 def run_chunk(job, frames):
     """Render consecutive frames; returns the finished frame files."""
     key = f"chunk-{frames[0]}-{frames[-1]}"
+    check_worker(job, key)
     scratch = _scratch(job, key)
     try:
         run_blender(job, key, frames, os.path.join(scratch, 'frame_####'))
@@ -109,6 +113,7 @@ def run_chunk(job, frames):
 def run_shard(job, frame, start, end):
     """Render sample indices [start, end) of one frame; returns its state files."""
     key = f"shard-{frame}-s{start}-{end}"
+    check_worker(job, key)
     scratch = _scratch(job, key)
     folder = plan.shard_dir(job.out_dir)
     try:
@@ -123,6 +128,11 @@ def run_shard(job, frame, start, end):
         if meta.get('blend_sha256') != job.blend_sha256:
             raise TaskFailed(f"{key}: the worker rendered a different {job.blend} (hash "
                              f"{meta.get('blend_sha256')}, job {job.blend_sha256}): is the shared storage in sync?")
+        if job.ember_version and meta.get('ember_version') != job.ember_version:
+            # A Blender binary renders with its installed add-on, which may not be the checkout's.
+            raise TaskFailed(f"{key}: rendered by Ember {meta.get('ember_version')} on {socket.gethostname()}, "
+                             f"the job was planned with Ember {job.ember_version} (update the add-on "
+                             f"installed in {job.blender or 'the bpy module'})")
     return files
 
 
@@ -130,6 +140,7 @@ def run_merge(job, frame, *_shards):
     """Merge the planned shards of one frame (each view layer apart) into its
     image.  The shard results are only dependencies: the files are found
     by the plan, so shards kept from an earlier run count too."""
+    check_worker(job, f"merge-{frame}", renders=False)
     ranges = plan.sample_ranges(job.samples, job.split)
     layers = {}
     for start, end in ranges:
@@ -138,8 +149,9 @@ def run_merge(job, frame, *_shards):
     if not layers:
         raise TaskFailed(f"merge of frame {frame}: no shards found")
     written = []
+    expect = {'blend_sha256': job.blend_sha256, 'frame': frame, 'ember_version': job.ember_version or None}
     for layer, paths in sorted(layers.items()):
         target = plan.frame_path(job.out_dir, frame, layer if len(layers) > 1 else None)
-        merge_to_image(paths, target, plan=ranges, expect={'blend_sha256': job.blend_sha256, 'frame': frame})
+        merge_to_image(paths, target, plan=ranges, expect=expect)
         written.append(target)
     return written

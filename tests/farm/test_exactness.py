@@ -140,3 +140,44 @@ def test_denoising_happens_after_the_merge(scene):
     assert np.abs(image[..., :3] - noisy[..., :3]).mean() > 1e-3 * noisy[..., :3].mean()
     np.testing.assert_array_equal(image[..., 3], noisy[..., 3])
     np.testing.assert_array_equal(final_image(merged, dict(meta, denoise=False)), noisy)
+
+
+def test_adaptive_split_frame_stops_each_shard_on_its_own_samples(scene):
+    """What a split frame does with adaptive sampling (docs/sampling.md,
+    "Adaptive sampling across farm shards"): each shard is an adaptive render
+    of its sample range alone.  Its min samples and its checks every 16
+    samples count from the shard's first sample, and its error estimate uses
+    its own samples only, so every pixel gets at least min samples in every
+    shard: the split frame traces more samples than one adaptive render
+    (which may stop a pixel at min samples in all)."""
+    if not hasattr(RenderSettings(), 'adaptive_threshold'):
+        require(False, "the engine has no adaptive sampling (RenderSettings.adaptive_threshold)")
+    base = settings(samples=60, samples_per_pass=0, adaptive_threshold=0.05, adaptive_min_samples=16)
+    ranges = sample_ranges(base.samples, 3)                 # [0, 20) [20, 40) [40, 60)
+    shards = [s['count'].astype(int) for s in shard_states(scene, base, 3)]
+    for (a, b), count in zip(ranges, shards):
+        # Stopped at the shard's own check point (16 = min samples) or ran to its end.
+        assert set(np.unique(count)) <= {16, b - a}, (a, b, np.unique(count))
+        assert (count < b - a).any(), f"adaptive sampling stopped no pixel in shard {a}-{b}"
+    one = render(scene, base).film.count.astype(int)
+    assert set(np.unique(one)) <= {16, 32, 48, 60}, np.unique(one)
+    split = sum(shards)
+    print(f"samples traced: one adaptive render {one.sum()}, 3 shards {split.sum()}; "
+          f"fewest per pixel: {one.min()} vs {split.min()}")
+    assert split.min() >= 3 * 16 and one.min() == 16
+    assert split.sum() > one.sum()
+
+
+def test_merge_task_refuses_shards_of_another_ember_version(scene, tmp_path, monkeypatch):
+    """Shards rendered by another Ember (a Blender binary's installed add-on
+    can differ from the checkout the job was planned with) are refused, also
+    by a worker whose checkout matches the job."""
+    from farm import plan, tasks, versions
+    monkeypatch.setattr(versions, 'ember_version', lambda: '0.2.0')
+    states = shard_states(scene, settings(), 2)
+    job = plan.Job(blend='scene.blend', out_dir=str(tmp_path), frames=[5], samples=12, split=2, blend_sha256='abc',
+                   ember_version='0.2.0')
+    for (a, b), state in zip(sample_ranges(12, 2), states):
+        _write_shard(tmp_path / 'shards', 5, a, b, 'ViewLayer', state)      # written by Ember 0.1.0
+    with pytest.raises(shardfile.ShardError, match="ember_version is '0.1.0', the job expects '0.2.0'"):
+        tasks.run_merge(job, 5)
