@@ -96,7 +96,7 @@ def assert_mean(values, target, what):
         assert mean == pytest.approx(target, rel=1e-9), what
         return
     z = (mean - target) / se
-    print(f"z {what}: {z:.3f}")
+    print(f"z {what}: {z:.3f}; detects {Z_MAX * se / max(abs(target), 1e-300):.3%} (relative) with probability 1/2")
     assert abs(z) < Z_MAX, f"{what}: mean {mean:.6g} vs {target:.6g}, z = {z:.2f}"
 
 
@@ -146,7 +146,7 @@ def test_lobe_sampling(name, cos_o, back):
         return bsdf.eval_pdf(rows, np.tile(wo1, (len(v), 1)), v)[1]
 
     res = sphere_chi2(wi[valid], pdf_fn, N, int((~valid).sum()))
-    print(f"chi2 {what}: {res}")
+    print(f"chi2 {what}: {res.power_line(LEVEL)}")
     assert res.p > LEVEL, f"{what}: {res}"
     kinds = [l.kind for l in MATERIALS[name]]
     if set(kinds) <= {"diffuse", "glossy", "sheen"}:
