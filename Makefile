@@ -2,7 +2,7 @@
 PY := .venv/bin/python
 export PYTHONPATH := $(CURDIR)
 
-.PHONY: setup render render-engine test test-engine test-addon bench bench-cycles bench-export zip install-blender clean
+.PHONY: setup render render-engine test test-engine test-addon mutate bench bench-cycles bench-export zip install-blender clean
 
 setup:
 	./scripts/setup.sh
@@ -29,6 +29,12 @@ test-engine: setup
 test-addon: setup
 	sh tools/setup_test_env.sh
 	$(PY) -m pytest tests/addon -q
+
+# The mutation table (docs/testing.md): small errors put into a copy of the
+# tree, one at a time, each followed by the tests that must catch it.  Not
+# part of make test; about 5-10 minutes.
+mutate: setup
+	$(PY) tools/mutate.py
 
 bench: setup
 	$(PY) -m tools.bench_engine
