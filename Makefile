@@ -2,7 +2,7 @@
 PY := .venv/bin/python
 export PYTHONPATH := $(CURDIR)
 
-.PHONY: setup render render-engine test test-engine test-addon bench bench-cycles bench-export zip install-blender clean
+.PHONY: setup render render-engine test test-engine test-addon mutate bench bench-cycles bench-export zip install-blender clean
 
 setup:
 	./scripts/setup.sh
@@ -18,6 +18,7 @@ render-engine: setup
 
 # Everything: engine and add-on tests, Cycles comparisons, Blender 3.4 binary
 # and bpy 4.2 runs.  Installs what it needs first (apt for Debian's Blender).
+# Missing prerequisites fail; EMBER_ALLOW_SKIPS=1 make test skips them (not under CI=true).
 test: setup
 	sh tools/setup_test_env.sh
 	$(PY) -m pytest tests -q -rfEs -p no:cacheprovider --durations=10
@@ -28,6 +29,12 @@ test-engine: setup
 test-addon: setup
 	sh tools/setup_test_env.sh
 	$(PY) -m pytest tests/addon -q
+
+# The mutation table (docs/testing.md): small errors put into a copy of the
+# tree, one at a time, each followed by the tests that must catch it.  Not
+# part of make test; about 5-10 minutes.
+mutate: setup
+	$(PY) tools/mutate.py
 
 bench: setup
 	$(PY) -m tools.bench_engine

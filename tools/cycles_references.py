@@ -9,9 +9,11 @@ test's small resolution, written to tests/data/cycles_<name>.exr with six
 float channels: R, G, B (the mean) and var.R, var.G, var.B (the variance of
 that mean per pixel, from the scatter of the seeds), so a test can account
 for Cycles' residual noise.  The EXR header records the Blender/Cycles
-version, the samples, seeds, bounces, filter, resolution and a fingerprint
-of the Blender scene (``ember:*`` attributes,
-tests/addon/ember_testlib.scene_fingerprint); the tests refuse a reference
+version, the samples, seeds, bounces, filter, a key of the other Cycles
+settings (tests/addon/ember_testlib.cycles_settings_key: the code of
+setup_cycles), resolution and a fingerprint of the Blender scene
+(``ember:*`` attributes, tests/addon/ember_testlib.scene_fingerprint:
+colours and modifiers included); the tests refuse a reference
 whose settings or scene differ from theirs.
 
 The scenes: blend_scenes/cornell.blend and ``glossy_world`` (built here by
@@ -56,7 +58,7 @@ REFERENCES['sky_plane'] = ('test_world_sky', 'plane', 2048)
 REFERENCES['sky_hosek'] = ('test_world_sky', 'hosek', 2048)
 # the scenes built here: (width, height, max bounces)
 BUILT_HERE = {'cornell': (48, 48, 4), 'glossy_world': (48, 32, 4)}
-HEADER = ('scene', 'blender', 'samples', 'seeds', 'max_bounces', 'filter', 'width', 'height', 'fingerprint')
+HEADER = ('scene', 'blender', 'samples', 'seeds', 'max_bounces', 'filter', 'cycles', 'width', 'height', 'fingerprint')
 FILTER = ('BLACKMAN_HARRIS', 1.5)
 
 
@@ -133,9 +135,10 @@ def build(name, folder):
 
 def expected_header(name):
     """The header entries that do not depend on the built scene."""
+    from ember_testlib import cycles_settings_key
     _, scene_name, samples = REFERENCES[name]
     return {'scene': scene_name, 'samples': str(samples), 'seeds': str(SEEDS),
-            'filter': f'{FILTER[0]} {FILTER[1]}'}
+            'filter': f'{FILTER[0]} {FILTER[1]}', 'cycles': cycles_settings_key(*FILTER)}
 
 
 def metadata(name, scene, bounces):

@@ -87,6 +87,18 @@ def setup_cycles(scene, samples, seed, max_bounces, filter_type='BLACKMAN_HARRIS
     scene.render.threads_mode = 'AUTO'
 
 
+def cycles_settings_key(filter_type='BLACKMAN_HARRIS', filter_width=1.5):
+    """A hash of how setup_cycles configures Cycles (its code and the filter
+    it is given): part of a reference's key, so a reference made with other
+    Cycles settings (a clamp, the light threshold, caustics) is refused.
+    Samples, seeds and bounces are keyed apart; Blender's own defaults by its
+    version."""
+    import inspect
+    source = inspect.getsource(setup_cycles)
+    body = source[source.index('"""', source.index('"""') + 3) + 3:]     # the code, not its docstring
+    return hashlib_sha(repr((body, filter_type, float(filter_width))).encode())[:16]
+
+
 def setup_ember(scene, samples, seed, max_bounces, filter_type='BLACKMAN_HARRIS', filter_width=1.5):
     scene.render.engine = 'EMBER'
     ember = scene.ember
@@ -227,7 +239,7 @@ _SKIP = {'rna_type', 'name', 'name_full', 'session_uid', 'is_evaluated', 'origin
          'use_extra_user', 'is_embedded_data', 'is_library_indirect', 'is_missing', 'is_runtime_data', 'tag',
          'id_type', 'library', 'library_weak_reference', 'asset_data', 'override_library', 'preview',
          'location', 'width', 'height', 'dimensions', 'select', 'show_options', 'show_preview', 'show_texture',
-         'hide', 'label', 'width_hidden', 'color', 'use_custom_color', 'bl_width_default', 'bl_width_min',
+         'hide', 'label', 'width_hidden', 'use_custom_color', 'bl_width_default', 'bl_width_min',
          'bl_width_max', 'bl_height_default', 'bl_height_min', 'bl_height_max', 'bl_icon', 'bl_label',
          'bl_description', 'bl_static_type', 'type', 'color_tag', 'warning_propagation', 'is_active_output',
          'is_editor_icon_update', 'filepath', 'filepath_raw', 'node_tree', 'image', 'object', 'parent'}
@@ -244,11 +256,17 @@ def _rounded(value):
         return repr(type(value).__name__)
 
 
-def _rna(struct):
+# A node's 'color' is its editor colour; a light's, a world's or an
+# object's colour is rendered (it was skipped everywhere once, so a light's
+# colour or a node-less world's colour could change unseen: issue 27).
+_NODE_SKIP = _SKIP | {'color'}
+
+
+def _rna(struct, skip=_SKIP):
     items = []
     for prop in struct.bl_rna.properties:
         key = prop.identifier
-        if key in _SKIP or prop.type in ('POINTER', 'COLLECTION'):
+        if key in skip or prop.type in ('POINTER', 'COLLECTION'):
             continue
         try:
             items.append((key, _rounded(getattr(struct, key))))
@@ -280,7 +298,7 @@ def _tree_print(tree):
     for node in nodes:
         inputs = [(s.identifier, _rounded(getattr(s, 'default_value', None))) for s in node.inputs]
         ramp = getattr(node, 'color_ramp', None)
-        out.append((node.bl_idname, _rna(node), inputs,
+        out.append((node.bl_idname, _rna(node, _NODE_SKIP), inputs,
                     [(e.position, tuple(e.color)) for e in ramp.elements] if ramp else None,
                     _image_print(getattr(node, 'image', None)),
                     _tree_print(getattr(node, 'node_tree', None)),
@@ -316,7 +334,9 @@ def _material_print(material):
 
 def scene_fingerprint(scene):
     """A hash of what the scene renders: a reference is only valid for the
-    scene it was rendered from."""
+    scene it was rendered from.  Objects (transform, visibility, modifiers,
+    data, materials), lights and worlds with their colours, node trees,
+    camera and resolution."""
     bpy.context.view_layer.update()     # matrix_world as rendered
     objects = []
     for obj in sorted(scene.objects, key=lambda o: o.name):
@@ -330,7 +350,8 @@ def scene_fingerprint(scene):
         matrix = _rounded([tuple(row) for row in obj.matrix_world])
         flags = [(k, getattr(obj, k)) for k in ('hide_render', 'visible_camera', 'visible_diffuse',
                                                 'visible_glossy', 'visible_transmission', 'visible_shadow')]
-        objects.append((obj.type, matrix, flags, data_print,
+        modifiers = [(m.type, _rna(m)) for m in obj.modifiers]   # a Subdivision changes the mesh rendered
+        objects.append((obj.type, matrix, flags, data_print, modifiers,
                         [_material_print(slot.material) for slot in obj.material_slots if slot.link == 'OBJECT']))
     world = scene.world
     render = scene.render

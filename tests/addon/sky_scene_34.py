@@ -9,8 +9,8 @@ import sys
 
 import bpy
 
-EMBER_SEEDS, EMBER_SPP = 4, 32
-CYCLES_SEEDS, CYCLES_SPP = 6, 16
+EMBER_SEEDS, EMBER_SPP = 8, 16      # 8 seeds: Welch dof near 7-18, not 3 (issue 27)
+CYCLES_SEEDS, CYCLES_SPP = 12, 8
 
 
 def sky_node(tree, sky_type):

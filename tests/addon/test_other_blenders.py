@@ -225,9 +225,9 @@ def test_sky_in_blender_34_matches_its_cycles(tmp_path, legacy_zip, needs_engine
     """Blender 3.4's Nishita sky (the 3.x / 4.x table layout, ground fade and
     disc) and its Hosek-Wilkie sky, each lighting a plane and seen above it,
     through the legacy zip in the real binary, against that binary's Cycles:
-    blocks and image / quadrant means (tests/addon/sky_scene_34.py renders
-    both; the skies' own pixels are checked against 3.4's Cycles in
-    tests/engine/test_sky.py)."""
+    blocks and image / quadrant means, their power printed
+    (tests/addon/sky_scene_34.py renders both; the skies' own pixels are
+    checked against 3.4's Cycles in tests/engine/test_sky.py)."""
     version = blender_version()
     require(version is not None and version.startswith('Blender 3.4'),
             f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
@@ -238,8 +238,10 @@ def test_sky_in_blender_34_matches_its_cycles(tmp_path, legacy_zip, needs_engine
     assert code == 0 and 'SKY SCENE DONE' in out, out[-4000:]
     assert 'Error' not in out, out[-4000:]
     from ember_testlib import assert_no_failing_blocks, compare_with_cycles
-    ember = np.array([load_exr(str(tmp_path / f'ember_{s}.exr'))[..., :3] for s in range(4)], np.float64)
-    cycles = np.array([load_exr(str(tmp_path / f'cycles_{s}.exr'))[..., :3] for s in range(6)], np.float64)
+    # sky_scene_34.py's seeds (8 Ember x 16 spp, 12 Cycles x 8 spp; were 4 and 6).
+    ember = np.array([load_exr(str(p))[..., :3] for p in sorted(tmp_path.glob('ember_*.exr'))], np.float64)
+    cycles = np.array([load_exr(str(p))[..., :3] for p in sorted(tmp_path.glob('cycles_*.exr'))], np.float64)
+    assert (len(ember), len(cycles)) == (8, 12), (len(ember), len(cycles))
     assert np.isfinite(ember).all() and ember.mean() > 0.05
     failures, details, _, _ = compare_with_cycles(f"Blender 3.4 {sky_type} sky plane", ember, cycles, 4)
     assert_no_failing_blocks(failures, details)

@@ -29,12 +29,40 @@ from ember_stats import chi2_sf, normal_two_sided_p, sidak, z_threshold  # noqa:
 # Pearson's test with pooling
 
 class Chi2Result:
-    def __init__(self, stat, dof, p, pooled, message=""):
+    def __init__(self, stat, dof, p, pooled, message="", total=0.0):
         self.stat, self.dof, self.p, self.pooled, self.message = stat, dof, p, pooled, message
+        self.total = total      # the expected counts' sum: the samples tested
 
     def __repr__(self):
         return (f"chi2={self.stat:.2f} dof={self.dof} p={self.p:.3g} pooled_cells={self.pooled}"
                 + (f" {self.message}" if self.message else ""))
+
+    def detects(self, level):
+        """The smallest rms relative error of the sampled density over the
+        cells (weighted by their probability) that the test at ``level``
+        detects with probability about 1/2: its noncentrality N eps^2 puts
+        the statistic's mean dof + N eps^2 on the threshold."""
+        if self.dof < 1 or self.total <= 0:
+            return float("nan")
+        return math.sqrt(max(chi2_threshold(level, self.dof) - self.dof, 0.0) / self.total)
+
+    def power_line(self, level):
+        return (f"{self}; detects a density error of {self.detects(level):.2%} (rms over the cells) "
+                f"with probability 1/2 at level {level:.2g}")
+
+
+def chi2_threshold(level, dof):
+    """The chi-square statistic whose upper tail is ``level`` (bisection)."""
+    lo, hi = 0.0, float(dof) + 10.0
+    while chi2_sf(hi, dof) > level:
+        lo, hi = hi, 2.0 * hi
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        if chi2_sf(mid, dof) > level:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
 
 
 def chi2_test(observed, expected, min_expected=5.0):
@@ -76,7 +104,7 @@ def chi2_test(observed, expected, min_expected=5.0):
     dof = cells - 1
     if dof < 1:
         return Chi2Result(stat, dof, 1.0, pooled, "fewer than two cells: nothing to test")
-    return Chi2Result(stat, dof, chi2_sf(stat, dof), pooled)
+    return Chi2Result(stat, dof, chi2_sf(stat, dof), pooled, total=float(exp.sum()))
 
 
 # ----------------------------------------------------------------------------

@@ -159,7 +159,7 @@ def test_distribution2d_chi2():
     assert outside == 0
     expected = N * (w / w.sum()).T
     res = C.chi2_test(counts, expected)
-    print("chi2 Distribution2D:", res)
+    print("chi2 Distribution2D:", res.power_line(LEVEL))
     assert res.p > LEVEL
     # Points inside a cell follow its uniform density: check the fractional part.
     fx = (x * 9) % 1.0
@@ -212,7 +212,7 @@ def test_environment_sampler(matrix, interp, comp):
     obs = np.append(counts.ravel(), outside + (~ok).sum())
     exp = np.append(N * mass.ravel(), max(N - N * mass.sum(), 0.0))
     res = C.chi2_test(obs, exp)
-    print(f"chi2 environment {matrix} {interp} compensate={comp}: {res}")
+    print(f"chi2 environment {matrix} {interp} compensate={comp}: {res.power_line(LEVEL)}")
     assert res.p > LEVEL
 
     # mean(1/pdf) = the world solid angle of the support: 4 pi, but for the

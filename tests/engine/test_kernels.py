@@ -425,27 +425,40 @@ def test_frame_and_rotations_agree(jit):
 def test_one_process_at_a_time_fills_the_cache(tmp_path):
     """Two processes compiling into one numba cache crashed the second (a
     segfault loading a gufunc the first was writing): ``cache_lock`` lets
-    one in at a time; a waiter that is told to stop gives up at once."""
+    one in at a time; a waiter that is told to stop gives up at once.  No
+    clock: the holder writes a marker file as the last thing it does while
+    it holds the lock, so whoever gets the lock after it must find the
+    marker (a lock that let the waiter in early would not).  The holder is
+    told to finish from inside the waiter's wait (its give_up callback), so
+    the waiter provably waited."""
     import subprocess
     import sys
-    import time
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    marker = tmp_path / "released"
     holder = subprocess.Popen(
         [sys.executable, "-c", "import sys, time; sys.path.insert(0, sys.argv[1]); from engine import kernels\n"
-         "with kernels.cache_lock(sys.argv[2]):\n    print('held', flush=True); time.sleep(1.5)",
-         root, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+         "with kernels.cache_lock(sys.argv[2]):\n    print('held', flush=True); sys.stdin.readline()\n"
+         "    open(sys.argv[3], 'w').close()",
+         root, str(tmp_path), str(marker)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
         assert holder.stdout.readline().strip() == "held"
         with kernels.cache_lock(str(tmp_path), give_up=lambda: True) as locked:
             assert not locked
-        t0 = time.perf_counter()
-        with kernels.cache_lock(str(tmp_path)) as locked:
-            assert locked
-            waited = time.perf_counter() - t0
-            assert holder.poll() is not None or waited > 1.0
+        assert not marker.exists()
+        told = []
+
+        def release_holder():             # called only while we wait for the lock
+            if not told:
+                holder.stdin.write("go\n")
+                holder.stdin.flush()
+                told.append(True)
+            return False
+        with kernels.cache_lock(str(tmp_path), give_up=release_holder) as locked:
+            assert locked and told, "the lock was granted without waiting for the holder"
+            assert marker.exists(), "the lock was granted while the holder still had it"
     finally:
+        holder.stdin.close()
         holder.wait(30)
-    assert waited > 0.5
 
 
 def test_light_sample_contribution_agrees(jit):

@@ -45,7 +45,7 @@ def uniforms(seed, k, n=N):
 
 
 def assert_chi2(res, what):
-    print(f"chi2 {what}: {res}")
+    print(f"chi2 {what}: {res.power_line(LEVEL)}")
     assert res.p > LEVEL, f"{what}: chi-square rejects the sampler: {res} (level {LEVEL:.3g})"
 
 
@@ -54,7 +54,8 @@ def assert_z(values, target, what):
     mean = values.mean()
     se = values.std(ddof=1) / math.sqrt(len(values))
     z = (mean - target) / se
-    print(f"z {what}: {z:.3f} (mean {mean:.6g}, exact {target:.6g})")
+    print(f"z {what}: {z:.3f} (mean {mean:.6g}, exact {target:.6g}); detects "
+          f"{Z_MAX * se / max(abs(target), 1e-300):.3%} (relative) with probability 1/2")
     assert abs(z) < Z_MAX, f"{what}: mean {mean} vs {target}, z = {z:.2f}"
 
 

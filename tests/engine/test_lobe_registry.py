@@ -126,7 +126,7 @@ def test_chi2(name, i, cos_o):
 
     pe, te = sphere_grid(name, i, cos_o)
     res = direction_chi2(wi[valid], pdf_fn, FZ, pe, te, N, rest=int((~valid).sum()))
-    print(f"chi2 {name}-{i} cos_o={cos_o}: {res}")
+    print(f"chi2 {name}-{i} cos_o={cos_o}: {res.power_line(LEVEL)}")
     assert res.p > LEVEL, f"{name}-{i} cos_o={cos_o}: chi-square rejects the sampler: {res} (level {LEVEL:.3g})"
 
 

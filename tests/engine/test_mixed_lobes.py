@@ -81,6 +81,17 @@ def _z(a, b):
     return (a.mean(axis=0) - b) / np.sqrt(var)
 
 
+def _detects(a, b):
+    """Per channel: the relative difference the |z| < Z_MAX test detects
+    with probability 1/2 (as text)."""
+    var = a.var(axis=0, ddof=1) / len(a)
+    if isinstance(b, np.ndarray) and b.ndim == 2:
+        var = var + b.var(axis=0, ddof=1) / len(b)
+        b = b.mean(axis=0)
+    rel = Z_MAX * np.sqrt(var) / np.maximum(np.abs(b), 1e-300)
+    return "(" + ", ".join(f"{r:.2%}" for r in rel) + ")"
+
+
 @pytest.mark.parametrize("name,cos_o", CASES)
 def test_sample_weights_integrate_f_cos_per_hemisphere(name, cos_o):
     seed = 40 + CASES.index((name, cos_o))
@@ -89,7 +100,7 @@ def test_sample_weights_integrate_f_cos_per_hemisphere(name, cos_o):
     for side, s, q in zip(("upper", "lower"), sampled, integrated):
         z = _z(s, q)
         print(f"{name} cos_o {cos_o} {side}: sampled {s.mean(axis=0).round(4)}, "
-              f"integrated {q.mean(axis=0).round(4)}, z {z.round(2)}")
+              f"integrated {q.mean(axis=0).round(4)}, z {z.round(2)}; detects {_detects(s, q)} with probability 1/2")
         assert np.all(np.abs(z) < Z_MAX), f"{name} cos_o {cos_o} {side}: z {z} (|z| < {Z_MAX:.2f})"
 
 
@@ -100,5 +111,6 @@ def test_leaf_transmits_its_translucent_weight(cos_o):
     _, lower = _sampled("leaf", cos_o, 60 + int(cos_o * 10))
     exact = 0.7 * np.array([0.3, 0.8, 0.2])
     z = _z(lower, exact)
-    print(f"leaf cos_o {cos_o}: transmitted {lower.mean(axis=0).round(4)}, exact {exact}, z {z.round(2)}")
+    print(f"leaf cos_o {cos_o}: transmitted {lower.mean(axis=0).round(4)}, exact {exact}, z {z.round(2)}; "
+          f"detects {_detects(lower, exact)} with probability 1/2")
     assert np.all(np.abs(z) < Z_MAX), f"cos_o {cos_o}: z {z} (|z| < {Z_MAX:.2f})"

@@ -97,7 +97,11 @@ def test_unweighted_strategies_agree(veach_seeds):
     limit = family_z(__name__, keep.sum())
     diff = (blocks["Light"][0] - blocks["BSDF"][0])[keep].sum()
     pooled = diff / np.sqrt((blocks["Light"][1] + blocks["BSDF"][1])[keep].sum())
-    print(f"{keep.sum()} blocks, max |z| {np.abs(z).max():.2f} (limit {limit:.2f}), pooled z {pooled:.2f}")
+    block_rel = np.sqrt(blocks["Light"][1] + blocks["BSDF"][1])[keep] / blocks["BSDF"][0][keep]
+    pooled_rel = np.sqrt((blocks["Light"][1] + blocks["BSDF"][1])[keep].sum()) / blocks["BSDF"][0][keep].sum()
+    print(f"{keep.sum()} blocks, max |z| {np.abs(z).max():.2f} (limit {limit:.2f}), pooled z {pooled:.2f}; "
+          f"detects {limit * np.median(block_rel):.1%} in a median block, {family_z(__name__, 1) * pooled_rel:.2%} "
+          f"pooled, with probability 1/2")
     assert keep.sum() >= 15
     assert np.abs(z).max() < limit
     assert abs(pooled) < family_z(__name__, 1)

@@ -101,7 +101,7 @@ Z_MAX = C.z_threshold(LEVEL)
 # Assertions
 
 def assert_chi2(res, what):
-    print(f"chi2 {what}: {res}")
+    print(f"chi2 {what}: {res.power_line(LEVEL)}")
     assert res.p > LEVEL, f"{what}: chi-square rejects the sampler: {res} (level {LEVEL:.3g})"
 
 
