@@ -466,9 +466,9 @@ def _displacement_bump(translator, output, inner):
     if node.type == 'DISPLACEMENT' and not node.mute:
         if getattr(node, 'space', 'OBJECT') != 'OBJECT':
             reader.warnings.append(f"'{node.name}' {node.space.lower()}-space displacement read as object space")
-        height = nodes.math('MULTIPLY', nodes.math('SUBTRACT', nodes.as_value(reader.input(node, 'Height')),
-                                                   nodes.as_value(reader.input(node, 'Midlevel'))),
-                            nodes.as_value(reader.input(node, 'Scale')))
+        height = nodes.math('MULTIPLY', nodes.math('SUBTRACT', reader.value_input(node, 'Height'),
+                                                   reader.value_input(node, 'Midlevel')),
+                            reader.value_input(node, 'Scale'))
     else:
         value = reader.read(socket)
         if value is None:
