@@ -298,3 +298,30 @@ def test_images_agree_with_cycles(name, tmp_path, tapped_engine):
         assert not notes, warnings
     check = check_against_reference('image_' + name, scene, bounces, image, var, EMBER_SPP, BLOCK)
     check.assert_agrees(IMAGE_POWER, BLOCK_POWER)
+
+
+def test_packed_udim_tiles_and_displacement_method(tmp_path, registered_addon):
+    """A packed tiled image is read tile by tile from its packed files; a
+    displacement method other than Bump Only is named in the warning (it
+    renders as bump)."""
+    from addon.export import material as material_export
+    grid_scene()
+    image = tiled_image(str(tmp_path), "packed.<UDIM>.png", {
+        '1001': (checker(2, (1.0, 0.0, 0.0), (1.0, 0.0, 0.0)), True),
+        '1002': (checker(2, (0.0, 0.0, 1.0), (0.0, 0.0, 1.0)), True)})
+    image.pack()
+    for name in os.listdir(str(tmp_path)):
+        os.remove(os.path.join(str(tmp_path), name))
+    mat, tree, diffuse = new_material("packed")
+    tree.links.new(image_node(tree, image).outputs['Color'], diffuse.inputs['Color'])
+    displacement = tree.nodes.new('ShaderNodeDisplacement')
+    tree.links.new(image_node(tree, image).outputs['Color'], displacement.inputs['Height'])
+    tree.links.new(displacement.outputs[0], tree.nodes['Material Output'].inputs['Displacement'])
+    mat.displacement_method = 'DISPLACEMENT'
+    translated, warning = material_export.translate(mat)
+    assert warning is not None and "displacement method displacement rendered as bump" in warning, warning
+    assert "magenta" not in warning, warning
+    tiles = dict(translated.lobes[0].color.image.tiles)
+    assert sorted(tiles) == [1001, 1002]
+    np.testing.assert_allclose(tiles[1001].pixels[..., :3].mean(axis=(0, 1)), (1.0, 0.0, 0.0), atol=1e-6)
+    np.testing.assert_allclose(tiles[1002].pixels[..., :3].mean(axis=(0, 1)), (0.0, 0.0, 1.0), atol=1e-6)
