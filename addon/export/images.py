@@ -7,6 +7,10 @@ OpenImageIO (without its automatic alpha association, as Cycles loads them);
 packed and generated images, or any image when OpenImageIO is missing, come
 from Blender's own pixel buffer.  A file that cannot be read gives Cycles'
 missing-texture magenta (1, 0, 1) and a warning, never an error.
+
+``load_texture`` is the same for an Image Texture node, with straight
+alpha associated as Cycles associates it at load; ``load_tiles`` reads a
+tiled (UDIM) image's tiles, each a texture of its own.
 """
 import os
 import tempfile
@@ -90,14 +94,9 @@ def _linearize(pixels, bpy_image, is_float):
 def load_image(bpy_image):
     """(pixels float32 (H, W, C) linear, row 0 = top, warnings).  NaN and
     infinite texels (a damaged EXR) become 0, with a warning."""
-    pixels, warnings = _load_image(bpy_image)
+    pixels, _, warnings = _load(bpy_image, texture=False)
     pixels, more = _checked(pixels, bpy_image)
     return pixels, warnings + more
-
-
-def _load_image(bpy_image, texture=False):
-    pixels, _, warnings = _load(bpy_image, texture)
-    return pixels, warnings
 
 
 def load_texture(bpy_image):
@@ -124,8 +123,7 @@ def _load(bpy_image, texture):
         byte = not bool(bpy_image.is_float)
         return _decoded(pixels, bpy_image, FileInfo(not byte, byte, byte), texture)
     except (OSError, RuntimeError, ValueError) as err:
-        mode = 'STRAIGHT'
-        return MAGENTA.copy(), mode, [f"Image '{name}' could not be loaded ({err}): rendered magenta"]
+        return MAGENTA.copy(), 'STRAIGHT', [f"Image '{name}' could not be loaded ({err}): rendered magenta"]
 
 
 def _decoded(pixels, bpy_image, info, texture):
