@@ -781,7 +781,8 @@ def _evaluate_normal(normal, hit, rows, triangles, ns, ctx):
     _, height, strength, distance, invert, inner, step = normal
     base = ns if inner is None else _unit(_evaluate_normal(inner, hit, rows, triangles, ns, ctx), ns)
     grad = surface_gradient(height, ctx, step, triangles)
-    return bump(base, grad, strength(ctx), distance(ctx), invert)
+    ng = triangles.ng[ctx.prim] if ctx.prim is not None else None
+    return bump(base, grad, strength(ctx), distance(ctx), invert, ng)
 
 
 def normal_map(hit, rows, ns, color_fn, strength_fn, ctx):
@@ -872,10 +873,20 @@ def uv_gradients(triangles, prim):
     return grad(d1[:, 0], d2[:, 0]), grad(d1[:, 1], d2[:, 1])
 
 
-def bump(normal, grad, strength, distance, invert):
+def bump(normal, grad, strength, distance, invert, ng=None):
     """Cycles' svm_node_set_bump in the limit of small differentials:
-    n' = normalize(n - distance * grad h), then mixed with n by strength."""
+    n' = normalize(n - distance * g), then mixed with n by strength.  g has
+    the height's derivatives along the surface, and is perpendicular to the
+    incoming normal n, as Cycles' surface gradient (dPdy x n, n x dPdx) /
+    det is: grad (in the triangle's plane, perpendicular to ng) moved along
+    ng when n is tilted (a smooth normal, a displacement's or an inner
+    bump's)."""
     d = -distance if invert else distance
+    if ng is not None:
+        cos = np.einsum("ij,ij->i", ng, normal)
+        ok = np.abs(cos) > 1e-6
+        shift = np.where(ok, np.einsum("ij,ij->i", grad, normal) / np.where(ok, cos, 1.0), 0.0)
+        grad = grad - shift[:, None] * ng
     bumped = _unit(normal - d[:, None] * grad, normal)
     s = np.maximum(strength, 0.0)[:, None]
     return s * bumped + (1.0 - s) * normal

@@ -486,7 +486,21 @@ def _displacement_bump(translator, output, inner, method='BUMP'):
         height = nodes.as_value(value)
     if not nodes.is_expr(height):
         return inner   # a constant displacement moves nothing
-    return _scene().Bump(height, 1.0, 1.0, False, inner)
+    displaced = _scene().Bump(height, 1.0, 1.0, False, None)
+    return _over(inner, displaced)
+
+
+def _over(normal, displaced):
+    """The BSDF's normal on top of the displacement's bump: Cycles sets the
+    shading normal from the displacement first, so a Bump node's own
+    unlinked Normal is the displaced one.  A normal map (whose frame Ember
+    takes from the surface) stays under the displacement bump instead."""
+    renderer = _scene()
+    if normal is None:
+        return displaced
+    if isinstance(normal, renderer.Bump):
+        return dataclasses.replace(normal, normal=_over(normal.normal, displaced))
+    return dataclasses.replace(displaced, normal=normal)
 
 
 class MaterialTable:

@@ -245,9 +245,9 @@ def build_terrain(folder):
     missing.source = 'FILE'
     missing.filepath = os.path.join(folder, "lost_height.png")
     # (Displacement Height, its scale or None, Bump strength or None).  Steeper displacement (scale
-    # 0.3 of this map) and a Bump over a displacement differ from Cycles by 1-4 %: see the README.
+    # 0.3 of this map) differs from Cycles by about 1 %: see the README.
     cases = [(height, 0.15, None), (height, None, 0.4), (missing, 0.15, 0.4), ('rgb', 0.15, None),
-             (height, 0.1, None), (height, None, 1.0), (height, -0.1, None), (missing, -0.1, None)]
+             (height, 0.15, 0.4), (height, None, 1.0), (height, -0.1, None), (missing, -0.1, None)]
     for index, (source, scale, bump_strength) in enumerate(cases):
         mat, tree, bsdf = new_material(f"terrain{index}", 'ShaderNodeBsdfPrincipled')
         bsdf.inputs['Roughness'].default_value = 0.6
