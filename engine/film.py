@@ -19,6 +19,8 @@ import numpy as np
 from . import passes as extra_passes
 from .sampler import is_class_a
 
+MAX_RADIANCE = 1e30   # engine.validate.MAX_MAGNITUDE
+
 AOV_CHANNELS = {"depth": 1, "normal": 3, "albedo": 3}
 STATE_VERSION = 1
 
@@ -44,6 +46,10 @@ class Tile:
     def add_radiance(self, pix, L, sample=None):
         """Queue finished paths; ``flush`` bins them all at once.  ``sample``
         (the paths' sample indices) feeds adaptive sampling's half buffer."""
+        # A path whose weight chain overflowed past the largest radiance Ember
+        # renders (textured weights times textured emission) is held there,
+        # as validation holds constants; NaN and inf stay visible to the checks.
+        L = np.where(np.isfinite(L), np.clip(L, -MAX_RADIANCE, MAX_RADIANCE), L)
         self._pending.append((pix, L, sample))
 
     def _bin3(self, pix, values):

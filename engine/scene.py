@@ -164,12 +164,17 @@ class TextureImage:
     alpha_mode: Blender's image alpha mode; STRAIGHT colours are associated
         with alpha before filtering (Cycles does); NONE ignores alpha.
     data: Non-Color (no alpha association).
+    tiles: a UDIM image's tiles, ((number, TextureImage), ...) with 1001 +
+        u + 10 v the tile of UVs in [u, u + 1) x [v, v + 1) (Cycles' lookup,
+        engine.textures); pixels are then the first tile's.  Empty for an
+        ordinary image.
     """
     pixels: np.ndarray
     name: str = "image"
     srgb_filter: bool = False
     alpha_mode: str = "STRAIGHT"
     data: bool = False
+    tiles: tuple = ()
 
 
 @dataclass(eq=False)

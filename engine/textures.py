@@ -148,7 +148,33 @@ def _last_call(fn):
     return cached
 
 
-def _image_lookup(node, texels):
+# Cycles' TEX_IMAGE_MISSING_*: a UV outside every tile of a UDIM image.
+MISSING_TILE = np.array([1.0, 0.0, 1.0, 1.0])
+
+
+def _tiled_lookup(node, tiles):
+    """RGBA of a UDIM image as Cycles' kernel_image_udim_map: the tile of
+    (tx, ty) = the UV's integer parts truncated toward zero (as C's (int)),
+    number 1001 + tx + 10 ty for 0 <= tx < 10 and ty >= 0, read at the UV
+    minus (tx, ty) with the node's extension; no such tile gives magenta.
+    tiles: [(number, TextureImage, texels)]."""
+    lookups = {int(number): _image_lookup(node, image, texels) for number, image, texels in tiles}
+
+    def lookup(uv):
+        uv = np.clip(np.nan_to_num(np.asarray(uv, dtype=np.float64)), -UV_LIMIT, UV_LIMIT)
+        t = np.trunc(uv)
+        inside = (t[:, 0] >= 0) & (t[:, 1] >= 0) & (t[:, 0] < 10)
+        number = np.where(inside, 1001 + t[:, 0] + 10 * t[:, 1], -1)
+        out = np.tile(MISSING_TILE, (len(uv), 1))
+        for n, fn in lookups.items():
+            rows = np.nonzero(number == n)[0]
+            if len(rows):
+                out[rows] = fn(uv[rows] - t[rows])
+        return out
+    return lookup
+
+
+def _image_lookup(node, image, texels):
     """RGBA at uv as the Image Texture node outputs it (colour linear)."""
     def lookup(uv):
         rgba = sample_texels(texels, uv, node.interpolation, node.extension)
@@ -156,7 +182,7 @@ def _image_lookup(node, texels):
             a = rgba[:, 3:]
             scale = np.where((a != 0) & (a != 1), 1.0 / np.where(a != 0, a, 1.0), 1.0)
             rgba[:, :3] *= scale
-        if node.image.srgb_filter:
+        if image.srgb_filter:
             rgba[:, :3] = srgb_to_linear(rgba[:, :3])
         return rgba
     return lookup
@@ -230,7 +256,12 @@ class Compiler:
         return self.value(expr) if kind == "float" else self.color(expr)
 
     def _image(self, node):
-        lookup = _last_call(_image_lookup(node, self.texels_of(node.image)))
+        image = node.image
+        if image.tiles:
+            sampler = _tiled_lookup(node, [(n, tile, self.texels_of(tile)) for n, tile in image.tiles])
+        else:
+            sampler = _image_lookup(node, image, self.texels_of(image))
+        lookup = _last_call(sampler)
         coords = (lambda ctx: ctx.uv) if node.uv is None else self._uv(node.uv)
         if node.output == "Alpha":
             return (lambda ctx: lookup(coords(ctx))[:, 3]), "float"
@@ -471,15 +502,23 @@ def _image_range(node):
     """Filtering blends the prepared texels (sRGB-encoded, alpha associated)
     with weights in [0, 1] summing to 1, so it stays within their hull (CLIP
     adds 0); decoding sRGB after is monotone.  Dividing by filtered alpha
-    (unassociate) is not bounded here."""
-    texels = prepare_texels(node.image)
+    (unassociate) is not bounded here.  A UDIM image: the hull of its
+    tiles' and of the missing-tile magenta."""
+    if not node.image.tiles:
+        return _single_image_range(node, node.image)
+    ranges = [_single_image_range(node, tile) for _, tile in node.image.tiles] + [(0.0, 1.0)]
+    return min(r[0] for r in ranges), max(r[1] for r in ranges)
+
+
+def _single_image_range(node, image):
+    texels = prepare_texels(image)
     zero = (0.0,) if node.extension == "CLIP" else ()
     if node.output == "Alpha":
         return _hull(texels[..., 3], *zero)
     if node.unassociate and (texels[..., 3] != 1).any():
         return UNBOUNDED
     lo, hi = _hull(texels[..., :3], *zero)
-    if node.image.srgb_filter:
+    if image.srgb_filter:
         lo, hi = (float(x) for x in srgb_to_linear([lo, hi]))
     return lo, hi
 
@@ -642,7 +681,7 @@ class MaterialTextures:
             rows = np.nonzero(mat == i)[0]
             if len(rows):
                 emission = np.array(emission, copy=True)
-                emission[rows] = np.maximum(fn(ctx.take(rows)), 0.0)
+                emission[rows] = np.clip(_renderable(fn(ctx.take(rows))), 0.0, None)
         return emission
 
     def perturb(self, hit, triangles):
@@ -657,11 +696,23 @@ class MaterialTextures:
         return ns
 
 
+# Per-ray values are held to what validation lets constants be (the largest
+# radiance Ember renders): a chain of multiplying nodes can reach 1e60 in
+# float64, which overflows the float32 film to infinity (and inf - inf to NaN).
+MAX_TEXTURE_VALUE = 1e30
+
+
+def _renderable(value):
+    return np.clip(np.nan_to_num(value, nan=0.0, posinf=MAX_TEXTURE_VALUE, neginf=-MAX_TEXTURE_VALUE),
+                   -MAX_TEXTURE_VALUE, MAX_TEXTURE_VALUE)
+
+
 # Lower bounds of textured fields, as the constant tables clamp them.
 FIELD_FLOORS = {"color": 0.0, "weight": 0.0, "f0": 0.0, "transmission_tint": 0.0, "ior": 1e-5}
 
 
 def _store(lobes, name, rows, j, value, is_color, min_alpha):
+    value = _renderable(value)
     if name == "roughness":
         r = np.clip(value @ LUMA if is_color else value, 0.0, 1.0)
         lobes.alpha[rows, j] = np.maximum(r * r, min_alpha)
@@ -700,7 +751,8 @@ def _bump_step(expr):
     """UV step of the bump's finite differences: a tenth of a texel of the
     finest image in the height expression (Cycles differentiates at a
     fraction of a pixel footprint), or 1e-4 without images."""
-    sizes = [max(np.shape(img.pixels)[:2]) for img in _images_in(expr.height)]
+    sizes = [max(np.shape(tile.pixels)[:2]) for img in _images_in(expr.height)
+             for tile in (img, *(t for _, t in img.tiles))]
     return 0.1 / max(sizes) if sizes else 1e-4
 
 
@@ -746,7 +798,8 @@ def _evaluate_normal(normal, hit, rows, triangles, ns, ctx):
     _, height, strength, distance, invert, inner, step = normal
     base = ns if inner is None else _unit(_evaluate_normal(inner, hit, rows, triangles, ns, ctx), ns)
     grad = surface_gradient(height, ctx, step, triangles)
-    return bump(base, grad, strength(ctx), distance(ctx), invert)
+    ng = triangles.ng[ctx.prim] if ctx.prim is not None else None
+    return bump(base, grad, strength(ctx), distance(ctx), invert, ng)
 
 
 def normal_map(hit, rows, ns, color_fn, strength_fn, ctx):
@@ -837,10 +890,20 @@ def uv_gradients(triangles, prim):
     return grad(d1[:, 0], d2[:, 0]), grad(d1[:, 1], d2[:, 1])
 
 
-def bump(normal, grad, strength, distance, invert):
+def bump(normal, grad, strength, distance, invert, ng=None):
     """Cycles' svm_node_set_bump in the limit of small differentials:
-    n' = normalize(n - distance * grad h), then mixed with n by strength."""
+    n' = normalize(n - distance * g), then mixed with n by strength.  g has
+    the height's derivatives along the surface, and is perpendicular to the
+    incoming normal n, as Cycles' surface gradient (dPdy x n, n x dPdx) /
+    det is: grad (in the triangle's plane, perpendicular to ng) moved along
+    ng when n is tilted (a smooth normal, a displacement's or an inner
+    bump's)."""
     d = -distance if invert else distance
+    if ng is not None:
+        cos = np.einsum("ij,ij->i", ng, normal)
+        ok = np.abs(cos) > 1e-6
+        shift = np.where(ok, np.einsum("ij,ij->i", grad, normal) / np.where(ok, cos, 1.0), 0.0)
+        grad = grad - shift[:, None] * ng
     bumped = _unit(normal - d[:, None] * grad, normal)
     s = np.maximum(strength, 0.0)[:, None]
     return s * bumped + (1.0 - s) * normal

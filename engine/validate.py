@@ -290,6 +290,10 @@ def validate_image(image, what):
     _finite(px, f"{what} pixels")
     if image.alpha_mode not in _scene.ALPHA_MODES:
         raise SceneError(f"{what}: unknown alpha mode {image.alpha_mode!r} (expected one of {_scene.ALPHA_MODES})")
+    for number, tile in getattr(image, "tiles", ()):
+        if not 1001 <= int(number) <= 2000:   # u in [0, 10), v in [0, 100): Blender's tile range
+            raise SceneError(f"{what}: UDIM tile number {number} outside 1001-2000")
+        validate_image(tile, what)
 
 
 def _choice(value, allowed, what, name):

@@ -7,8 +7,13 @@ OpenImageIO (without its automatic alpha association, as Cycles loads them);
 packed and generated images, or any image when OpenImageIO is missing, come
 from Blender's own pixel buffer.  A file that cannot be read gives Cycles'
 missing-texture magenta (1, 0, 1) and a warning, never an error.
+
+``load_texture`` is the same for an Image Texture node, with straight
+alpha associated as Cycles associates it at load; ``load_tiles`` reads a
+tiled (UDIM) image's tiles, each a texture of its own.
 """
 import os
+import tempfile
 
 import bpy
 import numpy as np
@@ -89,16 +94,21 @@ def _linearize(pixels, bpy_image, is_float):
 def load_image(bpy_image):
     """(pixels float32 (H, W, C) linear, row 0 = top, warnings).  NaN and
     infinite texels (a damaged EXR) become 0, with a warning."""
-    pixels, warnings = _load_image(bpy_image)
-    finite = np.isfinite(pixels)
-    if not finite.all():
-        bad = int(finite.size - np.count_nonzero(finite))
-        pixels = np.where(finite, pixels, np.float32(0.0))
-        warnings = warnings + [f"Image '{bpy_image.name}': {bad} NaN or infinite values were replaced by 0"]
-    return pixels, warnings
+    pixels, _, warnings = _load(bpy_image, texture=False)
+    pixels, more = _checked(pixels, bpy_image)
+    return pixels, warnings + more
 
 
-def _load_image(bpy_image):
+def load_texture(bpy_image):
+    """(pixels, alpha mode, warnings) for an Image Texture node's
+    engine.scene.TextureImage: as ``load_image``, with straight alpha
+    associated as Cycles' image manager does at load (``_associate``)."""
+    pixels, mode, warnings = _load(bpy_image, texture=True)
+    pixels, more = _checked(pixels, bpy_image)
+    return pixels, mode, warnings + more
+
+
+def _load(bpy_image, texture):
     name = bpy_image.name
     path = _external_path(bpy_image)
     try:
@@ -107,11 +117,124 @@ def _load_image(bpy_image):
                 raise OSError(f"file {path!r} not found")
             pixels = _read_oiio(path)
             if pixels is not None:
-                return _linearize(pixels, bpy_image, _file_is_float(path)), []
+                return _decoded(pixels, bpy_image, _file_info(path), texture)
         pixels = _read_blender(bpy_image)
-        return _linearize(pixels, bpy_image, bool(bpy_image.is_float)), []
+        # Blender's byte buffers hold straight alpha, its float buffers associated.
+        byte = not bool(bpy_image.is_float)
+        return _decoded(pixels, bpy_image, FileInfo(not byte, byte, byte), texture)
     except (OSError, RuntimeError, ValueError) as err:
-        return MAGENTA.copy(), [f"Image '{name}' could not be loaded ({err}): rendered magenta"]
+        return MAGENTA.copy(), 'STRAIGHT', [f"Image '{name}' could not be loaded ({err}): rendered magenta"]
+
+
+def _decoded(pixels, bpy_image, info, texture):
+    """Raw pixels -> (linear pixels, alpha mode, []): associated first when
+    for a texture (Cycles associates in the file's own encoding), then
+    decoded from sRGB."""
+    mode = alpha_mode(bpy_image)
+    if texture:
+        pixels, mode = _associate(pixels, bpy_image, info)
+    return _linearize(pixels, bpy_image, info.is_float), mode, []
+
+
+class FileInfo:
+    """What Cycles' loader reads from a file besides its pixels."""
+
+    def __init__(self, is_float, byte, straight):
+        self.is_float, self.byte, self.straight = is_float, byte, straight
+
+
+def alpha_mode(bpy_image):
+    mode = getattr(bpy_image, 'alpha_mode', 'STRAIGHT')
+    return mode if mode in ('STRAIGHT', 'PREMUL', 'CHANNEL_PACKED', 'NONE') else 'STRAIGHT'
+
+
+def _associate(pixels, bpy_image, info):
+    """Cycles' load-time alpha (ImageManager::file_load_image, OIIO loader):
+    RGBA pixels (4 channels only) that the file stores straight - as OIIO
+    reports it (PNG, TGA, ...; not EXR), whatever the image's Alpha Mode
+    says unless Channel Packed or None, and never for data - are multiplied
+    by alpha in the file's encoding; 8-bit ones in integers, truncated
+    (a * b / 255), as Cycles' byte textures hold them.  Returns (pixels,
+    mode for the engine): PREMUL once associated (or never to be), the
+    engine associates STRAIGHT ones itself (float files)."""
+    mode = alpha_mode(bpy_image)
+    if mode in ('CHANNEL_PACKED', 'NONE'):
+        return pixels, mode
+    if is_data(bpy_image) or pixels.shape[2] != 4 or not info.straight:
+        return pixels, 'PREMUL'
+    if not info.byte:
+        return pixels, 'STRAIGHT'
+    out = pixels if pixels.flags.writeable else pixels.copy()
+    for lo in range(0, len(out), 512):
+        band = out[lo:lo + 512]
+        raw = np.round(band * 255.0).astype(np.uint32)
+        band[..., :3] = (raw[..., :3] * raw[..., 3:] // 255).astype(np.float32) / np.float32(255.0)
+    return out, 'PREMUL'
+
+
+def tile_path(bpy_image, number):
+    """The file of UDIM tile ``number``: Blender's ``<UDIM>`` (1001) and
+    ``<UVTILE>`` (u1_v1) markers in the image's path replaced."""
+    path = bpy.path.abspath(bpy_image.filepath, library=bpy_image.library)
+    u, v = (number - 1001) % 10, (number - 1001) // 10
+    return path.replace('<UDIM>', str(number)).replace('<UVTILE>', f'u{u + 1}_v{v + 1}')
+
+
+def is_tiled(bpy_image):
+    return getattr(bpy_image, 'source', 'FILE') == 'TILED'
+
+
+def load_tiles(bpy_image):
+    """[(tile number, pixels, srgb_filtered, alpha mode, warnings)] of a tiled (UDIM)
+    image, each tile's file read as ``load_image`` reads one (its own bit
+    depth decides sRGB filtering and its own channels the alpha, as Cycles
+    loads each tile as an image of its own); a tile without a readable file
+    is the missing-texture magenta with a warning."""
+    packed = {int(p.tile_number): p for p in getattr(bpy_image, 'packed_files', ())}
+    tiles = []
+    with tempfile.TemporaryDirectory(prefix='ember-udim-') as folder:
+        for tile in bpy_image.tiles:
+            number = int(tile.number)
+            try:
+                path = _tile_file(bpy_image, number, packed.get(number), folder)
+                tiles.append(_read_tile(bpy_image, number, path))
+            except (OSError, RuntimeError, ValueError) as err:
+                tiles.append((number, MAGENTA.copy(), False, 'STRAIGHT', [
+                    f"Image '{bpy_image.name}' tile {number} could not be loaded ({err}): rendered magenta"]))
+    return tiles
+
+
+def _tile_file(bpy_image, number, packed, folder):
+    """The tile's file on disk; a packed tile is written to ``folder``."""
+    if packed is None:
+        path = tile_path(bpy_image, number)
+        if not os.path.isfile(path):
+            raise OSError(f"file {path!r} not found")
+        return path
+    path = os.path.join(folder, f'{number}{os.path.splitext(packed.filepath)[1]}')
+    with open(path, 'wb') as f:
+        f.write(packed.packed_file.data)
+    return path
+
+
+def _read_tile(bpy_image, number, path):
+    pixels = _read_oiio(path)
+    if pixels is None:
+        raise OSError("OpenImageIO is needed to read UDIM tiles")
+    info = _file_info(path)
+    pixels, mode, _ = _decoded(pixels, bpy_image, info, texture=True)
+    pixels, warnings = _checked(pixels, bpy_image, f" tile {number}")
+    return number, pixels, is_srgb(bpy_image) and not info.is_float, mode, warnings
+
+
+def _checked(pixels, bpy_image, where=""):
+    """NaN and infinite texels (a damaged EXR) become 0, with a warning."""
+    finite = np.isfinite(pixels)
+    if finite.all():
+        return pixels, []
+    bad = int(finite.size - np.count_nonzero(finite))
+    return (np.where(finite, pixels, np.float32(0.0)),
+            [f"Image '{bpy_image.name}'{where}: {bad} NaN or infinite values were replaced by 0"])
 
 
 def is_missing(pixels, warnings):
@@ -120,15 +243,29 @@ def is_missing(pixels, warnings):
 
 
 def _file_is_float(path):
+    return _file_info(path).is_float
+
+
+def _file_info(path):
+    """FileInfo of a file as OpenImageIO opens it for Cycles (without its
+    automatic alpha association; Cycles' workarounds for TGA, DDS, PSD)."""
     try:
         import OpenImageIO as oiio  # lazy: optional (and slow to load); Blender's pixels without it
     except ImportError:
-        return False
-    inp = oiio.ImageInput.open(path)
+        return FileInfo(False, True, True)
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(path, config)
     if inp is None:
-        return False
+        return FileInfo(False, True, True)
     try:
-        return inp.spec().format.basetype in (oiio.FLOAT, oiio.HALF, oiio.DOUBLE)
+        spec, name = inp.spec(), inp.format_name()
+        straight = bool(spec.get_int_attribute("oiio:UnassociatedAlpha", 0))
+        if not straight and spec.alpha_channel != -1:
+            straight = (spec.get_int_attribute("targa:alpha_type", -1) != 4 if name == 'targa'
+                        else name in ('dds', 'psd'))
+        basetype = spec.format.basetype
+        return FileInfo(basetype in (oiio.FLOAT, oiio.HALF, oiio.DOUBLE), basetype == oiio.UINT8, straight)
     finally:
         inp.close()
 

@@ -197,12 +197,12 @@ def _strength_and_falloff(reader, emission, light):
     from . import nodes
     node, out = reader.linked_node(emission.inputs['Strength'])
     if node is None or node.type != 'LIGHT_FALLOFF' or node.mute:
-        return reader.input(emission, 'Strength'), {}, []
-    strength = reader.input(node, 'Strength')
+        return reader.value_input(emission, 'Strength'), {}, []
+    strength = reader.value_input(node, 'Strength')
     names = {f.name for f in dataclasses.fields(light)}
     if 'falloff' not in names:
         return strength, {}, []
-    smooth, varies = _constant_rgb((1.0, 1.0, 1.0), reader.input(node, 'Smooth'))
+    smooth, varies = _constant_rgb((1.0, 1.0, 1.0), reader.value_input(node, 'Smooth'))
     notes = ["the Light Falloff's Smooth varies over the light: its mean is used"] if varies else []
     kind = out.name.upper()
     if kind not in _scene().FALLOFFS:

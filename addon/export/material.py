@@ -421,7 +421,8 @@ def translate(material):
     if output is None:
         return scene.Material(name, ()), f"Material '{name}': no Material Output node, rendered black"
     closure = translator.surface(output.inputs['Surface'])
-    normal = _displacement_bump(translator, output, _material_normal(translator, output))
+    normal = _displacement_bump(translator, output, _material_normal(translator, output),
+                                _displacement_method(material))
     return (scene.Material(name, tuple(closure.lobes), closure.emission, normal=normal),
             translator.warning())
 
@@ -447,7 +448,16 @@ def _material_normal(translator, output):
     return translator.reader.normal(found[0].inputs['Normal'])
 
 
-def _displacement_bump(translator, output, inner):
+def _displacement_method(material):
+    """'BUMP', 'DISPLACEMENT' or 'BOTH' (the material's in 4.x/5.0, its
+    Cycles settings' in 3.x)."""
+    method = getattr(material, 'displacement_method', None)
+    if method is None:
+        method = getattr(getattr(material, 'cycles', None), 'displacement_method', 'BUMP')
+    return method
+
+
+def _displacement_bump(translator, output, inner, method='BUMP'):
     """The Material Output's Displacement as Cycles' default "Bump Only": a
     bump whose height is the displacement along the normal (a Displacement
     node's (Height - Midlevel) * Scale, or a float linked directly), over the
@@ -460,15 +470,15 @@ def _displacement_bump(translator, output, inner):
     if node is None:
         return inner
     reader = translator.reader
-    method = getattr(getattr(translator, 'material', None), 'displacement_method', 'BUMP')
     if method not in ('BUMP', None):
-        reader.warnings.append(f"displacement method {method} rendered as bump")
+        reader.warnings.append(f"displacement method {method.lower()} rendered as bump (true displacement "
+                               "is not rendered)")
     if node.type == 'DISPLACEMENT' and not node.mute:
         if getattr(node, 'space', 'OBJECT') != 'OBJECT':
             reader.warnings.append(f"'{node.name}' {node.space.lower()}-space displacement read as object space")
-        height = nodes.math('MULTIPLY', nodes.math('SUBTRACT', nodes.as_value(reader.input(node, 'Height')),
-                                                   nodes.as_value(reader.input(node, 'Midlevel'))),
-                            nodes.as_value(reader.input(node, 'Scale')))
+        height = nodes.math('MULTIPLY', nodes.math('SUBTRACT', reader.value_input(node, 'Height'),
+                                                   reader.value_input(node, 'Midlevel')),
+                            reader.value_input(node, 'Scale'))
     else:
         value = reader.read(socket)
         if value is None:
@@ -476,7 +486,21 @@ def _displacement_bump(translator, output, inner):
         height = nodes.as_value(value)
     if not nodes.is_expr(height):
         return inner   # a constant displacement moves nothing
-    return _scene().Bump(height, 1.0, 1.0, False, inner)
+    displaced = _scene().Bump(height, 1.0, 1.0, False, None)
+    return _over(inner, displaced)
+
+
+def _over(normal, displaced):
+    """The BSDF's normal on top of the displacement's bump: Cycles sets the
+    shading normal from the displacement first, so a Bump node's own
+    unlinked Normal is the displaced one.  A normal map (whose frame Ember
+    takes from the surface) stays under the displacement bump instead."""
+    renderer = _scene()
+    if normal is None:
+        return displaced
+    if isinstance(normal, renderer.Bump):
+        return dataclasses.replace(normal, normal=_over(normal.normal, displaced))
+    return dataclasses.replace(displaced, normal=normal)
 
 
 class MaterialTable:

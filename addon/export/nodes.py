@@ -341,6 +341,15 @@ class SocketReader:
         value = self.read(socket)
         return constant(socket) if value is None else value
 
+    def value_input(self, node, name_or_index):
+        """A node's float input as a float or float expression: a colour
+        constant (an RGB node, a missing image's magenta, a muted colour
+        node's zero) becomes its luminance and a vector one its average, as
+        Cycles converts a link into a float socket."""
+        socket = _input(node, name_or_index)
+        value = _as_kind(self.input(node, name_or_index), 'float', self._source_is_vector(socket))
+        return as_value(value)
+
     def _unsupported(self, node):
         label = f"'{node.name}' ({node.bl_idname})"
         if label not in self.unsupported:
@@ -399,13 +408,7 @@ class SocketReader:
             return None
         key = bpy_image.as_pointer()
         if key not in self.images:
-            pixels, warnings = images.load_image(bpy_image)
-            if images.is_missing(pixels, warnings):
-                self.images[key] = (None, warnings)
-            else:
-                self.images[key] = (renderer.TextureImage(
-                    pixels, bpy_image.name, images.srgb_filtered(bpy_image),
-                    _alpha_mode(bpy_image), images.is_data(bpy_image)), warnings)
+            self.images[key] = _tiled_image(bpy_image) if images.is_tiled(bpy_image) else _image(bpy_image)
         image, warnings = self.images[key]
         for warning in warnings:
             self._note(warning)
@@ -459,18 +462,41 @@ class SocketReader:
         if node.type == 'NORMAL_MAP' and not node.mute:
             if node.space == 'TANGENT' and node.uv_map:
                 self._note(f"'{node.name}' UV map '{node.uv_map}' read as the active UV map")
-            return renderer.NormalMap(self.input(node, 'Color'), _as_value(self.input(node, 'Strength')),
-                                   node.space)
+            return renderer.NormalMap(self.input(node, 'Color'), self.value_input(node, 'Strength'), node.space)
         if node.type == 'BUMP' and not node.mute:
             inner = self.normal(node.inputs['Normal']) if node.inputs['Normal'].is_linked else None
-            return renderer.Bump(_as_value(self.input(node, 'Height')),
-                              _as_value(self.input(node, 'Strength')),
-                              _as_value(self.input(node, 'Distance')), bool(node.invert), inner)
+            return renderer.Bump(self.value_input(node, 'Height'), self.value_input(node, 'Strength'),
+                                 self.value_input(node, 'Distance'), bool(node.invert), inner)
         value = self.read(socket)
         if isinstance(value, renderer.NodeOutput) and _registry()[value.call.idname].output_kind(value.output) == 'vector':
             return value   # a vector node (e.g. Bevel): the normal itself, normalized by the engine
         self._unsupported(node)
         return None
+
+
+def _image(bpy_image):
+    """(engine TextureImage or None for a missing file, warnings)."""
+    pixels, mode, warnings = images.load_texture(bpy_image)
+    if images.is_missing(pixels, warnings):
+        return None, warnings
+    return backend.engine().TextureImage(pixels, bpy_image.name, images.srgb_filtered(bpy_image), mode,
+                                         images.is_data(bpy_image)), warnings
+
+
+def _tiled_image(bpy_image):
+    """A UDIM image: every tile its own TextureImage (a tile that cannot be
+    read is magenta, Cycles' missing-texture colour, there only)."""
+    renderer = backend.engine()
+    tiles, warnings = [], []
+    for number, pixels, srgb_filter, mode, notes in images.load_tiles(bpy_image):
+        tiles.append((number, renderer.TextureImage(pixels, f'{bpy_image.name} tile {number}', srgb_filter,
+                                                    mode, images.is_data(bpy_image))))
+        warnings += notes
+    if not tiles:
+        return None, [f"Image '{bpy_image.name}' is tiled but has no tiles: rendered magenta"]
+    first = tiles[0][1]
+    return renderer.TextureImage(first.pixels, bpy_image.name, first.srgb_filter, first.alpha_mode, first.data,
+                                 tuple(tiles)), warnings
 
 
 def _blender_version():
@@ -578,11 +604,6 @@ def _as_color(value):
 
 def _as_value(value):
     return luminance(value) if isinstance(value, tuple) else value
-
-
-def _alpha_mode(bpy_image):
-    mode = getattr(bpy_image, 'alpha_mode', 'STRAIGHT')
-    return mode if mode in ('STRAIGHT', 'PREMUL', 'CHANNEL_PACKED', 'NONE') else 'STRAIGHT'
 
 
 def output_node(tree, output_type):

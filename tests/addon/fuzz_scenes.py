@@ -465,6 +465,146 @@ def many_lights(scene, rng, folder, count=10_000):
     return []
 
 
+# Every node type the exporter translates (engine.nodes.REGISTRY and the
+# exporter's own readers), with each input fed a value of another shape.
+SHADER_NODES = ('ShaderNodeBsdfDiffuse', 'ShaderNodeBsdfGlossy', 'ShaderNodeBsdfGlass',
+                'ShaderNodeBsdfRefraction', 'ShaderNodeBsdfTranslucent', 'ShaderNodeBsdfTransparent',
+                'ShaderNodeBsdfSheen', 'ShaderNodeEmission', 'ShaderNodeBsdfPrincipled')
+VALUE_NODES = ('ShaderNodeTexImage', 'ShaderNodeMix', 'ShaderNodeMixRGB', 'ShaderNodeMath', 'ShaderNodeRGB',
+               'ShaderNodeValue', 'ShaderNodeBump', 'ShaderNodeNormalMap', 'ShaderNodeDisplacement',
+               'ShaderNodeVectorDisplacement')
+
+
+def _exported_value_nodes():
+    from engine.nodes import REGISTRY
+    return sorted(set(REGISTRY) | set(VALUE_NODES))
+
+
+def _wrong_shape_source(tree, rng, folder):
+    """An output socket whose value has a shape the input may not expect: a
+    colour or vector constant, a float, a missing image's magenta, a muted
+    node's zero, a group's unlinked colour input, a shader."""
+    bpy = _bpy()
+    kind = int(rng.integers(0, 8))
+    if kind == 0:
+        node = tree.nodes.new('ShaderNodeRGB')
+        node.outputs[0].default_value = tuple(float(v) for v in rng.choice([0.0, 0.5, 2.0, -1.0], 3)) + (1.0,)
+        return node.outputs[0]
+    if kind == 1:
+        node = tree.nodes.new('ShaderNodeValue')
+        node.outputs[0].default_value = float(rng.choice([0.0, 0.5, -3.0, 1e30]))
+        return node.outputs[0]
+    if kind == 2:
+        node = tree.nodes.new('ShaderNodeCombineXYZ')
+        for socket, value in zip(node.inputs, rng.uniform(-2, 2, 3)):
+            socket.default_value = float(value)
+        return node.outputs[0]
+    if kind == 3:
+        node = tree.nodes.new('ShaderNodeTexImage')
+        node.image = file_image(os.path.join(folder, 'fuzz_missing_height.png'), 'FuzzMissingShape')
+        return node.outputs[int(rng.integers(0, 2))]
+    if kind == 4:
+        node = tree.nodes.new('ShaderNodeMixRGB' if rng.random() < 0.5 else 'ShaderNodeMath')
+        node.mute = True
+        return node.outputs[0]
+    if kind == 5:
+        node = tree.nodes.new('ShaderNodeNewGeometry')
+        return node.outputs[int(rng.integers(0, len(node.outputs)))]
+    if kind == 6:
+        group = bpy.data.node_groups.new('FuzzShapeGroup', 'ShaderNodeTree')
+        if hasattr(group, 'interface'):
+            group.interface.new_socket('In', in_out='INPUT', socket_type='NodeSocketColor')
+            group.interface.new_socket('Out', in_out='OUTPUT', socket_type='NodeSocketColor')
+        else:
+            group.inputs.new('NodeSocketColor', 'In')
+            group.outputs.new('NodeSocketColor', 'Out')
+        inner_in, inner_out = group.nodes.new('NodeGroupInput'), group.nodes.new('NodeGroupOutput')
+        group.links.new(inner_in.outputs[0], inner_out.inputs[0])
+        node = tree.nodes.new('ShaderNodeGroup')
+        node.node_tree = group
+        node.inputs[0].default_value = (0.3, 0.6, 0.9, 1.0)
+        return node.outputs[0]
+    return tree.nodes.new('ShaderNodeBsdfDiffuse').outputs[0]
+
+
+def _feed_inputs(tree, node, rng, folder):
+    for socket in node.inputs:
+        if getattr(socket, 'enabled', True) and rng.random() < 0.7:
+            tree.links.new(_wrong_shape_source(tree, rng, folder), socket)
+
+
+# Enum items left out: a 4D Smooth F1 Voronoi (625 cells a point) reached
+# through bump differences costs 30-60 s at 16x16 pixels, a slow case, no hazard.
+SLOW_ITEMS = {'voronoi_dimensions': ('4D',)}
+
+
+def _randomize_enums(node, rng):
+    """Each enum property of the node set to one of its items at random."""
+    for prop in node.bl_rna.properties:
+        if prop.type != 'ENUM' or prop.is_readonly or prop.is_enum_flag or prop.identifier in ('location',):
+            continue
+        items = [item.identifier for item in prop.enum_items
+                 if item.identifier not in SLOW_ITEMS.get(prop.identifier, ())]
+        if items:
+            try:
+                setattr(node, prop.identifier, str(rng.choice(items)))
+            except (TypeError, ValueError, RuntimeError):
+                pass
+
+
+def wrong_shapes(scene, rng, folder):
+    """Issue 23's class of input: every node type the exporter knows, each
+    input linked to a value of another shape (a colour where a float is
+    read, a vector, a missing image, a muted node, a shader), the nodes
+    chained into the BSDF's inputs, its Normal and the Material Output's
+    Displacement; a light and a world whose Emission / Background inputs
+    are fed the same way."""
+    mat = material_on(cube(scene), 'FuzzShapesMat')
+    tree = mat.node_tree
+    output = next(n for n in tree.nodes if n.type == 'OUTPUT_MATERIAL')
+    bsdf = principled(mat)
+    chain = []
+    for kind in rng.permutation(_exported_value_nodes()):
+        try:
+            node = tree.nodes.new(str(kind))
+        except RuntimeError:
+            continue
+        _randomize_enums(node, rng)
+        _feed_inputs(tree, node, rng, folder)
+        chain.append(node)
+    targets = [s for s in bsdf.inputs if s.enabled] + [output.inputs['Displacement']]
+    for node, after in zip(chain, chain[1:] + [None]):
+        outputs = [s for s in node.outputs if s.enabled]
+        sink = targets if after is None else [s for s in after.inputs if s.enabled] or targets
+        if outputs:
+            tree.links.new(outputs[int(rng.integers(0, len(outputs)))], sink[int(rng.integers(0, len(sink)))])
+        if rng.random() < 0.3 and outputs:   # some go straight to the BSDF or the displacement
+            tree.links.new(outputs[int(rng.integers(0, len(outputs)))], targets[int(rng.integers(0, len(targets)))])
+    surface = bsdf.outputs[0]
+    for kind in rng.permutation(SHADER_NODES):
+        shader = tree.nodes.new(str(kind))
+        _randomize_enums(shader, rng)
+        _feed_inputs(tree, shader, rng, folder)
+        mix = tree.nodes.new('ShaderNodeMixShader' if rng.random() < 0.7 else 'ShaderNodeAddShader')
+        tree.links.new(surface, mix.inputs[-2])
+        tree.links.new(shader.outputs[0], mix.inputs[-1])
+        if mix.type == 'MIX_SHADER':
+            tree.links.new(_wrong_shape_source(tree, rng, folder), mix.inputs[0])
+        surface = mix.outputs[0]
+    tree.links.new(surface, output.inputs['Surface'])
+    world = scene.world
+    world.use_nodes = True
+    background = next(n for n in world.node_tree.nodes if n.type == 'BACKGROUND')
+    _feed_inputs(world.node_tree, background, rng, folder)
+    light = point_light(scene).data
+    if hasattr(light, 'use_nodes'):
+        light.use_nodes = True
+        emission = next((n for n in light.node_tree.nodes if n.type == 'EMISSION'), None) if light.node_tree else None
+        if emission is not None:
+            _feed_inputs(light.node_tree, emission, rng, folder)
+    return ['Cube', 'FuzzShapesMat', 'World', 'Light']
+
+
 # name -> (function, risky: run in a subprocess, full: only with --full)
 HAZARDS = {
     'nan_vertices': (nan_vertices, False, False),
@@ -482,6 +622,7 @@ HAZARDS = {
     'bad_images': (bad_images, False, False),
     'unsupported_nodes': (unsupported_nodes, False, False),
     'node_groups': (node_groups, False, False),
+    'wrong_shapes': (wrong_shapes, False, False),
     'some_instances': (some_instances, False, False),
     'large_texture': (large_texture, True, False),
     'more_instances': (more_instances, True, True),
