@@ -47,6 +47,11 @@ class Paths:
     pseed: np.ndarray
     sample: np.ndarray
     aux: np.ndarray       # (N, k) per-path state of the extra passes (k = 0 without)
+    # Volumes (engine/media): the materials whose media the path is in,
+    # (N, STACK_SIZE) with -1 for empty slots, or (N, 0) in a scene without
+    # volumes; and its scattering events in volumes so far.
+    stack: np.ndarray
+    vbounce: np.ndarray
 
     def __len__(self):
         return len(self.pix)
@@ -82,6 +87,7 @@ class RayHits:
     emitter: np.ndarray
     Le: np.ndarray
     pdf: np.ndarray
+    light_t: object = None   # the light's distance along the ray (from Paths.mis_o with transparent shadows)
 
     @property
     def surface(self):
