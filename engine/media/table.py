@@ -52,18 +52,33 @@ class MediumTable:
     # -- a stack's medium ------------------------------------------------------
     def coefficients(self, stack):
         """(sigma_a, sigma_s, emission (N, 3), g (N,)) of stacks (N, K): the
-        sums over their media; g is the scattering-weighted mean of theirs."""
-        sa = self.sigma_a[stack].sum(axis=1)
-        ss_each = self.sigma_s[stack]
-        ss = ss_each.sum(axis=1)
-        em = self.emission[stack].sum(axis=1)
-        w = ss_each.mean(axis=2)
-        total = w.sum(axis=1)
-        g = np.where(total > 0, (w * self.g[stack]).sum(axis=1) / np.where(total > 0, total, 1.0), 0.0)
+        sums over their media; g is the scattering-weighted mean of theirs.
+        Only the slots some path uses are read (mostly the first)."""
+        n = len(stack)
+        sa, ss, em = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+        gw, w = np.zeros(n), np.zeros(n)
+        for k in self._used_slots(stack):
+            m = stack[:, k]
+            sa += np.take(self.sigma_a, m, axis=0)
+            s = np.take(self.sigma_s, m, axis=0)
+            ss += s
+            em += np.take(self.emission, m, axis=0)
+            wk = s.mean(axis=1)
+            w += wk
+            gw += wk * np.take(self.g, m)
+        g = np.where(w > 0, gw / np.where(w > 0, w, 1.0), 0.0)
         return sa, ss, em, g
 
     def extinction(self, stack):
-        return self.sigma_a[stack].sum(axis=1) + self.sigma_s[stack].sum(axis=1)
+        out = np.zeros((len(stack), 3))
+        for k in self._used_slots(stack):
+            m = stack[:, k]
+            out += np.take(self.sigma_a, m, axis=0) + np.take(self.sigma_s, m, axis=0)
+        return out
+
+    @staticmethod
+    def _used_slots(stack):
+        return [k for k in range(stack.shape[1]) if (stack[:, k] >= 0).any()]
 
     # -- entering and leaving ---------------------------------------------------
     def cross(self, stack, rows, mat, back):
