@@ -87,6 +87,11 @@ class EmberRenderSettings(bpy.types.PropertyGroup):
         description="Transparent surfaces (Transparent BSDF, Principled Alpha) a path or shadow ray "
                     "may pass through, counted apart from Max Bounces; as Cycles' (default 8)",
         default=8, min=0, max=1024)
+    volume_bounces: IntProperty(
+        name="Volume Bounces",
+        description="Scattering events a path may have in volumes, counted apart from Max Bounces "
+                    "(0 = single scattering); as Cycles' (default 0)",
+        default=0, min=0, max=1024)
     light_selection: EnumProperty(
         name="Light Selection", description="How a light is chosen for next-event estimation",
         items=LIGHT_SELECTION_ITEMS, default='AUTO')

@@ -109,7 +109,8 @@ class RENDER_PT_ember_sampling_advanced(EmberPanel, bpy.types.Panel):
 class RENDER_PT_ember_light_paths(EmberPanel, bpy.types.Panel):
     bl_label = "Light Paths"
     bl_options = {'DEFAULT_CLOSED'}
-    PROPS = (("max_bounces", "Total Bounces"), ("transparent_max_bounces", "Transparent"))
+    PROPS = (("max_bounces", "Total Bounces"), ("transparent_max_bounces", "Transparent"),
+             ("volume_bounces", "Volume"))
 
 
 class RENDER_PT_ember_light_paths_clamping(EmberPanel, bpy.types.Panel):

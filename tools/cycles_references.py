@@ -53,6 +53,8 @@ for _scene in ('spheres', 'background'):
     REFERENCES['hdri_' + _scene] = ('test_world_hdri', _scene, 2048)
 REFERENCES['ray_nodes_ao_bevel'] = ('test_ray_node_parity', 'ao_bevel', 2048)
 REFERENCES['sky_plane'] = ('test_world_sky', 'plane', 2048)
+for _scene in ('coloured_glass', 'fog', 'emission'):
+    REFERENCES['volume_' + _scene] = ('test_volume_parity', _scene, 1024)
 # the scenes built here: (width, height, max bounces)
 BUILT_HERE = {'cornell': (48, 48, 4), 'glossy_world': (48, 32, 4)}
 HEADER = ('scene', 'blender', 'samples', 'seeds', 'max_bounces', 'filter', 'width', 'height', 'fingerprint')

@@ -93,6 +93,7 @@ def render_settings(scene, is_preview=False):
         samples=settings.preview_samples if is_preview else settings.samples,
         max_bounces=min(settings.max_bounces, PREVIEW_MAX_BOUNCES) if is_preview else settings.max_bounces,
         transparent_max_bounces=settings.transparent_max_bounces,
+        volume_bounces=settings.volume_bounces,
         seed=settings.seed,
         light_selection=settings.light_selection.lower(),
         strategy=settings.strategy.lower(),

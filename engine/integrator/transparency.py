@@ -33,9 +33,13 @@ def film_alpha_through(paths, i, tile):
 
 def last_vertices(ctx, paths):
     """Which paths are at a vertex that only collects emission: past
-    max_bounces, or (Cycles' TERMINATE_ON_NEXT_SURFACE) past the last
-    transparent pass."""
+    max_bounces or volume_bounces, or (Cycles' TERMINATE_ON_NEXT_SURFACE)
+    past the last transparent pass."""
     last = paths.bounce > ctx.settings.max_bounces
+    if ctx.media is not None:
+        # Past its volume bounces a path ends the same way (Cycles sets
+        # PATH_RAY_TERMINATE_AFTER_TRANSPARENT for both).
+        last |= paths.vbounce > ctx.settings.volume_bounces
     if ctx.transparent_shadows:
         last |= paths.tbounce >= ctx.transparent_limit
     return last

@@ -9,7 +9,11 @@ here.
 
 Bounces as Cycles: a scattering is a bounce (it counts towards max_bounces
 and, apart, towards volume_bounces); a path past either limit, or past its
-last transparent pass, is still attenuated but does not scatter.
+last transparent pass, is still attenuated but does not scatter, and at
+its next surface only collects emission (Cycles'
+PATH_RAY_TERMINATE_AFTER_TRANSPARENT): volume_bounces 0 is single
+scattering, lit by next-event estimation at the scattering point and by
+the phase-sampled ray finding a light.
 """
 import numpy as np
 
@@ -32,11 +36,9 @@ def free_flights(ctx, paths, found, depth):
     inside = np.flatnonzero((paths.stack >= 0).any(axis=1))
     if len(inside) == 0:
         return None
-    s = ctx.settings
     on = RowView(paths, inside, len(paths.pix))
     t_end = np.minimum(found.t[inside], on.tmax)
-    may = ((on.bounce <= s.max_bounces) & (on.vbounce <= s.volume_bounces)
-           & ~transparency.last_vertices(ctx, on))
+    may = ~transparency.last_vertices(ctx, on)   # past max_bounces or volume_bounces: no scattering
     u = ctx.sampler.get(on.pseed, on.sample, vertex_set(depth, MEDIUM))
     flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u[:, 1])
     flight.rows = inside
