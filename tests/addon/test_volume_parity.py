@@ -109,12 +109,12 @@ def scene_coloured_glass(scene):
                                                       Density=1.2))
     _object(bpy.ops.mesh.primitive_ico_sphere_add, smoke, radius=0.5, subdivisions=3, location=(0.7, 0.2, 0.5))
     light = bpy.data.lights.new("Area", 'AREA')
-    light.energy, light.size = 300.0, 1.5
+    light.energy, light.size = 80.0, 1.5
     obj = bpy.data.objects.new("Area", light)
     obj.location = (0.5, -1.5, 3.5)
     scene.collection.objects.link(obj)
     _world(scene, DARK_WORLD)
-    _camera(scene, (0.0, -3.8, 2.4), (0.0, 0.0, 0.4))
+    _camera(scene, (0.0, -3.0, 1.9), (0.05, 0.0, 0.45))
     _volume_settings(scene)
     return 8
 
