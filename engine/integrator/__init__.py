@@ -57,8 +57,9 @@ def trace_batch(ctx, pix, sample, tile):
     obs.start(paths)
     # Every step raises a live path's bounce or its transparent bounce
     # count, both bounded: max_bounces + 1 vertices scatter, one more only
-    # collects emission, and transparent passes end at transparent_limit.
-    for depth in range(ctx.settings.max_bounces + 2 + ctx.transparent_limit):
+    # collects emission, and transparent passes end at transparent_limit;
+    # volume boundaries, which count no transparent bounce, get steps of their own.
+    for depth in range(ctx.settings.max_bounces + 2 + ctx.transparent_limit + volume.boundary_steps(ctx)):
         if len(paths.pix) == 0:
             break
         paths = _bounce(ctx, paths, depth, tile, obs)
@@ -96,7 +97,7 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
     ray = paths.ray
     alive, through = stages.scatter(ctx, paths, v, depth)       # BSDF sample, throughput, roulette
     if ctx.media is not None:                                    # refracted or passed through: the volume stack
-        volume.cross_surfaces(ctx, paths, hit, alive & (dot(paths.d, hit.ng) < 0))
+        volume.cross_surfaces(ctx, paths, hit, alive & (dot(paths.d, hit.ng) < 0), through)
     obs.after_scatter(paths, v, through)
     stages.remember_vertex(ctx, paths, v, through, every, ray, depth)
     paths = _end(ctx, paths, alive, tile)
@@ -145,7 +146,7 @@ def _past_last_vertex(ctx, paths, hit, tile):
     if not go.all():
         stages.finish(ctx, carried, tile, ~go)
         carried, at = carried.take(go), at.take(go)
-    if ctx.media is not None:
-        volume.cross_surfaces(ctx, carried, at, np.ones(len(carried.pix), bool))
     transparency.step_through(ctx, carried, at)
+    if ctx.media is not None:
+        volume.cross_surfaces(ctx, carried, at, np.ones(len(carried.pix), bool), np.ones(len(carried.pix), bool))
     return paths.take(~last), hit.take(~last), carried

@@ -50,7 +50,10 @@ def pass_last(ctx, paths, hit, shading):
     still cross transparent surfaces, weighted by their transparency, as
     Cycles (TERMINATE_AFTER_TRANSPARENT keeps the transparent closure).
     Moves those on in place; returns which go on (the others end here)."""
-    go = ctx.transparent_mat[hit.mat] & (paths.tbounce < ctx.transparent_limit)
+    go = paths.tbounce < ctx.transparent_limit
+    if ctx.media is not None:
+        go |= ctx.media.boundary[hit.mat]     # volume boundaries count no transparent bounce
+    go &= ctx.transparent_mat[hit.mat]
     rows = np.nonzero(go)[0]
     if len(rows):
         T = bsdf.transparency(ctx.materials.gather(hit.mat[rows], shading(hit).take(rows)))
@@ -104,7 +107,8 @@ def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None):
         if stack is not None:
             out[idx] *= transmittance_factor(ctx.media, stack, np.where(hit, np.minimum(t, tm), tm))
         mat = ctx.triangles.material[np.maximum(prim, 0)]
-        crosses = hit & ctx.transparent_mat[mat] & (left > 0)
+        boundary = ctx.media.boundary[mat] if ctx.media is not None else False
+        crosses = hit & ctx.transparent_mat[mat] & ((left > 0) | boundary)
         out[idx[hit & ~crosses]] = 0.0
         c = np.nonzero(crosses)[0]
         if len(c) == 0:
@@ -120,5 +124,6 @@ def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None):
             ctx.media.cross(stack, np.arange(len(c)), mat[c], dot(ng, d[c]) > 0)
         start = ctx.accel.offset_origin(o[c] + d[c] * t[c, None], ng, d[c])
         tm = tm[c] - dot(start - o[c], d[c])
-        idx, o, d, left = idx[c], start, d[c], left[c] - 1
+        counted = 1 if ctx.media is None else ~ctx.media.boundary[mat[c]]
+        idx, o, d, left = idx[c], start, d[c], left[c] - counted
     return out

@@ -173,9 +173,26 @@ def trace_surface_shadows(ctx, paths, batch):
     paths.L[rows] += added
 
 
-def cross_surfaces(ctx, paths, hit, crossing):
+def cross_surfaces(ctx, paths, hit, crossing, passed):
     """Paths whose new ray passes through their hit surface (refraction, a
-    transparent pass) enter or leave its medium."""
+    transparent pass) enter or leave its medium; a transparent pass
+    (``passed``) through a volume boundary takes back its transparent bounce
+    (Cycles counts those apart, volume_bounds_bounce)."""
     rows = np.flatnonzero(crossing)
     if len(rows):
         ctx.media.cross(paths.stack, rows, hit.mat[rows], np.asarray(hit.back)[rows])
+    free = passed & ctx.media.boundary[hit.mat]
+    if free.any():
+        paths.tbounce = paths.tbounce - free
+
+
+# Wavefront steps per bounce for volume-boundary crossings, which count no
+# transparent bounce (Cycles allows VOLUME_BOUNDS_MAX = 1024 per bounce;
+# paths still going after the last step are finished with what they have).
+BOUNDARY_STEPS = 8
+
+
+def boundary_steps(ctx):
+    if ctx.media is None or not ctx.media.boundary.any():
+        return 0
+    return BOUNDARY_STEPS * (ctx.settings.max_bounces + 2)

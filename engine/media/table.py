@@ -38,6 +38,10 @@ class MediumTable:
             self.g[i] = vol.anisotropy
             self.has[i] = True
         self.names = list(names) + [""]
+        # Volume boundaries: a volume-only material's pass-through surface,
+        # which paths and shadow rays cross without counting a transparent
+        # bounce (Cycles' volume_bounds_bounce); set by ``of``.
+        self.boundary = np.zeros(m + 1, bool)
         self.camera = np.full(STACK_SIZE, -1, np.int32)   # the stack camera rays start with
         self.warnings = []
 
@@ -47,7 +51,9 @@ class MediumTable:
         volumes = [getattr(m, "volume", None) for m in materials]
         if all(v is None for v in volumes):
             return None
-        return cls(volumes, [m.name for m in materials])
+        table = cls(volumes, [m.name for m in materials])
+        table.boundary[:len(materials)] = [v is not None and _pass_through(m) for v, m in zip(volumes, materials)]
+        return table
 
     # -- a stack's medium ------------------------------------------------------
     def coefficients(self, stack):
@@ -100,6 +106,17 @@ class MediumTable:
         put = np.flatnonzero(enter & empty.any(axis=1))
         sub[put, slot[put]] = mat[put]
         stack[rows] = sub
+
+
+def _pass_through(material):
+    """The surface of a volume-only material: one white transparent lobe of
+    weight 1 (what the exporter gives a material with only a Volume output)."""
+    lobes = list(material.lobes)
+    if len(lobes) != 1 or lobes[0].kind != "transparent":
+        return False
+    color, weight = lobes[0].color, lobes[0].weight
+    return (isinstance(color, tuple) and tuple(float(c) for c in color) == (1.0, 1.0, 1.0)
+            and isinstance(weight, (int, float)) and float(weight) == 1.0)
 
 
 def start_stack(table, n):

@@ -32,14 +32,16 @@ from ember_testlib import check_against_reference, empty_factory_scene, render_f
 
 EMBER_SPP = 256
 # The fog's single scattering is noisy per sample (a spot beam in a dark
-# room): more samples, and still short of the targets (WEAK).
-SPP = {'fog': 512}
+# room): more samples, and still short of the targets (WEAK).  The glass's
+# caustics (floor lit through the cube, found by BSDF sampling only) are
+# heavy-tailed: at 256 spp their sample variance understates the error.
+SPP = {'fog': 2048, 'coloured_glass': 1024}
 BLOCK = 12
 WIDTH, HEIGHT = 48, 36
 IMAGE_POWER, BLOCK_POWER = 0.005, 0.02   # issue 12's targets (docs/testing.md)
 # Scenes whose power falls short of the targets at this budget (asserted at
 # the stated level instead).
-WEAK = {'fog': (0.013, 0.11)}
+WEAK = {'fog': (0.007, 0.06)}   # measured: 0.60% and 5.0% at 2048 spp
 DARK_WORLD = (0.0, 0.0, 0.0)
 
 
