@@ -99,6 +99,11 @@ class EmberRenderSettings(bpy.types.PropertyGroup):
     filter_glossy: FloatProperty(
         name="Filter Glossy", description="Blur glossy reflections after blurry bounces to cut caustic "
         "fireflies, at the cost of accuracy; as Cycles' (default 1.0, 0 = off)", default=1.0, min=0.0, soft_max=10.0)
+    volume_bounces: IntProperty(
+        name="Volume Bounces",
+        description="Scattering events a path may have in volumes, counted apart from Max Bounces "
+                    "(0 = single scattering); as Cycles' (default 0)",
+        default=0, min=0, max=1024)
     light_selection: EnumProperty(
         name="Light Selection", description="How a light is chosen for next-event estimation",
         items=LIGHT_SELECTION_ITEMS, default='AUTO')

@@ -110,7 +110,8 @@ class RENDER_PT_ember_light_paths(EmberPanel, bpy.types.Panel):
     bl_label = "Light Paths"
     bl_options = {'DEFAULT_CLOSED'}
     PROPS = (("max_bounces", "Total"), ("diffuse_bounces", "Diffuse"), ("glossy_bounces", "Glossy"),
-             ("transmission_bounces", "Transmission"), ("transparent_max_bounces", "Transparent"))
+             ("transmission_bounces", "Transmission"), ("transparent_max_bounces", "Transparent"),
+             ("volume_bounces", "Volume"))
 
 
 class RENDER_PT_ember_light_paths_caustics(EmberPanel, bpy.types.Panel):

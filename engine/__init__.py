@@ -26,14 +26,14 @@ from .render import RenderResult, prepare, render
 from .scene import (FALLOFFS, MATH_OPERATIONS, MIX_BLENDS, TEXTURE_TYPES, AreaLight, Bump, Camera, Cancelled,
                     EnvironmentTexture, ImageTexture, Instance, Lobe, Material, Math, Mesh, MixColor,
                     NodeCall, NodeOutput, NormalMap, PointLight, RenderSettings, Scene, SceneError,
-                    SpotLight, SunGuide, SunLight, TextureImage, World)
+                    SpotLight, SunGuide, SunLight, TextureImage, Volume, World)
 from .textures import Compiler as TextureCompiler
 from .textures import value_range
 from .validate import validate_camera, validate_scene, validate_settings
 
 __all__ = [
     # scene data the exporter builds (engine.scene)
-    "Scene", "Mesh", "Instance", "Material", "Lobe", "Camera", "World", "EnvironmentTexture", "SunGuide",
+    "Scene", "Mesh", "Instance", "Material", "Lobe", "Volume", "Camera", "World", "EnvironmentTexture", "SunGuide",
     "PointLight", "SpotLight", "SunLight", "AreaLight",
     "TextureImage", "ImageTexture", "MixColor", "Math", "NormalMap", "Bump", "NodeCall", "NodeOutput",
     "TEXTURE_TYPES", "MIX_BLENDS", "MATH_OPERATIONS", "FALLOFFS",

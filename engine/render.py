@@ -22,7 +22,7 @@ from .accel import Accel
 from .blas import single_threaded_blas
 from .bsdf import MaterialTable, bump_model
 from .camera import CameraModel, PixelFilter
-from . import kernels, pass_events
+from . import kernels, media, pass_events
 from .film import Film
 from .geometry import flatten, material_table
 from .integrator import Context, trace_batch
@@ -92,7 +92,21 @@ def prepare(scene, settings):
     return Context.build(accel, tris, materials, lights, camera, world, settings,
                          sampler=Sampler(settings.seed, settings.sampling_pattern),
                          bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
-                         pass_config=pass_events.configure(scene, settings))
+                         pass_config=pass_events.configure(scene, settings),
+                         media=_media(scene, accel, tris, camera))
+
+
+def _media(scene, accel, tris, camera):
+    """The scene's media (None without a volume), with the media the camera
+    starts in and a warning per object whose volume mesh is open."""
+    table = media.MediumTable.of(material_table(scene))
+    if table is None:
+        return None
+    if scene.camera.kind == "PERSP":
+        media.camera_media(table, accel, tris, np.asarray(scene.camera.matrix, np.float64)[:3, 3], camera.forward)
+    table.warnings = [f"object {name!r}: its volume mesh is not closed; paths may never leave the volume"
+                      for name in media.open_volume_meshes(scene)]
+    return table
 
 
 def _choose_kernels(settings, progress):
@@ -133,14 +147,20 @@ def prepare_interruptibly(scene, settings, progress, poll=0.05):
     return outcome["ctx"]
 
 
+def _emitting_media(ctx):
+    return ctx.media is not None and bool(np.any(ctx.media.emission > 0))
+
+
 def warnings_for(ctx):
     out = []
     if ctx.triangles.dropped:
         out.append(f"{ctx.triangles.dropped} degenerate triangles were skipped")
     if len(ctx.triangles) == 0 and ctx.lights.count == 0:
         out.append("the scene has no geometry and no lights")
-    elif ctx.lights.count == 0 and not np.any(ctx.world > 0):
+    elif ctx.lights.count == 0 and not np.any(ctx.world > 0) and not _emitting_media(ctx):
         out.append("the scene has no lights and a black world: the image will be black")
+    if ctx.media is not None:
+        out.extend(ctx.media.warnings)
     return out
 
 

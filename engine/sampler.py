@@ -32,9 +32,11 @@ PATTERNS = (SOBOL, RANDOM)
 # Dimension sets.  Camera: filter x, y and lens x, y.  Per path vertex
 # (indexed by the wavefront step, so transparent passes get their own):
 # LIGHT = selection, three numbers for the point; BSDF = lobe choice,
-# direction (2), roulette; KIND = the bounce kind for ray visibility.
+# direction (2), roulette; KIND = the bounce kind for ray visibility;
+# MEDIUM = the colour channel and distance of a free flight in a volume
+# (a path scattering in a volume uses its step's LIGHT and BSDF sets).
 CAMERA = 0
-LIGHT, BSDF, KIND = 0, 1, 2
+LIGHT, BSDF, KIND, MEDIUM = 0, 1, 2, 3
 _SETS_PER_STEP = 4
 
 

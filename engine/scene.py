@@ -124,8 +124,28 @@ FRESNEL_MODES = ("none", "schlick", "f82", "dielectric")
 
 
 @dataclass
+class Volume:
+    """A homogeneous medium filling a closed mesh (a material's Volume
+    output, Cycles' volume closures summed): per-metre coefficients, linear
+    RGB.  absorption = sigma_a, scattering = sigma_s (extinction is their
+    sum), emission = radiance emitted per metre (Cycles' volume emission:
+    integrated along the ray times the transmittance), anisotropy = the
+    Henyey-Greenstein g of the scattering, in [-1, 1] (Cycles clamps |g|
+    to 1 - 1e-3).  engine/media/ renders it."""
+    absorption: RGB = (0.0, 0.0, 0.0)
+    scattering: RGB = (0.0, 0.0, 0.0)
+    emission: RGB = (0.0, 0.0, 0.0)
+    anisotropy: float = 0.0
+
+
+@dataclass
 class Material:
-    """A weighted set of lobes plus emitted radiance (W/(m^2 sr), two-sided)."""
+    """A weighted set of lobes plus emitted radiance (W/(m^2 sr), two-sided).
+    ``volume``: the medium inside the mesh (None: none).  Paths enter it
+    crossing a front face of the material's triangles and leave it crossing
+    a back face, so the mesh should be closed with its normals outward.  A
+    material with only a Volume output in Blender has one transparent lobe
+    of weight 1: its surface is a pass-through boundary, as in Cycles."""
     name: str = "material"
     lobes: Sequence[Lobe] = (Lobe("diffuse"),)
     emission: RGB = (0.0, 0.0, 0.0)
@@ -135,6 +155,7 @@ class Material:
     pass_index: int = 0  # Blender's Material Index
     # Shader AOVs (AOV Output nodes): name -> ((r, g, b), value), constants.
     aovs: dict = field(default_factory=dict)
+    volume: Optional[Volume] = None
 
 
 DEFAULT_MATERIAL = Material("default", (Lobe("diffuse", (0.8, 0.8, 0.8)),))
@@ -534,6 +555,10 @@ class RenderSettings:
     # the same elementwise maths; off, or without numba, or with EMBER_JIT=0,
     # the NumPy code runs.  Images are the same bit for bit.
     use_jit: bool = True
+    # Scattering events a path may have in volumes (Cycles' volume_bounces,
+    # default 0: single scattering).  A path past it (or past max_bounces)
+    # is still attenuated and lit by volume emission, as in Cycles.
+    volume_bounces: int = 0
 
 
 @dataclass

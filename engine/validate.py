@@ -140,6 +140,19 @@ def validate_material(mat, index):
         elif not np.isfinite(lobe.roughness):
             raise SceneError(f"{what}: lobe {k} roughness is not finite")
         _validate_lobe_extras(lobe, k, what, len(mat.lobes))
+    if getattr(mat, "volume", None) is not None:
+        validate_volume(mat.volume, what)
+
+
+def validate_volume(vol, what):
+    """A homogeneous medium: finite, non-negative coefficients, |g| <= 1."""
+    for name in ("absorption", "scattering", "emission"):
+        arr = _rgb(getattr(vol, name), f"{what} volume {name}")
+        if np.any(arr < 0):
+            raise SceneError(f"{what}: volume {name} must be >= 0, got {tuple(arr)}")
+    g = vol.anisotropy
+    if not (np.isfinite(g) and -1.0 <= g <= 1.0):
+        raise SceneError(f"{what}: volume anisotropy must lie in [-1, 1], got {g}")
 
 
 def _validate_lobe_extras(lobe, k, what, n_lobes):
@@ -238,6 +251,8 @@ def validate_settings(s):
     for kind in ("diffuse", "glossy", "transmission"):
         if getattr(s, kind + "_bounces") < 0:
             raise SceneError(f"settings: {kind} bounces must be >= 0")
+    if getattr(s, "volume_bounces", 0) < 0:
+        raise SceneError("settings: volume bounces must be >= 0")
     if s.max_paths < 1024:
         raise SceneError("settings: max_paths must be >= 1024")
     if s.sample_start < 0 or s.sample_start + s.samples > 2 ** 32:

@@ -1,7 +1,9 @@
 """Blender shader node trees -> engine.scene.Material (a weighted set of lobes).
 
 Covered: Diffuse, Glossy, Glass, Refraction, Translucent, Transparent, Sheen,
-Emission, Principled BSDF (Cycles' layering), Mix Shader and Add Shader.  A
+Emission, Principled BSDF (Cycles' layering), Mix Shader and Add Shader; in
+the Volume output, Volume Absorption, Volume Scatter, Principled Volume,
+Emission, Add and Mix Shader with constant inputs (a homogeneous medium).  A
 node Ember cannot translate becomes a grey diffuse (or a diffuse of the
 node's Color input) and is named in one warning per material.  Inputs may be
 driven by textures (nodes.SocketReader): lobe colours, roughness, IOR and
@@ -69,6 +71,8 @@ class NodeTranslator:
         self.unsupported = []   # node labels, in order of discovery
         self.textured = []      # "node.input" names read as constants
         self.approximated = []  # Principled BSDF features not rendered yet
+        self.unsupported_volume = []   # volume nodes not rendered
+        self.volume_notes = []         # volume features approximated
         self.reader = nodes.SocketReader(self._linked_node)
 
     # -- socket values --------------------------------------------------------
@@ -271,6 +275,119 @@ class NodeTranslator:
     def _node_add_shader(self, node):
         return self.surface(node.inputs[0]).plus(self.surface(node.inputs[1]))
 
+    # -- volumes ---------------------------------------------------------------
+
+    def volume(self, socket):
+        """The homogeneous medium a Volume socket evaluates to (constant
+        inputs only: a linked input is read as its own value, with a warning)."""
+        node, out = self._linked_node(socket)
+        if node is None or node.type == 'GROUP_DEFAULT':
+            return VolumeClosure()
+        if node.mute:
+            source = nodes.muted_source(node, out)
+            return VolumeClosure() if source is None else self.volume(source)
+        handler = getattr(self, '_volume_' + node.type.lower(), None)
+        if handler is None:
+            label = f"'{node.name}' ({node.bl_idname}) in the Volume output"
+            if label not in self.unsupported_volume:
+                self.unsupported_volume.append(label)
+            return VolumeClosure()
+        return handler(node)
+
+    def _volume_const(self, node, name, default, color=False):
+        """A constant input of a volume node (Cycles' value for a texture
+        Ember cannot evaluate inside a volume yet: the socket's own), with
+        NaN read as 0 and infinities as the largest value, named in a warning."""
+        socket = node.inputs.get(name)
+        if socket is None:
+            return default
+        value = self.reader.read(socket) if socket.is_linked else nodes.constant(socket)
+        if value is None or nodes.is_expr(value):
+            self._note_texture(node, name)
+            value = nodes.constant(socket)
+        if color:
+            value = (float(value),) * 3 if isinstance(value, (float, int)) else tuple(float(c) for c in value[:3])
+            return tuple(self._finite(node, name, c) for c in value)
+        return self._finite(node, name, nodes.luminance(value) if isinstance(value, tuple) else float(value))
+
+    def _finite(self, node, name, value):
+        if math.isfinite(value):
+            return value
+        fixed = 0.0 if math.isnan(value) else math.copysign(VOLUME_LIMIT, value)
+        note = f"'{node.name}' {name} {value} read as {fixed:g}"
+        if note not in self.reader.warnings:
+            self.reader.warnings.append(note)
+        return fixed
+
+    def _density(self, node):
+        """Density, negative read as 0 (Cycles' fmaxf(density, 0))."""
+        return max(self._volume_const(node, 'Density', 1.0), 0.0)
+
+    def _volume_volume_absorption(self, node):
+        color = self._volume_const(node, 'Color', GREY, color=True)
+        d = self._density(node)
+        return VolumeClosure(absorption=tuple(max(1.0 - c, 0.0) * d for c in color))
+
+    def _volume_volume_scatter(self, node):
+        """Henyey-Greenstein; the other phase functions (Blender 4.2+) are
+        rendered as Henyey-Greenstein of the node's Anisotropy (Rayleigh: 0)."""
+        color = self._volume_const(node, 'Color', GREY, color=True)
+        d = self._density(node)
+        phase = getattr(node, 'phase', 'HENYEY_GREENSTEIN')
+        g = self._volume_const(node, 'Anisotropy', 0.0)
+        if phase != 'HENYEY_GREENSTEIN':
+            self._volume_note(node, f"{phase.replace('_', '-').title()} phase function rendered as "
+                                    "Henyey-Greenstein")
+            if phase == 'RAYLEIGH':
+                g = 0.0
+        return VolumeClosure(scattering=tuple(max(c, 0.0) * d for c in color)).with_phase(g)
+
+    def _volume_principled_volume(self, node):
+        """Cycles' svm_node_principled_volume with no attribute grids:
+        scattering Color x Density, absorption (1 - Color)(1 - sqrt(Absorption
+        Color)) x Density, emission Strength x Color.  Blackbody is named."""
+        color = self._volume_const(node, 'Color', (0.5, 0.5, 0.5), color=True)
+        d = self._density(node)
+        g = self._volume_const(node, 'Anisotropy', 0.0)
+        ac = self._volume_const(node, 'Absorption Color', (0.0, 0.0, 0.0), color=True)
+        strength = self._volume_const(node, 'Emission Strength', 0.0)
+        ec = self._volume_const(node, 'Emission Color', (1.0, 1.0, 1.0), color=True)
+        if self._volume_const(node, 'Blackbody Intensity', 0.0) > 0.0:
+            self._volume_note(node, "Blackbody emission not rendered yet")
+        out = VolumeClosure()
+        if d > 0.0:
+            out = VolumeClosure(
+                absorption=tuple(max(1.0 - c, 0.0) * max(1.0 - math.sqrt(max(a, 0.0)), 0.0) * d
+                                 for c, a in zip(color, ac)),
+                scattering=tuple(max(c, 0.0) * d for c in color)).with_phase(g)
+        if strength > 0.0:
+            out = out.plus(VolumeClosure(emission=tuple(strength * c for c in ec)))
+        return out
+
+    def _volume_emission(self, node):
+        strength = self._volume_const(node, 'Strength', 1.0)
+        color = self._volume_const(node, 'Color', (1.0, 1.0, 1.0), color=True)
+        return VolumeClosure(emission=tuple(strength * c for c in color))
+
+    def _volume_add_shader(self, node):
+        return self._volume_sum(self.volume(node.inputs[0]), self.volume(node.inputs[1]), node)
+
+    def _volume_mix_shader(self, node):
+        fac = min(max(self._volume_const(node, 'Fac', 0.5), 0.0), 1.0)
+        return self._volume_sum(self.volume(node.inputs[1]).scaled(1.0 - fac),
+                                self.volume(node.inputs[2]).scaled(fac), node)
+
+    def _volume_note(self, node, what):
+        label = f"'{node.name}' ({what})"
+        if label not in self.volume_notes:
+            self.volume_notes.append(label)
+
+    def _volume_sum(self, a, b, node):
+        if a.phases_differ(b):
+            self._volume_note(node, "volume phase functions of different anisotropy rendered as one of "
+                                    "their mean")
+        return a.plus(b)
+
     # -- report ----------------------------------------------------------------
 
     def warning(self):
@@ -278,6 +395,10 @@ class NodeTranslator:
         parts = []
         if self.unsupported:
             parts.append("unsupported node " + ", ".join(self.unsupported) + " rendered as diffuse")
+        if self.unsupported_volume:
+            parts.append("unsupported node " + ", ".join(self.unsupported_volume) + " not rendered")
+        if self.volume_notes:
+            parts.append("volume " + ", ".join(self.volume_notes))
         if self.approximated:
             parts.append("Principled BSDF " + ", ".join(self.approximated) + " not rendered yet")
         if self.textured:
@@ -288,6 +409,50 @@ class NodeTranslator:
         if not parts:
             return None
         return f"Material '{self.material_name}': " + "; ".join(parts)
+
+
+# Coefficients past this (1/m) render as opaque as any larger: validation's
+# largest renderable value.
+VOLUME_LIMIT = 1e30
+
+
+@dataclass
+class VolumeClosure:
+    """What a Volume socket evaluates to: the summed coefficients of its
+    volume closures (constants) and the scattering-weighted anisotropy."""
+    absorption: tuple = BLACK
+    scattering: tuple = BLACK
+    emission: tuple = BLACK
+    g_weight: float = 0.0        # sum of mean(scattering) x g over the closures
+    phases: tuple = ()           # the distinct g of the scattering closures
+
+    def with_phase(self, g):
+        g = min(max(float(g), -1.0), 1.0)
+        return dataclasses.replace(self, g_weight=sum(self.scattering) / 3.0 * g, phases=(g,))
+
+    def scaled(self, w):
+        return VolumeClosure(_scale3(self.absorption, w), _scale3(self.scattering, w), _scale3(self.emission, w),
+                             self.g_weight * w, self.phases if w > 0 else ())
+
+    def plus(self, other):
+        return VolumeClosure(_add3(self.absorption, other.absorption), _add3(self.scattering, other.scattering),
+                             _add3(self.emission, other.emission), self.g_weight + other.g_weight,
+                             tuple(sorted(set(self.phases) | set(other.phases))))
+
+    def phases_differ(self, other):
+        return len(set(self.phases) | set(other.phases)) > 1
+
+    def anisotropy(self):
+        total = sum(self.scattering) / 3.0
+        return min(max(self.g_weight / total, -1.0), 1.0) if total > 0 else 0.0
+
+
+def _scale3(c, w):
+    return tuple(min(x * w, VOLUME_LIMIT) for x in c)
+
+
+def _add3(a, b):
+    return tuple(min(x + y, VOLUME_LIMIT) for x, y in zip(a, b))
 
 
 def _f0_from_ior(ior):
@@ -423,8 +588,24 @@ def translate(material):
     closure = translator.surface(output.inputs['Surface'])
     normal = _displacement_bump(translator, output, _material_normal(translator, output),
                                 _displacement_method(material))
-    return (scene.Material(name, tuple(closure.lobes), closure.emission, normal=normal),
-            translator.warning())
+    lobes, volume = tuple(closure.lobes), _volume(translator, output)
+    if volume is not None and not output.inputs['Surface'].is_linked:
+        # Only a Volume output: Cycles' surface is a pass-through boundary.
+        lobes = (scene.Lobe('transparent', (1.0, 1.0, 1.0)),)
+    material = scene.Material(name, lobes, closure.emission, normal=normal)
+    if volume is not None:
+        material.volume = volume
+    return material, translator.warning()
+
+
+def _volume(translator, output):
+    """The engine Volume of a Material Output's linked Volume socket (None
+    when unlinked)."""
+    socket = output.inputs.get('Volume')
+    if socket is None or not socket.is_linked:
+        return None
+    v = translator.volume(socket)
+    return _scene().Volume(v.absorption, v.scattering, v.emission, v.anisotropy())
 
 
 def _material_normal(translator, output):

@@ -97,6 +97,7 @@ def render_settings(scene, is_preview=False):
         glossy_bounces=settings.glossy_bounces,
         transmission_bounces=settings.transmission_bounces,
         filter_glossy=settings.filter_glossy,
+        volume_bounces=settings.volume_bounces,
         seed=settings.seed,
         light_selection=settings.light_selection.lower(),
         strategy=settings.strategy.lower(),

@@ -25,9 +25,11 @@ import numpy as np
 
 from .. import pass_events
 from ..geometry import VIS_CAMERA
+from ..media import start_stack
 from ..nee import add_rows as _add_rows
 from ..sampler import CAMERA
-from . import stages, transparency
+from ..vec import dot
+from . import stages, transparency, volume
 from .context import Context
 from .records import Hit, LightSample, Paths, RayHits, ShadowBatch, Vertex, rows_of
 from .stages import every_light as _every_light, interaction as _interaction
@@ -50,13 +52,15 @@ def trace_batch(ctx, pix, sample, tile):
                   np.full(n, VIS_CAMERA, np.uint8),
                   o, np.zeros(n, np.int32), np.zeros(n, np.int32), pseed, sample,
                   np.zeros((n, pass_events.aux_width(ctx.settings)), np.float32),
-                  np.zeros((n, 3 if ctx.count_kinds else 0), np.int16), np.full(n, np.inf))
+                  np.zeros((n, 3 if ctx.count_kinds else 0), np.int16), np.full(n, np.inf),
+                  start_stack(ctx.media, n), np.zeros(n, np.int16))
     obs = pass_events.observer(ctx, tile)
     obs.start(paths)
     # Every step raises a live path's bounce or its transparent bounce
     # count, both bounded: max_bounces + 1 vertices scatter, one more only
-    # collects emission, and transparent passes end at transparent_limit.
-    for depth in range(ctx.settings.max_bounces + 2 + ctx.transparent_limit):
+    # collects emission, and transparent passes end at transparent_limit;
+    # volume boundaries, which count no transparent bounce, get steps of their own.
+    for depth in range(ctx.settings.max_bounces + 2 + ctx.transparent_limit + volume.boundary_steps(ctx)):
         if len(paths.pix) == 0:
             break
         paths = _bounce(ctx, paths, depth, tile, obs)
@@ -70,28 +74,43 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
     found = stages.intersect(ctx, paths)                         # RayHits
     if depth == 0:
         stages.camera_aovs(ctx, paths, found, tile)
+    flight = None if ctx.media is None else volume.free_flights(ctx, paths, found, depth)
     ended = stages.emitters(ctx, paths, found, obs)              # lights on the ray
+    scattered = None
+    if flight is not None:                                       # volume vertices: NEE, phase sample
+        paths, found, ended, scattered = volume.after_flights(ctx, paths, found, ended, flight, depth)
     stages.escaped(ctx, paths, np.flatnonzero((found.prim < 0) & ~ended), tile, obs)
     paths, surface = _compact(ctx, paths, found.surface, (found.prim >= 0) & ~ended, tile)
     if len(paths.pix) == 0:
-        return paths
+        return _join(paths, scattered)
     hit = stages.interaction(ctx, paths, *surface)               # Hit
     stages.surface_emission(ctx, paths, hit, depth, obs)
     paths, hit, carried = _past_last_vertex(ctx, paths, hit, tile)
     if len(paths.pix) == 0:
-        return paths if carried is None else carried
+        return _join(paths, carried, scattered)
     v = stages.shade(ctx, paths, hit, depth)                     # Vertex
     obs.vertex(paths, v, depth)
     every = stages.sampling_every_light(ctx, v)
+    trace = stages.trace_shadows if ctx.media is None else volume.trace_surface_shadows
     for batch in stages.light_samples(ctx, paths, v, depth, every):   # nee: ShadowBatch
-        stages.trace_shadows(ctx, paths, batch)
+        trace(ctx, paths, batch)
         obs.light_sample(paths, batch)
     ray = paths.ray
     alive, through = stages.scatter(ctx, paths, v, depth)       # BSDF sample, throughput, roulette
+    if ctx.media is not None:                                    # refracted or passed through: the volume stack
+        volume.cross_surfaces(ctx, paths, hit, alive & (dot(paths.d, hit.ng) < 0), through)
     obs.after_scatter(paths, v, through)
     stages.remember_vertex(ctx, paths, v, through, every, ray, depth)
     paths = _end(ctx, paths, alive, tile)
-    return paths if carried is None or len(carried.pix) == 0 else paths.concat(carried)
+    return _join(paths, carried, scattered)
+
+
+def _join(paths, *others):
+    """The paths and the others that go on (None or empty: none)."""
+    for other in others:
+        if other is not None and len(other.pix):
+            paths = other if len(paths.pix) == 0 else paths.concat(other)
+    return paths
 
 
 def _compact(ctx, paths, arrays, go_on, tile):
@@ -129,4 +148,6 @@ def _past_last_vertex(ctx, paths, hit, tile):
         stages.finish(ctx, carried, tile, ~go)
         carried, at = carried.take(go), at.take(go)
     transparency.step_through(ctx, carried, at)
+    if ctx.media is not None:
+        volume.cross_surfaces(ctx, carried, at, np.ones(len(carried.pix), bool), np.ones(len(carried.pix), bool))
     return paths.take(~last), hit.take(~last), carried

@@ -62,10 +62,13 @@ class Context:
     pass_config: object
     emitter_groups: object
     centres: object
+    # Volumes: the scene's media.MediumTable, None without a volume (the
+    # bounce's volume stages are then skipped: no cost).
+    media: object = None
 
     @classmethod
     def build(cls, accel, triangles, materials, lights, camera, world, settings, sampler=None,
-              bump_model=bsdf.BUMP_GGX, pass_config=None):
+              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None):
         """The Context of a render; ``sampler`` defaults to the settings'
         seed and pattern, ``pass_config`` to no extra passes."""
         if sampler is None:
@@ -81,7 +84,7 @@ class Context:
                    transparent_limit=max(int(settings.transparent_max_bounces), 1),
                    **_kind_limits(settings, light_path), light_path=light_path,
                    pass_config=pass_config, emitter_groups=pass_events.emitter_groups(pass_config, lights),
-                   centres=pass_events.CentreRecord(camera.width * camera.height))
+                   centres=pass_events.CentreRecord(camera.width * camera.height), media=media)
 
 
 def _delta_emitters(lights):

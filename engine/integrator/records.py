@@ -54,6 +54,11 @@ class Paths:
     # The smallest pdf of the path's non-singular bounces (inf: none yet),
     # Cycles' min_ray_pdf: Filter Glossy blurs by it.
     min_pdf: np.ndarray
+    # Volumes (engine/media): the materials whose media the path is in,
+    # (N, STACK_SIZE) with -1 for empty slots, or (N, 0) in a scene without
+    # volumes; and its scattering events in volumes so far.
+    stack: np.ndarray
+    vbounce: np.ndarray
 
     def __len__(self):
         return len(self.pix)
@@ -89,6 +94,7 @@ class RayHits:
     emitter: np.ndarray
     Le: np.ndarray
     pdf: np.ndarray
+    light_t: object = None   # the light's distance along the ray (from Paths.mis_o with transparent shadows)
 
     @property
     def surface(self):

@@ -31,7 +31,7 @@ def intersect(ctx, paths):
     if ctx.triangles.visibility is not None:
         t, prim, bu, bv = visibility.skip_invisible(ctx, paths.o, paths.d, paths.tmax, paths.ray, t, prim, bu, bv)
     light_t, emitter, Le, pdf = _lights_along(ctx, paths, np.minimum(t, paths.tmax))
-    return RayHits(t, prim, bu, bv, light_t < np.inf, emitter, Le, pdf)
+    return RayHits(t, prim, bu, bv, light_t < np.inf, emitter, Le, pdf, light_t)
 
 
 def _lights_along(ctx, paths, tmax):

@@ -8,6 +8,7 @@ import numpy as np
 
 from .. import bsdf
 from ..geometry import VIS_SHADOW
+from ..media import transmittance_factor
 from ..nodes import ShadingContext
 from ..vec import dot, row_any_positive
 from .visibility import skip_invisible
@@ -32,11 +33,15 @@ def film_alpha_through(paths, i, tile):
 
 def last_vertices(ctx, paths):
     """Which paths are at a vertex that only collects emission: past
-    max_bounces, or (Cycles' TERMINATE_ON_NEXT_SURFACE) past the last
-    transparent pass."""
+    max_bounces or volume_bounces, or (Cycles' TERMINATE_ON_NEXT_SURFACE)
+    past the last transparent pass."""
     last = paths.bounce > ctx.settings.max_bounces
     if ctx.count_kinds:
         last |= np.any(paths.kinds > ctx.kind_limits, axis=1)
+    if ctx.media is not None:
+        # Past its volume bounces a path ends the same way (Cycles sets
+        # PATH_RAY_TERMINATE_AFTER_TRANSPARENT for both).
+        last |= paths.vbounce > ctx.settings.volume_bounces
     if ctx.transparent_shadows:
         last |= paths.tbounce >= ctx.transparent_limit
     return last
@@ -47,7 +52,10 @@ def pass_last(ctx, paths, hit, shading):
     still cross transparent surfaces, weighted by their transparency, as
     Cycles (TERMINATE_AFTER_TRANSPARENT keeps the transparent closure).
     Moves those on in place; returns which go on (the others end here)."""
-    go = ctx.transparent_mat[hit.mat] & (paths.tbounce < ctx.transparent_limit)
+    go = paths.tbounce < ctx.transparent_limit
+    if ctx.media is not None:
+        go |= ctx.media.boundary[hit.mat]     # volume boundaries count no transparent bounce
+    go &= ctx.transparent_mat[hit.mat]
     rows = np.nonzero(go)[0]
     if len(rows):
         T = bsdf.transparency(ctx.materials.gather(hit.mat[rows], shading(hit).take(rows)))
@@ -73,12 +81,15 @@ def sampled_transparent(ctx, hit, delta, wi_l, wo_l):
     return delta & ctx.transparent_mat[hit.mat] & np.all(wi_l == -wo_l, axis=1)
 
 
-def transmittance(ctx, origin, wi, tmax, emitter, tbounce):
+def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None):
     """(N, 3) light reaching the shadow rays' ends through transparent
     surfaces (Cycles' transparent shadows).  embreex has no any-hit filter,
     so each ray is traced again from past its transparent hit, times that
     surface's transparency; an opaque hit blocks it, and so does a
-    transparent hit beyond the transparent bounces its path has left."""
+    transparent hit beyond the transparent bounces its path has left.
+    ``stack`` (N, K): the media each ray starts in (engine/media), whose
+    transmittance multiplies each segment; crossing a surface enters or
+    leaves its material's medium."""
     n = len(origin)
     out = np.ones((n, 3))
     cast = np.ones(n, bool)
@@ -87,14 +98,19 @@ def transmittance(ctx, origin, wi, tmax, emitter, tbounce):
     idx = np.nonzero(cast)[0]
     o, d, tm = origin[idx], wi[idx], tmax[idx]
     left = np.maximum(ctx.settings.transparent_max_bounces - tbounce[idx], 0)
+    if stack is not None:
+        stack = stack[idx].copy()
     while len(idx):
         t, prim, bu, bv = ctx.accel.intersect(o, d, tm)
         if ctx.shadow_skips:
             ray = np.full(len(idx), VIS_SHADOW, np.uint8)
             t, prim, bu, bv = skip_invisible(ctx, o, d, tm, ray, t, prim, bu, bv)
         hit = prim >= 0
+        if stack is not None:
+            out[idx] *= transmittance_factor(ctx.media, stack, np.where(hit, np.minimum(t, tm), tm))
         mat = ctx.triangles.material[np.maximum(prim, 0)]
-        crosses = hit & ctx.transparent_mat[mat] & (left > 0)
+        boundary = ctx.media.boundary[mat] if ctx.media is not None else False
+        crosses = hit & ctx.transparent_mat[mat] & ((left > 0) | boundary)
         out[idx[hit & ~crosses]] = 0.0
         c = np.nonzero(crosses)[0]
         if len(c) == 0:
@@ -104,7 +120,12 @@ def transmittance(ctx, origin, wi, tmax, emitter, tbounce):
         out[idx[c]] *= T
         c = c[row_any_positive(T)]
         # Go on from just past the surface, towards the same end point.
-        start = ctx.accel.offset_origin(o[c] + d[c] * t[c, None], ctx.triangles.ng[prim[c]], d[c])
+        ng = ctx.triangles.ng[prim[c]]
+        if stack is not None:
+            stack = stack[c]
+            ctx.media.cross(stack, np.arange(len(c)), mat[c], dot(ng, d[c]) > 0)
+        start = ctx.accel.offset_origin(o[c] + d[c] * t[c, None], ng, d[c])
         tm = tm[c] - dot(start - o[c], d[c])
-        idx, o, d, left = idx[c], start, d[c], left[c] - 1
+        counted = 1 if ctx.media is None else ~ctx.media.boundary[mat[c]]
+        idx, o, d, left = idx[c], start, d[c], left[c] - counted
     return out

@@ -75,9 +75,10 @@ def setup_cycles(scene, samples, seed, max_bounces, filter_type='BLACKMAN_HARRIS
     cycles.caustics_reflective = True
     cycles.caustics_refractive = True
     cycles.max_bounces = max_bounces
-    for name in ('diffuse_bounces', 'glossy_bounces', 'transmission_bounces',
-                 'volume_bounces', 'transparent_max_bounces'):
+    for name in ('diffuse_bounces', 'glossy_bounces', 'transmission_bounces', 'transparent_max_bounces'):
         setattr(cycles, name, max_bounces)
+    # Volume bounces as Ember renders the scene (its default 0 is Cycles').
+    cycles.volume_bounces = getattr(getattr(scene, 'ember', None), 'volume_bounces', 0)
     cycles.min_light_bounces = 0
     cycles.min_transparent_bounces = 0
     if hasattr(cycles, 'use_auto_tile'):

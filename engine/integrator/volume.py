@@ -1,0 +1,199 @@
+"""The bounce's volume stages (engine/media/ has the maths): each live
+path in a medium flies freely along its ray (attenuation, emission and
+perhaps a scattering before the surface), and the paths that scatter make a
+volume vertex there: next-event estimation with the phase function, then a
+phase-function sample for the next ray, as a surface vertex with its BSDF.
+Shadow rays, from surfaces and from volume vertices, are attenuated by every
+medium they cross.  Scenes without a volume (Context.media None) never get
+here.
+
+Bounces as Cycles: a scattering is a bounce (it counts towards max_bounces
+and, apart, towards volume_bounces); a path past either limit, or past its
+last transparent pass, is still attenuated but does not scatter, and at
+its next surface only collects emission (Cycles'
+PATH_RAY_TERMINATE_AFTER_TRANSPARENT): volume_bounces 0 is single
+scattering, lit by next-event estimation at the scattering point and by
+the phase-sampled ray finding a light.
+"""
+import numpy as np
+
+from .. import media
+from ..accel import shadow_rays
+from ..sampler import BSDF, LIGHT, MEDIUM, emitter_set, vertex_set
+from ..sampling import power_heuristic
+from ..vec import dot, row_any_positive
+from . import transparency, visibility
+from .records import RowView
+from .stages import nee_rounds
+from .visibility import VIS_INDIRECT
+
+
+def free_flights(ctx, paths, found, depth):
+    """The FreeFlight of the paths in a medium (None when none is): lights
+    met on the way are scaled by what reaches them, and hidden where the
+    path scattered first.  The throughput changes later (``after_flights``):
+    the emitters stage weighs lights by the throughput at the ray's start."""
+    inside = np.flatnonzero((paths.stack >= 0).any(axis=1))
+    if len(inside) == 0:
+        return None
+    on = RowView(paths, inside, len(paths.pix))
+    t_end = np.minimum(found.t[inside], on.tmax)
+    may = ~transparency.last_vertices(ctx, on)   # past max_bounces or volume_bounces: no scattering
+    u = ctx.sampler.get(on.pseed, on.sample, vertex_set(depth, MEDIUM))
+    flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u[:, 1])
+    flight.rows = inside
+    lit = np.flatnonzero(found.light[inside])
+    if len(lit):
+        rows = inside[lit]
+        x = found.light_t[rows]
+        if ctx.transparent_shadows:   # light_t is measured from where the straight line started
+            x = x - dot(paths.o[rows] - paths.mis_o[rows], paths.d[rows])
+        found.Le[rows] *= media.light_factor(flight, lit, x)
+        found.light[rows] = flight.t[lit] > x
+    return flight
+
+
+def after_flights(ctx, paths, found, ended, flight, depth):
+    """Apply the flights: emission, the throughput; the paths that scattered
+    (and did not end at a light first) make a volume vertex and leave this
+    bounce.  Returns (paths, found, ended) of the others and the scattered
+    paths moved on (None when none)."""
+    r = flight.rows
+    paths.L[r] += paths.beta[r] * flight.emitted
+    paths.beta[r] *= flight.weight
+    sc = flight.scatter & ~ended[r]
+    if not sc.any():
+        return paths, found, ended, None
+    rows = r[sc]
+    keep = np.ones(len(paths.pix), bool)
+    keep[rows] = False
+    moved = paths.take(rows)
+    p = moved.o + moved.d * flight.t[sc, None]
+    volume_vertex(ctx, moved, p, flight.g[sc], depth)
+    moved = moved.take(row_any_positive(moved.beta))
+    return paths.take(keep), found.take(keep), ended[keep], moved
+
+
+# ----------------------------------------------------------------------------
+# the volume vertex
+
+class _Points:
+    """What stages.nee_rounds asks of a set of vertices."""
+    path_rows = None
+
+    def __init__(self, n):
+        self.n = n
+
+    def __len__(self):
+        return self.n
+
+
+def volume_vertex(ctx, paths, p, g, depth):
+    """Light sampling at scattering points p (phase function g) and the
+    phase-function sample of the next ray; moves the paths in place."""
+    n = len(paths.pix)
+    zeros = np.zeros((n, 3))
+    for _, mode, emitters in nee_rounds(ctx, _Points(n), None):
+        if mode == "select":
+            u = ctx.sampler.get(paths.pseed, paths.sample, vertex_set(depth, LIGHT))
+            e, p_sel = ctx.lights.select(u[:, 0], p, zeros)
+            _light_sample(ctx, paths, p, g, e, p_sel, u[:, 1:])
+        else:
+            for e in emitters:
+                u = ctx.sampler.get(paths.pseed, paths.sample, emitter_set(depth, e))
+                _light_sample(ctx, paths, p, g, np.full(n, e), np.ones(n), u[:, :3])
+    u = ctx.sampler.get(paths.pseed, paths.sample, vertex_set(depth, BSDF))
+    wi, pdf = media.hg_sample(paths.d, g, u[:, 0], u[:, 1])
+    paths.o, paths.d, paths.mis_o, paths.prev_p = p, wi, p, p
+    paths.tmax = np.full(n, np.inf)
+    paths.prev_n = zeros
+    paths.prev_pdf = pdf
+    paths.prev_delta = np.zeros(n, bool)
+    paths.prev_every = np.zeros(n, bool)
+    paths.min_pdf = np.minimum(paths.min_pdf, pdf)   # Cycles' min_ray_pdf takes the phase pdf too
+    paths.bounce = paths.bounce + 1
+    paths.vbounce = paths.vbounce + 1
+    if ctx.track_rays or ctx.triangles.visibility is not None:
+        # Blender's Volume Scatter ray visibility is not exported: volume
+        # rays see what indirect rays see.
+        paths.ray = np.full(n, VIS_INDIRECT, np.uint8)
+
+
+def _light_sample(ctx, paths, p, g, e, p_sel, u):
+    """One light sample per scattering point, MIS-weighted against phase
+    sampling (power heuristic), its shadow ray attenuated by the media."""
+    ls = ctx.lights.sample(e, p, u[:, 0], u[:, 1], u[:, 2])
+    f = media.hg_eval(dot(paths.d, ls.wi), g)
+    p_light = p_sel * ls.pdf
+    if ctx.settings.strategy == "mis":
+        w = np.where(ls.delta, 1.0, power_heuristic(p_light, f))
+    else:
+        w = np.ones(len(f))
+    ok = (ls.pdf > 0) & (p_sel > 0)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        scale = np.where(ok, f * w / np.where(ok, p_light, 1.0), 0.0)
+    contrib = paths.beta * ls.Le * scale[:, None]
+    live = np.flatnonzero(row_any_positive(contrib))
+    if len(live) == 0:
+        return
+    eps = ctx.accel.offset_scale(p)
+    origin, direction, tmax = shadow_rays(p, np.zeros_like(p), ls.wi, ls.dist, ls.on_surface, eps, live)
+    T = shadow_transmittance(ctx, origin, direction, tmax, e[live], paths.tbounce[live], paths.stack[live])
+    paths.L[live] += contrib[live] * T
+
+
+# ----------------------------------------------------------------------------
+# shadow rays through media
+
+def shadow_transmittance(ctx, origin, direction, tmax, emitter, tbounce, stack):
+    """(N, 3) light reaching the shadow rays' ends: blocked by opaque
+    surfaces, times the transparency of transparent ones (volume boundaries
+    among them) and the transmittance of every medium between, starting in
+    the media of ``stack`` (N, K)."""
+    if ctx.transparent_shadows:
+        return transparency.transmittance(ctx, origin, direction, tmax, emitter, tbounce, stack=stack)
+    T = media.transmittance_factor(ctx.media, stack, tmax)
+    T[visibility.occluded(ctx, origin, direction, tmax, emitter)] = 0.0
+    return T
+
+
+def trace_surface_shadows(ctx, paths, batch):
+    """stages.trace_shadows in a scene with media: the shadow ray starts in
+    its path's media, entering or leaving the vertex's own medium when it
+    leaves through the surface."""
+    rows = batch.rows if batch.at.path_rows is None else batch.at.path_rows[batch.rows]
+    hit = batch.at.hit
+    stack = paths.stack[rows].copy()
+    mat, back, ng = hit.mat[batch.rows], hit.back[batch.rows], hit.ng[batch.rows]
+    below = np.flatnonzero(dot(batch.direction, ng) < 0)
+    ctx.media.cross(stack, below, mat[below], back[below])
+    e = batch.sample.emitter[batch.rows]
+    T = shadow_transmittance(ctx, batch.origin, batch.direction, batch.tmax, e, paths.tbounce[rows], stack)
+    added = batch.sample.contrib[batch.rows] * T
+    batch.free, batch.added = batch.rows, added
+    paths.L[rows] += added
+
+
+def cross_surfaces(ctx, paths, hit, crossing, passed):
+    """Paths whose new ray passes through their hit surface (refraction, a
+    transparent pass) enter or leave its medium; a transparent pass
+    (``passed``) through a volume boundary takes back its transparent bounce
+    (Cycles counts those apart, volume_bounds_bounce)."""
+    rows = np.flatnonzero(crossing)
+    if len(rows):
+        ctx.media.cross(paths.stack, rows, hit.mat[rows], np.asarray(hit.back)[rows])
+    free = passed & ctx.media.boundary[hit.mat]
+    if free.any():
+        paths.tbounce = paths.tbounce - free
+
+
+# Wavefront steps per bounce for volume-boundary crossings, which count no
+# transparent bounce (Cycles allows VOLUME_BOUNDS_MAX = 1024 per bounce;
+# paths still going after the last step are finished with what they have).
+BOUNDARY_STEPS = 8
+
+
+def boundary_steps(ctx):
+    if ctx.media is None or not ctx.media.boundary.any():
+        return 0
+    return BOUNDARY_STEPS * (ctx.settings.max_bounces + 2)

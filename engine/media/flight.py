@@ -1,0 +1,115 @@
+"""A ray segment through homogeneous media (Cycles' homogeneous volume
+integration with distance sampling).
+
+Along a segment of length t_end in a medium of extinction sigma_t =
+sigma_a + sigma_s, the radiance reaching the ray's start is
+
+    integral_0^t_end T(s) (emission + sigma_s L_in(s)) ds + T(t_end) L_end,
+
+with T(s) = exp(-sigma_t s) per channel.  The emission term is integrated in
+closed form (Cycles' volume_emission_integrate).  The rest is estimated by
+one distance: a colour channel c is chosen with probability proportional to
+|throughput x albedo| (Cycles' volume_sample_channel_pdf), a distance from
+sigma_t[c] exp(-sigma_t[c] s); the estimate divides by the pdf summed over
+the channels (one-sample MIS over the three strategies), so a grey medium
+is exact and a coloured one never divides by a channel's tiny pdf.
+A segment that may not scatter (absorption only, or past the volume
+bounces) is attenuated by T(t_end).
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class FreeFlight:
+    """One free flight per row of ``rows`` (the paths in a medium): the
+    segment's end, whether a scattering happened before it and where
+    (t; inf where not), the factor on the throughput, the emission integral
+    (times the throughput at the segment's start), the phase function's g,
+    and, for lights met on the way, the channel pdfs."""
+    rows: np.ndarray
+    t_end: np.ndarray
+    scatter: np.ndarray
+    t: np.ndarray
+    weight: np.ndarray
+    emitted: np.ndarray
+    g: np.ndarray
+    sigma_t: np.ndarray
+    channel_pdf: np.ndarray   # (n, 3); 0 rows where the segment may not scatter
+    samples: np.ndarray       # which rows sampled a distance
+
+
+def _exp_neg(sigma, t):
+    """exp(-sigma t), 1 where sigma is 0 (also for t = inf)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        return np.where(sigma > 0, np.exp(-sigma * np.where(sigma > 0, t, 0.0)), 1.0)
+
+
+def emission_integral(emission, sigma_t, t):
+    """integral_0^t exp(-sigma_t s) ds x emission, per channel; 0 where it
+    would be infinite (an emitting, non-extinguishing medium without end)."""
+    t = np.asarray(t, np.float64)[:, None] if np.ndim(t) == 1 else t
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        out = np.where(sigma_t > 0, (1.0 - _exp_neg(sigma_t, t)) / np.where(sigma_t > 0, sigma_t, 1.0),
+                       np.where(np.isfinite(t), t, 0.0))
+    return emission * out
+
+
+def channel_pdf(beta, sigma_s, sigma_t):
+    """Cycles' volume_sample_channel_pdf: |beta x albedo| normalized, else uniform."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        albedo = np.where(sigma_t > 0, sigma_s / np.where(sigma_t > 0, sigma_t, 1.0), 0.0)
+    w = np.abs(beta * albedo)
+    total = w.sum(axis=1)
+    return np.where(total[:, None] > 0, w / np.where(total > 0, total, 1.0)[:, None], 1.0 / 3.0)
+
+
+def free_flight(table, stack, beta, t_end, may_scatter, u_channel, u_distance):
+    """The FreeFlight of segments of length t_end (inf: no end) in the
+    media of ``stack`` (rows of the paths in a medium); ``may_scatter``:
+    the path has scattering events left."""
+    n = len(stack)
+    sa, ss, em, g = table.coefficients(stack)
+    st = sa + ss
+    emitted = emission_integral(em, st, t_end)
+    samples = may_scatter & np.any(ss > 0, axis=1)
+    pc = np.where(samples[:, None], channel_pdf(beta, ss, st), 0.0)
+    c = np.minimum((u_channel[:, None] >= np.cumsum(pc, axis=1)).sum(axis=1), 2)
+    sig_c = st[np.arange(n), c]
+    with np.errstate(divide="ignore"):
+        t = np.where(samples & (sig_c > 0), -np.log1p(-np.minimum(u_distance, 1.0 - 2 ** -53))
+                     / np.where(sig_c > 0, sig_c, 1.0), np.inf)
+    scatter = t < t_end
+    T_end = _exp_neg(st, t_end[:, None])
+    weight = T_end.copy()
+    s = np.flatnonzero(scatter)
+    if len(s):
+        T_t = _exp_neg(st[s], t[s, None])
+        pdf = (pc[s] * st[s] * T_t).sum(axis=1)
+        weight[s] = ss[s] * T_t / np.maximum(pdf, 1e-300)[:, None]
+    p = np.flatnonzero(samples & ~scatter)
+    if len(p):
+        P = (pc[p] * T_end[p]).sum(axis=1)
+        weight[p] = np.where(P[:, None] > 0, T_end[p] / np.where(P > 0, P, 1.0)[:, None], 0.0)
+    return FreeFlight(None, t_end, scatter, t, weight, emitted, g, st, pc, samples)
+
+
+def light_factor(flight, k, x):
+    """Throughput factor at distance x (< the segment's end) of rows k of a
+    flight, for a light met there: T(x) / P(no scattering before x), 0
+    where the path scattered before x; T(x) where the segment samples no
+    distance."""
+    T = _exp_neg(flight.sigma_t[k], x[:, None])
+    out = T.copy()
+    smp = flight.samples[k]
+    if smp.any():
+        P = (flight.channel_pdf[k] * T).sum(axis=1)
+        ok = smp & (flight.t[k] > x) & (P > 0)
+        out[smp] = np.where(ok[smp, None], T[smp] / np.where(P[smp] > 0, P[smp], 1.0)[:, None], 0.0)
+    return out
+
+
+def transmittance_factor(table, stack, length):
+    """(N, 3) exp(-sigma_t length) through the media of ``stack``."""
+    return _exp_neg(table.extinction(stack), np.asarray(length, np.float64)[:, None])

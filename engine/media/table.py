@@ -1,0 +1,184 @@
+"""A scene's media as plain arrays, and the volume stack of each path.
+
+Row i of every table is material i's medium (zero where the material has
+no Volume); one more zero row at the end is what an empty stack slot (-1)
+reads, so summing a stack's rows needs no mask.  The stack (N, STACK_SIZE)
+int32 holds the materials whose media a path is in (-1: empty slot):
+crossing a front face of a material with a volume enters it, a back face
+leaves it (Cycles' volume_stack_enter_exit, keyed by material where Cycles
+keys by object: two overlapping objects of one volume material count once).
+Overlapping media add their coefficients, as Cycles sums the closures of
+every stack entry.
+"""
+import numpy as np
+
+STACK_SIZE = 4
+# Crossings looked at along the camera's axis to find the media the camera
+# starts in (Cycles' volume_stack_init casts rays the same way).
+_CAMERA_PROBES = 64
+
+
+class MediumTable:
+    """sigma_a, sigma_s, emission (M + 1, 3), g (M + 1,), has (M + 1,) bool,
+    names: per material (the scene's materials and the default one)."""
+
+    def __init__(self, volumes, names):
+        m = len(volumes)
+        self.sigma_a = np.zeros((m + 1, 3))
+        self.sigma_s = np.zeros((m + 1, 3))
+        self.emission = np.zeros((m + 1, 3))
+        self.g = np.zeros(m + 1)
+        self.has = np.zeros(m + 1, bool)
+        for i, vol in enumerate(volumes):
+            if vol is None:
+                continue
+            self.sigma_a[i] = vol.absorption
+            self.sigma_s[i] = vol.scattering
+            self.emission[i] = vol.emission
+            self.g[i] = vol.anisotropy
+            self.has[i] = True
+        self.names = list(names) + [""]
+        # Volume boundaries: a volume-only material's pass-through surface,
+        # which paths and shadow rays cross without counting a transparent
+        # bounce (Cycles' volume_bounds_bounce); set by ``of``.
+        self.boundary = np.zeros(m + 1, bool)
+        self.camera = np.full(STACK_SIZE, -1, np.int32)   # the stack camera rays start with
+        self.warnings = []
+
+    @classmethod
+    def of(cls, materials):
+        """The table of a list of scene Materials; None when none has a volume."""
+        volumes = [getattr(m, "volume", None) for m in materials]
+        if all(v is None for v in volumes):
+            return None
+        table = cls(volumes, [m.name for m in materials])
+        table.boundary[:len(materials)] = [v is not None and _pass_through(m) for v, m in zip(volumes, materials)]
+        return table
+
+    # -- a stack's medium ------------------------------------------------------
+    def coefficients(self, stack):
+        """(sigma_a, sigma_s, emission (N, 3), g (N,)) of stacks (N, K): the
+        sums over their media; g is the scattering-weighted mean of theirs.
+        Only the slots some path uses are read (mostly the first)."""
+        n = len(stack)
+        sa, ss, em = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+        gw, w = np.zeros(n), np.zeros(n)
+        for k in self._used_slots(stack):
+            m = stack[:, k]
+            sa += np.take(self.sigma_a, m, axis=0)
+            s = np.take(self.sigma_s, m, axis=0)
+            ss += s
+            em += np.take(self.emission, m, axis=0)
+            wk = s.mean(axis=1)
+            w += wk
+            gw += wk * np.take(self.g, m)
+        g = np.where(w > 0, gw / np.where(w > 0, w, 1.0), 0.0)
+        return sa, ss, em, g
+
+    def extinction(self, stack):
+        out = np.zeros((len(stack), 3))
+        for k in self._used_slots(stack):
+            m = stack[:, k]
+            out += np.take(self.sigma_a, m, axis=0) + np.take(self.sigma_s, m, axis=0)
+        return out
+
+    @staticmethod
+    def _used_slots(stack):
+        return [k for k in range(stack.shape[1]) if (stack[:, k] >= 0).any()]
+
+    # -- entering and leaving ---------------------------------------------------
+    def cross(self, stack, rows, mat, back):
+        """Rows ``rows`` of ``stack`` cross a surface of material ``mat``
+        (per row) from its front (back False: enter its medium) or its back
+        (leave it).  In place; a full stack drops the entry (STACK_SIZE
+        nested media)."""
+        use = self.has[mat]
+        if not use.any():
+            return
+        rows, mat, back = rows[use], mat[use], np.asarray(back)[use]
+        sub = stack[rows]
+        present = sub == mat[:, None]
+        leave = back
+        sub[leave] = np.where(present[leave], -1, sub[leave])
+        enter = ~back & ~present.any(axis=1)
+        empty = sub < 0
+        slot = np.argmax(empty, axis=1)
+        put = np.flatnonzero(enter & empty.any(axis=1))
+        sub[put, slot[put]] = mat[put]
+        stack[rows] = sub
+
+
+def _pass_through(material):
+    """The surface of a volume-only material: one white transparent lobe of
+    weight 1 (what the exporter gives a material with only a Volume output)."""
+    lobes = list(material.lobes)
+    if len(lobes) != 1 or lobes[0].kind != "transparent":
+        return False
+    color, weight = lobes[0].color, lobes[0].weight
+    return (isinstance(color, tuple) and tuple(float(c) for c in color) == (1.0, 1.0, 1.0)
+            and isinstance(weight, (int, float)) and float(weight) == 1.0)
+
+
+def start_stack(table, n):
+    """(n, K) stacks of paths leaving the camera."""
+    if table is None:
+        return np.zeros((n, 0), np.int32)
+    return np.repeat(table.camera[None, :], n, axis=0)
+
+
+def camera_media(table, accel, triangles, origin, direction):
+    """The media a point starts in: walking from it along ``direction``,
+    a material's first crossing from its back side means the point is inside
+    its mesh.  Sets table.camera."""
+    seen = {}
+    o = np.asarray(origin, np.float64)[None, :]
+    d = np.asarray(direction, np.float64)[None, :]
+    d = d / np.linalg.norm(d)
+    for _ in range(_CAMERA_PROBES):
+        t, prim, _, _ = accel.intersect(o, d, np.array([np.inf]))
+        if prim[0] < 0 or not np.isfinite(t[0]):
+            break
+        k = int(prim[0])
+        mat = int(triangles.material[k])
+        ng = triangles.ng[k]
+        if table.has[mat] and mat not in seen:
+            seen[mat] = float(np.dot(ng, d[0])) > 0   # leaving through its outside: inside it
+        p = o + d * t[0]
+        o = accel.offset_origin(p, ng[None, :], d)
+    inside = [m for m, back in seen.items() if back][:STACK_SIZE]
+    table.camera[:] = -1
+    table.camera[:len(inside)] = inside
+
+
+def open_volume_meshes(scene):
+    """Names of objects whose volume material's triangles do not close
+    (an edge not shared by exactly two of them): paths entering such a
+    volume may never leave it."""
+    out = []
+    checked = {}
+    for inst in scene.instances:
+        mesh = scene.meshes[inst.mesh]
+        tris = np.asarray(mesh.triangles).reshape(-1, 3)
+        if len(tris) == 0:
+            continue
+        slots = np.zeros(len(tris), np.int64) if mesh.material_slots is None else np.asarray(mesh.material_slots)
+        mats = np.array([inst.materials[s] if s < len(inst.materials) else -1 for s in range(int(slots.max()) + 1)])
+        vol = np.array([m >= 0 and getattr(scene.materials[m], "volume", None) is not None for m in mats])
+        if not vol.any():
+            continue
+        key = (inst.mesh, tuple(vol))
+        if key not in checked:
+            checked[key] = not _closed(np.asarray(mesh.positions, np.float64), tris[vol[slots]])
+        if checked[key]:
+            out.append(inst.name)
+    return out
+
+
+def _closed(positions, tris):
+    """Every edge of ``tris`` is shared by exactly two of them (vertices
+    welded by position: exporters split vertices at UV seams)."""
+    _, weld = np.unique(np.round(positions, 9), axis=0, return_inverse=True)
+    t = weld.reshape(-1)[tris]
+    edges = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    return bool(np.all(counts == 2))

