@@ -13,6 +13,9 @@ import sys
 
 import bpy
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from parity_scenes import smooth_sphere  # noqa: E402
+
 
 def _material(name, **inputs):
     mat = bpy.data.materials.new(name)
@@ -24,12 +27,7 @@ def _material(name, **inputs):
 
 
 def _sphere(name, mat, location, radius=0.5):
-    bpy.ops.mesh.primitive_uv_sphere_add(radius=radius, location=location, segments=48, ring_count=24)
-    obj = bpy.context.active_object
-    obj.name = name
-    bpy.ops.object.shade_smooth()
-    obj.data.materials.append(mat)
-    return obj
+    return smooth_sphere(name, mat, location, radius, segments=48, rings=24)
 
 
 def _plane(name, mat, size, location=(0, 0, 0), rotation=(0, 0, 0)):

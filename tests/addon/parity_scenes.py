@@ -76,3 +76,57 @@ def top_camera(scene, height=6.0, lens=35.0, location=(0.0, 0.0), tilt=0.0):
 
 # ----------------------------------------------------------------------------
 # Scenes
+
+
+def glass_material(name, roughness=0.0, ior=None):
+    """A Glass BSDF material (Blender's default distribution; IOR left at
+    the node's default when None)."""
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nodes = mat.node_tree.nodes
+    nodes.clear()
+    node = nodes.new('ShaderNodeBsdfGlass')
+    node.inputs['Roughness'].default_value = roughness
+    if ior is not None:
+        node.inputs['IOR'].default_value = ior
+    mat.node_tree.links.new(node.outputs[0], nodes.new('ShaderNodeOutputMaterial').inputs['Surface'])
+    return mat
+
+
+def smooth_sphere(name, mat, location, radius=0.5, segments=32, rings=16):
+    """A smooth-shaded UV sphere with the material."""
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=radius, location=location, segments=segments, ring_count=rings)
+    obj = bpy.context.active_object
+    obj.name = name
+    bpy.ops.object.shade_smooth()
+    obj.data.materials.append(mat)
+    return obj
+
+
+def ortho_grid_scene(grid, rows, tile):
+    """An empty factory scene seen from above by an orthographic camera
+    over a grid x rows field of unit cells (tile pixels each), under one
+    area light, with a black world."""
+    from ember_testlib import small_resolution
+    bpy.ops.wm.read_factory_settings()
+    for obj in list(bpy.data.objects):
+        bpy.data.objects.remove(obj)
+    scene = bpy.context.scene
+    cam_data = bpy.data.cameras.new("cam")
+    cam_data.type = 'ORTHO'
+    cam_data.ortho_scale = grid
+    cam = bpy.data.objects.new("cam", cam_data)
+    cam.location = (grid / 2, rows / 2, 5.0)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    light_data = bpy.data.lights.new("area", 'AREA')
+    light_data.size = 6.0
+    light_data.energy = 400.0
+    light = bpy.data.objects.new("area", light_data)
+    light.location = (grid / 2 + 1.0, rows / 2 - 0.5, 3.0)
+    scene.collection.objects.link(light)
+    scene.world.color = (0.0, 0.0, 0.0)
+    if scene.world.node_tree is not None:
+        scene.world.node_tree.nodes['Background'].inputs['Color'].default_value = (0, 0, 0, 1)
+    small_resolution(scene, grid * tile, rows * tile)
+    return scene

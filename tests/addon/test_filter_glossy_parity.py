@@ -12,7 +12,7 @@ import bpy
 import numpy as np
 import pytest
 
-from parity_scenes import light, material, plane
+from parity_scenes import glass_material, smooth_sphere, light, material, plane
 from ember_testlib import (ReferenceCheck, empty_factory_scene, live_cycles_reference, render_for_reference,
                            small_resolution)
 
@@ -24,29 +24,10 @@ CYCLES_SEEDS, CYCLES_SPP = 8, 128
 FILTER = 1.0
 
 
-def _glass(name):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    nodes = mat.node_tree.nodes
-    nodes.clear()
-    node = nodes.new('ShaderNodeBsdfGlass')
-    node.inputs['Roughness'].default_value = 0.0
-    mat.node_tree.links.new(node.outputs[0], nodes.new('ShaderNodeOutputMaterial').inputs['Surface'])
-    return mat
-
-
-def _sphere(name, mat, location, radius=0.5):
-    bpy.ops.mesh.primitive_uv_sphere_add(radius=radius, location=location, segments=32, ring_count=16)
-    obj = bpy.context.active_object
-    obj.name = name
-    bpy.ops.object.shade_smooth()
-    obj.data.materials.append(mat)
-
-
 def caustics(scene):
     plane('floor', material('floor', 'diffuse', (0.8, 0.8, 0.8)), half=3.0)
-    _sphere('mirror', material('mirror', 'glossy', (0.9, 0.9, 0.9), roughness=0.0), (-0.6, 0.0, 0.5))
-    _sphere('glass', _glass('glass'), (0.6, 0.0, 0.5))
+    smooth_sphere('mirror', material('mirror', 'glossy', (0.9, 0.9, 0.9), roughness=0.0), (-0.6, 0.0, 0.5))
+    smooth_sphere('glass', glass_material('glass'), (0.6, 0.0, 0.5))
     light('AREA', (0.0, 0.8, 2.2), 60.0, size=0.25)
     background = scene.world.node_tree.nodes.get('Background')
     if background is not None:

@@ -27,7 +27,8 @@ import bpy
 import numpy as np
 import pytest
 
-from ember_testlib import check_against_reference, render_for_reference, require, small_resolution
+from parity_scenes import ortho_grid_scene
+from ember_testlib import check_against_reference, render_for_reference, require
 
 EMBER_SPP = 256
 BLOCK = 12          # one quad per block
@@ -80,28 +81,7 @@ def ramp(n, alpha_lo=0.0):
 # scene building
 
 def grid_scene():
-    bpy.ops.wm.read_factory_settings()
-    for obj in list(bpy.data.objects):
-        bpy.data.objects.remove(obj)
-    scene = bpy.context.scene
-    cam_data = bpy.data.cameras.new("cam")
-    cam_data.type = 'ORTHO'
-    cam_data.ortho_scale = GRID
-    cam = bpy.data.objects.new("cam", cam_data)
-    cam.location = (GRID / 2, ROWS / 2, 5.0)
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    light_data = bpy.data.lights.new("area", 'AREA')
-    light_data.size = 6.0
-    light_data.energy = 400.0
-    light = bpy.data.objects.new("area", light_data)
-    light.location = (GRID / 2 + 1.0, ROWS / 2 - 0.5, 3.0)
-    scene.collection.objects.link(light)
-    scene.world.color = (0.0, 0.0, 0.0)
-    if scene.world.node_tree is not None:
-        scene.world.node_tree.nodes['Background'].inputs['Color'].default_value = (0, 0, 0, 1)
-    small_resolution(scene, GRID * TILE, ROWS * TILE)
-    return scene
+    return ortho_grid_scene(GRID, ROWS, TILE)
 
 
 def add_quad(index, material, uv_min=(0.0, 0.0), uv_max=(1.0, 1.0)):

@@ -12,7 +12,7 @@ left at Max Bounces (the limits have their effect)."""
 import bpy
 import numpy as np
 
-from parity_scenes import light, material, mesh_object, plane
+from parity_scenes import glass_material, smooth_sphere, light, material, mesh_object, plane
 from ember_testlib import (ReferenceCheck, empty_factory_scene, live_cycles_reference, render_for_reference,
                            small_resolution)
 
@@ -24,27 +24,6 @@ LIMITS = {'diffuse_bounces': 1, 'glossy_bounces': 1, 'transmission_bounces': 2}
 MAX_BOUNCES = 8
 
 
-def _glass(name):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    nodes = mat.node_tree.nodes
-    nodes.clear()
-    node = nodes.new('ShaderNodeBsdfGlass')
-    node.inputs['Roughness'].default_value = 0.0
-    node.inputs['IOR'].default_value = 1.45
-    mat.node_tree.links.new(node.outputs[0], nodes.new('ShaderNodeOutputMaterial').inputs['Surface'])
-    return mat
-
-
-def _sphere(name, mat, location, radius):
-    bpy.ops.mesh.primitive_uv_sphere_add(radius=radius, location=location, segments=32, ring_count=16)
-    obj = bpy.context.active_object
-    obj.name = name
-    bpy.ops.object.shade_smooth()
-    obj.data.materials.append(mat)
-    return obj
-
-
 def room(scene):
     walls = material('walls', 'diffuse', (0.75, 0.7, 0.65))
     plane('floor', walls, half=2.0, z=0.0)
@@ -53,8 +32,8 @@ def room(scene):
                         ('left', [(-2, -2, 0), (-2, 2, 0), (-2, 2, 2.5), (-2, -2, 2.5)]),
                         ('right', [(2, 2, 0), (2, -2, 0), (2, -2, 2.5), (2, 2, 2.5)])):
         mesh_object(name, verts, [(0, 1, 2, 3)], walls)
-    _sphere('metal', material('metal', 'glossy', (0.9, 0.9, 0.9), roughness=0.15), (-0.8, 0.5, 0.6), 0.6)
-    _sphere('glass', _glass('glass'), (0.8, 0.0, 0.6), 0.6)
+    smooth_sphere('metal', material('metal', 'glossy', (0.9, 0.9, 0.9), roughness=0.15), (-0.8, 0.5, 0.6), 0.6)
+    smooth_sphere('glass', glass_material('glass', ior=1.45), (0.8, 0.0, 0.6), 0.6)
     light('AREA', (0.0, 0.5, 2.45), 120.0, size=1.0)
     cam = scene.camera
     cam.location, cam.rotation_euler = (0.0, -5.5, 1.3), (np.radians(87.0), 0.0, 0.0)
