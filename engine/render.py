@@ -161,6 +161,7 @@ def warnings_for(ctx):
         out.append("the scene has no lights and a black world: the image will be black")
     if ctx.media is not None:
         out.extend(ctx.media.warnings)
+    out.extend(ctx.materials.textures.bent_away_warnings())
     return out
 
 
