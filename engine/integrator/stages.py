@@ -205,9 +205,14 @@ def path_columns(paths, p):
     transparent passes, the ray's length from its last vertex (Cycles
     passes transparent surfaces by moving tmin) and whether the last bounce
     was singular (a camera ray is not)."""
-    length = np.linalg.norm(p - paths.mis_o, axis=1)
-    singular = paths.prev_delta & (paths.bounce > 0)
-    return np.column_stack([paths.kinds, paths.tbounce, length, singular]).astype(np.float64)
+    n = len(p)
+    zeros = np.zeros(n)
+    kinds = getattr(paths, "kinds", None)
+    if kinds is None or kinds.shape[1] == 0:
+        kinds = np.zeros((n, 3))   # camera rays of a probe (engine/nodes/probe.py): no bounces yet
+    length = np.linalg.norm(p - getattr(paths, "mis_o", paths.o), axis=1)
+    singular = getattr(paths, "prev_delta", np.zeros(n, bool)) & (getattr(paths, "bounce", zeros) > 0)
+    return np.column_stack([kinds, getattr(paths, "tbounce", zeros), length, singular]).astype(np.float64)
 
 
 def light_sample_path(ctx, paths, hit):
