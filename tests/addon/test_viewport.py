@@ -196,9 +196,9 @@ def test_moving_an_object_restarts_without_exporting_meshes(gui_run):
     after = np.load(out / 'viewport_moved.npy')[..., :3]
     z = np.abs(block_z(after, before, 8))
     assert z.max() > 10 * stats.z_threshold(stats.FAMILY_ALPHA), "the viewport did not change after the object moved"
-    stats = result['stats_after_move']
-    print(f"first picture after the move: {stats['first_image_seconds'][-1]:.3f} s, "
-          f"drawn after {stats['first_draw_seconds'][-1]:.3f} s, region {result['region_size']}")
+    timing = result['stats_after_move']
+    print(f"first picture after the move: {timing['first_image_seconds'][-1]:.3f} s, "
+          f"drawn after {timing['first_draw_seconds'][-1]:.3f} s, region {result['region_size']}")
 
 
 # -- bpy module: incremental export, camera, timing ---------------------------
