@@ -81,6 +81,11 @@ def sampled_transparent(ctx, hit, delta, wi_l, wo_l):
     return delta & ctx.transparent_mat[hit.mat] & np.all(wi_l == -wo_l, axis=1)
 
 
+# Surfaces a shadow ray crosses at most (volume boundaries count no
+# transparent bounce; Cycles' VOLUME_BOUNDS_MAX): past them it is blocked.
+VOLUME_BOUNDS_MAX = 1024
+
+
 def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None, rng=None):
     """(N, 3) light reaching the shadow rays' ends through transparent
     surfaces (Cycles' transparent shadows).  embreex has no any-hit filter,
@@ -100,7 +105,12 @@ def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None, rng=None)
     left = np.maximum(ctx.settings.transparent_max_bounces - tbounce[idx], 0)
     if stack is not None:
         stack = stack[idx].copy()
+    crossings = 0
     while len(idx):
+        crossings += 1
+        if crossings > VOLUME_BOUNDS_MAX:
+            out[idx] = 0.0     # more surfaces on the ray than Cycles crosses: blocked
+            break
         t, prim, bu, bv = ctx.accel.intersect(o, d, tm)
         if ctx.shadow_skips:
             ray = np.full(len(idx), VIS_SHADOW, np.uint8)

@@ -34,6 +34,7 @@ GRID = 16
 LATTICE = 2
 MARGIN = 1.25
 FLOOR = 1e-3
+FLOOR_DEPTH = 100.0
 SIGMA_MAX = 1e8
 # A majorant holds along the ray for STEP cells along each axis (the
 # segment's bounding box spans at most STEP + 1 cells per axis).
@@ -60,6 +61,7 @@ class Field:
         lo, hi = pos.min(axis=0), pos.max(axis=0)
         pad = 1e-4 * (hi - lo).max() + 1e-9
         self.lo, self.hi = lo - pad, hi + pad
+        self.pad = pad
         self.cell = (self.hi - self.lo) / GRID
         self.tri, self.tris = int(tri), tris
         self.repaired = {"NaN": 0, "negative": 0, "too large": 0}
@@ -114,7 +116,13 @@ class Field:
         q = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
         p = q @ self.matrix[:3, :3].T + self.matrix[:3, 3]
         d = np.tile([0.0, 0.0, 1.0], (len(p), 1))
-        sa, ss, _ = self.evaluate(p, d, q, inside=False)
+        ctx = self.context(p, d, q)
+        raw = [np.broadcast_to(fn(ctx), (len(p), 3)) for fn in self.fns]
+        # Negative values inside the mesh's bounds (not on the padded edge)
+        # are the texture's own: counted.
+        core = np.all((q > self.lo + 0.5 * self.pad) & (q < self.hi - 0.5 * self.pad), axis=1)
+        self.repaired["negative"] += int(sum(np.count_nonzero(core[:, None] & (r < 0)) for r in raw))
+        sa, ss, _ = (self._renderable(r, inside=False) for r in raw)
         v = (sa + ss).max(axis=1).reshape(k, k, k)
         for axis in range(3):   # each cell: the max over its (LATTICE + 1) lattice points per axis
             v = np.moveaxis(v, axis, 0)
@@ -122,7 +130,10 @@ class Field:
             v = np.moveaxis(v, 0, axis)
         top = float(v.max())
         self.max = top
-        return np.maximum(MARGIN * v, FLOOR * top)
+        # The floor: a collision rate in cells that looked empty, at most
+        # one per FLOOR_DEPTH object sizes.
+        size = float(np.linalg.norm((self.hi - self.lo) @ np.abs(self.matrix[:3, :3]).T))
+        return np.maximum(MARGIN * v, min(FLOOR * top, 1.0 / (FLOOR_DEPTH * max(size, 1e-9))))
 
     def majorant(self, p, d):
         """(mu, dist): a majorant of the medium along the ray from p (N, 3)

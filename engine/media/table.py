@@ -15,6 +15,7 @@ import numpy as np
 from .field import build_fields, is_heterogeneous
 
 STACK_SIZE = 4
+TRACKING_EVENTS = 512     # tracking.MAX_EVENTS
 # Crossings looked at along the camera's axis to find the media the camera
 # starts in (Cycles' volume_stack_init casts rays the same way).
 _CAMERA_PROBES = 64
@@ -49,6 +50,7 @@ class MediumTable:
         self.first_field = m
         self.fields = []
         self.tri_medium = None
+        self.truncated = {}     # material name -> rays the trackers stopped
         # Volume boundaries: a volume-only material's pass-through surface,
         # which paths and shadow rays cross without counting a transparent
         # bounce (Cycles' volume_bounds_bounce); set by ``of``.
@@ -95,7 +97,17 @@ class MediumTable:
         return np.any((stack >= self.first_field) & (stack < self.first_field + len(self.fields)), axis=1)
 
     def field_warnings(self):
-        return [w for w in (f.warning() for f in self.fields) if w]
+        out = [w for w in (f.warning() for f in self.fields) if w]
+        for name, count in sorted(self.truncated.items()):
+            out.append(f"material {name!r}: {count} rays stopped (opaque) after {TRACKING_EVENTS} collisions in "
+                       "its medium (a density far above its majorant grid's, or huge)")
+        return out
+
+    def note_truncated(self, stacks):
+        """Rays the trackers stopped: counted per heterogeneous material."""
+        for k, j, rows in self._field_rows(stacks):
+            name = self.fields[j].name
+            self.truncated[name] = self.truncated.get(name, 0) + len(rows)
 
     def local(self, stack, p, d):
         """(sigma_a, sigma_s, emission (N, 3), g weight (N,)) of the

@@ -15,9 +15,9 @@ are evaluated and, with sigma_n = mu - sigma_t per channel:
   sigma_n / (mu (1 - P_s)).  A path that may not scatter goes on with
   weight times sigma_n / mu (ratio tracking).
 * ``ratio`` (shadow rays): weight times sigma_n / mu at each collision.
-* ``delta`` (shadow rays, delta tracking): survives with probability
-  clip(mean(sigma_n) / mu, 0, 1), weight times sigma_n / (mu P); grey
-  media give 0 or 1.
+* ``delta`` (shadow rays, weighted delta tracking): survives with
+  probability P = min(mean|sigma_n| / mu, 1), weight times
+  sigma_n / (mu P); grey media under their majorant give 0 or 1.
 
 Every estimator is unbiased for any positive majorant, also where
 sigma_t > mu (a negative null weight).  Weights below RR_LEVEL are
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-MAX_EVENTS = 2048
+MAX_EVENTS = 512
 # Tentative collisions drawn per row at once: shadow rays use them all;
 # a free flight often stops at its first real collision.
 BATCH = {"flight": 8, "ratio": 8, "delta": 8}
@@ -117,6 +117,7 @@ def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=
     if len(left):
         out.truncated = len(left)
         w[left] = 0.0
+        table.note_truncated(stack[left])
     return out
 
 
@@ -152,7 +153,7 @@ def _collide(out, w, rows, tn, mu, sa, ss, em, gw, u, mode, beta, may_scatter):
     elif mode == "ratio":
         wr = wr * sn / m
     else:   # delta tracking
-        P = np.clip(sn.mean(axis=1) / mu, 0.0, 1.0)
+        P = np.minimum(np.abs(sn).mean(axis=1) / mu, 1.0)
         survive = u[:, 1] < P
         wr = np.where(survive[:, None], wr * sn / (m * np.where(P > 0, P, 1.0)[:, None]), 0.0)
         stop |= ~survive
