@@ -99,7 +99,7 @@ def prepare(scene, settings):
 def _media(scene, accel, tris, camera):
     """The scene's media (None without a volume), with the media the camera
     starts in and a warning per object whose volume mesh is open."""
-    table = media.MediumTable.of(material_table(scene))
+    table = media.MediumTable.of(material_table(scene), getattr(scene.world, "volume", None))
     if table is None:
         return None
     table.attach(material_table(scene), scene, tris)

@@ -66,8 +66,10 @@ CONSTANT_VALUE_INPUTS = PRINCIPLED_UNSUPPORTED + ('Anisotropy',)
 class NodeTranslator:
     """Translates one material's node tree, remembering what it could not."""
 
-    def __init__(self, material_name):
+    def __init__(self, material_name, constant_volumes=False):
         self.material_name = material_name
+        # Read every volume input as a constant (the world's volume).
+        self.constant_volumes = constant_volumes
         self.unsupported = []   # node labels, in order of discovery
         self.textured = []      # "node.input" names read as constants
         self.approximated = []  # Principled BSDF features not rendered yet
@@ -321,6 +323,8 @@ class NodeTranslator:
         socket = node.inputs.get(name)
         if socket is None:
             return default
+        if self.constant_volumes:
+            return self._volume_const(node, name, default, color)
         if not socket.is_linked:
             return self._const(node, name, nodes.constant(socket), color)
         value = self.reader.read(socket)

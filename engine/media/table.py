@@ -56,16 +56,25 @@ class MediumTable:
         # bounce (Cycles' volume_bounds_bounce); set by ``of``.
         self.boundary = np.zeros(m + 1, bool)
         self.camera = np.full(STACK_SIZE, -1, np.int32)   # the stack camera rays start with
+        self.world = -1     # the world volume's medium id (-1: none)
         self.warnings = []
 
     @classmethod
-    def of(cls, materials):
-        """The table of a list of scene Materials; None when none has a volume."""
+    def of(cls, materials, world=None):
+        """The table of a list of scene Materials and the world's volume
+        (row len(materials), after the materials'); None when there is no
+        volume."""
         volumes = [getattr(m, "volume", None) for m in materials]
-        if all(v is None for v in volumes):
+        if all(v is None for v in volumes) and world is None:
             return None
-        table = cls(volumes, [m.name for m in materials])
+        names = [m.name for m in materials]
+        if world is not None:
+            volumes, names = volumes + [world], names + ["world"]
+        table = cls(volumes, names)
         table.boundary[:len(materials)] = [v is not None and _pass_through(m) for v, m in zip(volumes, materials)]
+        if world is not None:
+            table.world = len(materials)
+            table.camera[0] = table.world
         return table
 
     def attach(self, materials, scene, tris):
@@ -233,7 +242,8 @@ def camera_media(table, accel, triangles, origin, direction):
             seen[mat] = float(np.dot(ng, d[0])) > 0   # leaving through its outside: inside it
         p = o + d * t[0]
         o = accel.offset_origin(p, ng[None, :], d)
-    inside = [m for m, back in seen.items() if back][:STACK_SIZE]
+    inside = ([table.world] if table.world >= 0 else []) + [m for m, back in seen.items() if back]
+    inside = inside[:STACK_SIZE]
     table.camera[:] = -1
     table.camera[:len(inside)] = inside
 
