@@ -11,18 +11,23 @@ Scenes:
   the same ramp's alpha (a glow where the smoke is dense), under a sun,
   on a floor: null-scattering tracking against the majorant grid, NEE
   through the textured medium, Object coordinates of a transformed object.
+* world_fog: the world's Volume output (Principled Volume fog everywhere)
+  around a point light over a floor and a block: every path starts
+  and stays in the world medium, the background is extinguished (its
+  distance is infinite, as in Cycles).
 """
 import bpy
 import pytest
 
 from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
-from test_volume_parity import _camera, _floor, _material, _object, _volume_settings, _world
+from test_volume_parity import _camera, _floor, _material, _node, _object, _volume_settings, _world
 
-SPP = {'smoke': 128}
+SPP = {'smoke': 128, 'world_fog': 1024}
 BLOCK = 6
 WIDTH, HEIGHT = 24, 18
 # What each scene resolves at its samples (the suite's time budget): asserted.
-POWER = {'smoke': (0.005, 0.03)}   # measured: 0.36% and 2.5% at 128 spp
+POWER = {'smoke': (0.005, 0.03),   # measured: 0.36% and 2.5% at 128 spp
+         'world_fog': (0.01, 0.04)}  # measured: 0.93% and 3.2% at 1024 spp
 
 
 def _smoke_volume(tree):
@@ -68,7 +73,30 @@ def scene_smoke(scene):
     return 4
 
 
-SCENES = {'smoke': scene_smoke}
+def scene_world_fog(scene):
+    _floor((0.6, 0.6, 0.6))
+    block = _material("Block", lambda t: _node(t, 'ShaderNodeBsdfDiffuse', Color=(0.7, 0.3, 0.2)))
+    _object(bpy.ops.mesh.primitive_cube_add, block, size=0.8, location=(0.5, 0.3, 0.4))
+    lamp = bpy.data.lights.new("Lamp", 'POINT')
+    lamp.energy = 300.0
+    lamp.shadow_soft_size = 0.5
+    obj = bpy.data.objects.new("Lamp", lamp)
+    obj.location = (-0.6, 0.8, 2.6)
+    scene.collection.objects.link(obj)
+    _world(scene, (0.2, 0.25, 0.3))
+    tree = scene.world.node_tree
+    fog = tree.nodes.new('ShaderNodeVolumePrincipled')
+    fog.inputs['Color'].default_value = (0.9, 0.85, 0.8, 1.0)
+    fog.inputs['Density'].default_value = 0.2
+    fog.inputs['Anisotropy'].default_value = 0.4
+    out = next(n for n in tree.nodes if n.type == 'OUTPUT_WORLD')
+    tree.links.new(fog.outputs[0], out.inputs['Volume'])
+    _camera(scene, (0.0, -5.0, 1.6), (0.0, 0.0, 0.9))
+    _volume_settings(scene)
+    return 4
+
+
+SCENES = {'smoke': scene_smoke, 'world_fog': scene_world_fog}
 
 
 def reference_scene(name, folder=None):
