@@ -120,6 +120,7 @@ Lobe.__module__, Lobe.__doc__ = __name__, _lobe_doc()
 
 
 LOBE_KINDS = _lobes.kinds()
+PHASE_FUNCTIONS = ("HENYEY_GREENSTEIN", "RAYLEIGH", "DRAINE", "FOURNIER_FORAND", "MIE")
 FRESNEL_MODES = ("none", "schlick", "f82", "dielectric")
 
 
@@ -136,6 +137,15 @@ class Volume:
     scattering: RGB = (0.0, 0.0, 0.0)
     emission: RGB = (0.0, 0.0, 0.0)
     anisotropy: float = 0.0
+    # The scattering's phase function (Blender 4.2+'s Volume Scatter, as
+    # Cycles): 'HENYEY_GREENSTEIN' (anisotropy), 'RAYLEIGH', 'DRAINE'
+    # (anisotropy, alpha), 'FOURNIER_FORAND' (backscatter, ior) or 'MIE'
+    # (droplet diameter in micrometres).
+    phase: str = "HENYEY_GREENSTEIN"
+    alpha: float = 0.5
+    backscatter: float = 0.1
+    ior: float = 1.33
+    diameter: float = 20.0
 
 
 @dataclass

@@ -157,6 +157,15 @@ def validate_volume(vol, what):
     g = vol.anisotropy
     if not (np.isfinite(g) and -1.0 <= g <= 1.0):
         raise SceneError(f"{what}: volume anisotropy must lie in [-1, 1], got {g}")
+    phase = getattr(vol, "phase", "HENYEY_GREENSTEIN")
+    if phase not in _scene.PHASE_FUNCTIONS:
+        raise SceneError(f"{what}: unknown volume phase function {phase!r} (expected one of "
+                         f"{_scene.PHASE_FUNCTIONS})")
+    for name, lo, hi in (("alpha", 0.0, 1e6), ("backscatter", 1e-6, 0.5 - 1e-6), ("ior", 1.0 + 1e-6, 10.0),
+                         ("diameter", 0.0, 1e6)):
+        v = float(getattr(vol, name, lo))
+        if not (np.isfinite(v) and lo <= v <= hi):
+            raise SceneError(f"{what}: volume {name} must lie in [{lo:g}, {hi:g}], got {v}")
 
 
 def _validate_lobe_extras(lobe, k, what, n_lobes):

@@ -17,6 +17,7 @@ import math
 from dataclasses import dataclass, field
 
 import bpy
+import numpy as np
 
 from .. import backend
 from . import nodes
@@ -362,25 +363,24 @@ class NodeTranslator:
         d = self._density(node)
         phase = getattr(node, 'phase', 'HENYEY_GREENSTEIN')
         g = self._volume_const(node, 'Anisotropy', 0.0)
+        out = VolumeClosure(scattering=_times(_positive(color), d)).with_phase(g)
         if phase != 'HENYEY_GREENSTEIN':
-            self._volume_note(node, f"{phase.replace('_', '-').title()} phase function rendered as "
-                                    "Henyey-Greenstein")
-            if phase == 'RAYLEIGH':
-                g = 0.0
-        return VolumeClosure(scattering=_times(_positive(color), d)).with_phase(g)
+            spec = (phase, self._volume_const(node, 'Alpha', 0.5), self._volume_const(node, 'Backscatter', 0.1),
+                    self._volume_const(node, 'IOR', 1.33), self._volume_const(node, 'Diameter', 20.0))
+            out = dataclasses.replace(out, phase_spec=_valid_phase(spec))
+        return out
 
     def _volume_principled_volume(self, node):
         """Cycles' svm_node_principled_volume with no attribute grids:
         scattering Color x Density, absorption (1 - Color)(1 - sqrt(Absorption
-        Color)) x Density, emission Strength x Color.  Blackbody is named."""
+        Color)) x Density, emission Strength x Color plus blackbody."""
         color = self._volume_input(node, 'Color', (0.5, 0.5, 0.5), color=True)
         d = self._density(node)
         g = self._volume_const(node, 'Anisotropy', 0.0)
         ac = self._volume_const(node, 'Absorption Color', (0.0, 0.0, 0.0), color=True)
         strength = self._volume_input(node, 'Emission Strength', 0.0)
         ec = self._volume_input(node, 'Emission Color', (1.0, 1.0, 1.0), color=True)
-        if self._volume_const(node, 'Blackbody Intensity', 0.0) > 0.0:
-            self._volume_note(node, "Blackbody emission not rendered yet")
+        blackbody = self._volume_const(node, 'Blackbody Intensity', 0.0)
         out = VolumeClosure()
         if nodes.may_exceed(d, 0.0):
             tint = tuple(max(1.0 - math.sqrt(max(a, 0.0)), 0.0) for a in ac)
@@ -388,7 +388,22 @@ class NodeTranslator:
                                 scattering=_times(_positive(color), d)).with_phase(g)
         if nodes.may_exceed(strength, 0.0):
             out = out.plus(VolumeClosure(emission=_times(ec, strength)))
+        if blackbody > 0.0:
+            out = out.plus(VolumeClosure(emission=self._blackbody(node, blackbody)))
         return out
+
+    def _blackbody(self, node, intensity):
+        """Cycles' Principled Volume blackbody emission: tint x sigma x
+        mix(1, T^4, intensity) x the blackbody colour of T (Stefan-Boltzmann,
+        sigma = 5.670373e-8 1e-6 / pi), constant inputs."""
+        t = max(self._volume_const(node, 'Temperature', 1000.0), 0.0)
+        tint = self._volume_const(node, 'Blackbody Tint', (1.0, 1.0, 1.0), color=True)
+        renderer = backend.engine()
+        entry = renderer.NODE_REGISTRY['ShaderNodeBlackbody']
+        rgb = entry.evaluate(renderer.ShadingContext(1), {'Temperature': np.array([t])}, {})['Color'][0]
+        sigma = 5.670373e-8 * 1e-6 / math.pi
+        power = sigma * ((1.0 - intensity) + intensity * t ** 4)
+        return tuple(min(float(c) * power * float(x), VOLUME_LIMIT) for c, x in zip(tint, rgb))
 
     def _volume_emission(self, node):
         strength = self._volume_input(node, 'Strength', 1.0)
@@ -409,6 +424,12 @@ class NodeTranslator:
             self.volume_notes.append(label)
 
     def _volume_sum(self, a, b, node):
+        if a.phase_spec is not None and b.phase_spec is not None and a.phase_spec != b.phase_spec:
+            self._volume_note(node, f"two {a.phase_spec[0].replace('_', '-').title()} / "
+                                    f"{b.phase_spec[0].replace('_', '-').title()} phase functions rendered as "
+                                    "the first")
+        elif (a.phase_spec is None) != (b.phase_spec is None) and a.scattering != BLACK and b.scattering != BLACK:
+            self._volume_note(node, "a Henyey-Greenstein and another phase function mixed rendered as the other")
         if a.phases_differ(b):
             self._volume_note(node, "volume phase functions of different anisotropy rendered as one of "
                                     "their mean")
@@ -451,6 +472,9 @@ class VolumeClosure:
     emission: tuple = BLACK
     g_weight: float = 0.0        # sum of mean(scattering) x g over the closures
     phases: tuple = ()           # the distinct g of the scattering closures
+    # A Volume Scatter's other phase function: (phase, alpha, backscatter,
+    # ior, diameter), None for Henyey-Greenstein.
+    phase_spec: tuple = None
 
     def with_phase(self, g):
         g = min(max(float(g), -1.0), 1.0)
@@ -458,12 +482,13 @@ class VolumeClosure:
 
     def scaled(self, w):
         return VolumeClosure(_scale3(self.absorption, w), _scale3(self.scattering, w), _scale3(self.emission, w),
-                             self.g_weight * w, self.phases if w > 0 else ())
+                             self.g_weight * w, self.phases if w > 0 else (), self.phase_spec if w > 0 else None)
 
     def plus(self, other):
         return VolumeClosure(_add3(self.absorption, other.absorption), _add3(self.scattering, other.scattering),
                              _add3(self.emission, other.emission), self.g_weight + other.g_weight,
-                             tuple(sorted(set(self.phases) | set(other.phases))))
+                             tuple(sorted(set(self.phases) | set(other.phases))),
+                             self.phase_spec if self.phase_spec is not None else other.phase_spec)
 
     def phases_differ(self, other):
         return len(set(self.phases) | set(other.phases)) > 1
@@ -471,6 +496,14 @@ class VolumeClosure:
     def anisotropy(self):
         total = _mean_weight(self.scattering)
         return min(max(self.g_weight / total, -1.0), 1.0) if total > 0 else 0.0
+
+
+def _valid_phase(spec):
+    """The phase parameters clamped to what Cycles accepts (IOR > 1,
+    backscatter in (0, 0.5), alpha and diameter >= 0)."""
+    phase, alpha, back, ior, diameter = spec
+    return (phase, min(max(alpha, 0.0), 1e6), min(max(back, 1e-6), 0.5 - 1e-6), min(max(ior, 1.0 + 1e-6), 10.0),
+            min(max(diameter, 0.0), 1e6))
 
 
 def _mean_weight(c):
@@ -662,8 +695,15 @@ def _volume(translator, output):
     socket = output.inputs.get('Volume')
     if socket is None or not socket.is_linked:
         return None
-    v = translator.volume(socket)
-    return _scene().Volume(v.absorption, v.scattering, v.emission, v.anisotropy())
+    return volume_of(translator.volume(socket))
+
+
+def volume_of(v):
+    """The engine Volume of a VolumeClosure."""
+    volume = _scene().Volume(v.absorption, v.scattering, v.emission, v.anisotropy())
+    if v.phase_spec is not None:
+        volume.phase, volume.alpha, volume.backscatter, volume.ior, volume.diameter = v.phase_spec
+    return volume
 
 
 def _material_normal(translator, output):

@@ -95,7 +95,7 @@ def _volume(world, notes):
     warning = translator.warning()
     if warning:
         notes.add(warning.split(": ", 1)[1])
-    return backend.engine().Volume(v.absorption, v.scattering, v.emission, v.anisotropy())
+    return material.volume_of(v)
 
 
 def _translate(world, notes):

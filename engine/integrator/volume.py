@@ -84,7 +84,7 @@ def after_flights(ctx, paths, found, ended, flight, depth):
     keep[rows] = False
     moved = paths.take(rows)
     p = moved.o + moved.d * flight.t[sc, None]
-    volume_vertex(ctx, moved, p, flight.g[sc], depth)
+    volume_vertex(ctx, moved, p, ctx.media.vertex_phase(flight.g[sc], flight.phase_medium[sc]), depth)
     moved = moved.take(row_any_positive(moved.beta))
     return paths.take(keep), found.take(keep), ended[keep], moved
 
@@ -103,22 +103,23 @@ class _Points:
         return self.n
 
 
-def volume_vertex(ctx, paths, p, g, depth):
-    """Light sampling at scattering points p (phase function g) and the
-    phase-function sample of the next ray; moves the paths in place."""
+def volume_vertex(ctx, paths, p, phase, depth):
+    """Light sampling at scattering points p (phase functions ``phase``,
+    MediumTable.vertex_phase) and the phase-function sample of the next
+    ray; moves the paths in place."""
     n = len(paths.pix)
     zeros = np.zeros((n, 3))
     for _, mode, emitters in nee_rounds(ctx, _Points(n), None):
         if mode == "select":
             u = ctx.sampler.get(paths.pseed, paths.sample, vertex_set(depth, LIGHT))
             e, p_sel = ctx.lights.select(u[:, 0], p, zeros)
-            _light_sample(ctx, paths, p, g, e, p_sel, u[:, 1:])
+            _light_sample(ctx, paths, p, phase, e, p_sel, u[:, 1:])
         else:
             for e in emitters:
                 u = ctx.sampler.get(paths.pseed, paths.sample, emitter_set(depth, e))
-                _light_sample(ctx, paths, p, g, np.full(n, e), np.ones(n), u[:, :3])
+                _light_sample(ctx, paths, p, phase, np.full(n, e), np.ones(n), u[:, :3])
     u = ctx.sampler.get(paths.pseed, paths.sample, vertex_set(depth, BSDF))
-    wi, pdf = media.hg_sample(paths.d, g, u[:, 0], u[:, 1])
+    wi, pdf = media.phase_sample(paths.d, phase, u[:, 0], u[:, 1])
     paths.o, paths.d, paths.mis_o, paths.prev_p = p, wi, p, p
     paths.tmax = np.full(n, np.inf)
     paths.prev_n = zeros
@@ -134,11 +135,11 @@ def volume_vertex(ctx, paths, p, g, depth):
         paths.ray = np.full(n, VIS_INDIRECT, np.uint8)
 
 
-def _light_sample(ctx, paths, p, g, e, p_sel, u):
+def _light_sample(ctx, paths, p, phase, e, p_sel, u):
     """One light sample per scattering point, MIS-weighted against phase
     sampling (power heuristic), its shadow ray attenuated by the media."""
     ls = ctx.lights.sample(e, p, u[:, 0], u[:, 1], u[:, 2])
-    f = media.hg_eval(dot(paths.d, ls.wi), g)
+    f = media.phase_eval(dot(paths.d, ls.wi), phase)
     p_light = p_sel * ls.pdf
     if ctx.settings.strategy == "mis":
         w = np.where(ls.delta, 1.0, power_heuristic(p_light, f))

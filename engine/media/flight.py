@@ -45,6 +45,9 @@ class FreeFlight:
     tracked: np.ndarray = None
     light_w: np.ndarray = None
     truncated: int = 0
+    # (n,) the medium whose phase function a scattering follows (-1:
+    # Henyey-Greenstein of g), MediumTable.phase_medium.
+    phase_medium: np.ndarray = None
 
 
 def _exp_neg(sigma, t):
@@ -80,6 +83,7 @@ def free_flight(table, stack, beta, t_end, may_scatter, u_channel, u_distance, o
     heterogeneous medium are tracked along o + t d (tracking.py, random
     numbers from ``rng``; ``x_light``: where a light on the ray is)."""
     flight = _homogeneous_flight(table, stack, beta, t_end, may_scatter, u_channel, u_distance)
+    flight.phase_medium = table.phase_medium(stack)
     het = table.heterogeneous(stack)
     flight.tracked = het
     if het.any():

@@ -13,6 +13,7 @@ every stack entry.
 import numpy as np
 
 from .field import build_fields, is_heterogeneous
+from .phase import HG, mixture_of
 
 STACK_SIZE = 4
 TRACKING_EVENTS = 512     # tracking.MAX_EVENTS
@@ -32,10 +33,14 @@ class MediumTable:
         self.emission = np.zeros((m + 1, 3))
         self.g = np.zeros(m + 1)
         self.has = np.zeros(m + 1, bool)
+        # Each medium's phase function: (k1, a1, b1, k2, a2, b2, w), a
+        # mixture of two lobes (phase.mixture_of); HG of g 0 by default.
+        self.phase = np.zeros((m + 1, 7))
         for i, vol in enumerate(volumes):
             if vol is None:
                 continue
             self.has[i] = True
+            self.phase[i] = mixture_of(vol)
             if is_heterogeneous(vol):
                 continue     # its rows are the Fields' (attach), these stay zero
             self.sigma_a[i] = vol.absorption
@@ -91,7 +96,36 @@ class MediumTable:
         self.sigma_a, self.sigma_s, self.emission = grow(self.sigma_a), grow(self.sigma_s), grow(self.emission)
         self.g = grow(self.g)
         self.has = grow(self.has, True)
+        self.phase = np.concatenate([self.phase[:m], self.phase[[f.material for f in self.fields]], self.phase[m:]])
         self.names = self.names[:m] + [f.name for f in self.fields] + self.names[m:]
+
+    def phase_medium(self, stack):
+        """(N,) the medium whose phase function a scattering in ``stack``
+        follows where it is not Henyey-Greenstein (-1: Henyey-Greenstein of
+        the scattering-weighted mean g): the medium scattering most (a
+        heterogeneous one before any homogeneous)."""
+        n = len(stack)
+        best, best_w = np.full(n, -1), np.full(n, -np.inf)
+        het = np.zeros(len(self.has), bool)
+        het[self.first_field:self.first_field + len(self.fields)] = True
+        for k in self._used_slots(stack):
+            m = stack[:, k]
+            w = np.where(m < 0, -np.inf, np.where(het[m], np.inf, np.take(self.sigma_s, m, axis=0).mean(axis=1)))
+            take = w > best_w
+            best, best_w = np.where(take, m, best), np.where(take, w, best_w)
+        ph = self.phase[np.maximum(best, 0)]
+        plain = (ph[:, 0] == HG) & (ph[:, 6] == 0)
+        return np.where((best < 0) | plain, -1, best)
+
+    def vertex_phase(self, g, medium):
+        """The 7 arrays of the phase mixtures at scattering points: HG of g
+        where ``medium`` is -1, else that medium's phase function."""
+        n = len(g)
+        out = np.zeros((n, 7))
+        out[:, 1] = out[:, 4] = g
+        use = medium >= 0
+        out[use] = self.phase[medium[use]]
+        return tuple(out[:, j].copy() for j in range(7))
 
     def medium_of(self, prim, mat):
         """Medium ids of the triangles ``prim`` (material ``mat``)."""

@@ -112,8 +112,15 @@ def _quadrature(field, o, d, length, steps=100):
     return tau, scat
 
 
-@pytest.mark.parametrize("grid_scale", [1.0, 0.3])
-def test_trackers_agree_with_quadrature(grid_scale):
+def test_trackers_agree_with_quadrature():
+    """_check_trackers at the majorant grid as built and scaled to 0.3
+    (one family)."""
+    level = family_level(f"{__name__}.trackers", 2 * 4 * 3)
+    for grid_scale in (1.0, 0.3):
+        _check_trackers(grid_scale, level)
+
+
+def _check_trackers(grid_scale, level):
     """Delta and ratio tracking of shadow rays through a coloured noise
     medium, and the free flight's pass and scattering weights (spectral
     tracking), have the means of exp(-tau) and of the integral of
@@ -138,7 +145,6 @@ def test_trackers_agree_with_quadrature(grid_scale):
     est["flight pass"] = (np.where(fl.scatter[:, None], 0.0, fl.weight), T)
     est["flight scatter"] = (np.where(fl.scatter[:, None], fl.weight, 0.0), scat)
     assert fl.truncated == 0
-    level = family_level(f"{__name__}.trackers", 2 * 4 * 3)
     zc = z_threshold(level)
     for name, (w, truth) in est.items():
         diff = w - truth
@@ -168,13 +174,13 @@ def test_grey_heterogeneous_furnace_is_exact():
     np.testing.assert_allclose(r.image[..., :3], 1.0, rtol=1e-6)
 
 
-def lit_smoke(size=(12, 12)):
-    light = AreaLight(np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1.6], [0, 0, 0, 1.0]]),
-                      (40.0, 40.0, 40.0), "SQUARE", 1.0, 1.0)
+def lit_smoke(size=(10, 10)):
+    light = AreaLight(np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1.3], [0, 0, 0, 1.0]]),
+                      (60.0, 60.0, 60.0), "SQUARE", 2.5, 2.5)
     cam = Camera(look_at((0, -4.5, 0.6), (0, 0, 0)), lens=80, resolution=size)
-    vol = Volume(scattering=colour((1.0, 0.8, 0.6), smoke_density(4.0)),
-                 absorption=colour((0.1, 0.2, 0.3), smoke_density(4.0)), anisotropy=0.3,
-                 emission=colour((0.05, 0.02, 0.0), smoke_density(1.0)))
+    dens = Math("ADD", Math("MULTIPLY", noise(), 2.5), 0.3)   # 0.3 to 2.8 per metre, nowhere empty
+    vol = Volume(scattering=colour((1.0, 0.8, 0.6), dens), absorption=colour((0.1, 0.2, 0.3), dens),
+                 anisotropy=0.3, phase="DRAINE", alpha=1.5, emission=colour((0.02, 0.01, 0.0), dens))
     return Scene([box((1.6, 1.6, 1.6))], [Instance(0, materials=[0], name="cube")],
                  [Material("smoke", PASS, volume=vol)], [light], World((0.0, 0.0, 0.0)), cam)
 
@@ -184,14 +190,15 @@ def test_heterogeneous_strategies_agree():
     by block and over the image on a textured, emitting smoke cube under
     an area light with up to two scatterings (NEE through the textured
     medium by ratio tracking, the phase-sampled ray finding the light
-    through it by the flight's light weight)."""
+    through it by the flight's light weight), its phase function Draine's
+    (g 0.3, alpha 1.5): evaluation and sampling agree inside the renderer."""
     results = {}
     for seed, strategy in enumerate(("light", "bsdf", "mis"), start=31):
-        spp = 384 if strategy == "bsdf" else 64
+        spp = 256 if strategy == "bsdf" else 64
         results[strategy] = render(lit_smoke(), RenderSettings(samples=spp, samples_per_pass=spp, seed=seed,
                                                                strategy=strategy, max_bounces=3, volume_bounces=1))
         assert np.isfinite(results[strategy].image).all()
-    blocks = {k: block_means_var(r.image[..., :3].astype(np.float64), r.variance.astype(np.float64), 2)
+    blocks = {k: block_means_var(r.image[..., :3].astype(np.float64), r.variance.astype(np.float64), 5)
               for k, r in results.items()}
     ref = blocks["mis"][0]
     keep = ref > 0.02 * ref.max()
@@ -209,7 +216,7 @@ def test_heterogeneous_strategies_agree():
         print(f"{a} vs {b}: {keep.sum()} block-channels, max |z| {np.abs(z).max():.2f} (limit {zc:.2f}), "
               f"median block detects {zc * np.median(rel_se):.1%}; image |z| {np.abs(zm).max():.2f}, "
               f"detects {(zc * se / mb).max():.2%}")
-    assert keep.sum() >= 20
+    assert keep.sum() >= 10
     assert worst < zc
 
 
@@ -296,3 +303,104 @@ def test_world_volume_is_beer_lambert_and_under_the_stack():
     # Rows 1-6: a sample of the bottom row's pixel (7, 3) misses the slab
     # (measured: 14% bright there; open question, a crack in the box's top face).
     np.testing.assert_allclose(img[1:7, 3:5], np.broadcast_to(through, (6, 2, 3)), rtol=2e-4)
+
+
+# ----------------------------------------------------------------------------
+# Phase functions (Volume Scatter's Henyey-Greenstein, Rayleigh, Draine,
+# Fournier-Forand and Mie, as Cycles' closure/volume_util.h)
+
+import functools  # noqa: E402
+import types  # noqa: E402
+
+import chi2 as C  # noqa: E402
+from engine.media import phase as P  # noqa: E402
+
+PHASE_CASES = {
+    "rayleigh": dict(phase="RAYLEIGH"),
+    "draine g0.6 a0.8": dict(phase="DRAINE", anisotropy=0.6, alpha=0.8),
+    "draine g0 a0.5": dict(phase="DRAINE", anisotropy=0.0, alpha=0.5),
+    "draine g-0.4 a2": dict(phase="DRAINE", anisotropy=-0.4, alpha=2.0),
+    "fournier-forand B0.1 n1.33": dict(phase="FOURNIER_FORAND", backscatter=0.1, ior=1.33),
+    "fournier-forand B0.05 n1.15": dict(phase="FOURNIER_FORAND", backscatter=0.05, ior=1.15),
+    "mie 20um": dict(phase="MIE", diameter=20.0),
+    "mie 2um": dict(phase="MIE", diameter=2.0),
+    "mie 0.5um": dict(phase="MIE", diameter=0.5),
+    "mie 0.05um": dict(phase="MIE", diameter=0.05),
+}
+
+
+def _phase_volume(case):
+    v = types.SimpleNamespace(anisotropy=0.0, alpha=0.5, backscatter=0.1, ior=1.33, diameter=20.0)
+    v.__dict__.update(case)
+    return v
+
+
+def _lobe_cdf(kind, a, b, c):
+    """CDF in cos theta of one lobe: closed forms (HG, Rayleigh, the
+    Fournier-Forand CDF of the original paper as Cycles writes it), Draine
+    (smooth) by a 2^17-point midpoint rule."""
+    if kind == P.HG:
+        g = min(max(a, -P.G_LIMIT), P.G_LIMIT)
+        if abs(g) < 1e-3:
+            return (c + 1) / 2
+        return (1 - g * g) / (2 * g) * (1 / np.sqrt(1 + g * g - 2 * g * c) - 1 / (1 + g))
+    if kind == P.RAYLEIGH:
+        return (3 * (c + 1) + (c ** 3 + 1)) / 8
+    if kind == P.FOURNIER_FORAND:
+        n, v, k = P.ff_coeffs(a, b)
+        # The paper's CDF runs in theta from the forward direction: 1 - it.
+        s2 = np.maximum(0.5 * (1 - c), 1e-12)
+        delta = 4 * s2 / (3 * (n - 1) ** 2)
+        pdv = delta ** v
+        out = (1 - pdv * delta - (1 - pdv) * s2) / ((1 - delta) * pdv) + k / 8 * c * (1 - c * c)
+        return np.where(c >= 1, 1.0, np.where(c <= -1, 0.0, 1.0 - out))
+    mu, cdf = _draine_table(float(a), float(b))
+    return np.interp(c, mu, cdf)
+
+
+@functools.lru_cache(maxsize=None)
+def _draine_table(a, b):
+    mu = np.linspace(-1, 1, 2 ** 17 + 1)
+    mid = 0.5 * (mu[1:] + mu[:-1])
+    f = P.draine_eval(mid, np.full(len(mid), a), np.full(len(mid), b))
+    cdf = np.concatenate([[0.0], np.cumsum(f) * (mu[1] - mu[0]) * 2 * np.pi])
+    return mu, cdf / cdf[-1]
+
+
+def test_phase_sampling_matches_its_cdf():
+    """For every case, 100 000 sampled directions: the pdf sampling returns
+    is the evaluated one, azimuths are uniform by construction, and cos
+    theta follows the phase function's CDF (chi-square over 48 cells of
+    equal expected count); the CDF ends at 1 (normalization).  One family."""
+    level = family_level(f"{__name__}.phase_chi2", len(PHASE_CASES))
+    for name in sorted(PHASE_CASES):
+        _check_phase(name, level)
+
+
+def _check_phase(name, level):
+    mix = P.mixture_of(_phase_volume(PHASE_CASES[name]))
+    k1, a1, b1, k2, a2, b2, w = mix
+
+    def cdf(c):
+        out = (1 - w) * _lobe_cdf(k1, a1, b1, c)
+        return out + w * _lobe_cdf(k2, a2, b2, c) if w > 0 else out
+    assert abs(float(cdf(np.array(1.0))) - 1.0) < 2e-3 and abs(float(cdf(np.array(-1.0)))) < 1e-9
+    m = 100_000
+    rng = np.random.default_rng(sorted(PHASE_CASES).index(name) + 40)
+    arr = tuple(np.full(m, float(x)) for x in mix)
+    d = np.tile(C.frame(np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8]))[2], (m, 1))
+    wi, pdf = P.phase_sample(d, arr, rng.random(m), rng.random(m))
+    cos = np.einsum("ij,ij->i", d, wi)
+    # cos recomputed from the direction differs by rounding; steep forward
+    # peaks amplify it (Fournier-Forand within 1e-9 of cos = 1: left out).
+    away = cos < 1 - 1e-9
+    np.testing.assert_allclose(pdf[away], P.phase_eval(cos[away], tuple(x[away] for x in arr)), rtol=1e-6)
+    assert np.isfinite(wi).all() and np.all(pdf > 0)
+    grid = np.linspace(-1, 1, 200_001)
+    F = cdf(grid)
+    edges = np.interp(np.linspace(0, 1, 49)[1:-1] * F[-1], F, grid)
+    hist = np.histogram(cos, np.concatenate([[-1.0], edges, [1.0]]))[0]
+    expected = np.diff(np.concatenate([[0.0], cdf(edges), [F[-1]]])) / F[-1] * m
+    res = C.chi2_test(hist, expected)
+    print(f"{name}: {res.power_line(level)} (level {level:.2e})")
+    assert res.p > level, f"{name}: {res}"
