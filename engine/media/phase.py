@@ -1,4 +1,6 @@
-"""The Henyey-Greenstein phase function, as Cycles' ``volume_henyey_greenstein``.
+"""Phase functions, as Cycles' closure/volume_util.h: Henyey-Greenstein
+(``volume_henyey_greenstein``) and, below, Rayleigh, Draine,
+Fournier-Forand and Mie.
 
 cos_theta is the cosine between the ray's direction of travel and the
 scattered direction (g > 0 scatters forward).  |g| is clamped to 1 - 1e-3
@@ -40,13 +42,19 @@ def hg_sample(d, g, u1, u2):
     """Scattered unit directions about the travel directions d (N, 3) and
     their pdf (the phase function's value)."""
     cos = hg_cos_theta(g, u1)
+    return direction_at(d, cos, u2), hg_eval(cos, g)
+
+
+def direction_at(d, cos, u2):
+    """Unit directions at angle acos(cos) to d, azimuth 2 pi u2 (Cycles'
+    phase_sample_direction)."""
     sin = np.sqrt(np.maximum(1.0 - cos * cos, 0.0))
     phi = 2.0 * np.pi * u2
     local = np.stack([sin * np.cos(phi), sin * np.sin(phi), cos], axis=1)
     s, t = frame(np.ascontiguousarray(d, np.float64))
     wi = to_world(local, s, t, d)
     wi /= np.linalg.norm(wi, axis=1)[:, None]
-    return wi, hg_eval(cos, g)
+    return wi
 
 
 # ----------------------------------------------------------------------------
@@ -153,19 +161,14 @@ def ff_eval(cos, n, v, c):
 
 def ff_cos(u, n, v, c):
     """Cycles' phase_fournier_forand_newton: Newton on the CDF, 20 steps."""
-    cdf_coeff, pf_coeff = c / 8.0, c / (16.0 * np.pi)
+    pf_coeff = c / (16.0 * np.pi)
     cos = np.full(np.shape(u), 0.64278760968)
     done = np.zeros(np.shape(u), bool)
     for _ in range(20):
         s2 = np.maximum(0.5 * (1.0 - cos), 1e-30)
         delta = _ff_delta(n, s2)
-        pdv = delta ** v
-        md, mpdv = 1.0 - delta, 1.0 - pdv
-        with np.errstate(all="ignore"):
-            cdf = np.where(np.abs(md) < 1e-3, 1 + v * (1 - s2) * (1 - 0.5 * (v + 1) * md),
-                           (1 - pdv * delta - mpdv * s2) / (md * pdv))
-        cdf = cdf + cdf_coeff * cos * (1 - cos * cos)
-        pf = _ff_impl(cos, delta, pdv, v, s2, pf_coeff)
+        cdf = _ff_theta_cdf(cos, n, v, c, 1e-30)
+        pf = _ff_impl(cos, delta, delta ** v, v, s2, pf_coeff)
         with np.errstate(all="ignore"):
             new = cos + (cdf - u) / (2.0 * np.pi * pf)
         new = np.where(new >= 1.0, np.maximum(0.5 * (cos + 1.0), 0.99), new)
@@ -192,9 +195,9 @@ def ff_cos(u, n, v, c):
     return np.clip(cos, -1.0, 1.0)
 
 
-def _ff_theta_cdf(cos, n, v, c):
+def _ff_theta_cdf(cos, n, v, c, floor=1e-300):
     """P(angle < theta) of Fournier-Forand at cos theta (the paper's CDF)."""
-    s2 = np.maximum(0.5 * (1.0 - cos), 1e-300)
+    s2 = np.maximum(0.5 * (1.0 - cos), floor)
     delta = _ff_delta(n, s2)
     pdv = delta ** v
     md, mpdv = 1.0 - delta, 1.0 - pdv
@@ -297,10 +300,4 @@ def phase_sample(d, mix, u1, u2):
     u = np.clip(u, 0.0, 1.0 - 1e-12)
     kind = np.where(second, k2, k1)
     cos = _lobe_cos(kind, np.where(second, a2, a1), np.where(second, b2, b1), u)
-    sin = np.sqrt(np.maximum(1.0 - cos * cos, 0.0))
-    phi = 2.0 * np.pi * u2
-    local = np.stack([sin * np.cos(phi), sin * np.sin(phi), cos], axis=1)
-    s, t = frame(np.ascontiguousarray(d, np.float64))
-    wi = to_world(local, s, t, d)
-    wi /= np.linalg.norm(wi, axis=1)[:, None]
-    return wi, phase_eval(cos, mix)
+    return direction_at(d, cos, u2), phase_eval(cos, mix)
