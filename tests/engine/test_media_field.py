@@ -245,13 +245,15 @@ def test_nan_textured_density_is_named_and_finite():
     assert "'hazy'" in w and "NaN" in w and "negative" in w and "too large" in w, w
 
 
-def test_a_million_volume_boundaries_on_a_ray():
-    """500 000 parallel volume-only sheets (10^6 triangles, each ray
-    crossing 500 000 boundaries, open meshes): camera paths stop after
+def test_a_hundred_thousand_volume_boundaries_on_a_ray():
+    """100 000 parallel volume-only sheets (200 000 triangles, each ray
+    crossing 100 000 boundaries, open meshes): camera paths stop after
     their boundary steps, shadow rays after Cycles' VOLUME_BOUNDS_MAX
-    crossings; finite pixels, the open mesh named, no hang."""
+    crossings; finite pixels, the open mesh named, no hang.  (500 000
+    sheets behave the same and took 88 s under load, most of it building
+    and checking the 10^6 triangles: past the suite's budget.)"""
     import time
-    k = 500_000
+    k = 100_000
     z = np.linspace(-1.0, 1.0, k)
     corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], np.float64)
     pos = np.zeros((k, 4, 3))
@@ -271,7 +273,7 @@ def test_a_million_volume_boundaries_on_a_ray():
     t0 = time.time()
     r = render(scene, RenderSettings(samples=1, samples_per_pass=1, max_bounces=1, volume_bounces=1))
     took = time.time() - t0
-    print(f"10^6 boundaries: {took:.1f} s")
+    print(f"10^5 boundaries: {took:.1f} s")
     assert np.isfinite(r.image).all()
     assert any("'sheets'" in w and "not closed" in w for w in r.warnings), r.warnings
 
