@@ -105,3 +105,34 @@ def test_volume_field_parity_with_cycles(name, tmp_path, tapped_engine):
     assert not [w for w in log.get('warnings', ()) if 'aterial' in w], log.get('warnings')
     check = check_against_reference('volume_field_' + name, scene, bounces, image, var, spp, BLOCK)
     check.assert_agrees(*POWER[name])
+
+
+def test_world_volume_and_phase_export(empty_scene):
+    """The world's Volume output becomes World.volume (constants; a texture
+    on it is read as the socket's value, named in the world's warning); a
+    Volume Scatter's phase function and its parameters reach the engine
+    Volume (Blender 4.2+)."""
+    from addon.export import material as export, world as world_export
+    _world(empty_scene, (0.1, 0.1, 0.1))
+    _world_fog(empty_scene, 0.3)
+    tree = empty_scene.world.node_tree
+    fog = next(n for n in tree.nodes if n.type == 'PRINCIPLED_VOLUME')
+    noise = tree.nodes.new('ShaderNodeTexNoise')
+    tree.links.new(noise.outputs['Fac'], fog.inputs['Emission Strength'])
+    world, warning = world_export.world_from_blender(empty_scene.world)
+    v = world.volume
+    assert v.scattering == pytest.approx((0.27, 0.255, 0.24)) and v.anisotropy == pytest.approx(0.4)
+    assert v.absorption == pytest.approx((0.1 * 0.3, 0.15 * 0.3, 0.2 * 0.3))
+    assert warning is not None and "Emission Strength" in warning and empty_scene.world.name in warning, warning
+
+    def scatter(t):
+        node = t.nodes.new('ShaderNodeVolumeScatter')
+        node.inputs['Density'].default_value = 2.0
+        if hasattr(node, 'phase'):
+            node.phase = 'MIE'
+            node.inputs['Diameter'].default_value = 7.5
+        return node.outputs[0]
+    mat, warning = export.translate(_material("Droplets", volume=scatter))
+    assert warning is None, warning
+    if bpy.app.version >= (4, 2, 0):
+        assert mat.volume.phase == 'MIE' and mat.volume.diameter == pytest.approx(7.5)
