@@ -149,7 +149,8 @@ def prepare_interruptibly(scene, settings, progress, poll=0.05):
 
 
 def _emitting_media(ctx):
-    return ctx.media is not None and bool(np.any(ctx.media.emission > 0))
+    return ctx.media is not None and (bool(np.any(ctx.media.emission > 0)) or
+                                      any(f.emits for f in ctx.media.fields))
 
 
 def warnings_for(ctx):

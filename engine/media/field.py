@@ -35,6 +35,7 @@ LATTICE = 2
 MARGIN = 1.25
 FLOOR = 1e-3
 FLOOR_DEPTH = 100.0
+EMISSIVE_RATE = 16.0
 SIGMA_MAX = 1e8
 # A majorant holds along the ray for STEP cells along each axis (the
 # segment's bounding box spans at most STEP + 1 cells per axis).
@@ -122,18 +123,21 @@ class Field:
         # are the texture's own: counted.
         core = np.all((q > self.lo + 0.5 * self.pad) & (q < self.hi - 0.5 * self.pad), axis=1)
         self.repaired["negative"] += int(sum(np.count_nonzero(core[:, None] & (r < 0)) for r in raw))
-        sa, ss, _ = (self._renderable(r, inside=False) for r in raw)
-        v = (sa + ss).max(axis=1).reshape(k, k, k)
-        for axis in range(3):   # each cell: the max over its (LATTICE + 1) lattice points per axis
-            v = np.moveaxis(v, axis, 0)
-            v = np.max([v[s:s + GRID * LATTICE:LATTICE] for s in range(LATTICE + 1)], axis=0)
-            v = np.moveaxis(v, 0, axis)
+        sa, ss, em = (self._renderable(r, inside=False) for r in raw)
+        self.emits = bool(np.any(em > 0))
+        v = _cell_max((sa + ss).max(axis=1).reshape(k, k, k))
+        e = _cell_max(em.max(axis=1).reshape(k, k, k))
         top = float(v.max())
         self.max = top
         # The floor: a collision rate in cells that looked empty, at most
-        # one per FLOOR_DEPTH object sizes.
-        size = float(np.linalg.norm((self.hi - self.lo) @ np.abs(self.matrix[:3, :3]).T))
-        return np.maximum(MARGIN * v, min(FLOOR * top, 1.0 / (FLOOR_DEPTH * max(size, 1e-9))))
+        # one per FLOOR_DEPTH object sizes; where the medium emits, at
+        # least EMISSIVE_RATE collisions per object size (emission is
+        # collected at collisions, also where nothing extinguishes).
+        size = max(float(np.linalg.norm((self.hi - self.lo) @ np.abs(self.matrix[:3, :3]).T)), 1e-9)
+        grid = np.maximum(MARGIN * v, min(FLOOR * top, 1.0 / (FLOOR_DEPTH * size)))
+        if self.emits:
+            grid = np.maximum(grid, np.where(e > 0, EMISSIVE_RATE / size, 1.0 / (FLOOR_DEPTH * size)))
+        return grid
 
     def majorant(self, p, d):
         """(mu, dist): a majorant of the medium along the ray from p (N, 3)
@@ -174,6 +178,15 @@ class Field:
                 ahead = (far[o] >= np.maximum(near[o], 0.0)) & (near[o] >= 0)
                 dist[o] = np.where(ahead, near[o], np.inf)
         return mu, dist
+
+
+def _cell_max(v):
+    """(GRID,) * 3 maxima over each cell's (LATTICE + 1)^3 lattice points."""
+    for axis in range(3):
+        v = np.moveaxis(v, axis, 0)
+        v = np.max([v[s:s + GRID * LATTICE:LATTICE] for s in range(LATTICE + 1)], axis=0)
+        v = np.moveaxis(v, 0, axis)
+    return v
 
 
 def build_fields(table, materials, scene, tris):
