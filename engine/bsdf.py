@@ -266,7 +266,7 @@ def _weights_numpy(lobes, wo):
         if len(sheen):
             # Cycles folds the sheen's directional albedo into its weight.
             w[sheen, k] *= _sheen_ltc(_rough(lobes, k)[sheen], mu[sheen])[2][:, None]
-        ms = np.nonzero(lobes.multiscatter[:, k] & kind_in(lobes.kind[:, k], (GLOSSY, GLASS)))[0]
+        ms = np.nonzero(lobes.multiscatter[:, k] & kind_in(lobes.kind[:, k], (GLOSSY, GLOSSY_ANISOTROPIC, GLASS)))[0]
         if len(ms):
             glass = lobes.kind[ms, k] == GLASS
             for part in (ms[glass], ms[~glass]):
