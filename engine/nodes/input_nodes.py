@@ -219,3 +219,30 @@ def mapping_values(kind, v, loc, rot, scale):
              for t in ("POINT", "TEXTURE", "VECTOR", "NORMAL")])
 def mapping(ctx, i, p):
     return {"Vector": mapping_values(p["vector_type"], i["Vector"], i["Location"], i["Rotation"], i["Scale"])}
+
+
+def _cross(a, b):
+    return np.cross(a, b)
+
+
+@node("ShaderNodeTangent", outputs=(("Tangent", "vector"),), props=(("direction_type", "RADIAL"), ("axis", "Z"),
+                                                                     ("uv_map", "")),
+      accepts=one_of(direction_type=("RADIAL",)),
+      cases=[{}, {"axis": "X"}, {"axis": "Y"}])
+def tangent(ctx, i, p):
+    """Cycles' svm_node_tangent, radial: a tangent about the object's axis
+    from Generated coordinates (object-space P without them), carried to
+    world space as a normal (object_normal_transform) and made perpendicular
+    to the shading normal.  The UV-map tangent is not rendered yet."""
+    g = ctx.generated - 0.5
+    zero = np.zeros(len(ctx))
+    axis = p.get("axis", "Z")
+    if axis == "X":
+        t = np.stack([zero, -g[:, 2], g[:, 1]], axis=1)
+    elif axis == "Y":
+        t = np.stack([-g[:, 2], zero, g[:, 0]], axis=1)
+    else:
+        t = np.stack([-g[:, 1], g[:, 0], zero], axis=1)
+    t = ctx.to_world_normal(t)
+    n = ctx.ns
+    return {"Tangent": _cross(n, _normalize(_cross(t, n)))}
