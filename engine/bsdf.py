@@ -150,7 +150,7 @@ class MaterialTable:
         self.emission_layers = {i: tuple(int(k) for k in getattr(m, "emission_layers", ()))
                                 for i, m in enumerate(materials) if getattr(m, "emission_layers", ())}
 
-    def dim_emission(self, mat, shading, cos, emission):
+    def dim_emission(self, mat, shading, cos, emission, albedo=True):
         """Emission (N, 3) seen at |cos| to the shading normal, dimmed where
         the material's emission lies under layers: by 1 - each layer's albedo
         estimate and the coat tint along the view, as Cycles' Principled BSDF
@@ -167,7 +167,7 @@ class MaterialTable:
             if out is None:
                 out = np.array(emission, dtype=np.float64, copy=True)
             lobes = self.gather(mat[rows], None if shading is None else shading.take(rows))
-            out[rows] *= emission_dimming(lobes, np.clip(np.abs(cos[rows]), 0.0, 1.0), layers)
+            out[rows] *= emission_dimming(lobes, np.clip(np.abs(cos[rows]), 0.0, 1.0), layers, albedo)
         return emission if out is None else out
 
     def gather(self, mat, uv=None):
@@ -307,16 +307,17 @@ def _weights_numpy(lobes, wo):
     return np.maximum(w, 0.0)
 
 
-def emission_dimming(lobes, mu, layers):
+def emission_dimming(lobes, mu, layers, albedo=True):
     """(N, 3) factor of an emission under the layer lobes ``layers`` (slot
     indices) seen at cos mu: the product of 1 - max(layer albedo) and the
-    coat tint (_layer_albedo, _coat_absorption, as ``weights``)."""
+    coat tint (_layer_albedo, _coat_absorption, as ``weights``); without
+    ``albedo`` the coat tint alone."""
     n = len(mu)
     factor = np.ones((n, 3))
     rows = np.arange(n)
     for k in layers:
         present = lobes.kind[:, k] != NONE
-        below = 1.0 - np.clip(_layer_albedo(lobes, k, rows, mu).max(axis=1), 0.0, 1.0)
+        below = 1.0 - np.clip(_layer_albedo(lobes, k, rows, mu).max(axis=1), 0.0, 1.0) if albedo else np.ones(n)
         step = below[:, None] * _coat_absorption(lobes, k, rows, mu)
         factor *= np.where(present[:, None], np.maximum(step, 0.0), 1.0)
     return factor

@@ -21,6 +21,15 @@ MESH = 3
 MAX_TREE_TRIANGLES = 16384
 
 
+# Cycles evaluates a light sample's emission with the emission nodes only
+# (KERNEL_FEATURE_NODE_MASK_SURFACE_LIGHT: no closures are allocated), so the
+# Principled BSDF's sheen and coat, which dim its emission by their albedo
+# where the shader allocates them, do not dim it there: only the coat tint
+# (applied outside the closure) does.  BSDF rays that hit the surface see
+# it dimmed.  Matched here (the integrator's MIS then blends the two as
+# Cycles' does).
+LIGHT_SAMPLES_DIM_BY_ALBEDO = False
+
 class MeshLights(LightTable):
     """Emissive triangles, one emitter per emissive material.
 
@@ -166,7 +175,8 @@ class MeshLights(LightTable):
         tr = self.tris
         shading = self._shading(tri, q)
         Le = np.array(np.broadcast_to(Le, q.shape), dtype=np.float64)
-        return self.materials.dim_emission(tr.material[tri], shading, dot(wi, shading.ns), Le)
+        return self.materials.dim_emission(tr.material[tri], shading, dot(wi, shading.ns), Le,
+                                           albedo=LIGHT_SAMPLES_DIM_BY_ALBEDO)
 
     def _shading(self, tri, q):
         tr = self.tris

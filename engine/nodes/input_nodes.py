@@ -228,7 +228,10 @@ def _cross(a, b):
 @node("ShaderNodeTangent", outputs=(("Tangent", "vector"),), props=(("direction_type", "RADIAL"), ("axis", "Z"),
                                                                      ("uv_map", "")),
       accepts=one_of(direction_type=("RADIAL",)),
-      cases=[{}, {"axis": "X"}, {"axis": "Y"}])
+      # Only Z: the parity scene's quads face +Z, where the X and Y tangents
+      # are along the normal (Generated z = 0.5) and Cycles' result is the
+      # sign of a float32 rounding of that 0.5.
+      cases=[{}])
 def tangent(ctx, i, p):
     """Cycles' svm_node_tangent, radial: a tangent about the object's axis
     from Generated coordinates (object-space P without them), carried to

@@ -22,8 +22,8 @@ import numpy as np
 from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
 
 EMBER_SPP = 256
-BLOCK = 8
-WIDTH, HEIGHT = 64, 40
+BLOCK = 16
+WIDTH, HEIGHT = 64, 48
 BOUNCES = 6
 
 
