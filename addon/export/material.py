@@ -270,7 +270,8 @@ class NodeTranslator:
             tint = _clamp_color(self.color(node, 'Edge Tint', (0.695, 0.726, 0.770)))
         anisotropy = _clamp01(self._finite_value(node, 'Anisotropy', self.value(node, 'Anisotropy', 0.0), 0.0))
         rotation = self._finite_value(node, 'Rotation', self.value(node, 'Rotation', 0.0), 0.0)
-        if self._value_linked(node, 'Thin Film Thickness') or self.value(node, 'Thin Film Thickness', 0.0) > 0.0:
+        thickness = self._finite_value(node, 'Thin Film Thickness', self.value(node, 'Thin Film Thickness', 0.0), 0.0)
+        if self._value_linked(node, 'Thin Film Thickness') or thickness > 0.0:
             self._approximate(node, "Thin Film")
         lobe = dict(color=(1.0, 1.0, 1.0), roughness=roughness, fresnel='f82', f0=f0, edge_tint=tint,
                     multiscatter=getattr(node, 'distribution', 'MULTI_GGX') == 'MULTI_GGX')

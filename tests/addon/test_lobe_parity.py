@@ -116,3 +116,45 @@ def test_lobes_parity_with_cycles(tmp_path, tapped_engine):
     assert np.isfinite(image).all()
     check = check_against_reference('lobes_lobes', scene, bounces, image, var, EMBER_SPP, BLOCK)
     check.assert_agrees(0.005, 0.02)
+
+
+def hostile(scene):
+    """Spheres whose anisotropy, rotation, thin film and diffuse roughness
+    inputs are NaN, huge or negative."""
+    nan = float('nan')
+    _sphere(_material("NaNAniso", 'ShaderNodeBsdfPrincipled', **{
+        'Metallic': 1.0, 'Anisotropic': nan, 'Anisotropic Rotation': 1e30, 'Diffuse Roughness': nan,
+        'Thin Film Thickness': nan}), (-1.0, 0.0, 0.42))
+    _sphere(_material("HugeRotation", 'ShaderNodeBsdfPrincipled', **{
+        'Anisotropic': 0.7, 'Anisotropic Rotation': 1e30, 'Thin Film Thickness': -5.0,
+        'Diffuse Roughness': 1e30}), (0.0, 0.0, 0.42))
+    _sphere(_material("NaNGlossy", 'ShaderNodeBsdfAnisotropic', Anisotropy=nan, Rotation=nan, Roughness=0.3),
+            (1.0, 0.0, 0.42))
+    _sphere(_material("NaNMetal", 'ShaderNodeBsdfMetallic', Anisotropy=0.5, Rotation=1e30,
+                      **{'Thin Film Thickness': nan}), (0.0, 1.0, 0.42))
+    _sphere(_material("NaNDiffuse", 'ShaderNodeBsdfDiffuse', Roughness=nan), (0.0, -1.0, 0.42))
+    world = bpy.data.worlds.new("W")
+    world.use_nodes = True
+    world.node_tree.nodes['Background'].inputs['Color'].default_value = (0.5, 0.5, 0.5, 1.0)
+    scene.world = world
+    scene.camera.location = (0.0, -4.0, 3.0)
+    from mathutils import Vector
+    scene.camera.rotation_euler = Vector((0.0, 4.0, -2.6)).to_track_quat('-Z', 'Y').to_euler()
+    small_resolution(scene, 24, 18)
+    return 4
+
+
+def test_hostile_lobe_inputs_render_finite_with_warnings(tmp_path, tapped_engine):
+    """NaN anisotropy, rotation 1e30, negative or NaN thin-film thickness,
+    NaN or huge diffuse roughness: finite pixels, and each material whose
+    input was not finite named in a warning."""
+    from addon import engine as ember_engine
+    scene = empty_factory_scene()
+    bounces = hostile(scene)
+    image, _ = render_for_reference(scene, tmp_path, 'hostile', tapped_engine, 8, 1, bounces)
+    assert np.isfinite(image).all() and image[..., :3].max() > 0.0
+    warnings = " ".join(ember_engine.RENDER_LOG[-1]['warnings'])
+    print(warnings)
+    for name in ("NaNAniso", "NaNGlossy", "NaNMetal", "NaNDiffuse"):
+        assert f"'{name}'" in warnings and "nan read as 0" in warnings, name
+    assert "'HugeRotation'" not in warnings   # finite values: clamped or reduced to a turn, as Cycles, unnamed
