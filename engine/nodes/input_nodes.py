@@ -227,18 +227,26 @@ def _cross(a, b):
 
 @node("ShaderNodeTangent", outputs=(("Tangent", "vector"),), props=(("direction_type", "RADIAL"), ("axis", "Z"),
                                                                      ("uv_map", "")),
-      accepts=one_of(direction_type=("RADIAL",)),
-      # Only Z: the parity scene's quads face +Z, where the X and Y tangents
-      # are along the normal (Generated z = 0.5) and Cycles' result is the
-      # sign of a float32 rounding of that 0.5.
-      cases=[{}])
+      # Radial about Z and the UV map: the parity scene's quads face +Z, where
+      # the X and Y radial tangents are along the normal (Generated z = 0.5)
+      # and Cycles' result is the sign of a float32 rounding of that 0.5.
+      cases=[{}, {"direction_type": "UV_MAP"}])
 def tangent(ctx, i, p):
-    """Cycles' svm_node_tangent, radial: a tangent about the object's axis
-    from Generated coordinates (object-space P without them), carried to
+    """Cycles' svm_node_tangent: radial, a tangent about the object's axis
+    from Generated coordinates (object-space P without them), or the UV
+    map's MikkTSpace tangent (the active map's: the one the exporter
+    computes; zero without one, as Cycles without the attribute); carried to
     world space as a normal (object_normal_transform) and made perpendicular
-    to the shading normal.  The UV-map tangent is not rendered yet."""
-    g = ctx.generated - 0.5
+    to the shading normal."""
     zero = np.zeros(len(ctx))
+    if p.get("direction_type", "RADIAL") == "UV_MAP":
+        t = ctx.uv_tangent
+        if t is None:
+            return {"Tangent": np.zeros((len(ctx), 3))}
+        t = ctx.to_world_normal(t)
+        n = ctx.ns
+        return {"Tangent": _cross(n, _normalize(_cross(t, n)))}
+    g = ctx.generated - 0.5
     axis = p.get("axis", "Z")
     if axis == "X":
         t = np.stack([zero, -g[:, 2], g[:, 1]], axis=1)

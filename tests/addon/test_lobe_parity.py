@@ -20,6 +20,7 @@ import bpy
 import numpy as np
 
 from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
+from parity_scenes import plane, smooth_sphere
 
 EMBER_SPP = 256
 BLOCK = 16
@@ -44,29 +45,17 @@ def _material(name, kind, **inputs):
     return mat
 
 
-def _object(op, material, smooth=True, **kwargs):
-    op(**kwargs)
-    obj = bpy.context.active_object
-    obj.data.materials.append(material)
-    if smooth:
-        for poly in obj.data.polygons:
-            poly.use_smooth = True
-    return obj
-
-
 def _sphere(material, location, radius=0.42):
-    return _object(bpy.ops.mesh.primitive_uv_sphere_add, material, radius=radius, location=location,
-                   segments=48, ring_count=24)
+    return smooth_sphere(material.name, material, location, radius, segments=48, rings=24)
 
 
 def lobes(scene):
-    floor = _material("Floor", 'ShaderNodeBsdfDiffuse', Color=(0.5, 0.5, 0.5))
-    _object(bpy.ops.mesh.primitive_plane_add, floor, smooth=False, size=12.0, location=(0, 0, 0))
+    plane("Floor", _material("Floor", 'ShaderNodeBsdfDiffuse', Color=(0.5, 0.5, 0.5)), half=6.0)
     disc = _material("BrushedDisc", 'ShaderNodeBsdfPrincipled', **{
         'Base Color': (0.92, 0.9, 0.88), 'Metallic': 1.0, 'Roughness': 0.35, 'Anisotropic': 0.9,
         'distribution': 'MULTI_GGX'})
-    _object(bpy.ops.mesh.primitive_cylinder_add, disc, smooth=False, vertices=64, radius=0.75, depth=0.04,
-            location=(0.0, -0.95, 0.02))
+    bpy.ops.mesh.primitive_cylinder_add(vertices=64, radius=0.75, depth=0.04, location=(0.0, -0.95, 0.02))
+    bpy.context.active_object.data.materials.append(disc)
     rough = _material("RoughDiffuse", 'ShaderNodeBsdfDiffuse', Color=(0.8, 0.7, 0.6), Roughness=1.0)
     _sphere(rough, (-1.65, 0.55, 0.42))
     glow = _material("CoatedGlow", 'ShaderNodeBsdfPrincipled', **{
