@@ -14,7 +14,8 @@ Objects, under an area light and a dim grey world, over a grey floor:
   emissive base (the coat and sheen dim the emission, svm/closure.h);
 * a Glossy BSDF sphere with Anisotropy -0.6 and Rotation 0.15 (the Glossy
   node's own alpha mapping and a rotated radial tangent);
-* a Metallic BSDF sphere (F82 Tint) with Anisotropy 0.5.
+* a Metallic BSDF sphere (F82 Tint) with Anisotropy 0.5 along its UV
+  map's tangent (a Tangent node, UV Map).
 """
 import bpy
 import numpy as np
@@ -69,6 +70,10 @@ def lobes(scene):
     metal = _material("MetallicF82", 'ShaderNodeBsdfMetallic', **{
         'Base Color': (0.95, 0.64, 0.54), 'Edge Tint': (0.9, 0.9, 0.6), 'Roughness': 0.3, 'Anisotropy': 0.5,
         'fresnel_type': 'F82', 'distribution': 'MULTI_GGX'})
+    tree = metal.node_tree
+    tangent = tree.nodes.new('ShaderNodeTangent')
+    tangent.direction_type = 'UV_MAP'
+    tree.links.new(tangent.outputs['Tangent'], tree.nodes['Metallic BSDF'].inputs['Tangent'])
     _sphere(metal, (1.65, 0.55, 0.42))
     light = bpy.data.lights.new("Area", 'AREA')
     light.energy = 100.0
