@@ -529,7 +529,7 @@ class NodeTranslator:
         if self.volume_notes:
             parts.append("volume " + ", ".join(self.volume_notes))
         if self.approximated:
-            parts.append("Principled BSDF " + ", ".join(self.approximated) + " not rendered yet")
+            parts.append("not rendered as Cycles yet: " + ", ".join(self.approximated))
         if self.textured:
             parts.append("linked input " + ", ".join(self.textured) + " read as its constant value")
         if self.reader.unsupported:
@@ -706,8 +706,8 @@ def _constant_color(translator, node, name, default):
         return default
     if socket.is_linked:
         translator._note_texture(node, name)
-    value = tuple(socket.default_value)[:3]
-    return tuple(float(c) if math.isfinite(c) else 0.0 for c in value)
+    value = tuple(float(c) for c in tuple(socket.default_value)[:3])
+    return tuple(translator._finite_value(node, name, c, 0.0) for c in value)
 
 
 def _conductor_fresnel(n, k, cos):

@@ -41,7 +41,9 @@ def _material(name, kind, **inputs):
             setattr(node, prop, inputs.pop(prop))
     for name_, value in inputs.items():
         socket = node.inputs[name_]
-        socket.default_value = value if not isinstance(value, tuple) or len(value) == 4 else value + (1.0,)
+        if isinstance(value, tuple) and len(socket.default_value) == 4:
+            value = value + (1.0,)
+        socket.default_value = value
     tree.links.new(node.outputs[0], out.inputs['Surface'])
     return mat
 
@@ -127,6 +129,8 @@ def hostile(scene):
     _sphere(_material("NaNMetal", 'ShaderNodeBsdfMetallic', Anisotropy=0.5, Rotation=1e30,
                       **{'Thin Film Thickness': nan}), (0.0, 1.0, 0.42))
     _sphere(_material("NaNDiffuse", 'ShaderNodeBsdfDiffuse', Roughness=nan), (0.0, -1.0, 0.42))
+    _sphere(_material("Conductor", 'ShaderNodeBsdfMetallic', fresnel_type='PHYSICAL_CONDUCTOR',
+                      IOR=(0.18, 0.42, nan), Extinction=(3.42, 2.35, 1.77)), (1.0, 1.0, 0.42))
     world = bpy.data.worlds.new("W")
     world.use_nodes = True
     world.node_tree.nodes['Background'].inputs['Color'].default_value = (0.5, 0.5, 0.5, 1.0)
@@ -149,6 +153,7 @@ def test_hostile_lobe_inputs_render_finite_with_warnings(tmp_path, tapped_engine
     assert np.isfinite(image).all() and image[..., :3].max() > 0.0
     warnings = " ".join(ember_engine.RENDER_LOG[-1]['warnings'])
     print(warnings)
-    for name in ("NaNAniso", "NaNGlossy", "NaNMetal", "NaNDiffuse"):
+    for name in ("NaNAniso", "NaNGlossy", "NaNMetal", "NaNDiffuse", "Conductor"):
         assert f"'{name}'" in warnings and "nan read as 0" in warnings, name
     assert "'HugeRotation'" not in warnings   # finite values: clamped or reduced to a turn, as Cycles, unnamed
+    assert "'Conductor'" in warnings and "Physical Conductor as its F82 fit" in warnings
