@@ -38,7 +38,6 @@ import pytest
 
 import ember_stats as stats
 from ember_testlib import SCENES_DIR, require, setup_cycles, setup_ember, small_resolution
-from test_other_blenders import legacy_zip  # noqa: F401  (fixture)
 
 # Ember 8 seeds x 12 samples (its cost is mostly per render), Cycles 12 x 24 (cheap).
 SEEDS, SPP, CYCLES_SEEDS, CYCLES_SPP, BOUNCES = 8, 12, 12, 24, 3
@@ -332,7 +331,7 @@ def test_sample_count_and_vector(renders):
         assert np.all(images["Vector"] == 0.0)              # no motion blur
 
 
-def test_legacy_pass_names_in_blender_34_binary(tmp_path, legacy_zip, needs_engine):
+def test_legacy_pass_names_in_blender_34_binary(tmp_path, legacy_addon, needs_engine):
     """Debian's Blender 3.4 (legacy zip, `blender -b -f 1`, multilayer EXR):
     the passes carry 3.4's names (IndexOB, DiffDir, Emit, Env, AO) and the
     file holds the Cryptomatte manifest."""
@@ -341,7 +340,7 @@ def test_legacy_pass_names_in_blender_34_binary(tmp_path, legacy_zip, needs_engi
     version = blender_version()
     require(version is not None and version.startswith('Blender 3.4'),
             f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
-    scripts = install_legacy(legacy_zip, tmp_path)
+    scripts = install_legacy(legacy_addon)
     settings = ("import bpy; s = bpy.context.scene; s.render.resolution_x = s.render.resolution_y = 16; "
                 "s.render.resolution_percentage = 100; s.ember.samples = 4; s.ember.max_bounces = 2; "
                 "s.render.image_settings.color_depth = '32'; l = bpy.context.view_layer; "
