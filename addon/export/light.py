@@ -23,7 +23,7 @@ import bpy
 import numpy as np
 
 from .. import backend
-from . import nodes
+from . import compat, nodes
 
 LEGACY_LIGHT_UNITS = bpy.app.version < (4, 0, 0)
 LEGACY_AREA_SCALE = math.pi / 4.0
@@ -129,7 +129,7 @@ def collect_lights(depsgraph, check=None):
             continue
         if _is_black(light):
             continue
-        if getattr(obj.data, 'use_nodes', False) and _has_light_nodes(obj.data):
+        if compat.uses_nodes(obj.data) and _has_light_nodes(obj.data):
             light, note = _with_node_tree(light, obj.data)
             if note:
                 warnings.append(f"Light '{obj.name}': {note}")

@@ -16,10 +16,8 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-import bpy
-
 from .. import backend
-from . import nodes
+from . import compat, nodes
 
 GREY = (0.8, 0.8, 0.8)
 # Principled BSDF inputs (3.x and 4.x names) whose features are not rendered
@@ -577,7 +575,7 @@ def translate(material):
     """Returns (engine Material, warning or None) for a bpy material."""
     scene = _scene()
     name = material.name
-    tree = material.node_tree if _uses_nodes(material) else None
+    tree = material.node_tree if compat.uses_nodes(material) else None
     if tree is None:
         color = tuple(material.diffuse_color)[:3]
         return scene.Material(name, (scene.Lobe('diffuse', color),)), None
@@ -749,10 +747,3 @@ def material_aovs(material):
             value = float(node.inputs['Value'].default_value)
         out[name] = (tuple(float(c) for c in colour[:3]), float(value))
     return out
-
-
-def _uses_nodes(datablock):
-    """Blender 5.0 always uses nodes and deprecates the ``use_nodes`` switch."""
-    if bpy.app.version >= (5, 0, 0):
-        return True
-    return bool(getattr(datablock, 'use_nodes', False))

@@ -18,11 +18,10 @@ sky are shaded per direction and its sun disc sampled by its cone (Cycles'
 sun guiding).  Anything else is read as the Background's constant colour and
 reported.
 """
-import bpy
 import numpy as np
 
 from .. import backend
-from . import images, nodes
+from . import compat, images, nodes
 
 BLACK = (0.0, 0.0, 0.0)
 MAGENTA = (1.0, 0.0, 1.0)
@@ -82,7 +81,7 @@ def world_from_blender(world):
 
 def _translate(world, notes):
     """(constant rgb, EnvironmentTexture or None)."""
-    tree = world.node_tree if _uses_nodes(world) else None
+    tree = world.node_tree if compat.uses_nodes(world) else None
     if tree is None:
         return tuple(float(c) for c in world.color), None
     output = _output_node(tree)
@@ -338,10 +337,3 @@ def _object_rotation(obj, notes):
     if np.any(np.abs(inverse[:3, 3]) > 1e-9):
         notes.add(f"Texture Coordinate object '{obj.name}' location is ignored")
     return inverse[:3, :3]
-
-
-def _uses_nodes(datablock):
-    """Blender 5.0 always uses nodes and deprecates the ``use_nodes`` switch."""
-    if bpy.app.version >= (5, 0, 0):
-        return True
-    return bool(getattr(datablock, 'use_nodes', False))
