@@ -99,9 +99,10 @@ def prepare(scene, settings):
 def _media(scene, accel, tris, camera):
     """The scene's media (None without a volume), with the media the camera
     starts in and a warning per object whose volume mesh is open."""
-    table = media.MediumTable.of(material_table(scene))
+    table = media.MediumTable.of(material_table(scene), getattr(scene.world, "volume", None))
     if table is None:
         return None
+    table.attach(material_table(scene), scene, tris)
     if scene.camera.kind == "PERSP":
         media.camera_media(table, accel, tris, np.asarray(scene.camera.matrix, np.float64)[:3, 3], camera.forward)
     table.warnings = [f"object {name!r}: its volume mesh is not closed; paths may never leave the volume"
@@ -161,6 +162,7 @@ def warnings_for(ctx):
         out.append("the scene has no lights and a black world: the image will be black")
     if ctx.media is not None:
         out.extend(ctx.media.warnings)
+        out.extend(ctx.media.field_warnings())
     out.extend(ctx.materials.textures.bent_away_warnings())
     return out
 

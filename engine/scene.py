@@ -441,6 +441,12 @@ class World:
     (next-event estimation combined with BSDF sampling by MIS)."""
     color: RGB = (0.05, 0.05, 0.05)
     texture: Optional[EnvironmentTexture] = None
+    # The world's Volume output: a homogeneous medium filling all space,
+    # at the bottom of every path's volume stack (Cycles adds the background
+    # volume first and keeps it inside objects: their media add to it).
+    # Constant coefficients only.  Light from infinitely far (the world,
+    # suns) is extinguished by it entirely, as in Cycles.
+    volume: Optional[Volume] = None
 
 
 # ----------------------------------------------------------------------------

@@ -145,8 +145,12 @@ def validate_material(mat, index):
 
 
 def validate_volume(vol, what):
-    """A homogeneous medium: finite, non-negative coefficients, |g| <= 1."""
+    """A medium: finite, non-negative constant coefficients or texture
+    expressions (a heterogeneous medium, repaired where evaluated), |g| <= 1."""
     for name in ("absorption", "scattering", "emission"):
+        if is_texture(getattr(vol, name)):
+            validate_texture(getattr(vol, name), f"{what} volume {name}")
+            continue
         arr = _rgb(getattr(vol, name), f"{what} volume {name}")
         if np.any(arr < 0):
             raise SceneError(f"{what}: volume {name} must be >= 0, got {tuple(arr)}")
@@ -181,6 +185,11 @@ def _validate_lobe_extras(lobe, k, what, n_lobes):
 
 def validate_world(world):
     _rgb(world.color, "world colour")
+    vol = getattr(world, "volume", None)
+    if vol is not None:
+        if any(is_texture(getattr(vol, f)) for f in ("absorption", "scattering", "emission")):
+            raise SceneError("world volume: textured coefficients are not supported (constants only)")
+        validate_volume(vol, "world")
     tex = world.texture
     if tex is None:
         return

@@ -64,8 +64,10 @@ CONSTANT_VALUE_INPUTS = PRINCIPLED_UNSUPPORTED + ('Anisotropy',)
 class NodeTranslator:
     """Translates one material's node tree, remembering what it could not."""
 
-    def __init__(self, material_name):
+    def __init__(self, material_name, constant_volumes=False):
         self.material_name = material_name
+        # Read every volume input as a constant (the world's volume).
+        self.constant_volumes = constant_volumes
         self.unsupported = []   # node labels, in order of discovery
         self.textured = []      # "node.input" names read as constants
         self.approximated = []  # Principled BSDF features not rendered yet
@@ -293,9 +295,9 @@ class NodeTranslator:
         return handler(node)
 
     def _volume_const(self, node, name, default, color=False):
-        """A constant input of a volume node (Cycles' value for a texture
-        Ember cannot evaluate inside a volume yet: the socket's own), with
-        NaN read as 0 and infinities as the largest value, named in a warning."""
+        """A constant input of a volume node (a texture on it is read as
+        the socket's own value, named in a warning), with NaN read as 0 and
+        infinities as the largest value, named in a warning."""
         socket = node.inputs.get(name)
         if socket is None:
             return default
@@ -303,10 +305,35 @@ class NodeTranslator:
         if value is None or nodes.is_expr(value):
             self._note_texture(node, name)
             value = nodes.constant(socket)
+        return self._const(node, name, value, color)
+
+    def _const(self, node, name, value, color):
         if color:
             value = (float(value),) * 3 if isinstance(value, (float, int)) else tuple(float(c) for c in value[:3])
             return tuple(self._finite(node, name, c) for c in value)
         return self._finite(node, name, nodes.luminance(value) if isinstance(value, tuple) else float(value))
+
+    def _volume_input(self, node, name, default, color=False):
+        """A volume node's input: a constant, or a texture expression
+        evaluated at points inside the medium (a heterogeneous medium:
+        engine/media/field.py); an untranslatable link is read as the
+        socket's value, named in a warning."""
+        socket = node.inputs.get(name)
+        if socket is None:
+            return default
+        if self.constant_volumes:
+            return self._volume_const(node, name, default, color)
+        if not socket.is_linked:
+            return self._const(node, name, nodes.constant(socket), color)
+        value = self.reader.read(socket)
+        if value is None:
+            self._note_texture(node, name)
+            return self._const(node, name, nodes.constant(socket), color)
+        if not nodes.is_expr(value):
+            return self._const(node, name, value, color)
+        if color:
+            return value
+        return nodes.as_value(value)
 
     def _finite(self, node, name, value):
         if math.isfinite(value):
@@ -319,17 +346,17 @@ class NodeTranslator:
 
     def _density(self, node):
         """Density, negative read as 0 (Cycles' fmaxf(density, 0))."""
-        return max(self._volume_const(node, 'Density', 1.0), 0.0)
+        d = self._volume_input(node, 'Density', 1.0)
+        return nodes.at_least(d, 0.0) if nodes.is_expr(d) else max(d, 0.0)
 
     def _volume_volume_absorption(self, node):
-        color = self._volume_const(node, 'Color', GREY, color=True)
-        d = self._density(node)
-        return VolumeClosure(absorption=tuple(max(1.0 - c, 0.0) * d for c in color))
+        color = self._volume_input(node, 'Color', GREY, color=True)
+        return VolumeClosure(absorption=_times(_positive(_one_minus_color(color)), self._density(node)))
 
     def _volume_volume_scatter(self, node):
         """Henyey-Greenstein; the other phase functions (Blender 4.2+) are
         rendered as Henyey-Greenstein of the node's Anisotropy (Rayleigh: 0)."""
-        color = self._volume_const(node, 'Color', GREY, color=True)
+        color = self._volume_input(node, 'Color', GREY, color=True)
         d = self._density(node)
         phase = getattr(node, 'phase', 'HENYEY_GREENSTEIN')
         g = self._volume_const(node, 'Anisotropy', 0.0)
@@ -338,34 +365,33 @@ class NodeTranslator:
                                     "Henyey-Greenstein")
             if phase == 'RAYLEIGH':
                 g = 0.0
-        return VolumeClosure(scattering=tuple(max(c, 0.0) * d for c in color)).with_phase(g)
+        return VolumeClosure(scattering=_times(_positive(color), d)).with_phase(g)
 
     def _volume_principled_volume(self, node):
         """Cycles' svm_node_principled_volume with no attribute grids:
         scattering Color x Density, absorption (1 - Color)(1 - sqrt(Absorption
         Color)) x Density, emission Strength x Color.  Blackbody is named."""
-        color = self._volume_const(node, 'Color', (0.5, 0.5, 0.5), color=True)
+        color = self._volume_input(node, 'Color', (0.5, 0.5, 0.5), color=True)
         d = self._density(node)
         g = self._volume_const(node, 'Anisotropy', 0.0)
         ac = self._volume_const(node, 'Absorption Color', (0.0, 0.0, 0.0), color=True)
-        strength = self._volume_const(node, 'Emission Strength', 0.0)
-        ec = self._volume_const(node, 'Emission Color', (1.0, 1.0, 1.0), color=True)
+        strength = self._volume_input(node, 'Emission Strength', 0.0)
+        ec = self._volume_input(node, 'Emission Color', (1.0, 1.0, 1.0), color=True)
         if self._volume_const(node, 'Blackbody Intensity', 0.0) > 0.0:
             self._volume_note(node, "Blackbody emission not rendered yet")
         out = VolumeClosure()
-        if d > 0.0:
-            out = VolumeClosure(
-                absorption=tuple(max(1.0 - c, 0.0) * max(1.0 - math.sqrt(max(a, 0.0)), 0.0) * d
-                                 for c, a in zip(color, ac)),
-                scattering=tuple(max(c, 0.0) * d for c in color)).with_phase(g)
-        if strength > 0.0:
-            out = out.plus(VolumeClosure(emission=tuple(strength * c for c in ec)))
+        if nodes.may_exceed(d, 0.0):
+            tint = tuple(max(1.0 - math.sqrt(max(a, 0.0)), 0.0) for a in ac)
+            out = VolumeClosure(absorption=_times(_times(_positive(_one_minus_color(color)), tint), d),
+                                scattering=_times(_positive(color), d)).with_phase(g)
+        if nodes.may_exceed(strength, 0.0):
+            out = out.plus(VolumeClosure(emission=_times(ec, strength)))
         return out
 
     def _volume_emission(self, node):
-        strength = self._volume_const(node, 'Strength', 1.0)
-        color = self._volume_const(node, 'Color', (1.0, 1.0, 1.0), color=True)
-        return VolumeClosure(emission=tuple(strength * c for c in color))
+        strength = self._volume_input(node, 'Strength', 1.0)
+        color = self._volume_input(node, 'Color', (1.0, 1.0, 1.0), color=True)
+        return VolumeClosure(emission=_times(color, strength))
 
     def _volume_add_shader(self, node):
         return self._volume_sum(self.volume(node.inputs[0]), self.volume(node.inputs[1]), node)
@@ -426,7 +452,7 @@ class VolumeClosure:
 
     def with_phase(self, g):
         g = min(max(float(g), -1.0), 1.0)
-        return dataclasses.replace(self, g_weight=sum(self.scattering) / 3.0 * g, phases=(g,))
+        return dataclasses.replace(self, g_weight=_mean_weight(self.scattering) * g, phases=(g,))
 
     def scaled(self, w):
         return VolumeClosure(_scale3(self.absorption, w), _scale3(self.scattering, w), _scale3(self.emission, w),
@@ -441,16 +467,48 @@ class VolumeClosure:
         return len(set(self.phases) | set(other.phases)) > 1
 
     def anisotropy(self):
-        total = sum(self.scattering) / 3.0
+        total = _mean_weight(self.scattering)
         return min(max(self.g_weight / total, -1.0), 1.0) if total > 0 else 0.0
 
 
+def _mean_weight(c):
+    """The mean scattering a closure's g is weighted by: a textured one's
+    is taken as 1 (its g then counts as one constant medium's)."""
+    return 1.0 if nodes.is_expr(c) else sum(c) / 3.0
+
+
 def _scale3(c, w):
+    if nodes.is_expr(c):
+        return nodes.scale(c, w)
     return tuple(min(x * w, VOLUME_LIMIT) for x in c)
 
 
 def _add3(a, b):
+    if nodes.is_expr(a) or nodes.is_expr(b):
+        return nodes.add(a, b)
     return tuple(min(x + y, VOLUME_LIMIT) for x, y in zip(a, b))
+
+
+def _times(color, w):
+    """A colour times a float or a colour (constants or expressions)."""
+    if nodes.is_expr(color) or nodes.is_expr(w) or isinstance(w, tuple):
+        if isinstance(w, tuple) and isinstance(color, tuple):
+            return tuple(min(x * y, VOLUME_LIMIT) for x, y in zip(color, w))
+        return backend.engine().MixColor('MULTIPLY', 1.0, color, w, clamp_factor=False)
+    return _scale3(color, float(w))
+
+
+def _positive(color):
+    """max(c, 0) per channel."""
+    if nodes.is_expr(color):
+        return backend.engine().MixColor('LIGHTEN', 1.0, color, BLACK, clamp_factor=False)
+    return tuple(max(c, 0.0) for c in color)
+
+
+def _one_minus_color(color):
+    if nodes.is_expr(color):
+        return backend.engine().MixColor('SUBTRACT', 1.0, (1.0, 1.0, 1.0), color, clamp_factor=False)
+    return tuple(1.0 - c for c in color)
 
 
 def _f0_from_ior(ior):

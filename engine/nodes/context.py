@@ -112,6 +112,15 @@ def generated_corners(mesh):
     pos = np.asarray(mesh.positions, dtype=np.float64)
     tris = np.asarray(mesh.triangles, dtype=np.int64)
     corners = np.asarray(orco, dtype=np.float64) if orco is not None else pos[tris]
+    loc, factor = texture_space(mesh)
+    return (corners - loc) * factor + 0.5
+
+
+def texture_space(mesh):
+    """(location, factor) of a mesh's texture space: Generated = (orco -
+    location) * factor + 0.5 (Cycles' generated transform; inside a volume
+    it maps the object-space point)."""
+    pos = np.asarray(mesh.positions, dtype=np.float64)
     space = getattr(mesh, "texspace", None)
     if space is None:
         lo, hi = (pos.min(axis=0), pos.max(axis=0)) if len(pos) else (np.zeros(3), np.zeros(3))
@@ -121,7 +130,7 @@ def generated_corners(mesh):
         loc, size = (np.asarray(v, dtype=np.float64) for v in space)
     # Cycles: a zero size maps that axis to 0.5.
     factor = np.where(size != 0.0, 0.5 / np.where(size != 0.0, size, 1.0), 0.0)
-    return (corners - loc) * factor + 0.5
+    return loc, factor
 
 
 class ShadingContext:
