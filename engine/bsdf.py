@@ -146,6 +146,29 @@ class MaterialTable:
                     getattr(self, name)[i, j] = value
         self.emissive = np.any(self.emission > 0, axis=1)
         self.names = [m.name for m in materials]
+        # material -> the lobes whose albedo dims its emission (Principled sheen, coat)
+        self.emission_layers = {i: tuple(int(k) for k in getattr(m, "emission_layers", ()))
+                                for i, m in enumerate(materials) if getattr(m, "emission_layers", ())}
+
+    def dim_emission(self, mat, shading, cos, emission, albedo=True):
+        """Emission (N, 3) seen at |cos| to the shading normal, dimmed where
+        the material's emission lies under layers: by 1 - each layer's albedo
+        estimate and the coat tint along the view, as Cycles' Principled BSDF
+        weighs its emission closure (the same terms ``weights`` applies to the
+        lobes under the layers).  ``shading``: the points' ShadingContext
+        (textured layers), or None."""
+        if not self.emission_layers:
+            return emission
+        out = None
+        for i, layers in self.emission_layers.items():
+            rows = np.nonzero(mat == i)[0]
+            if not len(rows):
+                continue
+            if out is None:
+                out = np.array(emission, dtype=np.float64, copy=True)
+            lobes = self.gather(mat[rows], None if shading is None else shading.take(rows))
+            out[rows] *= emission_dimming(lobes, np.clip(np.abs(cos[rows]), 0.0, 1.0), layers, albedo)
+        return emission if out is None else out
 
     def gather(self, mat, uv=None):
         """Per-ray lobe parameters for material ids ``mat`` at texture
@@ -266,7 +289,7 @@ def _weights_numpy(lobes, wo):
         if len(sheen):
             # Cycles folds the sheen's directional albedo into its weight.
             w[sheen, k] *= _sheen_ltc(_rough(lobes, k)[sheen], mu[sheen])[2][:, None]
-        ms = np.nonzero(lobes.multiscatter[:, k] & kind_in(lobes.kind[:, k], (GLOSSY, GLASS)))[0]
+        ms = np.nonzero(lobes.multiscatter[:, k] & kind_in(lobes.kind[:, k], (GLOSSY, GLOSSY_ANISOTROPIC, GLASS)))[0]
         if len(ms):
             glass = lobes.kind[ms, k] == GLASS
             for part in (ms[glass], ms[~glass]):
@@ -282,6 +305,22 @@ def _weights_numpy(lobes, wo):
             w[layer, j] *= np.where(under, below, 1.0)[:, None]
             w[layer, j] *= np.where(under[:, None], tint, 1.0)
     return np.maximum(w, 0.0)
+
+
+def emission_dimming(lobes, mu, layers, albedo=True):
+    """(N, 3) factor of an emission under the layer lobes ``layers`` (slot
+    indices) seen at cos mu: the product of 1 - max(layer albedo) and the
+    coat tint (_layer_albedo, _coat_absorption, as ``weights``); without
+    ``albedo`` the coat tint alone."""
+    n = len(mu)
+    factor = np.ones((n, 3))
+    rows = np.arange(n)
+    for k in layers:
+        present = lobes.kind[:, k] != NONE
+        below = 1.0 - np.clip(_layer_albedo(lobes, k, rows, mu).max(axis=1), 0.0, 1.0) if albedo else np.ones(n)
+        step = below[:, None] * _coat_absorption(lobes, k, rows, mu)
+        factor *= np.where(present[:, None], np.maximum(step, 0.0), 1.0)
+    return factor
 
 
 def transparency(lobes):

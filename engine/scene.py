@@ -156,6 +156,13 @@ class Material:
     # Shader AOVs (AOV Output nodes): name -> ((r, g, b), value), constants.
     aovs: dict = field(default_factory=dict)
     volume: Optional[Volume] = None
+    # The tangent of its anisotropic lobes: a vector expression (a Tangent
+    # node's NodeOutput, Cycles' radial default included), projected onto the
+    # plane of the shading normal per hit; None: the shading frame's own.
+    tangent: Optional["Texture"] = None
+    # The lobes (slot indices: sheen, coat) whose albedo at the view angle
+    # dims the emission, as Cycles' Principled BSDF layers its emission.
+    emission_layers: tuple = ()
 
 
 DEFAULT_MATERIAL = Material("default", (Lobe("diffuse", (0.8, 0.8, 0.8)),))

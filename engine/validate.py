@@ -127,6 +127,11 @@ def validate_material(mat, index):
     _color_param(mat.emission, f"{what} emission")
     if getattr(mat, "normal", None) is not None:
         validate_normal(mat.normal, f"{what} normal")
+    if getattr(mat, "tangent", None) is not None:
+        validate_texture(mat.tangent, f"{what} tangent")
+    for k in getattr(mat, "emission_layers", ()):
+        if not (isinstance(k, (int, np.integer)) and 0 <= k < len(mat.lobes)):
+            raise SceneError(f"{what}: emission layer {k!r} is no lobe of its {len(mat.lobes)}")
     for k, lobe in enumerate(mat.lobes):
         if lobe.kind not in LOBE_KINDS:
             raise SceneError(f"{what}: lobe {k} has unknown kind {lobe.kind!r} "

@@ -84,7 +84,7 @@ def _volume(world, notes):
     """The World Output's Volume: a homogeneous medium everywhere (the
     material exporter's volume translation with constant inputs; a texture
     on one is read as the socket's value, named)."""
-    tree = world.node_tree if _uses_nodes(world) else None
+    tree = world.node_tree if compat.uses_nodes(world) else None
     output = None if tree is None else _output_node(tree)
     socket = None if output is None else output.inputs.get('Volume')
     if socket is None or not socket.is_linked:

@@ -161,6 +161,12 @@ def surface_emission(ctx, paths, hit, depth, obs):
     em = np.flatnonzero(row_any_positive(emission))
     if len(em) == 0:
         return
+    if ctx.materials.emission_layers:
+        # Sheen and coat dim the emission below them (Principled BSDF).
+        sub = hit.take(em)
+        emission = np.array(emission, copy=True)
+        emission[em] = ctx.materials.dim_emission(sub.mat, ShadingContext.of_hit(ctx.triangles, sub),
+                                                  dot(sub.wo, sub.ns), emission[em])
     if ctx.settings.strategy == "mis":
         emitter = ctx.lights.emitter_of_triangle(hit.mat[em])
         w = np.ones(len(em))
@@ -248,7 +254,8 @@ def shade(ctx, paths, hit, depth):
     """The Vertex of each hit: its material's lobes gathered at the point,
     the shading normal after normal maps and bump, the shading frame, and
     the lobe weights and selection (wo only: once per vertex)."""
-    lobes = ctx.materials.gather(hit.mat, shading(ctx, hit, paths, depth))
+    sc = shading(ctx, hit, paths, depth)
+    lobes = ctx.materials.gather(hit.mat, sc)
     if ctx.settings.filter_glossy > 0:
         filter_glossy(ctx, paths, lobes)
     if hit.back is not None:
@@ -259,6 +266,9 @@ def shade(ctx, paths, hit, depth):
         smooth = hit.ns
         hit.ns = ctx.materials.textures.perturb(hit, ctx.triangles)
     tt, bb = frame(hit.ns)
+    # Anisotropic lobes' tangents (evaluated on the unbent normal, as Cycles'
+    # Tangent node reads sd->N; projected onto the bent one).
+    ctx.materials.textures.tangent_frames(hit.mat, sc, hit.ns, tt, bb)
     wo_l = to_local(hit.wo, tt, bb, hit.ns)
     if smooth is not None and not np.array_equal(smooth, hit.ns):
         # Cycles' bump shadowing term (bsdf.bump_shadowing) needs the smooth

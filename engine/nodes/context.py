@@ -99,6 +99,9 @@ def _mesh_corner_data(mesh, key):
         return data[..., None] if data.ndim == 2 else data
     if key[0] == "generated":
         return generated_corners(mesh)
+    if key[0] == "tangent":
+        tangents = getattr(mesh, "tangents", None)
+        return None if tangents is None else np.asarray(tangents, dtype=np.float64)
     raise KeyError(key)
 
 
@@ -312,6 +315,13 @@ class ShadingContext:
             return _normalize(v)
         inv = shading.inverse[inst][:, :3, :3]
         return _normalize(np.einsum("nji,nj->ni", inv, v))
+
+    @property
+    def uv_tangent(self):
+        """(N, 3) object-space MikkTSpace tangent of the active UV map
+        (interpolated, unnormalized, as Cycles' tangent attribute), or None
+        where the meshes have none."""
+        return self._interpolate(("tangent",))
 
     @property
     def generated(self):
