@@ -1,0 +1,315 @@
+"""Subsurface scattering: Cycles 5.0's random walk as a stage of the bounce
+(kernel/integrator/subsurface.h, subsurface_random_walk.h, closure/bssrdf.h).
+
+At a vertex whose material has a subsurface lobe (engine/lobes/subsurface.py)
+``split`` takes the first part of the lobe-choice number, of the size of
+the subsurface lobes' selection probability, for the BSSRDF; the BSDF lobes
+share the rest (their weights and pdfs scaled by its size, so next-event
+estimation's MIS, which sees the subsurface lobe as zero, stays unbiased).
+A path that chose it gets Cycles' entry bounce (a refraction through a GGX
+microfacet, or for Skin half the time a cosine direction) and the closure
+weight over its selection probability; ``walk`` then follows it through the
+medium Cycles derives from the albedo and radius (``coefficients``: the
+radius remap of bssrdf_setup_radius, Christensen-Burley's albedo fit
+inverted into a single-scattering albedo, sigma_t = 1 / radius) until it
+meets the object's own surface again (the object's triangles alone, as
+Cycles' scene_intersect_local), choosing the colour channel of each
+distance by one-sample MIS (Cycles' volume_sample_channel, the balance
+heuristic over the three channels).  Its exit point is the next vertex:
+the path's ray is set to come from just outside towards it, the next
+bounce takes the recorded triangle without tracing, collects no emission
+there and shades it as a white diffuse lobe under the exit's shading
+normal (Cycles' subsurface_shader_data_setup).  A walk that leaves no exit
+within 256 bounces, or whose throughput falls below 1e-6, ends the path.
+
+Cycles also guides the walk's directions towards and away from the surface
+(Dwivedi sampling, MIS-combined with the classic walk); that changes only
+the variance, and is not done here.  Its similarity relation past the 9th
+bounce (isotropic with the reduced scattering coefficient) changes the
+result and is kept.
+"""
+import numpy as np
+
+from .. import bsdf
+from ..bsdf import kind_in
+from ..lobe_ids import DIFFUSE, NONE
+from ..lobes import EXTRA_PARAMS, table_value
+from ..lobes.subsurface import G_RANGE, IDS, IOR_RANGE, SUBSURFACE_SKIN, entry_direction
+from ..media.flight import channel_pdf
+from ..media.phase import hg_sample
+from ..nodes.rays import local_accel
+from ..sampler import subsurface_set
+from ..scene import Lobe
+
+MAX_BOUNCES = 256           # BSSRDF_MAX_BOUNCES
+THROUGHPUT_EPSILON = 1e-6   # VOLUME_THROUGHPUT_EPSILON
+SIMILARITY_LEVEL = 9        # SUBSURFACE_RANDOM_WALK_SIMILARITY_LEVEL
+MIN_ALPHA = 0.2             # subsurface_random_walk_coefficients' min_alpha
+MIN_RADIUS = 1e-8           # BSSRDF_MIN_RADIUS
+_WHITE = Lobe("diffuse", (1.0, 1.0, 1.0))   # the exit point's lobe
+
+
+def in_scene(materials):
+    """Whether any material has a subsurface lobe."""
+    return bool(np.any(kind_in(materials.kind, IDS)))
+
+
+# ----------------------------------------------------------------------------
+# Cycles' coefficients (float64 here; Cycles computes them in float32)
+
+def dipole_rd(alpha_prime, fourthird_a):
+    """bssrdf_dipole_compute_Rd."""
+    s = np.sqrt(3.0 * (1.0 - alpha_prime))
+    return 0.5 * alpha_prime * (1.0 + np.exp(-fourthird_a * s)) * np.exp(-s)
+
+
+def dipole_alpha_prime(rd, fourthird_a):
+    """bssrdf_dipole_compute_alpha_prime: 12 bisection steps on [0, 1]."""
+    rd = np.asarray(rd, np.float64)
+    x0, x1 = np.zeros_like(rd), np.ones_like(rd)
+    for _ in range(12):
+        mid = 0.5 * (x0 + x1)
+        low = dipole_rd(mid, fourthird_a) < rd
+        x0, x1 = np.where(low, mid, x0), np.where(low, x1, mid)
+    return np.where(rd < 1e-4, 0.0, np.where(rd >= 0.995, 0.999999, mid))   # Cycles returns the last midpoint
+
+
+def remapped_radius(radius, albedo, ior, skin):
+    """bssrdf_setup_radius (5.0): Random Walk scales the radius by 1 / (4 pi);
+    Skin by sqrt(3 (1 - alpha')), alpha' the dipole albedo of Jensen's Fdr
+    for the IOR.  radius, albedo (N, 3); ior, skin (N,)."""
+    inv = 1.0 / ior
+    f_dr = inv * (-1.440 * inv + 0.710) + 0.668 + 0.0636 * ior
+    fourthird_a = (4.0 / 3.0) * (1.0 + f_dr) / (1.0 - f_dr)
+    alpha_prime = dipole_alpha_prime(albedo, fourthird_a[:, None])
+    skin_scale = np.sqrt(3.0 * (1.0 - alpha_prime))
+    return radius * np.where(skin[:, None], skin_scale, 0.25 / np.pi)
+
+
+def single_scatter_albedo(albedo, g):
+    """subsurface_random_walk_remap: the single-scattering albedo whose
+    multiple-scattering albedo is the surface colour (a fit by g)."""
+    g = np.asarray(g, np.float64)[..., None]
+    g2 = g * g
+    g3 = g2 * g
+    g4, g5, g6, g7 = g2 * g2, g2 * g3, g3 * g3, g3 * g2 * g2
+    a = (1.8260523782 - 1.28451056436 * g - 1.79904629312 * g2 + 9.19393289202 * g3 - 22.8215585862 * g4
+         + 32.0234874259 * g5 - 23.6264803333 * g6 + 7.21067002658 * g7)
+    b = 4.98511194385 + 0.127355959438 * np.exp(31.1491581433 * g - 201.847017512 * g2 + 841.576016723 * g3
+                                                 - 2018.09288505 * g4 + 2731.71560286 * g5
+                                                 - 1935.41424244 * g6 + 559.009054474 * g7)
+    c = (1.09686102424 - 0.394704063468 * g + 1.05258115941 * g2 - 8.83963712726 * g3 + 28.8643230661 * g4
+         - 46.8802913581 * g5 + 38.5402837518 * g6 - 12.7181042538 * g7)
+    d = (0.496310210422 + 0.360146581622 * g - 2.15139309747 * g2 + 17.8896899217 * g3 - 55.2984010333 * g4
+         + 82.065982243 * g5 - 58.5106008578 * g6 + 15.8478295021 * g7)
+    e = 4.23190299701 + 0.00310603949088 * np.exp(76.7316253952 * g - 594.356773233 * g2 + 2448.8834203 * g3
+                                                   - 5576.68528998 * g4 + 7116.60171912 * g5
+                                                   - 4763.54467887 * g6 + 1303.5318055 * g7)
+    f = (2.40602999408 - 2.51814844609 * g + 9.18494908356 * g2 - 79.2191708682 * g3 + 259.082868209 * g4
+         - 403.613804597 * g5 + 302.85712436 * g6 - 87.4370473567 * g7)
+    albedo = np.maximum(albedo, 0.0)
+    blend = albedo ** 0.25
+    alpha = (1.0 - blend) * a * np.arctan(b * albedo) ** c + blend * d * np.arctan(e * albedo) ** f
+    return np.clip(alpha, 0.0, 0.999999)
+
+
+def coefficients(albedo, radius, g):
+    """subsurface_random_walk_coefficients: (sigma_t, single-scattering
+    albedo, throughput factor) per channel for a closure whose weight
+    already holds the albedo (divided out here: scattering adds it back);
+    albedos below 0.2 are raised to it with the throughput lowered to match."""
+    alpha = single_scatter_albedo(albedo, g)
+    sigma_t = 1.0 / (np.maximum(radius, 1e-16) * (1.0 - np.asarray(g)[..., None]))
+    factor = np.where(albedo > 0, 1.0 / np.where(albedo > 0, albedo, 1.0), 0.0)
+    low = alpha < MIN_ALPHA
+    factor = np.where(low, factor * alpha / MIN_ALPHA, factor)
+    return sigma_t, np.where(low, MIN_ALPHA, alpha), factor
+
+
+# ----------------------------------------------------------------------------
+# the stage
+
+def split(v, u_lobe):
+    """The vertices that take a subsurface lobe: returns (rows, slot, the
+    selection left to the BSDF lobes (renormalized), their u_lobe, the
+    BSDF lobes' share (N,))."""
+    sel = v.lobes_wo[0]
+    ss = kind_in(v.lobes.kind, IDS)
+    q = np.where(ss, sel, 0.0)
+    q_total = q.sum(axis=1)
+    chose = u_lobe < q_total
+    rows = np.flatnonzero(chose)
+    cdf = np.cumsum(q[rows], axis=1)
+    slot = np.minimum((u_lobe[rows, None] >= cdf).sum(axis=1), sel.shape[1] - 1)
+    rest = 1.0 - q_total
+    safe = np.where(rest > 0, rest, 1.0)
+    bsdf_sel = np.where(ss, 0.0, sel) / safe[:, None]
+    u_bsdf = np.clip((u_lobe - q_total) / safe, 0.0, 1.0 - 1e-12)
+    return rows, slot, bsdf_sel, u_bsdf, rest
+
+
+def sample(v, u):
+    """The vertex's sample (bsdf.sample's (wi_l, weight, pdf, delta)) with
+    the subsurface lobes taking their share of the lobe choice u[:, 0]:
+    their rows get the entry bounce (``entry``), recorded in ``v.bssrdf``
+    for ``walk``; the BSDF lobes' weights and pdfs include their share."""
+    rows, slot, bsdf_sel, u_bsdf, share = split(v, u[:, 0])
+    wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u_bsdf, u[:, 1], u[:, 2], bsdf_sel, v.lobes_wo[1])
+    weight = weight / np.where(share > 0, share, 1.0)[:, None]
+    pdf = pdf * share
+    entry(v, rows, slot, u[:, 1], u[:, 2], wi_l, weight, pdf, delta)
+    v.bssrdf = (rows, slot)
+    return wi_l, weight, pdf, delta
+
+
+def entry(v, rows, slot, u1, u2, wi_l, weight, pdf, delta):
+    """Cycles' subsurface_bounce for ``rows``: the entry direction and the
+    closure weight over its selection probability, written into the
+    sample arrays (wi_l, weight, pdf, delta) in place."""
+    lobes = v.lobes
+    sel, w = v.lobes_wo
+    skin = lobes.kind[rows, slot] == SUBSURFACE_SKIN
+    wi, ok = entry_direction(skin, v.wo_l[rows], lobes.alpha[rows, slot], lobes.ior[rows, slot], u1[rows], u2[rows])
+    p = sel[rows, slot]
+    wi_l[rows] = wi
+    weight[rows] = np.where(ok[:, None], w[rows, slot] / np.where(p > 0, p, 1.0)[:, None], 0.0)
+    pdf[rows] = p
+    delta[rows] = True
+
+
+def walk(ctx, paths, v, alive, depth):
+    """The random walks of the paths that chose a subsurface lobe at ``v``
+    (``v.bssrdf``, set by ``entry``'s caller) and live on, from their new
+    ray (inside the object).  Updates their throughput and, for those that
+    leave, points their ray at the exit from just outside and records its
+    triangle (Paths.exit_prim, exit_hit).  Returns ``alive`` with the walks
+    that found no exit ended."""
+    rows, slot = v.bssrdf
+    keep = alive[rows]
+    rows, slot = rows[keep], slot[keep]
+    if len(rows) == 0:
+        return alive
+    albedo, radius, g = _params(v.lobes, rows, slot)
+    sigma_t, alpha, factor = coefficients(albedo, radius, g)
+    instance = ctx.triangles.shading.instance[v.hit.prim[rows]]
+    beta, o, d, exit_prim, exit_bary = random_walk(ctx, paths.o[rows], paths.d[rows], paths.beta[rows] * factor,
+                                                   sigma_t, alpha, g, instance, paths.pseed[rows],
+                                                   paths.sample[rows], depth)
+    out = exit_prim >= 0
+    alive = alive.copy()
+    alive[rows[~out]] = False
+    rows, o, d = rows[out], o[out], d[out]
+    s = ctx.accel.offset_scale(o)
+    paths.beta[rows] = beta[out]
+    # Cycles pretends the ray comes from outside towards the exit point.
+    paths.o[rows] = o + d * s[:, None]
+    paths.d[rows] = -d
+    paths.tmax[rows] = 2.0 * s
+    paths.mis_o[rows] = paths.o[rows]
+    paths.exit_prim[rows] = exit_prim[out]
+    paths.exit_hit[rows] = np.column_stack([exit_bary[out], s])
+    return alive
+
+
+def random_walk(ctx, o, d, beta, sigma_t, alpha, g, instance, pseed, sample, depth):
+    """Cycles' subsurface_random_walk (without its guiding) for N walks from
+    o along d inside objects ``instance`` with extinction sigma_t (N, 3),
+    single-scattering albedo alpha (N, 3) and Henyey-Greenstein g (N,),
+    throughput beta (N, 3).  Returns (beta, exit points, directions there,
+    exit triangle (-1: no exit), its barycentrics)."""
+    o, d, beta = np.array(o, np.float64), np.array(d, np.float64), np.array(beta, np.float64)
+    g = np.broadcast_to(np.asarray(g, np.float64), (len(o),))
+    sigma_s = sigma_t * alpha
+    # Past the similarity level: isotropic with the reduced scattering coefficient.
+    sigma_s_star = sigma_s * (1.0 - g)[:, None]
+    sigma_t_star = sigma_t - sigma_s + sigma_s_star
+    exit_prim = np.full(len(o), -1, np.int64)
+    exit_bary = np.zeros((len(o), 2))
+    active = np.arange(len(o))
+    for bounce in range(MAX_BOUNCES):
+        if len(active) == 0:
+            break
+        u = ctx.sampler.get(pseed[active], sample[active], subsurface_set(depth, bounce, 0))
+        similar = bounce > SIMILARITY_LEVEL
+        st = (sigma_t_star if similar else sigma_t)[active]
+        ss = (sigma_s_star if similar else sigma_s)[active]
+        if bounce > 0:
+            d[active] = hg_sample(d[active], 0.0 if similar else g[active], u[:, 2], u[:, 3])[0]
+        bt = beta[active]
+        cpdf = channel_pdf(bt, alpha[active], np.ones_like(bt))
+        channel = np.minimum((u[:, 0:1] >= np.cumsum(cpdf, axis=1)).sum(axis=1), 2)
+        t = -np.log1p(-u[:, 1]) / st[np.arange(len(active)), channel]
+        hit, t_hit, prim, bary = _local_hits(ctx, o[active], d[active], t, instance[active])
+        t = np.where(hit, t_hit, t)
+        tr = np.exp(-st * t[:, None])
+        pdf = np.where(hit[:, None], tr, st * tr)
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            step = bt * np.where(hit[:, None], tr, ss * tr) / np.sum(cpdf * pdf, axis=1)[:, None]
+        beta[active] = np.where(np.isfinite(step), step, 0.0)
+        o[active] += d[active] * t[:, None]
+        exit_prim[active[hit]] = prim[hit]
+        exit_bary[active[hit]] = bary[hit]
+        faded = beta[active].max(axis=1) < THROUGHPUT_EPSILON
+        active = active[~(hit | faded)]
+    return beta, o, d, exit_prim, exit_bary
+
+
+def _local_hits(ctx, o, d, tmax, instance):
+    """The first hit on each ray's own object within tmax: (hit (N,) bool,
+    t, global prim, barycentrics (N, 2))."""
+    n = len(o)
+    hit, t, prim, bary = np.zeros(n, bool), np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros((n, 2))
+    for inst in np.unique(instance):
+        rows = np.flatnonzero(instance == inst)
+        accel, prims = local_accel(ctx.accel, ctx.triangles, int(inst))
+        ti, pi, bu, bv = accel.intersect(o[rows], d[rows], tmax[rows])
+        found = (pi >= 0) & (ti <= tmax[rows])
+        r = rows[found]
+        hit[r], t[r], prim[r] = True, ti[found], prims[pi[found]]
+        bary[r, 0], bary[r, 1] = bu[found], bv[found]
+    return hit, t, prim, bary
+
+
+def arrive(paths, found):
+    """The next bounce's hits of the paths on their way to a subsurface
+    exit: the recorded triangle, no light on the way; marks them (-2) for
+    ``exit_lobes``."""
+    rows = np.flatnonzero(paths.exit_prim >= 0)
+    if len(rows) == 0:
+        return
+    found.prim[rows] = paths.exit_prim[rows]
+    found.bu[rows], found.bv[rows], found.t[rows] = paths.exit_hit[rows].T
+    found.light[rows] = False
+    paths.exit_prim[rows] = -2
+
+
+def at_exit(paths):
+    """Paths shading a subsurface exit point this bounce."""
+    return paths.exit_prim == -2
+
+
+def exit_lobes(paths, lobes):
+    """Cycles' subsurface_shader_data_setup: a white diffuse lobe of weight 1
+    replaces the material's lobes at exit points (under the shading normal
+    the material's normal map or bump gives); the mark is cleared."""
+    rows = np.flatnonzero(at_exit(paths))
+    if len(rows) == 0:
+        return
+    for param in EXTRA_PARAMS:
+        getattr(lobes, param.field)[rows] = table_value(param, _WHITE)
+    lobes.kind[rows] = NONE
+    lobes.kind[rows, 0] = DIFFUSE
+    lobes.color[rows] = 0.0
+    lobes.color[rows, 0] = 1.0
+    lobes.alpha[rows] = 1.0
+    lobes.schlick[rows] = False
+    paths.exit_prim[rows] = -1
+
+
+def _params(lobes, rows, slot):
+    albedo = np.clip(lobes.color[rows, slot], 0.0, 1.0)
+    ior = np.clip(lobes.ior[rows, slot], *IOR_RANGE)
+    g = np.clip(lobes.phase_g[rows, slot], *G_RANGE)
+    skin = lobes.kind[rows, slot] == SUBSURFACE_SKIN
+    radius = remapped_radius(np.maximum(lobes.radius[rows, slot], MIN_RADIUS), albedo, ior, skin)
+    return albedo, radius, g
