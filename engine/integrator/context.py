@@ -68,6 +68,7 @@ class Context:
     media: object = None
     # Some material has a subsurface lobe (integrator/subsurface.py).
     subsurface: bool = False
+    subsurface_warnings: tuple = ()
 
     @classmethod
     def build(cls, accel, triangles, materials, lights, camera, world, settings, sampler=None,

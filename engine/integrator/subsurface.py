@@ -35,6 +35,8 @@ from ..bsdf import kind_in
 from ..lobe_ids import DIFFUSE, NONE
 from ..lobes import EXTRA_PARAMS, table_value
 from ..lobes.subsurface import G_RANGE, IDS, IOR_RANGE, SUBSURFACE_SKIN, entry_direction
+from ..lobes import REGISTRY, SUBSURFACE
+from ..media import open_meshes
 from ..media.flight import channel_pdf
 from ..media.phase import hg_sample
 from ..nodes.rays import local_accel
@@ -52,6 +54,16 @@ _WHITE = Lobe("diffuse", (1.0, 1.0, 1.0))   # the exit point's lobe
 def in_scene(materials):
     """Whether any material has a subsurface lobe."""
     return bool(np.any(kind_in(materials.kind, IDS)))
+
+
+def open_mesh_warnings(scene):
+    """One warning per object whose subsurface material's triangles do not
+    close: walks entering there may never come out (Cycles loses them too)."""
+    def uses(material):
+        return any(REGISTRY[lobe.kind].has(SUBSURFACE) for lobe in material.lobes if lobe.kind in REGISTRY)
+    return [f"material {', '.join(repr(m) for m in mats)} on object {name!r}: subsurface scattering on a mesh "
+            "that is not closed; light entering it may never come out (rendered darker)"
+            for name, mats in open_meshes(scene, uses)]
 
 
 # ----------------------------------------------------------------------------
