@@ -37,7 +37,6 @@ from ..lobes import EXTRA_PARAMS, table_value
 from ..lobes.subsurface import G_RANGE, IDS, IOR_RANGE, SUBSURFACE_SKIN, entry_direction
 from ..lobes import REGISTRY, SUBSURFACE
 from ..media import open_meshes
-from ..media.flight import channel_pdf
 from ..media.phase import hg_sample
 from ..nodes.rays import local_accel
 from ..sampler import subsurface_set
@@ -228,42 +227,53 @@ def random_walk(ctx, o, d, beta, sigma_t, alpha, g, instance, pseed, sample, dep
     o along d inside objects ``instance`` with extinction sigma_t (N, 3),
     single-scattering albedo alpha (N, 3) and Henyey-Greenstein g (N,),
     throughput beta (N, 3).  Returns (beta, exit points, directions there,
-    exit triangle (-1: no exit), its barycentrics)."""
-    o, d, beta = np.array(o, np.float64), np.array(d, np.float64), np.array(beta, np.float64)
-    g = np.broadcast_to(np.asarray(g, np.float64), (len(o),))
+    exit triangle (-1: no exit), its barycentrics).  The walks in progress
+    are kept dense (finished ones written out and dropped)."""
+    n = len(o)
+    g = np.broadcast_to(np.asarray(g, np.float64), (n,))
     sigma_s = sigma_t * alpha
     # Past the similarity level: isotropic with the reduced scattering coefficient.
     sigma_s_star = sigma_s * (1.0 - g)[:, None]
     sigma_t_star = sigma_t - sigma_s + sigma_s_star
-    exit_prim = np.full(len(o), -1, np.int64)
-    exit_bary = np.zeros((len(o), 2))
-    active = np.arange(len(o))
+    out_beta, out_o, out_d = np.zeros((n, 3)), np.array(o, np.float64), np.array(d, np.float64)
+    exit_prim = np.full(n, -1, np.int64)
+    exit_bary = np.zeros((n, 2))
+    live = [np.arange(n), out_o.copy(), out_d.copy(), np.array(beta, np.float64), sigma_t, sigma_s, sigma_t_star,
+            sigma_s_star, np.asarray(alpha, np.float64), g, instance, pseed, sample]
     for bounce in range(MAX_BOUNCES):
-        if len(active) == 0:
+        rows, o, d, b, st, ss, st_star, ss_star, a, gg, inst, ps, sm = live
+        m = len(rows)
+        if m == 0:
             break
-        u = ctx.sampler.get(pseed[active], sample[active], subsurface_set(depth, bounce, 0))
+        u = ctx.sampler.get(ps, sm, subsurface_set(depth, bounce, 0))
         similar = bounce > SIMILARITY_LEVEL
-        st = (sigma_t_star if similar else sigma_t)[active]
-        ss = (sigma_s_star if similar else sigma_s)[active]
+        if similar:
+            st, ss = st_star, ss_star
         if bounce > 0:
-            d[active] = hg_sample(d[active], 0.0 if similar else g[active], u[:, 2], u[:, 3])[0]
-        bt = beta[active]
-        cpdf = channel_pdf(bt, alpha[active], np.ones_like(bt))
-        channel = np.minimum((u[:, 0:1] >= np.cumsum(cpdf, axis=1)).sum(axis=1), 2)
-        t = -np.log1p(-u[:, 1]) / st[np.arange(len(active)), channel]
-        hit, t_hit, prim, bary = _local_hits(ctx, o[active], d[active], t, instance[active])
+            d = hg_sample(d, 0.0 if similar else gg, u[:, 2], u[:, 3])[0]
+        # Cycles' volume_sample_channel: |throughput x albedo|, else uniform.
+        wc = np.abs(b * a)
+        total = wc.sum(axis=1)
+        cpdf = np.where(total[:, None] > 0, wc / np.where(total > 0, total, 1.0)[:, None], 1.0 / 3.0)
+        channel = (u[:, 0] >= cpdf[:, 0]).astype(np.int64) + (u[:, 0] >= cpdf[:, 0] + cpdf[:, 1])
+        t = -np.log1p(-u[:, 1]) / st[np.arange(m), channel]
+        hit, t_hit, prim, bary = _local_hits(ctx, o, d, t, inst)
         t = np.where(hit, t_hit, t)
         tr = np.exp(-st * t[:, None])
         pdf = np.where(hit[:, None], tr, st * tr)
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            step = bt * np.where(hit[:, None], tr, ss * tr) / np.sum(cpdf * pdf, axis=1)[:, None]
-        beta[active] = np.where(np.isfinite(step), step, 0.0)
-        o[active] += d[active] * t[:, None]
-        exit_prim[active[hit]] = prim[hit]
-        exit_bary[active[hit]] = bary[hit]
-        faded = beta[active].max(axis=1) < THROUGHPUT_EPSILON
-        active = active[~(hit | faded)]
-    return beta, o, d, exit_prim, exit_bary
+            b = b * np.where(hit[:, None], tr, ss * tr) / np.sum(cpdf * pdf, axis=1)[:, None]
+        b = np.where(np.isfinite(b), b, 0.0)
+        o = o + d * t[:, None]
+        done = hit | (b.max(axis=1) < THROUGHPUT_EPSILON)
+        live = [rows, o, d, b, *live[4:]]
+        if done.any():
+            r = rows[hit]
+            out_beta[r], out_o[r], out_d[r] = b[hit], o[hit], d[hit]
+            exit_prim[r], exit_bary[r] = prim[hit], bary[hit]
+            keep = np.flatnonzero(~done)
+            live = [x.take(keep, axis=0) for x in live]
+    return out_beta, out_o, out_d, exit_prim, exit_bary
 
 
 def _local_hits(ctx, o, d, tmax, instance):
