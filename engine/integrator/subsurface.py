@@ -37,7 +37,9 @@ from ..lobes import EXTRA_PARAMS, table_value
 from ..lobes.subsurface import G_RANGE, IDS, IOR_RANGE, SUBSURFACE_SKIN, entry_direction
 from ..lobes import REGISTRY, SUBSURFACE
 from ..media import open_meshes
-from ..media.phase import hg_sample
+from ..kernels import loop_kernel
+from ..media.phase import G_LIMIT
+from ..vec import frame_of
 from ..nodes.rays import local_accel
 from ..sampler import subsurface_set
 from ..scene import Lobe
@@ -228,9 +230,13 @@ def random_walk(ctx, o, d, beta, sigma_t, alpha, g, instance, pseed, sample, dep
     single-scattering albedo alpha (N, 3) and Henyey-Greenstein g (N,),
     throughput beta (N, 3).  Returns (beta, exit points, directions there,
     exit triangle (-1: no exit), its barycentrics).  The walks in progress
-    are kept dense (finished ones written out and dropped)."""
+    are kept dense (finished ones written out and dropped); each bounce is
+    two compiled row loops (``_direction_rows``, ``_advance_rows``) around
+    the intersection."""
     n = len(o)
-    g = np.broadcast_to(np.asarray(g, np.float64), (n,))
+    g = np.array(np.broadcast_to(np.asarray(g, np.float64), (n,)))
+    sigma_t = np.ascontiguousarray(sigma_t, np.float64)
+    alpha = np.ascontiguousarray(alpha, np.float64)
     sigma_s = sigma_t * alpha
     # Past the similarity level: isotropic with the reduced scattering coefficient.
     sigma_s_star = sigma_s * (1.0 - g)[:, None]
@@ -239,34 +245,21 @@ def random_walk(ctx, o, d, beta, sigma_t, alpha, g, instance, pseed, sample, dep
     exit_prim = np.full(n, -1, np.int64)
     exit_bary = np.zeros((n, 2))
     live = [np.arange(n), out_o.copy(), out_d.copy(), np.array(beta, np.float64), sigma_t, sigma_s, sigma_t_star,
-            sigma_s_star, np.asarray(alpha, np.float64), g, instance, pseed, sample]
+            sigma_s_star, alpha, g, instance, pseed, sample]
     for bounce in range(MAX_BOUNCES):
         rows, o, d, b, st, ss, st_star, ss_star, a, gg, inst, ps, sm = live
         m = len(rows)
         if m == 0:
             break
-        u = ctx.sampler.get(ps, sm, subsurface_set(depth, bounce, 0))
+        u = np.ascontiguousarray(ctx.sampler.get(ps, sm, subsurface_set(depth, bounce, 0)), np.float64)
         similar = bounce > SIMILARITY_LEVEL
         if similar:
-            st, ss = st_star, ss_star
-        if bounce > 0:
-            d = hg_sample(d, 0.0 if similar else gg, u[:, 2], u[:, 3])[0]
-        # Cycles' volume_sample_channel: |throughput x albedo|, else uniform.
-        wc = np.abs(b * a)
-        total = wc.sum(axis=1)
-        cpdf = np.where(total[:, None] > 0, wc / np.where(total > 0, total, 1.0)[:, None], 1.0 / 3.0)
-        channel = (u[:, 0] >= cpdf[:, 0]).astype(np.int64) + (u[:, 0] >= cpdf[:, 0] + cpdf[:, 1])
-        t = -np.log1p(-u[:, 1]) / st[np.arange(m), channel]
+            st, ss, gg = st_star, ss_star, np.zeros(m)
+        t = np.empty(m)
+        _direction_rows(u, d, gg, b, a, st, bounce > 0, t)
         hit, t_hit, prim, bary = _local_hits(ctx, o, d, t, inst)
-        t = np.where(hit, t_hit, t)
-        tr = np.exp(-st * t[:, None])
-        pdf = np.where(hit[:, None], tr, st * tr)
-        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            b = b * np.where(hit[:, None], tr, ss * tr) / np.sum(cpdf * pdf, axis=1)[:, None]
-        b = np.where(np.isfinite(b), b, 0.0)
-        o = o + d * t[:, None]
-        done = hit | (b.max(axis=1) < THROUGHPUT_EPSILON)
-        live = [rows, o, d, b, *live[4:]]
+        done = np.empty(m, bool)
+        _advance_rows(hit, t_hit, t, u, b, a, st, ss, o, d, done)
         if done.any():
             r = rows[hit]
             out_beta[r], out_o[r], out_d[r] = b[hit], o[hit], d[hit]
@@ -274,6 +267,115 @@ def random_walk(ctx, o, d, beta, sigma_t, alpha, g, instance, pseed, sample, dep
             keep = np.flatnonzero(~done)
             live = [x.take(keep, axis=0) for x in live]
     return out_beta, out_o, out_d, exit_prim, exit_bary
+
+
+def _channel_pdf(b, a):
+    """Cycles' volume_sample_channel_pdf: |throughput x albedo| normalized, else uniform."""
+    w = np.abs(b * a)
+    total = w.sum(axis=1)
+    return np.where(total[:, None] > 0, w / np.where(total > 0, total, 1.0)[:, None], 1.0 / 3.0)
+
+
+def _direction_numpy(u, d, g, b, a, st, scatter, t):
+    """The next direction (Henyey-Greenstein about d, in place, when
+    ``scatter``), the colour channel by u[:, 0] and a free-flight distance
+    t of its extinction by u[:, 1]."""
+    if scatter:
+        gc = np.clip(g, -G_LIMIT, G_LIMIT)
+        iso = np.abs(gc) < 1e-3
+        gs = np.where(iso, 0.5, gc)
+        k = (1.0 - gs * gs) / (1.0 - gs + 2.0 * gs * u[:, 2])
+        cos = np.clip(np.where(iso, 1.0 - 2.0 * u[:, 2], (1.0 + gs * gs - k * k) / (2.0 * gs)), -1.0, 1.0)
+        sin = np.sqrt(np.maximum(1.0 - cos * cos, 0.0))
+        phi = 2.0 * np.pi * u[:, 3]
+        x, y = sin * np.cos(phi), sin * np.sin(phi)
+        sign = 2.0 * (d[:, 2] >= 0.0) - 1.0
+        q = -1.0 / (sign + d[:, 2])
+        r = d[:, 0] * d[:, 1] * q
+        s0, s1, s2 = 1.0 + sign * d[:, 0] * d[:, 0] * q, sign * r, -sign * d[:, 0]
+        t0, t1, t2 = r, sign + d[:, 1] * d[:, 1] * q, -d[:, 1]
+        new = np.stack([x * s0 + y * t0 + cos * d[:, 0], x * s1 + y * t1 + cos * d[:, 1],
+                        x * s2 + y * t2 + cos * d[:, 2]], axis=1)
+        d[:] = new / np.sqrt(np.sum(new * new, axis=1))[:, None]
+    cpdf = _channel_pdf(b, a)
+    channel = (u[:, 0] >= cpdf[:, 0]).astype(np.int64) + (u[:, 0] >= cpdf[:, 0] + cpdf[:, 1])
+    t[:] = -np.log1p(-u[:, 1]) / st[np.arange(len(t)), channel]
+
+
+@loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[::1], float64[:, ::1], float64[:, ::1], "
+             "float64[:, ::1], boolean, float64[::1])", _direction_numpy)
+def _direction_rows(u, d, g, b, a, st, scatter, t):
+    for i in range(len(t)):
+        if scatter:
+            gc = min(max(g[i], -G_LIMIT), G_LIMIT)
+            if abs(gc) < 1e-3:
+                cos = 1.0 - 2.0 * u[i, 2]
+            else:
+                k = (1.0 - gc * gc) / (1.0 - gc + 2.0 * gc * u[i, 2])
+                cos = (1.0 + gc * gc - k * k) / (2.0 * gc)
+            cos = min(max(cos, -1.0), 1.0)
+            sin = np.sqrt(max(1.0 - cos * cos, 0.0))
+            phi = 2.0 * np.pi * u[i, 3]
+            x, y = sin * np.cos(phi), sin * np.sin(phi)
+            s0, s1, s2, t0, t1, t2 = frame_of(d[i, 0], d[i, 1], d[i, 2])
+            n0 = x * s0 + y * t0 + cos * d[i, 0]
+            n1 = x * s1 + y * t1 + cos * d[i, 1]
+            n2 = x * s2 + y * t2 + cos * d[i, 2]
+            length = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+            d[i, 0], d[i, 1], d[i, 2] = n0 / length, n1 / length, n2 / length
+        w0, w1, w2 = abs(b[i, 0] * a[i, 0]), abs(b[i, 1] * a[i, 1]), abs(b[i, 2] * a[i, 2])
+        total = w0 + w1 + w2
+        p0, p1 = (w0 / total, w1 / total) if total > 0 else (1.0 / 3.0, 1.0 / 3.0)
+        c = (1 if u[i, 0] >= p0 else 0) + (1 if u[i, 0] >= p0 + p1 else 0)
+        t[i] = -np.log1p(-u[i, 1]) / st[i, c]
+
+
+def _advance_numpy(hit, t_hit, t, u, b, a, st, ss, o, d, done):
+    """Cycles' update after the ray-cast: the distance (to the exit where
+    the segment met the surface), the throughput by one-sample MIS over the
+    channels (transmittance, times sigma_s at a scattering), the point
+    moved on (all in place); ``done``: exited or faded."""
+    t[:] = np.where(hit, t_hit, t)
+    cpdf = _channel_pdf(b, a)
+    tr = np.exp(-st * t[:, None])
+    pdf = np.where(hit[:, None], tr, st * tr)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        step = b * np.where(hit[:, None], tr, ss * tr) / np.sum(cpdf * pdf, axis=1)[:, None]
+    b[:] = np.where(np.isfinite(step), step, 0.0)
+    o += d * t[:, None]
+    done[:] = hit | (np.max(b, axis=1) < THROUGHPUT_EPSILON)
+
+
+@loop_kernel("void(boolean[::1], float64[::1], float64[::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], "
+             "float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], boolean[::1])", _advance_numpy)
+def _advance_rows(hit, t_hit, t, u, b, a, st, ss, o, d, done):
+    for i in range(len(t)):
+        if hit[i]:
+            t[i] = t_hit[i]
+        ti = t[i]
+        w0, w1, w2 = abs(b[i, 0] * a[i, 0]), abs(b[i, 1] * a[i, 1]), abs(b[i, 2] * a[i, 2])
+        total = w0 + w1 + w2
+        if total > 0:
+            p0, p1, p2 = w0 / total, w1 / total, w2 / total
+        else:
+            p0 = p1 = p2 = 1.0 / 3.0
+        tr0, tr1, tr2 = np.exp(-st[i, 0] * ti), np.exp(-st[i, 1] * ti), np.exp(-st[i, 2] * ti)
+        if hit[i]:
+            denom = p0 * tr0 + p1 * tr1 + p2 * tr2
+            f0, f1, f2 = tr0, tr1, tr2
+        else:
+            denom = p0 * st[i, 0] * tr0 + p1 * st[i, 1] * tr1 + p2 * st[i, 2] * tr2
+            f0, f1, f2 = ss[i, 0] * tr0, ss[i, 1] * tr1, ss[i, 2] * tr2
+        largest = 0.0
+        for c, f in ((0, f0), (1, f1), (2, f2)):
+            v = b[i, c] * f / denom if denom != 0 else np.nan
+            v = v if np.isfinite(v) else 0.0
+            b[i, c] = v
+            largest = v if c == 0 else max(largest, v)
+        o[i, 0] += d[i, 0] * ti
+        o[i, 1] += d[i, 1] * ti
+        o[i, 2] += d[i, 2] * ti
+        done[i] = hit[i] or largest < THROUGHPUT_EPSILON
 
 
 def _local_hits(ctx, o, d, tmax, instance):

@@ -16,6 +16,7 @@ import pytest
 
 from ember_stats import detectable, family_level, z_threshold
 from engine.integrator import subsurface as ss
+ss_mod = ss
 from engine.render import prepare, render
 from engine.scene import Camera, Instance, Lobe, Material, RenderSettings, Scene, World
 from engine.testscenes import box, look_at, quad, uv_sphere
@@ -143,3 +144,35 @@ def test_open_mesh_is_named(mesh):
                RenderSettings(samples=2, samples_per_pass=2, max_bounces=4))
     assert np.isfinite(r.image).all()
     assert any("'wax'" in w and "'ball'" in w and "not closed" in w for w in r.warnings), r.warnings
+
+
+def test_walk_kernels_agree():
+    """The walk's two row loops, compiled, against their NumPy forms (to
+    rounding: numba calls libm, NumPy its own transcendentals)."""
+    from engine import kernels
+    rng = np.random.default_rng(4)
+    n = 5000
+    u = rng.random((n, 4))
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    d[:5] = [[0, 0, 1], [0, 0, -1], [1, 0, 0], [0, -1, 0], [0.6, 0, -0.8]]
+    g = rng.uniform(-1.0, 1.0, n)
+    g[:50] = 0.0
+    b = rng.random((n, 3))
+    b[:20] = 0.0
+    a = rng.random((n, 3))
+    st = rng.uniform(0.1, 10.0, (n, 3))
+    ss = st * a
+    hit = rng.random(n) < 0.3
+    t_hit = rng.random(n)
+    for jit in (False, True):
+        kernels.configure(jit)
+        dd, t = d.copy(), np.empty(n)
+        ss_mod._direction_rows(u, dd, g, b, a, st, True, t)
+        bb, o, t2, done = b.copy(), np.zeros((n, 3)), t.copy(), np.empty(n, bool)
+        ss_mod._advance_rows(hit, t_hit, t2, u, bb, a, st, ss, o, dd, done)
+        if not jit:
+            ref = dd, t, bb, o, done
+    for x, y in zip(ref[:4], (dd, t, bb, o)):
+        np.testing.assert_allclose(y, x, rtol=1e-9, atol=1e-12)
+    assert np.array_equal(ref[4], done)
