@@ -23,7 +23,8 @@ import bpy
 import numpy as np
 import pytest
 
-from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
+from ember_testlib import (built_reference_scene, empty_factory_scene, render_against_reference, render_for_reference,
+                           small_resolution)
 
 WIDTH, HEIGHT = 40, 30
 BLOCK = 10
@@ -127,20 +128,13 @@ SCENES = {'spheres': scene_spheres, 'backlit': scene_backlit}
 
 def reference_scene(name, folder=None):
     """The scene ``name`` and its bounces (as tools/cycles_references.py renders it)."""
-    scene = empty_factory_scene()
-    bounces = SCENES[name](scene)
-    small_resolution(scene, WIDTH, HEIGHT)
-    return scene, bounces
+    return built_reference_scene(SCENES[name], WIDTH, HEIGHT)
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))
 def test_subsurface_parity_with_cycles(name, tmp_path, tapped_engine):
     scene, bounces = reference_scene(name)
-    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, EMBER_SPP, 1, bounces)
-    from addon import engine as ember_engine
-    log = ember_engine.RENDER_LOG[-1]
-    assert not [w for w in log.get('warnings', ()) if 'Material' in w], log.get('warnings')
-    check = check_against_reference('subsurface_' + name, scene, bounces, image, var, EMBER_SPP, BLOCK)
+    check = render_against_reference('subsurface_' + name, scene, bounces, tmp_path, tapped_engine, EMBER_SPP, BLOCK)
     check.assert_agrees(0.01, 0.05)
 
 
