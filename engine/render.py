@@ -25,7 +25,7 @@ from .camera import CameraModel, PixelFilter
 from . import kernels, media, pass_events
 from .film import Film
 from .geometry import flatten, material_table
-from .integrator import Context, trace_batch
+from .integrator import Context, subsurface, trace_batch
 from .lights import LightSet
 from .sampler import Sampler
 from .scene import Cancelled, RenderSettings, SceneError
@@ -89,11 +89,14 @@ def prepare(scene, settings):
         raise SceneError(f"camera: {exc}") from None
     accel = Accel(tris)
     world = np.asarray(scene.world.color, dtype=np.float64)
-    return Context.build(accel, tris, materials, lights, camera, world, settings,
-                         sampler=Sampler(settings.seed, settings.sampling_pattern),
-                         bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
-                         pass_config=pass_events.configure(scene, settings),
-                         media=_media(scene, accel, tris, camera))
+    ctx = Context.build(accel, tris, materials, lights, camera, world, settings,
+                        sampler=Sampler(settings.seed, settings.sampling_pattern),
+                        bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
+                        pass_config=pass_events.configure(scene, settings),
+                        media=_media(scene, accel, tris, camera))
+    if ctx.subsurface:
+        ctx = dataclasses.replace(ctx, subsurface_warnings=tuple(subsurface.open_mesh_warnings(scene)))
+    return ctx
 
 
 def _media(scene, accel, tris, camera):
@@ -163,6 +166,7 @@ def warnings_for(ctx):
     if ctx.media is not None:
         out.extend(ctx.media.warnings)
         out.extend(ctx.media.field_warnings())
+    out.extend(ctx.subsurface_warnings)
     out.extend(ctx.materials.textures.bent_away_warnings())
     return out
 

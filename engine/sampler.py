@@ -45,6 +45,14 @@ def vertex_set(step, which):
     return 1 + step * _SETS_PER_STEP + which
 
 
+def subsurface_set(step, bounce, which):
+    """Dimension-set id of a subsurface random walk's bounce ``bounce`` at
+    wavefront step ``step`` (``which`` 0: channel, distance and direction;
+    1: spare): disjoint from the vertex, node (bit 29) and all-lights (bit
+    30) sets."""
+    return 0x10000000 | ((int(step) & 0xFF) << 20) | ((int(bounce) & 0x3FFFF) << 1) | (int(which) & 1)
+
+
 def emitter_set(step, emitter):
     """Dimension-set id for emitter ``emitter`` in all-lights mode."""
     return 0x40000000 | ((step & 0xff) << 22) | (int(emitter) & 0x3fffff)

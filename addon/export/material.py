@@ -21,13 +21,13 @@ import math
 from dataclasses import dataclass, field
 
 from .. import backend
-from . import compat, nodes
+from . import compat, nodes, subsurface
 
 GREY = (0.8, 0.8, 0.8)
 # Principled BSDF inputs (3.x and 4.x names) whose features are not rendered
-# yet (subsurface scattering renders as diffuse, thin film as no film).
+# yet (3.x's Subsurface renders as diffuse, thin film as no film).
 PRINCIPLED_UNSUPPORTED = (
-    'Subsurface', 'Subsurface Weight', 'Thin Film Thickness',
+    'Subsurface', 'Thin Film Thickness',
 )
 # Cycles' Diffuse BSDF and Principled switch to Oren-Nayar above this roughness.
 DIFFUSE_ROUGHNESS_CUTOFF = 1e-5
@@ -312,6 +312,10 @@ class NodeTranslator:
         roughness = _clamp01(self.value(node, 'Roughness', 0.5))
         return Closure([_scene().Lobe('sheen', self.color(node, 'Color'), roughness)])
 
+    def _node_subsurface_scattering(self, node):
+        """Cycles' Subsurface Scattering node (Random Walk, Skin; Christensen-Burley as Random Walk)."""
+        return Closure(subsurface.node_lobes(self, node))
+
     def _node_emission(self, node):
         strength = self.value(node, 'Strength', 1.0)
         return Closure([], _scale(self.color(node, 'Color', (1.0, 1.0, 1.0)), strength))
@@ -323,7 +327,7 @@ class NodeTranslator:
         p = _principled_inputs(self, node)
         self._note_principled_features(node)
         top = self._principled_layers(p)
-        base = self._principled_base(p)
+        base = self._principled_base(p, node)
         for i, lobe in enumerate(top):
             top[i] = dataclasses.replace(lobe, covers=len(top) - 1 - i + len(base))
         lobes = top + base
@@ -348,7 +352,7 @@ class NodeTranslator:
                                      weight=p['alpha']))
         return layers
 
-    def _principled_base(self, p):
+    def _principled_base(self, p, node):
         """Metal, transmission, specular layer and diffuse, with their weights
         (per ray where an input is textured; a lobe is left out where its
         weight is zero everywhere)."""
@@ -371,16 +375,20 @@ class NodeTranslator:
         if not nodes.may_exceed(w, 0.0):
             return lobes
         eta, f0 = p['specular_eta'], p['specular_f0']
+        below, ss = subsurface.principled_lobes(self, node, p, w)   # under the specular layer
+        rest = _mul(w, _one_minus(ss)) if below else w
+        if not below or nodes.may_exceed(rest, 0.0):
+            if nodes.may_exceed(p['diffuse_roughness'], DIFFUSE_ROUGHNESS_CUTOFF):
+                below.append(scene.Lobe('oren_nayar', p['base'], diffuse_roughness=p['diffuse_roughness'],
+                                        weight=rest))
+            else:
+                below.append(scene.Lobe('diffuse', p['base'], weight=rest))
         if nodes.is_expr(eta) or eta != 1.0:
             lobes.append(self._anisotropic(p['node'], 'glossy', p['anisotropic'], p['rotation'],
                                            color=(1.0, 1.0, 1.0), roughness=p['roughness'], fresnel='dielectric',
-                                           ior=eta, f0=_clamp_color(_scale(p['specular_tint'], f0)), covers=1,
-                                           multiscatter=ms, weight=w))
-        if nodes.may_exceed(p['diffuse_roughness'], DIFFUSE_ROUGHNESS_CUTOFF):
-            lobes.append(scene.Lobe('oren_nayar', p['base'], diffuse_roughness=p['diffuse_roughness'], weight=w))
-        else:
-            lobes.append(scene.Lobe('diffuse', p['base'], weight=w))
-        return lobes
+                                           ior=eta, f0=_clamp_color(_scale(p['specular_tint'], f0)),
+                                           covers=len(below), multiscatter=ms, weight=w))
+        return lobes + below
 
     def _note_principled_features(self, node):
         """Name the Principled features in use that Ember does not render yet."""

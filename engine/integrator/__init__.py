@@ -29,7 +29,7 @@ from ..media import start_stack
 from ..nee import add_rows as _add_rows
 from ..sampler import CAMERA
 from ..vec import dot
-from . import stages, transparency, volume
+from . import stages, subsurface, transparency, volume
 from .context import Context
 from .records import Hit, LightSample, Paths, RayHits, ShadowBatch, Vertex, rows_of
 from .stages import every_light as _every_light, interaction as _interaction
@@ -53,7 +53,7 @@ def trace_batch(ctx, pix, sample, tile):
                   o, np.zeros(n, np.int32), np.zeros(n, np.int32), pseed, sample,
                   np.zeros((n, pass_events.aux_width(ctx.settings)), np.float32),
                   np.zeros((n, 3 if ctx.count_kinds else 0), np.int16), np.full(n, np.inf),
-                  start_stack(ctx.media, n), np.zeros(n, np.int16))
+                  start_stack(ctx.media, n), np.zeros(n, np.int16), np.full(n, -1, np.int64), np.zeros((n, 3)))
     obs = pass_events.observer(ctx, tile)
     obs.start(paths)
     # Every step raises a live path's bounce or its transparent bounce
@@ -72,6 +72,8 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
     """One wavefront step of the live paths; returns the paths that go on.
     Each line is a stage (stages.py) or bookkeeping (below)."""
     found = stages.intersect(ctx, paths)                         # RayHits
+    if ctx.subsurface:
+        subsurface.arrive(paths, found)                          # walks' exit points: no tracing
     if depth == 0:
         stages.camera_aovs(ctx, paths, found, tile)
     flight = None if ctx.media is None else volume.free_flights(ctx, paths, found, depth)
@@ -86,6 +88,8 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
     hit = stages.interaction(ctx, paths, *surface)               # Hit
     stages.surface_emission(ctx, paths, hit, depth, obs)
     paths, hit, carried = _past_last_vertex(ctx, paths, hit, tile)
+    if carried is not None and ctx.subsurface:
+        carried.exit_prim[:] = -1
     if len(paths.pix) == 0:
         return _join(paths, carried, scattered)
     v = stages.shade(ctx, paths, hit, depth)                     # Vertex
@@ -97,8 +101,11 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
         obs.light_sample(paths, batch)
     ray = paths.ray
     alive, through = stages.scatter(ctx, paths, v, depth)       # BSDF sample, throughput, roulette
+    if ctx.subsurface:                                           # BSSRDF: the random walk to the exit
+        alive = subsurface.walk(ctx, paths, v, alive, depth)
     if ctx.media is not None:                                    # refracted or passed through: the volume stack
-        volume.cross_surfaces(ctx, paths, hit, alive & (dot(paths.d, hit.ng) < 0), through)
+        volume.cross_surfaces(ctx, paths, hit, alive & (dot(paths.d, hit.ng) < 0) & (paths.exit_prim < 0),
+                              through)
     obs.after_scatter(paths, v, through)
     stages.remember_vertex(ctx, paths, v, through, every, ray, depth)
     paths = _end(ctx, paths, alive, tile)

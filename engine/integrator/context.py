@@ -15,6 +15,7 @@ import numpy as np
 from .. import bsdf, kernels, pass_events
 from ..geometry import VIS_SHADOW
 from ..sampler import Sampler
+from . import subsurface
 from .visibility import VIS_INDIRECT
 
 
@@ -65,6 +66,9 @@ class Context:
     # Volumes: the scene's media.MediumTable, None without a volume (the
     # bounce's volume stages are then skipped: no cost).
     media: object = None
+    # Some material has a subsurface lobe (integrator/subsurface.py).
+    subsurface: bool = False
+    subsurface_warnings: tuple = ()
 
     @classmethod
     def build(cls, accel, triangles, materials, lights, camera, world, settings, sampler=None,
@@ -84,7 +88,8 @@ class Context:
                    transparent_limit=max(int(settings.transparent_max_bounces), 1),
                    **_kind_limits(settings, light_path), light_path=light_path,
                    pass_config=pass_config, emitter_groups=pass_events.emitter_groups(pass_config, lights),
-                   centres=pass_events.CentreRecord(camera.width * camera.height), media=media)
+                   centres=pass_events.CentreRecord(camera.width * camera.height), media=media,
+                   subsurface=subsurface.in_scene(materials))
 
 
 def _delta_emitters(lights):

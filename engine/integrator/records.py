@@ -59,6 +59,11 @@ class Paths:
     # volumes; and its scattering events in volumes so far.
     stack: np.ndarray
     vbounce: np.ndarray
+    # Subsurface scattering (integrator/subsurface.py): the triangle of the
+    # exit point the ray leads to (-1: none; -2: being shaded this bounce)
+    # and its barycentrics and distance (N, 3).
+    exit_prim: np.ndarray
+    exit_hit: np.ndarray
 
     def __len__(self):
         return len(self.pix)

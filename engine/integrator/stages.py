@@ -16,7 +16,7 @@ from ..nodes.context import PATH_COLUMNS
 from ..sampler import BSDF, LIGHT, emitter_set, vertex_set
 from ..sampling import power_heuristic
 from ..vec import dot, frame, row_any_positive, row_max, to_local
-from . import transparency, visibility
+from . import subsurface, transparency, visibility
 from .records import Hit, LightSample, RayHits, ShadowBatch, Vertex, RowView
 from ..geometry import VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION
 from .visibility import VIS_INDIRECT
@@ -159,6 +159,8 @@ def surface_emission(ctx, paths, hit, depth, obs):
     if ctx.materials.textures.emission:
         emission = ctx.materials.textures.emission_at(hit.mat, shading(ctx, hit, paths, depth), emission)
     em = np.flatnonzero(row_any_positive(emission))
+    if ctx.subsurface:
+        em = em[~subsurface.at_exit(paths)[em]]   # Cycles collects no emission at an exit point
     if len(em) == 0:
         return
     if ctx.materials.emission_layers:
@@ -256,6 +258,8 @@ def shade(ctx, paths, hit, depth):
     the lobe weights and selection (wo only: once per vertex)."""
     sc = shading(ctx, hit, paths, depth)
     lobes = ctx.materials.gather(hit.mat, sc)
+    if ctx.subsurface:
+        subsurface.exit_lobes(paths, lobes)
     if ctx.settings.filter_glossy > 0:
         filter_glossy(ctx, paths, lobes)
     if hit.back is not None:
@@ -414,7 +418,10 @@ def scatter(ctx, paths, v, depth):
     s = ctx.settings
     hit = v.hit
     u = uniforms(ctx, paths, vertex_set(depth, BSDF))
-    wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u[:, 0], u[:, 1], u[:, 2], *v.lobes_wo)
+    if ctx.subsurface:
+        wi_l, weight, pdf, delta = subsurface.sample(v, u)
+    else:
+        wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u[:, 0], u[:, 1], u[:, 2], *v.lobes_wo)
     wi = v.world(wi_l)
     ok, paths.beta = throughput.update(wi, hit.ng, wi_l, weight, paths.beta, paths.bounce, s.rr_depth, u[:, 3])
     through = transparency.sampled_transparent(ctx, hit, delta, wi_l, v.wo_l)

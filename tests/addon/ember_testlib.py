@@ -469,3 +469,22 @@ def check_against_reference(name, scene, bounces, image, var, spp, block, splits
     the test built (checked to be the one the reference was rendered from)."""
     ref, ref_var, header = load_reference(name, scene, bounces)
     return ReferenceCheck(name, image[..., :3].astype(np.float64), var, spp, ref, ref_var, header, block, splits)
+
+
+def built_reference_scene(build, width, height):
+    """(scene, bounces) of a parity module's scene: ``build(scene)`` on an
+    empty factory scene returns its bounces; the resolution is set after."""
+    scene = empty_factory_scene()
+    bounces = build(scene)
+    small_resolution(scene, width, height)
+    return scene, bounces
+
+
+def render_against_reference(name, scene, bounces, tmp_path, taps, spp, block, seed=1):
+    """Ember's render of a reference scene (no material warning allowed)
+    checked against the stored reference ``name`` (a ReferenceCheck)."""
+    image, var = render_for_reference(scene, tmp_path, name, taps, spp, seed, bounces)
+    from addon import engine as ember_engine
+    log = ember_engine.RENDER_LOG[-1]
+    assert not [w for w in log.get('warnings', ()) if 'Material' in w], log.get('warnings')
+    return check_against_reference(name, scene, bounces, image, var, spp, block)
