@@ -233,7 +233,8 @@ def first_hit(ctx, paths, hit, lobes, w, tt, bb, tile):
     add = tile.add_pass
     add("Normal", pix, hit.ns)
     if tile.wants("UV"):
-        add("UV", pix, np.column_stack([hit.uv, np.ones(len(pix))]))
+        has = _has_uv(ctx.triangles, hit.prim)
+        add("UV", pix, np.where(has[:, None], np.column_stack([hit.uv, np.ones(len(pix))]), 0.0))
     if tile.wants("Mist"):
         add("Mist", pix, 1.0 - _mist(ctx, cfg, hit.p))
     inst = ctx.triangles.instance[hit.prim] if ctx.triangles.instance is not None else np.zeros(len(pix), int)
@@ -244,6 +245,14 @@ def first_hit(ctx, paths, hit, lobes, w, tt, bb, tile):
         _cryptomatte(cfg, inst, hit.mat, pix, tile)
     if tile.wants("Ambient Occlusion"):
         _ambient_occlusion(ctx, cfg, hit, tt, bb, pix, tile)
+
+
+def _has_uv(triangles, prim):
+    """Whether the triangles ``prim`` belong to meshes with a UV map."""
+    shading = getattr(triangles, "shading", None)
+    if shading is None:
+        return np.full(len(prim), triangles.uv is not None)
+    return shading.has_uv()[prim]
 
 
 def _denoising_features(ctx, paths, hit, lobes, w, tile):
