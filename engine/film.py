@@ -35,6 +35,7 @@ class Tile:
         self.rgb = np.zeros((n, 3))
         self.rgb2 = np.zeros((n, 3))
         self.alpha = np.zeros(n)
+        self.holdout = np.zeros(n)
         self.count = np.zeros(n)
         self.aovs = {name: np.zeros((n, AOV_CHANNELS[name])) for name in aovs}
         self.aux = np.zeros((n, 3)) if aux else None
@@ -70,6 +71,11 @@ class Tile:
         self.rgb += self._bin3(pix, L)
         self.rgb2 += self._bin3(pix, L * L)
 
+    def add_holdout(self, pix, transparency):
+        """Camera paths met holdouts: the film's alpha is uncovered by
+        ``transparency`` (Cycles' film_write_holdout), transparent film or not."""
+        self.holdout += self._bin(pix, transparency)
+
     def add_camera(self, pix, alpha, depth, normal, albedo):
         self.count += np.bincount(pix - self.lo, minlength=self.hi - self.lo)
         self.alpha += self._bin(pix, alpha)
@@ -97,6 +103,7 @@ class Film:
         self.mean = np.zeros((n, 3), np.float32)
         self.m2 = np.zeros((n, 3), np.float32)
         self.alpha = np.zeros(n, np.float32)   # sum of coverage
+        self.holdout = np.zeros(n, np.float32)   # sum of holdout transparency
         self.aovs = {name: np.zeros((n, AOV_CHANNELS[name]), np.float32) for name in aovs}
         # Adaptive sampling: sum of the class-A samples' radiance.
         self.aux = np.zeros((n, 3), np.float32) if adaptive else None
@@ -117,6 +124,7 @@ class Film:
         with self._lock:
             self._combine(s, nb, mean_b, m2_b)
             self.alpha[s] += tile.alpha
+            self.holdout[s] += tile.holdout
             for name, acc in self.aovs.items():
                 acc[s] += tile.aovs[name]
             if self.aux is not None:
@@ -144,10 +152,11 @@ class Film:
 
     def image(self, transparent=True):
         """(H, W, 4) float32 RGBA.  Alpha is the coverage with a transparent
-        film, else 1 (as Cycles)."""
+        film, else 1, less what holdouts uncovered (as Cycles)."""
         out = np.empty((self.height * self.width, 4), np.float32)
         out[:, :3] = self.mean
-        out[:, 3] = self._per_sample(self.alpha) if transparent else 1.0
+        alpha = self._per_sample(self.alpha) if transparent else 1.0
+        out[:, 3] = np.maximum(alpha - self._per_sample(self.holdout), 0.0)
         return out.reshape(self.height, self.width, 4)
 
     def variance(self):
@@ -199,7 +208,7 @@ class Film:
         """The film's statistics as plain arrays (a farm shard)."""
         out = {"version": np.array(STATE_VERSION), "width": np.array(self.width),
                "height": np.array(self.height), "count": self.count, "mean": self.mean,
-               "m2": self.m2, "alpha": self.alpha}
+               "m2": self.m2, "alpha": self.alpha, "holdout": self.holdout}
         for name, acc in self.aovs.items():
             out["aov_" + name] = acc
         if self.aux is not None:
@@ -224,6 +233,8 @@ class Film:
             self._combine(slice(0, n), np.asarray(state["count"], np.float64),
                           np.asarray(state["mean"], np.float64), np.asarray(state["m2"], np.float64))
             self.alpha += state["alpha"]
+            if "holdout" in state:     # shards written before holdouts have none
+                self.holdout += state["holdout"]
             for name, acc in self.aovs.items():
                 acc += state["aov_" + name]
             if self.aux is not None and "aux" in state:

@@ -93,7 +93,23 @@ def prepare(scene, settings):
                          sampler=Sampler(settings.seed, settings.sampling_pattern),
                          bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
                          pass_config=pass_events.configure(scene, settings),
-                         media=_media(scene, accel, tris, camera))
+                         media=_media(scene, accel, tris, camera), holdout=holdout_weights(scene, tris))
+
+
+def holdout_weights(scene, tris):
+    """(T,) holdout weight of every triangle for camera rays, or None when
+    nothing in the scene is a holdout: 1 on holdout objects, else the
+    material's Holdout shader weight."""
+    mats = material_table(scene)
+    per_material = np.array([float(getattr(m, "holdout", 0.0)) for m in mats])
+    per_instance = np.array([bool(getattr(i, "holdout", False)) for i in scene.instances] + [False])
+    if not (per_material.any() or per_instance.any()) or len(tris.material) == 0:
+        return None
+    weights = per_material[np.asarray(tris.material, np.int64)]
+    owner = getattr(tris.shading, "instance", None)
+    if owner is not None and per_instance.any():
+        weights = np.where(per_instance[np.asarray(owner, np.int64)], 1.0, weights)
+    return weights if weights.any() else None
 
 
 def _media(scene, accel, tris, camera):

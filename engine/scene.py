@@ -101,6 +101,10 @@ class Instance:
     pass_index: int = 0
     random: float = 0.0
     asset: str = ""
+    # Object > Visibility > Mask > Holdout (or a holdout collection): camera
+    # rays meeting the object end there and leave the film transparent;
+    # every other ray sees the object as usual (Cycles' SD_OBJECT_HOLDOUT_MASK).
+    holdout: bool = False
 
 
 # ----------------------------------------------------------------------------
@@ -156,6 +160,11 @@ class Material:
     # Shader AOVs (AOV Output nodes): name -> ((r, g, b), value), constants.
     aovs: dict = field(default_factory=dict)
     volume: Optional[Volume] = None
+    # Holdout shader weight in [0, 1] (Cycles' holdout closure): camera rays
+    # (and their transparent passes) hitting the surface uncover the film's
+    # alpha by it, whatever Film > Transparent says; other rays see its part
+    # as black.
+    holdout: float = 0.0
 
 
 DEFAULT_MATERIAL = Material("default", (Lobe("diffuse", (0.8, 0.8, 0.8)),))

@@ -37,6 +37,7 @@ class Closure:
     """What a shader socket evaluates to: lobes and emission, before weighting."""
     lobes: list = field(default_factory=list)
     emission: tuple = BLACK
+    holdout: object = 0.0      # the Holdout shader's weight (a constant or an expression)
 
     def scaled(self, weight):
         """Every lobe and the emission times a Mix Shader factor.  A lobe's
@@ -44,10 +45,11 @@ class Closure:
         layering terms, which a mix must not change)."""
         lobes = [dataclasses.replace(lobe, weight=nodes.multiply(lobe.weight, weight))
                  for lobe in self.lobes]
-        return Closure(lobes, _scale(self.emission, weight))
+        return Closure(lobes, _scale(self.emission, weight), nodes.multiply(self.holdout, weight))
 
     def plus(self, other):
-        return Closure(self.lobes + other.lobes, _add(self.emission, other.emission))
+        return Closure(self.lobes + other.lobes, _add(self.emission, other.emission),
+                       nodes.math('ADD', self.holdout, other.holdout))
 
 
 # Colours, roughness, IOR and weights may be texture expressions: nodes'
@@ -195,6 +197,10 @@ class NodeTranslator:
         """Blender 4.0+ Sheen BSDF (Microfiber: Cycles' LTC sheen)."""
         roughness = _clamp01(self.value(node, 'Roughness', 0.5))
         return Closure([_scene().Lobe('sheen', self.color(node, 'Color'), roughness)])
+
+    def _node_holdout(self, node):
+        """Cycles' Holdout: no light, and camera rays uncover the film."""
+        return Closure(holdout=1.0)
 
     def _node_emission(self, node):
         strength = self.value(node, 'Strength', 1.0)
@@ -592,10 +598,23 @@ def translate(material):
     if volume is not None and not output.inputs['Surface'].is_linked:
         # Only a Volume output: Cycles' surface is a pass-through boundary.
         lobes = (scene.Lobe('transparent', (1.0, 1.0, 1.0)),)
-    material = scene.Material(name, lobes, closure.emission, normal=normal)
+    material = scene.Material(name, lobes, closure.emission, normal=normal,
+                              holdout=_holdout_weight(translator, closure.holdout))
     if volume is not None:
         material.volume = volume
     return material, translator.warning()
+
+
+def _holdout_weight(translator, holdout):
+    """The material's holdout weight as a constant in [0, 1]: a textured Mix
+    Shader factor over a Holdout is read as the middle of its range (named
+    in the material's warning), a sum above 1 as 1."""
+    if nodes.is_expr(holdout):
+        lo, hi = nodes.value_range(holdout)
+        translator.approximated.append(f"'Holdout' (a textured factor read as {0.5 * (lo + hi):g})")
+        holdout = 0.5 * (lo + hi)
+    holdout = float(holdout)
+    return min(max(holdout, 0.0), 1.0) if math.isfinite(holdout) else 0.0
 
 
 def _volume(translator, output):

@@ -84,6 +84,10 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
     if len(paths.pix) == 0:
         return _join(paths, scattered)
     hit = stages.interaction(ctx, paths, *surface)               # Hit
+    if ctx.holdout is not None:                                  # camera rays at holdouts
+        paths, hit = _holdouts(ctx, paths, hit, tile)
+        if len(paths.pix) == 0:
+            return _join(paths, scattered)
     stages.surface_emission(ctx, paths, hit, depth, obs)
     paths, hit, carried = _past_last_vertex(ctx, paths, hit, tile)
     if len(paths.pix) == 0:
@@ -129,6 +133,23 @@ def _end(ctx, paths, alive, tile):
         return paths
     stages.finish(ctx, paths, tile, ~alive)
     return paths.take(alive)
+
+
+def _holdouts(ctx, paths, hit, tile):
+    """Camera paths (before any scattering, through transparent passes too)
+    at holdout surfaces uncover the film by the holdout weight times their
+    throughput; those at a full holdout end there (Cycles'
+    integrate_surface_holdout).  Returns the paths and hits that go on."""
+    weight = np.where(paths.bounce == 0, ctx.holdout[hit.prim], 0.0)
+    rows = np.flatnonzero(weight > 0)
+    if len(rows) == 0:
+        return paths, hit
+    tile.add_holdout(paths.pix[rows], weight[rows] * paths.beta[rows].mean(axis=1))
+    go_on = weight < 1.0
+    if go_on.all():
+        return paths, hit
+    stages.finish(ctx, paths, tile, ~go_on)
+    return paths.take(go_on), hit.take(go_on)
 
 
 def _past_last_vertex(ctx, paths, hit, tile):

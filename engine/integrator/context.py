@@ -65,10 +65,14 @@ class Context:
     # Volumes: the scene's media.MediumTable, None without a volume (the
     # bounce's volume stages are then skipped: no cost).
     media: object = None
+    # Holdouts: (T,) each triangle's holdout weight for camera rays (1 on a
+    # holdout object, the material's Holdout shader weight elsewhere); None
+    # in a scene without holdouts (the stage is skipped).
+    holdout: object = None
 
     @classmethod
     def build(cls, accel, triangles, materials, lights, camera, world, settings, sampler=None,
-              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None):
+              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None, holdout=None):
         """The Context of a render; ``sampler`` defaults to the settings'
         seed and pattern, ``pass_config`` to no extra passes."""
         if sampler is None:
@@ -84,7 +88,8 @@ class Context:
                    transparent_limit=max(int(settings.transparent_max_bounces), 1),
                    **_kind_limits(settings, light_path), light_path=light_path,
                    pass_config=pass_config, emitter_groups=pass_events.emitter_groups(pass_config, lights),
-                   centres=pass_events.CentreRecord(camera.width * camera.height), media=media)
+                   centres=pass_events.CentreRecord(camera.width * camera.height), media=media,
+                   holdout=holdout)
 
 
 def _delta_emitters(lights):
