@@ -25,6 +25,7 @@ from .camera import CameraModel, PixelFilter
 from . import kernels, media, pass_events
 from .film import Film
 from .geometry import flatten, material_table
+from .integrator.linking import LightLinks
 from .integrator import Context, trace_batch
 from .lights import LightSet
 from .sampler import Sampler
@@ -93,7 +94,8 @@ def prepare(scene, settings):
                          sampler=Sampler(settings.seed, settings.sampling_pattern),
                          bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
                          pass_config=pass_events.configure(scene, settings),
-                         media=_media(scene, accel, tris, camera), holdout=holdout_weights(scene, tris))
+                         media=_media(scene, accel, tris, camera), holdout=holdout_weights(scene, tris),
+                         links=LightLinks.build(scene, lights, tris))
 
 
 def holdout_weights(scene, tris):

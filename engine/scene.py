@@ -570,6 +570,21 @@ class RenderSettings:
     volume_bounces: int = 0
 
 
+@dataclass(frozen=True)
+class LinkSet:
+    """A light's receiver or blocker collection (Blender 4.0+ Light Linking
+    and Shadow Linking) as object names: objects excluded never take part;
+    with any object included only the included ones do, else every object
+    not excluded does (Blender's rule)."""
+    include: frozenset = frozenset()
+    exclude: frozenset = frozenset()
+
+    def admits(self, name):
+        if name in self.exclude:
+            return False
+        return name in self.include if self.include else True
+
+
 @dataclass
 class Scene:
     meshes: Sequence[Mesh] = ()
@@ -581,3 +596,7 @@ class Scene:
     # The Blender version the scene comes from: where Cycles changed between
     # versions (its bump shadowing term), Ember renders as that version's.
     cycles_version: tuple = (5, 0, 0)
+    # Light and shadow linking: scene light index -> (receivers, blockers),
+    # each a LinkSet or None (every object).  Lights not listed are linked
+    # to everything.
+    light_links: dict = field(default_factory=dict)

@@ -62,7 +62,8 @@ def export_scene(depsgraph, camera_override=None, should_stop=None):
     materials = material_export.MaterialTable(override)
     meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots, check)
     check()
-    lights, light_warnings = light_export.collect_lights(depsgraph, check)
+    links = {}
+    lights, light_warnings = light_export.collect_lights(depsgraph, check, links)
     world, world_warning = world_export.world_from_blender(scene.world)
     camera_object = scene_camera(depsgraph, camera_override)
     try:
@@ -73,7 +74,7 @@ def export_scene(depsgraph, camera_override=None, should_stop=None):
         raise ExportError(f"Camera '{camera_object.name}': {message}") from err
     result = renderer.Scene(
         meshes=meshes, instances=instances, materials=materials.materials,
-        lights=lights, world=world, camera=camera, cycles_version=tuple(bpy.app.version))
+        lights=lights, world=world, camera=camera, cycles_version=tuple(bpy.app.version), light_links=links)
     warnings = materials.warnings + warnings + light_warnings + camera_warnings
     if world_warning:
         warnings.append(world_warning)

@@ -69,10 +69,12 @@ class Context:
     # holdout object, the material's Holdout shader weight elsewhere); None
     # in a scene without holdouts (the stage is skipped).
     holdout: object = None
+    # Light and shadow linking: linking.LightLinks, None without links.
+    links: object = None
 
     @classmethod
     def build(cls, accel, triangles, materials, lights, camera, world, settings, sampler=None,
-              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None, holdout=None):
+              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None, holdout=None, links=None):
         """The Context of a render; ``sampler`` defaults to the settings'
         seed and pattern, ``pass_config`` to no extra passes."""
         if sampler is None:
@@ -89,7 +91,7 @@ class Context:
                    **_kind_limits(settings, light_path), light_path=light_path,
                    pass_config=pass_config, emitter_groups=pass_events.emitter_groups(pass_config, lights),
                    centres=pass_events.CentreRecord(camera.width * camera.height), media=media,
-                   holdout=holdout)
+                   holdout=holdout, links=links)
 
 
 def _delta_emitters(lights):

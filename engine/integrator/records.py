@@ -59,6 +59,8 @@ class Paths:
     # volumes; and its scattering events in volumes so far.
     stack: np.ndarray
     vbounce: np.ndarray
+    # The instance of the previous vertex (-1: the camera), for light linking.
+    prev_inst: np.ndarray
 
     def __len__(self):
         return len(self.pix)
