@@ -25,6 +25,7 @@ from .camera import CameraModel, PixelFilter
 from . import kernels, media, pass_events
 from .film import Film
 from .geometry import flatten, material_table
+from .integrator.catcher import catcher_triangles
 from .integrator.linking import LightLinks
 from .integrator import Context, trace_batch
 from .lights import LightSet
@@ -95,7 +96,7 @@ def prepare(scene, settings):
                          bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
                          pass_config=pass_events.configure(scene, settings),
                          media=_media(scene, accel, tris, camera), holdout=holdout_weights(scene, tris),
-                         links=LightLinks.build(scene, lights, tris))
+                         links=LightLinks.build(scene, lights, tris), catcher=catcher_triangles(scene, tris))
 
 
 def holdout_weights(scene, tris):

@@ -105,6 +105,8 @@ class Instance:
     # rays meeting the object end there and leave the film transparent;
     # every other ray sees the object as usual (Cycles' SD_OBJECT_HOLDOUT_MASK).
     holdout: bool = False
+    # Object > Visibility > Mask > Shadow Catcher (engine/integrator/catcher.py).
+    shadow_catcher: bool = False
 
 
 # ----------------------------------------------------------------------------

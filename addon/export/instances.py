@@ -50,6 +50,8 @@ class InstanceCollector:
             name=obj.name,
             **ray_visibility(inst),
             holdout=is_holdout(inst, self.view_layer),
+            shadow_catcher=bool(getattr(inst.parent if inst.is_instance and inst.parent is not None
+                                        else inst.object, 'is_shadow_catcher', False)),
             **_pass_fields(inst),
             **object_info(inst),
         ))

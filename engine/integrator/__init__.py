@@ -29,7 +29,7 @@ from ..media import start_stack
 from ..nee import add_rows as _add_rows
 from ..sampler import CAMERA
 from ..vec import dot
-from . import stages, transparency, volume
+from . import catcher, stages, transparency, volume
 from .context import Context
 from .records import Hit, LightSample, Paths, RayHits, ShadowBatch, Vertex, rows_of
 from .stages import every_light as _every_light, interaction as _interaction
@@ -53,7 +53,8 @@ def trace_batch(ctx, pix, sample, tile):
                   o, np.zeros(n, np.int32), np.zeros(n, np.int32), pseed, sample,
                   np.zeros((n, pass_events.aux_width(ctx.settings)), np.float32),
                   np.zeros((n, 3 if ctx.count_kinds else 0), np.int16), np.full(n, np.inf),
-                  start_stack(ctx.media, n), np.zeros(n, np.int16), np.full(n, -1, np.int32))
+                  start_stack(ctx.media, n), np.zeros(n, np.int16), np.full(n, -1, np.int32),
+                  np.zeros(n, np.int8))
     obs = pass_events.observer(ctx, tile)
     obs.start(paths)
     # Every step raises a live path's bounce or its transparent bounce
@@ -88,6 +89,8 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
         paths, hit = _holdouts(ctx, paths, hit, tile)
         if len(paths.pix) == 0:
             return _join(paths, scattered)
+    if ctx.catcher is not None:                                  # shadow catchers: split paths
+        paths, hit = catcher.split(ctx, paths, hit, tile)
     stages.surface_emission(ctx, paths, hit, depth, obs)
     paths, hit, carried = _past_last_vertex(ctx, paths, hit, tile)
     if len(paths.pix) == 0:

@@ -71,10 +71,13 @@ class Context:
     holdout: object = None
     # Light and shadow linking: linking.LightLinks, None without links.
     links: object = None
+    # Shadow catchers: (T,) whether each triangle is a catcher's, None
+    # without one (catcher.py).
+    catcher: object = None
 
     @classmethod
     def build(cls, accel, triangles, materials, lights, camera, world, settings, sampler=None,
-              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None, holdout=None, links=None):
+              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None, holdout=None, links=None, catcher=None):
         """The Context of a render; ``sampler`` defaults to the settings'
         seed and pattern, ``pass_config`` to no extra passes."""
         if sampler is None:
@@ -91,7 +94,7 @@ class Context:
                    **_kind_limits(settings, light_path), light_path=light_path,
                    pass_config=pass_config, emitter_groups=pass_events.emitter_groups(pass_config, lights),
                    centres=pass_events.CentreRecord(camera.width * camera.height), media=media,
-                   holdout=holdout, links=links)
+                   holdout=holdout, links=links, catcher=catcher)
 
 
 def _delta_emitters(lights):

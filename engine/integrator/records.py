@@ -61,6 +61,9 @@ class Paths:
     vbounce: np.ndarray
     # The instance of the previous vertex (-1: the camera), for light linking.
     prev_inst: np.ndarray
+    # Shadow catcher (catcher.py): 0 a matte path (no catcher met yet), 1 the
+    # main path after the split, 2 the catcher path (sees catchers only).
+    catcher: np.ndarray
 
     def __len__(self):
         return len(self.pix)

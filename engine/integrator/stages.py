@@ -16,9 +16,9 @@ from ..nodes.context import PATH_COLUMNS
 from ..sampler import BSDF, LIGHT, emitter_set, vertex_set
 from ..sampling import power_heuristic
 from ..vec import dot, frame, row_any_positive, row_max, to_local
-from . import transparency, visibility
+from . import catcher, transparency, visibility
 from .linking import instance_of
-from .records import Hit, LightSample, RayHits, ShadowBatch, Vertex, RowView
+from .records import Hit, LightSample, RayHits, ShadowBatch, Vertex, RowView, rows_of
 from ..geometry import VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION
 from .visibility import VIS_INDIRECT
 
@@ -31,6 +31,9 @@ def intersect(ctx, paths):
     t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax)
     if ctx.triangles.visibility is not None:
         t, prim, bu, bv = visibility.skip_invisible(ctx, paths.o, paths.d, paths.tmax, paths.ray, t, prim, bu, bv)
+    if ctx.catcher is not None:
+        t, prim, bu, bv = visibility.catchers_only(ctx, paths.o, paths.d, paths.tmax, paths.catcher == 2,
+                                                   t, prim, bu, bv)
     light_t, emitter, Le, pdf = _lights_along(ctx, paths, np.minimum(t, paths.tmax))
     return RayHits(t, prim, bu, bv, light_t < np.inf, emitter, Le, pdf, light_t)
 
@@ -124,6 +127,7 @@ def escaped(ctx, paths, i, tile, obs):
     unweighted) and the suns in their direction."""
     if len(i) == 0:
         return
+    catcher.camera_background(ctx, paths, i, tile)
     sky = i
     if ctx.settings.transparent:
         # With a transparent film camera rays (also through transparent
@@ -418,7 +422,14 @@ def trace_shadows(ctx, paths, batch):
         batch.free, batch.added = batch.rows, added
         paths.L[rows] += added
         return
-    batch.free = batch.rows[~visibility.occluded(ctx, batch.origin, batch.direction, batch.tmax, e)]
+    blocked = visibility.occluded(ctx, batch.origin, batch.direction, batch.tmax, e)
+    if ctx.catcher is not None:
+        rows = batch.rows if path_rows is None else path_rows[batch.rows]
+        only = np.flatnonzero(paths.catcher[rows] == 2)
+        if len(only):
+            blocked[only] = visibility.occluded_by_catchers(ctx, batch.origin[only], batch.direction[only],
+                                                            batch.tmax[only])
+    batch.free = batch.rows[~blocked]
     if path_rows is None:
         nee.add_rows(paths.L, batch.free, contrib)
     else:
@@ -515,4 +526,9 @@ def finish(ctx, paths, tile, keep=None):
     if clamp > 0:
         m = row_max(L)
         L = L * np.where(m > clamp, clamp / np.maximum(m, 1e-30), 1.0)[:, None]
+    if ctx.catcher is not None:
+        flag = paths.catcher if keep is None else np.take(paths.catcher, rows_of(keep))
+        tile.add_catcher(pix, L, flag)
+        combined = flag != 2
+        pix, L, sample = pix[combined], L[combined], sample[combined]
     tile.add_radiance(pix, L, sample)

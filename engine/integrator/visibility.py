@@ -94,6 +94,31 @@ def _occluded_linked(ctx, origin, wi, tmax, emitter):
     return blocked
 
 
+def catchers_only(ctx, o, d, tmax, only, t, prim, bu, bv):
+    """Rays of shadow catcher paths (``only``) see catcher triangles alone
+    (Cycles shifts their visibility onto the catchers' bits)."""
+    rows = np.flatnonzero(only)
+    if len(rows) == 0:
+        return t, prim, bu, bv
+    t, prim, bu, bv = t.copy(), prim.copy(), bu.copy(), bv.copy()
+    for _ in range(MAX_SKIPS):
+        again = rows[(prim[rows] >= 0) & ~ctx.catcher[np.maximum(prim[rows], 0)]]
+        if len(again) == 0:
+            return t, prim, bu, bv
+        tn, pn, un, vn = _continue_past(ctx, o[again], d[again], tmax[again], t[again], prim[again])
+        t[again], prim[again], bu[again], bv[again] = tn, pn, un, vn
+    miss = rows[(prim[rows] >= 0) & ~ctx.catcher[np.maximum(prim[rows], 0)]]
+    t[miss], prim[miss] = np.inf, -1
+    return t, prim, bu, bv
+
+
+def occluded_by_catchers(ctx, o, d, tmax):
+    """Shadow rays of shadow catcher paths: blocked by catchers only."""
+    t, prim, bu, bv = ctx.accel.intersect(o, d, tmax)
+    t, prim, _, _ = catchers_only(ctx, o, d, tmax, np.ones(len(o), bool), t, prim, bu, bv)
+    return (prim >= 0) & (t < tmax)
+
+
 def ray_kind(ctx, v, paths, depth):
     """VIS_* bit of the bounce just sampled at vertices ``v``, distributed as
     Cycles' (the kind of the closure it sampled): below the surface =

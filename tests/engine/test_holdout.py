@@ -42,3 +42,43 @@ def test_holdout_weight_out_of_range_is_named():
     for bad in (float("nan"), 1.5, -0.1):
         with pytest.raises(SceneError, match="'bad'.*holdout"):
             validate_scene(_quad_scene(Material("bad", holdout=bad)))
+
+
+def _catcher_scene(with_blocker):
+    """A catcher quad under a sun, seen from above, with or without a small
+    ordinary quad floating over its middle."""
+    from engine.scene import SunLight
+    floor = quad([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
+    small = quad([[-0.3, -0.3, 0.5], [0.3, -0.3, 0.5], [0.3, 0.3, 0.5], [-0.3, 0.3, 0.5]])
+    cam = Camera(look_at((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), (0, 1, 0)), kind="ORTHO", ortho_scale=2.0,
+                 resolution=(16, 16), clip_start=0.01, clip_end=10.0)
+    instances = [Instance(0, materials=[0], name="catcher", shadow_catcher=True)]
+    if with_blocker:
+        instances.append(Instance(1, materials=[0], name="blocker"))
+    return Scene([floor, small], instances, [Material("grey", (Lobe("diffuse", (0.5, 0.5, 0.5)),))],
+                 [SunLight((0.6, 0.0, -1.0), (3.0, 3.0, 3.0))], World((0.2, 0.3, 0.4)), cam)
+
+
+def test_shadow_catcher_shows_only_shadows():
+    """Alone, the catcher is invisible: alpha 0 on a transparent film, the
+    world on an opaque one.  With the blocker, its sun shadow (shifted 0.3
+    along +x, partly beside it) is in the alpha, the open floor stays clear."""
+    clear = render(_catcher_scene(False), RenderSettings(transparent=True, **SETTINGS)).image
+    np.testing.assert_allclose(clear[..., 3], 0.0, atol=1e-6)
+    opaque = render(_catcher_scene(False), RenderSettings(**SETTINGS)).image
+    np.testing.assert_allclose(opaque[..., :3], np.broadcast_to((0.2, 0.3, 0.4), opaque[..., :3].shape), rtol=1e-5)
+    shadowed = render(_catcher_scene(True), RenderSettings(transparent=True, **SETTINGS)).image
+    assert np.isfinite(shadowed).all()
+    middle, edge, shadow = shadowed[7:9, 7:9], shadowed[0:2, 0:2], shadowed[6:10, 11:12]
+    assert np.all(middle[..., 3] == 1.0) and middle[..., :3].min() > 0, "the blocker is an ordinary object"
+    np.testing.assert_allclose(edge[..., 3], 0.0, atol=1e-3)
+    assert shadow[..., 3].min() > 0.3, f"no shadow in the alpha: {shadow[..., 3]}"
+
+
+def test_emissive_shadow_catcher_is_finite():
+    """Hostile input: a catcher that is also a light (an emissive material)."""
+    scene = _catcher_scene(True)
+    scene.materials = [Material("glowing", (Lobe("diffuse", (0.5, 0.5, 0.5)),), emission=(4.0, 4.0, 4.0))]
+    for transparent in (False, True):
+        image = render(scene, RenderSettings(transparent=transparent, **SETTINGS)).image
+        assert np.isfinite(image).all() and image[..., 3].min() >= 0.0
