@@ -132,6 +132,7 @@ class Film:
         self.alpha = np.zeros(n, np.float32)   # sum of coverage
         self.holdout = np.zeros(n, np.float32)   # sum of holdout transparency
         self.catcher = None                      # shadow catcher sums (Tile.add_catcher)
+        self.combined_alpha = np.ones(n)         # Combined's alpha at the last image()
         self.aovs = {name: np.zeros((n, AOV_CHANNELS[name]), np.float32) for name in aovs}
         # Adaptive sampling: sum of the class-A samples' radiance.
         self.aux = np.zeros((n, 3), np.float32) if adaptive else None
@@ -186,13 +187,18 @@ class Film:
 
     def image(self, transparent=True, approximate_catcher=True):
         """(H, W, 4) float32 RGBA.  Alpha is the coverage with a transparent
-        film, else 1, less what holdouts uncovered (as Cycles)."""
+        film, else 1, less what holdouts uncovered (as Cycles).  With a
+        shadow catcher Combined is the matte: with the approximate shadow
+        when ``approximate_catcher`` (Cycles: the Shadow Catcher pass off),
+        in the alpha on a transparent film, over the background on an
+        opaque one; without it (the pass holds the shadow) the matte alone."""
         out = np.empty((self.height * self.width, 4), np.float32)
         out[:, :3] = self.mean
         alpha = self._per_sample(self.alpha) if transparent else 1.0
         out[:, 3] = np.maximum(alpha - self._per_sample(self.holdout), 0.0)
-        if self.catcher is not None and approximate_catcher:
-            out[:] = self._catcher_image(out, transparent)
+        self.combined_alpha = out[:, 3].copy()     # the Shadow Catcher pass reads it
+        if self.catcher is not None:
+            out[:] = self._catcher_image(out, transparent, approximate_catcher)
         return out.reshape(self.height, self.width, 4)
 
     def shadow_catcher(self, alpha):
@@ -208,9 +214,10 @@ class Film:
         a = np.asarray(alpha, np.float64)[:, None]
         return (1.0 - a) + a * ratio
 
-    def _catcher_image(self, out, transparent):
-        """Combined with the approximate shadow (Cycles' shadow catcher
-        matte with shadow; over the background on an opaque film)."""
+    def _catcher_image(self, out, transparent, approximate):
+        """Combined with a shadow catcher: the matte, with the approximate
+        shadow (Cycles' shadow catcher matte with shadow) in the alpha or
+        over the background, or alone."""
         c = np.maximum(self.count.astype(np.float64), 1.0)
         shadow = self.shadow_catcher(out[:, 3])
         matte = self.catcher["matte"] / c[:, None]
@@ -219,7 +226,9 @@ class Film:
         alpha = np.clip(1.0 - matte_t, 0.0, 1.0)
         alpha_matte = (1.0 - alpha) * (1.0 - np.clip(shadow.mean(axis=1), 0.0, 1.0)) + alpha
         image = np.empty_like(out, dtype=np.float64)
-        if transparent:
+        if not approximate:
+            image[:, :3], image[:, 3] = matte, alpha
+        elif transparent:
             image[:, :3], image[:, 3] = matte, alpha_matte
         else:
             image[:, :3] = matte + self.catcher["background"] / c[:, None] * (1.0 - alpha_matte)[:, None]

@@ -324,7 +324,7 @@ def _render(scene, settings, progress):
                 # mean is still unbiased.  Report the fewest samples any pixel has.
                 stats["samples"] = int(film.count.min())
             if progress is not None and hasattr(progress, "on_pass"):
-                image = film.image(settings.transparent)
+                image = film.image(settings.transparent, "Shadow Catcher" not in settings.passes)
                 progress.on_pass(image, stats["samples"], dict(stats))
             if cancelled or _should_stop(progress, stats, settings):
                 if queue:
@@ -332,7 +332,7 @@ def _render(scene, settings, progress):
                     pool.abandon()  # the next pass, already started, is dropped
                 break
     if image is None:
-        image = film.image(settings.transparent)
+        image = film.image(settings.transparent, "Shadow Catcher" not in settings.passes)
     return RenderResult(film, image, stats["samples"], stats, warnings_for(ctx),
                         film.pass_images(ctx.pass_config), pass_events.metadata(ctx.pass_config, settings.passes))
 

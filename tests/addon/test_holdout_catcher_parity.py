@@ -19,15 +19,21 @@ the same view with the floor a shadow catcher under a cube and a sphere
 approximate shadow, its alpha the shadow on a transparent film, the
 background times the shadow on an opaque one.
 
-Ember and Cycles seeds, RGBA of the four renders side by side (16
-channels): Welch's t per 4x4 block and channel and on the image mean
+With the Shadow Catcher pass on (opaque film), Combined keeps the shadow in
+its alpha and the pass holds Cycles' ratio (Combined - matte) / catcher light.
+
+Ember and Cycles seeds, the five renders side by side (23 channels):
+Welch's t per 4x4 block and channel and on the image mean
 (ember_testlib.seed_block_test: two families), power printed.
 """
+import os
+
 import bpy
 import numpy as np
 import pytest
 
-from ember_testlib import render_array, require, seed_block_test, setup_cycles, setup_ember, small_resolution
+from ember_testlib import (multilayer_output, read_multilayer_exr, render_array, require, seed_block_test,
+                           setup_cycles, setup_ember, small_resolution)
 
 SEEDS, SPP, BOUNCES = 6, 32, 3
 WIDTH, HEIGHT = 32, 24
@@ -128,12 +134,27 @@ def renders(registered_addon, tmp_path_factory):
                 out[kind, engine, transparent] = np.array(images)
         from addon import engine as ember_engine
         assert all(entry['error'] is None for entry in ember_engine.RENDER_LOG[-2 * SEEDS:])
+    # The Shadow Catcher pass on (opaque film): Combined keeps the shadow in
+    # its alpha, and the pass holds the shadow ratio.
+    scene = _catcher_scene()
+    scene.render.film_transparent = False
+    bpy.context.view_layer.cycles.use_pass_shadow_catcher = True
+    multilayer_output(scene)
+    for engine, setup in (('EMBER', setup_ember), ('CYCLES', setup_cycles)):
+        images = []
+        for seed in range(SEEDS):
+            setup(scene, SPP, 500 + seed, BOUNCES)
+            scene.render.filepath = os.path.join(str(folder), f"pass_{engine}_{seed}.exr")
+            bpy.ops.render.render(write_still=True)
+            layers = read_multilayer_exr(scene.render.filepath)
+            images.append(np.concatenate([layers['Combined'], layers['Shadow Catcher'][..., :3]], axis=-1))
+        out['pass', engine, False] = np.array(images)
     return out
 
 
 def test_holdouts_and_shadow_catchers_match_cycles(renders):
-    """Both scenes and both films in one comparison (RGBA of each: sixteen
-    channels, two families)."""
+    """Both scenes and both films, and the catcher scene with the Shadow
+    Catcher pass, in one comparison (23 channels, two families)."""
     middle = (slice(8, 11), slice(12, 15))    # the masked sphere's middle: no light, no alpha
     for transparent in (False, True):
         ember, cycles = renders['holdout', 'EMBER', transparent], renders['holdout', 'CYCLES', transparent]
@@ -143,8 +164,9 @@ def test_holdouts_and_shadow_catchers_match_cycles(renders):
     # On a transparent film the catcher floor away from the shadows is clear.
     corner = renders['catcher', 'EMBER', True][:, 20:, :3, 3]
     assert corner.max() < 0.05, f"the catcher's unshadowed floor is not transparent: {corner.max()}"
-    ember, cycles = (np.concatenate([renders[kind, engine, t] for kind in ("holdout", "catcher") for t in (False, True)],
-                                    axis=-1) for engine in ('EMBER', 'CYCLES'))
+    sets = [(kind, t) for kind in ("holdout", "catcher") for t in (False, True)] + [("pass", False)]
+    ember, cycles = (np.concatenate([renders[kind, engine, t] for kind, t in sets], axis=-1)
+                     for engine in ('EMBER', 'CYCLES'))
     seed_block_test("holdout parity blocks", "holdout parity image mean",
                     "holdout and shadow catcher (opaque | transparent film)", ember, cycles)
 
