@@ -25,6 +25,8 @@ from .camera import CameraModel, PixelFilter
 from . import kernels, media, pass_events
 from .film import Film
 from .geometry import flatten, material_table
+from .integrator.catcher import catcher_triangles
+from .integrator.linking import LightLinks
 from .integrator import Context, subsurface, trace_batch
 from .lights import LightSet
 from .sampler import Sampler
@@ -93,10 +95,27 @@ def prepare(scene, settings):
                         sampler=Sampler(settings.seed, settings.sampling_pattern),
                         bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
                         pass_config=pass_events.configure(scene, settings),
-                        media=_media(scene, accel, tris, camera))
+                        media=_media(scene, accel, tris, camera), holdout=holdout_weights(scene, tris),
+                        links=LightLinks.build(scene, lights, tris), catcher=catcher_triangles(scene, tris))
     if ctx.subsurface:
         ctx = dataclasses.replace(ctx, subsurface_warnings=tuple(subsurface.open_mesh_warnings(scene)))
     return ctx
+
+
+def holdout_weights(scene, tris):
+    """(T,) holdout weight of every triangle for camera rays, or None when
+    nothing in the scene is a holdout: 1 on holdout objects, else the
+    material's Holdout shader weight."""
+    mats = material_table(scene)
+    per_material = np.array([float(getattr(m, "holdout", 0.0)) for m in mats])
+    per_instance = np.array([bool(getattr(i, "holdout", False)) for i in scene.instances] + [False])
+    if not (per_material.any() or per_instance.any()) or len(tris.material) == 0:
+        return None
+    weights = per_material[np.asarray(tris.material, np.int64)]
+    owner = getattr(tris.shading, "instance", None)
+    if owner is not None and per_instance.any():
+        weights = np.where(per_instance[np.asarray(owner, np.int64)], 1.0, weights)
+    return weights if weights.any() else None
 
 
 def _media(scene, accel, tris, camera):
@@ -311,7 +330,7 @@ def _render(scene, settings, progress):
                 # mean is still unbiased.  Report the fewest samples any pixel has.
                 stats["samples"] = int(film.count.min())
             if progress is not None and hasattr(progress, "on_pass"):
-                image = film.image(settings.transparent)
+                image = film.image(settings.transparent, "Shadow Catcher" not in settings.passes)
                 progress.on_pass(image, stats["samples"], dict(stats))
             if cancelled or _should_stop(progress, stats, settings):
                 if queue:
@@ -319,7 +338,7 @@ def _render(scene, settings, progress):
                     pool.abandon()  # the next pass, already started, is dropped
                 break
     if image is None:
-        image = film.image(settings.transparent)
+        image = film.image(settings.transparent, "Shadow Catcher" not in settings.passes)
     return RenderResult(film, image, stats["samples"], stats, warnings_for(ctx),
                         film.pass_images(ctx.pass_config), pass_events.metadata(ctx.pass_config, settings.passes))
 

@@ -101,6 +101,12 @@ class Instance:
     pass_index: int = 0
     random: float = 0.0
     asset: str = ""
+    # Object > Visibility > Mask > Holdout (or a holdout collection): camera
+    # rays meeting the object end there and leave the film transparent;
+    # every other ray sees the object as usual (Cycles' SD_OBJECT_HOLDOUT_MASK).
+    holdout: bool = False
+    # Object > Visibility > Mask > Shadow Catcher (engine/integrator/catcher.py).
+    shadow_catcher: bool = False
 
 
 # ----------------------------------------------------------------------------
@@ -163,6 +169,11 @@ class Material:
     # The lobes (slot indices: sheen, coat) whose albedo at the view angle
     # dims the emission, as Cycles' Principled BSDF layers its emission.
     emission_layers: tuple = ()
+    # Holdout shader weight in [0, 1] (Cycles' holdout closure): camera rays
+    # (and their transparent passes) hitting the surface uncover the film's
+    # alpha by it, whatever Film > Transparent says; other rays see its part
+    # as black.
+    holdout: float = 0.0
 
 
 DEFAULT_MATERIAL = Material("default", (Lobe("diffuse", (0.8, 0.8, 0.8)),))
@@ -574,6 +585,21 @@ class RenderSettings:
     volume_bounces: int = 0
 
 
+@dataclass(frozen=True)
+class LinkSet:
+    """A light's receiver or blocker collection (Blender 4.0+ Light Linking
+    and Shadow Linking) as object names: objects excluded never take part;
+    with any object included only the included ones do, else every object
+    not excluded does (Blender's rule)."""
+    include: frozenset = frozenset()
+    exclude: frozenset = frozenset()
+
+    def admits(self, name):
+        if name in self.exclude:
+            return False
+        return name in self.include if self.include else True
+
+
 @dataclass
 class Scene:
     meshes: Sequence[Mesh] = ()
@@ -585,3 +611,7 @@ class Scene:
     # The Blender version the scene comes from: where Cycles changed between
     # versions (its bump shadowing term), Ember renders as that version's.
     cycles_version: tuple = (5, 0, 0)
+    # Light and shadow linking: scene light index -> (receivers, blockers),
+    # each a LinkSet or None (every object).  Lights not listed are linked
+    # to everything.
+    light_links: dict = field(default_factory=dict)

@@ -147,6 +147,9 @@ def validate_material(mat, index):
         _validate_lobe_extras(lobe, k, what, len(mat.lobes))
     if getattr(mat, "volume", None) is not None:
         validate_volume(mat.volume, what)
+    holdout = getattr(mat, "holdout", 0.0)
+    if not (np.isfinite(holdout) and 0.0 <= holdout <= 1.0):
+        raise SceneError(f"{what}: holdout must lie in [0, 1], got {holdout}")
 
 
 def validate_volume(vol, what):

@@ -15,9 +15,10 @@ from . import mesh as mesh_export
 class InstanceCollector:
     """Accumulates meshes and instances while walking the depsgraph."""
 
-    def __init__(self, material_index, check=None):
+    def __init__(self, material_index, check=None, view_layer=None):
         # material_index(obj) -> list of scene material indices per slot
         self.material_index = material_index
+        self.view_layer = view_layer     # for holdout collections
         self.meshes = []
         self.instances = []
         self.mesh_of_key = {}
@@ -48,6 +49,9 @@ class InstanceCollector:
             materials=self.material_index(obj),
             name=obj.name,
             **ray_visibility(inst),
+            holdout=is_holdout(inst, self.view_layer),
+            shadow_catcher=bool(getattr(inst.parent if inst.is_instance and inst.parent is not None
+                                        else inst.object, 'is_shadow_catcher', False)),
             **_pass_fields(inst),
             **object_info(inst),
         ))
@@ -83,6 +87,23 @@ class InstanceCollector:
 
 VISIBILITY_FLAGS = ('visible_camera', 'visible_diffuse', 'visible_glossy', 'visible_transmission',
                     'visible_shadow')
+
+
+def is_holdout(inst, view_layer=None):
+    """Object > Visibility > Mask > Holdout, or a holdout collection of the
+    view layer (Cycles: the instancer's flag for its instances)."""
+    obj = inst.parent if inst.is_instance and inst.parent is not None else inst.object
+    for candidate in (obj, inst.object):
+        test = getattr(candidate, 'holdout_get', None)
+        if test is not None and view_layer is not None:
+            try:
+                if test(view_layer=view_layer):
+                    return True
+            except (TypeError, RuntimeError):
+                pass
+        if getattr(candidate, 'is_holdout', False):
+            return True
+    return False
 
 
 def ray_visibility(inst):
@@ -124,7 +145,7 @@ def collect_instances(depsgraph, material_index, check=None):
     """Walk every object instance; returns (meshes, instances, warnings).
     ``check()`` (which raises to cancel) runs every 256 instances and before
     each mesh is exported."""
-    collector = InstanceCollector(material_index, check)
+    collector = InstanceCollector(material_index, check, getattr(depsgraph, 'view_layer', None))
     for count, inst in enumerate(depsgraph.object_instances):
         if count % 256 == 255:
             collector.check()

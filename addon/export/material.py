@@ -46,6 +46,7 @@ class Closure:
     lobes: list = field(default_factory=list)
     emission: tuple = BLACK
     emission_layers: tuple = ()
+    holdout: object = 0.0      # the Holdout shader's weight (a constant or an expression)
 
     def scaled(self, weight):
         """Every lobe and the emission times a Mix Shader factor.  A lobe's
@@ -53,7 +54,8 @@ class Closure:
         layering terms, which a mix must not change)."""
         lobes = [dataclasses.replace(lobe, weight=nodes.multiply(lobe.weight, weight))
                  for lobe in self.lobes]
-        return Closure(lobes, _scale(self.emission, weight), self.emission_layers)
+        return Closure(lobes, _scale(self.emission, weight), self.emission_layers,
+                       nodes.multiply(self.holdout, weight))
 
     def plus(self, other):
         """Both closures; the emission keeps the layers of the one that has
@@ -63,7 +65,8 @@ class Closure:
         layers = self.emission_layers if _has_emission(self.emission) else ()
         if _has_emission(other.emission):
             layers = layers + shifted
-        return Closure(self.lobes + other.lobes, _add(self.emission, other.emission), layers)
+        return Closure(self.lobes + other.lobes, _add(self.emission, other.emission), layers,
+                       nodes.math('ADD', self.holdout, other.holdout))
 
     def mixed_dimming(self, other):
         """Two emissions of which only one lies under layers (rendered with
@@ -315,6 +318,10 @@ class NodeTranslator:
     def _node_subsurface_scattering(self, node):
         """Cycles' Subsurface Scattering node (Random Walk, Skin; Christensen-Burley as Random Walk)."""
         return Closure(subsurface.node_lobes(self, node))
+
+    def _node_holdout(self, node):
+        """Cycles' Holdout: no light, and camera rays uncover the film."""
+        return Closure(holdout=1.0)
 
     def _node_emission(self, node):
         strength = self.value(node, 'Strength', 1.0)
@@ -836,7 +843,8 @@ def translate(material):
     if volume is not None and not output.inputs['Surface'].is_linked:
         # Only a Volume output: Cycles' surface is a pass-through boundary.
         lobes = (scene.Lobe('transparent', (1.0, 1.0, 1.0)),)
-    material = scene.Material(name, lobes, closure.emission, normal=normal)
+    material = scene.Material(name, lobes, closure.emission, normal=normal,
+                              holdout=_holdout_weight(translator, closure.holdout))
     if volume is not None:
         material.volume = volume
     if translator.tangent is not None and any(lobe.kind == 'glossy_anisotropic' for lobe in lobes):
@@ -844,6 +852,18 @@ def translate(material):
     if closure.emission_layers and hasattr(material, 'emission_layers'):
         material.emission_layers = tuple(closure.emission_layers)
     return material, translator.warning()
+
+
+def _holdout_weight(translator, holdout):
+    """The material's holdout weight as a constant in [0, 1]: a textured Mix
+    Shader factor over a Holdout is read as the middle of its range (named
+    in the material's warning), a sum above 1 as 1."""
+    if nodes.is_expr(holdout):
+        lo, hi = nodes.value_range(holdout)
+        translator.approximated.append(f"'Holdout' (a textured factor read as {0.5 * (lo + hi):g})")
+        holdout = 0.5 * (lo + hi)
+    holdout = float(holdout)
+    return min(max(holdout, 0.0), 1.0) if math.isfinite(holdout) else 0.0
 
 
 def _volume(translator, output):

@@ -62,7 +62,8 @@ def export_scene(depsgraph, camera_override=None, should_stop=None):
     materials = material_export.MaterialTable(override)
     meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots, check)
     check()
-    lights, light_warnings = light_export.collect_lights(depsgraph, check)
+    links = {}
+    lights, light_warnings = light_export.collect_lights(depsgraph, check, links)
     world, world_warning = world_export.world_from_blender(scene.world)
     camera_object = scene_camera(depsgraph, camera_override)
     try:
@@ -73,12 +74,31 @@ def export_scene(depsgraph, camera_override=None, should_stop=None):
         raise ExportError(f"Camera '{camera_object.name}': {message}") from err
     result = renderer.Scene(
         meshes=meshes, instances=instances, materials=materials.materials,
-        lights=lights, world=world, camera=camera, cycles_version=tuple(bpy.app.version))
-    warnings = materials.warnings + warnings + light_warnings + camera_warnings
+        lights=lights, world=world, camera=camera, cycles_version=tuple(bpy.app.version), light_links=links)
+    warnings = materials.warnings + warnings + light_warnings + camera_warnings + _catcher_notes(result)
     if world_warning:
         warnings.append(world_warning)
     triangles = sum(len(meshes[inst.mesh].triangles) for inst in instances)
     return Export(result, warnings, time.perf_counter() - start, triangles)
+
+
+def _catcher_notes(scene):
+    """A shadow catcher that emits light (Cycles renders it: its emission
+    enters the shadow ratio, which can exceed 1) is named in a warning."""
+    notes, seen = [], set()
+    for inst in scene.instances:
+        if not getattr(inst, 'shadow_catcher', False) or inst.name in seen:
+            continue
+        seen.add(inst.name)
+        for m in inst.materials:
+            mat = scene.materials[m] if 0 <= m < len(scene.materials) else None
+            emission = getattr(mat, 'emission', (0.0, 0.0, 0.0))
+            if mat is not None and (backend.engine().value_range(emission)[1] > 0
+                                    if not isinstance(emission, tuple) else max(emission) > 0):
+                notes.append(f"Object '{inst.name}' is a shadow catcher that emits light (material "
+                             f"'{mat.name}'): its emission enters the shadow catcher's ratio")
+                break
+    return notes
 
 
 # Material, world and light previews stop after this many bounces: they must

@@ -29,7 +29,7 @@ from ..media import start_stack
 from ..nee import add_rows as _add_rows
 from ..sampler import CAMERA
 from ..vec import dot
-from . import stages, subsurface, transparency, volume
+from . import catcher, stages, subsurface, transparency, volume
 from .context import Context
 from .records import Hit, LightSample, Paths, RayHits, ShadowBatch, Vertex, rows_of
 from .stages import every_light as _every_light, interaction as _interaction
@@ -53,7 +53,8 @@ def trace_batch(ctx, pix, sample, tile):
                   o, np.zeros(n, np.int32), np.zeros(n, np.int32), pseed, sample,
                   np.zeros((n, pass_events.aux_width(ctx.settings)), np.float32),
                   np.zeros((n, 3 if ctx.count_kinds else 0), np.int16), np.full(n, np.inf),
-                  start_stack(ctx.media, n), np.zeros(n, np.int16), np.full(n, -1, np.int64), np.zeros((n, 3)))
+                  start_stack(ctx.media, n), np.zeros(n, np.int16), np.full(n, -1, np.int64), np.zeros((n, 3)),
+                  np.full(n, -1, np.int32), np.zeros(n, np.int8))
     obs = pass_events.observer(ctx, tile)
     obs.start(paths)
     # Every step raises a live path's bounce or its transparent bounce
@@ -86,6 +87,12 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
     if len(paths.pix) == 0:
         return _join(paths, scattered)
     hit = stages.interaction(ctx, paths, *surface)               # Hit
+    if ctx.holdout is not None:                                  # camera rays at holdouts
+        paths, hit = _holdouts(ctx, paths, hit, tile)
+        if len(paths.pix) == 0:
+            return _join(paths, scattered)
+    if ctx.catcher is not None:                                  # shadow catchers: split paths
+        paths, hit = catcher.split(ctx, paths, hit, tile)
     stages.surface_emission(ctx, paths, hit, depth, obs)
     paths, hit, carried = _past_last_vertex(ctx, paths, hit, tile)
     if carried is not None and ctx.subsurface:
@@ -136,6 +143,23 @@ def _end(ctx, paths, alive, tile):
         return paths
     stages.finish(ctx, paths, tile, ~alive)
     return paths.take(alive)
+
+
+def _holdouts(ctx, paths, hit, tile):
+    """Camera paths (before any scattering, through transparent passes too)
+    at holdout surfaces uncover the film by the holdout weight times their
+    throughput; those at a full holdout end there (Cycles'
+    integrate_surface_holdout).  Returns the paths and hits that go on."""
+    weight = np.where(paths.bounce == 0, ctx.holdout[hit.prim], 0.0)
+    rows = np.flatnonzero(weight > 0)
+    if len(rows) == 0:
+        return paths, hit
+    tile.add_holdout(paths.pix[rows], weight[rows] * paths.beta[rows].mean(axis=1))
+    go_on = weight < 1.0
+    if go_on.all():
+        return paths, hit
+    stages.finish(ctx, paths, tile, ~go_on)
+    return paths.take(go_on), hit.take(go_on)
 
 
 def _past_last_vertex(ctx, paths, hit, tile):

@@ -69,10 +69,19 @@ class Context:
     # Some material has a subsurface lobe (integrator/subsurface.py).
     subsurface: bool = False
     subsurface_warnings: tuple = ()
+    # Holdouts: (T,) each triangle's holdout weight for camera rays (1 on a
+    # holdout object, the material's Holdout shader weight elsewhere); None
+    # in a scene without holdouts (the stage is skipped).
+    holdout: object = None
+    # Light and shadow linking: linking.LightLinks, None without links.
+    links: object = None
+    # Shadow catchers: (T,) whether each triangle is a catcher's, None
+    # without one (catcher.py).
+    catcher: object = None
 
     @classmethod
     def build(cls, accel, triangles, materials, lights, camera, world, settings, sampler=None,
-              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None):
+              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None, holdout=None, links=None, catcher=None):
         """The Context of a render; ``sampler`` defaults to the settings'
         seed and pattern, ``pass_config`` to no extra passes."""
         if sampler is None:
@@ -89,7 +98,7 @@ class Context:
                    **_kind_limits(settings, light_path), light_path=light_path,
                    pass_config=pass_config, emitter_groups=pass_events.emitter_groups(pass_config, lights),
                    centres=pass_events.CentreRecord(camera.width * camera.height), media=media,
-                   subsurface=subsurface.in_scene(materials))
+                   subsurface=subsurface.in_scene(materials), holdout=holdout, links=links, catcher=catcher)
 
 
 def _delta_emitters(lights):

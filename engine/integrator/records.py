@@ -64,6 +64,11 @@ class Paths:
     # and its barycentrics and distance (N, 3).
     exit_prim: np.ndarray
     exit_hit: np.ndarray
+    # The instance of the previous vertex (-1: the camera), for light linking.
+    prev_inst: np.ndarray
+    # Shadow catcher (catcher.py): 0 a matte path (no catcher met yet), 1 the
+    # main path after the split, 2 the catcher path (sees catchers only).
+    catcher: np.ndarray
 
     def __len__(self):
         return len(self.pix)

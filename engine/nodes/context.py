@@ -43,6 +43,16 @@ class SceneShading:
         self.mesh_of_instance = np.array([i.mesh for i in inst], dtype=np.int64).reshape(-1)
         self._corners = {}
 
+    def has_uv(self):
+        """(T,) whether each triangle's mesh has a UV map (Cycles' UV pass is
+        0 on meshes without one, (u, v, 1) on the others)."""
+        if "has_uv" not in self._corners:
+            per_mesh = np.array([mesh.uvs is not None for mesh in self.scene.meshes] + [False])
+            mesh = self.mesh_of_instance[self.instance] if len(self.mesh_of_instance) else \
+                np.full(len(self.instance), -1)
+            self._corners["has_uv"] = per_mesh[mesh]
+        return self._corners["has_uv"]
+
     def corners(self, key):
         """(T, 3, C) per-corner data of every triangle, or None when no mesh
         has it.  key: ('uv', name), ('attr', name) or ('generated',)."""
