@@ -31,6 +31,7 @@ import numpy as np
 from . import embree_upload
 
 RTC_GEOMETRY_TYPE_TRIANGLE = 0
+RTC_GEOMETRY_TYPE_INSTANCE = 121
 RTC_BUFFER_TYPE_INDEX = 0
 RTC_BUFFER_TYPE_VERTEX = 1
 RTC_FORMAT_UINT3 = 0x5003
@@ -72,6 +73,8 @@ def library():
             ("rtcAttachGeometry", u32, [vp, vp]),
             ("rtcSetGeometryTimeStepCount", None, [vp, u32]),
             ("rtcSetNewGeometryBuffer", vp, [vp, ctypes.c_int, u32, ctypes.c_int, size, size]),
+            ("rtcSetGeometryInstancedScene", None, [vp, vp]),
+            ("rtcSetGeometryTransformQuaternion", None, [vp, u32, vp]),
             ("rtcIntersect16", None, [vp, vp, vp, vp]),
             ("rtcOccluded16", None, [vp, vp, vp, vp])):
         fn = getattr(lib, name)
@@ -116,8 +119,8 @@ def _compiled_loops():
                 w[9], w[10], w[11] = 0xFFFFFFFF, 0, 0
                 w[18], w[19] = 0xFFFFFFFF, 0xFFFFFFFF
                 c_intersect(scene, addr, 0)
-                g = w[18]
-                if g == 0xFFFFFFFF:
+                g = w[19] if w[19] != 0xFFFFFFFF else w[18]   # an instance's id, or the geometry's
+                if w[18] == 0xFFFFFFFF:
                     prim_out[i] = -1
                     t_out[i] = np.inf
                 else:
@@ -146,10 +149,16 @@ class TriangleScene:
     """An Embree scene of triangle geometries, each with one or more time
     steps.  ``parts``: a list of (vertices (S, V, 3), indices (T, 3), prims
     (T,)) where ``prims`` are the global triangle indices queries return for
-    the part's triangles; S = 1 is a static part.  Time is in [0, 1] over
-    the steps (step k at k / (S - 1)), Embree's default time range."""
+    the part's triangles; S = 1 is a static part.  ``instances``: a list of
+    (vertices, indices, prims, transforms) whose triangles (object space,
+    S' steps) sit in a scene of their own that an instance geometry places
+    with ``transforms`` (S'', 16) float32 ``RTCQuaternionDecomposition``
+    rows (scale xyz, skew xy xz yz, shift xyz, quaternion r i j k,
+    translation xyz), interpolated by Embree: quaternions by slerp, the
+    rest linearly (Cycles' transform motion).  Time is in [0, 1] over the
+    steps (step k at k / (S - 1)), Embree's default time range."""
 
-    def __init__(self, parts):
+    def __init__(self, parts, instances=()):
         lib = library()
         if lib is None:
             raise RuntimeError("libembree4 (bundled with embreex) is not available")
@@ -158,6 +167,7 @@ class TriangleScene:
         if not self.device:
             raise RuntimeError("Embree could not create a device")
         self.scene = lib.rtcNewScene(self.device)
+        self.children = []
         offsets, order = [], []
         first = 0
         self.nbytes = 0
@@ -169,13 +179,45 @@ class TriangleScene:
             order.append(np.asarray(prims, np.int64))
             first += len(indices)
             self.nbytes += vertices.nbytes + indices.nbytes
+        for geom_id, (vertices, indices, prims, transforms) in enumerate(instances, start=len(parts)):
+            vertices = np.ascontiguousarray(vertices, np.float32)
+            indices = np.ascontiguousarray(indices, np.uint32)
+            child = lib.rtcNewScene(self.device)
+            self.children.append(child)
+            self._add(vertices, indices, 0, scene=child)
+            lib.rtcCommitScene(child)
+            self._instance(child, np.ascontiguousarray(transforms, np.float32), geom_id)
+            offsets.append(first)
+            order.append(np.asarray(prims, np.int64))
+            first += len(indices)
+            self.nbytes += vertices.nbytes + indices.nbytes
         lib.rtcCommitScene(self.scene)
         self._check("commit the scene")
         self.offsets = np.array(offsets or [0], np.int64)
         self.order = np.concatenate(order) if order else np.zeros(0, np.int64)
         self.handle = int(self.scene)
 
-    def _add(self, vertices, indices, geom_id):
+    def _instance(self, child, transforms, geom_id):
+        lib = self.lib
+        geom = lib.rtcNewGeometry(self.device, RTC_GEOMETRY_TYPE_INSTANCE)
+        if not geom:
+            raise MemoryError(f"Embree could not create an instance (error {lib.rtcGetDeviceError(self.device)})")
+        try:
+            lib.rtcSetGeometryInstancedScene(geom, child)
+            lib.rtcSetGeometryTimeStepCount(geom, len(transforms))
+            for step, row in enumerate(transforms):
+                decomposition = _aligned(16)
+                decomposition[:] = row
+                lib.rtcSetGeometryTransformQuaternion(geom, step, decomposition.ctypes.data)
+            lib.rtcCommitGeometry(geom)
+            got = lib.rtcAttachGeometry(self.scene, geom)
+        finally:
+            lib.rtcReleaseGeometry(geom)
+        if got != geom_id:
+            raise RuntimeError(f"Embree gave instance id {got}, expected {geom_id}")
+        self._check("place an instance")
+
+    def _add(self, vertices, indices, geom_id, scene=None):
         lib = self.lib
         steps = len(vertices)
         geom = lib.rtcNewGeometry(self.device, RTC_GEOMETRY_TYPE_TRIANGLE)
@@ -187,7 +229,7 @@ class TriangleScene:
                 self._fill(geom, RTC_BUFFER_TYPE_VERTEX, step, RTC_FORMAT_FLOAT3, vertices[step])
             self._fill(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices)
             lib.rtcCommitGeometry(geom)
-            got = lib.rtcAttachGeometry(self.scene, geom)
+            got = lib.rtcAttachGeometry(self.scene if scene is None else scene, geom)
         finally:
             lib.rtcReleaseGeometry(geom)
         if got != geom_id:
@@ -209,6 +251,8 @@ class TriangleScene:
     def close(self):
         if self.scene:
             self.lib.rtcReleaseScene(self.scene)
+            for child in self.children:
+                self.lib.rtcReleaseScene(child)
             self.lib.rtcReleaseDevice(self.device)
             self.scene = self.device = None
 
@@ -278,10 +322,9 @@ class TriangleScene:
         words[:, MASK], words[:, ID], words[:, FLAGS] = INVALID_ID, 0, 0
         words[:, 12 + 6] = INVALID_ID    # hit.geomID (hit words start at 12)
         words[:, 12 + 7] = INVALID_ID    # hit.instID[0]
-        valid = np.full(count * PACKET, -1, np.int32)
-        if pad:
-            valid[n:] = 0
-        valid = valid.reshape(count, PACKET)
+        valid = _aligned(count * PACKET).view(np.int32)   # read as one aligned 64-byte vector
+        valid[:] = -1
+        valid[n:] = 0
         fn = self.lib.rtcOccluded16 if hits is None else self.lib.rtcIntersect16
         base, vbase, step = buf.ctypes.data, valid.ctypes.data, PACKET_WORDS * 4
         for k in range(count):
@@ -291,13 +334,14 @@ class TriangleScene:
             return
         t, prim, u, v = hits
         geom = words[:, 12 + 6, :].reshape(-1)[:n]
+        inst = words[:, 12 + 7, :].reshape(-1)[:n]
         local = words[:, 12 + 5, :].reshape(-1)[:n].astype(np.int64)
         hit = geom != INVALID_ID
-        g = np.where(hit, geom, 0).astype(np.int64)
+        g = np.where(hit, np.where(inst != INVALID_ID, inst, geom), 0).astype(np.int64)
         prim[:] = np.where(hit, self.order[np.where(hit, self.offsets[g] + local, 0)], -1)
         t[:] = np.where(hit, buf[:, TFAR, :].reshape(-1)[:n], np.inf)
-        u[:] = buf[:, 12 + 3, :].reshape(-1)[:n]
-        v[:] = buf[:, 12 + 4, :].reshape(-1)[:n]
+        u[:] = np.where(hit, buf[:, 12 + 3, :].reshape(-1)[:n], 0.0)
+        v[:] = np.where(hit, buf[:, 12 + 4, :].reshape(-1)[:n], 0.0)
 
 
 def _aligned(words):

@@ -19,6 +19,7 @@ from concurrent.futures import TimeoutError as FuturesTimeout
 import numpy as np
 
 from .accel import Accel
+from .motion import MotionAccel, MotionGeometry, has_motion
 from .blas import single_threaded_blas
 from .bsdf import MaterialTable, bump_model
 from .camera import CameraModel, PixelFilter
@@ -87,13 +88,15 @@ def prepare(scene, settings):
         camera = CameraModel(scene.camera, PixelFilter(settings.filter_type, settings.filter_width))
     except ValueError as exc:
         raise SceneError(f"camera: {exc}") from None
-    accel = Accel(tris)
+    motion = MotionGeometry(scene, tris) if has_motion(scene) else None
+    # Only moving triangles need Embree's motion blur (a moving camera alone does not).
+    accel = MotionAccel(tris, motion) if motion is not None and motion.moving else Accel(tris)
     world = np.asarray(scene.world.color, dtype=np.float64)
     return Context.build(accel, tris, materials, lights, camera, world, settings,
                          sampler=Sampler(settings.seed, settings.sampling_pattern),
                          bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
                          pass_config=pass_events.configure(scene, settings),
-                         media=_media(scene, accel, tris, camera))
+                         media=_media(scene, accel, tris, camera), motion=motion)
 
 
 def _media(scene, accel, tris, camera):

@@ -71,6 +71,12 @@ class Mesh:
     attributes: Optional[dict] = None
     texspace: Optional[tuple] = None
     orco: Optional[np.ndarray] = None
+    # Deformation motion blur: vertex positions (S, V, 3) at the shutter's S
+    # evenly spaced steps (step k at time k / (S - 1) of the shutter), and
+    # optionally per-corner shading normals (S, T, 3, 3) there; None: the
+    # mesh does not deform during the shutter.
+    motion: Optional[np.ndarray] = None
+    motion_normals: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -101,6 +107,9 @@ class Instance:
     pass_index: int = 0
     random: float = 0.0
     asset: str = ""
+    # Transform motion blur: object-to-world (S, 4, 4) at the shutter's S
+    # evenly spaced steps (Cycles' motion steps); None: it does not move.
+    motion: Optional[np.ndarray] = None
 
 
 # ----------------------------------------------------------------------------
@@ -477,6 +486,11 @@ class Camera:
     resolution: Tuple[int, int] = (640, 480)
     pixel_aspect: Tuple[float, float] = (1.0, 1.0)
     border: Optional[Tuple[float, float, float, float]] = None
+    # Camera motion blur: camera-to-world (S, 4, 4) at the shutter's S evenly
+    # spaced steps; None: a still camera.  Rays take their time uniformly
+    # over the shutter (the sampler's time dimension) and the camera at that
+    # time (rotation by quaternion, translation linearly, as Cycles).
+    motion: Optional[np.ndarray] = None
 
 
 # ----------------------------------------------------------------------------

@@ -59,6 +59,9 @@ class Paths:
     # volumes; and its scattering events in volumes so far.
     stack: np.ndarray
     vbounce: np.ndarray
+    # Motion blur: the sample's time over the shutter, (N, 1) in [0, 1], or
+    # (N, 0) in a still scene (engine.motion.path_time).
+    time: np.ndarray
 
     def __len__(self):
         return len(self.pix)

@@ -11,6 +11,7 @@ import numpy as np
 from .. import bsdf, nee, throughput
 from ..accel import shadow_rays, shadow_rays_f32
 from ..hits import hit_geometry
+from ..motion import path_time, triangles_at
 from ..nodes import NodeRays, ShadingContext
 from ..nodes.context import PATH_COLUMNS
 from ..sampler import BSDF, LIGHT, emitter_set, vertex_set
@@ -27,9 +28,11 @@ from .visibility import VIS_INDIRECT
 
 def intersect(ctx, paths):
     """The closest surface each ray may see and the analytic lights before it."""
-    t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax)
+    time = path_time(paths)
+    t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax, time=time)
     if ctx.triangles.visibility is not None:
-        t, prim, bu, bv = visibility.skip_invisible(ctx, paths.o, paths.d, paths.tmax, paths.ray, t, prim, bu, bv)
+        t, prim, bu, bv = visibility.skip_invisible(ctx, paths.o, paths.d, paths.tmax, paths.ray, t, prim, bu, bv,
+                                                    time=time)
     light_t, emitter, Le, pdf = _lights_along(ctx, paths, np.minimum(t, paths.tmax))
     return RayHits(t, prim, bu, bv, light_t < np.inf, emitter, Le, pdf, light_t)
 
@@ -185,7 +188,12 @@ def interaction(ctx, paths, t, prim, bu, bv):
     """The Hit of rays (paths.o, paths.d) on triangles ``prim``."""
     tr = ctx.triangles
     d = paths.d
-    p, ng, ns, back = hit_geometry(tr, paths.o, d, t, prim, bu, bv)
+    time = path_time(paths) if ctx.motion is not None and ctx.motion.moving else None
+    if time is None:
+        p, ng, ns, back = hit_geometry(tr, paths.o, d, t, prim, bu, bv)
+    else:   # the triangles where they are at each ray's time
+        p, ng, ns, back = hit_geometry(triangles_at(ctx.motion, tr, prim, time), paths.o, d, t,
+                                       np.arange(len(prim)), bu, bv)
     uv = _hit_uv(tr, prim, bu, bv)
     hit = Hit(p, ng, ns, -d, np.take(tr.material, prim), prim, ctx.accel.offset_scale(p), uv, back=back,
               bary=np.stack([bu, bv], axis=1), depth=getattr(paths, "bounce", None),
@@ -379,14 +387,16 @@ def trace_shadows(ctx, paths, batch):
     e = batch.sample.emitter[batch.rows]
     contrib = batch.sample.contrib
     path_rows = batch.at.path_rows
+    rows = batch.rows if path_rows is None else path_rows[batch.rows]
+    time = path_time(paths)
+    time = None if time is None else time[rows]
     if ctx.transparent_shadows:
-        rows = batch.rows if path_rows is None else path_rows[batch.rows]
         added = contrib[batch.rows] * transparency.transmittance(ctx, batch.origin, batch.direction, batch.tmax,
-                                                                 e, paths.tbounce[rows])
+                                                                 e, paths.tbounce[rows], time=time)
         batch.free, batch.added = batch.rows, added
         paths.L[rows] += added
         return
-    batch.free = batch.rows[~visibility.occluded(ctx, batch.origin, batch.direction, batch.tmax, e)]
+    batch.free = batch.rows[~visibility.occluded(ctx, batch.origin, batch.direction, batch.tmax, e, time=time)]
     if path_rows is None:
         nee.add_rows(paths.L, batch.free, contrib)
     else:
