@@ -10,6 +10,7 @@ import numpy as np
 
 from .. import backend
 from . import mesh as mesh_export
+from .motion import instance_key
 
 
 class InstanceCollector:
@@ -23,6 +24,7 @@ class InstanceCollector:
         self.mesh_of_key = {}
         self.skipped_types = set()
         self.warnings = []
+        self.keys = []      # per instance: motion.instance_key (motion blur finds it at other times)
         self._warned = set()
         self.check = check or (lambda: None)
 
@@ -51,6 +53,7 @@ class InstanceCollector:
             **_pass_fields(inst),
             **object_info(inst),
         ))
+        self.keys.append(instance_key(inst))
 
     def _mesh_id(self, obj):
         """Index of the object's geometry in self.meshes, exporting it once."""
@@ -120,15 +123,17 @@ def _geometry_name(obj):
     return data.name if data is not None else obj.name
 
 
-def collect_instances(depsgraph, material_index, check=None):
+def collect_instances(depsgraph, material_index, check=None, keys=None):
     """Walk every object instance; returns (meshes, instances, warnings).
     ``check()`` (which raises to cancel) runs every 256 instances and before
-    each mesh is exported."""
+    each mesh is exported; ``keys`` (a list) receives each instance's key."""
     collector = InstanceCollector(material_index, check)
     for count, inst in enumerate(depsgraph.object_instances):
         if count % 256 == 255:
             collector.check()
         collector.add(inst)
+    if keys is not None:
+        keys.extend(collector.keys)
     warnings = collector.warnings + [f"Ember skips {kind.lower()} objects (not supported yet)"
                 for kind in sorted(collector.skipped_types)]
     return collector.meshes, collector.instances, warnings
