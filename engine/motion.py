@@ -142,6 +142,14 @@ def transform_at(rows, time):
     return L, np.einsum("nij,nj->ni", _rotation(q), shift) + lin[:, 13:16]
 
 
+def matrix_at(rows, time):
+    """(4, 4) transform of decomposition ``rows`` at one time."""
+    L, T = transform_at(rows, np.array([float(time)]))
+    m = np.eye(4)
+    m[:3, :3], m[:3, 3] = L[0], T[0]
+    return m
+
+
 def _lerp_steps(steps, index, time):
     """(N, ...) float64 rows ``index`` of per-step arrays (S, M, ...) at each time."""
     k, a = _step_weights(len(steps), time)
