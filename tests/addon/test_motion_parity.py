@@ -71,8 +71,26 @@ def objects(scene, blur=True):
     bpy.ops.object.shade_smooth()
     torus.data.materials.append(material("green", 'diffuse', color=(0.2, 0.7, 0.2)))
     _linear_keys(torus, 'rotation_euler', [(math.radians(-60.0), 0.0, 0.0), (math.radians(180.0), 0.0, 0.0)])
+    _shearing_box()
     _blur(scene, blur)
     return BOUNCES
+
+
+def _shearing_box():
+    """A box whose top face slides along x by a shape key (deformation
+    blur): its value goes 0 -> 1 over frames 1 -> 3, 0.8 unit of shear."""
+    obj = box("shear", material("yellow", 'diffuse', color=(0.8, 0.7, 0.1)), (0.0, -1.1, 0.35), (0.6, 0.6, 0.7))
+    obj.shape_key_add(name="Basis")
+    key = obj.shape_key_add(name="shear")
+    for point in key.data:
+        if point.co.z > 0:
+            point.co.x += 0.8 / 0.6   # object space: the box is scaled by 0.6 along x
+    for frame, value in ((1, 0.0), (3, 1.0)):
+        key.value = value
+        key.keyframe_insert('value', frame=frame)
+    for curve in _fcurves(obj.data.shape_keys.animation_data.action):
+        for point in curve.keyframe_points:
+            point.interpolation = 'LINEAR'
 
 
 def camera(scene, blur=True):
