@@ -32,6 +32,8 @@ from . import embree_upload
 
 RTC_GEOMETRY_TYPE_TRIANGLE = 0
 RTC_GEOMETRY_TYPE_INSTANCE = 121
+RTC_GEOMETRY_TYPE_SPHERE_POINT = 50
+RTC_FORMAT_FLOAT4 = 0x9004
 RTC_BUFFER_TYPE_INDEX = 0
 RTC_BUFFER_TYPE_VERTEX = 1
 RTC_FORMAT_UINT3 = 0x5003
@@ -156,9 +158,11 @@ class TriangleScene:
     rows (scale xyz, skew xy xz yz, shift xyz, quaternion r i j k,
     translation xyz), interpolated by Embree: quaternions by slerp, the
     rest linearly (Cycles' transform motion).  Time is in [0, 1] over the
-    steps (step k at k / (S - 1)), Embree's default time range."""
+    steps (step k at k / (S - 1)), Embree's default time range.  ``spheres``:
+    (centres and radii (N, 4), prims) for one RTC_GEOMETRY_TYPE_SPHERE_POINT
+    geometry, or None."""
 
-    def __init__(self, parts, instances=()):
+    def __init__(self, parts, instances=(), spheres=None):
         lib = library()
         if lib is None:
             raise RuntimeError("libembree4 (bundled with embreex) is not available")
@@ -191,6 +195,26 @@ class TriangleScene:
             order.append(np.asarray(prims, np.int64))
             first += len(indices)
             self.nbytes += vertices.nbytes + indices.nbytes
+        if spheres is not None:
+            xyzr, prims = spheres
+            xyzr = np.ascontiguousarray(xyzr, np.float32)
+            geom = lib.rtcNewGeometry(self.device, RTC_GEOMETRY_TYPE_SPHERE_POINT)
+            try:
+                buffer = lib.rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4, 16, len(xyzr))
+                if not buffer:
+                    raise MemoryError(f"Embree could not allocate {len(xyzr)} points")
+                ctypes.memmove(buffer, xyzr.ctypes.data, xyzr.nbytes)
+                lib.rtcCommitGeometry(geom)
+                got = lib.rtcAttachGeometry(self.scene, geom)
+            finally:
+                lib.rtcReleaseGeometry(geom)
+            if got != len(offsets):
+                raise RuntimeError(f"Embree gave the points id {got}, expected {len(offsets)}")
+            self._check("take the points")
+            offsets.append(first)
+            order.append(np.asarray(prims, np.int64))
+            first += len(xyzr)
+            self.nbytes += xyzr.nbytes
         lib.rtcCommitScene(self.scene)
         self._check("commit the scene")
         self.offsets = np.array(offsets or [0], np.int64)

@@ -213,18 +213,14 @@ class MotionGeometry:
     def moving(self):
         return len(self.parts) > 0
 
-    def embree_parts(self, tris):
-        """(parts, instances) for embree_c.TriangleScene."""
-        parts = []
-        if len(self.still):
-            corners = tris.corners_float32()[self.still]
-            parts.append((corners.reshape(1, -1, 3), np.arange(3 * len(corners)).reshape(-1, 3), self.still))
+    def embree_instances(self):
+        """The moving instances for embree_c.TriangleScene."""
         instances = []
         for part in self.parts:
             s, m = part.corners.shape[:2]
             instances.append((part.corners.reshape(s, -1, 3), np.arange(3 * m).reshape(-1, 3), part.rows,
                               part.decomposition.astype(np.float32)))
-        return parts, instances
+        return instances
 
     def at(self, tris, prim, time):
         """(p0, ng, ns) of triangles ``prim`` at each ray's time: float64
@@ -271,20 +267,36 @@ def triangles_at(motion, tris, prim, time):
 
 
 class MotionAccel(Accel):
-    """engine.accel.Accel's queries with a time per ray (None: the shutter's
-    centre), traced by Embree's motion blur (engine.embree_c)."""
+    """engine.accel.Accel's queries through Embree's C API (engine.embree_c)
+    for what embreex cannot trace: moving triangles (``motion``, a
+    MotionGeometry: queries take a time per ray, None = the shutter's
+    centre) and spheres (``spheres``, engine.points.Spheres rows)."""
 
     OFFSET = 4 * OFFSET_SCALE   # Embree's float32 interpolation against ours in float64
 
-    def __init__(self, triangles, motion):
+    def __init__(self, triangles, motion=None, spheres=None):
         self.triangles = triangles
         self.motion = motion
         self.empty = len(triangles) == 0
         self._lock = threading.Lock()
         self._totals = {"seconds": 0.0, "rays": 0}
-        self.upload = "embree C API (motion blur)"
+        self.upload = "embree C API"
         if not self.empty:
-            self.scene = embree_c.TriangleScene(*motion.embree_parts(triangles))
+            special = np.zeros(len(triangles), bool)
+            if motion is not None:
+                special |= motion.part >= 0
+            if spheres is not None:
+                special[spheres.rows] = True
+            still = np.flatnonzero(~special)
+            parts = []
+            if len(still):
+                corners = triangles.corners_float32()[still]
+                parts.append((corners.reshape(1, -1, 3), np.arange(3 * len(corners)).reshape(-1, 3), still))
+            points = None
+            if spheres is not None and len(spheres):
+                points = (np.concatenate([spheres.centres, spheres.radii[:, None]], axis=1), spheres.rows)
+            instances = motion.embree_instances() if motion is not None else []
+            self.scene = embree_c.TriangleScene(parts, instances, points)
 
     def intersect(self, origins, directions, tmax, time=None):
         n = len(origins)

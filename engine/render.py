@@ -23,7 +23,7 @@ from .motion import MotionAccel, MotionGeometry, has_motion
 from .blas import single_threaded_blas
 from .bsdf import MaterialTable, bump_model
 from .camera import CameraModel, PixelFilter
-from . import kernels, media, pass_events
+from . import kernels, media, pass_events, points
 from .film import Film
 from .geometry import flatten, material_table
 from .integrator import Context, trace_batch
@@ -77,9 +77,13 @@ def prepare(scene, settings):
     kernels.configure(getattr(settings, "use_jit", True))   # flatten has a kernel too
     validate_scene(scene)
     validate_settings(settings)
+    source = scene
+    scene, point_owners, point_radii = points.expand(scene)   # point clouds as stand-in rows
     tris = flatten(scene, with_instance=bool(settings.passes), threads=settings.threads)
+    spheres = points.spheres_of(tris, scene, point_owners, point_radii)
     materials = MaterialTable(material_table(scene))
-    lights = LightSet(scene, tris, materials, settings.light_selection,
+    lights = LightSet(scene, points.for_lights(tris, spheres, len(scene.materials)), materials,
+                      settings.light_selection,
                       env_compensation=settings.mis_compensation and settings.strategy == "mis")
     # 'auto' stays only where it samples every light at glossy vertices;
     # else it is the light tree.
@@ -88,15 +92,16 @@ def prepare(scene, settings):
         camera = CameraModel(scene.camera, PixelFilter(settings.filter_type, settings.filter_width))
     except ValueError as exc:
         raise SceneError(f"camera: {exc}") from None
-    motion = MotionGeometry(scene, tris) if has_motion(scene) else None
-    # Only moving triangles need Embree's motion blur (a moving camera alone does not).
-    accel = MotionAccel(tris, motion) if motion is not None and motion.moving else Accel(tris)
+    motion = MotionGeometry(scene, tris) if has_motion(source) else None
+    # Only moving triangles and points need Embree's C API (a moving camera alone does not).
+    moving = motion is not None and motion.moving
+    accel = MotionAccel(tris, motion if moving else None, spheres) if moving or spheres is not None else Accel(tris)
     world = np.asarray(scene.world.color, dtype=np.float64)
     return Context.build(accel, tris, materials, lights, camera, world, settings,
                          sampler=Sampler(settings.seed, settings.sampling_pattern),
                          bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
                          pass_config=pass_events.configure(scene, settings),
-                         media=_media(scene, accel, tris, camera), motion=motion)
+                         media=_media(scene, accel, tris, camera), motion=motion, spheres=spheres)
 
 
 def _media(scene, accel, tris, camera):

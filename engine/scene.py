@@ -112,6 +112,32 @@ class Instance:
     motion: Optional[np.ndarray] = None
 
 
+@dataclass
+class PointCloud:
+    """Spheres (Blender's point cloud objects, geometry nodes' Points).
+
+    positions: (N, 3) object-space centres; radii: (N,) radii (the radius
+    attribute); matrix: object-to-world (radii scale by cbrt|det|, as
+    Cycles); materials: scene material per slot (one slot: the cloud's
+    material); attributes: {name: (N, C)} per-point values shader nodes read
+    as colour attributes; the rest as ``Instance``.
+    """
+    positions: np.ndarray
+    radii: np.ndarray
+    matrix: np.ndarray = field(default_factory=lambda: np.eye(4))
+    materials: Sequence[int] = ()
+    name: str = "points"
+    attributes: Optional[dict] = None
+    visible_camera: bool = True
+    visible_diffuse: bool = True
+    visible_glossy: bool = True
+    visible_transmission: bool = True
+    visible_shadow: bool = True
+    color: tuple = (1.0, 1.0, 1.0)
+    pass_index: int = 0
+    random: float = 0.0
+
+
 # ----------------------------------------------------------------------------
 # Materials
 
@@ -586,3 +612,5 @@ class Scene:
     # The Blender version the scene comes from: where Cycles changed between
     # versions (its bump shadowing term), Ember renders as that version's.
     cycles_version: tuple = (5, 0, 0)
+    # Point clouds (spheres), after the fields above (scenes are built positionally too).
+    points: Sequence[PointCloud] = ()

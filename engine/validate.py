@@ -301,7 +301,33 @@ def _validate_passes(s):
         raise SceneError(f"settings: unknown render passes {bad}")
 
 
+def validate_point_cloud(cloud, index, n_materials):
+    what = f"point cloud {index} ({cloud.name!r})"
+    pos = _array(cloud.positions, f"{what} positions", (3,), "fi")
+    _finite(pos, f"{what} positions")
+    radii = _array(cloud.radii, f"{what} radii", (), "fi")
+    if len(radii) != len(pos):
+        raise SceneError(f"{what}: {len(radii)} radii for {len(pos)} points")
+    _finite(radii, f"{what} radii")
+    if len(radii) and radii.min() < 0:
+        raise SceneError(f"{what}: negative radius {radii.min()}")
+    m = np.asarray(cloud.matrix, dtype=np.float64)
+    if m.shape != (4, 4):
+        raise SceneError(f"{what}: matrix must be 4x4, got {m.shape}")
+    _finite(m, f"{what} matrix")
+    for slot, mat in enumerate(cloud.materials):
+        if not -1 <= mat < n_materials:
+            raise SceneError(f"{what}: slot {slot} names material {mat}, but the scene has {n_materials}")
+    for name, values in (cloud.attributes or {}).items():
+        arr = np.asarray(values)
+        if arr.ndim != 2 or len(arr) != len(pos) or arr.dtype.kind not in "fi":
+            raise SceneError(f"{what}: attribute {name!r} must be (N, C) numbers, got {arr.shape}")
+        _finite(arr, f"{what} attribute {name!r}")
+
+
 def validate_scene(scene):
+    for i, cloud in enumerate(getattr(scene, "points", ()) or ()):
+        validate_point_cloud(cloud, i, len(scene.materials))
     for i, mesh in enumerate(scene.meshes):
         validate_mesh(mesh, i)
     validate_instances(scene.instances, len(scene.meshes), len(scene.materials))

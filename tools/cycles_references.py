@@ -60,8 +60,8 @@ for _scene in ('udim', 'alpha', 'terrain'):
     REFERENCES['image_' + _scene] = ('test_image_parity', _scene, 1024)
 for _scene in ('coloured_glass', 'fog', 'emission'):
     REFERENCES['volume_' + _scene] = ('test_volume_parity', _scene, 1024)
-for _scene in ('objects', 'camera'):
-    REFERENCES['motion_' + _scene] = ('test_motion_parity', _scene, 2048)
+REFERENCES['motion_objects'] = ('test_motion_parity', 'objects', 2048)
+REFERENCES['points_heap'] = ('test_points_parity', 'heap', 1024)
 # the scenes built here: (width, height, max bounces)
 BUILT_HERE = {'cornell': (48, 48, 4), 'glossy_world': (48, 32, 4)}
 HEADER = ('scene', 'blender', 'samples', 'seeds', 'max_bounces', 'filter', 'cycles', 'width', 'height', 'fingerprint')

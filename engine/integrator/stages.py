@@ -12,6 +12,7 @@ from .. import bsdf, nee, throughput
 from ..accel import shadow_rays, shadow_rays_f32
 from ..hits import hit_geometry
 from ..motion import path_time, triangles_at
+from ..points import sphere_hits
 from ..nodes import NodeRays, ShadingContext
 from ..nodes.context import PATH_COLUMNS
 from ..sampler import BSDF, LIGHT, emitter_set, vertex_set
@@ -166,6 +167,8 @@ def surface_emission(ctx, paths, hit, depth, obs):
         return
     if ctx.settings.strategy == "mis":
         emitter = ctx.lights.emitter_of_triangle(hit.mat[em])
+        if ctx.spheres is not None:   # no light samples a point: BSDF rays find them alone
+            emitter = np.where(ctx.spheres.is_point[hit.prim[em]], -1, emitter)
         w = np.ones(len(em))
         # A surface that is no light (its emission's estimate is 0) is found
         # by BSDF rays alone: weight 1.
@@ -194,6 +197,11 @@ def interaction(ctx, paths, t, prim, bu, bv):
     else:   # the triangles where they are at each ray's time
         p, ng, ns, back = hit_geometry(triangles_at(ctx.motion, tr, prim, time), paths.o, d, t,
                                        np.arange(len(prim)), bu, bv)
+    if ctx.spheres is not None:   # points: the sphere's point and normal
+        on = np.flatnonzero(ctx.spheres.is_point[prim])
+        if len(on):
+            p[on], ng[on], back[on] = sphere_hits(ctx.spheres, paths.o[on], d[on], t[on], prim[on])
+            ns[on] = ng[on]
     uv = _hit_uv(tr, prim, bu, bv)
     hit = Hit(p, ng, ns, -d, np.take(tr.material, prim), prim, ctx.accel.offset_scale(p), uv, back=back,
               bary=np.stack([bu, bv], axis=1), depth=getattr(paths, "bounce", None),

@@ -1,10 +1,10 @@
 """Cycles parity of motion blur (engine/motion.py, addon/export/motion.py):
-a sliding cube beside a tumbling torus, and a moving camera, each keyframed
-linearly and rendered at frame 2 with a shutter of 0.5 frames, Position
-Centre, against converged Cycles references (tools/cycles_references.py
-motion_*), as tests/addon/test_light_parity.py compares its scenes.  Beside
-each comparison, Ember's own image must differ from the same scene without
-motion blur (the blur has its effect) by more than the test's noise."""
+a sliding cube, a tumbling torus and a box sheared by a shape key, seen by
+a moving, turning camera, all keyframed linearly and rendered at frame 2
+with a shutter of 0.5 frames, Position Centre, against a converged Cycles
+reference (tools/cycles_references.py motion_objects), as
+tests/addon/test_light_parity.py compares its scenes.  The same block test
+must tell a sharp render from the blurred reference (it sees the blur)."""
 import math
 
 import bpy
@@ -72,6 +72,9 @@ def objects(scene, blur=True):
     torus.data.materials.append(material("green", 'diffuse', color=(0.2, 0.7, 0.2)))
     _linear_keys(torus, 'rotation_euler', [(math.radians(-60.0), 0.0, 0.0), (math.radians(180.0), 0.0, 0.0)])
     _shearing_box()
+    # the camera moves along y (1.5 units per frame) and turns about z (20 degrees per frame)
+    _linear_keys(scene.camera, 'location', [(0.0, -1.5, 6.0), (0.0, 1.5, 6.0)])
+    _linear_keys(scene.camera, 'rotation_euler', [(0.0, 0.0, math.radians(-20.0)), (0.0, 0.0, math.radians(20.0))])
     _blur(scene, blur)
     return BOUNCES
 
@@ -93,19 +96,7 @@ def _shearing_box():
             point.interpolation = 'LINEAR'
 
 
-def camera(scene, blur=True):
-    """Still objects seen by a camera moving along y (1.5 units per frame)
-    and turning about z (20 degrees per frame)."""
-    _stage(scene)
-    box("cube", material("red", 'diffuse', color=(0.8, 0.15, 0.1)), (-0.8, 0.3, 0.4), (0.8, 0.8, 0.8))
-    box("post", material("blue", 'diffuse', color=(0.1, 0.2, 0.8)), (1.0, -0.4, 0.6), (0.3, 0.3, 1.2))
-    _linear_keys(scene.camera, 'location', [(0.0, -1.5, 6.0), (0.0, 1.5, 6.0)])
-    _linear_keys(scene.camera, 'rotation_euler', [(0.0, 0.0, math.radians(-20.0)), (0.0, 0.0, math.radians(20.0))])
-    _blur(scene, blur)
-    return BOUNCES
-
-
-SCENES = {'objects': objects, 'camera': camera}
+SCENES = {'objects': objects}
 
 
 def reference_scene(name, folder=None):
@@ -114,8 +105,7 @@ def reference_scene(name, folder=None):
     return scene, SCENES[name](scene)
 
 
-@pytest.mark.parametrize("name", sorted(SCENES))
-def test_motion_blur_parity_with_cycles(name, tmp_path, tapped_engine):
+def test_motion_blur_parity_with_cycles(tmp_path, tapped_engine, name='objects'):
     scene, bounces = reference_scene(name)
     image, var = render_for_reference(scene, tmp_path, name, tapped_engine, SPP, 2, bounces)
     check = check_against_reference('motion_' + name, scene, bounces, image, var, SPP, BLOCK)
