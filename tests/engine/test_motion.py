@@ -159,7 +159,7 @@ def _strip_expected(settings):
 
 
 def test_sliding_strip_blur_is_the_time_average():
-    settings = RenderSettings(samples=256, max_bounces=0, seed=5)
+    settings = RenderSettings(samples=256, samples_per_pass=256, max_bounces=0, seed=5)
     expected = _strip_expected(settings)
     images, variances = [], []
     for how in ("transform", "deform", "camera"):
