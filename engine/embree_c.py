@@ -110,15 +110,20 @@ def _compiled_loops():
         c_intersect = proto(ctypes.cast(lib.rtcIntersect1, ctypes.c_void_p).value)
         c_occluded = proto(ctypes.cast(lib.rtcOccluded1, ctypes.c_void_p).value)
 
+        @numba.njit(inline="always")
+        def ray(buf, w, o, d, tfar, time, i):
+            """Ray i into the RTCRay words of buf (w: the same words as uint32)."""
+            buf[0], buf[1], buf[2], buf[3] = o[i, 0], o[i, 1], o[i, 2], 0.0
+            buf[4], buf[5], buf[6], buf[7] = d[i, 0], d[i, 1], d[i, 2], time[i]
+            buf[8] = tfar[i]
+            w[9], w[10], w[11] = 0xFFFFFFFF, 0, 0
+
         @numba.njit(nogil=True)
         def intersect(scene, o, d, tfar, time, offsets, order, buf, t_out, prim_out, u_out, v_out):
             w = buf.view(np.uint32)
             addr = buf.ctypes.data
             for i in range(len(tfar)):
-                buf[0], buf[1], buf[2], buf[3] = o[i, 0], o[i, 1], o[i, 2], 0.0
-                buf[4], buf[5], buf[6], buf[7] = d[i, 0], d[i, 1], d[i, 2], time[i]
-                buf[8] = tfar[i]
-                w[9], w[10], w[11] = 0xFFFFFFFF, 0, 0
+                ray(buf, w, o, d, tfar, time, i)
                 w[18], w[19] = 0xFFFFFFFF, 0xFFFFFFFF
                 c_intersect(scene, addr, 0)
                 g = w[19] if w[19] != 0xFFFFFFFF else w[18]   # an instance's id, or the geometry's
@@ -136,10 +141,7 @@ def _compiled_loops():
             w = buf.view(np.uint32)
             addr = buf.ctypes.data
             for i in range(len(tfar)):
-                buf[0], buf[1], buf[2], buf[3] = o[i, 0], o[i, 1], o[i, 2], 0.0
-                buf[4], buf[5], buf[6], buf[7] = d[i, 0], d[i, 1], d[i, 2], time[i]
-                buf[8] = tfar[i]
-                w[9], w[10], w[11] = 0xFFFFFFFF, 0, 0
+                ray(buf, w, o, d, tfar, time, i)
                 c_occluded(scene, addr, 0)
                 blocked[i] = buf[8] < 0.0
 

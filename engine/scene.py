@@ -17,7 +17,7 @@ reads it and checks shapes, dtypes, finiteness and index ranges, raising
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, make_dataclass
+from dataclasses import MISSING, dataclass, field, fields, make_dataclass
 from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -112,30 +112,31 @@ class Instance:
     motion: Optional[np.ndarray] = None
 
 
-@dataclass
-class PointCloud:
-    """Spheres (Blender's point cloud objects, geometry nodes' Points).
+def _point_cloud_fields():
+    """PointCloud's fields: the points, then Instance's placement fields
+    (matrix, materials, name, ray visibility, object info) with their
+    defaults, then the per-point attributes."""
+    out = [("positions", np.ndarray), ("radii", np.ndarray)]
+    for f in fields(Instance):
+        if f.name in ("mesh", "asset", "motion"):
+            continue
+        default = {} if f.default is MISSING else {"default": "points" if f.name == "name" else f.default}
+        if f.default_factory is not MISSING:
+            default = {"default_factory": f.default_factory}
+        out.append((f.name, f.type, field(**default)))
+    return out + [("attributes", Optional[dict], field(default=None))]
+
+
+PointCloud = make_dataclass("PointCloud", _point_cloud_fields())
+PointCloud.__module__ = __name__
+PointCloud.__doc__ = """Spheres (Blender's point cloud objects, geometry nodes' Points).
 
     positions: (N, 3) object-space centres; radii: (N,) radii (the radius
     attribute); matrix: object-to-world (radii scale by cbrt|det|, as
     Cycles); materials: scene material per slot (one slot: the cloud's
     material); attributes: {name: (N, C)} per-point values shader nodes read
-    as colour attributes; the rest as ``Instance``.
+    as colour attributes; the other fields as ``Instance``'s.
     """
-    positions: np.ndarray
-    radii: np.ndarray
-    matrix: np.ndarray = field(default_factory=lambda: np.eye(4))
-    materials: Sequence[int] = ()
-    name: str = "points"
-    attributes: Optional[dict] = None
-    visible_camera: bool = True
-    visible_diffuse: bool = True
-    visible_glossy: bool = True
-    visible_transmission: bool = True
-    visible_shadow: bool = True
-    color: tuple = (1.0, 1.0, 1.0)
-    pass_index: int = 0
-    random: float = 0.0
 
 
 # ----------------------------------------------------------------------------

@@ -16,16 +16,12 @@ COUNT = 10_000
 
 
 def _points_material():
-    mat = bpy.data.materials.new("points")
-    mat.use_nodes = True
-    nodes, links = mat.node_tree.nodes, mat.node_tree.links
-    nodes.clear()
-    out = nodes.new('ShaderNodeOutputMaterial')
-    bsdf = nodes.new('ShaderNodeBsdfDiffuse')
-    attr = nodes.new('ShaderNodeAttribute')
+    """A Diffuse BSDF coloured by the attribute 'col'."""
+    mat = material("points", 'diffuse')
+    tree = mat.node_tree
+    attr = tree.nodes.new('ShaderNodeAttribute')
     attr.attribute_name = 'col'
-    links.new(attr.outputs['Color'], bsdf.inputs['Color'])
-    links.new(bsdf.outputs[0], out.inputs['Surface'])
+    tree.links.new(attr.outputs['Color'], tree.nodes['Diffuse BSDF'].inputs['Color'])
     return mat
 
 
