@@ -10,8 +10,9 @@ through the paths it already has).  ``Spheres`` says which rows are points,
 with their world centres and radii (radius x cbrt|det M| of the cloud's
 matrix, as Cycles' PointCloud::apply_transform): Embree traces those rows
 as spheres, the hit point is re-intersected with the sphere in float64 and
-its normal is the sphere's.  Lights never sample points (an emissive point
-is found by BSDF rays, MIS weight 1: unbiased).
+its normal is the sphere's.  Lights never sample points, nor moving
+triangles (``unlit_rows``: an emissive point or moving triangle is found
+by BSDF rays, MIS weight 1: unbiased).
 """
 from dataclasses import replace
 
@@ -81,13 +82,25 @@ def spheres_of(tris, scene, owners, radii):
     return Spheres(rows, tris.p0[rows].copy(), np.concatenate(r_world), len(tris))
 
 
-def for_lights(tris, spheres, default_material):
-    """The triangles as the lights see them: points carry the default
-    (non-emissive) material, so no light samples a point."""
-    if spheres is None:
+def unlit_rows(n_rows, spheres, motion):
+    """(T,) bool: the rows no light samples (points, moving triangles: the
+    light set holds still triangles only), or None when there are none.
+    Their emission is found by BSDF rays alone, with MIS weight 1: unbiased."""
+    rows = np.zeros(n_rows, bool)
+    if spheres is not None:
+        rows[spheres.rows] = True
+    if motion is not None and motion.moving:
+        rows |= motion.part >= 0
+    return rows if rows.any() else None
+
+
+def for_lights(tris, unlit, default_material):
+    """The triangles as the lights see them: ``unlit`` rows carry the
+    default (non-emissive) material, so no light samples them."""
+    if unlit is None:
         return tris
     material = tris.material.copy()
-    material[spheres.rows] = default_material
+    material[unlit] = default_material
     return replace(tris, material=material)
 
 

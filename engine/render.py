@@ -81,8 +81,10 @@ def prepare(scene, settings):
     scene, point_owners, point_radii = points.expand(scene)   # point clouds as stand-in rows
     tris = flatten(scene, with_instance=bool(settings.passes), threads=settings.threads)
     spheres = points.spheres_of(tris, scene, point_owners, point_radii)
+    motion = MotionGeometry(scene, tris) if has_motion(source) else None
+    unlit = points.unlit_rows(len(tris), spheres, motion)
     materials = MaterialTable(material_table(scene))
-    lights = LightSet(scene, points.for_lights(tris, spheres, len(scene.materials)), materials,
+    lights = LightSet(scene, points.for_lights(tris, unlit, len(scene.materials)), materials,
                       settings.light_selection,
                       env_compensation=settings.mis_compensation and settings.strategy == "mis")
     # 'auto' stays only where it samples every light at glossy vertices;
@@ -92,7 +94,6 @@ def prepare(scene, settings):
         camera = CameraModel(scene.camera, PixelFilter(settings.filter_type, settings.filter_width))
     except ValueError as exc:
         raise SceneError(f"camera: {exc}") from None
-    motion = MotionGeometry(scene, tris) if has_motion(source) else None
     # Only moving triangles and points need Embree's C API (a moving camera alone does not).
     moving = motion is not None and motion.moving
     accel = MotionAccel(tris, motion if moving else None, spheres) if moving or spheres is not None else Accel(tris)
@@ -101,7 +102,8 @@ def prepare(scene, settings):
                          sampler=Sampler(settings.seed, settings.sampling_pattern),
                          bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
                          pass_config=pass_events.configure(scene, settings),
-                         media=_media(scene, accel, tris, camera), motion=motion, spheres=spheres)
+                         media=_media(scene, accel, tris, camera), motion=motion, spheres=spheres,
+                         unlit=unlit)
 
 
 def _media(scene, accel, tris, camera):

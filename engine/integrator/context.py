@@ -69,10 +69,12 @@ class Context:
     motion: object = None
     # Point clouds (engine.points.Spheres: which triangle rows are spheres), None without.
     spheres: object = None
+    # Rows no light samples (engine.points.unlit_rows: points, moving triangles), None when none.
+    unlit: object = None
 
     @classmethod
     def build(cls, accel, triangles, materials, lights, camera, world, settings, sampler=None,
-              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None, motion=None, spheres=None):
+              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None, motion=None, spheres=None, unlit=None):
         """The Context of a render; ``sampler`` defaults to the settings'
         seed and pattern, ``pass_config`` to no extra passes."""
         if sampler is None:
@@ -88,7 +90,7 @@ class Context:
                    transparent_limit=max(int(settings.transparent_max_bounces), 1),
                    **_kind_limits(settings, light_path), light_path=light_path,
                    pass_config=pass_config, emitter_groups=pass_events.emitter_groups(pass_config, lights),
-                   centres=pass_events.CentreRecord(camera.width * camera.height), media=media, motion=motion, spheres=spheres)
+                   centres=pass_events.CentreRecord(camera.width * camera.height), media=media, motion=motion, spheres=spheres, unlit=unlit)
 
 
 def _delta_emitters(lights):

@@ -167,8 +167,8 @@ def surface_emission(ctx, paths, hit, depth, obs):
         return
     if ctx.settings.strategy == "mis":
         emitter = ctx.lights.emitter_of_triangle(hit.mat[em])
-        if ctx.spheres is not None:   # no light samples a point: BSDF rays find them alone
-            emitter = np.where(ctx.spheres.is_point[hit.prim[em]], -1, emitter)
+        if ctx.unlit is not None:   # no light samples points or moving triangles: BSDF rays find them
+            emitter = np.where(ctx.unlit[hit.prim[em]], -1, emitter)
         w = np.ones(len(em))
         # A surface that is no light (its emission's estimate is 0) is found
         # by BSDF rays alone: weight 1.

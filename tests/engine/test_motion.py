@@ -216,3 +216,20 @@ def test_a_step_of_scale_zero_renders_finite():
     scene.meshes[0].normals = np.tile(np.array([0.0, 0.0, 1.0]), (2, 3, 1))
     result = render(scene, RenderSettings(samples=4, max_bounces=1))
     assert np.isfinite(result.image).all() and result.image.max() > 0
+
+
+def test_moving_emitters_are_found_by_bsdf_rays_alone():
+    """No light samples a moving emissive triangle (the light set holds the
+    centre's triangles): BSDF rays find it with MIS weight 1, unbiased; a
+    floor under it is lit."""
+    scene = _strip_scene("transform")
+    floor = quad([[-3, -3, -0.5], [3, -3, -0.5], [3, 3, -0.5], [-3, 3, -0.5]])
+    scene.meshes.append(floor)
+    scene.materials.append(Material("floor"))
+    scene.instances.append(Instance(1, translate_rotate_z((0.0, 0.0, 0.0)), materials=[1]))
+    scene.instances[0].visible_camera = False
+    ctx = prepare(scene, RenderSettings(samples=1))
+    assert ctx.lights.emitter_of_triangle(np.array([0]))[0] == -1
+    assert ctx.unlit is not None and ctx.unlit.sum() == 2
+    image = render(scene, RenderSettings(samples=16, samples_per_pass=16, max_bounces=1)).image
+    assert np.isfinite(image).all() and image[..., 0].mean() > 0.01
