@@ -19,10 +19,11 @@ from concurrent.futures import TimeoutError as FuturesTimeout
 import numpy as np
 
 from .accel import Accel
+from .motion import MotionAccel, MotionGeometry, has_motion
 from .blas import single_threaded_blas
 from .bsdf import MaterialTable, bump_model
 from .camera import CameraModel, PixelFilter
-from . import kernels, media, pass_events
+from . import kernels, media, pass_events, points
 from .film import Film
 from .geometry import flatten, material_table
 from .integrator.catcher import catcher_triangles
@@ -78,9 +79,15 @@ def prepare(scene, settings):
     kernels.configure(getattr(settings, "use_jit", True))   # flatten has a kernel too
     validate_scene(scene)
     validate_settings(settings)
+    source = scene
+    scene, point_owners, point_radii = points.expand(scene)   # point clouds as stand-in rows
     tris = flatten(scene, with_instance=bool(settings.passes), threads=settings.threads)
+    spheres = points.spheres_of(tris, scene, point_owners, point_radii)
+    motion = MotionGeometry(scene, tris) if has_motion(source) else None
+    unlit = points.unlit_rows(len(tris), spheres, motion)
     materials = MaterialTable(material_table(scene))
-    lights = LightSet(scene, tris, materials, settings.light_selection,
+    lights = LightSet(scene, points.for_lights(tris, unlit, len(scene.materials)), materials,
+                      settings.light_selection,
                       env_compensation=settings.mis_compensation and settings.strategy == "mis")
     # 'auto' stays only where it samples every light at glossy vertices;
     # else it is the light tree.
@@ -89,14 +96,17 @@ def prepare(scene, settings):
         camera = CameraModel(scene.camera, PixelFilter(settings.filter_type, settings.filter_width))
     except ValueError as exc:
         raise SceneError(f"camera: {exc}") from None
-    accel = Accel(tris)
+    # Only moving triangles and points need Embree's C API (a moving camera alone does not).
+    moving = motion is not None and motion.moving
+    accel = MotionAccel(tris, motion if moving else None, spheres) if moving or spheres is not None else Accel(tris)
     world = np.asarray(scene.world.color, dtype=np.float64)
     ctx = Context.build(accel, tris, materials, lights, camera, world, settings,
                         sampler=Sampler(settings.seed, settings.sampling_pattern),
                         bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
                         pass_config=pass_events.configure(scene, settings),
                         media=_media(scene, accel, tris, camera), holdout=holdout_weights(scene, tris),
-                        links=LightLinks.build(scene, lights, tris), catcher=catcher_triangles(scene, tris))
+                        links=LightLinks.build(scene, lights, tris), catcher=catcher_triangles(scene, tris),
+                        motion=motion, spheres=spheres, unlit=unlit)
     if ctx.subsurface:
         ctx = dataclasses.replace(ctx, subsurface_warnings=tuple(subsurface.open_mesh_warnings(scene)))
     return ctx

@@ -17,7 +17,7 @@ reads it and checks shapes, dtypes, finiteness and index ranges, raising
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, make_dataclass
+from dataclasses import MISSING, dataclass, field, fields, make_dataclass
 from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -71,6 +71,12 @@ class Mesh:
     attributes: Optional[dict] = None
     texspace: Optional[tuple] = None
     orco: Optional[np.ndarray] = None
+    # Deformation motion blur: vertex positions (S, V, 3) at the shutter's S
+    # evenly spaced steps (step k at time k / (S - 1) of the shutter), and
+    # optionally per-corner shading normals (S, T, 3, 3) there; None: the
+    # mesh does not deform during the shutter.
+    motion: Optional[np.ndarray] = None
+    motion_normals: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -107,6 +113,36 @@ class Instance:
     holdout: bool = False
     # Object > Visibility > Mask > Shadow Catcher (engine/integrator/catcher.py).
     shadow_catcher: bool = False
+    # Transform motion blur: object-to-world (S, 4, 4) at the shutter's S
+    # evenly spaced steps (Cycles' motion steps); None: it does not move.
+    motion: Optional[np.ndarray] = None
+
+
+def _point_cloud_fields():
+    """PointCloud's fields: the points, then Instance's placement fields
+    (matrix, materials, name, ray visibility, object info) with their
+    defaults, then the per-point attributes."""
+    out = [("positions", np.ndarray), ("radii", np.ndarray)]
+    for f in fields(Instance):
+        if f.name in ("mesh", "asset", "motion"):
+            continue
+        default = {} if f.default is MISSING else {"default": "points" if f.name == "name" else f.default}
+        if f.default_factory is not MISSING:
+            default = {"default_factory": f.default_factory}
+        out.append((f.name, f.type, field(**default)))
+    return out + [("attributes", Optional[dict], field(default=None))]
+
+
+PointCloud = make_dataclass("PointCloud", _point_cloud_fields())
+PointCloud.__module__ = __name__
+PointCloud.__doc__ = """Spheres (Blender's point cloud objects, geometry nodes' Points).
+
+    positions: (N, 3) object-space centres; radii: (N,) radii (the radius
+    attribute); matrix: object-to-world (radii scale by cbrt|det|, as
+    Cycles); materials: scene material per slot (one slot: the cloud's
+    material); attributes: {name: (N, C)} per-point values shader nodes read
+    as colour attributes; the other fields as ``Instance``'s.
+    """
 
 
 # ----------------------------------------------------------------------------
@@ -501,6 +537,11 @@ class Camera:
     resolution: Tuple[int, int] = (640, 480)
     pixel_aspect: Tuple[float, float] = (1.0, 1.0)
     border: Optional[Tuple[float, float, float, float]] = None
+    # Camera motion blur: camera-to-world (S, 4, 4) at the shutter's S evenly
+    # spaced steps; None: a still camera.  Rays take their time uniformly
+    # over the shutter (the sampler's time dimension) and the camera at that
+    # time (rotation by quaternion, translation linearly, as Cycles).
+    motion: Optional[np.ndarray] = None
 
 
 # ----------------------------------------------------------------------------
@@ -615,3 +656,5 @@ class Scene:
     # each a LinkSet or None (every object).  Lights not listed are linked
     # to everything.
     light_links: dict = field(default_factory=dict)
+    # Point clouds (spheres), after the fields above (scenes are built positionally too).
+    points: Sequence[PointCloud] = ()

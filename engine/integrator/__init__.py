@@ -27,7 +27,7 @@ from .. import pass_events
 from ..geometry import VIS_CAMERA
 from ..media import start_stack
 from ..nee import add_rows as _add_rows
-from ..sampler import CAMERA
+from ..sampler import CAMERA, TIME
 from ..vec import dot
 from . import catcher, stages, subsurface, transparency, volume
 from .context import Context
@@ -46,7 +46,12 @@ def trace_batch(ctx, pix, sample, tile):
     pseed = ctx.sampler.pixel_seeds(pix)
     sample = np.asarray(sample, np.uint32)
     u = ctx.sampler.get(pseed, sample, CAMERA)
-    o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3])
+    if ctx.motion is None:
+        time = np.zeros((n, 0))
+        o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3])
+    else:   # motion blur: the sample's time, its own dimension set
+        time = ctx.sampler.get(pseed, sample, TIME)[:, :1]
+        o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3], time=time[:, 0])
     paths = Paths(pix, o, d, tmax, np.ones((n, 3)), np.zeros((n, 3)),
                   np.ones(n), np.ones(n, bool), o, np.zeros((n, 3)), np.zeros(n, bool),
                   np.full(n, VIS_CAMERA, np.uint8),
@@ -54,7 +59,7 @@ def trace_batch(ctx, pix, sample, tile):
                   np.zeros((n, pass_events.aux_width(ctx.settings)), np.float32),
                   np.zeros((n, 3 if ctx.count_kinds else 0), np.int16), np.full(n, np.inf),
                   start_stack(ctx.media, n), np.zeros(n, np.int16), np.full(n, -1, np.int64), np.zeros((n, 3)),
-                  np.full(n, -1, np.int32), np.zeros(n, np.int8))
+                  np.full(n, -1, np.int32), np.zeros(n, np.int8), time)
     obs = pass_events.observer(ctx, tile)
     obs.start(paths)
     # Every step raises a live path's bounce or its transparent bounce

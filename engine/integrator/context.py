@@ -78,10 +78,17 @@ class Context:
     # Shadow catchers: (T,) whether each triangle is a catcher's, None
     # without one (catcher.py).
     catcher: object = None
+    # Motion blur (engine.motion.MotionGeometry), None in a still scene.
+    motion: object = None
+    # Point clouds (engine.points.Spheres: which triangle rows are spheres), None without.
+    spheres: object = None
+    # Rows no light samples (engine.points.unlit_rows: points, moving triangles), None when none.
+    unlit: object = None
 
     @classmethod
     def build(cls, accel, triangles, materials, lights, camera, world, settings, sampler=None,
-              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None, holdout=None, links=None, catcher=None):
+              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None, holdout=None, links=None, catcher=None,
+              motion=None, spheres=None, unlit=None):
         """The Context of a render; ``sampler`` defaults to the settings'
         seed and pattern, ``pass_config`` to no extra passes."""
         if sampler is None:
@@ -98,7 +105,8 @@ class Context:
                    **_kind_limits(settings, light_path), light_path=light_path,
                    pass_config=pass_config, emitter_groups=pass_events.emitter_groups(pass_config, lights),
                    centres=pass_events.CentreRecord(camera.width * camera.height), media=media,
-                   subsurface=subsurface.in_scene(materials), holdout=holdout, links=links, catcher=catcher)
+                   subsurface=subsurface.in_scene(materials), holdout=holdout, links=links, catcher=catcher,
+                   motion=motion, spheres=spheres, unlit=unlit)
 
 
 def _delta_emitters(lights):

@@ -69,6 +69,9 @@ class Paths:
     # Shadow catcher (catcher.py): 0 a matte path (no catcher met yet), 1 the
     # main path after the split, 2 the catcher path (sees catchers only).
     catcher: np.ndarray
+    # Motion blur: the sample's time over the shutter, (N, 1) in [0, 1], or
+    # (N, 0) in a still scene (engine.motion.path_time).
+    time: np.ndarray
 
     def __len__(self):
         return len(self.pix)

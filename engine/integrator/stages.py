@@ -11,6 +11,8 @@ import numpy as np
 from .. import bsdf, nee, throughput
 from ..accel import shadow_rays, shadow_rays_f32
 from ..hits import hit_geometry
+from ..motion import path_time, triangles_at
+from ..points import sphere_hits
 from ..nodes import NodeRays, ShadingContext
 from ..nodes.context import PATH_COLUMNS
 from ..sampler import BSDF, LIGHT, emitter_set, vertex_set
@@ -28,9 +30,11 @@ from .visibility import VIS_INDIRECT
 
 def intersect(ctx, paths):
     """The closest surface each ray may see and the analytic lights before it."""
-    t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax)
+    time = path_time(paths)
+    t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax, time=time)
     if ctx.triangles.visibility is not None:
-        t, prim, bu, bv = visibility.skip_invisible(ctx, paths.o, paths.d, paths.tmax, paths.ray, t, prim, bu, bv)
+        t, prim, bu, bv = visibility.skip_invisible(ctx, paths.o, paths.d, paths.tmax, paths.ray, t, prim, bu, bv,
+                                                    time=time)
     if ctx.catcher is not None:
         t, prim, bu, bv = visibility.catchers_only(ctx, paths.o, paths.d, paths.tmax, paths.catcher == 2,
                                                    t, prim, bu, bv)
@@ -177,6 +181,8 @@ def surface_emission(ctx, paths, hit, depth, obs):
                                                   dot(sub.wo, sub.ns), emission[em])
     if ctx.settings.strategy == "mis":
         emitter = ctx.lights.emitter_of_triangle(hit.mat[em])
+        if ctx.unlit is not None:   # no light samples points or moving triangles: BSDF rays find them
+            emitter = np.where(ctx.unlit[hit.prim[em]], -1, emitter)
         w = np.ones(len(em))
         # A surface that is no light (its emission's estimate is 0) is found
         # by BSDF rays alone: weight 1.
@@ -199,7 +205,17 @@ def interaction(ctx, paths, t, prim, bu, bv):
     """The Hit of rays (paths.o, paths.d) on triangles ``prim``."""
     tr = ctx.triangles
     d = paths.d
-    p, ng, ns, back = hit_geometry(tr, paths.o, d, t, prim, bu, bv)
+    time = path_time(paths) if ctx.motion is not None and ctx.motion.moving else None
+    if time is None:
+        p, ng, ns, back = hit_geometry(tr, paths.o, d, t, prim, bu, bv)
+    else:   # the triangles where they are at each ray's time
+        p, ng, ns, back = hit_geometry(triangles_at(ctx.motion, tr, prim, time), paths.o, d, t,
+                                       np.arange(len(prim)), bu, bv)
+    if ctx.spheres is not None:   # points: the sphere's point and normal
+        on = np.flatnonzero(ctx.spheres.is_point[prim])
+        if len(on):
+            p[on], ng[on], back[on] = sphere_hits(ctx.spheres, paths.o[on], d[on], t[on], prim[on])
+            ns[on] = ng[on]
     uv = _hit_uv(tr, prim, bu, bv)
     hit = Hit(p, ng, ns, -d, np.take(tr.material, prim), prim, ctx.accel.offset_scale(p), uv, back=back,
               bary=np.stack([bu, bv], axis=1), depth=getattr(paths, "bounce", None),
@@ -429,14 +445,16 @@ def trace_shadows(ctx, paths, batch):
     e = batch.sample.emitter[batch.rows]
     contrib = batch.sample.contrib
     path_rows = batch.at.path_rows
+    rows = batch.rows if path_rows is None else path_rows[batch.rows]
+    time = path_time(paths)
+    time = None if time is None else time[rows]
     if ctx.transparent_shadows:
-        rows = batch.rows if path_rows is None else path_rows[batch.rows]
         added = contrib[batch.rows] * transparency.transmittance(ctx, batch.origin, batch.direction, batch.tmax,
-                                                                 e, paths.tbounce[rows])
+                                                                 e, paths.tbounce[rows], time=time)
         batch.free, batch.added = batch.rows, added
         paths.L[rows] += added
         return
-    blocked = visibility.occluded(ctx, batch.origin, batch.direction, batch.tmax, e)
+    blocked = visibility.occluded(ctx, batch.origin, batch.direction, batch.tmax, e, time=time)
     if ctx.catcher is not None:
         rows = batch.rows if path_rows is None else path_rows[batch.rows]
         only = np.flatnonzero(paths.catcher[rows] == 2)
