@@ -323,6 +323,65 @@ def emission_dimming(lobes, mu, layers, albedo=True):
     return factor
 
 
+def closure_albedos(lobes, wo):
+    """Each lobe's albedo as Cycles' ``bsdf_albedo`` estimates it for the
+    Diffuse / Glossy / Transmission Color passes and the denoising albedo:
+    (reflection, transmission), each (N, K, 3).  The closure weight (colour,
+    layering, the multiscatter darkening but not its 1/E energy scale) times
+    the Fresnel estimate of ``bsdf_microfacet_estimate_albedo``: F82 metals
+    mix(F0, 1, s) with s from ``ggx_gen_schlick_s`` at exponent 5 (the B
+    term left out, as Cycles does), the Principled dielectric and coat
+    mix(F0, 1, s) from ``ggx_gen_schlick_ior_s``; glass splits into that
+    reflection estimate and the refracted rest at the view angle,
+    (1 - F(mu)) x transmission tint; other lobes carry their weight whole
+    (sheen's weight holds its albedo)."""
+    mu = np.clip(wo[:, 2], 0.0, 1.0)
+    w = weights(lobes, wo)
+    refl = w.copy()
+    trans = np.zeros_like(w)
+    t = mf.tables()
+    for k in range(lobes.kind.shape[1]):
+        kind = lobes.kind[:, k]
+        glossy = kind_in(kind, (GLOSSY, GLASS, MIRROR, GLOSSY_ANISOTROPIC))
+        ms = np.nonzero(lobes.multiscatter[:, k] & kind_in(kind, (GLOSSY, GLASS)))[0]
+        if len(ms):
+            glass = kind[ms] == GLASS
+            for part in (ms[glass], ms[~glass]):
+                if len(part):
+                    factor, darkening = _energy(lobes, k, part, mu[part])
+                    refl[part, k] *= darkening / np.maximum(factor, 1e-12)
+        rough = _rough(lobes, k)
+        code = lobes.fresnel[:, k]
+        f0 = lobes.f0[:, k]
+        est = np.ones_like(f0)
+        metal = np.nonzero(glossy & (code == F_F82) & (kind != GLASS))[0]
+        if len(metal):
+            s = mf.lookup(t["ggx_gen_schlick_s"], rough[metal], mu[metal], np.full(len(metal), 0.5))
+            est[metal] = f0[metal] + (1.0 - f0[metal]) * s[:, None]
+        eta = _eta(lobes, k)
+        diel = np.nonzero(glossy & ((code == F_DIELECTRIC) | (kind == GLASS)))[0]
+        if len(diel):
+            e = eta[diel]
+            s = mf.lookup(t["ggx_gen_schlick_ior_s"], rough[diel], mu[diel], mf.ior_z(e))
+            exact = mf.schlick_s(mu[diel], e)[0]
+            # Cycles' real-Fresnel branch reads the table only above IOR 1.
+            s = np.where(e > 1.0, s, exact)
+            est[diel] = f0[diel] + (1.0 - f0[diel]) * s[:, None]
+        through = np.nonzero(kind_in(kind, (GLASS, REFRACTION)))[0]
+        if len(through):
+            e = eta[through]
+            cos_t = mf.fresnel_dielectric(mu[through], e)[1]
+            ft = f0[through]
+            f = ft + (1.0 - ft) * mf.schlick_s(mu[through], e)[0][:, None]
+            glass = (kind[through] == GLASS)[:, None]
+            tint = np.where(glass, lobes.transmission_tint[through, k], 1.0)
+            passes = np.where(glass, 1.0 - f, (cos_t > 0)[:, None] * 1.0)
+            trans[through, k] = refl[through, k] * tint * np.maximum(passes, 0.0)
+            refl[through, k] = np.where(glass, refl[through, k], 0.0)
+        refl[:, k] *= est
+    return np.maximum(refl, 0.0), np.maximum(trans, 0.0)
+
+
 def transparency(lobes):
     """(N, 3) light a surface lets straight through: the summed weight x
     colour of its transparent lobes (Cycles' closure_transparent_extinction),

@@ -20,7 +20,8 @@ import numpy as np
 from .kernels import clip
 from .lobes import EXTRA_PARAMS, PARAMS
 from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, GLOSSY_ANISOTROPIC, MIN_ALPHA,
-                       MIRROR, NONE, OREN_NAYAR, REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
+                       MIRROR, NONE, OREN_NAYAR, REFRACTION, SHEEN, SUBSURFACE_RANDOM_WALK, SUBSURFACE_SKIN,
+                       TRANSLUCENT, TRANSPARENT)
 from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect_terms, pow5
 
 _NUMBA_TYPES = {np.dtype(np.int8): "int8", np.dtype(np.float64): "float64", np.dtype(np.bool_): "boolean"}
@@ -656,6 +657,30 @@ def _sample_sheen(t_sheen, rough, wox, woy, woz, u1, u2):
             lx * 0.0 + ly * 0.0 + lz * 1.0)
 
 
+@helper
+def _subsurface_entry(skin, wox, woy, woz, alpha, ior, u1, u2):
+    """lobes/subsurface.entry_direction for one ray: (x, y, z, ok)."""
+    diffuse = skin and u1 < 0.5
+    if skin:
+        u1 = 2.0 * u1 if diffuse else 2.0 * (u1 - 0.5)
+        alpha = 1.0
+    u1 = min(u1, 1.0 - 1e-12)
+    if diffuse:
+        r = np.sqrt(u1)
+        phi = TWO_PI * u2
+        return r * np.cos(phi), r * np.sin(phi), -np.sqrt(max(0.0, 1.0 - u1)), True
+    if woz <= 0.0:
+        return 0.0, 0.0, 1.0, False
+    neta = 1.0 / clip(ior, 1.01, 3.8)
+    hx, hy, hz = _vndf(wox, woy, woz, alpha, u1, u2)
+    cos_hi = hx * wox + hy * woy + hz * woz
+    arg = 1.0 - neta * neta * (1.0 - cos_hi * cos_hi)
+    nk = neta * cos_hi - max(np.sqrt(max(arg, 0.0)), 1e-7)
+    x, y, z = -neta * wox + nk * hx, -neta * woy + nk * hy, -neta * woz + nk * hz
+    length = max(np.sqrt(x * x + y * y + z * z), 1e-30)
+    return x / length, y / length, z / length, z < 0.0
+
+
 def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delta, smooth):
     """bsdf._sample_numpy into wi, weight, pdf, delta, smooth."""
     kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, lobe_weight = lobes[:12]
@@ -725,6 +750,13 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
         elif kd == TRANSPARENT:
             x, y, z = -wox, -woy, -woz
             r0, r1, r2 = w[i, k, 0] / p_lobe, w[i, k, 1] / p_lobe, w[i, k, 2] / p_lobe
+            is_delta = True
+            p = p_lobe
+        elif kd == SUBSURFACE_RANDOM_WALK or kd == SUBSURFACE_SKIN:
+            # lobes/subsurface.entry_direction (the integrator's subsurface stage draws it itself).
+            x, y, z, ok = _subsurface_entry(kd == SUBSURFACE_SKIN, wox, woy, woz, alpha[i, k], ior[i, k], u1[i], u2[i])
+            if ok:
+                r0, r1, r2 = w[i, k, 0] / p_lobe, w[i, k, 1] / p_lobe, w[i, k, 2] / p_lobe
             is_delta = True
             p = p_lobe
         elif kd == GLASS or kd == REFRACTION:

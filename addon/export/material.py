@@ -20,16 +20,14 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-import bpy
-
 from .. import backend
-from . import nodes
+from . import compat, nodes, subsurface
 
 GREY = (0.8, 0.8, 0.8)
 # Principled BSDF inputs (3.x and 4.x names) whose features are not rendered
-# yet (subsurface scattering renders as diffuse, thin film as no film).
+# yet (3.x's Subsurface renders as diffuse, thin film as no film).
 PRINCIPLED_UNSUPPORTED = (
-    'Subsurface', 'Subsurface Weight', 'Thin Film Thickness',
+    'Subsurface', 'Thin Film Thickness',
 )
 # Cycles' Diffuse BSDF and Principled switch to Oren-Nayar above this roughness.
 DIFFUSE_ROUGHNESS_CUTOFF = 1e-5
@@ -48,6 +46,7 @@ class Closure:
     lobes: list = field(default_factory=list)
     emission: tuple = BLACK
     emission_layers: tuple = ()
+    holdout: object = 0.0      # the Holdout shader's weight (a constant or an expression)
 
     def scaled(self, weight):
         """Every lobe and the emission times a Mix Shader factor.  A lobe's
@@ -55,7 +54,8 @@ class Closure:
         layering terms, which a mix must not change)."""
         lobes = [dataclasses.replace(lobe, weight=nodes.multiply(lobe.weight, weight))
                  for lobe in self.lobes]
-        return Closure(lobes, _scale(self.emission, weight), self.emission_layers)
+        return Closure(lobes, _scale(self.emission, weight), self.emission_layers,
+                       nodes.multiply(self.holdout, weight))
 
     def plus(self, other):
         """Both closures; the emission keeps the layers of the one that has
@@ -65,7 +65,8 @@ class Closure:
         layers = self.emission_layers if _has_emission(self.emission) else ()
         if _has_emission(other.emission):
             layers = layers + shifted
-        return Closure(self.lobes + other.lobes, _add(self.emission, other.emission), layers)
+        return Closure(self.lobes + other.lobes, _add(self.emission, other.emission), layers,
+                       nodes.math('ADD', self.holdout, other.holdout))
 
     def mixed_dimming(self, other):
         """Two emissions of which only one lies under layers (rendered with
@@ -94,8 +95,10 @@ CONSTANT_VALUE_INPUTS = PRINCIPLED_UNSUPPORTED + ('Anisotropy',)
 class NodeTranslator:
     """Translates one material's node tree, remembering what it could not."""
 
-    def __init__(self, material_name):
+    def __init__(self, material_name, constant_volumes=False):
         self.material_name = material_name
+        # Read every volume input as a constant (the world's volume).
+        self.constant_volumes = constant_volumes
         self.unsupported = []   # node labels, in order of discovery
         self.textured = []      # "node.input" names read as constants
         self.approximated = []  # Principled BSDF features not rendered yet
@@ -312,6 +315,14 @@ class NodeTranslator:
         roughness = _clamp01(self.value(node, 'Roughness', 0.5))
         return Closure([_scene().Lobe('sheen', self.color(node, 'Color'), roughness)])
 
+    def _node_subsurface_scattering(self, node):
+        """Cycles' Subsurface Scattering node (Random Walk, Skin; Christensen-Burley as Random Walk)."""
+        return Closure(subsurface.node_lobes(self, node))
+
+    def _node_holdout(self, node):
+        """Cycles' Holdout: no light, and camera rays uncover the film."""
+        return Closure(holdout=1.0)
+
     def _node_emission(self, node):
         strength = self.value(node, 'Strength', 1.0)
         return Closure([], _scale(self.color(node, 'Color', (1.0, 1.0, 1.0)), strength))
@@ -323,7 +334,7 @@ class NodeTranslator:
         p = _principled_inputs(self, node)
         self._note_principled_features(node)
         top = self._principled_layers(p)
-        base = self._principled_base(p)
+        base = self._principled_base(p, node)
         for i, lobe in enumerate(top):
             top[i] = dataclasses.replace(lobe, covers=len(top) - 1 - i + len(base))
         lobes = top + base
@@ -348,7 +359,7 @@ class NodeTranslator:
                                      weight=p['alpha']))
         return layers
 
-    def _principled_base(self, p):
+    def _principled_base(self, p, node):
         """Metal, transmission, specular layer and diffuse, with their weights
         (per ray where an input is textured; a lobe is left out where its
         weight is zero everywhere)."""
@@ -371,16 +382,20 @@ class NodeTranslator:
         if not nodes.may_exceed(w, 0.0):
             return lobes
         eta, f0 = p['specular_eta'], p['specular_f0']
+        below, ss = subsurface.principled_lobes(self, node, p, w)   # under the specular layer
+        rest = _mul(w, _one_minus(ss)) if below else w
+        if not below or nodes.may_exceed(rest, 0.0):
+            if nodes.may_exceed(p['diffuse_roughness'], DIFFUSE_ROUGHNESS_CUTOFF):
+                below.append(scene.Lobe('oren_nayar', p['base'], diffuse_roughness=p['diffuse_roughness'],
+                                        weight=rest))
+            else:
+                below.append(scene.Lobe('diffuse', p['base'], weight=rest))
         if nodes.is_expr(eta) or eta != 1.0:
             lobes.append(self._anisotropic(p['node'], 'glossy', p['anisotropic'], p['rotation'],
                                            color=(1.0, 1.0, 1.0), roughness=p['roughness'], fresnel='dielectric',
-                                           ior=eta, f0=_clamp_color(_scale(p['specular_tint'], f0)), covers=1,
-                                           multiscatter=ms, weight=w))
-        if nodes.may_exceed(p['diffuse_roughness'], DIFFUSE_ROUGHNESS_CUTOFF):
-            lobes.append(scene.Lobe('oren_nayar', p['base'], diffuse_roughness=p['diffuse_roughness'], weight=w))
-        else:
-            lobes.append(scene.Lobe('diffuse', p['base'], weight=w))
-        return lobes
+                                           ior=eta, f0=_clamp_color(_scale(p['specular_tint'], f0)),
+                                           covers=len(below), multiscatter=ms, weight=w))
+        return lobes + below
 
     def _note_principled_features(self, node):
         """Name the Principled features in use that Ember does not render yet."""
@@ -424,9 +439,9 @@ class NodeTranslator:
         return handler(node)
 
     def _volume_const(self, node, name, default, color=False):
-        """A constant input of a volume node (Cycles' value for a texture
-        Ember cannot evaluate inside a volume yet: the socket's own), with
-        NaN read as 0 and infinities as the largest value, named in a warning."""
+        """A constant input of a volume node (a texture on it is read as
+        the socket's own value, named in a warning), with NaN read as 0 and
+        infinities as the largest value, named in a warning."""
         socket = node.inputs.get(name)
         if socket is None:
             return default
@@ -434,10 +449,35 @@ class NodeTranslator:
         if value is None or nodes.is_expr(value):
             self._note_texture(node, name)
             value = nodes.constant(socket)
+        return self._const(node, name, value, color)
+
+    def _const(self, node, name, value, color):
         if color:
             value = (float(value),) * 3 if isinstance(value, (float, int)) else tuple(float(c) for c in value[:3])
             return tuple(self._finite(node, name, c) for c in value)
         return self._finite(node, name, nodes.luminance(value) if isinstance(value, tuple) else float(value))
+
+    def _volume_input(self, node, name, default, color=False):
+        """A volume node's input: a constant, or a texture expression
+        evaluated at points inside the medium (a heterogeneous medium:
+        engine/media/field.py); an untranslatable link is read as the
+        socket's value, named in a warning."""
+        socket = node.inputs.get(name)
+        if socket is None:
+            return default
+        if self.constant_volumes:
+            return self._volume_const(node, name, default, color)
+        if not socket.is_linked:
+            return self._const(node, name, nodes.constant(socket), color)
+        value = self.reader.read(socket)
+        if value is None:
+            self._note_texture(node, name)
+            return self._const(node, name, nodes.constant(socket), color)
+        if not nodes.is_expr(value):
+            return self._const(node, name, value, color)
+        if color:
+            return value
+        return nodes.as_value(value)
 
     def _finite(self, node, name, value):
         if math.isfinite(value):
@@ -450,17 +490,17 @@ class NodeTranslator:
 
     def _density(self, node):
         """Density, negative read as 0 (Cycles' fmaxf(density, 0))."""
-        return max(self._volume_const(node, 'Density', 1.0), 0.0)
+        d = self._volume_input(node, 'Density', 1.0)
+        return nodes.at_least(d, 0.0) if nodes.is_expr(d) else max(d, 0.0)
 
     def _volume_volume_absorption(self, node):
-        color = self._volume_const(node, 'Color', GREY, color=True)
-        d = self._density(node)
-        return VolumeClosure(absorption=tuple(max(1.0 - c, 0.0) * d for c in color))
+        color = self._volume_input(node, 'Color', GREY, color=True)
+        return VolumeClosure(absorption=_times(_positive(_one_minus_color(color)), self._density(node)))
 
     def _volume_volume_scatter(self, node):
         """Henyey-Greenstein; the other phase functions (Blender 4.2+) are
         rendered as Henyey-Greenstein of the node's Anisotropy (Rayleigh: 0)."""
-        color = self._volume_const(node, 'Color', GREY, color=True)
+        color = self._volume_input(node, 'Color', GREY, color=True)
         d = self._density(node)
         phase = getattr(node, 'phase', 'HENYEY_GREENSTEIN')
         g = self._volume_const(node, 'Anisotropy', 0.0)
@@ -469,34 +509,33 @@ class NodeTranslator:
                                     "Henyey-Greenstein")
             if phase == 'RAYLEIGH':
                 g = 0.0
-        return VolumeClosure(scattering=tuple(max(c, 0.0) * d for c in color)).with_phase(g)
+        return VolumeClosure(scattering=_times(_positive(color), d)).with_phase(g)
 
     def _volume_principled_volume(self, node):
         """Cycles' svm_node_principled_volume with no attribute grids:
         scattering Color x Density, absorption (1 - Color)(1 - sqrt(Absorption
         Color)) x Density, emission Strength x Color.  Blackbody is named."""
-        color = self._volume_const(node, 'Color', (0.5, 0.5, 0.5), color=True)
+        color = self._volume_input(node, 'Color', (0.5, 0.5, 0.5), color=True)
         d = self._density(node)
         g = self._volume_const(node, 'Anisotropy', 0.0)
         ac = self._volume_const(node, 'Absorption Color', (0.0, 0.0, 0.0), color=True)
-        strength = self._volume_const(node, 'Emission Strength', 0.0)
-        ec = self._volume_const(node, 'Emission Color', (1.0, 1.0, 1.0), color=True)
+        strength = self._volume_input(node, 'Emission Strength', 0.0)
+        ec = self._volume_input(node, 'Emission Color', (1.0, 1.0, 1.0), color=True)
         if self._volume_const(node, 'Blackbody Intensity', 0.0) > 0.0:
             self._volume_note(node, "Blackbody emission not rendered yet")
         out = VolumeClosure()
-        if d > 0.0:
-            out = VolumeClosure(
-                absorption=tuple(max(1.0 - c, 0.0) * max(1.0 - math.sqrt(max(a, 0.0)), 0.0) * d
-                                 for c, a in zip(color, ac)),
-                scattering=tuple(max(c, 0.0) * d for c in color)).with_phase(g)
-        if strength > 0.0:
-            out = out.plus(VolumeClosure(emission=tuple(strength * c for c in ec)))
+        if nodes.may_exceed(d, 0.0):
+            tint = tuple(max(1.0 - math.sqrt(max(a, 0.0)), 0.0) for a in ac)
+            out = VolumeClosure(absorption=_times(_times(_positive(_one_minus_color(color)), tint), d),
+                                scattering=_times(_positive(color), d)).with_phase(g)
+        if nodes.may_exceed(strength, 0.0):
+            out = out.plus(VolumeClosure(emission=_times(ec, strength)))
         return out
 
     def _volume_emission(self, node):
-        strength = self._volume_const(node, 'Strength', 1.0)
-        color = self._volume_const(node, 'Color', (1.0, 1.0, 1.0), color=True)
-        return VolumeClosure(emission=tuple(strength * c for c in color))
+        strength = self._volume_input(node, 'Strength', 1.0)
+        color = self._volume_input(node, 'Color', (1.0, 1.0, 1.0), color=True)
+        return VolumeClosure(emission=_times(color, strength))
 
     def _volume_add_shader(self, node):
         return self._volume_sum(self.volume(node.inputs[0]), self.volume(node.inputs[1]), node)
@@ -557,7 +596,7 @@ class VolumeClosure:
 
     def with_phase(self, g):
         g = min(max(float(g), -1.0), 1.0)
-        return dataclasses.replace(self, g_weight=sum(self.scattering) / 3.0 * g, phases=(g,))
+        return dataclasses.replace(self, g_weight=_mean_weight(self.scattering) * g, phases=(g,))
 
     def scaled(self, w):
         return VolumeClosure(_scale3(self.absorption, w), _scale3(self.scattering, w), _scale3(self.emission, w),
@@ -572,16 +611,48 @@ class VolumeClosure:
         return len(set(self.phases) | set(other.phases)) > 1
 
     def anisotropy(self):
-        total = sum(self.scattering) / 3.0
+        total = _mean_weight(self.scattering)
         return min(max(self.g_weight / total, -1.0), 1.0) if total > 0 else 0.0
 
 
+def _mean_weight(c):
+    """The mean scattering a closure's g is weighted by: a textured one's
+    is taken as 1 (its g then counts as one constant medium's)."""
+    return 1.0 if nodes.is_expr(c) else sum(c) / 3.0
+
+
 def _scale3(c, w):
+    if nodes.is_expr(c):
+        return nodes.scale(c, w)
     return tuple(min(x * w, VOLUME_LIMIT) for x in c)
 
 
 def _add3(a, b):
+    if nodes.is_expr(a) or nodes.is_expr(b):
+        return nodes.add(a, b)
     return tuple(min(x + y, VOLUME_LIMIT) for x, y in zip(a, b))
+
+
+def _times(color, w):
+    """A colour times a float or a colour (constants or expressions)."""
+    if nodes.is_expr(color) or nodes.is_expr(w) or isinstance(w, tuple):
+        if isinstance(w, tuple) and isinstance(color, tuple):
+            return tuple(min(x * y, VOLUME_LIMIT) for x, y in zip(color, w))
+        return backend.engine().MixColor('MULTIPLY', 1.0, color, w, clamp_factor=False)
+    return _scale3(color, float(w))
+
+
+def _positive(color):
+    """max(c, 0) per channel."""
+    if nodes.is_expr(color):
+        return backend.engine().MixColor('LIGHTEN', 1.0, color, BLACK, clamp_factor=False)
+    return tuple(max(c, 0.0) for c in color)
+
+
+def _one_minus_color(color):
+    if nodes.is_expr(color):
+        return backend.engine().MixColor('SUBTRACT', 1.0, (1.0, 1.0, 1.0), color, clamp_factor=False)
+    return tuple(1.0 - c for c in color)
 
 
 def _f0_from_ior(ior):
@@ -757,7 +828,7 @@ def translate(material):
     """Returns (engine Material, warning or None) for a bpy material."""
     scene = _scene()
     name = material.name
-    tree = material.node_tree if _uses_nodes(material) else None
+    tree = material.node_tree if compat.uses_nodes(material) else None
     if tree is None:
         color = tuple(material.diffuse_color)[:3]
         return scene.Material(name, (scene.Lobe('diffuse', color),)), None
@@ -772,7 +843,8 @@ def translate(material):
     if volume is not None and not output.inputs['Surface'].is_linked:
         # Only a Volume output: Cycles' surface is a pass-through boundary.
         lobes = (scene.Lobe('transparent', (1.0, 1.0, 1.0)),)
-    material = scene.Material(name, lobes, closure.emission, normal=normal)
+    material = scene.Material(name, lobes, closure.emission, normal=normal,
+                              holdout=_holdout_weight(translator, closure.holdout))
     if volume is not None:
         material.volume = volume
     if translator.tangent is not None and any(lobe.kind == 'glossy_anisotropic' for lobe in lobes):
@@ -780,6 +852,18 @@ def translate(material):
     if closure.emission_layers and hasattr(material, 'emission_layers'):
         material.emission_layers = tuple(closure.emission_layers)
     return material, translator.warning()
+
+
+def _holdout_weight(translator, holdout):
+    """The material's holdout weight as a constant in [0, 1]: a textured Mix
+    Shader factor over a Holdout is read as the middle of its range (named
+    in the material's warning), a sum above 1 as 1."""
+    if nodes.is_expr(holdout):
+        lo, hi = nodes.value_range(holdout)
+        translator.approximated.append(f"'Holdout' (a textured factor read as {0.5 * (lo + hi):g})")
+        holdout = 0.5 * (lo + hi)
+    holdout = float(holdout)
+    return min(max(holdout, 0.0), 1.0) if math.isfinite(holdout) else 0.0
 
 
 def _volume(translator, output):
@@ -933,10 +1017,3 @@ def material_aovs(material):
             value = float(node.inputs['Value'].default_value)
         out[name] = (tuple(float(c) for c in colour[:3]), float(value))
     return out
-
-
-def _uses_nodes(datablock):
-    """Blender 5.0 always uses nodes and deprecates the ``use_nodes`` switch."""
-    if bpy.app.version >= (5, 0, 0):
-        return True
-    return bool(getattr(datablock, 'use_nodes', False))
