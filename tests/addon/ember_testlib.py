@@ -294,6 +294,66 @@ def empty_factory_scene():
     return bpy.context.scene
 
 
+def node_material(name, kind, inputs):
+    """A material whose surface is one shader node of type ``kind``, its
+    inputs (or, for other keys, node properties such as distribution) set."""
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    tree = mat.node_tree
+    out = next(n for n in tree.nodes if n.type == 'OUTPUT_MATERIAL')
+    for node in list(tree.nodes):
+        if node != out:
+            tree.nodes.remove(node)
+    node = tree.nodes.new(kind)
+    for key, value in inputs.items():
+        if key in node.inputs:
+            node.inputs[key].default_value = value
+        else:
+            setattr(node, key, value)
+    tree.links.new(node.outputs[0], out.inputs['Surface'])
+    return mat
+
+
+def rough_material(name, color):
+    """A Principled BSDF material of ``color`` at roughness 1; returns (material, its BSDF node)."""
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    bsdf = next(n for n in mat.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
+    bsdf.inputs['Base Color'].default_value = tuple(color) + (1.0,)
+    bsdf.inputs['Roughness'].default_value = 1.0
+    return mat, bsdf
+
+
+def add_object(op, name, mat, **kwargs):
+    """``op(**kwargs)`` (a bpy.ops.mesh primitive), named, with ``mat``."""
+    op(**kwargs)
+    obj = bpy.context.active_object
+    obj.name = name
+    obj.data.materials.append(mat)
+    return obj
+
+
+def render_seeds(scene, folder, name, seeds, spp, first_seed, bounces, read=None):
+    """{'EMBER' | 'CYCLES': (seeds, H, W, C)} renders of the scene with
+    seeds first_seed.. (render_array's RGBA, or ``read(path)`` of the written
+    file), the Ember renders checked for errors."""
+    out = {}
+    for engine, setup in (('EMBER', setup_ember), ('CYCLES', setup_cycles)):
+        images = []
+        for seed in range(seeds):
+            setup(scene, spp, first_seed + seed, bounces)
+            if read is None:
+                images.append(render_array(scene, folder, f"{name}_{engine}_{seed}").astype(np.float64))
+            else:
+                scene.render.filepath = os.path.join(str(folder), f"{name}_{engine}_{seed}.exr")
+                bpy.ops.render.render(write_still=True)
+                images.append(read(scene.render.filepath))
+        out[engine] = np.array(images)
+    from addon import engine as ember_engine
+    assert all(entry['error'] is None for entry in ember_engine.RENDER_LOG[-seeds:])
+    return out
+
+
 def references_tool():
     """tools/cycles_references.py as a module."""
     import importlib.util

@@ -13,14 +13,12 @@ channels: Welch's t per 4x4 block and channel and on the image mean
 (ember_testlib.seed_block_test: two families), power printed; the tables'
 precision is the floor of each block's standard error.
 """
-import os
-
 import bpy
 import numpy as np
 import pytest
 
-from ember_testlib import (multilayer_output, read_multilayer_exr, require, seed_block_test, setup_cycles,
-                           setup_ember, small_resolution)
+from ember_testlib import (multilayer_output, node_material, read_multilayer_exr, render_seeds, require,
+                           seed_block_test, small_resolution)
 
 SEEDS, SPP = 12, 16
 # Ember's albedo tables (engine/data/build_tables.py: midpoint quadrature)
@@ -47,19 +45,7 @@ SPHERES = (
 )
 
 
-def _material(name, kind, inputs):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    tree = mat.node_tree
-    out = next(n for n in tree.nodes if n.type == 'OUTPUT_MATERIAL')
-    for node in list(tree.nodes):
-        if node != out:
-            tree.nodes.remove(node)
-    node = tree.nodes.new(kind)
-    for key, value in inputs.items():
-        node.inputs[key].default_value = value
-    tree.links.new(node.outputs[0], out.inputs['Surface'])
-    return mat
+_material = node_material
 
 
 def _scene():
@@ -93,20 +79,11 @@ def _scene():
 def colours(registered_addon, tmp_path_factory):
     require(bpy.app.version >= (4, 0, 0), "the Principled BSDF's coat, sheen and transmission inputs are 4.0's")
     folder = tmp_path_factory.mktemp("colours")
-    scene = _scene()
-    out = {}
-    for engine, setup in (('EMBER', setup_ember), ('CYCLES', setup_cycles)):
-        images = []
-        for seed in range(SEEDS):
-            setup(scene, SPP, 300 + seed, 0)
-            scene.render.filepath = os.path.join(str(folder), f"{engine}_{seed}.exr")
-            bpy.ops.render.render(write_still=True)
-            passes = read_multilayer_exr(scene.render.filepath)
-            images.append(np.concatenate([passes[name][..., :3] for name in COLOURS], axis=-1))
-        out[engine] = np.array(images)
-    from addon import engine as ember_engine
-    assert all(entry['error'] is None for entry in ember_engine.RENDER_LOG[-SEEDS:])
-    return out
+
+    def read(path):
+        passes = read_multilayer_exr(path)
+        return np.concatenate([passes[name][..., :3] for name in COLOURS], axis=-1)
+    return render_seeds(_scene(), folder, "colours", SEEDS, SPP, 300, 0, read)
 
 
 def test_closure_colours_match_cycles(colours):

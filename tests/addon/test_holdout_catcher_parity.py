@@ -26,26 +26,18 @@ Ember and Cycles seeds, the five renders side by side (23 channels):
 Welch's t per 4x4 block and channel and on the image mean
 (ember_testlib.seed_block_test: two families), power printed.
 """
-import os
-
 import bpy
 import numpy as np
 import pytest
 
-from ember_testlib import (multilayer_output, read_multilayer_exr, render_array, require, seed_block_test,
-                           setup_cycles, setup_ember, small_resolution)
+from ember_testlib import (add_object, empty_factory_scene, multilayer_output, read_multilayer_exr, render_array,
+                           render_seeds, require, rough_material, seed_block_test, setup_ember, small_resolution)
 
 SEEDS, SPP, BOUNCES = 6, 32, 3
 WIDTH, HEIGHT = 32, 24
 
 
-def _diffuse(name, color):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    bsdf = next(n for n in mat.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
-    bsdf.inputs['Base Color'].default_value = color + (1.0,)
-    bsdf.inputs['Roughness'].default_value = 1.0
-    return mat, bsdf
+_diffuse = rough_material
 
 
 def _half_holdout():
@@ -61,20 +53,11 @@ def _half_holdout():
     return mat
 
 
-def _add(op, name, mat, **kwargs):
-    op(**kwargs)
-    obj = bpy.context.active_object
-    obj.name = name
-    obj.data.materials.append(mat)
-    return obj
+_add = add_object
 
 
 def _catcher_scene():
-    bpy.ops.wm.read_factory_settings()
-    scene = bpy.context.scene
-    for obj in list(bpy.data.objects):
-        if obj.type != 'CAMERA':
-            bpy.data.objects.remove(obj)
+    scene = empty_factory_scene()
     mesh = bpy.ops.mesh
     floor = _add(mesh.primitive_plane_add, "Catcher", _diffuse("Floor", (0.6, 0.6, 0.6))[0], size=12,
                  location=(0, 0, -1))
@@ -100,11 +83,7 @@ def _light_and_world(scene):
 
 
 def _scene():
-    bpy.ops.wm.read_factory_settings()
-    scene = bpy.context.scene
-    for obj in list(bpy.data.objects):
-        if obj.type != 'CAMERA':
-            bpy.data.objects.remove(obj)
+    scene = empty_factory_scene()
     mesh = bpy.ops.mesh
     _add(mesh.primitive_plane_add, "Floor", _diffuse("Floor", (0.6, 0.6, 0.6))[0], size=12, location=(0, 0, -1))
     sphere = _add(mesh.primitive_uv_sphere_add, "Masked", _diffuse("Sphere", (0.2, 0.7, 0.3))[0], radius=0.9,
@@ -125,30 +104,21 @@ def renders(registered_addon, tmp_path_factory):
         scene = build()
         for transparent in (False, True):
             scene.render.film_transparent = transparent
-            for engine, setup in (('EMBER', setup_ember), ('CYCLES', setup_cycles)):
-                images = []
-                for seed in range(SEEDS):
-                    setup(scene, SPP, 500 + seed, BOUNCES)
-                    name = f"{kind}_{engine}_{transparent}_{seed}"
-                    images.append(render_array(scene, folder, name).astype(np.float64))
-                out[kind, engine, transparent] = np.array(images)
-        from addon import engine as ember_engine
-        assert all(entry['error'] is None for entry in ember_engine.RENDER_LOG[-2 * SEEDS:])
-    # The Shadow Catcher pass on (opaque film): Combined keeps the shadow in
-    # its alpha, and the pass holds the shadow ratio.
+            for engine, images in render_seeds(scene, folder, f"{kind}_{transparent}", SEEDS, SPP, 500,
+                                               BOUNCES).items():
+                out[kind, engine, transparent] = images
+    # The Shadow Catcher pass on (opaque film): Combined is the matte alone,
+    # and the pass holds the shadow ratio.
     scene = _catcher_scene()
     scene.render.film_transparent = False
     bpy.context.view_layer.cycles.use_pass_shadow_catcher = True
     multilayer_output(scene)
-    for engine, setup in (('EMBER', setup_ember), ('CYCLES', setup_cycles)):
-        images = []
-        for seed in range(SEEDS):
-            setup(scene, SPP, 500 + seed, BOUNCES)
-            scene.render.filepath = os.path.join(str(folder), f"pass_{engine}_{seed}.exr")
-            bpy.ops.render.render(write_still=True)
-            layers = read_multilayer_exr(scene.render.filepath)
-            images.append(np.concatenate([layers['Combined'], layers['Shadow Catcher'][..., :3]], axis=-1))
-        out['pass', engine, False] = np.array(images)
+
+    def read(path):
+        layers = read_multilayer_exr(path)
+        return np.concatenate([layers['Combined'], layers['Shadow Catcher'][..., :3]], axis=-1)
+    for engine, images in render_seeds(scene, folder, "pass", SEEDS, SPP, 500, BOUNCES, read).items():
+        out['pass', engine, False] = images
     return out
 
 

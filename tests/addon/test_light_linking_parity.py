@@ -14,35 +14,19 @@ import bpy
 import numpy as np
 import pytest
 
-from ember_testlib import render_array, require, seed_block_test, setup_cycles, setup_ember, small_resolution
+from ember_testlib import (add_object, empty_factory_scene, render_array, render_seeds, require, rough_material,
+                           seed_block_test, setup_ember, small_resolution)
 
 SEEDS, SPP, BOUNCES = 6, 48, 2
 WIDTH, HEIGHT = 32, 24
 
 
-def _diffuse(name, color):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    bsdf = next(n for n in mat.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
-    bsdf.inputs['Base Color'].default_value = color + (1.0,)
-    bsdf.inputs['Roughness'].default_value = 1.0
-    return mat
-
-
 def _add(op, name, color, **kwargs):
-    op(**kwargs)
-    obj = bpy.context.active_object
-    obj.name = name
-    obj.data.materials.append(_diffuse(name, color))
-    return obj
+    return add_object(op, name, rough_material(name, color)[0], **kwargs)
 
 
 def linked_scene():
-    bpy.ops.wm.read_factory_settings()
-    scene = bpy.context.scene
-    for obj in list(bpy.data.objects):
-        if obj.type != 'CAMERA':
-            bpy.data.objects.remove(obj)
+    scene = empty_factory_scene()
     mesh = bpy.ops.mesh
     floor = _add(mesh.primitive_plane_add, "Floor", (0.6, 0.6, 0.6), size=12, location=(0, 0, -1))
     red = _add(mesh.primitive_uv_sphere_add, "Red", (0.8, 0.2, 0.1), radius=0.8, location=(-1.1, 0.0, -0.2))
@@ -72,17 +56,8 @@ def linked_scene():
 def renders(registered_addon, tmp_path_factory):
     require('light_linking' in bpy.types.Object.bl_rna.properties, "light linking is Blender 4.0's")
     folder = tmp_path_factory.mktemp("linking")
-    scene = linked_scene()
-    out = {}
-    for engine, setup in (('EMBER', setup_ember), ('CYCLES', setup_cycles)):
-        images = []
-        for seed in range(SEEDS):
-            setup(scene, SPP, 700 + seed, BOUNCES)
-            images.append(render_array(scene, folder, f"{engine}_{seed}")[..., :3].astype(np.float64))
-        out[engine] = np.array(images)
-    from addon import engine as ember_engine
-    assert all(entry['error'] is None for entry in ember_engine.RENDER_LOG[-SEEDS:])
-    return out
+    out = render_seeds(linked_scene(), folder, "linking", SEEDS, SPP, 700, BOUNCES)
+    return {engine: images[..., :3] for engine, images in out.items()}
 
 
 def test_light_and_shadow_linking_match_cycles(renders):

@@ -38,8 +38,8 @@ import numpy as np
 import pytest
 
 import ember_stats as stats
-from ember_testlib import (SCENES_DIR, multilayer_output, read_multilayer_exr, require, seed_block_test, setup_cycles,
-                           setup_ember, small_resolution)
+from ember_testlib import (SCENES_DIR, multilayer_output, node_material, read_multilayer_exr, require,
+                           seed_block_test, setup_cycles, setup_ember, small_resolution)
 
 # Ember 8 seeds x 12 samples (its cost is mostly per render), Cycles 12 x 24 (cheap).
 SEEDS, SPP, CYCLES_SEEDS, CYCLES_SPP, BOUNCES = 8, 12, 12, 24, 3
@@ -62,22 +62,8 @@ CLASSES = ("Diffuse", "Glossy", "Transmission")
 
 
 def _material(name, kind, color, index, **inputs):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
+    mat = node_material(name, kind, dict({'Color': color + (1.0,)}, **inputs))
     mat.pass_index = index
-    tree = mat.node_tree
-    out = next(n for n in tree.nodes if n.type == 'OUTPUT_MATERIAL')
-    for node in list(tree.nodes):
-        if node != out:
-            tree.nodes.remove(node)
-    node = tree.nodes.new(kind)
-    node.inputs['Color'].default_value = color + (1.0,)
-    for key, value in inputs.items():
-        if key in node.inputs:
-            node.inputs[key].default_value = value
-        else:
-            setattr(node, key, value)     # a node property (distribution)
-    tree.links.new(node.outputs[0], out.inputs['Surface'])
     return mat
 
 

@@ -82,3 +82,14 @@ def test_emissive_shadow_catcher_is_finite():
     for transparent in (False, True):
         image = render(scene, RenderSettings(transparent=transparent, **SETTINGS)).image
         assert np.isfinite(image).all() and image[..., 3].min() >= 0.0
+
+
+def test_catcher_with_transparent_surfaces_is_named():
+    """A limit, said: with transparent surfaces in the scene the catcher
+    paths' shadow rays see every object."""
+    scene = _catcher_scene(True)
+    scene.materials = list(scene.materials) + [Material("veil", (Lobe("transparent", (0.5, 0.5, 0.5)),))]
+    scene.instances[1].materials = [1]
+    result = render(scene, RenderSettings(**SETTINGS))
+    assert np.isfinite(result.image).all()
+    assert any("shadow catchers with transparent surfaces" in w for w in result.warnings), result.warnings
