@@ -37,7 +37,6 @@ import bpy
 import numpy as np
 import pytest
 
-import ember_stats as stats
 from ember_testlib import (SCENES_DIR, multilayer_output, node_material, read_multilayer_exr, require,
                            seed_block_test, setup_cycles, setup_ember, small_resolution)
 
