@@ -71,10 +71,12 @@ class Context:
     spheres: object = None
     # Rows no light samples (engine.points.unlit_rows: points, moving triangles), None when none.
     unlit: object = None
+    # Hair curves (engine.points.Strands: which rows are curve segments), None without.
+    strands: object = None
 
     @classmethod
     def build(cls, accel, triangles, materials, lights, camera, world, settings, sampler=None,
-              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None, motion=None, spheres=None, unlit=None):
+              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None, motion=None, spheres=None, unlit=None, strands=None):
         """The Context of a render; ``sampler`` defaults to the settings'
         seed and pattern, ``pass_config`` to no extra passes."""
         if sampler is None:
@@ -90,7 +92,7 @@ class Context:
                    transparent_limit=max(int(settings.transparent_max_bounces), 1),
                    **_kind_limits(settings, light_path), light_path=light_path,
                    pass_config=pass_config, emitter_groups=pass_events.emitter_groups(pass_config, lights),
-                   centres=pass_events.CentreRecord(camera.width * camera.height), media=media, motion=motion, spheres=spheres, unlit=unlit)
+                   centres=pass_events.CentreRecord(camera.width * camera.height), media=media, motion=motion, spheres=spheres, unlit=unlit, strands=strands)
 
 
 def _delta_emitters(lights):
