@@ -274,8 +274,8 @@ class MotionAccel(Accel):
 
     OFFSET = 4 * OFFSET_SCALE   # Embree's float32 interpolation against ours in float64
 
-    # Tessellation of round curves (Cycles: its curve subdivisions + 1, default 4 + 1)
-    CURVE_RATE = 5
+    # Tessellation of round curves (Cycles: its curve subdivisions + 1, default 2 + 1)
+    CURVE_RATE = 3
 
     def __init__(self, triangles, motion=None, spheres=None, strands=None):
         self.triangles = triangles

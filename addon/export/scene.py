@@ -101,6 +101,9 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None):
         meshes=meshes, instances=instances, points=points, curves=curves, materials=materials.materials,
         lights=lights, world=world, camera=camera, cycles_version=tuple(bpy.app.version))
     warnings = materials.warnings + warnings + light_warnings + camera_warnings
+    shape = getattr(getattr(scene, 'cycles_curves', None), 'shape', 'THICK')
+    if curves and shape != 'THICK':
+        warnings.append(f"Curves are rendered as 3D curves; Ember has no {shape.lower()} (Render > Curves > Shape)")
     if world_warning:
         warnings.append(world_warning)
     triangles = sum(len(meshes[inst.mesh].triangles) for inst in instances)
