@@ -21,19 +21,28 @@ import numpy as np
 from .scene import Instance, Mesh
 
 
-class Spheres:
-    """Rows ``rows`` of Triangles are spheres (centres (N, 3), radii (N,)),
-    ``first`` the first such row (they come after every triangle)."""
+class _Rows:
+    """Rows ``rows`` of Triangles that are not triangles: ``mask`` (T,) marks
+    them, ``slot`` (T,) is each one's index among them (-1 elsewhere)."""
 
-    def __init__(self, rows, centres, radii, n_rows):
-        self.rows, self.centres, self.radii = rows, centres, radii
-        self.is_point = np.zeros(n_rows, bool)
-        self.is_point[rows] = True
+    def __init__(self, rows, n_rows):
+        self.rows = rows
+        self.mask = np.zeros(n_rows, bool)
+        self.mask[rows] = True
         self.slot = np.full(n_rows, -1, np.int64)
         self.slot[rows] = np.arange(len(rows))
 
     def __len__(self):
         return len(self.rows)
+
+
+class Spheres(_Rows):
+    """Rows ``rows`` of Triangles are spheres (centres (N, 3), radii (N,))."""
+
+    def __init__(self, rows, centres, radii, n_rows):
+        super().__init__(rows, n_rows)
+        self.centres, self.radii = centres, radii
+        self.is_point = self.mask
 
 
 def _placed(cloud, mesh_index):
@@ -122,21 +131,16 @@ def spheres_of(tris, scene, owners, radii):
     return Spheres(rows, tris.p0[rows].copy(), np.concatenate(r_world), len(tris))
 
 
-class Strands:
+class Strands(_Rows):
     """Rows ``rows`` of Triangles are curve segments: ``cvs`` (V, 4) the
     padded world-space control points and radii Embree holds, ``start``
     each row's first control point there (4 consecutive ones make a
     segment)."""
 
     def __init__(self, rows, cvs, start, n_rows):
-        self.rows, self.cvs, self.start = rows, cvs, start
-        self.is_curve = np.zeros(n_rows, bool)
-        self.is_curve[rows] = True
-        self.slot = np.full(n_rows, -1, np.int64)
-        self.slot[rows] = np.arange(len(rows))
-
-    def __len__(self):
-        return len(self.rows)
+        super().__init__(rows, n_rows)
+        self.cvs, self.start = cvs, start
+        self.is_curve = self.mask
 
 
 def strands_of(tris, owners):
