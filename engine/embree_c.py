@@ -33,6 +33,8 @@ from . import embree_upload
 RTC_GEOMETRY_TYPE_TRIANGLE = 0
 RTC_GEOMETRY_TYPE_INSTANCE = 121
 RTC_GEOMETRY_TYPE_SPHERE_POINT = 50
+RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE = 58
+RTC_FORMAT_UINT = 0x5001
 RTC_FORMAT_FLOAT4 = 0x9004
 RTC_BUFFER_TYPE_INDEX = 0
 RTC_BUFFER_TYPE_VERTEX = 1
@@ -76,6 +78,7 @@ def library():
             ("rtcSetGeometryTimeStepCount", None, [vp, u32]),
             ("rtcSetNewGeometryBuffer", vp, [vp, ctypes.c_int, u32, ctypes.c_int, size, size]),
             ("rtcSetGeometryInstancedScene", None, [vp, vp]),
+            ("rtcSetGeometryTessellationRate", None, [vp, ctypes.c_float]),
             ("rtcSetGeometryTransformQuaternion", None, [vp, u32, vp]),
             ("rtcIntersect16", None, [vp, vp, vp, vp]),
             ("rtcOccluded16", None, [vp, vp, vp, vp])):
@@ -162,9 +165,12 @@ class TriangleScene:
     rest linearly (Cycles' transform motion).  Time is in [0, 1] over the
     steps (step k at k / (S - 1)), Embree's default time range.  ``spheres``:
     (centres and radii (N, 4), prims) for one RTC_GEOMETRY_TYPE_SPHERE_POINT
-    geometry, or None."""
+    geometry, or None.  ``curves``: (control points and radii (V, 4), the
+    first control point of each segment (S,), prims (S,), tessellation
+    rate) for one RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE geometry (as
+    Cycles' 3D curves), or None."""
 
-    def __init__(self, parts, instances=(), spheres=None):
+    def __init__(self, parts, instances=(), spheres=None, curves=None):
         lib = library()
         if lib is None:
             raise RuntimeError("libembree4 (bundled with embreex) is not available")
@@ -197,26 +203,16 @@ class TriangleScene:
             order.append(np.asarray(prims, np.int64))
             first += len(indices)
             self.nbytes += vertices.nbytes + indices.nbytes
-        if spheres is not None:
+        if spheres is not None:   # (x, y, z, r) rows
             xyzr, prims = spheres
-            xyzr = np.ascontiguousarray(xyzr, np.float32)
-            geom = lib.rtcNewGeometry(self.device, RTC_GEOMETRY_TYPE_SPHERE_POINT)
-            try:
-                buffer = lib.rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4, 16, len(xyzr))
-                if not buffer:
-                    raise MemoryError(f"Embree could not allocate {len(xyzr)} points")
-                ctypes.memmove(buffer, xyzr.ctypes.data, xyzr.nbytes)
-                lib.rtcCommitGeometry(geom)
-                got = lib.rtcAttachGeometry(self.scene, geom)
-            finally:
-                lib.rtcReleaseGeometry(geom)
-            if got != len(offsets):
-                raise RuntimeError(f"Embree gave the points id {got}, expected {len(offsets)}")
-            self._check("take the points")
-            offsets.append(first)
-            order.append(np.asarray(prims, np.int64))
-            first += len(xyzr)
-            self.nbytes += xyzr.nbytes
+            buffers = [(RTC_BUFFER_TYPE_VERTEX, RTC_FORMAT_FLOAT4, 16, np.ascontiguousarray(xyzr, np.float32))]
+            first = self._primitives(RTC_GEOMETRY_TYPE_SPHERE_POINT, buffers, prims, None, offsets, order, first)
+        if curves is not None:    # control points (x, y, z, r) and each segment's first one
+            xyzr, starts, prims, rate = curves
+            buffers = [(RTC_BUFFER_TYPE_VERTEX, RTC_FORMAT_FLOAT4, 16, np.ascontiguousarray(xyzr, np.float32)),
+                       (RTC_BUFFER_TYPE_INDEX, RTC_FORMAT_UINT, 4, np.ascontiguousarray(starts, np.uint32))]
+            first = self._primitives(RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE, buffers, prims, rate, offsets, order,
+                                     first)
         lib.rtcCommitScene(self.scene)
         self._check("commit the scene")
         self.offsets = np.array(offsets or [0], np.int64)
@@ -267,6 +263,36 @@ class TriangleScene:
         if not buffer:
             raise MemoryError(f"Embree could not allocate a buffer of {len(array)} rows "
                               f"(error {self.lib.rtcGetDeviceError(self.device)})")
+        ctypes.memmove(buffer, array.ctypes.data, array.nbytes)
+
+    def _primitives(self, kind, buffers, prims, rate, offsets, order, first):
+        """One geometry of points or curves from its buffers (kind, format,
+        stride, array); its primitives are ``prims``.  Returns the next first."""
+        lib = self.lib
+        geom = lib.rtcNewGeometry(self.device, kind)
+        if not geom:
+            raise MemoryError(f"Embree could not create a geometry (error {lib.rtcGetDeviceError(self.device)})")
+        try:
+            if rate is not None:
+                lib.rtcSetGeometryTessellationRate(geom, float(rate))
+            for buffer_kind, fmt, stride, array in buffers:
+                self._fill_raw(geom, buffer_kind, fmt, stride, array)
+            lib.rtcCommitGeometry(geom)
+            got = lib.rtcAttachGeometry(self.scene, geom)
+        finally:
+            lib.rtcReleaseGeometry(geom)
+        if got != len(offsets):
+            raise RuntimeError(f"Embree gave geometry id {got}, expected {len(offsets)}")
+        self._check("take the points or curves")
+        offsets.append(first)
+        order.append(np.asarray(prims, np.int64))
+        self.nbytes += sum(array.nbytes for *_, array in buffers)
+        return first + len(prims)
+
+    def _fill_raw(self, geom, kind, fmt, stride, array):
+        buffer = self.lib.rtcSetNewGeometryBuffer(geom, kind, 0, fmt, stride, len(array))
+        if not buffer:
+            raise MemoryError(f"Embree could not allocate a buffer of {len(array)} rows")
         ctypes.memmove(buffer, array.ctypes.data, array.nbytes)
 
     def _check(self, what):

@@ -274,7 +274,10 @@ class MotionAccel(Accel):
 
     OFFSET = 4 * OFFSET_SCALE   # Embree's float32 interpolation against ours in float64
 
-    def __init__(self, triangles, motion=None, spheres=None):
+    # Tessellation of round curves (Cycles: its curve subdivisions + 1, default 2 + 1)
+    CURVE_RATE = 3
+
+    def __init__(self, triangles, motion=None, spheres=None, strands=None):
         self.triangles = triangles
         self.motion = motion
         self.empty = len(triangles) == 0
@@ -287,6 +290,8 @@ class MotionAccel(Accel):
                 special |= motion.part >= 0
             if spheres is not None:
                 special[spheres.rows] = True
+            if strands is not None:
+                special[strands.rows] = True
             still = np.flatnonzero(~special)
             parts = []
             if len(still):
@@ -296,7 +301,10 @@ class MotionAccel(Accel):
             if spheres is not None and len(spheres):
                 points = (np.concatenate([spheres.centres, spheres.radii[:, None]], axis=1), spheres.rows)
             instances = motion.embree_instances() if motion is not None else []
-            self.scene = embree_c.TriangleScene(parts, instances, points)
+            curves = None
+            if strands is not None and len(strands):
+                curves = (strands.cvs, strands.start, strands.rows, self.CURVE_RATE)
+            self.scene = embree_c.TriangleScene(parts, instances, points, curves)
 
     def intersect(self, origins, directions, tmax, time=None):
         n = len(origins)

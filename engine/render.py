@@ -80,11 +80,13 @@ def prepare(scene, settings):
     validate_scene(scene)
     validate_settings(settings)
     source = scene
-    scene, point_owners, point_radii = points.expand(scene)   # point clouds as stand-in rows
+    scene, point_owners, point_radii = points.expand(scene)   # point clouds and curves as stand-in rows
+    scene, curve_owners = points.expand_curves(scene)
     tris = flatten(scene, with_instance=bool(settings.passes), threads=settings.threads)
     spheres = points.spheres_of(tris, scene, point_owners, point_radii)
+    strands = points.strands_of(tris, curve_owners)
     motion = MotionGeometry(scene, tris) if has_motion(source) else None
-    unlit = points.unlit_rows(len(tris), spheres, motion)
+    unlit = points.unlit_rows(len(tris), spheres, motion, strands)
     materials = MaterialTable(material_table(scene))
     lights = LightSet(scene, points.for_lights(tris, unlit, len(scene.materials)), materials,
                       settings.light_selection,
@@ -98,7 +100,8 @@ def prepare(scene, settings):
         raise SceneError(f"camera: {exc}") from None
     # Only moving triangles and points need Embree's C API (a moving camera alone does not).
     moving = motion is not None and motion.moving
-    accel = MotionAccel(tris, motion if moving else None, spheres) if moving or spheres is not None else Accel(tris)
+    special = moving or spheres is not None or strands is not None
+    accel = MotionAccel(tris, motion if moving else None, spheres, strands) if special else Accel(tris)
     world = np.asarray(scene.world.color, dtype=np.float64)
     ctx = Context.build(accel, tris, materials, lights, camera, world, settings,
                         sampler=Sampler(settings.seed, settings.sampling_pattern),
@@ -106,7 +109,7 @@ def prepare(scene, settings):
                         pass_config=pass_events.configure(scene, settings),
                         media=_media(scene, accel, tris, camera), holdout=holdout_weights(scene, tris),
                         links=LightLinks.build(scene, lights, tris), catcher=catcher_triangles(scene, tris),
-                        motion=motion, spheres=spheres, unlit=unlit)
+                        motion=motion, spheres=spheres, unlit=unlit, strands=strands)
     if ctx.subsurface:
         ctx = dataclasses.replace(ctx, subsurface_warnings=tuple(subsurface.open_mesh_warnings(scene)))
     return ctx

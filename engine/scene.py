@@ -145,6 +145,24 @@ PointCloud.__doc__ = """Spheres (Blender's point cloud objects, geometry nodes' 
     """
 
 
+def _curve_fields():
+    """HairCurves' fields: control points, radii and curve offsets, then
+    Instance's placement fields."""
+    skip = {"positions", "radii", "attributes"}
+    return ([("points", np.ndarray), ("radii", np.ndarray), ("offsets", np.ndarray)]
+            + [f for f in _point_cloud_fields() if f[0] not in skip])
+
+
+HairCurves = make_dataclass("HairCurves", _curve_fields())
+HairCurves.__module__ = __name__
+HairCurves.__doc__ = """Strands (Blender's Curves objects): round Catmull-Rom curves, Cycles' 3D curves.
+
+    points: (N, 3) object-space control points; radii: (N,) per point (the
+    radius attribute); offsets: (C + 1,) first point of each curve and the
+    total (Blender's curve_offset_data); the other fields as ``Instance``'s.
+    """
+
+
 # ----------------------------------------------------------------------------
 # Materials
 
@@ -658,3 +676,5 @@ class Scene:
     light_links: dict = field(default_factory=dict)
     # Point clouds (spheres), after the fields above (scenes are built positionally too).
     points: Sequence[PointCloud] = ()
+    # Hair curves (round Catmull-Rom strands).
+    curves: Sequence[HairCurves] = ()

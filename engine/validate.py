@@ -318,20 +318,27 @@ def _validate_passes(s):
         raise SceneError(f"settings: unknown render passes {bad}")
 
 
-def validate_point_cloud(cloud, index, n_materials):
-    what = f"point cloud {index} ({cloud.name!r})"
-    pos = _array(cloud.positions, f"{what} positions", (3,), "fi")
-    _finite(pos, f"{what} positions")
-    radii = _array(cloud.radii, f"{what} radii", (), "fi")
+def _radii_and_matrix(item, positions, name, what):
+    """The positions (N, 3) of a point cloud or curve set, checked with its
+    radii (N,, finite, >= 0) and matrix."""
+    pos = _array(positions, f"{what} {name}", (3,), "fi")
+    _finite(pos, f"{what} {name}")
+    radii = _array(item.radii, f"{what} radii", (), "fi")
     if len(radii) != len(pos):
         raise SceneError(f"{what}: {len(radii)} radii for {len(pos)} points")
     _finite(radii, f"{what} radii")
     if len(radii) and radii.min() < 0:
         raise SceneError(f"{what}: negative radius {radii.min()}")
-    m = np.asarray(cloud.matrix, dtype=np.float64)
+    m = np.asarray(item.matrix, dtype=np.float64)
     if m.shape != (4, 4):
         raise SceneError(f"{what}: matrix must be 4x4, got {m.shape}")
     _finite(m, f"{what} matrix")
+    return pos
+
+
+def validate_point_cloud(cloud, index, n_materials):
+    what = f"point cloud {index} ({cloud.name!r})"
+    pos = _radii_and_matrix(cloud, cloud.positions, "positions", what)
     for slot, mat in enumerate(cloud.materials):
         if not -1 <= mat < n_materials:
             raise SceneError(f"{what}: slot {slot} names material {mat}, but the scene has {n_materials}")
@@ -342,7 +349,17 @@ def validate_point_cloud(cloud, index, n_materials):
         _finite(arr, f"{what} attribute {name!r}")
 
 
+def validate_curves(strands, index, n_materials):
+    what = f"curves {index} ({strands.name!r})"
+    pos = _radii_and_matrix(strands, strands.points, "points", what)
+    offsets = _array(strands.offsets, f"{what} offsets", (), "iu")
+    if len(offsets) < 1 or offsets[0] != 0 or offsets[-1] != len(pos) or np.any(np.diff(offsets) < 1):
+        raise SceneError(f"{what}: offsets must rise from 0 to {len(pos)} with every curve holding a point")
+
+
 def validate_scene(scene):
+    for i, strands in enumerate(getattr(scene, "curves", ()) or ()):
+        validate_curves(strands, i, len(scene.materials))
     for i, cloud in enumerate(getattr(scene, "points", ()) or ()):
         validate_point_cloud(cloud, i, len(scene.materials))
     for i, mesh in enumerate(scene.meshes):

@@ -27,6 +27,7 @@ class InstanceCollector:
         self.warnings = []
         self.keys = []      # per instance: motion.instance_key (motion blur finds it at other times)
         self.points = []    # engine PointClouds (point cloud objects, geometry nodes' Points)
+        self.curves = []    # engine HairCurves (Curves objects)
         self._warned = set()
         self.check = check or (lambda: None)
 
@@ -37,8 +38,11 @@ class InstanceCollector:
         if obj.type == 'POINTCLOUD':
             self._add_points(inst)
             return
+        if obj.type == 'CURVES':
+            self._add_curves(inst)
+            return
         if obj.type not in mesh_export.MESHABLE_TYPES:
-            if obj.type in ('CURVES', 'VOLUME', 'GPENCIL', 'GREASEPENCIL'):
+            if obj.type in ('VOLUME', 'GPENCIL', 'GREASEPENCIL'):
                 self.skipped_types.add(obj.type)
             return
         mesh_id = self._mesh_id(obj)
@@ -97,6 +101,42 @@ class InstanceCollector:
         self.points.append(backend.engine().PointCloud(
             positions=positions, radii=np.maximum(radii, 0.0), matrix=matrix,
             materials=self.material_index(obj), name=obj.name, attributes=attributes or None,
+            **ray_visibility(inst), **object_info(inst),
+            pass_index=int(getattr(inst.object, 'pass_index', 0))))
+
+    def _add_curves(self, inst):
+        """A Curves object as round Catmull-Rom strands of its radius
+        attribute (Cycles: radius 0 without one, so nothing renders); curves
+        with a NaN or infinite point or radius are skipped with a warning."""
+        obj = inst.object
+        matrix = np.array(inst.matrix_world, dtype=np.float64)
+        data = obj.data
+        n, count = len(data.points), len(data.curves)
+        if n == 0 or count == 0 or not np.isfinite(matrix).all():
+            return
+        self.check()
+        positions = np.empty(n * 3, np.float32)
+        data.attributes['position'].data.foreach_get('vector', positions)
+        positions = positions.reshape(n, 3)
+        radii = np.zeros(n, np.float32)
+        if 'radius' in data.attributes:
+            data.attributes['radius'].data.foreach_get('value', radii)
+        offsets = np.empty(count + 1, np.int32)
+        data.curve_offset_data.foreach_get('value', offsets)
+        bad_point = ~(np.isfinite(positions).all(axis=1) & np.isfinite(radii))
+        if bad_point.any():
+            per_curve = np.add.reduceat(bad_point.astype(np.int64), offsets[:-1]) > 0
+            self._warn_once(('curves', obj.name), f"Object '{obj.name}': {int(per_curve.sum())} curves with "
+                            "a NaN or infinite point or radius were skipped")
+            keep = np.repeat(~per_curve, np.diff(offsets))
+            positions, radii = positions[keep], radii[keep]
+            sizes = np.diff(offsets)[~per_curve]
+            offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int32)
+            if len(sizes) == 0:
+                return
+        self.curves.append(backend.engine().HairCurves(
+            points=positions, radii=np.maximum(radii, 0.0), offsets=offsets, matrix=matrix,
+            materials=self.material_index(obj), name=obj.name,
             **ray_visibility(inst), **object_info(inst),
             pass_index=int(getattr(inst.object, 'pass_index', 0))))
 
@@ -187,7 +227,7 @@ def _geometry_name(obj):
     return data.name if data is not None else obj.name
 
 
-def collect_instances(depsgraph, material_index, check=None, keys=None, points=None):
+def collect_instances(depsgraph, material_index, check=None, keys=None, points=None, curves=None):
     """Walk every object instance; returns (meshes, instances, warnings).
     ``check()`` (which raises to cancel) runs every 256 instances and before
     each mesh is exported; ``keys`` (a list) receives each instance's key."""
@@ -200,6 +240,8 @@ def collect_instances(depsgraph, material_index, check=None, keys=None, points=N
         keys.extend(collector.keys)
     if points is not None:
         points.extend(collector.points)
+    if curves is not None:
+        curves.extend(collector.curves)
     warnings = collector.warnings + [f"Ember skips {kind.lower()} objects (not supported yet)"
                 for kind in sorted(collector.skipped_types)]
     return collector.meshes, collector.instances, warnings

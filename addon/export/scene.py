@@ -84,8 +84,9 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None):
     scene = depsgraph.scene
     override = getattr(depsgraph.view_layer, 'material_override', None)
     materials = material_export.MaterialTable(override)
-    points = []
-    meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots, check, keys, points)
+    points, curves = [], []
+    meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots, check, keys, points,
+                                                                    curves)
     check()
     links = {}
     lights, light_warnings = light_export.collect_lights(depsgraph, check, links)
@@ -98,9 +99,12 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None):
         message = str(err).removeprefix('camera: ')
         raise ExportError(f"Camera '{camera_object.name}': {message}") from err
     result = renderer.Scene(
-        meshes=meshes, instances=instances, points=points, materials=materials.materials,
+        meshes=meshes, instances=instances, points=points, curves=curves, materials=materials.materials,
         lights=lights, world=world, camera=camera, cycles_version=tuple(bpy.app.version), light_links=links)
     warnings = materials.warnings + warnings + light_warnings + camera_warnings + _catcher_notes(result)
+    shape = getattr(getattr(scene, 'cycles_curves', None), 'shape', 'THICK')
+    if curves and shape != 'THICK':
+        warnings.append(f"Curves are rendered as 3D curves; Ember has no {shape.lower()} (Render > Curves > Shape)")
     if world_warning:
         warnings.append(world_warning)
     triangles = sum(len(meshes[inst.mesh].triangles) for inst in instances)

@@ -84,11 +84,13 @@ class Context:
     spheres: object = None
     # Rows no light samples (engine.points.unlit_rows: points, moving triangles), None when none.
     unlit: object = None
+    # Hair curves (engine.points.Strands: which rows are curve segments), None without.
+    strands: object = None
 
     @classmethod
     def build(cls, accel, triangles, materials, lights, camera, world, settings, sampler=None,
               bump_model=bsdf.BUMP_GGX, pass_config=None, media=None, holdout=None, links=None, catcher=None,
-              motion=None, spheres=None, unlit=None):
+              motion=None, spheres=None, unlit=None, strands=None):
         """The Context of a render; ``sampler`` defaults to the settings'
         seed and pattern, ``pass_config`` to no extra passes."""
         if sampler is None:
@@ -106,7 +108,7 @@ class Context:
                    pass_config=pass_config, emitter_groups=pass_events.emitter_groups(pass_config, lights),
                    centres=pass_events.CentreRecord(camera.width * camera.height), media=media,
                    subsurface=subsurface.in_scene(materials), holdout=holdout, links=links, catcher=catcher,
-                   motion=motion, spheres=spheres, unlit=unlit)
+                   motion=motion, spheres=spheres, unlit=unlit, strands=strands)
 
 
 def _delta_emitters(lights):

@@ -12,7 +12,7 @@ from .. import bsdf, nee, throughput
 from ..accel import shadow_rays, shadow_rays_f32
 from ..hits import hit_geometry
 from ..motion import path_time, triangles_at
-from ..points import sphere_hits
+from ..points import curve_hits, sphere_hits
 from ..nodes import NodeRays, ShadingContext
 from ..nodes.context import PATH_COLUMNS
 from ..sampler import BSDF, LIGHT, emitter_set, vertex_set
@@ -216,10 +216,22 @@ def interaction(ctx, paths, t, prim, bu, bv):
         if len(on):
             p[on], ng[on], back[on] = sphere_hits(ctx.spheres, paths.o[on], d[on], t[on], prim[on])
             ns[on] = ng[on]
+    curve_eps = None
+    if ctx.strands is not None:   # curves: the point on the round curve and its normal
+        on = np.flatnonzero(ctx.strands.is_curve[prim])
+        if len(on):
+            p[on], ng[on], back[on], radius = curve_hits(ctx.strands, paths.o[on], d[on], t[on], prim[on], bu[on])
+            ns[on] = ng[on]
+            curve_eps = (on, radius)
     uv = _hit_uv(tr, prim, bu, bv)
     hit = Hit(p, ng, ns, -d, np.take(tr.material, prim), prim, ctx.accel.offset_scale(p), uv, back=back,
               bary=np.stack([bu, bv], axis=1), depth=getattr(paths, "bounce", None),
               ray=getattr(paths, "ray", None))
+    if curve_eps is not None:
+        # Embree's curve distances are coarser than its triangles': leave a strand
+        # by a thousandth of its radius at least.
+        on, radius = curve_eps
+        hit.eps[on] = np.maximum(hit.eps[on], 1e-3 * radius)
     if ctx.light_path:
         hit.path = path_columns(paths, p)
     if getattr(tr, "tangent", None) is not None:
