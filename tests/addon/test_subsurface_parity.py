@@ -9,8 +9,9 @@ Scenes:
 * spheres: a Principled sphere (Subsurface Weight 1, Random Walk, a red
   radius a third of the sphere) and a Subsurface Scattering node sphere
   (Random Walk (Skin)) on a grey floor under an area light;
-* backlit: a thin subsurface slab between the camera and an area light
-  behind it: the light that comes through is the walk's transmission.
+* backlit: a thin subsurface slab (10 cm, a few mean free paths) between
+  the camera and an area light facing it from behind: what the camera sees
+  of the slab is the walk's transmission (exits on the lit side).
 
 Also the export (the lobes Cycles' closure setup gives, no warning for what
 is rendered now) and hostile inputs through Blender: radius 0 and 1e30 and a
@@ -29,10 +30,11 @@ from ember_testlib import (built_reference_scene, empty_factory_scene, render_ag
 WIDTH, HEIGHT = 40, 30
 BLOCK = 10
 EMBER_SPP = 128
+SPP = {'backlit': 384}   # the light through the slab is noisier per sample
 BOUNCES = 6
-# What the image mean and the median block resolve at EMBER_SPP (measured:
-# spheres 0.88% and 6.0%).
-POWER = {'spheres': (0.01, 0.07), 'backlit': (0.01, 0.07)}
+# What the image mean and the median block must resolve (measured: spheres
+# 0.88% and 6.0% at 128 spp, backlit 1.62% and 12.2% at 384).
+POWER = {'spheres': (0.01, 0.07), 'backlit': (0.02, 0.14)}
 
 
 def principled(name, base=(0.8, 0.5, 0.3), radius=(1.0, 0.3, 0.15), scale=0.15, method='RANDOM_WALK', **inputs):
@@ -117,11 +119,11 @@ def scene_spheres(scene):
 
 
 def scene_backlit(scene):
-    slab = _object(bpy.ops.mesh.primitive_cube_add, principled("Jade", base=(0.3, 0.8, 0.4), radius=(0.6, 1.0, 0.6),
-                                                                scale=0.1), size=1.0, location=(0.0, 0.0, 0.6))
-    slab.scale = (1.2, 0.08, 0.8)
-    _area((0.0, 1.0, 0.6), (math.radians(90), 0.0, math.radians(180)), 60.0, 0.8)
-    _world(scene, 0.0)
+    slab = _object(bpy.ops.mesh.primitive_cube_add, principled("Jade", base=(0.7, 0.9, 0.6), radius=(0.6, 1.0, 0.5),
+                                                                scale=0.5), size=1.0, location=(0.0, 0.0, 0.6))
+    slab.scale = (1.2, 0.1, 0.8)
+    _area((0.0, 0.8, 0.6), (math.radians(-90), 0.0, 0.0), 80.0, 1.5)
+    _world(scene, 0.02)
     _camera(scene, (0.0, -3.0, 0.6), (0.0, 0.0, 0.6))
     return BOUNCES
 
@@ -137,7 +139,8 @@ def reference_scene(name, folder=None):
 @pytest.mark.parametrize("name", sorted(SCENES))
 def test_subsurface_parity_with_cycles(name, tmp_path, tapped_engine):
     scene, bounces = reference_scene(name)
-    check = render_against_reference('subsurface_' + name, scene, bounces, tmp_path, tapped_engine, EMBER_SPP, BLOCK)
+    check = render_against_reference('subsurface_' + name, scene, bounces, tmp_path, tapped_engine,
+                                     SPP.get(name, EMBER_SPP), BLOCK)
     check.assert_agrees(*POWER[name])
 
 
