@@ -104,10 +104,11 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
     if ctx.subsurface:                                           # BSSRDF: the random walk to the exit
         alive = subsurface.walk(ctx, paths, v, alive, depth)
     if ctx.media is not None:                                    # refracted or passed through: the volume stack
-        volume.cross_surfaces(ctx, paths, hit, alive & (dot(paths.d, hit.ng) < 0) & (paths.exit_prim < 0),
+        volume.cross_surfaces(ctx, paths, hit, alive & (dot(paths.d, hit.ng) < 0) & ~subsurface.walking(paths),
                               through)
     obs.after_scatter(paths, v, through)
-    stages.remember_vertex(ctx, paths, v, through, every, ray, depth)
+    held = through | subsurface.walking(paths) if ctx.subsurface else through
+    stages.remember_vertex(ctx, paths, v, held, every, ray, depth)
     paths = _end(ctx, paths, alive, tile)
     return _join(paths, carried, scattered)
 

@@ -19,7 +19,9 @@ heuristic over the three channels).  Its exit point is the next vertex:
 the path's ray is set to come from just outside towards it, the next
 bounce takes the recorded triangle without tracing, collects no emission
 there and shades it as a white diffuse lobe under the exit's shading
-normal (Cycles' subsurface_shader_data_setup).  A walk that leaves no exit
+normal (Cycles' subsurface_shader_data_setup).  As in Cycles the entry is
+no bounce: the exit vertex has the entry's bounce count (and the entry
+counts no bounce kind).  A walk that leaves no exit
 within 256 bounces, or whose throughput falls below 1e-6, ends the path.
 
 Cycles also guides the walk's directions towards and away from the surface
@@ -214,6 +216,9 @@ def walk(ctx, paths, v, alive, depth):
     triangle (Paths.exit_prim, exit_hit).  Returns ``alive`` with the walks
     that found no exit ended."""
     rows, slot = v.bssrdf
+    # Cycles' subsurface_bounce is no bounce (path_state_next is not called):
+    # the exit vertex has the entry's bounce count.
+    paths.bounce[rows] -= 1
     keep = alive[rows]
     rows, slot = rows[keep], slot[keep]
     if len(rows) == 0:
@@ -421,6 +426,13 @@ def arrive(paths, found):
     found.bu[rows], found.bv[rows], found.t[rows] = paths.exit_hit[rows].T
     found.light[rows] = False
     paths.exit_prim[rows] = -2
+
+
+def walking(paths):
+    """Paths on their way to an exit point (after ``walk``, before the next
+    bounce): their vertex counts no bounce kind and keeps the previous one's
+    MIS record (the exit collects no emission)."""
+    return paths.exit_prim >= 0
 
 
 def at_exit(paths):
