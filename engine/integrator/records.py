@@ -64,6 +64,9 @@ class Paths:
     # and its barycentrics and distance (N, 3).
     exit_prim: np.ndarray
     exit_hit: np.ndarray
+    # A diffuse bounce happened on the way (Cycles' PATH_RAY_DIFFUSE_ANCESTOR:
+    # Christensen-Burley is a diffuse lobe after one); tracked with subsurface only.
+    diffuse_ancestor: np.ndarray
 
     def __len__(self):
         return len(self.pix)
