@@ -1,5 +1,6 @@
-"""Subsurface scattering: Cycles 5.0's random walk as a stage of the bounce
-(kernel/integrator/subsurface.h, subsurface_random_walk.h, closure/bssrdf.h).
+"""Subsurface scattering: Cycles 5.0's random walk (and Christensen-Burley's
+disk probes, ``disk``) as a stage of the bounce (kernel/integrator/subsurface.h,
+subsurface_random_walk.h, subsurface_disk.h, closure/bssrdf.h).
 
 At a vertex whose material has a subsurface lobe (engine/lobes/subsurface.py)
 ``split`` takes the first part of the lobe-choice number, of the size of
