@@ -336,7 +336,7 @@ def disk(ctx, paths, v, rows, slot, depth):
     n_axis = axes[rows_m, pick]
     tt = np.where((pick == 1)[:, None], ng, t_axis)          # T <-> N when T is picked
     bb = np.where((pick == 2)[:, None], ng, b_axis)          # B <-> N when B is picked
-    pick_pdf = np.where(pick[:, None] == np.arange(3)[None, :], 0.5, 0.25)   # (N, T, B) of the original frame
+    pick_pdf = np.array([0.5, 0.25, 0.25])   # of the axes N, T, B
     phi = 2.0 * np.pi * a
     offset = tt * (disk_r * np.cos(phi))[:, None] + bb * (disk_r * np.sin(phi))[:, None]
     origin = p + n_axis * height[:, None] + offset
@@ -350,9 +350,10 @@ def disk(ctx, paths, v, rows, slot, depth):
     if hit.back is not None:
         hit_ng = np.where(hit.back[rows][r_idx, None], -hit_ng, hit_ng)
     cos = np.abs(np.einsum("hkj,hj->hk", axes[r_idx], hit_ng))   # |N.Ng|, |T.Ng|, |B.Ng| (original frame)
-    pdfs = pick_pdf[r_idx] * cos
+    pdfs = pick_pdf * cos
     with np.errstate(divide="ignore", invalid="ignore"):
-        w = pdfs[:, 0] / np.sum(pdfs * pdfs, axis=1)
+        # The power heuristic over the axes, the picked one's pdf over the sum of squares.
+        w = pdfs[np.arange(len(r_idx)), pick[r_idx]] / np.sum(pdfs * pdfs, axis=1)
         r = np.linalg.norm(hit_p - p[r_idx], axis=1)
         value = burley_pdf(d[r_idx], r[:, None])
         pdf = burley_pdf(d[r_idx], disk_r[r_idx, None]).sum(axis=1) / np.maximum(channels[r_idx], 1)

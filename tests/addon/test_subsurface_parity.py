@@ -1,14 +1,15 @@
 """Subsurface scattering against Cycles (issue 22): the Principled BSDF's
-Subsurface (Random Walk) and the Subsurface Scattering node (Random Walk
-(Skin)) exported to Ember's random walk (engine/integrator/subsurface.py),
+Subsurface (Random Walk, Christensen-Burley) and the Subsurface Scattering
+node (Random Walk (Skin)) exported to Ember's random walk (engine/integrator/subsurface.py),
 compared with converged Cycles references (tests/data/cycles_subsurface_<scene>.exr,
 tools/cycles_references.py) by the totals of the image and its quadrants
 and block by block (ember_testlib.check_against_reference), power printed.
 
 Scenes:
 * spheres: a Principled sphere (Subsurface Weight 1, Random Walk, a red
-  radius a third of the sphere) and a Subsurface Scattering node sphere
-  (Random Walk (Skin)) on a grey floor under an area light;
+  radius a third of the sphere), a Subsurface Scattering node sphere
+  (Random Walk (Skin)) and a Principled Christensen-Burley sphere on a grey
+  floor under an area light;
 * backlit: a thin subsurface slab (10 cm, a few mean free paths) between
   the camera and an area light facing it from behind: what the camera sees
   of the slab is the walk's transmission (exits on the lit side).
@@ -104,17 +105,20 @@ def _world(scene, value):
 
 def scene_spheres(scene):
     _object(bpy.ops.mesh.primitive_plane_add, _grey("Floor", 0.5), size=8.0)
-    left = _object(bpy.ops.mesh.primitive_uv_sphere_add, principled("Wax"), radius=0.5, segments=32, ring_count=16,
-                   location=(-0.6, 0.0, 0.52))
-    right = _object(bpy.ops.mesh.primitive_uv_sphere_add, sss_node("Skin"), radius=0.5, segments=32, ring_count=16,
-                    location=(0.6, 0.0, 0.52))
-    for obj in (left, right):
+    left = _object(bpy.ops.mesh.primitive_uv_sphere_add, principled("Wax"), radius=0.45, segments=32, ring_count=16,
+                   location=(-1.0, 0.0, 0.47))
+    middle = _object(bpy.ops.mesh.primitive_uv_sphere_add, sss_node("Skin"), radius=0.45, segments=32,
+                     ring_count=16, location=(0.0, 0.0, 0.47))
+    right = _object(bpy.ops.mesh.primitive_uv_sphere_add,
+                    principled("Marble", base=(0.85, 0.8, 0.75), radius=(1.0, 0.6, 0.4), scale=0.2, method='BURLEY'),
+                    radius=0.45, segments=32, ring_count=16, location=(1.0, 0.0, 0.47))
+    for obj in (left, middle, right):
         obj.select_set(True)
         bpy.context.view_layer.objects.active = obj
         bpy.ops.object.shade_smooth()
     _area((1.0, -1.5, 2.5), (math.radians(40), 0.0, math.radians(30)), 120.0, 1.0)
     _world(scene, 0.05)
-    _camera(scene, (0.0, -3.6, 1.4), (0.0, 0.0, 0.45))
+    _camera(scene, (0.0, -4.4, 1.5), (0.0, 0.0, 0.45))
     return BOUNCES
 
 
