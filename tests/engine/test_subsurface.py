@@ -123,10 +123,11 @@ def test_white_furnace_sphere(kind, radius):
     assert np.all(np.abs(img - 1.0) < 2e-3)
 
 
+@pytest.mark.parametrize("kind", ["subsurface", "subsurface_burley"])
 @pytest.mark.parametrize("radius", [(0.0, 0.0, 0.0), (1e30, 1e30, 1e30), (float("nan"), 1.0, 1.0),
                                     (float("inf"), 1e-12, 0.5)])
-def test_hostile_radius_renders_finite(radius):
-    r = render(_ball(Lobe("subsurface", (0.8, 0.5, 0.3), 0.5, radius=radius), size=(6, 6)),
+def test_hostile_radius_renders_finite(radius, kind):
+    r = render(_ball(Lobe(kind, (0.8, 0.5, 0.3), 0.5, radius=radius), size=(6, 6)),
                RenderSettings(samples=2, samples_per_pass=2, max_bounces=8))
     assert np.isfinite(r.image).all()
 
