@@ -36,6 +36,9 @@ PATTERNS = (SOBOL, RANDOM)
 # MEDIUM = the colour channel and distance of a free flight in a volume
 # (a path scattering in a volume uses its step's LIGHT and BSDF sets).
 CAMERA = 0
+# Motion blur: the time of a camera sample within the shutter (its first
+# dimension), a set of its own so the camera's four stay as they are.
+TIME = 0x20000000
 LIGHT, BSDF, KIND, MEDIUM = 0, 1, 2, 3
 _SETS_PER_STEP = 4
 

@@ -57,6 +57,36 @@ def render_array(scene, folder, name="render"):
     return load_exr(path)
 
 
+def read_multilayer_exr(path):
+    """{pass name: (H, W, C) float64} of a multilayer EXR, row 0 = top
+    (Composite as 'Composite')."""
+    import OpenImageIO as oiio
+    image = oiio.ImageInput.open(path)
+    assert image is not None, oiio.geterror()
+    channels = {}
+    index = 0
+    while image.seek_subimage(index, 0):
+        spec = image.spec()
+        pixels = image.read_image('float')
+        for k, name in enumerate(spec.channelnames):
+            parts = name.split('.')
+            key = 'Composite' if parts[0] == 'Composite' else parts[-2]
+            channels.setdefault(key, []).append(pixels[..., k])
+        index += 1
+    image.close()
+    return {k: np.stack(v, axis=-1).astype(np.float64) for k, v in channels.items()}
+
+
+def multilayer_output(scene):
+    """Render output: 32-bit multilayer EXR (every pass of the view layer)."""
+    settings = scene.render.image_settings
+    if hasattr(settings, 'media_type'):
+        settings.media_type = 'MULTI_LAYER_IMAGE'
+    else:
+        settings.file_format = 'OPEN_EXR_MULTILAYER'
+    settings.color_depth = '32'
+
+
 def setup_cycles(scene, samples, seed, max_bounces, filter_type='BLACKMAN_HARRIS', filter_width=1.5):
     """Cycles configured as Ember renders: CPU, unbiased, nothing clamped or
     filtered away, the same bounce limit and pixel filter."""
@@ -202,6 +232,47 @@ def _typical_relative_block_se(a, b):
     mean = np.abs(b.mean(axis=0))
     keep = mean > 0
     return float(np.median(se[keep] / mean[keep])) if keep.any() else 0.0
+
+
+def seed_block_test(block_family, mean_family, name, ember, cycles, keep=None, storage=1e-5):
+    """Ember seeds (N, H, W, C) against Cycles seeds: Welch t per 4x4
+    block-channel over the seeds (Sidak, family ``block_family``) and
+    Welch's t of the whole-image mean (``mean_family``), both asserted, with
+    the power of each printed.  ``storage``: a deterministic floor as a
+    relative standard error (the float32 EXR's rounding, 1e-5, below any
+    noise here; or the precision of a table both renderers read).
+    ``keep``: (H, W) pixels to compare; blocks with any other are left out."""
+    import ember_stats as stats
+    a, b = stats.block_means(ember, 4), stats.block_means(cycles, 4)
+    _, dof, ma, mb = stats.welch(a, b)
+    va, vb = a.var(axis=0, ddof=1) / len(a), b.var(axis=0, ddof=1) / len(b)
+    # Rounding relative to each block's value, and to the pass's largest
+    # value for blocks near 0 (a unit normal's 0 component stored as 1e-9).
+    scale = np.maximum(np.abs(ma), np.abs(mb)) + 1e-3 * np.abs(mb).max()
+    se = np.sqrt(va + vb + (storage * scale) ** 2 + 1e-30)
+    t = (ma - mb) / se
+    noisy = (va + vb > 0) & (mb != 0)            # the power of blocks that carry noise
+    rel_se = np.where(noisy, se / np.where(mb != 0, np.abs(mb), 1.0), np.nan)
+    if keep is not None:
+        blocks = stats.block_means(keep[None, :, :, None].astype(float), 4)[0, ..., 0] == 1.0
+        t, dof, rel_se, ma, mb = t[blocks], dof[blocks], rel_se[blocks], ma[blocks], mb[blocks]
+    level = stats.family_level(block_family, t.size)
+    p = stats.t_p_values(t, dof)
+    ember_means, cycles_means = (x.mean(axis=tuple(range(1, x.ndim))) for x in (ember, cycles))
+    mean = stats.MeanTest("image", ember_means.mean(), ember_means.var(ddof=1) / len(ember_means),
+                          len(ember_means) - 1, cycles_means.mean(), cycles_means.var(ddof=1) / len(cycles_means),
+                          len(cycles_means) - 1)
+    mean_level = stats.family_level(mean_family)
+    block_power = (f"the median noisy block detects "
+                   f"{stats.detectable(float(np.nanmedian(rel_se)), level, float(np.median(dof))):.1%}"
+                   if np.isfinite(rel_se).any() else "no block carries noise")
+    print(f"\n{name}: Ember {ember_means.mean():.5g}, Cycles {cycles_means.mean():.5g}: {mean}; detects "
+          f"{stats.detectable(mean.relative_se, mean_level, mean.dof):.2%} with probability 1/2; max block |t| "
+          f"{np.abs(t).max():.2f} over {t.size} block-channels (dof {np.median(dof):.0f}), {block_power}")
+    bad = p < level
+    assert not bad.any(), (f"{name}: {int(bad.sum())} blocks differ from Cycles (index, Ember, Cycles, t): "
+                           f"{[(tuple(i), ma[tuple(i)], mb[tuple(i)], t[tuple(i)]) for i in np.argwhere(bad)[:6]]}")
+    assert mean.p >= mean_level, f"{name}: whole-image mean off: {mean}"
 
 
 def assert_no_failing_blocks(failures, details):
