@@ -20,8 +20,8 @@ import numpy as np
 from .kernels import clip
 from .lobes import EXTRA_PARAMS, PARAMS
 from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, GLOSSY_ANISOTROPIC, MIN_ALPHA,
-                       MIRROR, NONE, OREN_NAYAR, REFRACTION, SHEEN, SUBSURFACE_RANDOM_WALK, SUBSURFACE_SKIN,
-                       TRANSLUCENT, TRANSPARENT)
+                       MIRROR, NONE, OREN_NAYAR, REFRACTION, SHEEN, SUBSURFACE_BURLEY, SUBSURFACE_RANDOM_WALK,
+                       SUBSURFACE_SKIN, TRANSLUCENT, TRANSPARENT)
 from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect_terms, pow5
 
 _NUMBA_TYPES = {np.dtype(np.int8): "int8", np.dtype(np.float64): "float64", np.dtype(np.bool_): "boolean"}
@@ -752,9 +752,13 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
             r0, r1, r2 = w[i, k, 0] / p_lobe, w[i, k, 1] / p_lobe, w[i, k, 2] / p_lobe
             is_delta = True
             p = p_lobe
-        elif kd == SUBSURFACE_RANDOM_WALK or kd == SUBSURFACE_SKIN:
-            # lobes/subsurface.entry_direction (the integrator's subsurface stage draws it itself).
-            x, y, z, ok = _subsurface_entry(kd == SUBSURFACE_SKIN, wox, woy, woz, alpha[i, k], ior[i, k], u1[i], u2[i])
+        elif kd == SUBSURFACE_RANDOM_WALK or kd == SUBSURFACE_SKIN or kd == SUBSURFACE_BURLEY:
+            # lobes/subsurface.entry (the integrator's subsurface stage draws it itself).
+            if kd == SUBSURFACE_BURLEY:
+                x, y, z, ok = 0.0, 0.0, -1.0, woz > 0.0
+            else:
+                x, y, z, ok = _subsurface_entry(kd == SUBSURFACE_SKIN, wox, woy, woz, alpha[i, k], ior[i, k],
+                                                u1[i], u2[i])
             if ok:
                 r0, r1, r2 = w[i, k, 0] / p_lobe, w[i, k, 1] / p_lobe, w[i, k, 2] / p_lobe
             is_delta = True

@@ -316,7 +316,7 @@ class NodeTranslator:
         return Closure([_scene().Lobe('sheen', self.color(node, 'Color'), roughness)])
 
     def _node_subsurface_scattering(self, node):
-        """Cycles' Subsurface Scattering node (Random Walk, Skin; Christensen-Burley as Random Walk)."""
+        """Cycles' Subsurface Scattering node (Random Walk, Skin, Christensen-Burley)."""
         return Closure(subsurface.node_lobes(self, node))
 
     def _node_holdout(self, node):

@@ -8,8 +8,8 @@ Cycles' max(radius * scale, 0) does); a channel whose radius is below
 Cycles' BSSRDF_MIN_RADIUS (1e-8) scatters as a diffuse lobe of that
 channel's weight instead, and a closure with no channel left is a diffuse
 lobe.  Radius, Scale, Subsurface IOR and Anisotropy are read as constants
-(a linked one is named in the material's warning).  Christensen-Burley
-renders as Random Walk (named in the warning).
+(a linked one is named in the material's warning).  Methods: Random Walk,
+Random Walk (Skin), Christensen-Burley.
 """
 import math
 
@@ -19,7 +19,7 @@ from . import nodes
 MIN_RADIUS = 1e-8        # Cycles' BSSRDF_MIN_RADIUS
 LARGEST = 1e30           # a larger (or infinite) radius renders as this
 HUGE = 1e6               # a radius above this (metres) is named in the warning
-METHODS = {'RANDOM_WALK': 'subsurface', 'RANDOM_WALK_SKIN': 'subsurface_skin', 'BURLEY': 'subsurface',
+METHODS = {'RANDOM_WALK': 'subsurface', 'RANDOM_WALK_SKIN': 'subsurface_skin', 'BURLEY': 'subsurface_burley',
            'RANDOM_WALK_FIXED_RADIUS': 'subsurface'}
 
 
@@ -66,11 +66,8 @@ def radius_of(translator, node, radius_name, scale_name):
     return out
 
 
-def _method(translator, node, prop):
-    method = getattr(node, prop, 'RANDOM_WALK')
-    if method == 'BURLEY':
-        translator._approximate(node, "Christensen-Burley subsurface as Random Walk")
-    return METHODS.get(method, 'subsurface')
+def _method(node, prop):
+    return METHODS.get(getattr(node, prop, 'RANDOM_WALK'), 'subsurface')
 
 
 def _times(color, mask):
@@ -104,7 +101,7 @@ def principled_lobes(translator, node, p, weight):
     ss = nodes.clamp01(translator.value(node, 'Subsurface Weight', 0.0))
     if not nodes.may_exceed(ss, 1e-5):
         return [], 0.0
-    kind = _method(translator, node, 'subsurface_method')
+    kind = _method(node, 'subsurface_method')
     radius = radius_of(translator, node, 'Subsurface Radius', 'Subsurface Scale')
     ior = p['ior']
     if kind == 'subsurface_skin':
@@ -125,4 +122,4 @@ def node_lobes(translator, node):
     alpha = min(max(_finite(_constant(translator, node, 'Roughness', 1.0)), 0.0), 1.0)
     ior = _finite(_constant(translator, node, 'IOR', 1.4), 1.4)
     anisotropy = _finite(_constant(translator, node, 'Anisotropy', 0.0))
-    return lobes(_method(translator, node, 'falloff'), color, radius, 1.0, math.sqrt(alpha), ior, anisotropy)
+    return lobes(_method(node, 'falloff'), color, radius, 1.0, math.sqrt(alpha), ior, anisotropy)

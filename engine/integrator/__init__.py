@@ -59,7 +59,7 @@ def trace_batch(ctx, pix, sample, tile):
                   np.zeros((n, pass_events.aux_width(ctx.settings)), np.float32),
                   np.zeros((n, 3 if ctx.count_kinds else 0), np.int16), np.full(n, np.inf),
                   start_stack(ctx.media, n), np.zeros(n, np.int16), np.full(n, -1, np.int64), np.zeros((n, 3)),
-                  np.full(n, -1, np.int32), np.zeros(n, np.int8), time)
+                  np.full(n, -1, np.int32), np.zeros(n, np.int8), time, np.zeros(n, bool))
     obs = pass_events.observer(ctx, tile)
     obs.start(paths)
     # Every step raises a live path's bounce or its transparent bounce
@@ -116,10 +116,11 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
     if ctx.subsurface:                                           # BSSRDF: the random walk to the exit
         alive = subsurface.walk(ctx, paths, v, alive, depth)
     if ctx.media is not None:                                    # refracted or passed through: the volume stack
-        volume.cross_surfaces(ctx, paths, hit, alive & (dot(paths.d, hit.ng) < 0) & (paths.exit_prim < 0),
+        volume.cross_surfaces(ctx, paths, hit, alive & (dot(paths.d, hit.ng) < 0) & ~subsurface.walking(paths),
                               through)
     obs.after_scatter(paths, v, through)
-    stages.remember_vertex(ctx, paths, v, through, every, ray, depth)
+    held = through | subsurface.walking(paths) if ctx.subsurface else through
+    stages.remember_vertex(ctx, paths, v, held, every, ray, depth)
     paths = _end(ctx, paths, alive, tile)
     return _join(paths, carried, scattered)
 

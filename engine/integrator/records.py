@@ -72,6 +72,9 @@ class Paths:
     # Motion blur: the sample's time over the shutter, (N, 1) in [0, 1], or
     # (N, 0) in a still scene (engine.motion.path_time).
     time: np.ndarray
+    # A diffuse bounce happened on the way (Cycles' PATH_RAY_DIFFUSE_ANCESTOR:
+    # Christensen-Burley is a diffuse lobe after one); tracked with subsurface only.
+    diffuse_ancestor: np.ndarray
 
     def __len__(self):
         return len(self.pix)

@@ -1,5 +1,6 @@
-"""Subsurface scattering: Cycles 5.0's random walk as a stage of the bounce
-(kernel/integrator/subsurface.h, subsurface_random_walk.h, closure/bssrdf.h).
+"""Subsurface scattering: Cycles 5.0's random walk (and Christensen-Burley's
+disk probes, ``disk``) as a stage of the bounce (kernel/integrator/subsurface.h,
+subsurface_random_walk.h, subsurface_disk.h, closure/bssrdf.h).
 
 At a vertex whose material has a subsurface lobe (engine/lobes/subsurface.py)
 ``split`` takes the first part of the lobe-choice number, of the size of
@@ -19,7 +20,9 @@ heuristic over the three channels).  Its exit point is the next vertex:
 the path's ray is set to come from just outside towards it, the next
 bounce takes the recorded triangle without tracing, collects no emission
 there and shades it as a white diffuse lobe under the exit's shading
-normal (Cycles' subsurface_shader_data_setup).  A walk that leaves no exit
+normal (Cycles' subsurface_shader_data_setup).  As in Cycles the entry is
+no bounce: the exit vertex has the entry's bounce count (and the entry
+counts no bounce kind).  A walk that leaves no exit
 within 256 bounces, or whose throughput falls below 1e-6, ends the path.
 
 Cycles also guides the walk's directions towards and away from the surface
@@ -34,13 +37,14 @@ from .. import bsdf
 from ..bsdf import kind_in
 from ..lobe_ids import DIFFUSE, NONE
 from ..lobes import EXTRA_PARAMS, table_value
-from ..lobes.subsurface import G_RANGE, IDS, IOR_RANGE, SUBSURFACE_SKIN, entry_direction
-from ..lobes import REGISTRY, SUBSURFACE
+from ..lobes.subsurface import G_RANGE, IDS, IOR_RANGE, SUBSURFACE_BURLEY, SUBSURFACE_SKIN
+from ..lobes.subsurface import entry as lobe_entry
+from ..lobes import REGISTRY, SUBSURFACE, kinds_of_class
 from ..media import open_meshes
 from ..kernels import loop_kernel
 from ..media.phase import G_LIMIT
 from ..vec import frame_of
-from ..nodes.rays import local_accel
+from ..nodes.rays import NodeRays, local_accel, make_orthonormals
 from ..sampler import subsurface_set
 from ..scene import Lobe
 
@@ -188,6 +192,14 @@ def sample(v, u):
     pdf = pdf * share
     entry(v, rows, slot, u[:, 1], u[:, 2], wi_l, weight, pdf, delta)
     v.bssrdf = (rows, slot)
+    # Which rows sampled a diffuse-class lobe (Cycles' PATH_RAY_DIFFUSE_ANCESTOR
+    # after the bounce), by the choice bsdf.sample made.
+    cdf = np.cumsum(bsdf_sel, axis=1)
+    chosen = np.minimum((u_bsdf[:, None] >= cdf).sum(axis=1), bsdf_sel.shape[1] - 1)
+    kind = v.lobes.kind[np.arange(len(chosen)), chosen]
+    diffuse = kind_in(kind, tuple(k for k in kinds_of_class("diffuse") if k not in IDS))
+    diffuse[rows] = False
+    v.sampled_diffuse = diffuse
     return wi_l, weight, pdf, delta
 
 
@@ -197,8 +209,8 @@ def entry(v, rows, slot, u1, u2, wi_l, weight, pdf, delta):
     sample arrays (wi_l, weight, pdf, delta) in place."""
     lobes = v.lobes
     sel, w = v.lobes_wo
-    skin = lobes.kind[rows, slot] == SUBSURFACE_SKIN
-    wi, ok = entry_direction(skin, v.wo_l[rows], lobes.alpha[rows, slot], lobes.ior[rows, slot], u1[rows], u2[rows])
+    wi, ok = lobe_entry(lobes.kind[rows, slot], v.wo_l[rows], lobes.alpha[rows, slot], lobes.ior[rows, slot],
+                        u1[rows], u2[rows])
     p = sel[rows, slot]
     wi_l[rows] = wi
     weight[rows] = np.where(ok[:, None], w[rows, slot] / np.where(p > 0, p, 1.0)[:, None], 0.0)
@@ -207,37 +219,168 @@ def entry(v, rows, slot, u1, u2, wi_l, weight, pdf, delta):
 
 
 def walk(ctx, paths, v, alive, depth):
-    """The random walks of the paths that chose a subsurface lobe at ``v``
-    (``v.bssrdf``, set by ``entry``'s caller) and live on, from their new
-    ray (inside the object).  Updates their throughput and, for those that
-    leave, points their ray at the exit from just outside and records its
-    triangle (Paths.exit_prim, exit_hit).  Returns ``alive`` with the walks
-    that found no exit ended."""
+    """The random walks (Christensen-Burley: the disk probes, ``disk``) of
+    the paths that chose a subsurface lobe at ``v`` (``v.bssrdf``, set by
+    ``sample``) and live on, from their new ray (inside the object).
+    Updates their throughput and, for those that leave, points their ray
+    at the exit from just outside and records its triangle
+    (Paths.exit_prim, exit_hit).  Returns ``alive`` with the walks that
+    found no exit ended."""
     rows, slot = v.bssrdf
+    # Cycles' subsurface_bounce is no bounce (path_state_next is not called):
+    # the exit vertex has the entry's bounce count.
+    paths.bounce[rows] -= 1
+    paths.diffuse_ancestor |= v.sampled_diffuse & alive
     keep = alive[rows]
     rows, slot = rows[keep], slot[keep]
     if len(rows) == 0:
         return alive
+    alive = alive.copy()
+    burley = v.lobes.kind[rows, slot] == SUBSURFACE_BURLEY
+    for part, method in ((~burley, _walk_rows), (burley, disk)):
+        if part.any():
+            r = rows[part]
+            beta, o, d, exit_prim, exit_bary = method(ctx, paths, v, r, slot[part], depth)
+            alive[r[exit_prim < 0]] = False
+            _leave(ctx, paths, r, beta, o, d, exit_prim, exit_bary)
+    return alive
+
+
+def _walk_rows(ctx, paths, v, rows, slot, depth):
+    """``random_walk`` of the Random Walk and Skin rows."""
     albedo, radius, g = _params(v.lobes, rows, slot)
     sigma_t, alpha, factor = coefficients(albedo, radius, g)
     instance = ctx.triangles.shading.instance[v.hit.prim[rows]]
-    beta, o, d, exit_prim, exit_bary = random_walk(ctx, paths.o[rows], paths.d[rows], paths.beta[rows] * factor,
-                                                   sigma_t, alpha, g, instance, paths.pseed[rows],
-                                                   paths.sample[rows], depth)
+    return random_walk(ctx, paths.o[rows], paths.d[rows], paths.beta[rows] * factor, sigma_t, alpha, g, instance,
+                       paths.pseed[rows], paths.sample[rows], depth)
+
+
+def _leave(ctx, paths, rows, beta, o, d, exit_prim, exit_bary):
+    """The rows that found an exit at o, leaving along d: their throughput,
+    the ray from just outside towards the exit (Cycles pretends the ray
+    comes from outside) and the recorded triangle."""
     out = exit_prim >= 0
-    alive = alive.copy()
-    alive[rows[~out]] = False
     rows, o, d = rows[out], o[out], d[out]
     s = ctx.accel.offset_scale(o)
     paths.beta[rows] = beta[out]
-    # Cycles pretends the ray comes from outside towards the exit point.
     paths.o[rows] = o + d * s[:, None]
     paths.d[rows] = -d
     paths.tmax[rows] = 2.0 * s
     paths.mis_o[rows] = paths.o[rows]
     paths.exit_prim[rows] = exit_prim[out]
     paths.exit_hit[rows] = np.column_stack([exit_bary[out], s])
-    return alive
+
+
+# ----------------------------------------------------------------------------
+# Christensen-Burley (kernel/integrator/subsurface_disk.h, closure/bssrdf.h)
+
+BURLEY_TRUNCATE = 16.0
+BURLEY_TRUNCATE_CDF = 0.9963790093708328
+
+
+def burley_pdf(d, r):
+    """bssrdf_burley_pdf: the normalized profile (times 2 pi, as its CDF)
+    truncated at 16 d, over the truncated CDF; 0 at r = 0 and for d = 0."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        e3 = np.exp(-r / (3.0 * d))
+        value = (e3 * e3 * e3 + e3) / (4.0 * d)
+    ok = (d > 0) & (r < BURLEY_TRUNCATE * d) & (r != 0)
+    return np.where(ok, value, 0.0) / BURLEY_TRUNCATE_CDF
+
+
+def burley_root(xi):
+    """bssrdf_burley_root_find: the scaled radius whose CDF is xi (Newton,
+    Cycles' initial guess, at most 10 steps)."""
+    r = np.where(xi <= 0.9, np.exp(xi * xi * 2.4) - 1.0, 15.0)
+    going = np.ones(len(r), bool)
+    for _ in range(10):
+        e3 = np.exp(-r / 3.0)
+        f = 1.0 - 0.25 * e3 * e3 * e3 - 0.75 * e3 - xi
+        df = 0.25 * e3 * e3 * e3 + 0.25 * e3
+        going &= ~((np.abs(f) < 1e-6) | (df == 0.0))
+        r = np.where(going, np.maximum(r - f / np.where(df != 0, df, 1.0), 0.0), r)
+    return r
+
+
+def disk(ctx, paths, v, rows, slot, depth):
+    """Cycles' subsurface_disk for ``rows``: a radius from the Burley profile
+    of a channel (uniform over those with a radius), one of the three axes
+    of the geometric normal's frame (1/2, 1/4, 1/4), a probe ray through
+    the disk along it finding every surface of the object within the
+    profile's reach, each hit weighted by the profile over the disk pdf
+    and by the power heuristic over the axes, one hit resampled by weight.
+    Returns (beta, exit points, outward normals there, exit triangle (-1:
+    none), barycentrics) as ``random_walk``."""
+    m = len(rows)
+    hit = v.hit
+    p, ng = hit.p[rows], hit.ng[rows]
+    d = np.maximum(v.lobes.radius[rows, slot], 0.0) * (0.25 / np.pi)
+    d = np.where(v.lobes.radius[rows, slot] < MIN_RADIUS, 0.0, d)
+    u = ctx.sampler.get(paths.pseed[rows], paths.sample[rows], subsurface_set(depth, 0, 1))
+    valid = d > 0
+    channels = valid.sum(axis=1)
+    xi = u[:, 0] * channels
+    rank = np.minimum(np.floor(xi), np.maximum(channels - 1, 0))
+    xi = xi - rank
+    order = np.cumsum(valid, axis=1) - 1
+    channel = np.argmax(valid & (order == rank[:, None]), axis=1)
+    dc = d[np.arange(m), channel]
+    disk_r = burley_root(xi * BURLEY_TRUNCATE_CDF) * dc
+    height = np.sqrt(np.maximum((BURLEY_TRUNCATE * dc) ** 2 - disk_r ** 2, 0.0))
+    t_axis, b_axis = make_orthonormals(ng)
+    a = u[:, 1]
+    pick = np.where(a < 0.5, 0, np.where(a < 0.75, 1, 2))
+    a = np.where(pick == 0, 2.0 * a, np.where(pick == 1, (a - 0.5) * 4.0, (a - 0.75) * 4.0))
+    axes = np.stack([ng, t_axis, b_axis], axis=1)            # N, T, B before the swap
+    rows_m = np.arange(m)
+    n_axis = axes[rows_m, pick]
+    tt = np.where((pick == 1)[:, None], ng, t_axis)          # T <-> N when T is picked
+    bb = np.where((pick == 2)[:, None], ng, b_axis)          # B <-> N when B is picked
+    pick_pdf = np.array([0.5, 0.25, 0.25])   # of the axes N, T, B
+    phi = 2.0 * np.pi * a
+    offset = tt * (disk_r * np.cos(phi))[:, None] + bb * (disk_r * np.sin(phi))[:, None]
+    origin = p + n_axis * height[:, None] + offset
+    rays = NodeRays(ctx.accel, ctx.triangles, ctx.sampler, depth, {})
+    instance = ctx.triangles.shading.instance[hit.prim[rows]]
+    r_idx, prim, t, bu, bv = rays.local_hits(origin, -n_axis, 2.0 * height, instance)
+    order_hits = np.lexsort((t, r_idx))
+    r_idx, prim, t, bu, bv = r_idx[order_hits], prim[order_hits], t[order_hits], bu[order_hits], bv[order_hits]
+    hit_p = origin[r_idx] - n_axis[r_idx] * t[:, None]
+    hit_ng = rays.outward_normal(prim)
+    if hit.back is not None:
+        hit_ng = np.where(hit.back[rows][r_idx, None], -hit_ng, hit_ng)
+    cos = np.abs(np.einsum("hkj,hj->hk", axes[r_idx], hit_ng))   # |N.Ng|, |T.Ng|, |B.Ng| (original frame)
+    pdfs = pick_pdf * cos
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # The power heuristic over the axes, the picked one's pdf over the sum of squares.
+        w = pdfs[np.arange(len(r_idx)), pick[r_idx]] / np.sum(pdfs * pdfs, axis=1)
+        r = np.linalg.norm(hit_p - p[r_idx], axis=1)
+        value = burley_pdf(d[r_idx], r[:, None])
+        pdf = burley_pdf(d[r_idx], disk_r[r_idx, None]).sum(axis=1) / np.maximum(channels[r_idx], 1)
+        weight = np.where((pdf > 0)[:, None], value / np.where(pdf > 0, pdf, 1.0)[:, None], 0.0) * w[:, None]
+    weight = np.where(np.isfinite(weight), weight, 0.0)
+    sample_weight = np.abs(weight).mean(axis=1)
+    total = np.bincount(r_idx, sample_weight, minlength=m)
+    # Importance resampling: one hit per row in proportion to its weight.
+    running = np.cumsum(sample_weight)
+    start = np.concatenate([[0.0], running])[np.searchsorted(r_idx, rows_m)]
+    target = u[:, 2] * total
+    inside = running - start[r_idx]
+    chosen = (inside > target[r_idx]) & (sample_weight > 0)
+    hits_chosen = np.flatnonzero(chosen)
+    first_by_row = np.full(m, len(r_idx), np.int64)
+    np.minimum.at(first_by_row, r_idx[hits_chosen], hits_chosen)
+    found = (first_by_row < len(r_idx)) & (total > 0)
+    k = first_by_row[found]
+    beta = np.zeros((m, 3))
+    beta[found] = paths.beta[rows[found]] * weight[k] * (total[found] / sample_weight[k])[:, None]
+    exit_prim = np.full(m, -1, np.int64)
+    exit_prim[found] = prim[k]
+    out_o, out_d = p.copy(), ng.copy()
+    out_o[found], out_d[found] = hit_p[k], hit_ng[k]
+    bary = np.zeros((m, 2))
+    bary[found] = np.column_stack([bu[k], bv[k]])
+    return beta, out_o, out_d, exit_prim, bary
 
 
 def random_walk(ctx, o, d, beta, sigma_t, alpha, g, instance, pseed, sample, depth):
@@ -423,6 +566,13 @@ def arrive(paths, found):
     paths.exit_prim[rows] = -2
 
 
+def walking(paths):
+    """Paths on their way to an exit point (after ``walk``, before the next
+    bounce): their vertex counts no bounce kind and keeps the previous one's
+    MIS record (the exit collects no emission)."""
+    return paths.exit_prim >= 0
+
+
 def at_exit(paths):
     """Paths shading a subsurface exit point this bounce."""
     return paths.exit_prim == -2
@@ -431,7 +581,12 @@ def at_exit(paths):
 def exit_lobes(paths, lobes):
     """Cycles' subsurface_shader_data_setup: a white diffuse lobe of weight 1
     replaces the material's lobes at exit points (under the shading normal
-    the material's normal map or bump gives); the mark is cleared."""
+    the material's normal map or bump gives); the mark is cleared.  After a
+    diffuse bounce a Christensen-Burley lobe is a diffuse one (Cycles'
+    bssrdf_setup with PATH_RAY_DIFFUSE_ANCESTOR)."""
+    after = paths.diffuse_ancestor[:, None] & (lobes.kind == SUBSURFACE_BURLEY)
+    if after.any():
+        lobes.kind[after] = DIFFUSE
     rows = np.flatnonzero(at_exit(paths))
     if len(rows) == 0:
         return

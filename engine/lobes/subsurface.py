@@ -13,7 +13,10 @@ hands the rest of the selection to the BSDF lobes.
 
 ``subsurface`` is Cycles' Random Walk, ``subsurface_skin`` its Random Walk
 (Skin): a fixed entry roughness of 1 with half the entries diffuse, and a
-radius remapped by the albedo and IOR (``bssrdf_setup_radius``).
+radius remapped by the albedo and IOR (``bssrdf_setup_radius``);
+``subsurface_burley`` its Christensen-Burley (disk sampling of the
+reflectance profile: no entry direction, the stage probes the surface
+around the point; its "entry" here is straight down).
 """
 import numpy as np
 
@@ -23,7 +26,8 @@ from .registry import DELTA, SUBSURFACE, TRANSMISSION, LobeDef, register
 
 SUBSURFACE_RANDOM_WALK = 20
 SUBSURFACE_SKIN = 21
-IDS = (SUBSURFACE_RANDOM_WALK, SUBSURFACE_SKIN)
+SUBSURFACE_BURLEY = 22
+IDS = (SUBSURFACE_RANDOM_WALK, SUBSURFACE_SKIN, SUBSURFACE_BURLEY)
 # Cycles' bssrdf_setup clamps.
 IOR_RANGE = (1.01, 3.8)
 G_RANGE = (0.0, 0.9)
@@ -62,13 +66,22 @@ def _eval(lobes, rows, k, wo, wi, w, sel, term, sampled):
     return np.zeros((n, 3)), np.zeros(n)
 
 
-def _sample(skin):
+def entry(kind, wo, alpha, ior, u1, u2):
+    """``entry_direction`` by lobe kind (Christensen-Burley: straight down)."""
+    wi, ok = entry_direction(kind == SUBSURFACE_SKIN, wo, alpha, ior, u1, u2)
+    burley = kind == SUBSURFACE_BURLEY
+    wi[burley] = (0.0, 0.0, -1.0)
+    ok[burley] = wo[burley, 2] > 0.0
+    return wi, ok
+
+
+def _sample(kind):
     def sample(lobes, rows, s):
         """The entry direction, with the closure's weight over its
         selection probability (Cycles' subsurface_bounce throughput)."""
         k = s.chosen[rows]
-        wi, ok = entry_direction(skin, s.wo[rows], lobes.alpha[rows, k], lobes.ior[rows, k],
-                                 s.u1[rows], s.u2[rows])
+        wi, ok = entry(np.full(len(k), kind), s.wo[rows], lobes.alpha[rows, k], lobes.ior[rows, k],
+                       s.u1[rows], s.u2[rows])
         s.wi[rows] = wi
         s.weight[rows] = np.where(ok[:, None], s.w[rows, k] / s.p_lobe[rows, None], 0.0)
         s.delta[rows] = True
@@ -78,11 +91,17 @@ def _sample(skin):
 
 _PARAMS = ("roughness", "ior", "radius", "phase_g")
 _CASES = [dict(color=(0.8, 0.5, 0.3), radius=(1.0, 0.2, 0.1), roughness=0.5, ior=1.4)]
-register(LobeDef(SUBSURFACE_RANDOM_WALK, "subsurface", "diffuse", DELTA | TRANSMISSION | SUBSURFACE, _sample(False),
+register(LobeDef(SUBSURFACE_RANDOM_WALK, "subsurface", "diffuse", DELTA | TRANSMISSION | SUBSURFACE,
+                 _sample(SUBSURFACE_RANDOM_WALK),
                  _eval, "lower", params=_PARAMS,
                  doc="Cycles' Random Walk BSSRDF (Principled Subsurface, Subsurface Scattering node)",
                  cases=_CASES))
-register(LobeDef(SUBSURFACE_SKIN, "subsurface_skin", "diffuse", DELTA | TRANSMISSION | SUBSURFACE, _sample(True),
+register(LobeDef(SUBSURFACE_SKIN, "subsurface_skin", "diffuse", DELTA | TRANSMISSION | SUBSURFACE,
+                 _sample(SUBSURFACE_SKIN),
                  _eval, "lower", params=_PARAMS,
                  doc="Cycles' Random Walk (Skin) BSSRDF: fixed entry roughness, albedo-remapped radius",
+                 cases=_CASES))
+register(LobeDef(SUBSURFACE_BURLEY, "subsurface_burley", "diffuse", DELTA | TRANSMISSION | SUBSURFACE,
+                 _sample(SUBSURFACE_BURLEY), _eval, "lower", params=_PARAMS,
+                 doc="Cycles' Christensen-Burley BSSRDF (disk sampling of the reflectance profile)",
                  cases=_CASES))

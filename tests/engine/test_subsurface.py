@@ -123,10 +123,11 @@ def test_white_furnace_sphere(kind, radius):
     assert np.all(np.abs(img - 1.0) < 2e-3)
 
 
+@pytest.mark.parametrize("kind", ["subsurface", "subsurface_burley"])
 @pytest.mark.parametrize("radius", [(0.0, 0.0, 0.0), (1e30, 1e30, 1e30), (float("nan"), 1.0, 1.0),
                                     (float("inf"), 1e-12, 0.5)])
-def test_hostile_radius_renders_finite(radius):
-    r = render(_ball(Lobe("subsurface", (0.8, 0.5, 0.3), 0.5, radius=radius), size=(6, 6)),
+def test_hostile_radius_renders_finite(radius, kind):
+    r = render(_ball(Lobe(kind, (0.8, 0.5, 0.3), 0.5, radius=radius), size=(6, 6)),
                RenderSettings(samples=2, samples_per_pass=2, max_bounces=8))
     assert np.isfinite(r.image).all()
 
@@ -176,3 +177,32 @@ def test_walk_kernels_agree():
     for x, y in zip(ref[:4], (dd, t, bb, o)):
         np.testing.assert_allclose(y, x, rtol=1e-9, atol=1e-12)
     assert np.array_equal(ref[4], done)
+
+
+def test_burley_root_inverts_its_cdf():
+    """bssrdf_burley_root_find: the scaled radius whose CDF
+    1 - e^-r / 4 - 3 e^(-r/3) / 4 is xi."""
+    xi = np.linspace(0.0, 0.99, 100)
+    r = ss.burley_root(xi)
+    np.testing.assert_allclose(1.0 - 0.25 * np.exp(-r) - 0.75 * np.exp(-r / 3.0), xi, atol=2e-6)
+
+
+def test_burley_on_a_plane_is_its_albedo():
+    """Christensen-Burley on a flat surface in a white world: the profile
+    integrates to 1 over the plane (every probe along the normal finds the
+    point; those along the tangents find none), so the surface reflects
+    its colour; within the render's standard error."""
+    mesh = box((20.0, 20.0, 20.0))
+    mesh.positions = np.asarray(mesh.positions, np.float64) - np.array([0.0, 0.0, 10.0])
+    cam = Camera(look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0)), kind="ORTHO", ortho_scale=2.0, resolution=(12, 12),
+                 clip_start=0.01, clip_end=100.0)
+    colour = (0.8, 0.5, 0.2)
+    scene = Scene([mesh], [Instance(0, materials=[0], name="slab")],
+                  [Material("marble", (Lobe("subsurface_burley", colour, radius=(0.05, 0.1, 0.2)),))], [],
+                  World((1, 1, 1)), cam)
+    r = render(scene, RenderSettings(samples=32, samples_per_pass=32, max_bounces=8, seed=2, sampling_pattern="random"))
+    mean = r.image[..., :3].mean(axis=(0, 1))
+    se = np.sqrt(r.variance[..., :3].sum(axis=(0, 1))) / 144
+    level = family_level(f"{__name__}.burley_plane", 3)
+    print(f"Burley plane: {mean} +- {se} against {colour}; detects {detectable(se.max(), level):.4f}")
+    assert np.all(np.abs(mean - colour) < z_threshold(level) * np.maximum(se, 1e-9))
