@@ -18,6 +18,7 @@ render starts.
 import functools
 import importlib
 import os
+import re
 import sys
 
 _HERE = os.path.dirname(os.path.abspath(__file__))
@@ -77,6 +78,24 @@ def require_ray_tracer():
     try:
         _import_embreex()
     except ImportError as err:
+        bundled = _bundled_python()
+        if bundled and bundled != sys.version_info[:2]:
+            raise ImportError(
+                f"this Ember add-on zip carries wheels for Python {'.'.join(map(str, bundled))}, and this "
+                f"Blender runs Python {sys.version_info[0]}.{sys.version_info[1]} ({err}); install the Ember "
+                "extension zip, which carries wheels for each") from err
         raise ImportError(
             f"Ember needs the 'embreex' package ({err}); install the Ember "
             "extension zip, or pip install embreex into Blender's Python") from err
+
+
+def _bundled_python():
+    """(major, minor) of the wheels unpacked into the legacy zip, or None."""
+    if not os.path.isdir(_SITE):
+        return None
+    for folder, _, files in os.walk(os.path.join(_SITE, 'embreex')):
+        for name in files:
+            match = re.search(r'\.cpython-3(\d+)-', name)
+            if match:
+                return (3, int(match.group(1)))
+    return None

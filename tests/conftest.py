@@ -9,10 +9,46 @@ if TESTS not in sys.path:
     sys.path.insert(0, TESTS)
 
 import ember_stats  # noqa: E402
+import pytest  # noqa: E402
+
+
+@pytest.fixture(scope='session')
+def legacy_addon(tmp_path_factory):
+    """(zip path, BLENDER_USER_SCRIPTS folder) of the legacy zip, built and
+    unpacked once for every Blender 3.4 binary test (tests/blender34.py)."""
+    import blender34
+    folder = tmp_path_factory.mktemp('legacy34')
+    zip_path = blender34.build_legacy_zip(folder)
+    return zip_path, blender34.unpack_addon(zip_path, folder / 'user')
+
+
+def pytest_configure(config):
+    config.ember_worker_families = []
+    config.addinivalue_line("markers", "xdist_group(name): pytest-xdist runs a group on one worker")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Under pytest-xdist (``-n 2 --dist loadgroup``) each test file runs
+    whole on one worker, so its module fixtures (references, renders) are
+    built once; every test of Debian's 3.4 binary shares one worker, so the
+    session's legacy install compiles its kernels once."""
+    for item in items:
+        group = 'blender34' if 'legacy_addon' in item.fixturenames else item.nodeid.split('::')[0]
+        item.add_marker(pytest.mark.xdist_group(group))
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node, error):
+    """pytest-xdist: a worker's statistical families join the controller's."""
+    node.config.ember_worker_families.extend(getattr(node, 'workeroutput', {}).get('ember_families', []))
+
+
+def _families(config):
+    return ember_stats.families_used() + list(getattr(config, 'ember_worker_families', []))
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
-    used = ember_stats.families_used()
+    used = _families(config)
     if not used:
         return
     line = (f"statistical families: {len(used)} of a budget of {ember_stats.FAMILIES} "
@@ -21,7 +57,10 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
 
 
 def pytest_sessionfinish(session, exitstatus):
-    used = ember_stats.families_used()
+    if hasattr(session.config, 'workeroutput'):   # an xdist worker: the controller counts
+        session.config.workeroutput['ember_families'] = ember_stats.families_used()
+        return
+    used = _families(session.config)
     if len(used) > ember_stats.FAMILIES:
         print(f"\nthe suite ran {len(used)} statistical families, more than its budget of "
               f"{ember_stats.FAMILIES}: raise FAMILIES in tests/ember_stats.py (docs/testing.md)")

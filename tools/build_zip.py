@@ -6,18 +6,21 @@
 * ``dist/ember-<version>-addon.zip``: a legacy add-on for Blender 3.4 and later
   (Preferences > Add-ons > Install, or unzip into scripts/addons/).  The wheels
   Blender lacks are unpacked into ``ember/vendor/site`` and put on sys.path by
-  ``ember/backend.py``.
+  ``ember/backend.py``.  They are CPython 3.11 wheels (Blender 3.4-5.0); in
+  Blender 5.1+ (Python 3.13) install the extension.
 * ``dist/ember-<version>-extension.zip``: an extension for Blender 4.2+
   (``blender --command extension install-file -r user_default FILE`` or drag
   and drop), with ``blender_manifest.toml`` listing the bundled wheels, which
-  Blender installs itself.
+  Blender installs itself: CPython 3.11 wheels (Blender 4.2-5.0) and 3.13
+  wheels (5.1+) side by side, of which Blender installs those matching its
+  Python (``bl_pkg`` filters a manifest's wheels by their python tag).
 
 Both contain ``addon/`` as the package ``ember`` (its modules import each other
 relatively) with the renderer vendored as ``ember.vendor.engine``, so nothing
 installed is called ``addon`` or ``engine`` and nothing collides with other
 modules.  The wheels are the ones the renderer imports (found by scanning
 engine/ for imports), downloaded once with pip into build/wheels for CPython
-3.11 on Linux x86-64, the platform of Blender 3.4-5.0 builds here.
+3.11 and 3.13 on Linux x86-64, the platforms of Blender 3.4-5.0 and 5.1-5.3.
 """
 import argparse
 import ast
@@ -40,7 +43,8 @@ WHEELS = {
 }
 # Wheels another bundled wheel needs, by import name.
 DEPENDS = {'numba': ('llvmlite',)}
-PYTHON_VERSION = '3.11'
+PYTHON_VERSION = '3.11'           # Blender 3.4-5.0: the legacy zip's wheels
+EXTENSION_PYTHONS = ('3.11', '3.13')  # Blender 4.2-5.0 and 5.1+: the extension's
 PLATFORM_TAG = 'manylinux_2_28_x86_64'
 # Intel Open Image Denoise for addon/denoise.py where Blender has none (3.4):
 # only the CPU device, its TBB and the oidnDenoise program of the wheel.
@@ -89,24 +93,35 @@ def needed_wheels():
     return [requirement for module, requirement in WHEELS.items() if module in imported]
 
 
-def fetch_wheels(requirements, wheel_dir):
-    """Wheel files for the requirements, downloaded once into wheel_dir."""
+def fetch_wheels(requirements, wheel_dir, python=PYTHON_VERSION):
+    """Wheel files for the requirements and CPython ``python`` ('3.11'),
+    downloaded once into wheel_dir."""
     os.makedirs(wheel_dir, exist_ok=True)
+    tag = 'cp' + python.replace('.', '')
     found = []
     for requirement in requirements:
         name, version = requirement.split('==')
-        pattern = re.compile(rf"^{re.escape(name)}-{re.escape(version)}-(cp311-.*x86_64.*|py3-none-any)\.whl$", re.I)
+        pattern = re.compile(rf"^{re.escape(name)}-{re.escape(version)}-({tag}-.*x86_64.*|py3-none-any)\.whl$", re.I)
         matches = [f for f in os.listdir(wheel_dir) if pattern.match(f)]
         if not matches:
             subprocess.check_call([
                 sys.executable, '-m', 'pip', 'download', '--quiet', '--no-deps', '--only-binary=:all:',
-                '--python-version', PYTHON_VERSION, '--platform', PLATFORM_TAG,
+                '--python-version', python, '--platform', PLATFORM_TAG,
                 '-d', wheel_dir, requirement])
             matches = [f for f in os.listdir(wheel_dir) if pattern.match(f)]
         if not matches:
-            raise SystemExit(f"no Linux x86-64 CPython 3.11 wheel for {requirement}")
+            raise SystemExit(f"no Linux x86-64 CPython {python} wheel for {requirement}")
         found.append(os.path.join(wheel_dir, sorted(matches)[-1]))
     return found
+
+
+def extension_wheel_files(wheel_dir):
+    """The extension's wheels: every needed wheel for each of EXTENSION_PYTHONS
+    (a pure-Python wheel once)."""
+    files = []
+    for python in EXTENSION_PYTHONS:
+        files.extend(w for w in fetch_wheels(needed_wheels(), wheel_dir, python) if w not in files)
+    return files
 
 
 def fetch_oidn_wheel(wheel_dir):
@@ -167,7 +182,9 @@ def write_zip(source, zip_path, prefix=''):
             dirs.sort()
             for name in sorted(files):
                 path = os.path.join(folder, name)
-                archive.write(path, os.path.join(prefix, os.path.relpath(path, source)))
+                # Wheels are zips already: stored, not deflated again (seconds per build).
+                compress = zipfile.ZIP_STORED if name.endswith('.whl') else zipfile.ZIP_DEFLATED
+                archive.write(path, os.path.join(prefix, os.path.relpath(path, source)), compress_type=compress)
     return zip_path
 
 
@@ -227,13 +244,15 @@ def main(argv=None):
     args = parser.parse_args(argv)
     check_engine_is_relocatable()
     version = addon_version()
-    wheels = fetch_wheels(needed_wheels(), args.wheels or os.path.join(args.build, 'wheels'))
-    oidn_wheel = fetch_oidn_wheel(args.wheels or os.path.join(args.build, 'wheels'))
+    wheel_dir = args.wheels or os.path.join(args.build, 'wheels')
+    wheels = fetch_wheels(needed_wheels(), wheel_dir)
+    oidn_wheel = fetch_oidn_wheel(wheel_dir)
     built = []
     if not args.extension:
         built.append(build_legacy(version, wheels, args.build, args.dist, oidn_wheel))
     if not args.legacy:
-        built.append(build_extension(version, wheels, args.build, args.dist, oidn_wheel))
+        extension_wheels = extension_wheel_files(wheel_dir)
+        built.append(build_extension(version, extension_wheels, args.build, args.dist, oidn_wheel))
     for path in built:
         print(f"{path} ({os.path.getsize(path) / 1e6:.1f} MB)")
     return built

@@ -19,11 +19,10 @@ sun guiding).  Anything else is read as the Background's constant colour and
 reported.  The World Output's Volume becomes a homogeneous medium filling
 space (constant inputs).
 """
-import bpy
 import numpy as np
 
 from .. import backend
-from . import images, material, nodes
+from . import compat, images, material, nodes
 
 BLACK = (0.0, 0.0, 0.0)
 MAGENTA = (1.0, 0.0, 1.0)
@@ -85,7 +84,7 @@ def _volume(world, notes):
     """The World Output's Volume: a homogeneous medium everywhere (the
     material exporter's volume translation with constant inputs; a texture
     on one is read as the socket's value, named)."""
-    tree = world.node_tree if _uses_nodes(world) else None
+    tree = world.node_tree if compat.uses_nodes(world) else None
     output = None if tree is None else _output_node(tree)
     socket = None if output is None else output.inputs.get('Volume')
     if socket is None or not socket.is_linked:
@@ -100,7 +99,7 @@ def _volume(world, notes):
 
 def _translate(world, notes):
     """(constant rgb, EnvironmentTexture or None)."""
-    tree = world.node_tree if _uses_nodes(world) else None
+    tree = world.node_tree if compat.uses_nodes(world) else None
     if tree is None:
         return tuple(float(c) for c in world.color), None
     output = _output_node(tree)
@@ -356,10 +355,3 @@ def _object_rotation(obj, notes):
     if np.any(np.abs(inverse[:3, 3]) > 1e-9):
         notes.add(f"Texture Coordinate object '{obj.name}' location is ignored")
     return inverse[:3, :3]
-
-
-def _uses_nodes(datablock):
-    """Blender 5.0 always uses nodes and deprecates the ``use_nodes`` switch."""
-    if bpy.app.version >= (5, 0, 0):
-        return True
-    return bool(getattr(datablock, 'use_nodes', False))

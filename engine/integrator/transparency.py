@@ -86,7 +86,7 @@ def sampled_transparent(ctx, hit, delta, wi_l, wo_l):
 VOLUME_BOUNDS_MAX = 1024
 
 
-def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None, rng=None):
+def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None, rng=None, time=None):
     """(N, 3) light reaching the shadow rays' ends through transparent
     surfaces (Cycles' transparent shadows).  embreex has no any-hit filter,
     so each ray is traced again from past its transparent hit, times that
@@ -102,6 +102,7 @@ def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None, rng=None)
         cast = (ctx.lights.visibility[emitter] & VIS_SHADOW) != 0
     idx = np.nonzero(cast)[0]
     o, d, tm = origin[idx], wi[idx], tmax[idx]
+    tt = None if time is None else time[idx]
     left = np.maximum(ctx.settings.transparent_max_bounces - tbounce[idx], 0)
     if stack is not None:
         stack = stack[idx].copy()
@@ -111,10 +112,10 @@ def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None, rng=None)
         if crossings > VOLUME_BOUNDS_MAX:
             out[idx] = 0.0     # more surfaces on the ray than Cycles crosses: blocked
             break
-        t, prim, bu, bv = ctx.accel.intersect(o, d, tm)
+        t, prim, bu, bv = ctx.accel.intersect(o, d, tm, time=tt)
         if ctx.shadow_skips:
             ray = np.full(len(idx), VIS_SHADOW, np.uint8)
-            t, prim, bu, bv = skip_invisible(ctx, o, d, tm, ray, t, prim, bu, bv)
+            t, prim, bu, bv = skip_invisible(ctx, o, d, tm, ray, t, prim, bu, bv, time=tt)
         hit = prim >= 0
         if stack is not None:
             out[idx] *= transmittance_factor(ctx.media, stack, np.where(hit, np.minimum(t, tm), tm), o, d, rng)
@@ -138,4 +139,6 @@ def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None, rng=None)
         tm = tm[c] - dot(start - o[c], d[c])
         counted = 1 if ctx.media is None else ~ctx.media.boundary[mat[c]]
         idx, o, d, left = idx[c], start, d[c], left[c] - counted
+        if tt is not None:
+            tt = tt[c]
     return out

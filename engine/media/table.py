@@ -286,6 +286,13 @@ def open_volume_meshes(scene):
     """Names of objects whose volume material's triangles do not close
     (an edge not shared by exactly two of them): paths entering such a
     volume may never leave it."""
+    return [name for name, _ in open_meshes(scene, lambda m: getattr(m, "volume", None) is not None)]
+
+
+def open_meshes(scene, uses):
+    """(object name, material names) of the objects whose triangles with a
+    material ``uses(material)`` picks do not close (an edge not shared by
+    exactly two of them)."""
     out = []
     checked = {}
     for inst in scene.instances:
@@ -295,14 +302,14 @@ def open_volume_meshes(scene):
             continue
         slots = np.zeros(len(tris), np.int64) if mesh.material_slots is None else np.asarray(mesh.material_slots)
         mats = np.array([inst.materials[s] if s < len(inst.materials) else -1 for s in range(int(slots.max()) + 1)])
-        vol = np.array([m >= 0 and getattr(scene.materials[m], "volume", None) is not None for m in mats])
-        if not vol.any():
+        picked = np.array([m >= 0 and bool(uses(scene.materials[m])) for m in mats])
+        if not picked.any():
             continue
-        key = (inst.mesh, tuple(vol))
+        key = (inst.mesh, tuple(picked))
         if key not in checked:
-            checked[key] = not _closed(np.asarray(mesh.positions, np.float64), tris[vol[slots]])
+            checked[key] = not _closed(np.asarray(mesh.positions, np.float64), tris[picked[slots]])
         if checked[key]:
-            out.append(inst.name)
+            out.append((inst.name, [scene.materials[m].name for m, p in zip(mats, picked) if p]))
     return out
 
 

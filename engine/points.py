@@ -1,0 +1,240 @@
+"""Point clouds: spheres of each point's radius (Cycles' point cloud objects
+and geometry nodes' Points), traced by Embree's RTC_GEOMETRY_TYPE_SPHERE_POINT.
+
+A ``scene.PointCloud`` becomes, before flattening, one mesh and instance of
+its own whose "triangle" k is a stand-in for point k (corners p, p + x,
+p + y: a row of ``geometry.Triangles`` with the point's material, ray
+visibility, object info and per-point attributes as per-corner data, so
+every consumer of triangle rows, shader nodes included, reads the point
+through the paths it already has).  ``Spheres`` says which rows are points,
+with their world centres and radii (radius x cbrt|det M| of the cloud's
+matrix, as Cycles' PointCloud::apply_transform): Embree traces those rows
+as spheres, the hit point is re-intersected with the sphere in float64 and
+its normal is the sphere's.  Lights never sample points, nor moving
+triangles (``unlit_rows``: an emissive point or moving triangle is found
+by BSDF rays, MIS weight 1: unbiased).
+"""
+from dataclasses import replace
+
+import numpy as np
+
+from .scene import Instance, Mesh
+
+
+class _Rows:
+    """Rows ``rows`` of Triangles that are not triangles: ``mask`` (T,) marks
+    them, ``slot`` (T,) is each one's index among them (-1 elsewhere)."""
+
+    def __init__(self, rows, n_rows):
+        self.rows = rows
+        self.mask = np.zeros(n_rows, bool)
+        self.mask[rows] = True
+        self.slot = np.full(n_rows, -1, np.int64)
+        self.slot[rows] = np.arange(len(rows))
+
+    def __len__(self):
+        return len(self.rows)
+
+
+class Spheres(_Rows):
+    """Rows ``rows`` of Triangles are spheres (centres (N, 3), radii (N,))."""
+
+    def __init__(self, rows, centres, radii, n_rows):
+        super().__init__(rows, n_rows)
+        self.centres, self.radii = centres, radii
+        self.is_point = self.mask
+
+
+def _placed(cloud, mesh_index):
+    """The stand-in Instance of a point cloud or curve set."""
+    return Instance(mesh_index, np.asarray(cloud.matrix, np.float64), materials=cloud.materials,
+                    name=cloud.name, visible_camera=cloud.visible_camera,
+                    visible_diffuse=cloud.visible_diffuse, visible_glossy=cloud.visible_glossy,
+                    visible_transmission=cloud.visible_transmission,
+                    visible_shadow=cloud.visible_shadow, color=cloud.color, random=cloud.random,
+                    pass_index=cloud.pass_index)
+
+
+def _stand_ins(p):
+    """A unit stand-in triangle at each point (never traced: only its row is used)."""
+    return np.stack([p, p + [1.0, 0.0, 0.0], p + [0.0, 1.0, 0.0]], axis=1)
+
+
+def expand_curves(scene):
+    """(scene with each curve set as a stand-in mesh and instance, one row
+    per segment; per set: its instance index and its curves)."""
+    sets = list(getattr(scene, "curves", ()) or ())
+    if not sets:
+        return scene, []
+    meshes, instances = list(scene.meshes), list(scene.instances)
+    owners = []
+    for strands in sets:
+        points = np.asarray(strands.points, np.float64).reshape(-1, 3)
+        starts = segment_starts(np.asarray(strands.offsets, np.int64))
+        corners = _stand_ins(points[starts[0]])
+        mesh = Mesh(corners.reshape(-1, 3), np.arange(3 * len(corners)).reshape(-1, 3), name=strands.name)
+        owners.append((len(instances), strands))
+        instances.append(_placed(strands, len(meshes)))
+        meshes.append(mesh)
+    return replace(scene, meshes=meshes, instances=instances), owners
+
+
+def segment_starts(offsets):
+    """(the first control point of each segment, its index in the padded
+    control points Embree gets: each curve's first and last point doubled,
+    Cycles' layout) for curves of at least 2 points."""
+    first, last = offsets[:-1], offsets[1:]
+    count = np.maximum(last - first - 1, 0)
+    curve = np.repeat(np.arange(len(first)), count)
+    k = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    point = first[curve] + k
+    return point, point + 2 * curve
+
+
+def expand(scene):
+    """(scene with each point cloud as a stand-in mesh and instance, the
+    instance indices of those, their radii per cloud)."""
+    clouds = list(getattr(scene, "points", ()) or ())
+    if not clouds:
+        return scene, [], []
+    meshes, instances = list(scene.meshes), list(scene.instances)
+    owners, radii = [], []
+    for cloud in clouds:
+        p = np.asarray(cloud.positions, np.float64).reshape(-1, 3)
+        r = np.asarray(cloud.radii, np.float64).reshape(-1)
+        corners = _stand_ins(p)
+        attributes = {name: np.repeat(np.asarray(values, np.float64).reshape(len(p), 1, -1), 3, axis=1)
+                      for name, values in (cloud.attributes or {}).items()}
+        mesh = Mesh(corners.reshape(-1, 3), np.arange(3 * len(p)).reshape(-1, 3),
+                    material_slots=None, name=cloud.name, attributes=attributes or None,
+                    texspace=None)
+        owners.append(len(instances))
+        radii.append(r)
+        instances.append(_placed(cloud, len(meshes)))
+        meshes.append(mesh)
+    return replace(scene, meshes=meshes, instances=instances), owners, radii
+
+
+def spheres_of(tris, scene, owners, radii):
+    """Spheres of the flattened stand-in rows (None without points)."""
+    if not owners:
+        return None
+    owner, local = tris.shading.instance, tris.shading.local
+    rows, r_world = [], []
+    for inst_index, r in zip(owners, radii):
+        mine = np.flatnonzero(owner == inst_index)
+        m = np.asarray(scene.instances[inst_index].matrix, np.float64)
+        scale = abs(np.linalg.det(m[:3, :3])) ** (1.0 / 3.0)
+        rows.append(mine)
+        r_world.append(r[local[mine]] * scale)
+    rows = np.concatenate(rows)
+    return Spheres(rows, tris.p0[rows].copy(), np.concatenate(r_world), len(tris))
+
+
+class Strands(_Rows):
+    """Rows ``rows`` of Triangles are curve segments: ``cvs`` (V, 4) the
+    padded world-space control points and radii Embree holds, ``start``
+    each row's first control point there (4 consecutive ones make a
+    segment)."""
+
+    def __init__(self, rows, cvs, start, n_rows):
+        super().__init__(rows, n_rows)
+        self.cvs, self.start = cvs, start
+        self.is_curve = self.mask
+
+
+def strands_of(tris, owners):
+    """Strands of the flattened segment rows (None without curves)."""
+    if not owners:
+        return None
+    owner = tris.shading.instance
+    rows, cvs, starts = [], [], []
+    base = 0
+    for inst_index, strands in owners:
+        mine = np.flatnonzero(owner == inst_index)
+        m = np.asarray(strands.matrix, np.float64)
+        scale = abs(np.linalg.det(m[:3, :3])) ** (1.0 / 3.0)
+        offsets = np.asarray(strands.offsets, np.int64)
+        p = np.asarray(strands.points, np.float64) @ m[:3, :3].T + m[:3, 3]
+        r = np.asarray(strands.radii, np.float64) * scale
+        # each curve's first and last control point doubled (Cycles' Catmull-Rom layout)
+        first, last = offsets[:-1], offsets[1:] - 1
+        index = (np.concatenate([np.r_[a, np.arange(a, b + 1), b] for a, b in zip(first, last)])
+                 if len(first) else np.zeros(0, np.int64))
+        padded = np.concatenate([p[index], r[index, None]], axis=1)
+        _, start = segment_starts(offsets)
+        local = tris.shading.local[mine]
+        rows.append(mine)
+        starts.append(start[local] + base)
+        cvs.append(padded)
+        base += len(padded)
+    return Strands(np.concatenate(rows), np.concatenate(cvs), np.concatenate(starts), len(tris))
+
+
+def _catmull_rom(t):
+    """Embree's uniform Catmull-Rom basis at t (N,) -> (N, 4)."""
+    t2, t3 = t * t, t * t * t
+    return 0.5 * np.stack([-t3 + 2 * t2 - t, 3 * t3 - 5 * t2 + 2, -3 * t3 + 4 * t2 + t, t3 - t2], axis=1)
+
+
+def curve_hits(strands, o, d, t, prim, u):
+    """(p, ng, back, radius) of rays (o, d) meeting segment rows ``prim`` at
+    Embree's distance t and curve parameter u: the point moved onto the
+    round curve's surface around its centre C(u) (radius r(u)), the normal
+    from C(u) to it, facing the ray."""
+    start = strands.start[strands.slot[prim]]
+    cv = strands.cvs[start[:, None] + np.arange(4)[None, :]]            # (n, 4, 4)
+    w = _catmull_rom(np.clip(u, 0.0, 1.0))
+    centre = np.einsum("nk,nkj->nj", w, cv[:, :, :3])
+    radius = np.maximum(np.einsum("nk,nk->n", w, cv[:, :, 3]), 0.0)
+    p = o + d * t[:, None]
+    n = p - centre
+    length = np.linalg.norm(n, axis=1)
+    n = np.where((length > 0)[:, None], n / np.maximum(length, 1e-300)[:, None], -d)
+    p = centre + n * radius[:, None]
+    back = np.einsum("ij,ij->i", d, n) > 0
+    return p, np.where(back[:, None], -n, n), back, radius
+
+
+def unlit_rows(n_rows, spheres, motion, strands=None):
+    """(T,) bool: the rows no light samples (points, moving triangles: the
+    light set holds still triangles only), or None when there are none.
+    Their emission is found by BSDF rays alone, with MIS weight 1: unbiased."""
+    rows = np.zeros(n_rows, bool)
+    if spheres is not None:
+        rows[spheres.rows] = True
+    if strands is not None:
+        rows[strands.rows] = True
+    if motion is not None and motion.moving:
+        rows |= motion.part >= 0
+    return rows if rows.any() else None
+
+
+def for_lights(tris, unlit, default_material):
+    """The triangles as the lights see them: ``unlit`` rows carry the
+    default (non-emissive) material, so no light samples them."""
+    if unlit is None:
+        return tris
+    material = tris.material.copy()
+    material[unlit] = default_material
+    return replace(tris, material=material)
+
+
+def sphere_hits(spheres, o, d, t, prim):
+    """(p, ng, back) of rays (o, d) meeting sphere rows ``prim`` near
+    Embree's distance t: the root of |o + t d - c| = r closest to it, in
+    float64; ng faces the ray."""
+    k = spheres.slot[prim]
+    c, r = spheres.centres[k], spheres.radii[k]
+    oc = o - c
+    b = np.einsum("ij,ij->i", oc, d)
+    q = np.einsum("ij,ij->i", oc, oc) - r * r
+    disc = np.sqrt(np.maximum(b * b - q, 0.0))
+    near, far = -b - disc, -b + disc
+    t64 = np.where(np.abs(near - t) <= np.abs(far - t), near, far)
+    t64 = np.where(np.isfinite(t64), t64, t)
+    p = o + d * t64[:, None]
+    n = (p - c) / np.maximum(r, 1e-300)[:, None]
+    n /= np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+    back = np.einsum("ij,ij->i", d, n) > 0
+    return p, np.where(back[:, None], -n, n), back
