@@ -40,8 +40,10 @@ def _linear_to_srgb(c):
 
 
 def _site(tmp):
-    """embreex unpacked from build/wheels: what the renderer needs in Blender 3.4."""
-    wheels = [w for w in os.listdir(os.path.join(ROOT, 'build', 'wheels')) if w.startswith('embreex-')] \
+    """embreex unpacked from build/wheels: what the renderer needs in Blender 3.4
+    (its CPython 3.11 wheel: build/wheels holds the 3.13 one too)."""
+    wheels = [w for w in os.listdir(os.path.join(ROOT, 'build', 'wheels'))
+              if w.startswith('embreex-') and '-cp311-' in w] \
         if os.path.isdir(os.path.join(ROOT, 'build', 'wheels')) else []
     require(wheels, "the embreex wheel is needed in build/wheels (tools/setup_test_env.sh)")
     site = tmp / 'site'

@@ -1,0 +1,43 @@
+"""Material, world and light previews with Ember in Debian's Blender 3.4.
+
+Its background mode crashes in any preview render (Cycles too), so
+tests/addon/previews_gui.py asks for them in a window under Xvfb, as the
+interface does; this file judges (tests/addon/test_previews.py covers bpy 5.0,
+test_render_engine.py's preview test bpy 4.2-5.3)."""
+import json
+import os
+import shutil
+import subprocess
+
+from ember_testlib import ROOT, require
+from test_viewport import BLENDER, _site
+
+
+def test_previews_render_with_ember_in_blender_34(tmp_path):
+    version = subprocess.run([BLENDER, '--version'], capture_output=True, text=True).stdout \
+        if os.path.exists(BLENDER) else ''
+    require(version.startswith('Blender 3.4'), f"Debian's Blender 3.4 binary is needed at {BLENDER}")
+    require(shutil.which('xvfb-run') and shutil.which('xauth'),
+            "xvfb-run and xauth are needed (apt-get install xvfb xauth; tools/setup_test_env.sh)")
+    out = tmp_path / 'out'
+    out.mkdir()
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / 'user'))
+    env.pop('PYTHONPATH', None)
+    cmd = ['xvfb-run', '-a', '-s', '-screen 0 800x600x24', BLENDER, '--factory-startup',
+           '-p', '0', '0', '480', '360', '-P', os.path.join(ROOT, 'tests', 'addon', 'previews_gui.py'),
+           '--', str(out), _site(tmp_path)]
+    done = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    result_path = out / 'result.json'
+    assert result_path.exists(), (done.stdout + done.stderr)[-4000:]
+    result = json.loads(result_path.read_text())
+    print(f"Blender {result['version']}: previews in {result.get('seconds', 0):.1f} s; {result.get('renders')}")
+    assert not result['errors'], result['errors']
+    renders = [r for r in result['renders'] if r['preview']]
+    assert len(renders) >= 3, f"Blender did not render the three previews with Ember: {result['renders']}"
+    assert all(r['error'] is None for r in renders), renders
+    for kind in ('material', 'world', 'light'):
+        preview = result[kind]
+        assert preview is not None and preview['size'][0] > 0, kind
+        assert preview['finite'] and preview['max'] > 0.05, f"{kind} preview is black: {preview}"
+    assert result['material']['reddish'] > 0.1, \
+        f"the material preview must show the material's red ({result['material']['reddish']:.3f} of it is red)"
