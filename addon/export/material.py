@@ -24,7 +24,7 @@ GREY = (0.8, 0.8, 0.8)
 # yet (subsurface scattering renders as diffuse; anisotropy as isotropic).
 PRINCIPLED_UNSUPPORTED = (
     'Subsurface', 'Subsurface Weight', 'Anisotropic', 'Diffuse Roughness', 'Thin Film Thickness',
-    # Blender 5.3: thin-walled transmission, dispersion.
+    # Blender 5.2: thin-walled transmission; 5.3: dispersion.
     'Thin Wall', 'Transmission Dispersion Scale',
 )
 # How a warning names them (default: the input's first word).
