@@ -16,42 +16,29 @@ import sys
 import time
 import traceback
 
-ARGS = sys.argv[sys.argv.index('--') + 1:]
-OUT, SITE = ARGS[0], ARGS[1]
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-sys.path.insert(0, ROOT)
-sys.path.append(SITE)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import gui_session  # noqa: E402  (the repository and SITE on sys.path)
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
-import addon  # noqa: E402
 from addon import engine as ember_engine  # noqa: E402
+from preview_scene import preview_datablocks  # noqa: E402
 
-addon.register()
+OUT = gui_session.OUT
+gui_session.register()
 RESULT = {'errors': [], 'version': bpy.app.version_string}
 TIMEOUT = float(os.environ.get('EMBER_STEP_TIMEOUT', '100'))
 state = {'started': time.perf_counter()}
-
-
-def datablocks():
-    return {'material': bpy.data.materials['Preview Red'], 'world': bpy.context.scene.world,
-            'light': bpy.data.lights['Light']}
 
 
 def start():
     try:
         scene = bpy.context.scene
         scene.render.engine = 'EMBER'
-        scene.ember.preview_samples = 2
-        material = bpy.data.materials.new('Preview Red')
-        material.use_nodes = True
-        bsdf = next(n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
-        bsdf.inputs['Base Color'].default_value = (0.8, 0.05, 0.05, 1.0)
-        bpy.data.objects['Cube'].data.materials.append(material)
-        scene.world.color = (0.2, 0.3, 0.5)
+        state['previews'] = preview_datablocks(scene)
         del ember_engine.RENDER_LOG[:]
-        state['queue'] = list(datablocks().values())
+        state['queue'] = list(state['previews'].values())
         request()
         bpy.app.timers.register(wait, first_interval=0.2)
     except Exception:  # noqa: BLE001 - recorded for the test
@@ -96,7 +83,7 @@ def wait():
 
 
 def record():
-    for kind, datablock in datablocks().items():
+    for kind, datablock in state['previews'].items():
         image = pixels(datablock)
         RESULT[kind] = None if image is None else {
             'size': list(datablock.preview.image_size), 'finite': bool(np.isfinite(image).all()),

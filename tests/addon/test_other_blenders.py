@@ -78,20 +78,24 @@ def blender_version():
     return out.splitlines()[0] if code == 0 and out else None
 
 
-@pytest.fixture(scope='module')
-def legacy_zip(tmp_path_factory):
+def build_package(out, kind):
+    """tools/build_zip.py's legacy or extension zip (kind 'legacy' / 'extension') in folder out."""
     sys.path.insert(0, os.path.join(ROOT, 'tools'))
     try:
         import build_zip
     finally:
         sys.path.pop(0)
-    out = tmp_path_factory.mktemp('dist')
     try:
         built = build_zip.main(['--dist', str(out), '--build', str(out / 'build'),
-                                '--wheels', os.path.join(ROOT, 'build', 'wheels'), '--legacy'])
+                                '--wheels', os.path.join(ROOT, 'build', 'wheels'), '--' + kind])
     except (subprocess.CalledProcessError, SystemExit) as err:
-        require(False, f"could not build the legacy zip (wheels need pip and PyPI): {err}")
+        require(False, f"could not build the {kind} zip (wheels need pip and PyPI): {err}")
     return built[0]
+
+
+@pytest.fixture(scope='module')
+def legacy_zip(tmp_path_factory):
+    return build_package(tmp_path_factory.mktemp('dist'), 'legacy')
 
 
 def install_legacy(zip_path, tmp_path):
@@ -211,22 +215,12 @@ print("EXTENSION OK", bpy.app.version_string, exported.triangles, image.shape, f
 
 @pytest.fixture(scope='module')
 def extension_zip(tmp_path_factory):
-    sys.path.insert(0, os.path.join(ROOT, 'tools'))
-    try:
-        import build_zip
-    finally:
-        sys.path.pop(0)
-    out = tmp_path_factory.mktemp('extension')
-    try:
-        built = build_zip.main(['--dist', str(out), '--build', str(out / 'build'),
-                                '--wheels', os.path.join(ROOT, 'build', 'wheels'), '--extension'])
-    except (subprocess.CalledProcessError, SystemExit) as err:
-        require(False, f"could not build the extension zip: {err}")
-    with zipfile.ZipFile(built[0]) as archive:
+    built = build_package(tmp_path_factory.mktemp('extension'), 'extension')
+    with zipfile.ZipFile(built) as archive:
         wheels = [n for n in archive.namelist() if n.endswith('.whl')]
     for tag in ('cp311', 'cp313'):
         assert any(f'-{tag}-' in w and w.startswith('wheels/embreex') for w in wheels), (tag, wheels)
-    return built[0]
+    return built
 
 
 @pytest.mark.parametrize('version', ['5.0', '4.5', '5.3'])

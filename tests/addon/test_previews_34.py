@@ -6,19 +6,14 @@ interface does; this file judges (tests/addon/test_previews.py covers bpy 5.0,
 test_render_engine.py's preview test bpy 4.2-5.3)."""
 import json
 import os
-import shutil
 import subprocess
 
-from ember_testlib import ROOT, require
-from test_viewport import BLENDER, _site
+from ember_testlib import ROOT
+from test_viewport import BLENDER, _site, require_blender_34_window
 
 
 def test_previews_render_with_ember_in_blender_34(tmp_path):
-    version = subprocess.run([BLENDER, '--version'], capture_output=True, text=True).stdout \
-        if os.path.exists(BLENDER) else ''
-    require(version.startswith('Blender 3.4'), f"Debian's Blender 3.4 binary is needed at {BLENDER}")
-    require(shutil.which('xvfb-run') and shutil.which('xauth'),
-            "xvfb-run and xauth are needed (apt-get install xvfb xauth; tools/setup_test_env.sh)")
+    require_blender_34_window()
     out = tmp_path / 'out'
     out.mkdir()
     env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / 'user'))
