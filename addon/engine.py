@@ -100,7 +100,8 @@ class EmberRenderEngine(bpy.types.RenderEngine):
         self.update_stats("", "Ember: exporting scene")
         try:
             exported = scene_export.export_scene(depsgraph, self.camera_override,
-                                                 should_stop=lambda: output.break_requested(self))
+                                                 should_stop=lambda: output.break_requested(self),
+                                                 engine=self, is_preview=self.is_preview)
         except scene_export.ExportCancelled:
             info['cancelled'] = True
             return

@@ -15,7 +15,7 @@ import bpy
 from . import backend
 
 # engine name, legacy (< 5.0) name, channels, chan_id, type, enabled by
-# (a view_layer property, or "ember.<property>" on view_layer.ember).
+# (a view_layer property, or "ember.<property>" / "cycles.<property>" on its settings).
 PASSES = (
     ("Depth", "Depth", 1, "Z", 'VALUE', "use_pass_z"),
     ("Mist", "Mist", 1, "Z", 'VALUE', "use_pass_mist"),
@@ -46,6 +46,7 @@ PASSES = (
     ("Strategy BSDF Unweighted", "Strategy BSDF Unweighted", 3, "RGB", 'COLOR', "ember.use_pass_strategies"),
     ("MIS Weight Light", "MIS Weight Light", 1, "X", 'VALUE', "ember.use_pass_strategies"),
     ("Variance", "Variance", 3, "RGB", 'COLOR', "ember.use_pass_variance"),
+    ("Shadow Catcher", "Shadow Catcher", 3, "RGB", 'COLOR', "cycles.use_pass_shadow_catcher"),
 )
 CRYPTO = (("CryptoObject", "use_pass_cryptomatte_object"),
           ("CryptoMaterial", "use_pass_cryptomatte_material"),
@@ -67,10 +68,11 @@ def blender_name(engine_name, legacy):
 
 
 def _enabled(view_layer, prop):
-    if prop.startswith("ember."):
-        settings = getattr(view_layer, "ember", None)
-        return bool(getattr(settings, prop[len("ember."):], False)) if settings is not None else False
-    return bool(getattr(view_layer, prop, False))
+    """A view layer property, or one of its ``ember.`` / ``cycles.`` settings
+    (Cycles' Shadow Catcher pass is ``view_layer.cycles.use_pass_shadow_catcher``)."""
+    owner, _, name = prop.rpartition(".")
+    settings = getattr(view_layer, owner, None) if owner else view_layer
+    return bool(getattr(settings, name, False)) if settings is not None else False
 
 
 def crypto_layers(view_layer):

@@ -62,6 +62,7 @@ class SceneCache:
         self.meshes = []
         self.materials = material_export.MaterialTable()
         self.instances = []
+        self.points = []        # engine PointClouds of the last walk
         self.lights = []
         self.world = None
         self.warnings = []
@@ -107,7 +108,8 @@ class SceneCache:
     def _walk(self, depsgraph):
         """Instances, their matrices and lights; meshes only where not cached."""
         self.materials.slots_cache.clear()  # slot assignments may have changed
-        collector = instance_export.InstanceCollector(self.materials.slots)
+        collector = instance_export.InstanceCollector(self.materials.slots,
+                                                      view_layer=getattr(depsgraph, 'view_layer', None))
         collector.meshes, collector.mesh_of_key = self.meshes, self.mesh_of_key
         meshes_before = len(self.mesh_of_key)
         materials_before = len(self.materials.materials)
@@ -129,6 +131,7 @@ class SceneCache:
         for key in [k for k in self.mesh_of_key if k not in seen]:
             del self.mesh_of_key[key]
         self.instances = collector.instances
+        self.points = collector.points
         self._compact()
         self.lights, self.warnings = light_export.collect_lights(depsgraph)
 
@@ -151,7 +154,9 @@ class SceneCache:
                            inst.visible_camera, inst.visible_diffuse, inst.visible_glossy,
                            inst.visible_transmission, inst.visible_shadow)
                           for inst in self.instances)
-        return instances, repr(self.lights)
+        points = tuple((hash(np.asarray(c.positions).tobytes()), hash(np.asarray(c.radii).tobytes()),
+                        np.asarray(c.matrix).tobytes(), tuple(c.materials)) for c in self.points)
+        return instances, points, repr(self.lights)
 
     def _refresh_material(self, material):
         key = material.as_pointer()
@@ -186,7 +191,7 @@ class SceneCache:
         return backend.engine().Scene(
             meshes=[self.meshes[i] for i in used], instances=instances,
             materials=list(self.materials.materials), lights=list(self.lights),
-            world=self.world, camera=camera)
+            world=self.world, camera=camera, points=list(self.points))
 
 
 def _geometry_keys(obj):

@@ -24,8 +24,8 @@ from .nodes.sky import sun_guide as sky_sun_guide
 from .passes import PassConfig, murmur3_32
 from .render import RenderResult, prepare, render
 from .scene import (FALLOFFS, MATH_OPERATIONS, MIX_BLENDS, TEXTURE_TYPES, AreaLight, Bump, Camera, Cancelled,
-                    EnvironmentTexture, ImageTexture, Instance, Lobe, Material, Math, Mesh, MixColor,
-                    NodeCall, NodeOutput, NormalMap, PointLight, RenderSettings, Scene, SceneError,
+                    EnvironmentTexture, ImageTexture, Instance, LinkSet, Lobe, Material, Math, Mesh, MixColor,
+                    NodeCall, NodeOutput, NormalMap, PointCloud, PointLight, RenderSettings, Scene, SceneError,
                     SpotLight, SunGuide, SunLight, TextureImage, Volume, World)
 from .textures import Compiler as TextureCompiler
 from .textures import value_range
@@ -33,8 +33,9 @@ from .validate import validate_camera, validate_scene, validate_settings
 
 __all__ = [
     # scene data the exporter builds (engine.scene)
-    "Scene", "Mesh", "Instance", "Material", "Lobe", "Volume", "Camera", "World", "EnvironmentTexture", "SunGuide",
-    "PointLight", "SpotLight", "SunLight", "AreaLight",
+    "Scene", "Mesh", "Instance", "LinkSet", "Material", "Lobe", "Volume", "Camera", "World", "EnvironmentTexture",
+    "SunGuide",
+    "PointLight", "SpotLight", "SunLight", "AreaLight", "PointCloud",
     "TextureImage", "ImageTexture", "MixColor", "Math", "NormalMap", "Bump", "NodeCall", "NodeOutput",
     "TEXTURE_TYPES", "MIX_BLENDS", "MATH_OPERATIONS", "FALLOFFS",
     "RenderSettings", "SceneError", "Cancelled",

@@ -11,7 +11,7 @@ embreex per thread so the benchmark can report Embree's share.
 import os
 import sys
 import threading
-import time
+from time import perf_counter
 
 import numpy as np
 
@@ -80,8 +80,10 @@ class Accel:
             return dict(self._totals)
 
     # -- queries --------------------------------------------------------------
-    def intersect(self, origins, directions, tmax):
-        """Closest hits.  Returns (t, prim, u, v); prim = -1 and t = inf on miss."""
+    def intersect(self, origins, directions, tmax, time=None):
+        """Closest hits.  Returns (t, prim, u, v); prim = -1 and t = inf on miss.
+        ``time``: the rays' shutter times, which a still scene ignores
+        (engine.motion.MotionAccel reads them)."""
         n = len(origins)
         if self.empty or n == 0:
             return (np.full(n, np.inf), np.full(n, -1, np.int64),
@@ -89,25 +91,25 @@ class Accel:
         o = np.ascontiguousarray(origins, dtype=np.float32)
         d = np.ascontiguousarray(directions, dtype=np.float32)
         tfar = np.minimum(tmax, 1e37).astype(np.float32)
-        t0 = time.perf_counter()
+        t0 = perf_counter()
         res = self.scene.run(o, d, dists=tfar, query="INTERSECT", output=1)
-        self._account(time.perf_counter() - t0, n)
+        self._account(perf_counter() - t0, n)
         prim = res["primID"].astype(np.int64)
         hit = prim >= 0
         t = np.where(hit, res["tfar"].astype(np.float64), np.inf)
         return t, prim, res["u"].astype(np.float64), res["v"].astype(np.float64)
 
-    def occluded(self, origins, directions, tmax):
-        """True where something lies between the origin and tmax."""
+    def occluded(self, origins, directions, tmax, time=None):
+        """True where something lies between the origin and tmax (``time``: as intersect)."""
         n = len(origins)
         if self.empty or n == 0:
             return np.zeros(n, dtype=bool)
         o = np.ascontiguousarray(origins, dtype=np.float32)
         d = np.ascontiguousarray(directions, dtype=np.float32)
         tfar = np.ascontiguousarray(np.maximum(tmax, 0.0), dtype=np.float32)
-        t0 = time.perf_counter()
+        t0 = perf_counter()
         res = self.scene.run(o, d, dists=tfar, query="OCCLUDED")
-        self._account(time.perf_counter() - t0, n)
+        self._account(perf_counter() - t0, n)
         return res == 0
 
     @staticmethod

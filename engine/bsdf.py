@@ -146,6 +146,29 @@ class MaterialTable:
                     getattr(self, name)[i, j] = value
         self.emissive = np.any(self.emission > 0, axis=1)
         self.names = [m.name for m in materials]
+        # material -> the lobes whose albedo dims its emission (Principled sheen, coat)
+        self.emission_layers = {i: tuple(int(k) for k in getattr(m, "emission_layers", ()))
+                                for i, m in enumerate(materials) if getattr(m, "emission_layers", ())}
+
+    def dim_emission(self, mat, shading, cos, emission, albedo=True):
+        """Emission (N, 3) seen at |cos| to the shading normal, dimmed where
+        the material's emission lies under layers: by 1 - each layer's albedo
+        estimate and the coat tint along the view, as Cycles' Principled BSDF
+        weighs its emission closure (the same terms ``weights`` applies to the
+        lobes under the layers).  ``shading``: the points' ShadingContext
+        (textured layers), or None."""
+        if not self.emission_layers:
+            return emission
+        out = None
+        for i, layers in self.emission_layers.items():
+            rows = np.nonzero(mat == i)[0]
+            if not len(rows):
+                continue
+            if out is None:
+                out = np.array(emission, dtype=np.float64, copy=True)
+            lobes = self.gather(mat[rows], None if shading is None else shading.take(rows))
+            out[rows] *= emission_dimming(lobes, np.clip(np.abs(cos[rows]), 0.0, 1.0), layers, albedo)
+        return emission if out is None else out
 
     def gather(self, mat, uv=None):
         """Per-ray lobe parameters for material ids ``mat`` at texture
@@ -266,7 +289,7 @@ def _weights_numpy(lobes, wo):
         if len(sheen):
             # Cycles folds the sheen's directional albedo into its weight.
             w[sheen, k] *= _sheen_ltc(_rough(lobes, k)[sheen], mu[sheen])[2][:, None]
-        ms = np.nonzero(lobes.multiscatter[:, k] & kind_in(lobes.kind[:, k], (GLOSSY, GLASS)))[0]
+        ms = np.nonzero(lobes.multiscatter[:, k] & kind_in(lobes.kind[:, k], (GLOSSY, GLOSSY_ANISOTROPIC, GLASS)))[0]
         if len(ms):
             glass = lobes.kind[ms, k] == GLASS
             for part in (ms[glass], ms[~glass]):
@@ -282,6 +305,81 @@ def _weights_numpy(lobes, wo):
             w[layer, j] *= np.where(under, below, 1.0)[:, None]
             w[layer, j] *= np.where(under[:, None], tint, 1.0)
     return np.maximum(w, 0.0)
+
+
+def emission_dimming(lobes, mu, layers, albedo=True):
+    """(N, 3) factor of an emission under the layer lobes ``layers`` (slot
+    indices) seen at cos mu: the product of 1 - max(layer albedo) and the
+    coat tint (_layer_albedo, _coat_absorption, as ``weights``); without
+    ``albedo`` the coat tint alone."""
+    n = len(mu)
+    factor = np.ones((n, 3))
+    rows = np.arange(n)
+    for k in layers:
+        present = lobes.kind[:, k] != NONE
+        below = 1.0 - np.clip(_layer_albedo(lobes, k, rows, mu).max(axis=1), 0.0, 1.0) if albedo else np.ones(n)
+        step = below[:, None] * _coat_absorption(lobes, k, rows, mu)
+        factor *= np.where(present[:, None], np.maximum(step, 0.0), 1.0)
+    return factor
+
+
+def closure_albedos(lobes, wo):
+    """Each lobe's albedo as Cycles' ``bsdf_albedo`` estimates it for the
+    Diffuse / Glossy / Transmission Color passes and the denoising albedo:
+    (reflection, transmission), each (N, K, 3).  The closure weight (colour,
+    layering, the multiscatter darkening but not its 1/E energy scale) times
+    the Fresnel estimate of ``bsdf_microfacet_estimate_albedo``: F82 metals
+    mix(F0, 1, s) with s from ``ggx_gen_schlick_s`` at exponent 5 (the B
+    term left out, as Cycles does), the Principled dielectric and coat
+    mix(F0, 1, s) from ``ggx_gen_schlick_ior_s``; glass splits into that
+    reflection estimate and the refracted rest at the view angle,
+    (1 - F(mu)) x transmission tint; other lobes carry their weight whole
+    (sheen's weight holds its albedo)."""
+    mu = np.clip(wo[:, 2], 0.0, 1.0)
+    w = weights(lobes, wo)
+    refl = w.copy()
+    trans = np.zeros_like(w)
+    t = mf.tables()
+    for k in range(lobes.kind.shape[1]):
+        kind = lobes.kind[:, k]
+        glossy = kind_in(kind, (GLOSSY, GLASS, MIRROR, GLOSSY_ANISOTROPIC))
+        ms = np.nonzero(lobes.multiscatter[:, k] & kind_in(kind, (GLOSSY, GLASS)))[0]
+        if len(ms):
+            glass = kind[ms] == GLASS
+            for part in (ms[glass], ms[~glass]):
+                if len(part):
+                    factor, darkening = _energy(lobes, k, part, mu[part])
+                    refl[part, k] *= darkening / np.maximum(factor, 1e-12)
+        rough = _rough(lobes, k)
+        code = lobes.fresnel[:, k]
+        f0 = lobes.f0[:, k]
+        est = np.ones_like(f0)
+        metal = np.nonzero(glossy & (code == F_F82) & (kind != GLASS))[0]
+        if len(metal):
+            s = mf.lookup(t["ggx_gen_schlick_s"], rough[metal], mu[metal], np.full(len(metal), 0.5))
+            est[metal] = f0[metal] + (1.0 - f0[metal]) * s[:, None]
+        eta = _eta(lobes, k)
+        diel = np.nonzero(glossy & ((code == F_DIELECTRIC) | (kind == GLASS)))[0]
+        if len(diel):
+            e = eta[diel]
+            s = mf.lookup(t["ggx_gen_schlick_ior_s"], rough[diel], mu[diel], mf.ior_z(e))
+            exact = mf.schlick_s(mu[diel], e)[0]
+            # Cycles' real-Fresnel branch reads the table only above IOR 1.
+            s = np.where(e > 1.0, s, exact)
+            est[diel] = f0[diel] + (1.0 - f0[diel]) * s[:, None]
+        through = np.nonzero(kind_in(kind, (GLASS, REFRACTION)))[0]
+        if len(through):
+            e = eta[through]
+            cos_t = mf.fresnel_dielectric(mu[through], e)[1]
+            ft = f0[through]
+            f = ft + (1.0 - ft) * mf.schlick_s(mu[through], e)[0][:, None]
+            glass = (kind[through] == GLASS)[:, None]
+            tint = np.where(glass, lobes.transmission_tint[through, k], 1.0)
+            passes = np.where(glass, 1.0 - f, (cos_t > 0)[:, None] * 1.0)
+            trans[through, k] = refl[through, k] * tint * np.maximum(passes, 0.0)
+            refl[through, k] = np.where(glass, refl[through, k], 0.0)
+        refl[:, k] *= est
+    return np.maximum(refl, 0.0), np.maximum(trans, 0.0)
 
 
 def transparency(lobes):

@@ -20,7 +20,8 @@ import numpy as np
 from .kernels import clip
 from .lobes import EXTRA_PARAMS, PARAMS
 from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, GLOSSY_ANISOTROPIC, MIN_ALPHA,
-                       MIRROR, NONE, REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
+                       MIRROR, NONE, OREN_NAYAR, REFRACTION, SHEEN, SUBSURFACE_RANDOM_WALK, SUBSURFACE_SKIN,
+                       TRANSLUCENT, TRANSPARENT)
 from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect_terms, pow5
 
 _NUMBA_TYPES = {np.dtype(np.int8): "int8", np.dtype(np.float64): "float64", np.dtype(np.bool_): "boolean"}
@@ -38,7 +39,9 @@ def array_type(dtype, ndim):
 LOBE_FIELDS = ((("kind", array_type(np.int8, 2), np.int8),)
                + tuple((p.field, array_type(p.dtype, 2 + len(p.tail)), p.dtype) for p in PARAMS)
                + (("back", array_type(np.bool_, 1), np.bool_),))
-ANISOTROPY = [name for name, _, _ in LOBE_FIELDS].index("anisotropy")   # the glossy_anisotropic lobe's array
+ANISOTROPY = [name for name, _, _ in LOBE_FIELDS].index("anisotropy")   # the glossy_anisotropic lobe's arrays
+ROTATION = [name for name, _, _ in LOBE_FIELDS].index("rotation")
+DIFFUSE_ROUGHNESS = [name for name, _, _ in LOBE_FIELDS].index("diffuse_roughness")   # oren_nayar's
 # MaterialTable's arrays gathered per ray (bsdf.Lobes' fields up to back).
 GATHER_FIELDS = (("kind", np.int8, ()), ("color", np.float64, (3,)), ("alpha", np.float64, ()),
                  ("schlick", np.bool_, ())) + tuple((p.field, p.dtype, p.tail) for p in EXTRA_PARAMS)
@@ -79,6 +82,11 @@ def register(numba):
 
 INV_PI = 1.0 / np.pi
 TWO_PI = 2.0 * np.pi
+FLT_MIN = 1.1754943508222875e-38
+# engine/lobes/anisotropic's clamps: anisotropy up to 1/0.9 (the Glossy
+# BSDF's range), the aspect's square at least MIN_ASPECT_SQ.
+MAX_ANISOTROPY = 1.0 / 0.9
+MIN_ASPECT_SQ = 1e-8
 # mf.f82_b's constants, computed as it does (Python's float pow).
 F82_F5 = (6.0 / 7.0) ** 5
 F82_SCALE = 7.0 / (F82_F5 * (6.0 / 7.0))
@@ -293,7 +301,8 @@ def weights_loop(lobes, tables, wo, out):
                 for c in range(3):
                     out[i, k, c] *= albedo
             # Multiscatter GGX (bsdf._energy): scales the lobe, darkens a layer's albedo.
-            ms = multiscatter[i, k] and kd != SHEEN and (kd == GLOSSY or kd == GLASS or covers[i, k] > 0)
+            ms = multiscatter[i, k] and kd != SHEEN and (kd == GLOSSY or kd == GLOSSY_ANISOTROPIC or kd == GLASS
+                                                         or covers[i, k] > 0)
             if ms:
                 glass = kd == GLASS
                 e, e_avg = _energy_tables(glass, _eta(ior[i, k], kd, back[i]), rough, mu,
@@ -304,7 +313,7 @@ def weights_loop(lobes, tables, wo, out):
                     else:
                         fss = _glossy_fss(fresnel[i, k], color[i, k, c], f0[i, k, c], edge[i, k, c], ior[i, k])
                     energy[0, c], energy[1, c] = _energy(fss, e, e_avg)
-                if kd == GLOSSY or glass:
+                if kd == GLOSSY or kd == GLOSSY_ANISOTROPIC or glass:
                     for c in range(3):
                         out[i, k, c] *= energy[0, c]
             if covers[i, k] <= 0:
@@ -431,8 +440,52 @@ def _refraction(alpha, eta, wox, woy, woz, wix, wiy, wiz):
 @helper
 def _aniso_alphas(alpha, anisotropy):
     """engine/lobes/anisotropic.alphas for one lobe."""
-    aspect = np.sqrt(1.0 - clip(anisotropy, 0.0, 1.0) * 0.9)
+    aspect = np.sqrt(max(1.0 - clip(anisotropy, 0.0, MAX_ANISOTROPY) * 0.9, MIN_ASPECT_SQ))
     return max(alpha / aspect, MIN_ALPHA), max(alpha * aspect, MIN_ALPHA)
+
+
+@helper
+def _turn(rotation):
+    """cos and sin of the tangent's rotation (engine/lobes/anisotropic.turn)."""
+    angle = TWO_PI * (rotation - np.floor(rotation))
+    return np.cos(angle), np.sin(angle)
+
+
+@helper
+def _g_oren_nayar(c):
+    """engine/lobes/oren_nayar.g_term for one cosine."""
+    if c < 1e-6:
+        return (0.5 * np.pi - 2.0 / 3.0) - c
+    s = np.sqrt(max(1.0 - c * c, 0.0))
+    theta = np.arccos(min(c, 1.0))
+    return s * (theta - 2.0 / 3.0 - s * c) + 2.0 / 3.0 * (s / c) * (1.0 - s * s * s)
+
+
+@helper
+def _oren_nayar_ms(rho, e_avg, factor):
+    """One channel of oren_nayar.multiscatter times (1 - E(wi)): Ems x factor."""
+    rho = clip(rho, 0.0, 1.0)
+    return INV_PI * rho * rho * (e_avg / (1.0 - e_avg)) / (1.0 - rho * (1.0 - e_avg)) * factor
+
+
+@helper
+def _oren_nayar(sigma, wox, woy, woz, wix, wiy, wiz):
+    """engine/lobes/oren_nayar.eval_f's shared part: the single-scattering
+    value, E_avg and (1 - E(wo)) (1 - E(wi)); b = 0 is Lambert."""
+    sigma = clip(sigma, 0.0, 1.0)
+    a = 1.0 / (np.pi + sigma * (0.5 * np.pi - 2.0 / 3.0))
+    b = sigma * a
+    if not b > 0.0:
+        return INV_PI, 0.5, 0.0
+    nl = max(wiz, 0.0)
+    nv = max(woz, 0.0)
+    t = (wix * wox + wiy * woy + wiz * woz) - nl * nv
+    if t > 0.0:
+        t = t / (max(nl, nv) + FLT_MIN)
+    e_avg = a * np.pi + ((2.0 * np.pi - 5.6) / 3.0) * b
+    e_o = a * np.pi + b * _g_oren_nayar(nv)
+    e_l = a * np.pi + b * _g_oren_nayar(nl)
+    return a + b * t, e_avg, (1.0 - e_o) * (1.0 - e_l)
 
 
 @helper
@@ -474,6 +527,13 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
                 f_1 += w[i, k, 1] * s
                 f_2 += w[i, k, 2] * s
                 p += sel[i, k] * np.abs(wiz) * INV_PI
+            elif kd == OREN_NAYAR and upper:
+                single, e_avg, ms = _oren_nayar(lobes[DIFFUSE_ROUGHNESS][i, k], wox, woy, woz, wix, wiy, wiz)
+                s = diffuse_term[i] if bump else 1.0
+                f_0 += w[i, k, 0] * ((single + _oren_nayar_ms(color[i, k, 0], e_avg, ms)) * s)
+                f_1 += w[i, k, 1] * ((single + _oren_nayar_ms(color[i, k, 1], e_avg, ms)) * s)
+                f_2 += w[i, k, 2] * ((single + _oren_nayar_ms(color[i, k, 2], e_avg, ms)) * s)
+                p += sel[i, k] * (max(wiz, 0.0) * INV_PI)
             elif kd == SHEEN and upper:
                 v, pk = _eval_sheen(t_sheen, np.sqrt(alpha[i, k]), wox, woy, woz, wix, wiy, wiz)
                 f_0 += w[i, k, 0] * v
@@ -482,7 +542,9 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
                 p += sel[i, k] * pk
             elif kd == GLOSSY_ANISOTROPIC and upper:
                 ax, ay = _aniso_alphas(alpha[i, k], lobes[ANISOTROPY][i, k])
-                spec, pk, cos = _ggx_aniso(ax, ay, wox, woy, woz, wix, wiy, wiz)
+                rc, rs = _turn(lobes[ROTATION][i, k])
+                spec, pk, cos = _ggx_aniso(ax, ay, rc * wox + rs * woy, rc * woy - rs * wox, woz,
+                                           rc * wix + rs * wiy, rc * wiy - rs * wix, wiz)
                 f_0, f_1, f_2 = _add_specular(f_0, f_1, f_2, w[i, k], fresnel[i, k], ior[i, k], color[i, k],
                                               f0[i, k], edge[i, k], cos, spec)
                 p += sel[i, k] * pk
@@ -595,6 +657,30 @@ def _sample_sheen(t_sheen, rough, wox, woy, woz, u1, u2):
             lx * 0.0 + ly * 0.0 + lz * 1.0)
 
 
+@helper
+def _subsurface_entry(skin, wox, woy, woz, alpha, ior, u1, u2):
+    """lobes/subsurface.entry_direction for one ray: (x, y, z, ok)."""
+    diffuse = skin and u1 < 0.5
+    if skin:
+        u1 = 2.0 * u1 if diffuse else 2.0 * (u1 - 0.5)
+        alpha = 1.0
+    u1 = min(u1, 1.0 - 1e-12)
+    if diffuse:
+        r = np.sqrt(u1)
+        phi = TWO_PI * u2
+        return r * np.cos(phi), r * np.sin(phi), -np.sqrt(max(0.0, 1.0 - u1)), True
+    if woz <= 0.0:
+        return 0.0, 0.0, 1.0, False
+    neta = 1.0 / clip(ior, 1.01, 3.8)
+    hx, hy, hz = _vndf(wox, woy, woz, alpha, u1, u2)
+    cos_hi = hx * wox + hy * woy + hz * woz
+    arg = 1.0 - neta * neta * (1.0 - cos_hi * cos_hi)
+    nk = neta * cos_hi - max(np.sqrt(max(arg, 0.0)), 1e-7)
+    x, y, z = -neta * wox + nk * hx, -neta * woy + nk * hy, -neta * woz + nk * hz
+    length = max(np.sqrt(x * x + y * y + z * z), 1e-30)
+    return x / length, y / length, z / length, z < 0.0
+
+
 def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delta, smooth):
     """bsdf._sample_numpy into wi, weight, pdf, delta, smooth."""
     kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, lobe_weight = lobes[:12]
@@ -629,7 +715,7 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
         x, y, z = 0.0, 0.0, 1.0
         r0 = r1 = r2 = p = 0.0
         is_delta = False
-        if kd == DIFFUSE or kd == TRANSLUCENT:
+        if kd == DIFFUSE or kd == TRANSLUCENT or kd == OREN_NAYAR:
             r = np.sqrt(u1[i])
             phi = TWO_PI * u2[i]
             x, y, z = r * np.cos(phi), r * np.sin(phi), np.sqrt(max(0.0, 1.0 - u1[i]))
@@ -642,8 +728,12 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
                 kd = NONE
         elif kd == GLOSSY_ANISOTROPIC:
             ax, ay = _aniso_alphas(alpha[i, k], lobes[ANISOTROPY][i, k])
-            hx, hy, hz = _vndf_aniso(wox, woy, woz, ax, ay, u1[i], u2[i])
-            x, y, z = _reflect(wox, woy, woz, hx, hy, hz)
+            rc, rs = _turn(lobes[ROTATION][i, k])
+            # In the rotated tangent's frame, then back.
+            lx, ly = rc * wox + rs * woy, rc * woy - rs * wox
+            hx, hy, hz = _vndf_aniso(lx, ly, woz, ax, ay, u1[i], u2[i])
+            x, y, z = _reflect(lx, ly, woz, hx, hy, hz)
+            x, y = rc * x - rs * y, rs * x + rc * y
             if z <= 0.0:
                 kd = NONE
         elif kd == SHEEN:
@@ -660,6 +750,13 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
         elif kd == TRANSPARENT:
             x, y, z = -wox, -woy, -woz
             r0, r1, r2 = w[i, k, 0] / p_lobe, w[i, k, 1] / p_lobe, w[i, k, 2] / p_lobe
+            is_delta = True
+            p = p_lobe
+        elif kd == SUBSURFACE_RANDOM_WALK or kd == SUBSURFACE_SKIN:
+            # lobes/subsurface.entry_direction (the integrator's subsurface stage draws it itself).
+            x, y, z, ok = _subsurface_entry(kd == SUBSURFACE_SKIN, wox, woy, woz, alpha[i, k], ior[i, k], u1[i], u2[i])
+            if ok:
+                r0, r1, r2 = w[i, k, 0] / p_lobe, w[i, k, 1] / p_lobe, w[i, k, 2] / p_lobe
             is_delta = True
             p = p_lobe
         elif kd == GLASS or kd == REFRACTION:

@@ -9,6 +9,7 @@ the view axis as Cycles does.
 import numpy as np
 
 from . import kernels
+from .motion import decompose, transform_at
 from .sampling import concentric_disk, upper_bound
 from .vec import column
 
@@ -165,13 +166,17 @@ class CameraModel:
         self.aperture = cam.aperture_radius
         if self.aperture <= 0 and cam.fstop > 0:
             self.aperture = cam.lens * 1e-3 / (2.0 * cam.fstop)
+        motion = getattr(cam, "motion", None)
+        # Camera motion blur: the decomposed camera-to-world at the shutter's steps.
+        self.motion = None if motion is None else decompose(motion)
 
     @property
     def forward(self):
         return -self.rot[:, 2]
 
-    def generate(self, pixel, u_fx, u_fy, u_l1, u_l2):
-        """Rays for window pixel indices (row-major, row 0 at the top).
+    def generate(self, pixel, u_fx, u_fy, u_l1, u_l2, time=None):
+        """Rays for window pixel indices (row-major, row 0 at the top), from
+        the camera where it is at each ray's shutter ``time`` when it moves.
 
         Returns world origins, unit directions and the distance to the far clip.
         """
@@ -195,6 +200,10 @@ class CameraModel:
         inv_z = 1.0 / np.maximum(-d[:, 2], 1e-12)
         o = o + d * (self.cam.clip_start * inv_z)[:, None]
         tmax = (self.cam.clip_end - self.cam.clip_start) * inv_z
+        if self.motion is not None and time is not None:
+            rot, pos = transform_at(self.motion, time)
+            rot = rot / np.linalg.norm(rot, axis=1, keepdims=True)   # rigid, as self.rot
+            return np.einsum("nij,nj->ni", rot, o) + pos, np.einsum("nij,nj->ni", rot, d), tmax
         return o @ self.rot.T + self.pos, d @ self.rot.T, tmax
 
     def _thin_lens(self, o, d, u1, u2):

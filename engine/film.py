@@ -35,9 +35,11 @@ class Tile:
         self.rgb = np.zeros((n, 3))
         self.rgb2 = np.zeros((n, 3))
         self.alpha = np.zeros(n)
+        self.holdout = np.zeros(n)
         self.count = np.zeros(n)
         self.aovs = {name: np.zeros((n, AOV_CHANNELS[name])) for name in aovs}
         self.aux = np.zeros((n, 3)) if aux else None
+        self.catcher = None
         self._pending = []
 
     def _bin(self, pix, w):
@@ -70,6 +72,37 @@ class Tile:
         self.rgb += self._bin3(pix, L)
         self.rgb2 += self._bin3(pix, L * L)
 
+    # -- shadow catchers (engine/integrator/catcher.py) ------------------------
+
+    def _catcher_sums(self):
+        if getattr(self, "catcher", None) is None:
+            n = self.hi - self.lo
+            self.catcher = {"matte": np.zeros((n, 3)), "light": np.zeros((n, 3)), "split": np.zeros(n),
+                            "background": np.zeros((n, 3))}
+        return self.catcher
+
+    def add_catcher(self, pix, L, flag):
+        """Radiance of ended paths by their catcher flag: matte paths (0) to
+        the matte, catcher paths (2) to the catcher's light."""
+        sums = self._catcher_sums()
+        for key, sel in (("matte", flag == 0), ("light", flag == 2)):
+            if sel.any():
+                sums[key] += self._bin3(pix[sel] - self.lo, L[sel])
+
+    def add_split(self, pix, transparency, background=None):
+        sums = self._catcher_sums()
+        sums["split"] += self._bin(pix, transparency)
+        if background is not None:
+            sums["background"] += self._bin3(pix - self.lo, background)
+
+    def add_background(self, pix, values):
+        self._catcher_sums()["background"] += self._bin3(pix - self.lo, values)
+
+    def add_holdout(self, pix, transparency):
+        """Camera paths met holdouts: the film's alpha is uncovered by
+        ``transparency`` (Cycles' film_write_holdout), transparent film or not."""
+        self.holdout += self._bin(pix, transparency)
+
     def add_camera(self, pix, alpha, depth, normal, albedo):
         self.count += np.bincount(pix - self.lo, minlength=self.hi - self.lo)
         self.alpha += self._bin(pix, alpha)
@@ -97,6 +130,9 @@ class Film:
         self.mean = np.zeros((n, 3), np.float32)
         self.m2 = np.zeros((n, 3), np.float32)
         self.alpha = np.zeros(n, np.float32)   # sum of coverage
+        self.holdout = np.zeros(n, np.float32)   # sum of holdout transparency
+        self.catcher = None                      # shadow catcher sums (Tile.add_catcher)
+        self.combined_alpha = np.ones(n)         # Combined's alpha at the last image()
         self.aovs = {name: np.zeros((n, AOV_CHANNELS[name]), np.float32) for name in aovs}
         # Adaptive sampling: sum of the class-A samples' radiance.
         self.aux = np.zeros((n, 3), np.float32) if adaptive else None
@@ -117,6 +153,13 @@ class Film:
         with self._lock:
             self._combine(s, nb, mean_b, m2_b)
             self.alpha[s] += tile.alpha
+            self.holdout[s] += tile.holdout
+            if tile.catcher is not None:
+                if self.catcher is None:
+                    n = self.width * self.height
+                    self.catcher = {k: np.zeros((n,) + v.shape[1:]) for k, v in tile.catcher.items()}
+                for key, value in tile.catcher.items():
+                    self.catcher[key][s] += value
             for name, acc in self.aovs.items():
                 acc[s] += tile.aovs[name]
             if self.aux is not None:
@@ -142,13 +185,55 @@ class Film:
         c = np.maximum(self.count, 1.0)
         return arr / (c if arr.ndim == 1 else c[:, None])
 
-    def image(self, transparent=True):
+    def image(self, transparent=True, approximate_catcher=True):
         """(H, W, 4) float32 RGBA.  Alpha is the coverage with a transparent
-        film, else 1 (as Cycles)."""
+        film, else 1, less what holdouts uncovered (as Cycles).  With a
+        shadow catcher Combined is the matte: with the approximate shadow
+        when ``approximate_catcher`` (Cycles: the Shadow Catcher pass off),
+        in the alpha on a transparent film, over the background on an
+        opaque one; without it (the pass holds the shadow) the matte alone."""
         out = np.empty((self.height * self.width, 4), np.float32)
         out[:, :3] = self.mean
-        out[:, 3] = self._per_sample(self.alpha) if transparent else 1.0
+        alpha = self._per_sample(self.alpha) if transparent else 1.0
+        out[:, 3] = np.maximum(alpha - self._per_sample(self.holdout), 0.0)
+        self.combined_alpha = out[:, 3].copy()     # the Shadow Catcher pass reads it
+        if self.catcher is not None:
+            out[:] = self._catcher_image(out, transparent, approximate_catcher)
         return out.reshape(self.height, self.width, 4)
+
+    def shadow_catcher(self, alpha):
+        """(N, 3) Cycles' Shadow Catcher pass: Combined without the matte
+        over the catcher's own light (1 where no catcher was met), alpha-
+        overed on white by Combined's alpha."""
+        c = np.maximum(self.count.astype(np.float64), 1.0)
+        combined = self.mean.astype(np.float64) * c[:, None]
+        light = self.catcher["light"]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(light != 0, (combined - self.catcher["matte"]) / np.where(light != 0, light, 1.0), 1.0)
+        ratio = np.where((self.catcher["split"] > 0)[:, None] | (light != 0), ratio, 1.0)
+        a = np.asarray(alpha, np.float64)[:, None]
+        return (1.0 - a) + a * ratio
+
+    def _catcher_image(self, out, transparent, approximate):
+        """Combined with a shadow catcher: the matte, with the approximate
+        shadow (Cycles' shadow catcher matte with shadow) in the alpha or
+        over the background, or alone."""
+        c = np.maximum(self.count.astype(np.float64), 1.0)
+        shadow = self.shadow_catcher(out[:, 3])
+        matte = self.catcher["matte"] / c[:, None]
+        # The matte's transparency: Combined's, and every split sample's throughput.
+        matte_t = (1.0 - out[:, 3]) + self.catcher["split"] / c
+        alpha = np.clip(1.0 - matte_t, 0.0, 1.0)
+        alpha_matte = (1.0 - alpha) * (1.0 - np.clip(shadow.mean(axis=1), 0.0, 1.0)) + alpha
+        image = np.empty_like(out, dtype=np.float64)
+        if not approximate:
+            image[:, :3], image[:, 3] = matte, alpha
+        elif transparent:
+            image[:, :3], image[:, 3] = matte, alpha_matte
+        else:
+            image[:, :3] = matte + self.catcher["background"] / c[:, None] * (1.0 - alpha_matte)[:, None]
+            image[:, 3] = 1.0
+        return image
 
     def variance(self):
         """(H, W, 3) float32 variance of each pixel's mean: the unbiased
@@ -199,7 +284,7 @@ class Film:
         """The film's statistics as plain arrays (a farm shard)."""
         out = {"version": np.array(STATE_VERSION), "width": np.array(self.width),
                "height": np.array(self.height), "count": self.count, "mean": self.mean,
-               "m2": self.m2, "alpha": self.alpha}
+               "m2": self.m2, "alpha": self.alpha, "holdout": self.holdout}
         for name, acc in self.aovs.items():
             out["aov_" + name] = acc
         if self.aux is not None:
@@ -224,6 +309,8 @@ class Film:
             self._combine(slice(0, n), np.asarray(state["count"], np.float64),
                           np.asarray(state["mean"], np.float64), np.asarray(state["m2"], np.float64))
             self.alpha += state["alpha"]
+            if "holdout" in state:     # shards written before holdouts have none
+                self.holdout += state["holdout"]
             for name, acc in self.aovs.items():
                 acc += state["aov_" + name]
             if self.aux is not None and "aux" in state:

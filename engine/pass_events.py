@@ -212,18 +212,17 @@ def _vertex(ctx, paths, hit, lobes, w, tt, bb, depth, tile):
     features = tile.wants("Denoising Albedo") or tile.wants("Denoising Normal")
     colours = depth == 0 and any(tile.wants(c + " Color") for c in LIGHT_CLASSES)
     if features or colours:
-        w = _closure_weights(lobes, hit, tt, bb)
+        w = _closure_albedos(lobes, hit, tt, bb)
     if depth == 0:
         first_hit(ctx, paths, hit, lobes, w, tt, bb, tile)
     if features:
-        _denoising_features(ctx, paths, hit, lobes, w, tile)
+        _denoising_features(ctx, paths, hit, lobes, w[0] + w[1], tile)
 
 
-def _closure_weights(lobes, hit, tt, bb):
-    """Lobe colours as Cycles' closure weights: with layering, without the
-    multiscatter energy compensation (Cycles keeps that in energy_scale)."""
-    plain = replace(lobes, multiscatter=np.zeros_like(lobes.multiscatter))
-    return bsdf.weights(plain, to_local(hit.wo, tt, bb, hit.ns))
+def _closure_albedos(lobes, hit, tt, bb):
+    """Each lobe's (reflection, transmission) albedo as Cycles' bsdf_albedo
+    (bsdf.closure_albedos): what its colour and denoising passes hold."""
+    return bsdf.closure_albedos(lobes, to_local(hit.wo, tt, bb, hit.ns))
 
 
 def first_hit(ctx, paths, hit, lobes, w, tt, bb, tile):
@@ -233,17 +232,26 @@ def first_hit(ctx, paths, hit, lobes, w, tt, bb, tile):
     add = tile.add_pass
     add("Normal", pix, hit.ns)
     if tile.wants("UV"):
-        add("UV", pix, np.column_stack([hit.uv, np.ones(len(pix))]))
+        has = _has_uv(ctx.triangles, hit.prim)
+        add("UV", pix, np.where(has[:, None], np.column_stack([hit.uv, np.ones(len(pix))]), 0.0))
     if tile.wants("Mist"):
         add("Mist", pix, 1.0 - _mist(ctx, cfg, hit.p))
     inst = ctx.triangles.instance[hit.prim] if ctx.triangles.instance is not None else np.zeros(len(pix), int)
-    _colours(lobes, w, dot(hit.wo, hit.ns), pix, tile)
+    _colours(lobes, w, pix, tile)
     for name, table in (cfg.aov_tables or {}).items():
         add(name, pix, table[hit.mat])
     if tile.extra.crypto:
         _cryptomatte(cfg, inst, hit.mat, pix, tile)
     if tile.wants("Ambient Occlusion"):
         _ambient_occlusion(ctx, cfg, hit, tt, bb, pix, tile)
+
+
+def _has_uv(triangles, prim):
+    """Whether the triangles ``prim`` belong to meshes with a UV map."""
+    shading = getattr(triangles, "shading", None)
+    if shading is None:
+        return np.full(len(prim), triangles.uv is not None)
+    return shading.has_uv()[prim]
 
 
 def _denoising_features(ctx, paths, hit, lobes, w, tile):
@@ -323,34 +331,22 @@ def _class_of(lobes):
     return np.where((kind == bsdf.NONE) | (kind == bsdf.TRANSPARENT), -1, cls)
 
 
-def _colours(lobes, w, cos_o, pix, tile):
-    """Diffuse / Glossy / Transmission Color: the summed effective lobe
-    colours of each class at vertex 0 (Cycles' closure albedos).  A glass
-    lobe's colour is split by the dielectric Fresnel of its IOR at the view
-    angle: reflection to glossy, the rest to transmission."""
+def _colours(lobes, w, pix, tile):
+    """Diffuse / Glossy / Transmission Color: the summed closure albedos of
+    each class at vertex 0 (Cycles' surface_shader_diffuse / glossy /
+    transmission): a glass lobe's reflection estimate is glossy, its
+    refracted part transmission.  ``w``: (reflection, transmission)."""
     if not any(tile.wants(c + " Color") for c in LIGHT_CLASSES):
         return
+    refl, trans = w
     cls = _class_of(lobes)
     glass = lobes.kind == bsdf.GLASS
-    fresnel = _fresnel_dielectric(np.clip(cos_o, 0.0, 1.0)[:, None], lobes.ior)
-    share = np.where(glass, fresnel, 1.0)
     for index, name in enumerate(LIGHT_CLASSES):
-        part = np.where(cls == index, share, 0.0)
         if index == 2:
-            part = part + np.where(glass, 1.0 - fresnel, 0.0)
-        tile.add_pass(name + " Color", pix, (w * part[:, :, None]).sum(axis=1))
-
-
-def _fresnel_dielectric(cos_i, eta):
-    """Unpolarised Fresnel reflectance of a dielectric (IOR ratio eta)."""
-    eta = np.where(eta > 0, eta, 1.5)
-    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
-    cos_t = np.sqrt(np.maximum(1.0 - sin2_t, 0.0))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
-        rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
-    f = 0.5 * (rs * rs + rp * rp)
-    return np.where(sin2_t >= 1.0, 1.0, np.nan_to_num(f, nan=1.0))
+            value = (trans * (glass | (cls == 2))[:, :, None]).sum(axis=1)
+        else:
+            value = (refl * (cls == index)[:, :, None]).sum(axis=1)
+        tile.add_pass(name + " Color", pix, value)
 
 
 def _cryptomatte(cfg, inst, mat, pix, tile):

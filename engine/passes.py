@@ -57,7 +57,7 @@ for _c in LIGHT_CLASSES:
     DEFS[_c + " Direct"] = (3, DIVIDE, _c + " Color")
     DEFS[_c + " Indirect"] = (3, DIVIDE, _c + " Color")
 # Passes the film derives from what it keeps anyway (no extra sums).
-FILM_PASSES = {"Variance": 3, "Sample Count": 1, "Vector": 4}
+FILM_PASSES = {"Variance": 3, "Sample Count": 1, "Vector": 4, "Shadow Catcher": 3}
 ALL_PASSES = tuple(DEFS) + tuple(FILM_PASSES) + CRYPTO
 
 
@@ -288,6 +288,10 @@ def _film_pass(name, film, count):
         return film.variance().reshape(-1, 3)
     if name == "Sample Count":
         return count.astype(np.float32)
+    if name == "Shadow Catcher":
+        if film.catcher is None:
+            return np.ones((len(count), 3), np.float32)
+        return film.shadow_catcher(film.combined_alpha).astype(np.float32)
     return np.zeros((len(count), 4), np.float32)  # Vector: no motion blur
 
 

@@ -19,13 +19,16 @@ from concurrent.futures import TimeoutError as FuturesTimeout
 import numpy as np
 
 from .accel import Accel
+from .motion import MotionAccel, MotionGeometry, has_motion
 from .blas import single_threaded_blas
 from .bsdf import MaterialTable, bump_model
 from .camera import CameraModel, PixelFilter
-from . import kernels, media, pass_events
+from . import kernels, media, pass_events, points
 from .film import Film
 from .geometry import flatten, material_table
-from .integrator import Context, trace_batch
+from .integrator.catcher import catcher_triangles
+from .integrator.linking import LightLinks
+from .integrator import Context, subsurface, trace_batch
 from .lights import LightSet
 from .sampler import Sampler
 from .scene import Cancelled, RenderSettings, SceneError
@@ -76,9 +79,15 @@ def prepare(scene, settings):
     kernels.configure(getattr(settings, "use_jit", True))   # flatten has a kernel too
     validate_scene(scene)
     validate_settings(settings)
+    source = scene
+    scene, point_owners, point_radii = points.expand(scene)   # point clouds as stand-in rows
     tris = flatten(scene, with_instance=bool(settings.passes), threads=settings.threads)
+    spheres = points.spheres_of(tris, scene, point_owners, point_radii)
+    motion = MotionGeometry(scene, tris) if has_motion(source) else None
+    unlit = points.unlit_rows(len(tris), spheres, motion)
     materials = MaterialTable(material_table(scene))
-    lights = LightSet(scene, tris, materials, settings.light_selection,
+    lights = LightSet(scene, points.for_lights(tris, unlit, len(scene.materials)), materials,
+                      settings.light_selection,
                       env_compensation=settings.mis_compensation and settings.strategy == "mis")
     # 'auto' stays only where it samples every light at glossy vertices;
     # else it is the light tree.
@@ -87,21 +96,45 @@ def prepare(scene, settings):
         camera = CameraModel(scene.camera, PixelFilter(settings.filter_type, settings.filter_width))
     except ValueError as exc:
         raise SceneError(f"camera: {exc}") from None
-    accel = Accel(tris)
+    # Only moving triangles and points need Embree's C API (a moving camera alone does not).
+    moving = motion is not None and motion.moving
+    accel = MotionAccel(tris, motion if moving else None, spheres) if moving or spheres is not None else Accel(tris)
     world = np.asarray(scene.world.color, dtype=np.float64)
-    return Context.build(accel, tris, materials, lights, camera, world, settings,
-                         sampler=Sampler(settings.seed, settings.sampling_pattern),
-                         bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
-                         pass_config=pass_events.configure(scene, settings),
-                         media=_media(scene, accel, tris, camera))
+    ctx = Context.build(accel, tris, materials, lights, camera, world, settings,
+                        sampler=Sampler(settings.seed, settings.sampling_pattern),
+                        bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
+                        pass_config=pass_events.configure(scene, settings),
+                        media=_media(scene, accel, tris, camera), holdout=holdout_weights(scene, tris),
+                        links=LightLinks.build(scene, lights, tris), catcher=catcher_triangles(scene, tris),
+                        motion=motion, spheres=spheres, unlit=unlit)
+    if ctx.subsurface:
+        ctx = dataclasses.replace(ctx, subsurface_warnings=tuple(subsurface.open_mesh_warnings(scene)))
+    return ctx
+
+
+def holdout_weights(scene, tris):
+    """(T,) holdout weight of every triangle for camera rays, or None when
+    nothing in the scene is a holdout: 1 on holdout objects, else the
+    material's Holdout shader weight."""
+    mats = material_table(scene)
+    per_material = np.array([float(getattr(m, "holdout", 0.0)) for m in mats])
+    per_instance = np.array([bool(getattr(i, "holdout", False)) for i in scene.instances] + [False])
+    if not (per_material.any() or per_instance.any()) or len(tris.material) == 0:
+        return None
+    weights = per_material[np.asarray(tris.material, np.int64)]
+    owner = getattr(tris.shading, "instance", None)
+    if owner is not None and per_instance.any():
+        weights = np.where(per_instance[np.asarray(owner, np.int64)], 1.0, weights)
+    return weights if weights.any() else None
 
 
 def _media(scene, accel, tris, camera):
     """The scene's media (None without a volume), with the media the camera
     starts in and a warning per object whose volume mesh is open."""
-    table = media.MediumTable.of(material_table(scene))
+    table = media.MediumTable.of(material_table(scene), getattr(scene.world, "volume", None))
     if table is None:
         return None
+    table.attach(material_table(scene), scene, tris)
     if scene.camera.kind == "PERSP":
         media.camera_media(table, accel, tris, np.asarray(scene.camera.matrix, np.float64)[:3, 3], camera.forward)
     table.warnings = [f"object {name!r}: its volume mesh is not closed; paths may never leave the volume"
@@ -161,7 +194,15 @@ def warnings_for(ctx):
         out.append("the scene has no lights and a black world: the image will be black")
     if ctx.media is not None:
         out.extend(ctx.media.warnings)
+        out.extend(ctx.media.field_warnings())
+    out.extend(ctx.subsurface_warnings)
     out.extend(ctx.materials.textures.bent_away_warnings())
+    if ctx.transparent_shadows and ctx.links is not None and ctx.links.any_blockers:
+        out.append("shadow linking is not applied to shadow rays through transparent surfaces: "
+                   "every object casts the shadows of shadow-linked lights in this scene")
+    if ctx.transparent_shadows and ctx.catcher is not None:
+        out.append("shadow catchers with transparent surfaces in the scene: the catchers' own light "
+                   "is shadowed by every object, so shadows fade from the catcher's alpha")
     return out
 
 
@@ -305,7 +346,7 @@ def _render(scene, settings, progress):
                 # mean is still unbiased.  Report the fewest samples any pixel has.
                 stats["samples"] = int(film.count.min())
             if progress is not None and hasattr(progress, "on_pass"):
-                image = film.image(settings.transparent)
+                image = film.image(settings.transparent, "Shadow Catcher" not in settings.passes)
                 progress.on_pass(image, stats["samples"], dict(stats))
             if cancelled or _should_stop(progress, stats, settings):
                 if queue:
@@ -313,7 +354,7 @@ def _render(scene, settings, progress):
                     pool.abandon()  # the next pass, already started, is dropped
                 break
     if image is None:
-        image = film.image(settings.transparent)
+        image = film.image(settings.transparent, "Shadow Catcher" not in settings.passes)
     return RenderResult(film, image, stats["samples"], stats, warnings_for(ctx),
                         film.pass_images(ctx.pass_config), pass_events.metadata(ctx.pass_config, settings.passes))
 

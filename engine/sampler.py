@@ -36,6 +36,9 @@ PATTERNS = (SOBOL, RANDOM)
 # MEDIUM = the colour channel and distance of a free flight in a volume
 # (a path scattering in a volume uses its step's LIGHT and BSDF sets).
 CAMERA = 0
+# Motion blur: the time of a camera sample within the shutter (its first
+# dimension), a set of its own so the camera's four stay as they are.
+TIME = 0x20000000
 LIGHT, BSDF, KIND, MEDIUM = 0, 1, 2, 3
 _SETS_PER_STEP = 4
 
@@ -43,6 +46,14 @@ _SETS_PER_STEP = 4
 def vertex_set(step, which):
     """Dimension-set id of ``which`` (LIGHT, BSDF, KIND) at wavefront step ``step``."""
     return 1 + step * _SETS_PER_STEP + which
+
+
+def subsurface_set(step, bounce, which):
+    """Dimension-set id of a subsurface random walk's bounce ``bounce`` at
+    wavefront step ``step`` (``which`` 0: channel, distance and direction;
+    1: spare): disjoint from the vertex, node (bit 29) and all-lights (bit
+    30) sets."""
+    return 0x10000000 | ((int(step) & 0xFF) << 20) | ((int(bounce) & 0x3FFFF) << 1) | (int(which) & 1)
 
 
 def emitter_set(step, emitter):

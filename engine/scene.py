@@ -17,7 +17,7 @@ reads it and checks shapes, dtypes, finiteness and index ranges, raising
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, make_dataclass
+from dataclasses import MISSING, dataclass, field, fields, make_dataclass
 from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -71,6 +71,12 @@ class Mesh:
     attributes: Optional[dict] = None
     texspace: Optional[tuple] = None
     orco: Optional[np.ndarray] = None
+    # Deformation motion blur: vertex positions (S, V, 3) at the shutter's S
+    # evenly spaced steps (step k at time k / (S - 1) of the shutter), and
+    # optionally per-corner shading normals (S, T, 3, 3) there; None: the
+    # mesh does not deform during the shutter.
+    motion: Optional[np.ndarray] = None
+    motion_normals: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -101,6 +107,42 @@ class Instance:
     pass_index: int = 0
     random: float = 0.0
     asset: str = ""
+    # Object > Visibility > Mask > Holdout (or a holdout collection): camera
+    # rays meeting the object end there and leave the film transparent;
+    # every other ray sees the object as usual (Cycles' SD_OBJECT_HOLDOUT_MASK).
+    holdout: bool = False
+    # Object > Visibility > Mask > Shadow Catcher (engine/integrator/catcher.py).
+    shadow_catcher: bool = False
+    # Transform motion blur: object-to-world (S, 4, 4) at the shutter's S
+    # evenly spaced steps (Cycles' motion steps); None: it does not move.
+    motion: Optional[np.ndarray] = None
+
+
+def _point_cloud_fields():
+    """PointCloud's fields: the points, then Instance's placement fields
+    (matrix, materials, name, ray visibility, object info) with their
+    defaults, then the per-point attributes."""
+    out = [("positions", np.ndarray), ("radii", np.ndarray)]
+    for f in fields(Instance):
+        if f.name in ("mesh", "asset", "motion"):
+            continue
+        default = {} if f.default is MISSING else {"default": "points" if f.name == "name" else f.default}
+        if f.default_factory is not MISSING:
+            default = {"default_factory": f.default_factory}
+        out.append((f.name, f.type, field(**default)))
+    return out + [("attributes", Optional[dict], field(default=None))]
+
+
+PointCloud = make_dataclass("PointCloud", _point_cloud_fields())
+PointCloud.__module__ = __name__
+PointCloud.__doc__ = """Spheres (Blender's point cloud objects, geometry nodes' Points).
+
+    positions: (N, 3) object-space centres; radii: (N,) radii (the radius
+    attribute); matrix: object-to-world (radii scale by cbrt|det|, as
+    Cycles); materials: scene material per slot (one slot: the cloud's
+    material); attributes: {name: (N, C)} per-point values shader nodes read
+    as colour attributes; the other fields as ``Instance``'s.
+    """
 
 
 # ----------------------------------------------------------------------------
@@ -156,6 +198,18 @@ class Material:
     # Shader AOVs (AOV Output nodes): name -> ((r, g, b), value), constants.
     aovs: dict = field(default_factory=dict)
     volume: Optional[Volume] = None
+    # The tangent of its anisotropic lobes: a vector expression (a Tangent
+    # node's NodeOutput, Cycles' radial default included), projected onto the
+    # plane of the shading normal per hit; None: the shading frame's own.
+    tangent: Optional["Texture"] = None
+    # The lobes (slot indices: sheen, coat) whose albedo at the view angle
+    # dims the emission, as Cycles' Principled BSDF layers its emission.
+    emission_layers: tuple = ()
+    # Holdout shader weight in [0, 1] (Cycles' holdout closure): camera rays
+    # (and their transparent passes) hitting the surface uncover the film's
+    # alpha by it, whatever Film > Transparent says; other rays see its part
+    # as black.
+    holdout: float = 0.0
 
 
 DEFAULT_MATERIAL = Material("default", (Lobe("diffuse", (0.8, 0.8, 0.8)),))
@@ -441,6 +495,12 @@ class World:
     (next-event estimation combined with BSDF sampling by MIS)."""
     color: RGB = (0.05, 0.05, 0.05)
     texture: Optional[EnvironmentTexture] = None
+    # The world's Volume output: a homogeneous medium filling all space,
+    # at the bottom of every path's volume stack (Cycles adds the background
+    # volume first and keeps it inside objects: their media add to it).
+    # Constant coefficients only.  Light from infinitely far (the world,
+    # suns) is extinguished by it entirely, as in Cycles.
+    volume: Optional[Volume] = None
 
 
 # ----------------------------------------------------------------------------
@@ -477,6 +537,11 @@ class Camera:
     resolution: Tuple[int, int] = (640, 480)
     pixel_aspect: Tuple[float, float] = (1.0, 1.0)
     border: Optional[Tuple[float, float, float, float]] = None
+    # Camera motion blur: camera-to-world (S, 4, 4) at the shutter's S evenly
+    # spaced steps; None: a still camera.  Rays take their time uniformly
+    # over the shutter (the sampler's time dimension) and the camera at that
+    # time (rotation by quaternion, translation linearly, as Cycles).
+    motion: Optional[np.ndarray] = None
 
 
 # ----------------------------------------------------------------------------
@@ -561,6 +626,21 @@ class RenderSettings:
     volume_bounces: int = 0
 
 
+@dataclass(frozen=True)
+class LinkSet:
+    """A light's receiver or blocker collection (Blender 4.0+ Light Linking
+    and Shadow Linking) as object names: objects excluded never take part;
+    with any object included only the included ones do, else every object
+    not excluded does (Blender's rule)."""
+    include: frozenset = frozenset()
+    exclude: frozenset = frozenset()
+
+    def admits(self, name):
+        if name in self.exclude:
+            return False
+        return name in self.include if self.include else True
+
+
 @dataclass
 class Scene:
     meshes: Sequence[Mesh] = ()
@@ -572,3 +652,9 @@ class Scene:
     # The Blender version the scene comes from: where Cycles changed between
     # versions (its bump shadowing term), Ember renders as that version's.
     cycles_version: tuple = (5, 0, 0)
+    # Light and shadow linking: scene light index -> (receivers, blockers),
+    # each a LinkSet or None (every object).  Lights not listed are linked
+    # to everything.
+    light_links: dict = field(default_factory=dict)
+    # Point clouds (spheres), after the fields above (scenes are built positionally too).
+    points: Sequence[PointCloud] = ()

@@ -613,6 +613,7 @@ class MaterialTextures:
         self.lobe_fields = []    # (material, lobe, field, fn)
         self.emission = {}       # material -> fn
         self.normals = {}        # material -> NormalMap | Bump
+        self.tangents = {}       # material -> fn (its anisotropic lobes' tangent)
         self.constants = [self._constant_material(i, m) for i, m in enumerate(materials)]
         self.any = bool(self.lobe_fields or self.emission)
         # Per material with a normal map or bump: [points shaded, points
@@ -635,7 +636,10 @@ class MaterialTextures:
         normal = getattr(mat, "normal", None)
         if normal is not None:
             self.normals[i] = self._compile_normal(normal)
-        return dataclasses.replace(mat, lobes=tuple(lobes), emission=emission, normal=None)
+        tangent = getattr(mat, "tangent", None)
+        if tangent is not None:
+            self.tangents[i] = self.compiler.color(tangent)
+        return dataclasses.replace(mat, lobes=tuple(lobes), emission=emission, normal=None, tangent=None)
 
     def _constant_lobe(self, i, j, lobe):
         lobe = _with_derived_f0(lobe)
@@ -692,6 +696,28 @@ class MaterialTextures:
                 emission = np.array(emission, copy=True)
                 emission[rows] = np.clip(_renderable(fn(ctx.take(rows))), 0.0, None)
         return emission
+
+    def tangent_frames(self, mat, shading, ns, tt, bb):
+        """The shading frames (tt, bb) of the rays whose material has a
+        tangent: tt its tangent made perpendicular to the shading normal ns
+        and bb = ns x tt, as Cycles' make_orthonormals_tangent; where the
+        tangent is zero, not finite or along ns, the frame is kept.  In place."""
+        if not self.tangents:
+            return
+        ctx = as_context(shading)
+        for i, fn in self.tangents.items():
+            rows = np.nonzero(mat == i)[0]
+            if not len(rows):
+                continue
+            n = ns[rows]
+            t = np.nan_to_num(np.asarray(fn(ctx.take(rows)), dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+            y = np.cross(n, t)
+            length = np.linalg.norm(y, axis=1)
+            ok = length > 1e-12 * np.maximum(np.linalg.norm(t, axis=1), 1e-300)
+            y = y / np.where(ok, length, 1.0)[:, None]
+            x = np.cross(y, n)
+            tt[rows] = np.where(ok[:, None], x, tt[rows])
+            bb[rows] = np.where(ok[:, None], y, bb[rows])
 
     def perturb(self, hit, triangles):
         """Shading normals with each material's normal map / bump applied."""

@@ -63,6 +63,27 @@ def validate_mesh(mesh, index):
             raise SceneError(f"{what}: {len(slots)} material slots for {n} triangles")
         if n and slots.min() < 0:
             raise SceneError(f"{what}: negative material slot {slots.min()}")
+    _validate_mesh_motion(mesh, what, len(pos), n)
+
+
+def _steps(value, what, tail):
+    """A motion array (S, ...) of at least two finite steps."""
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "fi" or arr.ndim != 1 + len(tail) or tuple(arr.shape[1:]) != tail:
+        raise SceneError(f"{what}: expected shape (steps, {', '.join(map(str, tail))}), got {arr.shape}")
+    if len(arr) < 2:
+        raise SceneError(f"{what}: motion needs at least 2 steps, got {len(arr)}")
+    _finite(arr, what)
+    return arr
+
+
+def _validate_mesh_motion(mesh, what, n_vertices, n_triangles):
+    if getattr(mesh, "motion", None) is not None:
+        steps = _steps(mesh.motion, f"{what} motion", (n_vertices, 3))
+        if getattr(mesh, "motion_normals", None) is not None:
+            normals = _steps(mesh.motion_normals, f"{what} motion_normals", (n_triangles, 3, 3))
+            if len(normals) != len(steps):
+                raise SceneError(f"{what}: {len(normals)} steps of motion normals for {len(steps)} of positions")
 
 
 def validate_instance(inst, index, n_meshes, n_materials):
@@ -73,6 +94,8 @@ def validate_instance(inst, index, n_meshes, n_materials):
     if m.shape != (4, 4):
         raise SceneError(f"{what}: matrix must be 4x4, got {m.shape}")
     _finite(m, f"{what} matrix")
+    if getattr(inst, "motion", None) is not None:
+        _steps(inst.motion, f"{what} motion", (4, 4))
     for slot, mat in enumerate(inst.materials):
         if not -1 <= mat < n_materials:
             raise SceneError(f"{what}: slot {slot} names material {mat}, "
@@ -90,6 +113,9 @@ def validate_instances(instances, n_meshes, n_materials):
     bad = _first_bad_instance(instances, n_meshes, n_materials)
     if bad is not None:
         validate_instance(instances[bad], bad, n_meshes, n_materials)
+    for i, inst in enumerate(instances):
+        if getattr(inst, "motion", None) is not None:
+            validate_instance(inst, i, n_meshes, n_materials)
 
 
 def _first_bad_instance(instances, n_meshes, n_materials):
@@ -127,6 +153,11 @@ def validate_material(mat, index):
     _color_param(mat.emission, f"{what} emission")
     if getattr(mat, "normal", None) is not None:
         validate_normal(mat.normal, f"{what} normal")
+    if getattr(mat, "tangent", None) is not None:
+        validate_texture(mat.tangent, f"{what} tangent")
+    for k in getattr(mat, "emission_layers", ()):
+        if not (isinstance(k, (int, np.integer)) and 0 <= k < len(mat.lobes)):
+            raise SceneError(f"{what}: emission layer {k!r} is no lobe of its {len(mat.lobes)}")
     for k, lobe in enumerate(mat.lobes):
         if lobe.kind not in LOBE_KINDS:
             raise SceneError(f"{what}: lobe {k} has unknown kind {lobe.kind!r} "
@@ -142,11 +173,18 @@ def validate_material(mat, index):
         _validate_lobe_extras(lobe, k, what, len(mat.lobes))
     if getattr(mat, "volume", None) is not None:
         validate_volume(mat.volume, what)
+    holdout = getattr(mat, "holdout", 0.0)
+    if not (np.isfinite(holdout) and 0.0 <= holdout <= 1.0):
+        raise SceneError(f"{what}: holdout must lie in [0, 1], got {holdout}")
 
 
 def validate_volume(vol, what):
-    """A homogeneous medium: finite, non-negative coefficients, |g| <= 1."""
+    """A medium: finite, non-negative constant coefficients or texture
+    expressions (a heterogeneous medium, repaired where evaluated), |g| <= 1."""
     for name in ("absorption", "scattering", "emission"):
+        if is_texture(getattr(vol, name)):
+            validate_texture(getattr(vol, name), f"{what} volume {name}")
+            continue
         arr = _rgb(getattr(vol, name), f"{what} volume {name}")
         if np.any(arr < 0):
             raise SceneError(f"{what}: volume {name} must be >= 0, got {tuple(arr)}")
@@ -181,6 +219,11 @@ def _validate_lobe_extras(lobe, k, what, n_lobes):
 
 def validate_world(world):
     _rgb(world.color, "world colour")
+    vol = getattr(world, "volume", None)
+    if vol is not None:
+        if any(is_texture(getattr(vol, f)) for f in ("absorption", "scattering", "emission")):
+            raise SceneError("world volume: textured coefficients are not supported (constants only)")
+        validate_volume(vol, "world")
     tex = world.texture
     if tex is None:
         return
@@ -218,6 +261,8 @@ def validate_camera(cam):
     if m.shape != (4, 4):
         raise SceneError("camera: matrix must be 4x4")
     _finite(m, "camera matrix")
+    if getattr(cam, "motion", None) is not None:
+        _steps(cam.motion, "camera motion", (4, 4))
     if cam.kind not in ("PERSP", "ORTHO"):
         raise SceneError(f"camera: unsupported type {cam.kind!r} (PERSP or ORTHO)")
     w, h = cam.resolution
@@ -273,7 +318,33 @@ def _validate_passes(s):
         raise SceneError(f"settings: unknown render passes {bad}")
 
 
+def validate_point_cloud(cloud, index, n_materials):
+    what = f"point cloud {index} ({cloud.name!r})"
+    pos = _array(cloud.positions, f"{what} positions", (3,), "fi")
+    _finite(pos, f"{what} positions")
+    radii = _array(cloud.radii, f"{what} radii", (), "fi")
+    if len(radii) != len(pos):
+        raise SceneError(f"{what}: {len(radii)} radii for {len(pos)} points")
+    _finite(radii, f"{what} radii")
+    if len(radii) and radii.min() < 0:
+        raise SceneError(f"{what}: negative radius {radii.min()}")
+    m = np.asarray(cloud.matrix, dtype=np.float64)
+    if m.shape != (4, 4):
+        raise SceneError(f"{what}: matrix must be 4x4, got {m.shape}")
+    _finite(m, f"{what} matrix")
+    for slot, mat in enumerate(cloud.materials):
+        if not -1 <= mat < n_materials:
+            raise SceneError(f"{what}: slot {slot} names material {mat}, but the scene has {n_materials}")
+    for name, values in (cloud.attributes or {}).items():
+        arr = np.asarray(values)
+        if arr.ndim != 2 or len(arr) != len(pos) or arr.dtype.kind not in "fi":
+            raise SceneError(f"{what}: attribute {name!r} must be (N, C) numbers, got {arr.shape}")
+        _finite(arr, f"{what} attribute {name!r}")
+
+
 def validate_scene(scene):
+    for i, cloud in enumerate(getattr(scene, "points", ()) or ()):
+        validate_point_cloud(cloud, i, len(scene.materials))
     for i, mesh in enumerate(scene.meshes):
         validate_mesh(mesh, i)
     validate_instances(scene.instances, len(scene.meshes), len(scene.materials))

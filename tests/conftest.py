@@ -9,6 +9,17 @@ if TESTS not in sys.path:
     sys.path.insert(0, TESTS)
 
 import ember_stats  # noqa: E402
+import pytest  # noqa: E402
+
+
+@pytest.fixture(scope='session')
+def legacy_addon(tmp_path_factory):
+    """(zip path, BLENDER_USER_SCRIPTS folder) of the legacy zip, built and
+    unpacked once for every Blender 3.4 binary test (tests/blender34.py)."""
+    import blender34
+    folder = tmp_path_factory.mktemp('legacy34')
+    zip_path = blender34.build_legacy_zip(folder)
+    return zip_path, blender34.unpack_addon(zip_path, folder / 'user')
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):

@@ -159,6 +159,86 @@ def build_hdri():
     return finish(scene, cam, (0.0, 0.0, 0.5))
 
 
+def _procedural_material(name, texture, ramp=None, scale=4.0, bump=False):
+    """A Principled BSDF whose base colour (and roughness) come from ``texture``
+    through a colour ramp, optionally a bump from the same texture."""
+    material = principled(name, (0.8, 0.8, 0.8), roughness=0.5)
+    tree = material.node_tree
+    bsdf = next(n for n in tree.nodes if n.type == 'BSDF_PRINCIPLED')
+    coords = tree.nodes.new('ShaderNodeTexCoord')
+    tex = tree.nodes.new(texture)
+    if 'Scale' in tex.inputs:
+        tex.inputs['Scale'].default_value = scale
+    tree.links.new(coords.outputs['Object'], tex.inputs['Vector'])
+    value = tex.outputs['Fac'] if 'Fac' in tex.outputs else tex.outputs['Distance']
+    color_ramp = tree.nodes.new('ShaderNodeValToRGB')
+    stops = color_ramp.color_ramp.elements
+    low, high = ramp or ((0.1, 0.1, 0.12, 1.0), (0.8, 0.5, 0.2, 1.0))
+    stops[0].color, stops[1].color = low, high
+    tree.links.new(value, color_ramp.inputs['Fac'])
+    tree.links.new(color_ramp.outputs['Color'], bsdf.inputs['Base Color'])
+    rough = tree.nodes.new('ShaderNodeMapRange')
+    rough.inputs['To Min'].default_value, rough.inputs['To Max'].default_value = 0.2, 0.8
+    tree.links.new(value, rough.inputs['Value'])
+    tree.links.new(rough.outputs['Result'], bsdf.inputs['Roughness'])
+    if bump:
+        node = tree.nodes.new('ShaderNodeBump')
+        node.inputs['Strength'].default_value = 0.3
+        tree.links.new(value, node.inputs['Height'])
+        tree.links.new(node.outputs['Normal'], bsdf.inputs['Normal'])
+    return material
+
+
+def _grouped_noise_material(name):
+    """Noise through a node group (Multiply + Add of its factor) into a Diffuse BSDF."""
+    group = bpy.data.node_groups.new(name + "Group", 'ShaderNodeTree')
+    if hasattr(group, 'interface'):   # 4.0+
+        group.interface.new_socket('Fac', in_out='INPUT', socket_type='NodeSocketFloat')
+        group.interface.new_socket('Fac', in_out='OUTPUT', socket_type='NodeSocketFloat')
+    else:
+        group.inputs.new('NodeSocketFloat', 'Fac')
+        group.outputs.new('NodeSocketFloat', 'Fac')
+    group_in, group_out = group.nodes.new('NodeGroupInput'), group.nodes.new('NodeGroupOutput')
+    mul = group.nodes.new('ShaderNodeMath')
+    mul.operation, mul.inputs[1].default_value = 'MULTIPLY', 0.7
+    add = group.nodes.new('ShaderNodeMath')
+    add.operation, add.inputs[1].default_value = 'ADD', 0.15
+    group.links.new(group_in.outputs[0], mul.inputs[0])
+    group.links.new(mul.outputs[0], add.inputs[0])
+    group.links.new(add.outputs[0], group_out.inputs[0])
+    material = bs.node_material(name, 'diffuse', (0.7, 0.7, 0.7))
+    tree = material.node_tree
+    diffuse = next(n for n in tree.nodes if n.type == 'BSDF_DIFFUSE')
+    noise = tree.nodes.new('ShaderNodeTexNoise')
+    noise.inputs['Scale'].default_value = 6.0
+    node = tree.nodes.new('ShaderNodeGroup')
+    node.node_tree = group
+    tree.links.new(noise.outputs['Fac'], node.inputs[0])
+    tree.links.new(node.outputs[0], diffuse.inputs['Color'])
+    return material
+
+
+def build_procedural():
+    """Procedural shading everywhere: Noise, Voronoi, Brick and Wave through
+    colour ramps into Principled BSDFs (roughness and bump from the same
+    texture), and a node group; a disk light and a dim world."""
+    scene = bs.reset()
+    floor(scene, _procedural_material("NoiseFloor", 'ShaderNodeTexNoise', scale=2.0, bump=True))
+    backdrop(scene, _procedural_material("BrickWall", 'ShaderNodeTexBrick', scale=3.0,
+                                         ramp=((0.5, 0.15, 0.1, 1.0), (0.8, 0.8, 0.75, 1.0))))
+    spheres = ((-1.1, _procedural_material("Voronoi", 'ShaderNodeTexVoronoi', scale=6.0, bump=True)),
+               (0.0, _procedural_material("Wave", 'ShaderNodeTexWave', scale=3.0,
+                                          ramp=((0.1, 0.3, 0.6, 1.0), (0.9, 0.9, 0.9, 1.0)))),
+               (1.1, _grouped_noise_material("Grouped")))
+    for x, material in spheres:
+        bs.uv_sphere(scene, material.name, 0.5, (x, 0.0, 0.5), material, segments=48, rings=24)
+    bs.light(scene, "Disk", 'AREA', (0.5, -1.0, 3.0), 300.0, shape='DISK', size=1.0,
+             rotation=(math.radians(20), 0.0, 0.0))
+    cam = bs.camera(scene, (0.0, -4.5, 1.6), (0, 0, 0), lens=40.0)
+    bs.world(scene, (0.05, 0.05, 0.05))
+    return finish(scene, cam, (0.0, 0.0, 0.5))
+
+
 SCENES = {
     'cornell': ("Cornell box, one rectangle light", lambda: open_blend('cornell')),
     'veach_mis': ("Veach MIS (4 GGX plates, 4 sphere lights)", lambda: open_blend('veach_mis')),
@@ -167,6 +247,7 @@ SCENES = {
     'emissive': ("emissive mesh lights", build_emissive_meshes),
     'instanced': ("2.1 M instanced triangles, sun + sky colour", build_instanced),
     'hdri': ("spheres under an HDRI (courtyard.exr)", build_hdri),
+    'procedural': ("procedural nodes (Noise, Voronoi, Brick, Wave, ramps, a group)", build_procedural),
 }
 BLEND_FILES = {'cornell', 'veach_mis'}
 

@@ -60,6 +60,13 @@ for _scene in ('udim', 'alpha', 'terrain'):
     REFERENCES['image_' + _scene] = ('test_image_parity', _scene, 1024)
 for _scene in ('coloured_glass', 'fog', 'emission'):
     REFERENCES['volume_' + _scene] = ('test_volume_parity', _scene, 1024)
+for _scene in ('smoke',):
+    REFERENCES['volume_field_' + _scene] = ('test_volume_field_parity', _scene, 512)
+REFERENCES['lobes_lobes'] = ('test_lobe_parity', 'lobes', 1024)
+for _scene in ('spheres', 'backlit'):
+    REFERENCES['subsurface_' + _scene] = ('test_subsurface_parity', _scene, 1024)
+REFERENCES['motion_objects'] = ('test_motion_parity', 'objects', 2048)
+REFERENCES['points_heap'] = ('test_points_parity', 'heap', 1024)
 # the scenes built here: (width, height, max bounces)
 BUILT_HERE = {'cornell': (48, 48, 4), 'glossy_world': (48, 32, 4)}
 HEADER = ('scene', 'blender', 'samples', 'seeds', 'max_bounces', 'filter', 'cycles', 'width', 'height', 'fingerprint')

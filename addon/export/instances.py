@@ -10,19 +10,23 @@ import numpy as np
 
 from .. import backend
 from . import mesh as mesh_export
+from .motion import instance_key
 
 
 class InstanceCollector:
     """Accumulates meshes and instances while walking the depsgraph."""
 
-    def __init__(self, material_index, check=None):
+    def __init__(self, material_index, check=None, view_layer=None):
         # material_index(obj) -> list of scene material indices per slot
         self.material_index = material_index
+        self.view_layer = view_layer     # for holdout collections
         self.meshes = []
         self.instances = []
         self.mesh_of_key = {}
         self.skipped_types = set()
         self.warnings = []
+        self.keys = []      # per instance: motion.instance_key (motion blur finds it at other times)
+        self.points = []    # engine PointClouds (point cloud objects, geometry nodes' Points)
         self._warned = set()
         self.check = check or (lambda: None)
 
@@ -30,8 +34,11 @@ class InstanceCollector:
         obj = inst.object  # for instances: the instanced (possibly temporary) object
         if not inst.is_instance and not inst.show_self:
             return  # e.g. a particle emitter with "Show Emitter" off
+        if obj.type == 'POINTCLOUD':
+            self._add_points(inst)
+            return
         if obj.type not in mesh_export.MESHABLE_TYPES:
-            if obj.type in ('CURVES', 'POINTCLOUD', 'VOLUME', 'GPENCIL', 'GREASEPENCIL'):
+            if obj.type in ('CURVES', 'VOLUME', 'GPENCIL', 'GREASEPENCIL'):
                 self.skipped_types.add(obj.type)
             return
         mesh_id = self._mesh_id(obj)
@@ -48,9 +55,50 @@ class InstanceCollector:
             materials=self.material_index(obj),
             name=obj.name,
             **ray_visibility(inst),
+            holdout=is_holdout(inst, self.view_layer),
+            shadow_catcher=bool(getattr(inst.parent if inst.is_instance and inst.parent is not None
+                                        else inst.object, 'is_shadow_catcher', False)),
             **_pass_fields(inst),
             **object_info(inst),
         ))
+        self.keys.append(instance_key(inst))
+
+    def _add_points(self, inst):
+        """A point cloud as spheres of its radius attribute (Cycles' default
+        radius 0.01 without one); points with a NaN or infinite position or
+        radius are skipped with a warning, negative radii are 0."""
+        obj = inst.object
+        matrix = np.array(inst.matrix_world, dtype=np.float64)
+        data = obj.data
+        n = len(data.points)
+        if n == 0 or not np.isfinite(matrix).all():
+            return
+        self.check()
+        positions = np.empty(n * 3, np.float32)
+        data.attributes['position'].data.foreach_get('vector', positions)
+        positions = positions.reshape(n, 3)
+        radii = np.full(n, POINT_RADIUS, np.float32)
+        if 'radius' in data.attributes:
+            data.attributes['radius'].data.foreach_get('value', radii)
+        attributes = {}
+        for attr in data.attributes:
+            if attr.domain == 'POINT' and attr.data_type in ('FLOAT_COLOR', 'BYTE_COLOR') and len(attr.data) == n:
+                rgba = np.empty(n * 4, np.float32)
+                attr.data.foreach_get('color', rgba)   # linear (Blender converts byte colours)
+                attributes[attr.name] = rgba.reshape(n, 4)
+        good = np.isfinite(positions).all(axis=1) & np.isfinite(radii)
+        if not good.all():
+            self._warn_once(('points', obj.name), f"Object '{obj.name}': {int((~good).sum())} points with "
+                            "a NaN or infinite position or radius were skipped")
+            positions, radii = positions[good], radii[good]
+            attributes = {k: v[good] for k, v in attributes.items()}
+        if len(attributes) == 1:
+            attributes[''] = next(iter(attributes.values()))   # the default colour attribute
+        self.points.append(backend.engine().PointCloud(
+            positions=positions, radii=np.maximum(radii, 0.0), matrix=matrix,
+            materials=self.material_index(obj), name=obj.name, attributes=attributes or None,
+            **ray_visibility(inst), **object_info(inst),
+            pass_index=int(getattr(inst.object, 'pass_index', 0))))
 
     def _mesh_id(self, obj):
         """Index of the object's geometry in self.meshes, exporting it once."""
@@ -81,8 +129,27 @@ class InstanceCollector:
             self.warnings.append(message)
 
 
+POINT_RADIUS = 0.01   # Cycles' radius of points without a radius attribute
+
 VISIBILITY_FLAGS = ('visible_camera', 'visible_diffuse', 'visible_glossy', 'visible_transmission',
                     'visible_shadow')
+
+
+def is_holdout(inst, view_layer=None):
+    """Object > Visibility > Mask > Holdout, or a holdout collection of the
+    view layer (Cycles: the instancer's flag for its instances)."""
+    obj = inst.parent if inst.is_instance and inst.parent is not None else inst.object
+    for candidate in (obj, inst.object):
+        test = getattr(candidate, 'holdout_get', None)
+        if test is not None and view_layer is not None:
+            try:
+                if test(view_layer=view_layer):
+                    return True
+            except (TypeError, RuntimeError):
+                pass
+        if getattr(candidate, 'is_holdout', False):
+            return True
+    return False
 
 
 def ray_visibility(inst):
@@ -120,15 +187,19 @@ def _geometry_name(obj):
     return data.name if data is not None else obj.name
 
 
-def collect_instances(depsgraph, material_index, check=None):
+def collect_instances(depsgraph, material_index, check=None, keys=None, points=None):
     """Walk every object instance; returns (meshes, instances, warnings).
     ``check()`` (which raises to cancel) runs every 256 instances and before
-    each mesh is exported."""
-    collector = InstanceCollector(material_index, check)
+    each mesh is exported; ``keys`` (a list) receives each instance's key."""
+    collector = InstanceCollector(material_index, check, getattr(depsgraph, 'view_layer', None))
     for count, inst in enumerate(depsgraph.object_instances):
         if count % 256 == 255:
             collector.check()
         collector.add(inst)
+    if keys is not None:
+        keys.extend(collector.keys)
+    if points is not None:
+        points.extend(collector.points)
     warnings = collector.warnings + [f"Ember skips {kind.lower()} objects (not supported yet)"
                 for kind in sorted(collector.skipped_types)]
     return collector.meshes, collector.instances, warnings

@@ -104,9 +104,11 @@ def _translate(light, matrix, name):
     raise ValueError(f"has an unknown light type {light.type}")
 
 
-def collect_lights(depsgraph, check=None):
+def collect_lights(depsgraph, check=None, links=None):
     """Every visible light, including instanced ones; returns (lights, warnings).
-    ``check()`` (which raises to cancel) runs every 256 instances."""
+    ``check()`` (which raises to cancel) runs every 256 instances.  Given a
+    dict ``links``, the lights' Light Linking and Shadow Linking collections
+    (Blender 4.0+) go there: light index -> (receivers, blockers)."""
     lights, warnings = [], []
     for count, inst in enumerate(depsgraph.object_instances):
         if check is not None and count % 256 == 255:
@@ -139,7 +141,46 @@ def collect_lights(depsgraph, check=None):
             if _is_black(light):
                 continue
         lights.append(light)
+        if links is not None:
+            linked = light_links(obj, warnings)
+            if linked != (None, None):
+                links[len(lights) - 1] = linked
     return lights, warnings
+
+
+def light_links(obj, warnings):
+    """(receivers, blockers) of a light object as engine LinkSets (None:
+    every object), from Blender 4.0+'s Object > Shading > Light Linking and
+    Shadow Linking collections; Blender 3.x has none (None, None)."""
+    linking = getattr(obj, 'light_linking', None)
+    if linking is None:
+        return None, None
+    out = []
+    for kind, attr in (("receiver", 'receiver_collection'), ("blocker", 'blocker_collection')):
+        collection = getattr(linking, attr, None)
+        out.append(None if collection is None else _link_set(obj, kind, collection, warnings))
+    return tuple(out)
+
+
+def _link_set(obj, kind, collection, warnings):
+    """A linking collection's objects by their Include / Exclude state (a
+    child collection's objects take its state); an empty collection links
+    every object, as in Blender, with a warning."""
+    include, exclude = set(), set()
+
+    def state(entry):
+        link = getattr(entry, 'light_linking', None)
+        return getattr(link, 'link_state', 'INCLUDE')
+    # collection_objects[i] holds the state of objects[i] (children alike).
+    for entry, member in zip(getattr(collection, 'collection_objects', ()), collection.objects):
+        (include if state(entry) == 'INCLUDE' else exclude).add(member.name)
+    for entry, child in zip(getattr(collection, 'collection_children', ()), collection.children):
+        (include if state(entry) == 'INCLUDE' else exclude).update(o.name for o in child.all_objects)
+    if not include and not exclude:
+        warnings.append(f"Light '{obj.name}': its {kind} collection '{collection.name}' is empty: "
+                        "every object takes part, as in Blender")
+        return None
+    return _scene().LinkSet(frozenset(include - exclude), frozenset(exclude))
 
 
 def _nonfinite_field(light):

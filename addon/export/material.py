@@ -1,7 +1,11 @@
 """Blender shader node trees -> engine.scene.Material (a weighted set of lobes).
 
-Covered: Diffuse, Glossy, Glass, Refraction, Translucent, Transparent, Sheen,
-Emission, Principled BSDF (Cycles' layering), Mix Shader and Add Shader; in
+Covered: Diffuse (Oren-Nayar at Roughness > 0), Glossy (anisotropic),
+Metallic, Glass, Refraction, Translucent, Transparent, Sheen, Emission,
+Principled BSDF (Cycles' layering, Anisotropic, Diffuse Roughness, emission
+dimmed by sheen and coat), Mix Shader and Add Shader; anisotropic lobes
+take the material's tangent (the Tangent input, Cycles' radial tangent
+about the object's Z when unlinked); in
 the Volume output, Volume Absorption, Volume Scatter, Principled Volume,
 Emission, Add and Mix Shader with constant inputs (a homogeneous medium).  A
 node Ember cannot translate becomes a grey diffuse (or a diffuse of the
@@ -17,18 +21,22 @@ import math
 from dataclasses import dataclass, field
 
 from .. import backend
-from . import compat, nodes
+from . import compat, nodes, subsurface
 
 GREY = (0.8, 0.8, 0.8)
 # Principled BSDF inputs (3.x and 4.x names) whose features are not rendered
-# yet (subsurface scattering renders as diffuse; anisotropy as isotropic).
+# yet (3.x's Subsurface renders as diffuse, thin film as no film).
 PRINCIPLED_UNSUPPORTED = (
-    'Subsurface', 'Subsurface Weight', 'Anisotropic', 'Diffuse Roughness', 'Thin Film Thickness',
+    'Subsurface', 'Thin Film Thickness',
     # Blender 5.2: thin-walled transmission; 5.3: dispersion.
     'Thin Wall', 'Transmission Dispersion Scale',
 )
 # How a warning names them (default: the input's first word).
 PRINCIPLED_LABELS = {'Thin Wall': 'Thin Wall', 'Transmission Dispersion Scale': 'Dispersion'}
+# Cycles' Diffuse BSDF and Principled switch to Oren-Nayar above this roughness.
+DIFFUSE_ROUGHNESS_CUTOFF = 1e-5
+# The Glossy BSDF's anisotropy is clamped to this, and isotropic below 1e-4.
+GLOSSY_ANISOTROPY_LIMIT = 0.99
 # Weights below this are no closure in Cycles (CLOSURE_WEIGHT_CUTOFF).
 CUTOFF = 1e-5
 BLACK = (0.0, 0.0, 0.0)
@@ -36,9 +44,13 @@ BLACK = (0.0, 0.0, 0.0)
 
 @dataclass
 class Closure:
-    """What a shader socket evaluates to: lobes and emission, before weighting."""
+    """What a shader socket evaluates to: lobes and emission, before
+    weighting.  ``emission_layers``: the indices of the lobes (sheen, coat)
+    that dim the emission by their albedo, as Cycles' Principled BSDF."""
     lobes: list = field(default_factory=list)
     emission: tuple = BLACK
+    emission_layers: tuple = ()
+    holdout: object = 0.0      # the Holdout shader's weight (a constant or an expression)
 
     def scaled(self, weight):
         """Every lobe and the emission times a Mix Shader factor.  A lobe's
@@ -46,10 +58,29 @@ class Closure:
         layering terms, which a mix must not change)."""
         lobes = [dataclasses.replace(lobe, weight=nodes.multiply(lobe.weight, weight))
                  for lobe in self.lobes]
-        return Closure(lobes, _scale(self.emission, weight))
+        return Closure(lobes, _scale(self.emission, weight), self.emission_layers,
+                       nodes.multiply(self.holdout, weight))
 
     def plus(self, other):
-        return Closure(self.lobes + other.lobes, _add(self.emission, other.emission))
+        """Both closures; the emission keeps the layers of the one that has
+        emission (two emissions, one under layers: the caller is told by
+        ``mixed_dimming``)."""
+        shifted = tuple(k + len(self.lobes) for k in other.emission_layers)
+        layers = self.emission_layers if _has_emission(self.emission) else ()
+        if _has_emission(other.emission):
+            layers = layers + shifted
+        return Closure(self.lobes + other.lobes, _add(self.emission, other.emission), layers,
+                       nodes.math('ADD', self.holdout, other.holdout))
+
+    def mixed_dimming(self, other):
+        """Two emissions of which only one lies under layers (rendered with
+        the layers dimming both)."""
+        return (_has_emission(self.emission) and _has_emission(other.emission)
+                and bool(self.emission_layers) != bool(other.emission_layers))
+
+
+def _has_emission(emission):
+    return nodes.is_expr(emission) or any(c != 0.0 for c in emission)
 
 
 # Colours, roughness, IOR and weights may be texture expressions: nodes'
@@ -68,14 +99,17 @@ CONSTANT_VALUE_INPUTS = PRINCIPLED_UNSUPPORTED + ('Anisotropy',)
 class NodeTranslator:
     """Translates one material's node tree, remembering what it could not."""
 
-    def __init__(self, material_name):
+    def __init__(self, material_name, constant_volumes=False):
         self.material_name = material_name
+        # Read every volume input as a constant (the world's volume).
+        self.constant_volumes = constant_volumes
         self.unsupported = []   # node labels, in order of discovery
         self.textured = []      # "node.input" names read as constants
         self.approximated = []  # Principled BSDF features not rendered yet
         self.unsupported_volume = []   # volume nodes not rendered
         self.volume_notes = []         # volume features approximated
         self.reader = nodes.SocketReader(self._linked_node)
+        self.tangent = None            # the anisotropic lobes' tangent expression
 
     # -- socket values --------------------------------------------------------
 
@@ -147,7 +181,52 @@ class NodeTranslator:
         return Closure([_scene().Lobe('diffuse', color)])
 
     def _node_bsdf_diffuse(self, node):
-        return Closure([_scene().Lobe('diffuse', self.color(node, 'Color'))])
+        """Lambert, or Cycles' energy-preserving Oren-Nayar where Roughness
+        may exceed 1e-5 (Cycles' switch)."""
+        color = self.color(node, 'Color')
+        roughness = self._finite_value(node, 'Roughness', self.value(node, 'Roughness', 0.0), 0.0)
+        if nodes.may_exceed(roughness, DIFFUSE_ROUGHNESS_CUTOFF):
+            return Closure([_scene().Lobe('oren_nayar', color, diffuse_roughness=_clamp01(roughness))])
+        return Closure([_scene().Lobe('diffuse', color)])
+
+    def _finite_value(self, node, name, value, fallback):
+        """A constant input read as ``fallback`` where it is not finite (NaN,
+        infinities), named in the material's warning; expressions are made
+        finite per ray by the engine."""
+        if nodes.is_expr(value) or math.isfinite(value):
+            return value
+        note = f"'{node.name}' {name} {value} read as {fallback:g}"
+        if note not in self.reader.warnings:
+            self.reader.warnings.append(note)
+        return fallback
+
+    def _use_tangent(self, node):
+        """The material's tangent for an anisotropic lobe of ``node``: its
+        Tangent input, Cycles' default radial tangent about Z when unlinked
+        (ShaderGraph's LINK_TANGENT); one tangent per material."""
+        socket = node.inputs.get('Tangent')
+        value = None
+        if socket is not None and socket.is_linked:
+            value = self.reader.read(socket)
+            if not isinstance(value, _scene().NodeOutput):
+                self._approximate(node, "Tangent input read as the radial tangent")
+                value = None
+        if value is None:
+            value = _scene().NodeOutput(_scene().NodeCall('ShaderNodeTangent', {}, {
+                'direction_type': 'RADIAL', 'axis': 'Z', 'uv_map': ''}), 'Tangent')
+        if self.tangent is None:
+            self.tangent = value
+        elif not _same_tangent(self.tangent, value):
+            self.reader.warnings.append(f"one tangent per material: the tangent of '{node.name}' is replaced by "
+                                        "the first anisotropic shader's")
+
+    def _anisotropic(self, node, kind, anisotropy, rotation, **lobe):
+        """A glossy lobe, anisotropic (with the material's tangent) where
+        ``anisotropy`` (Ember's lobe value, Principled mapping) may be > 0."""
+        if nodes.may_exceed(anisotropy, 0.0):
+            self._use_tangent(node)
+            return _scene().Lobe('glossy_anisotropic', anisotropy=anisotropy, rotation=rotation, **lobe)
+        return _scene().Lobe(kind, **lobe)
 
     def _multiscatter(self, node):
         """Multiscatter GGX (Blender 5.0's default) or single-scatter GGX;
@@ -163,11 +242,53 @@ class NodeTranslator:
             self.approximated.append(label)
 
     def _node_bsdf_glossy(self, node):
+        """GGX reflection; with Anisotropy (Blender 4.0+, clamped to +-0.99,
+        isotropic below 1e-4) Cycles' Glossy mapping alpha_x = alpha (1 - a),
+        alpha_y = alpha / (1 - a) (a > 0; the reverse for a < 0), held as the
+        Principled mapping's (1 - (1 - |a|)^2) / 0.9 with the tangent turned a
+        quarter where the long axis is the bitangent."""
         roughness = _clamp01(self.value(node, 'Roughness', 0.5))
-        if 'Anisotropy' in node.inputs and self.value(node, 'Anisotropy', 0.0) != 0.0:
-            self._approximate(node, "Anisotropy")
-        return Closure([_scene().Lobe('glossy', self.color(node, 'Color'), roughness, 'none',
-                                      multiscatter=self._multiscatter(node))])
+        lobe = dict(color=self.color(node, 'Color'), roughness=roughness, fresnel='none',
+                    multiscatter=self._multiscatter(node))
+        a = 0.0
+        if 'Anisotropy' in node.inputs:
+            a = self._finite_value(node, 'Anisotropy', self.value(node, 'Anisotropy', 0.0), 0.0)
+            a = min(max(a, -GLOSSY_ANISOTROPY_LIMIT), GLOSSY_ANISOTROPY_LIMIT)
+        if abs(a) <= 1e-4:
+            return Closure([_scene().Lobe('glossy', **lobe)])
+        rotation = self._finite_value(node, 'Rotation', self.value(node, 'Rotation', 0.0), 0.0)
+        rotation = nodes.math('ADD', rotation, 0.25) if a > 0 else rotation
+        aspect = 1.0 - abs(a)
+        return Closure([self._anisotropic(node, 'glossy', (1.0 - aspect * aspect) / 0.9, rotation, **lobe)])
+
+    def _node_bsdf_metallic(self, node):
+        """Cycles' Metallic BSDF (4.3+): F82 Tint (Base Color as F0, Edge Tint
+        as F82 tint), or a Physical Conductor (IOR n and Extinction k per
+        channel) rendered through the F82 model fitted at 0 and 82 degrees
+        (exact there), with a warning; Principled anisotropy mapping."""
+        roughness = _clamp01(self.value(node, 'Roughness', 0.5))
+        if getattr(node, 'fresnel_type', 'F82') == 'PHYSICAL_CONDUCTOR':
+            n = _constant_color(self, node, 'IOR', (0.2, 0.9, 1.1))
+            k = _constant_color(self, node, 'Extinction', (3.9, 2.45, 2.14))
+            f0, tint = _conductor_f82(n, k)
+            self._approximate(node, "Physical Conductor as its F82 fit")
+        else:
+            f0 = _clamp_color(self.color(node, 'Base Color', (0.617, 0.577, 0.540)))
+            tint = _clamp_color(self.color(node, 'Edge Tint', (0.695, 0.726, 0.770)))
+        anisotropy = _clamp01(self._finite_value(node, 'Anisotropy', self.value(node, 'Anisotropy', 0.0), 0.0))
+        rotation = self._finite_value(node, 'Rotation', self.value(node, 'Rotation', 0.0), 0.0)
+        thickness = self._finite_value(node, 'Thin Film Thickness', self.value(node, 'Thin Film Thickness', 0.0), 0.0)
+        if self._value_linked(node, 'Thin Film Thickness') or thickness > 0.0:
+            self._approximate(node, "Thin Film")
+        lobe = dict(color=(1.0, 1.0, 1.0), roughness=roughness, fresnel='f82', f0=f0, edge_tint=tint,
+                    multiscatter=getattr(node, 'distribution', 'MULTI_GGX') == 'MULTI_GGX')
+        if getattr(node, 'distribution', 'MULTI_GGX') not in ('GGX', 'MULTI_GGX'):
+            self._approximate(node, f"{node.distribution.title()} as GGX")
+        return Closure([self._anisotropic(node, 'glossy', anisotropy, rotation, **lobe)])
+
+    def _value_linked(self, node, name):
+        socket = node.inputs.get(name)
+        return socket is not None and socket.is_linked
 
     # Blender 5.0 registers the Glossy BSDF under the anisotropic type.
     _node_bsdf_anisotropic = _node_bsdf_glossy
@@ -201,6 +322,14 @@ class NodeTranslator:
         roughness = _clamp01(self.value(node, 'Roughness', 0.5))
         return Closure([_scene().Lobe('sheen', self.color(node, 'Color'), roughness)])
 
+    def _node_subsurface_scattering(self, node):
+        """Cycles' Subsurface Scattering node (Random Walk, Skin; Christensen-Burley as Random Walk)."""
+        return Closure(subsurface.node_lobes(self, node))
+
+    def _node_holdout(self, node):
+        """Cycles' Holdout: no light, and camera rays uncover the film."""
+        return Closure(holdout=1.0)
+
     def _node_emission(self, node):
         strength = self.value(node, 'Strength', 1.0)
         return Closure([], _scale(self.color(node, 'Color', (1.0, 1.0, 1.0)), strength))
@@ -212,13 +341,15 @@ class NodeTranslator:
         p = _principled_inputs(self, node)
         self._note_principled_features(node)
         top = self._principled_layers(p)
-        base = self._principled_base(p)
+        base = self._principled_base(p, node)
         for i, lobe in enumerate(top):
             top[i] = dataclasses.replace(lobe, covers=len(top) - 1 - i + len(base))
         lobes = top + base
+        layers = tuple(range(len(top)))       # sheen and coat dim the emission (Cycles)
         if nodes.may_be_below(p['alpha'], 1.0):
             lobes = [_scene().Lobe('transparent', (1.0, 1.0, 1.0), weight=_one_minus(p['alpha']))] + lobes
-        return Closure(lobes, _scale(_principled_emission(self, node), p['alpha']))
+            layers = tuple(k + 1 for k in layers)
+        return Closure(lobes, _scale(_principled_emission(self, node), p['alpha']), layers)
 
     def _principled_layers(self, p):
         """Sheen and coat, the layers on top (covers set by the caller)."""
@@ -235,7 +366,7 @@ class NodeTranslator:
                                      weight=p['alpha']))
         return layers
 
-    def _principled_base(self, p):
+    def _principled_base(self, p, node):
         """Metal, transmission, specular layer and diffuse, with their weights
         (per ray where an input is textured; a lobe is left out where its
         weight is zero everywhere)."""
@@ -244,9 +375,10 @@ class NodeTranslator:
         w = p['alpha']
         ms = p['multiscatter']
         if nodes.may_exceed(p['metallic'], CUTOFF):
-            lobes.append(scene.Lobe('glossy', (1.0, 1.0, 1.0), p['roughness'], 'f82', f0=p['base_clamped'],
-                                    edge_tint=_clamp_color(p['specular_tint']), multiscatter=ms,
-                                    weight=_mul(w, p['metallic'])))
+            lobes.append(self._anisotropic(p['node'], 'glossy', p['anisotropic'], p['rotation'],
+                                           color=(1.0, 1.0, 1.0), roughness=p['roughness'], fresnel='f82',
+                                           f0=p['base_clamped'], edge_tint=_clamp_color(p['specular_tint']),
+                                           multiscatter=ms, weight=_mul(w, p['metallic'])))
             w = _mul(w, _one_minus(p['metallic']))
         if nodes.may_exceed(p['transmission'], CUTOFF) and nodes.may_exceed(w, 0.0):
             f0 = _clamp_color(_scale(p['specular_tint'], _f0_from_ior(p['ior'])))
@@ -257,17 +389,26 @@ class NodeTranslator:
         if not nodes.may_exceed(w, 0.0):
             return lobes
         eta, f0 = p['specular_eta'], p['specular_f0']
+        below, ss = subsurface.principled_lobes(self, node, p, w)   # under the specular layer
+        rest = _mul(w, _one_minus(ss)) if below else w
+        if not below or nodes.may_exceed(rest, 0.0):
+            if nodes.may_exceed(p['diffuse_roughness'], DIFFUSE_ROUGHNESS_CUTOFF):
+                below.append(scene.Lobe('oren_nayar', p['base'], diffuse_roughness=p['diffuse_roughness'],
+                                        weight=rest))
+            else:
+                below.append(scene.Lobe('diffuse', p['base'], weight=rest))
         if nodes.is_expr(eta) or eta != 1.0:
-            lobes.append(scene.Lobe('glossy', (1.0, 1.0, 1.0), p['roughness'], 'dielectric', ior=eta,
-                                    f0=_clamp_color(_scale(p['specular_tint'], f0)), covers=1,
-                                    multiscatter=ms, weight=w))
-        lobes.append(scene.Lobe('diffuse', p['base'], weight=w))
-        return lobes
+            lobes.append(self._anisotropic(p['node'], 'glossy', p['anisotropic'], p['rotation'],
+                                           color=(1.0, 1.0, 1.0), roughness=p['roughness'], fresnel='dielectric',
+                                           ior=eta, f0=_clamp_color(_scale(p['specular_tint'], f0)),
+                                           covers=len(below), multiscatter=ms, weight=w))
+        return lobes + below
 
     def _note_principled_features(self, node):
         """Name the Principled features in use that Ember does not render yet."""
         used = [PRINCIPLED_LABELS.get(name, name.split()[0]) for name in PRINCIPLED_UNSUPPORTED
-                if name in node.inputs and self.value(node, name, 0.0) > 0.0]  # constants here
+                if name in node.inputs and (self._value_linked(node, name)
+                                            or self._finite_value(node, name, self.value(node, name, 0.0), 0.0) > 0.0)]
         if used:
             self._approximate(node, ', '.join(used))
 
@@ -275,10 +416,15 @@ class NodeTranslator:
         fac = _clamp01(self.value(node, 'Fac', 0.5))
         first = self.surface(node.inputs[1]).scaled(_one_minus(fac))
         second = self.surface(node.inputs[2]).scaled(fac)
-        return first.plus(second)
+        return self._sum(node, first, second)
 
     def _node_add_shader(self, node):
-        return self.surface(node.inputs[0]).plus(self.surface(node.inputs[1]))
+        return self._sum(node, self.surface(node.inputs[0]), self.surface(node.inputs[1]))
+
+    def _sum(self, node, a, b):
+        if a.mixed_dimming(b):
+            self._approximate(node, "an emission beside a sheen- or coat-dimmed one dimmed alike")
+        return a.plus(b)
 
     # -- volumes ---------------------------------------------------------------
 
@@ -300,9 +446,9 @@ class NodeTranslator:
         return handler(node)
 
     def _volume_const(self, node, name, default, color=False):
-        """A constant input of a volume node (Cycles' value for a texture
-        Ember cannot evaluate inside a volume yet: the socket's own), with
-        NaN read as 0 and infinities as the largest value, named in a warning."""
+        """A constant input of a volume node (a texture on it is read as
+        the socket's own value, named in a warning), with NaN read as 0 and
+        infinities as the largest value, named in a warning."""
         socket = node.inputs.get(name)
         if socket is None:
             return default
@@ -310,10 +456,35 @@ class NodeTranslator:
         if value is None or nodes.is_expr(value):
             self._note_texture(node, name)
             value = nodes.constant(socket)
+        return self._const(node, name, value, color)
+
+    def _const(self, node, name, value, color):
         if color:
             value = (float(value),) * 3 if isinstance(value, (float, int)) else tuple(float(c) for c in value[:3])
             return tuple(self._finite(node, name, c) for c in value)
         return self._finite(node, name, nodes.luminance(value) if isinstance(value, tuple) else float(value))
+
+    def _volume_input(self, node, name, default, color=False):
+        """A volume node's input: a constant, or a texture expression
+        evaluated at points inside the medium (a heterogeneous medium:
+        engine/media/field.py); an untranslatable link is read as the
+        socket's value, named in a warning."""
+        socket = node.inputs.get(name)
+        if socket is None:
+            return default
+        if self.constant_volumes:
+            return self._volume_const(node, name, default, color)
+        if not socket.is_linked:
+            return self._const(node, name, nodes.constant(socket), color)
+        value = self.reader.read(socket)
+        if value is None:
+            self._note_texture(node, name)
+            return self._const(node, name, nodes.constant(socket), color)
+        if not nodes.is_expr(value):
+            return self._const(node, name, value, color)
+        if color:
+            return value
+        return nodes.as_value(value)
 
     def _finite(self, node, name, value):
         if math.isfinite(value):
@@ -326,17 +497,17 @@ class NodeTranslator:
 
     def _density(self, node):
         """Density, negative read as 0 (Cycles' fmaxf(density, 0))."""
-        return max(self._volume_const(node, 'Density', 1.0), 0.0)
+        d = self._volume_input(node, 'Density', 1.0)
+        return nodes.at_least(d, 0.0) if nodes.is_expr(d) else max(d, 0.0)
 
     def _volume_volume_absorption(self, node):
-        color = self._volume_const(node, 'Color', GREY, color=True)
-        d = self._density(node)
-        return VolumeClosure(absorption=tuple(max(1.0 - c, 0.0) * d for c in color))
+        color = self._volume_input(node, 'Color', GREY, color=True)
+        return VolumeClosure(absorption=_times(_positive(_one_minus_color(color)), self._density(node)))
 
     def _volume_volume_scatter(self, node):
         """Henyey-Greenstein; the other phase functions (Blender 4.2+) are
         rendered as Henyey-Greenstein of the node's Anisotropy (Rayleigh: 0)."""
-        color = self._volume_const(node, 'Color', GREY, color=True)
+        color = self._volume_input(node, 'Color', GREY, color=True)
         d = self._density(node)
         phase = getattr(node, 'phase', 'HENYEY_GREENSTEIN')
         g = self._volume_const(node, 'Anisotropy', 0.0)
@@ -345,34 +516,33 @@ class NodeTranslator:
                                     "Henyey-Greenstein")
             if phase == 'RAYLEIGH':
                 g = 0.0
-        return VolumeClosure(scattering=tuple(max(c, 0.0) * d for c in color)).with_phase(g)
+        return VolumeClosure(scattering=_times(_positive(color), d)).with_phase(g)
 
     def _volume_principled_volume(self, node):
         """Cycles' svm_node_principled_volume with no attribute grids:
         scattering Color x Density, absorption (1 - Color)(1 - sqrt(Absorption
         Color)) x Density, emission Strength x Color.  Blackbody is named."""
-        color = self._volume_const(node, 'Color', (0.5, 0.5, 0.5), color=True)
+        color = self._volume_input(node, 'Color', (0.5, 0.5, 0.5), color=True)
         d = self._density(node)
         g = self._volume_const(node, 'Anisotropy', 0.0)
         ac = self._volume_const(node, 'Absorption Color', (0.0, 0.0, 0.0), color=True)
-        strength = self._volume_const(node, 'Emission Strength', 0.0)
-        ec = self._volume_const(node, 'Emission Color', (1.0, 1.0, 1.0), color=True)
+        strength = self._volume_input(node, 'Emission Strength', 0.0)
+        ec = self._volume_input(node, 'Emission Color', (1.0, 1.0, 1.0), color=True)
         if self._volume_const(node, 'Blackbody Intensity', 0.0) > 0.0:
             self._volume_note(node, "Blackbody emission not rendered yet")
         out = VolumeClosure()
-        if d > 0.0:
-            out = VolumeClosure(
-                absorption=tuple(max(1.0 - c, 0.0) * max(1.0 - math.sqrt(max(a, 0.0)), 0.0) * d
-                                 for c, a in zip(color, ac)),
-                scattering=tuple(max(c, 0.0) * d for c in color)).with_phase(g)
-        if strength > 0.0:
-            out = out.plus(VolumeClosure(emission=tuple(strength * c for c in ec)))
+        if nodes.may_exceed(d, 0.0):
+            tint = tuple(max(1.0 - math.sqrt(max(a, 0.0)), 0.0) for a in ac)
+            out = VolumeClosure(absorption=_times(_times(_positive(_one_minus_color(color)), tint), d),
+                                scattering=_times(_positive(color), d)).with_phase(g)
+        if nodes.may_exceed(strength, 0.0):
+            out = out.plus(VolumeClosure(emission=_times(ec, strength)))
         return out
 
     def _volume_emission(self, node):
-        strength = self._volume_const(node, 'Strength', 1.0)
-        color = self._volume_const(node, 'Color', (1.0, 1.0, 1.0), color=True)
-        return VolumeClosure(emission=tuple(strength * c for c in color))
+        strength = self._volume_input(node, 'Strength', 1.0)
+        color = self._volume_input(node, 'Color', (1.0, 1.0, 1.0), color=True)
+        return VolumeClosure(emission=_times(color, strength))
 
     def _volume_add_shader(self, node):
         return self._volume_sum(self.volume(node.inputs[0]), self.volume(node.inputs[1]), node)
@@ -405,7 +575,7 @@ class NodeTranslator:
         if self.volume_notes:
             parts.append("volume " + ", ".join(self.volume_notes))
         if self.approximated:
-            parts.append("Principled BSDF " + ", ".join(self.approximated) + " not rendered yet")
+            parts.append("not rendered as Cycles yet: " + ", ".join(self.approximated))
         if self.textured:
             parts.append("linked input " + ", ".join(self.textured) + " read as its constant value")
         if self.reader.unsupported:
@@ -433,7 +603,7 @@ class VolumeClosure:
 
     def with_phase(self, g):
         g = min(max(float(g), -1.0), 1.0)
-        return dataclasses.replace(self, g_weight=sum(self.scattering) / 3.0 * g, phases=(g,))
+        return dataclasses.replace(self, g_weight=_mean_weight(self.scattering) * g, phases=(g,))
 
     def scaled(self, w):
         return VolumeClosure(_scale3(self.absorption, w), _scale3(self.scattering, w), _scale3(self.emission, w),
@@ -448,16 +618,48 @@ class VolumeClosure:
         return len(set(self.phases) | set(other.phases)) > 1
 
     def anisotropy(self):
-        total = sum(self.scattering) / 3.0
+        total = _mean_weight(self.scattering)
         return min(max(self.g_weight / total, -1.0), 1.0) if total > 0 else 0.0
 
 
+def _mean_weight(c):
+    """The mean scattering a closure's g is weighted by: a textured one's
+    is taken as 1 (its g then counts as one constant medium's)."""
+    return 1.0 if nodes.is_expr(c) else sum(c) / 3.0
+
+
 def _scale3(c, w):
+    if nodes.is_expr(c):
+        return nodes.scale(c, w)
     return tuple(min(x * w, VOLUME_LIMIT) for x in c)
 
 
 def _add3(a, b):
+    if nodes.is_expr(a) or nodes.is_expr(b):
+        return nodes.add(a, b)
     return tuple(min(x + y, VOLUME_LIMIT) for x, y in zip(a, b))
+
+
+def _times(color, w):
+    """A colour times a float or a colour (constants or expressions)."""
+    if nodes.is_expr(color) or nodes.is_expr(w) or isinstance(w, tuple):
+        if isinstance(w, tuple) and isinstance(color, tuple):
+            return tuple(min(x * y, VOLUME_LIMIT) for x, y in zip(color, w))
+        return backend.engine().MixColor('MULTIPLY', 1.0, color, w, clamp_factor=False)
+    return _scale3(color, float(w))
+
+
+def _positive(color):
+    """max(c, 0) per channel."""
+    if nodes.is_expr(color):
+        return backend.engine().MixColor('LIGHTEN', 1.0, color, BLACK, clamp_factor=False)
+    return tuple(max(c, 0.0) for c in color)
+
+
+def _one_minus_color(color):
+    if nodes.is_expr(color):
+        return backend.engine().MixColor('SUBTRACT', 1.0, (1.0, 1.0, 1.0), color, clamp_factor=False)
+    return tuple(1.0 - c for c in color)
 
 
 def _f0_from_ior(ior):
@@ -559,7 +761,58 @@ def _principled_inputs(translator, node):
         'sheen_tint': _max0(sheen_tint),
         'alpha': _clamp01(t.value(node, 'Alpha', 1.0)) if 'Alpha' in node.inputs else 1.0,
         'multiscatter': getattr(node, 'distribution', 'GGX') == 'MULTI_GGX',
+        'anisotropic': _clamp01(t._finite_value(node, 'Anisotropic', t.value(node, 'Anisotropic', 0.0), 0.0))
+        if 'Anisotropic' in node.inputs else 0.0,
+        'rotation': t._finite_value(node, 'Anisotropic Rotation', t.value(node, 'Anisotropic Rotation', 0.0), 0.0)
+        if 'Anisotropic Rotation' in node.inputs else 0.0,
+        'diffuse_roughness': _clamp01(t._finite_value(node, 'Diffuse Roughness',
+                                                      t.value(node, 'Diffuse Roughness', 0.0), 0.0))
+        if 'Diffuse Roughness' in node.inputs else 0.0,
+        'node': node,
     }
+
+
+def _same_tangent(a, b):
+    return a is b or (a.output == b.output and a.call.idname == b.call.idname and a.call.props == b.call.props
+                      and not a.call.inputs and not b.call.inputs)
+
+
+def _constant_color(translator, node, name, default):
+    """A colour input as a constant (linked: its own value, named), NaN as 0."""
+    socket = node.inputs.get(name)
+    if socket is None:
+        return default
+    if socket.is_linked:
+        translator._note_texture(node, name)
+    value = tuple(float(c) for c in tuple(socket.default_value)[:3])
+    return tuple(translator._finite_value(node, name, c, 0.0) for c in value)
+
+
+def _conductor_fresnel(n, k, cos):
+    """Unpolarized Fresnel reflectance of a conductor n + ik at cos."""
+    c2 = cos * cos
+    s2 = 1.0 - c2
+    a = n * n - k * k - s2
+    b = math.sqrt(a * a + 4.0 * n * n * k * k)
+    t = math.sqrt(max(0.5 * (b + a), 0.0))
+    rs = (b + c2 - 2.0 * t * cos) / max(b + c2 + 2.0 * t * cos, 1e-30)
+    rp = rs * (b * c2 + s2 * s2 - 2.0 * t * cos * s2) / max(b * c2 + s2 * s2 + 2.0 * t * cos * s2, 1e-30)
+    return 0.5 * (rs + rp)
+
+
+def _conductor_f82(n, k):
+    """(F0, F82 tint) of the F82-tint model through a conductor's Fresnel at
+    0 and 82 degrees (cos 1/7): tint = F(1/7) / Schlick(F0, 1/7), as Cycles'
+    F82 tint defines F82 = tint x Schlick."""
+    f0, tint = [], []
+    for nc, kc in zip(n, k):
+        nc, kc = max(nc, 0.0), max(kc, 0.0)
+        r0 = _conductor_fresnel(nc, kc, 1.0)
+        r82 = _conductor_fresnel(nc, kc, 1.0 / 7.0)
+        schlick = r0 + (1.0 - r0) * (6.0 / 7.0) ** 5
+        f0.append(min(max(r0, 0.0), 1.0))
+        tint.append(min(max(r82 / schlick, 0.0), 1.0) if schlick > 0 else 1.0)
+    return tuple(f0), tuple(tint)
 
 
 def _max0(color):
@@ -597,10 +850,27 @@ def translate(material):
     if volume is not None and not output.inputs['Surface'].is_linked:
         # Only a Volume output: Cycles' surface is a pass-through boundary.
         lobes = (scene.Lobe('transparent', (1.0, 1.0, 1.0)),)
-    material = scene.Material(name, lobes, closure.emission, normal=normal)
+    material = scene.Material(name, lobes, closure.emission, normal=normal,
+                              holdout=_holdout_weight(translator, closure.holdout))
     if volume is not None:
         material.volume = volume
+    if translator.tangent is not None and any(lobe.kind == 'glossy_anisotropic' for lobe in lobes):
+        material.tangent = translator.tangent
+    if closure.emission_layers and hasattr(material, 'emission_layers'):
+        material.emission_layers = tuple(closure.emission_layers)
     return material, translator.warning()
+
+
+def _holdout_weight(translator, holdout):
+    """The material's holdout weight as a constant in [0, 1]: a textured Mix
+    Shader factor over a Holdout is read as the middle of its range (named
+    in the material's warning), a sum above 1 as 1."""
+    if nodes.is_expr(holdout):
+        lo, hi = nodes.value_range(holdout)
+        translator.approximated.append(f"'Holdout' (a textured factor read as {0.5 * (lo + hi):g})")
+        holdout = 0.5 * (lo + hi)
+    holdout = float(holdout)
+    return min(max(holdout, 0.0), 1.0) if math.isfinite(holdout) else 0.0
 
 
 def _volume(translator, output):

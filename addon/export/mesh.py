@@ -78,10 +78,12 @@ def _corner_tangents(mesh, loops):
 
 
 def needs_tangents(obj):
-    """True if a material of the object uses a tangent-space Normal Map node."""
+    """True if a material of the object uses a tangent-space Normal Map node
+    or a UV-map Tangent node (anisotropic lobes)."""
     for slot in getattr(obj, 'material_slots', ()):
         tree = getattr(slot.material, 'node_tree', None) if slot.material else None
-        if tree is not None and any(n.type == 'NORMAL_MAP' and n.space == 'TANGENT' for n in tree.nodes):
+        if tree is not None and any((n.type == 'NORMAL_MAP' and n.space == 'TANGENT')
+                                    or (n.type == 'TANGENT' and n.direction_type == 'UV_MAP') for n in tree.nodes):
             return True
     return False
 

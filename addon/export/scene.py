@@ -9,6 +9,7 @@ from . import camera as camera_export
 from . import instances as instance_export
 from . import light as light_export
 from . import material as material_export
+from . import motion as motion_export
 from . import world as world_export
 
 
@@ -50,19 +51,44 @@ def scene_camera(depsgraph, camera_override=None):
     return camera.evaluated_get(depsgraph)
 
 
-def export_scene(depsgraph, camera_override=None, should_stop=None):
+def export_scene(depsgraph, camera_override=None, should_stop=None, engine=None, is_preview=False):
     """Everything the renderer needs, read from an evaluated depsgraph.
     ``should_stop()`` is asked between objects and between the arrays of a
-    mesh; once true, ExportCancelled is raised."""
+    mesh; once true, ExportCancelled is raised.  Given the RenderEngine
+    (``engine``, whose frame_set evaluates other times), a render with motion
+    blur is exported at its shutter's centre with the motion over the
+    shutter (export/motion.py), and the frame is set back after."""
+    scene = depsgraph.scene
+    blur = motion_export.shutter(scene, is_preview) if engine is not None else None
+    if blur is None:
+        return _export(depsgraph, camera_override, should_stop)
+    frame = scene.frame_current + scene.frame_subframe
+    centre = motion_export.centre_time(scene, blur)
+    try:
+        motion_export.set_time(engine, centre)
+        keys = []
+        exported = _export(depsgraph, camera_override, should_stop, keys)
+        start = time.perf_counter()
+        exported.warnings += motion_export.add_motion(engine, depsgraph, exported, keys, blur, centre,
+                                                      scene_camera(depsgraph, camera_override))
+        exported.seconds += time.perf_counter() - start
+    finally:
+        motion_export.set_time(engine, frame)
+    return exported
+
+
+def _export(depsgraph, camera_override=None, should_stop=None, keys=None):
     check = stop_checker(should_stop)
     start = time.perf_counter()
     renderer = backend.engine()
     scene = depsgraph.scene
     override = getattr(depsgraph.view_layer, 'material_override', None)
     materials = material_export.MaterialTable(override)
-    meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots, check)
+    points = []
+    meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots, check, keys, points)
     check()
-    lights, light_warnings = light_export.collect_lights(depsgraph, check)
+    links = {}
+    lights, light_warnings = light_export.collect_lights(depsgraph, check, links)
     world, world_warning = world_export.world_from_blender(scene.world)
     camera_object = scene_camera(depsgraph, camera_override)
     try:
@@ -72,13 +98,32 @@ def export_scene(depsgraph, camera_override=None, should_stop=None):
         message = str(err).removeprefix('camera: ')
         raise ExportError(f"Camera '{camera_object.name}': {message}") from err
     result = renderer.Scene(
-        meshes=meshes, instances=instances, materials=materials.materials,
-        lights=lights, world=world, camera=camera, cycles_version=tuple(bpy.app.version))
-    warnings = materials.warnings + warnings + light_warnings + camera_warnings
+        meshes=meshes, instances=instances, points=points, materials=materials.materials,
+        lights=lights, world=world, camera=camera, cycles_version=tuple(bpy.app.version), light_links=links)
+    warnings = materials.warnings + warnings + light_warnings + camera_warnings + _catcher_notes(result)
     if world_warning:
         warnings.append(world_warning)
     triangles = sum(len(meshes[inst.mesh].triangles) for inst in instances)
     return Export(result, warnings, time.perf_counter() - start, triangles)
+
+
+def _catcher_notes(scene):
+    """A shadow catcher that emits light (Cycles renders it: its emission
+    enters the shadow ratio, which can exceed 1) is named in a warning."""
+    notes, seen = [], set()
+    for inst in scene.instances:
+        if not getattr(inst, 'shadow_catcher', False) or inst.name in seen:
+            continue
+        seen.add(inst.name)
+        for m in inst.materials:
+            mat = scene.materials[m] if 0 <= m < len(scene.materials) else None
+            emission = getattr(mat, 'emission', (0.0, 0.0, 0.0))
+            if mat is not None and (backend.engine().value_range(emission)[1] > 0
+                                    if not isinstance(emission, tuple) else max(emission) > 0):
+                notes.append(f"Object '{inst.name}' is a shadow catcher that emits light (material "
+                             f"'{mat.name}'): its emission enters the shadow catcher's ratio")
+                break
+    return notes
 
 
 # Material, world and light previews stop after this many bounces: they must

@@ -16,12 +16,13 @@ magenta.  Other trees of registered nodes (procedural textures, the Sky
 Texture) are baked into an equirectangular map for sampling; worlds with a
 sky are shaded per direction and its sun disc sampled by its cone (Cycles'
 sun guiding).  Anything else is read as the Background's constant colour and
-reported.
+reported.  The World Output's Volume becomes a homogeneous medium filling
+space (constant inputs).
 """
 import numpy as np
 
 from .. import backend
-from . import compat, images, nodes
+from . import compat, images, material, nodes
 
 BLACK = (0.0, 0.0, 0.0)
 MAGENTA = (1.0, 0.0, 1.0)
@@ -76,7 +77,24 @@ def world_from_blender(world):
         return renderer.World(color=BLACK), None
     notes = _Notes(world)
     color, texture = _translate(world, notes)
-    return renderer.World(color=color, texture=texture), notes.message()
+    return renderer.World(color=color, texture=texture, volume=_volume(world, notes)), notes.message()
+
+
+def _volume(world, notes):
+    """The World Output's Volume: a homogeneous medium everywhere (the
+    material exporter's volume translation with constant inputs; a texture
+    on one is read as the socket's value, named)."""
+    tree = world.node_tree if compat.uses_nodes(world) else None
+    output = None if tree is None else _output_node(tree)
+    socket = None if output is None else output.inputs.get('Volume')
+    if socket is None or not socket.is_linked:
+        return None
+    translator = material.NodeTranslator(world.name, constant_volumes=True)
+    v = translator.volume(socket)
+    warning = translator.warning()
+    if warning:
+        notes.add(warning.split(": ", 1)[1])
+    return backend.engine().Volume(v.absorption, v.scattering, v.emission, v.anisotropy())
 
 
 def _translate(world, notes):

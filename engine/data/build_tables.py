@@ -17,6 +17,9 @@ refracted branch weighed by their Fresnel probabilities.
 * ggx_gen_schlick_ior_s[z, mu, rough]: the Principled BSDF's Fresnel
   estimate: mean over visible normals of the remapped-Fresnel weight s,
   counting samples reflected below the horizon as 0 (as Cycles does).
+* ggx_gen_schlick_s[z, mu, rough]: the same for the generalized Schlick
+  weight s = (1 - cos_h)^exponent, exponent = 5 (1 - z) / z (Cycles reads
+  z = 0.5, exponent 5, for the F82-tint metal's albedo estimate).
 * sheen_ltc[3, rough, mu]: the LTC fit of Zeltner et al. 2022 (A, B and
   albedo) that Cycles' Sheen BSDF is defined by; it is data of the model, not
   something to recompute, so it is copied from Cycles' shader.tables.
@@ -95,6 +98,21 @@ def gen_schlick_s(rough, mu, eta, grid):
     return np.where(g_r > 0, s, 0.0).mean()
 
 
+def gen_schlick_exp_s(rough, mu, exponent, grid):
+    if _singular(rough):
+        return float((1.0 - mu) ** exponent)
+    g_r, wo, h, _ = reflection_terms(rough, mu, grid)
+    cos_h = np.clip(np.einsum("ij,ij->i", wo, h), 0.0, 1.0)
+    return np.where(g_r > 0, (1.0 - cos_h) ** exponent, 0.0).mean()
+
+
+def build_gen_schlick_s(grid=None):
+    grid = _grid(GRID_3D) if grid is None else grid
+    rough, mus, zs = axis(16), axis(16), axis(16, hi=0.99)
+    return np.clip(np.array([[[gen_schlick_exp_s(r, m, 5.0 * (1.0 - z) / z, grid) for r in rough] for m in mus]
+                             for z in zs]), 0.0, 1.0)
+
+
 def axis(n, lo=1e-4, hi=1.0):
     return np.clip(np.arange(n) / (n - 1), lo, hi)
 
@@ -118,6 +136,7 @@ def build_ggx():
                                         for e in etas])
     out["ggx_gen_schlick_ior_s"] = np.array([[[gen_schlick_s(r, m, e, g3) for r in rough] for m in mus]
                                              for e in iors])
+    out["ggx_gen_schlick_s"] = build_gen_schlick_s(g3)
     return {k: np.clip(v, 0.0, 1.0) for k, v in out.items()}
 
 

@@ -27,9 +27,9 @@ from .. import pass_events
 from ..geometry import VIS_CAMERA
 from ..media import start_stack
 from ..nee import add_rows as _add_rows
-from ..sampler import CAMERA
+from ..sampler import CAMERA, TIME
 from ..vec import dot
-from . import stages, transparency, volume
+from . import catcher, stages, subsurface, transparency, volume
 from .context import Context
 from .records import Hit, LightSample, Paths, RayHits, ShadowBatch, Vertex, rows_of
 from .stages import every_light as _every_light, interaction as _interaction
@@ -46,14 +46,20 @@ def trace_batch(ctx, pix, sample, tile):
     pseed = ctx.sampler.pixel_seeds(pix)
     sample = np.asarray(sample, np.uint32)
     u = ctx.sampler.get(pseed, sample, CAMERA)
-    o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3])
+    if ctx.motion is None:
+        time = np.zeros((n, 0))
+        o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3])
+    else:   # motion blur: the sample's time, its own dimension set
+        time = ctx.sampler.get(pseed, sample, TIME)[:, :1]
+        o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3], time=time[:, 0])
     paths = Paths(pix, o, d, tmax, np.ones((n, 3)), np.zeros((n, 3)),
                   np.ones(n), np.ones(n, bool), o, np.zeros((n, 3)), np.zeros(n, bool),
                   np.full(n, VIS_CAMERA, np.uint8),
                   o, np.zeros(n, np.int32), np.zeros(n, np.int32), pseed, sample,
                   np.zeros((n, pass_events.aux_width(ctx.settings)), np.float32),
                   np.zeros((n, 3 if ctx.count_kinds else 0), np.int16), np.full(n, np.inf),
-                  start_stack(ctx.media, n), np.zeros(n, np.int16))
+                  start_stack(ctx.media, n), np.zeros(n, np.int16), np.full(n, -1, np.int64), np.zeros((n, 3)),
+                  np.full(n, -1, np.int32), np.zeros(n, np.int8), time)
     obs = pass_events.observer(ctx, tile)
     obs.start(paths)
     # Every step raises a live path's bounce or its transparent bounce
@@ -72,6 +78,8 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
     """One wavefront step of the live paths; returns the paths that go on.
     Each line is a stage (stages.py) or bookkeeping (below)."""
     found = stages.intersect(ctx, paths)                         # RayHits
+    if ctx.subsurface:
+        subsurface.arrive(paths, found)                          # walks' exit points: no tracing
     if depth == 0:
         stages.camera_aovs(ctx, paths, found, tile)
     flight = None if ctx.media is None else volume.free_flights(ctx, paths, found, depth)
@@ -84,8 +92,16 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
     if len(paths.pix) == 0:
         return _join(paths, scattered)
     hit = stages.interaction(ctx, paths, *surface)               # Hit
+    if ctx.holdout is not None:                                  # camera rays at holdouts
+        paths, hit = _holdouts(ctx, paths, hit, tile)
+        if len(paths.pix) == 0:
+            return _join(paths, scattered)
+    if ctx.catcher is not None:                                  # shadow catchers: split paths
+        paths, hit = catcher.split(ctx, paths, hit, tile)
     stages.surface_emission(ctx, paths, hit, depth, obs)
     paths, hit, carried = _past_last_vertex(ctx, paths, hit, tile)
+    if carried is not None and ctx.subsurface:
+        carried.exit_prim[:] = -1
     if len(paths.pix) == 0:
         return _join(paths, carried, scattered)
     v = stages.shade(ctx, paths, hit, depth)                     # Vertex
@@ -97,8 +113,11 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
         obs.light_sample(paths, batch)
     ray = paths.ray
     alive, through = stages.scatter(ctx, paths, v, depth)       # BSDF sample, throughput, roulette
+    if ctx.subsurface:                                           # BSSRDF: the random walk to the exit
+        alive = subsurface.walk(ctx, paths, v, alive, depth)
     if ctx.media is not None:                                    # refracted or passed through: the volume stack
-        volume.cross_surfaces(ctx, paths, hit, alive & (dot(paths.d, hit.ng) < 0), through)
+        volume.cross_surfaces(ctx, paths, hit, alive & (dot(paths.d, hit.ng) < 0) & (paths.exit_prim < 0),
+                              through)
     obs.after_scatter(paths, v, through)
     stages.remember_vertex(ctx, paths, v, through, every, ray, depth)
     paths = _end(ctx, paths, alive, tile)
@@ -129,6 +148,23 @@ def _end(ctx, paths, alive, tile):
         return paths
     stages.finish(ctx, paths, tile, ~alive)
     return paths.take(alive)
+
+
+def _holdouts(ctx, paths, hit, tile):
+    """Camera paths (before any scattering, through transparent passes too)
+    at holdout surfaces uncover the film by the holdout weight times their
+    throughput; those at a full holdout end there (Cycles'
+    integrate_surface_holdout).  Returns the paths and hits that go on."""
+    weight = np.where(paths.bounce == 0, ctx.holdout[hit.prim], 0.0)
+    rows = np.flatnonzero(weight > 0)
+    if len(rows) == 0:
+        return paths, hit
+    tile.add_holdout(paths.pix[rows], weight[rows] * paths.beta[rows].mean(axis=1))
+    go_on = weight < 1.0
+    if go_on.all():
+        return paths, hit
+    stages.finish(ctx, paths, tile, ~go_on)
+    return paths.take(go_on), hit.take(go_on)
 
 
 def _past_last_vertex(ctx, paths, hit, tile):

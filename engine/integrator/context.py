@@ -15,6 +15,7 @@ import numpy as np
 from .. import bsdf, kernels, pass_events
 from ..geometry import VIS_SHADOW
 from ..sampler import Sampler
+from . import subsurface
 from .visibility import VIS_INDIRECT
 
 
@@ -65,10 +66,29 @@ class Context:
     # Volumes: the scene's media.MediumTable, None without a volume (the
     # bounce's volume stages are then skipped: no cost).
     media: object = None
+    # Some material has a subsurface lobe (integrator/subsurface.py).
+    subsurface: bool = False
+    subsurface_warnings: tuple = ()
+    # Holdouts: (T,) each triangle's holdout weight for camera rays (1 on a
+    # holdout object, the material's Holdout shader weight elsewhere); None
+    # in a scene without holdouts (the stage is skipped).
+    holdout: object = None
+    # Light and shadow linking: linking.LightLinks, None without links.
+    links: object = None
+    # Shadow catchers: (T,) whether each triangle is a catcher's, None
+    # without one (catcher.py).
+    catcher: object = None
+    # Motion blur (engine.motion.MotionGeometry), None in a still scene.
+    motion: object = None
+    # Point clouds (engine.points.Spheres: which triangle rows are spheres), None without.
+    spheres: object = None
+    # Rows no light samples (engine.points.unlit_rows: points, moving triangles), None when none.
+    unlit: object = None
 
     @classmethod
     def build(cls, accel, triangles, materials, lights, camera, world, settings, sampler=None,
-              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None):
+              bump_model=bsdf.BUMP_GGX, pass_config=None, media=None, holdout=None, links=None, catcher=None,
+              motion=None, spheres=None, unlit=None):
         """The Context of a render; ``sampler`` defaults to the settings'
         seed and pattern, ``pass_config`` to no extra passes."""
         if sampler is None:
@@ -84,7 +104,9 @@ class Context:
                    transparent_limit=max(int(settings.transparent_max_bounces), 1),
                    **_kind_limits(settings, light_path), light_path=light_path,
                    pass_config=pass_config, emitter_groups=pass_events.emitter_groups(pass_config, lights),
-                   centres=pass_events.CentreRecord(camera.width * camera.height), media=media)
+                   centres=pass_events.CentreRecord(camera.width * camera.height), media=media,
+                   subsurface=subsurface.in_scene(materials), holdout=holdout, links=links, catcher=catcher,
+                   motion=motion, spheres=spheres, unlit=unlit)
 
 
 def _delta_emitters(lights):

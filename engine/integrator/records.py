@@ -59,6 +59,19 @@ class Paths:
     # volumes; and its scattering events in volumes so far.
     stack: np.ndarray
     vbounce: np.ndarray
+    # Subsurface scattering (integrator/subsurface.py): the triangle of the
+    # exit point the ray leads to (-1: none; -2: being shaded this bounce)
+    # and its barycentrics and distance (N, 3).
+    exit_prim: np.ndarray
+    exit_hit: np.ndarray
+    # The instance of the previous vertex (-1: the camera), for light linking.
+    prev_inst: np.ndarray
+    # Shadow catcher (catcher.py): 0 a matte path (no catcher met yet), 1 the
+    # main path after the split, 2 the catcher path (sees catchers only).
+    catcher: np.ndarray
+    # Motion blur: the sample's time over the shutter, (N, 1) in [0, 1], or
+    # (N, 0) in a still scene (engine.motion.path_time).
+    time: np.ndarray
 
     def __len__(self):
         return len(self.pix)

@@ -11,13 +11,16 @@ import numpy as np
 from .. import bsdf, nee, throughput
 from ..accel import shadow_rays, shadow_rays_f32
 from ..hits import hit_geometry
+from ..motion import path_time, triangles_at
+from ..points import sphere_hits
 from ..nodes import NodeRays, ShadingContext
 from ..nodes.context import PATH_COLUMNS
 from ..sampler import BSDF, LIGHT, emitter_set, vertex_set
 from ..sampling import power_heuristic
 from ..vec import dot, frame, row_any_positive, row_max, to_local
-from . import transparency, visibility
-from .records import Hit, LightSample, RayHits, ShadowBatch, Vertex, RowView
+from . import catcher, subsurface, transparency, visibility
+from .linking import instance_of
+from .records import Hit, LightSample, RayHits, ShadowBatch, Vertex, RowView, rows_of
 from ..geometry import VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION
 from .visibility import VIS_INDIRECT
 
@@ -27,9 +30,14 @@ from .visibility import VIS_INDIRECT
 
 def intersect(ctx, paths):
     """The closest surface each ray may see and the analytic lights before it."""
-    t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax)
+    time = path_time(paths)
+    t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax, time=time)
     if ctx.triangles.visibility is not None:
-        t, prim, bu, bv = visibility.skip_invisible(ctx, paths.o, paths.d, paths.tmax, paths.ray, t, prim, bu, bv)
+        t, prim, bu, bv = visibility.skip_invisible(ctx, paths.o, paths.d, paths.tmax, paths.ray, t, prim, bu, bv,
+                                                    time=time)
+    if ctx.catcher is not None:
+        t, prim, bu, bv = visibility.catchers_only(ctx, paths.o, paths.d, paths.tmax, paths.catcher == 2,
+                                                   t, prim, bu, bv)
     light_t, emitter, Le, pdf = _lights_along(ctx, paths, np.minimum(t, paths.tmax))
     return RayHits(t, prim, bu, bv, light_t < np.inf, emitter, Le, pdf, light_t)
 
@@ -110,7 +118,7 @@ def emitters(ctx, paths, found, obs):
     hit_light = found.light
     if hit_light.any():
         i = np.nonzero(hit_light)[0]
-        w = mis_hit(ctx, paths, i, found.emitter[i], found.pdf[i])
+        w = linking_hits(ctx, paths, i, found.emitter[i], mis_hit(ctx, paths, i, found.emitter[i], found.pdf[i]))
         unweighted = paths.beta[i] * found.Le[i]
         _collect(paths, i, unweighted, w)
         obs.emitter(paths, i, unweighted, w, emitters=found.emitter[i])
@@ -123,6 +131,7 @@ def escaped(ctx, paths, i, tile, obs):
     unweighted) and the suns in their direction."""
     if len(i) == 0:
         return
+    catcher.camera_background(ctx, paths, i, tile)
     sky = i
     if ctx.settings.transparent:
         # With a transparent film camera rays (also through transparent
@@ -146,7 +155,8 @@ def escaped(ctx, paths, i, tile, obs):
     for mask, emitter, Le, pdf in ctx.lights.sun_hits(paths.d[i], paths.ray[i] if ctx.track_rays else None):
         j = i[mask]
         if len(j):
-            w = mis_hit(ctx, paths, j, np.full(len(j), emitter), np.full(len(j), pdf))
+            w = linking_hits(ctx, paths, j, emitter, mis_hit(ctx, paths, j, np.full(len(j), emitter),
+                                                             np.full(len(j), pdf)))
             unweighted = paths.beta[j] * Le
             _collect(paths, j, unweighted, w)
             obs.emitter(paths, j, unweighted, w, emitters=np.full(len(j), emitter))
@@ -159,10 +169,20 @@ def surface_emission(ctx, paths, hit, depth, obs):
     if ctx.materials.textures.emission:
         emission = ctx.materials.textures.emission_at(hit.mat, shading(ctx, hit, paths, depth), emission)
     em = np.flatnonzero(row_any_positive(emission))
+    if ctx.subsurface:
+        em = em[~subsurface.at_exit(paths)[em]]   # Cycles collects no emission at an exit point
     if len(em) == 0:
         return
+    if ctx.materials.emission_layers:
+        # Sheen and coat dim the emission below them (Principled BSDF).
+        sub = hit.take(em)
+        emission = np.array(emission, copy=True)
+        emission[em] = ctx.materials.dim_emission(sub.mat, ShadingContext.of_hit(ctx.triangles, sub),
+                                                  dot(sub.wo, sub.ns), emission[em])
     if ctx.settings.strategy == "mis":
         emitter = ctx.lights.emitter_of_triangle(hit.mat[em])
+        if ctx.unlit is not None:   # no light samples points or moving triangles: BSDF rays find them
+            emitter = np.where(ctx.unlit[hit.prim[em]], -1, emitter)
         w = np.ones(len(em))
         # A surface that is no light (its emission's estimate is 0) is found
         # by BSDF rays alone: weight 1.
@@ -185,7 +205,17 @@ def interaction(ctx, paths, t, prim, bu, bv):
     """The Hit of rays (paths.o, paths.d) on triangles ``prim``."""
     tr = ctx.triangles
     d = paths.d
-    p, ng, ns, back = hit_geometry(tr, paths.o, d, t, prim, bu, bv)
+    time = path_time(paths) if ctx.motion is not None and ctx.motion.moving else None
+    if time is None:
+        p, ng, ns, back = hit_geometry(tr, paths.o, d, t, prim, bu, bv)
+    else:   # the triangles where they are at each ray's time
+        p, ng, ns, back = hit_geometry(triangles_at(ctx.motion, tr, prim, time), paths.o, d, t,
+                                       np.arange(len(prim)), bu, bv)
+    if ctx.spheres is not None:   # points: the sphere's point and normal
+        on = np.flatnonzero(ctx.spheres.is_point[prim])
+        if len(on):
+            p[on], ng[on], back[on] = sphere_hits(ctx.spheres, paths.o[on], d[on], t[on], prim[on])
+            ns[on] = ng[on]
     uv = _hit_uv(tr, prim, bu, bv)
     hit = Hit(p, ng, ns, -d, np.take(tr.material, prim), prim, ctx.accel.offset_scale(p), uv, back=back,
               bary=np.stack([bu, bv], axis=1), depth=getattr(paths, "bounce", None),
@@ -248,7 +278,10 @@ def shade(ctx, paths, hit, depth):
     """The Vertex of each hit: its material's lobes gathered at the point,
     the shading normal after normal maps and bump, the shading frame, and
     the lobe weights and selection (wo only: once per vertex)."""
-    lobes = ctx.materials.gather(hit.mat, shading(ctx, hit, paths, depth))
+    sc = shading(ctx, hit, paths, depth)
+    lobes = ctx.materials.gather(hit.mat, sc)
+    if ctx.subsurface:
+        subsurface.exit_lobes(paths, lobes)
     if ctx.settings.filter_glossy > 0:
         filter_glossy(ctx, paths, lobes)
     if hit.back is not None:
@@ -259,6 +292,9 @@ def shade(ctx, paths, hit, depth):
         smooth = hit.ns
         hit.ns = ctx.materials.textures.perturb(hit, ctx.triangles)
     tt, bb = frame(hit.ns)
+    # Anisotropic lobes' tangents (evaluated on the unbent normal, as Cycles'
+    # Tangent node reads sd->N; projected onto the bent one).
+    ctx.materials.textures.tangent_frames(hit.mat, sc, hit.ns, tt, bb)
     wo_l = to_local(hit.wo, tt, bb, hit.ns)
     if smooth is not None and not np.array_equal(smooth, hit.ns):
         # Cycles' bump shadowing term (bsdf.bump_shadowing) needs the smooth
@@ -343,6 +379,34 @@ def light_samples(ctx, paths, v, depth, every):
                 yield batch
 
 
+def linking_nee(ctx, e, prim, contrib, w, live):
+    """Light linking at light samples: nothing from lights that do not
+    light the vertex's object; shadow-linked lights weigh 1 (light sampling
+    alone finds them, engine/integrator/linking.py)."""
+    links = ctx.links
+    e = np.broadcast_to(e, live.shape)
+    lit = links.lit(e, instance_of(ctx, prim))
+    contrib = contrib * lit[:, None]
+    live = live & lit
+    alone = links.shadow_linked(e) & (w > 0)
+    if alone.any():
+        contrib = np.where(alone[:, None], contrib / np.where(alone, w, 1.0)[:, None], contrib)
+        w = np.where(alone, 1.0, w)
+    return contrib, w, live
+
+
+def linking_hits(ctx, paths, i, emitter, w):
+    """Light linking for BSDF rays ``i`` that met ``emitter``: the weight 0
+    where the light does not light the previous vertex's object, or where
+    it is shadow-linked (found by light sampling alone) after a bounce."""
+    if ctx.links is None:
+        return w
+    emitter = np.broadcast_to(emitter, (len(i),))
+    keep = ctx.links.lit(emitter, paths.prev_inst[i])
+    keep &= ~(ctx.links.shadow_linked(emitter) & (paths.bounce[i] > 0))
+    return w * keep
+
+
 def uniforms(ctx, paths, dim_set):
     """(N, 4) sample values of one dimension set for the paths."""
     return ctx.sampler.get(paths.pseed, paths.sample, dim_set)
@@ -360,6 +424,8 @@ def light_sample(ctx, paths, v, e, p_sel, u):
         f = visibility.visible_lobes_f(ctx, v, wi_l, ls.wi, e, f)
     contrib, w, live = nee.contribution(wi_l, ls.wi, hit.ng, ls.pdf, p_sel, pdf_b, ls.delta,
                                         ctx.settings.strategy == "mis", paths.beta, f, ls.Le)
+    if ctx.links is not None:
+        contrib, w, live = linking_nee(ctx, e, hit.prim, contrib, w, live)
     live = np.flatnonzero(live)
     if len(live) == 0:
         return None
@@ -379,14 +445,23 @@ def trace_shadows(ctx, paths, batch):
     e = batch.sample.emitter[batch.rows]
     contrib = batch.sample.contrib
     path_rows = batch.at.path_rows
+    rows = batch.rows if path_rows is None else path_rows[batch.rows]
+    time = path_time(paths)
+    time = None if time is None else time[rows]
     if ctx.transparent_shadows:
-        rows = batch.rows if path_rows is None else path_rows[batch.rows]
         added = contrib[batch.rows] * transparency.transmittance(ctx, batch.origin, batch.direction, batch.tmax,
-                                                                 e, paths.tbounce[rows])
+                                                                 e, paths.tbounce[rows], time=time)
         batch.free, batch.added = batch.rows, added
         paths.L[rows] += added
         return
-    batch.free = batch.rows[~visibility.occluded(ctx, batch.origin, batch.direction, batch.tmax, e)]
+    blocked = visibility.occluded(ctx, batch.origin, batch.direction, batch.tmax, e, time=time)
+    if ctx.catcher is not None:
+        rows = batch.rows if path_rows is None else path_rows[batch.rows]
+        only = np.flatnonzero(paths.catcher[rows] == 2)
+        if len(only):
+            blocked[only] = visibility.occluded_by_catchers(ctx, batch.origin[only], batch.direction[only],
+                                                            batch.tmax[only])
+    batch.free = batch.rows[~blocked]
     if path_rows is None:
         nee.add_rows(paths.L, batch.free, contrib)
     else:
@@ -404,7 +479,10 @@ def scatter(ctx, paths, v, depth):
     s = ctx.settings
     hit = v.hit
     u = uniforms(ctx, paths, vertex_set(depth, BSDF))
-    wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u[:, 0], u[:, 1], u[:, 2], *v.lobes_wo)
+    if ctx.subsurface:
+        wi_l, weight, pdf, delta = subsurface.sample(v, u)
+    else:
+        wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u[:, 0], u[:, 1], u[:, 2], *v.lobes_wo)
     wi = v.world(wi_l)
     ok, paths.beta = throughput.update(wi, hit.ng, wi_l, weight, paths.beta, paths.bounce, s.rr_depth, u[:, 3])
     through = transparency.sampled_transparent(ctx, hit, delta, wi_l, v.wo_l)
@@ -435,6 +513,8 @@ def remember_vertex(ctx, paths, v, through, every, ray, depth):
     hit = v.hit
     paths.prev_p = unless(through, paths.prev_p, hit.p)
     paths.prev_n = unless(through, paths.prev_n, hit.ng)
+    if ctx.links is not None:
+        paths.prev_inst = unless(through, paths.prev_inst, instance_of(ctx, hit.prim).astype(np.int32))
     if every is not None:
         paths.prev_every = unless(through, paths.prev_every, every)
     if ctx.track_rays or ctx.count_kinds:
@@ -481,4 +561,9 @@ def finish(ctx, paths, tile, keep=None):
     if clamp > 0:
         m = row_max(L)
         L = L * np.where(m > clamp, clamp / np.maximum(m, 1e-30), 1.0)[:, None]
+    if ctx.catcher is not None:
+        flag = paths.catcher if keep is None else np.take(paths.catcher, rows_of(keep))
+        tile.add_catcher(pix, L, flag)
+        combined = flag != 2
+        pix, L, sample = pix[combined], L[combined], sample[combined]
     tile.add_radiance(pix, L, sample)

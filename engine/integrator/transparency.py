@@ -81,7 +81,12 @@ def sampled_transparent(ctx, hit, delta, wi_l, wo_l):
     return delta & ctx.transparent_mat[hit.mat] & np.all(wi_l == -wo_l, axis=1)
 
 
-def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None):
+# Surfaces a shadow ray crosses at most (volume boundaries count no
+# transparent bounce; Cycles' VOLUME_BOUNDS_MAX): past them it is blocked.
+VOLUME_BOUNDS_MAX = 1024
+
+
+def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None, rng=None, time=None):
     """(N, 3) light reaching the shadow rays' ends through transparent
     surfaces (Cycles' transparent shadows).  embreex has no any-hit filter,
     so each ray is traced again from past its transparent hit, times that
@@ -97,17 +102,23 @@ def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None):
         cast = (ctx.lights.visibility[emitter] & VIS_SHADOW) != 0
     idx = np.nonzero(cast)[0]
     o, d, tm = origin[idx], wi[idx], tmax[idx]
+    tt = None if time is None else time[idx]
     left = np.maximum(ctx.settings.transparent_max_bounces - tbounce[idx], 0)
     if stack is not None:
         stack = stack[idx].copy()
+    crossings = 0
     while len(idx):
-        t, prim, bu, bv = ctx.accel.intersect(o, d, tm)
+        crossings += 1
+        if crossings > VOLUME_BOUNDS_MAX:
+            out[idx] = 0.0     # more surfaces on the ray than Cycles crosses: blocked
+            break
+        t, prim, bu, bv = ctx.accel.intersect(o, d, tm, time=tt)
         if ctx.shadow_skips:
             ray = np.full(len(idx), VIS_SHADOW, np.uint8)
-            t, prim, bu, bv = skip_invisible(ctx, o, d, tm, ray, t, prim, bu, bv)
+            t, prim, bu, bv = skip_invisible(ctx, o, d, tm, ray, t, prim, bu, bv, time=tt)
         hit = prim >= 0
         if stack is not None:
-            out[idx] *= transmittance_factor(ctx.media, stack, np.where(hit, np.minimum(t, tm), tm))
+            out[idx] *= transmittance_factor(ctx.media, stack, np.where(hit, np.minimum(t, tm), tm), o, d, rng)
         mat = ctx.triangles.material[np.maximum(prim, 0)]
         boundary = ctx.media.boundary[mat] if ctx.media is not None else False
         crosses = hit & ctx.transparent_mat[mat] & ((left > 0) | boundary)
@@ -123,9 +134,11 @@ def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None):
         ng = ctx.triangles.ng[prim[c]]
         if stack is not None:
             stack = stack[c]
-            ctx.media.cross(stack, np.arange(len(c)), mat[c], dot(ng, d[c]) > 0)
+            ctx.media.cross(stack, np.arange(len(c)), ctx.media.medium_of(prim[c], mat[c]), dot(ng, d[c]) > 0)
         start = ctx.accel.offset_origin(o[c] + d[c] * t[c, None], ng, d[c])
         tm = tm[c] - dot(start - o[c], d[c])
         counted = 1 if ctx.media is None else ~ctx.media.boundary[mat[c]]
         idx, o, d, left = idx[c], start, d[c], left[c] - counted
+        if tt is not None:
+            tt = tt[c]
     return out

@@ -17,7 +17,7 @@ MAX_SKIPS = 16   # invisible surfaces a ray may pass before it counts as a miss
 VIS_INDIRECT = VIS_DIFFUSE | VIS_GLOSSY | VIS_TRANSMISSION
 
 
-def skip_invisible(ctx, o, d, tmax, ray, t, prim, bu, bv):
+def skip_invisible(ctx, o, d, tmax, ray, t, prim, bu, bv, time=None):
     """Closest hit among triangles visible to each ray's kind: embreex has no
     ray masks, so rays that hit an invisible triangle continue past it."""
     vis = ctx.triangles.visibility
@@ -26,41 +26,99 @@ def skip_invisible(ctx, o, d, tmax, ray, t, prim, bu, bv):
         again = np.nonzero((prim >= 0) & ((vis[np.maximum(prim, 0)] & ray) == 0))[0]
         if len(again) == 0:
             return t, prim, bu, bv
-        tn, pn, un, vn = _continue_past(ctx, o[again], d[again], tmax[again], t[again], prim[again])
+        tn, pn, un, vn = _continue_past(ctx, o[again], d[again], tmax[again], t[again], prim[again],
+                                        None if time is None else time[again])
         t[again], prim[again], bu[again], bv[again] = tn, pn, un, vn
     miss = (prim >= 0) & ((vis[np.maximum(prim, 0)] & ray) == 0)
     t[miss], prim[miss] = np.inf, -1
     return t, prim, bu, bv
 
 
-def _continue_past(ctx, o, d, tmax, t, prim):
+def _continue_past(ctx, o, d, tmax, t, prim, time=None):
     """Intersect again from just behind the hit triangle; t stays measured
     from the original origin o."""
     p = o + d * t[:, None]
     start = ctx.accel.offset_origin(p, ctx.triangles.ng[prim], d)
     t0 = dot(start - o, d)
-    tn, pn, un, vn = ctx.accel.intersect(start, d, np.maximum(tmax - t0, 0.0))
+    tn, pn, un, vn = ctx.accel.intersect(start, d, np.maximum(tmax - t0, 0.0), time=time)
     return np.where(pn >= 0, tn + t0, np.inf), pn, un, vn
 
 
-def occluded(ctx, origin, wi, tmax, emitter):
+def occluded(ctx, origin, wi, tmax, emitter, time=None):
     """Shadow test: lights with visible_shadow off (Cycles' Cast Shadow) are
     never blocked; objects with visible_shadow off never block."""
+    if ctx.links is not None and ctx.links.any_blockers:
+        return _occluded_linked(ctx, origin, wi, tmax, emitter)
     if not ctx.light_no_shadow and not ctx.shadow_skips:
-        return ctx.accel.occluded(origin, wi, tmax)
+        return ctx.accel.occluded(origin, wi, tmax, time=time)
     blocked = np.zeros(len(origin), bool)
     test = np.ones(len(origin), bool)
     if ctx.light_no_shadow:
         test = (ctx.lights.visibility[emitter] & VIS_SHADOW) != 0
     idx = np.nonzero(test)[0]
+    ti = None if time is None else time[idx]
     if not ctx.shadow_skips:
-        blocked[idx] = ctx.accel.occluded(origin[idx], wi[idx], tmax[idx])
+        blocked[idx] = ctx.accel.occluded(origin[idx], wi[idx], tmax[idx], time=ti)
         return blocked
-    t, prim, _, _ = ctx.accel.intersect(origin[idx], wi[idx], tmax[idx])
+    t, prim, _, _ = ctx.accel.intersect(origin[idx], wi[idx], tmax[idx], time=ti)
     ray = np.full(len(idx), VIS_SHADOW, np.uint8)
-    t, prim, _, _ = skip_invisible(ctx, origin[idx], wi[idx], tmax[idx], ray, t, prim, t, t)
+    t, prim, _, _ = skip_invisible(ctx, origin[idx], wi[idx], tmax[idx], ray, t, prim, t, t, time=ti)
     blocked[idx] = prim >= 0
     return blocked
+
+
+def _occluded_linked(ctx, origin, wi, tmax, emitter):
+    """Shadow linking: the shadow rays of a light with a blocker set pass
+    every object outside it (the others as ``occluded`` without links)."""
+    emitter = np.broadcast_to(np.asarray(emitter, np.int64), (len(origin),))
+    linked = ctx.links.shadow_linked(emitter)
+    blocked = np.zeros(len(origin), bool)
+    plain = np.flatnonzero(~linked)
+    if len(plain):
+        blocked[plain] = occluded(replace(ctx, links=None), origin[plain], wi[plain], tmax[plain], emitter[plain])
+    idx = np.flatnonzero(linked)
+    if len(idx):
+        o, d, tm, e = origin[idx], wi[idx], tmax[idx], emitter[idx]
+        t, prim, _, _ = ctx.accel.intersect(o, d, tm)
+        if ctx.light_no_shadow:
+            prim = np.where((ctx.lights.visibility[e] & VIS_SHADOW) != 0, prim, -1)
+        vis = ctx.triangles.visibility
+        for _ in range(MAX_SKIPS):
+            passes = (prim >= 0) & ~ctx.links.blocking(e, prim)
+            if vis is not None:
+                passes |= (prim >= 0) & ((vis[np.maximum(prim, 0)] & VIS_SHADOW) == 0)
+            again = np.flatnonzero(passes)
+            if len(again) == 0:
+                break
+            tn, pn, _, _ = _continue_past(ctx, o[again], d[again], tm[again], t[again], prim[again])
+            t[again], prim[again] = tn, pn
+        blocked[idx] = (prim >= 0) & ctx.links.blocking(e, prim)
+    return blocked
+
+
+def catchers_only(ctx, o, d, tmax, only, t, prim, bu, bv):
+    """Rays of shadow catcher paths (``only``) see catcher triangles alone
+    (Cycles shifts their visibility onto the catchers' bits)."""
+    rows = np.flatnonzero(only)
+    if len(rows) == 0:
+        return t, prim, bu, bv
+    t, prim, bu, bv = t.copy(), prim.copy(), bu.copy(), bv.copy()
+    for _ in range(MAX_SKIPS):
+        again = rows[(prim[rows] >= 0) & ~ctx.catcher[np.maximum(prim[rows], 0)]]
+        if len(again) == 0:
+            return t, prim, bu, bv
+        tn, pn, un, vn = _continue_past(ctx, o[again], d[again], tmax[again], t[again], prim[again])
+        t[again], prim[again], bu[again], bv[again] = tn, pn, un, vn
+    miss = rows[(prim[rows] >= 0) & ~ctx.catcher[np.maximum(prim[rows], 0)]]
+    t[miss], prim[miss] = np.inf, -1
+    return t, prim, bu, bv
+
+
+def occluded_by_catchers(ctx, o, d, tmax):
+    """Shadow rays of shadow catcher paths: blocked by catchers only."""
+    t, prim, bu, bv = ctx.accel.intersect(o, d, tmax)
+    t, prim, _, _ = catchers_only(ctx, o, d, tmax, np.ones(len(o), bool), t, prim, bu, bv)
+    return (prim >= 0) & (t < tmax)
 
 
 def ray_kind(ctx, v, paths, depth):

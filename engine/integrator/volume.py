@@ -40,17 +40,32 @@ def free_flights(ctx, paths, found, depth):
     t_end = np.minimum(found.t[inside], on.tmax)
     may = ~transparency.last_vertices(ctx, on)   # past max_bounces or volume_bounces: no scattering
     u = ctx.sampler.get(on.pseed, on.sample, vertex_set(depth, MEDIUM))
-    flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u[:, 1])
-    flight.rows = inside
     lit = np.flatnonzero(found.light[inside])
+    x_light = np.full(len(inside), np.inf)
     if len(lit):
         rows = inside[lit]
         x = found.light_t[rows]
         if ctx.transparent_shadows:   # light_t is measured from where the straight line started
             x = x - dot(paths.o[rows] - paths.mis_o[rows], paths.d[rows])
+        x_light[lit] = x
+    flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u[:, 1],
+                               on.o, on.d, tracking_rng(ctx, on.pseed, on.sample, depth, 1), x_light)
+    flight.rows = inside
+    if len(lit):
+        rows = inside[lit]
+        x = x_light[lit]
         found.Le[rows] *= media.light_factor(flight, lit, x)
         found.light[rows] = flight.t[lit] > x
     return flight
+
+
+def tracking_rng(ctx, pseed, sample, depth, salt):
+    """The random numbers of null-scattering tracking (a ray's collisions
+    are unbounded in number, so they come from a generator seeded by the
+    batch's first path, the step and the purpose: deterministic for a seed)."""
+    n = len(pseed)
+    first = (int(pseed[0]), int(sample[0])) if n else (0, 0)
+    return np.random.default_rng([int(ctx.settings.seed) & 0xFFFFFFFF, first[0], first[1], depth, salt, n])
 
 
 def after_flights(ctx, paths, found, ended, flight, depth):
@@ -138,21 +153,23 @@ def _light_sample(ctx, paths, p, g, e, p_sel, u):
         return
     eps = ctx.accel.offset_scale(p)
     origin, direction, tmax = shadow_rays(p, np.zeros_like(p), ls.wi, ls.dist, ls.on_surface, eps, live)
-    T = shadow_transmittance(ctx, origin, direction, tmax, e[live], paths.tbounce[live], paths.stack[live])
+    rng = tracking_rng(ctx, paths.pseed[live], paths.sample[live], int(paths.bounce[live[0]]), 2)
+    T = shadow_transmittance(ctx, origin, direction, tmax, e[live], paths.tbounce[live], paths.stack[live], rng)
     paths.L[live] += contrib[live] * T
 
 
 # ----------------------------------------------------------------------------
 # shadow rays through media
 
-def shadow_transmittance(ctx, origin, direction, tmax, emitter, tbounce, stack):
+def shadow_transmittance(ctx, origin, direction, tmax, emitter, tbounce, stack, rng):
     """(N, 3) light reaching the shadow rays' ends: blocked by opaque
     surfaces, times the transparency of transparent ones (volume boundaries
     among them) and the transmittance of every medium between, starting in
-    the media of ``stack`` (N, K)."""
+    the media of ``stack`` (N, K); heterogeneous media by ratio tracking
+    with ``rng``."""
     if ctx.transparent_shadows:
-        return transparency.transmittance(ctx, origin, direction, tmax, emitter, tbounce, stack=stack)
-    T = media.transmittance_factor(ctx.media, stack, tmax)
+        return transparency.transmittance(ctx, origin, direction, tmax, emitter, tbounce, stack=stack, rng=rng)
+    T = media.transmittance_factor(ctx.media, stack, tmax, origin, direction, rng)
     T[visibility.occluded(ctx, origin, direction, tmax, emitter)] = 0.0
     return T
 
@@ -164,11 +181,13 @@ def trace_surface_shadows(ctx, paths, batch):
     rows = batch.rows if batch.at.path_rows is None else batch.at.path_rows[batch.rows]
     hit = batch.at.hit
     stack = paths.stack[rows].copy()
-    mat, back, ng = hit.mat[batch.rows], hit.back[batch.rows], hit.ng[batch.rows]
+    mat = ctx.media.medium_of(hit.prim[batch.rows], hit.mat[batch.rows])
+    back, ng = hit.back[batch.rows], hit.ng[batch.rows]
     below = np.flatnonzero(dot(batch.direction, ng) < 0)
     ctx.media.cross(stack, below, mat[below], back[below])
     e = batch.sample.emitter[batch.rows]
-    T = shadow_transmittance(ctx, batch.origin, batch.direction, batch.tmax, e, paths.tbounce[rows], stack)
+    rng = tracking_rng(ctx, paths.pseed[rows], paths.sample[rows], int(paths.bounce[rows[0]]) if len(rows) else 0, 3)
+    T = shadow_transmittance(ctx, batch.origin, batch.direction, batch.tmax, e, paths.tbounce[rows], stack, rng)
     added = batch.sample.contrib[batch.rows] * T
     batch.free, batch.added = batch.rows, added
     paths.L[rows] += added
@@ -181,7 +200,8 @@ def cross_surfaces(ctx, paths, hit, crossing, passed):
     (Cycles counts those apart, volume_bounds_bounce)."""
     rows = np.flatnonzero(crossing)
     if len(rows):
-        ctx.media.cross(paths.stack, rows, hit.mat[rows], np.asarray(hit.back)[rows])
+        ctx.media.cross(paths.stack, rows, ctx.media.medium_of(hit.prim[rows], hit.mat[rows]),
+                        np.asarray(hit.back)[rows])
     free = passed & ctx.media.boundary[hit.mat]
     if free.any():
         paths.tbounce = paths.tbounce - free

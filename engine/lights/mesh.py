@@ -21,6 +21,15 @@ MESH = 3
 MAX_TREE_TRIANGLES = 16384
 
 
+# Cycles evaluates a light sample's emission with the emission nodes only
+# (KERNEL_FEATURE_NODE_MASK_SURFACE_LIGHT: no closures are allocated), so the
+# Principled BSDF's sheen and coat, which dim its emission by their albedo
+# where the shader allocates them, do not dim it there: only the coat tint
+# (applied outside the closure) does.  BSDF rays that hit the surface see
+# it dimmed.  Matched here (the integrator's MIS then blends the two as
+# Cycles' does).
+LIGHT_SAMPLES_DIM_BY_ALBEDO = False
+
 class MeshLights(LightTable):
     """Emissive triangles, one emitter per emissive material.
 
@@ -41,6 +50,7 @@ class MeshLights(LightTable):
         self.count = len(self.material)
         self.L = materials.emission[self.material].reshape(-1, 3)
         self.textures = materials.textures
+        self.materials = materials
         self.members, self.dists, self.total_area, self.trees = [], [], [], []
         # Index of each triangle within its group (for the group's tree pmf).
         self.rank = np.zeros(len(triangles), np.int64)
@@ -99,7 +109,10 @@ class MeshLights(LightTable):
         wi = v / np.maximum(t, 1e-30)[:, None]
         cos_l = np.abs(dot(wi, tr.ng[tri]))
         path = None if out.path is None else (out.path[0][idx], out.path[1][idx])
-        out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, self._radiance(tri, q, self.L[j], path, t)
+        Le = self._radiance(tri, q, self.L[j], path, t)
+        if self.materials.emission_layers:
+            Le = self._dimmed(tri, q, wi, Le)
+        out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, Le
         out.pdf[idx] = self._pdf(tri, p_tri, t * t, cos_l, sph, solid_angle)
         out.on_surface[idx] = True
 
@@ -150,6 +163,23 @@ class MeshLights(LightTable):
         if not self.textures.emission:
             return L
         tr = self.tris
+        shading = self._shading(tri, q)
+        if path is not None:
+            shading.depth, shading.path = path[0], path[1].copy()
+            shading.path[:, PATH_COLUMNS.index("Ray Length")] = t
+        return self.textures.emission_at(tr.material[tri], shading, np.broadcast_to(L, q.shape))
+
+    def _dimmed(self, tri, q, wi, Le):
+        """Le toward the shading point (-wi) dimmed by the layers over the
+        emission (bsdf.MaterialTable.dim_emission), at the smooth normal of q."""
+        tr = self.tris
+        shading = self._shading(tri, q)
+        Le = np.array(np.broadcast_to(Le, q.shape), dtype=np.float64)
+        return self.materials.dim_emission(tr.material[tri], shading, dot(wi, shading.ns), Le,
+                                           albedo=LIGHT_SAMPLES_DIM_BY_ALBEDO)
+
+    def _shading(self, tri, q):
+        tr = self.tris
         d = q - tr.p0[tri]
         e1, e2 = tr.e1[tri], tr.e2[tri]
         d00, d01, d11 = dot(e1, e1), dot(e1, e2), dot(e2, e2)
@@ -159,11 +189,7 @@ class MeshLights(LightTable):
         b2 = (d00 * d21 - d01 * d20) / denom
         # No ray kind: Cycles evaluates a light sample's emission with
         # PATH_RAY_EMISSION, so Light Path's 'Is ... Ray' outputs read 0.
-        shading = ShadingContext.at(tr, tri, b1, b2, ray=np.zeros(len(tri), np.uint8))
-        if path is not None:
-            shading.depth, shading.path = path[0], path[1].copy()
-            shading.path[:, PATH_COLUMNS.index("Ray Length")] = t
-        return self.textures.emission_at(tr.material[tri], shading, np.broadcast_to(L, q.shape))
+        return ShadingContext.at(tr, tri, b1, b2, ray=np.zeros(len(tri), np.uint8))
 
     def _spherical(self, tri, p):
         """Which shading points sample their triangle by solid angle (Arvo),

@@ -45,6 +45,7 @@ TRANSMISSION = 2          # wi through the surface (wi.z < 0)
 DELTA = 4                 # always a singular direction (no eval, no pdf)
 DELTA_WHEN_SMOOTH = 8     # singular at alpha <= MIN_ALPHA (smooth glass)
 STRAIGHT = 16             # wi = -wo: the path continues as if no surface were there
+SUBSURFACE = 32           # a BSSRDF: no BSDF value; the integrator's subsurface stage walks it
 # Below this alpha, GGX is numerically a mirror (glass: a smooth refractor);
 # Cycles switches to a singular lobe at alpha^2 <= 2e-10.
 MIN_ALPHA = 1e-3
@@ -127,8 +128,33 @@ PARAMS = (
           "unlike colour it does not enter Fresnel, energy or layering estimates.",
           to_table=lambda lobe: max(float(getattr(lobe, "weight", 1.0)), 0.0)),
     Param("anisotropy", float, 0.0, np.float64, (), "Anisotropy in [0, 1] (glossy_anisotropic): alpha_x = "
-          "alpha / aspect, alpha_y = alpha aspect with aspect = sqrt(1 - 0.9 anisotropy), as Cycles' Principled."),
+          "alpha / aspect, alpha_y = alpha aspect with aspect = sqrt(1 - 0.9 anisotropy), as Cycles' Principled "
+          "(values up to 1/0.9 express the Glossy BSDF's stronger anisotropy).",
+          to_table=lambda lobe: _finite_or(getattr(lobe, "anisotropy", 0.0), 0.0)),
+    Param("diffuse_roughness", float, 0.0, np.float64, (), "Oren-Nayar sigma in [0, 1] (oren_nayar: Cycles' "
+          "Diffuse BSDF Roughness, the Principled Diffuse Roughness)."),
+    Param("rotation", float, 0.0, np.float64, (), "tangent rotation about the normal in turns (glossy_anisotropic: "
+          "Anisotropic Rotation), applied as Cycles' rotate_around_axis(T, N, 2 pi rotation).",
+          to_table=lambda lobe: _turns(getattr(lobe, "rotation", 0.0))),
+    Param("radius", RGB, (1.0, 1.0, 1.0), np.float64, (3,), "subsurface: RGB scattering radius in metres "
+          "(Blender's Radius x Scale; Cycles' bssrdf radius before its per-method remap)",
+          to_table=lambda lobe: np.nan_to_num(np.maximum(getattr(lobe, "radius", (1.0, 1.0, 1.0)), 0.0),
+                                              nan=0.0, posinf=1e30)),
+    Param("phase_g", float, 0.0, np.float64, (), "subsurface: Henyey-Greenstein anisotropy of the walk "
+          "(Blender's Subsurface Anisotropy; clamped to [0, 0.9] as Cycles 5.0)."),
 )
+
+
+def _finite_or(value, fallback):
+    value = float(value)
+    return value if np.isfinite(value) else fallback
+
+
+def _turns(value):
+    """A rotation in turns reduced to [0, 1) (a huge one keeps its float
+    fraction: 1e30 turns is a whole number of turns, 0)."""
+    value = _finite_or(value, 0.0)
+    return float(value - np.floor(value))
 PARAM = {p.name: p for p in PARAMS}
 # The per-lobe table arrays beside kind / color / alpha / schlick, in order.
 EXTRA_PARAMS = tuple(p for p in PARAMS if p.name not in ("color", "roughness"))

@@ -15,7 +15,7 @@ volume has no MediumTable (Context.media is None) and never gets here.
 """
 from .flight import FreeFlight, emission_integral, free_flight, light_factor, transmittance_factor
 from .phase import hg_eval, hg_sample
-from .table import STACK_SIZE, MediumTable, camera_media, open_volume_meshes, start_stack
+from .table import STACK_SIZE, MediumTable, camera_media, open_meshes, open_volume_meshes, start_stack
 
 __all__ = ["FreeFlight", "MediumTable", "STACK_SIZE", "camera_media", "emission_integral", "free_flight",
-           "hg_eval", "hg_sample", "light_factor", "open_volume_meshes", "start_stack", "transmittance_factor"]
+           "hg_eval", "hg_sample", "light_factor", "open_meshes", "open_volume_meshes", "start_stack", "transmittance_factor"]

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .tracking import track, transmittance
+
 
 @dataclass
 class FreeFlight:
@@ -38,6 +40,11 @@ class FreeFlight:
     sigma_t: np.ndarray
     channel_pdf: np.ndarray   # (n, 3); 0 rows where the segment may not scatter
     samples: np.ndarray       # which rows sampled a distance
+    # Rows in a heterogeneous medium, tracked (tracking.py), and their
+    # throughput factor on reaching the light met on the way.
+    tracked: np.ndarray = None
+    light_w: np.ndarray = None
+    truncated: int = 0
 
 
 def _exp_neg(sigma, t):
@@ -65,10 +72,31 @@ def channel_pdf(beta, sigma_s, sigma_t):
     return np.where(total[:, None] > 0, w / np.where(total > 0, total, 1.0)[:, None], 1.0 / 3.0)
 
 
-def free_flight(table, stack, beta, t_end, may_scatter, u_channel, u_distance):
+def free_flight(table, stack, beta, t_end, may_scatter, u_channel, u_distance, o=None, d=None, rng=None,
+                x_light=None):
     """The FreeFlight of segments of length t_end (inf: no end) in the
     media of ``stack`` (rows of the paths in a medium); ``may_scatter``:
-    the path has scattering events left."""
+    the path has scattering events left.  Rows whose stack holds a
+    heterogeneous medium are tracked along o + t d (tracking.py, random
+    numbers from ``rng``; ``x_light``: where a light on the ray is)."""
+    flight = _homogeneous_flight(table, stack, beta, t_end, may_scatter, u_channel, u_distance)
+    het = table.heterogeneous(stack)
+    flight.tracked = het
+    if het.any():
+        h = np.flatnonzero(het)
+        xl = None if x_light is None else x_light[h]
+        tr = track(table, stack[h], o[h], d[h], t_end[h], rng, "flight", beta[h], may_scatter[h], xl)
+        flight.scatter[h], flight.t[h], flight.weight[h] = tr.scatter, tr.t, tr.weight
+        flight.emitted[h], flight.g[h] = tr.emitted, tr.g
+        flight.samples[h] = False
+        flight.channel_pdf[h] = 0.0
+        flight.light_w = np.zeros((len(stack), 3))
+        flight.light_w[h] = tr.light_w
+        flight.truncated = tr.truncated
+    return flight
+
+
+def _homogeneous_flight(table, stack, beta, t_end, may_scatter, u_channel, u_distance):
     n = len(stack)
     sa, ss, em, g = table.coefficients(stack)
     st = sa + ss
@@ -107,9 +135,20 @@ def light_factor(flight, k, x):
         P = (flight.channel_pdf[k] * T).sum(axis=1)
         ok = smp & (flight.t[k] > x) & (P > 0)
         out[smp] = np.where(ok[smp, None], T[smp] / np.where(P[smp] > 0, P[smp], 1.0)[:, None], 0.0)
+    if flight.tracked is not None and flight.tracked[k].any():
+        tk = flight.tracked[k]
+        out[tk] = flight.light_w[k[tk]]
     return out
 
 
-def transmittance_factor(table, stack, length):
-    """(N, 3) exp(-sigma_t length) through the media of ``stack``."""
-    return _exp_neg(table.extinction(stack), np.asarray(length, np.float64)[:, None])
+def transmittance_factor(table, stack, length, o=None, d=None, rng=None):
+    """(N, 3) transmittance of segments of ``length`` through the media of
+    ``stack``: exp(-sigma_t length) in homogeneous media, a ratio-tracking
+    estimate along o + t d where a heterogeneous medium is in the stack."""
+    length = np.asarray(length, np.float64)
+    out = _exp_neg(table.extinction(stack), length[:, None])
+    het = table.heterogeneous(stack)
+    if het.any():
+        h = np.flatnonzero(het)
+        out[h] = transmittance(table, stack[h], o[h], d[h], length[h], rng)
+    return out

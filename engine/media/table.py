@@ -12,7 +12,10 @@ every stack entry.
 """
 import numpy as np
 
+from .field import build_fields, is_heterogeneous
+
 STACK_SIZE = 4
+TRACKING_EVENTS = 512     # tracking.MAX_EVENTS
 # Crossings looked at along the camera's axis to find the media the camera
 # starts in (Cycles' volume_stack_init casts rays the same way).
 _CAMERA_PROBES = 64
@@ -32,28 +35,122 @@ class MediumTable:
         for i, vol in enumerate(volumes):
             if vol is None:
                 continue
+            self.has[i] = True
+            if is_heterogeneous(vol):
+                continue     # its rows are the Fields' (attach), these stay zero
             self.sigma_a[i] = vol.absorption
             self.sigma_s[i] = vol.scattering
             self.emission[i] = vol.emission
             self.g[i] = vol.anisotropy
-            self.has[i] = True
         self.names = list(names) + [""]
+        # Heterogeneous media (field.py): one medium id per (material,
+        # instance), ids first_field + j after the materials' rows; the
+        # triangles' medium ids (attach); without any, a medium id is its
+        # material's.
+        self.first_field = m
+        self.fields = []
+        self.tri_medium = None
+        self.truncated = {}     # material name -> rays the trackers stopped
         # Volume boundaries: a volume-only material's pass-through surface,
         # which paths and shadow rays cross without counting a transparent
         # bounce (Cycles' volume_bounds_bounce); set by ``of``.
         self.boundary = np.zeros(m + 1, bool)
         self.camera = np.full(STACK_SIZE, -1, np.int32)   # the stack camera rays start with
+        self.world = -1     # the world volume's medium id (-1: none)
         self.warnings = []
 
     @classmethod
-    def of(cls, materials):
-        """The table of a list of scene Materials; None when none has a volume."""
+    def of(cls, materials, world=None):
+        """The table of a list of scene Materials and the world's volume
+        (row len(materials), after the materials'); None when there is no
+        volume."""
         volumes = [getattr(m, "volume", None) for m in materials]
-        if all(v is None for v in volumes):
+        if all(v is None for v in volumes) and world is None:
             return None
-        table = cls(volumes, [m.name for m in materials])
+        names = [m.name for m in materials]
+        if world is not None:
+            volumes, names = volumes + [world], names + ["world"]
+        table = cls(volumes, names)
         table.boundary[:len(materials)] = [v is not None and _pass_through(m) for v, m in zip(volumes, materials)]
+        if world is not None:
+            table.world = len(materials)
+            table.camera[0] = table.world
         return table
+
+    def attach(self, materials, scene, tris):
+        """Build the Fields of the heterogeneous media among the triangles
+        and give every triangle its medium id (``medium_of``)."""
+        self.fields, self.tri_medium = build_fields(self, materials, scene, tris)
+        h = len(self.fields)
+        if h == 0:
+            return
+        m = self.first_field
+        def grow(a, fill=0):
+            extra = np.full((h,) + a.shape[1:], fill, a.dtype)
+            return np.concatenate([a[:m], extra, a[m:]])
+        self.sigma_a, self.sigma_s, self.emission = grow(self.sigma_a), grow(self.sigma_s), grow(self.emission)
+        self.g = grow(self.g)
+        self.has = grow(self.has, True)
+        self.names = self.names[:m] + [f.name for f in self.fields] + self.names[m:]
+
+    def medium_of(self, prim, mat):
+        """Medium ids of the triangles ``prim`` (material ``mat``)."""
+        if self.tri_medium is None or not self.fields:
+            return mat
+        return self.tri_medium[prim]
+
+    def heterogeneous(self, stack):
+        """(N,) which stacks hold a heterogeneous medium."""
+        if not self.fields:
+            return np.zeros(len(stack), bool)
+        return np.any((stack >= self.first_field) & (stack < self.first_field + len(self.fields)), axis=1)
+
+    def field_warnings(self):
+        out = [w for w in (f.warning() for f in self.fields) if w]
+        for name, count in sorted(self.truncated.items()):
+            out.append(f"material {name!r}: {count} rays stopped (opaque) after {TRACKING_EVENTS} collisions in "
+                       "its medium (a density far above its majorant grid's, or huge)")
+        return out
+
+    def note_truncated(self, stacks):
+        """Rays the trackers stopped: counted per heterogeneous material."""
+        for k, j, rows in self._field_rows(stacks):
+            name = self.fields[j].name
+            self.truncated[name] = self.truncated.get(name, 0) + len(rows)
+
+    def local(self, stack, p, d):
+        """(sigma_a, sigma_s, emission (N, 3), g weight (N,)) of the
+        heterogeneous media of ``stack`` at points p: their sums, and the sum
+        of mean(sigma_s) x g."""
+        n = len(stack)
+        sa, ss, em, gw = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
+        for k, j, rows in self._field_rows(stack):
+            f = self.fields[j]
+            a, s, e = f.evaluate(p[rows], d[rows])
+            sa[rows] += a
+            ss[rows] += s
+            em[rows] += e
+            gw[rows] += s.mean(axis=1) * f.g
+        return sa, ss, em, gw
+
+    def majorant(self, stack, p, d):
+        """(mu (N,), dist (N,)): the heterogeneous media's summed majorant at
+        p and the distance along d over which it holds."""
+        n = len(stack)
+        mu, dist = np.zeros(n), np.full(n, np.inf)
+        for k, j, rows in self._field_rows(stack):
+            m, t = self.fields[j].majorant(p[rows], d[rows])
+            mu[rows] += m
+            dist[rows] = np.minimum(dist[rows], t)
+        return mu, dist
+
+    def _field_rows(self, stack):
+        lo, h = self.first_field, len(self.fields)
+        for k in self._used_slots(stack):
+            ids = stack[:, k] - lo
+            use = (ids >= 0) & (ids < h)
+            for j in np.unique(ids[use]):
+                yield k, int(j), np.flatnonzero(ids == j)
 
     # -- a stack's medium ------------------------------------------------------
     def coefficients(self, stack):
@@ -139,13 +236,14 @@ def camera_media(table, accel, triangles, origin, direction):
         if prim[0] < 0 or not np.isfinite(t[0]):
             break
         k = int(prim[0])
-        mat = int(triangles.material[k])
+        mat = int(table.medium_of(prim[:1], triangles.material[prim[:1]])[0])
         ng = triangles.ng[k]
         if table.has[mat] and mat not in seen:
             seen[mat] = float(np.dot(ng, d[0])) > 0   # leaving through its outside: inside it
         p = o + d * t[0]
         o = accel.offset_origin(p, ng[None, :], d)
-    inside = [m for m, back in seen.items() if back][:STACK_SIZE]
+    inside = ([table.world] if table.world >= 0 else []) + [m for m, back in seen.items() if back]
+    inside = inside[:STACK_SIZE]
     table.camera[:] = -1
     table.camera[:len(inside)] = inside
 
@@ -154,6 +252,13 @@ def open_volume_meshes(scene):
     """Names of objects whose volume material's triangles do not close
     (an edge not shared by exactly two of them): paths entering such a
     volume may never leave it."""
+    return [name for name, _ in open_meshes(scene, lambda m: getattr(m, "volume", None) is not None)]
+
+
+def open_meshes(scene, uses):
+    """(object name, material names) of the objects whose triangles with a
+    material ``uses(material)`` picks do not close (an edge not shared by
+    exactly two of them)."""
     out = []
     checked = {}
     for inst in scene.instances:
@@ -163,14 +268,14 @@ def open_volume_meshes(scene):
             continue
         slots = np.zeros(len(tris), np.int64) if mesh.material_slots is None else np.asarray(mesh.material_slots)
         mats = np.array([inst.materials[s] if s < len(inst.materials) else -1 for s in range(int(slots.max()) + 1)])
-        vol = np.array([m >= 0 and getattr(scene.materials[m], "volume", None) is not None for m in mats])
-        if not vol.any():
+        picked = np.array([m >= 0 and bool(uses(scene.materials[m])) for m in mats])
+        if not picked.any():
             continue
-        key = (inst.mesh, tuple(vol))
+        key = (inst.mesh, tuple(picked))
         if key not in checked:
-            checked[key] = not _closed(np.asarray(mesh.positions, np.float64), tris[vol[slots]])
+            checked[key] = not _closed(np.asarray(mesh.positions, np.float64), tris[picked[slots]])
         if checked[key]:
-            out.append(inst.name)
+            out.append((inst.name, [scene.materials[m].name for m, p in zip(mats, picked) if p]))
     return out
 
 

@@ -43,6 +43,16 @@ class SceneShading:
         self.mesh_of_instance = np.array([i.mesh for i in inst], dtype=np.int64).reshape(-1)
         self._corners = {}
 
+    def has_uv(self):
+        """(T,) whether each triangle's mesh has a UV map (Cycles' UV pass is
+        0 on meshes without one, (u, v, 1) on the others)."""
+        if "has_uv" not in self._corners:
+            per_mesh = np.array([mesh.uvs is not None for mesh in self.scene.meshes] + [False])
+            mesh = self.mesh_of_instance[self.instance] if len(self.mesh_of_instance) else \
+                np.full(len(self.instance), -1)
+            self._corners["has_uv"] = per_mesh[mesh]
+        return self._corners["has_uv"]
+
     def corners(self, key):
         """(T, 3, C) per-corner data of every triangle, or None when no mesh
         has it.  key: ('uv', name), ('attr', name) or ('generated',)."""
@@ -99,6 +109,9 @@ def _mesh_corner_data(mesh, key):
         return data[..., None] if data.ndim == 2 else data
     if key[0] == "generated":
         return generated_corners(mesh)
+    if key[0] == "tangent":
+        tangents = getattr(mesh, "tangents", None)
+        return None if tangents is None else np.asarray(tangents, dtype=np.float64)
     raise KeyError(key)
 
 
@@ -112,6 +125,15 @@ def generated_corners(mesh):
     pos = np.asarray(mesh.positions, dtype=np.float64)
     tris = np.asarray(mesh.triangles, dtype=np.int64)
     corners = np.asarray(orco, dtype=np.float64) if orco is not None else pos[tris]
+    loc, factor = texture_space(mesh)
+    return (corners - loc) * factor + 0.5
+
+
+def texture_space(mesh):
+    """(location, factor) of a mesh's texture space: Generated = (orco -
+    location) * factor + 0.5 (Cycles' generated transform; inside a volume
+    it maps the object-space point)."""
+    pos = np.asarray(mesh.positions, dtype=np.float64)
     space = getattr(mesh, "texspace", None)
     if space is None:
         lo, hi = (pos.min(axis=0), pos.max(axis=0)) if len(pos) else (np.zeros(3), np.zeros(3))
@@ -121,7 +143,7 @@ def generated_corners(mesh):
         loc, size = (np.asarray(v, dtype=np.float64) for v in space)
     # Cycles: a zero size maps that axis to 0.5.
     factor = np.where(size != 0.0, 0.5 / np.where(size != 0.0, size, 1.0), 0.0)
-    return (corners - loc) * factor + 0.5
+    return loc, factor
 
 
 class ShadingContext:
@@ -303,6 +325,13 @@ class ShadingContext:
             return _normalize(v)
         inv = shading.inverse[inst][:, :3, :3]
         return _normalize(np.einsum("nji,nj->ni", inv, v))
+
+    @property
+    def uv_tangent(self):
+        """(N, 3) object-space MikkTSpace tangent of the active UV map
+        (interpolated, unnormalized, as Cycles' tangent attribute), or None
+        where the meshes have none."""
+        return self._interpolate(("tangent",))
 
     @property
     def generated(self):

@@ -219,3 +219,41 @@ def mapping_values(kind, v, loc, rot, scale):
              for t in ("POINT", "TEXTURE", "VECTOR", "NORMAL")])
 def mapping(ctx, i, p):
     return {"Vector": mapping_values(p["vector_type"], i["Vector"], i["Location"], i["Rotation"], i["Scale"])}
+
+
+def _cross(a, b):
+    return np.cross(a, b)
+
+
+@node("ShaderNodeTangent", outputs=(("Tangent", "vector"),), props=(("direction_type", "RADIAL"), ("axis", "Z"),
+                                                                     ("uv_map", "")),
+      # Radial about Z and the UV map: the parity scene's quads face +Z, where
+      # the X and Y radial tangents are along the normal (Generated z = 0.5)
+      # and Cycles' result is the sign of a float32 rounding of that 0.5.
+      cases=[{}, {"direction_type": "UV_MAP"}])
+def tangent(ctx, i, p):
+    """Cycles' svm_node_tangent: radial, a tangent about the object's axis
+    from Generated coordinates (object-space P without them), or the UV
+    map's MikkTSpace tangent (the active map's: the one the exporter
+    computes; zero without one, as Cycles without the attribute); carried to
+    world space as a normal (object_normal_transform) and made perpendicular
+    to the shading normal."""
+    zero = np.zeros(len(ctx))
+    if p.get("direction_type", "RADIAL") == "UV_MAP":
+        t = ctx.uv_tangent
+        if t is None:
+            return {"Tangent": np.zeros((len(ctx), 3))}
+        t = ctx.to_world_normal(t)
+        n = ctx.ns
+        return {"Tangent": _cross(n, _normalize(_cross(t, n)))}
+    g = ctx.generated - 0.5
+    axis = p.get("axis", "Z")
+    if axis == "X":
+        t = np.stack([zero, -g[:, 2], g[:, 1]], axis=1)
+    elif axis == "Y":
+        t = np.stack([-g[:, 2], zero, g[:, 0]], axis=1)
+    else:
+        t = np.stack([-g[:, 1], g[:, 0], zero], axis=1)
+    t = ctx.to_world_normal(t)
+    n = ctx.ns
+    return {"Tangent": _cross(n, _normalize(_cross(t, n)))}

@@ -4,6 +4,7 @@ import itertools
 
 import numpy as np
 
+from .. import kernels
 from .hashing import hash_float, hash_uint
 
 F = np.float32
@@ -68,10 +69,125 @@ def perlin(p):
     return values[(0,) * d]
 
 
+def _snoise_numpy(p, out):
+    """snoise of p (N, D) float32 into out (N,): the NumPy reference form."""
+    with np.errstate(invalid="ignore"):   # non-finite points: NaN, as the compiled loop
+        wrapped = np.fmod(p, F(100000.0))
+        out[:] = SCALES[p.shape[1]] * perlin(wrapped)
+
+
+# lookup3 on uint32 values held in int64 (every step masked to 32 bits): numba
+# types int64 arithmetic without the uint64/int64 -> float64 promotion.
+_M32 = 0xFFFFFFFF
+
+
+@kernels.helper
+def _rot32(x, k):
+    return ((x << k) | (x >> (32 - k))) & _M32
+
+
+@kernels.helper
+def _lookup3(n, k0, k1, k2, k3):
+    """hash_uint{,2,3,4} of n keys (util/hash.h), keys in [0, 2^32)."""
+    a = b = c = (0xDEADBEEF + (n << 2) + 13) & _M32
+    if n == 4:
+        a = (a + k0) & _M32
+        b = (b + k1) & _M32
+        c = (c + k2) & _M32
+        a = (a - c) & _M32; a ^= _rot32(c, 4); c = (c + b) & _M32
+        b = (b - a) & _M32; b ^= _rot32(a, 6); a = (a + c) & _M32
+        c = (c - b) & _M32; c ^= _rot32(b, 8); b = (b + a) & _M32
+        a = (a - c) & _M32; a ^= _rot32(c, 16); c = (c + b) & _M32
+        b = (b - a) & _M32; b ^= _rot32(a, 19); a = (a + c) & _M32
+        c = (c - b) & _M32; c ^= _rot32(b, 4); b = (b + a) & _M32
+        a = (a + k3) & _M32
+    else:
+        if n >= 3:
+            c = (c + k2) & _M32
+        if n >= 2:
+            b = (b + k1) & _M32
+        a = (a + k0) & _M32
+    c ^= b; c = (c - _rot32(b, 14)) & _M32
+    a ^= c; a = (a - _rot32(c, 11)) & _M32
+    b ^= a; b = (b - _rot32(a, 25)) & _M32
+    c ^= b; c = (c - _rot32(b, 16)) & _M32
+    a ^= c; a = (a - _rot32(c, 4)) & _M32
+    b ^= a; b = (b - _rot32(a, 14)) & _M32
+    c ^= b; c = (c - _rot32(b, 24)) & _M32
+    return c
+
+
+@kernels.helper
+def _signed(v, negate):
+    # -v when negate != 0; a product by +-1 (exact), not a branch: an inlined
+    # conditional expression trips numba's SSA pass (NumbaIRAssumptionWarning).
+    return v * np.float32(1 - 2 * (negate != 0))
+
+
+@kernels.helper
+def _grad_scalar(h, d, f):
+    """_grad for one point: hash h, offsets f[0:d] (float32)."""
+    if d == 1:
+        h = h & 15
+        return _signed(np.float32(1.0) + np.float32(h & 7), h & 8) * f[0]
+    if d == 2:
+        h = h & 7
+        u = f[0] if h < 4 else f[1]
+        v = np.float32(2.0) * (f[1] if h < 4 else f[0])
+        return _signed(u, h & 1) + _signed(v, h & 2)
+    if d == 3:
+        h = h & 15
+        u = f[0] if h < 8 else f[1]
+        v = f[1] if h < 4 else (f[0] if h == 12 or h == 14 else f[2])
+        return _signed(u, h & 1) + _signed(v, h & 2)
+    h = h & 31
+    u = f[0] if h < 24 else f[1]
+    v = f[1] if h < 16 else f[2]
+    w = f[2] if h < 8 else f[3]
+    return _signed(u, h & 1) + _signed(v, h & 2) + _signed(w, h & 4)
+
+
+@kernels.loop_kernel("void(float32[:, ::1], float32[::1])", _snoise_numpy)
+def _snoise_loop(p, out):
+    n, d = p.shape
+    scale = np.float32((0.25, 0.6616, 0.982, 0.8344)[d - 1])
+    cell = np.empty(4, np.int64)
+    frac = np.empty(4, np.float32)
+    fade = np.empty(4, np.float32)
+    off = np.empty(4, np.float32)
+    keys = np.zeros(4, np.int64)
+    values = np.empty(16, np.float32)
+    one = np.float32(1.0)
+    for i in range(n):
+        for k in range(d):
+            x = np.float32(np.fmod(np.float64(p[i, k]), 100000.0))   # exact in float64
+            fl = np.float32(np.floor(x))
+            cell[k] = np.int64(fl)
+            t = x - fl
+            frac[k] = t
+            fade[k] = t * t * t * (t * (t * np.float32(6.0) - np.float32(15.0)) + np.float32(10.0))
+        for corner in range(1 << d):
+            for k in range(d):
+                bit = (corner >> k) & 1
+                keys[k] = (cell[k] + bit) & _M32
+                off[k] = frac[k] - np.float32(bit)
+            values[corner] = _grad_scalar(_lookup3(d, keys[0], keys[1], keys[2], keys[3]), d, off)
+        # Lerp along x, y, z, w in turn, as the NumPy form (Cycles' nested mixes).
+        for k in range(d):
+            t = fade[k]
+            for corner in range(1 << d):
+                if (corner >> k) & 1 == 0:
+                    values[corner] = (one - t) * values[corner] + t * values[corner | (1 << k)]
+        out[i] = scale * values[0]
+
+
 def snoise(p):
     """Cycles' snoise_{1,2,3,4}d: wrapped at 1e5, scaled to about [-1, 1]."""
-    p = np.fmod(p.astype(F), F(100000.0))
-    return SCALES[p.shape[1]] * perlin(p)
+    p = np.ascontiguousarray(p, F)
+    out = np.empty(len(p), F)
+    if len(p):
+        _snoise_loop(p, out)
+    return out
 
 
 def random_offset(dim, seed):
@@ -98,6 +214,9 @@ def fbm(p, detail, roughness, lacunarity, normalize):
         amp = np.where(live, amp * roughness, amp)
         fscale = np.where(live, fscale * lacunarity, fscale)
     rmd = (detail - np.floor(detail)).astype(F)
+    if not rmd.any():   # integer detail everywhere: no partial octave to blend
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return F(0.5) * total / maxamp + F(0.5) if normalize else total
     t = snoise(fscale[:, None] * p)
     sum2 = total + t * amp
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -121,6 +240,8 @@ def multi_fractal(p, detail, roughness, lacunarity):
         pwr = np.where(live, pwr * roughness, pwr)
         p = np.where(live[:, None], p * lacunarity[:, None], p)
     rmd = (detail - np.floor(detail)).astype(F)
+    if not rmd.any():
+        return value
     return np.where(rmd != 0, value * (rmd * pwr * snoise(p) + F(1.0)), value)
 
 
@@ -136,6 +257,8 @@ def hetero_terrain(p, detail, roughness, lacunarity, offset):
         pwr = np.where(live, pwr * roughness, pwr)
         p = np.where(live[:, None], p * lacunarity[:, None], p)
     rmd = (detail - np.floor(detail)).astype(F)
+    if not rmd.any():
+        return value
     inc = (snoise(p) + offset) * pwr * value
     return np.where(rmd != 0, value + rmd * inc, value)
 
@@ -156,6 +279,8 @@ def hybrid_multi_fractal(p, detail, roughness, lacunarity, offset, gain):
         p = np.where(live[:, None], p * lacunarity[:, None], p)
     rmd = (detail - np.floor(detail)).astype(F)
     ok = (rmd != 0) & (weight > F(0.001))
+    if not ok.any():
+        return value
     w = np.minimum(weight, F(1.0))
     signal = (snoise(p) + offset) * pwr
     return np.where(ok, value + rmd * w * signal, value)

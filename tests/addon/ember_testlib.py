@@ -57,6 +57,36 @@ def render_array(scene, folder, name="render"):
     return load_exr(path)
 
 
+def read_multilayer_exr(path):
+    """{pass name: (H, W, C) float64} of a multilayer EXR, row 0 = top
+    (Composite as 'Composite')."""
+    import OpenImageIO as oiio
+    image = oiio.ImageInput.open(path)
+    assert image is not None, oiio.geterror()
+    channels = {}
+    index = 0
+    while image.seek_subimage(index, 0):
+        spec = image.spec()
+        pixels = image.read_image('float')
+        for k, name in enumerate(spec.channelnames):
+            parts = name.split('.')
+            key = 'Composite' if parts[0] == 'Composite' else parts[-2]
+            channels.setdefault(key, []).append(pixels[..., k])
+        index += 1
+    image.close()
+    return {k: np.stack(v, axis=-1).astype(np.float64) for k, v in channels.items()}
+
+
+def multilayer_output(scene):
+    """Render output: 32-bit multilayer EXR (every pass of the view layer)."""
+    settings = scene.render.image_settings
+    if hasattr(settings, 'media_type'):
+        settings.media_type = 'MULTI_LAYER_IMAGE'
+    else:
+        settings.file_format = 'OPEN_EXR_MULTILAYER'
+    settings.color_depth = '32'
+
+
 def setup_cycles(scene, samples, seed, max_bounces, filter_type='BLACKMAN_HARRIS', filter_width=1.5):
     """Cycles configured as Ember renders: CPU, unbiased, nothing clamped or
     filtered away, the same bounce limit and pixel filter."""
@@ -204,6 +234,47 @@ def _typical_relative_block_se(a, b):
     return float(np.median(se[keep] / mean[keep])) if keep.any() else 0.0
 
 
+def seed_block_test(block_family, mean_family, name, ember, cycles, keep=None, storage=1e-5):
+    """Ember seeds (N, H, W, C) against Cycles seeds: Welch t per 4x4
+    block-channel over the seeds (Sidak, family ``block_family``) and
+    Welch's t of the whole-image mean (``mean_family``), both asserted, with
+    the power of each printed.  ``storage``: a deterministic floor as a
+    relative standard error (the float32 EXR's rounding, 1e-5, below any
+    noise here; or the precision of a table both renderers read).
+    ``keep``: (H, W) pixels to compare; blocks with any other are left out."""
+    import ember_stats as stats
+    a, b = stats.block_means(ember, 4), stats.block_means(cycles, 4)
+    _, dof, ma, mb = stats.welch(a, b)
+    va, vb = a.var(axis=0, ddof=1) / len(a), b.var(axis=0, ddof=1) / len(b)
+    # Rounding relative to each block's value, and to the pass's largest
+    # value for blocks near 0 (a unit normal's 0 component stored as 1e-9).
+    scale = np.maximum(np.abs(ma), np.abs(mb)) + 1e-3 * np.abs(mb).max()
+    se = np.sqrt(va + vb + (storage * scale) ** 2 + 1e-30)
+    t = (ma - mb) / se
+    noisy = (va + vb > 0) & (mb != 0)            # the power of blocks that carry noise
+    rel_se = np.where(noisy, se / np.where(mb != 0, np.abs(mb), 1.0), np.nan)
+    if keep is not None:
+        blocks = stats.block_means(keep[None, :, :, None].astype(float), 4)[0, ..., 0] == 1.0
+        t, dof, rel_se, ma, mb = t[blocks], dof[blocks], rel_se[blocks], ma[blocks], mb[blocks]
+    level = stats.family_level(block_family, t.size)
+    p = stats.t_p_values(t, dof)
+    ember_means, cycles_means = (x.mean(axis=tuple(range(1, x.ndim))) for x in (ember, cycles))
+    mean = stats.MeanTest("image", ember_means.mean(), ember_means.var(ddof=1) / len(ember_means),
+                          len(ember_means) - 1, cycles_means.mean(), cycles_means.var(ddof=1) / len(cycles_means),
+                          len(cycles_means) - 1)
+    mean_level = stats.family_level(mean_family)
+    block_power = (f"the median noisy block detects "
+                   f"{stats.detectable(float(np.nanmedian(rel_se)), level, float(np.median(dof))):.1%}"
+                   if np.isfinite(rel_se).any() else "no block carries noise")
+    print(f"\n{name}: Ember {ember_means.mean():.5g}, Cycles {cycles_means.mean():.5g}: {mean}; detects "
+          f"{stats.detectable(mean.relative_se, mean_level, mean.dof):.2%} with probability 1/2; max block |t| "
+          f"{np.abs(t).max():.2f} over {t.size} block-channels (dof {np.median(dof):.0f}), {block_power}")
+    bad = p < level
+    assert not bad.any(), (f"{name}: {int(bad.sum())} blocks differ from Cycles (index, Ember, Cycles, t): "
+                           f"{[(tuple(i), ma[tuple(i)], mb[tuple(i)], t[tuple(i)]) for i in np.argwhere(bad)[:6]]}")
+    assert mean.p >= mean_level, f"{name}: whole-image mean off: {mean}"
+
+
 def assert_no_failing_blocks(failures, details):
     assert len(failures) == 0, (
         f"{len(failures)} blocks differ from Cycles (block, y, x, channel): {failures[:10].tolist()}; {details}")
@@ -221,6 +292,66 @@ def empty_factory_scene():
         if obj.type != 'CAMERA':
             bpy.data.objects.remove(obj)
     return bpy.context.scene
+
+
+def node_material(name, kind, inputs):
+    """A material whose surface is one shader node of type ``kind``, its
+    inputs (or, for other keys, node properties such as distribution) set."""
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    tree = mat.node_tree
+    out = next(n for n in tree.nodes if n.type == 'OUTPUT_MATERIAL')
+    for node in list(tree.nodes):
+        if node != out:
+            tree.nodes.remove(node)
+    node = tree.nodes.new(kind)
+    for key, value in inputs.items():
+        if key in node.inputs:
+            node.inputs[key].default_value = value
+        else:
+            setattr(node, key, value)
+    tree.links.new(node.outputs[0], out.inputs['Surface'])
+    return mat
+
+
+def rough_material(name, color):
+    """A Principled BSDF material of ``color`` at roughness 1; returns (material, its BSDF node)."""
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    bsdf = next(n for n in mat.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
+    bsdf.inputs['Base Color'].default_value = tuple(color) + (1.0,)
+    bsdf.inputs['Roughness'].default_value = 1.0
+    return mat, bsdf
+
+
+def add_object(op, name, mat, **kwargs):
+    """``op(**kwargs)`` (a bpy.ops.mesh primitive), named, with ``mat``."""
+    op(**kwargs)
+    obj = bpy.context.active_object
+    obj.name = name
+    obj.data.materials.append(mat)
+    return obj
+
+
+def render_seeds(scene, folder, name, seeds, spp, first_seed, bounces, read=None):
+    """{'EMBER' | 'CYCLES': (seeds, H, W, C)} renders of the scene with
+    seeds first_seed.. (render_array's RGBA, or ``read(path)`` of the written
+    file), the Ember renders checked for errors."""
+    out = {}
+    for engine, setup in (('EMBER', setup_ember), ('CYCLES', setup_cycles)):
+        images = []
+        for seed in range(seeds):
+            setup(scene, spp, first_seed + seed, bounces)
+            if read is None:
+                images.append(render_array(scene, folder, f"{name}_{engine}_{seed}").astype(np.float64))
+            else:
+                scene.render.filepath = os.path.join(str(folder), f"{name}_{engine}_{seed}.exr")
+                bpy.ops.render.render(write_still=True)
+                images.append(read(scene.render.filepath))
+        out[engine] = np.array(images)
+    from addon import engine as ember_engine
+    assert all(entry['error'] is None for entry in ember_engine.RENDER_LOG[-seeds:])
+    return out
 
 
 def references_tool():
@@ -469,3 +600,22 @@ def check_against_reference(name, scene, bounces, image, var, spp, block, splits
     the test built (checked to be the one the reference was rendered from)."""
     ref, ref_var, header = load_reference(name, scene, bounces)
     return ReferenceCheck(name, image[..., :3].astype(np.float64), var, spp, ref, ref_var, header, block, splits)
+
+
+def built_reference_scene(build, width, height):
+    """(scene, bounces) of a parity module's scene: ``build(scene)`` on an
+    empty factory scene returns its bounces; the resolution is set after."""
+    scene = empty_factory_scene()
+    bounces = build(scene)
+    small_resolution(scene, width, height)
+    return scene, bounces
+
+
+def render_against_reference(name, scene, bounces, tmp_path, taps, spp, block, seed=1):
+    """Ember's render of a reference scene (no material warning allowed)
+    checked against the stored reference ``name`` (a ReferenceCheck)."""
+    image, var = render_for_reference(scene, tmp_path, name, taps, spp, seed, bounces)
+    from addon import engine as ember_engine
+    log = ember_engine.RENDER_LOG[-1]
+    assert not [w for w in log.get('warnings', ()) if 'Material' in w], log.get('warnings')
+    return check_against_reference(name, scene, bounces, image, var, spp, block)

@@ -33,13 +33,9 @@ def blender_34():
     return out.startswith('Blender 3.4')
 
 
-def test_cancel_latency_in_blender_34_binary(tmp_path):
+def test_cancel_latency_in_blender_34_binary(tmp_path, legacy_addon):
     require(blender_34(), f"Debian's Blender 3.4 binary is needed at {bench_cancel.BLENDER}")
-    try:
-        zip_path = bench_cancel.build_legacy_zip(str(tmp_path))
-    except (SystemExit, Exception) as err:  # noqa: BLE001 - wheels missing: a prerequisite
-        require(False, f"could not build the legacy zip: {err}")
-    scripts = bench_cancel.install_addon(zip_path, str(tmp_path / 'user'))
+    scripts = legacy_addon[1]   # the session's install: its kernels compile once for all 3.4 tests
     # Esc 0.05 s into export and into scene preparation (each takes 0.2 s or
     # more with 300k triangles: 0.2 s could land just past the export, between
     # phases), 0.2 s into the passes.

@@ -472,8 +472,13 @@ def test_unsupported_nodes_fall_back_with_one_warning(factory_scene):
 def test_principled_layers_not_rendered_are_named(factory_scene):
     material, tree = new_material("Glassy")
     principled = tree.nodes['Principled BSDF']
-    name = 'Subsurface Weight' if 'Subsurface Weight' in principled.inputs else 'Subsurface'
-    principled.inputs[name].default_value = 1.0
+    if 'Subsurface Weight' in principled.inputs:   # 4.x: subsurface is rendered (the random walk), no warning
+        principled.inputs['Subsurface Weight'].default_value = 1.0
+        translated, warning = material_export.translate(material)
+        assert warning is None, warning
+        assert [lobe.kind for lobe in translated.lobes] == ['glossy', 'subsurface']   # weight 1: no diffuse left
+        return
+    principled.inputs['Subsurface'].default_value = 1.0
     translated, warning = material_export.translate(material)
     assert warning is not None and 'Subsurface' in warning and principled.name in warning
     assert [lobe.kind for lobe in translated.lobes] == ['glossy', 'diffuse']

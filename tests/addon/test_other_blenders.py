@@ -78,37 +78,10 @@ def blender_version():
     return out.splitlines()[0] if code == 0 and out else None
 
 
-def build_package(out, kind):
-    """tools/build_zip.py's legacy or extension zip (kind 'legacy' / 'extension') in folder out."""
-    sys.path.insert(0, os.path.join(ROOT, 'tools'))
-    try:
-        import build_zip
-    finally:
-        sys.path.pop(0)
-    try:
-        built = build_zip.main(['--dist', str(out), '--build', str(out / 'build'),
-                                '--wheels', os.path.join(ROOT, 'build', 'wheels'), '--' + kind])
-    except (subprocess.CalledProcessError, SystemExit) as err:
-        require(False, f"could not build the {kind} zip (wheels need pip and PyPI): {err}")
-    return built[0]
-
-
-@pytest.fixture(scope='module')
-def legacy_zip(tmp_path_factory):
-    return build_package(tmp_path_factory.mktemp('dist'), 'legacy')
-
-
-def install_legacy(zip_path, tmp_path):
-    scripts = tmp_path / 'scripts'
-    addons = scripts / 'addons'
-    addons.mkdir(parents=True)
-    with zipfile.ZipFile(zip_path) as archive:
-        archive.extractall(addons)
-    for folder, _, files in os.walk(addons):  # zipfile drops the execute bits
-        for name in files:
-            if '.so' in name:
-                os.chmod(os.path.join(folder, name), 0o755)
-    return str(scripts)
+def install_legacy(legacy_addon):
+    """The session's unpacked legacy zip (tests/conftest.py legacy_addon): one
+    folder for every 3.4 test, so the binary compiles its kernels once."""
+    return legacy_addon[1]
 
 
 def test_portable_tests_in_blender_34_binary(tmp_path):
@@ -215,7 +188,8 @@ print("EXTENSION OK", bpy.app.version_string, exported.triangles, image.shape, f
 
 @pytest.fixture(scope='module')
 def extension_zip(tmp_path_factory):
-    built = build_package(tmp_path_factory.mktemp('extension'), 'extension')
+    import blender34
+    built = blender34.build_package(tmp_path_factory.mktemp('extension'), 'extension')
     with zipfile.ZipFile(built) as archive:
         wheels = [n for n in archive.namelist() if n.endswith('.whl')]
     for tag in ('cp311', 'cp313'):
@@ -244,12 +218,12 @@ def test_extension_installs_and_renders(tmp_path, extension_zip, version):
     assert finite and mean > 0.02, line
 
 
-def test_legacy_zip_renders_with_blender_34_binary(tmp_path, legacy_zip, needs_engine):
+def test_legacy_zip_renders_with_blender_34_binary(tmp_path, legacy_addon, needs_engine):
     """`blender -b scene --addons ember -E EMBER -f 1` writes the expected image."""
     version = blender_version()
     require(version is not None and version.startswith('Blender 3.4'),
             f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
-    scripts = install_legacy(legacy_zip, tmp_path)
+    scripts = install_legacy(legacy_addon)
     settings = ("import bpy; s = bpy.context.scene; s.render.resolution_x = s.render.resolution_y = 32; "
                 "s.render.resolution_percentage = 100; s.ember.samples = 16; s.ember.seed = 3; "
                 "s.ember.max_bounces = 4; s.ember.threads = 2; s.render.image_settings.color_depth = '32'")
@@ -282,13 +256,17 @@ def test_legacy_zip_renders_with_blender_34_binary(tmp_path, legacy_zip, needs_e
     assert difference < 1e-5
 
 
-def test_one_command_install_into_blender_34(tmp_path, legacy_zip, needs_engine):
+def test_one_command_install_into_blender_34(tmp_path, needs_engine):
     """tools/install_addon.py installs and enables Ember in the real binary:
     afterwards `blender -b scene -E EMBER -f 1` renders without --addons."""
     version = blender_version()
     require(version is not None and version.startswith('Blender 3.4'),
             f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
-    env = {'BLENDER_USER_CONFIG': str(tmp_path / 'config'), 'BLENDER_USER_SCRIPTS': str(tmp_path / 'scripts')}
+    # NumPy kernels (EMBER_JIT=0): this install's own folder would compile them
+    # cold (60-100 s); the compiled path in this binary is the shared install's
+    # (test_legacy_zip_renders_with_blender_34_binary and the others).
+    env = {'BLENDER_USER_CONFIG': str(tmp_path / 'config'), 'BLENDER_USER_SCRIPTS': str(tmp_path / 'scripts'),
+           'EMBER_JIT': '0'}
     code, out = run([sys.executable, os.path.join(ROOT, 'tools', 'install_addon.py'), '--blender', BLENDER], env=env)
     assert code == 0 and "Ember installed" in out, out[-4000:]
     assert (tmp_path / 'scripts' / 'addons' / 'ember' / '__init__.py').exists()
@@ -301,13 +279,13 @@ def test_one_command_install_into_blender_34(tmp_path, legacy_zip, needs_engine)
     assert "Error" not in out, out[-4000:]
 
 
-def test_legacy_zip_denoises_in_blender_34(tmp_path, legacy_zip):
+def test_legacy_zip_denoises_in_blender_34(tmp_path, legacy_addon):
     """The OIDN program bundled in the legacy zip runs inside Debian's 3.4
     (which ships no OIDN): addon/denoise.py finds it in vendor/oidn."""
     version = blender_version()
     require(version is not None and version.startswith('Blender 3.4'),
             f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
-    scripts = install_legacy(legacy_zip, tmp_path)
+    scripts = install_legacy(legacy_addon)
     expr = ("import numpy as np; from ember import denoise; rng = np.random.default_rng(0); "
             "flat = np.full((24, 24, 3), 0.5, np.float32); noisy = flat * rng.exponential(1, flat.shape)"
             ".astype(np.float32); out = denoise.denoise(noisy, flat, None); "
@@ -326,7 +304,7 @@ def test_legacy_zip_denoises_in_blender_34(tmp_path, legacy_zip):
 # scene to Cycles in bpy 5.0 (test_world_sky.py); the binary's run (97 s) is spent on Nishita,
 # whose 3.x table layout only this binary has.
 @pytest.mark.parametrize('sky_type', ['NISHITA'])
-def test_sky_in_blender_34_matches_its_cycles(tmp_path, legacy_zip, needs_engine, sky_type):
+def test_sky_in_blender_34_matches_its_cycles(tmp_path, legacy_addon, needs_engine, sky_type):
     """Blender 3.4's Nishita sky (the 3.x / 4.x table layout, ground fade and
     disc; sky_scene_34.py renders Hosek-Wilkie too), lighting a plane and seen above it,
     through the legacy zip in the real binary, against that binary's Cycles:
@@ -336,7 +314,7 @@ def test_sky_in_blender_34_matches_its_cycles(tmp_path, legacy_zip, needs_engine
     version = blender_version()
     require(version is not None and version.startswith('Blender 3.4'),
             f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
-    scripts = install_legacy(legacy_zip, tmp_path)
+    scripts = install_legacy(legacy_addon)
     code, out = run([BLENDER, '-b', '--factory-startup', '--addons', 'ember', '--python',
                      os.path.join(ROOT, 'tests', 'addon', 'sky_scene_34.py'), '--', str(tmp_path), sky_type],
                     env={'BLENDER_USER_SCRIPTS': scripts})

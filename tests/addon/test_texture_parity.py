@@ -391,7 +391,7 @@ def test_missing_image_renders_magenta_with_one_warning(tmp_path, tapped_engine)
 def test_textured_float_inputs_become_expressions_without_warnings(tmp_path):
     """Metallic, Alpha, IOR, Coat, Specular IOR Level and Mix Fac textures are
     rendered (no "read as its constant value" warning); a texture on an input
-    of a feature Ember does not render (Subsurface) still is, and a lobe
+    of an input Ember reads as a constant (Subsurface Radius; 3.x Subsurface) still is, and a lobe
     whose weight texture is zero everywhere is left out."""
     from addon.export import material as material_export
     from engine.scene import TEXTURE_TYPES
@@ -408,7 +408,10 @@ def test_textured_float_inputs_become_expressions_without_warnings(tmp_path):
     assert kinds == ['transparent', 'glossy', 'glossy', 'diffuse'], kinds   # no coat: its weight is 0
     assert all(isinstance(lobe.weight, TEXTURE_TYPES) for lobe in translated.lobes)
     assert isinstance(translated.lobes[2].ior, TEXTURE_TYPES)            # specular layer IOR
-    subsurface = 'Subsurface Weight' if 'Subsurface Weight' in bsdf.inputs else 'Subsurface'
+    # A texture on a subsurface input read as a constant (4.x: the Radius; 3.x: Subsurface itself).
+    subsurface = 'Subsurface Radius' if 'Subsurface Weight' in bsdf.inputs else 'Subsurface'
+    if 'Subsurface Weight' in bsdf.inputs:
+        bsdf.inputs['Subsurface Weight'].default_value = 0.5
     tree.links.new(image_node(tree, mask, 'Non-Color').outputs['Color'], bsdf.inputs[subsurface])
     _, warning = material_export.translate(mat)
     assert warning is not None and f"{bsdf.name}.{subsurface}" in warning and "constant value" in warning

@@ -21,6 +21,8 @@ import chi2 as C
 import ember_stats
 from engine import bsdf, lobes
 from engine import scene as S
+from engine.lobes.oren_nayar import OREN_NAYAR
+from engine.lobes.subsurface import SUBSURFACE_RANDOM_WALK, SUBSURFACE_SKIN
 from sampling_lib import FP_RTOL, assert_close, direction_chi2
 
 N = 200_000
@@ -206,5 +208,6 @@ def test_registry_is_consistent():
     assert [name for name, _, _ in bsdf.EXTRA_FIELDS] == [p.field for p in lobes.EXTRA_PARAMS]
     assert [name for name, _, _ in bsdf.loops.LOBE_FIELDS] == ["kind"] + [p.field for p in lobes.PARAMS] + ["back"]
     diffuse = lobes.kinds_of_class("diffuse")
-    assert set(diffuse) == {bsdf.DIFFUSE, bsdf.TRANSLUCENT, bsdf.SHEEN}
+    assert set(diffuse) == {bsdf.DIFFUSE, bsdf.TRANSLUCENT, bsdf.SHEEN, OREN_NAYAR, SUBSURFACE_RANDOM_WALK,
+                            SUBSURFACE_SKIN}
     assert sorted(sum((lobes.kinds_of_class(c) for c in lobes.PASS_CLASSES), ())) == sorted(ids)

@@ -4,12 +4,10 @@ render fails its task with Blender's log."""
 import os
 import shutil
 import subprocess
-import sys
-import zipfile
 
 import pytest
 
-from farmlib import (ROOT, assert_same_image, make_animation_with_binary, make_job, read_exr, render_locally,
+from farmlib import (assert_same_image, make_animation_with_binary, make_job, read_exr, render_locally,
                      require, run_job)
 from farm import client as farm_client
 from farm import plan, shardfile
@@ -18,30 +16,16 @@ BLENDER = shutil.which('blender') or '/usr/bin/blender'
 
 
 @pytest.fixture(scope='module')
-def blender34(tmp_path_factory):
+def blender34(tmp_path_factory, legacy_addon):
+    """A 3.4-saved animation and the env that makes the binary find the
+    session's legacy install (tests/conftest.py: one kernel compile for all)."""
     ok = os.path.exists(BLENDER) and subprocess.run([BLENDER, '--version'], capture_output=True,
                                                     text=True).stdout.startswith('Blender 3.4')
     require(ok, f"Debian's Blender 3.4 binary is needed at {BLENDER} (tools/setup_test_env.sh)")
     folder = tmp_path_factory.mktemp('blender34')
-    sys.path.insert(0, os.path.join(ROOT, 'tools'))
-    try:
-        import build_zip
-    finally:
-        sys.path.pop(0)
-    try:
-        (zip_path,) = build_zip.main(['--dist', str(folder), '--build', str(folder / 'build'),
-                                      '--wheels', os.path.join(ROOT, 'build', 'wheels'), '--legacy'])
-    except (subprocess.CalledProcessError, SystemExit) as err:
-        require(False, f"could not build the legacy zip: {err}")
-    scripts = folder / 'scripts'
-    with zipfile.ZipFile(zip_path) as archive:
-        archive.extractall(scripts / 'addons')
-    for dirpath, _, files in os.walk(scripts):  # zipfile drops the execute bits
-        for name in files:
-            if '.so' in name:
-                os.chmod(os.path.join(dirpath, name), 0o755)
+    scripts = legacy_addon[1]
     blend = make_animation_with_binary(BLENDER, folder / 'anim34.blend', scripts)
-    return blend, {'BLENDER_USER_SCRIPTS': str(scripts)}
+    return blend, {'BLENDER_USER_SCRIPTS': scripts}
 
 
 @pytest.fixture(scope='module')

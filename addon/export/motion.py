@@ -1,0 +1,170 @@
+"""Motion blur: the scene at the shutter's steps (Cycles' BlenderSync::sync_motion).
+
+With Render > Motion Blur on, Cycles exports the scene at the shutter's
+centre (frame + shutter / 2 for Position 'Start', - shutter / 2 for 'End')
+and then, for each motion step, sets the frame to centre + t shutter / 2
+(t = -1 ... 1 over the steps) and reads the objects' matrices, the
+camera's and the vertex positions of deforming meshes.  Objects take
+2^(motion_steps - 1) + 1 steps (Object > Motion Blur > Steps, default 1: 3
+steps); Object > Motion Blur off keeps an object still, Deformation off
+keeps its mesh undeformed.  An object whose steps all equal its centre gets
+no motion, so a still scene renders as without motion blur.
+
+The render engine's ``frame_set`` re-evaluates the render's depsgraph; the
+original frame is set again afterwards.
+"""
+import math
+
+import numpy as np
+
+from . import mesh as mesh_export
+
+
+def shutter(scene, is_preview=False):
+    """(shutter in frames, position) when the render blurs motion, else None
+    (motion blur off, a preview, or a shutter of 0 frames)."""
+    render = scene.render
+    if is_preview or not render.use_motion_blur:
+        return None
+    length = float(render.motion_blur_shutter)
+    if not length > 0.0 or not math.isfinite(length):
+        return None
+    position = getattr(render, 'motion_blur_position', None)
+    if position is None:   # before Blender 3.x moved it to the render settings
+        position = getattr(getattr(scene, 'cycles', None), 'motion_blur_position', 'CENTER')
+    return length, position
+
+
+def centre_time(scene, blur):
+    """The frame (with subframe) at the shutter's centre."""
+    length, position = blur
+    delta = {'START': 0.5 * length, 'END': -0.5 * length}.get(position, 0.0)
+    return scene.frame_current + scene.frame_subframe + delta
+
+
+def set_time(engine, time):
+    """Evaluate the render depsgraph at a frame with subframe."""
+    frame = math.floor(time)
+    engine.frame_set(int(frame), float(time - frame))
+
+
+def object_steps(obj):
+    """Cycles' motion steps of an object: 0 when its motion blur is off."""
+    props = getattr(obj, 'cycles', None)
+    if props is None:
+        return 3
+    if not getattr(props, 'use_motion_blur', True):
+        return 0
+    steps = max(1, int(getattr(props, 'motion_steps', 1)))
+    return (2 << (steps - 1)) + 1
+
+
+def _deforms(obj):
+    props = getattr(obj, 'cycles', None)
+    return obj.type == 'MESH' and getattr(props, 'use_deform_motion', True)
+
+
+def _step_times(centre, length, steps):
+    return [centre + (-1.0 + 2.0 * k / (steps - 1)) * 0.5 * length for k in range(steps)]
+
+
+def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object):
+    """Fill Instance.motion, Mesh.motion and Camera.motion of ``exported``
+    (exported at the shutter's centre, frame ``centre``; ``keys`` names each
+    instance as ``instance_key`` does) by evaluating the scene at every
+    step.  Returns warnings."""
+    scene = depsgraph.scene
+    length = blur[0]
+    result = exported.scene
+    wanted = {}          # steps -> instance indices
+    for index, key in enumerate(keys):
+        if key is None:
+            continue
+        steps = object_steps(key[2])
+        if steps >= 2:
+            wanted.setdefault(steps, []).append(index)
+    camera_steps = object_steps(camera_object.original)
+    all_steps = sorted(set(wanted) | ({camera_steps} if camera_steps >= 2 else set()))
+    times = sorted({t for s in all_steps for t in _step_times(centre, length, s)})
+    matrices = {}        # time -> {instance key: matrix}
+    positions = {}       # time -> {mesh index: engine Mesh there}
+    cameras = {}
+    deforming = {}
+    for index, key in enumerate(keys):
+        if key is not None and key[3] and _deforms(key[2]) and key[2].is_deform_modified(scene, 'RENDER'):
+            deforming.setdefault(result.instances[index].mesh, key)
+    warnings = []
+    for t in times:
+        set_time(engine, t)
+        matrices[t] = {instance_key(inst)[:2]: np.array(inst.matrix_world, np.float64)
+                       for inst in depsgraph.object_instances if instance_key(inst) is not None}
+        cam = camera_object.original.evaluated_get(depsgraph)
+        cameras[t] = np.array(cam.matrix_world, np.float64)
+        positions[t] = {}
+        for mesh_index, key in deforming.items():
+            obj = key[2].evaluated_get(depsgraph)
+            positions[t][mesh_index] = mesh_export.mesh_from_object(obj, obj.name)
+    set_time(engine, centre)
+    for steps, indices in wanted.items():
+        step_times = _step_times(centre, length, steps)
+        for index in indices:
+            inst = result.instances[index]
+            found = [matrices[t].get(keys[index][:2]) for t in step_times]
+            if any(m is None for m in found):
+                continue   # the instance does not exist at every step: no motion (Cycles' rule)
+            stack = np.array(found)
+            if not np.isfinite(stack).all():
+                warnings.append(f"Object '{inst.name}': its transform is NaN or infinite during the shutter, "
+                                "rendered without motion blur")
+                continue
+            if not np.allclose(stack, np.asarray(inst.matrix)[None], rtol=0.0, atol=1e-9):
+                inst.motion = stack
+    for mesh_index, key in deforming.items():
+        mesh = result.meshes[mesh_index]
+        steps = object_steps(key[2])
+        if steps < 2:
+            continue
+        found = [positions[t].get(mesh_index) for t in _step_times(centre, length, steps)]
+        if any(m is None or m.positions.shape != mesh.positions.shape
+               or not np.array_equal(m.triangles, mesh.triangles) for m in found):
+            warnings.append(f"Object '{key[2].name}': its vertices or faces change during the shutter, "
+                            "rendered without deformation blur")
+            continue
+        stack = np.array([m.positions for m in found], np.float64)
+        if not np.isfinite(stack).all():
+            warnings.append(f"Object '{key[2].name}': NaN or infinite vertices during the shutter, "
+                            "rendered without deformation blur")
+            continue
+        if not np.allclose(stack, np.asarray(mesh.positions, np.float64)[None], rtol=0.0, atol=1e-7):
+            mesh.motion = stack
+            if mesh.normals is not None and all(m.normals is not None for m in found):
+                mesh.motion_normals = np.array([m.normals for m in found], np.float64)
+    if camera_steps >= 2:
+        stack = np.array([mesh_export_unit_axes(cameras[t]) for t in _step_times(centre, length, camera_steps)])
+        if np.isfinite(stack).all() and not np.allclose(stack, np.asarray(result.camera.matrix)[None],
+                                                        rtol=0.0, atol=1e-9):
+            result.camera.motion = stack
+    return warnings
+
+
+def mesh_export_unit_axes(matrix):
+    """Camera-to-world without scale (as the camera export)."""
+    out = np.array(matrix, np.float64)
+    for axis in range(3):
+        length = np.linalg.norm(out[:3, axis])
+        if length > 0:
+            out[:3, axis] /= length
+    return out
+
+
+def instance_key(inst):
+    """(kind, name or persistent id, original object, is a real object) of a
+    depsgraph object instance, stable across frames; None for what the
+    export skips."""
+    obj = inst.object
+    if obj.type not in mesh_export.MESHABLE_TYPES:
+        return None
+    if inst.is_instance:
+        parent = inst.parent.original.name if inst.parent is not None else ''
+        return ('instance', (parent, tuple(inst.persistent_id)), obj.original, False)
+    return ('object', obj.original.name, obj.original, True)

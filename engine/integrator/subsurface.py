@@ -1,0 +1,455 @@
+"""Subsurface scattering: Cycles 5.0's random walk as a stage of the bounce
+(kernel/integrator/subsurface.h, subsurface_random_walk.h, closure/bssrdf.h).
+
+At a vertex whose material has a subsurface lobe (engine/lobes/subsurface.py)
+``split`` takes the first part of the lobe-choice number, of the size of
+the subsurface lobes' selection probability, for the BSSRDF; the BSDF lobes
+share the rest (their weights and pdfs scaled by its size, so next-event
+estimation's MIS, which sees the subsurface lobe as zero, stays unbiased).
+A path that chose it gets Cycles' entry bounce (a refraction through a GGX
+microfacet, or for Skin half the time a cosine direction) and the closure
+weight over its selection probability; ``walk`` then follows it through the
+medium Cycles derives from the albedo and radius (``coefficients``: the
+radius remap of bssrdf_setup_radius, Christensen-Burley's albedo fit
+inverted into a single-scattering albedo, sigma_t = 1 / radius) until it
+meets the object's own surface again (the object's triangles alone, as
+Cycles' scene_intersect_local), choosing the colour channel of each
+distance by one-sample MIS (Cycles' volume_sample_channel, the balance
+heuristic over the three channels).  Its exit point is the next vertex:
+the path's ray is set to come from just outside towards it, the next
+bounce takes the recorded triangle without tracing, collects no emission
+there and shades it as a white diffuse lobe under the exit's shading
+normal (Cycles' subsurface_shader_data_setup).  A walk that leaves no exit
+within 256 bounces, or whose throughput falls below 1e-6, ends the path.
+
+Cycles also guides the walk's directions towards and away from the surface
+(Dwivedi sampling, MIS-combined with the classic walk); that changes only
+the variance, and is not done here.  Its similarity relation past the 9th
+bounce (isotropic with the reduced scattering coefficient) changes the
+result and is kept.
+"""
+import numpy as np
+
+from .. import bsdf
+from ..bsdf import kind_in
+from ..lobe_ids import DIFFUSE, NONE
+from ..lobes import EXTRA_PARAMS, table_value
+from ..lobes.subsurface import G_RANGE, IDS, IOR_RANGE, SUBSURFACE_SKIN, entry_direction
+from ..lobes import REGISTRY, SUBSURFACE
+from ..media import open_meshes
+from ..kernels import loop_kernel
+from ..media.phase import G_LIMIT
+from ..vec import frame_of
+from ..nodes.rays import local_accel
+from ..sampler import subsurface_set
+from ..scene import Lobe
+
+MAX_BOUNCES = 256           # BSSRDF_MAX_BOUNCES
+THROUGHPUT_EPSILON = 1e-6   # VOLUME_THROUGHPUT_EPSILON
+SIMILARITY_LEVEL = 9        # SUBSURFACE_RANDOM_WALK_SIMILARITY_LEVEL
+MIN_ALPHA = 0.2             # subsurface_random_walk_coefficients' min_alpha
+MIN_RADIUS = 1e-8           # BSSRDF_MIN_RADIUS
+_WHITE = Lobe("diffuse", (1.0, 1.0, 1.0))   # the exit point's lobe
+
+
+def in_scene(materials):
+    """Whether any material has a subsurface lobe."""
+    return bool(np.any(kind_in(materials.kind, IDS)))
+
+
+def open_mesh_warnings(scene):
+    """One warning per object whose subsurface material's triangles do not
+    close: walks entering there may never come out (Cycles loses them too)."""
+    def uses(material):
+        return any(REGISTRY[lobe.kind].has(SUBSURFACE) for lobe in material.lobes if lobe.kind in REGISTRY)
+    return [f"material {', '.join(repr(m) for m in mats)} on object {name!r}: subsurface scattering on a mesh "
+            "that is not closed; light entering it may never come out (rendered darker)"
+            for name, mats in open_meshes(scene, uses)]
+
+
+# ----------------------------------------------------------------------------
+# Cycles' coefficients (float64 here; Cycles computes them in float32)
+
+def dipole_rd(alpha_prime, fourthird_a):
+    """bssrdf_dipole_compute_Rd."""
+    s = np.sqrt(3.0 * (1.0 - alpha_prime))
+    return 0.5 * alpha_prime * (1.0 + np.exp(-fourthird_a * s)) * np.exp(-s)
+
+
+def dipole_alpha_prime(rd, fourthird_a):
+    """bssrdf_dipole_compute_alpha_prime: 12 bisection steps on [0, 1]."""
+    rd = np.asarray(rd, np.float64)
+    x0, x1 = np.zeros_like(rd), np.ones_like(rd)
+    for _ in range(12):
+        mid = 0.5 * (x0 + x1)
+        low = dipole_rd(mid, fourthird_a) < rd
+        x0, x1 = np.where(low, mid, x0), np.where(low, x1, mid)
+    return np.where(rd < 1e-4, 0.0, np.where(rd >= 0.995, 0.999999, mid))   # Cycles returns the last midpoint
+
+
+def remapped_radius(radius, albedo, ior, skin):
+    """bssrdf_setup_radius (5.0): Random Walk scales the radius by 1 / (4 pi);
+    Skin by sqrt(3 (1 - alpha')), alpha' the dipole albedo of Jensen's Fdr
+    for the IOR.  radius, albedo (N, 3); ior, skin (N,)."""
+    inv = 1.0 / ior
+    f_dr = inv * (-1.440 * inv + 0.710) + 0.668 + 0.0636 * ior
+    fourthird_a = (4.0 / 3.0) * (1.0 + f_dr) / (1.0 - f_dr)
+    alpha_prime = dipole_alpha_prime(albedo, fourthird_a[:, None])
+    skin_scale = np.sqrt(3.0 * (1.0 - alpha_prime))
+    return radius * np.where(skin[:, None], skin_scale, 0.25 / np.pi)
+
+
+# subsurface_random_walk_remap's fit: polynomials in g of degree 7 (B and E:
+# constant + factor x exp(polynomial without constant term)).
+_FIT = {
+    "A": (1.8260523782, -1.28451056436, -1.79904629312, 9.19393289202, -22.8215585862, 32.0234874259,
+          -23.6264803333, 7.21067002658),
+    "B": (0.0, 31.1491581433, -201.847017512, 841.576016723, -2018.09288505, 2731.71560286, -1935.41424244,
+          559.009054474),
+    "C": (1.09686102424, -0.394704063468, 1.05258115941, -8.83963712726, 28.8643230661, -46.8802913581,
+          38.5402837518, -12.7181042538),
+    "D": (0.496310210422, 0.360146581622, -2.15139309747, 17.8896899217, -55.2984010333, 82.065982243,
+          -58.5106008578, 15.8478295021),
+    "E": (0.0, 76.7316253952, -594.356773233, 2448.8834203, -5576.68528998, 7116.60171912, -4763.54467887,
+          1303.5318055),
+    "F": (2.40602999408, -2.51814844609, 9.18494908356, -79.2191708682, 259.082868209, -403.613804597,
+          302.85712436, -87.4370473567),
+}
+_FIT_B = (4.98511194385, 0.127355959438)
+_FIT_E = (4.23190299701, 0.00310603949088)
+
+
+def _poly(coeffs, g):
+    """sum_k coeffs[k] g^k, in Cycles' order of terms."""
+    out = coeffs[0] + 0.0 * g
+    power = g
+    for c in coeffs[1:]:
+        out = out + c * power
+        power = power * g
+    return out
+
+
+def single_scatter_albedo(albedo, g):
+    """subsurface_random_walk_remap: the single-scattering albedo whose
+    multiple-scattering albedo is the surface colour (a fit by g)."""
+    g = np.asarray(g, np.float64)[..., None]
+    a, c, d, f = (_poly(_FIT[k], g) for k in "ACDF")
+    b = _FIT_B[0] + _FIT_B[1] * np.exp(_poly(_FIT["B"], g))
+    e = _FIT_E[0] + _FIT_E[1] * np.exp(_poly(_FIT["E"], g))
+    albedo = np.maximum(albedo, 0.0)
+    blend = albedo ** 0.25
+    alpha = (1.0 - blend) * a * np.arctan(b * albedo) ** c + blend * d * np.arctan(e * albedo) ** f
+    return np.clip(alpha, 0.0, 0.999999)
+
+
+def coefficients(albedo, radius, g):
+    """subsurface_random_walk_coefficients: (sigma_t, single-scattering
+    albedo, throughput factor) per channel for a closure whose weight
+    already holds the albedo (divided out here: scattering adds it back);
+    albedos below 0.2 are raised to it with the throughput lowered to match."""
+    alpha = single_scatter_albedo(albedo, g)
+    sigma_t = 1.0 / (np.maximum(radius, 1e-16) * (1.0 - np.asarray(g)[..., None]))
+    factor = np.where(albedo > 0, 1.0 / np.where(albedo > 0, albedo, 1.0), 0.0)
+    low = alpha < MIN_ALPHA
+    factor = np.where(low, factor * alpha / MIN_ALPHA, factor)
+    return sigma_t, np.where(low, MIN_ALPHA, alpha), factor
+
+
+# ----------------------------------------------------------------------------
+# the stage
+
+def split(v, u_lobe):
+    """The vertices that take a subsurface lobe: returns (rows, slot, the
+    selection left to the BSDF lobes (renormalized), their u_lobe, the
+    BSDF lobes' share (N,))."""
+    sel = v.lobes_wo[0]
+    ss = kind_in(v.lobes.kind, IDS)
+    q = np.where(ss, sel, 0.0)
+    q_total = q.sum(axis=1)
+    chose = u_lobe < q_total
+    rows = np.flatnonzero(chose)
+    cdf = np.cumsum(q[rows], axis=1)
+    slot = np.minimum((u_lobe[rows, None] >= cdf).sum(axis=1), sel.shape[1] - 1)
+    rest = 1.0 - q_total
+    safe = np.where(rest > 0, rest, 1.0)
+    bsdf_sel = np.where(ss, 0.0, sel) / safe[:, None]
+    u_bsdf = np.clip((u_lobe - q_total) / safe, 0.0, 1.0 - 1e-12)
+    return rows, slot, bsdf_sel, u_bsdf, rest
+
+
+def sample(v, u):
+    """The vertex's sample (bsdf.sample's (wi_l, weight, pdf, delta)) with
+    the subsurface lobes taking their share of the lobe choice u[:, 0]:
+    their rows get the entry bounce (``entry``), recorded in ``v.bssrdf``
+    for ``walk``; the BSDF lobes' weights and pdfs include their share."""
+    rows, slot, bsdf_sel, u_bsdf, share = split(v, u[:, 0])
+    wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u_bsdf, u[:, 1], u[:, 2], bsdf_sel, v.lobes_wo[1])
+    weight = weight / np.where(share > 0, share, 1.0)[:, None]
+    pdf = pdf * share
+    entry(v, rows, slot, u[:, 1], u[:, 2], wi_l, weight, pdf, delta)
+    v.bssrdf = (rows, slot)
+    return wi_l, weight, pdf, delta
+
+
+def entry(v, rows, slot, u1, u2, wi_l, weight, pdf, delta):
+    """Cycles' subsurface_bounce for ``rows``: the entry direction and the
+    closure weight over its selection probability, written into the
+    sample arrays (wi_l, weight, pdf, delta) in place."""
+    lobes = v.lobes
+    sel, w = v.lobes_wo
+    skin = lobes.kind[rows, slot] == SUBSURFACE_SKIN
+    wi, ok = entry_direction(skin, v.wo_l[rows], lobes.alpha[rows, slot], lobes.ior[rows, slot], u1[rows], u2[rows])
+    p = sel[rows, slot]
+    wi_l[rows] = wi
+    weight[rows] = np.where(ok[:, None], w[rows, slot] / np.where(p > 0, p, 1.0)[:, None], 0.0)
+    pdf[rows] = p
+    delta[rows] = True
+
+
+def walk(ctx, paths, v, alive, depth):
+    """The random walks of the paths that chose a subsurface lobe at ``v``
+    (``v.bssrdf``, set by ``entry``'s caller) and live on, from their new
+    ray (inside the object).  Updates their throughput and, for those that
+    leave, points their ray at the exit from just outside and records its
+    triangle (Paths.exit_prim, exit_hit).  Returns ``alive`` with the walks
+    that found no exit ended."""
+    rows, slot = v.bssrdf
+    keep = alive[rows]
+    rows, slot = rows[keep], slot[keep]
+    if len(rows) == 0:
+        return alive
+    albedo, radius, g = _params(v.lobes, rows, slot)
+    sigma_t, alpha, factor = coefficients(albedo, radius, g)
+    instance = ctx.triangles.shading.instance[v.hit.prim[rows]]
+    beta, o, d, exit_prim, exit_bary = random_walk(ctx, paths.o[rows], paths.d[rows], paths.beta[rows] * factor,
+                                                   sigma_t, alpha, g, instance, paths.pseed[rows],
+                                                   paths.sample[rows], depth)
+    out = exit_prim >= 0
+    alive = alive.copy()
+    alive[rows[~out]] = False
+    rows, o, d = rows[out], o[out], d[out]
+    s = ctx.accel.offset_scale(o)
+    paths.beta[rows] = beta[out]
+    # Cycles pretends the ray comes from outside towards the exit point.
+    paths.o[rows] = o + d * s[:, None]
+    paths.d[rows] = -d
+    paths.tmax[rows] = 2.0 * s
+    paths.mis_o[rows] = paths.o[rows]
+    paths.exit_prim[rows] = exit_prim[out]
+    paths.exit_hit[rows] = np.column_stack([exit_bary[out], s])
+    return alive
+
+
+def random_walk(ctx, o, d, beta, sigma_t, alpha, g, instance, pseed, sample, depth):
+    """Cycles' subsurface_random_walk (without its guiding) for N walks from
+    o along d inside objects ``instance`` with extinction sigma_t (N, 3),
+    single-scattering albedo alpha (N, 3) and Henyey-Greenstein g (N,),
+    throughput beta (N, 3).  Returns (beta, exit points, directions there,
+    exit triangle (-1: no exit), its barycentrics).  The walks in progress
+    are kept dense (finished ones written out and dropped); each bounce is
+    two compiled row loops (``_direction_rows``, ``_advance_rows``) around
+    the intersection."""
+    n = len(o)
+    g = np.array(np.broadcast_to(np.asarray(g, np.float64), (n,)))
+    sigma_t = np.ascontiguousarray(sigma_t, np.float64)
+    alpha = np.ascontiguousarray(alpha, np.float64)
+    sigma_s = sigma_t * alpha
+    # Past the similarity level: isotropic with the reduced scattering coefficient.
+    sigma_s_star = sigma_s * (1.0 - g)[:, None]
+    sigma_t_star = sigma_t - sigma_s + sigma_s_star
+    out_beta, out_o, out_d = np.zeros((n, 3)), np.array(o, np.float64), np.array(d, np.float64)
+    exit_prim = np.full(n, -1, np.int64)
+    exit_bary = np.zeros((n, 2))
+    live = [np.arange(n), out_o.copy(), out_d.copy(), np.array(beta, np.float64), sigma_t, sigma_s, sigma_t_star,
+            sigma_s_star, alpha, g, instance, pseed, sample]
+    for bounce in range(MAX_BOUNCES):
+        rows, o, d, b, st, ss, st_star, ss_star, a, gg, inst, ps, sm = live
+        m = len(rows)
+        if m == 0:
+            break
+        u = np.ascontiguousarray(ctx.sampler.get(ps, sm, subsurface_set(depth, bounce, 0)), np.float64)
+        similar = bounce > SIMILARITY_LEVEL
+        if similar:
+            st, ss, gg = st_star, ss_star, np.zeros(m)
+        t = np.empty(m)
+        _direction_rows(u, d, gg, b, a, st, bounce > 0, t)
+        hit, t_hit, prim, bary = _local_hits(ctx, o, d, t, inst)
+        done = np.empty(m, bool)
+        _advance_rows(hit, t_hit, t, u, b, a, st, ss, o, d, done)
+        if done.any():
+            r = rows[hit]
+            out_beta[r], out_o[r], out_d[r] = b[hit], o[hit], d[hit]
+            exit_prim[r], exit_bary[r] = prim[hit], bary[hit]
+            keep = np.flatnonzero(~done)
+            live = [x.take(keep, axis=0) for x in live]
+    return out_beta, out_o, out_d, exit_prim, exit_bary
+
+
+def _channel_pdf(b, a):
+    """Cycles' volume_sample_channel_pdf: |throughput x albedo| normalized, else uniform."""
+    w = np.abs(b * a)
+    total = w.sum(axis=1)
+    return np.where(total[:, None] > 0, w / np.where(total > 0, total, 1.0)[:, None], 1.0 / 3.0)
+
+
+def _direction_numpy(u, d, g, b, a, st, scatter, t):
+    """The next direction (Henyey-Greenstein about d, in place, when
+    ``scatter``), the colour channel by u[:, 0] and a free-flight distance
+    t of its extinction by u[:, 1]."""
+    if scatter:
+        gc = np.clip(g, -G_LIMIT, G_LIMIT)
+        iso = np.abs(gc) < 1e-3
+        gs = np.where(iso, 0.5, gc)
+        k = (1.0 - gs * gs) / (1.0 - gs + 2.0 * gs * u[:, 2])
+        cos = np.clip(np.where(iso, 1.0 - 2.0 * u[:, 2], (1.0 + gs * gs - k * k) / (2.0 * gs)), -1.0, 1.0)
+        sin = np.sqrt(np.maximum(1.0 - cos * cos, 0.0))
+        phi = 2.0 * np.pi * u[:, 3]
+        x, y = sin * np.cos(phi), sin * np.sin(phi)
+        sign = 2.0 * (d[:, 2] >= 0.0) - 1.0
+        q = -1.0 / (sign + d[:, 2])
+        r = d[:, 0] * d[:, 1] * q
+        s0, s1, s2 = 1.0 + sign * d[:, 0] * d[:, 0] * q, sign * r, -sign * d[:, 0]
+        t0, t1, t2 = r, sign + d[:, 1] * d[:, 1] * q, -d[:, 1]
+        new = np.stack([x * s0 + y * t0 + cos * d[:, 0], x * s1 + y * t1 + cos * d[:, 1],
+                        x * s2 + y * t2 + cos * d[:, 2]], axis=1)
+        d[:] = new / np.sqrt(np.sum(new * new, axis=1))[:, None]
+    cpdf = _channel_pdf(b, a)
+    channel = (u[:, 0] >= cpdf[:, 0]).astype(np.int64) + (u[:, 0] >= cpdf[:, 0] + cpdf[:, 1])
+    t[:] = -np.log1p(-u[:, 1]) / st[np.arange(len(t)), channel]
+
+
+@loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[::1], float64[:, ::1], float64[:, ::1], "
+             "float64[:, ::1], boolean, float64[::1])", _direction_numpy)
+def _direction_rows(u, d, g, b, a, st, scatter, t):
+    for i in range(len(t)):
+        if scatter:
+            gc = min(max(g[i], -G_LIMIT), G_LIMIT)
+            if abs(gc) < 1e-3:
+                cos = 1.0 - 2.0 * u[i, 2]
+            else:
+                k = (1.0 - gc * gc) / (1.0 - gc + 2.0 * gc * u[i, 2])
+                cos = (1.0 + gc * gc - k * k) / (2.0 * gc)
+            cos = min(max(cos, -1.0), 1.0)
+            sin = np.sqrt(max(1.0 - cos * cos, 0.0))
+            phi = 2.0 * np.pi * u[i, 3]
+            x, y = sin * np.cos(phi), sin * np.sin(phi)
+            s0, s1, s2, t0, t1, t2 = frame_of(d[i, 0], d[i, 1], d[i, 2])
+            n0 = x * s0 + y * t0 + cos * d[i, 0]
+            n1 = x * s1 + y * t1 + cos * d[i, 1]
+            n2 = x * s2 + y * t2 + cos * d[i, 2]
+            length = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+            d[i, 0], d[i, 1], d[i, 2] = n0 / length, n1 / length, n2 / length
+        w0, w1, w2 = abs(b[i, 0] * a[i, 0]), abs(b[i, 1] * a[i, 1]), abs(b[i, 2] * a[i, 2])
+        total = w0 + w1 + w2
+        p0, p1 = (w0 / total, w1 / total) if total > 0 else (1.0 / 3.0, 1.0 / 3.0)
+        c = (1 if u[i, 0] >= p0 else 0) + (1 if u[i, 0] >= p0 + p1 else 0)
+        t[i] = -np.log1p(-u[i, 1]) / st[i, c]
+
+
+def _advance_numpy(hit, t_hit, t, u, b, a, st, ss, o, d, done):
+    """Cycles' update after the ray-cast: the distance (to the exit where
+    the segment met the surface), the throughput by one-sample MIS over the
+    channels (transmittance, times sigma_s at a scattering), the point
+    moved on (all in place); ``done``: exited or faded."""
+    t[:] = np.where(hit, t_hit, t)
+    cpdf = _channel_pdf(b, a)
+    tr = np.exp(-st * t[:, None])
+    pdf = np.where(hit[:, None], tr, st * tr)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        step = b * np.where(hit[:, None], tr, ss * tr) / np.sum(cpdf * pdf, axis=1)[:, None]
+    b[:] = np.where(np.isfinite(step), step, 0.0)
+    o += d * t[:, None]
+    done[:] = hit | (np.max(b, axis=1) < THROUGHPUT_EPSILON)
+
+
+@loop_kernel("void(boolean[::1], float64[::1], float64[::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], "
+             "float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], boolean[::1])", _advance_numpy)
+def _advance_rows(hit, t_hit, t, u, b, a, st, ss, o, d, done):
+    for i in range(len(t)):
+        if hit[i]:
+            t[i] = t_hit[i]
+        ti = t[i]
+        w0, w1, w2 = abs(b[i, 0] * a[i, 0]), abs(b[i, 1] * a[i, 1]), abs(b[i, 2] * a[i, 2])
+        total = w0 + w1 + w2
+        if total > 0:
+            p0, p1, p2 = w0 / total, w1 / total, w2 / total
+        else:
+            p0 = p1 = p2 = 1.0 / 3.0
+        tr0, tr1, tr2 = np.exp(-st[i, 0] * ti), np.exp(-st[i, 1] * ti), np.exp(-st[i, 2] * ti)
+        if hit[i]:
+            denom = p0 * tr0 + p1 * tr1 + p2 * tr2
+            f0, f1, f2 = tr0, tr1, tr2
+        else:
+            denom = p0 * st[i, 0] * tr0 + p1 * st[i, 1] * tr1 + p2 * st[i, 2] * tr2
+            f0, f1, f2 = ss[i, 0] * tr0, ss[i, 1] * tr1, ss[i, 2] * tr2
+        largest = 0.0
+        for c, f in ((0, f0), (1, f1), (2, f2)):
+            v = b[i, c] * f / denom if denom != 0 else np.nan
+            v = v if np.isfinite(v) else 0.0
+            b[i, c] = v
+            largest = v if c == 0 else max(largest, v)
+        o[i, 0] += d[i, 0] * ti
+        o[i, 1] += d[i, 1] * ti
+        o[i, 2] += d[i, 2] * ti
+        done[i] = hit[i] or largest < THROUGHPUT_EPSILON
+
+
+def _local_hits(ctx, o, d, tmax, instance):
+    """The first hit on each ray's own object within tmax: (hit (N,) bool,
+    t, global prim, barycentrics (N, 2))."""
+    n = len(o)
+    hit, t, prim, bary = np.zeros(n, bool), np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros((n, 2))
+    for inst in np.unique(instance):
+        rows = np.flatnonzero(instance == inst)
+        accel, prims = local_accel(ctx.accel, ctx.triangles, int(inst))
+        ti, pi, bu, bv = accel.intersect(o[rows], d[rows], tmax[rows])
+        found = (pi >= 0) & (ti <= tmax[rows])
+        r = rows[found]
+        hit[r], t[r], prim[r] = True, ti[found], prims[pi[found]]
+        bary[r, 0], bary[r, 1] = bu[found], bv[found]
+    return hit, t, prim, bary
+
+
+def arrive(paths, found):
+    """The next bounce's hits of the paths on their way to a subsurface
+    exit: the recorded triangle, no light on the way; marks them (-2) for
+    ``exit_lobes``."""
+    rows = np.flatnonzero(paths.exit_prim >= 0)
+    if len(rows) == 0:
+        return
+    found.prim[rows] = paths.exit_prim[rows]
+    found.bu[rows], found.bv[rows], found.t[rows] = paths.exit_hit[rows].T
+    found.light[rows] = False
+    paths.exit_prim[rows] = -2
+
+
+def at_exit(paths):
+    """Paths shading a subsurface exit point this bounce."""
+    return paths.exit_prim == -2
+
+
+def exit_lobes(paths, lobes):
+    """Cycles' subsurface_shader_data_setup: a white diffuse lobe of weight 1
+    replaces the material's lobes at exit points (under the shading normal
+    the material's normal map or bump gives); the mark is cleared."""
+    rows = np.flatnonzero(at_exit(paths))
+    if len(rows) == 0:
+        return
+    for param in EXTRA_PARAMS:
+        getattr(lobes, param.field)[rows] = table_value(param, _WHITE)
+    lobes.kind[rows] = NONE
+    lobes.kind[rows, 0] = DIFFUSE
+    lobes.color[rows] = 0.0
+    lobes.color[rows, 0] = 1.0
+    lobes.alpha[rows] = 1.0
+    lobes.schlick[rows] = False
+    paths.exit_prim[rows] = -1
+
+
+def _params(lobes, rows, slot):
+    albedo = np.clip(lobes.color[rows, slot], 0.0, 1.0)
+    ior = np.clip(lobes.ior[rows, slot], *IOR_RANGE)
+    g = np.clip(lobes.phase_g[rows, slot], *G_RANGE)
+    skin = lobes.kind[rows, slot] == SUBSURFACE_SKIN
+    radius = remapped_radius(np.maximum(lobes.radius[rows, slot], MIN_RADIUS), albedo, ior, skin)
+    return albedo, radius, g

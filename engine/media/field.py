@@ -1,0 +1,198 @@
+"""Heterogeneous media: a material's volume coefficients given by its node
+tree (texture expressions of engine.scene), evaluated at points inside the
+object, and the majorant grid over the object's bounds that the null-
+scattering trackers (tracking.py) sample against.
+
+A ``Field`` is one material's medium inside one instance: Object
+coordinates are that instance's inverse matrix times the point, Generated
+its mesh's texture space applied to them (Cycles' generated transform in a
+volume), so two objects of one smoke material see their own coordinates.
+
+The majorant grid (Cycles 5.0 builds an octree the same way, bvh/octree.cpp:
+the density shader evaluated over the object's bounding box) has GRID^3
+cells in object space; each holds MARGIN x the largest extinction (max over
+colour channels) found at the (LATTICE + 1)^3 lattice points of the cell,
+and at least FLOOR x the object's largest one.  A cell whose true extinction
+exceeds its majorant is no bias: the trackers' null weights
+(sigma_maj - sigma_t) / sigma_maj may go negative (weighted tracking), and
+the floor keeps every cell's collision rate positive.  Points outside the
+grid's box are outside the object: the medium there is empty.
+
+Evaluated coefficients are made renderable as Cycles' closures do: NaN is 0,
+negative densities are 0 (fmaxf(density, 0)), and values past SIGMA_MAX
+(1/m) are SIGMA_MAX; each kind of repair is named in a warning with the
+material.
+"""
+import numpy as np
+
+from ..nodes import ShadingContext
+from ..nodes.context import texture_space
+from ..textures import Compiler, is_texture
+
+FIELDS = ("absorption", "scattering", "emission")
+GRID = 16
+LATTICE = 2
+MARGIN = 1.25
+FLOOR = 1e-3
+FLOOR_DEPTH = 100.0
+SIGMA_MAX = 1e8
+# A majorant holds along the ray for STEP cells along each axis (the
+# segment's bounding box spans at most STEP + 1 cells per axis).
+STEP = 3
+
+
+def is_heterogeneous(volume):
+    return volume is not None and any(is_texture(getattr(volume, f)) for f in FIELDS)
+
+
+class Field:
+    """The medium of material ``material`` inside scene instance ``instance``."""
+
+    def __init__(self, material, name, volume, matrix, mesh, tri, tris, compiler):
+        self.material, self.name = material, name
+        self.fns = [compiler.color(getattr(volume, f)) for f in FIELDS]
+        self.g = float(volume.anisotropy)
+        m = np.asarray(matrix, np.float64).reshape(4, 4)
+        self.matrix = m
+        self.inverse = np.linalg.inv(m) if np.isfinite(m).all() and abs(np.linalg.det(m[:3, :3])) > 1e-300 \
+            else np.eye(4)
+        self.loc, self.factor = texture_space(mesh)
+        pos = np.asarray(mesh.positions, np.float64).reshape(-1, 3)
+        lo, hi = pos.min(axis=0), pos.max(axis=0)
+        pad = 1e-4 * (hi - lo).max() + 1e-9
+        self.lo, self.hi = lo - pad, hi + pad
+        self.pad = pad
+        self.cell = (self.hi - self.lo) / GRID
+        self.tri, self.tris = int(tri), tris
+        self.repaired = {"NaN": 0, "negative": 0, "too large": 0}
+        self.evaluated = 0     # points evaluated (statistics)
+        self.grid = self._majorants()
+
+    # -- coefficients at points -----------------------------------------------
+    def context(self, p, d, q=None):
+        """A shading context for world points p (N, 3) inside the object,
+        the ray travelling along d."""
+        n = len(p)
+        ctx = ShadingContext(n, self.tris, np.full(n, self.tri, np.int64), None, p, wo=-d)
+        q = self.to_object(p) if q is None else q
+        ctx._cache["object"] = q
+        ctx._cache[("generated",)] = (q - self.loc) * self.factor + 0.5
+        return ctx
+
+    def to_object(self, p):
+        return p @ self.inverse[:3, :3].T + self.inverse[:3, 3]
+
+    def evaluate(self, p, d, q=None, inside=True):
+        """(sigma_a, sigma_s, emission) (N, 3) at world points p (``inside``
+        False: the grid's lattice, partly outside the mesh, where a negative
+        value is no user error)."""
+        ctx = self.context(p, d, q)
+        self.evaluated += len(p)
+        return tuple(self._renderable(fn(ctx), inside) for fn in self.fns)
+
+    def _renderable(self, v, inside=True):
+        v = np.array(np.broadcast_to(v, (len(v), 3)), np.float64)
+        nan = np.isnan(v)
+        neg = v < 0
+        big = v > SIGMA_MAX
+        if nan.any() or neg.any() or big.any():
+            self.repaired["NaN"] += int(nan.sum())
+            self.repaired["negative"] += int(neg.sum()) if inside else 0
+            self.repaired["too large"] += int(big.sum())
+            v = np.where(nan | neg, 0.0, np.minimum(v, SIGMA_MAX))
+        return v
+
+    def warning(self):
+        bad = [f"{k} ({n} values)" for k, n in self.repaired.items() if n]
+        if not bad:
+            return None
+        return (f"material {self.name!r}: textured volume coefficients " + ", ".join(bad)
+                + f" read as 0 (NaN, negative) or {SIGMA_MAX:g}/m (too large)")
+
+    # -- the majorant grid ----------------------------------------------------
+    def _majorants(self):
+        k = GRID * LATTICE + 1
+        axes = [np.linspace(self.lo[a], self.hi[a], k) for a in range(3)]
+        q = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        p = q @ self.matrix[:3, :3].T + self.matrix[:3, 3]
+        d = np.tile([0.0, 0.0, 1.0], (len(p), 1))
+        ctx = self.context(p, d, q)
+        raw = [np.broadcast_to(fn(ctx), (len(p), 3)) for fn in self.fns]
+        # Negative values inside the mesh's bounds (not on the padded edge)
+        # are the texture's own: counted.
+        core = np.all((q > self.lo + 0.5 * self.pad) & (q < self.hi - 0.5 * self.pad), axis=1)
+        self.repaired["negative"] += int(sum(np.count_nonzero(core[:, None] & (r < 0)) for r in raw))
+        sa, ss, _ = (self._renderable(r, inside=False) for r in raw)
+        v = (sa + ss).max(axis=1).reshape(k, k, k)
+        for axis in range(3):   # each cell: the max over its (LATTICE + 1) lattice points per axis
+            v = np.moveaxis(v, axis, 0)
+            v = np.max([v[s:s + GRID * LATTICE:LATTICE] for s in range(LATTICE + 1)], axis=0)
+            v = np.moveaxis(v, 0, axis)
+        top = float(v.max())
+        self.max = top
+        # The floor: a collision rate in cells that looked empty, at most
+        # one per FLOOR_DEPTH object sizes.
+        size = float(np.linalg.norm((self.hi - self.lo) @ np.abs(self.matrix[:3, :3]).T))
+        return np.maximum(MARGIN * v, min(FLOOR * top, 1.0 / (FLOOR_DEPTH * max(size, 1e-9))))
+
+    def majorant(self, p, d):
+        """(mu, dist): a majorant of the medium along the ray from p (N, 3)
+        in direction d (unit) for a distance dist: the largest cell
+        majorant in the cells of the segment's bounding box, the segment
+        reaching at most STEP cells along any axis (and ending where the
+        ray leaves the grid's box).  Outside the box mu is 0 and dist the
+        distance to it (inf: it is not ahead)."""
+        q = self.to_object(p)
+        dq = d @ self.inverse[:3, :3].T
+        inside = np.all((q >= self.lo) & (q < self.hi), axis=1)
+        mu = np.zeros(len(p))
+        dist = np.full(len(p), np.inf)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            t0 = (self.lo - q) / dq
+            t1 = (self.hi - q) / dq
+            near = np.max(np.where(np.isnan(t0), -np.inf, np.minimum(t0, t1)), axis=1)
+            far = np.min(np.where(np.isnan(t1), np.inf, np.maximum(t0, t1)), axis=1)
+            i = np.flatnonzero(inside)
+            if len(i):
+                reach = STEP * np.min(np.where(dq[i] != 0, self.cell / np.abs(dq[i]), np.inf), axis=1)
+                length = np.minimum(reach, far[i])
+                q1 = q[i] + dq[i] * np.where(np.isfinite(length), length, 0.0)[:, None]
+                a = np.clip(np.floor((np.minimum(q[i], q1) - self.lo) / self.cell), 0, GRID - 1).astype(np.int64)
+                b = np.clip(np.floor((np.maximum(q[i], q1) - self.lo) / self.cell), 0, GRID - 1).astype(np.int64)
+                best = np.zeros(len(i))
+                for ox in range(STEP + 1):
+                    x = np.minimum(a[:, 0] + ox, b[:, 0])
+                    for oy in range(STEP + 1):
+                        y = np.minimum(a[:, 1] + oy, b[:, 1])
+                        for oz in range(STEP + 1):
+                            z = np.minimum(a[:, 2] + oz, b[:, 2])
+                            best = np.maximum(best, self.grid[x, y, z])
+                mu[i] = best
+                dist[i] = length
+            o = np.flatnonzero(~inside)
+            if len(o):
+                ahead = (far[o] >= np.maximum(near[o], 0.0)) & (near[o] >= 0)
+                dist[o] = np.where(ahead, near[o], np.inf)
+        return mu, dist
+
+
+def build_fields(table, materials, scene, tris):
+    """The Fields of every (heterogeneous material, instance) pair among the
+    triangles, and each triangle's medium id (-1: no volume)."""
+    compiler = Compiler()
+    tri_medium = np.asarray(tris.material, np.int64).copy()
+    het = np.array([is_heterogeneous(getattr(m, "volume", None)) for m in materials])
+    fields = []
+    shading = getattr(tris, "shading", None)
+    rows = np.flatnonzero(het[tri_medium]) if len(tri_medium) else np.zeros(0, np.int64)
+    if len(rows) and shading is not None:
+        inst = shading.instance[rows].astype(np.int64)
+        key = tri_medium[rows] * (len(scene.instances) + 1) + inst
+        keys, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+        for j, k in enumerate(keys):
+            mat, i = int(k // (len(scene.instances) + 1)), int(k % (len(scene.instances) + 1))
+            instance = scene.instances[i]
+            fields.append(Field(mat, materials[mat].name, materials[mat].volume, instance.matrix,
+                                scene.meshes[instance.mesh], rows[first[j]], tris, compiler))
+        tri_medium[rows] = table.first_field + inverse
+    return fields, tri_medium

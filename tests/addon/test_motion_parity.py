@@ -1,0 +1,162 @@
+"""Cycles parity of motion blur (engine/motion.py, addon/export/motion.py):
+a sliding cube, a tumbling torus and a box sheared by a shape key, seen by
+a moving, turning camera, all keyframed linearly and rendered at frame 2
+with a shutter of 0.5 frames, Position Centre, against a converged Cycles
+reference (tools/cycles_references.py motion_objects), as
+tests/addon/test_light_parity.py compares its scenes.  The same block test
+must tell a sharp render from the blurred reference (it sees the blur)."""
+import math
+
+import bpy
+import numpy as np
+import pytest
+
+from parity_scenes import box, light, material, plane, top_camera
+import ember_stats as stats
+from ember_testlib import check_against_reference, empty_factory_scene, load_reference, render_for_reference
+
+BLOCK = 8
+SPP = 256
+BOUNCES = 1
+FRAME = 2
+
+
+def _linear_keys(obj, path, values, frames=(1, 3)):
+    """Keyframe ``obj.path`` at ``frames`` to ``values``, linearly interpolated."""
+    for frame, value in zip(frames, values):
+        setattr(obj, path, value)
+        obj.keyframe_insert(path, frame=frame)
+    action = obj.animation_data.action
+    for curve in _fcurves(action):
+        for key in curve.keyframe_points:
+            key.interpolation = 'LINEAR'
+
+
+def _fcurves(action):
+    """An action's F-curves (Blender 5 keeps them in layered channel bags)."""
+    curves = getattr(action, 'fcurves', None)
+    if curves is not None and len(curves):
+        return list(curves)
+    found = []
+    for layer in getattr(action, 'layers', ()):
+        for strip in layer.strips:
+            for bag in strip.channelbags:
+                found.extend(bag.fcurves)
+    return found
+
+
+def _blur(scene, on=True):
+    scene.render.use_motion_blur = on
+    scene.render.motion_blur_shutter = 0.5
+    scene.render.motion_blur_position = 'CENTER'
+    scene.frame_set(FRAME)
+
+
+def _stage(scene):
+    plane("floor", material("floor", 'diffuse'))
+    light('AREA', (0.5, -0.5, 4.0), 400.0, size=2.0)
+    top_camera(scene, 6.0)
+
+
+def objects(scene, blur=True):
+    """A cube sliding along x (2 units per frame, so 1 in the shutter) and a
+    torus tumbling about x (120 degrees per frame, 60 in the shutter)."""
+    _stage(scene)
+    cube = box("cube", material("red", 'diffuse', color=(0.8, 0.15, 0.1)), (-1.2, 0.0, 0.4), (0.8, 0.8, 0.8))
+    _linear_keys(cube, 'location', [(-3.2, 0.0, 0.4), (0.8, 0.0, 0.4)])
+    bpy.ops.mesh.primitive_torus_add(major_radius=0.7, minor_radius=0.25, major_segments=32, minor_segments=12,
+                                     location=(1.0, 0.0, 1.0))
+    torus = bpy.context.active_object
+    torus.name = "torus"
+    bpy.ops.object.shade_smooth()
+    torus.data.materials.append(material("green", 'diffuse', color=(0.2, 0.7, 0.2)))
+    _linear_keys(torus, 'rotation_euler', [(math.radians(-60.0), 0.0, 0.0), (math.radians(180.0), 0.0, 0.0)])
+    _shearing_box()
+    # the camera moves along y (1.5 units per frame) and turns about z (20 degrees per frame)
+    _linear_keys(scene.camera, 'location', [(0.0, -1.5, 6.0), (0.0, 1.5, 6.0)])
+    _linear_keys(scene.camera, 'rotation_euler', [(0.0, 0.0, math.radians(-20.0)), (0.0, 0.0, math.radians(20.0))])
+    _blur(scene, blur)
+    return BOUNCES
+
+
+def _shearing_box():
+    """A box whose top face slides along x by a shape key (deformation
+    blur): its value goes 0 -> 1 over frames 1 -> 3, 0.8 unit of shear."""
+    obj = box("shear", material("yellow", 'diffuse', color=(0.8, 0.7, 0.1)), (0.0, -1.1, 0.35), (0.6, 0.6, 0.7))
+    obj.shape_key_add(name="Basis")
+    key = obj.shape_key_add(name="shear")
+    for point in key.data:
+        if point.co.z > 0:
+            point.co.x += 0.8 / 0.6   # object space: the box is scaled by 0.6 along x
+    for frame, value in ((1, 0.0), (3, 1.0)):
+        key.value = value
+        key.keyframe_insert('value', frame=frame)
+    for curve in _fcurves(obj.data.shape_keys.animation_data.action):
+        for point in curve.keyframe_points:
+            point.interpolation = 'LINEAR'
+
+
+SCENES = {'objects': objects}
+
+
+def reference_scene(name, folder=None):
+    """The scene ``name`` and its bounces (as tools/cycles_references.py renders it)."""
+    scene = empty_factory_scene()
+    return scene, SCENES[name](scene)
+
+
+def test_motion_blur_parity_with_cycles(tmp_path, tapped_engine, name='objects'):
+    scene, bounces = reference_scene(name)
+    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, SPP, 2, bounces)
+    check = check_against_reference('motion_' + name, scene, bounces, image, var, SPP, BLOCK)
+    check.assert_agrees(0.005, 0.02)
+    # The same blocks at the same level tell Cycles' blurred image from a sharp one.
+    still = empty_factory_scene()
+    SCENES[name](still, blur=False)
+    sharp, sharp_var = render_for_reference(still, tmp_path, name + '_still', tapped_engine, SPP // 2, 2, bounces)
+    ref, ref_var, _ = load_reference('motion_' + name)
+    a, va = stats.block_means_var(sharp[..., :3].astype(np.float64), sharp_var, BLOCK)
+    b, vb = stats.block_means_var(ref, ref_var, BLOCK)
+    t = np.abs(a - b) / np.sqrt(va + vb)
+    limit = stats.t_threshold(check.details['level'], SPP // 2 - 1)
+    print(f"motion_{name}: a sharp render against the blurred reference: max block |t| {t.max():.1f} "
+          f"(limit {limit:.1f}), {(t > limit).sum()} of {t.size} blocks beyond")
+    assert (t > limit).any(), f"the test cannot tell {name}'s motion blur from none"
+
+
+def _exported_scene(monkeypatch):
+    """Record the engine scene each render receives."""
+    from addon import backend
+    real = backend.engine().render
+    seen = []
+
+    def spy(scene, settings, progress=None):
+        seen.append(scene)
+        return real(scene, settings, progress)
+    monkeypatch.setattr(backend.engine(), 'render', spy)
+    return seen
+
+
+@pytest.mark.parametrize("shutter, position", [(0.0, 'CENTER'), (10.0, 'START'), (0.5, 'END')])
+def test_shutter_lengths_and_positions(shutter, position, tmp_path, tapped_engine, monkeypatch):
+    """A shutter of 0 frames blurs nothing; one of 10 frames (keyframes
+    extrapolated far past their range) renders finite pixels with the
+    cube's steps spanning 10 frames from the frame (Position Start); Position
+    End puts the frame at the shutter's end, as Cycles."""
+    seen = _exported_scene(monkeypatch)
+    scene, bounces = reference_scene('objects')
+    scene.render.motion_blur_shutter = shutter
+    scene.render.motion_blur_position = position
+    image, _ = render_for_reference(scene, tmp_path, 'shutter', tapped_engine, 4, 2, bounces)
+    assert np.isfinite(image).all()
+    assert scene.frame_current == FRAME and scene.frame_subframe == 0.0   # the frame is set back
+    cube = next(inst for inst in seen[-1].instances if inst.name == 'cube')
+    if shutter == 0.0:
+        assert cube.motion is None and seen[-1].camera.motion is None
+        return
+    x = cube.motion[:, 0, 3]
+    centre = {'START': FRAME + shutter / 2, 'END': FRAME - shutter / 2}[position]
+    # the cube's x is 2 (frame - 2) - 1.2 (linear keys, extrapolated constant past frames 1 and 3)
+    expect = [np.clip(2.0 * (f - 2.0) - 1.2, -3.2, 0.8) for f in (centre - shutter / 2, centre, centre + shutter / 2)]
+    assert np.allclose(x, expect, atol=1e-4), (x, expect)
+    assert np.isclose(cube.matrix[0, 3], expect[1], atol=1e-4)

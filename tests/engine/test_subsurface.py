@@ -1,0 +1,178 @@
+"""Subsurface scattering (engine/integrator/subsurface.py, Cycles' random walk).
+
+* The walk against a closed form: a semi-infinite, index-matched,
+  isotropically scattering half-space lit at normal incidence reflects
+  R(a) = 1 - H(1; a) sqrt(1 - a) (Chandrasekhar, Radiative Transfer 1950,
+  section 49; H his H-function of the single-scattering albedo a, from its
+  integral form), for several albedos.
+* Cycles' coefficient maps (bssrdf.h, subsurface_random_walk.h) at known points.
+* Renders: a white-furnace sphere of albedo 1 stays 1; hostile radius,
+  scale and open meshes give finite pixels and a warning naming the material.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from ember_stats import detectable, family_level, z_threshold
+from engine.integrator import subsurface as ss
+ss_mod = ss
+from engine.render import prepare, render
+from engine.scene import Camera, Instance, Lobe, Material, RenderSettings, Scene, World
+from engine.testscenes import box, look_at, quad, uv_sphere
+
+ALBEDOS = (0.3, 0.6, 0.9)
+WALKS = 20_000
+
+
+def h_function(mu, a, nodes=400):
+    """Chandrasekhar's H(mu) for isotropic scattering of albedo a:
+    exp(-(mu / pi) int_0^{pi/2} ln(1 - a theta cot theta) / (cos^2 + mu^2 sin^2) dtheta)
+    by Gauss-Legendre quadrature (the integrand is smooth)."""
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    theta = 0.25 * math.pi * (x + 1.0)
+    integrand = np.log(1.0 - a * theta / np.tan(theta)) / (np.cos(theta) ** 2 + mu * mu * np.sin(theta) ** 2)
+    return math.exp(-(mu / math.pi) * 0.25 * math.pi * float(np.sum(w * integrand)))
+
+
+def slab_albedo(a):
+    """Diffuse reflectance of the half-space at normal incidence."""
+    return 1.0 - h_function(1.0, a) * math.sqrt(1.0 - a)
+
+
+def test_h_function_known_values():
+    """H(1) of a conservative medium is 2.9078 (Chandrasekhar's table);
+    the reflectance is 1 there and 0 without scattering."""
+    assert h_function(1.0, 1.0) == pytest.approx(2.9078, abs=2e-4)
+    assert slab_albedo(1e-12) == pytest.approx(0.0, abs=1e-9)
+
+
+def _half_space():
+    """A box 2000 mean free paths wide and deep whose top face is z = 0."""
+    mesh = box((2000.0, 2000.0, 2000.0))
+    mesh.positions = np.asarray(mesh.positions, np.float64) - np.array([0.0, 0.0, 1000.0])
+    cam = Camera(look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0)), resolution=(4, 4))
+    mat = Material("slab", (Lobe("subsurface", (0.5, 0.5, 0.5)),))
+    return Scene([mesh], [Instance(0, materials=[0], name="slab")], [mat], [], World((0, 0, 0)), cam)
+
+
+@pytest.mark.parametrize("a", ALBEDOS)
+def test_walk_reflects_the_half_space_albedo(a):
+    """Walks from just under the surface straight down, sigma_t = 1,
+    isotropic: the mean exit throughput is R(a), within its standard error."""
+    ctx = prepare(_half_space(), RenderSettings(samples=1, seed=11, sampling_pattern="random"))
+    n = WALKS
+    o = np.tile([0.0, 0.0, -1e-4], (n, 1))
+    d = np.tile([0.0, 0.0, -1.0], (n, 1))
+    ones = np.ones((n, 3))
+    pseed = ctx.sampler.pixel_seeds(np.arange(n))
+    beta, _, _, prim, _ = ss.random_walk(ctx, o, d, ones, ones, ones * a, np.zeros(n),
+                                         np.zeros(n, np.int64), pseed, np.zeros(n, np.uint32), 0)
+    value = np.where(prim >= 0, beta[:, 0], 0.0)
+    mean, se = value.mean(), value.std(ddof=1) / math.sqrt(n)
+    expected = slab_albedo(a)
+    level = family_level(f"{__name__}.half_space", len(ALBEDOS))
+    print(f"albedo {a}: walk {mean:.4f} +- {se:.4f}, closed form {expected:.4f}; "
+          f"detects {detectable(se, level):.4f} ({detectable(se, level) / expected:.1%})")
+    assert abs(mean - expected) < z_threshold(level) * se
+    assert np.all(beta[:, 0] == beta[:, 1]) and np.all(beta[:, 0] == beta[:, 2])   # grey: channels agree
+
+
+def test_cycles_coefficients():
+    """Cycles' maps at known points: the single-scattering albedo fit is
+    0 at 0 and close to 1 at 1; the Skin radius remap is sqrt(3 (1 - a'))
+    with a' the dipole albedo giving the colour back."""
+    alpha = ss.single_scatter_albedo(np.array([[0.0, 0.5, 1.0]]), np.array([0.0]))
+    assert alpha[0, 0] == 0.0 and 0.8 < alpha[0, 1] < 0.99 and alpha[0, 2] > 0.999
+    ior = 1.4
+    inv = 1.0 / ior
+    f_dr = inv * (-1.440 * inv + 0.710) + 0.668 + 0.0636 * ior
+    a4 = (4.0 / 3.0) * (1.0 + f_dr) / (1.0 - f_dr)
+    ap = ss.dipole_alpha_prime(np.array([0.1, 0.5, 0.8]), a4)
+    lo, hi = np.zeros(3), np.ones(3)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        low = ss.dipole_rd(mid, a4) < [0.1, 0.5, 0.8]
+        lo, hi = np.where(low, mid, lo), np.where(low, hi, mid)
+    assert np.all(np.abs(ap - lo) <= 2.0 ** -12)   # Cycles' 12 bisection steps
+    r = ss.remapped_radius(np.ones((1, 3)), np.array([[0.1, 0.5, 0.8]]), np.array([ior]), np.array([True]))
+    np.testing.assert_allclose(r[0], np.sqrt(3.0 * (1.0 - ap)))
+    r = ss.remapped_radius(np.ones((1, 3)), np.array([[0.1, 0.5, 0.8]]), np.array([ior]), np.array([False]))
+    np.testing.assert_allclose(r[0], 0.25 / math.pi)
+
+
+def _ball(lobe, mesh=None, world=(1.0, 1.0, 1.0), size=(10, 10)):
+    mesh = uv_sphere(1.0, 32, 16) if mesh is None else mesh
+    cam = Camera(look_at((0, -4, 0), (0, 0, 0)), kind="ORTHO", ortho_scale=2.4, resolution=size,
+                 clip_start=0.01, clip_end=100.0)
+    return Scene([mesh], [Instance(0, materials=[0], name="ball")], [Material("wax", (lobe,))], [],
+                 World(world), cam)
+
+
+# Skin scales the radius of albedo 1 by sqrt(3 (1 - 0.999999)) = 0.0017.
+@pytest.mark.parametrize("kind,radius", [("subsurface", 20.0), ("subsurface_skin", 1e4)])
+def test_white_furnace_sphere(kind, radius):
+    """Albedo 1 in a white world: walks lose nothing but the paths past
+    256 scatterings (a radius of several sphere sizes keeps those rare), so
+    pixels are 1.  Flat shading: with a smooth normal some entry directions
+    leave above the triangle, and Cycles drops those (so does Ember)."""
+    r = render(_ball(Lobe(kind, (1.0, 1.0, 1.0), 0.5, ior=1.4, radius=(radius,) * 3), uv_sphere(1.0, 32, 16, False)),
+               RenderSettings(samples=8, samples_per_pass=8, max_bounces=64, rr_depth=1000, seed=3))
+    img = r.image[..., :3]
+    print(kind, img.mean(), img.min())
+    assert np.all(np.abs(img - 1.0) < 2e-3)
+
+
+@pytest.mark.parametrize("radius", [(0.0, 0.0, 0.0), (1e30, 1e30, 1e30), (float("nan"), 1.0, 1.0),
+                                    (float("inf"), 1e-12, 0.5)])
+def test_hostile_radius_renders_finite(radius):
+    r = render(_ball(Lobe("subsurface", (0.8, 0.5, 0.3), 0.5, radius=radius), size=(6, 6)),
+               RenderSettings(samples=2, samples_per_pass=2, max_bounces=8))
+    assert np.isfinite(r.image).all()
+
+
+@pytest.mark.parametrize("mesh", ["quad", "triangle"])
+def test_open_mesh_is_named(mesh):
+    """Subsurface on an open mesh: walks may never come out (as in Cycles);
+    finite pixels and a warning naming the object and the material."""
+    if mesh == "quad":
+        m = quad([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]])
+    else:
+        m = quad([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]])
+        m.triangles = np.asarray(m.triangles)[:1]
+    r = render(_ball(Lobe("subsurface", (0.8, 0.8, 0.8), radius=(0.5, 0.5, 0.5)), mesh=m, size=(6, 6)),
+               RenderSettings(samples=2, samples_per_pass=2, max_bounces=4))
+    assert np.isfinite(r.image).all()
+    assert any("'wax'" in w and "'ball'" in w and "not closed" in w for w in r.warnings), r.warnings
+
+
+def test_walk_kernels_agree():
+    """The walk's two row loops, compiled, against their NumPy forms (to
+    rounding: numba calls libm, NumPy its own transcendentals)."""
+    from engine import kernels
+    rng = np.random.default_rng(4)
+    n = 5000
+    u = rng.random((n, 4))
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    d[:5] = [[0, 0, 1], [0, 0, -1], [1, 0, 0], [0, -1, 0], [0.6, 0, -0.8]]
+    g = rng.uniform(-1.0, 1.0, n)
+    g[:50] = 0.0
+    b = rng.random((n, 3))
+    b[:20] = 0.0
+    a = rng.random((n, 3))
+    st = rng.uniform(0.1, 10.0, (n, 3))
+    ss = st * a
+    hit = rng.random(n) < 0.3
+    t_hit = rng.random(n)
+    for jit in (False, True):
+        kernels.configure(jit)
+        dd, t = d.copy(), np.empty(n)
+        ss_mod._direction_rows(u, dd, g, b, a, st, True, t)
+        bb, o, t2, done = b.copy(), np.zeros((n, 3)), t.copy(), np.empty(n, bool)
+        ss_mod._advance_rows(hit, t_hit, t2, u, bb, a, st, ss, o, dd, done)
+        if not jit:
+            ref = dd, t, bb, o, done
+    for x, y in zip(ref[:4], (dd, t, bb, o)):
+        np.testing.assert_allclose(y, x, rtol=1e-9, atol=1e-12)
+    assert np.array_equal(ref[4], done)
