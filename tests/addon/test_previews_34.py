@@ -6,6 +6,7 @@ interface does; this file judges (tests/addon/test_previews.py covers bpy 5.0,
 test_render_engine.py's preview test bpy 4.2-5.3)."""
 import json
 import os
+import signal
 import subprocess
 
 from ember_testlib import ROOT
@@ -21,9 +22,16 @@ def test_previews_render_with_ember_in_blender_34(tmp_path):
     cmd = ['xvfb-run', '-a', '-s', '-screen 0 800x600x24', BLENDER, '--factory-startup',
            '-p', '0', '0', '480', '360', '-P', os.path.join(ROOT, 'tests', 'addon', 'previews_gui.py'),
            '--', str(out), _site(tmp_path)]
-    done = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    # Its own session: on a timeout Blender and Xvfb go too (xvfb-run alone leaves them running).
+    process = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                               text=True, start_new_session=True)
+    try:
+        output, _ = process.communicate(timeout=300)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.pid, signal.SIGKILL)
+        output, _ = process.communicate()
     result_path = out / 'result.json'
-    assert result_path.exists(), (done.stdout + done.stderr)[-4000:]
+    assert result_path.exists(), output[-4000:]
     result = json.loads(result_path.read_text())
     print(f"Blender {result['version']}: previews in {result.get('seconds', 0):.1f} s; {result.get('renders')}")
     assert not result['errors'], result['errors']
