@@ -20,6 +20,7 @@ import importlib
 import os
 import re
 import sys
+import threading
 
 _HERE = os.path.dirname(os.path.abspath(__file__))
 _VENDOR = os.path.join(_HERE, 'vendor')
@@ -32,23 +33,32 @@ def _add_bundled_site():
         sys.path.append(_SITE)
 
 
+_IMPORT_LOCK = threading.RLock()
+_EMBREEX_MODULES = ('embreex', 'embreex.rtcore_scene', 'embreex.mesh_construction')
+
+
 def _import_embreex():
     """Import embreex so that it binds to its own Embree library.
 
     Blender 3.4 links its own libembree3 with global symbols; without
     RTLD_DEEPBIND embreex resolves against it and building a scene crashes.
     The flag is harmless in newer Blender and is restored right away
-    (OpenImageIO must not be loaded with it).
+    (OpenImageIO must not be loaded with it).  Under a lock: Blender's window
+    runs preview renders in job threads, and the dlopen flags are process-wide,
+    so two first imports must not interleave.
     """
-    if 'embreex' in sys.modules or not hasattr(sys, 'setdlopenflags'):
+    if all(m in sys.modules for m in _EMBREEX_MODULES) or not hasattr(sys, 'setdlopenflags'):
         return
-    old = sys.getdlopenflags()
-    sys.setdlopenflags(os.RTLD_NOW | os.RTLD_DEEPBIND)
-    try:
-        for module in ('embreex', 'embreex.rtcore_scene', 'embreex.mesh_construction'):
-            importlib.import_module(module)
-    finally:
-        sys.setdlopenflags(old)
+    with _IMPORT_LOCK:
+        if all(m in sys.modules for m in _EMBREEX_MODULES):
+            return
+        old = sys.getdlopenflags()
+        sys.setdlopenflags(os.RTLD_NOW | os.RTLD_DEEPBIND)
+        try:
+            for module in _EMBREEX_MODULES:
+                importlib.import_module(module)
+        finally:
+            sys.setdlopenflags(old)
 
 
 def _package_name():
@@ -64,12 +74,13 @@ def engine():
     its ``__all__`` declares.  Imported on first use, never at registration,
     after embreex (with RTLD_DEEPBIND) where embreex is installed: exporting
     needs no ray tracer, rendering does (``require_ray_tracer``)."""
-    _add_bundled_site()
-    try:
-        _import_embreex()
-    except ImportError:
-        pass   # require_ray_tracer() says why, when a render starts
-    return importlib.import_module(_package_name())
+    with _IMPORT_LOCK:   # one thread imports the renderer, the others wait for it (previews)
+        _add_bundled_site()
+        try:
+            _import_embreex()
+        except ImportError:
+            pass   # require_ray_tracer() says why, when a render starts
+        return importlib.import_module(_package_name())
 
 
 def require_ray_tracer():

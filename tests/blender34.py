@@ -33,6 +33,11 @@ def require_blender_34():
 
 
 def build_legacy_zip(folder):
+    return build_package(folder, 'legacy')
+
+
+def build_package(folder, kind):
+    """tools/build_zip.py's 'legacy' or 'extension' zip, built in folder."""
     sys.path.insert(0, os.path.join(ROOT, 'tools'))
     try:
         import build_zip
@@ -40,9 +45,9 @@ def build_legacy_zip(folder):
         sys.path.pop(0)
     try:
         (zip_path,) = build_zip.main(['--dist', str(folder), '--build', os.path.join(str(folder), 'build'),
-                                      '--wheels', os.path.join(ROOT, 'build', 'wheels'), '--legacy'])
+                                      '--wheels', os.path.join(ROOT, 'build', 'wheels'), '--' + kind])
     except (subprocess.CalledProcessError, SystemExit) as err:
-        require(False, f"could not build the legacy zip (wheels need pip and PyPI): {err}")
+        require(False, f"could not build the {kind} zip (wheels need pip and PyPI): {err}")
     return zip_path
 
 

@@ -30,7 +30,11 @@ GREY = (0.8, 0.8, 0.8)
 # yet (3.x's Subsurface renders as diffuse, thin film as no film).
 PRINCIPLED_UNSUPPORTED = (
     'Subsurface', 'Thin Film Thickness',
+    # Blender 5.2: thin-walled transmission; 5.3: dispersion.
+    'Thin Wall', 'Transmission Dispersion Scale',
 )
+# How a warning names them (default: the input's first word).
+PRINCIPLED_LABELS = {'Thin Wall': 'Thin Wall', 'Transmission Dispersion Scale': 'Dispersion'}
 # Cycles' Diffuse BSDF and Principled switch to Oren-Nayar above this roughness.
 DIFFUSE_ROUGHNESS_CUTOFF = 1e-5
 # The Glossy BSDF's anisotropy is clamped to this, and isotropic below 1e-4.
@@ -292,8 +296,11 @@ class NodeTranslator:
     _node_bsdf_anisotropic = _node_bsdf_glossy
 
     def _node_bsdf_glass(self, node):
-        """Cycles' Glass BSDF: the colour tints reflection and refraction."""
+        """Cycles' Glass BSDF: the colour tints reflection and refraction
+        (5.3's Anisotropy renders as isotropic, with a warning)."""
         roughness = _clamp01(self.value(node, 'Roughness', 0.0))
+        if 'Anisotropy' in node.inputs and self.value(node, 'Anisotropy', 0.0) != 0.0:
+            self._approximate(node, "Anisotropy")
         ior = nodes.at_least(self.value(node, 'IOR', 1.5), 1e-5)
         return Closure([_scene().Lobe('glass', self.color(node, 'Color', (1.0, 1.0, 1.0)), roughness,
                                       'dielectric', ior=ior, multiscatter=self._multiscatter(node))])
@@ -401,7 +408,7 @@ class NodeTranslator:
 
     def _note_principled_features(self, node):
         """Name the Principled features in use that Ember does not render yet."""
-        used = [name.split()[0] for name in PRINCIPLED_UNSUPPORTED
+        used = [PRINCIPLED_LABELS.get(name, name.split()[0]) for name in PRINCIPLED_UNSUPPORTED
                 if name in node.inputs and (self._value_linked(node, name)
                                             or self._finite_value(node, name, self.value(node, name, 0.0), 0.0) > 0.0)]
         if used:

@@ -4,17 +4,12 @@ import bpy
 import numpy as np
 
 from addon import engine as ember_engine
+from preview_scene import preview_datablocks
 
 
 def test_material_world_and_light_previews(factory_scene, needs_engine):
-    scene = factory_scene
-    material = bpy.data.materials.new('Preview Red')
-    material.use_nodes = True
-    bsdf = next(n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
-    bsdf.inputs['Base Color'].default_value = (0.8, 0.05, 0.05, 1.0)
-    bpy.data.objects['Cube'].data.materials.append(material)
-    scene.world.color = (0.2, 0.3, 0.5)
-    previews = {'material': material, 'world': scene.world, 'light': bpy.data.lights[0]}
+    previews = preview_datablocks(factory_scene)
+    material = previews['material']
     # The log keeps only its last entries: start it empty (an index into a
     # full log would point past every new entry).
     del ember_engine.RENDER_LOG[:]

@@ -40,8 +40,10 @@ def _linear_to_srgb(c):
 
 
 def _site(tmp):
-    """embreex unpacked from build/wheels: what the renderer needs in Blender 3.4."""
-    wheels = [w for w in os.listdir(os.path.join(ROOT, 'build', 'wheels')) if w.startswith('embreex-')] \
+    """embreex unpacked from build/wheels: what the renderer needs in Blender 3.4
+    (its CPython 3.11 wheel: build/wheels holds the 3.13 one too)."""
+    wheels = [w for w in os.listdir(os.path.join(ROOT, 'build', 'wheels'))
+              if w.startswith('embreex-') and '-cp311-' in w] \
         if os.path.isdir(os.path.join(ROOT, 'build', 'wheels')) else []
     require(wheels, "the embreex wheel is needed in build/wheels (tools/setup_test_env.sh)")
     site = tmp / 'site'
@@ -54,14 +56,19 @@ def _site(tmp):
     return str(site)
 
 
-@pytest.fixture(scope='module')
-def gui_run(tmp_path_factory):
-    """Runs viewport_gui.py in Blender 3.4 under Xvfb once; returns (result, folder)."""
+def require_blender_34_window():
+    """Debian's Blender 3.4 binary and Xvfb (a window for it)."""
     version = subprocess.run([BLENDER, '--version'], capture_output=True, text=True).stdout \
         if os.path.exists(BLENDER) else ''
     require(version.startswith('Blender 3.4'), f"Debian's Blender 3.4 binary is needed at {BLENDER}")
     require(shutil.which('xvfb-run') and shutil.which('xauth'),
             "xvfb-run and xauth are needed (apt-get install xvfb xauth; tools/setup_test_env.sh)")
+
+
+@pytest.fixture(scope='module')
+def gui_run(tmp_path_factory):
+    """Runs viewport_gui.py in Blender 3.4 under Xvfb once; returns (result, folder)."""
+    require_blender_34_window()
     tmp = tmp_path_factory.mktemp('viewport_gui')
     out = tmp / 'out'
     out.mkdir()

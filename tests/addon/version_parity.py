@@ -16,6 +16,10 @@ difference between the versions.  bpy 5.0's Ember is held to converged
 Cycles by the suite's parity tests, so a version that renders this scene as
 5.0 does carries that parity for everything the scene uses.
 
+Also: the inputs Blender added after 5.0 that Ember does not render (5.2:
+Principled Thin Wall; 5.3: Principled Dispersion, Glass Anisotropy) are named
+in warnings.
+
 Not collected by itself (no test_ prefix): tests/addon/test_other_blenders.py
 renders the expected image in bpy 5.0 (``render_scene``), then runs this file
 in each other version's interpreter with ``EMBER_EXPECTED_RENDER`` naming the
@@ -250,3 +254,31 @@ def test_renders_as_in_bpy_50(tmp_path, registered_addon, needs_engine):
     print(f"Blender {bpy.app.version_string} against bpy {tuple(int(v) for v in expected['version'])}: largest relative pixel "
           f"difference {difference:.2e} (allowed {TOLERANCE:.0e}); {summary}")
     assert difference < TOLERANCE
+
+
+# Inputs Blender added after 5.0 that Ember does not render: set, they must be
+# named in the export's warnings (node type, input, value set, word the warning
+# carries, the first Blender that has it).
+NEW_INPUTS = [('ShaderNodeBsdfPrincipled', 'Thin Wall', True, 'Thin Wall', (5, 2, 0)),
+              ('ShaderNodeBsdfPrincipled', 'Transmission Dispersion Scale', 0.5, 'Dispersion', (5, 3, 0)),
+              ('ShaderNodeBsdfGlass', 'Anisotropy', 0.5, 'Anisotropy', (5, 3, 0))]
+
+
+def test_inputs_newer_than_50_are_named_when_used(registered_addon):
+    from addon.export import scene as scene_export
+    present = 0
+    for node_type, name, value, word, _ in NEW_INPUTS:
+        bpy.ops.wm.read_factory_settings()
+        mat, nodes, links, out = _node_material('VP New Input')
+        node = nodes.new(node_type)
+        links.new(node.outputs[0], out.inputs['Surface'])
+        bpy.data.objects['Cube'].data.materials.append(mat)
+        if name not in node.inputs:
+            continue
+        present += 1
+        clean = scene_export.export_scene(bpy.context.evaluated_depsgraph_get()).warnings
+        node.inputs[name].default_value = value
+        warned = scene_export.export_scene(bpy.context.evaluated_depsgraph_get()).warnings
+        assert not any(word in w for w in clean), clean
+        assert any('VP New Input' in w and word in w for w in warned), (node_type, name, warned)
+    assert present == sum(bpy.app.version >= since for *_, since in NEW_INPUTS), present

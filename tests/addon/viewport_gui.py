@@ -17,20 +17,17 @@ import sys
 import time
 import traceback
 
-ARGS = sys.argv[sys.argv.index('--') + 1:]
-OUT, SITE = ARGS[0], ARGS[1]
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-sys.path.insert(0, ROOT)
-sys.path.append(SITE)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import gui_session  # noqa: E402  (the repository and SITE on sys.path)
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 from bpy_extras import view3d_utils  # noqa: E402
 
-import addon  # noqa: E402
 from addon import viewport  # noqa: E402
 
-addon.register()
+OUT = gui_session.OUT
+gui_session.register()
 RESULT = {'errors': []}
 STEP_TIMEOUT = float(os.environ.get('EMBER_STEP_TIMEOUT', '100'))
 # EMBER_GALLERY=1: keep Blender's interface, denoise, and save the whole
