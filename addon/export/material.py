@@ -61,7 +61,7 @@ class Closure:
         lobes = [dataclasses.replace(lobe, weight=nodes.multiply(lobe.weight, weight))
                  for lobe in self.lobes]
         return Closure(lobes, _scale(self.emission, weight), self.emission_layers,
-                       nodes.multiply(self.holdout, weight))
+                       _holdout_op(nodes.multiply, self.holdout, weight))
 
     def plus(self, other):
         """Both closures; the emission keeps the layers of the one that has
@@ -72,13 +72,22 @@ class Closure:
         if _has_emission(other.emission):
             layers = layers + shifted
         return Closure(self.lobes + other.lobes, _add(self.emission, other.emission), layers,
-                       nodes.math('ADD', self.holdout, other.holdout))
+                       _holdout_op(lambda a, b: nodes.math('ADD', a, b), self.holdout, other.holdout))
 
     def mixed_dimming(self, other):
         """Two emissions of which only one lies under layers (rendered with
         the layers dimming both)."""
         return (_has_emission(self.emission) and _has_emission(other.emission)
                 and bool(self.emission_layers) != bool(other.emission_layers))
+
+
+def _holdout_op(op, holdout, other):
+    """op(holdout, other) for a Holdout weight; no Holdout (the constant 0)
+    stays 0 under a Mix factor and adds nothing, so most materials carry no
+    holdout expression."""
+    if not nodes.is_expr(holdout) and float(holdout) == 0.0:
+        return 0.0 if op is nodes.multiply else other
+    return op(holdout, other)
 
 
 def _has_emission(emission):
@@ -901,7 +910,8 @@ def _holdout_weight(translator, holdout):
     in the material's warning), a sum above 1 as 1."""
     if nodes.is_expr(holdout):
         lo, hi = nodes.value_range(holdout)
-        translator.approximated.append(f"'Holdout' (a textured factor read as {0.5 * (lo + hi):g})")
+        if lo != hi:   # a textured Mix factor times no Holdout is an expression of range [0, 0]: no warning
+            translator.approximated.append(f"'Holdout' (a textured factor read as {0.5 * (lo + hi):g})")
         holdout = 0.5 * (lo + hi)
     holdout = float(holdout)
     return min(max(holdout, 0.0), 1.0) if math.isfinite(holdout) else 0.0
