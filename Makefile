@@ -19,9 +19,12 @@ render-engine: setup
 # Everything: engine and add-on tests, Cycles comparisons, Blender 3.4 binary
 # and bpy 4.2 runs.  Installs what it needs first (apt for Debian's Blender).
 # Missing prerequisites fail; EMBER_ALLOW_SKIPS=1 make test skips them (not under CI=true).
+# Two pytest-xdist workers (TEST_WORKERS=0: one process): a test file runs
+# whole on one worker, the Blender 3.4 binary tests together (tests/conftest.py).
+TEST_WORKERS ?= 2
 test: setup
 	sh tools/setup_test_env.sh
-	$(PY) -m pytest tests -q -rfEs -p no:cacheprovider --durations=10
+	$(PY) -m pytest tests -q -rfEs -p no:cacheprovider --durations=10 -n $(TEST_WORKERS) --dist loadgroup
 
 test-engine: setup
 	$(PY) -m pytest tests/engine -q
