@@ -23,7 +23,7 @@ import bpy
 import numpy as np
 import pytest
 
-from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
+from ember_testlib import built_reference_scene, check_against_reference, render_for_reference
 
 EMBER_SPP = 256
 BLOCK = 12
@@ -220,10 +220,7 @@ SCENES = {'glass': scene_glass, 'principled': scene_principled, 'mix': scene_mix
 
 def reference_scene(name, folder=None):
     """The scene ``name`` and its bounces (as tools/cycles_references.py renders it)."""
-    scene = empty_factory_scene()
-    bounces = SCENES[name](scene)
-    small_resolution(scene, WIDTH, HEIGHT)
-    return scene, bounces
+    return built_reference_scene(SCENES[name], WIDTH, HEIGHT)
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))

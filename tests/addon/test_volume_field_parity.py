@@ -19,7 +19,7 @@ Scene (one, for the statistics budget: two families per reference):
 import bpy
 import pytest
 
-from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
+from ember_testlib import built_reference_scene, check_against_reference, render_for_reference
 from test_volume_parity import _camera, _floor, _material, _object, _volume_settings, _world
 
 SPP = {'smoke_in_fog': 128}
@@ -89,10 +89,7 @@ SCENES = {'smoke_in_fog': scene_smoke_in_fog}
 
 def reference_scene(name, folder=None):
     """The scene ``name`` and its bounces (as tools/cycles_references.py renders it)."""
-    scene = empty_factory_scene()
-    bounces = SCENES[name](scene)
-    small_resolution(scene, WIDTH, HEIGHT)
-    return scene, bounces
+    return built_reference_scene(SCENES[name], WIDTH, HEIGHT)
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))

@@ -28,7 +28,7 @@ Scenes:
 import bpy
 import pytest
 
-from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
+from ember_testlib import built_reference_scene, check_against_reference, render_for_reference
 
 EMBER_SPP = 256
 # The fog's single scattering is noisy per sample (a spot beam in a dark
@@ -167,10 +167,7 @@ SCENES = {'coloured_glass': scene_coloured_glass, 'fog': scene_fog, 'emission': 
 
 def reference_scene(name, folder=None):
     """The scene ``name`` and its bounces (as tools/cycles_references.py renders it)."""
-    scene = empty_factory_scene()
-    bounces = SCENES[name](scene)
-    small_resolution(scene, WIDTH, HEIGHT)
-    return scene, bounces
+    return built_reference_scene(SCENES[name], WIDTH, HEIGHT)
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))
