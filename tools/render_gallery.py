@@ -9,7 +9,22 @@ import sys
 import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SCENES = ("cornell", "veach_mis", "instances_lights", "materials")
+SCENES = ("cornell", "veach_mis", "instances_lights", "materials", "subsurface", "lobes", "motion", "smoke",
+          "points")
+# Gallery scenes that are parity scenes of tests/addon (module, scene name, upscale of its resolution).
+PARITY = {"subsurface": ("test_subsurface_parity", "spheres", 6), "lobes": ("test_lobe_parity", "lobes", 4),
+          "motion": ("test_motion_parity", "objects", 4), "smoke": ("test_volume_field_parity", "smoke_in_fog", 10),
+          "points": ("test_points_parity", "heap", 4)}
+
+
+def build_parity_scene(name):
+    """A tests/addon parity scene, at a gallery resolution."""
+    import importlib
+    module, scene_name, upscale = PARITY[name]
+    scene, bounces = importlib.import_module(module).reference_scene(scene_name)
+    scene.render.resolution_x *= upscale
+    scene.render.resolution_y *= upscale
+    return scene, bounces
 
 
 def build_materials_scene(bpy):
@@ -80,7 +95,7 @@ def main(argv=None):
     ap.add_argument("scenes", nargs="*", help=f"which of {', '.join(SCENES)} (default all)")
     args = ap.parse_args(argv)
     os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="ember-gallery-"))
-    sys.path[:0] = [ROOT, os.path.join(ROOT, "tests", "addon")]
+    sys.path[:0] = [ROOT, os.path.join(ROOT, "tests", "addon"), os.path.join(ROOT, "tests")]
     import bpy
     import OpenImageIO as oiio
 
@@ -92,12 +107,15 @@ def main(argv=None):
     for name in args.scenes or SCENES:
         paths = []
         for engine, spp in (("ember", args.samples), ("cycles", args.cycles_samples)):
-            if name == "materials":
-                scene = build_materials_scene(bpy)
+            if name in PARITY:
+                scene, bounces = build_parity_scene(name)
             else:
-                bpy.ops.wm.open_mainfile(filepath=os.path.join(ROOT, "blend_scenes", name + ".blend"))
-                scene = bpy.context.scene
-            bounces = scene.ember.max_bounces
+                if name == "materials":
+                    scene = build_materials_scene(bpy)
+                else:
+                    bpy.ops.wm.open_mainfile(filepath=os.path.join(ROOT, "blend_scenes", name + ".blend"))
+                    scene = bpy.context.scene
+                bounces = scene.ember.max_bounces
             (setup_ember if engine == "ember" else setup_cycles)(scene, spp, 1, bounces)
             scene.render.image_settings.file_format = "PNG"
             path = os.path.join(args.out, f"{name}_{engine}.png")
