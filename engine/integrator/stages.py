@@ -468,7 +468,6 @@ def trace_shadows(ctx, paths, batch):
         return
     blocked = visibility.occluded(ctx, batch.origin, batch.direction, batch.tmax, e, time=time)
     if ctx.catcher is not None:
-        rows = batch.rows if path_rows is None else path_rows[batch.rows]
         only = np.flatnonzero(paths.catcher[rows] == 2)
         if len(only):
             blocked[only] = visibility.occluded_by_catchers(ctx, batch.origin[only], batch.direction[only],
