@@ -17,7 +17,8 @@ import pytest
 
 from addon import engine as ember_engine
 from addon import output
-from ember_testlib import ROOT, require
+from blender34 import require_blender_34
+from ember_testlib import ROOT
 
 sys.path.insert(0, os.path.join(ROOT, 'tools'))
 import bench_cancel  # noqa: E402
@@ -25,16 +26,8 @@ sys.path.pop(0)
 
 
 
-def blender_34():
-    import subprocess
-    if not os.path.exists(bench_cancel.BLENDER):
-        return False
-    out = subprocess.run([bench_cancel.BLENDER, '--version'], capture_output=True, text=True).stdout
-    return out.startswith('Blender 3.4')
-
-
 def test_cancel_latency_in_blender_34_binary(tmp_path, legacy_addon):
-    require(blender_34(), f"Debian's Blender 3.4 binary is needed at {bench_cancel.BLENDER}")
+    require_blender_34()
     scripts = legacy_addon[1]   # the session's install: its kernels compile once for all 3.4 tests
     # Esc 0.05 s into export and into scene preparation (each takes 0.2 s or
     # more with 300k triangles: 0.2 s could land just past the export, between

@@ -11,7 +11,6 @@ the renderer's wheels and warm numba caches, the wheels).
 import concurrent.futures
 import importlib.util
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -20,9 +19,9 @@ import zipfile
 import numpy as np
 import pytest
 
+from blender34 import BLENDER, require_blender_34
 from ember_testlib import ROOT, SCENES_DIR, load_exr, require
 
-BLENDER = shutil.which('blender') or '/usr/bin/blender'
 BPY42_PYTHON = os.path.join(ROOT, 'build', 'venv-bpy42', 'bin', 'python')
 PORTABLE_TESTS = ['tests/addon/test_export.py', 'tests/addon/test_render_engine.py', 'tests/addon/test_blend_scenes.py',
                   'tests/engine/test_stats.py', 'tests/addon/test_pass_names.py',
@@ -71,13 +70,6 @@ def pytest_path(tmp_path):
     return str(folder)
 
 
-def blender_version():
-    if not os.path.exists(BLENDER):
-        return None
-    code, out = run([BLENDER, '--version'])
-    return out.splitlines()[0] if code == 0 and out else None
-
-
 def install_legacy(legacy_addon):
     """The session's unpacked legacy zip (tests/conftest.py legacy_addon): one
     folder for every 3.4 test, so the binary compiles its kernels once."""
@@ -85,9 +77,7 @@ def install_legacy(legacy_addon):
 
 
 def test_portable_tests_in_blender_34_binary(tmp_path):
-    version = blender_version()
-    require(version is not None and version.startswith('Blender 3.4'),
-            f"Debian's Blender 3.4 binary is needed at {BLENDER} (tools/setup_test_env.sh): found {version}")
+    require_blender_34()
     code, out = run([BLENDER, '-b', '--factory-startup', '--python-exit-code', '1',
                      '--python', 'tests/addon/blender_pytest.py', '--',
                      *PORTABLE_TESTS, '-q', '-p', 'no:cacheprovider', '-p', 'no:warnings',
@@ -220,9 +210,7 @@ def test_extension_installs_and_renders(tmp_path, extension_zip, version):
 
 def test_legacy_zip_renders_with_blender_34_binary(tmp_path, legacy_addon, needs_engine):
     """`blender -b scene --addons ember -E EMBER -f 1` writes the expected image."""
-    version = blender_version()
-    require(version is not None and version.startswith('Blender 3.4'),
-            f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
+    require_blender_34()
     scripts = install_legacy(legacy_addon)
     settings = ("import bpy; s = bpy.context.scene; s.render.resolution_x = s.render.resolution_y = 32; "
                 "s.render.resolution_percentage = 100; s.ember.samples = 16; s.ember.seed = 3; "
@@ -259,9 +247,7 @@ def test_legacy_zip_renders_with_blender_34_binary(tmp_path, legacy_addon, needs
 def test_one_command_install_into_blender_34(tmp_path, needs_engine):
     """tools/install_addon.py installs and enables Ember in the real binary:
     afterwards `blender -b scene -E EMBER -f 1` renders without --addons."""
-    version = blender_version()
-    require(version is not None and version.startswith('Blender 3.4'),
-            f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
+    require_blender_34()
     # NumPy kernels (EMBER_JIT=0): this install's own folder would compile them
     # cold (60-100 s); the compiled path in this binary is the shared install's
     # (test_legacy_zip_renders_with_blender_34_binary and the others).
@@ -282,9 +268,7 @@ def test_one_command_install_into_blender_34(tmp_path, needs_engine):
 def test_legacy_zip_denoises_in_blender_34(tmp_path, legacy_addon):
     """The OIDN program bundled in the legacy zip runs inside Debian's 3.4
     (which ships no OIDN): addon/denoise.py finds it in vendor/oidn."""
-    version = blender_version()
-    require(version is not None and version.startswith('Blender 3.4'),
-            f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
+    require_blender_34()
     scripts = install_legacy(legacy_addon)
     expr = ("import numpy as np; from ember import denoise; rng = np.random.default_rng(0); "
             "flat = np.full((24, 24, 3), 0.5, np.float32); noisy = flat * rng.exponential(1, flat.shape)"
@@ -311,9 +295,7 @@ def test_sky_in_blender_34_matches_its_cycles(tmp_path, legacy_addon, needs_engi
     blocks and image / quadrant means, their power printed
     (tests/addon/sky_scene_34.py renders both; the skies' own pixels are
     checked against 3.4's Cycles in tests/engine/test_sky.py)."""
-    version = blender_version()
-    require(version is not None and version.startswith('Blender 3.4'),
-            f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
+    require_blender_34()
     scripts = install_legacy(legacy_addon)
     code, out = run([BLENDER, '-b', '--factory-startup', '--addons', 'ember', '--python',
                      os.path.join(ROOT, 'tests', 'addon', 'sky_scene_34.py'), '--', str(tmp_path), sky_type],

@@ -263,10 +263,9 @@ def test_legacy_pass_names_in_blender_34_binary(tmp_path, legacy_addon, needs_en
     the passes carry 3.4's names (IndexOB, DiffDir, Emit, Env, AO) and the
     file holds the Cryptomatte manifest."""
     import OpenImageIO as oiio
-    from test_other_blenders import BLENDER, blender_version, install_legacy, run
-    version = blender_version()
-    require(version is not None and version.startswith('Blender 3.4'),
-            f"Debian's Blender 3.4 binary is needed at {BLENDER}: found {version}")
+    from blender34 import BLENDER, require_blender_34
+    from test_other_blenders import install_legacy, run
+    require_blender_34()
     scripts = install_legacy(legacy_addon)
     settings = ("import bpy; s = bpy.context.scene; s.render.resolution_x = s.render.resolution_y = 16; "
                 "s.render.resolution_percentage = 100; s.ember.samples = 4; s.ember.max_bounces = 2; "

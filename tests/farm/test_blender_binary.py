@@ -2,26 +2,23 @@
 installed from the legacy zip: frames equal the bpy module's, a failing
 render fails its task with Blender's log."""
 import os
-import shutil
-import subprocess
 
 import pytest
+
+from blender34 import BLENDER, require_blender_34
 
 from farmlib import (assert_same_image, make_animation_with_binary, make_job, read_exr, render_locally,
                      require, run_job)
 from farm import client as farm_client
 from farm import plan, shardfile
 
-BLENDER = shutil.which('blender') or '/usr/bin/blender'
 
 
 @pytest.fixture(scope='module')
 def blender34(tmp_path_factory, legacy_addon):
     """A 3.4-saved animation and the env that makes the binary find the
     session's legacy install (tests/conftest.py: one kernel compile for all)."""
-    ok = os.path.exists(BLENDER) and subprocess.run([BLENDER, '--version'], capture_output=True,
-                                                    text=True).stdout.startswith('Blender 3.4')
-    require(ok, f"Debian's Blender 3.4 binary is needed at {BLENDER} (tools/setup_test_env.sh)")
+    require_blender_34()
     folder = tmp_path_factory.mktemp('blender34')
     scripts = legacy_addon[1]
     blend = make_animation_with_binary(BLENDER, folder / 'anim34.blend', scripts)
