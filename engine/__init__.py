@@ -20,6 +20,7 @@ from .kernels import warm_cache as warm_kernel_cache
 from .nodes import REGISTRY as NODE_REGISTRY
 from .nodes import ShadingContext
 from .nodes.hashing import hash_uint
+from . import mesh_attributes
 from .nodes.sky import sun_guide as sky_sun_guide
 from .passes import PassConfig, murmur3_32
 from .render import RenderResult, prepare, render
@@ -48,6 +49,8 @@ __all__ = [
     "configure_kernels", "wait_for_kernels", "stop_kernels", "kernel_cache_complete", "warm_kernel_cache",
     # shader nodes and textures the exporter evaluates (engine.nodes, engine.textures)
     "NODE_REGISTRY", "ShadingContext", "TextureCompiler", "value_range", "hash_uint",
+    # Geometry node attributes derived from a mesh's topology (engine.mesh_attributes)
+    "mesh_attributes",
     # worlds (engine.environment, engine.nodes.sky)
     "bake_environment", "environment_lookup", "sky_sun_guide",
 ]

@@ -88,7 +88,60 @@ def needs_tangents(obj):
     return False
 
 
-def mesh_from_blender(mesh, name, tangents=False, check=None):
+GEOMETRY_DERIVED = ('Pointiness', 'Random Per Island')
+
+
+def _trees_of(tree, seen):
+    """A node tree and the groups inside it, each once."""
+    if tree is None or tree.as_pointer() in seen:
+        return
+    seen.add(tree.as_pointer())
+    yield tree
+    for n in tree.nodes:
+        if n.type == 'GROUP':
+            yield from _trees_of(getattr(n, 'node_tree', None), seen)
+
+
+def needs_derived(obj):
+    """The Geometry node outputs Cycles computes from the mesh's topology
+    (Pointiness, Random Per Island) that a material of the object reads."""
+    out, seen = set(), set()
+    for slot in getattr(obj, 'material_slots', ()):
+        tree = getattr(slot.material, 'node_tree', None) if slot.material else None
+        for t in _trees_of(tree, seen):
+            for n in t.nodes:
+                if n.type == 'NEW_GEOMETRY':
+                    out |= {s.name for s in n.outputs if s.name in GEOMETRY_DERIVED and s.is_linked}
+    return out
+
+
+def _derived_attributes(mesh, triangles, wanted):
+    """{reserved name: (T, 3) corners} of Pointiness and Random Per Island
+    (engine.mesh_attributes), computed as Cycles does at sync."""
+    if not wanted:
+        return {}
+    attrs = backend.engine().mesh_attributes
+    count = len(mesh.vertices)
+    edges = _get(mesh.edges, 'vertices', len(mesh.edges), 2, np.int32)
+    out = {}
+    if 'Pointiness' in wanted:
+        positions = _get(mesh.vertices, 'co', count, 3, np.float32)
+        normals = _vertex_normals(mesh, count)
+        out[attrs.POINTINESS] = attrs.pointiness(positions, normals, edges)[triangles]
+    if 'Random Per Island' in wanted:
+        value = attrs.random_per_island(count, edges, triangles)
+        out[attrs.RANDOM_PER_ISLAND] = np.repeat(value[:, None], 3, axis=1)
+    return out
+
+
+def _vertex_normals(mesh, count):
+    """Blender's vertex normals (4.1+: ``vertex_normals``; before: ``normal``)."""
+    if hasattr(mesh, 'vertex_normals'):
+        return _get(mesh.vertex_normals, 'vector', count, 3, np.float32)
+    return _get(mesh.vertices, 'normal', count, 3, np.float32)
+
+
+def mesh_from_blender(mesh, name, tangents=False, check=None, derived=()):
     """Copy a triangulated Blender mesh into an engine Mesh.
 
     Returns None for geometry without triangles (empty meshes, edges, points),
@@ -123,7 +176,8 @@ def mesh_from_blender(mesh, name, tangents=False, check=None):
         tangents=corner_tangents,
         tangent_signs=signs,
         uv_maps=_named_uv_maps(mesh, loops),
-        attributes=_color_attributes(mesh, triangles, loops),
+        attributes=_with_derived(_color_attributes(mesh, triangles, loops),
+                                 _derived_attributes(mesh, triangles, derived)),
         texspace=_texspace(mesh),
     )
 
@@ -178,6 +232,12 @@ def _color_attributes(mesh, triangles, loops):
     return out or None
 
 
+def _with_derived(attributes, derived):
+    if not derived:
+        return attributes
+    return dict(attributes or {}, **derived)
+
+
 def _texspace(mesh):
     """(location, size) of the mesh's texture space (Generated coordinates)."""
     loc = getattr(mesh, 'texspace_location', None)
@@ -195,11 +255,11 @@ def mesh_from_object(obj, name, check=None):
     """
     if obj.type == 'MESH':
         # The evaluated mesh already has the modifiers applied: no copy needed.
-        return mesh_from_blender(obj.data, name, needs_tangents(obj), check)
+        return mesh_from_blender(obj.data, name, needs_tangents(obj), check, needs_derived(obj))
     mesh = obj.to_mesh()
     try:
         if mesh is None:
             return None
-        return mesh_from_blender(mesh, name, needs_tangents(obj), check)
+        return mesh_from_blender(mesh, name, needs_tangents(obj), check, needs_derived(obj))
     finally:
         obj.to_mesh_clear()

@@ -3,6 +3,7 @@ Fresnel / Layer Weight, and Mapping (kernel/svm/tex_coord.h, geometry.h,
 fresnel.h, attribute.h, light_path.h, mapping_util.h)."""
 import numpy as np
 
+from ..mesh_attributes import POINTINESS, RANDOM_PER_ISLAND
 from .context import PATH_COLUMNS
 from .registry import node, one_of
 
@@ -66,11 +67,22 @@ def uv_map(ctx, i, p):
 
 
 @node("ShaderNodeNewGeometry", outputs=(("Position", "vector"), ("Normal", "vector"), ("True Normal", "vector"),
-                                        ("Incoming", "vector"), ("Parametric", "vector"), ("Backfacing", "float")),
-      unsupported_outputs=("Tangent", "Pointiness", "Random Per Island"), cases=[{}])
+                                        ("Incoming", "vector"), ("Parametric", "vector"), ("Backfacing", "float"),
+                                        ("Pointiness", "float"), ("Random Per Island", "float")),
+      unsupported_outputs=("Tangent",), cases=[{}],
+      bounds=lambda p: {"Pointiness": (0.0, 1.0), "Random Per Island": (0.0, 1.0)})
 def geometry(ctx, i, p):
+    """Cycles' geometry.h; Pointiness and Random Per Island are the mesh
+    attributes engine.mesh_attributes computes at export (0 on geometry
+    without them, as Cycles' missing attribute)."""
     return {"Position": ctx.p, "Normal": ctx.ns, "True Normal": ctx.ng, "Incoming": ctx.wo,
-            "Parametric": _parametric(ctx), "Backfacing": ctx.back.astype(np.float64)}
+            "Parametric": _parametric(ctx), "Backfacing": ctx.back.astype(np.float64),
+            "Pointiness": _derived(ctx, POINTINESS), "Random Per Island": _derived(ctx, RANDOM_PER_ISLAND)}
+
+
+def _derived(ctx, name):
+    value = ctx.attribute(name)
+    return np.zeros(len(ctx)) if value is None else value[:, 0]
 
 
 def _parametric(ctx):

@@ -478,7 +478,7 @@ def test_node_structures_match_cycles_per_pixel(parity, name):
 
 
 def test_unevaluated_node_variants_fall_back_with_one_warning(registered_addon):
-    """An object-attribute Attribute node and a Geometry Pointiness feed
+    """An object-attribute Attribute node and a Geometry Tangent feed
     inputs: each falls back to the socket's constant, both named in one
     warning."""
     from addon.export import material as material_export
@@ -492,7 +492,7 @@ def test_unevaluated_node_variants_fall_back_with_one_warning(registered_addon):
     attribute.attribute_name = 'color'
     geometry = tree.nodes.new('ShaderNodeNewGeometry')
     tree.links.new(attribute.outputs['Fac'], principled.inputs['Roughness'])
-    tree.links.new(geometry.outputs['Pointiness'], principled.inputs['Metallic'])
+    tree.links.new(geometry.outputs['Tangent'], principled.inputs['Metallic'])
     translated, warning = material_export.translate(mat)
     assert warning is not None and warning.count("'Unrendered'") == 1, warning
     assert attribute.name in warning and geometry.name in warning and "'OBJECT'" in warning

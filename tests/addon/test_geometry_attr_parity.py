@@ -1,0 +1,130 @@
+"""Geometry node Pointiness and Random Per Island as Cycles computes them
+(blender/mesh.cpp attr_create_pointiness, attr_create_random_per_island),
+per pixel against a one-sample Cycles render, as test_node_parity.py.
+
+The scene, seen from above by an orthographic camera: a bumpy welded grid
+(pointiness varies over it), a cube whose faces carry their own vertices
+(Cycles welds coincident vertices for Pointiness; each face is an island of
+its own for Random Per Island) and one mesh of several separate bumpy
+pieces (islands).  Each shows Pointiness or Random Per Island through an
+Emission shader.  Pixels next to a silhouette are left out (which surface a
+ray grazing an outline hits is float rounding, not shading).
+"""
+import bpy
+import numpy as np
+
+from test_node_parity import ATOL, RTOL, SHIFT_Y_SIGN, cycles_first_sample_offset, emission_material, render_cycles
+from ember_testlib import small_resolution
+
+WIDTH, HEIGHT = 64, 48
+
+
+def _material(output):
+    mat, tree, emission = emission_material(f"geometry {output}")
+    geometry = tree.nodes.new('ShaderNodeNewGeometry')
+    tree.links.new(geometry.outputs[output], emission.inputs['Color'])
+    return mat
+
+
+def _bumpy_grid(name, n, size, seed, offset):
+    rng = np.random.default_rng(seed)
+    xs = np.linspace(-size / 2, size / 2, n + 1)
+    verts = [(x + offset[0], y + offset[1], float(rng.uniform(-0.15, 0.15)) * size / 2)
+             for y in xs for x in xs]
+    faces = [(j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i)
+             for j in range(n) for i in range(n)]
+    return verts, faces
+
+
+def _link(name, verts, faces, material, location, rotation=(0.0, 0.0, 0.0), scale=1.0):
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata(verts, [], faces)
+    mesh.update()
+    mesh.materials.append(material)
+    obj = bpy.data.objects.new(name, mesh)
+    obj.location, obj.rotation_euler, obj.scale = location, rotation, (scale,) * 3
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def _split_cube():
+    corners = [(x, y, z) for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)]
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    verts, faces = [], []
+    for quad in quads:   # every face its own four vertices
+        faces.append(tuple(range(len(verts), len(verts) + 4)))
+        verts += [corners[k] for k in quad]
+    return verts, faces
+
+
+def _pieces(seed):
+    verts, faces = [], []
+    rng = np.random.default_rng(seed)
+    for k in range(6):
+        y = 2.2 * (k // 3) - 1.1 + float(rng.uniform(-0.1, 0.1))
+        v, f = _bumpy_grid("piece", 3, 1.9, seed + k, (2.3 * (k % 3 - 1) + 0.07 * k, y))
+        base = len(verts)
+        verts += v
+        faces += [tuple(base + i for i in face) for face in f]
+    return verts, faces
+
+
+def build_scene():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    cam_data = bpy.data.cameras.new("cam")
+    cam_data.type = 'ORTHO'
+    cam_data.ortho_scale = 16.0
+    cam = bpy.data.objects.new("cam", cam_data)
+    cam.location = (0.013, 0.021, 10.0)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    world = bpy.data.worlds.new("world")
+    world.use_nodes = False
+    world.color = (0.0, 0.0, 0.0)
+    scene.world = world
+    small_resolution(scene, WIDTH, HEIGHT)
+    pointiness, island = _material('Pointiness'), _material('Random Per Island')
+    v, f = _bumpy_grid("grid", 10, 5.0, 3, (0.0, 0.0))
+    _link("grid", v, f, pointiness, (-4.4, 2.3, 0.0), (0.0, 0.0, 0.21))
+    v, f = _split_cube()
+    _link("cube pointiness", v, f, pointiness, (1.2, 3.0, 0.0), (0.6, 0.4, 0.3), 2.2)
+    _link("cube islands", v, f, island, (4.9, 2.9, 0.0), (0.6, 0.4, 0.3), 2.2)
+    v, f = _pieces(11)
+    _link("pieces islands", v, f, island, (3.0, -3.0, 0.0), (0.0, 0.0, 0.13))
+    _link("pieces pointiness", v, f, pointiness, (-4.4, -3.1, 0.0), (0.0, 0.0, -0.11))
+    return scene
+
+
+def _interior(material):
+    """Pixels whose 3x3 neighbourhood hits one material."""
+    m = np.pad(material, 1, mode='edge')
+    same = np.ones(material.shape, bool)
+    for dy in (0, 1, 2):
+        for dx in (0, 1, 2):
+            same &= m[dy:dy + material.shape[0], dx:dx + material.shape[1]] == material
+    return same & (material >= 0)
+
+
+def test_pointiness_and_random_per_island_match_cycles(registered_addon, tmp_path):
+    from addon.export.scene import export_scene
+    from engine.nodes import probe
+    scene = build_scene()
+    exported = export_scene(bpy.context.evaluated_depsgraph_get())
+    assert not exported.warnings, exported.warnings
+    shift = cycles_first_sample_offset()
+    ember, material = probe.emission_at_pixel_centres(exported.scene, offset=(shift, SHIFT_Y_SIGN * shift))
+    cycles = render_cycles(scene, tmp_path)
+    assert cycles.shape == ember.shape
+    keep = _interior(material)
+    names = [m.name for m in exported.scene.materials]
+    for name in ('geometry Pointiness', 'geometry Random Per Island'):
+        rows = keep & (material == names.index(name))
+        got, want = ember[rows], cycles[rows]
+        assert rows.sum() > 200 and np.ptp(want[:, 0]) > 0.1, (name, int(rows.sum()), np.ptp(want[:, 0]))
+        bad = ~np.isclose(got, want, atol=ATOL, rtol=RTOL)
+        assert not bad.any(), (f"{name}: {int(bad.any(axis=1).sum())} of {int(rows.sum())} pixels off, "
+                               f"max |error| {np.abs(got - want).max():.3g}")
+    # Random Per Island: one value per island (three faces of the cube in view, six pieces).
+    islands = np.unique(np.round(cycles[keep & (material == names.index('geometry Random Per Island'))][:, 0], 5))
+    assert len(islands) >= 8, islands
