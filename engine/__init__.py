@@ -21,6 +21,7 @@ from .nodes import REGISTRY as NODE_REGISTRY
 from .nodes import ShadingContext
 from .nodes.hashing import hash_uint
 from . import mesh_attributes
+from .nodes.input_nodes import instance_attribute_key
 from .nodes.sky import sun_guide as sky_sun_guide
 from .passes import PassConfig, murmur3_32
 from .render import RenderResult, prepare, render
@@ -51,6 +52,8 @@ __all__ = [
     "NODE_REGISTRY", "ShadingContext", "TextureCompiler", "value_range", "hash_uint",
     # Geometry node attributes derived from a mesh's topology (engine.mesh_attributes)
     "mesh_attributes",
+    # Attribute nodes of Object / Instancer / View Layer type: Instance.object_attributes keys
+    "instance_attribute_key",
     # worlds (engine.environment, engine.nodes.sky)
     "bake_environment", "environment_lookup", "sky_sun_guide",
 ]

@@ -107,6 +107,10 @@ class Instance:
     pass_index: int = 0
     random: float = 0.0
     asset: str = ""
+    # Attribute nodes of type Object, Instancer and View Layer: the RGBA value
+    # (4 floats) the exporter resolved for this instance, by
+    # engine.nodes.input_nodes.instance_attribute_key(type, name).
+    object_attributes: dict = field(default_factory=dict)
     # Object > Visibility > Mask > Holdout (or a holdout collection): camera
     # rays meeting the object end there and leave the film transparent;
     # every other ray sees the object as usual (Cycles' SD_OBJECT_HOLDOUT_MASK).

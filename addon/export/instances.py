@@ -10,13 +10,14 @@ import numpy as np
 
 from .. import backend
 from . import mesh as mesh_export
+from . import object_attributes
 from .motion import instance_key
 
 
 class InstanceCollector:
     """Accumulates meshes and instances while walking the depsgraph."""
 
-    def __init__(self, material_index, check=None, view_layer=None):
+    def __init__(self, material_index, check=None, view_layer=None, scene=None):
         # material_index(obj) -> list of scene material indices per slot
         self.material_index = material_index
         self.view_layer = view_layer     # for holdout collections
@@ -30,6 +31,8 @@ class InstanceCollector:
         self.curves = []    # engine HairCurves (Curves objects)
         self._warned = set()
         self.check = check or (lambda: None)
+        self.scene = scene
+        self._attribute_requests = {}   # materials -> Attribute nodes of object / instancer / view layer type
 
     def add(self, inst):
         obj = inst.object  # for instances: the instanced (possibly temporary) object
@@ -64,6 +67,8 @@ class InstanceCollector:
                                         else inst.object, 'is_shadow_catcher', False)),
             **_pass_fields(inst),
             **object_info(inst),
+            object_attributes=object_attributes.instance_values(inst, self.view_layer, self.scene,
+                                                                self._attribute_requests),
         ))
         self.keys.append(instance_key(inst))
 
@@ -231,7 +236,8 @@ def collect_instances(depsgraph, material_index, check=None, keys=None, points=N
     """Walk every object instance; returns (meshes, instances, warnings).
     ``check()`` (which raises to cancel) runs every 256 instances and before
     each mesh is exported; ``keys`` (a list) receives each instance's key."""
-    collector = InstanceCollector(material_index, check, getattr(depsgraph, 'view_layer', None))
+    collector = InstanceCollector(material_index, check, getattr(depsgraph, 'view_layer', None),
+                                  getattr(depsgraph, 'scene', None))
     for count, inst in enumerate(depsgraph.object_instances):
         if count % 256 == 255:
             collector.check()

@@ -41,7 +41,21 @@ class SceneShading:
         self.pass_index = np.array([float(getattr(i, "pass_index", 0)) for i in inst]).reshape(-1)
         self.random = np.array([float(getattr(i, "random", 0.0)) for i in inst]).reshape(-1)
         self.mesh_of_instance = np.array([i.mesh for i in inst], dtype=np.int64).reshape(-1)
+        self._instance_attributes = {}
         self._corners = {}
+
+    def instance_attribute(self, key):
+        """(I, 4) RGBA per instance of an Object / Instancer / View Layer
+        attribute (zeros where the exporter found none, as Cycles)."""
+        if key not in self._instance_attributes:
+            inst = self.scene.instances
+            table = np.zeros((len(inst), 4))
+            for k, i in enumerate(inst):
+                value = (getattr(i, "object_attributes", None) or {}).get(key)
+                if value is not None:
+                    table[k] = value
+            self._instance_attributes[key] = table
+        return self._instance_attributes[key]
 
     def has_uv(self):
         """(T,) whether each triangle's mesh has a UV map (Cycles' UV pass is
@@ -338,6 +352,13 @@ class ShadingContext:
         """(N, 3) Generated coordinates (object-space P without a mesh)."""
         value = self._interpolate(("generated",))
         return self.object_coords if value is None else value
+
+    def instance_attribute(self, key):
+        """(N, 4) RGBA of an Object / Instancer / View Layer attribute."""
+        shading, inst = self.instance
+        if shading is None:
+            return np.zeros((self.n, 4))
+        return shading.instance_attribute(key)[inst]
 
     def object_info(self, what):
         shading, inst = self.instance

@@ -105,6 +105,14 @@ def object_info(ctx, i, p):
             "Random": ctx.object_info("random")}
 
 
+INSTANCE_ATTRIBUTE_TYPES = ("GEOMETRY", "OBJECT", "INSTANCER", "VIEW_LAYER")
+
+
+def instance_attribute_key(kind, name):
+    """The key of Instance.object_attributes for an Attribute node's type and name."""
+    return f"{kind}:{name}"
+
+
 def _attribute_rgba(ctx, name):
     rgba = ctx.attribute(name)
     if rgba is None:
@@ -115,9 +123,17 @@ def _attribute_rgba(ctx, name):
 @node("ShaderNodeAttribute", outputs=(("Color", "color"), ("Vector", "vector"), ("Fac", "float"),
                                       ("Alpha", "float")),
       props=(("attribute_name", ""), ("attribute_type", "GEOMETRY")), cases=[{"attribute_name": "Col"}],
-      accepts=one_of(attribute_type=("GEOMETRY",)))
+      accepts=one_of(attribute_type=INSTANCE_ATTRIBUTE_TYPES))
 def attribute(ctx, i, p):
-    rgba = _attribute_rgba(ctx, p["attribute_name"])
+    """Cycles' svm_node_attr: a geometry attribute interpolated over the
+    surface, or an Object / Instancer / View Layer one, constant per
+    instance (the exporter resolves it as Blender's
+    BKE_object_dupli_find_rgba_attribute / BKE_view_layer_find_rgba_attribute)."""
+    kind = p.get("attribute_type", "GEOMETRY")
+    if kind == "GEOMETRY":
+        rgba = _attribute_rgba(ctx, p["attribute_name"])
+    else:
+        rgba = ctx.instance_attribute(instance_attribute_key(kind, p["attribute_name"]))
     return {"Color": rgba[:, :3], "Vector": rgba[:, :3], "Fac": rgba[:, :3].mean(axis=1), "Alpha": rgba[:, 3]}
 
 

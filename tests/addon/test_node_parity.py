@@ -478,24 +478,21 @@ def test_node_structures_match_cycles_per_pixel(parity, name):
 
 
 def test_unevaluated_node_variants_fall_back_with_one_warning(registered_addon):
-    """An object-attribute Attribute node and a Geometry Tangent feed
-    inputs: each falls back to the socket's constant, both named in one
-    warning."""
+    """A Texture Coordinate Window and a Geometry Tangent feed inputs: each
+    falls back to the socket's constant, both named in one warning."""
     from addon.export import material as material_export
     bpy.ops.wm.read_factory_settings()
     mat = bpy.data.materials.new("Unrendered")
     mat.use_nodes = True
     tree = mat.node_tree
     principled = tree.nodes['Principled BSDF']
-    attribute = tree.nodes.new('ShaderNodeAttribute')
-    attribute.attribute_type = 'OBJECT'
-    attribute.attribute_name = 'color'
+    coords = tree.nodes.new('ShaderNodeTexCoord')
     geometry = tree.nodes.new('ShaderNodeNewGeometry')
-    tree.links.new(attribute.outputs['Fac'], principled.inputs['Roughness'])
+    tree.links.new(coords.outputs['Window'], principled.inputs['Roughness'])
     tree.links.new(geometry.outputs['Tangent'], principled.inputs['Metallic'])
     translated, warning = material_export.translate(mat)
     assert warning is not None and warning.count("'Unrendered'") == 1, warning
-    assert attribute.name in warning and geometry.name in warning and "'OBJECT'" in warning
+    assert coords.name in warning and geometry.name in warning and "'Window'" in warning
     from addon import backend
     textures = backend.engine().TEXTURE_TYPES
     assert translated.lobes

@@ -234,9 +234,9 @@ def test_object_and_world_space_normal_maps(space, strength):
 
 def test_unevaluated_properties_are_rejected_by_validation():
     quad = Mesh(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float), np.array([[0, 1, 2], [0, 2, 3]]))
-    attr = NodeOutput(NodeCall("ShaderNodeAttribute", {}, {"attribute_type": "VIEW_LAYER"}), "Fac")
+    attr = NodeOutput(NodeCall("ShaderNodeAttribute", {}, {"attribute_type": "PARTICLE"}), "Fac")
     scene = Scene([quad], [Instance(0, materials=[0])], [Material("m", emission=attr)], camera=Camera())
-    with pytest.raises(SceneError, match="VIEW_LAYER"):
+    with pytest.raises(SceneError, match="PARTICLE"):
         validate_scene(scene)
 
 
@@ -246,3 +246,28 @@ def test_context_subsets_keep_missing_attributes_missing():
     assert ctx.attribute("Nope") is None
     sub = ctx.take(np.array([1]))
     assert sub.attribute("Nope") is None and len(sub) == 1
+
+
+def test_pointiness_welds_and_blurs_as_cycles():
+    """A tetrahedron's tip is pointier than a flat vertex (0.5); a copy of
+    a vertex at the same place is welded (same value); the blur averages a
+    vertex with its edge neighbours."""
+    from engine import mesh_attributes
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.3, 0.3, 1.0], [0.3, 0.3, 1.0]], np.float32)
+    edges = np.array([[0, 1], [1, 2], [2, 0], [0, 3], [1, 4], [2, 3]])
+    normals = np.array([[-1, -1, -1], [1, -1, -0.2], [-1, 1, -0.2], [0, 0, 1], [0, 0, 1]], np.float32)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    p = mesh_attributes.pointiness(pos, normals, edges)
+    assert p[3] == p[4]
+    assert (p > 0.5).all() and np.isfinite(p).all()
+
+
+def test_island_roots_follow_cycles_disjoint_set():
+    """Union by rank, the first edge vertex's root kept on ties: (1, 0)
+    roots {0, 1} at 1, (2, 3) roots {2, 3} at 2, (3, 0) joins the two
+    rank-1 roots under 2 (3's); 4 stays alone."""
+    from engine import mesh_attributes
+    roots = mesh_attributes.island_roots(5, np.array([[1, 0], [2, 3], [3, 0]]))
+    assert roots.tolist() == [2, 2, 2, 2, 4]
+    value = mesh_attributes.random_per_island(5, np.array([[1, 0], [2, 3], [3, 0]]), np.array([[0, 1, 2], [4, 4, 4]]))
+    assert value[0] != value[1] and 0 <= value.min() and value.max() <= 1
