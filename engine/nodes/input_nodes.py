@@ -41,9 +41,35 @@ def _camera_coords(ctx):
     return local
 
 
+def _window_coords(ctx):
+    """Cycles' NODE_TEXCO_WINDOW: the point projected into the camera's
+    full frame, (0, 0) at its bottom-left corner and (1, 1) at the top
+    right (camera_world_to_ndc), z = 0."""
+    shading = getattr(ctx.tris, "shading", None) if ctx.tris is not None else None
+    camera = getattr(getattr(shading, "scene", None), "camera", None)
+    out = np.zeros((len(ctx), 3))
+    if camera is None:
+        return out
+    from ..camera import view_plane
+    m = np.asarray(camera.matrix, dtype=np.float64)
+    rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0, keepdims=True)
+    local = (ctx.p - m[:3, 3]) @ rot
+    if camera.kind == "ORTHO":
+        sx, sy = local[:, 0], local[:, 1]
+    else:
+        depth = -local[:, 2]
+        depth = np.where(depth != 0, depth, 1e-30)
+        sx, sy = local[:, 0] / depth, local[:, 1] / depth
+    xmin, ymin, pw, ph = view_plane(camera)
+    out[:, 0] = (sx - xmin) / (pw * float(camera.resolution[0]))
+    out[:, 1] = (sy - ymin) / (ph * float(camera.resolution[1]))
+    return out
+
+
 @node("ShaderNodeTexCoord", outputs=(("Generated", "vector"), ("Normal", "vector"), ("UV", "vector"),
-                                     ("Object", "vector"), ("Camera", "vector"), ("Reflection", "vector")),
-      translate=_object_matrix_inverse, unsupported_outputs=("Window",), cases=[{}])
+                                     ("Object", "vector"), ("Camera", "vector"), ("Reflection", "vector"),
+                                     ("Window", "vector")),
+      translate=_object_matrix_inverse, cases=[{}])
 def tex_coord(ctx, i, p):
     n = len(ctx)
     uv = np.zeros((n, 3))
@@ -56,7 +82,7 @@ def tex_coord(ctx, i, p):
         obj = ctx.object_coords
     refl = 2.0 * _dot(ctx.ns, ctx.wo)[:, None] * ctx.ns - ctx.wo
     return {"Generated": ctx.generated, "Normal": ctx.to_object(ctx.ns), "UV": uv, "Object": obj,
-            "Camera": _camera_coords(ctx), "Reflection": refl}
+            "Camera": _camera_coords(ctx), "Reflection": refl, "Window": _window_coords(ctx)}
 
 
 @node("ShaderNodeUVMap", outputs=(("UV", "vector"),), props=(("uv_map", ""),), cases=[{}])

@@ -128,3 +128,37 @@ def test_pointiness_and_random_per_island_match_cycles(registered_addon, tmp_pat
     # Random Per Island: one value per island (three faces of the cube in view, six pieces).
     islands = np.unique(np.round(cycles[keep & (material == names.index('geometry Random Per Island'))][:, 0], 5))
     assert len(islands) >= 8, islands
+
+
+def test_window_coordinates_match_cycles_in_perspective(registered_addon, tmp_path):
+    """Texture Coordinate Window through a shifted perspective camera over
+    a tilted plane: the frame position of each point (the orthographic
+    case is in test_node_parity.py's Texture Coordinate quads)."""
+    from addon.export.scene import export_scene
+    from engine.nodes import probe
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    cam_data = bpy.data.cameras.new("cam")
+    cam_data.lens, cam_data.shift_x, cam_data.shift_y = 35.0, 0.12, -0.05
+    cam = bpy.data.objects.new("cam", cam_data)
+    cam.location, cam.rotation_euler = (0.3, -6.0, 3.0), (1.1, 0.0, 0.08)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    small_resolution(scene, 48, 36)
+    mat, tree, emission = emission_material("window")
+    coords = tree.nodes.new('ShaderNodeTexCoord')
+    tree.links.new(coords.outputs['Window'], emission.inputs['Color'])
+    v, f = _bumpy_grid("plane", 4, 12.0, 5, (0.0, 0.0))
+    _link("plane", v, f, mat, (0.0, 0.0, 0.0), (0.2, 0.1, 0.0))
+    exported = export_scene(bpy.context.evaluated_depsgraph_get())
+    assert not exported.warnings, exported.warnings
+    # A perspective camera's rays fan out: no one shift moves them all; the
+    # first sample sits within 5e-4 pixel of the centre (about 1e-5 in
+    # Window units at 48 pixels), far inside the tolerance below.
+    ember, material = probe.emission_at_pixel_centres(exported.scene)
+    cycles = render_cycles(scene, tmp_path)
+    keep = _interior(material)
+    assert keep.sum() > 600, int(keep.sum())
+    got, want = ember[keep], cycles[keep]
+    assert np.ptp(want[:, 0]) > 0.5 and np.ptp(want[:, 1]) > 0.5
+    np.testing.assert_allclose(got, want, atol=3e-5)

@@ -478,7 +478,7 @@ def test_node_structures_match_cycles_per_pixel(parity, name):
 
 
 def test_unevaluated_node_variants_fall_back_with_one_warning(registered_addon):
-    """A Texture Coordinate Window and a Geometry Tangent feed inputs: each
+    """A Light Path Portal Depth and a Geometry Tangent feed inputs: each
     falls back to the socket's constant, both named in one warning."""
     from addon.export import material as material_export
     bpy.ops.wm.read_factory_settings()
@@ -486,13 +486,13 @@ def test_unevaluated_node_variants_fall_back_with_one_warning(registered_addon):
     mat.use_nodes = True
     tree = mat.node_tree
     principled = tree.nodes['Principled BSDF']
-    coords = tree.nodes.new('ShaderNodeTexCoord')
+    coords = tree.nodes.new('ShaderNodeLightPath')
     geometry = tree.nodes.new('ShaderNodeNewGeometry')
-    tree.links.new(coords.outputs['Window'], principled.inputs['Roughness'])
+    tree.links.new(coords.outputs['Portal Depth'], principled.inputs['Roughness'])
     tree.links.new(geometry.outputs['Tangent'], principled.inputs['Metallic'])
     translated, warning = material_export.translate(mat)
     assert warning is not None and warning.count("'Unrendered'") == 1, warning
-    assert coords.name in warning and geometry.name in warning and "'Window'" in warning
+    assert coords.name in warning and geometry.name in warning and "'Portal Depth'" in warning
     from addon import backend
     textures = backend.engine().TEXTURE_TYPES
     assert translated.lobes
