@@ -190,7 +190,7 @@ def drop_nonfinite_triangles(mesh):
         return 0
     keep = finite[mesh.triangles].all(axis=1)
     mesh.positions = np.where(finite[:, None], mesh.positions, np.float32(0.0))
-    for name in ('triangles', 'normals', 'uvs', 'material_slots', 'tangents', 'tangent_signs'):
+    for name in ('triangles', 'normals', 'uvs', 'material_slots', 'tangents', 'tangent_signs', 'orco'):
         value = getattr(mesh, name)
         if value is not None:
             setattr(mesh, name, value[keep])
@@ -247,6 +247,21 @@ def _texspace(mesh):
     return (tuple(float(v) for v in loc), tuple(float(v) for v in size))
 
 
+def _undeformed_corners(obj, mesh):
+    """Corner positions (T, 3, 3) of the original (undeformed) mesh, which
+    Cycles' Generated coordinates use (Blender's orco), when modifiers or
+    shape keys moved the vertices without changing their count; None when
+    nothing moved or the count changed (then the evaluated positions stand
+    in, and the texture space is the evaluated one)."""
+    original = getattr(getattr(obj, 'original', None), 'data', None)
+    if original is None or original is obj.data or len(original.vertices) != len(mesh.positions):
+        return None
+    positions = _get(original.vertices, 'co', len(original.vertices), 3, np.float32)
+    if np.array_equal(positions, mesh.positions):
+        return None
+    return positions[mesh.triangles]
+
+
 def mesh_from_object(obj, name, check=None):
     """Export an evaluated object's geometry (modifiers applied).
 
@@ -255,7 +270,10 @@ def mesh_from_object(obj, name, check=None):
     """
     if obj.type == 'MESH':
         # The evaluated mesh already has the modifiers applied: no copy needed.
-        return mesh_from_blender(obj.data, name, needs_tangents(obj), check, needs_derived(obj))
+        out = mesh_from_blender(obj.data, name, needs_tangents(obj), check, needs_derived(obj))
+        if out is not None:
+            out.orco = _undeformed_corners(obj, out)
+        return out
     mesh = obj.to_mesh()
     try:
         if mesh is None:
