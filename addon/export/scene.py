@@ -10,6 +10,7 @@ from . import instances as instance_export
 from . import light as light_export
 from . import material as material_export
 from . import motion as motion_export
+from . import udim
 from . import world as world_export
 
 
@@ -101,6 +102,7 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None):
     result = renderer.Scene(
         meshes=meshes, instances=instances, points=points, curves=curves, materials=materials.materials,
         lights=lights, world=world, camera=camera, cycles_version=tuple(bpy.app.version), light_links=links)
+    udim.cull_tiles(result)
     warnings = materials.warnings + warnings + light_warnings + camera_warnings + _catcher_notes(result)
     shape = getattr(getattr(scene, 'cycles_curves', None), 'shape', 'THICK')
     if curves and shape != 'THICK':
