@@ -5,7 +5,7 @@ this package registers every node module.  ``ShadingContext`` (context.py)
 is what the nodes read.  engine.textures compiles ``scene.NodeOutput``
 expressions through the registry.
 """
-from . import converter_nodes, input_nodes, ray_nodes, sky, texture_nodes  # noqa: F401  (registration)
+from . import converter_nodes, gabor, input_nodes, ray_nodes, sky, texture_nodes  # noqa: F401  (registration)
 from .context import SceneShading, ShadingContext, as_context
 from .rays import NodeRays
 from .registry import REGISTRY, NodeDef, lookup
