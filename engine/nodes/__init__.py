@@ -5,7 +5,10 @@ this package registers every node module.  ``ShadingContext`` (context.py)
 is what the nodes read.  engine.textures compiles ``scene.NodeOutput``
 expressions through the registry.
 """
-from . import converter_nodes, gabor, input_nodes, ray_nodes, sky, texture_nodes  # noqa: F401  (registration)
+from . import converter_nodes, input_nodes, ray_nodes, sky, texture_nodes  # noqa: F401  (registration)
+# Registered last: the node parity scene places quads in registry order, and
+# its Camera-coordinate quad must stay where its values are positive.
+from . import gabor  # noqa: F401,E402
 from .context import SceneShading, ShadingContext, as_context
 from .rays import NodeRays
 from .registry import REGISTRY, NodeDef, lookup
