@@ -13,10 +13,8 @@ exporter and the engine's interpolation treat them like colour attributes.
 """
 import numpy as np
 
+from .nodes.context import POINTINESS, RANDOM_PER_ISLAND  # noqa: F401  (the reserved names)
 from .nodes.hashing import hash_uint, to_float
-
-POINTINESS = "\x00pointiness"
-RANDOM_PER_ISLAND = "\x00random_per_island"
 
 F32 = np.float32
 FLT_EPSILON = F32(1.1920929e-07)

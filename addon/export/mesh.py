@@ -91,7 +91,7 @@ def needs_tangents(obj):
 GEOMETRY_DERIVED = ('Pointiness', 'Random Per Island')
 
 
-def _trees_of(tree, seen):
+def node_trees(tree, seen):
     """A node tree and the groups inside it, each once."""
     if tree is None or tree.as_pointer() in seen:
         return
@@ -99,7 +99,7 @@ def _trees_of(tree, seen):
     yield tree
     for n in tree.nodes:
         if n.type == 'GROUP':
-            yield from _trees_of(getattr(n, 'node_tree', None), seen)
+            yield from node_trees(getattr(n, 'node_tree', None), seen)
 
 
 def needs_derived(obj):
@@ -108,7 +108,7 @@ def needs_derived(obj):
     out, seen = set(), set()
     for slot in getattr(obj, 'material_slots', ()):
         tree = getattr(slot.material, 'node_tree', None) if slot.material else None
-        for t in _trees_of(tree, seen):
+        for t in node_trees(tree, seen):
             for n in t.nodes:
                 if n.type == 'NEW_GEOMETRY':
                     out |= {s.name for s in n.outputs if s.name in GEOMETRY_DERIVED and s.is_linked}

@@ -9,7 +9,7 @@ nothing found, is zero RGBA.  Object: the object, then its data (mesh).
 Instancer: the instancing object first (for instances), then as Object.
 View Layer: the view layer, the scene, then the scene's world.
 """
-from .mesh import _trees_of
+from .mesh import node_trees
 
 TYPES = ('OBJECT', 'INSTANCER', 'VIEW_LAYER')
 _NOT_FOUND = object()
@@ -24,7 +24,7 @@ def requested(obj, cache=None):
         return cache[key]
     out, seen = [], set()
     for mat in mats:
-        for tree in _trees_of(getattr(mat, 'node_tree', None), seen):
+        for tree in node_trees(getattr(mat, 'node_tree', None), seen):
             for node in tree.nodes:
                 if node.type == 'ATTRIBUTE' and node.attribute_type in TYPES and not node.mute:
                     item = (node.attribute_type, node.attribute_name)

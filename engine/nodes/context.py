@@ -20,6 +20,12 @@ import numpy as np
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 # What the Light Path node reads of the path besides its ray kind and depth
 # (ShadingContext.path, filled by the integrator where a material uses it).
+# Reserved corner-attribute names of the Geometry node's Pointiness and
+# Random Per Island (engine.mesh_attributes computes them; no user attribute
+# name holds a NUL).
+POINTINESS = "\x00pointiness"
+RANDOM_PER_ISLAND = "\x00random_per_island"
+
 PATH_COLUMNS = ("Diffuse Depth", "Glossy Depth", "Transmission Depth", "Transparent Depth", "Ray Length",
                 "Is Singular Ray")
 

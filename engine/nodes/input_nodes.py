@@ -3,8 +3,7 @@ Fresnel / Layer Weight, and Mapping (kernel/svm/tex_coord.h, geometry.h,
 fresnel.h, attribute.h, light_path.h, mapping_util.h)."""
 import numpy as np
 
-from ..mesh_attributes import POINTINESS, RANDOM_PER_ISLAND
-from .context import PATH_COLUMNS
+from .context import PATH_COLUMNS, POINTINESS, RANDOM_PER_ISLAND
 from .registry import node, one_of
 
 VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION, VIS_SHADOW = 1, 2, 4, 8, 16
