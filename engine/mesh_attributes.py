@@ -70,10 +70,14 @@ def pointiness(positions, vertex_normals, edges):
     orig = _weld(positions)
     normal = np.zeros((n, 3), F32)
     np.add.at(normal, orig, np.asarray(vertex_normals, dtype=F32).reshape(-1, 3))
-    normal = normal[orig]
+    normal = np.nan_to_num(normal[orig], nan=0.0, posinf=0.0, neginf=0.0)
     length = np.sqrt((normal * normal).sum(axis=1, dtype=F32))
     normal = np.where(length[:, None] > 0, normal / np.where(length > 0, length, F32(1))[:, None], normal)
     e = _unique_edges(edges, orig)
+    # Edges touching a NaN or infinite vertex are left out (the exporter
+    # drops those triangles): the values stay finite around them.
+    finite = np.isfinite(positions).all(axis=1)
+    e = e[finite[e[:, 0]] & finite[e[:, 1]]]
     v0, v1 = e[:, 0], e[:, 1]
     d = positions[v1] - positions[v0]
     dl = np.sqrt((d * d).sum(axis=1, dtype=F32))
@@ -90,7 +94,7 @@ def pointiness(positions, vertex_normals, edges):
     data = raw.copy()
     np.add.at(data, np.stack([v0, v1], axis=1).ravel(), np.stack([raw[v1], raw[v0]], axis=1).ravel())
     data = data / (counter + 1).astype(F32)
-    return data[orig].astype(F32)
+    return np.nan_to_num(data[orig], nan=0.0).astype(F32)
 
 
 def island_roots(num_vertices, edges):
