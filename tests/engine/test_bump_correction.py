@@ -88,3 +88,57 @@ def test_normal_map_bent_away_from_the_view_lights_the_diffuse_lobe_with_the_ben
     on = np.ones(result.image.shape[:2], bool)   # the plane fills the view
     assert on.mean() > 0.3
     np.testing.assert_allclose(result.image[on][:, :3], want, rtol=1e-5)
+
+
+# ----------------------------------------------------------------------------
+# sampling a split row: the mean sample weight against an independent
+# estimate of the integral of f |cos| over the sphere (one family)
+
+import ember_stats  # noqa: E402
+from engine import bsdf  # noqa: E402
+from engine import scene as S  # noqa: E402
+
+N = 400_000
+SPLIT_CASES = [(0.8, -0.3), (0.4, 0.2)]   # (cos of wo to the shading normal, of wo to the bent normal)
+LEVEL = ember_stats.family_level(__name__, 3 * len(SPLIT_CASES))
+Z_MAX = ember_stats.z_threshold(LEVEL)
+
+
+def _split_lobes(n, cos_o, cos_bent):
+    lobes = bsdf.MaterialTable([Material("m", (S.Lobe("diffuse", (0.8, 0.5, 0.3), weight=0.6),
+                                               S.Lobe("glossy", (0.9, 0.9, 0.9), 0.5, weight=0.4)))]
+                               ).gather(np.zeros(n, int))
+    s = math.sqrt(1.0 - cos_o * cos_o)
+    wo = np.tile([s, 0.0, cos_o], (n, 1))
+    # The bent normal in the plane of wo and z, at cos_bent to wo.
+    tilt = math.acos(cos_o) - math.acos(cos_bent)   # from z towards wo (negative: away from it)
+    bent = np.array([math.sin(tilt), 0.0, math.cos(tilt)])
+    assert np.dot(bent, wo[0]) == pytest.approx(cos_bent, abs=1e-12)
+    z = np.tile([0.0, 0.0, 1.0], (n, 1))
+    rot, split = bump_correction.rotations(np.tile([1.0, 0, 0], (n, 1)), np.tile([0, 1.0, 0], (n, 1)), z,
+                                           np.tile(bent, (n, 1)))
+    lobes.diffuse_rot, lobes.diffuse_split = rot, split
+    return lobes, wo, bent
+
+
+@pytest.mark.parametrize("cos_o,cos_bent", SPLIT_CASES)
+def test_split_rows_sample_what_they_evaluate(cos_o, cos_bent):
+    """A diffuse lobe on its bent normal (facing away from the view in the
+    first case) beside a glossy one on the shading normal: the mean of
+    bsdf.sample's weights is the integral of eval_pdf's f |wi.z| over the
+    sphere (uniform directions); power asserted (2%)."""
+    seed = 70 + SPLIT_CASES.index((cos_o, cos_bent))
+    lobes, wo, bent = _split_lobes(N, cos_o, cos_bent)
+    rng = np.random.default_rng(seed)
+    wi, weight, pdf, _ = bsdf.sample(lobes, wo, *rng.random((3, N)))
+    assert np.all(np.isfinite(weight)) and np.all(weight >= 0) and np.all(pdf >= 0)
+    d = unit(rng.normal(size=(N, 3)))
+    f, _ = bsdf.eval_pdf(lobes, wo, d)
+    quad = 4.0 * np.pi * f * np.abs(d[:, 2:])
+    var = weight.var(axis=0, ddof=1) / N + quad.var(axis=0, ddof=1) / N
+    z = (weight.mean(axis=0) - quad.mean(axis=0)) / np.sqrt(var)
+    detects = Z_MAX * np.sqrt(var) / quad.mean(axis=0)
+    print(f"split row cos_o {cos_o} cos_bent {cos_bent}: sampled {weight.mean(axis=0).round(4)}, integrated "
+          f"{quad.mean(axis=0).round(4)}, z {z.round(2)}; detects {np.round(detects * 100, 2)}% with probability 1/2")
+    assert np.all(np.abs(z) < Z_MAX), z
+    assert np.all(detects < 0.02)
