@@ -30,12 +30,13 @@ per-ray loops over the lobe slots once numba has built them
 (engine/bsdf_loops.py); the batch NumPy code here is their twin (JIT off),
 equal to float64 rounding.
 """
-from dataclasses import field, make_dataclass
+from dataclasses import field, make_dataclass, replace
 from typing import Optional
 
 import numpy as np
 
 from . import bsdf_loops as loops
+from . import bump_correction
 from . import lobes as registry
 from . import microfacet as mf
 from .kernels import LoopKernel
@@ -51,6 +52,7 @@ from .lobes.sheen import eval_sheen_f as _eval_sheen, sample_sheen_dir as _sampl
 from .lobes.sheen import ltc as _ltc, sheen_frame as _sheen_frame, sheen_ltc as _sheen_ltc  # noqa: F401
 from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect, ggx_sample_vndf  # noqa: F401
 from .sampling import cosine_hemisphere
+from .rows import take_arrays
 from .textures import MaterialTextures
 from .vec import count, subset
 
@@ -98,11 +100,16 @@ _LOBES_DOC = """Per-ray lobe parameters, one array per ``scene.Lobe`` field (N r
     (N, 3): where a normal map, bump or Bevel moved the shading normal, the
     smooth normal in the shading frame, and bump_model (N,) int8 which of
     Cycles' bump shadowing terms applies (BUMP_CHIANG, BUMP_GGX); None without.
+    diffuse_rot (N, 3, 3), diffuse_split (N,) bool, diffuse_smooth (N, 3):
+    Bump Map Correction (engine/bump_correction.py), where the diffuse
+    lobes' bent normal differs from the shading frame's corrected one: the
+    rotation into its frame, which rows, the smooth normal there; None without.
     """
 Lobes = make_dataclass(
     "Lobes", [("kind", np.ndarray), ("color", np.ndarray), ("alpha", np.ndarray), ("schlick", np.ndarray)]
     + [(p.field, Optional[np.ndarray], field(default=None)) for p in registry.EXTRA_PARAMS]
-    + [(name, Optional[np.ndarray], field(default=None)) for name in ("back", "smooth_n", "bump_model")],
+    + [(name, Optional[np.ndarray], field(default=None)) for name in ("back", "smooth_n", "bump_model", "diffuse_rot",
+                                                                   "diffuse_split", "diffuse_smooth")],
     namespace={"__post_init__": _lobes_post_init, "__len__": lambda self: len(self.kind), "__doc__": _LOBES_DOC})
 Lobes.__module__ = __name__
 
@@ -494,13 +501,40 @@ def eval_pdf(lobes, wo, wi, sel=None, w=None, sampled=False):
     """f (N, 3) and pdf (N,) summed over the non-delta lobes; wi below the
     surface (wi.z < 0) reaches the transmitting lobes only.  sampled: wi
     came from ``sample`` (Cycles then softens only a reflecting diffuse
-    lobe's bump shadowing and rejects no other lobe)."""
-    n = len(wo)
+    lobe's bump shadowing and rejects no other lobe).  Rows with a bent
+    normal of their own (Lobes.diffuse_split) evaluate their diffuse lobes
+    in its frame, f scaled so that f |wi.z| is Cycles' f cos(bent, wi)."""
     if w is None:
         w = weights(lobes, wo)
-    diffuse_term, keep = bump_shadowing(lobes.smooth_n, lobes.bump_model, wi)
     if sel is None:
         sel = selection(lobes, wo, w)
+    split = lobes.diffuse_split
+    if split is None or not split.any():
+        return _eval_pdf_frame(lobes, wo, wi, sel, w, sampled)
+    bent = kind_in(lobes.kind, bump_correction.BENT_KINDS) & split[:, None]
+    main = replace(lobes, kind=np.where(bent, NONE, lobes.kind).astype(lobes.kind.dtype))
+    f, pdf = _eval_pdf_frame(main, wo, wi, sel, w, sampled)
+    rows = np.flatnonzero(split & bent.any(axis=1))
+    if len(rows):
+        sub = take_arrays(lobes, rows, len(lobes))
+        keep = kind_in(sub.kind, bump_correction.BENT_KINDS)
+        rot = sub.diffuse_rot
+        sub = replace(sub, kind=np.where(keep, sub.kind, NONE).astype(sub.kind.dtype),
+                                  smooth_n=sub.diffuse_smooth)
+        wo_d = bump_correction.view_above(bump_correction.apply(rot, wo[rows]))
+        wi_d = bump_correction.apply(rot, wi[rows])
+        fd, pd = _eval_pdf_frame(sub, wo_d, wi_d, sel[rows], w[rows], sampled)
+        cos = np.abs(wi[rows, 2])
+        scale = np.where(cos > 1e-12, np.abs(wi_d[:, 2]) / np.where(cos > 1e-12, cos, 1.0), 0.0)
+        f[rows] += fd * scale[:, None]
+        pdf[rows] += pd
+    return f, pdf
+
+
+def _eval_pdf_frame(lobes, wo, wi, sel, w, sampled):
+    """eval_pdf in the shading frame alone."""
+    n = len(wo)
+    diffuse_term, keep = bump_shadowing(lobes.smooth_n, lobes.bump_model, wi)
     f, pdf = np.empty((n, 3)), np.empty(n)
     _eval_pdf_kernel(_lobe_arrays(lobes), _table_arrays(), _c(wo), _c(wi), _c(sel), _c(w),
                      _NO_TERM if diffuse_term is None else _c(diffuse_term),
@@ -624,15 +658,19 @@ _sample_kernel = _Loop(loops.sample_loop,
                        "boolean[::1], boolean[::1])", _sample_twin)
 
 
-def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
+def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None, bent=None):
     """Sample wi.  Returns wi, weight (= f cos / pdf), pdf, delta (bool).
 
     A sample with weight 0 is an absorbed path.  For delta samples pdf is the
     probability of that discrete choice (only its being > 0 matters downstream).
     Transmitted samples have wi.z < 0.  ``w``/``sel`` (weights, selection for
-    this wo) may be passed when the caller has them already.
+    this wo) may be passed when the caller has them already.  ``bent``, an
+    (N,) bool array, receives which samples a bent-normal lobe drew on rows
+    with a second normal (bump_correction.sided).
     """
-    if lobes.kind.shape[1] == 1 and _simple(lobes):
+    if bent is not None:
+        bent[:] = False
+    if lobes.kind.shape[1] == 1 and _simple(lobes) and lobes.diffuse_split is None:
         return _sample_single(lobes, wo, u1, u2)
     n = len(wo)
     if w is None:
@@ -644,11 +682,53 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None):
     wo, sel, w = _c(wo), _c(sel), _c(w)
     _sample_kernel(_lobe_arrays(lobes), _table_arrays(), wo, _c(u_lobe), _c(u1), _c(u2), sel, w,
                    wi, weight, pdf, delta, smooth)
+    if lobes.diffuse_split is not None:
+        drawn = _resample_bent(lobes, wo, u_lobe, u1, u2, sel, w, wi)
+        if bent is not None:
+            bent[:] = drawn
     # Every row evaluated (rarely not needed; no copies of the lobes), the
     # smooth ones' weight and pdf taken from it.
     fs, ps = eval_pdf(lobes, wo, wi, sel, w, sampled=True)
     _finish_kernel(wo, wi, smooth, fs, ps, weight, pdf)
     return wi, weight, pdf, delta
+
+
+def chosen_lobe(sel, u_lobe):
+    """The slot ``sample`` picks for u_lobe (as _sample_numpy) and its kind."""
+    cdf = np.cumsum(sel, axis=1)
+    last = sel.shape[1] - 1 - np.argmax(sel[:, ::-1] > 0, axis=1)
+    return np.minimum((u_lobe[:, None] >= cdf).sum(axis=1), last), cdf[:, -1] > 0
+
+
+def bent_samples(lobes, u_lobe, sel):
+    """Which samples chose a lobe that keeps the bent normal on a row with
+    a second normal (bump_correction; all False without)."""
+    split = lobes.diffuse_split
+    if split is None:
+        return np.zeros(len(u_lobe), bool)
+    chosen, any_lobe = chosen_lobe(sel, u_lobe)
+    kind = lobes.kind[np.arange(len(chosen)), chosen]
+    return split & any_lobe & kind_in(kind, bump_correction.BENT_KINDS)
+
+
+def _resample_bent(lobes, wo, u_lobe, u1, u2, sel, w, wi):
+    """Directions of the bent-normal lobes chosen on split rows, drawn in
+    the bent normal's frame (the same lobe, the same numbers) and turned
+    back into the shading frame.  In place."""
+    drawn = bent_samples(lobes, u_lobe, sel)
+    rows = np.flatnonzero(drawn)
+    if not len(rows):
+        return drawn
+    sub = take_arrays(lobes, rows, len(lobes))
+    rot = sub.diffuse_rot
+    wo_d = _c(bump_correction.view_above(bump_correction.apply(rot, wo[rows])))
+    m = len(rows)
+    wi_d, weight, pdf = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
+    delta, smooth = np.empty(m, bool), np.empty(m, bool)
+    _sample_kernel(_lobe_arrays(sub), _table_arrays(), wo_d, _c(u_lobe[rows]), _c(u1[rows]), _c(u2[rows]),
+                   _c(sel[rows]), _c(w[rows]), wi_d, weight, pdf, delta, smooth)
+    wi[rows] = bump_correction.apply_t(rot, wi_d)
+    return drawn
 
 
 def _finish_numpy(wo, wi, smooth, fs, ps, weight, pdf):

@@ -200,7 +200,6 @@ def warnings_for(ctx):
         out.extend(ctx.media.warnings)
         out.extend(ctx.media.field_warnings())
     out.extend(ctx.subsurface_warnings)
-    out.extend(ctx.materials.textures.bent_away_warnings())
     if ctx.transparent_shadows and ctx.links is not None and ctx.links.any_blockers:
         out.append("shadow linking is not applied to shadow rays through transparent surfaces: "
                    "every object casts the shadows of shadow-linked lights in this scene")

@@ -595,10 +595,6 @@ def _blend_operand_range(blend, a, b):
 ROUGHNESS_FLOOR = 0.1  # a textured glossy lobe must stay glossy in the table
 
 
-# A material warns when more of its points than this had a bent normal
-# facing away from the viewer.
-BENT_AWAY_SHARE = 0.005
-
 
 class MaterialTextures:
     """Every texture expression of a scene's materials, compiled.
@@ -616,9 +612,6 @@ class MaterialTextures:
         self.tangents = {}       # material -> fn (its anisotropic lobes' tangent)
         self.constants = [self._constant_material(i, m) for i, m in enumerate(materials)]
         self.any = bool(self.lobe_fields or self.emission)
-        # Per material with a normal map or bump: [points shaded, points
-        # whose bent normal faced away from the view] (bent_away_warnings).
-        self.bent = {i: [0, 0] for i in self.normals}
         self.names = [m.name for m in materials]
         # A Light Path node reads the ray's kind and the path's depths: the
         # integrator then tracks them (Context.light_path).
@@ -727,23 +720,8 @@ class MaterialTextures:
             rows = np.nonzero(hit.mat == i)[0]
             if len(rows):
                 ns = np.array(ns, copy=True)
-                ns[rows], away = _perturbed(normal, hit, rows, triangles, ctx.take(rows))
-                # Counted without a lock: a lost update only blurs a warning's share.
-                self.bent[i][0] += len(rows)
-                self.bent[i][1] += away
+                ns[rows] = _perturbed(normal, hit, rows, triangles, ctx.take(rows))
         return ns
-
-    def bent_away_warnings(self, share=BENT_AWAY_SHARE):
-        """One warning per material whose normal map or bump bent more than
-        ``share`` of its shaded points' normals away from the viewer."""
-        out = []
-        for i, (shaded, away) in self.bent.items():
-            if shaded and away > share * shaded:
-                out.append(f"material {self.names[i]!r}: its normal map or bump turns {away / shaded:.1%} of its "
-                           f"shaded points away from the view; Ember shades those with the unbent normal, "
-                           f"Cycles keeps the bent one for diffuse and lifts it for glossy (Bump Map Correction), "
-                           f"so they differ there")
-        return out
 
 
 # Per-ray values are held to what validation lets constants be (the largest
@@ -830,14 +808,10 @@ def _unit(v, fallback):
 
 def _perturbed(normal, hit, rows, triangles, ctx):
     """New unit shading normals for hit rows, facing the same side as hit.ns;
-    normals the viewer would see from behind keep the unperturbed one (also
-    returns how many did)."""
+    also those the viewer sees from behind (the diffuse lobes keep them, the
+    others take Cycles' Bump Map Correction: engine/bump_correction.py)."""
     ns = hit.ns[rows]
-    out = _evaluate_normal(normal, hit, rows, triangles, ns, ctx)
-    out = _unit(out, ns)
-    wo = hit.wo[rows]
-    facing = np.einsum("ij,ij->i", out, wo) > 1e-6
-    return np.where(facing[:, None], out, ns), int(np.count_nonzero(~facing))
+    return _unit(_evaluate_normal(normal, hit, rows, triangles, ns, ctx), ns)
 
 
 def _evaluate_normal(normal, hit, rows, triangles, ns, ctx):

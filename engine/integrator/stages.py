@@ -8,7 +8,7 @@ record it came from.
 """
 import numpy as np
 
-from .. import bsdf, nee, throughput
+from .. import bsdf, bump_correction, nee, throughput
 from ..accel import shadow_rays, shadow_rays_f32
 from ..hits import hit_geometry
 from ..motion import path_time, triangles_at
@@ -299,20 +299,27 @@ def shade(ctx, paths, hit, depth):
     if hit.back is not None:
         # Refraction inverts the relative IOR on back faces (leaving the medium).
         lobes.back = hit.back
-    smooth = None
+    smooth = bent = None
     if ctx.materials.textures.normals:
         smooth = hit.ns
-        hit.ns = ctx.materials.textures.perturb(hit, ctx.triangles)
+        bent = ctx.materials.textures.perturb(hit, ctx.triangles)
+        # The shading frame is the glossy lobes' normal, Cycles' Bump Map
+        # Correction of the bent one (the diffuse lobes keep that: below).
+        hit.ns = bump_correction.corrected(hit.ng, hit.wo, bent, smooth)
     tt, bb = frame(hit.ns)
     # Anisotropic lobes' tangents (evaluated on the unbent normal, as Cycles'
     # Tangent node reads sd->N; projected onto the bent one).
     ctx.materials.textures.tangent_frames(hit.mat, sc, hit.ns, tt, bb)
     wo_l = to_local(hit.wo, tt, bb, hit.ns)
-    if smooth is not None and not np.array_equal(smooth, hit.ns):
+    if smooth is not None and not (np.array_equal(smooth, hit.ns) and np.array_equal(bent, hit.ns)):
         # Cycles' bump shadowing term (bsdf.bump_shadowing) needs the smooth
         # normal in the shading frame, in the scene's Blender version's form.
         lobes.smooth_n = to_local(smooth, tt, bb, hit.ns)
         lobes.bump_model = np.full(len(hit.ns), ctx.bump_model, np.int8)
+        rot, split = bump_correction.rotations(tt, bb, hit.ns, bent)
+        if rot is not None:
+            lobes.diffuse_rot, lobes.diffuse_split = rot, split
+            lobes.diffuse_smooth = bump_correction.apply(rot, lobes.smooth_n)
     w = bsdf.weights(lobes, wo_l)
     return Vertex(hit, tt, bb, wo_l, lobes, w, bsdf.selection(lobes, wo_l, w))
 
@@ -434,7 +441,8 @@ def light_sample(ctx, paths, v, e, p_sel, u):
     f, pdf_b = bsdf.eval_pdf(v.lobes, v.wo_l, wi_l, *v.lobes_wo)
     if ctx.light_excludes:
         f = visibility.visible_lobes_f(ctx, v, wi_l, ls.wi, e, f)
-    contrib, w, live = nee.contribution(wi_l, ls.wi, hit.ng, ls.pdf, p_sel, pdf_b, ls.delta,
+    side_l = bump_correction.sided(v.lobes, wi_l, dot(ls.wi, hit.ng))
+    contrib, w, live = nee.contribution(side_l, ls.wi, hit.ng, ls.pdf, p_sel, pdf_b, ls.delta,
                                         ctx.settings.strategy == "mis", paths.beta, f, ls.Le)
     if ctx.links is not None:
         contrib, w, live = linking_nee(ctx, e, hit.prim, contrib, w, live)
@@ -492,10 +500,14 @@ def scatter(ctx, paths, v, depth):
     u = uniforms(ctx, paths, vertex_set(depth, BSDF))
     if ctx.subsurface:
         wi_l, weight, pdf, delta = subsurface.sample(v, u)
+        bent = v.sampled_bent
     else:
-        wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u[:, 0], u[:, 1], u[:, 2], *v.lobes_wo)
+        bent = np.zeros(len(u), bool)
+        wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u[:, 0], u[:, 1], u[:, 2], *v.lobes_wo, bent=bent)
     wi = v.world(wi_l)
-    ok, paths.beta = throughput.update(wi, hit.ng, wi_l, weight, paths.beta, paths.bounce, s.rr_depth, u[:, 3])
+    # Rows with a second normal (Bump Map Correction) judge a sample's side by its lobe's.
+    side_l = bump_correction.sided(v.lobes, wi_l, None, reflected=bent)
+    ok, paths.beta = throughput.update(wi, hit.ng, side_l, weight, paths.beta, paths.bounce, s.rr_depth, u[:, 3])
     through = transparency.sampled_transparent(ctx, hit, delta, wi_l, v.wo_l)
     if through.any():
         # A transparent pass is not a vertex: the path keeps its direction,

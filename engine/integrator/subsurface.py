@@ -187,11 +187,15 @@ def sample(v, u):
     their rows get the entry bounce (``entry``), recorded in ``v.bssrdf``
     for ``walk``; the BSDF lobes' weights and pdfs include their share."""
     rows, slot, bsdf_sel, u_bsdf, share = split(v, u[:, 0])
-    wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u_bsdf, u[:, 1], u[:, 2], bsdf_sel, v.lobes_wo[1])
+    bent = np.zeros(len(u), bool)
+    wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u_bsdf, u[:, 1], u[:, 2], bsdf_sel, v.lobes_wo[1],
+                                           bent=bent)
     weight = weight / np.where(share > 0, share, 1.0)[:, None]
     pdf = pdf * share
     entry(v, rows, slot, u[:, 1], u[:, 2], wi_l, weight, pdf, delta)
     v.bssrdf = (rows, slot)
+    bent[rows] = False
+    v.sampled_bent = bent
     # Which rows sampled a diffuse-class lobe (Cycles' PATH_RAY_DIFFUSE_ANCESTOR
     # after the bounce), by the choice bsdf.sample made.
     cdf = np.cumsum(bsdf_sel, axis=1)

@@ -199,24 +199,6 @@ def test_normal_map_on_back_faces_flips_with_the_surface():
                                -c / np.linalg.norm(c), atol=1e-9)
 
 
-def test_normals_bent_away_from_the_view_are_named_per_material():
-    """A normal map whose normal lies past the horizon of an oblique view
-    (c = (0, 0.02, 0.5) leans 88 degrees towards +y; the viewer sits towards
-    -y) is shaded with the unbent normal, which differs from Cycles' Bump
-    Map Correction: the render names the material and the share of points;
-    a gentle map (half the lean) is not named."""
-    cam = Camera(look_at((0, -4, 1.2), (0, 0, 0)), lens=35.0, resolution=(12, 12))
-    for color, named in (((0.5, 1.0, 0.51), True), ((0.5, 0.6, 0.9), False)):
-        mat = Material("steep map" if named else "gentle map", normal=NormalMap(color, 1.0))
-        scene = ortho_scene(mat)
-        scene.camera = cam
-        result = render(scene, RenderSettings(samples=1, samples_per_pass=1, max_bounces=0))
-        said = [w for w in result.warnings if "turns" in w]
-        assert bool(said) == named, result.warnings
-        if named:
-            assert "'steep map'" in said[0] and "100.0%" in said[0], said
-
-
 def test_exported_tangents_are_used_and_follow_the_instance_matrix():
     """Tangents along y with sign -1: the frame is (y, -(z x y), z) = (y, x, z)."""
     mesh = uv_quad()
