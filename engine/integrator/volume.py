@@ -18,6 +18,7 @@ the phase-sampled ray finding a light.
 import numpy as np
 
 from .. import media
+from ..media import equiangular
 from ..accel import shadow_rays
 from ..sampler import BSDF, LIGHT, MEDIUM, emitter_set, vertex_set
 from ..sampling import power_heuristic
@@ -32,7 +33,9 @@ def free_flights(ctx, paths, found, depth):
     """The FreeFlight of the paths in a medium (None when none is): lights
     met on the way are scaled by what reaches them, and hidden where the
     path scattered first.  The throughput changes later (``after_flights``):
-    the emitters stage weighs lights by the throughput at the ray's start."""
+    the emitters stage weighs lights by the throughput at the ray's start.
+    Segments in homogeneous media also choose where their direct light is
+    estimated (``_direct_setup``)."""
     inside = np.flatnonzero((paths.stack >= 0).any(axis=1))
     if len(inside) == 0:
         return None
@@ -40,6 +43,8 @@ def free_flights(ctx, paths, found, depth):
     t_end = np.minimum(found.t[inside], on.tmax)
     may = ~transparency.last_vertices(ctx, on)   # past max_bounces or volume_bounces: no scattering
     u = ctx.sampler.get(on.pseed, on.sample, vertex_set(depth, MEDIUM))
+    u_distance = u[:, 1].copy()
+    direct = _direct_setup(ctx, on, t_end, may, u_distance, depth)
     lit = np.flatnonzero(found.light[inside])
     x_light = np.full(len(inside), np.inf)
     if len(lit):
@@ -48,15 +53,92 @@ def free_flights(ctx, paths, found, depth):
         if ctx.transparent_shadows:   # light_t is measured from where the straight line started
             x = x - dot(paths.o[rows] - paths.mis_o[rows], paths.d[rows])
         x_light[lit] = x
-    flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u[:, 1],
+    flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u_distance,
                                on.o, on.d, tracking_rng(ctx, on.pseed, on.sample, depth, 1), x_light)
     flight.rows = inside
+    _direct_points(ctx, on, flight, direct, u[:, 2])
     if len(lit):
         rows = inside[lit]
         x = x_light[lit]
         found.Le[rows] *= media.light_factor(flight, lit, x)
         found.light[rows] = flight.t[lit] > x
     return flight
+
+
+# ----------------------------------------------------------------------------
+# where a segment's direct light is estimated (Cycles' direct scatter)
+
+def _direct_setup(ctx, on, t_end, may, u_distance, depth):
+    """Segments in homogeneous scattering media that may scatter pick how
+    their direct-light point is sampled (the stack's Volume > Sampling,
+    equiangular.stack_method): by distance (the scattering point of the
+    free flight itself), or equiangular towards a point on a light sampled
+    from the ray's start, or one of the two with probability 1/2 each (MIS:
+    u_distance is rescaled in place for the half it picks, as Cycles'
+    rscatter).  Distant lights and worlds give distance sampling.  Returns
+    (rows, equiangular (bool), mis (bool), light point P) or None."""
+    if ctx.lights.count == 0:
+        return None
+    _, ss, _, _ = ctx.media.coefficients(on.stack)
+    cand = np.flatnonzero(may & ~ctx.media.heterogeneous(on.stack) & np.any(ss > 0, axis=1))
+    if len(cand) == 0:
+        return None
+    method = equiangular.stack_method(ctx.media.sampling, on.stack[cand])
+    keep = method != equiangular.DISTANCE
+    cand, method = cand[keep], method[keep]
+    if len(cand) == 0:
+        return None
+    o = on.o[cand]
+    ul = ctx.sampler.get(on.pseed[cand], on.sample[cand], vertex_set(depth, LIGHT))
+    e, p_sel = ctx.lights.select(ul[:, 0], o, np.zeros_like(o))
+    ls = ctx.lights.sample(e, o, ul[:, 1], ul[:, 2], ul[:, 3])
+    ok = (ls.pdf > 0) & (p_sel > 0) & np.isfinite(ls.dist)
+    cand, method = cand[ok], method[ok]
+    P = o[ok] + ls.wi[ok] * ls.dist[ok, None]
+    mis = method == equiangular.MIS
+    xi = u_distance[cand]
+    equi = ~mis | (xi >= 0.5)
+    u_distance[cand] = np.where(mis, np.where(xi < 0.5, 2.0 * xi, 2.0 * xi - 1.0), xi)
+    return cand, equi, mis, P, t_end[cand]
+
+
+def _direct_points(ctx, on, flight, direct, xi):
+    """Sets flight.nee_scale (the factor on the light sampled at a free
+    flight's scattering point: 0 where the segment's direct light is
+    estimated at an equiangular point, the MIS weight 2 w_distance where
+    distance was picked by MIS) and flight.direct: (rows, t, throughput
+    factor) of the equiangular points, sigma_s T(t) / pdf, times
+    2 w_equiangular under MIS (power heuristic, Cycles'
+    volume_direct_scatter_mis)."""
+    n = len(flight.t_end)
+    flight.nee_scale = np.ones(n)
+    flight.direct = None
+    if direct is None or len(direct[0]) == 0:
+        return
+    rows, equi, mis, P, t_end = direct
+    o, d = on.o[rows], on.d[rows]
+    pc, st = flight.channel_pdf[rows], flight.sigma_t[rows]
+    flight.nee_scale[rows[equi]] = 0.0
+    dist = np.flatnonzero(~equi & flight.scatter[rows])
+    if len(dist):
+        t = flight.t[rows[dist]]
+        p_d = (pc[dist] * st[dist] * np.exp(-st[dist] * t[:, None])).sum(axis=1)
+        p_e = equiangular.pdf(o[dist], d[dist], P[dist], t_end[dist], t)
+        flight.nee_scale[rows[dist]] = 2.0 * power_heuristic(p_d, p_e)
+    k = np.flatnonzero(equi)
+    if len(k) == 0:
+        return
+    t, p_e = equiangular.sample(o[k], d[k], P[k], t_end[k], xi[rows[k]])
+    good = p_e > 0
+    k, t, p_e = k[good], t[good], p_e[good]
+    _, ss, _, _ = ctx.media.coefficients(on.stack[rows[k]])
+    T = np.exp(-st[k] * t[:, None])
+    w = ss * T / p_e[:, None]
+    m = mis[k]
+    if m.any():
+        p_d = (pc[k[m]] * st[k[m]] * T[m]).sum(axis=1)
+        w[m] *= 2.0 * power_heuristic(p_e[m], p_d)[:, None]
+    flight.direct = (rows[k], t, w)
 
 
 def tracking_rng(ctx, pseed, sample, depth, salt):
@@ -74,6 +156,15 @@ def after_flights(ctx, paths, found, ended, flight, depth):
     bounce.  Returns (paths, found, ended) of the others and the scattered
     paths moved on (None when none)."""
     r = flight.rows
+    if flight.direct is not None:   # equiangular direct-light points, lit with the throughput at the start
+        k, t, w = flight.direct
+        rows = r[k]
+        at = paths.take(rows)
+        at.beta = at.beta * w
+        before = at.L.copy()
+        phase = ctx.media.vertex_phase(flight.g[k], flight.phase_medium[k])
+        direct_light(ctx, at, at.o + at.d * t[:, None], phase, depth)
+        paths.L[rows] += at.L - before
     paths.L[r] += paths.beta[r] * flight.emitted
     paths.beta[r] *= flight.weight
     sc = flight.scatter & ~ended[r]
@@ -84,7 +175,8 @@ def after_flights(ctx, paths, found, ended, flight, depth):
     keep[rows] = False
     moved = paths.take(rows)
     p = moved.o + moved.d * flight.t[sc, None]
-    volume_vertex(ctx, moved, p, ctx.media.vertex_phase(flight.g[sc], flight.phase_medium[sc]), depth)
+    volume_vertex(ctx, moved, p, ctx.media.vertex_phase(flight.g[sc], flight.phase_medium[sc]), depth,
+                  flight.nee_scale[sc])
     moved = moved.take(row_any_positive(moved.beta))
     return paths.take(keep), found.take(keep), ended[keep], moved
 
@@ -103,21 +195,23 @@ class _Points:
         return self.n
 
 
-def volume_vertex(ctx, paths, p, phase, depth):
+def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None):
     """Light sampling at scattering points p (phase functions ``phase``,
-    MediumTable.vertex_phase) and the phase-function sample of the next
-    ray; moves the paths in place."""
+    MediumTable.vertex_phase; its contributions times ``nee_scale``, None:
+    1) and the phase-function sample of the next ray; moves the paths in
+    place."""
     n = len(paths.pix)
     zeros = np.zeros((n, 3))
-    for _, mode, emitters in nee_rounds(ctx, _Points(n), None):
-        if mode == "select":
-            u = ctx.sampler.get(paths.pseed, paths.sample, vertex_set(depth, LIGHT))
-            e, p_sel = ctx.lights.select(u[:, 0], p, zeros)
-            _light_sample(ctx, paths, p, phase, e, p_sel, u[:, 1:])
-        else:
-            for e in emitters:
-                u = ctx.sampler.get(paths.pseed, paths.sample, emitter_set(depth, e))
-                _light_sample(ctx, paths, p, phase, np.full(n, e), np.ones(n), u[:, :3])
+    if nee_scale is None:
+        direct_light(ctx, paths, p, phase, depth)
+    else:
+        lit = np.flatnonzero(nee_scale > 0)
+        if len(lit):
+            at = paths.take(lit)
+            at.beta = at.beta * nee_scale[lit, None]
+            before = at.L.copy()
+            direct_light(ctx, at, p[lit], phase_rows(phase, lit), depth)
+            paths.L[lit] += at.L - before
     u = ctx.sampler.get(paths.pseed, paths.sample, vertex_set(depth, BSDF))
     wi, pdf = media.phase_sample(paths.d, phase, u[:, 0], u[:, 1])
     paths.o, paths.d, paths.mis_o, paths.prev_p = p, wi, p, p
@@ -133,6 +227,26 @@ def volume_vertex(ctx, paths, p, phase, depth):
         # Blender's Volume Scatter ray visibility is not exported: volume
         # rays see what indirect rays see.
         paths.ray = np.full(n, VIS_INDIRECT, np.uint8)
+
+
+def phase_rows(phase, rows):
+    return tuple(a[rows] for a in phase)
+
+
+def direct_light(ctx, paths, p, phase, depth):
+    """Next-event estimation at points p in media (phase functions
+    ``phase``): paths.L gains the light reaching them times paths.beta."""
+    n = len(paths.pix)
+    zeros = np.zeros((n, 3))
+    for _, mode, emitters in nee_rounds(ctx, _Points(n), None):
+        if mode == "select":
+            u = ctx.sampler.get(paths.pseed, paths.sample, vertex_set(depth, LIGHT))
+            e, p_sel = ctx.lights.select(u[:, 0], p, zeros)
+            _light_sample(ctx, paths, p, phase, e, p_sel, u[:, 1:])
+        else:
+            for e in emitters:
+                u = ctx.sampler.get(paths.pseed, paths.sample, emitter_set(depth, e))
+                _light_sample(ctx, paths, p, phase, np.full(n, e), np.ones(n), u[:, :3])
 
 
 def _light_sample(ctx, paths, p, phase, e, p_sel, u):

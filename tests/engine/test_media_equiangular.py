@@ -1,0 +1,115 @@
+"""Equiangular sampling of direct-light points in homogeneous media and its
+MIS with distance sampling (engine/media/equiangular.py, the direct-light
+points of engine/integrator/volume.py; Cycles' shade_volume.h).
+
+The sampler's inverse CDF against its pdf in closed form, and a spot light
+inside fog rendered with Volume > Sampling 'DISTANCE', 'EQUIANGULAR' and
+'MULTIPLE_IMPORTANCE': the three agree block by block and over the whole
+image (one statistical family), and equiangular / MIS have a lower variance
+than distance sampling (the gain printed).
+"""
+import numpy as np
+import pytest
+
+from ember_stats import block_means_var, family_z, z_scores
+from engine.media import equiangular
+from engine.render import render
+from engine.scene import Camera, Instance, Lobe, Material, RenderSettings, Scene, SpotLight, Volume, World
+from engine.testscenes import box, look_at, quad
+
+PASS = (Lobe("transparent", (1.0, 1.0, 1.0)),)
+
+
+@pytest.mark.parametrize("t_end", [0.7, 3.0, np.inf])
+def test_equiangular_inverse_cdf_matches_its_pdf(t_end):
+    """t(xi) from ``sample`` integrates ``pdf`` to xi (trapezoid on a fine
+    grid), its pdf is the one ``pdf`` gives, and pdf integrates to 1."""
+    rng = np.random.default_rng(5)
+    n = 6
+    o = rng.normal(size=(n, 3))
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    P = o + d * rng.uniform(-0.5, 2.0, n)[:, None] + rng.normal(scale=0.3, size=(n, 3))
+    te = np.full(n, t_end)
+    xi = np.linspace(0.05, 0.95, 7)
+    for i in range(n):
+        oo, dd, PP, tt = (np.repeat(a[i:i + 1], len(xi), axis=0) for a in (o, d, P, te))
+        t, p = equiangular.sample(oo, dd, PP, tt, xi)
+        assert (p > 0).all()
+        np.testing.assert_allclose(p, equiangular.pdf(oo, dd, PP, tt, t), rtol=1e-12)
+        top = t_end if np.isfinite(t_end) else 1e4
+        grid = np.concatenate([np.linspace(0, min(top, 20.0), 200001), np.geomspace(20.0, 1e4, 20001)[1:]]) \
+            if not np.isfinite(t_end) else np.linspace(0, top, 200001)
+        g = len(grid)
+        pg = equiangular.pdf(np.repeat(o[i:i + 1], g, 0), np.repeat(d[i:i + 1], g, 0),
+                             np.repeat(P[i:i + 1], g, 0), np.full(g, t_end), grid)
+        cdf = np.concatenate([[0.0], np.cumsum(0.5 * (pg[1:] + pg[:-1]) * np.diff(grid))])
+        np.testing.assert_allclose(np.interp(t, grid, cdf), xi, atol=2e-4)
+        if np.isfinite(t_end):
+            assert abs(cdf[-1] - 1.0) < 1e-6
+
+
+def test_stack_method_combines_like_cycles():
+    m = np.array([equiangular.DISTANCE, equiangular.EQUIANGULAR, equiangular.MIS])
+    stacks = np.array([[0, -1], [1, -1], [2, -1], [0, 1], [1, 1], [-1, -1]])
+    assert list(equiangular.stack_method(m, stacks)) == [equiangular.DISTANCE, equiangular.EQUIANGULAR,
+                                                         equiangular.MIS, equiangular.MIS,
+                                                         equiangular.EQUIANGULAR, equiangular.DISTANCE]
+
+
+def spot_in_fog(sampling, size=(24, 18)):
+    """A spot shining down through a fog box onto a grey floor, the camera
+    outside the fog: the beam and its lit floor."""
+    fog = Material("fog", PASS, volume=Volume(scattering=(0.5, 0.5, 0.5), absorption=(0.05, 0.08, 0.12),
+                                              anisotropy=0.3, sampling=sampling))
+    floor = Material("floor", (Lobe("diffuse", (0.6, 0.6, 0.6)),))
+    spot = SpotLight((0.0, 0.0, 1.2), (60.0, 60.0, 60.0), radius=0.1, direction=(0.0, 0.0, -1.0),
+                     spot_size=1.1, spot_blend=0.2)
+    cam = Camera(look_at((0, -6, 0.3), (0, 0, 0.1)), lens=40, resolution=size)
+    meshes = [box((3.0, 3.0, 3.0)), quad([[-1.4, -1.4, -1.2], [1.4, -1.4, -1.2], [1.4, 1.4, -1.2], [-1.4, 1.4, -1.2]])]
+    instances = [Instance(0, materials=[0], name="fog box"), Instance(1, materials=[1], name="floor")]
+    return Scene(meshes, instances, [fog, floor], [spot], World((0.0, 0.0, 0.0)), cam)
+
+
+def test_spot_in_fog_sampling_methods_agree():
+    """Distance, equiangular and MIS direct-light points give the same
+    image (blocks and whole-image means, single scattering as Cycles'
+    default volume_bounces 0), and equiangular sampling cuts the variance
+    of a spot's beam."""
+    results = {}
+    for seed, sampling in enumerate(("DISTANCE", "EQUIANGULAR", "MULTIPLE_IMPORTANCE"), start=41):
+        spp = 1024
+        results[sampling] = render(spot_in_fog(sampling), RenderSettings(samples=spp, samples_per_pass=spp,
+                                                                         seed=seed, max_bounces=4))
+        assert np.isfinite(results[sampling].image).all()
+    blocks = {k: block_means_var(r.image[..., :3].astype(np.float64), r.variance.astype(np.float64), 3)
+              for k, r in results.items()}
+    ref = blocks["MULTIPLE_IMPORTANCE"][0]
+    keep = ref > 0.02 * ref.max()
+    names = list(results)
+    pairs = [(names[i], names[j]) for i in range(3) for j in range(i + 1, 3)]
+    zc = family_z(__name__ + ".methods", (int(keep.sum()) + 3) * len(pairs))
+    worst = 0.0
+    for a, b in pairs:
+        z = z_scores(*blocks[a], *blocks[b])[keep]
+        rel_se = np.sqrt(blocks[a][1][keep] + blocks[b][1][keep]) / blocks[b][0][keep]
+        ma, mb = (results[k].image[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (a, b))
+        se = np.sqrt(sum(results[k].variance[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (a, b)))
+        zm = (ma - mb) / se
+        worst = max(worst, np.abs(z).max(), np.abs(zm).max())
+        print(f"{a} vs {b}: {keep.sum()} block-channels, max |z| {np.abs(z).max():.2f} (limit {zc:.2f}), "
+              f"median block detects {zc * np.median(rel_se):.1%}; image |z| {np.abs(zm).max():.2f}, "
+              f"detects {(zc * se / mb).max():.2%}")
+    # The variance gain over the lit pixels, robustly: the median of the
+    # per-pixel variance ratios (a distance-sampled image's total variance
+    # is dominated by rare points next to the light).
+    lit = results["MULTIPLE_IMPORTANCE"].image[..., :3].mean(axis=2)
+    lit = lit > 0.05 * lit.max()
+    var = {k: r.variance[..., :3].astype(np.float64).sum(axis=2)[lit] for k, r in results.items()}
+    gain = {k: float(np.median(var["DISTANCE"] / np.maximum(v, 1e-30))) for k, v in var.items()}
+    total = {k: float(v.sum()) for k, v in var.items()}
+    print(f"{lit.sum()} lit pixels; median variance gain over distance sampling:",
+          {k: f"{g:.2f}x" for k, g in gain.items()}, "; total variance", total)
+    assert keep.sum() >= 20
+    assert worst < zc
+    assert gain["EQUIANGULAR"] > 1.2 and gain["MULTIPLE_IMPORTANCE"] > 1.0, gain
