@@ -18,6 +18,7 @@ the phase-sampled ray finding a light.
 import numpy as np
 
 from .. import media
+from ..lights.point import PointLights
 from ..media import equiangular
 from ..accel import shadow_rays
 from ..sampler import BSDF, LIGHT, MEDIUM, emitter_set, vertex_set
@@ -95,11 +96,35 @@ def _direct_setup(ctx, on, t_end, may, u_distance, depth):
     ok = (ls.pdf > 0) & (p_sel > 0) & np.isfinite(ls.dist)
     cand, method = cand[ok], method[ok]
     P = o[ok] + ls.wi[ok] * ls.dist[ok, None]
+    t0, t1 = _lit_segment(ctx, on.o[cand], on.d[cand], e[ok], t_end[cand])
     mis = method == equiangular.MIS
     xi = u_distance[cand]
     equi = ~mis | (xi >= 0.5)
     u_distance[cand] = np.where(mis, np.where(xi < 0.5, 2.0 * xi, 2.0 * xi - 1.0), xi)
-    return cand, equi, mis, P, t_end[cand]
+    return cand, equi, mis, P, t0, t1
+
+
+def _lit_segment(ctx, o, d, e, t_end):
+    """(t0, t1) of the rays' part the emitters e can light: a spot's cone
+    (Cycles' volume_valid_direct_ray_segment), else the whole segment."""
+    t0, t1 = np.zeros(len(o)), np.array(t_end, np.float64, copy=True)
+    for g in ctx.lights.groups:
+        table = g.table
+        if not isinstance(table, PointLights) or not table.spot.any():
+            continue
+        j = ctx.lights.local[e]
+        rows = np.flatnonzero((ctx.lights.kind[e] == g.definition.kind) & table.spot[np.minimum(j, table.count - 1)])
+        rows = rows[table.cos_half[j[rows]] >= 0.0]   # cones up to 180 degrees wide
+        if len(rows):
+            jr = j[rows]
+            # The spot's attenuation is taken towards the sampled point of
+            # its sphere or disk: the cone tangent to the sphere (apex moved
+            # back r / sin(half angle)) holds every point it lights.
+            sin_half = np.sqrt(np.maximum(1.0 - table.cos_half[jr] ** 2, 1e-12))
+            apex = table.pos[jr] - table.dir[jr] * (table.radius[jr] / sin_half)[:, None]
+            t0[rows], t1[rows] = equiangular.cone_segment(o[rows], d[rows], apex, table.dir[jr],
+                                                          table.cos_half[jr], t_end[rows])
+    return t0, t1
 
 
 def _direct_points(ctx, on, flight, direct, xi):
@@ -115,7 +140,7 @@ def _direct_points(ctx, on, flight, direct, xi):
     flight.direct = None
     if direct is None or len(direct[0]) == 0:
         return
-    rows, equi, mis, P, t_end = direct
+    rows, equi, mis, P, t0, t1 = direct
     o, d = on.o[rows], on.d[rows]
     pc, st = flight.channel_pdf[rows], flight.sigma_t[rows]
     flight.nee_scale[rows[equi]] = 0.0
@@ -123,12 +148,12 @@ def _direct_points(ctx, on, flight, direct, xi):
     if len(dist):
         t = flight.t[rows[dist]]
         p_d = (pc[dist] * st[dist] * np.exp(-st[dist] * t[:, None])).sum(axis=1)
-        p_e = equiangular.pdf(o[dist], d[dist], P[dist], t_end[dist], t)
+        p_e = equiangular.pdf(o[dist], d[dist], P[dist], t0[dist], t1[dist], t)
         flight.nee_scale[rows[dist]] = 2.0 * power_heuristic(p_d, p_e)
     k = np.flatnonzero(equi)
     if len(k) == 0:
         return
-    t, p_e = equiangular.sample(o[k], d[k], P[k], t_end[k], xi[rows[k]])
+    t, p_e = equiangular.sample(o[k], d[k], P[k], t0[k], t1[k], xi[rows[k]])
     good = p_e > 0
     k, t, p_e = k[good], t[good], p_e[good]
     _, ss, _, _ = ctx.media.coefficients(on.stack[rows[k]])

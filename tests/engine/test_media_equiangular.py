@@ -34,15 +34,15 @@ def test_equiangular_inverse_cdf_matches_its_pdf(t_end):
     xi = np.linspace(0.05, 0.95, 7)
     for i in range(n):
         oo, dd, PP, tt = (np.repeat(a[i:i + 1], len(xi), axis=0) for a in (o, d, P, te))
-        t, p = equiangular.sample(oo, dd, PP, tt, xi)
+        t, p = equiangular.sample(oo, dd, PP, np.zeros(len(xi)), tt, xi)
         assert (p > 0).all()
-        np.testing.assert_allclose(p, equiangular.pdf(oo, dd, PP, tt, t), rtol=1e-12)
+        np.testing.assert_allclose(p, equiangular.pdf(oo, dd, PP, np.zeros(len(xi)), tt, t), rtol=1e-12)
         top = t_end if np.isfinite(t_end) else 1e4
         grid = np.concatenate([np.linspace(0, min(top, 20.0), 200001), np.geomspace(20.0, 1e4, 20001)[1:]]) \
             if not np.isfinite(t_end) else np.linspace(0, top, 200001)
         g = len(grid)
         pg = equiangular.pdf(np.repeat(o[i:i + 1], g, 0), np.repeat(d[i:i + 1], g, 0),
-                             np.repeat(P[i:i + 1], g, 0), np.full(g, t_end), grid)
+                             np.repeat(P[i:i + 1], g, 0), np.zeros(g), np.full(g, t_end), grid)
         cdf = np.concatenate([[0.0], np.cumsum(0.5 * (pg[1:] + pg[:-1]) * np.diff(grid))])
         np.testing.assert_allclose(np.interp(t, grid, cdf), xi, atol=2e-4)
         if np.isfinite(t_end):
@@ -113,3 +113,32 @@ def test_spot_in_fog_sampling_methods_agree():
     assert keep.sum() >= 20
     assert worst < zc
     assert gain["EQUIANGULAR"] > 1.2 and gain["MULTIPLE_IMPORTANCE"] > 1.0, gain
+
+
+@pytest.mark.parametrize("cos_half", [0.95, 0.6, 0.0])
+def test_cone_segment_is_where_the_ray_is_inside_the_cone(cos_half):
+    """The spot's lit interval of random rays against points tested one by
+    one along them (grid spacing 1e-3: endpoints agree within 2 steps)."""
+    rng = np.random.default_rng(8)
+    n = 200
+    o = rng.uniform(-2, 2, (n, 3))
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    apex = np.zeros((n, 3))
+    axis = np.tile([0.0, 0.0, -1.0], (n, 1))
+    t_end = np.where(np.arange(n) % 3 == 0, np.inf, rng.uniform(0.5, 5.0, n))
+    t0, t1 = equiangular.cone_segment(o, d, apex, axis, np.full(n, cos_half), t_end)
+    grid = np.arange(0, 8.0, 1e-3)
+    for i in range(n):
+        top = min(t_end[i], 8.0)
+        ts = grid[grid <= top]
+        x = o[i] + d[i] * ts[:, None]
+        inside = x @ axis[i] >= cos_half * np.linalg.norm(x, axis=1)
+        if not inside.any():
+            assert t1[i] <= t0[i] + 2e-3 or t0[i] >= top - 2e-3, (i, t0[i], t1[i])
+            continue
+        assert abs(t0[i] - ts[inside][0]) < 2e-3, (i, t0[i], ts[inside][0])
+        if ts[inside][-1] < top - 2e-3:
+            assert abs(min(t1[i], 8.0) - ts[inside][-1]) < 2e-3, (i, t1[i], ts[inside][-1])
+        else:
+            assert t1[i] >= top - 2e-3
