@@ -57,7 +57,7 @@ def free_flights(ctx, paths, found, depth):
     flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u_distance,
                                on.o, on.d, tracking_rng(ctx, on.pseed, on.sample, depth, 1), x_light)
     flight.rows = inside
-    _direct_points(ctx, on, flight, direct, u[:, 2])
+    _direct_points(ctx, on, flight, direct, u)
     if len(lit):
         rows = inside[lit]
         x = x_light[lit]
@@ -100,7 +100,7 @@ def _direct_setup(ctx, on, t_end, may, u_distance, depth):
     mis = method == equiangular.MIS
     xi = u_distance[cand]
     equi = ~mis | (xi >= 0.5)
-    u_distance[cand] = np.where(mis, np.where(xi < 0.5, 2.0 * xi, 2.0 * xi - 1.0), xi)
+    u_distance[cand] = np.where(mis, np.where(xi < 0.5, 2.0 * xi, 2.0 * xi - 1.0), xi)   # Cycles' rscatter
     return cand, equi, mis, P, t0, t1
 
 
@@ -127,13 +127,15 @@ def _lit_segment(ctx, o, d, e, t_end):
     return t0, t1
 
 
-def _direct_points(ctx, on, flight, direct, xi):
+def _direct_points(ctx, on, flight, direct, u):
     """Sets flight.nee_scale (the factor on the light sampled at a free
-    flight's scattering point: 0 where the segment's direct light is
-    estimated at an equiangular point, the MIS weight 2 w_distance where
-    distance was picked by MIS) and flight.direct: (rows, t, throughput
-    factor) of the equiangular points, sigma_s T(t) / pdf, times
-    2 w_equiangular under MIS (power heuristic, Cycles'
+    flight's scattering point: 1, or 0 for the segments ``_direct_setup``
+    chose a direct-light point for) and flight.direct: (rows, t, throughput
+    factor) of those points, sigma_s T(t) / pdf, inside the part of the
+    segment the light can reach (a spot's cone): equiangular, or under MIS
+    either equiangular or a distance (the free flight's channel mixture of
+    exponentials truncated to that part, as Cycles 5.0's homogeneous direct
+    scatter), weighted 2 w by the power heuristic (Cycles'
     volume_direct_scatter_mis)."""
     n = len(flight.t_end)
     flight.nee_scale = np.ones(n)
@@ -141,29 +143,53 @@ def _direct_points(ctx, on, flight, direct, xi):
     if direct is None or len(direct[0]) == 0:
         return
     rows, equi, mis, P, t0, t1 = direct
+    flight.nee_scale[rows] = 0.0
     o, d = on.o[rows], on.d[rows]
     pc, st = flight.channel_pdf[rows], flight.sigma_t[rows]
-    flight.nee_scale[rows[equi]] = 0.0
-    dist = np.flatnonzero(~equi & flight.scatter[rows])
-    if len(dist):
-        t = flight.t[rows[dist]]
-        p_d = (pc[dist] * st[dist] * np.exp(-st[dist] * t[:, None])).sum(axis=1)
-        p_e = equiangular.pdf(o[dist], d[dist], P[dist], t0[dist], t1[dist], t)
-        flight.nee_scale[rows[dist]] = 2.0 * power_heuristic(p_d, p_e)
-    k = np.flatnonzero(equi)
-    if len(k) == 0:
+    xi, uc = u[rows, 2], u[rows, 3]
+    t = np.zeros(len(rows))
+    p_e = np.zeros(len(rows))
+    e = np.flatnonzero(equi)
+    t[e], p_e[e] = equiangular.sample(o[e], d[e], P[e], t0[e], t1[e], xi[e])
+    k = np.flatnonzero(~equi)
+    if len(k):
+        c = np.minimum((uc[k, None] >= np.cumsum(pc[k], axis=1)).sum(axis=1), 2)
+        t[k] = _truncated_exponential(st[k, c], t0[k], t1[k], xi[k])
+        p_e[k] = equiangular.pdf(o[k], d[k], P[k], t0[k], t1[k], t[k])
+    p_d = _truncated_pdf(pc, st, t0, t1, t)
+    p = np.where(equi, p_e, p_d)
+    good = (p > 0) & np.isfinite(t) & (t1 > t0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = np.where(mis, 2.0 * power_heuristic(p, np.where(equi, p_d, p_e)), 1.0)
+    keep = np.flatnonzero(good)
+    if len(keep) == 0:
         return
-    t, p_e = equiangular.sample(o[k], d[k], P[k], t0[k], t1[k], xi[rows[k]])
-    good = p_e > 0
-    k, t, p_e = k[good], t[good], p_e[good]
-    _, ss, _, _ = ctx.media.coefficients(on.stack[rows[k]])
-    T = np.exp(-st[k] * t[:, None])
-    w = ss * T / p_e[:, None]
-    m = mis[k]
-    if m.any():
-        p_d = (pc[k[m]] * st[k[m]] * T[m]).sum(axis=1)
-        w[m] *= 2.0 * power_heuristic(p_e[m], p_d)[:, None]
-    flight.direct = (rows[k], t, w)
+    _, ss, _, _ = ctx.media.coefficients(on.stack[rows[keep]])
+    T = np.exp(-st[keep] * t[keep, None])
+    flight.direct = (rows[keep], t[keep], ss * T * (w[keep] / p[keep])[:, None])
+
+
+def _truncated_exponential(sigma, t0, t1, xi):
+    """Distances in [t0, t1] of density sigma exp(-sigma (t - t0)),
+    renormalized (uniform where sigma is 0)."""
+    length = t1 - t0
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        mass = -np.expm1(-sigma * length)
+        t = t0 - np.log1p(-xi * mass) / np.where(sigma > 0, sigma, 1.0)
+        t = np.where(sigma > 0, t, t0 + xi * np.where(np.isfinite(length), length, 0.0))
+    return np.clip(t, t0, t1)
+
+
+def _truncated_pdf(pc, sigma, t0, t1, t):
+    """The channel mixture's pdf of ``_truncated_exponential`` distances."""
+    length = (t1 - t0)[:, None]
+    x = (t - t0)[:, None]
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        mass = -np.expm1(-sigma * length)
+        each = np.where(sigma > 0, sigma * np.exp(-sigma * x) / np.where(mass > 0, mass, 1.0),
+                        np.where(np.isfinite(length), 1.0 / np.where(length > 0, length, 1.0), 0.0))
+    out = (pc * np.where(np.isfinite(each), each, 0.0)).sum(axis=1)
+    return np.where((t >= t0) & (t <= t1) & (t1 > t0), out, 0.0)
 
 
 def tracking_rng(ctx, pseed, sample, depth, salt):
