@@ -70,38 +70,39 @@ def free_flights(ctx, paths, found, depth):
 # where a segment's direct light is estimated (Cycles' direct scatter)
 
 def _direct_setup(ctx, on, t_end, may, u_distance, depth):
-    """Segments in homogeneous scattering media that may scatter pick how
-    their direct-light point is sampled (the stack's Volume > Sampling,
-    equiangular.stack_method): by distance (the scattering point of the
-    free flight itself), or equiangular towards a point on a light sampled
-    from the ray's start, or one of the two with probability 1/2 each (MIS:
-    u_distance is rescaled in place for the half it picks, as Cycles'
-    rscatter).  Distant lights and worlds give distance sampling.  Returns
-    (rows, equiangular (bool), mis (bool), light point P) or None."""
-    if ctx.lights.count == 0:
+    """Segments in homogeneous scattering media that may scatter get a
+    direct-light point of their own, as Cycles 5.0's: a light is sampled
+    from the ray's start (its emitter is the one the point samples), and
+    the stack's Volume > Sampling (equiangular.stack_method) says how the
+    point is found: a distance, equiangular towards the sampled light point,
+    or one of the two with probability 1/2 each (MIS).  Distant lights and
+    worlds take distance sampling.  Only with MIS strategy and one light
+    picked per vertex (else the scattering point samples light, as before).
+    Returns (rows, equiangular (bool), mis (bool), light point P, t0, t1,
+    emitter, its selection probability) or None."""
+    s = ctx.settings
+    if ctx.lights.count == 0 or s.strategy != "mis" or s.light_selection == "all":
         return None
     _, ss, _, _ = ctx.media.coefficients(on.stack)
     cand = np.flatnonzero(may & ~ctx.media.heterogeneous(on.stack) & np.any(ss > 0, axis=1))
     if len(cand) == 0:
         return None
     method = equiangular.stack_method(ctx.media.sampling, on.stack[cand])
-    keep = method != equiangular.DISTANCE
-    cand, method = cand[keep], method[keep]
-    if len(cand) == 0:
-        return None
     o = on.o[cand]
     ul = ctx.sampler.get(on.pseed[cand], on.sample[cand], vertex_set(depth, LIGHT))
     e, p_sel = ctx.lights.select(ul[:, 0], o, np.zeros_like(o))
     ls = ctx.lights.sample(e, o, ul[:, 1], ul[:, 2], ul[:, 3])
-    ok = (ls.pdf > 0) & (p_sel > 0) & np.isfinite(ls.dist)
-    cand, method = cand[ok], method[ok]
-    P = o[ok] + ls.wi[ok] * ls.dist[ok, None]
-    t0, t1 = _lit_segment(ctx, on.o[cand], on.d[cand], e[ok], t_end[cand])
+    ok = (ls.pdf > 0) & (p_sel > 0)
+    cand, method, e, p_sel = cand[ok], method[ok], e[ok], p_sel[ok]
+    finite = np.isfinite(ls.dist[ok])
+    method = np.where(finite, method, equiangular.DISTANCE)
+    P = o[ok] + ls.wi[ok] * np.where(finite, ls.dist[ok], 0.0)[:, None]
+    t0, t1 = _lit_segment(ctx, on.o[cand], on.d[cand], e, t_end[cand])
     mis = method == equiangular.MIS
     xi = u_distance[cand]
-    equi = ~mis | (xi >= 0.5)
+    equi = (method == equiangular.EQUIANGULAR) | (mis & (xi >= 0.5))
     u_distance[cand] = np.where(mis, np.where(xi < 0.5, 2.0 * xi, 2.0 * xi - 1.0), xi)   # Cycles' rscatter
-    return cand, equi, mis, P, t0, t1
+    return cand, equi, mis, P, t0, t1, e, p_sel
 
 
 def _lit_segment(ctx, o, d, e, t_end):
@@ -142,7 +143,7 @@ def _direct_points(ctx, on, flight, direct, u):
     flight.direct = None
     if direct is None or len(direct[0]) == 0:
         return
-    rows, equi, mis, P, t0, t1 = direct
+    rows, equi, mis, P, t0, t1, emitter, p_sel = direct
     flight.nee_scale[rows] = 0.0
     o, d = on.o[rows], on.d[rows]
     pc, st = flight.channel_pdf[rows], flight.sigma_t[rows]
@@ -166,7 +167,7 @@ def _direct_points(ctx, on, flight, direct, u):
         return
     _, ss, _, _ = ctx.media.coefficients(on.stack[rows[keep]])
     T = np.exp(-st[keep] * t[keep, None])
-    flight.direct = (rows[keep], t[keep], ss * T * (w[keep] / p[keep])[:, None])
+    flight.direct = (rows[keep], t[keep], ss * T * (w[keep] / p[keep])[:, None], emitter[keep], p_sel[keep])
 
 
 def _truncated_exponential(sigma, t0, t1, xi):
@@ -208,13 +209,20 @@ def after_flights(ctx, paths, found, ended, flight, depth):
     paths moved on (None when none)."""
     r = flight.rows
     if flight.direct is not None:   # equiangular direct-light points, lit with the throughput at the start
-        k, t, w = flight.direct
+        k, t, w, e, p_sel = flight.direct
         rows = r[k]
         at = paths.take(rows)
         at.beta = at.beta * w
         before = at.L.copy()
         phase = ctx.media.vertex_phase(flight.g[k], flight.phase_medium[k])
-        direct_light(ctx, at, at.o + at.d * t[:, None], phase, depth)
+        p = at.o + at.d * t[:, None]
+        # The emitter picked at the segment's start (the point was sampled
+        # for it), divided by the probability it had; its MIS weight against
+        # phase sampling takes the probability selection has at p, as an
+        # emitter met by the phase-sampled ray does.
+        u = ctx.sampler.get(at.pseed, at.sample, vertex_set(depth, LIGHT))
+        p_mis = ctx.lights.selection_pdf(e, p, np.zeros_like(p))
+        _light_sample(ctx, at, p, phase, e, p_sel, u[:, 1:], p_mis)
         paths.L[rows] += at.L - before
     paths.L[r] += paths.beta[r] * flight.emitted
     paths.beta[r] *= flight.weight
@@ -300,14 +308,15 @@ def direct_light(ctx, paths, p, phase, depth):
                 _light_sample(ctx, paths, p, phase, np.full(n, e), np.ones(n), u[:, :3])
 
 
-def _light_sample(ctx, paths, p, phase, e, p_sel, u):
+def _light_sample(ctx, paths, p, phase, e, p_sel, u, p_mis=None):
     """One light sample per scattering point, MIS-weighted against phase
-    sampling (power heuristic), its shadow ray attenuated by the media."""
+    sampling (power heuristic; with the selection probability ``p_mis``
+    where given, else p_sel), its shadow ray attenuated by the media."""
     ls = ctx.lights.sample(e, p, u[:, 0], u[:, 1], u[:, 2])
     f = media.phase_eval(dot(paths.d, ls.wi), phase)
     p_light = p_sel * ls.pdf
     if ctx.settings.strategy == "mis":
-        w = np.where(ls.delta, 1.0, power_heuristic(p_light, f))
+        w = np.where(ls.delta, 1.0, power_heuristic((p_sel if p_mis is None else p_mis) * ls.pdf, f))
     else:
         w = np.ones(len(f))
     ok = (ls.pdf > 0) & (p_sel > 0)

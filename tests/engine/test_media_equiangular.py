@@ -74,8 +74,9 @@ def spot_in_fog(sampling, size=(24, 18)):
 def test_spot_in_fog_sampling_methods_agree():
     """Distance, equiangular and MIS direct-light points give the same
     image (blocks and whole-image means, single scattering as Cycles'
-    default volume_bounces 0), and equiangular sampling cuts the variance
-    of a spot's beam."""
+    default volume_bounces 0), and equiangular sampling (alone or by MIS)
+    cuts the variance of a spot's beam against distance sampling (each
+    segment's own point, truncated to the spot's cone, as Cycles 5.0)."""
     results = {}
     for seed, sampling in enumerate(("DISTANCE", "EQUIANGULAR", "MULTIPLE_IMPORTANCE"), start=41):
         spp = 1024
@@ -100,9 +101,9 @@ def test_spot_in_fog_sampling_methods_agree():
         print(f"{a} vs {b}: {keep.sum()} block-channels, max |z| {np.abs(z).max():.2f} (limit {zc:.2f}), "
               f"median block detects {zc * np.median(rel_se):.1%}; image |z| {np.abs(zm).max():.2f}, "
               f"detects {(zc * se / mb).max():.2%}")
-    # The variance gain over the lit pixels, robustly: the median of the
-    # per-pixel variance ratios (a distance-sampled image's total variance
-    # is dominated by rare points next to the light).
+    # The variance gain over the lit pixels: in total, and the median of
+    # the per-pixel ratios (distance sampling's variance is mostly in a few
+    # pixels, from points next to the light).
     lit = results["MULTIPLE_IMPORTANCE"].image[..., :3].mean(axis=2)
     lit = lit > 0.05 * lit.max()
     var = {k: r.variance[..., :3].astype(np.float64).sum(axis=2)[lit] for k, r in results.items()}
@@ -112,7 +113,7 @@ def test_spot_in_fog_sampling_methods_agree():
           {k: f"{g:.2f}x" for k, g in gain.items()}, "; total variance", total)
     assert keep.sum() >= 20
     assert worst < zc
-    assert gain["EQUIANGULAR"] > 1.2 and gain["MULTIPLE_IMPORTANCE"] > 1.0, gain
+    assert total["EQUIANGULAR"] < total["DISTANCE"] and total["MULTIPLE_IMPORTANCE"] < total["DISTANCE"], total
 
 
 @pytest.mark.parametrize("cos_half", [0.95, 0.6, 0.0])
