@@ -145,16 +145,18 @@ def test_cone_segment_is_where_the_ray_is_inside_the_cone(cos_half):
             assert t1[i] >= top - 2e-3
 
 
-def test_two_lights_in_fog_agree_with_light_sampling_at_scattering_points():
-    """A spot and a point light in fog: each segment's direct-light point
-    (restricted to the cone of the spot when the spot was picked) against
+def test_three_lights_in_fog_agree_with_light_sampling_at_scattering_points():
+    """A spot, a point light and a sun in fog: each segment's direct-light
+    point (restricted to the cone of the spot when the spot was picked; a
+    truncated distance for the sun) against
     light sampling at the free flights' scattering points (strategy
     'light', which has no direct-light points), blocks and image means."""
-    from engine.scene import PointLight
+    from engine.scene import PointLight, SunLight
     results = {}
     for seed, strategy in ((61, "mis"), (62, "light")):
         scene = spot_in_fog("MULTIPLE_IMPORTANCE")
         scene.lights.append(PointLight((-1.0, 0.5, 0.2), (8.0, 4.0, 2.0), radius=0.1))
+        scene.lights.append(SunLight((0.5, 0.3, -0.8), (0.3, 0.4, 0.6), angle=0.05))
         results[strategy] = render(scene, RenderSettings(samples=1024, samples_per_pass=1024, seed=seed,
                                                          strategy=strategy, max_bounces=4))
         assert np.isfinite(results[strategy].image).all()
@@ -162,7 +164,7 @@ def test_two_lights_in_fog_agree_with_light_sampling_at_scattering_points():
               for k, r in results.items()}
     ref = blocks["mis"][0]
     keep = ref > 0.02 * ref.max()
-    zc = family_z(__name__ + ".two_lights", int(keep.sum()) + 3)
+    zc = family_z(__name__ + ".three_lights", int(keep.sum()) + 3)
     z = z_scores(*blocks["mis"], *blocks["light"])[keep]
     rel_se = np.sqrt(blocks["mis"][1][keep] + blocks["light"][1][keep]) / blocks["light"][0][keep]
     ma, mb = (results[k].image[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in ("mis", "light"))
