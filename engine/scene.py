@@ -210,6 +210,11 @@ class Volume:
     backscatter: float = 0.1
     ior: float = 1.33
     diameter: float = 20.0
+    # How the point a segment's direct light is sampled at is chosen
+    # (Cycles' material / world Volume > Sampling): 'DISTANCE',
+    # 'EQUIANGULAR' or 'MULTIPLE_IMPORTANCE' (the two by MIS; Blender's
+    # default for materials, its worlds default to 'EQUIANGULAR').
+    sampling: str = "MULTIPLE_IMPORTANCE"
 
 
 @dataclass

@@ -239,6 +239,38 @@ def build_procedural():
     return finish(scene, cam, (0.0, 0.0, 0.5))
 
 
+def build_fog():
+    """A fog room lit by a spot (its beam): a Principled Volume cube on a
+    floor before a backdrop, Cycles' default single scattering (volume
+    bounces 0)."""
+    scene = bs.reset()
+    white = bs.node_material("White", 'diffuse', (0.6, 0.6, 0.6))
+    floor(scene, white)
+    backdrop(scene, white)
+    fog = bpy.data.materials.new("Fog")
+    fog.use_nodes = True
+    tree = fog.node_tree
+    for node in list(tree.nodes):
+        if node.type != 'OUTPUT_MATERIAL':
+            tree.nodes.remove(node)
+    volume = tree.nodes.new('ShaderNodeVolumePrincipled')
+    volume.inputs['Color'].default_value = (0.85, 0.8, 0.7, 1.0)
+    volume.inputs['Density'].default_value = 0.4
+    volume.inputs['Anisotropy'].default_value = 0.3
+    output = next(n for n in tree.nodes if n.type == 'OUTPUT_MATERIAL')
+    tree.links.new(volume.outputs[0], output.inputs['Volume'])
+    bs.box(scene, "Fog", (4.0, 4.0, 3.0), (0.0, 0.0, 1.52), 0.0, fog)
+    bs.light(scene, "Spot", 'SPOT', (0.3, 0.2, 2.8), 600.0, rotation=(0.15, 0.0, 0.0),
+             spot_size=0.6, spot_blend=0.2, shadow_soft_size=0.1)
+    bs.box(scene, "Block", (0.5, 0.5, 0.7), (0.4, 0.3, 0.35), 0.4, white)
+    cam = bs.camera(scene, (0.0, -5.5, 1.6), (0, 0, 0), lens=35.0)
+    bs.world(scene, (0.01, 0.01, 0.01))
+    scene.cycles.volume_bounces = 0
+    if hasattr(scene, 'ember'):
+        scene.ember.volume_bounces = 0
+    return finish(scene, cam, (0.0, 0.0, 0.9))
+
+
 SCENES = {
     'cornell': ("Cornell box, one rectangle light", lambda: open_blend('cornell')),
     'veach_mis': ("Veach MIS (4 GGX plates, 4 sphere lights)", lambda: open_blend('veach_mis')),
@@ -248,6 +280,7 @@ SCENES = {
     'instanced': ("2.1 M instanced triangles, sun + sky colour", build_instanced),
     'hdri': ("spheres under an HDRI (courtyard.exr)", build_hdri),
     'procedural': ("procedural nodes (Noise, Voronoi, Brick, Wave, ramps, a group)", build_procedural),
+    'fog': ("a fog room lit by a spot (homogeneous volume, single scattering)", build_fog),
 }
 BLEND_FILES = {'cornell', 'veach_mis'}
 

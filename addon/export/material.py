@@ -878,6 +878,7 @@ def translate(material):
     """Returns (engine Material, warning or None) for a bpy material."""
     scene = _scene()
     name = material.name
+    sampling = volume_sampling(material, 'MULTIPLE_IMPORTANCE')
     tree = material.node_tree if compat.uses_nodes(material) else None
     if tree is None:
         color = tuple(material.diffuse_color)[:3]
@@ -896,6 +897,7 @@ def translate(material):
     material = scene.Material(name, lobes, closure.emission, normal=normal,
                               holdout=_holdout_weight(translator, closure.holdout))
     if volume is not None:
+        volume.sampling = sampling
         material.volume = volume
     if translator.tangent is not None and any(lobe.kind == 'glossy_anisotropic' for lobe in lobes):
         material.tangent = translator.tangent
@@ -924,6 +926,13 @@ def _volume(translator, output):
     if socket is None or not socket.is_linked:
         return None
     return volume_of(translator.volume(socket))
+
+
+def volume_sampling(datablock, default):
+    """A material's or world's Cycles Volume > Sampling ('DISTANCE',
+    'EQUIANGULAR', 'MULTIPLE_IMPORTANCE'; ``default`` where unreadable)."""
+    value = getattr(getattr(datablock, 'cycles', None), 'volume_sampling', default)
+    return value if value in ('DISTANCE', 'EQUIANGULAR', 'MULTIPLE_IMPORTANCE') else default
 
 
 def volume_of(v):

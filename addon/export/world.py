@@ -94,7 +94,9 @@ def _volume(world, notes):
     warning = translator.warning()
     if warning:
         notes.add(warning.split(": ", 1)[1])
-    return material.volume_of(v)
+    volume = material.volume_of(v)
+    volume.sampling = material.volume_sampling(world, 'EQUIANGULAR')
+    return volume
 
 
 def _translate(world, notes):

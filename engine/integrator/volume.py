@@ -18,6 +18,8 @@ the phase-sampled ray finding a light.
 import numpy as np
 
 from .. import media
+from ..lights.point import PointLights
+from ..media import equiangular
 from ..accel import shadow_rays
 from ..sampler import BSDF, LIGHT, MEDIUM, emitter_set, vertex_set
 from ..sampling import power_heuristic
@@ -32,7 +34,9 @@ def free_flights(ctx, paths, found, depth):
     """The FreeFlight of the paths in a medium (None when none is): lights
     met on the way are scaled by what reaches them, and hidden where the
     path scattered first.  The throughput changes later (``after_flights``):
-    the emitters stage weighs lights by the throughput at the ray's start."""
+    the emitters stage weighs lights by the throughput at the ray's start.
+    Segments in homogeneous media also choose where their direct light is
+    estimated (``_direct_setup``)."""
     inside = np.flatnonzero((paths.stack >= 0).any(axis=1))
     if len(inside) == 0:
         return None
@@ -40,6 +44,8 @@ def free_flights(ctx, paths, found, depth):
     t_end = np.minimum(found.t[inside], on.tmax)
     may = ~transparency.last_vertices(ctx, on)   # past max_bounces or volume_bounces: no scattering
     u = ctx.sampler.get(on.pseed, on.sample, vertex_set(depth, MEDIUM))
+    u_distance = u[:, 1].copy()
+    direct = _direct_setup(ctx, on, t_end, may, u_distance, depth)
     lit = np.flatnonzero(found.light[inside])
     x_light = np.full(len(inside), np.inf)
     if len(lit):
@@ -48,15 +54,143 @@ def free_flights(ctx, paths, found, depth):
         if ctx.transparent_shadows:   # light_t is measured from where the straight line started
             x = x - dot(paths.o[rows] - paths.mis_o[rows], paths.d[rows])
         x_light[lit] = x
-    flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u[:, 1],
+    flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u_distance,
                                on.o, on.d, tracking_rng(ctx, on.pseed, on.sample, depth, 1), x_light)
     flight.rows = inside
+    _direct_points(ctx, on, flight, direct, u)
     if len(lit):
         rows = inside[lit]
         x = x_light[lit]
         found.Le[rows] *= media.light_factor(flight, lit, x)
         found.light[rows] = flight.t[lit] > x
     return flight
+
+
+# ----------------------------------------------------------------------------
+# where a segment's direct light is estimated (Cycles' direct scatter)
+
+def _direct_setup(ctx, on, t_end, may, u_distance, depth):
+    """Segments in homogeneous scattering media that may scatter get a
+    direct-light point of their own, as Cycles 5.0's: a light is sampled
+    from the ray's start (its emitter is the one the point samples), and
+    the stack's Volume > Sampling (equiangular.stack_method) says how the
+    point is found: a distance, equiangular towards the sampled light point,
+    or one of the two with probability 1/2 each (MIS).  Distant lights and
+    worlds take distance sampling.  Only with MIS strategy and one light
+    picked per vertex (else the scattering point samples light, as before).
+    Returns (rows, equiangular (bool), mis (bool), light point P, t0, t1,
+    emitter, its selection probability) or None."""
+    s = ctx.settings
+    if ctx.lights.count == 0 or s.strategy != "mis" or s.light_selection == "all":
+        return None
+    _, ss, _, _ = ctx.media.coefficients(on.stack)
+    cand = np.flatnonzero(may & ~ctx.media.heterogeneous(on.stack) & np.any(ss > 0, axis=1))
+    if len(cand) == 0:
+        return None
+    method = equiangular.stack_method(ctx.media.sampling, on.stack[cand])
+    o = on.o[cand]
+    ul = ctx.sampler.get(on.pseed[cand], on.sample[cand], vertex_set(depth, LIGHT))
+    e, p_sel = ctx.lights.select(ul[:, 0], o, np.zeros_like(o))
+    ls = ctx.lights.sample(e, o, ul[:, 1], ul[:, 2], ul[:, 3])
+    ok = (ls.pdf > 0) & (p_sel > 0)
+    cand, method, e, p_sel = cand[ok], method[ok], e[ok], p_sel[ok]
+    finite = np.isfinite(ls.dist[ok])
+    method = np.where(finite, method, equiangular.DISTANCE)
+    P = o[ok] + ls.wi[ok] * np.where(finite, ls.dist[ok], 0.0)[:, None]
+    t0, t1 = _lit_segment(ctx, on.o[cand], on.d[cand], e, t_end[cand])
+    mis = method == equiangular.MIS
+    xi = u_distance[cand]
+    equi = (method == equiangular.EQUIANGULAR) | (mis & (xi >= 0.5))
+    u_distance[cand] = np.where(mis, np.where(xi < 0.5, 2.0 * xi, 2.0 * xi - 1.0), xi)   # Cycles' rscatter
+    return cand, equi, mis, P, t0, t1, e, p_sel
+
+
+def _lit_segment(ctx, o, d, e, t_end):
+    """(t0, t1) of the rays' part the emitters e can light: a spot's cone
+    (Cycles' volume_valid_direct_ray_segment), else the whole segment."""
+    t0, t1 = np.zeros(len(o)), np.array(t_end, np.float64, copy=True)
+    for g in ctx.lights.groups:
+        table = g.table
+        if not isinstance(table, PointLights) or not table.spot.any():
+            continue
+        j = ctx.lights.local[e]
+        rows = np.flatnonzero((ctx.lights.kind[e] == g.definition.kind) & table.spot[np.minimum(j, table.count - 1)])
+        rows = rows[table.cos_half[j[rows]] >= 0.0]   # cones up to 180 degrees wide
+        if len(rows):
+            jr = j[rows]
+            # The spot's attenuation is taken towards the sampled point of
+            # its sphere or disk: the cone tangent to the sphere (apex moved
+            # back r / sin(half angle)) holds every point it lights.
+            sin_half = np.sqrt(np.maximum(1.0 - table.cos_half[jr] ** 2, 1e-12))
+            apex = table.pos[jr] - table.dir[jr] * (table.radius[jr] / sin_half)[:, None]
+            t0[rows], t1[rows] = equiangular.cone_segment(o[rows], d[rows], apex, table.dir[jr],
+                                                          table.cos_half[jr], t_end[rows])
+    return t0, t1
+
+
+def _direct_points(ctx, on, flight, direct, u):
+    """Sets flight.nee_scale (the factor on the light sampled at a free
+    flight's scattering point: 1, or 0 for the segments ``_direct_setup``
+    chose a direct-light point for) and flight.direct: (rows, t, throughput
+    factor) of those points, sigma_s T(t) / pdf, inside the part of the
+    segment the light can reach (a spot's cone): equiangular, or under MIS
+    either equiangular or a distance (the free flight's channel mixture of
+    exponentials truncated to that part, as Cycles 5.0's homogeneous direct
+    scatter), weighted 2 w by the power heuristic (Cycles'
+    volume_direct_scatter_mis)."""
+    n = len(flight.t_end)
+    flight.nee_scale = np.ones(n)
+    flight.direct = None
+    if direct is None or len(direct[0]) == 0:
+        return
+    rows, equi, mis, P, t0, t1, emitter, p_sel = direct
+    flight.nee_scale[rows] = 0.0
+    o, d = on.o[rows], on.d[rows]
+    pc, st = flight.channel_pdf[rows], flight.sigma_t[rows]
+    xi, uc = u[rows, 2], u[rows, 3]
+    t = np.zeros(len(rows))
+    p_e = np.zeros(len(rows))
+    e = np.flatnonzero(equi)
+    t[e], p_e[e] = equiangular.sample(o[e], d[e], P[e], t0[e], t1[e], xi[e])
+    k = np.flatnonzero(~equi)
+    if len(k):
+        c = np.minimum((uc[k, None] >= np.cumsum(pc[k], axis=1)).sum(axis=1), 2)
+        t[k] = _truncated_exponential(st[k, c], t0[k], t1[k], xi[k])
+        p_e[k] = equiangular.pdf(o[k], d[k], P[k], t0[k], t1[k], t[k])
+    p_d = _truncated_pdf(pc, st, t0, t1, t)
+    p = np.where(equi, p_e, p_d)
+    good = (p > 0) & np.isfinite(t) & (t1 > t0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = np.where(mis, 2.0 * power_heuristic(p, np.where(equi, p_d, p_e)), 1.0)
+    keep = np.flatnonzero(good)
+    if len(keep) == 0:
+        return
+    _, ss, _, _ = ctx.media.coefficients(on.stack[rows[keep]])
+    T = np.exp(-st[keep] * t[keep, None])
+    flight.direct = (rows[keep], t[keep], ss * T * (w[keep] / p[keep])[:, None], emitter[keep], p_sel[keep])
+
+
+def _truncated_exponential(sigma, t0, t1, xi):
+    """Distances in [t0, t1] of density sigma exp(-sigma (t - t0)),
+    renormalized (uniform where sigma is 0)."""
+    length = t1 - t0
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        mass = -np.expm1(-sigma * length)
+        t = t0 - np.log1p(-xi * mass) / np.where(sigma > 0, sigma, 1.0)
+        t = np.where(sigma > 0, t, t0 + xi * np.where(np.isfinite(length), length, 0.0))
+    return np.clip(t, t0, t1)
+
+
+def _truncated_pdf(pc, sigma, t0, t1, t):
+    """The channel mixture's pdf of ``_truncated_exponential`` distances."""
+    length = (t1 - t0)[:, None]
+    x = (t - t0)[:, None]
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        mass = -np.expm1(-sigma * length)
+        each = np.where(sigma > 0, sigma * np.exp(-sigma * x) / np.where(mass > 0, mass, 1.0),
+                        np.where(np.isfinite(length), 1.0 / np.where(length > 0, length, 1.0), 0.0))
+    out = (pc * np.where(np.isfinite(each), each, 0.0)).sum(axis=1)
+    return np.where((t >= t0) & (t <= t1) & (t1 > t0), out, 0.0)
 
 
 def tracking_rng(ctx, pseed, sample, depth, salt):
@@ -74,6 +208,22 @@ def after_flights(ctx, paths, found, ended, flight, depth):
     bounce.  Returns (paths, found, ended) of the others and the scattered
     paths moved on (None when none)."""
     r = flight.rows
+    if flight.direct is not None:   # equiangular direct-light points, lit with the throughput at the start
+        k, t, w, e, p_sel = flight.direct
+        rows = r[k]
+        at = paths.take(rows)
+        at.beta = at.beta * w
+        before = at.L.copy()
+        phase = ctx.media.vertex_phase(flight.g[k], flight.phase_medium[k])
+        p = at.o + at.d * t[:, None]
+        # The emitter picked at the segment's start (the point was sampled
+        # for it), divided by the probability it had; its MIS weight against
+        # phase sampling takes the probability selection has at p, as an
+        # emitter met by the phase-sampled ray does.
+        u = ctx.sampler.get(at.pseed, at.sample, vertex_set(depth, LIGHT))
+        p_mis = ctx.lights.selection_pdf(e, p, np.zeros_like(p))
+        _light_sample(ctx, at, p, phase, e, p_sel, u[:, 1:], p_mis)
+        paths.L[rows] += at.L - before
     paths.L[r] += paths.beta[r] * flight.emitted
     paths.beta[r] *= flight.weight
     sc = flight.scatter & ~ended[r]
@@ -84,7 +234,8 @@ def after_flights(ctx, paths, found, ended, flight, depth):
     keep[rows] = False
     moved = paths.take(rows)
     p = moved.o + moved.d * flight.t[sc, None]
-    volume_vertex(ctx, moved, p, ctx.media.vertex_phase(flight.g[sc], flight.phase_medium[sc]), depth)
+    volume_vertex(ctx, moved, p, ctx.media.vertex_phase(flight.g[sc], flight.phase_medium[sc]), depth,
+                  flight.nee_scale[sc])
     moved = moved.take(row_any_positive(moved.beta))
     return paths.take(keep), found.take(keep), ended[keep], moved
 
@@ -103,21 +254,23 @@ class _Points:
         return self.n
 
 
-def volume_vertex(ctx, paths, p, phase, depth):
+def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None):
     """Light sampling at scattering points p (phase functions ``phase``,
-    MediumTable.vertex_phase) and the phase-function sample of the next
-    ray; moves the paths in place."""
+    MediumTable.vertex_phase; its contributions times ``nee_scale``, None:
+    1) and the phase-function sample of the next ray; moves the paths in
+    place."""
     n = len(paths.pix)
     zeros = np.zeros((n, 3))
-    for _, mode, emitters in nee_rounds(ctx, _Points(n), None):
-        if mode == "select":
-            u = ctx.sampler.get(paths.pseed, paths.sample, vertex_set(depth, LIGHT))
-            e, p_sel = ctx.lights.select(u[:, 0], p, zeros)
-            _light_sample(ctx, paths, p, phase, e, p_sel, u[:, 1:])
-        else:
-            for e in emitters:
-                u = ctx.sampler.get(paths.pseed, paths.sample, emitter_set(depth, e))
-                _light_sample(ctx, paths, p, phase, np.full(n, e), np.ones(n), u[:, :3])
+    if nee_scale is None:
+        direct_light(ctx, paths, p, phase, depth)
+    else:
+        lit = np.flatnonzero(nee_scale > 0)
+        if len(lit):
+            at = paths.take(lit)
+            at.beta = at.beta * nee_scale[lit, None]
+            before = at.L.copy()
+            direct_light(ctx, at, p[lit], phase_rows(phase, lit), depth)
+            paths.L[lit] += at.L - before
     u = ctx.sampler.get(paths.pseed, paths.sample, vertex_set(depth, BSDF))
     wi, pdf = media.phase_sample(paths.d, phase, u[:, 0], u[:, 1])
     paths.o, paths.d, paths.mis_o, paths.prev_p = p, wi, p, p
@@ -135,14 +288,35 @@ def volume_vertex(ctx, paths, p, phase, depth):
         paths.ray = np.full(n, VIS_INDIRECT, np.uint8)
 
 
-def _light_sample(ctx, paths, p, phase, e, p_sel, u):
+def phase_rows(phase, rows):
+    return tuple(a[rows] for a in phase)
+
+
+def direct_light(ctx, paths, p, phase, depth):
+    """Next-event estimation at points p in media (phase functions
+    ``phase``): paths.L gains the light reaching them times paths.beta."""
+    n = len(paths.pix)
+    zeros = np.zeros((n, 3))
+    for _, mode, emitters in nee_rounds(ctx, _Points(n), None):
+        if mode == "select":
+            u = ctx.sampler.get(paths.pseed, paths.sample, vertex_set(depth, LIGHT))
+            e, p_sel = ctx.lights.select(u[:, 0], p, zeros)
+            _light_sample(ctx, paths, p, phase, e, p_sel, u[:, 1:])
+        else:
+            for e in emitters:
+                u = ctx.sampler.get(paths.pseed, paths.sample, emitter_set(depth, e))
+                _light_sample(ctx, paths, p, phase, np.full(n, e), np.ones(n), u[:, :3])
+
+
+def _light_sample(ctx, paths, p, phase, e, p_sel, u, p_mis=None):
     """One light sample per scattering point, MIS-weighted against phase
-    sampling (power heuristic), its shadow ray attenuated by the media."""
+    sampling (power heuristic; with the selection probability ``p_mis``
+    where given, else p_sel), its shadow ray attenuated by the media."""
     ls = ctx.lights.sample(e, p, u[:, 0], u[:, 1], u[:, 2])
     f = media.phase_eval(dot(paths.d, ls.wi), phase)
     p_light = p_sel * ls.pdf
     if ctx.settings.strategy == "mis":
-        w = np.where(ls.delta, 1.0, power_heuristic(p_light, f))
+        w = np.where(ls.delta, 1.0, power_heuristic((p_sel if p_mis is None else p_mis) * ls.pdf, f))
     else:
         w = np.ones(len(f))
     ok = (ls.pdf > 0) & (p_sel > 0)

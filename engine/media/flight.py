@@ -48,6 +48,11 @@ class FreeFlight:
     # (n,) the medium whose phase function a scattering follows (-1:
     # Henyey-Greenstein of g), MediumTable.phase_medium.
     phase_medium: np.ndarray = None
+    # Set by the integrator (engine/integrator/volume.py): the factor on the
+    # light sampled at the scattering point, and the equiangular direct-light
+    # points (rows, t, throughput factor) or None.
+    nee_scale: np.ndarray = None
+    direct: tuple = None
 
 
 def _exp_neg(sigma, t):

@@ -12,6 +12,7 @@ every stack entry.
 """
 import numpy as np
 
+from . import equiangular
 from .field import build_fields, is_heterogeneous
 from .phase import HG, mixture_of
 
@@ -36,10 +37,14 @@ class MediumTable:
         # Each medium's phase function: (k1, a1, b1, k2, a2, b2, w), a
         # mixture of two lobes (phase.mixture_of); HG of g 0 by default.
         self.phase = np.zeros((m + 1, 7))
+        # How each medium samples its segments' direct-light points
+        # (equiangular.DISTANCE / EQUIANGULAR / MIS).
+        self.sampling = np.full(m + 1, equiangular.DISTANCE, np.int64)
         for i, vol in enumerate(volumes):
             if vol is None:
                 continue
             self.has[i] = True
+            self.sampling[i] = equiangular.METHODS.get(getattr(vol, "sampling", ""), equiangular.MIS)
             self.phase[i] = mixture_of(vol)
             if is_heterogeneous(vol):
                 continue     # its rows are the Fields' (attach), these stay zero
@@ -97,6 +102,8 @@ class MediumTable:
         self.g = grow(self.g)
         self.has = grow(self.has, True)
         self.phase = np.concatenate([self.phase[:m], self.phase[[f.material for f in self.fields]], self.phase[m:]])
+        self.sampling = np.concatenate([self.sampling[:m], self.sampling[[f.material for f in self.fields]],
+                                        self.sampling[m:]])
         self.names = self.names[:m] + [f.name for f in self.fields] + self.names[m:]
 
     def phase_medium(self, stack):

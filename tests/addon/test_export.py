@@ -620,3 +620,15 @@ def test_every_ember_panel_draws(factory_scene):
     factory_scene.ember.filter_type = 'BOX'
     ui.RENDER_PT_ember_film.draw(film, bpy.context)
     assert 'filter_width' not in film.layout.shown  # Cycles' box filter has no width
+
+
+def test_volume_object_is_named_in_a_warning(factory_scene):
+    """No bpy release has Python access to a Volume object's OpenVDB voxels
+    (no openvdb module, VolumeGrid exposes no values): the object is named."""
+    import importlib.util
+    assert importlib.util.find_spec("openvdb") is None and importlib.util.find_spec("pyopenvdb") is None, \
+        "this bpy has an openvdb module: read Volume objects' grids with it"
+    obj = bpy.data.objects.new("CloudVDB", bpy.data.volumes.new("CloudVDB"))
+    factory_scene.collection.objects.link(obj)
+    exported = export()
+    assert any("CloudVDB" in w and "OpenVDB" in w for w in exported.warnings), exported.warnings

@@ -1,0 +1,109 @@
+"""Equiangular sampling of a scattering distance towards a light point
+(Kulla and Fajardo 2012, as Cycles' volume_equiangular_sample /
+volume_equiangular_pdf), and the choice of how a segment samples the point
+its direct light is estimated at (Cycles' volume_stack_sample_method).
+
+Along o + t d, 0 <= t < t_end, with the light point P at distance D from
+the ray's line and delta = (P - o) . d, t = delta + D tan(theta) with theta
+uniform between atan2(-delta, D) and atan2(t_end - delta, D): the pdf is
+D / ((theta_b - theta_a) (D^2 + (t - delta)^2)), which cancels the 1/r^2 of
+a light near the ray.
+"""
+import numpy as np
+
+DISTANCE, EQUIANGULAR, MIS = 0, 1, 2
+METHODS = {"DISTANCE": DISTANCE, "EQUIANGULAR": EQUIANGULAR, "MULTIPLE_IMPORTANCE": MIS}
+
+
+def _frame(o, d, P):
+    delta = np.einsum("ij,ij->i", P - o, d)
+    D = np.linalg.norm(P - o - d * delta[:, None], axis=1)
+    return delta, D
+
+
+def _angles(delta, D, t0, t1):
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a = np.arctan2(t0 - delta, D)
+        b = np.where(np.isfinite(t1), np.arctan2(np.where(np.isfinite(t1), t1, 0.0) - delta, D), 0.5 * np.pi)
+    return a, b
+
+
+def sample(o, d, P, t0, t1, xi):
+    """(t, pdf) per row, t in [t0, t1]; pdf 0 where the light point is on
+    the ray's line or the interval is empty (no equiangular sample: the
+    caller samples a distance instead)."""
+    delta, D = _frame(o, d, P)
+    a, b = _angles(delta, D, t0, t1)
+    span = b - a
+    ok = (D > 1e-12) & (span > 1e-9) & np.isfinite(delta) & (t1 > t0)
+    with np.errstate(invalid="ignore", over="ignore"):
+        tt = D * np.tan(xi * b + (1.0 - xi) * a)
+        t = np.clip(delta + tt, t0, t1)
+        pdf = D / (np.where(ok, span, 1.0) * (D * D + tt * tt))
+    ok &= np.isfinite(t) & (pdf > 0) & np.isfinite(pdf)
+    return np.where(ok, t, 0.0), np.where(ok, pdf, 0.0)
+
+
+def pdf(o, d, P, t0, t1, t):
+    """The equiangular pdf of distance t (0 where ``sample`` gives none)."""
+    delta, D = _frame(o, d, P)
+    a, b = _angles(delta, D, t0, t1)
+    span = b - a
+    ok = (D > 1e-12) & (span > 1e-9) & np.isfinite(delta) & (t >= t0) & (t <= t1) & (t1 > t0)
+    with np.errstate(invalid="ignore", over="ignore"):
+        tt = t - delta
+        out = D / (np.where(ok, span, 1.0) * (D * D + tt * tt))
+    return np.where(ok & np.isfinite(out), out, 0.0)
+
+
+def cone_segment(o, d, apex, axis, cos_half, t_end):
+    """(t0, t1): the part of o + t d, 0 <= t <= t_end, inside the cone of
+    half-angle acos(cos_half) <= 90 degrees around ``axis`` from ``apex``
+    (a spot light's lit region, Cycles' spot_light_valid_ray_segment); an
+    empty interval has t1 <= t0.  A convex cone meets a line in one
+    interval: the roots of the cone's quadratic split the ray, and the
+    pieces whose middles are inside make it."""
+    v = o - apex
+    da, va = np.einsum("ij,ij->i", d, axis), np.einsum("ij,ij->i", v, axis)
+    dv, vv = np.einsum("ij,ij->i", d, v), np.einsum("ij,ij->i", v, v)
+    c2 = cos_half * cos_half
+    A, B, C = da * da - c2, 2.0 * (da * va - c2 * dv), va * va - c2 * vv
+    with np.errstate(invalid="ignore", divide="ignore"):
+        disc = B * B - 4.0 * A * C
+        sq = np.sqrt(np.maximum(disc, 0.0))
+        lin = np.abs(A) < 1e-12
+        r1 = np.where(lin, np.where(B != 0, -C / np.where(B != 0, B, 1.0), np.nan), (-B - sq) / (2.0 * np.where(lin, 1.0, A)))
+        r2 = np.where(lin, np.nan, (-B + sq) / (2.0 * np.where(lin, 1.0, A)))
+    real = disc >= -1e-9 * (B * B + np.abs(4.0 * A * C))   # a tangent ray's double root, within rounding
+    r1, r2 = np.where(real, r1, np.nan), np.where(real, r2, np.nan)
+    end = np.where(np.isfinite(t_end), t_end, np.inf)
+    cuts = np.stack([np.zeros_like(end), np.clip(np.nan_to_num(r1, nan=0.0), 0.0, end),
+                     np.clip(np.nan_to_num(r2, nan=0.0), 0.0, end), end], axis=1)
+    cuts = np.sort(cuts, axis=1)
+    lo, hi = np.full(len(o), np.inf), np.full(len(o), -np.inf)
+    for k in range(3):
+        a, b = cuts[:, k], cuts[:, k + 1]
+        mid = np.where(np.isfinite(b), 0.5 * (a + b), a + 1.0 + np.abs(a))
+        x = v + d * mid[:, None]
+        inside = (np.einsum("ij,ij->i", x, axis) >= cos_half * np.linalg.norm(x, axis=1)) & (b > a)
+        lo = np.where(inside, np.minimum(lo, a), lo)
+        hi = np.where(inside, np.maximum(hi, b), hi)
+    empty = ~(hi > lo)
+    return np.where(empty, 0.0, lo), np.where(empty, 0.0, hi)
+
+
+def stack_method(methods, stack):
+    """(N,) DISTANCE / EQUIANGULAR / MIS of stacks (N, K), ``methods`` per
+    medium id: any medium with MIS, or distance and equiangular media
+    together, give MIS (Cycles' volume_stack_sample_method)."""
+    n = len(stack)
+    has = np.zeros((n, 3), bool)
+    for k in range(stack.shape[1]):
+        m = stack[:, k]
+        use = m >= 0
+        if use.any():
+            has[np.flatnonzero(use), methods[m[use]]] = True
+    out = np.full(n, DISTANCE)
+    out[has[:, EQUIANGULAR]] = EQUIANGULAR
+    out[has[:, MIS] | (has[:, DISTANCE] & has[:, EQUIANGULAR])] = MIS
+    return out
