@@ -271,6 +271,41 @@ def build_fog():
     return finish(scene, cam, (0.0, 0.0, 0.9))
 
 
+def _subsurface_material(name, color, radius, scale, method='RANDOM_WALK'):
+    material = principled(name, color, roughness=0.4)
+    node = next(n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
+    node.inputs['Subsurface Weight'].default_value = 1.0
+    node.inputs['Subsurface Radius'].default_value = radius
+    node.inputs['Subsurface Scale'].default_value = scale
+    node.subsurface_method = method
+    return material
+
+
+def build_subsurface():
+    """A random-walk subsurface sphere and torus (wax, jade) on a grey floor,
+    a disk light in front and a rim light behind (thin parts lit through)."""
+    scene = bs.reset()
+    grey = principled("Floor", (0.5, 0.5, 0.5), roughness=0.6)
+    floor(scene, grey)
+    backdrop(scene, grey)
+    wax = _subsurface_material("Wax", (0.85, 0.55, 0.35), (1.0, 0.35, 0.15), 0.25)
+    jade = _subsurface_material("Jade", (0.35, 0.75, 0.45), (0.3, 1.0, 0.5), 0.15)
+    bs.uv_sphere(scene, "Wax", 0.55, (-0.75, 0.0, 0.55), wax, segments=48, rings=24)
+    bpy.ops.mesh.primitive_torus_add(major_radius=0.5, minor_radius=0.14, major_segments=48, minor_segments=16,
+                                     location=(0.8, 0.1, 0.62), rotation=(math.radians(70), 0.0, math.radians(-20)))
+    torus = bpy.context.active_object
+    torus.name = "Jade"
+    torus.data.materials.append(jade)
+    for polygon in torus.data.polygons:
+        polygon.use_smooth = True
+    bs.light(scene, "Disk", 'AREA', (0.5, -1.0, 3.0), 250.0, shape='DISK', size=1.0,
+             rotation=(math.radians(20), 0.0, 0.0))
+    bs.light(scene, "Rim", 'AREA', (0.6, 1.8, 1.0), 120.0, size=0.8, rotation=(math.radians(-100), 0.0, 0.0))
+    cam = bs.camera(scene, (0.0, -4.5, 1.6), (0, 0, 0), lens=40.0)
+    bs.world(scene, (0.02, 0.02, 0.02))
+    return finish(scene, cam, (0.0, 0.0, 0.5))
+
+
 SCENES = {
     'cornell': ("Cornell box, one rectangle light", lambda: open_blend('cornell')),
     'veach_mis': ("Veach MIS (4 GGX plates, 4 sphere lights)", lambda: open_blend('veach_mis')),
@@ -281,6 +316,7 @@ SCENES = {
     'hdri': ("spheres under an HDRI (courtyard.exr)", build_hdri),
     'procedural': ("procedural nodes (Noise, Voronoi, Brick, Wave, ramps, a group)", build_procedural),
     'fog': ("a fog room lit by a spot (homogeneous volume, single scattering)", build_fog),
+    'subsurface': ("random-walk subsurface sphere and torus, front and rim light", build_subsurface),
 }
 BLEND_FILES = {'cornell', 'veach_mis'}
 
