@@ -69,21 +69,26 @@ def bake_geometric(mesh, matrix, kind, prim, u, v):
 
 
 def _world_normals(mesh, m, p, w):
-    """Shading normals (smooth/custom corner normals interpolated, else the
-    face normal) in world space, as Cycles' fast path for Normal bakes of
-    materials without bump: normals through the inverse transpose."""
-    corners = np.asarray(mesh.positions, np.float64)[np.asarray(mesh.triangles)[p]]
-    ng = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    if mesh.normals is not None:
-        n = np.einsum("rc,rcj->rj", w, np.asarray(mesh.normals, np.float64)[p])
-        bad = ~(np.linalg.norm(n, axis=1) > 1e-12)
-        n[bad] = ng[bad]
-    else:
-        n = ng
+    """Shading normals in world space, as Cycles' fast path for Normal
+    bakes of materials without bump: Cycles applies the object transform to
+    the mesh (its corner normals through the inverse transpose, each
+    normalized) and then interpolates and normalizes; under a non-uniform
+    scale that differs from transforming the interpolated normal (by up to
+    0.02 on a 16-segment sphere scaled (1, 1.5, 0.8)).  Flat faces: the
+    world-space face normal."""
     try:
         normal_matrix = np.linalg.inv(m[:3, :3]).T
     except np.linalg.LinAlgError:
         normal_matrix = np.eye(3)
-    n = n @ normal_matrix.T
+    corners = np.asarray(mesh.positions, np.float64)[np.asarray(mesh.triangles)[p]] @ m[:3, :3].T
+    ng = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    if mesh.normals is not None:
+        cn = np.asarray(mesh.normals, np.float64)[p] @ normal_matrix.T               # (R, 3, 3)
+        cn = cn / np.maximum(np.linalg.norm(cn, axis=2, keepdims=True), 1e-30)
+        n = np.einsum("rc,rcj->rj", w, cn)
+        bad = ~(np.linalg.norm(n, axis=1) > 1e-12)
+        n[bad] = ng[bad]
+    else:
+        n = ng
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return np.where(length > 1e-30, n / np.maximum(length, 1e-30), 0.0)
