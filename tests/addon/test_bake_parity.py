@@ -59,7 +59,6 @@ def _bake(scene, image, engine, kind, margin=0, **settings):
 
 CASES = [
     ('POSITION', {}),
-    ('UV', {}),
     ('NORMAL', {'normal_space': 'OBJECT'}),
     ('NORMAL', {'normal_space': 'TANGENT'}),
     ('NORMAL', {'normal_space': 'OBJECT', 'normal_r': 'NEG_Y', 'normal_g': 'POS_Z', 'normal_b': 'NEG_X'}),
@@ -82,6 +81,24 @@ def test_exact_bakes_match_cycles(kind, settings):
     # Both fill the same texels (Blender decides which), the values agree within float rounding.
     assert ((np.abs(cycles[..., :3]).sum(axis=2) > 0) == (np.abs(ember[..., :3]).sum(axis=2) > 0)).mean() > 0.99
     assert diff.max() < 2e-4
+
+
+def test_uv_bake_is_the_texel_uv():
+    """A UV bake writes, in each texel, the UV that maps to that texel: its
+    centre ((x + 0.5) / 32, (y + 0.5) / 32) within float rounding (Blender
+    samples texel centres).  Not against Cycles: bpy 5.0.1's Cycles bakes UV
+    as 0 in every texel of this sphere (measured; its UV pass needs the UV
+    attribute requested by a shader, which a bake does not do)."""
+    scene, obj, image = _scene()
+    ember = _bake(scene, image, 'EMBER', 'UV')
+    filled = ember[..., 3] > 0
+    ys, xs = np.nonzero(filled)
+    expected = np.stack([(xs + 0.5) / SIZE, (ys + 0.5) / SIZE], axis=1)
+    diff = np.abs(ember[ys, xs, :2] - expected)
+    print(f"UV: {len(xs)} texels, max |uv - texel centre| {diff.max():.2e}")
+    assert len(xs) > 0.5 * SIZE * SIZE
+    assert diff.max() < 1e-4
+    assert np.all(ember[ys, xs, 2] == 0)
 
 
 def test_margin_applied_by_blender():
