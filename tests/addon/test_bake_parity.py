@@ -137,3 +137,31 @@ def test_hostile_bakes_report_clearly(case):
     pixels = np.empty(SIZE * SIZE * 4, np.float32)
     image.pixels.foreach_get(pixels)
     assert np.isfinite(pixels).all()
+
+
+@pytest.mark.parametrize("kind", ["POSITION", "NORMAL"])
+def test_selected_to_active_matches_cycles(kind):
+    """Selected to active with extrusion: Blender casts the rays from the
+    active object onto the selected one and hands the engine the selected
+    object's texels; Ember bakes them as Cycles."""
+    scene, obj, image = _scene()
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2, radius=1.05, location=obj.location)
+    high = bpy.context.active_object
+    high.scale = SCALE
+    high.rotation_euler = (0.1, 0.5, 0.2)
+    high.select_set(True)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    settings = {'use_selected_to_active': True, 'cage_extrusion': 0.2}
+    if kind == 'NORMAL':
+        settings['normal_space'] = 'OBJECT'
+    cycles = _bake(scene, image, 'CYCLES', kind, **settings)
+    ember = _bake(scene, image, 'EMBER', kind, **settings)
+    filled = ember[..., 3] > 0
+    diff = np.abs(ember[..., :3] - cycles[..., :3])[filled]
+    print(f"selected to active {kind}: {int(filled.sum())} texels, max |diff| {diff.max():.2e}")
+    assert filled.sum() > 0.5 * SIZE * SIZE
+    assert diff.max() < 2e-4
+    high.select_set(False)   # the active object's own bake differs: the test sees which object was baked
+    own = _bake(scene, image, 'EMBER', kind, **dict(settings, use_selected_to_active=False))
+    assert np.abs(own[..., :3] - ember[..., :3])[filled].max() > 1e-2
