@@ -153,6 +153,10 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             info['warnings'].append(message)
             self.report({'WARNING'}, message)
 
+    def bake(self, depsgraph, obj, pass_type, pass_filter, width, height):
+        from . import bake  # lazy: only when baking
+        bake.bake(self, depsgraph, obj, pass_type, pass_filter, width, height)
+
     def _denoised(self, result, extra, info):
         """Combined denoised (alpha kept), the raw image as Noisy Image.  A
         denoiser failure keeps the noisy image and says why."""

@@ -10,6 +10,7 @@ engine's modules, not numba (compiled on the first render) nor embreex
 (loaded on the first scene built).  ``engine.render`` is the render function;
 the module of that name is ``importlib.import_module("engine.render")``.
 """
+from . import bake
 from .environment import bake as bake_environment
 from .environment import lookup as environment_lookup
 from .kernels import cache_complete as kernel_cache_complete
@@ -46,6 +47,8 @@ __all__ = [
     "validate_scene", "validate_settings", "validate_camera",
     # rendering (engine.render, engine.passes)
     "render", "prepare", "RenderResult", "PassConfig", "murmur3_32",
+    # texture baking (engine.bake)
+    "bake",
     # the numba kernels (engine.kernels): compile once, wait, stop
     "configure_kernels", "wait_for_kernels", "stop_kernels", "kernel_cache_complete", "warm_kernel_cache",
     # shader nodes and textures the exporter evaluates (engine.nodes, engine.textures)
