@@ -17,6 +17,8 @@ from .kernels import configure as configure_kernels
 from .kernels import stop as stop_kernels
 from .kernels import wait as wait_for_kernels
 from .kernels import warm_cache as warm_kernel_cache
+from .lobes.hair import sigma_from_color as hair_sigma_from_color
+from .lobes.hair import sigma_from_melanin as hair_sigma_from_melanin
 from .nodes import REGISTRY as NODE_REGISTRY
 from .nodes import ShadingContext
 from .nodes.hashing import hash_uint
@@ -48,6 +50,8 @@ __all__ = [
     "configure_kernels", "wait_for_kernels", "stop_kernels", "kernel_cache_complete", "warm_kernel_cache",
     # shader nodes and textures the exporter evaluates (engine.nodes, engine.textures)
     "NODE_REGISTRY", "ShadingContext", "TextureCompiler", "value_range", "hash_uint",
+    # the Principled Hair BSDF's absorption from melanin or colour (engine.lobes.hair)
+    "hair_sigma_from_melanin", "hair_sigma_from_color",
     # worlds (engine.environment, engine.nodes.sky)
     "bake_environment", "environment_lookup", "sky_sun_guide",
 ]
