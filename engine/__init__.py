@@ -18,6 +18,8 @@ from .kernels import configure as configure_kernels
 from .kernels import stop as stop_kernels
 from .kernels import wait as wait_for_kernels
 from .kernels import warm_cache as warm_kernel_cache
+from .lobes.hair import sigma_from_color as hair_sigma_from_color
+from .lobes.hair import sigma_from_melanin as hair_sigma_from_melanin
 from .nodes import REGISTRY as NODE_REGISTRY
 from .nodes import ShadingContext
 from .nodes.hashing import hash_uint
@@ -57,6 +59,8 @@ __all__ = [
     "mesh_attributes",
     # Attribute nodes of Object / Instancer / View Layer type: Instance.object_attributes keys
     "instance_attribute_key",
+    # the Principled Hair BSDF's absorption from melanin or colour (engine.lobes.hair)
+    "hair_sigma_from_melanin", "hair_sigma_from_color",
     # worlds (engine.environment, engine.nodes.sky)
     "bake_environment", "environment_lookup", "sky_sun_guide",
 ]

@@ -21,7 +21,7 @@ from .kernels import clip
 from .lobes import EXTRA_PARAMS, PARAMS
 from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, GLOSSY_ANISOTROPIC, MIN_ALPHA,
                        MIRROR, NONE, OREN_NAYAR, REFRACTION, SHEEN, SUBSURFACE_BURLEY, SUBSURFACE_RANDOM_WALK,
-                       SUBSURFACE_SKIN, TRANSLUCENT, TRANSPARENT)
+                       SUBSURFACE_SKIN, TRANSLUCENT, TRANSPARENT, HAIR_CHIANG)
 from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect_terms, pow5
 
 _NUMBA_TYPES = {np.dtype(np.int8): "int8", np.dtype(np.float64): "float64", np.dtype(np.bool_): "boolean"}
@@ -42,6 +42,10 @@ LOBE_FIELDS = ((("kind", array_type(np.int8, 2), np.int8),)
 ANISOTROPY = [name for name, _, _ in LOBE_FIELDS].index("anisotropy")   # the glossy_anisotropic lobe's arrays
 ROTATION = [name for name, _, _ in LOBE_FIELDS].index("rotation")
 DIFFUSE_ROUGHNESS = [name for name, _, _ in LOBE_FIELDS].index("diffuse_roughness")   # oren_nayar's
+ABSORPTION = [name for name, _, _ in LOBE_FIELDS].index("absorption")   # hair_chiang's
+RADIAL_ROUGHNESS = [name for name, _, _ in LOBE_FIELDS].index("radial_roughness")
+COAT = [name for name, _, _ in LOBE_FIELDS].index("coat")
+OFFSET = [name for name, _, _ in LOBE_FIELDS].index("offset")
 # MaterialTable's arrays gathered per ray (bsdf.Lobes' fields up to back).
 GATHER_FIELDS = (("kind", np.int8, ()), ("color", np.float64, (3,)), ("alpha", np.float64, ()),
                  ("schlick", np.bool_, ())) + tuple((p.field, p.dtype, p.tail) for p in EXTRA_PARAMS)
@@ -504,6 +508,200 @@ def _ggx_aniso(ax, ay, wox, woy, woz, wix, wiy, wiz):
     return spec, d / ((1.0 + lo) * 4.0 * woz), wox * hx + woy * hy + woz * hz
 
 
+# ----------------------------------------------------------------------------
+# hair_chiang (engine/lobes/hair.py for one ray)
+
+SQRT_PI_8 = np.sqrt(np.pi / 8.0)
+I0_TERMS = 24   # as engine/lobes/hair.py
+LN_2PI = np.log(2.0 * np.pi)
+
+
+@helper
+def _cos_from_sin(s):
+    return np.sqrt(max(1.0 - s * s, 0.0))
+
+
+@helper
+def _hair_variance(r):
+    r = clip(r, 0.001, 1.0)
+    a = 0.726 * r + 0.812 * r * r + 3.7 * r ** 20
+    return a * a
+
+
+@helper
+def _bessel_i0(x):
+    x = x * x
+    val = 1.0 + 0.25 * x
+    pw = x * x
+    fac = 1.0
+    p4 = 16.0
+    for i in range(2, I0_TERMS):
+        fac *= i * i
+        val = val + pw / (p4 * fac)
+        pw = pw * x
+        p4 *= 4.0
+    return val
+
+
+@helper
+def _hair_mp(sin_i, cos_i, sin_o, cos_o, v):
+    inv_v = 1.0 / v
+    cos_arg = cos_i * cos_o * inv_v
+    sin_arg = sin_i * sin_o * inv_v
+    if v <= 0.1:
+        if cos_arg > 12.0:   # hair.log_bessel_i0's asymptotic form
+            inv = 1.0 / cos_arg
+            i0 = (cos_arg - 0.5 * (LN_2PI + np.log(cos_arg))
+                  + np.log1p(inv * (0.125 + inv * (9.0 / 128.0 + inv * (225.0 / 3072.0)))))
+        else:
+            i0 = np.log(_bessel_i0(cos_arg))
+        return np.exp(i0 - sin_arg - inv_v + 0.6931 + np.log(0.5 * inv_v))
+    return np.exp(-sin_arg) * _bessel_i0(cos_arg) / (np.sinh(inv_v) * 2.0 * v)
+
+
+@helper
+def _logistic_cdf(x, s):
+    arg = -x / s
+    if arg > 88.0:
+        return 0.0
+    return 1.0 / (1.0 + np.exp(arg))
+
+
+@helper
+def _hair_np(phi, p, s, gamma_o, gamma_t):
+    a = phi - (2.0 * p * gamma_t - 2.0 * gamma_o + p * np.pi)
+    a = (a + np.pi) - 2.0 * np.pi * np.floor((a + np.pi) / (2.0 * np.pi)) - np.pi
+    e = np.exp(-np.abs(a) / s)
+    scale = 1.0 - 2.0 * _logistic_cdf(-np.pi, s)
+    return e / (s * (1.0 + e) * (1.0 + e)) / scale if scale > 0 else 0.0
+
+
+@helper
+def _fresnel_dielectric_cos(cos, eta):
+    c = np.abs(cos)
+    g = eta * eta - 1.0 + c * c
+    if g <= 0:
+        return 1.0
+    g = np.sqrt(g)
+    a = (g - c) / (g + c)
+    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    return 0.5 * a * a * (1.0 + b * b)
+
+
+@helper
+def _hair_fibre(lobes, i, k, wox, woy, woz, ap, energy, tilt):
+    """hair.Fibre for one ray: fills ap (4, 3), energy (4,), tilt (3, 2);
+    returns (v, s, m0, sin_o, cos_o, phi_o, gamma_o, gamma_t)."""
+    alpha = lobes[2]
+    ior = lobes[4]
+    r = np.sqrt(alpha[i, k])
+    radial = lobes[RADIAL_ROUGHNESS][i, k]
+    v = _hair_variance(r)
+    sr = clip(radial, 0.001, 1.0)
+    s = (0.265 * sr + 1.194 * sr * sr + 5.372 * sr ** 22) * SQRT_PI_8
+    m0 = _hair_variance(clip((1.0 - clip(lobes[COAT][i, k], 0.0, 1.0)) * clip(r, 0.001, 1.0), 0.001, 1.0))
+    tilt_angle = -lobes[OFFSET][i, k]
+    eta = max(ior[i, k], 1e-5)
+    sin_o = clip(wox, -1.0, 1.0)
+    cos_o = _cos_from_sin(sin_o)
+    phi_o = np.arctan2(woz, woy)
+    yz = np.sqrt(woy * woy + woz * woz)
+    h = clip(-woy / yz, -1.0, 1.0) if yz > 0 else 0.0
+    gamma_o = np.arcsin(h)
+    cos_gamma_o = _cos_from_sin(h)
+    cos_t = _cos_from_sin(sin_o / eta)
+    sin_gt = h * cos_o / np.sqrt(max(eta * eta - sin_o * sin_o, 1e-30))
+    gamma_t = np.arcsin(clip(sin_gt, -1.0, 1.0))
+    cos_gt = _cos_from_sin(sin_gt)
+    f = _fresnel_dielectric_cos(cos_o * cos_gamma_o, eta)
+    total = 0.0
+    for c in range(3):
+        t = np.exp(-max(lobes[ABSORPTION][i, k, c], 0.0) * (2.0 * cos_gt / max(cos_t, 1e-30)))
+        ap[0, c] = f
+        col = (1.0 - f) * (1.0 - f) * t
+        ap[1, c] = col
+        col = col * t * f
+        ap[2, c] = col
+        tf = t * f
+        ap[3, c] = col * (tf / (1.0 - tf) if tf < 1.0 else 0.0)
+    for p in range(4):
+        energy[p] = _luminance(ap[p, 0], ap[p, 1], ap[p, 2])
+        total += energy[p]
+    for p in range(4):
+        energy[p] = energy[p] / total if total > 0 else 0.0
+    s1 = np.sin(tilt_angle)
+    c1 = _cos_from_sin(s1)
+    s2 = 2.0 * s1 * c1
+    c2 = c1 * c1 - s1 * s1
+    s4 = 2.0 * s2 * c2
+    c4 = c2 * c2 - s2 * s2
+    tilt[0, 0], tilt[0, 1] = sin_o * c2 - cos_o * s2, np.abs(cos_o * c2 + sin_o * s2)
+    tilt[1, 0], tilt[1, 1] = sin_o * c1 + cos_o * s1, np.abs(cos_o * c1 - sin_o * s1)
+    tilt[2, 0], tilt[2, 1] = sin_o * c4 + cos_o * s4, np.abs(cos_o * c4 - sin_o * s4)
+    return v, s, m0, sin_o, cos_o, phi_o, gamma_o, gamma_t
+
+
+@helper
+def _hair_eval(lobes, i, k, wox, woy, woz, wix, wiy, wiz, ap, energy, tilt):
+    """hair.eval_hair_f for one ray: (f_0, f_1, f_2, pdf), f without the weight."""
+    v, s, m0, sin_o, cos_o, phi_o, gamma_o, gamma_t = _hair_fibre(lobes, i, k, wox, woy, woz, ap, energy, tilt)
+    sin_i = clip(wix, -1.0, 1.0)
+    cos_i = _cos_from_sin(sin_i)
+    phi = np.arctan2(wiz, wiy) - phi_o
+    f_0 = f_1 = f_2 = e = 0.0
+    for p in range(3):
+        vp = m0 if p == 0 else (0.25 * v if p == 1 else 4.0 * v)
+        mn = _hair_mp(sin_i, cos_i, tilt[p, 0], tilt[p, 1], vp) * _hair_np(phi, p, s, gamma_o, gamma_t)
+        f_0 += ap[p, 0] * mn
+        f_1 += ap[p, 1] * mn
+        f_2 += ap[p, 2] * mn
+        e += energy[p] * mn
+    m = _hair_mp(sin_i, cos_i, sin_o, cos_o, 4.0 * v) / (2.0 * np.pi)
+    f_0 += ap[3, 0] * m
+    f_1 += ap[3, 1] * m
+    f_2 += ap[3, 2] * m
+    e += energy[3] * m
+    cos = np.abs(wiz)
+    if not cos > 1e-12 or not (np.isfinite(f_0) and np.isfinite(f_1) and np.isfinite(f_2) and np.isfinite(e)):
+        return 0.0, 0.0, 0.0, 0.0
+    return f_0 / cos, f_1 / cos, f_2 / cos, e
+
+
+@helper
+def _hair_sample(lobes, i, k, wox, woy, woz, u_lobe, u1, u2, ap, energy, tilt):
+    """hair.sample_hair_dir for one ray."""
+    v, s, m0, sin_o, cos_o, phi_o, gamma_o, gamma_t = _hair_fibre(lobes, i, k, wox, woy, woz, ap, energy, tilt)
+    z = u_lobe
+    p = 0
+    while p < 3:
+        if z < energy[p]:
+            break
+        z -= energy[p]
+        p += 1
+    if energy[p] > 0:
+        z = z / energy[p]
+    if p == 1:
+        v = v * 0.25
+    elif p >= 2:
+        v = v * 4.0
+    so, co = sin_o, cos_o
+    if p < 3:
+        so, co = tilt[p, 0], tilt[p, 1]
+    z = max(z, 1e-5)
+    fac = 1.0 + v * np.log(z + (1.0 - z) * np.exp(-2.0 / v))
+    sin_i = -fac * so + _cos_from_sin(fac) * np.cos(TWO_PI * u2) * co
+    cos_i = _cos_from_sin(sin_i)
+    if p < 3:
+        c = _logistic_cdf(-np.pi, s)
+        d = u1 * (1.0 - 2.0 * c) + c
+        x = -s * np.log(1.0 / d - 1.0) if d > 0 else -np.pi
+        phi = 2.0 * p * gamma_t - 2.0 * gamma_o + p * np.pi + clip(x, -np.pi, np.pi)
+    else:
+        phi = TWO_PI * u1
+    phi_i = phi_o + phi
+    return sin_i, cos_i * np.cos(phi_i), cos_i * np.sin(phi_i)
+
+
 def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f, pdf):
     """bsdf.eval_pdf into f (N, 3) and pdf (N,); diffuse_term and keep
     are bsdf.bump_shadowing's arrays, or empty without a moved normal."""
@@ -511,6 +709,7 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
     back = lobes[-1]
     t_sheen = tables[7]
     bump = len(diffuse_term) > 0
+    ap, energy, tilt = np.empty((4, 3)), np.empty(4), np.empty((3, 2))
     for i in range(len(wo)):
         wox, woy, woz, wix, wiy, wiz = wo[i, 0], wo[i, 1], wo[i, 2], wi[i, 0], wi[i, 1], wi[i, 2]
         f_0 = f_1 = f_2 = p = 0.0
@@ -527,6 +726,12 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
                 f_1 += w[i, k, 1] * s
                 f_2 += w[i, k, 2] * s
                 p += sel[i, k] * np.abs(wiz) * INV_PI
+            elif kd == HAIR_CHIANG and woz > COS_EPS:
+                h0, h1, h2, pk = _hair_eval(lobes, i, k, wox, woy, woz, wix, wiy, wiz, ap, energy, tilt)
+                f_0 += w[i, k, 0] * h0
+                f_1 += w[i, k, 1] * h1
+                f_2 += w[i, k, 2] * h2
+                p += sel[i, k] * pk
             elif kd == OREN_NAYAR and upper:
                 single, e_avg, ms = _oren_nayar(lobes[DIFFUSE_ROUGHNESS][i, k], wox, woy, woz, wix, wiy, wiz)
                 s = diffuse_term[i] if bump else 1.0
@@ -687,6 +892,7 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
     back = lobes[-1]
     t_sheen = tables[7]
     kk = kind.shape[1]
+    ap, energy, tilt = np.empty((4, 3)), np.empty(4), np.empty((3, 2))
     for i in range(len(wo)):
         wox, woy, woz = wo[i, 0], wo[i, 1], wo[i, 2]
         # The lobe: u_lobe against the running sum of the selection
@@ -736,6 +942,8 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
             x, y = rc * x - rs * y, rs * x + rc * y
             if z <= 0.0:
                 kd = NONE
+        elif kd == HAIR_CHIANG:
+            x, y, z = _hair_sample(lobes, i, k, wox, woy, woz, u_sub, u1[i], u2[i], ap, energy, tilt)
         elif kd == SHEEN:
             x, y, z = _sample_sheen(t_sheen, np.sqrt(alpha[i, k]), wox, woy, woz, u1[i], u2[i])
         elif kd == MIRROR:

@@ -177,6 +177,19 @@ def _catmull_rom(t):
     return 0.5 * np.stack([-t3 + 2 * t2 - t, 3 * t3 - 5 * t2 + 2, -3 * t3 + 4 * t2 + t, t3 - t2], axis=1)
 
 
+def _catmull_rom_derivative(t):
+    """d/dt of _catmull_rom."""
+    t2 = t * t
+    return 0.5 * np.stack([-3 * t2 + 4 * t - 1, 9 * t2 - 10 * t, -9 * t2 + 8 * t + 1, 3 * t2 - 2 * t], axis=1)
+
+
+def curve_tangents(strands, prim, u):
+    """The strands' tangents dC/du (unnormalized) at segment rows ``prim``, parameter u."""
+    start = strands.start[strands.slot[prim]]
+    cv = strands.cvs[start[:, None] + np.arange(4)[None, :]]
+    return np.einsum("nk,nkj->nj", _catmull_rom_derivative(np.clip(u, 0.0, 1.0)), cv[:, :, :3])
+
+
 def curve_hits(strands, o, d, t, prim, u):
     """(p, ng, back, radius) of rays (o, d) meeting segment rows ``prim`` at
     Embree's distance t and curve parameter u: the point moved onto the
@@ -194,6 +207,32 @@ def curve_hits(strands, o, d, t, prim, u):
     p = centre + n * radius[:, None]
     back = np.einsum("ij,ij->i", d, n) > 0
     return p, np.where(back[:, None], -n, n), back, radius
+
+
+def through_fibre(p, ng, fibre, radius, wi):
+    """Where rays from strand points p in directions wi that enter the strand
+    (wi . ng < 0) leave it again: (p', n', t) with p' = p + t wi on the far
+    side of the round strand (a cylinder about the tangent ``fibre`` of the
+    given radius, locally), n' its outward normal there, t the distance
+    (0 and p, ng unchanged elsewhere).  Cycles' rays skip the primitive they
+    leave; Ember's start past it, so a transmitted or light-sampled ray
+    through the fibre does not meet its inside."""
+    t = np.zeros(len(p))
+    cos = np.einsum("ij,ij->i", wi, ng)
+    length = np.linalg.norm(fibre, axis=1)
+    axis = fibre / np.where(length > 0, length, 1.0)[:, None]
+    across = wi - np.einsum("ij,ij->i", wi, axis)[:, None] * axis
+    a2 = np.einsum("ij,ij->i", across, across)
+    enter = (radius > 0) & (length > 0) & (cos < 0) & (a2 > 1e-12)
+    if not enter.any():
+        return p, ng, t
+    t[enter] = -2.0 * radius[enter] * cos[enter] / a2[enter]
+    out = p + wi * t[:, None]
+    centre = p - ng * radius[:, None]
+    n = out - centre
+    n -= np.einsum("ij,ij->i", n, axis)[:, None] * axis
+    n /= np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+    return np.where(enter[:, None], out, p), np.where(enter[:, None], n, ng), t
 
 
 def unlit_rows(n_rows, spheres, motion, strands=None):

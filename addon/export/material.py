@@ -333,6 +333,44 @@ class NodeTranslator:
         roughness = _clamp01(self.value(node, 'Roughness', 0.5))
         return Closure([_scene().Lobe('sheen', self.color(node, 'Color'), roughness)])
 
+    def _hair_constant(self, node, name, default):
+        """A hair input as a finite constant (a linked one: its own value, named)."""
+        socket = node.inputs.get(name)
+        if socket is None:
+            return default
+        value = self.value(node, name, default)
+        if nodes.is_expr(value):
+            self._note_texture(node, name)
+            value = float(nodes.constant(socket))
+        return self._finite_value(node, name, float(value), default)
+
+    def _node_bsdf_hair_principled(self, node):
+        """Cycles' Principled Hair BSDF, Chiang model (svm_node_closure_bsdf):
+        the absorption from Direct Coloring, Melanin Concentration or the
+        Absorption Coefficient; roughness, radial roughness, coat, IOR and
+        offset as constants.  Huang (4.0+) renders as Chiang, and Random
+        Roughness / Random Color as 0, with a warning."""
+        if getattr(node, 'model', 'CHIANG') != 'CHIANG':
+            self._approximate(node, "Huang hair model rendered as Chiang")
+        c = lambda name, default: self._hair_constant(node, name, default)  # noqa: E731
+        roughness, radial = _clamp01(c('Roughness', 0.3)), _clamp01(c('Radial Roughness', 0.3))
+        for name in ('Random Roughness', 'Random Color'):
+            if c(name, 0.0) != 0.0:
+                self._approximate(node, f"{name} read as 0")
+        mode = getattr(node, 'parametrization', 'COLOR')
+        if mode == 'ABSORPTION':
+            sigma = _constant_color(self, node, 'Absorption Coefficient', (0.245531, 0.52, 1.365))
+        elif mode == 'MELANIN':
+            sigma = _scene().hair_sigma_from_melanin(c('Melanin', 0.8), c('Melanin Redness', 1.0),
+                                                     _constant_color(self, node, 'Tint', (1.0, 1.0, 1.0)), radial)
+        else:
+            sigma = _scene().hair_sigma_from_color(
+                _constant_color(self, node, 'Color', (0.017513, 0.005763, 0.002059)), radial)
+        sigma = tuple(float(x) for x in np.nan_to_num(np.maximum(sigma, 0.0), nan=0.0, posinf=1e30))
+        return Closure([_scene().Lobe('hair_chiang', (1.0, 1.0, 1.0), roughness, ior=c('IOR', 1.55),
+                                      absorption=sigma, radial_roughness=radial, coat=_clamp01(c('Coat', 0.0)),
+                                      offset=c('Offset', 2.0 * math.pi / 180.0))])
+
     def _node_subsurface_scattering(self, node):
         """Cycles' Subsurface Scattering node (Random Walk, Skin, Christensen-Burley)."""
         return Closure(subsurface.node_lobes(self, node))

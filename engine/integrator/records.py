@@ -145,6 +145,10 @@ class Hit:
     # The Light Path node's path columns (nodes.context.PATH_COLUMNS), only
     # when some material reads that node (Context.light_path).
     path: object = None
+    # Curves (points.Strands): the strand's tangent dC/du (N, 3) at curve hits,
+    # zero elsewhere; None without curves.  The shading frame's x on strands.
+    fibre: object = None
+    fibre_radius: object = None   # (N,) the strand's radius there (0 elsewhere), with fibre
     # The ShadingContext of these points, made on first use
     # (ShadingContext.of_hit); a taken Hit makes its own.
     shading: object = None

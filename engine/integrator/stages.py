@@ -12,7 +12,7 @@ from .. import bsdf, bump_correction, nee, throughput
 from ..accel import shadow_rays, shadow_rays_f32
 from ..hits import hit_geometry
 from ..motion import path_time, triangles_at
-from ..points import curve_hits, sphere_hits
+from ..points import curve_hits, curve_tangents, sphere_hits, through_fibre
 from ..nodes import NodeRays, ShadingContext
 from ..nodes.context import PATH_COLUMNS
 from ..sampler import BSDF, LIGHT, emitter_set, vertex_set
@@ -216,17 +216,21 @@ def interaction(ctx, paths, t, prim, bu, bv):
         if len(on):
             p[on], ng[on], back[on] = sphere_hits(ctx.spheres, paths.o[on], d[on], t[on], prim[on])
             ns[on] = ng[on]
-    curve_eps = None
-    if ctx.strands is not None:   # curves: the point on the round curve and its normal
+    curve_eps = fibre = None
+    if ctx.strands is not None:   # curves: the point on the round curve, its normal and tangent
         on = np.flatnonzero(ctx.strands.is_curve[prim])
         if len(on):
             p[on], ng[on], back[on], radius = curve_hits(ctx.strands, paths.o[on], d[on], t[on], prim[on], bu[on])
             ns[on] = ng[on]
             curve_eps = (on, radius)
+            fibre, fibre_radius = np.zeros_like(p), np.zeros(len(p))
+            fibre[on] = curve_tangents(ctx.strands, prim[on], bu[on])
+            fibre_radius[on] = radius
     uv = _hit_uv(tr, prim, bu, bv)
     hit = Hit(p, ng, ns, -d, np.take(tr.material, prim), prim, ctx.accel.offset_scale(p), uv, back=back,
               bary=np.stack([bu, bv], axis=1), depth=getattr(paths, "bounce", None),
-              ray=getattr(paths, "ray", None))
+              ray=getattr(paths, "ray", None), fibre=fibre,
+              fibre_radius=None if fibre is None else fibre_radius)
     if curve_eps is not None:
         # Embree's curve distances are coarser than its triangles': leave a strand
         # by a thousandth of its radius at least.
@@ -310,6 +314,8 @@ def shade(ctx, paths, hit, depth):
     # Anisotropic lobes' tangents (evaluated on the unbent normal, as Cycles'
     # Tangent node reads sd->N; projected onto the bent one).
     ctx.materials.textures.tangent_frames(hit.mat, sc, hit.ns, tt, bb)
+    if hit.fibre is not None:
+        fibre_frames(hit.fibre, hit.ns, tt, bb)
     wo_l = to_local(hit.wo, tt, bb, hit.ns)
     if smooth is not None and not (np.array_equal(smooth, hit.ns) and np.array_equal(bent, hit.ns)):
         # Cycles' bump shadowing term (bsdf.bump_shadowing) needs the smooth
@@ -322,6 +328,21 @@ def shade(ctx, paths, hit, depth):
             lobes.diffuse_smooth = bump_correction.apply(rot, lobes.smooth_n)
     w = bsdf.weights(lobes, wo_l)
     return Vertex(hit, tt, bb, wo_l, lobes, w, bsdf.selection(lobes, wo_l, w))
+
+
+def fibre_frames(fibre, ns, tt, bb):
+    """On strands the shading frame's x is the curve's tangent (made
+    perpendicular to the normal; the hair lobes read the fibre's axis and
+    the offset across it from that frame, engine/lobes/hair.py).  In place,
+    where ``fibre`` is not zero."""
+    y = np.cross(ns, fibre)
+    length = np.linalg.norm(y, axis=1)
+    ok = length > 1e-12 * np.maximum(np.linalg.norm(fibre, axis=1), 1e-300)
+    if not ok.any():
+        return
+    y = y / np.where(ok, length, 1.0)[:, None]
+    tt[ok] = np.cross(y, ns)[ok]
+    bb[ok] = y[ok]
 
 
 def filter_glossy(ctx, paths, lobes):
@@ -450,7 +471,11 @@ def light_sample(ctx, paths, v, e, p_sel, u):
     if len(live) == 0:
         return None
     rays = shadow_rays if ctx.transparent_shadows else shadow_rays_f32
-    origin, direction, tmax = rays(hit.p, hit.ng, ls.wi, ls.dist, ls.on_surface, hit.eps, live)
+    p, ng, dist = hit.p, hit.ng, ls.dist
+    if hit.fibre is not None:   # light through a strand: the ray starts on its far side
+        p, ng, t = through_fibre(p, ng, hit.fibre, hit.fibre_radius, ls.wi)
+        dist = np.maximum(dist - t, 0.0)
+    origin, direction, tmax = rays(p, ng, ls.wi, dist, ls.on_surface, hit.eps, live)
     sample = LightSample(e, ls.wi, wi_l, f, w, ls.delta, contrib)
     return ShadowBatch(v, sample, live, origin, direction, tmax)
 
@@ -515,7 +540,11 @@ def scatter(ctx, paths, v, depth):
         wi[through] = paths.d[through]
         pdf = np.where(through, paths.prev_pdf, pdf)
         delta = np.where(through, paths.prev_delta, delta)
-    o = ctx.accel.offset_origin(hit.p, hit.ng, wi, hit.eps)
+    if hit.fibre is None:
+        o = ctx.accel.offset_origin(hit.p, hit.ng, wi, hit.eps)
+    else:   # a ray into a strand leaves from its far side
+        p, ng, _ = through_fibre(hit.p, hit.ng, hit.fibre, hit.fibre_radius, wi)
+        o = ctx.accel.offset_origin(p, ng, wi, hit.eps)
     paths.tmax = unless(through, paths.tmax - dot(o - paths.o, wi), np.full(len(wi), np.inf))
     paths.mis_o = unless(through, paths.mis_o, o)
     paths.o = o

@@ -142,6 +142,17 @@ PARAMS = (
                                               nan=0.0, posinf=1e30)),
     Param("phase_g", float, 0.0, np.float64, (), "subsurface: Henyey-Greenstein anisotropy of the walk "
           "(Blender's Subsurface Anisotropy; clamped to [0, 0.9] as Cycles 5.0)."),
+    Param("absorption", RGB, (0.0, 0.0, 0.0), np.float64, (3,), "hair_chiang: the fibre's absorption "
+          "coefficient sigma_a per unit of its radius (Cycles' bsdf->sigma; engine/lobes/hair.py converts "
+          "melanin and colour).",
+          to_table=lambda lobe: np.nan_to_num(np.maximum(getattr(lobe, "absorption", (0.0, 0.0, 0.0)), 0.0),
+                                              nan=0.0, posinf=1e30)),
+    Param("radial_roughness", float, 0.3, np.float64, (), "hair_chiang: azimuthal roughness in [0, 1].",
+          to_table=lambda lobe: _finite_or(getattr(lobe, "radial_roughness", 0.3), 0.3)),
+    Param("coat", float, 0.0, np.float64, (), "hair_chiang: Coat in [0, 1] (the R lobe's roughness is "
+          "(1 - coat) roughness).", to_table=lambda lobe: _finite_or(getattr(lobe, "coat", 0.0), 0.0)),
+    Param("offset", float, 0.0, np.float64, (), "hair_chiang: the cuticle tilt in radians (the node's Offset).",
+          to_table=lambda lobe: _finite_or(getattr(lobe, "offset", 0.0), 0.0)),
 )
 
 

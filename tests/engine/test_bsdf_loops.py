@@ -12,11 +12,11 @@ import pytest
 from engine import bsdf, kernels
 from engine.bsdf import (DIFFUSE, GLASS, GLOSSY, GLOSSY_ANISOTROPIC, Lobes, MIN_ALPHA, MIRROR, NONE, REFRACTION,
                          SHEEN, TRANSLUCENT, TRANSPARENT)
-from engine.lobe_ids import OREN_NAYAR
+from engine.lobe_ids import HAIR_CHIANG, OREN_NAYAR
 from test_kernels import assert_agree, both_ways, compiled_ready
 
 KINDS = np.array([NONE, DIFFUSE, MIRROR, GLOSSY, GLASS, REFRACTION, TRANSLUCENT, TRANSPARENT, SHEEN,
-                  GLOSSY_ANISOTROPIC, OREN_NAYAR], np.int8)
+                  GLOSSY_ANISOTROPIC, OREN_NAYAR, HAIR_CHIANG], np.int8)
 
 
 def random_lobes(rng, n, k=4, bump=False):
@@ -38,7 +38,9 @@ def random_lobes(rng, n, k=4, bump=False):
                   multiscatter=multiscatter, covers=covers, absorb=rng.random((n, k, 3)),
                   weight=rng.uniform(0.0, 1.2, (n, k)), back=rng.random(n) < 0.3,
                   anisotropy=rng.uniform(-0.1, 1.15, (n, k)), rotation=rng.uniform(-2.0, 2.0, (n, k)),
-                  diffuse_roughness=rng.uniform(-0.1, 1.1, (n, k)))
+                  diffuse_roughness=rng.uniform(-0.1, 1.1, (n, k)),
+                  absorption=rng.random((n, k, 3)) * 3.0, radial_roughness=rng.uniform(-0.1, 1.1, (n, k)),
+                  coat=rng.uniform(-0.1, 1.1, (n, k)), offset=rng.uniform(-0.2, 0.2, (n, k)))
     if bump:
         s = rng.normal(size=(n, 3)) + np.array([0.0, 0.0, 2.0])
         lobes.smooth_n = s / np.linalg.norm(s, axis=1)[:, None]
