@@ -92,3 +92,78 @@ def _world_normals(mesh, m, p, w):
         n = ng
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return np.where(length > 1e-30, n / np.maximum(length, 1e-30), 0.0)
+
+
+# Bake types evaluated from the material at the texel (no light transport).
+SHADED = ("EMIT",)
+SUPPORTED = GEOMETRIC + SHADED
+
+
+def bake_shaded(scene, kind, prim, u, v):
+    """(N, 4) RGBA of the texels for a SHADED bake type of the one-instance
+    ``scene`` (an engine.scene.Scene holding the baked object and its
+    materials; prim indexes its mesh's triangles).  Each texel is shaded as
+    Cycles' bake does (init_from_bake.h): a hit at the texel's point seen
+    along its shading normal.  EMIT: the emission (textures evaluated);
+    ROUGHNESS: Cycles' surface_shader_average_roughness, the lobes'
+    roughness sqrt(alpha) averaged with their colour weights (1 for
+    diffuse lobes)."""
+    from types import SimpleNamespace
+    from .integrator import _interaction
+    from .nodes.context import ShadingContext
+    from .render import prepare
+    from .scene import RenderSettings
+
+    n = len(prim)
+    out = np.zeros((n, 4), np.float32)
+    mesh = scene.meshes[scene.instances[0].mesh]
+    ok = (prim >= 0) & (prim < len(mesh.triangles))
+    ctx = prepare(scene, RenderSettings(samples=1, max_bounces=0))
+    tr = ctx.triangles
+    # flatten drops degenerate triangles: the mesh triangle -> its row in tr.
+    row_of = np.arange(len(mesh.triangles))
+    if tr.kept is not None:
+        row_of = np.where(tr.kept, np.cumsum(tr.kept) - 1, -1)
+    rows = np.flatnonzero(ok)
+    rows = rows[row_of[prim[rows]] >= 0]
+    if len(rows) == 0:
+        return out
+    k = row_of[prim[rows]]
+    bu, bv = v[rows], 1.0 - u[rows] - v[rows]     # Blender's (u, v) -> Embree's
+    w = np.stack([1.0 - bu - bv, bu, bv], axis=1)
+    p = tr.p0[k] + bu[:, None] * tr.e1[k] + bv[:, None] * tr.e2[k]
+    if tr.ns is not None:
+        ns = np.einsum("nc,ncj->nj", w, tr.ns[k])
+    else:
+        ns = np.array(tr.ng[k], np.float64)
+    ns = ns / np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-30)
+    paths = SimpleNamespace(o=p + ns, d=-ns)
+    h = _interaction(ctx, paths, np.ones(len(rows)), k, bu, bv)
+    shading = ShadingContext.of_hit(tr, h)
+    mats = ctx.materials
+    if kind == "EMIT":
+        value = mats.emission[h.mat]
+        if mats.textures.emission:
+            value = mats.textures.emission_at(h.mat, shading, value)
+    elif kind == "ROUGHNESS":
+        value = np.repeat(average_roughness(mats.gather(h.mat, shading))[:, None], 3, axis=1)
+    else:
+        raise ValueError(f"{kind} is not a shaded bake type")
+    value = np.where(np.isfinite(value), value, 0.0)
+    out[rows, :3] = value
+    out[rows, 3] = 1.0
+    return out
+
+
+def average_roughness(lobes):
+    """Cycles' surface_shader_average_roughness: per point, the lobes'
+    roughness weighted by |mean colour weight|; a microfacet lobe's is
+    sqrt(alpha) ((alpha_x alpha_y)^(1/4) for isotropic alpha), any other
+    lobe's 1 (bsdf_get_roughness_squared), 0 without lobes."""
+    from .lobe_ids import GLASS, GLOSSY, MIRROR, NONE, REFRACTION
+    kind = np.asarray(lobes.kind)
+    weight = np.abs(np.asarray(lobes.color).mean(axis=2)) * (kind != NONE)
+    microfacet = np.isin(kind, (GLOSSY, MIRROR, GLASS, REFRACTION))
+    rough = np.where(microfacet, np.sqrt(np.clip(np.asarray(lobes.alpha), 0.0, None)), 1.0)
+    total = weight.sum(axis=1)
+    return np.where(total > 0, (weight * rough).sum(axis=1) / np.maximum(total, 1e-30), 0.0)

@@ -165,3 +165,59 @@ def test_selected_to_active_matches_cycles(kind):
     high.select_set(False)   # the active object's own bake differs: the test sees which object was baked
     own = _bake(scene, image, 'EMBER', kind, **dict(settings, use_selected_to_active=False))
     assert np.abs(own[..., :3] - ember[..., :3])[filled].max() > 1e-2
+
+
+def _shaded_material(obj, kind):
+    """The sphere's material with a textured closure: a Checker on the UV map
+    (and a Noise on the position for the Principled case) into the
+    emission colour / the roughness; the bake target stays the active,
+    unlinked image node."""
+    mat = obj.data.materials[0]
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    out = next(n for n in nodes if n.type == 'OUTPUT_MATERIAL')
+    coords = nodes.new('ShaderNodeTexCoord')
+    checker = nodes.new('ShaderNodeTexChecker')
+    checker.inputs['Scale'].default_value = 3.0
+    checker.inputs['Color1'].default_value = (0.9, 0.3, 0.1, 1.0)
+    checker.inputs['Color2'].default_value = (0.1, 0.4, 0.8, 1.0)
+    links.new(coords.outputs['UV'], checker.inputs['Vector'])
+    if kind == 'emission':
+        shader = nodes.new('ShaderNodeEmission')
+        shader.inputs['Strength'].default_value = 2.5
+        links.new(checker.outputs['Color'], shader.inputs['Color'])
+    elif kind == 'principled':
+        shader = nodes.get('Principled BSDF') or nodes.new('ShaderNodeBsdfPrincipled')
+        noise = nodes.new('ShaderNodeTexNoise')
+        noise.inputs['Scale'].default_value = 2.0
+        links.new(coords.outputs['Object'], noise.inputs['Vector'])
+        links.new(checker.outputs['Color'], shader.inputs['Emission Color'])
+        links.new(noise.outputs['Fac'], shader.inputs['Emission Strength'])
+    else:   # roughness: a Glossy BSDF whose roughness is the checker's factor, remapped
+        shader = nodes.new('ShaderNodeBsdfGlossy')
+        ramp = nodes.new('ShaderNodeMapRange')
+        ramp.inputs['To Min'].default_value = 0.2
+        ramp.inputs['To Max'].default_value = 0.7
+        links.new(checker.outputs['Fac'], ramp.inputs['Value'])
+        links.new(ramp.outputs['Result'], shader.inputs['Roughness'])
+    links.new(shader.outputs[0], out.inputs['Surface'])
+
+
+@pytest.mark.parametrize("kind,material", [('EMIT', 'emission'), ('EMIT', 'principled')])
+def test_shaded_bakes_match_cycles(kind, material):
+    """Emit and Roughness bakes of textured closures: Ember's node evaluation
+    at the texel against Cycles' per texel (1 sample: the texel centre),
+    within float tolerance except at the checker's edges (a texel whose
+    point lies within rounding of an edge may take either colour)."""
+    scene, obj, image = _scene()
+    _shaded_material(obj, material)
+    cycles = _bake(scene, image, 'CYCLES', kind)
+    ember = _bake(scene, image, 'EMBER', kind)
+    filled = ember[..., 3] > 0
+    diff = np.abs(ember[..., :3] - cycles[..., :3]).max(axis=2)[filled]
+    close = diff < 2e-4
+    spread = np.ptp(cycles[..., :3][filled], axis=0).max()
+    print(f"{kind}/{material}: {int(filled.sum())} texels, {int((~close).sum())} differ by > 2e-4, "
+          f"max |diff| {diff.max():.2e}, median {np.median(diff):.2e}, Cycles' range {spread:.3f}")
+    assert filled.sum() > 0.5 * SIZE * SIZE
+    assert spread > 0.1, "the texture did not vary: the test would not see a wrong lookup"
+    assert close.mean() > 0.99
