@@ -95,7 +95,7 @@ def _world_normals(mesh, m, p, w):
 
 
 # Bake types evaluated from the material at the texel (no light transport).
-SHADED = ("EMIT",)
+SHADED = ("EMIT", "ROUGHNESS")
 SUPPORTED = GEOMETRIC + SHADED
 
 
@@ -156,14 +156,22 @@ def bake_shaded(scene, kind, prim, u, v):
 
 
 def average_roughness(lobes):
-    """Cycles' surface_shader_average_roughness: per point, the lobes'
-    roughness weighted by |mean colour weight|; a microfacet lobe's is
-    sqrt(alpha) ((alpha_x alpha_y)^(1/4) for isotropic alpha), any other
-    lobe's 1 (bsdf_get_roughness_squared), 0 without lobes."""
-    from .lobe_ids import GLASS, GLOSSY, MIRROR, NONE, REFRACTION
+    """Cycles' ROUGHNESS bake: per point, the lobes' roughness averaged with
+    their weights |mean colour| x mix weight; a microfacet lobe's roughness
+    is sqrt(alpha), an Oren-Nayar lobe's its sigma.  Measured on bpy 5.0.1:
+    a Lambert Diffuse does not enter the average (Glossy 0.4 mixed with a
+    Diffuse bakes 0.4) and a point without such lobes bakes 1 (a Diffuse
+    alone bakes 1); the other lobes (translucent, sheen, subsurface,
+    transparent) are assumed to behave as Lambert's."""
+    from .lobe_ids import GLASS, GLOSSY, MIRROR, OREN_NAYAR, REFRACTION
     kind = np.asarray(lobes.kind)
-    weight = np.abs(np.asarray(lobes.color).mean(axis=2)) * (kind != NONE)
+    weight = np.abs(np.asarray(lobes.color).mean(axis=2))
+    if lobes.weight is not None:
+        weight = weight * np.asarray(lobes.weight)
     microfacet = np.isin(kind, (GLOSSY, MIRROR, GLASS, REFRACTION))
-    rough = np.where(microfacet, np.sqrt(np.clip(np.asarray(lobes.alpha), 0.0, None)), 1.0)
+    rough = np.sqrt(np.clip(np.asarray(lobes.alpha), 0.0, None))
+    if lobes.diffuse_roughness is not None:
+        rough = np.where(kind == OREN_NAYAR, np.clip(lobes.diffuse_roughness, 0.0, 1.0), rough)
+    weight = weight * (microfacet | (kind == OREN_NAYAR))
     total = weight.sum(axis=1)
-    return np.where(total > 0, (weight * rough).sum(axis=1) / np.maximum(total, 1e-30), 0.0)
+    return np.where(total > 0, (weight * rough).sum(axis=1) / np.maximum(total, 1e-30), 1.0)

@@ -10,6 +10,8 @@ margin after the engine returns, so it is off here (margin 0) to compare
 the engine's texels only; one run with Blender's margin checks it is still
 applied around Ember's texels.  Hostile input: a type Ember does not bake
 yet, an object without UV map, a non-mesh object: a clear error, no crash.
+Shaded types (Emit, Roughness) of textured closures: the render's node
+evaluation at each texel against Cycles' bake, per texel.
 """
 import bpy
 import numpy as np
@@ -199,10 +201,24 @@ def _shaded_material(obj, kind):
         ramp.inputs['To Max'].default_value = 0.7
         links.new(checker.outputs['Fac'], ramp.inputs['Value'])
         links.new(ramp.outputs['Result'], shader.inputs['Roughness'])
+        if kind == 'mix':   # with a Diffuse (roughness 1) by a 0.3 mix: Cycles' weighted average
+            mix = nodes.new('ShaderNodeMixShader')
+            mix.inputs['Fac'].default_value = 0.3
+            links.new(shader.outputs[0], mix.inputs[1])
+            links.new(nodes.new('ShaderNodeBsdfDiffuse').outputs[0], mix.inputs[2])
+            shader = mix
+        elif kind == 'oren_nayar':   # a Diffuse BSDF with that roughness: Oren-Nayar's sigma
+            shader = nodes.new('ShaderNodeBsdfDiffuse')
+            links.new(ramp.outputs['Result'], shader.inputs['Roughness'])
+        elif kind == 'principled_roughness':
+            shader = nodes.get('Principled BSDF') or nodes.new('ShaderNodeBsdfPrincipled')
+            links.new(ramp.outputs['Result'], shader.inputs['Roughness'])
     links.new(shader.outputs[0], out.inputs['Surface'])
 
 
-@pytest.mark.parametrize("kind,material", [('EMIT', 'emission'), ('EMIT', 'principled')])
+@pytest.mark.parametrize("kind,material", [('EMIT', 'emission'), ('EMIT', 'principled'),
+                                           ('ROUGHNESS', 'roughness'), ('ROUGHNESS', 'mix'),
+                                           ('ROUGHNESS', 'oren_nayar'), ('ROUGHNESS', 'principled_roughness')])
 def test_shaded_bakes_match_cycles(kind, material):
     """Emit and Roughness bakes of textured closures: Ember's node evaluation
     at the texel against Cycles' per texel (1 sample: the texel centre),
@@ -216,6 +232,7 @@ def test_shaded_bakes_match_cycles(kind, material):
     diff = np.abs(ember[..., :3] - cycles[..., :3]).max(axis=2)[filled]
     close = diff < 2e-4
     spread = np.ptp(cycles[..., :3][filled], axis=0).max()
+    print("centre texel: Cycles", cycles[16, 10, :3], "Ember", ember[16, 10, :3])
     print(f"{kind}/{material}: {int(filled.sum())} texels, {int((~close).sum())} differ by > 2e-4, "
           f"max |diff| {diff.max():.2e}, median {np.median(diff):.2e}, Cycles' range {spread:.3f}")
     assert filled.sum() > 0.5 * SIZE * SIZE
