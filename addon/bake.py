@@ -54,7 +54,13 @@ def _bake(engine, depsgraph, obj, pass_type, width, height):
         flat = np.empty(width * height * channels, np.float32)
         primitive_pass.rect.foreach_get(flat)
         prim, u, v = renderer.bake.unpack_primitives(flat.reshape(-1, channels))
-        if pass_type in renderer.bake.SHADED:
+        if pass_type == 'AO':
+            scene, index = _whole_scene(renderer, depsgraph, evaluated, engine)
+            world = depsgraph.scene.world
+            distance = world.light_settings.distance if world is not None else 10.0
+            rgba = renderer.bake.bake_ao(scene, index, prim, u, v, depsgraph.scene.ember.samples, distance,
+                                         seed=getattr(depsgraph.scene.ember, 'seed', 0))
+        elif pass_type in renderer.bake.SHADED:
             rgba = renderer.bake.bake_shaded(_object_scene(renderer, depsgraph, evaluated, mesh, matrix, engine),
                                              pass_type, prim, u, v)
         else:
@@ -79,3 +85,19 @@ def _object_scene(renderer, depsgraph, obj, mesh, matrix, engine):
         engine.report({'WARNING'}, f"Ember: {warning}")
     return renderer.Scene(meshes=[mesh], instances=[instance], materials=materials.materials,
                           cycles_version=tuple(bpy.app.version))
+
+
+def _whole_scene(renderer, depsgraph, obj, engine):
+    """Every mesh instance of the depsgraph as an engine Scene (the
+    occluders of an AO bake) and the index of the baked object's instance."""
+    from .export import instances as instance_export
+    override = getattr(depsgraph.view_layer, 'material_override', None)
+    materials = material_export.MaterialTable(override)
+    meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots)
+    index = next((i for i, inst in enumerate(instances) if inst.name == obj.name), None)
+    if index is None:
+        raise BakeError(f"object '{obj.name}' is not rendered in this view layer: nothing to bake")
+    for warning in materials.warnings + warnings:
+        engine.report({'WARNING'}, f"Ember: {warning}")
+    return renderer.Scene(meshes=meshes, instances=instances, materials=materials.materials,
+                          cycles_version=tuple(bpy.app.version)), index

@@ -96,7 +96,9 @@ def _world_normals(mesh, m, p, w):
 
 # Bake types evaluated from the material at the texel (no light transport).
 SHADED = ("EMIT", "ROUGHNESS")
-SUPPORTED = GEOMETRIC + SHADED
+# Bake types that trace rays through the whole scene.
+TRACED = ("AO",)
+SUPPORTED = GEOMETRIC + SHADED + TRACED
 
 
 def bake_shaded(scene, kind, prim, u, v):
@@ -175,3 +177,55 @@ def average_roughness(lobes):
     weight = weight * (microfacet | (kind == OREN_NAYAR))
     total = weight.sum(axis=1)
     return np.where(total > 0, (weight * rough).sum(axis=1) / np.maximum(total, 1e-30), 1.0)
+
+
+def bake_ao(scene, instance, prim, u, v, samples, distance, seed=0):
+    """(N, 4) RGBA of an AO bake: per texel the fraction of ``samples``
+    cosine-weighted rays about the shading normal that meet nothing within
+    ``distance`` (Cycles' AO pass at a bake point, world AO distance; a
+    direction below the geometric normal counts as occluded).  ``scene``
+    holds every object (they occlude), ``instance`` is the baked one's
+    index in scene.instances; prim indexes its mesh's triangles."""
+    from .nodes.rays import make_orthonormals
+    from .render import prepare
+    from .sampling import cosine_hemisphere
+    from .scene import RenderSettings
+
+    n = len(prim)
+    out = np.zeros((n, 4), np.float32)
+    mesh = scene.meshes[scene.instances[instance].mesh]
+    ctx = prepare(scene, RenderSettings(samples=1, max_bounces=0))
+    tr = ctx.triangles
+    first = sum(len(scene.meshes[i.mesh].triangles) for i in scene.instances[:instance])
+    total = sum(len(scene.meshes[i.mesh].triangles) for i in scene.instances)
+    row_of = np.arange(total)
+    if tr.kept is not None:
+        row_of = np.where(tr.kept, np.cumsum(tr.kept) - 1, -1)
+    ok = (prim >= 0) & (prim < len(mesh.triangles))
+    rows = np.flatnonzero(ok)
+    rows = rows[row_of[first + prim[rows]] >= 0]
+    if len(rows) == 0:
+        return out
+    k = row_of[first + prim[rows]]
+    bu, bv = v[rows], 1.0 - u[rows] - v[rows]
+    w = np.stack([1.0 - bu - bv, bu, bv], axis=1)
+    p = tr.p0[k] + bu[:, None] * tr.e1[k] + bv[:, None] * tr.e2[k]
+    ng = np.asarray(tr.ng[k], np.float64)
+    ng = ng / np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-30)
+    ns = np.einsum("nc,ncj->nj", w, tr.ns[k]) if tr.ns is not None else ng.copy()
+    ns = ns / np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-30)
+    ng = np.where((np.einsum("ij,ij->i", ng, ns) < 0)[:, None], -ng, ng)   # the side the normal faces
+    a, b = make_orthonormals(ns)
+    rng = np.random.default_rng(seed)
+    unoccluded = np.zeros(len(rows))
+    eps = ctx.accel.offset_scale(p)
+    for _ in range(int(samples)):
+        local, _pdf = cosine_hemisphere(rng.random(len(rows)), rng.random(len(rows)))
+        d = local[:, :1] * a + local[:, 1:2] * b + local[:, 2:3] * ns
+        up = np.einsum("ij,ij->i", d, ng) > 0
+        o = p + ng * eps[:, None]
+        blocked = ctx.accel.occluded(o, d, np.full(len(rows), float(distance)))
+        unoccluded += up & ~blocked
+    out[rows, :3] = (unoccluded / max(int(samples), 1))[:, None]
+    out[rows, 3] = 1.0
+    return out

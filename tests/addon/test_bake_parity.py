@@ -238,3 +238,65 @@ def test_shaded_bakes_match_cycles(kind, material):
     assert filled.sum() > 0.5 * SIZE * SIZE
     assert spread > 0.1, "the texture did not vary: the test would not see a wrong lookup"
     assert close.mean() > 0.99
+
+
+AO_SAMPLES = 256
+AO_BLOCK = 4
+
+
+def test_ao_bake_matches_cycles():
+    """AO bake of a plane under a tilted cube (the cube occludes; the world's
+    AO distance 0.8 cuts the far rays) against Cycles' AO bake, both at 256
+    samples: the means of 4 x 4 texel blocks, z-tested with binomial
+    variances p (1 - p) / S per texel (an upper bound for Cycles' stratified
+    samples), Sidak over the blocks; one statistical family."""
+    from ember_stats import detectable, family_level, z_scores, z_threshold
+    scene = empty_factory_scene()
+    bpy.ops.mesh.primitive_plane_add(size=2.0)
+    plane = bpy.context.active_object
+    bpy.ops.mesh.primitive_cube_add(size=0.6, location=(0.2, -0.1, 0.45), rotation=(0.3, 0.2, 0.4))
+    image = bpy.data.images.new("bake_target", SIZE, SIZE, float_buffer=True, alpha=True)
+    mat = bpy.data.materials.new("bake_mat")
+    mat.use_nodes = True
+    node = mat.node_tree.nodes.new('ShaderNodeTexImage')
+    node.image = image
+    mat.node_tree.nodes.active = node
+    plane.data.materials.append(mat)
+    for o in scene.objects:
+        o.select_set(False)
+    plane.select_set(True)
+    bpy.context.view_layer.objects.active = plane
+    if scene.world is None:
+        scene.world = bpy.data.worlds.new("World")
+    scene.world.light_settings.distance = 0.8
+    scene.cycles.samples = AO_SAMPLES
+    scene.cycles.device = 'CPU'
+    scene.render.engine = 'CYCLES'
+    scene.render.bake.margin = 0
+    image.pixels.foreach_set(np.zeros(SIZE * SIZE * 4, np.float32))
+    bpy.ops.object.bake(type='AO', margin=0)
+    cycles = np.empty(SIZE * SIZE * 4, np.float32)
+    image.pixels.foreach_get(cycles)
+    scene.render.engine = 'EMBER'
+    scene.ember.samples = AO_SAMPLES
+    image.pixels.foreach_set(np.zeros(SIZE * SIZE * 4, np.float32))
+    bpy.ops.object.bake(type='AO', margin=0)
+    ember = np.empty(SIZE * SIZE * 4, np.float32)
+    image.pixels.foreach_get(ember)
+    cycles, ember = cycles.reshape(SIZE, SIZE, 4)[..., 0], ember.reshape(SIZE, SIZE, 4)[..., 0]
+
+    def blocks(img):
+        return img.reshape(SIZE // AO_BLOCK, AO_BLOCK, SIZE // AO_BLOCK, AO_BLOCK).mean(axis=(1, 3))
+
+    def block_var(img):
+        return blocks(np.clip(img * (1 - img), 1.0 / AO_SAMPLES, None) / AO_SAMPLES) / AO_BLOCK ** 2
+    a, b, va, vb = blocks(ember), blocks(cycles), block_var(ember), block_var(cycles)
+    count = a.size
+    level = family_level("bake AO blocks", count)
+    z = z_scores(a, va, b, vb)
+    se = float(np.sqrt(np.median(va + vb)))
+    print(f"AO: Cycles mean {cycles.mean():.4f} (min {cycles.min():.3f}), Ember mean {ember.mean():.4f} "
+          f"(min {ember.min():.3f}); {count} blocks, max |z| {np.abs(z).max():.2f} (threshold "
+          f"{z_threshold(level):.2f}); detectable block difference {detectable(se, level):.4f}")
+    assert cycles.min() < 0.6, "the cube did not occlude: the test would not see a wrong AO"
+    assert np.abs(z).max() < z_threshold(level)
