@@ -5,7 +5,10 @@ Blender applies the margin, the normal space and swizzle, cage and
 selected-to-active itself.  Bad input ends in a clear report, never a crash."""
 import numpy as np
 
+import bpy
+
 from . import backend
+from .export import material as material_export
 from .export import mesh as mesh_export
 
 
@@ -31,9 +34,9 @@ def _bake(engine, depsgraph, obj, pass_type, width, height):
         raise BakeError(f"object '{name}': the bake image has no pixels ({width} x {height})")
     if obj is None or obj.type not in mesh_export.MESHABLE_TYPES:
         raise BakeError(f"object '{name}' is not a mesh: only meshes can be baked")
-    if pass_type not in renderer.bake.GEOMETRIC:
+    if pass_type not in renderer.bake.SUPPORTED:
         raise BakeError(f"bake type {pass_type} is not supported yet (Ember bakes "
-                        f"{', '.join(renderer.bake.GEOMETRIC)})")
+                        f"{', '.join(renderer.bake.SUPPORTED)})")
     evaluated = obj.evaluated_get(depsgraph) if hasattr(obj, 'evaluated_get') else obj
     mesh = mesh_export.mesh_from_object(evaluated, name)
     if mesh is None:
@@ -51,7 +54,17 @@ def _bake(engine, depsgraph, obj, pass_type, width, height):
         flat = np.empty(width * height * channels, np.float32)
         primitive_pass.rect.foreach_get(flat)
         prim, u, v = renderer.bake.unpack_primitives(flat.reshape(-1, channels))
-        rgba = renderer.bake.bake_geometric(mesh, matrix, pass_type, prim, u, v)
+        if pass_type == 'AO':
+            scene, index = _whole_scene(renderer, depsgraph, evaluated, engine)
+            world = depsgraph.scene.world
+            distance = world.light_settings.distance if world is not None else 10.0
+            rgba = renderer.bake.bake_ao(scene, index, prim, u, v, depsgraph.scene.ember.samples, distance,
+                                         seed=getattr(depsgraph.scene.ember, 'seed', 0))
+        elif pass_type in renderer.bake.SHADED:
+            rgba = renderer.bake.bake_shaded(_object_scene(renderer, depsgraph, evaluated, mesh, matrix, engine),
+                                             pass_type, prim, u, v)
+        else:
+            rgba = renderer.bake.bake_geometric(mesh, matrix, pass_type, prim, u, v)
         combined = next(p for p in layer.passes if p.name == "Combined")
         out = np.zeros((width * height, combined.channels), np.float32)
         k = min(4, combined.channels)
@@ -59,3 +72,32 @@ def _bake(engine, depsgraph, obj, pass_type, width, height):
         combined.rect.foreach_set(np.ascontiguousarray(out).ravel())
     finally:
         engine.end_result(result)
+
+
+def _object_scene(renderer, depsgraph, obj, mesh, matrix, engine):
+    """A one-instance engine Scene of the baked object with its materials
+    compiled by the exporter (the render's node evaluation); their
+    translation warnings reach the user."""
+    override = getattr(depsgraph.view_layer, 'material_override', None)
+    materials = material_export.MaterialTable(override)
+    instance = renderer.Instance(mesh=0, matrix=matrix, materials=materials.slots(obj), name=obj.name)
+    for warning in materials.warnings:
+        engine.report({'WARNING'}, f"Ember: {warning}")
+    return renderer.Scene(meshes=[mesh], instances=[instance], materials=materials.materials,
+                          cycles_version=tuple(bpy.app.version))
+
+
+def _whole_scene(renderer, depsgraph, obj, engine):
+    """Every mesh instance of the depsgraph as an engine Scene (the
+    occluders of an AO bake) and the index of the baked object's instance."""
+    from .export import instances as instance_export
+    override = getattr(depsgraph.view_layer, 'material_override', None)
+    materials = material_export.MaterialTable(override)
+    meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots)
+    index = next((i for i, inst in enumerate(instances) if inst.name == obj.name), None)
+    if index is None:
+        raise BakeError(f"object '{obj.name}' is not rendered in this view layer: nothing to bake")
+    for warning in materials.warnings + warnings:
+        engine.report({'WARNING'}, f"Ember: {warning}")
+    return renderer.Scene(meshes=meshes, instances=instances, materials=materials.materials,
+                          cycles_version=tuple(bpy.app.version)), index

@@ -92,3 +92,140 @@ def _world_normals(mesh, m, p, w):
         n = ng
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return np.where(length > 1e-30, n / np.maximum(length, 1e-30), 0.0)
+
+
+# Bake types evaluated from the material at the texel (no light transport).
+SHADED = ("EMIT", "ROUGHNESS")
+# Bake types that trace rays through the whole scene.
+TRACED = ("AO",)
+SUPPORTED = GEOMETRIC + SHADED + TRACED
+
+
+def bake_shaded(scene, kind, prim, u, v):
+    """(N, 4) RGBA of the texels for a SHADED bake type of the one-instance
+    ``scene`` (an engine.scene.Scene holding the baked object and its
+    materials; prim indexes its mesh's triangles).  Each texel is shaded as
+    Cycles' bake does (init_from_bake.h): a hit at the texel's point seen
+    along its shading normal.  EMIT: the emission (textures evaluated);
+    ROUGHNESS: Cycles' surface_shader_average_roughness, the lobes'
+    roughness sqrt(alpha) averaged with their colour weights (1 for
+    diffuse lobes)."""
+    from types import SimpleNamespace
+    from .integrator import _interaction
+    from .nodes.context import ShadingContext
+    from .render import prepare
+    from .scene import RenderSettings
+
+    n = len(prim)
+    out = np.zeros((n, 4), np.float32)
+    mesh = scene.meshes[scene.instances[0].mesh]
+    ok = (prim >= 0) & (prim < len(mesh.triangles))
+    ctx = prepare(scene, RenderSettings(samples=1, max_bounces=0))
+    tr = ctx.triangles
+    # flatten drops degenerate triangles: the mesh triangle -> its row in tr.
+    row_of = np.arange(len(mesh.triangles))
+    if tr.kept is not None:
+        row_of = np.where(tr.kept, np.cumsum(tr.kept) - 1, -1)
+    rows = np.flatnonzero(ok)
+    rows = rows[row_of[prim[rows]] >= 0]
+    if len(rows) == 0:
+        return out
+    k = row_of[prim[rows]]
+    bu, bv = v[rows], 1.0 - u[rows] - v[rows]     # Blender's (u, v) -> Embree's
+    w = np.stack([1.0 - bu - bv, bu, bv], axis=1)
+    p = tr.p0[k] + bu[:, None] * tr.e1[k] + bv[:, None] * tr.e2[k]
+    if tr.ns is not None:
+        ns = np.einsum("nc,ncj->nj", w, tr.ns[k])
+    else:
+        ns = np.array(tr.ng[k], np.float64)
+    ns = ns / np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-30)
+    paths = SimpleNamespace(o=p + ns, d=-ns)
+    h = _interaction(ctx, paths, np.ones(len(rows)), k, bu, bv)
+    shading = ShadingContext.of_hit(tr, h)
+    mats = ctx.materials
+    if kind == "EMIT":
+        value = mats.emission[h.mat]
+        if mats.textures.emission:
+            value = mats.textures.emission_at(h.mat, shading, value)
+    elif kind == "ROUGHNESS":
+        value = np.repeat(average_roughness(mats.gather(h.mat, shading))[:, None], 3, axis=1)
+    else:
+        raise ValueError(f"{kind} is not a shaded bake type")
+    value = np.where(np.isfinite(value), value, 0.0)
+    out[rows, :3] = value
+    out[rows, 3] = 1.0
+    return out
+
+
+def average_roughness(lobes):
+    """Cycles' ROUGHNESS bake: per point, the lobes' roughness averaged with
+    their weights |mean colour| x mix weight; a microfacet lobe's roughness
+    is sqrt(alpha), an Oren-Nayar lobe's its sigma.  Measured on bpy 5.0.1:
+    a Lambert Diffuse does not enter the average (Glossy 0.4 mixed with a
+    Diffuse bakes 0.4) and a point without such lobes bakes 1 (a Diffuse
+    alone bakes 1); the other lobes (translucent, sheen, subsurface,
+    transparent) are assumed to behave as Lambert's."""
+    from .lobe_ids import GLASS, GLOSSY, MIRROR, OREN_NAYAR, REFRACTION
+    kind = np.asarray(lobes.kind)
+    weight = np.abs(np.asarray(lobes.color).mean(axis=2))
+    if lobes.weight is not None:
+        weight = weight * np.asarray(lobes.weight)
+    microfacet = np.isin(kind, (GLOSSY, MIRROR, GLASS, REFRACTION))
+    rough = np.sqrt(np.clip(np.asarray(lobes.alpha), 0.0, None))
+    if lobes.diffuse_roughness is not None:
+        rough = np.where(kind == OREN_NAYAR, np.clip(lobes.diffuse_roughness, 0.0, 1.0), rough)
+    weight = weight * (microfacet | (kind == OREN_NAYAR))
+    total = weight.sum(axis=1)
+    return np.where(total > 0, (weight * rough).sum(axis=1) / np.maximum(total, 1e-30), 1.0)
+
+
+def bake_ao(scene, instance, prim, u, v, samples, distance, seed=0):
+    """(N, 4) RGBA of an AO bake: per texel the fraction of ``samples``
+    cosine-weighted rays about the shading normal that meet nothing within
+    ``distance`` (Cycles' AO pass at a bake point, world AO distance; a
+    direction below the geometric normal counts as occluded).  ``scene``
+    holds every object (they occlude), ``instance`` is the baked one's
+    index in scene.instances; prim indexes its mesh's triangles."""
+    from .nodes.rays import make_orthonormals
+    from .render import prepare
+    from .sampling import cosine_hemisphere
+    from .scene import RenderSettings
+
+    n = len(prim)
+    out = np.zeros((n, 4), np.float32)
+    mesh = scene.meshes[scene.instances[instance].mesh]
+    ctx = prepare(scene, RenderSettings(samples=1, max_bounces=0))
+    tr = ctx.triangles
+    first = sum(len(scene.meshes[i.mesh].triangles) for i in scene.instances[:instance])
+    total = sum(len(scene.meshes[i.mesh].triangles) for i in scene.instances)
+    row_of = np.arange(total)
+    if tr.kept is not None:
+        row_of = np.where(tr.kept, np.cumsum(tr.kept) - 1, -1)
+    ok = (prim >= 0) & (prim < len(mesh.triangles))
+    rows = np.flatnonzero(ok)
+    rows = rows[row_of[first + prim[rows]] >= 0]
+    if len(rows) == 0:
+        return out
+    k = row_of[first + prim[rows]]
+    bu, bv = v[rows], 1.0 - u[rows] - v[rows]
+    w = np.stack([1.0 - bu - bv, bu, bv], axis=1)
+    p = tr.p0[k] + bu[:, None] * tr.e1[k] + bv[:, None] * tr.e2[k]
+    ng = np.asarray(tr.ng[k], np.float64)
+    ng = ng / np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-30)
+    ns = np.einsum("nc,ncj->nj", w, tr.ns[k]) if tr.ns is not None else ng.copy()
+    ns = ns / np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-30)
+    ng = np.where((np.einsum("ij,ij->i", ng, ns) < 0)[:, None], -ng, ng)   # the side the normal faces
+    a, b = make_orthonormals(ns)
+    rng = np.random.default_rng(seed)
+    unoccluded = np.zeros(len(rows))
+    eps = ctx.accel.offset_scale(p)
+    for _ in range(int(samples)):
+        local, _pdf = cosine_hemisphere(rng.random(len(rows)), rng.random(len(rows)))
+        d = local[:, :1] * a + local[:, 1:2] * b + local[:, 2:3] * ns
+        up = np.einsum("ij,ij->i", d, ng) > 0
+        o = p + ng * eps[:, None]
+        blocked = ctx.accel.occluded(o, d, np.full(len(rows), float(distance)))
+        unoccluded += up & ~blocked
+    out[rows, :3] = (unoccluded / max(int(samples), 1))[:, None]
+    out[rows, 3] = 1.0
+    return out

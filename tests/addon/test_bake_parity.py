@@ -10,6 +10,8 @@ margin after the engine returns, so it is off here (margin 0) to compare
 the engine's texels only; one run with Blender's margin checks it is still
 applied around Ember's texels.  Hostile input: a type Ember does not bake
 yet, an object without UV map, a non-mesh object: a clear error, no crash.
+Shaded types (Emit, Roughness) of textured closures: the render's node
+evaluation at each texel against Cycles' bake, per texel.
 """
 import bpy
 import numpy as np
@@ -165,3 +167,136 @@ def test_selected_to_active_matches_cycles(kind):
     high.select_set(False)   # the active object's own bake differs: the test sees which object was baked
     own = _bake(scene, image, 'EMBER', kind, **dict(settings, use_selected_to_active=False))
     assert np.abs(own[..., :3] - ember[..., :3])[filled].max() > 1e-2
+
+
+def _shaded_material(obj, kind):
+    """The sphere's material with a textured closure: a Checker on the UV map
+    (and a Noise on the position for the Principled case) into the
+    emission colour / the roughness; the bake target stays the active,
+    unlinked image node."""
+    mat = obj.data.materials[0]
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    out = next(n for n in nodes if n.type == 'OUTPUT_MATERIAL')
+    coords = nodes.new('ShaderNodeTexCoord')
+    checker = nodes.new('ShaderNodeTexChecker')
+    checker.inputs['Scale'].default_value = 3.0
+    checker.inputs['Color1'].default_value = (0.9, 0.3, 0.1, 1.0)
+    checker.inputs['Color2'].default_value = (0.1, 0.4, 0.8, 1.0)
+    links.new(coords.outputs['UV'], checker.inputs['Vector'])
+    if kind == 'emission':
+        shader = nodes.new('ShaderNodeEmission')
+        shader.inputs['Strength'].default_value = 2.5
+        links.new(checker.outputs['Color'], shader.inputs['Color'])
+    elif kind == 'principled':
+        shader = nodes.get('Principled BSDF') or nodes.new('ShaderNodeBsdfPrincipled')
+        noise = nodes.new('ShaderNodeTexNoise')
+        noise.inputs['Scale'].default_value = 2.0
+        links.new(coords.outputs['Object'], noise.inputs['Vector'])
+        links.new(checker.outputs['Color'], shader.inputs['Emission Color'])
+        links.new(noise.outputs['Fac'], shader.inputs['Emission Strength'])
+    else:   # roughness: a Glossy BSDF whose roughness is the checker's factor, remapped
+        shader = nodes.new('ShaderNodeBsdfGlossy')
+        ramp = nodes.new('ShaderNodeMapRange')
+        ramp.inputs['To Min'].default_value = 0.2
+        ramp.inputs['To Max'].default_value = 0.7
+        links.new(checker.outputs['Fac'], ramp.inputs['Value'])
+        links.new(ramp.outputs['Result'], shader.inputs['Roughness'])
+        if kind == 'mix':   # with a Diffuse (roughness 1) by a 0.3 mix: Cycles' weighted average
+            mix = nodes.new('ShaderNodeMixShader')
+            mix.inputs['Fac'].default_value = 0.3
+            links.new(shader.outputs[0], mix.inputs[1])
+            links.new(nodes.new('ShaderNodeBsdfDiffuse').outputs[0], mix.inputs[2])
+            shader = mix
+        elif kind == 'oren_nayar':   # a Diffuse BSDF with that roughness: Oren-Nayar's sigma
+            shader = nodes.new('ShaderNodeBsdfDiffuse')
+            links.new(ramp.outputs['Result'], shader.inputs['Roughness'])
+        elif kind == 'principled_roughness':
+            shader = nodes.get('Principled BSDF') or nodes.new('ShaderNodeBsdfPrincipled')
+            links.new(ramp.outputs['Result'], shader.inputs['Roughness'])
+    links.new(shader.outputs[0], out.inputs['Surface'])
+
+
+@pytest.mark.parametrize("kind,material", [('EMIT', 'emission'), ('EMIT', 'principled'),
+                                           ('ROUGHNESS', 'roughness'), ('ROUGHNESS', 'mix'),
+                                           ('ROUGHNESS', 'oren_nayar'), ('ROUGHNESS', 'principled_roughness')])
+def test_shaded_bakes_match_cycles(kind, material):
+    """Emit and Roughness bakes of textured closures: Ember's node evaluation
+    at the texel against Cycles' per texel (1 sample: the texel centre),
+    within float tolerance except at the checker's edges (a texel whose
+    point lies within rounding of an edge may take either colour)."""
+    scene, obj, image = _scene()
+    _shaded_material(obj, material)
+    cycles = _bake(scene, image, 'CYCLES', kind)
+    ember = _bake(scene, image, 'EMBER', kind)
+    filled = ember[..., 3] > 0
+    diff = np.abs(ember[..., :3] - cycles[..., :3]).max(axis=2)[filled]
+    close = diff < 2e-4
+    spread = np.ptp(cycles[..., :3][filled], axis=0).max()
+    print("centre texel: Cycles", cycles[16, 10, :3], "Ember", ember[16, 10, :3])
+    print(f"{kind}/{material}: {int(filled.sum())} texels, {int((~close).sum())} differ by > 2e-4, "
+          f"max |diff| {diff.max():.2e}, median {np.median(diff):.2e}, Cycles' range {spread:.3f}")
+    assert filled.sum() > 0.5 * SIZE * SIZE
+    assert spread > 0.1, "the texture did not vary: the test would not see a wrong lookup"
+    assert close.mean() > 0.99
+
+
+AO_SAMPLES = 256
+AO_BLOCK = 4
+
+
+def test_ao_bake_matches_cycles():
+    """AO bake of a plane under a tilted cube (the cube occludes; the world's
+    AO distance 0.8 cuts the far rays) against Cycles' AO bake, both at 256
+    samples: the means of 4 x 4 texel blocks, z-tested with binomial
+    variances p (1 - p) / S per texel (an upper bound for Cycles' stratified
+    samples), Sidak over the blocks; one statistical family."""
+    from ember_stats import detectable, family_level, z_scores, z_threshold
+    scene = empty_factory_scene()
+    bpy.ops.mesh.primitive_plane_add(size=2.0)
+    plane = bpy.context.active_object
+    bpy.ops.mesh.primitive_cube_add(size=0.6, location=(0.2, -0.1, 0.45), rotation=(0.3, 0.2, 0.4))
+    image = bpy.data.images.new("bake_target", SIZE, SIZE, float_buffer=True, alpha=True)
+    mat = bpy.data.materials.new("bake_mat")
+    mat.use_nodes = True
+    node = mat.node_tree.nodes.new('ShaderNodeTexImage')
+    node.image = image
+    mat.node_tree.nodes.active = node
+    plane.data.materials.append(mat)
+    for o in scene.objects:
+        o.select_set(False)
+    plane.select_set(True)
+    bpy.context.view_layer.objects.active = plane
+    if scene.world is None:
+        scene.world = bpy.data.worlds.new("World")
+    scene.world.light_settings.distance = 0.8
+    scene.cycles.samples = AO_SAMPLES
+    scene.cycles.device = 'CPU'
+    scene.render.engine = 'CYCLES'
+    scene.render.bake.margin = 0
+    image.pixels.foreach_set(np.zeros(SIZE * SIZE * 4, np.float32))
+    bpy.ops.object.bake(type='AO', margin=0)
+    cycles = np.empty(SIZE * SIZE * 4, np.float32)
+    image.pixels.foreach_get(cycles)
+    scene.render.engine = 'EMBER'
+    scene.ember.samples = AO_SAMPLES
+    image.pixels.foreach_set(np.zeros(SIZE * SIZE * 4, np.float32))
+    bpy.ops.object.bake(type='AO', margin=0)
+    ember = np.empty(SIZE * SIZE * 4, np.float32)
+    image.pixels.foreach_get(ember)
+    cycles, ember = cycles.reshape(SIZE, SIZE, 4)[..., 0], ember.reshape(SIZE, SIZE, 4)[..., 0]
+
+    def blocks(img):
+        return img.reshape(SIZE // AO_BLOCK, AO_BLOCK, SIZE // AO_BLOCK, AO_BLOCK).mean(axis=(1, 3))
+
+    def block_var(img):
+        return blocks(np.clip(img * (1 - img), 1.0 / AO_SAMPLES, None) / AO_SAMPLES) / AO_BLOCK ** 2
+    a, b, va, vb = blocks(ember), blocks(cycles), block_var(ember), block_var(cycles)
+    count = a.size
+    level = family_level("bake AO blocks", count)
+    z = z_scores(a, va, b, vb)
+    se = float(np.sqrt(np.median(va + vb)))
+    print(f"AO: Cycles mean {cycles.mean():.4f} (min {cycles.min():.3f}), Ember mean {ember.mean():.4f} "
+          f"(min {ember.min():.3f}); {count} blocks, max |z| {np.abs(z).max():.2f} (threshold "
+          f"{z_threshold(level):.2f}); detectable block difference {detectable(se, level):.4f}")
+    assert cycles.min() < 0.6, "the cube did not occlude: the test would not see a wrong AO"
+    assert np.abs(z).max() < z_threshold(level)
