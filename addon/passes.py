@@ -34,6 +34,8 @@ PASSES = (
     ("Transmission Direct", "TransDir", 3, "RGB", 'COLOR', "use_pass_transmission_direct"),
     ("Transmission Indirect", "TransInd", 3, "RGB", 'COLOR', "use_pass_transmission_indirect"),
     ("Transmission Color", "TransCol", 3, "RGB", 'COLOR', "use_pass_transmission_color"),
+    ("Volume Direct", "VolumeDir", 3, "RGB", 'COLOR', "cycles.use_pass_volume_direct"),
+    ("Volume Indirect", "VolumeInd", 3, "RGB", 'COLOR', "cycles.use_pass_volume_indirect"),
     ("Emission", "Emit", 3, "RGB", 'COLOR', "use_pass_emit"),
     ("Environment", "Env", 3, "RGB", 'COLOR', "use_pass_environment"),
     ("Ambient Occlusion", "AO", 3, "RGB", 'COLOR', "use_pass_ambient_occlusion"),

@@ -140,7 +140,8 @@ class RENDER_PT_ember_film(EmberPanel, bpy.types.Panel):
 
 class EmberPassesPanel(EmberPanel):
     bl_context = 'view_layer'
-    # (owner, property, label): owner 'layer' = view_layer, 'ember' = view_layer.ember;
+    # (owner, property, label): owner 'layer' = view_layer, 'ember' = view_layer.ember,
+    # 'cycles' = view_layer.cycles (Cycles' own pass settings, as Volume Direct);
     # properties a Blender version lacks are left out.
     PROPS = ()
 
@@ -148,8 +149,8 @@ class EmberPassesPanel(EmberPanel):
         layout = self.split_layout()
         layer = context.view_layer
         for owner, name, label in self.PROPS:
-            target = layer.ember if owner == 'ember' else layer
-            if hasattr(target, name):
+            target = getattr(layer, owner, None) if owner in ('ember', 'cycles') else layer
+            if target is not None and hasattr(target, name):
                 layout.prop(target, name, text=label)
 
 
@@ -179,6 +180,8 @@ class VIEWLAYER_PT_ember_passes_light(EmberPassesPanel, bpy.types.Panel):
     PROPS = tuple(('layer', f'use_pass_{kind}_{part}', f"{kind.title()} {part.title()}")
                         for kind in ('diffuse', 'glossy', 'transmission')
                         for part in ('direct', 'indirect', 'color')) + (
+        ('cycles', 'use_pass_volume_direct', "Volume Direct"),
+        ('cycles', 'use_pass_volume_indirect', "Volume Indirect"),
         ('layer', 'use_pass_emit', "Emission"), ('layer', 'use_pass_environment', "Environment"),
         ('layer', 'use_pass_ambient_occlusion', "Ambient Occlusion"))
 

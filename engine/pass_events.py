@@ -35,8 +35,8 @@ import numpy as np
 from . import bsdf
 from .lights import scene_lights_in_order
 from .lobes import kinds_of_class
-from .passes import (AOV_COLOR, CRYPTO, LIGHT_CLASSES, STRATEGY, PassConfig, crypto_manifest, is_aov,
-                     light_groups)
+from .passes import (AOV_COLOR, CRYPTO, LIGHT_CLASSES, STRATEGY, VOLUME_PASSES, PassConfig, crypto_manifest,
+                     is_aov, light_groups)
 from .rows import take_arrays
 from .sampling import cosine_hemisphere
 from .vec import dot, luminance, to_local, to_world
@@ -44,9 +44,10 @@ from .vec import dot, luminance, to_local, to_world
 # Per-path state (Paths.aux columns), only when passes are requested:
 # the share of each light class (diffuse, glossy, transmission; RGB each) in
 # the BSDF sample that left vertex 0; whether the denoising features are
-# still to be written, and their throughput (Cycles').
-SHARES, PENDING, FEATURE_TP = slice(0, 9), 9, slice(10, 13)
-AUX_WIDTH = 13
+# still to be written, and their throughput (Cycles'); whether the path's
+# first scattering vertex was in a volume (Cycles' PATH_RAY_VOLUME_PASS).
+SHARES, PENDING, FEATURE_TP, VOLUME = slice(0, 9), 9, slice(10, 13), 13
+AUX_WIDTH = 14
 SPECULAR_ALPHA = 0.075  # Cycles: roughness^2 below this is specular for denoising features
 DIFFUSE_KINDS = kinds_of_class("diffuse")
 
@@ -210,11 +211,22 @@ def _vertex(ctx, paths, hit, lobes, w, tt, bb, depth, tile):
     """Paths at a surface that scatters: the first one's data passes, and
     the denoising features of paths still looking for a non-specular one."""
     features = tile.wants("Denoising Albedo") or tile.wants("Denoising Normal")
-    colours = depth == 0 and any(tile.wants(c + " Color") for c in LIGHT_CLASSES)
+    colours = any(tile.wants(c + " Color") for c in LIGHT_CLASSES)
     if features or colours:
         w = _closure_albedos(lobes, hit, tt, bb)
     if depth == 0:
         first_hit(ctx, paths, hit, lobes, w, tt, bb, tile)
+    if colours:
+        # Cycles writes the colours at every surface a camera ray meets
+        # (PATH_RAY_CAMERA: before the first scattering vertex, through
+        # transparent ones and volume boundaries), times the throughput.
+        rows = np.flatnonzero(paths.bounce == 0)
+        if len(rows) == len(paths.pix):
+            _colours(lobes, (w[0] * paths.beta[:, None], w[1] * paths.beta[:, None]), paths.pix, tile)
+        elif len(rows):
+            sub = lobe_rows(lobes, rows)
+            tp = paths.beta[rows][:, None]
+            _colours(sub, (w[0][rows] * tp, w[1][rows] * tp), paths.pix[rows], tile)
     if features:
         _denoising_features(ctx, paths, hit, lobes, w[0] + w[1], tile)
 
@@ -237,7 +249,6 @@ def first_hit(ctx, paths, hit, lobes, w, tt, bb, tile):
     if tile.wants("Mist"):
         add("Mist", pix, 1.0 - _mist(ctx, cfg, hit.p))
     inst = ctx.triangles.instance[hit.prim] if ctx.triangles.instance is not None else np.zeros(len(pix), int)
-    _colours(lobes, w, pix, tile)
     for name, table in (cfg.aov_tables or {}).items():
         add(name, pix, table[hit.mat])
     if tile.extra.crypto:
@@ -421,11 +432,26 @@ def lobe_rows(lobes, rows):
 
 
 def _light_passes(tile):
-    return any(tile.wants(f"{c} {p}") for c in LIGHT_CLASSES for p in ("Direct", "Indirect"))
+    return (any(tile.wants(f"{c} {p}") for c in LIGHT_CLASSES for p in ("Direct", "Indirect"))
+            or any(tile.wants(n) for n in VOLUME_PASSES))
 
 
 def _add_light_classes(paths, rows, contrib, direct, tile, shares=None):
-    """Split light by class into the Direct / Indirect passes."""
+    """Split light by class into the Direct / Indirect passes; the light of
+    paths whose first vertex was a volume scatter goes to Volume Direct /
+    Indirect instead (Cycles' film_write_combined_pass: VOLUME_PASS paths)."""
+    if len(rows) == 0:
+        return
+    vol = paths.aux[rows, VOLUME] > 0
+    if vol.any():
+        pix = paths.pix[rows[vol]]
+        tile.add_pass("Volume Direct", pix[direct[vol]], contrib[vol][direct[vol]])
+        tile.add_pass("Volume Indirect", pix[~direct[vol]], contrib[vol][~direct[vol]])
+        if vol.all():
+            return
+        keep = ~vol
+        rows, contrib, direct = rows[keep], contrib[keep], direct[keep]
+        shares = None if shares is None else shares[keep]
     if shares is None:
         shares = paths.aux[rows][:, SHARES].reshape(len(rows), 3, 3)
     for index, name in enumerate(LIGHT_CLASSES):
@@ -433,6 +459,21 @@ def _add_light_classes(paths, rows, contrib, direct, tile, shares=None):
         for sel, suffix in ((direct, " Direct"), (~direct, " Indirect")):
             if sel.any():
                 tile.add_pass(name + suffix, paths.pix[rows[sel]], part[sel])
+
+
+def _volume_light(paths, rows, added, direct, tile, vertex=True):
+    """Light added at (``vertex``: by light sampling at a volume scattering
+    point whose index is the path's bounce) or along (volume emission) a
+    path's segment: a volume vertex 0 makes its own light Volume Direct;
+    later, the path's first vertex decides (_add_light_classes)."""
+    if len(rows) == 0 or not _light_passes(tile):
+        return
+    if vertex:
+        first = direct
+        tile.add_pass("Volume Direct", paths.pix[rows[first]], added[first])
+        rest = np.nonzero(~first)[0]
+        rows, added, direct = rows[rest], added[rest], direct[rest]
+    _add_light_classes(paths, rows, added, direct, tile)
 
 
 def _nee(ctx, paths, prows, rows, contrib, w, delta, lobes, lobes_wo, wo_l, wi_l, f, tile, emitters=None):
@@ -533,6 +574,16 @@ class NoPasses:
     def after_scatter(self, paths, v, through):
         """The paths left the vertices ``v`` (``through``: by a transparent pass)."""
 
+    def volume_vertex(self, paths):
+        """The paths scatter in a volume (before their bounce count rises)."""
+
+    def volume_light(self, paths, rows, added):
+        """Light sampling at volume scattering points added ``added`` to ``rows``
+        (whose bounce is the vertex's index)."""
+
+    def volume_emission(self, paths, rows, added):
+        """Volume emission along the paths' last segment added ``added``."""
+
 
 NO_PASSES = NoPasses()
 
@@ -571,3 +622,18 @@ class PassObserver(NoPasses):
 
     def after_scatter(self, paths, v, through):
         _after_scatter(self.ctx, paths, v.hit, v.lobes, v.lobes_wo, v.tt, v.bb, v.wo_l, through, self.tile)
+
+    def volume_vertex(self, paths):
+        if paths.aux.shape[1]:
+            paths.aux[paths.bounce == 0, VOLUME] = 1.0
+
+    def volume_light(self, paths, rows, added):
+        _volume_light(paths, rows, added, paths.bounce[rows] == 0, self.tile)
+
+    def volume_emission(self, paths, rows, added):
+        bounce = paths.bounce[rows]
+        camera = bounce == 0
+        self.tile.add_pass("Emission", paths.pix[rows[camera]], added[camera])
+        lit = np.nonzero(~camera)[0]
+        if len(lit) and _light_passes(self.tile):
+            _volume_light(paths, rows[lit], added[lit], bounce[lit] == 1, self.tile, vertex=False)

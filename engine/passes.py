@@ -30,6 +30,7 @@ MEAN, FIRST, RATIO, DIVIDE, ONE_MINUS = "mean", "first", "ratio", "divide", "one
 
 STRATEGY = ("Strategy Light", "Strategy BSDF", "Strategy Light Unweighted", "Strategy BSDF Unweighted")
 LIGHT_CLASSES = ("Diffuse", "Glossy", "Transmission")
+VOLUME_PASSES = ("Volume Direct", "Volume Indirect")
 CRYPTO = ("CryptoObject", "CryptoMaterial", "CryptoAsset")
 
 # name: (channels, kind, divisor or weight channel)
@@ -51,6 +52,11 @@ DEFS = {
     "Emission": (3, MEAN, None),
     "Environment": (3, MEAN, None),
     "Ambient Occlusion": (3, MEAN, None),
+    # Light of paths whose first scattering vertex is in a volume (Cycles'
+    # PATH_RAY_VOLUME_PASS): at that vertex (Direct) and after (Indirect).
+    # Not divided: Cycles has no Volume Color.
+    "Volume Direct": (3, MEAN, None),
+    "Volume Indirect": (3, MEAN, None),
 }
 for _c in LIGHT_CLASSES:
     DEFS[_c + " Color"] = (3, MEAN, None)

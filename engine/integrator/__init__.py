@@ -86,7 +86,7 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
     ended = stages.emitters(ctx, paths, found, obs)              # lights on the ray
     scattered = None
     if flight is not None:                                       # volume vertices: NEE, phase sample
-        paths, found, ended, scattered = volume.after_flights(ctx, paths, found, ended, flight, depth)
+        paths, found, ended, scattered = volume.after_flights(ctx, paths, found, ended, flight, depth, obs)
     stages.escaped(ctx, paths, np.flatnonzero((found.prim < 0) & ~ended), tile, obs)
     paths, surface = _compact(ctx, paths, found.surface, (found.prim >= 0) & ~ended, tile)
     if len(paths.pix) == 0:

@@ -18,6 +18,7 @@ the phase-sampled ray finding a light.
 import numpy as np
 
 from .. import media
+from ..pass_events import NO_PASSES
 from ..lights.point import PointLights
 from ..media import equiangular
 from ..accel import shadow_rays
@@ -202,11 +203,12 @@ def tracking_rng(ctx, pseed, sample, depth, salt):
     return np.random.default_rng([int(ctx.settings.seed) & 0xFFFFFFFF, first[0], first[1], depth, salt, n])
 
 
-def after_flights(ctx, paths, found, ended, flight, depth):
+def after_flights(ctx, paths, found, ended, flight, depth, obs=NO_PASSES):
     """Apply the flights: emission, the throughput; the paths that scattered
     (and did not end at a light first) make a volume vertex and leave this
     bounce.  Returns (paths, found, ended) of the others and the scattered
-    paths moved on (None when none)."""
+    paths moved on (None when none).  ``obs``: the pass observer, told of
+    the light added here (engine.pass_events)."""
     r = flight.rows
     if flight.direct is not None:   # equiangular direct-light points, lit with the throughput at the start
         k, t, w, e, p_sel = flight.direct
@@ -222,9 +224,12 @@ def after_flights(ctx, paths, found, ended, flight, depth):
         # emitter met by the phase-sampled ray does.
         u = ctx.sampler.get(at.pseed, at.sample, vertex_set(depth, LIGHT))
         p_mis = ctx.lights.selection_pdf(e, p, np.zeros_like(p))
-        _light_sample(ctx, at, p, phase, e, p_sel, u[:, 1:], p_mis)
+        _light_sample(ctx, at, p, phase, e, p_sel, u[:, 1:], p_mis, obs)
         paths.L[rows] += at.L - before
-    paths.L[r] += paths.beta[r] * flight.emitted
+    emitted = paths.beta[r] * flight.emitted
+    paths.L[r] += emitted
+    if obs.active:
+        obs.volume_emission(paths, r, emitted)
     paths.beta[r] *= flight.weight
     sc = flight.scatter & ~ended[r]
     if not sc.any():
@@ -235,7 +240,7 @@ def after_flights(ctx, paths, found, ended, flight, depth):
     moved = paths.take(rows)
     p = moved.o + moved.d * flight.t[sc, None]
     volume_vertex(ctx, moved, p, ctx.media.vertex_phase(flight.g[sc], flight.phase_medium[sc]), depth,
-                  flight.nee_scale[sc])
+                  flight.nee_scale[sc], obs)
     moved = moved.take(row_any_positive(moved.beta))
     return paths.take(keep), found.take(keep), ended[keep], moved
 
@@ -254,22 +259,23 @@ class _Points:
         return self.n
 
 
-def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None):
+def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None, obs=NO_PASSES):
     """Light sampling at scattering points p (phase functions ``phase``,
     MediumTable.vertex_phase; its contributions times ``nee_scale``, None:
     1) and the phase-function sample of the next ray; moves the paths in
     place."""
     n = len(paths.pix)
     zeros = np.zeros((n, 3))
+    obs.volume_vertex(paths)
     if nee_scale is None:
-        direct_light(ctx, paths, p, phase, depth)
+        direct_light(ctx, paths, p, phase, depth, obs)
     else:
         lit = np.flatnonzero(nee_scale > 0)
         if len(lit):
             at = paths.take(lit)
             at.beta = at.beta * nee_scale[lit, None]
             before = at.L.copy()
-            direct_light(ctx, at, p[lit], phase_rows(phase, lit), depth)
+            direct_light(ctx, at, p[lit], phase_rows(phase, lit), depth, obs)
             paths.L[lit] += at.L - before
     u = ctx.sampler.get(paths.pseed, paths.sample, vertex_set(depth, BSDF))
     wi, pdf = media.phase_sample(paths.d, phase, u[:, 0], u[:, 1])
@@ -292,7 +298,7 @@ def phase_rows(phase, rows):
     return tuple(a[rows] for a in phase)
 
 
-def direct_light(ctx, paths, p, phase, depth):
+def direct_light(ctx, paths, p, phase, depth, obs=NO_PASSES):
     """Next-event estimation at points p in media (phase functions
     ``phase``): paths.L gains the light reaching them times paths.beta."""
     n = len(paths.pix)
@@ -301,14 +307,14 @@ def direct_light(ctx, paths, p, phase, depth):
         if mode == "select":
             u = ctx.sampler.get(paths.pseed, paths.sample, vertex_set(depth, LIGHT))
             e, p_sel = ctx.lights.select(u[:, 0], p, zeros)
-            _light_sample(ctx, paths, p, phase, e, p_sel, u[:, 1:])
+            _light_sample(ctx, paths, p, phase, e, p_sel, u[:, 1:], obs=obs)
         else:
             for e in emitters:
                 u = ctx.sampler.get(paths.pseed, paths.sample, emitter_set(depth, e))
-                _light_sample(ctx, paths, p, phase, np.full(n, e), np.ones(n), u[:, :3])
+                _light_sample(ctx, paths, p, phase, np.full(n, e), np.ones(n), u[:, :3], obs=obs)
 
 
-def _light_sample(ctx, paths, p, phase, e, p_sel, u, p_mis=None):
+def _light_sample(ctx, paths, p, phase, e, p_sel, u, p_mis=None, obs=NO_PASSES):
     """One light sample per scattering point, MIS-weighted against phase
     sampling (power heuristic; with the selection probability ``p_mis``
     where given, else p_sel), its shadow ray attenuated by the media."""
@@ -330,7 +336,10 @@ def _light_sample(ctx, paths, p, phase, e, p_sel, u, p_mis=None):
     origin, direction, tmax = shadow_rays(p, np.zeros_like(p), ls.wi, ls.dist, ls.on_surface, eps, live)
     rng = tracking_rng(ctx, paths.pseed[live], paths.sample[live], int(paths.bounce[live[0]]), 2)
     T = shadow_transmittance(ctx, origin, direction, tmax, e[live], paths.tbounce[live], paths.stack[live], rng)
-    paths.L[live] += contrib[live] * T
+    added = contrib[live] * T
+    paths.L[live] += added
+    if obs.active:
+        obs.volume_light(paths, live, added)
 
 
 # ----------------------------------------------------------------------------
