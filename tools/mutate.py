@@ -77,9 +77,16 @@ MUTATIONS = [
              'init = U32((0xDEADBEEF + (n << 2) + 13) & 0xFFFFFFFF)',
              'init = U32((0xDEADBEEE + (n << 2) + 13) & 0xFFFFFFFF)',
              ('tests/engine/test_nodes.py::test_lookup3_matches_its_reference_values',)),
+    Mutation('phase', "a phase function's value (= its pdf) x 1.02 where light samples read it",
+             'engine/media/phase.py',
+             '        f[two] = (1.0 - w[two]) * f[two] + w[two] * _lobe_eval(k2[two], a2[two], b2[two], cos[two])\n'
+             '    return f\n',
+             '        f[two] = (1.0 - w[two]) * f[two] + w[two] * _lobe_eval(k2[two], a2[two], b2[two], cos[two])\n'
+             '    return 1.02 * f\n',
+             ('tests/engine/test_media_field.py::test_phase_functions_integrate_to_one',
+              'tests/engine/test_media.py::test_volume_strategies_agree')),
 ]
-# A phase-function pdf x 1.02 belongs on this list once the engine has a
-# volume phase function (issue 27); it has none yet.  The mutations edit the
+# The mutations edit the
 # NumPy forms (what EMBER_JIT=0 runs); the compiled twins in bsdf_loops.py,
 # nee.py's and throughput.py's row loops are held to them by
 # tests/engine/test_kernels.py with the JIT on.
