@@ -23,6 +23,18 @@ SIZE = 32
 SCALE = (1.0, 1.5, 0.8)   # non-uniform: normals through the inverse transpose, per corner as Cycles
 
 
+def bake_target_material():
+    """A material whose active node is an Image Texture on a new SIZE x SIZE
+    float image: where bpy.ops.object.bake writes."""
+    image = bpy.data.images.new("bake_target", SIZE, SIZE, float_buffer=True, alpha=True)
+    mat = bpy.data.materials.new("bake_mat")
+    mat.use_nodes = True
+    node = mat.node_tree.nodes.new('ShaderNodeTexImage')
+    node.image = image
+    mat.node_tree.nodes.active = node
+    return mat, image
+
+
 def _scene():
     scene = empty_factory_scene()
     bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8, radius=1.0, location=(0.3, -0.2, 0.5),
@@ -30,12 +42,7 @@ def _scene():
     obj = bpy.context.active_object
     obj.scale = SCALE
     bpy.ops.object.shade_smooth()
-    image = bpy.data.images.new("bake_target", SIZE, SIZE, float_buffer=True, alpha=True)
-    mat = bpy.data.materials.new("bake_mat")
-    mat.use_nodes = True
-    node = mat.node_tree.nodes.new('ShaderNodeTexImage')
-    node.image = image
-    mat.node_tree.nodes.active = node
+    mat, image = bake_target_material()
     obj.data.materials.append(mat)
     obj.select_set(True)
     bpy.context.view_layer.objects.active = obj
@@ -255,12 +262,7 @@ def test_ao_bake_matches_cycles():
     bpy.ops.mesh.primitive_plane_add(size=2.0)
     plane = bpy.context.active_object
     bpy.ops.mesh.primitive_cube_add(size=0.6, location=(0.2, -0.1, 0.45), rotation=(0.3, 0.2, 0.4))
-    image = bpy.data.images.new("bake_target", SIZE, SIZE, float_buffer=True, alpha=True)
-    mat = bpy.data.materials.new("bake_mat")
-    mat.use_nodes = True
-    node = mat.node_tree.nodes.new('ShaderNodeTexImage')
-    node.image = image
-    mat.node_tree.nodes.active = node
+    mat, image = bake_target_material()
     plane.data.materials.append(mat)
     for o in scene.objects:
         o.select_set(False)

@@ -106,15 +106,22 @@ def _interior(material):
     return same & (material >= 0)
 
 
-def test_pointiness_and_random_per_island_match_cycles(registered_addon, tmp_path):
+def emission_against_cycles(scene, tmp_path):
+    """(exported scene, Ember's emission at Cycles' first-sample positions,
+    the material per pixel, Cycles' one-sample render) of ``scene``, which
+    must export without warnings."""
     from addon.export.scene import export_scene
     from engine.nodes import probe
-    scene = build_scene()
     exported = export_scene(bpy.context.evaluated_depsgraph_get())
     assert not exported.warnings, exported.warnings
     shift = cycles_first_sample_offset()
     ember, material = probe.emission_at_pixel_centres(exported.scene, offset=(shift, SHIFT_Y_SIGN * shift))
-    cycles = render_cycles(scene, tmp_path)
+    return exported, ember, material, render_cycles(scene, tmp_path)
+
+
+def test_pointiness_and_random_per_island_match_cycles(registered_addon, tmp_path):
+    scene = build_scene()
+    exported, ember, material, cycles = emission_against_cycles(scene, tmp_path)
     assert cycles.shape == ember.shape
     keep = _interior(material)
     names = [m.name for m in exported.scene.materials]
@@ -168,8 +175,6 @@ def test_generated_coordinates_of_deformed_meshes_match_cycles(registered_addon,
     """Generated coordinates come from the undeformed mesh (Blender's orco),
     as Cycles reads them: a grid bent by a Simple Deform modifier, one
     moved by a shape key, and one whose texture space is set by hand."""
-    from addon.export.scene import export_scene
-    from engine.nodes import probe
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     cam_data = bpy.data.cameras.new("cam")
@@ -197,11 +202,7 @@ def test_generated_coordinates_of_deformed_meshes_match_cycles(registered_addon,
     spaced.data.texspace_location, spaced.data.texspace_size = (0.3, -0.2, 0.1), (2.8, 2.5, 0.6)   # Generated stays in [0, 1]: Ember clips negative emission
     wave = spaced.modifiers.new("wave", 'WAVE')
     wave.height = 0.3
-    exported = export_scene(bpy.context.evaluated_depsgraph_get())
-    assert not exported.warnings, exported.warnings
-    shift = cycles_first_sample_offset()
-    ember, material = probe.emission_at_pixel_centres(exported.scene, offset=(shift, SHIFT_Y_SIGN * shift))
-    cycles = render_cycles(scene, tmp_path)
+    exported, ember, material, cycles = emission_against_cycles(scene, tmp_path)
     keep = _interior(material)
     assert keep.sum() > 400, int(keep.sum())
     bad = ~np.isclose(ember, cycles, atol=ATOL, rtol=RTOL) & keep[..., None]

@@ -12,8 +12,8 @@ layer, the scene and the world.
 import bpy
 import numpy as np
 
-from test_node_parity import ATOL, RTOL, SHIFT_Y_SIGN, cycles_first_sample_offset, emission_material, render_cycles
-from test_geometry_attr_parity import _interior
+from test_node_parity import ATOL, RTOL, emission_material
+from test_geometry_attr_parity import _interior, emission_against_cycles
 from ember_testlib import small_resolution
 
 COLUMNS, ROWS, TILE = 8, 4, 8
@@ -100,14 +100,8 @@ def build_scene():
 
 
 def test_object_instancer_view_layer_attributes_match_cycles(registered_addon, tmp_path):
-    from addon.export.scene import export_scene
-    from engine.nodes import probe
     scene = build_scene()
-    exported = export_scene(bpy.context.evaluated_depsgraph_get())
-    assert not exported.warnings, exported.warnings
-    shift = cycles_first_sample_offset()
-    ember, material = probe.emission_at_pixel_centres(exported.scene, offset=(shift, SHIFT_Y_SIGN * shift))
-    cycles = render_cycles(scene, tmp_path)
+    exported, ember, material, cycles = emission_against_cycles(scene, tmp_path)
     keep = _interior(material)
     assert keep.sum() > 22 * 20, int(keep.sum())
     bad = ~np.isclose(ember, cycles, atol=ATOL, rtol=RTOL) & keep[..., None]
