@@ -101,11 +101,13 @@ def view_above(wo_d):
     return out
 
 
-def sided(lobes, wi_l, g, reflected=None):
+def sided(lobes, wi_l, wi=None, ng=None, reflected=None):
     """wi_l's z as the integrator's side test reads it (a sample counts
     where (Ng . wi > 0) == (z > 0)): unchanged on rows without a second
     normal; on the others, whose lobes judge their own side, the light
-    samples' z takes the sign of g (Cycles' eval does not test Ng), a
+    samples' z takes the sign of Ng . wi (world directions ``wi`` and
+    normals ``ng``, read only when some row has a second normal: Cycles'
+    eval does not test Ng), a
     sample of a bent-normal lobe counts as a reflection (``reflected``,
     Cycles' diffuse sample rejects directions below Ng)."""
     split = getattr(lobes, "diffuse_split", None)
@@ -114,7 +116,7 @@ def sided(lobes, wi_l, g, reflected=None):
     out = np.array(wi_l, copy=True)
     z = np.abs(out[:, 2])
     if reflected is None:
-        sign = np.where(g > 0, 1.0, -1.0)
+        sign = np.where(np.einsum("ij,ij->i", wi, ng) > 0, 1.0, -1.0)
         out[:, 2] = np.where(split, sign * z, out[:, 2])
     else:
         out[:, 2] = np.where(split & reflected, z, out[:, 2])

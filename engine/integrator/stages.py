@@ -462,7 +462,7 @@ def light_sample(ctx, paths, v, e, p_sel, u):
     f, pdf_b = bsdf.eval_pdf(v.lobes, v.wo_l, wi_l, *v.lobes_wo)
     if ctx.light_excludes:
         f = visibility.visible_lobes_f(ctx, v, wi_l, ls.wi, e, f)
-    side_l = bump_correction.sided(v.lobes, wi_l, dot(ls.wi, hit.ng))
+    side_l = bump_correction.sided(v.lobes, wi_l, ls.wi, hit.ng)
     contrib, w, live = nee.contribution(side_l, ls.wi, hit.ng, ls.pdf, p_sel, pdf_b, ls.delta,
                                         ctx.settings.strategy == "mis", paths.beta, f, ls.Le)
     if ctx.links is not None:
@@ -531,7 +531,7 @@ def scatter(ctx, paths, v, depth):
         wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u[:, 0], u[:, 1], u[:, 2], *v.lobes_wo, bent=bent)
     wi = v.world(wi_l)
     # Rows with a second normal (Bump Map Correction) judge a sample's side by its lobe's.
-    side_l = bump_correction.sided(v.lobes, wi_l, None, reflected=bent)
+    side_l = bump_correction.sided(v.lobes, wi_l, reflected=bent)
     ok, paths.beta = throughput.update(wi, hit.ng, side_l, weight, paths.beta, paths.bounce, s.rr_depth, u[:, 3])
     through = transparency.sampled_transparent(ctx, hit, delta, wi_l, v.wo_l)
     if through.any():
