@@ -16,6 +16,7 @@ from ..vec import column, dot, frame, frame_of, rows3, to_world
 from .common import (Falloff, check_direction, check_falloff, check_rgb, check_size, selection_power,
                      smoothstep, unit)
 from .registry import RAY, LightDef, LightExample, LightTable, register
+from .shader import LightShaders, check_shader, checker_of
 
 POINT = 0
 # Half-angle of emission beyond a spot cone: its light ends at the cone edge.
@@ -29,6 +30,7 @@ class PointLights(LightTable):
         self.count = len(lights)
         self.lights = list(lights)
         self.falloff = Falloff.of(lights)
+        self.shaders = LightShaders.of(lights, [_matrix(l) for l in lights])
         self.pos = np.array([l.position for l in lights], float).reshape(-1, 3)
         self.radius = np.array([max(0.0, l.radius) for l in lights], float)
         self.sphere = np.array([not l.soft_falloff for l in lights], bool)
@@ -92,8 +94,21 @@ class PointLights(LightTable):
         _point_sample(column(j, n, np.int64), rows3(p)[0],
                       column(u1, n, np.float64), column(u2, n, np.float64), self.pos, self.radius, self.sphere,
                       self.L, self.spot, self.dir, self.cos_half, self.smooth, wi, t, le, pdf, delta)
+        if self.shaders is not None:
+            le *= self._shader(np.broadcast_to(j, (n,)), p + wi * t[:, None], -wi)
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, le
         out.pdf[idx], out.delta[idx] = pdf, delta
+
+    def _shader(self, j, q, wo):
+        """The lights' node trees at points q seen along Incoming wo: N is the
+        sphere's normal at q, or (soft falloff, delta) Incoming itself, the disk
+        facing the shading point; UV = Parametric = map_to_sphere of N in
+        object space (as Cycles 5.0 renders it)."""
+        sphere = (self.sphere[j] & (self.radius[j] > 0))[:, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            radial = (q - self.pos[j]) / np.maximum(self.radius[j], 1e-300)[:, None]
+        n = np.where(sphere, radial, wo)
+        return self.shaders.factor(j, q, n, wo, self.shaders.sphere_uv(j, n))
 
     def nearest(self, o, d, t, ray, bits, camera):
         """The nearest of these lights each ray meets before t: t (updated
@@ -115,6 +130,8 @@ class PointLights(LightTable):
         if len(rows):
             j = index[rows]
             Le[rows] = self.L[j] * self._spot_factor(j, -d[rows])[:, None]
+            if self.shaders is not None:
+                Le[rows] *= self._shader(j, o[rows] + d[rows] * hit_t[rows, None], -d[rows])
         return hit_t, index, Le, pdf
 
 
@@ -315,11 +332,26 @@ def _nearest_point(o, d, t, ray_bits, pos, radius, sphere, light_bits, hit_t, in
 
 
 
+def _matrix(light):
+    """The light object's matrix (what its node tree's Object coordinates
+    read), or a translation to its position."""
+    if light.matrix is not None:
+        return np.asarray(light.matrix, np.float64)
+    m = np.eye(4)
+    m[:3, 3] = light.position
+    return m
+
+
 def validate(light, what):
     check_rgb(light.power, f"{what} power", nonnegative=True)
     check_rgb(light.position, f"{what} position")
     check_size(light.radius, f"{what}: radius")
     check_falloff(light, what)
+    check_shader(light, what)
+    if light.matrix is not None:
+        m = np.asarray(light.matrix, dtype=np.float64)
+        if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+            raise SceneError(f"{what}: matrix must be a finite 4x4")
     if isinstance(light, SpotLight):
         check_direction(light.direction, f"{what}: direction")
         size = check_size(light.spot_size, f"{what}: spot_size", 0.0, np.pi)
@@ -353,7 +385,20 @@ def _examples():
         LightExample("delta constant smooth", scene(radius=0.0, falloff="CONSTANT", falloff_smooth=1.5), (0, 0, 0),
                      irradiance=tuple(np.array(delta) * d * d * d * d / (1.5 + d * d))),
         LightExample("sphere linear", scene(radius=r, falloff="LINEAR"), (0, 0, 0), solid_angle=cone),
+        # Node trees varying over the light: the radiance changes, the pdf does not.
+        LightExample("sphere normal checker", scene(radius=r, shader=checker_of("ShaderNodeTexCoord", "Normal", 3.0)),
+                     (0, 0, 0), solid_angle=cone),
+        LightExample("soft disk incoming checker",
+                     scene(radius=r, soft_falloff=True, shader=checker_of("ShaderNodeNewGeometry", "Incoming", 20.0)),
+                     (0.3, 0, 0)),
+        LightExample("spot uv checker", scene(radius=0.1, direction=(0, 0, -1), spot_size=2.0, spot_blend=0.1,
+                                              shader=checker_of("ShaderNodeTexCoord", "UV", 9.0)), (0, 0, 0)),
     ]
+
+
+def _unknown_node():
+    from ..scene import NodeCall, NodeOutput
+    return NodeOutput(NodeCall("ShaderNodeNope", {}), "Color")
 
 
 def _set(field, value):
@@ -374,6 +419,8 @@ register(LightDef(
              ("negative radius", _set("radius", -0.1), "radius"),
              ("NaN radius", _set("radius", np.nan), "radius"),
              ("unknown falloff", _set("falloff", "CUBIC"), "falloff"),
+             ("NaN matrix", _set("matrix", np.full((4, 4), np.nan)), "matrix"),
+             ("shader of an unknown node", _set("shader", _unknown_node()), "ShaderNodeNope"),
              ("negative smooth", _set("falloff_smooth", -1.0), "smooth"),
              ("zero spot size", _spot(spot_size=0.0), "spot_size"),
              ("zero spot direction", _spot(direction=(0.0, 0.0, 0.0)), "direction"),
