@@ -22,7 +22,7 @@ from ember_testlib import check_against_reference, empty_factory_scene, render_f
 
 WIDTH, HEIGHT = 48, 32
 BLOCK = 8
-SPP = 384
+SPP = 3072
 COLOURS = ((1.0, 0.25, 0.05, 1.0), (0.05, 0.3, 1.0, 1.0))
 
 
