@@ -46,6 +46,8 @@ class PointLights(LightTable):
                             float).reshape(-1, 3)
         half = np.array([0.5 * l.spot_size if s else np.pi for l, s in zip(lights, spot)], float)
         self.cos_half = np.cos(half)
+        with np.errstate(divide="ignore"):
+            self.half_cot = np.where(self.spot, 0.5 / np.tan(half), 0.0)   # Cycles' half_cot_half_spot_angle
         blend = np.array([l.spot_blend if s else 0.0 for l, s in zip(lights, spot)], float)
         with np.errstate(divide="ignore"):
             self.smooth = 1.0 / ((1.0 - self.cos_half) * blend)
@@ -103,12 +105,28 @@ class PointLights(LightTable):
         """The lights' node trees at points q seen along Incoming wo: N is the
         sphere's normal at q, or (soft falloff, delta) Incoming itself, the disk
         facing the shading point; UV = Parametric = map_to_sphere of N in
-        object space (as Cycles 5.0 renders it)."""
+        object space for point lights, Cycles' spot_light_uv of Incoming in
+        the spot's axes for spots (as Cycles 5.0 renders them)."""
         sphere = (self.sphere[j] & (self.radius[j] > 0))[:, None]
         with np.errstate(invalid="ignore", divide="ignore"):
             radial = (q - self.pos[j]) / np.maximum(self.radius[j], 1e-300)[:, None]
         n = np.where(sphere, radial, wo)
-        return self.shaders.factor(j, q, n, wo, self.shaders.sphere_uv(j, n))
+        uv = self.shaders.sphere_uv(j, n)
+        spot = np.flatnonzero(self.spot[j])
+        if len(spot):
+            uv[spot] = self._spot_uv(j[spot], wo[spot])
+        return self.shaders.factor(j, q, n, wo, uv)
+
+    def _spot_uv(self, j, wo):
+        """Cycles' spot_light_uv: the direction in the spot's unit axes (z
+        along the cone) projected so that the cone spans [0, 1]^2."""
+        axes = self.shaders.matrix[j][:, :3, :3]
+        axes = axes / np.maximum(np.linalg.norm(axes, axis=1, keepdims=True), 1e-300)
+        x, y = np.einsum("nij,ni->nj", axes, wo)[:, :2].T
+        z = -np.einsum("ni,ni->n", axes[:, :, 2], wo)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            f = np.where(z > 0, self.half_cot[j] / np.where(z > 0, z, 1.0), 0.0)
+        return np.stack([x * f + 0.5, y * f + 0.5], axis=1)
 
     def nearest(self, o, d, t, ray, bits, camera):
         """The nearest of these lights each ray meets before t: t (updated

@@ -214,3 +214,36 @@ def test_nan_producing_light_tree_renders_finite():
     q = np.random.default_rng(2).random((64, 3))
     value = shaders.factor(0, q, np.tile((0.0, 0.0, -1.0), (64, 1)), -q, q[:, :2])
     assert np.isfinite(value).all() and value.max() <= MAX_VALUE and value.min() >= 0.0
+
+
+# Measured in bpy 5.0.1 (Cycles, one sample per pixel centre, a camera below
+# the light looking up, so Incoming is (0, 0, -1)): a point or spot light
+# at Euler XYZ (0.2, 0.1, 0.5), soft falloff, seen along Incoming; the spot
+# with Spot Size 2.5 rad.  Values to the 4 decimals they were read with.
+CYCLES_SEEN = {
+    "point": {("ShaderNodeTexCoord", "UV"): (0.0744, 0.0711, 0.0),
+              ("ShaderNodeTexCoord", "Normal"): (0.0998, -0.1977, -0.9752),
+              ("ShaderNodeNewGeometry", "Normal"): (0.0, 0.0, -1.0)},
+    "spot": {("ShaderNodeTexCoord", "UV"): (0.517, 0.4663, 0.0),
+             ("ShaderNodeTexCoord", "Normal"): (0.0998, -0.1977, -0.9752)},
+}
+
+
+@pytest.mark.parametrize("kind", sorted(CYCLES_SEEN))
+def test_point_and_spot_coordinates_as_cycles_renders_them(kind):
+    from engine.scene import SpotLight
+    m = object_matrix((0.3, -0.2, 0.5), (0.2, 0.1, 0.5), (1.0, 1.0, 1.0))
+    for (idname, output), want in CYCLES_SEEN[kind].items():
+        shader = shifted(node(idname, output))
+        common = dict(radius=0.0, soft_falloff=True, shader=shader, matrix=m)
+        if kind == "spot":
+            light = SpotLight(tuple(m[:3, 3]), (1.0, 1.0, 1.0), direction=tuple(-m[:3, 2]), spot_size=2.5,
+                              spot_blend=0.0, **common)
+        else:
+            light = PointLight(tuple(m[:3, 3]), (1.0, 1.0, 1.0), **common)
+        scene = Scene(lights=[light])
+        ls = lights.LightSet(scene, geometry.flatten(scene), bsdf.MaterialTable(geometry.material_table(scene)))
+        p = m[:3, 3] + (0.0, 0.0, -5.0)                  # seen along Incoming (0, 0, -1)
+        s = ls.sample(np.zeros(1, np.int64), p[None], np.full(1, 0.5), np.full(1, 0.5), np.full(1, 0.5))
+        base = 1.0 / (4 * np.pi * 25.0)                   # a delta light: P / (4 pi) / d^2
+        np.testing.assert_allclose(s.Le[0] / base - 2.0, want, atol=1.5e-4, err_msg=f"{kind} {output}")
