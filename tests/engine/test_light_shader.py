@@ -29,7 +29,7 @@ N = 4000
 CHECKER = ((1.0, 0.5, 0.2), (0.1, 0.2, 0.3))
 STRATEGIES = ("light", "bsdf", "mis")
 BLOCK = 4
-SPP = {"light": 1024, "bsdf": 4096, "mis": 1024}
+SPP = {"light": 1024, "bsdf": 2048, "mis": 1024}
 # One family: every 4 x 4 block and the image mean, per channel and strategy.
 Z_MAX = ember_stats.family_z(__name__, len(STRATEGIES) * 3 * ((40 // BLOCK) ** 2 + 1))
 
