@@ -16,7 +16,7 @@ from ..vec import column, dot, frame, frame_of, rows3, to_world
 from .common import (Falloff, check_direction, check_falloff, check_rgb, check_size, selection_power,
                      smoothstep, unit)
 from .registry import RAY, LightDef, LightExample, LightTable, register
-from .shader import LightShaders, check_shader, checker_of
+from .shader import LightShaders, check_shader, checker_of, spread_directions
 
 POINT = 0
 # Half-angle of emission beyond a spot cone: its light ends at the cone edge.
@@ -53,7 +53,17 @@ class PointLights(LightTable):
             self.smooth = 1.0 / ((1.0 - self.cos_half) * blend)
 
     def power(self, radius):
-        return selection_power(self.power_rgb) if self.count else []
+        if not self.count:
+            return []
+        return selection_power(self.power_rgb) * np.array([self._selection_scale(j) for j in range(self.count)])
+
+    def _selection_scale(self, j, count=256):
+        """The light's tree averaged over the directions it emits to (1 without one)."""
+        if self.shaders is None:
+            return 1.0
+        wo = spread_directions(count)
+        q = self.pos[j] + wo * self.radius[j]
+        return self.shaders.selection_scale(j, q, wo, wo, self._shader_uv(np.full(count, j), wo, wo))
 
     def is_delta(self):
         return self.radius <= 0
@@ -111,11 +121,14 @@ class PointLights(LightTable):
         with np.errstate(invalid="ignore", divide="ignore"):
             radial = (q - self.pos[j]) / np.maximum(self.radius[j], 1e-300)[:, None]
         n = np.where(sphere, radial, wo)
+        return self.shaders.factor(j, q, n, wo, self._shader_uv(j, n, wo))
+
+    def _shader_uv(self, j, n, wo):
         uv = self.shaders.sphere_uv(j, n)
         spot = np.flatnonzero(self.spot[j])
         if len(spot):
             uv[spot] = self._spot_uv(j[spot], wo[spot])
-        return self.shaders.factor(j, q, n, wo, uv)
+        return uv
 
     def _spot_uv(self, j, wo):
         """Cycles' spot_light_uv: the direction in the spot's unit axes (z

@@ -16,7 +16,8 @@ in bpy 5.0.1 (a camera seeing the light, one sample at each pixel centre):
 * Object = Generated = the point in the light object's space (its inverse
   matrix), Normal = N in object space (transpose of the matrix, normalized).
 
-The pdf never changes, only the radiance, and NEE samples and BSDF rays
+Light selection weighs a textured light by its power times the tree's
+mean over the light (``selection_scale``).  The pdf never changes, only the radiance, and NEE samples and BSDF rays
 that hit a light evaluate the same function of the point, so MIS stays
 unbiased.  Values are made finite and non-negative (a NaN-producing node
 gives 0, as everywhere in Ember's textures).
@@ -99,6 +100,18 @@ class LightShaders:
             out[rows] = np.clip(value, 0.0, MAX_VALUE)
         return out
 
+    def selection_scale(self, j, q, n, wo, uv):
+        """What light selection weighs light j's power by: the mean of its
+        tree over the given points and directions (a spread over the light
+        and the directions it emits to), so that an IES light of Fac 50
+        is picked as often as its light deserves.  Only noise depends on
+        it; a tree that reads 0 everywhere sampled keeps the plain power
+        (a light must stay selectable wherever it may emit)."""
+        if j not in self.fns:
+            return 1.0
+        mean = float(self.factor(np.full(len(q), j), q, n, wo, uv).mean())
+        return mean if np.isfinite(mean) and mean > 0 else 1.0
+
     def sphere_uv(self, j, n):
         """Cycles' map_to_sphere of the object-space normal n of light j."""
         m = len(n)
@@ -147,3 +160,13 @@ def _safe_inverse(m):
 def _normalize(v):
     length = np.linalg.norm(v, axis=1, keepdims=True)
     return np.where(length > 0, v / np.where(length > 0, length, 1.0), 0.0)
+
+
+def spread_directions(count, seed=0):
+    """(count, 3) fixed unit directions spread over the sphere (a Fibonacci
+    lattice): where selection_scale evaluates a tree."""
+    k = np.arange(count) + 0.5
+    z = 1.0 - 2.0 * k / count
+    phi = k * np.pi * (3.0 - np.sqrt(5.0)) + seed
+    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)

@@ -247,3 +247,24 @@ def test_point_and_spot_coordinates_as_cycles_renders_them(kind):
         s = ls.sample(np.zeros(1, np.int64), p[None], np.full(1, 0.5), np.full(1, 0.5), np.full(1, 0.5))
         base = 1.0 / (4 * np.pi * 25.0)                   # a delta light: P / (4 pi) / d^2
         np.testing.assert_allclose(s.Le[0] / base - 2.0, want, atol=1.5e-4, err_msg=f"{kind} {output}")
+
+
+def test_light_selection_weighs_the_tree():
+    """Light selection weighs a textured light by its tree's mean: a
+    checker of (10, 20) on one of two equal area lights gives it 15 times
+    the other's power (the lattice samples both colours alike), and a
+    point light's IES-like factor does the same; the images do not depend
+    on it, only their noise."""
+    m0, m1 = np.eye(4), np.eye(4)
+    m0[:3, 3], m1[:3, 3] = (-1.0, 0.0, 1.0), (1.0, 0.0, 1.0)
+    uv = node("ShaderNodeTexCoord", "UV")
+    checker = node("ShaderNodeTexChecker", "Color", Vector=uv, Color1=(10.0,) * 3, Color2=(20.0,) * 3, Scale=4.0)
+    scene = Scene(lights=[AreaLight(m0, (5.0,) * 3, "SQUARE", 1.0), AreaLight(m1, (5.0,) * 3, "SQUARE", 1.0,
+                                                                             shader=checker),
+                          PointLight((0.0, 0.0, 2.0), (5.0,) * 3, radius=0.1),
+                          PointLight((0.0, 1.0, 2.0), (5.0,) * 3, radius=0.1, shader=checker)])
+    ls = lights.LightSet(scene, geometry.flatten(scene), bsdf.MaterialTable(geometry.material_table(scene)))
+    power = ls.power
+    points, areas = power[:2], power[2:]
+    assert areas[1] / areas[0] == pytest.approx(15.0, rel=0.02)
+    assert points[1] / points[0] == pytest.approx(15.0, rel=0.02)
