@@ -10,6 +10,8 @@ converged reference (tools/cycles_references.py light_textures), with
   floor;
 * a sphere light (soft falloff off, seen by the camera) whose colour is a
   Checker on the Texture Coordinate Normal at Emission Strength 1.5,
+* a spot light whose colour is a Checker on its UV (Cycles' spot_light_uv):
+  a gobo projecting the checker onto the floor,
 
 over a diffuse floor: the whole image, its quadrants and every block
 against Cycles (two statistical families), power printed and asserted.
@@ -50,13 +52,16 @@ def light_textures(scene, textured=True):
     point = light('POINT', (1.1, 0.6, 0.7), 60.0, shadow_soft_size=0.25)
     sphere = light('POINT', (0.6, -0.9, 0.5), 25.0, shadow_soft_size=0.2, use_soft_falloff=False)
     sphere.visible_camera = True
+    spot = light('SPOT', (-0.6, -0.8, 1.4), 80.0, rotation=(0.25, -0.2, 0.4), shadow_soft_size=0.05,
+                 spot_size=0.9, spot_blend=0.1)
     if textured:
         _checker(area, 'ShaderNodeTexCoord', 'UV', 3.0)
         _checker(point, 'ShaderNodeNewGeometry', 'Incoming', 2.5)
         _checker(sphere, 'ShaderNodeTexCoord', 'Normal', 2.0, strength=1.5)
+        _checker(spot, 'ShaderNodeTexCoord', 'UV', 4.0)          # a gobo: the checker projected
     else:
         mean = tuple(0.5 * (a + b) for a, b in zip(*COLOURS))[:3]
-        for obj, strength in ((area, 1.0), (point, 1.0), (sphere, 1.5)):
+        for obj, strength in ((area, 1.0), (point, 1.0), (sphere, 1.5), (spot, 1.0)):
             obj.data.color = mean
             obj.data.energy *= strength
     cam = scene.camera
