@@ -11,16 +11,18 @@ in bpy 5.0.1 (a camera seeing the light, one sample at each pixel centre):
 * area lights: N the emitting normal; UV = Parametric = (x + 0.5, y + 0.5,
   0) with (x, y) the point in the light's axes scaled to [-0.5, 0.5];
 * point and spot lights: N = Ng the sphere's normal at the point (soft
-  falloff: the disk faces the shading point, N = Incoming);
-  UV = Parametric = Cycles' map_to_sphere of the object-space N;
+  falloff: the disk faces the shading point, N = Incoming); UV =
+  Parametric = Cycles' map_to_sphere of the object-space N for point
+  lights, spot_light_uv of Incoming in the spot's axes for spots;
 * Object = Generated = the point in the light object's space (its inverse
   matrix), Normal = N in object space (transpose of the matrix, normalized).
 
-Light selection weighs a textured light by its power times the tree's
-mean over the light (``selection_scale``).  The pdf never changes, only the radiance, and NEE samples and BSDF rays
+The pdf never changes, only the radiance, and NEE samples and BSDF rays
 that hit a light evaluate the same function of the point, so MIS stays
-unbiased.  Values are made finite and non-negative (a NaN-producing node
-gives 0, as everywhere in Ember's textures).
+unbiased.  Light selection weighs a textured light by its power times the
+tree's mean over the light (``selection_scale``: noise, not bias).  Values
+are made finite and non-negative (a NaN-producing node gives 0, as
+everywhere in Ember's textures).
 """
 import numpy as np
 
