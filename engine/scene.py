@@ -423,6 +423,13 @@ class PointLight:
     visible_shadow: bool = True
     falloff: str = "QUADRATIC"
     falloff_smooth: float = 0.0
+    # The light's node tree where it varies over the light: a colour
+    # expression (as Material.emission) multiplying the radiance per light
+    # point (engine/lights/shader.py); None: constant.  matrix: the light
+    # object's (4, 4) light-to-world, which its Object and Normal
+    # coordinates read (None: a translation to ``position``).
+    shader: object = None
+    matrix: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -480,6 +487,7 @@ class AreaLight:
     visible_shadow: bool = True
     falloff: str = "QUADRATIC"
     falloff_smooth: float = 0.0
+    shader: object = None   # as PointLight.shader
 
 
 Light = Union[PointLight, SpotLight, SunLight, AreaLight]

@@ -330,6 +330,8 @@ def _default_input(ctx, entry, name, kind):
             return ctx.generated
         if entry.coords == "position":
             return ctx.p
+        if entry.coords == "incoming":
+            return ctx.to_object(ctx.wo)   # Cycles' LINK_TEXTURE_INCOMING (IES)
         uv = np.zeros((len(ctx), 3))
         uv[:, :2] = ctx.uv
         return uv

@@ -4,8 +4,11 @@ power (point, spot, area) = colour * energy [W]; sun strength = colour *
 strength [W/m^2]; Blender 4.0+ light exposure multiplies both by 2^exposure.
 Light node trees (Cycles-only) are read through the shader-node registry
 (nodes.SocketReader): an Emission node's Color x Strength that is the same
-at every point (e.g. a Blackbody of a fixed temperature) scales the light;
-one that varies per point is reported and its mean is used.  A Light
+at every point (e.g. a Blackbody of a fixed temperature) scales the light
+(the fast path); one that varies over the light (textures on the light's
+Texture Coordinate or Geometry outputs) becomes the engine light's
+``shader``, evaluated per light sample and per BSDF-ray hit as Cycles does
+(engine/lights/shader.py); suns keep its mean, with a note.  A Light
 Falloff node on the Strength (Quadratic, Linear or Constant output, Smooth)
 becomes the engine light's ``falloff`` / ``falloff_smooth``.
 
@@ -132,7 +135,7 @@ def collect_lights(depsgraph, check=None, links=None):
         if _is_black(light):
             continue
         if compat.uses_nodes(obj.data) and _has_light_nodes(obj.data):
-            light, note = _with_node_tree(light, obj.data)
+            light, note = _with_node_tree(light, obj.data, matrix)
             if note:
                 warnings.append(f"Light '{obj.name}': {note}")
             if _nonfinite_field(light):
@@ -199,11 +202,15 @@ def _nonfinite_field(light):
     return None
 
 
-def _with_node_tree(light, data):
+def _with_node_tree(light, data, matrix=None):
     """The light scaled by its node tree's emission (Color x Strength of the
-    Emission node feeding the Light Output), and a note or None.  A Light
-    Falloff node on the Strength gives the light its falloff (the node's
-    Strength scales the light, its output and Smooth go to the engine)."""
+    Emission node feeding the Light Output), and a note or None; where the
+    emission varies over the light and the light type can evaluate it per
+    point, the light with that expression as its ``shader`` (and point
+    lights with their object ``matrix``, which Object and Normal
+    coordinates read).  A Light Falloff node on the Strength gives the light
+    its falloff (the node's Strength scales the light, its output and
+    Smooth go to the engine)."""
     output = nodes.output_node(data.node_tree, 'OUTPUT_LIGHT')
     if output is None:
         return light, None
@@ -216,16 +223,62 @@ def _with_node_tree(light, data):
     strength, falloff, notes = _strength_and_falloff(reader, source, light)
     if reader.unsupported:
         return light, "light nodes " + ", ".join(reader.unsupported) + " are ignored"
+    expr = nodes.scale(nodes._as_color(color), strength)
     factor, varies = _constant_rgb(nodes._as_color(color), strength)
+    light = dataclasses.replace(light, **falloff)
+    names = {f.name for f in dataclasses.fields(light)}
+    if varies and 'shader' in names:
+        notes += _unsupported_on_lights(expr)
+        extra = {'matrix': np.array(matrix, dtype=np.float64)} if 'position' in names and matrix is not None else {}
+        return dataclasses.replace(light, shader=expr, **extra), "; ".join(notes) or None
     if varies:
         notes.append("the light's node tree varies over the light: its mean is used")
-    light = dataclasses.replace(light, **falloff)
     note = "; ".join(notes) or None
     for name in ('power', 'strength'):
         value = getattr(light, name, None)
         if value is not None:
             return dataclasses.replace(light, **{name: tuple(v * f for v, f in zip(value, factor))}), note
     return light, note
+
+
+# Nodes whose light-shader values Ember does not give as Cycles does: no
+# object data, camera or path on a light point (rendered with the value
+# named).  Outputs not listed read the light point as Cycles' lamp shader.
+_OFF_ON_LIGHTS = {
+    'ShaderNodeObjectInfo': "the Object Info node reads no light object (0, colour 1)",
+    'ShaderNodeLightPath': "the Light Path node reads no path on lights (0)",
+    'ShaderNodeWireframe': "the Wireframe node reads no mesh on lights",
+    'ShaderNodeParticleInfo': "the Particle Info node reads no particle on lights",
+}
+_OFF_OUTPUTS = {('ShaderNodeTexCoord', 'Camera'): "Texture Coordinate's Camera output is world Position on lights",
+                ('ShaderNodeTexCoord', 'Window'): "Texture Coordinate's Window output is 0 on lights"}
+
+
+def _unsupported_on_lights(expr):
+    """Notes naming each node of a light's expression that Ember evaluates
+    differently from Cycles on a light point."""
+    notes = []
+    for idname, output in _expr_nodes(expr):
+        note = _OFF_ON_LIGHTS.get(idname) or _OFF_OUTPUTS.get((idname, output))
+        if note and note not in notes:
+            notes.append(note)
+    return notes
+
+
+def _expr_nodes(expr, seen=None):
+    """(idname, output) of every node call in an engine expression."""
+    seen = set() if seen is None else seen
+    if id(expr) in seen or not nodes.is_expr(expr):
+        return
+    seen.add(id(expr))
+    call = getattr(expr, 'call', None)
+    if call is not None:
+        yield call.idname, expr.output
+        for value in call.inputs.values():
+            yield from _expr_nodes(value, seen)
+        return
+    for f in dataclasses.fields(expr):
+        yield from _expr_nodes(getattr(expr, f.name), seen)
 
 
 def _strength_and_falloff(reader, emission, light):

@@ -573,6 +573,8 @@ def _texture_mapping(node, entry, vector):
         coords = getattr(entry, 'coords', None) or 'uv'
         if coords == 'position':
             vector = renderer.NodeOutput(renderer.NodeCall('ShaderNodeNewGeometry', {}), 'Position')
+        elif coords == 'incoming':
+            vector = renderer.NodeOutput(renderer.NodeCall('ShaderNodeNewGeometry', {}), 'Incoming')
         else:
             vector = renderer.NodeOutput(renderer.NodeCall('ShaderNodeTexCoord', {}),
                                       'Generated' if coords == 'generated' else 'UV')

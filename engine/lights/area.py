@@ -13,6 +13,7 @@ from ..scene import AREA_SHAPES, AreaLight, Scene, SceneError
 from . import common
 from .common import Falloff, check_falloff, check_rgb, check_size, selection_power, uniform_index, unit
 from .registry import RAY, LightDef, LightExample, LightTable, register
+from .shader import LightShaders, check_shader, checker_of, spread_directions
 
 AREA = 2
 
@@ -22,6 +23,7 @@ class AreaLights(LightTable):
         self.count = len(lights)
         self.lights = list(lights)
         self.falloff = Falloff.of(lights)
+        self.shaders = LightShaders.of(lights, [l.matrix for l in lights])
         u, v, c, n, area, ell = [], [], [], [], [], []
         for l in lights:
             m = np.asarray(l.matrix, float)
@@ -58,7 +60,26 @@ class AreaLights(LightTable):
         self.rect = ~self.ellipse & (self.area > 0) & (skew < 1e-9)
 
     def power(self, radius):
-        return selection_power(self.L) * np.pi * self.area if self.count else []
+        if not self.count:
+            return []
+        scale = np.array([self._selection_scale(j) for j in range(self.count)])
+        return selection_power(self.L) * np.pi * self.area * scale
+
+    def _selection_scale(self, j, count=256):
+        """The light's tree averaged over a lattice of its points, seen
+        along directions of its emitting hemisphere (1 without a tree)."""
+        if self.shaders is None:
+            return 1.0
+        k = np.arange(count)
+        # Roberts' R2 lattice: even in both axes, aligned with no texture's cells.
+        x, y = (0.5 + k * 0.7548776662466927) % 1.0 - 0.5, (0.5 + k * 0.5698402909980532) % 1.0 - 0.5
+        if self.ellipse[j]:
+            x, y = x * np.sqrt(0.5), y * np.sqrt(0.5)     # inside the inscribed ellipse
+        q = self.c[j] + x[:, None] * self.u[j] + y[:, None] * self.v[j]
+        d = spread_directions(count)
+        wo = np.where((d @ self.n[j] < 0)[:, None], -d, d)
+        return self.shaders.selection_scale(j, q, np.broadcast_to(self.n[j], q.shape), wo,
+                                            np.stack([x + 0.5, y + 0.5], axis=1))
 
     def visibility(self):
         return np.array([visibility_bits(l) for l in self.lights], np.uint8)
@@ -129,8 +150,20 @@ class AreaLights(LightTable):
             p[:, 0], p[:, 1], p[:, 2], c[..., 0], c[..., 1], c[..., 2], ex[..., 0], ex[..., 1], ex[..., 2],
             ey[..., 0], ey[..., 1], ey[..., 2], self.len_u[j], self.len_v[j], n[..., 0], n[..., 1], n[..., 2],
             self.area[j], self.rect[j].astype(np.float64), x, y, u1, u2, common.MIN_SPHERICAL)
-        out.wi[idx], out.dist[idx], out.Le[idx] = np.stack([wx, wy, wz], axis=1), t, self.L[j]
+        wi = np.stack([wx, wy, wz], axis=1)
+        Le = self.L[j]
+        if self.shaders is not None:
+            Le = Le * self._shader(j, p + wi * t[:, None], -wi)
+        out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, Le
         out.pdf[idx] = pdf
+
+    def _shader(self, j, q, wo):
+        """The lights' node trees at points q (Incoming wo): UV = Parametric =
+        the point in the light's axes shifted to [0, 1] (Cycles' area.h u, v)."""
+        rel = q - self.c[j]
+        uv = np.stack([dot_rows(rel, self.du[j]) + 0.5, dot_rows(rel, self.dv[j]) + 0.5], axis=1)
+        n = np.broadcast_to(self.n[j], q.shape)
+        return self.shaders.factor(j, q, n, wo, uv)
 
     def _solid_angle_pdf(self, j, o):
         """Which rays from o NEE samples by solid angle, and that pdf."""
@@ -158,11 +191,15 @@ class AreaLights(LightTable):
         ok = front & (th > 0) & inside & (self.area[j] > 0)
         t[ok] = th[ok]
         pdf[ok] = th[ok] ** 2 / (-denom[ok] * self.area[j])
+        Le = np.tile(self.L[j], (n, 1))
+        if self.shaders is not None and ok.any():
+            rows = np.flatnonzero(ok)
+            Le[rows] *= self._shader(j, o[rows] + d[rows] * th[rows, None], -d[rows])
         if self.rect[j] and ok.any():
             # The pdf NEE has for this point: the same choice of strategy.
             sph, solid_angle_pdf = self._solid_angle_pdf(j, o[ok])
             pdf[ok] = np.where(sph, solid_angle_pdf, pdf[ok])
-        return t, np.tile(self.L[j], (n, 1)), pdf
+        return t, Le, pdf
 
 
 @kernel(24, 5)
@@ -197,6 +234,11 @@ def _area_light_sample(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, len
 _rectangle_warp = helper(spherical_rectangle_warp.fn)
 
 
+def dot_rows(a, b):
+    """Row-wise dot of (N, 3) a with b, (3,) or (N, 3)."""
+    return np.einsum("ij,ij->i", a, np.broadcast_to(b, a.shape))
+
+
 
 def validate(light, what):
     check_rgb(light.power, f"{what} power", nonnegative=True)
@@ -211,6 +253,7 @@ def validate(light, what):
         # 0 is allowed: a light without area emits nothing (rendered as such).
         check_size(getattr(light, name), f"{what}: {name}")
     check_falloff(light, what)
+    check_shader(light, what)
 
 
 def _facing_down(height):
@@ -237,6 +280,11 @@ def _examples():
         LightExample("square near", scene("SQUARE", 3.0), (0.2, 0.1, 1.5)),
         LightExample("ellipse", scene("ELLIPSE", 1.2, 0.5, normalize=False), (0.3, 0, 0)),
         LightExample("disk linear", scene("DISK", 2 * R, falloff="LINEAR", falloff_smooth=0.5), (0, 0, 0)),
+        # A node tree varying over the light changes the radiance, never the pdf.
+        LightExample("rectangle checker", scene("RECTANGLE", a, b, shader=checker_of("ShaderNodeTexCoord", "UV", 4.0)),
+                     (0, 0, 0), solid_angle=rect_sa),
+        LightExample("disk object checker", scene("DISK", 2 * R, shader=checker_of("ShaderNodeTexCoord", "Object", 3.0)),
+                     (0.2, 0, 0)),
     ]
 
 
@@ -254,4 +302,5 @@ register(LightDef(
              ("unknown shape", _set("shape", "STAR"), "shape"),
              ("negative size", _set("size_x", -1.0), "size_x"),
              ("NaN size", _set("size_y", np.nan), "size_y"),
-             ("unknown falloff", _set("falloff", "INVERSE"), "falloff"))))
+             ("unknown falloff", _set("falloff", "INVERSE"), "falloff"),
+             ("shader not a colour", _set("shader", "red"), "shader"))))

@@ -16,6 +16,7 @@ from ..vec import column, dot, frame, frame_of, rows3, to_world
 from .common import (Falloff, check_direction, check_falloff, check_rgb, check_size, selection_power,
                      smoothstep, unit)
 from .registry import RAY, LightDef, LightExample, LightTable, register
+from .shader import LightShaders, check_shader, checker_of, spread_directions
 
 POINT = 0
 # Half-angle of emission beyond a spot cone: its light ends at the cone edge.
@@ -29,6 +30,7 @@ class PointLights(LightTable):
         self.count = len(lights)
         self.lights = list(lights)
         self.falloff = Falloff.of(lights)
+        self.shaders = LightShaders.of(lights, [_matrix(l) for l in lights])
         self.pos = np.array([l.position for l in lights], float).reshape(-1, 3)
         self.radius = np.array([max(0.0, l.radius) for l in lights], float)
         self.sphere = np.array([not l.soft_falloff for l in lights], bool)
@@ -44,12 +46,24 @@ class PointLights(LightTable):
                             float).reshape(-1, 3)
         half = np.array([0.5 * l.spot_size if s else np.pi for l, s in zip(lights, spot)], float)
         self.cos_half = np.cos(half)
+        with np.errstate(divide="ignore"):
+            self.half_cot = np.where(self.spot, 0.5 / np.tan(half), 0.0)   # Cycles' half_cot_half_spot_angle
         blend = np.array([l.spot_blend if s else 0.0 for l, s in zip(lights, spot)], float)
         with np.errstate(divide="ignore"):
             self.smooth = 1.0 / ((1.0 - self.cos_half) * blend)
 
     def power(self, radius):
-        return selection_power(self.power_rgb) if self.count else []
+        if not self.count:
+            return []
+        return selection_power(self.power_rgb) * np.array([self._selection_scale(j) for j in range(self.count)])
+
+    def _selection_scale(self, j, count=256):
+        """The light's tree averaged over the directions it emits to (1 without one)."""
+        if self.shaders is None:
+            return 1.0
+        wo = spread_directions(count)
+        q = self.pos[j] + wo * self.radius[j]
+        return self.shaders.selection_scale(j, q, wo, wo, self._shader_uv(np.full(count, j), wo, wo))
 
     def is_delta(self):
         return self.radius <= 0
@@ -92,8 +106,40 @@ class PointLights(LightTable):
         _point_sample(column(j, n, np.int64), rows3(p)[0],
                       column(u1, n, np.float64), column(u2, n, np.float64), self.pos, self.radius, self.sphere,
                       self.L, self.spot, self.dir, self.cos_half, self.smooth, wi, t, le, pdf, delta)
+        if self.shaders is not None:
+            le *= self._shader(np.broadcast_to(j, (n,)), p + wi * t[:, None], -wi)
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, le
         out.pdf[idx], out.delta[idx] = pdf, delta
+
+    def _shader(self, j, q, wo):
+        """The lights' node trees at points q seen along Incoming wo: N is the
+        sphere's normal at q, or (soft falloff, delta) Incoming itself, the disk
+        facing the shading point; UV = Parametric = map_to_sphere of N in
+        object space for point lights, Cycles' spot_light_uv of Incoming in
+        the spot's axes for spots (as Cycles 5.0 renders them)."""
+        sphere = (self.sphere[j] & (self.radius[j] > 0))[:, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            radial = (q - self.pos[j]) / np.maximum(self.radius[j], 1e-300)[:, None]
+        n = np.where(sphere, radial, wo)
+        return self.shaders.factor(j, q, n, wo, self._shader_uv(j, n, wo))
+
+    def _shader_uv(self, j, n, wo):
+        uv = self.shaders.sphere_uv(j, n)
+        spot = np.flatnonzero(self.spot[j])
+        if len(spot):
+            uv[spot] = self._spot_uv(j[spot], wo[spot])
+        return uv
+
+    def _spot_uv(self, j, wo):
+        """Cycles' spot_light_uv: the direction in the spot's unit axes (z
+        along the cone) projected so that the cone spans [0, 1]^2."""
+        axes = self.shaders.matrix[j][:, :3, :3]
+        axes = axes / np.maximum(np.linalg.norm(axes, axis=1, keepdims=True), 1e-300)
+        x, y = np.einsum("nij,ni->nj", axes, wo)[:, :2].T
+        z = -np.einsum("ni,ni->n", axes[:, :, 2], wo)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            f = np.where(z > 0, self.half_cot[j] / np.where(z > 0, z, 1.0), 0.0)
+        return np.stack([x * f + 0.5, y * f + 0.5], axis=1)
 
     def nearest(self, o, d, t, ray, bits, camera):
         """The nearest of these lights each ray meets before t: t (updated
@@ -115,6 +161,8 @@ class PointLights(LightTable):
         if len(rows):
             j = index[rows]
             Le[rows] = self.L[j] * self._spot_factor(j, -d[rows])[:, None]
+            if self.shaders is not None:
+                Le[rows] *= self._shader(j, o[rows] + d[rows] * hit_t[rows, None], -d[rows])
         return hit_t, index, Le, pdf
 
 
@@ -315,11 +363,26 @@ def _nearest_point(o, d, t, ray_bits, pos, radius, sphere, light_bits, hit_t, in
 
 
 
+def _matrix(light):
+    """The light object's matrix (what its node tree's Object coordinates
+    read), or a translation to its position."""
+    if light.matrix is not None:
+        return np.asarray(light.matrix, np.float64)
+    m = np.eye(4)
+    m[:3, 3] = light.position
+    return m
+
+
 def validate(light, what):
     check_rgb(light.power, f"{what} power", nonnegative=True)
     check_rgb(light.position, f"{what} position")
     check_size(light.radius, f"{what}: radius")
     check_falloff(light, what)
+    check_shader(light, what)
+    if light.matrix is not None:
+        m = np.asarray(light.matrix, dtype=np.float64)
+        if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+            raise SceneError(f"{what}: matrix must be a finite 4x4")
     if isinstance(light, SpotLight):
         check_direction(light.direction, f"{what}: direction")
         size = check_size(light.spot_size, f"{what}: spot_size", 0.0, np.pi)
@@ -353,7 +416,20 @@ def _examples():
         LightExample("delta constant smooth", scene(radius=0.0, falloff="CONSTANT", falloff_smooth=1.5), (0, 0, 0),
                      irradiance=tuple(np.array(delta) * d * d * d * d / (1.5 + d * d))),
         LightExample("sphere linear", scene(radius=r, falloff="LINEAR"), (0, 0, 0), solid_angle=cone),
+        # Node trees varying over the light: the radiance changes, the pdf does not.
+        LightExample("sphere normal checker", scene(radius=r, shader=checker_of("ShaderNodeTexCoord", "Normal", 3.0)),
+                     (0, 0, 0), solid_angle=cone),
+        LightExample("soft disk incoming checker",
+                     scene(radius=r, soft_falloff=True, shader=checker_of("ShaderNodeNewGeometry", "Incoming", 20.0)),
+                     (0.3, 0, 0)),
+        LightExample("spot uv checker", scene(radius=0.1, direction=(0, 0, -1), spot_size=2.0, spot_blend=0.1,
+                                              shader=checker_of("ShaderNodeTexCoord", "UV", 9.0)), (0, 0, 0)),
     ]
+
+
+def _unknown_node():
+    from ..scene import NodeCall, NodeOutput
+    return NodeOutput(NodeCall("ShaderNodeNope", {}), "Color")
 
 
 def _set(field, value):
@@ -374,6 +450,8 @@ register(LightDef(
              ("negative radius", _set("radius", -0.1), "radius"),
              ("NaN radius", _set("radius", np.nan), "radius"),
              ("unknown falloff", _set("falloff", "CUBIC"), "falloff"),
+             ("NaN matrix", _set("matrix", np.full((4, 4), np.nan)), "matrix"),
+             ("shader of an unknown node", _set("shader", _unknown_node()), "ShaderNodeNope"),
              ("negative smooth", _set("falloff_smooth", -1.0), "smooth"),
              ("zero spot size", _spot(spot_size=0.0), "spot_size"),
              ("zero spot direction", _spot(direction=(0.0, 0.0, 0.0)), "direction"),

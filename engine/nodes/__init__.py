@@ -9,6 +9,7 @@ from . import converter_nodes, input_nodes, ray_nodes, sky, texture_nodes  # noq
 # Registered last: the node parity scene places quads in registry order, and
 # its Camera-coordinate quad must stay where its values are positive.
 from . import gabor  # noqa: F401,E402
+from . import ies  # noqa: F401,E402  (after gabor: the parity scene's quad order)
 from .context import SceneShading, ShadingContext, as_context
 from .rays import NodeRays
 from .registry import REGISTRY, NodeDef, lookup

@@ -27,7 +27,7 @@ class NodeDef:
     evaluate: Callable
     props: tuple = ()              # ((bpy property, default), ...)
     translate: Optional[Callable] = None   # bpy node -> dict of extra props
-    coords: Optional[str] = None   # what an unlinked 'Vector' input reads: 'generated', 'uv', 'position'
+    coords: Optional[str] = None   # what an unlinked 'Vector' input reads: 'generated', 'uv', 'position', 'incoming'
     bounds: Optional[Callable] = None      # (props) -> {output: (lo, hi)}
     unsupported_outputs: tuple = ()
     # Extra absolute error allowed against Cycles: chains of float32

@@ -458,6 +458,14 @@ def _mesh_print(mesh):
     return hashlib_sha(repr(sorted(faces)).encode()), [_material_print(m) for m in mesh.materials]
 
 
+def _light_tree_renders(light):
+    """Whether a light's node tree holds more than its Emission and Light
+    Output (references of lights with the default tree keep their
+    fingerprints; a Light Falloff or a texture on the light counts)."""
+    tree = getattr(light, 'node_tree', None)
+    return tree is not None and any(n.type not in ('OUTPUT_LIGHT', 'EMISSION') for n in tree.nodes)
+
+
 def _material_print(material):
     if material is None:
         return None
@@ -475,6 +483,8 @@ def scene_fingerprint(scene):
         data = obj.data
         if obj.type == 'MESH':
             data_print = _mesh_print(data)
+        elif obj.type == 'LIGHT' and _light_tree_renders(data):
+            data_print = (_rna(data), _tree_print(data.node_tree))
         elif data is not None:
             data_print = _rna(data)
         else:

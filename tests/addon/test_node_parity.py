@@ -539,8 +539,8 @@ def test_displacement_output_becomes_bump_only(registered_addon):
 
 def test_light_node_tree_scales_the_light(registered_addon):
     """A light whose Emission colour is a Blackbody (and strength 2) emits
-    colour x energy x Blackbody x 2; a tree varying over the light is
-    reported."""
+    colour x energy x Blackbody x 2; a tree varying over the light becomes
+    the light's shader."""
     from addon.export.light import collect_lights
     from engine.nodes.converter_nodes import blackbody_rec709
     bpy.ops.wm.read_factory_settings()
@@ -561,4 +561,7 @@ def test_light_node_tree_scales_the_light(registered_addon):
     noise = tree.nodes.new('ShaderNodeTexNoise')
     tree.links.new(noise.outputs['Color'], emission.inputs['Color'])
     lights, warnings = collect_lights(bpy.context.evaluated_depsgraph_get())
-    assert len(warnings) == 1 and 'varies' in warnings[0]
+    # Varying over the light: evaluated per light point (engine/lights/shader.py), the power left alone.
+    assert not warnings, warnings
+    assert lights[0].shader is not None
+    np.testing.assert_allclose(lights[0].power, 100.0 * np.array(data.color), rtol=1e-6)

@@ -1,0 +1,100 @@
+"""Cycles parity of light node trees that vary over the light (issue 23;
+engine/lights/shader.py, read by addon/export/light.py): one scene, one
+converged reference (tools/cycles_references.py light_textures), with
+
+* an area light (rectangle, seen by the camera) whose Emission Color is a
+  Checker Texture on its Texture Coordinate UV: the camera sees the checker
+  on the light (BSDF-ray hits) and the floor is lit by it (light samples);
+* a point light (soft falloff, Blender's default) whose colour is a
+  Checker on the Geometry node's Incoming: it projects the pattern onto the
+  floor;
+* a sphere light (soft falloff off, seen by the camera) whose colour is a
+  Checker on the Texture Coordinate Normal at Emission Strength 1.5,
+* a spot light whose colour is a Checker on its UV (Cycles' spot_light_uv):
+  a gobo projecting the checker onto the floor,
+
+over a diffuse floor: the whole image, its quadrants and every block
+against Cycles (two statistical families), power printed and asserted.
+Beside it Ember's image must differ from the same lights with their mean
+colours (the texture has its effect, not only its average)."""
+import math
+
+from parity_scenes import light, material, plane
+from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
+
+WIDTH, HEIGHT = 48, 32
+BLOCK = 8
+SPP = 3072
+COLOURS = ((1.0, 0.25, 0.05, 1.0), (0.05, 0.3, 1.0, 1.0))
+
+
+def _checker(obj, node_type, output, scale, strength=1.0):
+    """The light's Emission Color from a Checker on node_type's output."""
+    data = obj.data
+    data.use_nodes = True
+    tree = data.node_tree
+    emission = next(n for n in tree.nodes if n.type == 'EMISSION')
+    emission.inputs['Strength'].default_value = strength
+    source = tree.nodes.new(node_type)
+    checker = tree.nodes.new('ShaderNodeTexChecker')
+    checker.inputs['Scale'].default_value = scale
+    checker.inputs['Color1'].default_value = COLOURS[0]
+    checker.inputs['Color2'].default_value = COLOURS[1]
+    tree.links.new(source.outputs[output], checker.inputs['Vector'])
+    tree.links.new(checker.outputs['Color'], emission.inputs['Color'])
+
+
+def light_textures(scene, textured=True):
+    plane("floor", material("floor", 'diffuse'))
+    area = light('AREA', (-0.9, 0.4, 0.9), 30.0, rotation=(-1.0, 0.0, 0.3), shape='RECTANGLE', size=1.2,
+                 size_y=0.8)
+    area.visible_camera = True
+    point = light('POINT', (1.1, 0.6, 0.7), 60.0, shadow_soft_size=0.25)
+    sphere = light('POINT', (0.6, -0.9, 0.5), 25.0, shadow_soft_size=0.2, use_soft_falloff=False)
+    sphere.visible_camera = True
+    spot = light('SPOT', (-0.6, -0.8, 1.4), 80.0, rotation=(0.25, -0.2, 0.4), shadow_soft_size=0.05,
+                 spot_size=0.9, spot_blend=0.1)
+    if textured:
+        _checker(area, 'ShaderNodeTexCoord', 'UV', 3.0)
+        _checker(point, 'ShaderNodeNewGeometry', 'Incoming', 2.5)
+        _checker(sphere, 'ShaderNodeTexCoord', 'Normal', 2.0, strength=1.5)
+        _checker(spot, 'ShaderNodeTexCoord', 'UV', 4.0)          # a gobo: the checker projected
+    else:
+        mean = tuple(0.5 * (a + b) for a, b in zip(*COLOURS))[:3]
+        for obj, strength in ((area, 1.0), (point, 1.0), (sphere, 1.5), (spot, 1.0)):
+            obj.data.color = mean
+            obj.data.energy *= strength
+    cam = scene.camera
+    cam.location = (0.0, -3.2, 2.6)
+    cam.rotation_euler = (math.atan2(3.4, 2.3), 0.0, 0.0)
+    cam.data.lens = 30.0
+    small_resolution(scene, WIDTH, HEIGHT)
+    scene.world.color = (0.0, 0.0, 0.0)
+    if scene.world.node_tree is not None and 'Background' in scene.world.node_tree.nodes:
+        scene.world.node_tree.nodes['Background'].inputs['Color'].default_value = (0, 0, 0, 1)
+    return 2
+
+
+SCENES = {'light_textures': light_textures}
+
+
+def reference_scene(name, folder=None):
+    """The scene ``name`` and its bounces (as tools/cycles_references.py renders it)."""
+    scene = empty_factory_scene()
+    return scene, SCENES[name](scene)
+
+
+def test_light_textures_match_cycles(tmp_path, tapped_engine):
+    scene, bounces = reference_scene('light_textures')
+    image, var = render_for_reference(scene, tmp_path, 'light_textures', tapped_engine, SPP, 2, bounces)
+    from addon import engine as ember_engine
+    warnings = ember_engine.RENDER_LOG[-1].get('warnings', ())
+    assert not [w for w in warnings if 'Light' in w], warnings
+    check = check_against_reference('light_textures', scene, bounces, image, var, SPP, BLOCK)
+    plain = empty_factory_scene()
+    light_textures(plain, textured=False)
+    mean, _ = render_for_reference(plain, tmp_path, 'light_means', tapped_engine, 32, 2, bounces)
+    diff = abs(image[..., :3] - mean[..., :3]).mean() / mean[..., :3].mean()
+    print(f"light_textures: mean |textured - mean colours| / mean {diff:.3f}")
+    assert diff > 0.1, f"the light textures change little against their mean colours ({diff:.3f})"
+    check.assert_agrees(0.005, 0.02)
