@@ -110,7 +110,7 @@ class SceneCache:
         self.materials.slots_cache.clear()  # slot assignments may have changed
         collector = instance_export.InstanceCollector(self.materials.slots,
                                                       view_layer=getattr(depsgraph, 'view_layer', None),
-                                                      scene=getattr(depsgraph, 'scene', None))
+                                                      scene=getattr(depsgraph, 'scene', None), render=False)
         collector.meshes, collector.mesh_of_key = self.meshes, self.mesh_of_key
         meshes_before = len(self.mesh_of_key)
         materials_before = len(self.materials.materials)

@@ -112,6 +112,58 @@ class Accel:
         self._account(perf_counter() - t0, n)
         return res == 0
 
+    # -- Cycles' self-intersection rule for curves ------------------------------
+    # A ray leaving a strand passes every hit on that strand (Cycles'
+    # intersection_skip_self: ray->self.prim is the curve, every segment of it
+    # maps to it, kernel/device/cpu/bvh.h): a transmitted or light-sampled ray
+    # goes through the strand it starts on, a reflected one never meets it
+    # again, whatever its shape.  ``skip`` (N,): the key each ray leaves (-1:
+    # none); a hit's key is ``self_key[prim]`` (MotionAccel: the curve of a
+    # segment row, -1 elsewhere), or the row itself without one.  A ray may
+    # meet its own strand several times (a curl): up to SELF_SKIPS, past
+    # them the hit counts.
+    SELF_SKIPS = 8
+    self_key = None
+
+    def _own(self, prim, skip):
+        key = prim if self.self_key is None else self.self_key[np.maximum(prim, 0)]
+        return (prim >= 0) & (skip >= 0) & (key == skip)
+
+    def intersect_skipping(self, origins, directions, tmax, skip, time=None):
+        """``intersect`` passing each ray's own row ``skip``; t is measured
+        from the original origins."""
+        t, prim, u, v = self.intersect(origins, directions, tmax, time=time)
+        again = np.flatnonzero(self._own(prim, skip))
+        if len(again) == 0:
+            return t, prim, u, v
+        t, prim, u, v = t.copy(), prim.copy(), u.copy(), v.copy()
+        o = np.asarray(origins, np.float64)
+        d = np.asarray(directions, np.float64)
+        for _ in range(self.SELF_SKIPS):
+            # go on from just past the self hit (its row is passed again anyway)
+            p = o[again] + d[again] * t[again, None]
+            step = t[again] + self.offset_scale(p)
+            tn, pn, un, vn = self.intersect(o[again] + d[again] * step[:, None], d[again],
+                                            np.maximum(tmax[again] - step, 0.0),
+                                            time=None if time is None else time[again])
+            t[again] = np.where(pn >= 0, tn + step, np.inf)
+            prim[again], u[again], v[again] = pn, un, vn
+            again = again[self._own(pn, skip[again])]
+            if len(again) == 0:
+                break
+        return t, prim, u, v
+
+    def occluded_skipping(self, origins, directions, tmax, skip, time=None):
+        """``occluded`` passing each ray's own row ``skip``: blocked rays
+        leaving a row are traced again to see what blocks them."""
+        blocked = self.occluded(origins, directions, tmax, time=time)
+        rows = np.flatnonzero(blocked & (skip >= 0))
+        if len(rows):
+            _, prim, _, _ = self.intersect_skipping(origins[rows], directions[rows], tmax[rows], skip[rows],
+                                                    time=None if time is None else time[rows])
+            blocked[rows] = prim >= 0
+        return blocked
+
     @staticmethod
     def offset_scale(p):
         """How far to move a point off its surface.  Embree sees float32

@@ -304,6 +304,7 @@ class MotionAccel(Accel):
             curves = None
             if strands is not None and len(strands):
                 curves = (strands.cvs, strands.start, strands.rows, self.CURVE_RATE)
+                self.self_key = strands.curve   # rays leaving a strand pass all of it
             self.scene = embree_c.TriangleScene(parts, instances, points, curves)
 
     def intersect(self, origins, directions, tmax, time=None):

@@ -137,10 +137,16 @@ class Strands(_Rows):
     each row's first control point there (4 consecutive ones make a
     segment)."""
 
-    def __init__(self, rows, cvs, start, n_rows):
+    def __init__(self, rows, cvs, start, n_rows, curve=None):
         super().__init__(rows, n_rows)
         self.cvs, self.start = cvs, start
         self.is_curve = self.mask
+        # (n_rows,) the curve (strand) each segment row belongs to, numbered
+        # over every curve set, -1 on other rows: rays leaving a strand pass
+        # all of its segments (curve_rows).
+        self.curve = np.full(n_rows, -1, np.int64)
+        if curve is not None:
+            self.curve[rows] = curve
 
 
 def strands_of(tris, owners):
@@ -148,8 +154,8 @@ def strands_of(tris, owners):
     if not owners:
         return None
     owner = tris.shading.instance
-    rows, cvs, starts = [], [], []
-    base = 0
+    rows, cvs, starts, curves = [], [], [], []
+    base = curve_base = 0
     for inst_index, strands in owners:
         mine = np.flatnonzero(owner == inst_index)
         m = np.asarray(strands.matrix, np.float64)
@@ -163,12 +169,16 @@ def strands_of(tris, owners):
                  if len(first) else np.zeros(0, np.int64))
         padded = np.concatenate([p[index], r[index, None]], axis=1)
         _, start = segment_starts(offsets)
+        curve = np.repeat(np.arange(len(first)), np.maximum(last - first, 0))   # each segment's curve
         local = tris.shading.local[mine]
         rows.append(mine)
         starts.append(start[local] + base)
+        curves.append(curve[local] + curve_base)
         cvs.append(padded)
         base += len(padded)
-    return Strands(np.concatenate(rows), np.concatenate(cvs), np.concatenate(starts), len(tris))
+        curve_base += len(first)
+    return Strands(np.concatenate(rows), np.concatenate(cvs), np.concatenate(starts), len(tris),
+                   np.concatenate(curves))
 
 
 def _catmull_rom(t):
@@ -209,30 +219,11 @@ def curve_hits(strands, o, d, t, prim, u):
     return p, np.where(back[:, None], -n, n), back, radius
 
 
-def through_fibre(p, ng, fibre, radius, wi):
-    """Where rays from strand points p in directions wi that enter the strand
-    (wi . ng < 0) leave it again: (p', n', t) with p' = p + t wi on the far
-    side of the round strand (a cylinder about the tangent ``fibre`` of the
-    given radius, locally), n' its outward normal there, t the distance
-    (0 and p, ng unchanged elsewhere).  Cycles' rays skip the primitive they
-    leave; Ember's start past it, so a transmitted or light-sampled ray
-    through the fibre does not meet its inside."""
-    t = np.zeros(len(p))
-    cos = np.einsum("ij,ij->i", wi, ng)
-    length = np.linalg.norm(fibre, axis=1)
-    axis = fibre / np.where(length > 0, length, 1.0)[:, None]
-    across = wi - np.einsum("ij,ij->i", wi, axis)[:, None] * axis
-    a2 = np.einsum("ij,ij->i", across, across)
-    enter = (radius > 0) & (length > 0) & (cos < 0) & (a2 > 1e-12)
-    if not enter.any():
-        return p, ng, t
-    t[enter] = -2.0 * radius[enter] * cos[enter] / a2[enter]
-    out = p + wi * t[:, None]
-    centre = p - ng * radius[:, None]
-    n = out - centre
-    n -= np.einsum("ij,ij->i", n, axis)[:, None] * axis
-    n /= np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
-    return np.where(enter[:, None], out, p), np.where(enter[:, None], n, ng), t
+def curve_rows(strands, prim):
+    """(N,) int64: the curve of each hit row ``prim`` (strands.curve), -1
+    for other rows and misses: what rays leaving them pass."""
+    prim = np.asarray(prim, np.int64)
+    return np.where(prim >= 0, strands.curve[np.maximum(prim, 0)], -1)
 
 
 def unlit_rows(n_rows, spheres, motion, strands=None):

@@ -70,7 +70,7 @@ REFERENCES['motion_objects'] = ('test_motion_parity', 'objects', 2048)
 REFERENCES['points_heap'] = ('test_points_parity', 'heap', 1024)
 REFERENCES['curves_strands'] = ('test_curves_parity', 'strands', 1024)
 REFERENCES['bump_correction_sphere'] = ('test_bump_correction_parity', 'sphere', 512)
-REFERENCES['hair_chiang'] = ('test_hair_parity', 'chiang', 1024)
+REFERENCES['hair_particles'] = ('test_hair_parity', 'particles', 1024)
 for _scene in ('emissive', 'hdri', 'many_lights', 'principled', 'procedural'):
     REFERENCES['yardstick_' + _scene] = ('test_yardstick_parity', _scene, 1024)
 # the scenes built here: (width, height, max bounces)

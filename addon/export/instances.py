@@ -11,15 +11,17 @@ import numpy as np
 from .. import backend
 from . import mesh as mesh_export
 from . import object_attributes
+from . import particle_hair
 from .motion import instance_key
 
 
 class InstanceCollector:
     """Accumulates meshes and instances while walking the depsgraph."""
 
-    def __init__(self, material_index, check=None, view_layer=None, scene=None):
+    def __init__(self, material_index, check=None, view_layer=None, scene=None, render=True):
         # material_index(obj) -> list of scene material indices per slot
         self.material_index = material_index
+        self.render = render             # a final render's depsgraph (particle hair's render steps)
         self.view_layer = view_layer     # for holdout collections
         self.meshes = []
         self.instances = []
@@ -28,7 +30,7 @@ class InstanceCollector:
         self.warnings = []
         self.keys = []      # per instance: motion.instance_key (motion blur finds it at other times)
         self.points = []    # engine PointClouds (point cloud objects, geometry nodes' Points)
-        self.curves = []    # engine HairCurves (Curves objects)
+        self.curves = []    # engine HairCurves (Curves objects, hair particle systems)
         self._warned = set()
         self.check = check or (lambda: None)
         self.scene = scene
@@ -36,6 +38,8 @@ class InstanceCollector:
 
     def add(self, inst):
         obj = inst.object  # for instances: the instanced (possibly temporary) object
+        if obj.type == 'MESH' and inst.show_particles and len(obj.particle_systems):
+            self._add_particle_hair(inst)
         if not inst.is_instance and not inst.show_self:
             return  # e.g. a particle emitter with "Show Emitter" off
         if obj.type == 'POINTCLOUD':
@@ -151,6 +155,29 @@ class InstanceCollector:
             **ray_visibility(inst), **object_info(inst),
             pass_index=int(getattr(inst.object, 'pass_index', 0))))
 
+    def _add_particle_hair(self, inst):
+        """The emitter's hair particle systems as strands (particle_hair.py),
+        placed with the instance, with the material of each system's slot."""
+        obj = inst.object
+        matrix = np.array(inst.matrix_world, dtype=np.float64)
+        if not np.isfinite(matrix).all():
+            return
+        slots = self.material_index(obj)
+        for strands in particle_hair.particle_strands(obj, self.render, self.check):
+            if strands.skipped:
+                self._warn_once(('particle hair', obj.name, strands.name),
+                                f"Object '{obj.name}', particle system '{strands.name}': {strands.skipped} strands "
+                                "with a NaN or infinite key were skipped")
+            if len(strands.offsets) < 2:
+                continue
+            slot = min(strands.slot, len(slots) - 1) if len(slots) else 0
+            self.curves.append(backend.engine().HairCurves(
+                points=strands.points.astype(np.float32), radii=strands.radii.astype(np.float32),
+                offsets=strands.offsets.astype(np.int32), matrix=matrix,
+                materials=[slots[slot]] if len(slots) else slots, name=f"{obj.name} {strands.name}",
+                **ray_visibility(inst), **object_info(inst),
+                pass_index=int(getattr(obj, 'pass_index', 0))))
+
     def _mesh_id(self, obj):
         """Index of the object's geometry in self.meshes, exporting it once."""
         if obj.type == 'MESH':
@@ -243,7 +270,8 @@ def collect_instances(depsgraph, material_index, check=None, keys=None, points=N
     ``check()`` (which raises to cancel) runs every 256 instances and before
     each mesh is exported; ``keys`` (a list) receives each instance's key."""
     collector = InstanceCollector(material_index, check, getattr(depsgraph, 'view_layer', None),
-                                  getattr(depsgraph, 'scene', None))
+                                  getattr(depsgraph, 'scene', None),
+                                  render=getattr(depsgraph, 'mode', 'RENDER') == 'RENDER')
     for count, inst in enumerate(depsgraph.object_instances):
         if count % 256 == 255:
             collector.check()

@@ -75,6 +75,9 @@ class Paths:
     # A diffuse bounce happened on the way (Cycles' PATH_RAY_DIFFUSE_ANCESTOR:
     # Christensen-Burley is a diffuse lobe after one); tracked with subsurface only.
     diffuse_ancestor: np.ndarray
+    # The curve segment's row the ray leaves (-1: none, or not a curve): its
+    # hits are passed (Accel.intersect_skipping, Cycles' self-intersection rule).
+    self_prim: np.ndarray
 
     def __len__(self):
         return len(self.pix)
@@ -148,7 +151,6 @@ class Hit:
     # Curves (points.Strands): the strand's tangent dC/du (N, 3) at curve hits,
     # zero elsewhere; None without curves.  The shading frame's x on strands.
     fibre: object = None
-    fibre_radius: object = None   # (N,) the strand's radius there (0 elsewhere), with fibre
     # The ShadingContext of these points, made on first use
     # (ShadingContext.of_hit); a taken Hit makes its own.
     shading: object = None
@@ -226,6 +228,7 @@ class ShadowBatch:
     tmax: np.ndarray
     free: object = None
     added: object = None
+    skip: object = None   # (len(rows),) the curve row each ray leaves and passes (-1: none), or None
 
 
 class RowView:

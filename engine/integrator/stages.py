@@ -12,7 +12,7 @@ from .. import bsdf, bump_correction, nee, throughput
 from ..accel import shadow_rays, shadow_rays_f32
 from ..hits import hit_geometry
 from ..motion import path_time, triangles_at
-from ..points import curve_hits, curve_tangents, sphere_hits, through_fibre
+from ..points import curve_hits, curve_tangents, curve_rows, sphere_hits
 from ..nodes import NodeRays, ShadingContext
 from ..nodes.context import PATH_COLUMNS
 from ..sampler import BSDF, LIGHT, emitter_set, vertex_set
@@ -31,7 +31,10 @@ from .visibility import VIS_INDIRECT
 def intersect(ctx, paths):
     """The closest surface each ray may see and the analytic lights before it."""
     time = path_time(paths)
-    t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax, time=time)
+    if ctx.strands is None:
+        t, prim, bu, bv = ctx.accel.intersect(paths.o, paths.d, paths.tmax, time=time)
+    else:   # rays leaving a strand pass it (Cycles' self-intersection rule)
+        t, prim, bu, bv = ctx.accel.intersect_skipping(paths.o, paths.d, paths.tmax, paths.self_prim, time=time)
     if ctx.triangles.visibility is not None:
         t, prim, bu, bv = visibility.skip_invisible(ctx, paths.o, paths.d, paths.tmax, paths.ray, t, prim, bu, bv,
                                                     time=time)
@@ -223,14 +226,12 @@ def interaction(ctx, paths, t, prim, bu, bv):
             p[on], ng[on], back[on], radius = curve_hits(ctx.strands, paths.o[on], d[on], t[on], prim[on], bu[on])
             ns[on] = ng[on]
             curve_eps = (on, radius)
-            fibre, fibre_radius = np.zeros_like(p), np.zeros(len(p))
+            fibre = np.zeros_like(p)
             fibre[on] = curve_tangents(ctx.strands, prim[on], bu[on])
-            fibre_radius[on] = radius
     uv = _hit_uv(tr, prim, bu, bv)
     hit = Hit(p, ng, ns, -d, np.take(tr.material, prim), prim, ctx.accel.offset_scale(p), uv, back=back,
               bary=np.stack([bu, bv], axis=1), depth=getattr(paths, "bounce", None),
-              ray=getattr(paths, "ray", None), fibre=fibre,
-              fibre_radius=None if fibre is None else fibre_radius)
+              ray=getattr(paths, "ray", None), fibre=fibre)
     if curve_eps is not None:
         # Embree's curve distances are coarser than its triangles': leave a strand
         # by a thousandth of its radius at least.
@@ -471,13 +472,11 @@ def light_sample(ctx, paths, v, e, p_sel, u):
     if len(live) == 0:
         return None
     rays = shadow_rays if ctx.transparent_shadows else shadow_rays_f32
-    p, ng, dist = hit.p, hit.ng, ls.dist
-    if hit.fibre is not None:   # light through a strand: the ray starts on its far side
-        p, ng, t = through_fibre(p, ng, hit.fibre, hit.fibre_radius, ls.wi)
-        dist = np.maximum(dist - t, 0.0)
-    origin, direction, tmax = rays(p, ng, ls.wi, dist, ls.on_surface, hit.eps, live)
+    origin, direction, tmax = rays(hit.p, hit.ng, ls.wi, ls.dist, ls.on_surface, hit.eps, live)
     sample = LightSample(e, ls.wi, wi_l, f, w, ls.delta, contrib)
-    return ShadowBatch(v, sample, live, origin, direction, tmax)
+    # shadow rays from a strand pass it (light through the fibre: its TT lobes)
+    skip = None if ctx.strands is None else curve_rows(ctx.strands, hit.prim[live])
+    return ShadowBatch(v, sample, live, origin, direction, tmax, skip=skip)
 
 
 # ----------------------------------------------------------------------------
@@ -495,11 +494,12 @@ def trace_shadows(ctx, paths, batch):
     time = None if time is None else time[rows]
     if ctx.transparent_shadows:
         added = contrib[batch.rows] * transparency.transmittance(ctx, batch.origin, batch.direction, batch.tmax,
-                                                                 e, paths.tbounce[rows], time=time)
+                                                                 e, paths.tbounce[rows], time=time,
+                                                                 skip=batch.skip)
         batch.free, batch.added = batch.rows, added
         paths.L[rows] += added
         return
-    blocked = visibility.occluded(ctx, batch.origin, batch.direction, batch.tmax, e, time=time)
+    blocked = visibility.occluded(ctx, batch.origin, batch.direction, batch.tmax, e, time=time, skip=batch.skip)
     if ctx.catcher is not None:
         only = np.flatnonzero(paths.catcher[rows] == 2)
         if len(only):
@@ -540,11 +540,9 @@ def scatter(ctx, paths, v, depth):
         wi[through] = paths.d[through]
         pdf = np.where(through, paths.prev_pdf, pdf)
         delta = np.where(through, paths.prev_delta, delta)
-    if hit.fibre is None:
-        o = ctx.accel.offset_origin(hit.p, hit.ng, wi, hit.eps)
-    else:   # a ray into a strand leaves from its far side
-        p, ng, _ = through_fibre(hit.p, hit.ng, hit.fibre, hit.fibre_radius, wi)
-        o = ctx.accel.offset_origin(p, ng, wi, hit.eps)
+    o = ctx.accel.offset_origin(hit.p, hit.ng, wi, hit.eps)
+    if ctx.strands is not None:   # the next ray passes the strand it leaves (into it: through it)
+        paths.self_prim = curve_rows(ctx.strands, hit.prim)
     paths.tmax = unless(through, paths.tmax - dot(o - paths.o, wi), np.full(len(wi), np.inf))
     paths.mis_o = unless(through, paths.mis_o, o)
     paths.o = o

@@ -271,6 +271,7 @@ def _leave(ctx, paths, rows, beta, o, d, exit_prim, exit_bary):
     paths.d[rows] = -d
     paths.tmax[rows] = 2.0 * s
     paths.mis_o[rows] = paths.o[rows]
+    paths.self_prim[rows] = -1
     paths.exit_prim[rows] = exit_prim[out]
     paths.exit_hit[rows] = np.column_stack([exit_bary[out], s])
 

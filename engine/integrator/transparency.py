@@ -10,6 +10,7 @@ from .. import bsdf
 from ..geometry import VIS_SHADOW
 from ..media import transmittance_factor
 from ..nodes import ShadingContext
+from ..points import curve_rows
 from ..vec import dot, row_any_positive
 from .visibility import skip_invisible
 
@@ -70,6 +71,8 @@ def step_through(ctx, paths, hit):
     paths.tmax = paths.tmax - dot(o - paths.o, paths.d)
     paths.o = o
     paths.tbounce = paths.tbounce + 1
+    if ctx.strands is not None:   # a transparent strand is passed whole
+        paths.self_prim = curve_rows(ctx.strands, hit.prim)
 
 
 def sampled_transparent(ctx, hit, delta, wi_l, wo_l):
@@ -86,7 +89,7 @@ def sampled_transparent(ctx, hit, delta, wi_l, wo_l):
 VOLUME_BOUNDS_MAX = 1024
 
 
-def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None, rng=None, time=None):
+def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None, rng=None, time=None, skip=None):
     """(N, 3) light reaching the shadow rays' ends through transparent
     surfaces (Cycles' transparent shadows).  embreex has no any-hit filter,
     so each ray is traced again from past its transparent hit, times that
@@ -94,7 +97,8 @@ def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None, rng=None,
     transparent hit beyond the transparent bounces its path has left.
     ``stack`` (N, K): the media each ray starts in (engine/media), whose
     transmittance multiplies each segment; crossing a surface enters or
-    leaves its material's medium."""
+    leaves its material's medium.  ``skip`` (N,): the curve row each ray
+    leaves, passed on its first segment (None: none)."""
     n = len(origin)
     out = np.ones((n, 3))
     cast = np.ones(n, bool)
@@ -103,6 +107,7 @@ def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None, rng=None,
     idx = np.nonzero(cast)[0]
     o, d, tm = origin[idx], wi[idx], tmax[idx]
     tt = None if time is None else time[idx]
+    own = None if skip is None else skip[idx]
     left = np.maximum(ctx.settings.transparent_max_bounces - tbounce[idx], 0)
     if stack is not None:
         stack = stack[idx].copy()
@@ -112,7 +117,11 @@ def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None, rng=None,
         if crossings > VOLUME_BOUNDS_MAX:
             out[idx] = 0.0     # more surfaces on the ray than Cycles crosses: blocked
             break
-        t, prim, bu, bv = ctx.accel.intersect(o, d, tm, time=tt)
+        if own is None:
+            t, prim, bu, bv = ctx.accel.intersect(o, d, tm, time=tt)
+        else:   # the first segment passes the strand the ray leaves
+            t, prim, bu, bv = ctx.accel.intersect_skipping(o, d, tm, own, time=tt)
+            own = None
         if ctx.shadow_skips:
             ray = np.full(len(idx), VIS_SHADOW, np.uint8)
             t, prim, bu, bv = skip_invisible(ctx, o, d, tm, ray, t, prim, bu, bv, time=tt)

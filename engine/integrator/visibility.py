@@ -44,30 +44,44 @@ def _continue_past(ctx, o, d, tmax, t, prim, time=None):
     return np.where(pn >= 0, tn + t0, np.inf), pn, un, vn
 
 
-def occluded(ctx, origin, wi, tmax, emitter, time=None):
+def occluded(ctx, origin, wi, tmax, emitter, time=None, skip=None):
     """Shadow test: lights with visible_shadow off (Cycles' Cast Shadow) are
-    never blocked; objects with visible_shadow off never block."""
+    never blocked; objects with visible_shadow off never block.  ``skip``
+    (N,): the curve row each ray leaves, which it passes (None: none)."""
     if ctx.links is not None and ctx.links.any_blockers:
-        return _occluded_linked(ctx, origin, wi, tmax, emitter)
+        return _occluded_linked(ctx, origin, wi, tmax, emitter, skip)
     if not ctx.light_no_shadow and not ctx.shadow_skips:
-        return ctx.accel.occluded(origin, wi, tmax, time=time)
+        return _occluded(ctx, origin, wi, tmax, time, skip)
     blocked = np.zeros(len(origin), bool)
     test = np.ones(len(origin), bool)
     if ctx.light_no_shadow:
         test = (ctx.lights.visibility[emitter] & VIS_SHADOW) != 0
     idx = np.nonzero(test)[0]
     ti = None if time is None else time[idx]
+    own = None if skip is None else skip[idx]
     if not ctx.shadow_skips:
-        blocked[idx] = ctx.accel.occluded(origin[idx], wi[idx], tmax[idx], time=ti)
+        blocked[idx] = _occluded(ctx, origin[idx], wi[idx], tmax[idx], ti, own)
         return blocked
-    t, prim, _, _ = ctx.accel.intersect(origin[idx], wi[idx], tmax[idx], time=ti)
+    t, prim, _, _ = _intersect(ctx, origin[idx], wi[idx], tmax[idx], ti, own)
     ray = np.full(len(idx), VIS_SHADOW, np.uint8)
     t, prim, _, _ = skip_invisible(ctx, origin[idx], wi[idx], tmax[idx], ray, t, prim, t, t, time=ti)
     blocked[idx] = prim >= 0
     return blocked
 
 
-def _occluded_linked(ctx, origin, wi, tmax, emitter):
+def _occluded(ctx, origin, wi, tmax, time, skip):
+    if skip is None:
+        return ctx.accel.occluded(origin, wi, tmax, time=time)
+    return ctx.accel.occluded_skipping(origin, wi, tmax, skip, time=time)
+
+
+def _intersect(ctx, origin, wi, tmax, time, skip):
+    if skip is None:
+        return ctx.accel.intersect(origin, wi, tmax, time=time)
+    return ctx.accel.intersect_skipping(origin, wi, tmax, skip, time=time)
+
+
+def _occluded_linked(ctx, origin, wi, tmax, emitter, skip=None):
     """Shadow linking: the shadow rays of a light with a blocker set pass
     every object outside it (the others as ``occluded`` without links)."""
     emitter = np.broadcast_to(np.asarray(emitter, np.int64), (len(origin),))
@@ -75,11 +89,12 @@ def _occluded_linked(ctx, origin, wi, tmax, emitter):
     blocked = np.zeros(len(origin), bool)
     plain = np.flatnonzero(~linked)
     if len(plain):
-        blocked[plain] = occluded(replace(ctx, links=None), origin[plain], wi[plain], tmax[plain], emitter[plain])
+        blocked[plain] = occluded(replace(ctx, links=None), origin[plain], wi[plain], tmax[plain], emitter[plain],
+                                  skip=None if skip is None else skip[plain])
     idx = np.flatnonzero(linked)
     if len(idx):
         o, d, tm, e = origin[idx], wi[idx], tmax[idx], emitter[idx]
-        t, prim, _, _ = ctx.accel.intersect(o, d, tm)
+        t, prim, _, _ = _intersect(ctx, o, d, tm, None, None if skip is None else skip[idx])
         if ctx.light_no_shadow:
             prim = np.where((ctx.lights.visibility[e] & VIS_SHADOW) != 0, prim, -1)
         vis = ctx.triangles.visibility

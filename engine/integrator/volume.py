@@ -280,6 +280,7 @@ def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None, obs=NO_PASSES):
     u = ctx.sampler.get(paths.pseed, paths.sample, vertex_set(depth, BSDF))
     wi, pdf = media.phase_sample(paths.d, phase, u[:, 0], u[:, 1])
     paths.o, paths.d, paths.mis_o, paths.prev_p = p, wi, p, p
+    paths.self_prim = np.full(n, -1, np.int64)
     paths.tmax = np.full(n, np.inf)
     paths.prev_n = zeros
     paths.prev_pdf = pdf

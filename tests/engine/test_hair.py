@@ -9,7 +9,7 @@ branch against NumPy):
   the solid angle is d sin theta d phi), and every sample's weight is 1;
 * absorption only takes energy away;
 * Cycles' parametrizations (svm_node_closure_bsdf): melanin and colour;
-* a ray into a strand leaves it on the far side (points.through_fibre);
+* rays leaving a strand pass all of it (Accel.intersect_skipping, Cycles' rule);
 * a hair ball in a white world with no absorption renders white.
 """
 import math
@@ -20,7 +20,7 @@ import pytest
 from engine import bsdf, embree_c
 from engine import scene as S
 from engine.lobes import hair
-from engine.points import through_fibre
+from engine.points import curve_hits, curve_rows
 
 ROUGH = (0.15, 0.3, 0.7)
 CELLS = 400   # per unit of sin theta (2 CELLS in phi): 1e-5 of the albedo at roughness 0.15
@@ -92,22 +92,63 @@ def test_parametrizations_are_cycles():
     assert np.all(np.isfinite(hair.sigma_from_melanin(1.0, 0.5, (1, 1, 1), 0.3)))
 
 
-def test_a_ray_into_a_strand_leaves_on_its_far_side():
-    rng = np.random.default_rng(9)
-    n = 1000
-    r = 0.02
-    axis = np.tile([0.0, 0.0, 3.0], (n, 1))                 # the tangent, unnormalized
-    ang = rng.uniform(0, 2 * np.pi, n)
-    ng = np.c_[np.cos(ang), np.sin(ang), np.zeros(n)]
-    p = np.array([1.0, 2.0, 0.5]) + r * ng
-    wi = rng.normal(size=(n, 3))
-    wi /= np.linalg.norm(wi, axis=1)[:, None]
-    q, nq, t = through_fibre(p, ng, axis, np.full(n, r), wi)
-    inward = np.einsum("ij,ij->i", wi, ng) < 0
-    assert np.allclose(np.hypot(q[:, 0] - 1.0, q[:, 1] - 2.0), r, atol=1e-12)
-    assert np.all(t[inward] > 0) and np.all(t[~inward] == 0) and np.array_equal(q[~inward], p[~inward])
-    assert np.all(np.einsum("ij,ij->i", wi[inward], nq[inward]) > 0)       # leaving outward
-    assert np.allclose(nq[inward], (q[inward] - [1.0, 2.0, 0.0]) * [1, 1, 0] / r, atol=1e-9)
+@pytest.mark.skipif(not embree_c.available(), reason="libembree4 (embreex) not loaded")
+def test_rays_leaving_a_strand_pass_all_of_it():
+    """Cycles' self-intersection rule for curves (kernel/device/cpu/bvh.h:
+    a hair hit maps to its curve, and a ray leaving a curve skips it): rays
+    from points on a curly strand A, into it or away from it, never meet A
+    again; aimed at a straight strand B beside it they meet B; shadow rays
+    stop at B and pass A.  Without the rule every ray into A meets
+    A again (its far wall, or the curl)."""
+    import importlib
+    prepare = importlib.import_module("engine.render").prepare
+    turns = np.linspace(0.0, 6.0 * np.pi, 40)
+    curly = np.c_[0.05 * np.cos(turns), 0.05 * np.sin(turns), np.linspace(-0.6, 0.6, 40)]
+    straight = np.c_[np.full(8, 0.4), np.zeros(8), np.linspace(-0.8, 0.8, 8)]
+    points = np.concatenate([curly, straight])
+    radii = np.r_[np.full(40, 0.03), np.full(8, 0.05)]
+    curves = S.HairCurves(points, radii, np.array([0, 40, 48]), materials=[0])
+    mat = S.Material("hair", (S.Lobe("diffuse", (0.5, 0.5, 0.5)),))
+    scene = S.Scene(meshes=[], instances=[], materials=[mat], world=S.World(color=(0.0, 0.0, 0.0)),
+                    camera=S.Camera(matrix=np.eye(4), resolution=(4, 4)), curves=[curves])
+    ctx = prepare(scene, S.RenderSettings(samples=1))
+    acc, strands = ctx.accel, ctx.strands
+    rng = np.random.default_rng(11)
+    n = 20000
+    o = np.c_[np.full(n, -2.0), rng.uniform(-0.08, 0.08, n), rng.uniform(-0.5, 0.5, n)]
+    t, prim, u, _ = acc.intersect(o, np.tile([1.0, 0.0, 0.0], (n, 1)), np.full(n, np.inf))
+    on_a = np.flatnonzero((prim >= 0) & (points_curve(strands, prim) == 0))
+    assert len(on_a) > 0.3 * n
+    o, prim, u = o[on_a], prim[on_a], u[on_a]
+    p, ng, _, _ = curve_hits(strands, o, np.tile([1.0, 0.0, 0.0], (len(o), 1)), t[on_a], prim, u)
+    m = len(p)
+    eps = np.full(m, 1e-5)
+    skip = curve_rows(strands, prim)
+    assert np.all(skip == 0)
+    d = rng.normal(size=(m, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    start = acc.offset_origin(p, ng, d, eps)
+    into = np.einsum("ij,ij->i", d, ng) < 0
+    _, plain, _, _ = acc.intersect(start, d, np.full(m, np.inf))
+    again = (plain >= 0) & (points_curve(strands, plain) == 0)
+    print(f"rays into the strand meeting it again without the rule: {again[into].mean():.1%}")
+    assert again[into].mean() > 0.2
+    _, passed, _, _ = acc.intersect_skipping(start, d, np.full(m, np.inf), skip)
+    assert not np.any((passed >= 0) & (points_curve(strands, passed) == 0))
+    # aimed at B's axis (straight through A when A is in the way): B, every time
+    target = np.c_[np.full(m, 0.4), np.zeros(m), np.clip(p[:, 2], -0.5, 0.5)]
+    d = target - p
+    dist = np.linalg.norm(d, axis=1)
+    d /= dist[:, None]
+    start = acc.offset_origin(p, ng, d, eps)
+    _, hit_b, _, _ = acc.intersect_skipping(start, d, np.full(m, np.inf), skip)
+    assert np.all(points_curve(strands, hit_b) == 1)
+    assert acc.occluded_skipping(start, d, dist, skip).all()              # B blocks its own axis
+    assert not acc.occluded_skipping(start, d, dist - 0.06, skip).any()    # A does not block
+
+
+def points_curve(strands, prim):
+    return np.where(prim >= 0, strands.curve[np.maximum(prim, 0)], -1)
 
 
 @pytest.mark.skipif(not embree_c.available(), reason="libembree4 (embreex) not loaded")
