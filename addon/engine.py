@@ -40,6 +40,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
         # Blender 4.4+ passes arguments here; older versions pass none.
         super().__init__(*args, **kwargs)
         self.viewport = None
+        self.mesh_cache = None     # Persistent Data: export.persistent.MeshCache
 
     def __del__(self):
         try:
@@ -101,12 +102,15 @@ class EmberRenderEngine(bpy.types.RenderEngine):
         try:
             exported = scene_export.export_scene(depsgraph, self.camera_override,
                                                  should_stop=lambda: output.break_requested(self),
-                                                 engine=self, is_preview=self.is_preview)
+                                                 engine=self, is_preview=self.is_preview,
+                                                 cache=self._mesh_cache(scene))
         except scene_export.ExportCancelled:
             info['cancelled'] = True
             return
         info.update(export_seconds=exported.seconds, triangles=exported.triangles,
                     warnings=list(exported.warnings))
+        if self.mesh_cache is not None:
+            info.update(meshes_reused=self.mesh_cache.reused, meshes_exported=self.mesh_cache.exported)
         if not self.is_preview:
             for warning in exported.warnings:
                 self.report({'WARNING'}, "Ember: " + warning)
@@ -152,6 +156,17 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             message = f"Ember: {writer.nonfinite} non-finite pixel values were replaced by 0"
             info['warnings'].append(message)
             self.report({'WARNING'}, message)
+
+    def _mesh_cache(self, scene):
+        """Persistent Data: the meshes kept from this engine's last render
+        (Blender keeps the engine between frames with the option on); off,
+        nothing is kept."""
+        from .export import persistent  # lazy: only for Persistent Data
+        if not scene_export.persistent_data(scene, self.is_preview):
+            self.mesh_cache = None
+        elif self.mesh_cache is None:
+            self.mesh_cache = persistent.MeshCache()
+        return self.mesh_cache
 
     def bake(self, depsgraph, obj, pass_type, pass_filter, width, height):
         from . import bake  # lazy: only when baking

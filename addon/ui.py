@@ -106,6 +106,17 @@ class RENDER_PT_ember_sampling_advanced(EmberPanel, bpy.types.Panel):
     PROPS = (("sampling_pattern", None), ("strategy", None), ("threads", None), ("use_jit", None))
 
 
+class RENDER_PT_ember_performance(EmberPanel, bpy.types.Panel):
+    """Render > Performance > Final Render, where Cycles keeps Persistent
+    Data (scene.render.use_persistent_data: Blender's own property)."""
+    bl_label = "Performance"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.split_layout()
+        layout.prop(context.scene.render, "use_persistent_data", text="Persistent Data")
+
+
 class RENDER_PT_ember_light_paths(EmberPanel, bpy.types.Panel):
     bl_label = "Light Paths"
     bl_options = {'DEFAULT_CLOSED'}
@@ -282,6 +293,7 @@ classes = (
     RENDER_PT_ember_light_paths_clamping,
     RENDER_PT_ember_light_paths_caustics,
     RENDER_PT_ember_film,
+    RENDER_PT_ember_performance,
     VIEWLAYER_PT_ember_passes,
     VIEWLAYER_PT_ember_passes_data,
     VIEWLAYER_PT_ember_passes_light,

@@ -34,40 +34,98 @@ def _import_embreex():
 OFFSET_SCALE = 1e-5
 
 
+class BuiltScenes:
+    """The last BVH built, kept for Blender's Persistent Data: the next
+    render that traces the same triangles (same float32 vertices and
+    indices, compared by a hash of their bytes) reuses it instead of
+    building again.  One entry: an animation's frames follow each other."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self.key = self.entry = None
+        self.hits = self.builds = 0
+
+    def get(self, vertices, indices, build):
+        key = _geometry_hash(vertices, indices)
+        with self._lock:
+            if self.key == key:
+                self.hits += 1
+                return self.entry
+        entry = build()
+        with self._lock:
+            self.key, self.entry = key, entry
+            self.builds += 1
+        return entry
+
+    def clear(self):
+        with self._lock:
+            self.key = self.entry = None
+
+
+def _geometry_hash(vertices, indices):
+    import hashlib
+    h = hashlib.blake2b(digest_size=16)
+    for a in (vertices, indices):
+        a = np.ascontiguousarray(a)
+        h.update(repr((a.dtype.str, a.shape)).encode())
+        h.update(memoryview(a).cast("B"))
+    return h.digest()
+
+
+def _geometry_arrays(triangles):
+    """(float32 vertices, int32 indices, the corner soup or None): shared
+    vertices when the triangles have them (fewer to copy), else a corner
+    soup, corner k of triangle t being vertex 3 t + k."""
+    indexed = getattr(triangles, "indexed_float32", lambda: None)()
+    if indexed is not None:
+        return indexed[0], indexed[1], None
+    corners = triangles.corners_float32()
+    vertices = corners.reshape(-1, 3)
+    return vertices, np.arange(len(vertices), dtype=np.int32).reshape(-1, 3), corners
+
+
+# The process's persistent BVH (engine.render.prepare passes it when
+# RenderSettings.persistent is on, and clears it when a render is not).
+PERSISTENT = BuiltScenes()
+
+
 class Accel:
-    def __init__(self, triangles):
+    def __init__(self, triangles, reuse=None):
+        """``reuse``: a BuiltScenes whose BVH serves if it holds the same
+        triangles (``self.reused`` says whether it did)."""
         self.triangles = triangles
         self.empty = len(triangles) == 0
         self._lock = threading.Lock()
         self._totals = {"seconds": 0.0, "rays": 0}
         self.upload = None
+        self.reused = False
         if not self.empty:
-            self.scene = self._build(triangles)
-            # The first run() commits the BVH; do it now, single-threaded.
-            self.scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32))
+            vertices, indices, corners = _geometry_arrays(triangles)
+            if reuse is None:
+                self.scene, self.upload = self._build(vertices, indices, corners)
+            else:
+                built = []
+                self.scene, self.upload = reuse.get(vertices, indices, lambda: built.append(1) or
+                                                    self._build(vertices, indices, corners))
+                self.reused = not built
 
-    def _build(self, triangles):
-        """An EmbreeScene holding the triangles (primID = their index).
-        Shared vertices when the triangles have them (fewer to copy), copied
-        at memory speed when engine.embree_upload can, else through
-        embreex's per-element loop.  ``self.upload`` says which."""
+    @staticmethod
+    def _build(vertices, indices, corners):
+        """An EmbreeScene holding the triangles (primID = their index), and
+        how it was filled: copied at memory speed when engine.embree_upload
+        can ("direct"), else through embreex's per-element loop."""
         mc, rs = _import_embreex()
         from embreex import rtcore  # loaded with rtcore_scene (its EmbreeDevice type)
         device = rtcore.EmbreeDevice()
         scene = rs.EmbreeScene(device)
-        indexed = getattr(triangles, "indexed_float32", lambda: None)()
-        if indexed is None:   # a corner soup: corner k of triangle t is vertex 3 t + k
-            corners = triangles.corners_float32()
-            vertices = corners.reshape(-1, 3)
-            indices = np.arange(len(vertices), dtype=np.int32).reshape(-1, 3)
-        else:
-            vertices, indices = indexed
         if embree_upload.upload(scene, device, vertices, indices):
-            self.upload = "direct"
+            upload = "direct"
         else:
-            mc.TriangleMesh(scene, *((corners,) if indexed is None else indexed))
-            self.upload = "embreex"
-        return scene
+            mc.TriangleMesh(scene, *((corners,) if corners is not None else (vertices, indices)))
+            upload = "embreex"
+        # The first run() commits the BVH; do it now, single-threaded.
+        scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32))
+        return scene, upload
 
     # -- timing ---------------------------------------------------------------
     def _account(self, seconds, rays):

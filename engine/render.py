@@ -18,6 +18,7 @@ from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FuturesTimeout
 import numpy as np
 
+from . import accel as accel_module
 from .accel import Accel
 from .motion import MotionAccel, MotionGeometry, has_motion
 from .blas import single_threaded_blas
@@ -101,7 +102,8 @@ def prepare(scene, settings):
     # Only moving triangles and points need Embree's C API (a moving camera alone does not).
     moving = motion is not None and motion.moving
     special = moving or spheres is not None or strands is not None
-    accel = MotionAccel(tris, motion if moving else None, spheres, strands) if special else Accel(tris)
+    accel = (MotionAccel(tris, motion if moving else None, spheres, strands) if special
+             else Accel(tris, reuse=persistent_bvh(settings)))
     world = np.asarray(scene.world.color, dtype=np.float64)
     ctx = Context.build(accel, tris, materials, lights, camera, world, settings,
                         sampler=Sampler(settings.seed, settings.sampling_pattern),
@@ -113,6 +115,15 @@ def prepare(scene, settings):
     if ctx.subsurface:
         ctx = dataclasses.replace(ctx, subsurface_warnings=tuple(subsurface.open_mesh_warnings(scene)))
     return ctx
+
+
+def persistent_bvh(settings):
+    """The BVH cache a render may reuse (Persistent Data on), else None; a
+    render without Persistent Data frees what an earlier one kept."""
+    if getattr(settings, "persistent", False):
+        return accel_module.PERSISTENT
+    accel_module.PERSISTENT.clear()
+    return None
 
 
 def holdout_weights(scene, tris):
@@ -319,7 +330,8 @@ def _render(scene, settings, progress):
                 ctx.pass_config.crypto_levels)
     threads = settings.threads or os.cpu_count() or 1
     stats = {"samples": 0, "samples_total": settings.samples, "kernels": kernel_mode,
-             "compile_wait_seconds": compile_wait, "prepare_seconds": time.perf_counter() - t_start - compile_wait}
+             "compile_wait_seconds": compile_wait, "prepare_seconds": time.perf_counter() - t_start - compile_wait,
+             "bvh_reused": bool(getattr(ctx.accel, "reused", False))}
     t_trace = time.perf_counter()
     image = None  # the last pass's image: the film does not change after it
     with _AbandonablePool(threads, film) as pool:

@@ -669,6 +669,10 @@ class RenderSettings:
     # default 0: single scattering).  A path past it (or past max_bounces)
     # is still attenuated and lit by volume emission, as in Cycles.
     volume_bounces: int = 0
+    # Blender's Persistent Data (Render > Performance): keep the last
+    # render's BVH and reuse it when the next one traces the same triangles
+    # (engine/accel.py BuiltScenes).  Off, nothing outlives a render.
+    persistent: bool = False
 
 
 @dataclass(frozen=True)

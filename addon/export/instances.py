@@ -35,6 +35,9 @@ class InstanceCollector:
         self.check = check or (lambda: None)
         self.scene = scene
         self._attribute_requests = {}   # materials -> Attribute nodes of object / instancer / view layer type
+        self.used = {}            # geometry key -> names of the objects and instancers that used it
+        self.mesh_warnings = {}   # geometry key -> its export's warning
+        self.exported = 0         # meshes exported by this walk
 
     def add(self, inst):
         obj = inst.object  # for instances: the instanced (possibly temporary) object
@@ -59,6 +62,7 @@ class InstanceCollector:
                 self.skipped_types.add(obj.type)
             return
         mesh_id = self._mesh_id(obj)
+        self._note_use(inst, obj)
         if mesh_id is None:
             return
         matrix = np.array(inst.matrix_world, dtype=np.float64)
@@ -180,25 +184,31 @@ class InstanceCollector:
 
     def _mesh_id(self, obj):
         """Index of the object's geometry in self.meshes, exporting it once."""
-        if obj.type == 'MESH':
-            key = obj.data.as_pointer()
-        else:
-            # A curve's mesh depends on the object's own modifiers, not only
-            # on its data block: share it only between copies of the object.
-            key = ('object', obj.name_full)
+        key = mesh_key(obj)
         if key not in self.mesh_of_key:
             self.check()
+            self.exported += 1
             mesh = mesh_export.mesh_from_object(obj, _geometry_name(obj), self.check)
             dropped = mesh_export.drop_nonfinite_triangles(mesh) if mesh is not None else 0
             if dropped:
-                self._warn_once(('vertices', key), f"Object '{obj.name}': {dropped} triangles with "
-                                "NaN or infinite vertex positions were skipped")
+                self.mesh_warnings[key] = (f"Object '{obj.name}': {dropped} triangles with "
+                                           "NaN or infinite vertex positions were skipped")
             if mesh is None or len(mesh.triangles) == 0:
                 self.mesh_of_key[key] = None
             else:
                 self.mesh_of_key[key] = len(self.meshes)
                 self.meshes.append(mesh)
+        if key in self.mesh_warnings:   # also for geometry a persistent cache kept
+            self._warn_once(('vertices', key), self.mesh_warnings[key])
         return self.mesh_of_key[key]
+
+    def _note_use(self, inst, obj):
+        """Record which objects use each geometry key (Persistent Data
+        forgets a key when one of them changes geometry)."""
+        owners = self.used.setdefault(mesh_key(obj), set())
+        owners.add(obj.name_full)
+        if inst.is_instance and inst.parent is not None:
+            owners.add(inst.parent.name_full)
 
 
     def _warn_once(self, key, message):
@@ -260,18 +270,33 @@ def object_info(inst):
             'random': random}
 
 
+def mesh_key(obj):
+    """The key geometry is shared by: a mesh's evaluated data block; a
+    curve's or text's mesh depends on the object's own modifiers, not only on
+    its data block, so it is shared only between copies of the object."""
+    if obj.type == 'MESH':
+        return obj.data.as_pointer()
+    return ('object', obj.name_full)
+
+
 def _geometry_name(obj):
     data = obj.data
     return data.name if data is not None else obj.name
 
 
-def collect_instances(depsgraph, material_index, check=None, keys=None, points=None, curves=None):
+def collect_instances(depsgraph, material_index, check=None, keys=None, points=None, curves=None, cache=None):
     """Walk every object instance; returns (meshes, instances, warnings).
     ``check()`` (which raises to cancel) runs every 256 instances and before
-    each mesh is exported; ``keys`` (a list) receives each instance's key."""
-    collector = InstanceCollector(material_index, check, getattr(depsgraph, 'view_layer', None),
-                                  getattr(depsgraph, 'scene', None),
+    each mesh is exported; ``keys`` (a list) receives each instance's key.
+    ``cache``: a persistent.MeshCache whose meshes serve where the
+    depsgraph's updates left them valid (Persistent Data)."""
+    view_layer = getattr(depsgraph, 'view_layer', None)
+    collector = InstanceCollector(material_index, check, view_layer, getattr(depsgraph, 'scene', None),
                                   render=getattr(depsgraph, 'mode', 'RENDER') == 'RENDER')
+    if cache is not None:
+        cache.begin(depsgraph, getattr(view_layer, 'name', ''))
+        collector.meshes, collector.mesh_of_key = cache.meshes, cache.mesh_of_key
+        collector.mesh_warnings = cache.warnings_of
     for count, inst in enumerate(depsgraph.object_instances):
         if count % 256 == 255:
             collector.check()
@@ -284,6 +309,9 @@ def collect_instances(depsgraph, material_index, check=None, keys=None, points=N
         curves.extend(collector.curves)
     warnings = collector.warnings + [f"Ember skips {kind.lower()} objects (not supported yet)"
                 for kind in sorted(collector.skipped_types)]
+    if cache is not None:
+        meshes, instances = cache.end(collector.used, collector.instances, collector.exported)
+        return meshes, instances, warnings
     return collector.meshes, collector.instances, warnings
 
 

@@ -52,17 +52,20 @@ def scene_camera(depsgraph, camera_override=None):
     return camera.evaluated_get(depsgraph)
 
 
-def export_scene(depsgraph, camera_override=None, should_stop=None, engine=None, is_preview=False):
+def export_scene(depsgraph, camera_override=None, should_stop=None, engine=None, is_preview=False, cache=None):
     """Everything the renderer needs, read from an evaluated depsgraph.
     ``should_stop()`` is asked between objects and between the arrays of a
     mesh; once true, ExportCancelled is raised.  Given the RenderEngine
     (``engine``, whose frame_set evaluates other times), a render with motion
     blur is exported at its shutter's centre with the motion over the
-    shutter (export/motion.py), and the frame is set back after."""
+    shutter (export/motion.py), and the frame is set back after.
+    ``cache`` (a persistent.MeshCache, Persistent Data) keeps meshes between
+    renders; motion blur exports without it (its frame changes would make
+    the depsgraph's updates describe other times)."""
     scene = depsgraph.scene
     blur = motion_export.shutter(scene, is_preview) if engine is not None else None
     if blur is None:
-        return _export(depsgraph, camera_override, should_stop)
+        return _export(depsgraph, camera_override, should_stop, cache=cache)
     frame = scene.frame_current + scene.frame_subframe
     centre = motion_export.centre_time(scene, blur)
     try:
@@ -78,7 +81,7 @@ def export_scene(depsgraph, camera_override=None, should_stop=None, engine=None,
     return exported
 
 
-def _export(depsgraph, camera_override=None, should_stop=None, keys=None):
+def _export(depsgraph, camera_override=None, should_stop=None, keys=None, cache=None):
     check = stop_checker(should_stop)
     start = time.perf_counter()
     renderer = backend.engine()
@@ -87,7 +90,7 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None):
     materials = material_export.MaterialTable(override)
     points, curves = [], []
     meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots, check, keys, points,
-                                                                    curves)
+                                                                    curves, cache)
     check()
     links = {}
     lights, light_warnings = light_export.collect_lights(depsgraph, check, links)
@@ -174,4 +177,10 @@ def render_settings(scene, is_preview=False):
         # Depth and Normal passes come from the pass accumulators).
         aovs=("normal", "albedo") if settings.use_denoising and not is_preview else (),
         use_jit=getattr(settings, 'use_jit', True),
+        persistent=persistent_data(scene, is_preview),
     )
+
+
+def persistent_data(scene, is_preview=False):
+    """Render > Performance > Final Render > Persistent Data (final renders only)."""
+    return bool(getattr(scene.render, 'use_persistent_data', False)) and not is_preview

@@ -208,3 +208,26 @@ def test_scene_handle_refuses_a_foreign_device():
     assert embree_upload.scene_handle(scene, device, lib) is not None
     assert embree_upload.scene_handle(scene, other, lib) is None
     assert scene.is_committed == 0  # the probe put the field back
+
+
+def test_persistent_bvh_is_reused_only_for_the_same_triangles(scene, triangles):
+    """Persistent Data: a BuiltScenes hands the last BVH to an Accel of the
+    same triangles (hits unchanged), and builds anew when any vertex moved."""
+    cache = accel_module.BuiltScenes()
+    first = Accel(triangles, reuse=cache)
+    again = Accel(flatten(scene, with_instance=True), reuse=cache)
+    assert (first.reused, again.reused, cache.builds, cache.hits) == (False, True, 1, 1)
+    rng = np.random.default_rng(4)
+    o = rng.uniform(-3, 3, (256, 3))
+    d = -o / np.linalg.norm(o, axis=1, keepdims=True)
+    tmax = np.full(len(o), np.inf)
+    np.testing.assert_array_equal(first.intersect(o, d, tmax)[1], again.intersect(o, d, tmax)[1])
+    nudged = [i.matrix.copy() for i in scene.instances]
+    nudged[0][0, 3] += 1e-3
+    moved = Scene(meshes=scene.meshes, materials=scene.materials,
+                  instances=[Instance(i.mesh, m, materials=i.materials, visible_shadow=i.visible_shadow)
+                             for i, m in zip(scene.instances, nudged)])
+    rebuilt = Accel(flatten(moved, with_instance=True), reuse=cache)
+    assert not rebuilt.reused and cache.builds == 2
+    cache.clear()
+    assert cache.entry is None
