@@ -262,12 +262,13 @@ def light_filter(kind, pass_filter):
     direct, indirect = "DIRECT" in names, "INDIRECT" in names
     if kind == "COMBINED":
         classes = tuple(c for c in ("diffuse", "glossy", "transmission") if c.upper() in names)
-        return BakeFilter(classes, "EMIT" in names, direct, True), indirect, "combined"
+        emit = "EMIT" in names
+        return BakeFilter(classes, emit, direct, True, texel_emission=emit), indirect, "combined"
     if kind not in ("DIFFUSE", "GLOSSY", "TRANSMISSION"):
         raise ValueError(f"{kind} is not a light bake type")
     cls = kind.lower()
     value = "color" if not (direct or indirect) else ("combined" if "COLOR" in names else "light")
-    return BakeFilter((cls,), False, direct, cls == "diffuse"), indirect, value
+    return BakeFilter((cls,), True, direct, cls == "diffuse", texel_emission=False), indirect, value
 
 
 def bake_light(scene, instance, prim, u, v, kind, pass_filter, settings, diff=None, progress=None):

@@ -14,7 +14,11 @@ along the shading normal: the ray comes from P + N towards -N.
 lobes of the kept light classes scatter (a glass lobe stays while glossy or
 transmission does; subsurface stays as Cycles never filters a BSSRDF unless
 the bake is of another class's pass; transparent lobes absorb: the bake
-sees the object itself), the surface's own emission counts only with Emit,
+sees the object itself); without Combined's Emit no surface a path meets
+emits (Cycles zeroes the emission at every surface, not only the baked one,
+while light sampling still reaches emissive meshes: so does Ember), and a
+Diffuse / Glossy / Transmission bake leaves out the texel's own emission
+(not in the class's pass) but keeps the others';
 and without Direct light vertex 0 samples no light and its BSDF rays see no
 lamp and no world (the emissive meshes they meet still count, as Cycles).
 Without Indirect the render stops at max_bounces 0 (engine/bake.py).
@@ -34,9 +38,14 @@ CLASSES = ("diffuse", "glossy", "transmission")
 @dataclass(frozen=True)
 class BakeFilter:
     classes: tuple = CLASSES     # light classes whose lobes scatter at vertex 0
-    emission: bool = True        # the baked surface's own emission
+    emission: bool = True        # emission of the surfaces paths meet (Combined's Emit)
     direct: bool = True          # light sampled at vertex 0 / met by its BSDF rays
     subsurface: bool = True      # subsurface lobes scatter at vertex 0
+    texel_emission: bool = True  # the baked surface's own emission (vertex 0)
+
+    def emits(self, depth):
+        """Whether surface emission met at wavefront step ``depth`` counts."""
+        return self.emission and (depth > 0 or self.texel_emission)
 
     def dropped_kinds(self):
         """Lobe kinds that do not scatter at vertex 0."""

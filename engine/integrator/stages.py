@@ -167,8 +167,8 @@ def escaped(ctx, paths, i, tile, obs):
 def surface_emission(ctx, paths, hit, depth, obs):
     """Emissive surfaces hit: their radiance, MIS-weighted against the
     light sample the previous vertex could have taken of them."""
-    if depth == 0 and ctx.bake is not None and not ctx.bake.filter.emission:
-        return   # a bake without Emit: the baked surface's own emission
+    if ctx.bake is not None and not ctx.bake.filter.emits(depth):
+        return   # a bake's filter: bake_paths.BakeFilter
     emission = ctx.materials.emission[hit.mat]
     if ctx.materials.textures.emission:
         emission = ctx.materials.textures.emission_at(hit.mat, shading(ctx, hit, paths, depth), emission)
