@@ -111,7 +111,7 @@ def prepare(scene, settings, bake=None):
                         sampler=Sampler(settings.seed, settings.sampling_pattern),
                         bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
                         pass_config=pass_events.configure(scene, settings),
-                        media=_media(scene, accel, tris, camera), holdout=holdout_weights(scene, tris),
+                        media=_media(scene, accel, tris, camera, bake is None), holdout=holdout_weights(scene, tris),
                         links=LightLinks.build(scene, lights, tris), catcher=catcher_triangles(scene, tris),
                         motion=motion, spheres=spheres, unlit=unlit, strands=strands)
     if bake is not None:
@@ -137,14 +137,15 @@ def holdout_weights(scene, tris):
     return weights if weights.any() else None
 
 
-def _media(scene, accel, tris, camera):
+def _media(scene, accel, tris, camera, from_camera=True):
     """The scene's media (None without a volume), with the media the camera
-    starts in and a warning per object whose volume mesh is open."""
+    starts in (none for a bake's texels: ``from_camera`` False) and a
+    warning per object whose volume mesh is open."""
     table = media.MediumTable.of(material_table(scene), getattr(scene.world, "volume", None))
     if table is None:
         return None
     table.attach(material_table(scene), scene, tris)
-    if scene.camera.kind == "PERSP":
+    if from_camera and scene.camera.kind == "PERSP":
         media.camera_media(table, accel, tris, np.asarray(scene.camera.matrix, np.float64)[:3, 3], camera.forward)
     table.warnings = [f"object {name!r}: its volume mesh is not closed; paths may never leave the volume"
                       for name in media.open_volume_meshes(scene)]
