@@ -168,13 +168,15 @@ def prepare_interruptibly(scene, settings, progress, poll=0.05, bake=None):
     ``progress.should_stop`` every ``poll`` seconds.  On a stop the thread is
     abandoned (it finishes in the background, its result is dropped) and
     ``Cancelled`` is raised at once."""
+    def prepared():
+        return prepare(scene, settings) if bake is None else prepare(scene, settings, bake)
     if not hasattr(progress, "should_stop"):
-        return prepare(scene, settings, bake)
+        return prepared()
     outcome = {}
 
     def work():
         try:
-            outcome["ctx"] = prepare(scene, settings, bake)
+            outcome["ctx"] = prepared()
         except BaseException as exc:  # noqa: BLE001 - re-raised in the caller's thread
             outcome["error"] = exc
     worker = threading.Thread(target=work, name="ember-prepare", daemon=True)
