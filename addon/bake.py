@@ -18,7 +18,7 @@ class BakeError(Exception):
 
 def bake(engine, depsgraph, obj, pass_type, pass_filter, width, height):
     try:
-        _bake(engine, depsgraph, obj, pass_type, width, height)
+        _bake(engine, depsgraph, obj, pass_type, pass_filter, width, height)
     except BakeError as err:
         engine.report({'ERROR'}, f"Ember: {err}")
     except Exception as err:  # noqa: BLE001 - every failure must reach the user
@@ -27,7 +27,7 @@ def bake(engine, depsgraph, obj, pass_type, pass_filter, width, height):
         engine.report({'ERROR'}, f"Ember: bake failed: {type(err).__name__}: {err}")
 
 
-def _bake(engine, depsgraph, obj, pass_type, width, height):
+def _bake(engine, depsgraph, obj, pass_type, pass_filter, width, height):
     renderer = backend.engine()
     name = getattr(obj, 'name', '?')
     if width <= 0 or height <= 0:
@@ -41,6 +41,8 @@ def _bake(engine, depsgraph, obj, pass_type, width, height):
     mesh = mesh_export.mesh_from_object(evaluated, name)
     if mesh is None:
         raise BakeError(f"object '{name}' has no triangles to bake")
+    if pass_type in renderer.bake.LIGHT and mesh.uvs is None:
+        raise BakeError(f"object '{name}' has no UV map: a {pass_type} bake needs one to place its texels")
     matrix = np.array(evaluated.matrix_world, np.float64)
     result = engine.begin_result(0, 0, width, height, layer=depsgraph.view_layer.name, view="")
     try:
@@ -54,7 +56,12 @@ def _bake(engine, depsgraph, obj, pass_type, width, height):
         flat = np.empty(width * height * channels, np.float32)
         primitive_pass.rect.foreach_get(flat)
         prim, u, v = renderer.bake.unpack_primitives(flat.reshape(-1, channels))
-        if pass_type == 'AO':
+        if pass_type in renderer.bake.LIGHT:
+            rgba = _bake_light(engine, renderer, depsgraph, evaluated, pass_type, pass_filter, prim, u, v,
+                               _differentials(layer, width * height))
+            if rgba is None:
+                return   # cancelled: Blender keeps the image as it was
+        elif pass_type == 'AO':
             scene, index = _whole_scene(renderer, depsgraph, evaluated, engine)
             world = depsgraph.scene.world
             distance = world.light_settings.distance if world is not None else 10.0
@@ -72,6 +79,70 @@ def _bake(engine, depsgraph, obj, pass_type, width, height):
         combined.rect.foreach_set(np.ascontiguousarray(out).ravel())
     finally:
         engine.end_result(result)
+
+
+def _differentials(layer, count):
+    """(N, 4) BakeDifferential (du/dx, du/dy, dv/dx, dv/dy), or None."""
+    diff = next((p for p in layer.passes if p.name == "BakeDifferential"), None)
+    if diff is None or diff.channels != 4:
+        return None
+    flat = np.empty(count * 4, np.float32)
+    diff.rect.foreach_get(flat)
+    return flat.reshape(-1, 4)
+
+
+def filter_names(pass_filter):
+    """Blender's pass filter (an int of BakeSettings.pass_filter bits, or a
+    set of its names) as a set of names."""
+    if isinstance(pass_filter, (set, frozenset, list, tuple)):
+        return {str(n) for n in pass_filter}
+    items = bpy.types.BakeSettings.bl_rna.properties['pass_filter'].enum_items
+    return {item.identifier for item in items if item.value and int(pass_filter) & item.value}
+
+
+class _BakeProgress:
+    """Progress and cancel of a light bake, as a render's: Blender's
+    progress bar and status line, Esc (test_break) between batches."""
+
+    def __init__(self, engine, samples):
+        self.engine, self.samples = engine, max(int(samples), 1)
+        self.cancelled = False
+
+    def on_pass(self, image, samples_done, stats):
+        self.engine.update_progress(min(samples_done / self.samples, 1.0))
+        self.engine.update_stats("", f"Ember: baking, sample {samples_done} / {self.samples}")
+
+    def should_stop(self):
+        from . import output
+        if output.break_requested(self.engine):
+            self.cancelled = True
+        return self.cancelled
+
+
+def _bake_light(engine, renderer, depsgraph, obj, pass_type, pass_filter, prim, u, v, diff):
+    """A DIFFUSE / GLOSSY / TRANSMISSION / COMBINED bake: the whole scene
+    (every object casts, reflects and emits light), traced by the render
+    integrator from the object's texels with Render > Samples; None when
+    the user cancelled."""
+    from .export import scene as scene_export
+    backend.require_ray_tracer()
+    exported = scene_export.export_scene(depsgraph, require_camera=False)
+    for warning in exported.warnings:
+        engine.report({'WARNING'}, f"Ember: {warning}")
+    scene = exported.scene
+    index = next((i for i, inst in enumerate(scene.instances) if inst.name == obj.name), None)
+    if index is None:
+        raise BakeError(f"object '{obj.name}' is not rendered in this view layer: nothing to bake")
+    settings = scene_export.render_settings(depsgraph.scene)
+    progress = _BakeProgress(engine, settings.samples)
+    try:
+        baked = renderer.bake.bake_light(scene, index, prim, u, v, pass_type, filter_names(pass_filter), settings,
+                                         diff=diff, progress=progress)
+    except renderer.Cancelled:
+        return None
+    for warning in getattr(baked.result, 'warnings', None) or ():
+        engine.report({'WARNING'}, f"Ember: {warning}")
+    return None if progress.cancelled else baked.rgba
 
 
 def _object_scene(renderer, depsgraph, obj, mesh, matrix, engine):

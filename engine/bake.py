@@ -98,7 +98,10 @@ def _world_normals(mesh, m, p, w):
 SHADED = ("EMIT", "ROUGHNESS")
 # Bake types that trace rays through the whole scene.
 TRACED = ("AO",)
-SUPPORTED = GEOMETRIC + SHADED + TRACED
+# Bake types of the light arriving at the texel: paths of the integrator
+# start there (integrator/bake_paths.py), under Blender's pass filter.
+LIGHT = ("DIFFUSE", "GLOSSY", "TRANSMISSION", "COMBINED")
+SUPPORTED = GEOMETRIC + SHADED + TRACED + LIGHT
 
 
 def bake_shaded(scene, kind, prim, u, v):
@@ -229,3 +232,92 @@ def bake_ao(scene, instance, prim, u, v, samples, distance, seed=0):
     out[rows, :3] = (unoccluded / max(int(samples), 1))[:, None]
     out[rows, 3] = 1.0
     return out
+
+
+# Blender's pass filter (BakeSettings.pass_filter): the light components a
+# DIFFUSE / GLOSSY / TRANSMISSION bake keeps (Direct, Indirect, Color) and a
+# COMBINED bake's contributions (Emit, Diffuse, Glossy, Transmission).
+FILTER_NAMES = ("EMIT", "DIRECT", "INDIRECT", "COLOR", "DIFFUSE", "GLOSSY", "TRANSMISSION")
+
+
+class LightBake:
+    """A light bake's texels: ``rgba`` (N, 4), ``variance`` (N, 3) the
+    variance of each texel's value (None where the value is a colour pass),
+    and the render behind it (``result``: samples, stats, warnings)."""
+
+    def __init__(self, rgba, variance, result):
+        self.rgba, self.variance, self.result = rgba, variance, result
+
+
+def light_filter(kind, pass_filter):
+    """(BakeFilter, indirect, value) of a light bake as Cycles sets it up
+    (blender/session.cpp bake_setup_pass): ``value`` is 'combined' (the
+    light through the kept lobes, colour included), 'light' (that / the
+    class's colour) or 'color' (the class's Color pass)."""
+    from .integrator.bake_paths import BakeFilter
+    names = {str(n).upper() for n in pass_filter}
+    unknown = names - set(FILTER_NAMES)
+    if unknown:
+        raise ValueError(f"unknown bake pass filter {sorted(unknown)} (known: {', '.join(FILTER_NAMES)})")
+    direct, indirect = "DIRECT" in names, "INDIRECT" in names
+    if kind == "COMBINED":
+        classes = tuple(c for c in ("diffuse", "glossy", "transmission") if c.upper() in names)
+        emit = "EMIT" in names
+        return BakeFilter(classes, emit, direct, True, texel_emission=emit), indirect, "combined"
+    if kind not in ("DIFFUSE", "GLOSSY", "TRANSMISSION"):
+        raise ValueError(f"{kind} is not a light bake type")
+    cls = kind.lower()
+    value = "color" if not (direct or indirect) else ("combined" if "COLOR" in names else "light")
+    return BakeFilter((cls,), True, direct, cls == "diffuse", texel_emission=False), indirect, value
+
+
+def bake_light(scene, instance, prim, u, v, kind, pass_filter, settings, diff=None, progress=None):
+    """A light bake (``LIGHT``) of the texels (prim, u, v) of
+    ``scene.instances[instance]``: every path starts at a texel's point,
+    seen along its shading normal (Cycles' init_from_bake), and is traced
+    by the render integrator with ``settings`` (samples, bounces, seed;
+    engine.scene.RenderSettings) under the pass filter's closure filter.
+    ``diff``: Blender's (N, 4) BakeDifferential, to spread the samples over
+    each texel; ``progress`` as engine.render.render's (on_pass,
+    should_stop).  Returns a LightBake; texels without a primitive (or on a
+    degenerate triangle) are 0 with alpha 0."""
+    import dataclasses
+    from .integrator.bake_paths import BakeTarget
+    from .render import render
+    from .validate import validate_settings
+
+    validate_settings(settings)
+    bake_filter, indirect, value = light_filter(kind, pass_filter)
+    n = len(prim)
+    out = np.zeros((n, 4), np.float32)
+    mesh = scene.meshes[scene.instances[instance].mesh]
+    ok = np.flatnonzero((prim >= 0) & (prim < len(mesh.triangles)))
+    if len(ok) == 0:
+        return LightBake(out, np.zeros((n, 3)), None)
+    first = sum(len(scene.meshes[i.mesh].triangles) for i in scene.instances[:instance])
+    target = BakeTarget(first + prim[ok], u[ok], v[ok], None if diff is None else np.asarray(diff)[ok], bake_filter)
+    colour = kind.capitalize() + " Color"
+    passes = (colour,) if value != "combined" else ()
+    settings = dataclasses.replace(settings, passes=tuple(passes), aovs=(), transparent=False,
+                                   max_bounces=settings.max_bounces if indirect else 0)
+    result = render(scene, settings, progress, bake=target)
+    combined = result.image[0, :, :3].astype(np.float64)
+    var = result.variance[0].astype(np.float64)
+    if value == "color":
+        texel, texel_var = result.passes[colour][0, :, :3].astype(np.float64), None
+    elif value == "light":
+        c = result.passes[colour][0, :, :3].astype(np.float64)
+        safe = np.where(c > 0, c, 1.0)
+        texel = np.where(c > 0, combined / safe, 0.0)
+        texel_var = np.where(c > 0, var / safe ** 2, 0.0)
+    else:
+        texel, texel_var = combined, var
+    good = target.valid
+    rows = ok[good]
+    out[rows, :3] = np.where(np.isfinite(texel[good]), texel[good], 0.0)
+    out[rows, 3] = 1.0
+    variance = None
+    if texel_var is not None:
+        variance = np.zeros((n, 3))
+        variance[rows] = texel_var[good]
+    return LightBake(out, variance, result)

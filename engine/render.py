@@ -75,8 +75,10 @@ class RenderResult:
         return self.film.sample_count()
 
 
-def prepare(scene, settings):
-    """Validate and compile a Scene into the read-only Context batches share."""
+def prepare(scene, settings, bake=None):
+    """Validate and compile a Scene into the read-only Context batches share.
+    ``bake``: an integrator.bake_paths.BakeTarget, the camera of a light
+    bake (its texels are the film's pixels), or None."""
     kernels.configure(getattr(settings, "use_jit", True))   # flatten has a kernel too
     validate_scene(scene)
     validate_settings(settings)
@@ -99,6 +101,8 @@ def prepare(scene, settings):
         camera = CameraModel(scene.camera, PixelFilter(settings.filter_type, settings.filter_width))
     except ValueError as exc:
         raise SceneError(f"camera: {exc}") from None
+    if bake is not None:
+        camera = bake.bind(tris)
     # Only moving triangles and points need Embree's C API (a moving camera alone does not).
     moving = motion is not None and motion.moving
     special = moving or spheres is not None or strands is not None
@@ -109,9 +113,11 @@ def prepare(scene, settings):
                         sampler=Sampler(settings.seed, settings.sampling_pattern),
                         bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
                         pass_config=pass_events.configure(scene, settings),
-                        media=_media(scene, accel, tris, camera), holdout=holdout_weights(scene, tris),
+                        media=_media(scene, accel, tris, camera, bake is None), holdout=holdout_weights(scene, tris),
                         links=LightLinks.build(scene, lights, tris), catcher=catcher_triangles(scene, tris),
                         motion=motion, spheres=spheres, unlit=unlit, strands=strands)
+    if bake is not None:
+        ctx = dataclasses.replace(ctx, bake=bake)
     if ctx.subsurface:
         ctx = dataclasses.replace(ctx, subsurface_warnings=tuple(subsurface.open_mesh_warnings(scene)))
     return ctx
@@ -142,14 +148,15 @@ def holdout_weights(scene, tris):
     return weights if weights.any() else None
 
 
-def _media(scene, accel, tris, camera):
+def _media(scene, accel, tris, camera, from_camera=True):
     """The scene's media (None without a volume), with the media the camera
-    starts in and a warning per object whose volume mesh is open."""
+    starts in (none for a bake's texels: ``from_camera`` False) and a
+    warning per object whose volume mesh is open."""
     table = media.MediumTable.of(material_table(scene), getattr(scene.world, "volume", None))
     if table is None:
         return None
     table.attach(material_table(scene), scene, tris)
-    if scene.camera.kind == "PERSP":
+    if from_camera and scene.camera.kind == "PERSP":
         media.camera_media(table, accel, tris, np.asarray(scene.camera.matrix, np.float64)[:3, 3], camera.forward)
     table.warnings = [f"object {name!r}: its volume mesh is not closed; paths may never leave the volume"
                       for name in media.open_volume_meshes(scene)]
@@ -166,19 +173,21 @@ def _choose_kernels(settings, progress):
         raise Cancelled(str(exc)) from None
 
 
-def prepare_interruptibly(scene, settings, progress, poll=0.05):
+def prepare_interruptibly(scene, settings, progress, poll=0.05, bake=None):
     """``prepare`` (flattening, light set, BVH build: seconds on millions of
     triangles, none of it interruptible) in a daemon thread, asking
     ``progress.should_stop`` every ``poll`` seconds.  On a stop the thread is
     abandoned (it finishes in the background, its result is dropped) and
     ``Cancelled`` is raised at once."""
+    def prepared():
+        return prepare(scene, settings) if bake is None else prepare(scene, settings, bake)
     if not hasattr(progress, "should_stop"):
-        return prepare(scene, settings)
+        return prepared()
     outcome = {}
 
     def work():
         try:
-            outcome["ctx"] = prepare(scene, settings)
+            outcome["ctx"] = prepared()
         except BaseException as exc:  # noqa: BLE001 - re-raised in the caller's thread
             outcome["error"] = exc
     worker = threading.Thread(target=work, name="ember-prepare", daemon=True)
@@ -314,16 +323,18 @@ class _Adaptive:
         return done
 
 
-def render(scene, settings=None, progress=None):
+def render(scene, settings=None, progress=None, bake=None):
+    """Render ``scene``; given a ``bake`` (integrator.bake_paths.BakeTarget)
+    the film's pixels are its texels instead of the camera's (engine/bake.py)."""
     with single_threaded_blas():
-        return _render(scene, settings or RenderSettings(), progress)
+        return _render(scene, settings or RenderSettings(), progress, bake)
 
 
-def _render(scene, settings, progress):
+def _render(scene, settings, progress, bake=None):
     t_start = time.perf_counter()
     kernel_mode = _choose_kernels(settings, progress)
     compile_wait = time.perf_counter() - t_start
-    ctx = prepare_interruptibly(scene, settings, progress)
+    ctx = prepare_interruptibly(scene, settings, progress, bake=bake)
     cam = ctx.camera
     adaptive = _Adaptive(settings, cam.width * cam.height)
     film = Film(cam.width, cam.height, settings.aovs, adaptive.params is not None, settings.passes,

@@ -52,7 +52,8 @@ def scene_camera(depsgraph, camera_override=None):
     return camera.evaluated_get(depsgraph)
 
 
-def export_scene(depsgraph, camera_override=None, should_stop=None, engine=None, is_preview=False, cache=None):
+def export_scene(depsgraph, camera_override=None, should_stop=None, engine=None, is_preview=False,
+                 require_camera=True, cache=None):
     """Everything the renderer needs, read from an evaluated depsgraph.
     ``should_stop()`` is asked between objects and between the arrays of a
     mesh; once true, ExportCancelled is raised.  Given the RenderEngine
@@ -61,9 +62,13 @@ def export_scene(depsgraph, camera_override=None, should_stop=None, engine=None,
     shutter (export/motion.py), and the frame is set back after.
     ``cache`` (a persistent.MeshCache, Persistent Data) keeps meshes between
     renders; motion blur exports without it (its frame changes would make
-    the depsgraph's updates describe other times)."""
+    the depsgraph's updates describe other times).  A bake
+    (``require_camera`` False) needs no camera: without one the engine's
+    default stands in, unused."""
     scene = depsgraph.scene
     blur = motion_export.shutter(scene, is_preview) if engine is not None else None
+    if not require_camera and camera_override is None and scene.camera is None:
+        return _export(depsgraph, None, should_stop, camera=False)
     if blur is None:
         return _export(depsgraph, camera_override, should_stop, cache=cache)
     frame = scene.frame_current + scene.frame_subframe
@@ -81,7 +86,7 @@ def export_scene(depsgraph, camera_override=None, should_stop=None, engine=None,
     return exported
 
 
-def _export(depsgraph, camera_override=None, should_stop=None, keys=None, cache=None):
+def _export(depsgraph, camera_override=None, should_stop=None, keys=None, camera=True, cache=None):
     check = stop_checker(should_stop)
     start = time.perf_counter()
     renderer = backend.engine()
@@ -95,13 +100,10 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None, cache=
     links = {}
     lights, light_warnings = light_export.collect_lights(depsgraph, check, links)
     world, world_warning = world_export.world_from_blender(scene.world)
-    camera_object = scene_camera(depsgraph, camera_override)
-    try:
-        camera, camera_warnings = camera_export.camera_from_blender(camera_object, scene.render)
-        renderer.validate_camera(camera)
-    except ValueError as err:  # engine.scene.SceneError is a ValueError
-        message = str(err).removeprefix('camera: ')
-        raise ExportError(f"Camera '{camera_object.name}': {message}") from err
+    if camera:
+        camera, camera_warnings = _camera(depsgraph, camera_override, renderer)
+    else:
+        camera, camera_warnings = renderer.Camera(), []
     result = renderer.Scene(
         meshes=meshes, instances=instances, points=points, curves=curves, materials=materials.materials,
         lights=lights, world=world, camera=camera, cycles_version=tuple(bpy.app.version), light_links=links)
@@ -114,6 +116,17 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None, cache=
         warnings.append(world_warning)
     triangles = sum(len(meshes[inst.mesh].triangles) for inst in instances)
     return Export(result, warnings, time.perf_counter() - start, triangles)
+
+
+def _camera(depsgraph, camera_override, renderer):
+    camera_object = scene_camera(depsgraph, camera_override)
+    try:
+        camera, warnings = camera_export.camera_from_blender(camera_object, depsgraph.scene.render)
+        renderer.validate_camera(camera)
+    except ValueError as err:  # engine.scene.SceneError is a ValueError
+        message = str(err).removeprefix('camera: ')
+        raise ExportError(f"Camera '{camera_object.name}': {message}") from err
+    return camera, warnings
 
 
 def _catcher_notes(scene):

@@ -46,7 +46,11 @@ def trace_batch(ctx, pix, sample, tile):
     pseed = ctx.sampler.pixel_seeds(pix)
     sample = np.asarray(sample, np.uint32)
     u = ctx.sampler.get(pseed, sample, CAMERA)
-    if ctx.motion is None:
+    first = None
+    if ctx.bake is not None:   # texels of a light bake: their first hit is given
+        time = np.zeros((n, 0))
+        o, d, tmax, first = ctx.bake.generate(pix, u[:, 0], u[:, 1], sample)
+    elif ctx.motion is None:
         time = np.zeros((n, 0))
         o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3])
     else:   # motion blur: the sample's time, its own dimension set
@@ -70,15 +74,18 @@ def trace_batch(ctx, pix, sample, tile):
     for depth in range(ctx.settings.max_bounces + 2 + ctx.transparent_limit + volume.boundary_steps(ctx)):
         if len(paths.pix) == 0:
             break
-        paths = _bounce(ctx, paths, depth, tile, obs)
+        paths = _bounce(ctx, paths, depth, tile, obs, first if depth == 0 else None)
     if len(paths.pix):
         stages.finish(ctx, paths, tile)
 
 
-def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
+def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES, first=None):
     """One wavefront step of the live paths; returns the paths that go on.
-    Each line is a stage (stages.py) or bookkeeping (below)."""
-    found = stages.intersect(ctx, paths)                         # RayHits
+    Each line is a stage (stages.py) or bookkeeping (below).  ``first``:
+    the RayHits of a bake's texels, given instead of traced at depth 0."""
+    found = stages.intersect(ctx, paths) if first is None else first   # RayHits
+    if ctx.bake is not None and not ctx.bake.filter.direct:
+        found.light[paths.bounce == 1] = False                   # a bake without Direct: no lamps there
     if ctx.subsurface:
         subsurface.arrive(paths, found)                          # walks' exit points: no tracing
     if depth == 0:
@@ -109,7 +116,8 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES):
     obs.vertex(paths, v, depth)
     every = stages.sampling_every_light(ctx, v)
     trace = stages.trace_shadows if ctx.media is None else volume.trace_surface_shadows
-    for batch in stages.light_samples(ctx, paths, v, depth, every):   # nee: ShadowBatch
+    no_nee = depth == 0 and ctx.bake is not None and not ctx.bake.filter.direct
+    for batch in () if no_nee else stages.light_samples(ctx, paths, v, depth, every):   # nee: ShadowBatch
         trace(ctx, paths, batch)
         obs.light_sample(paths, batch)
     ray = paths.ray

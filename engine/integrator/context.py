@@ -80,6 +80,9 @@ class Context:
     catcher: object = None
     # Motion blur (engine.motion.MotionGeometry), None in a still scene.
     motion: object = None
+    # A light bake (bake_paths.BakeTarget, also the camera): paths start at its
+    # texels under its closure filter; None in a render.
+    bake: object = None
     # Point clouds (engine.points.Spheres: which triangle rows are spheres), None without.
     spheres: object = None
     # Rows no light samples (engine.points.unlit_rows: points, moving triangles), None when none.

@@ -132,6 +132,8 @@ def emitters(ctx, paths, found, obs):
 def escaped(ctx, paths, i, tile, obs):
     """Paths ``i`` left the scene: the world (an HDRI by MIS, a constant one
     unweighted) and the suns in their direction."""
+    if ctx.bake is not None and not ctx.bake.filter.direct:
+        i = i[paths.bounce[i] != 1]   # a bake without Direct: vertex 0's rays see no world (Cycles)
     if len(i) == 0:
         return
     catcher.camera_background(ctx, paths, i, tile)
@@ -168,6 +170,8 @@ def escaped(ctx, paths, i, tile, obs):
 def surface_emission(ctx, paths, hit, depth, obs):
     """Emissive surfaces hit: their radiance, MIS-weighted against the
     light sample the previous vertex could have taken of them."""
+    if ctx.bake is not None and not ctx.bake.filter.emits(depth):
+        return   # a bake's filter: bake_paths.BakeFilter
     emission = ctx.materials.emission[hit.mat]
     if ctx.materials.textures.emission:
         emission = ctx.materials.textures.emission_at(hit.mat, shading(ctx, hit, paths, depth), emission)
@@ -328,6 +332,8 @@ def shade(ctx, paths, hit, depth):
             lobes.diffuse_rot, lobes.diffuse_split = rot, split
             lobes.diffuse_smooth = bump_correction.apply(rot, lobes.smooth_n)
     w = bsdf.weights(lobes, wo_l)
+    if depth == 0 and ctx.bake is not None:
+        w = ctx.bake.filter_weights(lobes, w)   # the bake's pass filter: lobes kept at the texel
     return Vertex(hit, tt, bb, wo_l, lobes, w, bsdf.selection(lobes, wo_l, w))
 
 

@@ -127,7 +127,7 @@ def test_hostile_bakes_report_clearly(case):
     scene.render.engine = 'EMBER'
     kind = 'POSITION'
     if case == "unsupported_type":
-        kind = 'GLOSSY'
+        kind = 'SHADOW'
     elif case == "no_uv":
         obj.data.uv_layers.remove(obj.data.uv_layers[0])
     else:
@@ -140,7 +140,7 @@ def test_hostile_bakes_report_clearly(case):
     message = str(err.value)
     print(case, "->", message.strip())
     if case == "unsupported_type":
-        assert "Ember" in message and "GLOSSY" in message
+        assert "Ember" in message and "SHADOW" in message
     else:
         assert message.strip()   # Blender's own check, before Ember is called
     pixels = np.empty(SIZE * SIZE * 4, np.float32)

@@ -1,0 +1,58 @@
+"""engine/integrator/bake_paths.py and engine.bake.light_filter: the pass
+filter as Cycles' closure filter, and the texels' sample positions
+(exact checks, no statistics)."""
+import numpy as np
+import pytest
+
+from engine.bake import light_filter
+from engine.integrator.bake_paths import BakeFilter, _mirror
+from engine.lobe_ids import (DIFFUSE, GLASS, GLOSSY, OREN_NAYAR, REFRACTION, SUBSURFACE_RANDOM_WALK,
+                             TRANSLUCENT, TRANSPARENT)
+
+
+def test_class_bakes_keep_their_lobes_as_cycles():
+    diffuse = set(BakeFilter(("diffuse",), subsurface=True).dropped_kinds())
+    assert {GLOSSY, GLASS, REFRACTION, TRANSPARENT} <= diffuse
+    assert not diffuse & {DIFFUSE, OREN_NAYAR, TRANSLUCENT, SUBSURFACE_RANDOM_WALK}
+    glossy = set(BakeFilter(("glossy",), subsurface=False).dropped_kinds())
+    assert {DIFFUSE, REFRACTION, TRANSPARENT, SUBSURFACE_RANDOM_WALK} <= glossy
+    assert GLOSSY not in glossy and GLASS not in glossy        # glass stays while glossy does
+    transmission = set(BakeFilter(("transmission",), subsurface=False).dropped_kinds())
+    assert GLASS not in transmission and REFRACTION not in transmission and GLOSSY in transmission
+    everything = set(BakeFilter().dropped_kinds())
+    assert everything == {TRANSPARENT}                        # a bake sees the object itself
+
+
+@pytest.mark.parametrize("kind,names,expect", [
+    ('DIFFUSE', {'DIRECT', 'INDIRECT', 'COLOR'}, ("combined", True, True)),
+    ('DIFFUSE', {'DIRECT'}, ("light", True, False)),
+    ('GLOSSY', {'INDIRECT'}, ("light", False, True)),
+    ('DIFFUSE', {'COLOR'}, ("color", False, False)),
+    ('COMBINED', {'INDIRECT', 'DIFFUSE'}, ("combined", False, True)),
+])
+def test_light_filter_as_blenders_bake_setup(kind, names, expect):
+    bake_filter, indirect, value = light_filter(kind, names)
+    assert (value, bake_filter.direct, indirect) == expect
+    if kind == 'COMBINED':
+        assert bake_filter.classes == ("diffuse",) and not bake_filter.emission
+    else:
+        # A class bake leaves out the texel's own emission, not the others'.
+        assert bake_filter.emission and not bake_filter.emits(0) and bake_filter.emits(1)
+
+
+def test_light_filter_refuses_unknown_names():
+    with pytest.raises(ValueError, match="AO"):
+        light_filter('DIFFUSE', {'DIRECT', 'AO'})
+    with pytest.raises(ValueError, match="SHADOW"):
+        light_filter('SHADOW', {'DIRECT'})
+
+
+def test_mirror_repeat_stays_in_range_and_is_cycles():
+    x = np.linspace(-2.5, 2.5, 101)
+    for top in (1.0, 0.3):
+        m = _mirror(x, np.full_like(x, top))
+        assert np.all((m >= 0) & (m <= top + 1e-12))
+        inside = (x >= 0) & (x < top)
+        assert np.allclose(m[inside], x[inside])
+    assert np.isclose(_mirror(np.array([1.2]), 1.0)[0], 0.8)      # mirrored back, not wrapped
+    assert np.isclose(_mirror(np.array([-0.1]), 1.0)[0], 0.1)
