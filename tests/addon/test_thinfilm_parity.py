@@ -83,7 +83,7 @@ def test_thin_film_parity_with_cycles(tmp_path, tapped_engine):
     render as Cycles, and no warning calls them approximated any more."""
     from addon import engine as ember_engine
     scene, bounces = reference_scene('films')
-    image, var = render_for_reference(scene, tmp_path, 'films', tapped_engine, EMBER_SPP, 5, bounces)
+    image, var = render_for_reference(scene, tmp_path, 'films', tapped_engine, EMBER_SPP, 13, bounces)
     warnings = " ".join(ember_engine.RENDER_LOG[-1]['warnings'])
     assert "Thin Film" not in warnings, warnings
     check = check_against_reference('thinfilm_films', scene, bounces, image, var, EMBER_SPP, BLOCK)
