@@ -245,8 +245,9 @@ def _energy(lobes, k, rows, mu):
 
 def _layer_albedo(lobes, k, rows, mu):
     """Cycles' albedo estimate of a layer lobe (relative to the weight of
-    what it covers): colour times the Fresnel estimate (tables) for a glossy
-    layer, colour times the LTC albedo for sheen."""
+    what it covers): colour times the Fresnel estimate (tables; under a thin
+    film its reflectance at the view angle) for a glossy layer, colour times
+    the LTC albedo for sheen."""
     col = lobes.color[rows, k]
     kind = lobes.kind[rows, k]
     rough = _rough(lobes, k)[rows]
@@ -347,8 +348,9 @@ def closure_albedos(lobes, wo):
     term left out, as Cycles does), the Principled dielectric and coat
     mix(F0, 1, s) from ``ggx_gen_schlick_ior_s``; glass splits into that
     reflection estimate and the refracted rest at the view angle,
-    (1 - F(mu)) x transmission tint; other lobes carry their weight whole
-    (sheen's weight holds its albedo)."""
+    (1 - F(mu)) x transmission tint; under a thin film (no table) the
+    film's reflectance at the view angle F(mu) instead; other lobes carry
+    their weight whole (sheen's weight holds its albedo)."""
     mu = np.clip(wo[:, 2], 0.0, 1.0)
     w = weights(lobes, wo)
     refl = w.copy()
