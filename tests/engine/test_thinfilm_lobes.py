@@ -155,3 +155,18 @@ def test_hostile_films_are_finite(kind, thickness, film_ior):
     for a in (f, pdf, *out, *albedos):
         assert np.isfinite(a).all()
     assert (out[1] >= 0).all() and (albedos[0] >= 0).all()
+
+
+def test_textured_film_equals_constant_film():
+    """A thickness and film IOR given as texture expressions (a linked
+    socket) gather per ray to the constants' values, and render the same
+    Fresnel."""
+    n = len(COS)
+    textured = bsdf.MaterialTable([S.Material("t", (S.Lobe("glossy", **dict(
+        SPECULAR, thin_film_thickness=S.Math("ADD", 250.0, 350.0),
+        thin_film_ior=S.Math("MULTIPLY", 0.7, 2.0))),))]).gather(np.zeros(n, np.int64), np.zeros((n, 2)))
+    constant = lobes_of(**SPECULAR)
+    np.testing.assert_allclose(textured.thin_film_thickness, 600.0)
+    np.testing.assert_allclose(textured.thin_film_ior, 1.4)
+    rows = np.arange(n)
+    np.testing.assert_allclose(ggx.fresnel(textured, rows, 0, COS), ggx.fresnel(constant, rows, 0, COS), atol=1e-12)
