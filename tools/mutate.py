@@ -85,6 +85,11 @@ MUTATIONS = [
              '    return 1.02 * f\n',
              ('tests/engine/test_media_field.py::test_phase_functions_integrate_to_one',
               'tests/engine/test_media.py::test_volume_strategies_agree')),
+    Mutation('glass_shadowing', "rough glass refraction's Smith term uncorrelated (f only: its pdf and "
+             "sampling stay right)", 'engine/lobes/glass.py',
+             'trans * (common / ((1.0 + lo + li) * -wi[t, 2]))',
+             'trans * (common / ((1.0 + lo) * (1.0 + li) * -wi[t, 2]))',
+             ('tests/engine/test_glass_albedo_truth.py::test_single_scatter_glass_albedo_is_cycles_table',)),
 ]
 # The mutations edit the
 # NumPy forms (what EMBER_JIT=0 runs); the compiled twins in bsdf_loops.py,
