@@ -39,6 +39,7 @@ from . import bsdf_loops as loops
 from . import bump_correction
 from . import lobes as registry
 from . import microfacet as mf
+from . import thinfilm
 from .kernels import LoopKernel
 # The lobe codes live in lobe_ids (shared with bsdf_loops); bsdf.NONE etc. stay the public names.
 from .lobe_ids import GLOSSY_ANISOTROPIC  # noqa: E402
@@ -46,6 +47,8 @@ from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FRESNEL_
                        KIND_IDS, MIN_ALPHA, MIRROR, NONE, REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
 from .lobes.ggx import fresnel as _fresnel, fresnel_of as _fresnel_of, ggx_pdf, schlick  # noqa: F401
 from .lobes.ggx import eval_glossy_f as _eval_glossy, ggx_reflect_rows as _ggx_reflect  # noqa: F401
+from .lobes.ggx import film_fresnel as _film_fresnel, has_film as _has_film
+from .lobes.glass import film_ior_of as _film_ior_of
 from .lobes.glass import dielectric as _dielectric, eta_of as _eta, mean3 as _mean3  # noqa: F401
 from .lobes.glass import eval_glass_f as _eval_glass, sample_glass_dir as _sample_glass  # noqa: F401
 from .lobes.sheen import eval_sheen_f as _eval_sheen, sample_sheen_dir as _sample_sheen  # noqa: F401
@@ -242,8 +245,9 @@ def _energy(lobes, k, rows, mu):
 
 def _layer_albedo(lobes, k, rows, mu):
     """Cycles' albedo estimate of a layer lobe (relative to the weight of
-    what it covers): colour times the Fresnel estimate (tables) for a glossy
-    layer, colour times the LTC albedo for sheen."""
+    what it covers): colour times the Fresnel estimate (tables; under a thin
+    film its reflectance at the view angle) for a glossy layer, colour times
+    the LTC albedo for sheen."""
     col = lobes.color[rows, k]
     kind = lobes.kind[rows, k]
     rough = _rough(lobes, k)[rows]
@@ -257,6 +261,10 @@ def _layer_albedo(lobes, k, rows, mu):
         s = mf.lookup(mf.tables()["ggx_gen_schlick_ior_s"], rough[gl], mu[gl], mf.ior_z(ior))
         f0 = lobes.f0[rows[gl], k]
         est = f0 + (1.0 - f0) * s[:, None]
+        # Under a thin film Cycles has no table: the film's reflectance at the view angle.
+        film = np.flatnonzero(_has_film(lobes, rows[gl], k) & (lobes.fresnel[rows[gl], k] == F_DIELECTRIC))
+        if len(film):
+            est[film] = _film_fresnel(F_DIELECTRIC, lobes, rows[gl][film], k, mu[gl][film])
         ms = lobes.multiscatter[rows[gl], k]
         if ms.any():
             g = rows[gl][ms]
@@ -340,8 +348,9 @@ def closure_albedos(lobes, wo):
     term left out, as Cycles does), the Principled dielectric and coat
     mix(F0, 1, s) from ``ggx_gen_schlick_ior_s``; glass splits into that
     reflection estimate and the refracted rest at the view angle,
-    (1 - F(mu)) x transmission tint; other lobes carry their weight whole
-    (sheen's weight holds its albedo)."""
+    (1 - F(mu)) x transmission tint; under a thin film (no table) the
+    film's reflectance at the view angle F(mu) instead; other lobes carry
+    their weight whole (sheen's weight holds its albedo)."""
     mu = np.clip(wo[:, 2], 0.0, 1.0)
     w = weights(lobes, wo)
     refl = w.copy()
@@ -374,12 +383,24 @@ def closure_albedos(lobes, wo):
             # Cycles' real-Fresnel branch reads the table only above IOR 1.
             s = np.where(e > 1.0, s, exact)
             est[diel] = f0[diel] + (1.0 - f0[diel]) * s[:, None]
+        # Thin films: no table either, the film's reflectance at the view angle.
+        film = np.flatnonzero(glossy & _has_film(lobes, slice(None), k))
+        glass_film = film[kind[film] == GLASS]
+        other = film[kind[film] != GLASS]
+        for c in (F_F82, F_DIELECTRIC):
+            m = other[code[other] == c]
+            if len(m):
+                est[m] = _film_fresnel(c, lobes, m, k, mu[m])
+        if len(glass_film):
+            est[glass_film] = _film_fresnel(F_DIELECTRIC, lobes, glass_film, k, mu[glass_film], eta[glass_film],
+                                            _film_ior_of(lobes, glass_film, k))
         through = np.nonzero(kind_in(kind, (GLASS, REFRACTION)))[0]
         if len(through):
             e = eta[through]
             cos_t = mf.fresnel_dielectric(mu[through], e)[1]
             ft = f0[through]
             f = ft + (1.0 - ft) * mf.schlick_s(mu[through], e)[0][:, None]
+            f = np.where(np.isin(through, glass_film)[:, None], est[through], f)
             glass = (kind[through] == GLASS)[:, None]
             tint = np.where(glass, lobes.transmission_tint[through, k], 1.0)
             passes = np.where(glass, 1.0 - f, (cos_t > 0)[:, None] * 1.0)
@@ -435,7 +456,7 @@ def selection(lobes, wo, w=None):
     if w is None:
         w = weights(lobes, wo)
     out = np.empty(lobes.kind.shape)
-    _selection_kernel(_lobe_arrays(lobes), _c(wo), _c(w), out)
+    _selection_kernel(_lobe_arrays(lobes), _table_arrays(), _c(wo), _c(w), out)
     return out
 
 
@@ -587,6 +608,8 @@ def _lobe_arrays(lobes):
 
 def _table_arrays():
     t = mf.tables()
+    if "thin_film_cmf" not in t:
+        t["thin_film_cmf"] = np.ascontiguousarray(thinfilm.sensitivity_table(np.float64))
     return tuple(t[name] for name, _ in loops.TABLES)
 
 
@@ -599,7 +622,7 @@ def _weights_twin(lobes, tables, wo, out):
     out[:] = _weights_numpy(_lobes_of(lobes), wo)
 
 
-def _selection_twin(lobes, wo, w, out):
+def _selection_twin(lobes, tables, wo, w, out):
     out[:] = _selection_numpy(_lobes_of(lobes), wo, w)
 
 
@@ -646,7 +669,8 @@ _GATHERED = ("kind", "color", "alpha", "schlick") + tuple(name for name, _, _ in
 _gather_kernel = _Loop(loops.gather_loop, loops.GATHER_SIGNATURE, _gather_numpy)
 _weights_kernel = _Loop(loops.weights_loop, f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, :, ::1])",
                         _weights_twin)
-_selection_kernel = _Loop(loops.selection_loop, f"void({_LOBES}, float64[:, ::1], float64[:, :, ::1], float64[:, ::1])",
+_selection_kernel = _Loop(loops.selection_loop,
+                          f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, :, ::1], float64[:, ::1])",
                           _selection_twin)
 _eval_pdf_kernel = _Loop(loops.eval_pdf_loop,
                          f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, ::1], float64[:, ::1], "
@@ -778,7 +802,8 @@ def _sample_numpy(lobes, wo, u_lobe, u1, u2, sel, w):
 def _simple(lobes):
     """One-lobe materials with a closed-form sample weight."""
     return (np.all(kind_in(lobes.kind[:, 0], (NONE, DIFFUSE, GLOSSY, MIRROR)))
-            and not lobes.multiscatter.any() and np.all(lobes.weight == 1.0))
+            and not lobes.multiscatter.any() and np.all(lobes.weight == 1.0)
+            and not np.any(lobes.thin_film_thickness > registry.FILM_CUTOFF))   # the loop has no film
 
 
 def _sample_single(lobes, wo, u1, u2):

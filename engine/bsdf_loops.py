@@ -18,7 +18,7 @@ the lobe parameters.
 import numpy as np
 
 from .kernels import clip
-from .lobes import EXTRA_PARAMS, PARAMS
+from .lobes import EXTRA_PARAMS, FILM_CUTOFF, PARAMS
 from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, GLOSSY_ANISOTROPIC, MIN_ALPHA,
                        MIRROR, NONE, OREN_NAYAR, REFRACTION, SHEEN, SUBSURFACE_BURLEY, SUBSURFACE_RANDOM_WALK,
                        SUBSURFACE_SKIN, TRANSLUCENT, TRANSPARENT, HAIR_CHIANG)
@@ -46,6 +46,8 @@ ABSORPTION = [name for name, _, _ in LOBE_FIELDS].index("absorption")   # hair_c
 RADIAL_ROUGHNESS = [name for name, _, _ in LOBE_FIELDS].index("radial_roughness")
 COAT = [name for name, _, _ in LOBE_FIELDS].index("coat")
 OFFSET = [name for name, _, _ in LOBE_FIELDS].index("offset")
+FILM_THICKNESS = [name for name, _, _ in LOBE_FIELDS].index("thin_film_thickness")   # thin films
+FILM_IOR = [name for name, _, _ in LOBE_FIELDS].index("thin_film_ior")
 # MaterialTable's arrays gathered per ray (bsdf.Lobes' fields up to back).
 GATHER_FIELDS = (("kind", np.int8, ()), ("color", np.float64, (3,)), ("alpha", np.float64, ()),
                  ("schlick", np.bool_, ())) + tuple((p.field, p.dtype, p.tail) for p in EXTRA_PARAMS)
@@ -62,7 +64,7 @@ GATHER_SIGNATURE = "void(int64[::1], " + ", ".join(
 TABLES = (("ggx_E", "float64[:, ::1]"), ("ggx_Eavg", "float64[::1]"), ("ggx_glass_E", "float64[:, :, ::1]"),
           ("ggx_glass_inv_E", "float64[:, :, ::1]"), ("ggx_glass_Eavg", "float64[:, ::1]"),
           ("ggx_glass_inv_Eavg", "float64[:, ::1]"), ("ggx_gen_schlick_ior_s", "float64[:, :, ::1]"),
-          ("sheen_ltc", "float64[:, :, ::1]"))
+          ("sheen_ltc", "float64[:, :, ::1]"), ("thin_film_cmf", "float64[:, ::1]"))
 LOBES_SIGNATURE = "Tuple((" + ", ".join(t for _, t, _ in LOBE_FIELDS) + "))"
 TABLES_SIGNATURE = "Tuple((" + ", ".join(t for _, t in TABLES) + "))"
 
@@ -213,6 +215,15 @@ def _add_specular(f_0, f_1, f_2, w, code, ior, color, f0, tint, cos, spec):
 
 
 @helper
+def _add_specular_film(f_0, f_1, f_2, w, code, ior, color, f0, tint, thickness, film_ior, cmf, cos, spec):
+    """_add_specular, with the lobe's thin film where it has one."""
+    if not _has_film(code, thickness):
+        return _add_specular(f_0, f_1, f_2, w, code, ior, color, f0, tint, cos, spec)
+    r0, r1, r2 = _film_rgb(cmf, code, cos, max(ior, 1e-5), f0, tint, thickness, film_ior)
+    return f_0 + w[0] * (r0 * spec), f_1 + w[1] * (r1 * spec), f_2 + w[2] * (r2 * spec)
+
+
+@helper
 def _fresnel(code, color, f0, tint, s, cos):
     """One channel of bsdf._fresnel given _fresnel_s's s."""
     if code == F_SCHLICK:
@@ -232,8 +243,199 @@ def _dielectric_refl(refraction, f0, s):
 
 
 @helper
+def _glass_refl(cmf, refraction, f0, s, cos, eta, ior, back, thickness, film_ior):
+    """glass.dielectric's reflectance (RGB) given the remapped Fresnel s: a
+    glass lobe's thin film over eta where it has one, its film IOR divided by
+    the glass IOR on back faces (glass.film_ior_of)."""
+    if refraction:
+        return 0.0, 0.0, 0.0
+    if thickness > FILM_CUTOFF:
+        film = film_ior / max(ior, 1e-5) if back else film_ior
+        return _film_rgb(cmf, F_DIELECTRIC, cos, eta, f0, f0, thickness, film)
+    return f0[0] + (1.0 - f0[0]) * s, f0[1] + (1.0 - f0[1]) * s, f0[2] + (1.0 - f0[2]) * s
+
+
+@helper
 def _dielectric_trans(refraction, refl, tint, cos_t):
     return (1.0 if refraction else 1.0 - refl) * tint if cos_t > 0 else 0.0
+
+
+# ----------------------------------------------------------------------------
+# Thin-film iridescence (engine/thinfilm.py for one ray, in float64; the
+# table is thinfilm.sensitivity_table: real R G B, imaginary R G B)
+
+FILM_TABLE = 512
+FILM_SCALE = 2.0 * np.pi
+
+
+@helper
+def _film_lookup(cmf, row, x):
+    x = clip(x, 0.0, 1.0) * (FILM_TABLE - 1)
+    i = min(np.int64(x), FILM_TABLE - 1)
+    j = min(i + 1, FILM_TABLE - 1)
+    t = x - i
+    return (1.0 - t) * cmf[row, i] + t * cmf[row, j]
+
+
+@helper
+def _film_dielectric(cos_i, eta):
+    """thinfilm.fresnel_dielectric_polarized: R_s, R_p, cos_t (negative),
+    the phase signs of s and p."""
+    t2 = eta * eta - (1.0 - cos_i * cos_i)
+    if t2 <= 0:
+        return 1.0, 1.0, 0.0, 1.0, 1.0
+    c = np.abs(cos_i)
+    cos_t = -np.sqrt(t2) / eta
+    r_s = (c + eta * cos_t) / (c - eta * cos_t)
+    r_p = (cos_t + eta * c) / (eta * c - cos_t)
+    return r_s * r_s, r_p * r_p, cos_t, (1.0 if r_s >= 0 else -1.0), (1.0 if r_p >= 0 else -1.0)
+
+
+@helper
+def _film_f82(cos, f0, b):
+    s = clip(1.0 - cos, 0.0, 1.0)
+    s5 = (s * s) * (s * s) * s
+    return clip(f0 + (1.0 - f0) * s5 - b * cos * s5 * s, 0.0, 1.0)
+
+
+@helper
+def _film_conductor(cosi, eta1, eta2, k2, f82):
+    """thinfilm.fresnel_conductor_polarized with F82 reflectances: R (s and
+    p alike) and the phasors of s and p (re, im)."""
+    eta1_sq, eta2_sq, k2_sq = eta1 * eta1, eta2 * eta2, k2 * k2
+    two_eta2_k2 = 2.0 * eta2 * k2
+    t1 = eta2_sq - k2_sq - eta1_sq * (1.0 - cosi * cosi)
+    t2 = np.sqrt(t1 * t1 + two_eta2_k2 * two_eta2_k2)
+    u_sq = max(0.5 * (t2 + t1), 0.0)
+    v_sq = max(0.5 * (t2 - t1), 0.0)
+    u, v = np.sqrt(u_sq), np.sqrt(v_sq)
+    n = eta2 / eta1
+    k_sq = (k2 / eta1) ** 2
+    f0 = ((n - 1.0) ** 2 + k_sq) / ((n + 1.0) ** 2 + k_sq)
+    f = 6.0 / 7.0
+    f5 = (f * f) * (f * f) * f
+    b = (7.0 / (f5 * f)) * ((f0 + (1.0 - f0) * f5) - f82)
+    r = _film_f82(cosi, f0, b)
+    re_s = -u_sq - v_sq + (eta1 * cosi) ** 2
+    im_s = -2.0 * eta1 * cosi * v
+    mag_s = np.sqrt(re_s * re_s + im_s * im_s)
+    re_p = ((eta2_sq + k2_sq) * cosi) ** 2 - eta1_sq * (u_sq + v_sq)
+    im_p = 2.0 * eta1 * cosi * (two_eta2_k2 * u - (eta2_sq - k2_sq) * v)
+    mag_p = np.sqrt(re_p * re_p + im_p * im_p)
+    if mag_s == 0:
+        re_s, im_s = 1.0, 0.0
+    else:
+        re_s, im_s = re_s / mag_s, im_s / mag_s
+    if mag_p == 0:
+        re_p, im_p = 1.0, 0.0
+    else:
+        re_p, im_p = re_p / mag_p, im_p / mag_p
+    return r, re_s, im_s, re_p, im_p
+
+
+@helper
+def _film_airy(cmf, channel, r12, r23, opd, ph_re, ph_im):
+    """thinfilm.airy_summation for one polarisation and channel."""
+    t121 = 1.0 - r12
+    r123 = r12 * r23
+    sq = np.sqrt(r123)
+    rs = t121 * t121 * r23 / (1.0 - r123)
+    acc_re, acc_im = ph_re, ph_im
+    out = rs + r12
+    cm = rs - t121
+    for m in range(1, 4):
+        cm = cm * sq
+        x = FILM_SCALE * (m * opd) / 60000.0
+        s_re = _film_lookup(cmf, channel, x)
+        s_im = _film_lookup(cmf, channel + 3, x)
+        out = out + cm * 2.0 * (acc_re * s_re + acc_im * s_im)
+        acc_re, acc_im = acc_re * ph_re - acc_im * ph_im, acc_re * ph_im + acc_im * ph_re
+    return out
+
+
+@helper
+def _film_channel(cmf, channel, thickness, film_ior, sub_n, sub_k, cos1, conductive, f82):
+    """thinfilm.fresnel_iridescence's reflectance (ambient IOR 1)."""
+    if thickness < 1.0:
+        t = clip(thickness, 0.0, 1.0)
+        film_ior = 1.0 + (film_ior - 1.0) * (t * t * (3.0 - 2.0 * t))
+    r12s, r12p, cos2, ph12s, ph12p = _film_dielectric(cos1, film_ior)
+    if r12s == 1.0 and r12p == 1.0:
+        return 1.0
+    if conductive:
+        r23, re_s, im_s, re_p, im_p = _film_conductor(-cos2, film_ior, sub_n, sub_k, f82)
+        r23s = r23p = r23
+    else:
+        r23s, r23p, _, c23s, c23p = _film_dielectric(-cos2, sub_n / film_ior)
+        if r23s == 1.0 and r23p == 1.0:
+            return 1.0
+        re_s, im_s, re_p, im_p = c23s, 0.0, c23p, 0.0
+    opd = -2.0 * film_ior * thickness * cos2
+    r_s = _film_airy(cmf, channel, r12s, r23s, opd, re_s * -ph12s, im_s * -ph12s)
+    r_p = _film_airy(cmf, channel, r12p, r23p, opd, re_p * -ph12p, im_p * -ph12p)
+    r = 0.5 * (r_s + r_p)
+    if not r == r:
+        return 0.0
+    return clip(r, 0.0, 1.0)
+
+
+@helper
+def _film_metal(cmf, c, cos, f0, tint, thickness, film_ior):
+    """One channel of thinfilm.f82_conductor (F0, edge tint of the F82 lobe)."""
+    f0 = clip(f0, 0.0, 1.0)
+    b = _f82_b(f0, tint)
+    r = min(f0, 0.999)
+    g = _film_f82(1.0 / 7.0, f0, b)
+    sr = np.sqrt(r)
+    n = (1.0 + sr) / (1.0 - sr)
+    n = n + ((1.0 - r) / (1.0 + r) - n) * g
+    k = np.sqrt(max((r * (n + 1.0) ** 2 - (n - 1.0) ** 2) / (1.0 - r), 0.0))
+    return _film_channel(cmf, c, thickness, film_ior, n, k, cos, True, g)
+
+
+@helper
+def _film_rgb(cmf, code, cos, ior, f0, tint, thickness, film_ior):
+    """ggx.film_fresnel for one ray: the RGB reflectance of the film over
+    an F82 metal or over a dielectric of IOR ``ior`` scaled towards f0 /
+    F0(ior) (f0, tint: the lobe's RGB rows)."""
+    cos = clip(cos, -1.0, 1.0)
+    if code == F_F82:
+        return (_film_metal(cmf, 0, cos, f0[0], tint[0], thickness, film_ior),
+                _film_metal(cmf, 1, cos, f0[1], tint[1], thickness, film_ior),
+                _film_metal(cmf, 2, cos, f0[2], tint[2], thickness, film_ior))
+    r0 = _film_channel(cmf, 0, thickness, film_ior, ior, 0.0, cos, False, 0.0)
+    r1 = _film_channel(cmf, 1, thickness, film_ior, ior, 0.0, cos, False, 0.0)
+    r2 = _film_channel(cmf, 2, thickness, film_ior, ior, 0.0, cos, False, 0.0)
+    f0_real = _f0_from_ior(ior)
+    if f0_real > 1e-5 and not (r0 == 1.0 and r1 == 1.0 and r2 == 1.0):
+        r0 = _film_scale(r0, f0[0], f0_real)
+        r1 = _film_scale(r1, f0[1], f0_real)
+        r2 = _film_scale(r2, f0[2], f0_real)
+    return r0, r1, r2
+
+
+@helper
+def _film_scale(f, f0, f0_real):
+    """thinfilm.principled_dielectric's F0 scaling of one channel."""
+    s = clip((f - 1.0) / (f0_real - 1.0), 0.0, 1.0)
+    factor = clip(f0, 0.0, 1.0) / f0_real
+    return clip(f * (1.0 + (factor - 1.0) * s), 0.0, 1.0)
+
+
+@helper
+def _has_film(code, thickness):
+    """The F82 and dielectric Fresnel modes take a film thicker than the cutoff."""
+    return thickness > FILM_CUTOFF and (code == F_F82 or code == F_DIELECTRIC)
+
+
+@helper
+def _fresnel_rgb(cmf, code, ior, color, f0, tint, thickness, film_ior, cos):
+    """bsdf._fresnel for one ray, every channel (a thin film where it has one)."""
+    if _has_film(code, thickness):
+        return _film_rgb(cmf, code, cos, max(ior, 1e-5), f0, tint, thickness, film_ior)
+    s = _fresnel_s(code, ior, cos)
+    return (_fresnel(code, color[0], f0[0], tint[0], s, cos), _fresnel(code, color[1], f0[1], tint[1], s, cos),
+            _fresnel(code, color[2], f0[2], tint[2], s, cos))
 
 
 # ----------------------------------------------------------------------------
@@ -289,7 +491,7 @@ def weights_loop(lobes, tables, wo, out):
     """bsdf.weights into out (N, K, 3)."""
     kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, weight = lobes[:12]
     back = lobes[-1]
-    t_e, t_eavg, t_ge, t_gie, t_geavg, t_gieavg, t_s, t_sheen = tables
+    t_e, t_eavg, t_ge, t_gie, t_geavg, t_gieavg, t_s, t_sheen, cmf = tables
     n, kk = kind.shape
     energy = np.empty((2, 3))   # the multiscatter factor and darkening of one lobe, per channel
     for i in range(n):
@@ -323,8 +525,14 @@ def weights_loop(lobes, tables, wo, out):
             if covers[i, k] <= 0:
                 continue
             # The layer's albedo (bsdf._layer_albedo), its largest channel.
+            film = kd != SHEEN and fresnel[i, k] == F_DIELECTRIC and lobes[FILM_THICKNESS][i, k] > FILM_CUTOFF
+            e0 = e1 = e2 = 0.0
             if kd == SHEEN:
                 albedo = _sheen_ltc(t_sheen, 2, rough, mu)
+            elif film:
+                # No table under a thin film: its reflectance at the view angle (Cycles).
+                e0, e1, e2 = _film_rgb(cmf, F_DIELECTRIC, mu, max(ior[i, k], 1e-5), f0[i, k], edge[i, k],
+                                       lobes[FILM_THICKNESS][i, k], lobes[FILM_IOR][i, k])
             else:
                 s = _lookup3(t_s, rough, mu, _ior_z(max(ior[i, k], 1e-5)))
             a = 0.0
@@ -332,7 +540,10 @@ def weights_loop(lobes, tables, wo, out):
                 if kd == SHEEN:
                     layer = color[i, k, c] * albedo
                 else:
-                    est = f0[i, k, c] + (1.0 - f0[i, k, c]) * s
+                    if film:
+                        est = e0 if c == 0 else (e1 if c == 1 else e2)
+                    else:
+                        est = f0[i, k, c] + (1.0 - f0[i, k, c]) * s
                     if ms:
                         est = est * energy[1, c]
                     layer = color[i, k, c] * est
@@ -362,9 +573,11 @@ def _luminance(r, g, b):
     return 0.2126 * r + 0.7152 * g + 0.0722 * b
 
 
-def selection_loop(lobes, wo, w, out):
+def selection_loop(lobes, tables, wo, w, out):
     """bsdf.selection into out (N, K)."""
-    kind, color, fresnel, f0 = lobes[0], lobes[1], lobes[3], lobes[5]
+    kind, color, fresnel, ior, f0, edge = lobes[0], lobes[1], lobes[3], lobes[4], lobes[5], lobes[6]
+    thickness, film_ior = lobes[FILM_THICKNESS], lobes[FILM_IOR]
+    cmf = tables[8]
     n, kk = kind.shape
     for i in range(n):
         cos_o = clip(wo[i, 2], 0.0, 1.0)
@@ -382,6 +595,10 @@ def selection_loop(lobes, wo, w, out):
             guess = 1.0
             if kind[i, k] == NONE:
                 guess = 0.0
+            elif kind[i, k] == GLOSSY and _has_film(code, thickness[i, k]):
+                r0, r1, r2 = _film_rgb(cmf, code, cos_o, max(ior[i, k], 1e-5), f0[i, k], edge[i, k],
+                                       thickness[i, k], film_ior[i, k])
+                guess = _luminance(r0, r1, r2)
             elif kind[i, k] == GLOSSY and code != F_SCHLICK and code != F_NONE:
                 f0l = _luminance(f0[i, k, 0], f0[i, k, 1], f0[i, k, 2])
                 guess = f0l + (1.0 - f0l) * pow5(1.0 - cos_o)
@@ -707,7 +924,8 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
     are bsdf.bump_shadowing's arrays, or empty without a moved normal."""
     kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, weight = lobes[:12]
     back = lobes[-1]
-    t_sheen = tables[7]
+    t_sheen, cmf = tables[7], tables[8]
+    thickness, film_ior = lobes[FILM_THICKNESS], lobes[FILM_IOR]
     bump = len(diffuse_term) > 0
     ap, energy, tilt = np.empty((4, 3)), np.empty(4), np.empty((3, 2))
     for i in range(len(wo)):
@@ -750,8 +968,9 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
                 rc, rs = _turn(lobes[ROTATION][i, k])
                 spec, pk, cos = _ggx_aniso(ax, ay, rc * wox + rs * woy, rc * woy - rs * wox, woz,
                                            rc * wix + rs * wiy, rc * wiy - rs * wix, wiz)
-                f_0, f_1, f_2 = _add_specular(f_0, f_1, f_2, w[i, k], fresnel[i, k], ior[i, k], color[i, k],
-                                              f0[i, k], edge[i, k], cos, spec)
+                f_0, f_1, f_2 = _add_specular_film(f_0, f_1, f_2, w[i, k], fresnel[i, k], ior[i, k], color[i, k],
+                                                   f0[i, k], edge[i, k], thickness[i, k], film_ior[i, k], cmf,
+                                                   cos, spec)
                 p += sel[i, k] * pk
             elif (kd == GLOSSY and upper) or ((kd == GLASS or kd == REFRACTION) and alpha[i, k] > MIN_ALPHA
                                                and (upper or lower)):
@@ -764,16 +983,17 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
                     spec, common, cos, pk = _refraction(alpha[i, k], _eta(ior[i, k], kd, back[i]),
                                                         wox, woy, woz, wix, wiy, wiz)
                 if kd == GLOSSY:
-                    f_0, f_1, f_2 = _add_specular(f_0, f_1, f_2, w[i, k], fresnel[i, k], ior[i, k], color[i, k],
-                                                  f0[i, k], edge[i, k], cos, spec)
+                    f_0, f_1, f_2 = _add_specular_film(f_0, f_1, f_2, w[i, k], fresnel[i, k], ior[i, k],
+                                                       color[i, k], f0[i, k], edge[i, k], thickness[i, k],
+                                                       film_ior[i, k], cmf, cos, spec)
                     p += sel[i, k] * pk
                     continue
                 # bsdf._eval_glass: the dielectric Fresnel splits reflection and refraction.
                 refraction = kd == REFRACTION
-                s, cos_t = _schlick_s(cos, _eta(ior[i, k], kd, back[i]))
-                r0 = _dielectric_refl(refraction, f0[i, k, 0], s)
-                r1 = _dielectric_refl(refraction, f0[i, k, 1], s)
-                r2 = _dielectric_refl(refraction, f0[i, k, 2], s)
+                eta = _eta(ior[i, k], kd, back[i])
+                s, cos_t = _schlick_s(cos, eta)
+                r0, r1, r2 = _glass_refl(cmf, refraction, f0[i, k], s, cos, eta, ior[i, k], back[i],
+                                         thickness[i, k], film_ior[i, k])
                 t0 = _dielectric_trans(refraction, r0, trans_tint[i, k, 0], cos_t)
                 t1 = _dielectric_trans(refraction, r1, trans_tint[i, k, 1], cos_t)
                 t2 = _dielectric_trans(refraction, r2, trans_tint[i, k, 2], cos_t)
@@ -890,7 +1110,8 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
     """bsdf._sample_numpy into wi, weight, pdf, delta, smooth."""
     kind, color, alpha, fresnel, ior, f0, edge, trans_tint, multiscatter, covers, absorb, lobe_weight = lobes[:12]
     back = lobes[-1]
-    t_sheen = tables[7]
+    t_sheen, cmf = tables[7], tables[8]
+    thickness, film_ior = lobes[FILM_THICKNESS], lobes[FILM_IOR]
     kk = kind.shape[1]
     ap, energy, tilt = np.empty((4, 3)), np.empty(4), np.empty((3, 2))
     for i in range(len(wo)):
@@ -948,11 +1169,9 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
             x, y, z = _sample_sheen(t_sheen, np.sqrt(alpha[i, k]), wox, woy, woz, u1[i], u2[i])
         elif kd == MIRROR:
             x, y, z = wox * -1.0, woy * -1.0, woz * 1.0
-            code = fresnel[i, k]
-            s = _fresnel_s(code, ior[i, k], woz)
-            r0 = w[i, k, 0] * _fresnel(code, color[i, k, 0], f0[i, k, 0], edge[i, k, 0], s, woz) / p_lobe
-            r1 = w[i, k, 1] * _fresnel(code, color[i, k, 1], f0[i, k, 1], edge[i, k, 1], s, woz) / p_lobe
-            r2 = w[i, k, 2] * _fresnel(code, color[i, k, 2], f0[i, k, 2], edge[i, k, 2], s, woz) / p_lobe
+            a0, a1, a2 = _fresnel_rgb(cmf, fresnel[i, k], ior[i, k], color[i, k], f0[i, k], edge[i, k],
+                                      thickness[i, k], film_ior[i, k], woz)
+            r0, r1, r2 = w[i, k, 0] * a0 / p_lobe, w[i, k, 1] * a1 / p_lobe, w[i, k, 2] * a2 / p_lobe
             is_delta = True
             p = p_lobe
         elif kd == TRANSPARENT:
@@ -982,8 +1201,8 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
                 hx, hy, hz = _vndf(wox, woy, woz, alpha[i, k], u1[i], u2[i])
             cos = wox * hx + woy * hy + woz * hz
             refraction = kd == REFRACTION
-            p_refl, cos_t = _glass_choice(refraction, f0[i, k, 0], f0[i, k, 1], f0[i, k, 2], trans_tint[i, k, 0],
-                                          trans_tint[i, k, 1], trans_tint[i, k, 2], cos, eta)
+            p_refl, cos_t = _glass_choice(cmf, refraction, f0[i, k], trans_tint[i, k], cos, eta, ior[i, k], back[i],
+                                          thickness[i, k], film_ior[i, k])
             refract = u_sub >= p_refl
             if refract:
                 inv = 1.0 / eta
@@ -997,9 +1216,8 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
                 kd = NONE
             if singular:
                 s, cos_t = _schlick_s(woz, eta)
-                a0 = _dielectric_refl(refraction, f0[i, k, 0], s)
-                a1 = _dielectric_refl(refraction, f0[i, k, 1], s)
-                a2 = _dielectric_refl(refraction, f0[i, k, 2], s)
+                a0, a1, a2 = _glass_refl(cmf, refraction, f0[i, k], s, woz, eta, ior[i, k], back[i],
+                                         thickness[i, k], film_ior[i, k])
                 if refract:
                     a0 = _dielectric_trans(refraction, a0, trans_tint[i, k, 0], cos_t)
                     a1 = _dielectric_trans(refraction, a1, trans_tint[i, k, 1], cos_t)
@@ -1019,15 +1237,13 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
 
 
 @helper
-def _glass_choice(refraction, f0r, f0g, f0b, ttr, ttg, ttb, cos, eta):
+def _glass_choice(cmf, refraction, f0, tint, cos, eta, ior, back, thickness, film_ior):
     """The probability of reflecting and |cos| of the refracted angle (bsdf._dielectric)."""
     s, cos_t = _schlick_s(cos, eta)
-    r0 = _dielectric_refl(refraction, f0r, s)
-    r1 = _dielectric_refl(refraction, f0g, s)
-    r2 = _dielectric_refl(refraction, f0b, s)
-    t0 = _dielectric_trans(refraction, r0, ttr, cos_t)
-    t1 = _dielectric_trans(refraction, r1, ttg, cos_t)
-    t2 = _dielectric_trans(refraction, r2, ttb, cos_t)
+    r0, r1, r2 = _glass_refl(cmf, refraction, f0, s, cos, eta, ior, back, thickness, film_ior)
+    t0 = _dielectric_trans(refraction, r0, tint[0], cos_t)
+    t1 = _dielectric_trans(refraction, r1, tint[1], cos_t)
+    t2 = _dielectric_trans(refraction, r2, tint[2], cos_t)
     r = (r0 + r1 + r2) / 3.0
     t = (t0 + t1 + t2) / 3.0
     return (r / (r + t) if r + t > 0 else 1.0), cos_t

@@ -738,7 +738,8 @@ def _renderable(value):
 
 
 # Lower bounds of textured fields, as the constant tables clamp them.
-FIELD_FLOORS = {"color": 0.0, "weight": 0.0, "f0": 0.0, "transmission_tint": 0.0, "ior": 1e-5}
+FIELD_FLOORS = {"color": 0.0, "weight": 0.0, "f0": 0.0, "transmission_tint": 0.0, "ior": 1e-5,
+                "thin_film_thickness": 0.0, "thin_film_ior": 1e-5}
 
 
 def _store(lobes, name, rows, j, value, is_color, min_alpha):

@@ -2,8 +2,8 @@
 
 Covered: Diffuse (Oren-Nayar at Roughness > 0), Glossy (anisotropic),
 Metallic, Glass, Refraction, Translucent, Transparent, Sheen, Emission,
-Principled BSDF (Cycles' layering, Anisotropic, Diffuse Roughness, emission
-dimmed by sheen and coat), Mix Shader and Add Shader; anisotropic lobes
+Principled BSDF (Cycles' layering, Anisotropic, Diffuse Roughness, Thin
+Film, emission dimmed by sheen and coat), Mix Shader and Add Shader; anisotropic lobes
 take the material's tangent (the Tangent input, Cycles' radial tangent
 about the object's Z when unlinked); in
 the Volume output, Volume Absorption, Volume Scatter, Principled Volume,
@@ -27,9 +27,9 @@ from . import compat, nodes, subsurface
 
 GREY = (0.8, 0.8, 0.8)
 # Principled BSDF inputs (3.x and 4.x names) whose features are not rendered
-# yet (3.x's Subsurface renders as diffuse, thin film as no film).
+# yet (3.x's Subsurface renders as diffuse).
 PRINCIPLED_UNSUPPORTED = (
-    'Subsurface', 'Thin Film Thickness',
+    'Subsurface',
     # Blender 5.2: thin-walled transmission; 5.3: dispersion.
     'Thin Wall', 'Transmission Dispersion Scale',
 )
@@ -41,6 +41,8 @@ DIFFUSE_ROUGHNESS_CUTOFF = 1e-5
 GLOSSY_ANISOTROPY_LIMIT = 0.99
 # Weights below this are no closure in Cycles (CLOSURE_WEIGHT_CUTOFF).
 CUTOFF = 1e-5
+# A thin film at most this thick (nm) is no film (Cycles' THINFILM_THICKNESS_CUTOFF).
+FILM_CUTOFF = 0.1
 BLACK = (0.0, 0.0, 0.0)
 
 
@@ -288,14 +290,25 @@ class NodeTranslator:
             tint = _clamp_color(self.color(node, 'Edge Tint', (0.695, 0.726, 0.770)))
         anisotropy = _clamp01(self._finite_value(node, 'Anisotropy', self.value(node, 'Anisotropy', 0.0), 0.0))
         rotation = self._finite_value(node, 'Rotation', self.value(node, 'Rotation', 0.0), 0.0)
-        thickness = self._finite_value(node, 'Thin Film Thickness', self.value(node, 'Thin Film Thickness', 0.0), 0.0)
-        if self._value_linked(node, 'Thin Film Thickness') or thickness > 0.0:
-            self._approximate(node, "Thin Film")
+        # A Physical Conductor's film lies over its F82 fit's n, k (named above).
         lobe = dict(color=(1.0, 1.0, 1.0), roughness=roughness, fresnel='f82', f0=f0, edge_tint=tint,
-                    multiscatter=getattr(node, 'distribution', 'MULTI_GGX') == 'MULTI_GGX')
+                    multiscatter=getattr(node, 'distribution', 'MULTI_GGX') == 'MULTI_GGX', **self._thin_film(node))
         if getattr(node, 'distribution', 'MULTI_GGX') not in ('GGX', 'MULTI_GGX'):
             self._approximate(node, f"{node.distribution.title()} as GGX")
         return Closure([self._anisotropic(node, 'glossy', anisotropy, rotation, **lobe)])
+
+    def _thin_film(self, node):
+        """The thin-film lobe parameters of a node with Thin Film Thickness /
+        IOR inputs (Principled 4.2+, Metallic and Glass 5.0): none where the
+        thickness is never above the cutoff (Cycles' no film); the film IOR
+        at least 1e-5 (svm_node_closure_bsdf)."""
+        if 'Thin Film Thickness' not in node.inputs:
+            return {}
+        thickness = self._finite_value(node, 'Thin Film Thickness', self.value(node, 'Thin Film Thickness', 0.0), 0.0)
+        if not nodes.may_exceed(thickness, FILM_CUTOFF):
+            return {}
+        film_ior = self._finite_value(node, 'Thin Film IOR', self.value(node, 'Thin Film IOR', 1.33), 1.33)
+        return dict(thin_film_thickness=thickness, thin_film_ior=nodes.at_least(film_ior, 1e-5))
 
     def _value_linked(self, node, name):
         socket = node.inputs.get(name)
@@ -312,7 +325,8 @@ class NodeTranslator:
             self._approximate(node, "Anisotropy")
         ior = nodes.at_least(self.value(node, 'IOR', 1.5), 1e-5)
         return Closure([_scene().Lobe('glass', self.color(node, 'Color', (1.0, 1.0, 1.0)), roughness,
-                                      'dielectric', ior=ior, multiscatter=self._multiscatter(node))])
+                                      'dielectric', ior=ior, multiscatter=self._multiscatter(node),
+                                      **self._thin_film(node))])
 
     def _node_bsdf_refraction(self, node):
         """Refraction only, no Fresnel (total internal reflection absorbs)."""
@@ -423,17 +437,18 @@ class NodeTranslator:
         lobes = []
         w = p['alpha']
         ms = p['multiscatter']
+        film = self._thin_film(node)     # over the metal, the glass and the specular layer (Cycles)
         if nodes.may_exceed(p['metallic'], CUTOFF):
             lobes.append(self._anisotropic(p['node'], 'glossy', p['anisotropic'], p['rotation'],
                                            color=(1.0, 1.0, 1.0), roughness=p['roughness'], fresnel='f82',
                                            f0=p['base_clamped'], edge_tint=_clamp_color(p['specular_tint']),
-                                           multiscatter=ms, weight=_mul(w, p['metallic'])))
+                                           multiscatter=ms, weight=_mul(w, p['metallic']), **film))
             w = _mul(w, _one_minus(p['metallic']))
         if nodes.may_exceed(p['transmission'], CUTOFF) and nodes.may_exceed(w, 0.0):
             f0 = _clamp_color(_scale(p['specular_tint'], _f0_from_ior(p['ior'])))
             lobes.append(scene.Lobe('glass', (1.0, 1.0, 1.0), p['roughness'], 'dielectric', ior=p['ior'],
                                     f0=f0, transmission_tint=_sqrt_color(p['base_clamped']),
-                                    multiscatter=ms, weight=_mul(w, p['transmission'])))
+                                    multiscatter=ms, weight=_mul(w, p['transmission']), **film))
             w = _mul(w, _one_minus(p['transmission']))
         if not nodes.may_exceed(w, 0.0):
             return lobes
@@ -446,11 +461,12 @@ class NodeTranslator:
                                         weight=rest))
             else:
                 below.append(scene.Lobe('diffuse', p['base'], weight=rest))
-        if nodes.is_expr(eta) or eta != 1.0:
+        # Cycles' specular layer: where eta != 1 or a film is on it.
+        if nodes.is_expr(eta) or eta != 1.0 or film:
             lobes.append(self._anisotropic(p['node'], 'glossy', p['anisotropic'], p['rotation'],
                                            color=(1.0, 1.0, 1.0), roughness=p['roughness'], fresnel='dielectric',
                                            ior=eta, f0=_clamp_color(_scale(p['specular_tint'], f0)),
-                                           covers=len(below), multiscatter=ms, weight=w))
+                                           covers=len(below), multiscatter=ms, weight=w, **film))
         return lobes + below
 
     def _note_principled_features(self, node):

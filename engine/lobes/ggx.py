@@ -1,10 +1,14 @@
 """GGX reflection (Glossy BSDF, Principled metal / specular / coat) and the
-perfect mirror a glossy lobe becomes below MIN_ALPHA; their Fresnel modes."""
+perfect mirror a glossy lobe becomes below MIN_ALPHA; their Fresnel modes,
+with Cycles' thin-film iridescence over the 'dielectric' and 'f82' ones
+(microfacet_fresnel's GENERALIZED_SCHLICK and F82_TINT film branches)."""
 import numpy as np
 
 from .. import microfacet as mf
+from .. import thinfilm
 from ..microfacet import ggx_reflect, ggx_sample_vndf
-from .registry import (DELTA, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, NONE, REFLECTION, LobeDef, register)
+from .registry import (DELTA, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FILM_CUTOFF, NONE, REFLECTION, LobeDef,
+                       register)
 
 MIRROR = 1
 GLOSSY = 2
@@ -40,12 +44,43 @@ def fresnel_of(code, lobes, rows, k, cos):
         return schlick(lobes.color[rows, k], cos)
     if code == F_F82:
         f0 = lobes.f0[rows, k]
-        return mf.f82(cos, f0, mf.f82_b(f0, lobes.edge_tint[rows, k]))
-    if code == F_DIELECTRIC:
+        out = mf.f82(cos, f0, mf.f82_b(f0, lobes.edge_tint[rows, k]))
+    elif code == F_DIELECTRIC:
         f0 = lobes.f0[rows, k]
         s, _ = mf.schlick_s(cos, np.maximum(lobes.ior[rows, k], 1e-5))
-        return f0 + (1.0 - f0) * s[:, None]
-    return np.ones((len(cos), 3))
+        out = f0 + (1.0 - f0) * s[:, None]
+    else:
+        return np.ones((len(cos), 3))
+    rows = np.arange(len(lobes))[rows]
+    m = np.flatnonzero(has_film(lobes, rows, k))
+    if len(m):
+        out[m] = film_fresnel(code, lobes, rows[m], k, np.asarray(cos)[m])
+    return out
+
+
+def has_film(lobes, rows, k):
+    """Which of ``rows`` have a thin film on slot k (Cycles: thickness > 0.1 nm)."""
+    return lobes.thin_film_thickness[rows, k] > FILM_CUTOFF
+
+
+def film_fresnel(code, lobes, rows, k, cos, eta=None, film_ior=None):
+    """(n, 3) reflectance of a thin film over the lobe's Fresnel at cos
+    (F82: the film over Gulbrandsen's n, k of F0 and the value at 82
+    degrees; dielectric: the film over the IOR ``eta`` (default the lobe's),
+    each channel scaled towards f0 / F0(eta)), in float64."""
+    thickness = lobes.thin_film_thickness[rows, k]
+    if film_ior is None:
+        film_ior = lobes.thin_film_ior[rows, k]
+    f0 = np.clip(lobes.f0[rows, k], 0.0, 1.0)
+    cos = np.clip(cos, -1.0, 1.0)
+    with np.errstate(all="ignore"):
+        if code == F_F82:
+            b = mf.f82_b(f0, lobes.edge_tint[rows, k])
+            out = thinfilm.f82_conductor(cos, f0, b, thickness, film_ior, dtype=np.float64)
+        else:
+            ior = np.maximum(lobes.ior[rows, k], 1e-5) if eta is None else eta
+            out = thinfilm.principled_dielectric(cos, ior, f0, thickness, film_ior, dtype=np.float64)
+    return np.clip(np.nan_to_num(out, nan=0.0), 0.0, 1.0)
 
 
 def ggx_reflect_rows(wo, wi, alpha):
@@ -92,17 +127,26 @@ def sample_mirror(lobes, rows, s):
 
 def albedo_guess_glossy(lobes, k, mu):
     """The Fresnel at the view angle for F82 and dielectric lobes (their
-    colour does not hold it); 1 for the others."""
+    colour does not hold it; under a thin film its reflectance there, as
+    Cycles' sample weight); 1 for the others."""
     f0 = luminance(lobes.f0[:, k])
     est = f0 + (1.0 - f0) * mf.pow5(1.0 - mu)
-    return np.where((lobes.fresnel[:, k] != F_NONE) & (lobes.fresnel[:, k] != F_SCHLICK), est, 1.0)
+    code = lobes.fresnel[:, k]
+    est = np.where((code != F_NONE) & (code != F_SCHLICK), est, 1.0)
+    for c in (F_F82, F_DIELECTRIC):
+        m = np.flatnonzero((code == c) & has_film(lobes, slice(None), k))
+        if len(m):
+            est[m] = luminance(film_fresnel(c, lobes, m, k, mu[m]))
+    return est
 
 
-_FRESNEL = ("fresnel", "ior", "f0", "edge_tint")
+_FRESNEL = ("fresnel", "ior", "f0", "edge_tint", "thin_film_thickness", "thin_film_ior")
 register(LobeDef(MIRROR, "mirror", "glossy", REFLECTION | DELTA, sample_mirror, params=_FRESNEL,
                  doc="perfect specular reflection (a glossy lobe below MIN_ALPHA becomes one)",
                  cases=[dict(color=(0.9, 0.8, 0.7)), dict(color=(1, 1, 1), fresnel="f82", f0=(0.9, 0.6, 0.3),
-                                                           edge_tint=(0.9, 0.9, 0.5))]))
+                                                           edge_tint=(0.9, 0.9, 0.5)),
+                        dict(color=(1, 1, 1), fresnel="f82", f0=(0.9, 0.6, 0.3), edge_tint=(0.9, 0.9, 0.5),
+                             thin_film_thickness=350.0, thin_film_ior=1.5)]))
 register(LobeDef(GLOSSY, "glossy", "glossy", REFLECTION, sample_glossy, eval_glossy, "upper",
                  albedo_guess=albedo_guess_glossy, params=("roughness", "multiscatter") + _FRESNEL,
                  doc="GGX microfacet reflection, alpha = roughness^2 (Walter et al. 2007, VNDF sampling)",
@@ -112,4 +156,9 @@ register(LobeDef(GLOSSY, "glossy", "glossy", REFLECTION, sample_glossy, eval_glo
                         dict(color=(1, 1, 1), roughness=0.3, fresnel="f82", f0=(0.9, 0.6, 0.3),
                              edge_tint=(0.9, 0.9, 0.5)),
                         dict(color=(1, 1, 1), roughness=0.6, fresnel="dielectric", ior=1.45),
-                        dict(color=(0.8, 0.8, 0.8), roughness=0.4, multiscatter=True)]))
+                        dict(color=(0.8, 0.8, 0.8), roughness=0.4, multiscatter=True),
+                        # thin films: oil on a metal, a soap film on the Principled specular layer
+                        dict(color=(1, 1, 1), roughness=0.25, fresnel="f82", f0=(0.9, 0.6, 0.3),
+                             edge_tint=(0.9, 0.9, 0.5), thin_film_thickness=450.0, thin_film_ior=1.5),
+                        dict(color=(1, 1, 1), roughness=0.3, fresnel="dielectric", ior=1.5,
+                             thin_film_thickness=500.0, thin_film_ior=1.33, multiscatter=True)]))

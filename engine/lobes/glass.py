@@ -5,8 +5,8 @@ import numpy as np
 
 from .. import microfacet as mf
 from ..microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_sample_vndf
-from .ggx import ggx_reflect_rows
-from .registry import (DELTA_WHEN_SMOOTH, MIN_ALPHA, NONE, REFLECTION, TRANSMISSION, LobeDef, register)
+from .ggx import film_fresnel, ggx_reflect_rows, has_film
+from .registry import (DELTA_WHEN_SMOOTH, F_DIELECTRIC, MIN_ALPHA, NONE, REFLECTION, TRANSMISSION, LobeDef, register)
 
 GLASS = 3
 REFRACTION = 4
@@ -24,14 +24,32 @@ def eta_of(lobes, k):
     return np.where(lobes.back & refracts, 1.0 / ior, ior)
 
 
+def film_ior_of(lobes, rows, k):
+    """The film IOR a glass lobe's film is evaluated with: on back faces
+    divided by the glass IOR (Cycles' adjust_thin_film_ior_at_backface: the
+    stack glass | film | air read from outside as air | film / ior | 1 / ior)."""
+    ior = np.maximum(lobes.ior[rows, k], 1e-5)
+    film = lobes.thin_film_ior[rows, k]
+    return np.where(lobes.back[rows], film / ior, film)
+
+
 def dielectric(lobes, rows, k, cos, eta):
     """Glass: reflectance (n, 3), transmittance (n, 3), probability of
     reflecting, |cos| of the refracted angle (0 under total internal
     reflection).  Principled/Glass BSDF: F = mix(f0, 1, s) with s the real
-    Fresnel remapped; Refraction BSDF: no reflection, T = 1 unless TIR."""
+    Fresnel remapped (under a thin film, the film's reflectance scaled by
+    f0 / F0(eta) per channel); Refraction BSDF: no reflection, T = 1 unless
+    TIR.  ``eta`` is per row of ``rows``."""
     s, cos_t = mf.schlick_s(cos, eta)
     f0 = lobes.f0[rows, k]
     refl = f0 + (1.0 - f0) * s[:, None]
+    rows = np.arange(len(lobes))[rows]
+    film = np.flatnonzero(has_film(lobes, rows, k) & (lobes.kind[rows, k] == GLASS))
+    if len(film):
+        # Under a film that reflects all (its own total reflection) the
+        # transmittance 1 - F is 0 whatever cos_t says, as in Cycles.
+        refl[film] = film_fresnel(F_DIELECTRIC, lobes, rows[film], k, cos[film], eta[film],
+                                  film_ior_of(lobes, rows[film], k))
     refraction = lobes.kind[rows, k] == REFRACTION
     refl = np.where(refraction[:, None], 0.0, refl)
     trans = np.where(refraction[:, None], 1.0, 1.0 - refl) * lobes.transmission_tint[rows, k]
@@ -125,7 +143,7 @@ def sample_glass(lobes, rows, s):
             s.pdf[d] = p * s.p_lobe[d]
 
 
-_PARAMS = ("roughness", "ior", "f0", "transmission_tint", "multiscatter")
+_PARAMS = ("roughness", "ior", "f0", "transmission_tint", "multiscatter", "thin_film_thickness", "thin_film_ior")
 register(LobeDef(GLASS, "glass", "glossy", REFLECTION | TRANSMISSION | DELTA_WHEN_SMOOTH, sample_glass,
                  eval_glass, "both", evaluates=rough, params=_PARAMS, reciprocal=False,
                  doc="GGX dielectric: reflection and refraction (Glass BSDF, Principled transmission); its "
@@ -133,7 +151,11 @@ register(LobeDef(GLASS, "glass", "glossy", REFLECTION | TRANSMISSION | DELTA_WHE
                  cases=[dict(color=(1, 1, 1), roughness=0.4, ior=1.5),
                         dict(color=(1, 1, 1), roughness=0.2, ior=1.33, transmission_tint=(0.9, 1.0, 0.8)),
                         dict(color=(1, 1, 1), roughness=0.3, ior=1.5, multiscatter=True),
-                        dict(color=(1, 1, 1), roughness=0.0, ior=1.5)]))
+                        dict(color=(1, 1, 1), roughness=0.0, ior=1.5),
+                        # a soap bubble's film over water (smooth: tests/engine/test_thinfilm_lobes.py,
+                        # its sample weights vary by channel, so its albedo is 1 only in the mean)
+                        dict(color=(1, 1, 1), roughness=0.2, ior=1.33, thin_film_thickness=500.0,
+                             thin_film_ior=1.4)]))
 register(LobeDef(REFRACTION, "refraction", "transmission", TRANSMISSION | DELTA_WHEN_SMOOTH, sample_glass,
                  eval_glass, "both", evaluates=rough, params=_PARAMS, reciprocal=False,
                  doc="Refraction BSDF: GGX refraction only",

@@ -153,7 +153,29 @@ PARAMS = (
           "(1 - coat) roughness).", to_table=lambda lobe: _finite_or(getattr(lobe, "coat", 0.0), 0.0)),
     Param("offset", float, 0.0, np.float64, (), "hair_chiang: the cuticle tilt in radians (the node's Offset).",
           to_table=lambda lobe: _finite_or(getattr(lobe, "offset", 0.0), 0.0)),
+    Param("thin_film_thickness", float, 0.0, np.float64, (), "thin-film iridescence over the lobe's Fresnel "
+          "(glossy 'dielectric' and 'f82', mirror, glass): the film's thickness in nm; at most 0.1 (Cycles' "
+          "THINFILM_THICKNESS_CUTOFF) is no film (engine/thinfilm.py).",
+          to_table=lambda lobe: film_thickness(getattr(lobe, "thin_film_thickness", 0.0))),
+    Param("thin_film_ior", float, 1.33, np.float64, (), "the thin film's IOR (at least 1e-5, as Cycles; divided "
+          "by the glass IOR on back faces of glass lobes).",
+          to_table=lambda lobe: film_ior(getattr(lobe, "thin_film_ior", 1.33))),
 )
+# Cycles' THINFILM_THICKNESS_CUTOFF (nm): a thinner film is no film.
+FILM_CUTOFF = 0.1
+# Thickness and film IOR are held below this (a 1e30 nm film is finite maths).
+FILM_MAX = 1e30
+
+
+def film_thickness(value):
+    """A film thickness for the tables: NaN and negative ones are no film."""
+    value = _finite_or(value, 0.0)
+    return float(min(max(value, 0.0), FILM_MAX))
+
+
+def film_ior(value):
+    """A film IOR for the tables: at least 1e-5 (Cycles' fmaxf), NaN the default."""
+    return float(min(max(_finite_or(value, 1.33), 1e-5), FILM_MAX))
 
 
 def _finite_or(value, fallback):

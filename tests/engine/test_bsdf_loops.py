@@ -2,7 +2,8 @@
 their NumPy reference forms (engine/bsdf.py), within rounding
 (tests/engine/rounding.py), on random lobes of every
 kind: sheen, coats with absorption, glass and refraction (rough and smooth,
-back faces, IORs below 1), multiscatter GGX, every Fresnel mode, empty
+back faces, IORs below 1), multiscatter GGX, every Fresnel mode with and
+without a thin film (engine/thinfilm.py; thicknesses under 1 nm too), empty
 (NONE) slots, moved normals (bump shadowing), directions on both sides and
 grazing ones.
 """
@@ -40,7 +41,11 @@ def random_lobes(rng, n, k=4, bump=False):
                   anisotropy=rng.uniform(-0.1, 1.15, (n, k)), rotation=rng.uniform(-2.0, 2.0, (n, k)),
                   diffuse_roughness=rng.uniform(-0.1, 1.1, (n, k)),
                   absorption=rng.random((n, k, 3)) * 3.0, radial_roughness=rng.uniform(-0.1, 1.1, (n, k)),
-                  coat=rng.uniform(-0.1, 1.1, (n, k)), offset=rng.uniform(-0.2, 0.2, (n, k)))
+                  coat=rng.uniform(-0.1, 1.1, (n, k)), offset=rng.uniform(-0.2, 0.2, (n, k)),
+                  # thin films on half the slots (some under the 0.1 nm cutoff or 1 nm), film IORs below 1 too
+                  thin_film_thickness=np.where(rng.random((n, k)) < 0.5, rng.uniform(0.0, 1200.0, (n, k))
+                                               * np.where(rng.random((n, k)) < 0.1, 1e-3, 1.0), 0.0),
+                  thin_film_ior=rng.uniform(0.7, 2.2, (n, k)))
     if bump:
         s = rng.normal(size=(n, 3)) + np.array([0.0, 0.0, 2.0])
         lobes.smooth_n = s / np.linalg.norm(s, axis=1)[:, None]
