@@ -251,6 +251,12 @@ class ShadingContext:
         out._cache = {k: None if v is None else v[rows] for k, v in self._cache.items()}
         return out
 
+    def tiled(self, k):
+        """The points repeated k times over (k N points): several moved
+        copies of them (the bump's differences) evaluated in one pass
+        through the node tree."""
+        return self.take(np.tile(np.arange(self.n), k))
+
     def shifted(self, dp):
         """The same points moved by world offsets dp (N, 3) within their
         triangles' planes; interpolated attributes move with them."""
