@@ -328,6 +328,11 @@ class ShadingContext:
             shading, inst = self.instance
             if shading is None:
                 self._cache["object"] = self.p
+            elif len(inst) and (inst == inst[0]).all():
+                # One object (a material's points usually are): one matrix
+                # product, not a gathered (N, 4, 4) stack.
+                inv = shading.inverse[inst[0]]
+                self._cache["object"] = self.p @ inv[:3, :3].T + inv[:3, 3]
             else:
                 inv = shading.inverse[inst]
                 self._cache["object"] = np.einsum("nij,nj->ni", inv[:, :3, :3], self.p) + inv[:, :3, 3]

@@ -138,7 +138,8 @@ def _grad_scalar(h, d, f):
     if d == 3:
         h = h & 15
         u = f[0] if h < 8 else f[1]
-        v = f[1] if h < 4 else (f[0] if h == 12 or h == 14 else f[2])
+        f02 = f[0] if (h == 12) | (h == 14) else f[2]   # no short-circuit: selects, not branches
+        v = f[1] if h < 4 else f02
         return _signed(u, h & 1) + _signed(v, h & 2)
     h = h & 31
     u = f[0] if h < 24 else f[1]
@@ -186,8 +187,18 @@ def _grad3(h, x, y, z):
     """_grad_scalar for D = 3 with the offsets in registers."""
     h = h & 15
     u = x if h < 8 else y
-    v = y if h < 4 else (x if h == 12 or h == 14 else z)
+    xz = x if (h == 12) | (h == 14) else z   # no short-circuit: selects, not branches
+    v = y if h < 4 else xz
     return _signed(u, h & 1) + _signed(v, h & 2)
+
+
+@kernels.helper
+def _wrap(x):
+    """fmod(x, 1e5) (exact in float64); the identity below 1e5, which is
+    nearly every point, without the libm call."""
+    if abs(x) < np.float32(100000.0):
+        return x
+    return np.float32(np.fmod(np.float64(x), 100000.0))
 
 
 @kernels.helper
@@ -195,9 +206,7 @@ def _snoise3(x, y, z):
     """snoise_3d of one point (float32), unrolled: the generic loop keeps
     its corners in small arrays, at about 4x the cost."""
     one = np.float32(1.0)
-    x = np.float32(np.fmod(np.float64(x), 100000.0))
-    y = np.float32(np.fmod(np.float64(y), 100000.0))
-    z = np.float32(np.fmod(np.float64(z), 100000.0))
+    x, y, z = _wrap(x), _wrap(y), _wrap(z)
     fx, fy, fz = np.float32(np.floor(x)), np.float32(np.floor(y)), np.float32(np.floor(z))
     ix, iy, iz = np.int64(fx), np.int64(fy), np.int64(fz)
     x, y, z = x - fx, y - fy, z - fz
