@@ -80,10 +80,10 @@ def _cell_colour(key, dim, h, colour):
 
 
 @kernels.helper
-def _metric(v, dim, metric, e):
-    """texture_nodes._distance of one offset vector v[0:dim] (float32); one
-    accumulation per metric and a single return (several returns trip
-    numba's SSA pass: NumbaIRAssumptionWarning)."""
+def _metric(v, dim, metric):
+    """texture_nodes._distance of one offset vector v[0:dim] (float32) for
+    Euclidean, Manhattan and Chebychev; one accumulation and a single return
+    (several returns trip numba's SSA pass: NumbaIRAssumptionWarning)."""
     total = np.float32(0.0)
     for j in range(dim):
         a = abs(v[j])
@@ -91,21 +91,18 @@ def _metric(v, dim, metric, e):
             total += v[j] * v[j]
         elif metric == 1:
             total += a
-        elif metric == 2:
-            if not a <= total and not np.isnan(total):   # NaN wins, as np.max
-                total = a
-        else:
-            total += np.float32(a ** e)
+        elif not a <= total and not np.isnan(total):   # Chebychev; NaN wins, as np.max
+            total = a
     if metric == 0:
         total = np.float32(np.sqrt(total))
-    elif metric == 3:
-        total = np.float32(total ** (np.float32(1.0) / e))
     return total
 
 
 @kernels.loop_kernel("void(float32[:, ::1], float32[::1], float32[::1], float32[::1], int64, int64, "
                      "float32[::1], float32[:, ::1], float32[:, ::1])", _numpy_octave)
 def voronoi_octave_loop(q, rand, expo, smooth, feature, metric, dist, color, pos):
+    """dist, color, pos of one octave at q (N, D); expo (Minkowski's
+    exponent) is the NumPy form's argument, unused by the compiled metrics."""
     n, dim = q.shape
     one, zero, half = np.float32(1.0), np.float32(0.0), np.float32(0.5)
     big = np.float32(3.4028234663852886e38)
@@ -130,7 +127,7 @@ def voronoi_octave_loop(q, rand, expo, smooth, feature, metric, dist, color, pos
     colour = np.zeros(3, np.float32)
     squared = feature == 0 and metric == 0
     for i in range(n):
-        r, e, s = rand[i], expo[i], smooth[i]
+        r, s = rand[i], smooth[i]
         for j in range(dim):
             c = np.float32(np.floor(q[i, j]))
             cell[j] = c
@@ -163,7 +160,7 @@ def voronoi_octave_loop(q, rand, expo, smooth, feature, metric, dist, color, pos
                 for j in range(dim):
                     dd += v[j] * v[j]
             else:
-                dd = _metric(v, dim, metric, e)
+                dd = _metric(v, dim, metric)
             if feature == 2:
                 if idx == 0:
                     w = one
@@ -215,7 +212,7 @@ def voronoi_octave_loop(q, rand, expo, smooth, feature, metric, dist, color, pos
             # F1 measures its winner after comparing (squared Euclidean).
             for j in range(dim):
                 v[j] = p1[j] - local[j]
-            dist[i] = _metric(v, dim, metric, e)
+            dist[i] = _metric(v, dim, metric)
         for j in range(dim):
             key[j] = _i32(cell_i[j] + np.int64(o1[j]))
             pos[i, j] = p1[j] + cell[j]
