@@ -889,10 +889,13 @@ def surface_gradient(height_fn, ctx, uv_step, triangles):
         size = np.sqrt(triangles.area[prim])
         h = np.where(uv_rate > 0, uv_step / np.where(uv_rate > 0, uv_rate, 1.0), 1e-3 * size)
         h = np.clip(h, 1e-7 * (1.0 + np.abs(ctx.p).max(axis=1)), np.maximum(size, 1e-12))
-    def slope(t):
-        step = t * h[:, None]
-        return (height_fn(ctx.shifted(step)) - height_fn(ctx.shifted(-step))) / (2.0 * h)
-    d1, d2 = slope(t1), slope(t2)
+    # The four moved copies in one evaluation of the height: one pass
+    # through its nodes instead of four (per-node overhead, small batches).
+    s1, s2 = t1 * h[:, None], t2 * h[:, None]
+    n = len(ctx)
+    values = height_fn(ctx.shifted_pairs((s1, s2))) if n else np.zeros(0)
+    up1, down1, up2, down2 = (values[k * n:(k + 1) * n] for k in range(4))
+    d1, d2 = (up1 - down1) / (2.0 * h), (up2 - down2) / (2.0 * h)
     return d1[:, None] * t1 + d2[:, None] * t2
 
 

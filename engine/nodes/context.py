@@ -251,6 +251,28 @@ class ShadingContext:
         out._cache = {k: None if v is None else v[rows] for k, v in self._cache.items()}
         return out
 
+    def shifted_pairs(self, steps):
+        """The points moved by +s and by -s for each world offset s (N, 3)
+        of ``steps``, as one context of 2 len(steps) N points in the order
+        +s0, -s0, +s1, ...: the bump's central differences evaluate the
+        height once (one pass through its nodes, not four).  Each copy holds
+        what ``shifted`` gives; a -s copy's barycentric change is the +s
+        one's negated (exactly: the map is linear)."""
+        n, k = self.n, 2 * len(steps)
+        rows = np.tile(np.arange(n), k)
+        dp = np.concatenate([x for step in steps for x in (step, -step)])
+        pick = (lambda a: None if a is None else a[rows])
+        out = ShadingContext(k * n, self.tris, pick(self.prim), None, self.p[rows] + dp, self.ng[rows],
+                             self.ns[rows], self.wo[rows], self.back[rows], self.depth[rows], self.ray[rows],
+                             path=pick(self.path))
+        out.rays = None if self.rays is None else self.rays.take(rows)
+        if self.bary is not None and self.tris is not None:
+            moves = [_bary_of_offset(self.tris, self.prim, step) for step in steps]
+            out.bary = self.bary[rows] + np.concatenate([x for d in moves for x in (d, -d)])
+        else:
+            out._cache[("uv", "")] = self.uv[rows] + dp[:, :2]
+        return out
+
     def shifted(self, dp):
         """The same points moved by world offsets dp (N, 3) within their
         triangles' planes; interpolated attributes move with them."""
@@ -322,6 +344,11 @@ class ShadingContext:
             shading, inst = self.instance
             if shading is None:
                 self._cache["object"] = self.p
+            elif len(inst) and (inst == inst[0]).all():
+                # One object (a material's points usually are): one matrix
+                # product, not a gathered (N, 4, 4) stack.
+                inv = shading.inverse[inst[0]]
+                self._cache["object"] = self.p @ inv[:3, :3].T + inv[:3, 3]
             else:
                 inv = shading.inverse[inst]
                 self._cache["object"] = np.einsum("nij,nj->ni", inv[:, :3, :3], self.p) + inv[:, :3, 3]

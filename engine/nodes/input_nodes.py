@@ -4,7 +4,7 @@ fresnel.h, attribute.h, light_path.h, mapping_util.h)."""
 import numpy as np
 
 from .context import PATH_COLUMNS, POINTINESS, RANDOM_PER_ISLAND
-from .registry import node, one_of
+from .registry import node, one_of, wanted
 
 VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION, VIS_SHADOW = 1, 2, 4, 8, 16
 
@@ -70,18 +70,28 @@ def _window_coords(ctx):
                                      ("Window", "vector")),
       translate=_object_matrix_inverse, cases=[{}])
 def tex_coord(ctx, i, p):
-    n = len(ctx)
-    uv = np.zeros((n, 3))
+    # Only the outputs something reads: Camera and Window project every
+    # point, Normal transforms it (a third of a procedural material's cost).
+    makers = {"Generated": lambda: ctx.generated, "Normal": lambda: ctx.to_object(ctx.ns),
+              "UV": lambda: _uv3(ctx), "Object": lambda: _object_coords(ctx, p),
+              "Camera": lambda: _camera_coords(ctx),
+              "Reflection": lambda: 2.0 * _dot(ctx.ns, ctx.wo)[:, None] * ctx.ns - ctx.wo,
+              "Window": lambda: _window_coords(ctx)}
+    return {name: make() for name, make in makers.items() if wanted(p, name)}
+
+
+def _uv3(ctx):
+    uv = np.zeros((len(ctx), 3))
     uv[:, :2] = ctx.uv
+    return uv
+
+
+def _object_coords(ctx, p):
     inv = p.get("object_inverse")
-    if inv is not None:
-        inv = np.asarray(inv)
-        obj = ctx.p @ inv[:3, :3].T + inv[:3, 3]
-    else:
-        obj = ctx.object_coords
-    refl = 2.0 * _dot(ctx.ns, ctx.wo)[:, None] * ctx.ns - ctx.wo
-    return {"Generated": ctx.generated, "Normal": ctx.to_object(ctx.ns), "UV": uv, "Object": obj,
-            "Camera": _camera_coords(ctx), "Reflection": refl, "Window": _window_coords(ctx)}
+    if inv is None:
+        return ctx.object_coords
+    inv = np.asarray(inv)
+    return ctx.p @ inv[:3, :3].T + inv[:3, 3]
 
 
 @node("ShaderNodeUVMap", outputs=(("UV", "vector"),), props=(("uv_map", ""),), cases=[{}])

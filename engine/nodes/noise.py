@@ -138,7 +138,8 @@ def _grad_scalar(h, d, f):
     if d == 3:
         h = h & 15
         u = f[0] if h < 8 else f[1]
-        v = f[1] if h < 4 else (f[0] if h == 12 or h == 14 else f[2])
+        f02 = f[0] if (h == 12) | (h == 14) else f[2]   # no short-circuit: selects, not branches
+        v = f[1] if h < 4 else f02
         return _signed(u, h & 1) + _signed(v, h & 2)
     h = h & 31
     u = f[0] if h < 24 else f[1]
@@ -181,6 +182,93 @@ def _snoise_loop(p, out):
         out[i] = scale * values[0]
 
 
+@kernels.helper
+def _grad3(h, x, y, z):
+    """_grad_scalar for D = 3 with the offsets in registers."""
+    h = h & 15
+    u = x if h < 8 else y
+    xz = x if (h == 12) | (h == 14) else z   # no short-circuit: selects, not branches
+    v = y if h < 4 else xz
+    return _signed(u, h & 1) + _signed(v, h & 2)
+
+
+@kernels.helper
+def _wrap(x):
+    """fmod(x, 1e5) (exact in float64); the identity below 1e5, which is
+    nearly every point, without the libm call."""
+    if abs(x) < np.float32(100000.0):
+        return x
+    return np.float32(np.fmod(np.float64(x), 100000.0))
+
+
+@kernels.helper
+def _snoise3(x, y, z):
+    """snoise_3d of one point (float32), unrolled: the generic loop keeps
+    its corners in small arrays, at about 4x the cost."""
+    one = np.float32(1.0)
+    x, y, z = _wrap(x), _wrap(y), _wrap(z)
+    fx, fy, fz = np.float32(np.floor(x)), np.float32(np.floor(y)), np.float32(np.floor(z))
+    ix, iy, iz = np.int64(fx), np.int64(fy), np.int64(fz)
+    x, y, z = x - fx, y - fy, z - fz
+    u = x * x * x * (x * (x * np.float32(6.0) - np.float32(15.0)) + np.float32(10.0))
+    v = y * y * y * (y * (y * np.float32(6.0) - np.float32(15.0)) + np.float32(10.0))
+    w = z * z * z * (z * (z * np.float32(6.0) - np.float32(15.0)) + np.float32(10.0))
+    x1, y1, z1 = x - one, y - one, z - one
+    a0, a1 = ix & _M32, (ix + 1) & _M32
+    b0, b1 = iy & _M32, (iy + 1) & _M32
+    c0, c1 = iz & _M32, (iz + 1) & _M32
+    v000 = _grad3(_lookup3(3, a0, b0, c0, 0), x, y, z)
+    v100 = _grad3(_lookup3(3, a1, b0, c0, 0), x1, y, z)
+    v010 = _grad3(_lookup3(3, a0, b1, c0, 0), x, y1, z)
+    v110 = _grad3(_lookup3(3, a1, b1, c0, 0), x1, y1, z)
+    v001 = _grad3(_lookup3(3, a0, b0, c1, 0), x, y, z1)
+    v101 = _grad3(_lookup3(3, a1, b0, c1, 0), x1, y, z1)
+    v011 = _grad3(_lookup3(3, a0, b1, c1, 0), x, y1, z1)
+    v111 = _grad3(_lookup3(3, a1, b1, c1, 0), x1, y1, z1)
+    # Lerp along x, then y, then z (as the generic loop and Cycles' tri_mix).
+    e00 = (one - u) * v000 + u * v100
+    e10 = (one - u) * v010 + u * v110
+    e01 = (one - u) * v001 + u * v101
+    e11 = (one - u) * v011 + u * v111
+    g0 = (one - v) * e00 + v * e10
+    g1 = (one - v) * e01 + v * e11
+    return np.float32(0.982) * ((one - w) * g0 + w * g1)
+
+
+def _fbm3_numpy(p, detail, roughness, lacunarity, normalize, out):
+    out[:] = _fbm_arrays(p, detail, roughness, lacunarity, normalize != 0)
+
+
+@kernels.loop_kernel("void(float32[:, ::1], float32[::1], float32[::1], float32[::1], int64, float32[::1])",
+                     _fbm3_numpy)
+def _fbm3_loop(p, detail, roughness, lacunarity, normalize, out):
+    """noise_fbm in 3D, all octaves of a point in one pass (the NumPy form
+    makes a temporary per octave and operation)."""
+    one, half = np.float32(1.0), np.float32(0.5)
+    for i in range(p.shape[0]):
+        px, py, pz = p[i, 0], p[i, 1], p[i, 2]
+        d, rough, lac = detail[i], roughness[i], lacunarity[i]
+        if not np.isfinite(d):   # the array form: no octave, 0 / 0
+            out[i] = np.float32(np.nan)
+            continue
+        fscale, amp = one, one
+        maxamp, total = np.float32(0.0), np.float32(0.0)
+        for _ in range(np.int64(d) + 1):
+            t = _snoise3(fscale * px, fscale * py, fscale * pz)
+            total = total + t * amp
+            maxamp = maxamp + amp
+            amp = amp * rough
+            fscale = fscale * lac
+        rmd = np.float32(d - np.float32(np.floor(d)))
+        a = half * total / maxamp + half if normalize != 0 else total
+        if rmd != 0:
+            t = _snoise3(fscale * px, fscale * py, fscale * pz)
+            sum2 = total + t * amp
+            b = half * sum2 / (maxamp + amp) + half if normalize != 0 else sum2
+            a = (one - rmd) * a + rmd * b
+        out[i] = a
+
+
 def snoise(p):
     """Cycles' snoise_{1,2,3,4}d: wrapped at 1e5, scaled to about [-1, 1]."""
     p = np.ascontiguousarray(p, F)
@@ -199,7 +287,21 @@ def random_offset(dim, seed):
 
 
 def fbm(p, detail, roughness, lacunarity, normalize):
-    """noise_fbm; detail, roughness, lacunarity are (N,) float32."""
+    """noise_fbm; detail, roughness, lacunarity are (N,) float32 (in 3D by
+    the fused loop, else over arrays)."""
+    if p.ndim != 2 or p.shape[1] != 3:
+        return _fbm_arrays(p, detail, roughness, lacunarity, normalize)
+    n = len(p)
+    out = np.empty(n, F)
+    if n:
+        _fbm3_loop(np.ascontiguousarray(p, F), *(np.array(np.broadcast_to(a, (n,)), F)
+                                                 for a in (detail, roughness, lacunarity)),
+                   int(bool(normalize)), out)
+    return out
+
+
+def _fbm_arrays(p, detail, roughness, lacunarity, normalize):
+    """noise_fbm over arrays (the NumPy reference form, and 1D, 2D, 4D)."""
     n = len(p)
     fscale = np.ones(n, F)
     amp = np.ones(n, F)

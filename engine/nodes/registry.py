@@ -73,5 +73,13 @@ def one_of(**allowed):
     return check
 
 
+def wanted(props, output):
+    """Whether an output of a node call is read by anyone: the exporter lists
+    the outputs it linked in ``props['_outputs']``; without that list (tests,
+    probes) every output is computed."""
+    used = props.get("_outputs")
+    return used is None or output in used
+
+
 def lookup(idname):
     return REGISTRY.get(idname)

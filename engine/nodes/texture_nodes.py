@@ -5,7 +5,8 @@ import numpy as np
 
 from . import noise
 from .hashing import hash_float, hash_int_to_float3, hash_int_to_floats, hash_same_dim, hash_to_float3
-from .registry import node, one_of
+from . import voronoi_loop
+from .registry import node, one_of, wanted
 
 F = np.float32
 DIMS = {"1D": 1, "2D": 2, "3D": 3, "4D": 4}
@@ -187,7 +188,22 @@ def _pcg_cells(props):
     return tuple(props.get("_blender_version", (5, 0, 0))) >= (5, 0, 0)
 
 
-def _voronoi_octave(q, feature, metric, exponent, randomness, smoothness, pcg=True):
+def _octave(q, feature, metric, exponent, randomness, smoothness, pcg, colour):
+    """One octave by the compiled loop where it covers the case, else by
+    the NumPy form (colour skipped when nobody reads it)."""
+    n, dim = q.shape
+    if not voronoi_loop.supported(dim, feature, metric, pcg):
+        return _voronoi_octave(q, feature, metric, exponent, randomness, smoothness, pcg, colour)
+    dist, color, pos = np.empty(n, F), np.empty((n, 3), F), np.empty((n, dim), F)
+    if n:
+        voronoi_loop.voronoi_octave_loop(
+            np.ascontiguousarray(q, F), *(np.array(np.broadcast_to(a, (n,)), F)
+                                          for a in (randomness, exponent, smoothness)),
+            voronoi_loop.FEATURES[feature], voronoi_loop.METRICS[metric], dist, color, pos)
+    return dist, color, pos
+
+
+def _voronoi_octave(q, feature, metric, exponent, randomness, smoothness, pcg=True, colour=True):
     """F1, F2 or smooth F1 of one octave: distance (N,), colour (N, 3),
     position (N, dim).  F1 compares squared Euclidean distances (Cycles'
     voronoi_distance_bound) and measures the winner after."""
@@ -244,7 +260,8 @@ def _voronoi_octave(q, feature, metric, exponent, randomness, smoothness, pcg=Tr
     d, o, pos = (d2, o2, p2) if feature == "F2" else (d1, o1, p1)
     if feature == "F1" and dim > 1 and pcg:
         d = _distance(pos - local, metric, exponent).astype(F)
-    return d, _cell_color(cell + o, cell_int + o.astype(np.int32), dim, pcg), pos + cell
+    c = _cell_color(cell + o, cell_int + o.astype(np.int32), dim, pcg) if colour else np.zeros((n, 3), F)
+    return d, c, pos + cell
 
 
 def _offsets(dim, reach=1):
@@ -423,8 +440,8 @@ def voronoi(ctx, i, p):
     pos = np.zeros((n, dim), F)
     top = int(np.ceil(detail.max(initial=0.0)))
     for k in range(top + 1):
-        d, c, ps = _voronoi_octave(q * fscale[:, None], feature, metric, expo, rand, smooth,
-                                   _pcg_cells(p))
+        d, c, ps = _octave(q * fscale[:, None], feature, metric, expo, rand, smooth,
+                           _pcg_cells(p), wanted(p, "Color"))
         ps = ps / fscale[:, None]
         first_only = zero & (k == 0)
         full = ~zero & (k <= detail)

@@ -768,3 +768,43 @@ def test_perlin_noise_agrees(jit):
         p[500:600] *= np.float32(1e4)                # past the 1e5 wrap
         p[600:610, 0] = (np.nan, np.inf, -np.inf, 1e30, -1e30, 0.0, -0.0, 0.5, -0.5, 99999.5)
         assert_agree(*both_ways(snoise, p), f"snoise {d}D")
+
+
+def test_voronoi_octave_agrees(jit):
+    """One Voronoi octave (engine/nodes/voronoi_loop.py): the compiled loop
+    against the NumPy form for F1, F2 and Smooth F1 under the compiled metrics in
+    2D-4D (Blender 5's integer cell hashes), on points spanning negative
+    cells, cell borders, zero randomness and huge or non-finite coordinates."""
+    from engine.nodes.texture_nodes import _octave
+    rng = np.random.default_rng(32)
+    n = 800   # the NumPy form of Smooth F1 in 4D visits 625 cells, nine times for the rounding spread
+    for dim in (2, 3, 4):
+        q = rng.normal(0.0, 6.0, (n, dim)).astype(np.float32)
+        q[:200] = np.round(q[:200])                       # on cell borders
+        q[200:210, 0] = (np.nan, np.inf, -np.inf, 3e9, -3e9, 1e20, 0.0, -0.0, 0.5, -0.5)
+        rand = rng.uniform(0.0, 1.0, n).astype(np.float32)
+        rand[:100] = 0.0
+        expo = rng.uniform(0.3, 4.0, n).astype(np.float32)
+        smooth = rng.uniform(0.0, 0.5, n).astype(np.float32)
+        for feature in ("F1", "F2", "SMOOTH_F1"):
+            for metric in ("EUCLIDEAN", "MANHATTAN", "CHEBYCHEV"):
+                def octave(q, rand, expo, smooth):
+                    return _octave(q, feature, metric, expo, rand, smooth, True, True)
+                assert_agree(*both_ways(octave, q, rand, expo, smooth), f"voronoi {dim}D {feature} {metric}")
+
+
+def test_fbm_3d_agrees(jit):
+    """3D fBm noise (engine/nodes/noise.py): the fused loop of all octaves
+    against the NumPy form, integer and fractional detail, normalized or
+    not, on points spanning cell corners, the 1e5 wrap and large scales."""
+    from engine.nodes.noise import fbm
+    rng = np.random.default_rng(33)
+    n = 4000
+    p = rng.normal(0.0, 8.0, (n, 3)).astype(np.float32)
+    p[:300] = np.round(p[:300])
+    p[300:400] *= np.float32(2e4)
+    detail = rng.choice([0.0, 1.0, 2.0, 2.5, 3.7, 15.0], n).astype(np.float32)
+    rough = rng.uniform(0.0, 1.0, n).astype(np.float32)
+    lac = rng.uniform(1.0, 3.0, n).astype(np.float32)
+    for normalize in (True, False):
+        assert_agree(*both_ways(lambda *a: fbm(*a, normalize), p, detail, rough, lac), f"fbm normalize={normalize}")
