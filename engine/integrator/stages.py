@@ -15,7 +15,7 @@ from ..motion import path_time, triangles_at
 from ..points import curve_hits, curve_tangents, sphere_hits, through_fibre
 from ..nodes import NodeRays, ShadingContext
 from ..nodes.context import PATH_COLUMNS
-from ..sampler import BSDF, LIGHT, emitter_set, vertex_set
+from ..sampler import BSDF, LIGHT, candidate_set, emitter_set, vertex_set
 from ..sampling import power_heuristic
 from ..vec import dot, frame, row_any_positive, row_max, to_local
 from . import catcher, subsurface, transparency, visibility
@@ -101,6 +101,10 @@ def mis_hit(ctx, paths, i, emitter, pdf_light):
         return np.ones(len(i))
     if s.strategy == "light":
         return prev_delta.astype(np.float64)
+    if s.light_selection == "ris":
+        p_sel = ctx.lights.selection_pdf(emitter, paths.prev_p[i], paths.prev_n[i])
+        p_light = np.where(paths.prev_every[i], resampled_mis_pmf(p_sel), p_sel) * pdf_light
+        return np.where(prev_delta, 1.0, power_heuristic(paths.prev_pdf[i], p_light))
     every = paths.prev_every[i] if ctx.lights.every_at_glossy else None
     p_light = ctx.lights.selection_pdf(emitter, paths.prev_p[i], paths.prev_n[i], every) * pdf_light
     return np.where(prev_delta, 1.0, power_heuristic(paths.prev_pdf[i], p_light))
@@ -363,8 +367,10 @@ def sampling_every_light(ctx, v):
     """For light selection 'auto': which vertices sample every light
     (mostly narrow glossy ones); None in the other modes."""
     s = ctx.settings
-    if ctx.lights.count == 0 or s.strategy == "bsdf" or s.light_selection != "auto":
+    if ctx.lights.count == 0 or s.strategy == "bsdf" or s.light_selection not in ("auto", "ris"):
         return None
+    if s.light_selection == "ris":   # every surface vertex resamples its lights
+        return np.ones(len(v), bool)
     return every_light(v.lobes, v.selection)
 
 
@@ -380,6 +386,8 @@ def nee_rounds(ctx, v, every):
         return [(v, "each", ctx.delta_emitters)]
     if s.light_selection == "all":
         return [(v, "each", ctx.all_emitters)]
+    if s.light_selection == "ris":
+        return [(v, "resample", None)]
     if every is None or not every.any():
         return [(v, "select", None)]
     if every.all():
@@ -407,7 +415,9 @@ def light_samples(ctx, paths, v, depth, every):
         rows = at.path_rows
         on = paths if rows is None else RowView(paths, rows, len(paths.pix))
         n = len(at)
-        if mode == "select":
+        if mode == "resample":
+            batches = [resampled_light_sample(ctx, on, at, depth)]
+        elif mode == "select":
             u = uniforms(ctx, on, vertex_set(depth, LIGHT))
             e, p_sel = ctx.lights.select(u[:, 0], at.hit.p, at.hit.ng)
             batches = [light_sample(ctx, on, at, e, p_sel, u[:, 1:])]
@@ -456,6 +466,78 @@ def light_sample(ctx, paths, v, e, p_sel, u):
     """A sample of emitter e[i] (picked with probability p_sel[i]) at each
     vertex: its MIS-weighted contribution and the shadow rays of the
     vertices it brings light to (None when none)."""
+    return shadow_batch(ctx, v, unshadowed(ctx, paths, v, e, p_sel, u))
+
+
+# Light candidates per vertex under resampled light selection (nee.resample).
+RIS_CANDIDATES = 4
+_U_BELOW_1 = np.nextafter(1.0, 0.0)
+
+
+def resampled_light_sample(ctx, paths, v, depth, m=None):
+    """Resampled light selection: ``m`` candidates per vertex, each picked
+    by the light tree and sampled as usual (MIS against the BSDF with the
+    tree's probability, so a BSDF ray that meets a light is weighed as in
+    'tree'), one kept by its unshadowed contribution with the BSDF
+    (nee.resample); one shadow ray per vertex."""
+    m = RIS_CANDIDATES if m is None else m
+    hit = v.hit
+    candidates = []
+    for k in range(m):
+        u = uniforms(ctx, paths, candidate_set(depth, k))
+        if k == 0:
+            # The selections are stratified: candidate k picks by a number
+            # of [k/m, (k+1)/m), so the candidates spread over the lights.
+            # Each candidate alone is then no unbiased estimate, but their
+            # mean is, and that is all nee.resample needs.
+            u_select = u[:, 0]
+        else:
+            choice = u[:, 0] if k == 1 else choice   # candidate 1's spare number: the choice
+        e, p_sel = ctx.lights.select(np.minimum((u_select + k) / m, _U_BELOW_1), hit.p, hit.ng)
+        candidates.append(unshadowed(ctx, paths, v, e, p_sel, u[:, 1:], resampled_mis_pmf(p_sel, m)))
+    if m == 1:
+        choice = np.zeros(len(v))
+    kept, factor = nee.resample(np.stack([c.contrib.sum(axis=1) for c in candidates]), choice)
+    chosen = _Unshadowed.pick(candidates, kept)
+    chosen.contrib = chosen.contrib * factor[:, None]
+    chosen.live = chosen.live & (factor > 0)
+    return shadow_batch(ctx, v, chosen)
+
+
+class _Unshadowed:
+    """A light sample at each vertex before its shadow ray: emitter e,
+    direction (world and shading frame), distance, whether it ends on a
+    triangle, delta, BSDF value f, MIS weight w, contribution, live."""
+    FIELDS = ("e", "wi", "wi_l", "dist", "on_surface", "delta", "f", "w", "contrib", "live")
+
+    def __init__(self, *values):
+        for name, value in zip(self.FIELDS, values):
+            setattr(self, name, value)
+
+    @classmethod
+    def pick(cls, candidates, kept):
+        """Row i of candidate kept[i], for every field."""
+        rows = np.arange(len(kept))
+        return cls(*(np.stack([np.broadcast_to(getattr(c, name), np.shape(candidates[0].e) +
+                                               np.shape(getattr(c, name))[1:]) for c in candidates])[kept, rows]
+                     for name in cls.FIELDS))
+
+
+def resampled_mis_pmf(p_sel, m=None):
+    """The selection probability MIS weighs a light by at a vertex that
+    resampled its light candidates: about the chance that the light is
+    among the m stratified candidates, min(1, m p_sel); resampling keeps a
+    candidate the BSDF reflects, so where one light dominates this is close
+    to the probability of its sample.  Any function of the light and the
+    vertex would keep MIS unbiased (NEE and BSDF rays use the same)."""
+    m = RIS_CANDIDATES if m is None else m
+    return np.minimum(1.0, m * p_sel)
+
+
+def unshadowed(ctx, paths, v, e, p_sel, u, p_mis=None):
+    """A sample of emitter e[i] (picked with probability p_sel[i]) at each
+    vertex, with its MIS-weighted contribution if unoccluded (MIS with the
+    selection probability p_mis, None: p_sel)."""
     hit = v.hit
     ls = ctx.lights.sample(e, hit.p, u[:, 0], u[:, 1], u[:, 2], path=light_sample_path(ctx, paths, hit))
     wi_l = v.local(ls.wi)
@@ -464,19 +546,26 @@ def light_sample(ctx, paths, v, e, p_sel, u):
         f = visibility.visible_lobes_f(ctx, v, wi_l, ls.wi, e, f)
     side_l = bump_correction.sided(v.lobes, wi_l, ls.wi, hit.ng)
     contrib, w, live = nee.contribution(side_l, ls.wi, hit.ng, ls.pdf, p_sel, pdf_b, ls.delta,
-                                        ctx.settings.strategy == "mis", paths.beta, f, ls.Le)
+                                        ctx.settings.strategy == "mis", paths.beta, f, ls.Le, p_mis)
     if ctx.links is not None:
         contrib, w, live = linking_nee(ctx, e, hit.prim, contrib, w, live)
-    live = np.flatnonzero(live)
+    return _Unshadowed(e, ls.wi, wi_l, ls.dist, ls.on_surface, ls.delta, f, w, contrib, live)
+
+
+def shadow_batch(ctx, v, s):
+    """The ShadowBatch of an unshadowed sample ``s``: shadow rays of the
+    vertices it brings light to (None when none)."""
+    hit = v.hit
+    live = np.flatnonzero(s.live)
     if len(live) == 0:
         return None
     rays = shadow_rays if ctx.transparent_shadows else shadow_rays_f32
-    p, ng, dist = hit.p, hit.ng, ls.dist
+    p, ng, dist = hit.p, hit.ng, s.dist
     if hit.fibre is not None:   # light through a strand: the ray starts on its far side
-        p, ng, t = through_fibre(p, ng, hit.fibre, hit.fibre_radius, ls.wi)
+        p, ng, t = through_fibre(p, ng, hit.fibre, hit.fibre_radius, s.wi)
         dist = np.maximum(dist - t, 0.0)
-    origin, direction, tmax = rays(p, ng, ls.wi, dist, ls.on_surface, hit.eps, live)
-    sample = LightSample(e, ls.wi, wi_l, f, w, ls.delta, contrib)
+    origin, direction, tmax = rays(p, ng, s.wi, dist, s.on_surface, hit.eps, live)
+    sample = LightSample(s.e, s.wi, s.wi_l, s.f, s.w, s.delta, s.contrib)
     return ShadowBatch(v, sample, live, origin, direction, tmax)
 
 
