@@ -482,21 +482,18 @@ def resampled_light_sample(ctx, paths, v, depth, m=None):
     (nee.resample); one shadow ray per vertex."""
     m = RIS_CANDIDATES if m is None else m
     hit = v.hit
-    candidates = []
-    for k in range(m):
-        u = uniforms(ctx, paths, candidate_set(depth, k))
-        if k == 0:
-            # The selections are stratified: candidate k picks by a number
-            # of [k/m, (k+1)/m), so the candidates spread over the lights.
-            # Each candidate alone is then no unbiased estimate, but their
-            # mean is, and that is all nee.resample needs.
-            u_select = u[:, 0]
-        else:
-            choice = u[:, 0] if k == 1 else choice   # candidate 1's spare number: the choice
-        e, p_sel = ctx.lights.select(np.minimum((u_select + k) / m, _U_BELOW_1), hit.p, hit.ng)
-        candidates.append(unshadowed(ctx, paths, v, e, p_sel, u[:, 1:], resampled_mis_pmf(p_sel, m)))
-    if m == 1:
-        choice = np.zeros(len(v))
+    u = [uniforms(ctx, paths, candidate_set(depth, k)) for k in range(m)]
+    # The selections are stratified: candidate k picks by a number of
+    # [k/m, (k+1)/m), so the candidates spread over the lights.  Each
+    # candidate alone is then no unbiased estimate, but their mean is, and
+    # that is all nee.resample needs.
+    strata = np.minimum((u[0][:, :1] + np.arange(m)) / m, _U_BELOW_1)
+    e, p_sel = ctx.lights.select_many(strata, hit.p, hit.ng)
+    n = len(v)
+    candidates = [unshadowed(ctx, paths, v, e[:, k], p_sel[:, k], u[k][:, 1:], resampled_mis_pmf(p_sel[:, k], m))
+                  for k in range(m)]
+    # Candidate 1's spare number makes the choice.
+    choice = u[1][:, 0] if m > 1 else np.zeros(n)
     kept, factor = nee.resample(np.stack([c.contrib.sum(axis=1) for c in candidates]), choice)
     chosen = _Unshadowed.pick(candidates, kept)
     chosen.contrib = chosen.contrib * factor[:, None]
@@ -516,11 +513,13 @@ class _Unshadowed:
 
     @classmethod
     def pick(cls, candidates, kept):
-        """Row i of candidate kept[i], for every field."""
-        rows = np.arange(len(kept))
-        return cls(*(np.stack([np.broadcast_to(getattr(c, name), np.shape(candidates[0].e) +
-                                               np.shape(getattr(c, name))[1:]) for c in candidates])[kept, rows]
-                     for name in cls.FIELDS))
+        """Row i of candidate kept[i], for every field (np.choose: one pass)."""
+        out = []
+        for name in cls.FIELDS:
+            values = [getattr(c, name) for c in candidates]
+            index = kept if np.ndim(values[0]) < 2 else kept[:, None]
+            out.append(np.choose(index, values))
+        return cls(*out)
 
 
 def resampled_mis_pmf(p_sel, m=None):

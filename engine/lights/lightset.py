@@ -143,6 +143,14 @@ class LightSet:
             return self.tree.select(u, p, normals(n, len(u)))
         return self.dist.sample(u)
 
+    def select_many(self, u, p=None, n=None):
+        """``select`` of each column of u (N, M), rows ascending: emitters
+        and probabilities (N, M)."""
+        if self.tree is not None:
+            return self.tree.select_many(u, p, normals(n, len(u)))
+        picks = [self.dist.sample(u[:, k]) for k in range(u.shape[1])]
+        return np.stack([e for e, _ in picks], axis=1), np.stack([q for _, q in picks], axis=1)
+
     def selection_pdf(self, emitter, p=None, n=None, every=None):
         """Probability that ``select`` at p (normal n) picks ``emitter``; 1
         where ``every`` (per row: NEE sampled every light there)."""
