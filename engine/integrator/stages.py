@@ -365,7 +365,9 @@ def filter_glossy(ctx, paths, lobes):
 
 def sampling_every_light(ctx, v):
     """For light selection 'auto': which vertices sample every light
-    (mostly narrow glossy ones); None in the other modes."""
+    (mostly narrow glossy ones); for 'ris' every vertex (MIS then weighs
+    BSDF rays from there by ``resampled_mis_pmf``); None in the other
+    modes."""
     s = ctx.settings
     if ctx.lights.count == 0 or s.strategy == "bsdf" or s.light_selection not in ("auto", "ris"):
         return None
@@ -376,8 +378,9 @@ def sampling_every_light(ctx, v):
 
 def nee_rounds(ctx, v, every):
     """The light-sampling rounds at vertices ``v``: (vertices, mode,
-    emitters) with mode 'select' (one light picked per vertex) or 'each'
-    (one round per emitter).  Light selection 'auto' samples every light at
+    emitters) with mode 'select' (one light picked per vertex), 'resample'
+    (light selection 'ris': one kept of several candidates; points in
+    media pick as 'select') or 'each' (one round per emitter).  Light selection 'auto' samples every light at
     the vertices ``every`` and picks one at the others."""
     s = ctx.settings
     if ctx.lights.count == 0 or len(v) == 0:
@@ -475,10 +478,11 @@ _U_BELOW_1 = np.nextafter(1.0, 0.0)
 
 
 def resampled_light_sample(ctx, paths, v, depth, m=None):
-    """Resampled light selection: ``m`` candidates per vertex, each picked
-    by the light tree and sampled as usual (MIS against the BSDF with the
-    tree's probability, so a BSDF ray that meets a light is weighed as in
-    'tree'), one kept by its unshadowed contribution with the BSDF
+    """Resampled light selection (light selection 'ris'): ``m`` candidates
+    per vertex, each picked by the light tree and sampled as usual, weighed
+    by MIS against the BSDF with the selection probability
+    ``resampled_mis_pmf`` (which mis_hit gives a BSDF ray that meets the
+    light too), one kept by its unshadowed contribution with the BSDF
     (nee.resample); one shadow ray per vertex."""
     m = RIS_CANDIDATES if m is None else m
     hit = v.hit
