@@ -6,6 +6,8 @@ of engine/integrator/records.py it names; it updates the paths in place
 to a path is reported to the pass observer (engine.pass_events) with the
 record it came from.
 """
+from dataclasses import replace
+
 import numpy as np
 
 from .. import bsdf, bump_correction, nee, throughput
@@ -494,8 +496,14 @@ def resampled_light_sample(ctx, paths, v, depth, m=None):
     strata = np.minimum((u[0][:, :1] + np.arange(m)) / m, _U_BELOW_1)
     e, p_sel = ctx.lights.select_many(strata, hit.p, hit.ng)
     n = len(v)
-    candidates = [unshadowed(ctx, paths, v, e[:, k], p_sel[:, k], u[k][:, 1:], resampled_mis_pmf(p_sel[:, k], m))
-                  for k in range(m)]
+    # Every candidate's light point in one pass over m n rows (candidate k
+    # of vertex i in row k n + i): the light types' loops run once.
+    rows = np.tile(np.arange(n), m)
+    path = light_sample_path(ctx, paths, hit)
+    ls = ctx.lights.sample(e.T.ravel(), hit.p[rows], *np.concatenate([uk[:, 1:] for uk in u]).T,
+                           path=None if path is None else (path[0][rows], path[1][rows]))
+    candidates = [unshadowed(ctx, paths, v, e[:, k], p_sel[:, k], None, resampled_mis_pmf(p_sel[:, k], m),
+                             ls=_rows_of_sample(ls, k * n, (k + 1) * n)) for k in range(m)]
     # Candidate 1's spare number makes the choice.
     choice = u[1][:, 0] if m > 1 else np.zeros(n)
     kept, factor = nee.resample(np.stack([c.contrib.sum(axis=1) for c in candidates]), choice)
@@ -537,12 +545,19 @@ def resampled_mis_pmf(p_sel, m=None):
     return np.minimum(1.0, m * p_sel)
 
 
-def unshadowed(ctx, paths, v, e, p_sel, u, p_mis=None):
+def _rows_of_sample(ls, start, stop):
+    """Rows start:stop of a lights.LightSample (views)."""
+    return replace(ls, **{f: getattr(ls, f)[start:stop] for f in ("wi", "dist", "Le", "pdf", "delta", "on_surface")})
+
+
+def unshadowed(ctx, paths, v, e, p_sel, u, p_mis=None, ls=None):
     """A sample of emitter e[i] (picked with probability p_sel[i]) at each
     vertex, with its MIS-weighted contribution if unoccluded (MIS with the
-    selection probability p_mis, None: p_sel)."""
+    selection probability p_mis, None: p_sel); ``ls``: the light sample, if
+    drawn already (else drawn by u)."""
     hit = v.hit
-    ls = ctx.lights.sample(e, hit.p, u[:, 0], u[:, 1], u[:, 2], path=light_sample_path(ctx, paths, hit))
+    if ls is None:
+        ls = ctx.lights.sample(e, hit.p, u[:, 0], u[:, 1], u[:, 2], path=light_sample_path(ctx, paths, hit))
     wi_l = v.local(ls.wi)
     f, pdf_b = bsdf.eval_pdf(v.lobes, v.wo_l, wi_l, *v.lobes_wo)
     if ctx.light_excludes:
