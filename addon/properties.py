@@ -19,6 +19,8 @@ LIGHT_SELECTION_ITEMS = (
     ('POWER', "Power", "Pick one light per vertex, proportional to its power", 1),
     ('UNIFORM', "Uniform", "Pick one light per vertex, every light equally likely", 2),
     ('ALL', "All Lights", "Sample every light at every vertex (slower, less noise with few lights)", 3),
+    ('RIS', "Resampled", "Draw 4 lights by the light tree at each vertex and keep one by its unshadowed "
+     "contribution with the BSDF (one shadow ray): less noise over glossy surfaces, more CPU per sample", 5),
 )
 
 STRATEGY_ITEMS = (

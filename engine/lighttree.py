@@ -137,6 +137,33 @@ class LightTree:
             emitter[rows], prob[rows] = picked, p_rows
         return emitter, prob
 
+    def select_many(self, u, p, n):
+        """``select`` for several numbers per shading point, u (N, M), each
+        row ascending (stratified candidates): emitters and probabilities
+        (N, M), as ``select`` gives them column by column.  The compiled
+        descent reuses a node's split where a row's descent repeats the one
+        before it (ascending numbers share their first levels)."""
+        u = np.asarray(u, float)
+        m, k = u.shape
+        emitter = np.zeros((m, k), np.int64)
+        prob = np.ones((m, k))
+        tree = np.ones((m, k), bool)
+        uu = u.copy()
+        if len(self.infinite):
+            pick_inf = (u < self.p_infinite) | (not self.has_tree)
+            j = np.minimum((u[pick_inf] / self.p_infinite * len(self.infinite)).astype(np.int64),
+                           len(self.infinite) - 1)
+            emitter[pick_inf] = self.infinite[j]
+            prob[pick_inf] = self.p_infinite / len(self.infinite)
+            tree = ~pick_inf
+            if self.has_tree:
+                uu = np.where(tree, (u - self.p_infinite) / (1.0 - self.p_infinite), u)
+        if self.has_tree and tree.any():
+            prob[tree] = 1.0 - self.p_infinite
+            _descend_many(np.ascontiguousarray(uu), np.ascontiguousarray(tree), _rows(p, np.arange(m)),
+                          _rows(n, np.arange(m)), *self._tree_arrays(), self.leaf_emitter, emitter, prob)
+        return emitter, prob
+
     def pmf(self, emitter, p, n):
         """Probability that ``select`` picks ``emitter`` at p (same products)."""
         emitter = np.asarray(emitter, np.int64)
@@ -324,3 +351,59 @@ def _path_pmf(emitter, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, 
             pl = _p_left_one(i, path_node[e, k], p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi,
                              left, right)
             prob[i] *= pl if path_left[e, k] else 1.0 - pl
+
+
+def _descend_many_numpy(u, use, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf,
+                        emitter, prob):
+    """``_descend`` of each column of u (N, M) where ``use``."""
+    for k in range(u.shape[1]):
+        rows = np.flatnonzero(use[:, k])
+        if len(rows) == 0:
+            continue
+        e, pr = np.empty(len(rows), np.int64), prob[rows, k].copy()
+        _descend_numpy(u[rows, k], p[rows], n[rows], center, radius, w, two_sided, sin_o, cos_o, cos_e, phi,
+                       left, right, leaf, e, pr)
+        emitter[rows, k], prob[rows, k] = e, pr
+
+
+_CACHED_LEVELS = 64
+
+
+@loop_kernel(f"void(float64[:, ::1], boolean[:, ::1], {_TREE_SIGNATURE}, int64[::1], int64[:, ::1], "
+             "float64[:, ::1])", _descend_many_numpy)
+def _descend_many(u, use, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf,
+                  emitter, prob):
+    cache_node = np.empty(_CACHED_LEVELS, np.int64)
+    cache_pl = np.empty(_CACHED_LEVELS)
+    for i in range(u.shape[0]):
+        valid = 0   # levels of the row's previous descent kept in the cache
+        for k in range(u.shape[1]):
+            if not use[i, k]:
+                continue
+            node = 0
+            uu = u[i, k]
+            level = 0
+            same = True
+            while leaf[node] < 0:
+                if same and level < valid and cache_node[level] == node:
+                    pl = cache_pl[level]
+                else:
+                    same = False
+                    pl = _p_left_one(i, node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi,
+                                     left, right)
+                    if level < _CACHED_LEVELS:
+                        cache_node[level], cache_pl[level] = node, pl
+                if uu < pl:
+                    prob[i, k] *= pl
+                    v = uu / pl
+                    node = left[node]
+                else:
+                    prob[i, k] *= 1.0 - pl
+                    v = (uu - pl) / (1.0 - pl)
+                    node = right[node]
+                if v != v:
+                    v = 0.0
+                uu = min(max(v, 0.0), _U_MAX)
+                level += 1
+            valid = min(level, _CACHED_LEVELS)
+            emitter[i, k] = leaf[node]

@@ -10,6 +10,16 @@ direction leaves on the same side of the geometric and the shading surface
 (lights behind the surface count for transmitting lobes, whose f is 0
 otherwise).  The compiled row loop and the NumPy form agree bit for bit.
 ``add_rows`` adds the light of the samples whose shadow rays are free.
+
+``resample`` is resampled importance sampling (Talbot et al. 2005) over a
+vertex's light candidates: each candidate is an ordinary light sample
+(drawn by the selection pmf, the light's own pdf, weighed by MIS against
+the BSDF with that pdf), and its unshadowed contribution, BSDF included,
+is the target.  One candidate is kept with probability proportional to
+its target and scaled by (sum of targets) / (M target): the expected value
+of the kept sample, shadow included, is the mean of the M candidates'
+estimates, so the estimator is unbiased whatever the target, while its one
+shadow ray goes where the BSDF and the light agree.
 """
 import numpy as np
 
@@ -18,12 +28,12 @@ from .sampling import power_heuristic
 from .vec import column, dot, row_any_positive, rows3
 
 
-def _contribution_numpy(wi_l, wi, ng, light_pdf, p_sel, pdf_b, delta, mis, beta, f, le, contrib, w, live):
+def _contribution_numpy(wi_l, wi, ng, light_pdf, p_sel, p_mis, pdf_b, delta, mis, beta, f, le, contrib, w, live):
     cos = np.abs(wi_l[:, 2])
     p_light = p_sel * light_pdf
     g = dot(wi, ng)
     ok = (light_pdf > 0) & (cos > 0) & (g != 0) & ((g > 0) == (wi_l[:, 2] > 0))
-    w[:] = np.where(delta, 1.0, power_heuristic(p_light, pdf_b)) if mis else 1.0
+    w[:] = np.where(delta, 1.0, power_heuristic(p_mis * light_pdf, pdf_b)) if mis else 1.0
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         scale = np.where(ok, cos * w / np.where(ok, p_light, 1.0), 0.0)
         contrib[:] = beta * f * le * scale[:, None]
@@ -31,9 +41,9 @@ def _contribution_numpy(wi_l, wi, ng, light_pdf, p_sel, pdf_b, delta, mis, beta,
 
 
 @kernels.loop_kernel("void(float64[:, :], float64[:, :], float64[:, :], float64[:], float64[:], float64[:], "
-                     "boolean[:], boolean, float64[:, :], float64[:, :], float64[:, :], float64[:, ::1], "
-                     "float64[::1], boolean[::1])", _contribution_numpy)
-def _contribution_rows(wi_l, wi, ng, light_pdf, p_sel, pdf_b, delta, mis, beta, f, le, contrib, w, live):
+                     "float64[:], boolean[:], boolean, float64[:, :], float64[:, :], float64[:, :], "
+                     "float64[:, ::1], float64[::1], boolean[::1])", _contribution_numpy)
+def _contribution_rows(wi_l, wi, ng, light_pdf, p_sel, p_mis, pdf_b, delta, mis, beta, f, le, contrib, w, live):
     for i in range(len(wi_l)):
         z = wi_l[i, 2]
         cos = abs(z)
@@ -42,11 +52,12 @@ def _contribution_rows(wi_l, wi, ng, light_pdf, p_sel, pdf_b, delta, mis, beta, 
         ok = light_pdf[i] > 0 and cos > 0 and g != 0 and (g > 0) == (z > 0)
         weight = 1.0
         if mis and not delta[i]:
-            a2 = p_light * p_light
+            q = p_mis[i] * light_pdf[i]
+            a2 = q * q
             b = pdf_b[i]
             weight = a2 / (a2 + b * b)
             if not np.isfinite(weight):   # sampling.power_heuristic's rule
-                weight = 1.0 if np.isinf(p_light) and np.isfinite(b) else 0.0
+                weight = 1.0 if np.isinf(q) and np.isfinite(b) else 0.0
         w[i] = weight
         scale = cos * weight / p_light if ok else 0.0
         any_positive = False
@@ -57,12 +68,14 @@ def _contribution_rows(wi_l, wi, ng, light_pdf, p_sel, pdf_b, delta, mis, beta, 
         live[i] = any_positive
 
 
-def contribution(wi_l, wi, ng, light_pdf, p_sel, pdf_b, delta, mis, beta, f, le):
-    """(contrib (N, 3), MIS weight (N,), live (N,) bool) of light samples."""
+def contribution(wi_l, wi, ng, light_pdf, p_sel, pdf_b, delta, mis, beta, f, le, p_mis=None):
+    """(contrib (N, 3), MIS weight (N,), live (N,) bool) of light samples.
+    p_mis: the selection probability the MIS weight takes (the one BSDF
+    rays that meet the light are weighed with; None: p_sel)."""
     n = len(wi_l)
     wi_l, wi, ng = rows3(wi_l, wi, ng)
     contrib, w, live = np.empty((n, 3)), np.empty(n), np.empty(n, bool)
-    columns = [column(a, n, np.float64) for a in (light_pdf, p_sel, pdf_b)]
+    columns = [column(a, n, np.float64) for a in (light_pdf, p_sel, p_sel if p_mis is None else p_mis, pdf_b)]
     _contribution_rows(wi_l, wi, ng, *columns, column(delta, n, bool), bool(mis), *rows3(beta, f, le),
                        contrib, w, live)
     return contrib, w, live
@@ -93,3 +106,21 @@ def _add_rows_loop(L, rows, values):
     for r in rows:
         for k in range(3):
             L[r, k] += values[r, k]
+
+
+def resample(targets, u):
+    """Resampled importance sampling among M candidates per row: targets
+    (M, N) >= 0 (a candidate's unshadowed contribution), u (N,) uniform.
+    Returns the candidate kept per row (N,) and the factor its estimate is
+    multiplied by, sum(targets) / (M targets[kept]) (0 where every target
+    is 0: no candidate brings light)."""
+    m = len(targets)
+    cum = np.cumsum(targets, axis=0)
+    total = cum[-1]
+    # The first candidate whose cumulative target passes u * total has a
+    # positive target (u < 1, so u * total < total where total > 0).
+    kept = np.minimum((cum <= (u * total)[None, :]).sum(axis=0), m - 1)
+    chosen = np.take_along_axis(targets, kept[None, :], axis=0)[0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        factor = np.where(chosen > 0, total / (m * np.where(chosen > 0, chosen, 1.0)), 0.0)
+    return kept, factor

@@ -61,6 +61,16 @@ def emitter_set(step, emitter):
     return 0x40000000 | ((step & 0xff) << 22) | (int(emitter) & 0x3fffff)
 
 
+def candidate_set(step, k):
+    """Dimension-set id of light candidate ``k`` at wavefront step ``step``
+    under resampled light selection (bit 31: disjoint from every other
+    set); candidate 0 is the step's LIGHT set, the set after the last
+    candidate gives the choice among them."""
+    if k == 0:
+        return vertex_set(step, LIGHT)
+    return 0x80000000 | ((step & 0xff) << 22) | (int(k) & 0x3fffff)
+
+
 # ---------------------------------------------------------------------------
 # Tables
 

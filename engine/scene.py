@@ -604,7 +604,8 @@ class RenderSettings:
     'power', 'all', 'tree' (a light tree: by each light's estimated
     contribution at the shading point; for scenes with many lights) or 'auto'
     (the tree, and every light at glossy vertices with 2-4 lights and no
-    emissive mesh: engine/lights/lightset.py resolve_selection).  strategy: 'mis', 'light' (NEE only) or 'bsdf'.
+    emissive mesh: engine/lights/lightset.py resolve_selection) or 'ris' (4 light-tree
+    candidates per vertex, one kept by its unshadowed contribution with the BSDF: engine/nee.py resample).  strategy: 'mis', 'light' (NEE only) or 'bsdf'.
     clamp: 0 disables clamping of a sample's radiance.  max_paths bounds the
     number of paths in flight (memory); threads 0 = every core.
     time_limit: seconds (0 = none); stops after the pass that crosses it.

@@ -306,6 +306,41 @@ def build_subsurface():
     return finish(scene, cam, (0.0, 0.0, 0.5))
 
 
+def build_glossy_lights():
+    """Seven lights of five kinds (points of two sizes, a spot, a rectangle,
+    a disk, a big sphere, a sun) over three glossy plates of GGX roughness
+    0.05, 0.15 and 0.35, a rough metal plate and a glossy Principled floor:
+    a scene no light-selection rule was tuned on (issue 25)."""
+    from mathutils import Vector
+    scene = bs.reset()
+    floor(scene, principled("Floor", (0.35, 0.35, 0.38), roughness=0.25))
+    backdrop(scene, bs.node_material("Wall", 'diffuse', (0.5, 0.5, 0.5)), y=4.0)
+    eye, target = Vector((0.0, -6.0, 2.6)), Vector((0.0, 2.5, 2.4))
+    plates = ((-2.1, bs.node_material("Sharp", 'glossy', (0.8, 0.8, 0.8), 0.05)),
+              (-0.7, bs.node_material("Medium", 'glossy', (0.8, 0.8, 0.8), 0.15)),
+              (0.7, bs.node_material("Rough", 'glossy', (0.8, 0.8, 0.8), 0.35)),
+              (2.1, principled("Metal", (0.9, 0.6, 0.4), metallic=1.0, roughness=0.2)))
+    for x, material in plates:
+        center = Vector((x, 0.6, 0.45))
+        normal = ((eye - center).normalized() + (target - center).normalized()).normalized()
+        plate = bs.box(scene, material.name, (1.2, 1.2, 0.04), center, material=material)
+        plate.rotation_euler = normal.to_track_quat('Z', 'Y').to_euler()
+    bs.light(scene, "PointSmall", 'POINT', (-2.6, 2.4, 2.6), 40.0, (1.0, 0.4, 0.3), shadow_soft_size=0.05)
+    bs.light(scene, "PointLarge", 'POINT', (1.6, 2.8, 2.0), 60.0, (0.4, 0.6, 1.0), shadow_soft_size=0.4)
+    bs.light(scene, "Spot", 'SPOT', (0.0, 2.0, 3.4), 300.0, (1.0, 0.9, 0.6), shadow_soft_size=0.1,
+             spot_size=math.radians(70), spot_blend=0.3, rotation=(math.radians(-30), 0.0, 0.0))
+    bs.light(scene, "Rect", 'AREA', (-1.2, 3.2, 1.6), 120.0, (0.5, 1.0, 0.5), size=0.6, size_y=0.2,
+             shape='RECTANGLE', rotation=(math.radians(-80), 0.0, 0.0))
+    bs.light(scene, "Disk", 'AREA', (2.8, 1.5, 3.0), 150.0, (1.0, 0.6, 0.9), size=0.5, shape='DISK',
+             rotation=(math.radians(-20), math.radians(30), 0.0))
+    bs.light(scene, "Sphere", 'POINT', (-0.4, 3.4, 3.2), 80.0, (0.9, 0.9, 1.0), shadow_soft_size=0.7)
+    bs.light(scene, "Sun", 'SUN', (0, 0, 5), 0.5, (1.0, 0.95, 0.85),
+             rotation=(math.radians(50), 0.0, math.radians(20)), angle=math.radians(3))
+    cam = bs.camera(scene, tuple(eye), (0, 0, 0), lens=35.0)
+    bs.world(scene, (0.01, 0.01, 0.01))
+    return finish(scene, cam, (0.0, 0.8, 0.7))
+
+
 SCENES = {
     'cornell': ("Cornell box, one rectangle light", lambda: open_blend('cornell')),
     'veach_mis': ("Veach MIS (4 GGX plates, 4 sphere lights)", lambda: open_blend('veach_mis')),
@@ -317,6 +352,7 @@ SCENES = {
     'procedural': ("procedural nodes (Noise, Voronoi, Brick, Wave, ramps, a group)", build_procedural),
     'fog': ("a fog room lit by a spot (homogeneous volume, single scattering)", build_fog),
     'subsurface': ("random-walk subsurface sphere and torus, front and rim light", build_subsurface),
+    'glossy_lights': ("7 lights of 5 kinds over glossy plates", build_glossy_lights),
 }
 BLEND_FILES = {'cornell', 'veach_mis'}
 

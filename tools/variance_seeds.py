@@ -2,6 +2,7 @@
 
     .venv/bin/python -P tools/variance_seeds.py veach_mis --samples 128 --seeds 64
     .venv/bin/python -P tools/variance_seeds.py veach_mis --selection all tree --samples 32 --seeds 16
+    .venv/bin/python -P tools/variance_seeds.py glossy_lights --selection tree ris ris:2 --samples 16 --seeds 8
 
 Renders the scene exported by tools/profile_scene.py (cached pickle, 256 px,
 8 bounces) with the engine alone, each seed at the same sample count, and
@@ -44,7 +45,8 @@ def parse_args(argv):
     parser.add_argument('--seeds', type=int, default=32)
     parser.add_argument('--first-seed', type=int, default=1000)
     parser.add_argument('--selection', nargs='+', default=[None],
-                        help="light selections to compare (auto, tree, power, uniform, all); default: the scene's")
+                        help="light selections to compare (auto, tree, ris, ris:M with M candidates, power, uniform, "
+                             "all); default: the scene's")
     parser.add_argument('--bright', action='store_true', help="only pixels the reference shows brighter than 1")
     return parser.parse_args(argv)
 
@@ -105,7 +107,12 @@ def main(argv=None):
     scene, settings = load(args.scene)
     kernels.configure(True)
     kernels.wait(900)
+    from engine.integrator import stages
+    default_candidates = stages.RIS_CANDIDATES
     for selection in args.selection:
+        # 'ris:M': resampled selection with M candidates per vertex.
+        selection, _, candidates = (selection or '').partition(':')
+        stages.RIS_CANDIDATES = int(candidates) if candidates else default_candidates
         chosen = replace(settings, light_selection=selection) if selection else settings
         ctx = prepare(scene, chosen)
         image_pixels = ctx.camera.width * ctx.camera.height
@@ -115,7 +122,8 @@ def main(argv=None):
             means, cpu = render_seeds(ctx, pixels, args.samples, args.seeds, args.first_seed)
         v, error = summary(means, args.samples, image_pixels)
         per_64k = cpu / (args.seeds * args.samples * len(pixels)) * 65536
-        print(f"{args.scene} ({chosen.light_selection}, {args.samples} spp, {args.seeds} seeds, "
+        label = chosen.light_selection + (f":{stages.RIS_CANDIDATES}" if chosen.light_selection == "ris" else "")
+        print(f"{args.scene} ({label}, {args.samples} spp, {args.seeds} seeds, "
               f"{len(pixels)} px): variance per sample {v:.4f} +- {error:.4f}, "
               f"{per_64k:.3f} CPU-s per 64k paths, product {v * per_64k:.4f}", flush=True)
     return 0

@@ -31,7 +31,8 @@ class Paths:
     prev_p: np.ndarray
     prev_n: np.ndarray
     # NEE sampled every light at the previous vertex (light selection
-    # 'auto' at a glossy vertex): its selection probability is 1 there.
+    # 'auto' at a glossy vertex): its selection probability is 1 there; or
+    # resampled its light candidates ('ris'): stages.resampled_mis_pmf.
     prev_every: np.ndarray
     # VIS_* bit of the ray: camera, or the kind of the bounce that cast it
     # (tracked only when something in the scene is invisible to some rays).

@@ -6,6 +6,8 @@ of engine/integrator/records.py it names; it updates the paths in place
 to a path is reported to the pass observer (engine.pass_events) with the
 record it came from.
 """
+from dataclasses import replace
+
 import numpy as np
 
 from .. import bsdf, bump_correction, nee, throughput
@@ -15,7 +17,7 @@ from ..motion import path_time, triangles_at
 from ..points import curve_hits, curve_tangents, curve_rows, sphere_hits
 from ..nodes import NodeRays, ShadingContext
 from ..nodes.context import PATH_COLUMNS
-from ..sampler import BSDF, LIGHT, emitter_set, vertex_set
+from ..sampler import BSDF, LIGHT, candidate_set, emitter_set, vertex_set
 from ..sampling import power_heuristic
 from ..vec import dot, frame, row_any_positive, row_max, to_local
 from . import catcher, subsurface, transparency, visibility
@@ -104,6 +106,10 @@ def mis_hit(ctx, paths, i, emitter, pdf_light):
         return np.ones(len(i))
     if s.strategy == "light":
         return prev_delta.astype(np.float64)
+    if s.light_selection == "ris":
+        p_sel = ctx.lights.selection_pdf(emitter, paths.prev_p[i], paths.prev_n[i])
+        p_light = np.where(paths.prev_every[i], resampled_mis_pmf(p_sel), p_sel) * pdf_light
+        return np.where(prev_delta, 1.0, power_heuristic(paths.prev_pdf[i], p_light))
     every = paths.prev_every[i] if ctx.lights.every_at_glossy else None
     p_light = ctx.lights.selection_pdf(emitter, paths.prev_p[i], paths.prev_n[i], every) * pdf_light
     return np.where(prev_delta, 1.0, power_heuristic(paths.prev_pdf[i], p_light))
@@ -368,17 +374,22 @@ def filter_glossy(ctx, paths, lobes):
 
 def sampling_every_light(ctx, v):
     """For light selection 'auto': which vertices sample every light
-    (mostly narrow glossy ones); None in the other modes."""
+    (mostly narrow glossy ones); for 'ris' every vertex (MIS then weighs
+    BSDF rays from there by ``resampled_mis_pmf``); None in the other
+    modes."""
     s = ctx.settings
-    if ctx.lights.count == 0 or s.strategy == "bsdf" or s.light_selection != "auto":
+    if ctx.lights.count == 0 or s.strategy == "bsdf" or s.light_selection not in ("auto", "ris"):
         return None
+    if s.light_selection == "ris":   # every surface vertex resamples its lights
+        return np.ones(len(v), bool)
     return every_light(v.lobes, v.selection)
 
 
 def nee_rounds(ctx, v, every):
     """The light-sampling rounds at vertices ``v``: (vertices, mode,
-    emitters) with mode 'select' (one light picked per vertex) or 'each'
-    (one round per emitter).  Light selection 'auto' samples every light at
+    emitters) with mode 'select' (one light picked per vertex), 'resample'
+    (light selection 'ris': one kept of several candidates; points in
+    media pick as 'select') or 'each' (one round per emitter).  Light selection 'auto' samples every light at
     the vertices ``every`` and picks one at the others."""
     s = ctx.settings
     if ctx.lights.count == 0 or len(v) == 0:
@@ -387,6 +398,8 @@ def nee_rounds(ctx, v, every):
         return [(v, "each", ctx.delta_emitters)]
     if s.light_selection == "all":
         return [(v, "each", ctx.all_emitters)]
+    if s.light_selection == "ris":
+        return [(v, "resample", None)]
     if every is None or not every.any():
         return [(v, "select", None)]
     if every.all():
@@ -414,7 +427,9 @@ def light_samples(ctx, paths, v, depth, every):
         rows = at.path_rows
         on = paths if rows is None else RowView(paths, rows, len(paths.pix))
         n = len(at)
-        if mode == "select":
+        if mode == "resample":
+            batches = [resampled_light_sample(ctx, on, at, depth)]
+        elif mode == "select":
             u = uniforms(ctx, on, vertex_set(depth, LIGHT))
             e, p_sel = ctx.lights.select(u[:, 0], at.hit.p, at.hit.ng)
             batches = [light_sample(ctx, on, at, e, p_sel, u[:, 1:])]
@@ -463,23 +478,115 @@ def light_sample(ctx, paths, v, e, p_sel, u):
     """A sample of emitter e[i] (picked with probability p_sel[i]) at each
     vertex: its MIS-weighted contribution and the shadow rays of the
     vertices it brings light to (None when none)."""
+    return shadow_batch(ctx, v, unshadowed(ctx, paths, v, e, p_sel, u))
+
+
+# Light candidates per vertex under resampled light selection (nee.resample).
+RIS_CANDIDATES = 4
+_U_BELOW_1 = np.nextafter(1.0, 0.0)
+
+
+def resampled_light_sample(ctx, paths, v, depth, m=None):
+    """Resampled light selection (light selection 'ris'): ``m`` candidates
+    per vertex, each picked by the light tree and sampled as usual, weighed
+    by MIS against the BSDF with the selection probability
+    ``resampled_mis_pmf`` (which mis_hit gives a BSDF ray that meets the
+    light too), one kept by its unshadowed contribution with the BSDF
+    (nee.resample); one shadow ray per vertex."""
+    m = RIS_CANDIDATES if m is None else m
     hit = v.hit
-    ls = ctx.lights.sample(e, hit.p, u[:, 0], u[:, 1], u[:, 2], path=light_sample_path(ctx, paths, hit))
+    u = [uniforms(ctx, paths, candidate_set(depth, k)) for k in range(m)]
+    # The selections are stratified: candidate k picks by a number of
+    # [k/m, (k+1)/m), so the candidates spread over the lights.  Each
+    # candidate alone is then no unbiased estimate, but their mean is, and
+    # that is all nee.resample needs.
+    strata = np.minimum((u[0][:, :1] + np.arange(m)) / m, _U_BELOW_1)
+    e, p_sel = ctx.lights.select_many(strata, hit.p, hit.ng)
+    n = len(v)
+    # Every candidate's light point in one pass over m n rows (candidate k
+    # of vertex i in row k n + i): the light types' loops run once.
+    rows = np.tile(np.arange(n), m)
+    path = light_sample_path(ctx, paths, hit)
+    ls = ctx.lights.sample(e.T.ravel(), hit.p[rows], *np.concatenate([uk[:, 1:] for uk in u]).T,
+                           path=None if path is None else (path[0][rows], path[1][rows]))
+    candidates = [unshadowed(ctx, paths, v, e[:, k], p_sel[:, k], None, resampled_mis_pmf(p_sel[:, k], m),
+                             ls=_rows_of_sample(ls, k * n, (k + 1) * n)) for k in range(m)]
+    # Candidate 1's spare number makes the choice.
+    choice = u[1][:, 0] if m > 1 else np.zeros(n)
+    kept, factor = nee.resample(np.stack([c.contrib.sum(axis=1) for c in candidates]), choice)
+    chosen = _Unshadowed.pick(candidates, kept)
+    chosen.contrib = chosen.contrib * factor[:, None]
+    chosen.live = chosen.live & (factor > 0)
+    return shadow_batch(ctx, v, chosen)
+
+
+class _Unshadowed:
+    """A light sample at each vertex before its shadow ray: emitter e,
+    direction (world and shading frame), distance, whether it ends on a
+    triangle, delta, BSDF value f, MIS weight w, contribution, live."""
+    FIELDS = ("e", "wi", "wi_l", "dist", "on_surface", "delta", "f", "w", "contrib", "live")
+
+    def __init__(self, *values):
+        for name, value in zip(self.FIELDS, values):
+            setattr(self, name, value)
+
+    @classmethod
+    def pick(cls, candidates, kept):
+        """Row i of candidate kept[i], for every field (np.choose: one pass)."""
+        out = []
+        for name in cls.FIELDS:
+            values = [getattr(c, name) for c in candidates]
+            index = kept if np.ndim(values[0]) < 2 else kept[:, None]
+            out.append(np.choose(index, values))
+        return cls(*out)
+
+
+def resampled_mis_pmf(p_sel, m=None):
+    """The selection probability MIS weighs a light by at a vertex that
+    resampled its light candidates: about the chance that the light is
+    among the m stratified candidates, min(1, m p_sel); resampling keeps a
+    candidate the BSDF reflects, so where one light dominates this is close
+    to the probability of its sample.  Any function of the light and the
+    vertex would keep MIS unbiased (NEE and BSDF rays use the same)."""
+    m = RIS_CANDIDATES if m is None else m
+    return np.minimum(1.0, m * p_sel)
+
+
+def _rows_of_sample(ls, start, stop):
+    """Rows start:stop of a lights.LightSample (views)."""
+    return replace(ls, **{f: getattr(ls, f)[start:stop] for f in ("wi", "dist", "Le", "pdf", "delta", "on_surface")})
+
+
+def unshadowed(ctx, paths, v, e, p_sel, u, p_mis=None, ls=None):
+    """A sample of emitter e[i] (picked with probability p_sel[i]) at each
+    vertex, with its MIS-weighted contribution if unoccluded (MIS with the
+    selection probability p_mis, None: p_sel); ``ls``: the light sample, if
+    drawn already (else drawn by u)."""
+    hit = v.hit
+    if ls is None:
+        ls = ctx.lights.sample(e, hit.p, u[:, 0], u[:, 1], u[:, 2], path=light_sample_path(ctx, paths, hit))
     wi_l = v.local(ls.wi)
     f, pdf_b = bsdf.eval_pdf(v.lobes, v.wo_l, wi_l, *v.lobes_wo)
     if ctx.light_excludes:
         f = visibility.visible_lobes_f(ctx, v, wi_l, ls.wi, e, f)
     side_l = bump_correction.sided(v.lobes, wi_l, ls.wi, hit.ng)
     contrib, w, live = nee.contribution(side_l, ls.wi, hit.ng, ls.pdf, p_sel, pdf_b, ls.delta,
-                                        ctx.settings.strategy == "mis", paths.beta, f, ls.Le)
+                                        ctx.settings.strategy == "mis", paths.beta, f, ls.Le, p_mis)
     if ctx.links is not None:
         contrib, w, live = linking_nee(ctx, e, hit.prim, contrib, w, live)
-    live = np.flatnonzero(live)
+    return _Unshadowed(e, ls.wi, wi_l, ls.dist, ls.on_surface, ls.delta, f, w, contrib, live)
+
+
+def shadow_batch(ctx, v, s):
+    """The ShadowBatch of an unshadowed sample ``s``: shadow rays of the
+    vertices it brings light to (None when none)."""
+    hit = v.hit
+    live = np.flatnonzero(s.live)
     if len(live) == 0:
         return None
     rays = shadow_rays if ctx.transparent_shadows else shadow_rays_f32
-    origin, direction, tmax = rays(hit.p, hit.ng, ls.wi, ls.dist, ls.on_surface, hit.eps, live)
-    sample = LightSample(e, ls.wi, wi_l, f, w, ls.delta, contrib)
+    origin, direction, tmax = rays(hit.p, hit.ng, s.wi, s.dist, s.on_surface, hit.eps, live)
+    sample = LightSample(s.e, s.wi, s.wi_l, s.f, s.w, s.delta, s.contrib)
     # shadow rays from a strand pass it (light through the fibre: its TT lobes)
     skip = None if ctx.strands is None else curve_rows(ctx.strands, hit.prim[live])
     return ShadowBatch(v, sample, live, origin, direction, tmax, skip=skip)

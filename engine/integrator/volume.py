@@ -305,7 +305,7 @@ def direct_light(ctx, paths, p, phase, depth, obs=NO_PASSES):
     n = len(paths.pix)
     zeros = np.zeros((n, 3))
     for _, mode, emitters in nee_rounds(ctx, _Points(n), None):
-        if mode == "select":
+        if mode in ("select", "resample"):   # resampling weighs by a BSDF: the tree's pick at points in media
             u = ctx.sampler.get(paths.pseed, paths.sample, vertex_set(depth, LIGHT))
             e, p_sel = ctx.lights.select(u[:, 0], p, zeros)
             _light_sample(ctx, paths, p, phase, e, p_sel, u[:, 1:], obs=obs)

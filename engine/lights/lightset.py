@@ -41,6 +41,8 @@ def resolve_selection(strategy, lights, mesh_emitters):
     at glossy vertices): 'auto' is the light tree, with every light at glossy
     vertices when there are 2 to AUTO_ALL_LIGHTS emitters, none an emissive
     mesh.  Other selections stand for themselves."""
+    if strategy == "ris":
+        return "tree", False
     if strategy != "auto":
         return strategy, False
     return "tree", mesh_emitters == 0 and 2 <= lights <= AUTO_ALL_LIGHTS
@@ -73,6 +75,7 @@ class LightSet:
             base = group.stop
         self.count = base
         surface = sum(g.table.count for g in self.groups if g.definition.hit == SURFACE)
+        self.resampled = strategy == "ris"
         strategy, self.every_at_glossy = resolve_selection(strategy, self.count, surface)
         self.strategy = strategy
         radius = _scene_radius(triangles)
@@ -139,6 +142,14 @@ class LightSet:
         if self.tree is not None:
             return self.tree.select(u, p, normals(n, len(u)))
         return self.dist.sample(u)
+
+    def select_many(self, u, p=None, n=None):
+        """``select`` of each column of u (N, M), rows ascending: emitters
+        and probabilities (N, M)."""
+        if self.tree is not None:
+            return self.tree.select_many(u, p, normals(n, len(u)))
+        picks = [self.dist.sample(u[:, k]) for k in range(u.shape[1])]
+        return np.stack([e for e, _ in picks], axis=1), np.stack([q for _, q in picks], axis=1)
 
     def selection_pdf(self, emitter, p=None, n=None, every=None):
         """Probability that ``select`` at p (normal n) picks ``emitter``; 1

@@ -283,6 +283,13 @@ def test_light_tree_descent_agrees(jit):
     # Two compiled paths to one product of per-level probabilities (at most
     # about 20 levels of a few roundings each).
     np.testing.assert_allclose(tree.pmf(plain[0], p, nn), plain[1], rtol=64 * np.finfo(float).eps, atol=0)
+    # Several ascending numbers per point (resampled selection's strata):
+    # the compiled descent reuses the levels a row's descents share.
+    strata = np.minimum((u[:, None] + np.arange(4)) / 4, np.nextafter(1.0, 0.0))
+    many = both_ways(tree.select_many, strata, p, nn)
+    assert_agree(*many)
+    for k in range(4):
+        assert_agree(tuple(a[:, k] for a in many[0]), tree.select(strata[:, k], p, nn))
 
 
 def test_hit_geometry_agrees(jit):
