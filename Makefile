@@ -2,7 +2,7 @@
 PY := .venv/bin/python
 export PYTHONPATH := $(CURDIR)
 
-.PHONY: setup render render-engine test test-engine test-addon mutate bench bench-cycles bench-export zip install-blender clean
+.PHONY: setup render render-engine test test-engine test-addon mutate bench bench-cycles bench-yardstick bench-export zip install-blender clean
 
 setup:
 	./scripts/setup.sh
@@ -45,6 +45,11 @@ bench: setup
 # Ember against Cycles through Blender on the yardstick scenes (QUICK=1: 64x64).
 bench-cycles: setup
 	$(PY) -P tools/bench_cycles.py $(if $(QUICK),--quick,)
+
+# Measured time to Cycles' RMSE (Cycles' better light-tree setting, Ember's
+# sample count by bisection, 5 seeds each): tools/yardstick.py.
+bench-yardstick: setup
+	$(PY) -P tools/yardstick.py $(if $(QUICK),--quick,) $(if $(SCENES),--scenes $(SCENES),)
 
 bench-export: setup
 	$(PY) -P tools/bench_export.py
