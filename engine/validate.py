@@ -378,6 +378,11 @@ def validate_scene(scene):
         validate_material(mat, i)
     for i, light in enumerate(scene.lights):
         validate_light(light, i)
+        # A light's node tree (engine/lights/shader.py), a colour expression
+        # like any texture: validated here, as the light modules cannot import
+        # this one (it imports them).
+        if getattr(light, "shader", None) is not None:
+            validate_texture(light.shader, f"light {i} ({getattr(light, 'name', '?')!r}) shader")
     validate_world(scene.world)
     validate_camera(scene.camera)
 

@@ -13,7 +13,7 @@ from ..scene import AREA_SHAPES, AreaLight, Scene, SceneError
 from . import common
 from .common import Falloff, check_falloff, check_rgb, check_size, selection_power, uniform_index, unit
 from .registry import RAY, LightDef, LightExample, LightTable, register
-from .shader import LightShaders, check_shader, checker_of, spread_directions
+from .shader import LightShaders, checker_of, spread_directions
 
 AREA = 2
 
@@ -253,7 +253,6 @@ def validate(light, what):
         # 0 is allowed: a light without area emits nothing (rendered as such).
         check_size(getattr(light, name), f"{what}: {name}")
     check_falloff(light, what)
-    check_shader(light, what)
 
 
 def _facing_down(height):

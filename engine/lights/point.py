@@ -16,7 +16,7 @@ from ..vec import column, dot, frame, frame_of, rows3, to_world
 from .common import (Falloff, check_direction, check_falloff, check_rgb, check_size, selection_power,
                      smoothstep, unit)
 from .registry import RAY, LightDef, LightExample, LightTable, register
-from .shader import LightShaders, check_shader, checker_of, spread_directions
+from .shader import LightShaders, checker_of, spread_directions
 
 POINT = 0
 # Half-angle of emission beyond a spot cone: its light ends at the cone edge.
@@ -378,7 +378,6 @@ def validate(light, what):
     check_rgb(light.position, f"{what} position")
     check_size(light.radius, f"{what}: radius")
     check_falloff(light, what)
-    check_shader(light, what)
     if light.matrix is not None:
         m = np.asarray(light.matrix, dtype=np.float64)
         if m.shape != (4, 4) or not np.all(np.isfinite(m)):

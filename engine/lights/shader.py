@@ -143,15 +143,6 @@ def checker_of(idname, output, scale):
     return NodeOutput(call, "Color")
 
 
-def check_shader(light, what):
-    """A light's shader: None, or a colour expression validation accepts."""
-    shader = getattr(light, "shader", None)
-    if shader is None:
-        return
-    from ..validate import validate_texture   # validate imports this package
-    validate_texture(shader, f"{what} shader")
-
-
 def _safe_inverse(m):
     try:
         return np.linalg.inv(m)

@@ -264,6 +264,9 @@ def _voronoi_octave(q, feature, metric, exponent, randomness, smoothness, pcg=Tr
     return d, c, pos + cell
 
 
+voronoi_loop.set_reference(_voronoi_octave)
+
+
 def _offsets(dim, reach=1):
     return [np.array(o[::-1], F) for o in itertools.product(range(-reach, reach + 1), repeat=dim)]
 

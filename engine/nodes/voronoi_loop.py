@@ -26,9 +26,19 @@ def supported(dim, feature, metric, pcg):
     return pcg and dim >= 2 and feature in FEATURES and metric in COMPILED_METRICS
 
 
+# The NumPy reference, texture_nodes._voronoi_octave, handed in by
+# texture_nodes when it imports this module (importing it from here would be
+# an import cycle: texture_nodes calls the compiled loop).
+_reference = []
+
+
+def set_reference(octave):
+    _reference[:] = [octave]
+
+
 def _numpy_octave(q, rand, expo, smooth, feature, metric, dist, color, pos):
     """The NumPy reference: texture_nodes._voronoi_octave into the outputs."""
-    from .texture_nodes import _voronoi_octave
+    _voronoi_octave, = _reference
     names = {v: k for k, v in FEATURES.items()}, {v: k for k, v in METRICS.items()}
     d, c, p = _voronoi_octave(q, names[0][feature], names[1][metric], expo, rand, smooth, True)
     dist[:], color[:], pos[:] = d, c, p
