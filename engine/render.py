@@ -20,6 +20,7 @@ import numpy as np
 
 from .accel import Accel
 from .motion import MotionAccel, MotionGeometry, has_motion
+from . import vector_pass
 from .blas import single_threaded_blas
 from .bsdf import MaterialTable, bump_model
 from .camera import CameraModel, PixelFilter
@@ -106,13 +107,21 @@ def prepare(scene, settings):
     ctx = Context.build(accel, tris, materials, lights, camera, world, settings,
                         sampler=Sampler(settings.seed, settings.sampling_pattern),
                         bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
-                        pass_config=pass_events.configure(scene, settings),
+                        pass_config=_with_vector(pass_events.configure(scene, settings), source, scene, tris,
+                                                 settings),
                         media=_media(scene, accel, tris, camera), holdout=holdout_weights(scene, tris),
                         links=LightLinks.build(scene, lights, tris), catcher=catcher_triangles(scene, tris),
                         motion=motion, spheres=spheres, unlit=unlit, strands=strands)
     if ctx.subsurface:
         ctx = dataclasses.replace(ctx, subsurface_warnings=tuple(subsurface.open_mesh_warnings(scene)))
     return ctx
+
+
+def _with_vector(cfg, source, scene, tris, settings):
+    """The pass config with the Vector pass's motion when that pass is written."""
+    if not vector_pass.wanted(source, settings.passes):
+        return cfg
+    return dataclasses.replace(cfg, vector=vector_pass.VectorMotion(scene, tris))
 
 
 def holdout_weights(scene, tris):
