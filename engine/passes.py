@@ -45,8 +45,9 @@ DEFS = {
     "Normal": (3, MEAN, None),
     "UV": (3, MEAN, None),
     # Screen-space motion of the first hit (engine/vector_pass.py), averaged
-    # over the pixel's samples as Cycles' data passes; 0 with motion blur on.
-    "Vector": (4, MEAN, None),
+    # over the samples that hit a surface (Cycles' pass_motion_weight: the
+    # background does not dilute it); 0 with motion blur on.
+    "Vector": (4, RATIO, "Vector:n"),
     "Depth": (1, FIRST, None),
     "Object Index": (1, FIRST, None),
     "Material Index": (1, FIRST, None),

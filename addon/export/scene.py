@@ -62,7 +62,9 @@ def export_scene(depsgraph, camera_override=None, should_stop=None, engine=None,
     scene = depsgraph.scene
     blur = motion_export.shutter(scene, is_preview) if engine is not None else None
     if blur is None:
-        return _export(depsgraph, camera_override, should_stop)
+        if engine is None or not motion_export.wants_vector(depsgraph, blur, is_preview):
+            return _export(depsgraph, camera_override, should_stop)
+        return _export_with_vector(engine, depsgraph, camera_override, should_stop)
     frame = scene.frame_current + scene.frame_subframe
     centre = motion_export.centre_time(scene, blur)
     try:
@@ -75,6 +77,22 @@ def export_scene(depsgraph, camera_override=None, should_stop=None, engine=None,
         exported.seconds += time.perf_counter() - start
     finally:
         motion_export.set_time(engine, frame)
+    return exported
+
+
+def _export_with_vector(engine, depsgraph, camera_override, should_stop):
+    """The scene at its frame, with frame - 1 and frame + 1 for the Vector pass."""
+    scene = depsgraph.scene
+    frame = scene.frame_current + scene.frame_subframe
+    keys = []
+    exported = _export(depsgraph, camera_override, should_stop, keys)
+    start = time.perf_counter()
+    try:
+        exported.warnings += motion_export.add_vector_motion(engine, depsgraph, exported, keys, frame,
+                                                             scene_camera(depsgraph, camera_override))
+    finally:
+        motion_export.set_time(engine, frame)
+    exported.seconds += time.perf_counter() - start
     return exported
 
 
