@@ -54,8 +54,9 @@ def test_vector_pass_matches_cycles(renders):
 
 def test_vector_pass_is_zero_with_motion_blur_on(registered_addon, tmp_path):
     scene = _scene(blur=True)
-    vector = _render(scene, tmp_path, 'EMBER', 0, 1)['Vector']
-    assert np.all(vector == 0.0)
+    for engine in ('EMBER', 'CYCLES'):
+        vector = _render(scene, tmp_path, engine, 0, 1)['Vector']
+        assert np.all(vector == 0.0), engine
 
 
 def test_vector_pass_of_a_one_frame_range(registered_addon, tmp_path):
