@@ -248,6 +248,9 @@ def first_hit(ctx, paths, hit, lobes, w, tt, bb, tile):
         add("UV", pix, np.where(has[:, None], np.column_stack([hit.uv, np.ones(len(pix))]), 0.0))
     if tile.wants("Mist"):
         add("Mist", pix, 1.0 - _mist(ctx, cfg, hit.p))
+    if cfg.vector is not None and tile.wants("Vector"):
+        add("Vector", pix, cfg.vector.vectors(hit.p, hit.prim))
+        add("Vector:n", pix, np.ones(len(pix)))
     inst = ctx.triangles.instance[hit.prim] if ctx.triangles.instance is not None else np.zeros(len(pix), int)
     for name, table in (cfg.aov_tables or {}).items():
         add(name, pix, table[hit.mat])

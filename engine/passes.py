@@ -44,6 +44,10 @@ DEFS = {
     "Position": (3, FIRST, None),
     "Normal": (3, MEAN, None),
     "UV": (3, MEAN, None),
+    # Screen-space motion of the first hit (engine/vector_pass.py), averaged
+    # over the samples that hit a surface (Cycles' pass_motion_weight: the
+    # background does not dilute it); 0 with motion blur on.
+    "Vector": (4, RATIO, "Vector:n"),
     "Depth": (1, FIRST, None),
     "Object Index": (1, FIRST, None),
     "Material Index": (1, FIRST, None),
@@ -63,7 +67,7 @@ for _c in LIGHT_CLASSES:
     DEFS[_c + " Direct"] = (3, DIVIDE, _c + " Color")
     DEFS[_c + " Indirect"] = (3, DIVIDE, _c + " Color")
 # Passes the film derives from what it keeps anyway (no extra sums).
-FILM_PASSES = {"Variance": 3, "Sample Count": 1, "Vector": 4, "Shadow Catcher": 3}
+FILM_PASSES = {"Variance": 3, "Sample Count": 1, "Shadow Catcher": 3}
 ALL_PASSES = tuple(DEFS) + tuple(FILM_PASSES) + CRYPTO
 
 
@@ -78,6 +82,7 @@ class PassConfig:
     mist_start: float = 5.0
     mist_depth: float = 25.0
     mist_falloff: float = 2.0
+    vector: object = None   # engine.vector_pass.VectorMotion when the Vector pass is written
     ao_distance: float = 10.0
     strategy_first_vertex: bool = False
     crypto_levels: int = 6
@@ -298,7 +303,7 @@ def _film_pass(name, film, count):
         if film.catcher is None:
             return np.ones((len(count), 3), np.float32)
         return film.shadow_catcher(film.combined_alpha).astype(np.float32)
-    return np.zeros((len(count), 4), np.float32)  # Vector: no motion blur
+    raise KeyError(name)
 
 
 # ----------------------------------------------------------------------------

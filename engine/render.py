@@ -21,6 +21,7 @@ import numpy as np
 from . import accel as accel_module
 from .accel import Accel
 from .motion import MotionAccel, MotionGeometry, has_motion
+from . import vector_pass
 from .blas import single_threaded_blas
 from .bsdf import MaterialTable, bump_model
 from .camera import CameraModel, PixelFilter
@@ -113,7 +114,8 @@ def prepare(scene, settings, bake=None):
     ctx = Context.build(accel, tris, materials, lights, camera, world, settings,
                         sampler=Sampler(settings.seed, settings.sampling_pattern),
                         bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
-                        pass_config=pass_events.configure(scene, settings),
+                        pass_config=_with_vector(pass_events.configure(scene, settings), source, scene, tris,
+                                                 settings),
                         media=_media(scene, accel, tris, camera, bake is None), holdout=holdout_weights(scene, tris),
                         links=LightLinks.build(scene, lights, tris), catcher=catcher_triangles(scene, tris),
                         motion=motion, spheres=spheres, unlit=unlit, strands=strands)
@@ -131,6 +133,13 @@ def persistent_bvh(settings):
         return accel_module.PERSISTENT
     accel_module.PERSISTENT.clear()
     return None
+
+
+def _with_vector(cfg, source, scene, tris, settings):
+    """The pass config with the Vector pass's motion when that pass is written."""
+    if not vector_pass.wanted(source, settings.passes):
+        return cfg
+    return dataclasses.replace(cfg, vector=vector_pass.VectorMotion(scene, tris))
 
 
 def holdout_weights(scene, tris):

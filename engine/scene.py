@@ -77,6 +77,9 @@ class Mesh:
     # mesh does not deform during the shutter.
     motion: Optional[np.ndarray] = None
     motion_normals: Optional[np.ndarray] = None
+    # The Vector pass (engine/vector_pass.py): vertex positions (3, V, 3) at
+    # frame - 1, frame, frame + 1 when that pass is on and motion blur off.
+    vector_motion: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -120,6 +123,8 @@ class Instance:
     # Transform motion blur: object-to-world (S, 4, 4) at the shutter's S
     # evenly spaced steps (Cycles' motion steps); None: it does not move.
     motion: Optional[np.ndarray] = None
+    # The Vector pass: object-to-world (3, 4, 4) at frame - 1, frame, frame + 1.
+    vector_motion: Optional[np.ndarray] = None
 
 
 def _point_cloud_fields():
@@ -128,7 +133,7 @@ def _point_cloud_fields():
     defaults, then the per-point attributes."""
     out = [("positions", np.ndarray), ("radii", np.ndarray)]
     for f in fields(Instance):
-        if f.name in ("mesh", "asset", "motion"):
+        if f.name in ("mesh", "asset", "motion", "vector_motion"):
             continue
         default = {} if f.default is MISSING else {"default": "points" if f.name == "name" else f.default}
         if f.default_factory is not MISSING:
@@ -587,6 +592,8 @@ class Camera:
     # over the shutter (the sampler's time dimension) and the camera at that
     # time (rotation by quaternion, translation linearly, as Cycles).
     motion: Optional[np.ndarray] = None
+    # The Vector pass: camera-to-world (3, 4, 4) at frame - 1, frame, frame + 1.
+    vector_motion: Optional[np.ndarray] = None
 
 
 # ----------------------------------------------------------------------------

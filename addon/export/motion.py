@@ -68,11 +68,13 @@ def _step_times(centre, length, steps):
     return [centre + (-1.0 + 2.0 * k / (steps - 1)) * 0.5 * length for k in range(steps)]
 
 
-def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object):
+def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, steps_of=None):
     """Fill Instance.motion, Mesh.motion and Camera.motion of ``exported``
     (exported at the shutter's centre, frame ``centre``; ``keys`` names each
     instance as ``instance_key`` does) by evaluating the scene at every
-    step.  Returns warnings."""
+    step (``steps_of(object)``: Cycles' object_steps unless given).  Returns
+    warnings."""
+    steps_for = steps_of or object_steps
     scene = depsgraph.scene
     length = blur[0]
     result = exported.scene
@@ -80,10 +82,10 @@ def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object):
     for index, key in enumerate(keys):
         if key is None:
             continue
-        steps = object_steps(key[2])
+        steps = steps_for(key[2])
         if steps >= 2:
             wanted.setdefault(steps, []).append(index)
-    camera_steps = object_steps(camera_object.original)
+    camera_steps = steps_for(camera_object.original)
     all_steps = sorted(set(wanted) | ({camera_steps} if camera_steps >= 2 else set()))
     times = sorted({t for s in all_steps for t in _step_times(centre, length, s)})
     matrices = {}        # time -> {instance key: matrix}
@@ -121,7 +123,7 @@ def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object):
                 inst.motion = stack
     for mesh_index, key in deforming.items():
         mesh = result.meshes[mesh_index]
-        steps = object_steps(key[2])
+        steps = steps_for(key[2])
         if steps < 2:
             continue
         found = [positions[t].get(mesh_index) for t in _step_times(centre, length, steps)]
@@ -168,3 +170,29 @@ def instance_key(inst):
         parent = inst.parent.original.name if inst.parent is not None else ''
         return ('instance', (parent, tuple(inst.persistent_id)), obj.original, False)
     return ('object', obj.original.name, obj.original, True)
+
+
+# ----------------------------------------------------------------------------
+# The Vector pass (engine/vector_pass.py)
+
+def wants_vector(depsgraph, blur, is_preview):
+    """Whether to export frame - 1 and frame + 1 for the Vector pass: Cycles
+    writes it only with motion blur off, in final renders."""
+    return blur is None and not is_preview and bool(getattr(depsgraph.view_layer, 'use_pass_vector', False))
+
+
+def add_vector_motion(engine, depsgraph, exported, keys, frame, camera_object):
+    """Fill ``vector_motion`` of ``exported`` (exported at ``frame``) with
+    the scene at frame - 1, frame, frame + 1 (Cycles' MOTION_PASS: three
+    steps for every object, whatever its motion blur settings), leaving the
+    render still.  Returns warnings."""
+    warnings = add_motion(engine, depsgraph, exported, keys, (2.0, 'CENTER'), frame, camera_object,
+                          steps_of=lambda obj: 3)
+    result = exported.scene
+    for item in list(result.instances) + list(result.meshes) + [result.camera]:
+        item.vector_motion, item.motion = item.motion, None
+        if hasattr(item, 'motion_normals'):
+            item.motion_normals = None
+    return [w.replace("rendered without motion blur", "its Vector pass is 0")
+             .replace("rendered without deformation blur", "its Vector pass ignores deformation")
+            for w in warnings]

@@ -70,7 +70,11 @@ def export_scene(depsgraph, camera_override=None, should_stop=None, engine=None,
     if not require_camera and camera_override is None and scene.camera is None:
         return _export(depsgraph, None, should_stop, camera=False)
     if blur is None:
-        return _export(depsgraph, camera_override, should_stop, cache=cache)
+        if engine is None or not motion_export.wants_vector(depsgraph, blur, is_preview):
+            return _export(depsgraph, camera_override, should_stop, cache=cache)
+        # (the Vector pass's frame changes would make Persistent Data's
+        # depsgraph updates describe other frames: exported without the cache)
+        return _export_with_vector(engine, depsgraph, camera_override, should_stop)
     frame = scene.frame_current + scene.frame_subframe
     centre = motion_export.centre_time(scene, blur)
     try:
@@ -83,6 +87,22 @@ def export_scene(depsgraph, camera_override=None, should_stop=None, engine=None,
         exported.seconds += time.perf_counter() - start
     finally:
         motion_export.set_time(engine, frame)
+    return exported
+
+
+def _export_with_vector(engine, depsgraph, camera_override, should_stop):
+    """The scene at its frame, with frame - 1 and frame + 1 for the Vector pass."""
+    scene = depsgraph.scene
+    frame = scene.frame_current + scene.frame_subframe
+    keys = []
+    exported = _export(depsgraph, camera_override, should_stop, keys)
+    start = time.perf_counter()
+    try:
+        exported.warnings += motion_export.add_vector_motion(engine, depsgraph, exported, keys, frame,
+                                                             scene_camera(depsgraph, camera_override))
+    finally:
+        motion_export.set_time(engine, frame)
+    exported.seconds += time.perf_counter() - start
     return exported
 
 

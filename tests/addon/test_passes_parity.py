@@ -255,7 +255,7 @@ def test_cryptomatte_node_selects_the_box_as_in_cycles(renders):
 def test_sample_count_and_vector(renders):
     for images in renders['EMBER']:
         assert np.all(images["Debug Sample Count"] == 1.0)  # every sample taken, as Cycles writes it
-        assert np.all(images["Vector"] == 0.0)              # no motion blur
+        assert np.all(images["Vector"] == 0.0)              # a still scene: nothing moves
 
 
 def test_legacy_pass_names_in_blender_34_binary(tmp_path, legacy_addon, needs_engine):
