@@ -3,8 +3,10 @@ by every test that runs that binary (tests/addon, tests/farm).
 
 The zip is built and unpacked once per session: numba keys its kernel cache
 by the source folder, so one unpacked add-on compiles its kernels once
-(60-100 s in the binary's Python) and every later test loads them; an
-unpacked copy per test paid that compile six times.
+(60-100 s in the binary's Python, more on a busy machine) and every later test
+loads them; an unpacked copy per test paid that compile six times.  The
+session fixture compiles them before the first test (``compile_kernels``), so
+no test's own time limit holds the compile.
 """
 import os
 import shutil
@@ -63,3 +65,30 @@ def unpack_addon(zip_path, folder):
             if '.so' in name:
                 os.chmod(os.path.join(path, name), 0o755)
     return scripts
+
+
+COMPILE_SCRIPT = """
+import sys
+from ember import backend
+backend.require_ray_tracer()
+seconds = backend.engine().warm_kernel_cache()
+print(f"ember kernels compiled in {seconds:.1f} s")
+sys.stdout.flush()
+"""
+
+
+def compile_kernels(scripts, timeout=1800):
+    """Compile the unpacked add-on's kernels into numba's cache in the 3.4
+    binary (its Python and numba), once per session; a failure names itself
+    (the tests then compile in their first render)."""
+    if blender_version() is None:
+        return None
+    env = dict(os.environ, BLENDER_USER_SCRIPTS=str(scripts))
+    env.pop('PYTHONPATH', None)
+    cmd = [BLENDER, '-b', '--addons', 'ember', '--python-expr', COMPILE_SCRIPT]
+    try:
+        out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return f"kernels not compiled within {timeout} s"
+    lines = [line for line in (out.stdout + out.stderr).splitlines() if 'ember kernels compiled' in line]
+    return lines[0] if lines else f"kernel compile failed: {(out.stdout + out.stderr)[-800:]}"

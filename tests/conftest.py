@@ -19,7 +19,9 @@ def legacy_addon(tmp_path_factory):
     import blender34
     folder = tmp_path_factory.mktemp('legacy34')
     zip_path = blender34.build_legacy_zip(folder)
-    return zip_path, blender34.unpack_addon(zip_path, folder / 'user')
+    scripts = blender34.unpack_addon(zip_path, folder / 'user')
+    print(f"\nBlender 3.4: {blender34.compile_kernels(scripts)}")
+    return zip_path, scripts
 
 
 def pytest_configure(config):
