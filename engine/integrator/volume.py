@@ -78,9 +78,10 @@ def _direct_setup(ctx, on, t_end, may, u_distance, depth):
     Volume > Sampling (equiangular.stack_method) says how the point is
     found: a distance, equiangular towards the sampled light point, or one
     of the two with probability 1/2 each (MIS).  Distant lights and worlds
-    take distance sampling.  In heterogeneous media, distance sampling is
-    the free flight's own scattering point, as before (those rows are left
-    out); their equiangular and MIS points are tracked
+    take distance sampling.  In heterogeneous media, the Distance setting
+    keeps light sampling at the free flight's own scattering point, as
+    before (those rows are left out); their equiangular and MIS points,
+    and the distance points of distant lights, are tracked
     (``_tracked_points``).  Only with MIS strategy and one light picked per
     vertex (else the scattering point samples light, as before).  Returns
     (rows, equiangular (bool), mis (bool), light point P, t0, t1, emitter,
@@ -99,11 +100,9 @@ def _direct_setup(ctx, on, t_end, may, u_distance, depth):
     ul = ctx.sampler.get(on.pseed[cand], on.sample[cand], vertex_set(depth, LIGHT))
     e, p_sel = ctx.lights.select(ul[:, 0], o, np.zeros_like(o))
     ls = ctx.lights.sample(e, o, ul[:, 1], ul[:, 2], ul[:, 3])
-    finite = np.isfinite(ls.dist)
-    # A distant light or the world in a heterogeneous medium: the free
-    # flight's scattering point samples it (no evaluable distance pdf here).
-    ok = (ls.pdf > 0) & (p_sel > 0) & (finite | ~het[cand])
-    cand, method, e, p_sel, finite = cand[ok], method[ok], e[ok], p_sel[ok], finite[ok]
+    ok = (ls.pdf > 0) & (p_sel > 0)
+    cand, method, e, p_sel = cand[ok], method[ok], e[ok], p_sel[ok]
+    finite = np.isfinite(ls.dist[ok])
     method = np.where(finite, method, equiangular.DISTANCE)
     P = o[ok] + ls.wi[ok] * np.where(finite, ls.dist[ok], 0.0)[:, None]
     t0, t1 = _lit_segment(ctx, on.o[cand], on.d[cand], e, t_end[cand])
@@ -121,7 +120,8 @@ def _tracked_points(ctx, on, direct, u, n):
     the point, tracking.track's x_point): equiangular, or under MIS either
     equiangular or a distance from a homogeneous stand-in, the media's mean
     majorant (MediumTable.mean_majorant), truncated to the lit part of the
-    segment; both pdfs are evaluable, so the power heuristic applies.
+    segment (also the point of a distant light); both pdfs are evaluable,
+    so the power heuristic applies.
     Their pdfs are kept in ``direct`` for ``_direct_points``."""
     x = np.full(n, np.inf)
     if direct is None or not direct[8].any():
