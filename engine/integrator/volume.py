@@ -20,7 +20,7 @@ import numpy as np
 from .. import media
 from ..pass_events import NO_PASSES
 from ..lights.point import PointLights
-from ..media import equiangular
+from ..media import equiangular, tracking
 from ..accel import shadow_rays
 from ..sampler import BSDF, LIGHT, MEDIUM, emitter_set, vertex_set
 from ..sampling import power_heuristic
@@ -59,7 +59,7 @@ def free_flights(ctx, paths, found, depth):
     flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u_distance,
                                on.o, on.d, tracking_rng(ctx, on.pseed, on.sample, depth, 1), x_light, x_point)
     flight.rows = inside
-    _direct_points(ctx, on, flight, direct, u)
+    _direct_points(ctx, on, flight, direct, u, depth)
     if len(lit):
         rows = inside[lit]
         x = x_light[lit]
@@ -167,7 +167,7 @@ def _lit_segment(ctx, o, d, e, t_end):
     return t0, t1
 
 
-def _direct_points(ctx, on, flight, direct, u):
+def _direct_points(ctx, on, flight, direct, u, depth):
     """Sets flight.nee_scale (the factor on the light sampled at a free
     flight's scattering point: 1, or 0 for the segments ``_direct_setup``
     chose a direct-light point for) and flight.direct: (rows, t, throughput
@@ -216,7 +216,8 @@ def _direct_points(ctx, on, flight, direct, u):
         r = rows[keep[hk]]
         x = on.o[r] + on.d[r] * t[keep[hk], None]
         ss[hk] += ctx.media.local(on.stack[r], x, on.d[r])[1]
-        T[hk] = flight.point_w[r]
+        rng = tracking_rng(ctx, on.pseed[r], on.sample[r], depth, 4)
+        T[hk] = tracking.field_transmittance(ctx.media, on.stack[r], on.o[r], on.d[r], t[keep[hk]], rng)
     flight.direct = (rows[keep], t[keep], ss * T * (w[keep] / p[keep])[:, None], emitter[keep], p_sel[keep])
 
 

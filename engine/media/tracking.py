@@ -49,12 +49,14 @@ class Tracked:
 
 
 def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=None, x_light=None,
-          x_point=None):
+          x_point=None, homogeneous=True):
     """Track rays o + t d, 0 <= t < t_end, through the media of ``stack``.
     The running weight where a ray passes x_light (a light on it) and
     x_point (a direct-light point, engine/integrator/volume.py) is kept:
     its expectation is the transmittance to there (ratio tracking's, the
-    scattering's 1 / (1 - P_s) making up for the paths that stopped)."""
+    scattering's 1 / (1 - P_s) making up for the paths that stopped).
+    ``homogeneous`` False: the stack's homogeneous media are left out (the
+    caller takes their transmittance in closed form)."""
     n = len(o)
     w = np.ones((n, 3))
     out = Tracked(w, np.zeros(n, bool), np.full(n, np.inf), np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)))
@@ -66,6 +68,8 @@ def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=
     x_point = np.full(n, np.inf) if x_point is None else np.asarray(x_point, np.float64)
     out.point_w = np.zeros((n, 3))
     hsa, hss, hem, hg = table.coefficients(stack)
+    if not homogeneous:
+        hsa, hss, hem = np.zeros_like(hsa), np.zeros_like(hss), np.zeros_like(hem)
     hst = hsa + hss
     hmu = hst.max(axis=1)
     hgw = hss.mean(axis=1) * hg
@@ -181,3 +185,13 @@ def _collide(out, w, rows, tn, mu, sa, ss, em, gw, u, mode, beta, may_scatter):
 def transmittance(table, stack, o, d, length, rng, estimator="ratio"):
     """(N, 3) transmittance estimates of segments through the media of stack."""
     return track(table, stack, o, d, np.asarray(length, np.float64), rng, mode=estimator).weight
+
+
+def field_transmittance(table, stack, o, d, length, rng):
+    """(N, 3) transmittance of segments through the media of ``stack``:
+    the homogeneous media's exp(-sigma_t length) in closed form times a
+    ratio-tracking estimate of the textured ones' alone (no collisions,
+    hence no noise, from the homogeneous part)."""
+    length = np.asarray(length, np.float64)
+    closed = np.exp(-table.extinction(stack) * length[:, None])
+    return closed * track(table, stack, o, d, length, rng, mode="ratio", homogeneous=False).weight
