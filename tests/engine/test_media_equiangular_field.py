@@ -7,7 +7,7 @@ Truths from outside the new code: a fog whose coefficients are a constant
 texture (so the trackers and the field evaluation render it) against the
 same fog as a homogeneous medium (closed-form transmittance, its
 equiangular points tested in test_media_equiangular.py); and on a noise
-fog lit by a point light inside it and a sun, Volume > Sampling
+fog in a world haze, lit by a point light inside it and a sun, Volume > Sampling
 'EQUIANGULAR' and 'MULTIPLE_IMPORTANCE' against 'DISTANCE' (light sampling
 at the trackers' scattering points, tested in test_media_field.py).  Two
 statistical families; power printed; the variance gain printed.
@@ -35,15 +35,15 @@ def _tinted(rgb, density):
     return MixColor("MULTIPLY", 1.0, tuple(rgb), density, clamp_factor=False)
 
 
-def fog(volume, sun=False, size=(16, 12)):
+def fog(volume, sun=False, size=(16, 12), world=None):
     """A 2 m fog cube, a small point light inside it off the centre, seen
-    from outside (and a sun from above)."""
+    from outside (and a sun from above; ``world``: the world's volume)."""
     lights = [PointLight((0.2, 0.0, 0.1), (20.0, 20.0, 20.0), radius=0.05)]
     if sun:
         lights.append(SunLight((0.3, 0.2, -0.9), (0.6, 0.6, 0.6), angle=0.05))
     cam = Camera(look_at((0, -5, 0.3), (0, 0, 0)), lens=45, resolution=size)
     return Scene([box((2.0, 2.0, 2.0))], [Instance(0, materials=[0], name="fog")],
-                 [Material("fog", PASS, volume=volume)], lights, World((0.0, 0.0, 0.0)), cam)
+                 [Material("fog", PASS, volume=volume)], lights, World((0.0, 0.0, 0.0), volume=world), cam)
 
 
 def constant_fog(sampling, textured):
@@ -56,8 +56,9 @@ def constant_fog(sampling, textured):
 
 def noise_fog(sampling):
     dens = Math("MULTIPLY", Math("MAXIMUM", Math("SUBTRACT", _noise(), 0.3), 0.0), 4.0)
+    haze = Volume(scattering=(0.08, 0.08, 0.08), absorption=(0.01, 0.02, 0.03), sampling=sampling)
     return fog(Volume(scattering=_tinted(SCATTER, dens), absorption=_tinted(ABSORB, dens), anisotropy=0.2,
-                      sampling=sampling), sun=True)
+                      sampling=sampling), sun=True, world=haze)
 
 
 def _render(scene, seed, spp=1024):
@@ -112,7 +113,8 @@ def test_constant_texture_fog_matches_homogeneous_fog():
 
 def test_noise_fog_sampling_methods_agree():
     """A noise fog (empty patches, dense cores) around a point light, and
-    a sun: equiangular and MIS points (the sun's a distance point from the
+    a sun, in a homogeneous world haze (both in the stack inside the cube,
+    the haze's transmittance in closed form): equiangular and MIS points (the sun's a distance point from the
     media's mean majorant) against light sampling at the trackers'
     scattering points ('DISTANCE')."""
     results = {s: _render(noise_fog(s), seed)
