@@ -55,9 +55,9 @@ def free_flights(ctx, paths, found, depth):
         if ctx.transparent_shadows:   # light_t is measured from where the straight line started
             x = x - dot(paths.o[rows] - paths.mis_o[rows], paths.d[rows])
         x_light[lit] = x
-    x_point = _tracked_points(ctx, on, direct, u, len(inside))
+    _tracked_points(ctx, on, direct, u)
     flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u_distance,
-                               on.o, on.d, tracking_rng(ctx, on.pseed, on.sample, depth, 1), x_light, x_point)
+                               on.o, on.d, tracking_rng(ctx, on.pseed, on.sample, depth, 1), x_light)
     flight.rows = inside
     _direct_points(ctx, on, flight, direct, u, depth)
     if len(lit):
@@ -81,11 +81,12 @@ def _direct_setup(ctx, on, t_end, may, u_distance, depth):
     take distance sampling.  In heterogeneous media, the Distance setting
     keeps light sampling at the free flight's own scattering point, as
     before (those rows are left out); their equiangular and MIS points,
-    and the distance points of distant lights, are tracked
-    (``_tracked_points``).  Only with MIS strategy and one light picked per
+    and the distance points of distant lights, come from
+    ``_tracked_points``.  Only with MIS strategy and one light picked per
     vertex (else the scattering point samples light, as before).  Returns
     (rows, equiangular (bool), mis (bool), light point P, t0, t1, emitter,
-    its selection probability, heterogeneous (bool)) or None."""
+    its selection probability, heterogeneous (bool), the heterogeneous
+    rows' points) or None."""
     s = ctx.settings
     if ctx.lights.count == 0 or s.strategy != "mis" or s.light_selection == "all":
         return None
@@ -113,19 +114,16 @@ def _direct_setup(ctx, on, t_end, may, u_distance, depth):
     return [cand, equi, mis, P, t0, t1, e, p_sel, het[cand], None]
 
 
-def _tracked_points(ctx, on, direct, u, n):
-    """(n,) the direct-light points of the heterogeneous segments (inf
-    where none), sampled before their free flight so that its tracker keeps
-    its running weight there (an unbiased estimate of the transmittance to
-    the point, tracking.track's x_point): equiangular, or under MIS either
-    equiangular or a distance from a homogeneous stand-in, the media's mean
-    majorant (MediumTable.mean_majorant), truncated to the lit part of the
-    segment (also the point of a distant light); both pdfs are evaluable,
-    so the power heuristic applies.
-    Their pdfs are kept in ``direct`` for ``_direct_points``."""
-    x = np.full(n, np.inf)
+def _tracked_points(ctx, on, direct, u):
+    """The direct-light points of the heterogeneous segments of ``direct``
+    (stored in its last slot for ``_direct_points``): equiangular, or under
+    MIS either equiangular or a distance from a homogeneous stand-in, the
+    media's mean majorant (MediumTable.mean_majorant) plus the homogeneous
+    extinction, truncated to the lit part of the segment (also the point
+    of a distant light); both pdfs are closed-form, so the power heuristic
+    needs no null-collision probabilities."""
     if direct is None or not direct[8].any():
-        return x
+        return
     rows, equi, mis, P, t0, t1 = direct[:6]
     h = np.flatnonzero(direct[8])
     r = rows[h]
@@ -140,8 +138,6 @@ def _tracked_points(ctx, on, direct, u, n):
     p_e = equiangular.pdf(o, d, P[h], t0[h], t1[h], t)
     p_d = _truncated_pdf(np.ones((len(h), 1)), sigma[:, None], t0[h], t1[h], t)
     direct[9] = (h, t, p_e, p_d)
-    x[r] = np.where(np.where(q, p_e, p_d) > 0, t, np.inf)
-    return x
 
 
 def _lit_segment(ctx, o, d, e, t_end):
@@ -178,7 +174,9 @@ def _direct_points(ctx, on, flight, direct, u, depth):
     exponentials truncated to that part, as Cycles 5.0's homogeneous direct
     scatter), weighted 2 w by the power heuristic (Cycles'
     volume_direct_scatter_mis).  In heterogeneous media T(t) is the
-    tracker's weight at the point and sigma_s is evaluated there."""
+    homogeneous media's transmittance in closed form times a ratio-tracking
+    estimate of the textured ones' (tracking.field_transmittance), and
+    sigma_s is evaluated there."""
     n = len(flight.t_end)
     flight.nee_scale = np.ones(n)
     flight.direct = None

@@ -44,7 +44,6 @@ class FreeFlight:
     # throughput factor on reaching the light met on the way.
     tracked: np.ndarray = None
     light_w: np.ndarray = None
-    point_w: np.ndarray = None   # (n, 3) likewise at x_point (tracked rows; 0 elsewhere)
     truncated: int = 0
     # (n,) the medium whose phase function a scattering follows (-1:
     # Henyey-Greenstein of g), MediumTable.phase_medium.
@@ -82,13 +81,12 @@ def channel_pdf(beta, sigma_s, sigma_t):
 
 
 def free_flight(table, stack, beta, t_end, may_scatter, u_channel, u_distance, o=None, d=None, rng=None,
-                x_light=None, x_point=None):
+                x_light=None):
     """The FreeFlight of segments of length t_end (inf: no end) in the
     media of ``stack`` (rows of the paths in a medium); ``may_scatter``:
     the path has scattering events left.  Rows whose stack holds a
     heterogeneous medium are tracked along o + t d (tracking.py, random
-    numbers from ``rng``; ``x_light``: where a light on the ray is;
-    ``x_point``: a direct-light point, inf where none)."""
+    numbers from ``rng``; ``x_light``: where a light on the ray is)."""
     flight = _homogeneous_flight(table, stack, beta, t_end, may_scatter, u_channel, u_distance)
     flight.phase_medium = table.phase_medium(stack)
     het = table.heterogeneous(stack)
@@ -96,16 +94,13 @@ def free_flight(table, stack, beta, t_end, may_scatter, u_channel, u_distance, o
     if het.any():
         h = np.flatnonzero(het)
         xl = None if x_light is None else x_light[h]
-        xp = None if x_point is None else x_point[h]
-        tr = track(table, stack[h], o[h], d[h], t_end[h], rng, "flight", beta[h], may_scatter[h], xl, xp)
+        tr = track(table, stack[h], o[h], d[h], t_end[h], rng, "flight", beta[h], may_scatter[h], xl)
         flight.scatter[h], flight.t[h], flight.weight[h] = tr.scatter, tr.t, tr.weight
         flight.emitted[h], flight.g[h] = tr.emitted, tr.g
         flight.samples[h] = False
         flight.channel_pdf[h] = 0.0
         flight.light_w = np.zeros((len(stack), 3))
         flight.light_w[h] = tr.light_w
-        flight.point_w = np.zeros((len(stack), 3))
-        flight.point_w[h] = tr.point_w
         flight.truncated = tr.truncated
     return flight
 

@@ -45,16 +45,11 @@ class Tracked:
     g: np.ndarray          # (N,) Henyey-Greenstein g at the scattering point
     light_w: np.ndarray    # (N, 3) weight on reaching x_light (0 if scattered or stopped first)
     truncated: int = 0
-    point_w: np.ndarray = None   # (N, 3) likewise on reaching x_point (a direct-light point)
 
 
 def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=None, x_light=None,
-          x_point=None, homogeneous=True):
+          homogeneous=True):
     """Track rays o + t d, 0 <= t < t_end, through the media of ``stack``.
-    The running weight where a ray passes x_light (a light on it) and
-    x_point (a direct-light point, engine/integrator/volume.py) is kept:
-    its expectation is the transmittance to there (ratio tracking's, the
-    scattering's 1 / (1 - P_s) making up for the paths that stopped).
     ``homogeneous`` False: the stack's homogeneous media are left out (the
     caller takes their transmittance in closed form)."""
     n = len(o)
@@ -65,8 +60,6 @@ def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=
     beta = np.ones((n, 3)) if beta is None else np.abs(beta)
     may_scatter = np.zeros(n, bool) if may_scatter is None else np.asarray(may_scatter, bool)
     x_light = np.full(n, np.inf) if x_light is None else np.asarray(x_light, np.float64)
-    x_point = np.full(n, np.inf) if x_point is None else np.asarray(x_point, np.float64)
-    out.point_w = np.zeros((n, 3))
     hsa, hss, hem, hg = table.coefficients(stack)
     if not homogeneous:
         hsa, hss, hem = np.zeros_like(hsa), np.zeros_like(hss), np.zeros_like(hem)
@@ -109,7 +102,6 @@ def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=
             if len(out_of):   # past the cell (or the segment's end) before collision j
                 rows = live[out_of]
                 _light(out.light_w, w, x_light, rows, t[rows], step_end[out_of])
-                _light(out.point_w, w, x_point, rows, t[rows], step_end[out_of])
                 t[rows] = step_end[out_of]
                 done[out_of] = step_end[out_of] >= t_end[rows]
                 going[out_of] = False
@@ -118,7 +110,6 @@ def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=
             rows = live[c]
             tn = tk[c, j]
             _light(out.light_w, w, x_light, rows, t[rows], tn)
-            _light(out.point_w, w, x_point, rows, t[rows], tn)
             t[rows] = tn
             stop = _collide(out, w, rows, tn, mu[c], sa[c, j], ss[c, j], em[c, j], gw[c, j], u[c, j], mode,
                             beta, may_scatter)
