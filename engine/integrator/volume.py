@@ -20,7 +20,7 @@ import numpy as np
 from .. import media
 from ..pass_events import NO_PASSES
 from ..lights.point import PointLights
-from ..media import equiangular
+from ..media import equiangular, tracking
 from ..accel import shadow_rays
 from ..sampler import BSDF, LIGHT, MEDIUM, emitter_set, vertex_set
 from ..sampling import power_heuristic
@@ -55,10 +55,11 @@ def free_flights(ctx, paths, found, depth):
         if ctx.transparent_shadows:   # light_t is measured from where the straight line started
             x = x - dot(paths.o[rows] - paths.mis_o[rows], paths.d[rows])
         x_light[lit] = x
+    _tracked_points(ctx, on, direct, u)
     flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u_distance,
                                on.o, on.d, tracking_rng(ctx, on.pseed, on.sample, depth, 1), x_light)
     flight.rows = inside
-    _direct_points(ctx, on, flight, direct, u)
+    _direct_points(ctx, on, flight, direct, u, depth)
     if len(lit):
         rows = inside[lit]
         x = x_light[lit]
@@ -71,24 +72,31 @@ def free_flights(ctx, paths, found, depth):
 # where a segment's direct light is estimated (Cycles' direct scatter)
 
 def _direct_setup(ctx, on, t_end, may, u_distance, depth):
-    """Segments in homogeneous scattering media that may scatter get a
-    direct-light point of their own, as Cycles 5.0's: a light is sampled
-    from the ray's start (its emitter is the one the point samples), and
-    the stack's Volume > Sampling (equiangular.stack_method) says how the
-    point is found: a distance, equiangular towards the sampled light point,
-    or one of the two with probability 1/2 each (MIS).  Distant lights and
-    worlds take distance sampling.  Only with MIS strategy and one light
-    picked per vertex (else the scattering point samples light, as before).
-    Returns (rows, equiangular (bool), mis (bool), light point P, t0, t1,
-    emitter, its selection probability) or None."""
+    """Segments in scattering media that may scatter get a direct-light
+    point of their own, as Cycles 5.0's: a light is sampled from the ray's
+    start (its emitter is the one the point samples), and the stack's
+    Volume > Sampling (equiangular.stack_method) says how the point is
+    found: a distance, equiangular towards the sampled light point, or one
+    of the two with probability 1/2 each (MIS).  Distant lights and worlds
+    take distance sampling.  In heterogeneous media, the Distance setting
+    keeps light sampling at the free flight's own scattering point, as
+    before (those rows are left out); their equiangular and MIS points,
+    and the distance points of distant lights, come from
+    ``_tracked_points``.  Only with MIS strategy and one light picked per
+    vertex (else the scattering point samples light, as before).  Returns
+    (rows, equiangular (bool), mis (bool), light point P, t0, t1, emitter,
+    its selection probability, heterogeneous (bool), the heterogeneous
+    rows' points) or None."""
     s = ctx.settings
     if ctx.lights.count == 0 or s.strategy != "mis" or s.light_selection == "all":
         return None
     _, ss, _, _ = ctx.media.coefficients(on.stack)
-    cand = np.flatnonzero(may & ~ctx.media.heterogeneous(on.stack) & np.any(ss > 0, axis=1))
+    het = ctx.media.heterogeneous(on.stack)
+    method = equiangular.stack_method(ctx.media.sampling, on.stack)
+    cand = np.flatnonzero(may & np.where(het, method != equiangular.DISTANCE, np.any(ss > 0, axis=1)))
     if len(cand) == 0:
         return None
-    method = equiangular.stack_method(ctx.media.sampling, on.stack[cand])
+    method = method[cand]
     o = on.o[cand]
     ul = ctx.sampler.get(on.pseed[cand], on.sample[cand], vertex_set(depth, LIGHT))
     e, p_sel = ctx.lights.select(ul[:, 0], o, np.zeros_like(o))
@@ -103,7 +111,33 @@ def _direct_setup(ctx, on, t_end, may, u_distance, depth):
     xi = u_distance[cand]
     equi = (method == equiangular.EQUIANGULAR) | (mis & (xi >= 0.5))
     u_distance[cand] = np.where(mis, np.where(xi < 0.5, 2.0 * xi, 2.0 * xi - 1.0), xi)   # Cycles' rscatter
-    return cand, equi, mis, P, t0, t1, e, p_sel
+    return [cand, equi, mis, P, t0, t1, e, p_sel, het[cand], None]
+
+
+def _tracked_points(ctx, on, direct, u):
+    """The direct-light points of the heterogeneous segments of ``direct``
+    (stored in its last slot for ``_direct_points``): equiangular, or under
+    MIS either equiangular or a distance from a homogeneous stand-in, the
+    media's mean majorant (MediumTable.mean_majorant) plus the homogeneous
+    extinction, truncated to the lit part of the segment (also the point
+    of a distant light); both pdfs are closed-form, so the power heuristic
+    needs no null-collision probabilities."""
+    if direct is None or not direct[8].any():
+        return
+    rows, equi, mis, P, t0, t1 = direct[:6]
+    h = np.flatnonzero(direct[8])
+    r = rows[h]
+    o, d = on.o[r], on.d[r]
+    xi = u[r, 2]
+    sigma = ctx.media.mean_majorant(on.stack[r]) + ctx.media.extinction(on.stack[r]).max(axis=1)
+    t = np.zeros(len(h))
+    q = equi[h]
+    e, k = np.flatnonzero(q), np.flatnonzero(~q)
+    t[e], _ = equiangular.sample(o[e], d[e], P[h[e]], t0[h[e]], t1[h[e]], xi[e])
+    t[k] = _truncated_exponential(sigma[k], t0[h[k]], t1[h[k]], xi[k])
+    p_e = equiangular.pdf(o, d, P[h], t0[h], t1[h], t)
+    p_d = _truncated_pdf(np.ones((len(h), 1)), sigma[:, None], t0[h], t1[h], t)
+    direct[9] = (h, t, p_e, p_d)
 
 
 def _lit_segment(ctx, o, d, e, t_end):
@@ -129,36 +163,43 @@ def _lit_segment(ctx, o, d, e, t_end):
     return t0, t1
 
 
-def _direct_points(ctx, on, flight, direct, u):
+def _direct_points(ctx, on, flight, direct, u, depth):
     """Sets flight.nee_scale (the factor on the light sampled at a free
     flight's scattering point: 1, or 0 for the segments ``_direct_setup``
     chose a direct-light point for) and flight.direct: (rows, t, throughput
-    factor) of those points, sigma_s T(t) / pdf, inside the part of the
-    segment the light can reach (a spot's cone): equiangular, or under MIS
-    either equiangular or a distance (the free flight's channel mixture of
+    factor, emitter, its selection probability) of those points,
+    sigma_s T(t) / pdf, inside the part of the segment the light can reach
+    (a spot's cone): equiangular, or under MIS either equiangular or a
+    distance (in homogeneous media the free flight's channel mixture of
     exponentials truncated to that part, as Cycles 5.0's homogeneous direct
     scatter), weighted 2 w by the power heuristic (Cycles'
-    volume_direct_scatter_mis)."""
+    volume_direct_scatter_mis).  In heterogeneous media T(t) is the
+    homogeneous media's transmittance in closed form times a ratio-tracking
+    estimate of the textured ones' (tracking.field_transmittance), and
+    sigma_s is evaluated there."""
     n = len(flight.t_end)
     flight.nee_scale = np.ones(n)
     flight.direct = None
     if direct is None or len(direct[0]) == 0:
         return
-    rows, equi, mis, P, t0, t1, emitter, p_sel = direct
+    rows, equi, mis, P, t0, t1, emitter, p_sel, het, tracked = direct
     flight.nee_scale[rows] = 0.0
     o, d = on.o[rows], on.d[rows]
     pc, st = flight.channel_pdf[rows], flight.sigma_t[rows]
     xi, uc = u[rows, 2], u[rows, 3]
     t = np.zeros(len(rows))
     p_e = np.zeros(len(rows))
-    e = np.flatnonzero(equi)
+    e = np.flatnonzero(equi & ~het)
     t[e], p_e[e] = equiangular.sample(o[e], d[e], P[e], t0[e], t1[e], xi[e])
-    k = np.flatnonzero(~equi)
+    k = np.flatnonzero(~equi & ~het)
     if len(k):
         c = np.minimum((uc[k, None] >= np.cumsum(pc[k], axis=1)).sum(axis=1), 2)
         t[k] = _truncated_exponential(st[k, c], t0[k], t1[k], xi[k])
         p_e[k] = equiangular.pdf(o[k], d[k], P[k], t0[k], t1[k], t[k])
     p_d = _truncated_pdf(pc, st, t0, t1, t)
+    if tracked is not None:   # heterogeneous rows: sampled before their flight
+        h = tracked[0]
+        t[h], p_e[h], p_d[h] = tracked[1], tracked[2], tracked[3]
     p = np.where(equi, p_e, p_d)
     good = (p > 0) & np.isfinite(t) & (t1 > t0)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -168,6 +209,13 @@ def _direct_points(ctx, on, flight, direct, u):
         return
     _, ss, _, _ = ctx.media.coefficients(on.stack[rows[keep]])
     T = np.exp(-st[keep] * t[keep, None])
+    hk = np.flatnonzero(het[keep])
+    if len(hk):   # the textured media's scattering at the point, the tracker's transmittance to it
+        r = rows[keep[hk]]
+        x = on.o[r] + on.d[r] * t[keep[hk], None]
+        ss[hk] += ctx.media.local(on.stack[r], x, on.d[r])[1]
+        rng = tracking_rng(ctx, on.pseed[r], on.sample[r], depth, 4)
+        T[hk] = tracking.field_transmittance(ctx.media, on.stack[r], on.o[r], on.d[r], t[keep[hk]], rng)
     flight.direct = (rows[keep], t[keep], ss * T * (w[keep] / p[keep])[:, None], emitter[keep], p_sel[keep])
 
 

@@ -185,6 +185,15 @@ class MediumTable:
             dist[rows] = np.minimum(dist[rows], t)
         return mu, dist
 
+    def mean_majorant(self, stack):
+        """(N,) the heterogeneous media's summed mean grid majorant: the
+        extinction of a homogeneous stand-in that distance-samples direct-
+        light points in them (engine/integrator/volume.py)."""
+        out = np.zeros(len(stack))
+        for k, j, rows in self._field_rows(stack):
+            out[rows] += float(self.fields[j].grid.mean())
+        return out
+
     def _field_rows(self, stack):
         lo, h = self.first_field, len(self.fields)
         for k in self._used_slots(stack):

@@ -47,8 +47,11 @@ class Tracked:
     truncated: int = 0
 
 
-def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=None, x_light=None):
-    """Track rays o + t d, 0 <= t < t_end, through the media of ``stack``."""
+def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=None, x_light=None,
+          homogeneous=True):
+    """Track rays o + t d, 0 <= t < t_end, through the media of ``stack``.
+    ``homogeneous`` False: the stack's homogeneous media are left out (the
+    caller takes their transmittance in closed form)."""
     n = len(o)
     w = np.ones((n, 3))
     out = Tracked(w, np.zeros(n, bool), np.full(n, np.inf), np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)))
@@ -58,6 +61,8 @@ def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=
     may_scatter = np.zeros(n, bool) if may_scatter is None else np.asarray(may_scatter, bool)
     x_light = np.full(n, np.inf) if x_light is None else np.asarray(x_light, np.float64)
     hsa, hss, hem, hg = table.coefficients(stack)
+    if not homogeneous:
+        hsa, hss, hem = np.zeros_like(hsa), np.zeros_like(hss), np.zeros_like(hem)
     hst = hsa + hss
     hmu = hst.max(axis=1)
     hgw = hss.mean(axis=1) * hg
@@ -96,7 +101,7 @@ def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=
             out_of = np.flatnonzero(going & ~valid[:, j])
             if len(out_of):   # past the cell (or the segment's end) before collision j
                 rows = live[out_of]
-                _light(out, w, x_light, rows, t[rows], step_end[out_of])
+                _light(out.light_w, w, x_light, rows, t[rows], step_end[out_of])
                 t[rows] = step_end[out_of]
                 done[out_of] = step_end[out_of] >= t_end[rows]
                 going[out_of] = False
@@ -104,7 +109,7 @@ def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=
                 continue
             rows = live[c]
             tn = tk[c, j]
-            _light(out, w, x_light, rows, t[rows], tn)
+            _light(out.light_w, w, x_light, rows, t[rows], tn)
             t[rows] = tn
             stop = _collide(out, w, rows, tn, mu[c], sa[c, j], ss[c, j], em[c, j], gw[c, j], u[c, j], mode,
                             beta, may_scatter)
@@ -121,10 +126,10 @@ def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=
     return out
 
 
-def _light(out, w, x_light, rows, t0, t1):
-    """Rows passing the light on their ray between t0 and t1: their weight there."""
-    seen = (t0 < x_light[rows]) & (x_light[rows] <= t1)
-    out.light_w[rows[seen]] = w[rows[seen]]
+def _light(into, w, x, rows, t0, t1):
+    """Rows passing x on their ray between t0 and t1: their weight there."""
+    seen = (t0 < x[rows]) & (x[rows] <= t1)
+    into[rows[seen]] = w[rows[seen]]
 
 
 def _collide(out, w, rows, tn, mu, sa, ss, em, gw, u, mode, beta, may_scatter):
@@ -171,3 +176,13 @@ def _collide(out, w, rows, tn, mu, sa, ss, em, gw, u, mode, beta, may_scatter):
 def transmittance(table, stack, o, d, length, rng, estimator="ratio"):
     """(N, 3) transmittance estimates of segments through the media of stack."""
     return track(table, stack, o, d, np.asarray(length, np.float64), rng, mode=estimator).weight
+
+
+def field_transmittance(table, stack, o, d, length, rng):
+    """(N, 3) transmittance of segments through the media of ``stack``:
+    the homogeneous media's exp(-sigma_t length) in closed form times a
+    ratio-tracking estimate of the textured ones' alone (no collisions,
+    hence no noise, from the homogeneous part)."""
+    length = np.asarray(length, np.float64)
+    closed = np.exp(-table.extinction(stack) * length[:, None])
+    return closed * track(table, stack, o, d, length, rng, mode="ratio", homogeneous=False).weight
