@@ -349,6 +349,8 @@ _lobe_one = helper(_lobe_weight.fn)
 
 @helper
 def _lobe_at(i, k, p, lobe, center, radius):
+    if lobe[i, 4] == 0.0:   # no lobe: the factor is exactly 1; skip its arccos and exp
+        return 1.0
     return _lobe_one(p[i, 0], p[i, 1], p[i, 2], center[k, 0], center[k, 1], center[k, 2], radius[k],
                      lobe[i, 0], lobe[i, 1], lobe[i, 2], lobe[i, 3], lobe[i, 4])
 
