@@ -425,19 +425,22 @@ def every_light(lobes, selection):
 # weight that the light tree's lobe factor weighs (lighttree LOBE_COLUMNS),
 # at most 1 - LOBE_FLOOR so every light keeps a nonzero probability; lobes
 # rougher than LOBE_MAX_ALPHA are too wide for the factor to tell lights apart.
-LOBE_FLOOR = 0.1
+LOBE_FLOOR = 0.03
 LOBE_MAX_ALPHA = 0.5
 
 
 def lobe_terms(ctx, v):
     """(N, LOBE_COLUMNS) per vertex: the mirror direction of wo about the
     shading normal (world), the glossy lobes' angular width (2 alpha, their
-    selection-weighted mean, radians) and the mix; None unless 'tree_bsdf'."""
+    selection-weighted mean, radians) and the mix; None unless
+    'tree_bsdf' or where no vertex has a glossy lobe."""
     if not ctx.lights.lobe_term:
         return None
     lobes, sel = v.lobes, v.selection
     glossy = np.where((lobes.kind == bsdf.GLOSSY) & (lobes.alpha <= LOBE_MAX_ALPHA), sel, 0.0)
     share = glossy.sum(axis=1)
+    if not share.any():   # no glossy vertex: the plain tree, without the factor's work
+        return None
     alpha = (glossy * lobes.alpha).sum(axis=1) / np.maximum(share, 1e-12)
     wo = v.wo_l
     mirror = v.world(np.stack([-wo[:, 0], -wo[:, 1], wo[:, 2]], axis=1))
@@ -709,7 +712,8 @@ def remember_vertex(ctx, paths, v, through, every, ray, depth):
     if every is not None:
         paths.prev_every = unless(through, paths.prev_every, every)
     if ctx.lights.lobe_term:
-        paths.prev_lobe = unless(through, paths.prev_lobe, lobe_terms(ctx, v))
+        lobe = lobe_terms(ctx, v)
+        paths.prev_lobe = unless(through, paths.prev_lobe, np.zeros((len(v), 5)) if lobe is None else lobe)
     if ctx.track_rays or ctx.count_kinds:
         kind = visibility.ray_kind(ctx, v, paths, depth)
         if ctx.count_kinds:
