@@ -21,6 +21,8 @@ LIGHT_SELECTION_ITEMS = (
     ('ALL', "All Lights", "Sample every light at every vertex (slower, less noise with few lights)", 3),
     ('RIS', "Resampled", "Draw 4 lights by the light tree at each vertex and keep one by its unshadowed "
      "contribution with the BSDF (one shadow ray): less noise over glossy surfaces, more CPU per sample", 5),
+    ('TREE_BSDF', "Light Tree with BSDF", "The light tree, weighing each branch by how much of it the glossy "
+     "lobe reflects at glossy surfaces: less noise over glossy surfaces at about the tree's cost", 6),
 )
 
 STRATEGY_ITEMS = (

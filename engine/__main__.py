@@ -43,7 +43,7 @@ def main(argv=None):
     ap.add_argument("--max-bounces", type=int, default=8)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--strategy", default="mis", choices=("mis", "light", "bsdf"))
-    ap.add_argument("--light-selection", default="auto", choices=("auto", "tree", "ris", "power", "uniform", "all"))
+    ap.add_argument("--light-selection", default="auto", choices=("auto", "tree", "ris", "tree_bsdf", "power", "uniform", "all"))
     ap.add_argument("--max-paths", type=int, default=1 << 18)
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("-o", "--output", default=os.path.join("out", "engine_cornell"))

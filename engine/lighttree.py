@@ -112,8 +112,10 @@ class LightTree:
                 self.phi, self.left, self.right)
 
     # -- sampling ---------------------------------------------------------------
-    def select(self, u, p, n):
-        """Emitter index and its selection probability for each shading point."""
+    def select(self, u, p, n, lobe=None):
+        """Emitter index and its selection probability for each shading point
+        (lobe: (N, LOBE_COLUMNS) glossy-lobe terms, None: none)."""
+        lobe = _lobes(lobe, len(u))
         m = len(u)
         emitter = np.zeros(m, np.int64)
         prob = np.ones(m)
@@ -132,12 +134,13 @@ class LightTree:
         if len(rows):
             picked = np.empty(len(rows), np.int64)
             p_rows = np.full(len(rows), 1.0 - self.p_infinite)
-            _descend(np.ascontiguousarray(u[rows]), _rows(p, rows), _rows(n, rows), *self._tree_arrays(),
+            _descend(np.ascontiguousarray(u[rows]), _rows(p, rows), _rows(n, rows), _rows(lobe, rows),
+                     *self._tree_arrays(),
                      self.leaf_emitter, picked, p_rows)
             emitter[rows], prob[rows] = picked, p_rows
         return emitter, prob
 
-    def select_many(self, u, p, n):
+    def select_many(self, u, p, n, lobe=None):
         """``select`` for several numbers per shading point, u (N, M), each
         row ascending (stratified candidates): emitters and probabilities
         (N, M), as ``select`` gives them column by column.  The compiled
@@ -145,6 +148,7 @@ class LightTree:
         before it (ascending numbers share their first levels)."""
         u = np.asarray(u, float)
         m, k = u.shape
+        lobe = _lobes(lobe, m)
         emitter = np.zeros((m, k), np.int64)
         prob = np.ones((m, k))
         tree = np.ones((m, k), bool)
@@ -161,12 +165,13 @@ class LightTree:
         if self.has_tree and tree.any():
             prob[tree] = 1.0 - self.p_infinite
             _descend_many(np.ascontiguousarray(uu), np.ascontiguousarray(tree), _rows(p, np.arange(m)),
-                          _rows(n, np.arange(m)), *self._tree_arrays(), self.leaf_emitter, emitter, prob)
+                          _rows(n, np.arange(m)), _rows(lobe, np.arange(m)), *self._tree_arrays(), self.leaf_emitter, emitter, prob)
         return emitter, prob
 
-    def pmf(self, emitter, p, n):
+    def pmf(self, emitter, p, n, lobe=None):
         """Probability that ``select`` picks ``emitter`` at p (same products)."""
         emitter = np.asarray(emitter, np.int64)
+        lobe = _lobes(lobe, len(emitter))
         prob = np.ones(len(emitter))
         inf = np.zeros(len(emitter), bool)
         if len(self.infinite):
@@ -175,20 +180,27 @@ class LightTree:
         rows = np.nonzero(~inf)[0]
         if len(rows):
             p_rows = np.full(len(rows), 1.0 - self.p_infinite)
-            _path_pmf(np.ascontiguousarray(emitter[rows]), _rows(p, rows), _rows(n, rows), *self._tree_arrays(),
+            _path_pmf(np.ascontiguousarray(emitter[rows]), _rows(p, rows), _rows(n, rows), _rows(lobe, rows),
+                      *self._tree_arrays(),
                       self.path_node, self.path_left, self.path_len, p_rows)
             prob[rows] = p_rows
         return prob
+
+
+def _lobes(lobe, m):
+    return np.zeros((m, LOBE_COLUMNS)) if lobe is None else lobe
 
 
 def _rows(a, rows):
     return np.ascontiguousarray(a[rows] if len(rows) < len(a) else a, dtype=np.float64)
 
 
-def _p_left_numpy(node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right):
+def _p_left_numpy(node, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right):
     """Probability of descending into the left child of each ``node``."""
     il = _node_importance(left[node], p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
     ir = _node_importance(right[node], p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
+    il = il * _node_lobe(left[node], p, lobe, center, radius)
+    ir = ir * _node_lobe(right[node], p, lobe, center, radius)
     total = il + ir
     # Both zero: neither child can light p; any choice is unbiased.
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -205,7 +217,7 @@ def _node_importance(node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos
 _U_MAX = np.nextafter(1.0, 0.0)
 
 
-def _descend_numpy(u, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf,
+def _descend_numpy(u, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf,
                    emitter, prob):
     """From the root to a leaf per row, picking a child by importance; the
     product of the choices' probabilities multiplies ``prob``."""
@@ -219,7 +231,7 @@ def _descend_numpy(u, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, p
         rows, node, uu = rows[interior], node[interior], uu[interior]
         if len(rows) == 0:
             break
-        pl = _p_left_numpy(node, p[rows], n[rows], *arrays)
+        pl = _p_left_numpy(node, p[rows], n[rows], lobe[rows], *arrays)
         go_left = uu < pl
         prob[rows] *= np.where(go_left, pl, 1.0 - pl)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -228,7 +240,7 @@ def _descend_numpy(u, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, p
         node = np.where(go_left, left[node], right[node])
 
 
-def _path_pmf_numpy(emitter, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right,
+def _path_pmf_numpy(emitter, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right,
                     path_node, path_left, path_len, prob):
     """The product ``_descend`` forms for each row's emitter, along its path."""
     arrays = (center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right)
@@ -238,7 +250,7 @@ def _path_pmf_numpy(emitter, p, n, center, radius, w, two_sided, sin_o, cos_o, c
         if len(rows) == 0:
             break
         e = emitter[rows]
-        pl = _p_left_numpy(path_node[e, k], p[rows], n[rows], *arrays)
+        pl = _p_left_numpy(path_node[e, k], p[rows], n[rows], lobe[rows], *arrays)
         prob[rows] *= np.where(path_left[e, k], pl, 1.0 - pl)
 
 
@@ -287,6 +299,38 @@ def _sin_sub(sin_a, cos_a, sin_b, cos_b):
     return where(cos_a > cos_b, 0.0, sin_a * cos_b - cos_a * sin_b)
 
 
+# -- the glossy lobe's term (light selection 'tree_bsdf') --------------------
+# A vertex whose BSDF is mostly a glossy lobe passes LOBE_COLUMNS numbers:
+# the lobe's mirror direction (world), its angular width sigma (radians) and
+# the share ``mix`` of the importance the lobe weighs.  A node's importance is
+# multiplied by (1 - mix) + mix * exp(-(x / sigma)^2), x the angle between the
+# mirror direction and the nearest direction into the node's bounding sphere
+# (0 inside it), after Conty Estevez & Kulla 2018's BSDF bound.  mix < 1, so
+# every light keeps a nonzero probability; mix 0 multiplies by exactly 1
+# (the plain tree).  ``select`` and ``pmf`` use the same factor.
+LOBE_COLUMNS = 5
+
+
+@kernel(12)
+def _lobe_weight(px, py, pz, cx, cy, cz, r, rx, ry, rz, sigma, mix):
+    """The lobe factor of one node for one shading point."""
+    dx, dy, dz = cx - px, cy - py, cz - pz
+    d2 = dx * dx + dy * dy + dz * dz
+    inv = 1.0 / np.sqrt(np.maximum(d2, 1e-300))
+    cos_r = np.minimum(np.maximum((rx * dx + ry * dy + rz * dz) * inv, -1.0), 1.0)
+    inside = d2 <= r * r
+    cos_b = where(inside, -1.0, np.sqrt(np.maximum(0.0, 1.0 - r * r / np.maximum(d2, 1e-300))))
+    cos_x = _cos_sub(_sin(cos_r), cos_r, _sin(cos_b), cos_b)
+    x = np.arccos(np.minimum(np.maximum(cos_x, -1.0), 1.0)) / np.maximum(sigma, 1e-6)
+    return (1.0 - mix) + mix * np.exp(-x * x)
+
+
+def _node_lobe(node, p, lobe, center, radius):
+    c = center[node]
+    return _lobe_weight(p[:, 0], p[:, 1], p[:, 2], c[:, 0], c[:, 1], c[:, 2], radius[node],
+                        lobe[:, 0], lobe[:, 1], lobe[:, 2], lobe[:, 3], lobe[:, 4])
+
+
 # -- the descent, compiled: one loop per row instead of a dozen array
 # operations per tree level (the NumPy forms above define the results).
 
@@ -300,14 +344,26 @@ def _importance_at(i, k, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e
                            two_sided[k], sin_o[k], cos_o[k], cos_e[k], phi[k])
 
 
+_lobe_one = helper(_lobe_weight.fn)
+
+
 @helper
-def _p_left_one(i, node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right):
+def _lobe_at(i, k, p, lobe, center, radius):
+    if lobe[i, 4] == 0.0:   # no lobe: the factor is exactly 1; skip its arccos and exp
+        return 1.0
+    return _lobe_one(p[i, 0], p[i, 1], p[i, 2], center[k, 0], center[k, 1], center[k, 2], radius[k],
+                     lobe[i, 0], lobe[i, 1], lobe[i, 2], lobe[i, 3], lobe[i, 4])
+
+
+@helper
+def _p_left_one(i, node, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right):
     # One call site for both children: numba inlines the importance once
     # (two sites cost ~10 s more compile time).  0 + il + ir == il + ir exactly.
     il, total = 0.0, 0.0
     for side in range(2):
         child = left[node] if side == 0 else right[node]
         imp = _importance_at(i, child, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
+        imp *= _lobe_at(i, child, p, lobe, center, radius)
         if side == 0:
             il = imp
         total += imp
@@ -316,17 +372,17 @@ def _p_left_one(i, node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e
     return 0.5
 
 
-_TREE_SIGNATURE = ("float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64[:, ::1], "
+_TREE_SIGNATURE = ("float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64[:, ::1], "
                    "float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], int64[::1], int64[::1]")
 
 
 @loop_kernel(f"void(float64[::1], {_TREE_SIGNATURE}, int64[::1], int64[::1], float64[::1])", _descend_numpy)
-def _descend(u, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf, emitter, prob):
+def _descend(u, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf, emitter, prob):
     for i in range(len(u)):
         node = 0
         uu = u[i]
         while leaf[node] < 0:
-            pl = _p_left_one(i, node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right)
+            pl = _p_left_one(i, node, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right)
             if uu < pl:
                 prob[i] *= pl
                 v = uu / pl
@@ -343,17 +399,17 @@ def _descend(u, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, le
 
 @loop_kernel(f"void(int64[::1], {_TREE_SIGNATURE}, int64[:, ::1], boolean[:, ::1], int64[::1], float64[::1])",
              _path_pmf_numpy)
-def _path_pmf(emitter, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right,
+def _path_pmf(emitter, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right,
               path_node, path_left, path_len, prob):
     for i in range(len(emitter)):
         e = emitter[i]
         for k in range(path_len[e]):
-            pl = _p_left_one(i, path_node[e, k], p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi,
+            pl = _p_left_one(i, path_node[e, k], p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi,
                              left, right)
             prob[i] *= pl if path_left[e, k] else 1.0 - pl
 
 
-def _descend_many_numpy(u, use, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf,
+def _descend_many_numpy(u, use, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf,
                         emitter, prob):
     """``_descend`` of each column of u (N, M) where ``use``."""
     for k in range(u.shape[1]):
@@ -361,7 +417,7 @@ def _descend_many_numpy(u, use, p, n, center, radius, w, two_sided, sin_o, cos_o
         if len(rows) == 0:
             continue
         e, pr = np.empty(len(rows), np.int64), prob[rows, k].copy()
-        _descend_numpy(u[rows, k], p[rows], n[rows], center, radius, w, two_sided, sin_o, cos_o, cos_e, phi,
+        _descend_numpy(u[rows, k], p[rows], n[rows], lobe[rows], center, radius, w, two_sided, sin_o, cos_o, cos_e, phi,
                        left, right, leaf, e, pr)
         emitter[rows, k], prob[rows, k] = e, pr
 
@@ -371,7 +427,7 @@ _CACHED_LEVELS = 64
 
 @loop_kernel(f"void(float64[:, ::1], boolean[:, ::1], {_TREE_SIGNATURE}, int64[::1], int64[:, ::1], "
              "float64[:, ::1])", _descend_many_numpy)
-def _descend_many(u, use, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf,
+def _descend_many(u, use, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf,
                   emitter, prob):
     cache_node = np.empty(_CACHED_LEVELS, np.int64)
     cache_pl = np.empty(_CACHED_LEVELS)
@@ -389,7 +445,7 @@ def _descend_many(u, use, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_
                     pl = cache_pl[level]
                 else:
                     same = False
-                    pl = _p_left_one(i, node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi,
+                    pl = _p_left_one(i, node, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi,
                                      left, right)
                     if level < _CACHED_LEVELS:
                         cache_node[level], cache_pl[level] = node, pl

@@ -97,7 +97,8 @@ def prepare(scene, settings, bake=None):
                       env_compensation=settings.mis_compensation and settings.strategy == "mis")
     # 'auto' stays only where it samples every light at glossy vertices;
     # else it is the light tree.
-    chosen = "auto" if lights.every_at_glossy else "ris" if lights.resampled else lights.strategy
+    chosen = ("auto" if lights.every_at_glossy else "ris" if lights.resampled
+              else "tree_bsdf" if lights.lobe_term else lights.strategy)
     settings = dataclasses.replace(settings, light_selection=chosen)
     try:
         camera = CameraModel(scene.camera, PixelFilter(settings.filter_type, settings.filter_width))

@@ -290,7 +290,7 @@ def validate_settings(s):
         raise SceneError("settings: samples must be >= 1")
     if s.samples_per_pass < 0:
         raise SceneError("settings: samples per pass must be >= 0 (0 = automatic)")
-    if s.light_selection not in ("uniform", "power", "all", "tree", "ris", "auto"):
+    if s.light_selection not in ("uniform", "power", "all", "tree", "ris", "tree_bsdf", "auto"):
         raise SceneError(f"settings: unknown light selection {s.light_selection!r}")
     if s.strategy not in ("mis", "light", "bsdf"):
         raise SceneError(f"settings: unknown strategy {s.strategy!r}")

@@ -79,6 +79,9 @@ class Paths:
     # The curve segment's row the ray leaves (-1: none, or not a curve): its
     # hits are passed (Accel.intersect_skipping, Cycles' self-intersection rule).
     self_prim: np.ndarray
+    # Light selection 'tree_bsdf': the previous vertex's glossy-lobe terms
+    # (stages.lobe_terms), for the tree's selection pdf in MIS; (N, 5).
+    prev_lobe: np.ndarray
 
     def __len__(self):
         return len(self.pix)

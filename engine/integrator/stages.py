@@ -111,7 +111,8 @@ def mis_hit(ctx, paths, i, emitter, pdf_light):
         p_light = np.where(paths.prev_every[i], resampled_mis_pmf(p_sel), p_sel) * pdf_light
         return np.where(prev_delta, 1.0, power_heuristic(paths.prev_pdf[i], p_light))
     every = paths.prev_every[i] if ctx.lights.every_at_glossy else None
-    p_light = ctx.lights.selection_pdf(emitter, paths.prev_p[i], paths.prev_n[i], every) * pdf_light
+    lobe = paths.prev_lobe[i] if ctx.lights.lobe_term else None
+    p_light = ctx.lights.selection_pdf(emitter, paths.prev_p[i], paths.prev_n[i], every, lobe) * pdf_light
     return np.where(prev_delta, 1.0, power_heuristic(paths.prev_pdf[i], p_light))
 
 
@@ -420,6 +421,36 @@ def every_light(lobes, selection):
     return np.where(narrow, selection, 0.0).sum(axis=1) > 0.5
 
 
+# Light selection 'tree_bsdf': the glossy lobes' share of a vertex's sampling
+# weight that the light tree's lobe factor weighs (lighttree LOBE_COLUMNS),
+# at most 1 - LOBE_FLOOR so every light keeps a nonzero probability; lobes
+# rougher than LOBE_MAX_ALPHA are too wide for the factor to tell lights apart.
+LOBE_FLOOR = 0.03
+LOBE_MAX_ALPHA = 0.5
+
+
+def lobe_terms(ctx, v):
+    """(N, LOBE_COLUMNS) per vertex: the mirror direction of wo about the
+    shading normal (world), the glossy lobes' angular width (2 alpha, their
+    selection-weighted mean, radians) and the mix; None unless
+    'tree_bsdf' or where no vertex has a glossy lobe."""
+    if not ctx.lights.lobe_term:
+        return None
+    lobes, sel = v.lobes, v.selection
+    glossy = np.where((lobes.kind == bsdf.GLOSSY) & (lobes.alpha <= LOBE_MAX_ALPHA), sel, 0.0)
+    share = glossy.sum(axis=1)
+    if not share.any():   # no glossy vertex: the plain tree, without the factor's work
+        return None
+    alpha = (glossy * lobes.alpha).sum(axis=1) / np.maximum(share, 1e-12)
+    wo = v.wo_l
+    mirror = v.world(np.stack([-wo[:, 0], -wo[:, 1], wo[:, 2]], axis=1))
+    out = np.empty((len(share), 5))
+    out[:, :3] = mirror
+    out[:, 3] = 2.0 * alpha + 0.02
+    out[:, 4] = np.clip(share, 0.0, 1.0) * (1.0 - LOBE_FLOOR)
+    return out
+
+
 def light_samples(ctx, paths, v, depth, every):
     """Every light sample of the vertices ``v`` that brings light, as
     ShadowBatches (one per round, made when the previous one is traced)."""
@@ -431,7 +462,7 @@ def light_samples(ctx, paths, v, depth, every):
             batches = [resampled_light_sample(ctx, on, at, depth)]
         elif mode == "select":
             u = uniforms(ctx, on, vertex_set(depth, LIGHT))
-            e, p_sel = ctx.lights.select(u[:, 0], at.hit.p, at.hit.ng)
+            e, p_sel = ctx.lights.select(u[:, 0], at.hit.p, at.hit.ng, lobe_terms(ctx, at))
             batches = [light_sample(ctx, on, at, e, p_sel, u[:, 1:])]
         else:
             batches = (light_sample(ctx, on, at, np.full(n, e), np.ones(n),
@@ -680,6 +711,9 @@ def remember_vertex(ctx, paths, v, through, every, ray, depth):
         paths.prev_inst = unless(through, paths.prev_inst, instance_of(ctx, hit.prim).astype(np.int32))
     if every is not None:
         paths.prev_every = unless(through, paths.prev_every, every)
+    if ctx.lights.lobe_term:
+        lobe = lobe_terms(ctx, v)
+        paths.prev_lobe = unless(through, paths.prev_lobe, np.zeros((len(v), 5)) if lobe is None else lobe)
     if ctx.track_rays or ctx.count_kinds:
         kind = visibility.ray_kind(ctx, v, paths, depth)
         if ctx.count_kinds:

@@ -334,6 +334,7 @@ def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None, obs=NO_PASSES):
     paths.prev_pdf = pdf
     paths.prev_delta = np.zeros(n, bool)
     paths.prev_every = np.zeros(n, bool)
+    paths.prev_lobe = np.zeros((n, 5))
     paths.min_pdf = np.minimum(paths.min_pdf, pdf)   # Cycles' min_ray_pdf takes the phase pdf too
     paths.bounce = paths.bounce + 1
     paths.vbounce = paths.vbounce + 1

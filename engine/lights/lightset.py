@@ -41,7 +41,7 @@ def resolve_selection(strategy, lights, mesh_emitters):
     at glossy vertices): 'auto' is the light tree, with every light at glossy
     vertices when there are 2 to AUTO_ALL_LIGHTS emitters, none an emissive
     mesh.  Other selections stand for themselves."""
-    if strategy == "ris":
+    if strategy in ("ris", "tree_bsdf"):
         return "tree", False
     if strategy != "auto":
         return strategy, False
@@ -76,6 +76,8 @@ class LightSet:
         self.count = base
         surface = sum(g.table.count for g in self.groups if g.definition.hit == SURFACE)
         self.resampled = strategy == "ris"
+        # 'tree_bsdf': the tree weighs nodes by the glossy lobe too (lighttree LOBE_COLUMNS).
+        self.lobe_term = strategy == "tree_bsdf"
         strategy, self.every_at_glossy = resolve_selection(strategy, self.count, surface)
         self.strategy = strategy
         radius = _scene_radius(triangles)
@@ -136,11 +138,12 @@ class LightSet:
         return out
 
     # -- selection ----------------------------------------------------------
-    def select(self, u, p=None, n=None):
+    def select(self, u, p=None, n=None, lobe=None):
         """Emitter per uniform u and its probability; the tree needs the
-        shading points p and their normals n (zero rows: no normal)."""
+        shading points p and their normals n (zero rows: no normal), and
+        under 'tree_bsdf' the vertices' glossy-lobe terms (None: none)."""
         if self.tree is not None:
-            return self.tree.select(u, p, normals(n, len(u)))
+            return self.tree.select(u, p, normals(n, len(u)), lobe)
         return self.dist.sample(u)
 
     def select_many(self, u, p=None, n=None):
@@ -151,19 +154,20 @@ class LightSet:
         picks = [self.dist.sample(u[:, k]) for k in range(u.shape[1])]
         return np.stack([e for e, _ in picks], axis=1), np.stack([q for _, q in picks], axis=1)
 
-    def selection_pdf(self, emitter, p=None, n=None, every=None):
-        """Probability that ``select`` at p (normal n) picks ``emitter``; 1
-        where ``every`` (per row: NEE sampled every light there)."""
+    def selection_pdf(self, emitter, p=None, n=None, every=None, lobe=None):
+        """Probability that ``select`` at p (normal n, lobe terms) picks
+        ``emitter``; 1 where ``every`` (per row: NEE sampled every light there)."""
         if self.strategy == "all":
             return np.ones(len(emitter))
         if every is not None and every.any():
             out = np.ones(len(emitter))
             some = np.flatnonzero(~every)
             if len(some):
-                out[some] = self.selection_pdf(emitter[some], _rows(p, some), _rows(n, some))
+                out[some] = self.selection_pdf(emitter[some], _rows(p, some), _rows(n, some),
+                                               lobe=_rows(lobe, some))
             return out
         if self.tree is not None:
-            return self.tree.pmf(emitter, p, normals(n, len(emitter)))
+            return self.tree.pmf(emitter, p, normals(n, len(emitter)), lobe)
         return self.dist.pmf[emitter]
 
     # -- NEE ----------------------------------------------------------------

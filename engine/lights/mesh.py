@@ -222,7 +222,8 @@ class MeshLights(LightTable):
 
 
 def _build(inputs):
-    return MeshLights(inputs.triangles, inputs.materials, inputs.strategy in ("tree", "auto"), inputs.make_tree)
+    tree = inputs.strategy in ("tree", "auto", "tree_bsdf")
+    return MeshLights(inputs.triangles, inputs.materials, tree, inputs.make_tree)
 
 
 def _glow_scene(corners, emission=(2.0, 1.0, 0.5)):

@@ -60,6 +60,8 @@ def test_render_settings_follow_scene(factory_scene):
     assert (settings.light_selection, settings.strategy, settings.filter_type) == ('all', 'bsdf', 'BOX')
     # Cycles ignores the box filter's width (always one pixel); so does the export.
     assert settings.filter_width == 1.0 and settings.time_limit == 12.0
+    ember.light_selection = 'TREE_BSDF'   # the light tree with the glossy lobe's term
+    assert scene_export.render_settings(factory_scene).light_selection == 'tree_bsdf'
     ember.filter_type = 'GAUSSIAN'
     assert scene_export.render_settings(factory_scene).filter_width == pytest.approx(0.5)
     assert settings.mis_compensation is True

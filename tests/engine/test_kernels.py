@@ -290,6 +290,15 @@ def test_light_tree_descent_agrees(jit):
     assert_agree(*many)
     for k in range(4):
         assert_agree(tuple(a[:, k] for a in many[0]), tree.select(strata[:, k], p, nn))
+    # With glossy-lobe terms (light selection 'tree_bsdf'): the same agreements.
+    lobe = np.empty((n, 5))
+    r = rng.normal(size=(n, 3))
+    lobe[:, :3] = r / np.linalg.norm(r, axis=1)[:, None]
+    lobe[:, 3], lobe[:, 4] = rng.uniform(0.02, 1.0, n), rng.uniform(0.0, 0.9, n)
+    plain, compiled = both_ways(tree.select, u, p, nn, lobe)
+    assert_agree(plain, compiled)
+    assert_agree(*both_ways(tree.pmf, plain[0], p, nn, lobe))
+    np.testing.assert_allclose(tree.pmf(plain[0], p, nn, lobe), plain[1], rtol=64 * np.finfo(float).eps, atol=0)
 
 
 def test_hit_geometry_agrees(jit):
