@@ -12,7 +12,9 @@ with the scene's fingerprint, samples, seeds and bounces (regenerate:
 minute).  Ember bakes once with EMBER_SAMPLES samples and its per-texel
 variance (engine.bake.bake_light): Welch-style z-tests on 4 x 4 texel
 blocks per channel and on the whole image's mean, one statistical family
-per case (3: diffuse, glossy, combined), power printed and asserted.
+per case (4: diffuse, glossy, transmission, combined), power printed and
+asserted. The Transmission case bakes a variant of the scene: a Refraction
+BSDF with the checker colour over a floor lit by a point light below the plane.
 Diffuse Color alone is a colour pass (the closure colour at the texel
 centre at 1 sample): compared per texel, no statistics.
 """
@@ -50,7 +52,11 @@ CASES = {
     # sampling's MIS-weighted share of emissive meshes: the result then depends on each
     # renderer's light selection pdf, and Ember's differs: +12 % in one block here.)
     'combined_indirect': ('COMBINED', {'INDIRECT', 'EMIT', 'DIFFUSE', 'GLOSSY'}, 0.005, 0.02),
+    # The plane of TRANSMISSIVE: light through its Refraction BSDF (the world and the floor below).
+    'transmission': ('TRANSMISSION', {'DIRECT', 'INDIRECT', 'COLOR'}, 0.01, 0.05),
 }
+# Cases baked on the scene variant with a Refraction BSDF in place of the Glossy.
+TRANSMISSIVE = ('transmission',)
 # Ember's samples where EMBER_SAMPLES leaves too little power (dim, noisy indirect light).
 SAMPLES = {'combined_indirect': 1024}
 # One statistical family each for Diffuse and Glossy; the Combined bake and
@@ -58,8 +64,11 @@ SAMPLES = {'combined_indirect': 1024}
 FILTERED = ('combined', 'diffuse_direct', 'combined_indirect')
 
 
-def bake_scene():
-    """The scene, the baked plane and its bake image."""
+def bake_scene(case=None):
+    """The scene, the baked plane and its bake image (for the TRANSMISSIVE
+    cases: a Refraction BSDF with the checker's colour in place of the
+    Glossy, over a lit floor that it sees through)."""
+    transmissive = case in TRANSMISSIVE
     scene = empty_factory_scene()
     bpy.ops.mesh.primitive_plane_add(size=2.0)
     plane = bpy.context.active_object
@@ -79,12 +88,18 @@ def bake_scene():
     links.new(coords.outputs['UV'], checker.inputs['Vector'])
     diffuse = nodes.new('ShaderNodeBsdfDiffuse')
     links.new(checker.outputs['Color'], diffuse.inputs['Color'])
-    glossy = nodes.new('ShaderNodeBsdfGlossy')
-    glossy.distribution = 'GGX'
+    if transmissive:
+        glossy = nodes.new('ShaderNodeBsdfRefraction')
+        glossy.distribution = 'GGX'
+        glossy.inputs['IOR'].default_value = 1.45
+        links.new(checker.outputs['Color'], glossy.inputs['Color'])
+    else:
+        glossy = nodes.new('ShaderNodeBsdfGlossy')
+        glossy.distribution = 'GGX'
+        glossy.inputs['Color'].default_value = (0.9, 0.9, 0.9, 1.0)
     glossy.inputs['Roughness'].default_value = 0.3
-    glossy.inputs['Color'].default_value = (0.9, 0.9, 0.9, 1.0)
     mix = nodes.new('ShaderNodeMixShader')
-    mix.inputs['Fac'].default_value = 0.3
+    mix.inputs['Fac'].default_value = 0.6 if transmissive else 0.3
     links.new(diffuse.outputs[0], mix.inputs[1])
     links.new(glossy.outputs[0], mix.inputs[2])
     emission = nodes.new('ShaderNodeEmission')   # what Combined's Emit toggle keeps or drops
@@ -108,6 +123,11 @@ def bake_scene():
     bsdf.inputs['Roughness'].default_value = 1.0
     cube.data.materials.append(red)
 
+    if transmissive:   # a white floor below, lit by a point light beside the plane
+        bpy.ops.mesh.primitive_plane_add(size=6.0, location=(0.0, 0.0, -0.8))
+        bpy.context.active_object.data.materials.append(red)
+        bpy.ops.object.light_add(type='POINT', location=(1.8, -1.5, -0.2))
+        bpy.context.active_object.data.energy = 150.0
     bpy.ops.object.light_add(type='AREA', location=(-0.8, 0.6, 2.2), rotation=(0.3, -0.3, 0.0))
     light = bpy.context.active_object
     light.data.energy = 60.0
@@ -146,10 +166,10 @@ def reference_path(case):
 
 def make_reference(case):
     kind, pass_filter = CASES[case][:2]
-    scene, plane, image = bake_scene()
+    scene, plane, image = bake_scene(case)
     bakes = np.stack([run_bake(scene, image, 'CYCLES', kind, pass_filter, CYCLES_SAMPLES, seed)[..., :3]
                       for seed in range(1, SEEDS + 1)])
-    scene, plane, image = bake_scene()
+    scene, plane, image = bake_scene(case)
     np.savez_compressed(reference_path(case), mean=bakes.mean(axis=0), var=bakes.var(axis=0, ddof=1) / SEEDS,
                         fingerprint=scene_fingerprint(scene), samples=CYCLES_SAMPLES, seeds=SEEDS, bounces=BOUNCES,
                         blender=bpy.app.version_string)
@@ -207,7 +227,7 @@ def compare(case, level):
     z of the image mean, image and median block power, relative)."""
     from ember_stats import detectable
     kind, pass_filter = CASES[case][:2]
-    scene, plane, image = bake_scene()
+    scene, plane, image = bake_scene(case)
     ref, ref_var = load_reference(case, scene)
     samples = SAMPLES.get(case, EMBER_SAMPLES)
     ember, var, result = ember_bake(scene, image, kind, pass_filter, samples)
@@ -241,7 +261,14 @@ def _assert_agrees(case, result, threshold):
 BLOCK_TESTS = 3 * (SIZE // BLOCK) ** 2 + 1   # block-channels and the image mean of one bake
 
 
-@pytest.mark.parametrize("case", ['diffuse', 'glossy'])
+# Found by this test, cause not found yet: Ember's Transmission bake of the
+# Refraction BSDF is about 10 % low in blue (red and green agree) in the
+# quadrant whose floor the point light lights (block |z| up to 27).
+TRANSMISSION_GAP = pytest.mark.xfail(strict=True, reason="Transmission bake ~10 % low in blue where the floor "
+                                                         "below is lit (cause not found)")
+
+
+@pytest.mark.parametrize("case", ['diffuse', 'glossy', pytest.param('transmission', marks=TRANSMISSION_GAP)])
 def test_light_bake_matches_cycles(case):
     from ember_stats import family_level, z_threshold
     level = family_level(f"light bake {case}", BLOCK_TESTS)
