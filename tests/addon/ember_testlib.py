@@ -629,3 +629,16 @@ def render_against_reference(name, scene, bounces, tmp_path, taps, spp, block, s
     log = ember_engine.RENDER_LOG[-1]
     assert not [w for w in log.get('warnings', ()) if 'Material' in w], log.get('warnings')
     return check_against_reference(name, scene, bounces, image, var, spp, block)
+
+
+def record_engine_scenes(monkeypatch):
+    """A list that receives the engine Scene of every render from now on
+    (the renderer's entry point wrapped for the test's duration)."""
+    from addon import backend
+    real, seen = backend.engine().render, []
+
+    def spy(scene, settings, progress=None):
+        seen.append(scene)
+        return real(scene, settings, progress)
+    monkeypatch.setattr(backend.engine(), 'render', spy)
+    return seen

@@ -33,7 +33,8 @@ import numpy as np
 
 import bpy
 
-from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
+from ember_testlib import (check_against_reference, empty_factory_scene, record_engine_scenes,
+                           render_for_reference, small_resolution)
 from parity_scenes import material
 from test_curves_parity import strands
 
@@ -139,14 +140,8 @@ def test_particle_hair_hostile_input_renders_finite(tmp_path, tapped_engine, mon
     """Zero-length particle hair (Hair Length 0) renders finite and is
     exported; a NaN Radius Scale leaves that system's strands out with a
     warning naming the object and the particle system."""
-    from addon import backend
     from addon import engine as ember_engine
-    real, seen = backend.engine().render, []
-
-    def spy(scene, settings, progress=None):
-        seen.append(scene)
-        return real(scene, settings, progress)
-    monkeypatch.setattr(backend.engine(), 'render', spy)
+    seen = record_engine_scenes(monkeypatch)
     scene = empty_factory_scene()
     bounces = particles_base(scene)
     zero = hairy_sphere("zero", (-0.8, 0.0, 0.5), hair_material(), count=40, children=0)
@@ -181,13 +176,7 @@ def test_particle_hair_export_is_cycles(tmp_path, tapped_engine, monkeypatch):
     settings' slot, and radii as Cycles' shaperadius of each key's
     arc-length fraction (written out here from blender/curves.cpp), 0 at
     the tip with Close Tip; with Close Tip off the tip keeps Tip x scale / 2."""
-    from addon import backend
-    real, seen = backend.engine().render, []
-
-    def spy(scene, settings, progress=None):
-        seen.append(scene)
-        return real(scene, settings, progress)
-    monkeypatch.setattr(backend.engine(), 'render', spy)
+    seen = record_engine_scenes(monkeypatch)
     scene = empty_factory_scene()
     bounces = particles_base(scene)
     obj = hairy_sphere("kids", (0.0, 0.0, 0.5), hair_material(), count=30, children=3)

@@ -126,15 +126,8 @@ def test_motion_blur_parity_with_cycles(tmp_path, tapped_engine, name='objects')
 
 def _exported_scene(monkeypatch):
     """Record the engine scene each render receives."""
-    from addon import backend
-    real = backend.engine().render
-    seen = []
-
-    def spy(scene, settings, progress=None):
-        seen.append(scene)
-        return real(scene, settings, progress)
-    monkeypatch.setattr(backend.engine(), 'render', spy)
-    return seen
+    from ember_testlib import record_engine_scenes
+    return record_engine_scenes(monkeypatch)
 
 
 @pytest.mark.parametrize("shutter, position", [(0.0, 'CENTER'), (10.0, 'START'), (0.5, 'END')])

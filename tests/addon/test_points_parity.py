@@ -8,7 +8,8 @@ import bpy
 import numpy as np
 
 from parity_scenes import light, material, plane, top_camera
-from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
+from ember_testlib import (check_against_reference, empty_factory_scene, record_engine_scenes,
+                           render_for_reference, small_resolution)
 
 BLOCK = 8
 SPP = 512   # the median block resolves 2.7% at 256
@@ -91,13 +92,7 @@ def test_nan_radii_render_finite(tmp_path, tapped_engine, monkeypatch):
     skip a NaN it met, with a warning naming the object; engine-level NaN
     radii are a named error, tests/engine/test_points.py): finite pixels, no
     error, every point exported."""
-    from addon import backend
-    real, seen = backend.engine().render, []
-
-    def spy(scene, settings, progress=None):
-        seen.append(scene)
-        return real(scene, settings, progress)
-    monkeypatch.setattr(backend.engine(), 'render', spy)
+    seen = record_engine_scenes(monkeypatch)
     scene = empty_factory_scene()
     bounces = heap(scene, count=500, nan_radii=7)
     image, _ = render_for_reference(scene, tmp_path, 'nan', tapped_engine, 4, 2, bounces)
