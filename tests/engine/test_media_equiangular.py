@@ -90,17 +90,7 @@ def test_spot_in_fog_sampling_methods_agree():
     names = list(results)
     pairs = [(names[i], names[j]) for i in range(3) for j in range(i + 1, 3)]
     zc = family_z(__name__ + ".methods", (int(keep.sum()) + 3) * len(pairs))
-    worst = 0.0
-    for a, b in pairs:
-        z = z_scores(*blocks[a], *blocks[b])[keep]
-        rel_se = np.sqrt(blocks[a][1][keep] + blocks[b][1][keep]) / blocks[b][0][keep]
-        ma, mb = (results[k].image[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (a, b))
-        se = np.sqrt(sum(results[k].variance[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (a, b)))
-        zm = (ma - mb) / se
-        worst = max(worst, np.abs(z).max(), np.abs(zm).max())
-        print(f"{a} vs {b}: {keep.sum()} block-channels, max |z| {np.abs(z).max():.2f} (limit {zc:.2f}), "
-              f"median block detects {zc * np.median(rel_se):.1%}; image |z| {np.abs(zm).max():.2f}, "
-              f"detects {(zc * se / mb).max():.2%}")
+    worst = worst_pair_z(results, blocks, pairs, keep, zc)
     # The variance gain over the lit pixels: in total, and the median of
     # the per-pixel ratios (distance sampling's variance is mostly in a few
     # pixels, from points next to the light).
@@ -175,3 +165,20 @@ def test_three_lights_in_fog_agree_with_light_sampling_at_scattering_points():
           f"|z| {np.abs(zm).max():.2f}, detects {(zc * se / mb).max():.2%}")
     assert keep.sum() >= 20
     assert max(np.abs(z).max(), np.abs(zm).max()) < zc
+
+
+def worst_pair_z(results, blocks, pairs, keep, zc):
+    """The largest |z| over the kept block-channels and the whole-image
+    means of each pair of renders (their power printed against ``zc``)."""
+    worst = 0.0
+    for a, b in pairs:
+        z = z_scores(*blocks[a], *blocks[b])[keep]
+        rel_se = np.sqrt(blocks[a][1][keep] + blocks[b][1][keep]) / blocks[b][0][keep]
+        ma, mb = (results[k].image[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (a, b))
+        se = np.sqrt(sum(results[k].variance[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (a, b)))
+        zm = (ma - mb) / se
+        worst = max(worst, np.abs(z).max(), np.abs(zm).max())
+        print(f"{a} vs {b}: {keep.sum()} block-channels, max |z| {np.abs(z).max():.2f} (limit {zc:.2f}), "
+              f"median block detects {zc * np.median(rel_se):.1%}; image |z| {np.abs(zm).max():.2f}, "
+              f"detects {(zc * se / mb).max():.2%}")
+    return worst

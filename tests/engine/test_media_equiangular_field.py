@@ -14,7 +14,8 @@ statistical families; power printed; the variance gain printed.
 """
 import numpy as np
 
-from ember_stats import block_means_var, family_z, z_scores
+from ember_stats import block_means_var, family_z
+from test_media_equiangular import worst_pair_z
 from engine.render import render
 from engine.scene import (Camera, Instance, Lobe, Material, Math, NodeCall, NodeOutput, PointLight,
                           RenderSettings, Scene, SunLight, Volume, World)
@@ -74,17 +75,7 @@ def _agree(results, pairs, family, block=2):
     ref = blocks[pairs[0][1]][0]
     keep = ref > 0.02 * ref.max()
     zc = family_z(__name__ + "." + family, (int(keep.sum()) + 3) * len(pairs))
-    worst = 0.0
-    for a, b in pairs:
-        z = z_scores(*blocks[a], *blocks[b])[keep]
-        rel_se = np.sqrt(blocks[a][1][keep] + blocks[b][1][keep]) / blocks[b][0][keep]
-        ma, mb = (results[k].image[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (a, b))
-        se = np.sqrt(sum(results[k].variance[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (a, b)))
-        zm = (ma - mb) / se
-        worst = max(worst, np.abs(z).max(), np.abs(zm).max())
-        print(f"{a} vs {b}: {keep.sum()} block-channels, max |z| {np.abs(z).max():.2f} (limit {zc:.2f}), "
-              f"median block detects {zc * np.median(rel_se):.1%}; image |z| {np.abs(zm).max():.2f}, "
-              f"detects {(zc * se / mb).max():.2%}")
+    worst = worst_pair_z(results, blocks, pairs, keep, zc)
     assert keep.sum() >= 20
     assert worst < zc
 
