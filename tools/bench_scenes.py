@@ -341,6 +341,57 @@ def build_glossy_lights():
     return finish(scene, cam, (0.0, 0.8, 0.7))
 
 
+def _wall_with_window(scene, material, x, y0, y1, z1, window):
+    """The wall x = ``x`` from y0 to y1 and floor to z1, with the
+    rectangular hole ``window`` = (ya, yb, za, zb) cut out: four quads
+    (below, above, left and right of the hole), facing -x (into the room)."""
+    ya, yb, za, zb = window
+    quads = [(y0, y1, 0.0, za), (y0, y1, zb, z1), (y0, ya, za, zb), (yb, y1, za, zb)]
+    verts, faces = [], []
+    for a, b, lo, hi in quads:
+        k = len(verts)
+        verts += [(x, a, lo), (x, a, hi), (x, b, hi), (x, b, lo)]
+        faces.append((k, k + 1, k + 2, k + 3))
+    return bs.mesh_object(scene, "WindowWall", verts, faces, material)
+
+
+def build_interior():
+    """A closed room lit only through a window in one wall by a sun and a
+    sky colour outside: the camera looks away from the window, so what it
+    sees is lit mostly by light that bounced (issue 25's interior).  Built
+    here, tuned on by nothing."""
+    scene = bs.reset()
+    white = bs.node_material("Walls", 'diffuse', (0.75, 0.75, 0.72))
+    room_x, room_y, room_z = 3.0, 2.5, 2.8            # half-extents in x and y, height
+    inward = [  # floor, ceiling, back, front, left walls as quads facing the room
+        ("Floor", [(-room_x, -room_y, 0), (room_x, -room_y, 0), (room_x, room_y, 0), (-room_x, room_y, 0)],
+         principled("Wood", (0.45, 0.28, 0.15), roughness=0.35)),
+        ("Ceiling", [(-room_x, -room_y, room_z), (-room_x, room_y, room_z), (room_x, room_y, room_z),
+                     (room_x, -room_y, room_z)], white),
+        ("Back", [(-room_x, room_y, 0), (room_x, room_y, 0), (room_x, room_y, room_z), (-room_x, room_y, room_z)],
+         white),
+        ("Front", [(-room_x, -room_y, 0), (-room_x, -room_y, room_z), (room_x, -room_y, room_z),
+                   (room_x, -room_y, 0)], white),
+        ("Left", [(-room_x, -room_y, 0), (-room_x, room_y, 0), (-room_x, room_y, room_z),
+                  (-room_x, -room_y, room_z)], bs.node_material("Blue", 'diffuse', (0.25, 0.35, 0.6))),
+    ]
+    for name, verts, material in inward:
+        bs.mesh_object(scene, name, verts, [(0, 1, 2, 3)], material)
+    _wall_with_window(scene, white, room_x, -room_y, room_y, room_z, (-0.9, 0.9, 0.9, 2.2))
+    bs.box(scene, "Sofa", (1.0, 2.2, 0.8), (-2.3, 0.6, 0.4), material=bs.node_material("Red", 'diffuse', (0.6, 0.12, 0.1)))
+    bs.box(scene, "Table", (1.0, 1.0, 0.5), (-0.6, 0.3, 0.25), material=principled("Lacquer", (0.1, 0.1, 0.1),
+                                                                                     roughness=0.15, coat=1.0))
+    ball = bs.uv_sphere(scene, "Vase", 0.3, (-0.6, 0.3, 0.8), principled("Brass", (0.9, 0.7, 0.4), metallic=1.0,
+                                                                           roughness=0.25), segments=32, rings=16)
+    for polygon in ball.data.polygons:
+        polygon.use_smooth = True
+    bs.light(scene, "Sun", 'SUN', (6, 0, 6), 6.0, (1.0, 0.93, 0.8),
+             rotation=(0.0, math.radians(55), math.radians(10)), angle=math.radians(1.5))
+    bs.world(scene, (0.45, 0.6, 0.9), 1.0)
+    cam = bs.camera(scene, (2.4, -2.0, 1.5), (0, 0, 0), lens=24.0)
+    return finish(scene, cam, (-2.0, 1.2, 0.9))
+
+
 SCENES = {
     'cornell': ("Cornell box, one rectangle light", lambda: open_blend('cornell')),
     'veach_mis': ("Veach MIS (4 GGX plates, 4 sphere lights)", lambda: open_blend('veach_mis')),
@@ -353,6 +404,7 @@ SCENES = {
     'fog': ("a fog room lit by a spot (homogeneous volume, single scattering)", build_fog),
     'subsurface': ("random-walk subsurface sphere and torus, front and rim light", build_subsurface),
     'glossy_lights': ("7 lights of 5 kinds over glossy plates", build_glossy_lights),
+    'interior': ("a room lit through a window by sun and sky (indirect light)", build_interior),
 }
 BLEND_FILES = {'cornell', 'veach_mis'}
 

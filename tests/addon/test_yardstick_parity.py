@@ -32,6 +32,8 @@ SCENES = {
     'emissive': (1024, 12, (0.01, 0.05)),   # small glowing spheres: rare bright paths
     'hdri': (256, 12, (0.01, 0.05)),
     'procedural': (128, 12, (0.01, 0.05)),
+    'glossy_lights': (512, 12, (0.01, 0.05)),   # small sharp highlights: heavy-tailed
+    'interior': (1024, 12, (0.01, 0.05)),   # lit through a window: mostly bounced light
 }
 
 
