@@ -107,19 +107,29 @@ def _translate(light, matrix, name):
     raise ValueError(f"has an unknown light type {light.type}")
 
 
-def collect_lights(depsgraph, check=None, links=None):
-    """Every visible light, including instanced ones; returns (lights, warnings).
-    ``check()`` (which raises to cancel) runs every 256 instances.  Given a
-    dict ``links``, the lights' Light Linking and Shadow Linking collections
-    (Blender 4.0+) go there: light index -> (receivers, blockers)."""
-    lights, warnings = [], []
-    for count, inst in enumerate(depsgraph.object_instances):
-        if check is not None and count % 256 == 255:
-            check()
-        obj = inst.object  # for instances: the instanced (possibly temporary) object
-        if obj.type != 'LIGHT':
-            continue
-        matrix = np.array(inst.matrix_world, dtype=np.float64)
+class LightCollector:
+    """Engine lights of the light instances given to ``add`` one by one,
+    while a depsgraph walk is at them (an instance's object is the walk's
+    temporary copy: read at once, never kept).  ``lights``, ``warnings``;
+    with a dict ``links``, light index -> (receivers, blockers) of Blender
+    4.0+'s Light Linking and Shadow Linking collections."""
+
+    def __init__(self, links=None):
+        self.lights, self.warnings, self.links = [], [], links
+
+    def add(self, obj, matrix):
+        light = self._light(obj, matrix)
+        if light is None:
+            return
+        self.lights.append(light)
+        if self.links is not None:
+            linked = light_links(obj, self.warnings)
+            if linked != (None, None):
+                self.links[len(self.lights) - 1] = linked
+
+    def _light(self, obj, matrix):
+        """The engine light, or None (black, or skipped with a warning)."""
+        warnings = self.warnings
         try:
             visibility = {key: getattr(obj, key, True)
                           for key in ('visible_diffuse', 'visible_glossy', 'visible_transmission')}
@@ -127,28 +137,38 @@ def collect_lights(depsgraph, check=None, links=None):
                                        getattr(obj, 'visible_camera', False), visibility)
         except ValueError as err:
             warnings.append(f"Light '{obj.name}' skipped: it {err}")
-            continue
+            return None
         bad = _nonfinite_field(light)
         if bad:
             warnings.append(f"Light '{obj.name}' skipped: its {bad} is NaN or infinite")
-            continue
+            return None
         if _is_black(light):
-            continue
+            return None
         if compat.uses_nodes(obj.data) and _has_light_nodes(obj.data):
             light, note = _with_node_tree(light, obj.data, matrix)
             if note:
                 warnings.append(f"Light '{obj.name}': {note}")
             if _nonfinite_field(light):
                 warnings.append(f"Light '{obj.name}' skipped: its node tree gives a NaN or infinite strength")
-                continue
+                return None
             if _is_black(light):
-                continue
-        lights.append(light)
-        if links is not None:
-            linked = light_links(obj, warnings)
-            if linked != (None, None):
-                links[len(lights) - 1] = linked
-    return lights, warnings
+                return None
+        return light
+
+
+def collect_lights(depsgraph, check=None, links=None):
+    """Every visible light, including instanced ones; returns (lights,
+    warnings).  ``check()`` (which raises to cancel) runs every 256
+    instances; ``links``: see LightCollector.  (A render's export gives its
+    instance walk a LightCollector instead: one walk, not two.)"""
+    collector = LightCollector(links)
+    for count, inst in enumerate(depsgraph.object_instances):
+        if check is not None and count % 256 == 255:
+            check()
+        obj = inst.object  # for instances: the instanced (possibly temporary) object
+        if obj.type == 'LIGHT':
+            collector.add(obj, np.array(inst.matrix_world, dtype=np.float64))
+    return collector.lights, collector.warnings
 
 
 def light_links(obj, warnings):

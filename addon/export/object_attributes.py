@@ -96,13 +96,14 @@ def resolve(kind, name, inst, view_layer, scene):
     return _object_value(inst.object, name)
 
 
-def instance_values(inst, view_layer, scene, cache=None):
+def instance_values(inst, view_layer, scene, cache=None, requests=None):
     """{key: RGBA} of every Object / Instancer / View Layer attribute the
-    instance's materials read."""
+    instance's materials read (``requests``: requested(inst.object) when
+    the caller has it)."""
     from .. import backend
     key_of = backend.engine().instance_attribute_key
     out = {}
-    for kind, name in requested(inst.object, cache):
+    for kind, name in requests if requests is not None else requested(inst.object, cache):
         value = resolve(kind, name, inst, view_layer, scene)
         if value is not None:
             out[key_of(kind, name)] = value

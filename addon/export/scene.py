@@ -113,12 +113,12 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None, camera
     scene = depsgraph.scene
     override = getattr(depsgraph.view_layer, 'material_override', None)
     materials = material_export.MaterialTable(override)
-    points, curves = [], []
+    points, curves, links = [], [], {}
+    light_collector = light_export.LightCollector(links)
     meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots, check, keys, points,
-                                                                    curves, cache)
+                                                                    curves, cache, light_collector.add)
     check()
-    links = {}
-    lights, light_warnings = light_export.collect_lights(depsgraph, check, links)
+    lights, light_warnings = light_collector.lights, light_collector.warnings
     world, world_warning = world_export.world_from_blender(scene.world)
     if camera:
         camera, camera_warnings = _camera(depsgraph, camera_override, renderer)
