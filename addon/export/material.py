@@ -629,7 +629,7 @@ class NodeTranslator:
 
     def _by_attribute(self, node, socket_name, value, color=False):
         name = self._attribute_name(node, socket_name)
-        if not name:
+        if not name or (not nodes.is_expr(value) and not color and value == 0.0):
             return value
         if color:
             return _times(value, self._attribute(name, 'Color'))
