@@ -81,7 +81,6 @@ def trilinear(grid, u):
     out[:, 3] = 1.0
     res = np.array(grid.shape[:3][::-1])          # (X, Y, Z)
     if n == 0 or res.min() == 0:
-        out[:, :3] = 0.0
         return out
     with np.errstate(invalid="ignore"):
         inside = np.all((u >= 0.0) & (u <= 1.0), axis=1)
@@ -104,11 +103,7 @@ def trilinear(grid, u):
     if c == 1:
         out[:, :3] = value
     else:
-        out[:, :c] = value
-        if c == 4:
-            out[~inside, 3] = 0.0
-    if c == 1 or c == 3:
-        out[~inside, 3] = 1.0
+        out[:, :c] = value      # RGB keeps alpha 1; RGBA reads its own (0 outside)
     return out
 
 
