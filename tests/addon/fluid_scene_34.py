@@ -19,8 +19,8 @@ import numpy as np
 
 FRAMES, RESOLUTION = 10, 20
 WIDTH, HEIGHT = 40, 24
-EMBER_SEEDS, EMBER_SPP = 8, int(os.environ.get('FLUID_EMBER_SPP', '32'))
-CYCLES_SEEDS, CYCLES_SPP = 8, int(os.environ.get('FLUID_CYCLES_SPP', '4'))
+EMBER_SEEDS, EMBER_SPP = 8, int(os.environ.get('FLUID_EMBER_SPP', '48'))
+CYCLES_SEEDS, CYCLES_SPP = 8, int(os.environ.get('FLUID_CYCLES_SPP', '16'))
 STEP_RATE = float(os.environ.get('FLUID_STEP_RATE', '0.25'))
 
 

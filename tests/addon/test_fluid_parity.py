@@ -4,7 +4,7 @@ there the domain is named in a warning, test_fluid_without_data_is_named).
 
 tests/addon/fluid_scene_34.py simulates two smoke-and-fire domains side by
 side (20 voxels, 10 frames) and renders them by Ember (the legacy zip, 8
-seeds x 32 spp) and by Cycles 3.4 (8 seeds x 4 spp, ray marching at a
+seeds x 48 spp) and by Cycles 3.4 (8 seeds x 16 spp, ray marching at a
 quarter voxel): the left as smoke (Principled Volume, density x the density
 grid, single scattering of a sun), the right as fire (emission only: the
 blackbody of Temperature x the temperature grid).  Each half: Welch's t per

@@ -18,7 +18,7 @@ from ember_stats import detectable, family_level, z_threshold
 from engine.media import field as fieldmod
 from engine.media.voxels import Voxels, trilinear
 from engine.render import prepare, render
-from engine.scene import (Camera, Instance, Lobe, Material, Math, MixColor, NodeCall, NodeOutput,
+from engine.scene import (Camera, Instance, Lobe, Material, MixColor, NodeCall, NodeOutput,
                           RenderSettings, Scene, SceneError, Volume, World)
 from engine.testscenes import box, look_at
 
@@ -132,4 +132,3 @@ def test_empty_and_misshapen_grids():
     with pytest.raises(SceneError, match="'domain'"):
         render(slab(volume, {"density": np.zeros((4, 4), np.float32)}, size=(4, 4)), RenderSettings(samples=1))
     assert Voxels({"density": np.ones((2, 2, 2))}, "d").warning() is None
-    assert Math  # (imported for scenes written by hand in other tests)
