@@ -72,8 +72,8 @@ def material(domain, kind):
     mat = bpy.data.materials.new(kind)
     mat.use_nodes = True
     tree = mat.node_tree
-    tree.nodes.clear()
-    out = tree.nodes.new('ShaderNodeOutputMaterial')
+    tree.nodes.remove(tree.nodes['Principled BSDF'])      # a volume only: no surface
+    out = tree.nodes['Material Output']
     volume = tree.nodes.new('ShaderNodeVolumePrincipled')
     if kind == 'smoke':
         volume.inputs['Density'].default_value = 6.0
