@@ -125,6 +125,10 @@ class Instance:
     motion: Optional[np.ndarray] = None
     # The Vector pass: object-to-world (3, 4, 4) at frame - 1, frame, frame + 1.
     vector_motion: Optional[np.ndarray] = None
+    # A fluid domain's voxel grids {name: (Z, Y, X) or (Z, Y, X, C)} over
+    # its mesh's texture space (engine/media/voxels.py), read by its
+    # volume material's attribute lookups; None: no grids.
+    voxels: Optional[dict] = None
 
 
 def _point_cloud_fields():
@@ -133,7 +137,7 @@ def _point_cloud_fields():
     defaults, then the per-point attributes."""
     out = [("positions", np.ndarray), ("radii", np.ndarray)]
     for f in fields(Instance):
-        if f.name in ("mesh", "asset", "motion", "vector_motion"):
+        if f.name in ("mesh", "asset", "motion", "vector_motion", "voxels"):
             continue
         default = {} if f.default is MISSING else {"default": "points" if f.name == "name" else f.default}
         if f.default_factory is not MISSING:

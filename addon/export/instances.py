@@ -10,6 +10,7 @@ import numpy as np
 
 from .. import backend
 from . import mesh as mesh_export
+from . import fluid
 from . import object_attributes
 from . import particle_hair
 from .motion import instance_key
@@ -110,9 +111,18 @@ class InstanceCollector:
                 shadow_catcher=bool(getattr(parent if parent is not None else obj, 'is_shadow_catcher', False)),
                 **_pass_fields(inst),
                 **object_info(inst))
+            fields.update(self._fluid(obj))
             group = (fields, object_attributes.requested(obj, self._attribute_requests))
         self._groups[key] = group
         return group
+
+    def _fluid(self, obj):
+        """{'voxels': grids} of a gas fluid domain with simulated data ({}
+        otherwise; one without data is named in a warning)."""
+        grids, warning = fluid.domain_grids(obj)
+        if warning:
+            self._warn_once(('fluid', obj.name), warning)
+        return {'voxels': grids} if grids else {}
 
     def _add_points(self, inst):
         """A point cloud as spheres of its radius attribute (Cycles' default

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import backend
-from . import compat, nodes, subsurface
+from . import compat, fluid, nodes, subsurface
 
 GREY = (0.8, 0.8, 0.8)
 # Principled BSDF inputs (3.x and 4.x names) whose features are not rendered
@@ -584,11 +584,18 @@ class NodeTranslator:
         return out
 
     def _volume_principled_volume(self, node):
-        """Cycles' svm_node_principled_volume with no attribute grids:
-        scattering Color x Density, absorption (1 - Color)(1 - sqrt(Absorption
-        Color)) x Density, emission Strength x Color plus blackbody."""
+        """Cycles' svm_node_principled_volume: scattering Color x Density,
+        absorption (1 - Color)(1 - sqrt(Absorption Color)) x Density,
+        emission Strength x Color plus blackbody.  In a gas fluid domain's
+        material, Density, Color and Temperature are multiplied by the
+        domain's grids their attribute inputs name (Cycles: where the
+        object has such an attribute)."""
+        fluid_grids = fluid.material_in_domain(self.material_name)
         color = self._volume_input(node, 'Color', (0.5, 0.5, 0.5), color=True)
         d = self._density(node)
+        if fluid_grids:
+            d = self._by_attribute(node, 'Density Attribute', d)
+            color = self._by_attribute(node, 'Color Attribute', color, color=True)
         g = self._volume_const(node, 'Anisotropy', 0.0)
         ac = self._volume_const(node, 'Absorption Color', (0.0, 0.0, 0.0), color=True)
         strength = self._volume_input(node, 'Emission Strength', 0.0)
@@ -602,8 +609,31 @@ class NodeTranslator:
         if nodes.may_exceed(strength, 0.0):
             out = out.plus(VolumeClosure(emission=_times(ec, strength)))
         if blackbody > 0.0:
-            out = out.plus(VolumeClosure(emission=self._blackbody(node, blackbody)))
+            temperature = self._attribute_name(node, 'Temperature Attribute') if fluid_grids else ''
+            emission = (self._blackbody_of_attribute(node, blackbody, temperature) if temperature
+                        else self._blackbody(node, blackbody))
+            out = out.plus(VolumeClosure(emission=emission))
         return out
+
+    def _attribute_name(self, node, name):
+        socket = node.inputs.get(name)
+        return str(socket.default_value) if socket is not None else ''
+
+    def _attribute(self, name, output):
+        """An Attribute node's output for a volume attribute input: 1 where
+        the object has no such attribute (Cycles' primitive_density = 1)."""
+        renderer = backend.engine()
+        call = renderer.NodeCall('ShaderNodeAttribute', {}, {'attribute_name': name, 'attribute_type': 'GEOMETRY',
+                                                             '_missing': 1.0})
+        return renderer.NodeOutput(call, output)
+
+    def _by_attribute(self, node, socket_name, value, color=False):
+        name = self._attribute_name(node, socket_name)
+        if not name or (not nodes.is_expr(value) and not color and value == 0.0):
+            return value
+        if color:
+            return _times(value, self._attribute(name, 'Color'))
+        return nodes.at_least(nodes.math('MULTIPLY', value, self._attribute(name, 'Fac')), 0.0)
 
     def _blackbody(self, node, intensity):
         """Cycles' Principled Volume blackbody emission: tint x sigma x
@@ -617,6 +647,20 @@ class NodeTranslator:
         sigma = 5.670373e-8 * 1e-6 / math.pi
         power = sigma * ((1.0 - intensity) + intensity * t ** 4)
         return tuple(min(float(c) * power * float(x), VOLUME_LIMIT) for c, x in zip(tint, rgb))
+
+    def _blackbody_of_attribute(self, node, intensity, name):
+        """Blackbody emission of Temperature x max(the attribute, 0) (a
+        domain's temperature grid): tint x sigma x mix(1, T^4, intensity) x
+        the blackbody colour of T, evaluated per point."""
+        t = max(self._volume_const(node, 'Temperature', 1000.0), 0.0)
+        tint = self._volume_const(node, 'Blackbody Tint', (1.0, 1.0, 1.0), color=True)
+        renderer = backend.engine()
+        temperature = nodes.math('MULTIPLY', nodes.at_least(self._attribute(name, 'Fac'), 0.0), t)
+        rgb = renderer.NodeOutput(renderer.NodeCall('ShaderNodeBlackbody', {'Temperature': temperature}), 'Color')
+        sigma = 5.670373e-8 * 1e-6 / math.pi
+        power = nodes.math('ADD', nodes.math('MULTIPLY', nodes.math('POWER', temperature, 4.0), sigma * intensity),
+                           sigma * (1.0 - intensity))
+        return _times(_times(rgb, power), tint)
 
     def _volume_emission(self, node):
         strength = self._volume_input(node, 'Strength', 1.0)

@@ -9,6 +9,8 @@ renders them (kernel/integrator/shade_volume.h, volume_stack.h).
   sampling; a medium's is a mixture of two lobes.
 * ``field``, ``tracking``: heterogeneous media (textured coefficients, a
   majorant grid) and null-scattering tracking through them.
+* ``voxels``: an object's dense voxel grids (a fluid domain's smoke and
+  fire), read by name as attributes inside its medium.
 * ``flight``: what a ray segment through the stack's media does: attenuation,
   emission, and a scattering distance sampled per colour channel chosen by
   the throughput-weighted albedo (Cycles' ``volume_sample_channel``), all

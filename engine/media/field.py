@@ -18,6 +18,13 @@ exceeds its majorant is no bias: the trackers' null weights
 the floor keeps every cell's collision rate positive.  Points outside the
 grid's box are outside the object: the medium there is empty.
 
+A fluid domain's medium also carries the object's voxel grids (voxels.py),
+which its node tree reads by name (Attribute nodes, Principled Volume's
+Density / Color / Temperature attributes).  The lattice that builds the
+majorant grid reads them max-filtered over the lattice spacing, so for a
+node tree that grows with its grids (density x a constant, the usual
+case) each cell's majorant bounds every voxel lookup inside it.
+
 Evaluated coefficients are made renderable as Cycles' closures do: NaN is 0,
 negative densities are 0 (fmaxf(density, 0)), and values past SIGMA_MAX
 (1/m) are SIGMA_MAX; each kind of repair is named in a warning with the
@@ -28,6 +35,7 @@ import numpy as np
 from ..nodes import ShadingContext
 from ..nodes.context import texture_space
 from ..textures import Compiler, is_texture
+from .voxels import Voxels
 
 FIELDS = ("absorption", "scattering", "emission")
 GRID = 16
@@ -49,8 +57,9 @@ def is_heterogeneous(volume):
 class Field:
     """The medium of material ``material`` inside scene instance ``instance``."""
 
-    def __init__(self, material, name, volume, matrix, mesh, tri, tris, compiler):
+    def __init__(self, material, name, volume, matrix, mesh, tri, tris, compiler, voxels=None):
         self.material, self.name = material, name
+        self.voxels = voxels
         self.fns = [compiler.color(getattr(volume, f)) for f in FIELDS]
         self.g = float(volume.anisotropy)
         m = np.asarray(matrix, np.float64).reshape(4, 4)
@@ -75,6 +84,7 @@ class Field:
         the ray travelling along d."""
         n = len(p)
         ctx = ShadingContext(n, self.tris, np.full(n, self.tri, np.int64), None, p, wo=-d)
+        ctx.voxels = self.voxels
         q = self.to_object(p) if q is None else q
         ctx._cache["object"] = q
         ctx._cache[("generated",)] = (q - self.loc) * self.factor + 0.5
@@ -118,6 +128,8 @@ class Field:
         p = q @ self.matrix[:3, :3].T + self.matrix[:3, 3]
         d = np.tile([0.0, 0.0, 1.0], (len(p), 1))
         ctx = self.context(p, d, q)
+        if self.voxels is not None:
+            ctx.voxels = self.voxels.dilated(_reach(self.voxels))
         raw = [np.broadcast_to(fn(ctx), (len(p), 3)) for fn in self.fns]
         # Negative values inside the mesh's bounds (not on the padded edge)
         # are the texture's own: counted.
@@ -180,6 +192,14 @@ class Field:
         return mu, dist
 
 
+def _reach(voxels):
+    """Voxels to max-filter over so that lookups at the lattice's points
+    bound the lookups anywhere between them: half the lattice spacing plus
+    the one voxel trilinear interpolation reaches."""
+    spacing = 1.0 / (GRID * LATTICE)
+    return int(np.ceil(0.5 * spacing / voxels.voxel_size())) + 1
+
+
 def _cell_max(v):
     """(GRID,) * 3 maxima over each cell's (LATTICE + 1)^3 lattice points."""
     for axis in range(3):
@@ -193,6 +213,7 @@ def build_fields(table, materials, scene, tris):
     """The Fields of every (heterogeneous material, instance) pair among the
     triangles, and each triangle's medium id (-1: no volume)."""
     compiler = Compiler()
+    voxels = {}
     tri_medium = np.asarray(tris.material, np.int64).copy()
     het = np.array([is_heterogeneous(getattr(m, "volume", None)) for m in materials])
     fields = []
@@ -205,7 +226,15 @@ def build_fields(table, materials, scene, tris):
         for j, k in enumerate(keys):
             mat, i = int(k // (len(scene.instances) + 1)), int(k % (len(scene.instances) + 1))
             instance = scene.instances[i]
+            if i not in voxels:
+                voxels[i] = instance_voxels(instance)
             fields.append(Field(mat, materials[mat].name, materials[mat].volume, instance.matrix,
-                                scene.meshes[instance.mesh], rows[first[j]], tris, compiler))
+                                scene.meshes[instance.mesh], rows[first[j]], tris, compiler, voxels[i]))
         tri_medium[rows] = table.first_field + inverse
     return fields, tri_medium
+
+
+def instance_voxels(instance):
+    """The Voxels of an instance's grids (a fluid domain), or None."""
+    grids = getattr(instance, "voxels", None)
+    return Voxels(grids, instance.name) if grids else None

@@ -148,6 +148,8 @@ class MediumTable:
 
     def field_warnings(self):
         out = [w for w in (f.warning() for f in self.fields) if w]
+        grids = {id(f.voxels): f.voxels for f in self.fields if f.voxels is not None}
+        out += [w for w in (v.warning() for v in grids.values()) if w]
         for name, count in sorted(self.truncated.items()):
             out.append(f"material {name!r}: {count} rays stopped (opaque) after {TRACKING_EVENTS} collisions in "
                        "its medium (a density far above its majorant grid's, or huge)")

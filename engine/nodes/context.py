@@ -190,7 +190,11 @@ class ShadingContext:
     made from UVs alone).  rays: the renderer's handle for nodes that cast
     rays from the points (engine.nodes.rays.NodeRays: AO, Bevel), or None
     where Cycles does not ray-trace in shaders (light samples, shadow rays,
-    worlds): those nodes then return their no-ray value."""
+    worlds): those nodes then return their no-ray value.  voxels: the
+    engine.media.voxels.Voxels of the object a medium point lies in (a
+    fluid domain's grids, read by name as attributes), or None."""
+
+    voxels = None
 
     def __init__(self, n, tris=None, prim=None, bary=None, p=None, ng=None, ns=None, wo=None,
                  back=None, depth=None, ray=None, uv=None, path=None):
@@ -329,7 +333,10 @@ class ShadingContext:
         return np.zeros((self.n, 2)) if value is None else value
 
     def attribute(self, name):
-        """(N, 4) RGBA of a colour attribute (or (N, C) padded), None if absent."""
+        """(N, 4) RGBA of a colour attribute (or (N, C) padded), None if absent;
+        inside a fluid domain's medium its voxel grids of that name."""
+        if self.voxels is not None and name in self.voxels:
+            return self.voxels.lookup(name, self.generated)
         value = self._interpolate(("attr", name))
         if value is None:
             return None

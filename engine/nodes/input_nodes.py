@@ -148,10 +148,10 @@ def instance_attribute_key(kind, name):
     return f"{kind}:{name}"
 
 
-def _attribute_rgba(ctx, name):
+def _attribute_rgba(ctx, name, missing=0.0):
     rgba = ctx.attribute(name)
     if rgba is None:
-        rgba = np.zeros((len(ctx), 4))
+        rgba = np.full((len(ctx), 4), float(missing))
     return rgba
 
 
@@ -163,10 +163,12 @@ def attribute(ctx, i, p):
     """Cycles' svm_node_attr: a geometry attribute interpolated over the
     surface, or an Object / Instancer / View Layer one, constant per
     instance (the exporter resolves it as Blender's
-    BKE_object_dupli_find_rgba_attribute / BKE_view_layer_find_rgba_attribute)."""
+    BKE_object_dupli_find_rgba_attribute / BKE_view_layer_find_rgba_attribute).
+    The exporter's private prop ``_missing`` is the value of an absent
+    attribute (0 as Cycles' node; Principled Volume's attribute inputs: 1)."""
     kind = p.get("attribute_type", "GEOMETRY")
     if kind == "GEOMETRY":
-        rgba = _attribute_rgba(ctx, p["attribute_name"])
+        rgba = _attribute_rgba(ctx, p["attribute_name"], p.get("_missing", 0.0))
     else:
         rgba = ctx.instance_attribute(instance_attribute_key(kind, p["attribute_name"]))
     return {"Color": rgba[:, :3], "Vector": rgba[:, :3], "Fac": rgba[:, :3].mean(axis=1), "Alpha": rgba[:, 3]}

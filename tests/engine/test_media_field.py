@@ -59,22 +59,28 @@ def test_linear_density_slab_is_beer_lambert():
     emission-only slab of emission k z renders its integral 0.25 k."""
     k = np.array([0.6, 2.0, 5.0])
     level = family_level(f"{__name__}.slab", 6)
-    zc = z_threshold(level)
     cases = (("absorbing", Volume(absorption=colour(k, generated("Z"))), (1, 1, 1), np.exp(-0.25 * k)),
              # Emission only (nothing extinguishes): the collisions' rate is
              # the emissive floor; the radiance is the emission's integral.
              ("emitting", Volume(emission=colour(k, generated("Z"))), (0, 0, 0), 0.25 * k))
     for what, volume, world, expected in cases:
-        r = render(slab_scene(volume, size=(16, 16), world=world), RenderSettings(samples=256, samples_per_pass=256))
-        assert np.isfinite(r.image).all() and not r.warnings, r.warnings
-        img = r.image[..., :3].astype(np.float64)
-        n = img.shape[0] * img.shape[1]
-        mean = img.mean(axis=(0, 1))
-        se = np.sqrt(r.variance[..., :3].astype(np.float64).sum(axis=(0, 1))) / n
-        z = (mean - expected) / se
-        print(f"{what} slab: {mean} against {expected}, |z| {np.abs(z).max():.2f} (limit {zc:.2f}), "
-              f"detects {detectable(se / expected, level).max():.2%}")
-        assert np.abs(z).max() < zc, what
+        assert_image_mean(slab_scene(volume, size=(16, 16), world=world), expected, level, f"{what} slab")
+
+
+def assert_image_mean(scene, expected, level, what):
+    """The scene's image mean (256 spp) is ``expected`` per channel: |z| of
+    the render's own standard error under the family's threshold."""
+    zc = z_threshold(level)
+    r = render(scene, RenderSettings(samples=256, samples_per_pass=256))
+    assert np.isfinite(r.image).all() and not r.warnings, r.warnings
+    img = r.image[..., :3].astype(np.float64)
+    n = img.shape[0] * img.shape[1]
+    mean = img.mean(axis=(0, 1))
+    se = np.sqrt(r.variance[..., :3].astype(np.float64).sum(axis=(0, 1))) / n
+    z = (mean - expected) / se
+    print(f"{what}: {mean} against {expected}, |z| {np.abs(z).max():.2f} (limit {zc:.2f}), "
+          f"detects {detectable(se / expected, level).max():.2%}")
+    assert np.abs(z).max() < zc, what
 
 
 def _field_table(volume, grid_scale=1.0):
