@@ -149,34 +149,45 @@ def test_open_mesh_is_named(mesh):
 
 def test_walk_kernels_agree():
     """The walk's two row loops, compiled, against their NumPy forms (to
-    rounding: numba calls libm, NumPy its own transcendentals)."""
+    rounding: numba calls libm, NumPy its own transcendentals), on the
+    first step (look-ahead, opposite side) and later ones (classic,
+    guided forward and backward)."""
     from engine import kernels
     rng = np.random.default_rng(4)
     n = 5000
-    u = rng.random((n, 4))
+    u, u2 = rng.random((n, 4)), rng.random((n, 4))
     d = rng.normal(size=(n, 3))
     d /= np.linalg.norm(d, axis=1)[:, None]
     d[:5] = [[0, 0, 1], [0, 0, -1], [1, 0, 0], [0, -1, 0], [0.6, 0, -0.8]]
+    nrm = rng.normal(size=(n, 3))
+    nrm /= np.linalg.norm(nrm, axis=1)[:, None]
     g = rng.uniform(-1.0, 1.0, n)
     g[:50] = 0.0
     b = rng.random((n, 3))
     b[:20] = 0.0
-    a = rng.random((n, 3))
+    a = rng.uniform(0.2, 0.999999, (n, 3))
     st = rng.uniform(0.1, 10.0, (n, 3))
     ss = st * a
+    dl, plog, gf = ss_mod.guide_terms(a, g, True)
+    o, p0 = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
     hit = rng.random(n) < 0.3
     t_hit = rng.random(n)
-    for jit in (False, True):
-        kernels.configure(jit)
-        dd, t = d.copy(), np.empty(n)
-        ss_mod._direction_rows(u, dd, g, b, a, st, True, t)
-        bb, o, t2, done = b.copy(), np.zeros((n, 3)), t.copy(), np.empty(n, bool)
-        ss_mod._advance_rows(hit, t_hit, t2, u, bb, a, st, ss, o, dd, done)
-        if not jit:
-            ref = dd, t, bb, o, done
-    for x, y in zip(ref[:4], (dd, t, bb, o)):
-        np.testing.assert_allclose(y, x, rtol=1e-9, atol=1e-12)
-    assert np.array_equal(ref[4], done)
+    for scatter in (False, True):
+        have = rng.random(n) < 0.5
+        opp = rng.uniform(-0.5, 3.0, n)
+        results = []
+        for jit in (False, True):
+            kernels.configure(jit)
+            dd, t, tmax, terms = d.copy(), np.empty(n), np.empty(n), np.empty((n, 6))
+            hh, oo, hv, op = have.copy(), o.copy(), hit.copy(), opp.copy()
+            ss_mod._direction_rows(u, u2, dd, g, gf, b, a, st, oo, p0, nrm, hh, op, dl, plog, scatter, t, tmax, terms)
+            bb, t2, done = b.copy(), t.copy(), np.empty(n, bool)
+            ss_mod._advance_rows(hv, t_hit, t2, bb, a, st, ss, oo, dd, p0, nrm, hh, op, terms, scatter, done)
+            results.append((dd, t, tmax, terms, bb, oo, t2, op, hh, hv, done))
+        for x, y in zip(results[0][:8], results[1][:8]):
+            np.testing.assert_allclose(y, x, rtol=1e-9, atol=1e-12)
+        for x, y in zip(results[0][8:], results[1][8:]):
+            assert np.array_equal(x, y)
 
 
 def test_burley_root_inverts_its_cdf():
