@@ -78,6 +78,48 @@ def test_walk_reflects_the_half_space_albedo(a):
     assert np.all(beta[:, 0] == beta[:, 1]) and np.all(beta[:, 0] == beta[:, 2])   # grey: channels agree
 
 
+SLAB_CASES = (0.0, 0.6)
+
+
+def _slab(thickness):
+    """A box 2000 wide, ``thickness`` deep, its top face z = 0."""
+    mesh = box((2000.0, 2000.0, thickness))
+    mesh.positions = np.asarray(mesh.positions, np.float64) - np.array([0.0, 0.0, 0.5 * thickness])
+    cam = Camera(look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0)), resolution=(4, 4))
+    mat = Material("slab", (Lobe("subsurface", (0.5, 0.5, 0.5)),))
+    return Scene([mesh], [Instance(0, materials=[0], name="slab")], [mat], [], World((0, 0, 0)), cam)
+
+
+@pytest.mark.parametrize("g", SLAB_CASES)
+def test_guided_walk_matches_the_classic_walk(g):
+    """Through a slab 2 mean free paths thick (its far side within the
+    first step's look-ahead: Cycles' backward guiding is on) the guided
+    walk reflects and transmits what the classic walk does: a two-sample
+    test per side on independent walks (other seeds); the guided walk's
+    variance printed against the classic one's."""
+    ctx = prepare(_slab(2.0), RenderSettings(samples=1, seed=5, sampling_pattern="random"))
+    n = WALKS
+    o = np.tile([0.0, 0.0, -1e-4], (n, 1))
+    d = np.tile([0.0, 0.0, -1.0], (n, 1))
+    ones = np.ones((n, 3))
+    alpha = ones * np.array([0.95, 0.8, 0.6])
+    sides = {}
+    for guided, first in ((True, 0), (False, n)):
+        pseed = ctx.sampler.pixel_seeds(np.arange(first, first + n))
+        beta, out_o, _, prim, _ = ss.random_walk(ctx, o, d, ones, ones, alpha, np.full(n, g), np.zeros(n, np.int64),
+                                                 pseed, np.zeros(n, np.uint32), 0, guided=guided)
+        value = np.where(prim >= 0, beta[:, 0], 0.0)
+        top = out_o[:, 2] > -1.0
+        sides[guided] = [(x.mean(), x.std(ddof=1) / math.sqrt(n)) for x in (value * top, value * ~top)]
+    level = family_level(f"{__name__}.guided_slab", 2 * len(SLAB_CASES))
+    for k, side in enumerate(("reflected", "transmitted")):
+        (mg, sg), (mc, sc) = sides[True][k], sides[False][k]
+        se = math.hypot(sg, sc)
+        print(f"g {g} {side}: guided {mg:.4f} +- {sg:.4f}, classic {mc:.4f} +- {sc:.4f} "
+              f"(variance ratio {(sg / sc) ** 2:.2f}); detects {detectable(se, level):.4f}")
+        assert abs(mg - mc) < z_threshold(level) * se
+
+
 def test_cycles_coefficients():
     """Cycles' maps at known points: the single-scattering albedo fit is
     0 at 0 and close to 1 at 1; the Skin radius remap is sqrt(3 (1 - a'))
