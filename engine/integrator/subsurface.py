@@ -388,6 +388,16 @@ def disk(ctx, paths, v, rows, slot, depth):
     return beta, out_o, out_d, exit_prim, bary
 
 
+# Columns of a walk's state row (``_walk_state``): position, direction,
+# throughput, extinction and scattering (and their reduced forms past the
+# similarity level), single-scattering albedo, g, entry normal and point,
+# whether an opposite side was found and its distance, the guide's
+# diffusion length, log term and guided share.
+O, D, B, ST, SS, ST_STAR, SS_STAR, A, G, N, P0, HAVE, OPP, DL, PLOG, GF = (
+    0, 3, 6, 9, 12, 15, 18, 21, 24, 25, 28, 31, 32, 33, 34, 35)
+WIDTH = 36
+
+
 def random_walk(ctx, o, d, beta, sigma_t, alpha, g, instance, pseed, sample, depth, normal=None, entry=None,
                 guided=True):
     """Cycles' subsurface_random_walk for N walks from o along d inside
@@ -397,54 +407,64 @@ def random_walk(ctx, o, d, beta, sigma_t, alpha, g, instance, pseed, sample, dep
     default -d) and ``entry`` the entry point (default o), which the guided
     sampling steers by (``guided`` False: the classic walk alone).  Returns
     (beta, exit points, directions there, exit triangle (-1: no exit), its
-    barycentrics).  The walks in progress are kept dense (finished ones
-    written out and dropped); each bounce is two compiled row loops
-    (``_direction_rows``, ``_advance_rows``) around one intersection call
-    for all live walks of an object."""
+    barycentrics).  The walks in progress are rows of one state array,
+    kept dense (finished ones written out and dropped) and sorted by
+    object; each bounce is two compiled row loops (``_direction_rows``,
+    ``_advance_rows``) around one intersection call per object for all
+    its live walks."""
     n = len(o)
-    g = np.array(np.broadcast_to(np.asarray(g, np.float64), (n,)))
-    sigma_t = np.ascontiguousarray(sigma_t, np.float64)
-    alpha = np.ascontiguousarray(alpha, np.float64)
-    normal = -np.asarray(d, np.float64) if normal is None else np.asarray(normal, np.float64)
-    entry = np.asarray(o, np.float64) if entry is None else np.asarray(entry, np.float64)
-    sigma_s = sigma_t * alpha
-    # Past the similarity level: isotropic with the reduced scattering coefficient.
-    sigma_s_star = sigma_s * (1.0 - g)[:, None]
-    sigma_t_star = sigma_t - sigma_s + sigma_s_star
-    length, phase_log, fraction = guide_terms(alpha, g, guided)
+    state = _walk_state(o, d, beta, sigma_t, alpha, g, normal, entry, guided)
     out_beta, out_o, out_d = np.zeros((n, 3)), np.array(o, np.float64), np.array(d, np.float64)
     exit_prim = np.full(n, -1, np.int64)
     exit_bary = np.zeros((n, 2))
     # Cycles gives up on a walk whose diffusion length is 1 (an infinite guided phase).
-    start = np.flatnonzero(np.isfinite(length) & (length > 1.0))
-    live = [np.arange(n), out_o.copy(), out_d.copy(), np.array(beta, np.float64), sigma_t, sigma_s, sigma_t_star,
-            sigma_s_star, alpha, g, instance, pseed, sample, normal, entry, np.zeros(n, bool), np.zeros(n),
-            length, phase_log, fraction]
-    live = [np.ascontiguousarray(x.take(start, axis=0)) for x in live]
+    ok = np.isfinite(state[:, DL]) & (state[:, DL] > 1.0)
+    instance = np.asarray(instance, np.int64)
+    start = np.flatnonzero(ok)
+    start = start[np.argsort(instance[start], kind="stable")]
+    rows, inst = start, instance[start]
+    pseed, sample, state = np.asarray(pseed)[start], np.asarray(sample)[start], state[start]
     similar_fraction = 0.75 if guided else 0.0   # Cycles' isotropic heuristic past the similarity level
     for bounce in range(MAX_BOUNCES):
-        rows, o, d, b, st, ss, st_star, ss_star, a, gg, inst, ps, sm, nrm, p0, have, opp, dl, plog, gf = live
         m = len(rows)
         if m == 0:
             break
-        u = np.ascontiguousarray(ctx.sampler.get(ps, sm, subsurface_set(depth, bounce, 0)), np.float64)
-        scatter = bounce > 0
-        u2 = np.ascontiguousarray(ctx.sampler.get(ps, sm, subsurface_set(depth, bounce, 1)) if scatter
-                                  else u, np.float64)
-        if bounce > SIMILARITY_LEVEL:
-            st, ss, gg, gf = st_star, ss_star, np.zeros(m), np.full(m, similar_fraction)
+        scatter, similar = bounce > 0, bounce > SIMILARITY_LEVEL
+        u = np.ascontiguousarray(ctx.sampler.get(pseed, sample, subsurface_set(depth, bounce, 0)), np.float64)
+        u2 = np.ascontiguousarray(ctx.sampler.get(pseed, sample, subsurface_set(depth, bounce, 1)), np.float64) \
+            if scatter else u
         t, tmax, terms = np.empty(m), np.empty(m), np.empty((m, 6))
-        _direction_rows(u, u2, d, gg, gf, b, a, st, o, p0, nrm, have, opp, dl, plog, scatter, t, tmax, terms)
-        hit, t_hit, prim, bary = _local_hits(ctx, o, d, tmax, inst)
+        _direction_rows(u, u2, state, scatter, similar, similar_fraction, t, tmax, terms)
+        hit, t_hit, prim, bary = _local_hits(ctx, state[:, O:O + 3], state[:, D:D + 3], tmax, inst)
         done = np.empty(m, bool)
-        _advance_rows(hit, t_hit, t, b, a, st, ss, o, d, p0, nrm, have, opp, terms, scatter, done)
+        _advance_rows(hit, t_hit, t, state, terms, scatter, similar, done)
         if done.any():
             r = rows[hit]
-            out_beta[r], out_o[r], out_d[r] = b[hit], o[hit], d[hit]
+            out_beta[r], out_o[r], out_d[r] = state[hit, B:B + 3], state[hit, O:O + 3], state[hit, D:D + 3]
             exit_prim[r], exit_bary[r] = prim[hit], bary[hit]
             keep = np.flatnonzero(~done)
-            live = [x.take(keep, axis=0) for x in live]
+            rows, inst, pseed, sample, state = rows[keep], inst[keep], pseed[keep], sample[keep], state[keep]
     return out_beta, out_o, out_d, exit_prim, exit_bary
+
+
+def _walk_state(o, d, beta, sigma_t, alpha, g, normal, entry, guided):
+    """The (N, WIDTH) state rows of N walks at their start."""
+    n = len(o)
+    g = np.array(np.broadcast_to(np.asarray(g, np.float64), (n,)))
+    sigma_t = np.asarray(sigma_t, np.float64)
+    alpha = np.asarray(alpha, np.float64)
+    sigma_s = sigma_t * alpha
+    # Past the similarity level: isotropic with the reduced scattering coefficient.
+    sigma_s_star = sigma_s * (1.0 - g)[:, None]
+    state = np.zeros((n, WIDTH))
+    state[:, O:O + 3], state[:, D:D + 3], state[:, B:B + 3] = o, d, beta
+    state[:, ST:ST + 3], state[:, SS:SS + 3] = sigma_t, sigma_s
+    state[:, ST_STAR:ST_STAR + 3], state[:, SS_STAR:SS_STAR + 3] = sigma_t - sigma_s + sigma_s_star, sigma_s_star
+    state[:, A:A + 3], state[:, G] = alpha, g
+    state[:, N:N + 3] = -np.asarray(d, np.float64) if normal is None else normal
+    state[:, P0:P0 + 3] = o if entry is None else entry
+    state[:, DL], state[:, PLOG], state[:, GF] = guide_terms(alpha, g, guided)
+    return state
 
 
 def guide_terms(alpha, g, guided):
@@ -467,6 +487,15 @@ def _channel_pdf(b, a):
     return np.where(total[:, None] > 0, w / np.where(total > 0, total, 1.0)[:, None], 1.0 / 3.0)
 
 
+def _coefficients_now(state, similar, similar_fraction):
+    """(sigma_t, sigma_s, g, guided share) of this bounce's walks."""
+    if similar:
+        m = len(state)
+        return (state[:, ST_STAR:ST_STAR + 3], state[:, SS_STAR:SS_STAR + 3], np.zeros(m),
+                np.full(m, similar_fraction))
+    return state[:, ST:ST + 3], state[:, SS:SS + 3], state[:, G], state[:, GF]
+
+
 def _hg_numpy(cos, g):
     """phase_henyey_greenstein (g already clamped)."""
     fac = 1.0 + g * (g - 2.0 * cos)
@@ -487,19 +516,22 @@ def _around_numpy(axis, cos, u):
     return new / np.sqrt(np.sum(new * new, axis=1))[:, None]
 
 
-def _direction_numpy(u, u2, d, g, gf, b, a, st, o, p0, nrm, have, opp, dl, plog, scatter, t, tmax, terms):
+def _direction_numpy(u, u2, state, scatter, similar, similar_fraction, t, tmax, terms):
     """The next direction (in place, when ``scatter``): guided (Dwivedi's
     phase about the entry normal, towards the entry side or, near an
-    opposite side, mirrored away from it) with probability gf by u2[:, 0],
-    else Henyey-Greenstein about d; the colour channel by u[:, 0] and a
-    free-flight distance t of its extinction (stretched when guided) by
-    u[:, 1]; tmax the distance to trace (the first step looks 10 mean free
-    paths ahead for an opposite side).  ``terms`` keeps what the pdf
-    needs after the ray-cast: guided share, backward share, the guided
-    forward and backward phase over Henyey-Greenstein's, the forward and
-    backward stretchings."""
+    opposite side, mirrored away from it) with the guided share's
+    probability by u2[:, 0], else Henyey-Greenstein about d; the colour
+    channel by u[:, 0] and a free-flight distance t of its extinction
+    (stretched when guided) by u[:, 1]; tmax the distance to trace (the
+    first step looks 10 mean free paths ahead for an opposite side).
+    ``terms`` keeps what the pdf needs after the ray-cast: guided share,
+    backward share, the guided forward and backward phase over
+    Henyey-Greenstein's, the forward and backward stretchings."""
     m = len(t)
-    cpdf = _channel_pdf(b, a)
+    st, _, g, gf = _coefficients_now(state, similar, similar_fraction)
+    d, o, nrm, p0 = state[:, D:D + 3], state[:, O:O + 3], state[:, N:N + 3], state[:, P0:P0 + 3]
+    have, opp, dl, plog = state[:, HAVE] > 0, state[:, OPP], state[:, DL], state[:, PLOG]
+    cpdf = _channel_pdf(state[:, B:B + 3], state[:, A:A + 3])
     channel = (u[:, 0] >= cpdf[:, 0]).astype(np.int64) + (u[:, 0] >= cpdf[:, 0] + cpdf[:, 1])
     sample_st = st[np.arange(m), channel]
     if not scatter:
@@ -526,7 +558,7 @@ def _direction_numpy(u, u2, d, g, gf, b, a, st, o, p0, nrm, have, opp, dl, plog,
     hg = _hg_numpy(np.where(guided, np.sum(d * steered, axis=1), cos_hg), gc)
     new = np.where(guided[:, None], steered, classic)
     cos = np.where(guided, cos_g, np.sum(new * nrm, axis=1))
-    d[:] = new
+    state[:, D:D + 3] = new
     with np.errstate(divide="ignore", invalid="ignore"):
         forward = 1.0 / ((dl - cos) * plog) / (2.0 * np.pi * hg)
         mirrored = 1.0 / ((dl + cos) * plog) / (2.0 * np.pi * hg)
@@ -537,37 +569,40 @@ def _direction_numpy(u, u2, d, g, gf, b, a, st, o, p0, nrm, have, opp, dl, plog,
     tmax[:] = t
 
 
-@loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], float64[:, ::1], "
-             "float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], boolean[::1], "
-             "float64[::1], float64[::1], float64[::1], boolean, float64[::1], float64[::1], float64[:, ::1])",
-             _direction_numpy)
-def _direction_rows(u, u2, d, g, gf, b, a, st, o, p0, nrm, have, opp, dl, plog, scatter, t, tmax, terms):
+@loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[:, ::1], boolean, boolean, float64, float64[::1], "
+             "float64[::1], float64[:, ::1])", _direction_numpy)
+def _direction_rows(u, u2, state, scatter, similar, similar_fraction, t, tmax, terms):
+    stc = ST_STAR if similar else ST
     for i in range(len(t)):
-        w0, w1, w2 = abs(b[i, 0] * a[i, 0]), abs(b[i, 1] * a[i, 1]), abs(b[i, 2] * a[i, 2])
+        w0, w1, w2 = (abs(state[i, B] * state[i, A]), abs(state[i, B + 1] * state[i, A + 1]),
+                      abs(state[i, B + 2] * state[i, A + 2]))
         total = w0 + w1 + w2
         p0c, p1c = (w0 / total, w1 / total) if total > 0 else (1.0 / 3.0, 1.0 / 3.0)
         c = (1 if u[i, 0] >= p0c else 0) + (1 if u[i, 0] >= p0c + p1c else 0)
-        sample_st = st[i, c]
+        sample_st = state[i, stc + c]
         if not scatter:
             terms[i, 0], terms[i, 1], terms[i, 2], terms[i, 3], terms[i, 4], terms[i, 5] = 0.0, 0.0, 1.0, 1.0, 1.0, 1.0
             t[i] = -np.log1p(-u[i, 1]) / sample_st
-            tmax[i] = max(t[i], 10.0 / min(st[i, 0], min(st[i, 1], st[i, 2])))
+            tmax[i] = max(t[i], 10.0 / min(state[i, stc], min(state[i, stc + 1], state[i, stc + 2])))
             continue
-        gc = min(max(g[i], -G_LIMIT), G_LIMIT)
-        guided = u2[i, 0] < gf[i]
+        gc = 0.0 if similar else min(max(state[i, G], -G_LIMIT), G_LIMIT)
+        gf = similar_fraction if similar else state[i, GF]
+        dl, plog = state[i, DL], state[i, PLOG]
+        guided = u2[i, 0] < gf
         back_share = 0.0
         backward = False
-        if have[i]:
-            x = -((o[i, 0] - p0[i, 0]) * nrm[i, 0] + (o[i, 1] - p0[i, 1]) * nrm[i, 1] + (o[i, 2] - p0[i, 2]) * nrm[i, 2])
-            x = min(max(x, 0.0), opp[i])
-            back_share = 1.0 / (1.0 + np.exp((opp[i] - 2.0 * x) / dl[i]))
+        if state[i, HAVE] > 0:
+            x = -((state[i, O] - state[i, P0]) * state[i, N] + (state[i, O + 1] - state[i, P0 + 1]) * state[i, N + 1]
+                  + (state[i, O + 2] - state[i, P0 + 2]) * state[i, N + 2])
+            x = min(max(x, 0.0), state[i, OPP])
+            back_share = 1.0 / (1.0 + np.exp((state[i, OPP] - 2.0 * x) / dl))
             backward = u2[i, 1] < back_share
         if guided:
-            cos = dl[i] - (dl[i] + 1.0) * np.exp(-u[i, 2] * plog[i])
+            cos = dl - (dl + 1.0) * np.exp(-u[i, 2] * plog)
             if backward:
                 cos = -cos
-            n0, n1, n2 = _around(nrm[i, 0], nrm[i, 1], nrm[i, 2], min(max(cos, -1.0), 1.0), u[i, 3])
-            cos_d = d[i, 0] * n0 + d[i, 1] * n1 + d[i, 2] * n2
+            n0, n1, n2 = _around(state[i, N], state[i, N + 1], state[i, N + 2], min(max(cos, -1.0), 1.0), u[i, 3])
+            cos_d = state[i, D] * n0 + state[i, D + 1] * n1 + state[i, D + 2] * n2
         else:
             if abs(gc) < 1e-3:
                 cos_d = 1.0 - 2.0 * u[i, 2]
@@ -575,14 +610,14 @@ def _direction_rows(u, u2, d, g, gf, b, a, st, o, p0, nrm, have, opp, dl, plog, 
                 k = (1.0 - gc * gc) / (1.0 - gc + 2.0 * gc * u[i, 2])
                 cos_d = (1.0 + gc * gc - k * k) / (2.0 * gc)
             cos_d = min(max(cos_d, -1.0), 1.0)
-            n0, n1, n2 = _around(d[i, 0], d[i, 1], d[i, 2], cos_d, u[i, 3])
-            cos = n0 * nrm[i, 0] + n1 * nrm[i, 1] + n2 * nrm[i, 2]
-        d[i, 0], d[i, 1], d[i, 2] = n0, n1, n2
+            n0, n1, n2 = _around(state[i, D], state[i, D + 1], state[i, D + 2], cos_d, u[i, 3])
+            cos = n0 * state[i, N] + n1 * state[i, N + 1] + n2 * state[i, N + 2]
+        state[i, D], state[i, D + 1], state[i, D + 2] = n0, n1, n2
         hg = _hg(cos_d, gc)
-        terms[i, 0], terms[i, 1] = gf[i], back_share
-        terms[i, 2] = 1.0 / ((dl[i] - cos) * plog[i]) / (2.0 * np.pi * hg)
-        terms[i, 3] = 1.0 / ((dl[i] + cos) * plog[i]) / (2.0 * np.pi * hg)
-        terms[i, 4], terms[i, 5] = 1.0 - cos / dl[i], 1.0 + cos / dl[i]
+        terms[i, 0], terms[i, 1] = gf, back_share
+        terms[i, 2] = 1.0 / ((dl - cos) * plog) / (2.0 * np.pi * hg)
+        terms[i, 3] = 1.0 / ((dl + cos) * plog) / (2.0 * np.pi * hg)
+        terms[i, 4], terms[i, 5] = 1.0 - cos / dl, 1.0 + cos / dl
         if guided:
             sample_st *= terms[i, 5] if backward else terms[i, 4]
         t[i] = -np.log1p(-u[i, 1]) / sample_st
@@ -612,7 +647,7 @@ def _around(a0, a1, a2, cos, u):
     return n0 / length, n1 / length, n2 / length
 
 
-def _advance_numpy(hit, t_hit, t, b, a, st, ss, o, d, p0, nrm, have, opp, terms, scatter, done):
+def _advance_numpy(hit, t_hit, t, state, terms, scatter, similar, done):
     """Cycles' update after the ray-cast: on the first step a hit within
     the look-ahead records the opposite side's distance along -normal and
     counts as an exit only within t; the distance (to the exit where the
@@ -620,13 +655,16 @@ def _advance_numpy(hit, t_hit, t, b, a, st, ss, o, d, p0, nrm, have, opp, terms,
     channels and, after the first step, the classic, guided and backward
     guided samplings (transmittance, times sigma_s at a scattering), the
     point moved on (all in place); ``done``: exited or faded."""
+    st, ss, _, _ = _coefficients_now(state, similar, 0.0)
+    o, d, b = state[:, O:O + 3], state[:, D:D + 3], state[:, B:B + 3]
     if not scatter:
         far = o + d * np.where(hit, t_hit, 0.0)[:, None]
-        opp[:] = np.where(hit, np.sum((far - p0) * -nrm, axis=1), opp)
-        have |= hit
+        state[:, OPP] = np.where(hit, np.sum((far - state[:, P0:P0 + 3]) * -state[:, N:N + 3], axis=1), state[:, OPP])
+        state[:, HAVE] = np.where(hit, 1.0, state[:, HAVE])
         hit &= t_hit < t
+    have = state[:, HAVE] > 0
     t[:] = np.where(hit, t_hit, t)
-    cpdf = _channel_pdf(b, a)
+    cpdf = _channel_pdf(b, state[:, A:A + 3])
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         tr = np.exp(-st * t[:, None])
         pdf = _distance_pdf(st, t, hit)
@@ -648,21 +686,23 @@ def _distance_pdf(st, t, hit):
     return np.where(hit[:, None], tr, st * tr)
 
 
-@loop_kernel("void(boolean[::1], float64[::1], float64[::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], "
-             "float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], boolean[::1], "
-             "float64[::1], float64[:, ::1], boolean, boolean[::1])", _advance_numpy)
-def _advance_rows(hit, t_hit, t, b, a, st, ss, o, d, p0, nrm, have, opp, terms, scatter, done):
+@loop_kernel("void(boolean[::1], float64[::1], float64[::1], float64[:, ::1], float64[:, ::1], boolean, boolean, "
+             "boolean[::1])", _advance_numpy)
+def _advance_rows(hit, t_hit, t, state, terms, scatter, similar, done):
+    stc = ST_STAR if similar else ST
+    ssc = SS_STAR if similar else SS
     for i in range(len(t)):
         if not scatter and hit[i]:
-            opp[i] = -((o[i, 0] + d[i, 0] * t_hit[i] - p0[i, 0]) * nrm[i, 0]
-                       + (o[i, 1] + d[i, 1] * t_hit[i] - p0[i, 1]) * nrm[i, 1]
-                       + (o[i, 2] + d[i, 2] * t_hit[i] - p0[i, 2]) * nrm[i, 2])
-            have[i] = True
+            state[i, OPP] = -((state[i, O] + state[i, D] * t_hit[i] - state[i, P0]) * state[i, N]
+                              + (state[i, O + 1] + state[i, D + 1] * t_hit[i] - state[i, P0 + 1]) * state[i, N + 1]
+                              + (state[i, O + 2] + state[i, D + 2] * t_hit[i] - state[i, P0 + 2]) * state[i, N + 2])
+            state[i, HAVE] = 1.0
             hit[i] = t_hit[i] < t[i]
         if hit[i]:
             t[i] = t_hit[i]
         ti = t[i]
-        w0, w1, w2 = abs(b[i, 0] * a[i, 0]), abs(b[i, 1] * a[i, 1]), abs(b[i, 2] * a[i, 2])
+        w0, w1, w2 = (abs(state[i, B] * state[i, A]), abs(state[i, B + 1] * state[i, A + 1]),
+                      abs(state[i, B + 2] * state[i, A + 2]))
         total = w0 + w1 + w2
         if total > 0:
             p0c, p1c, p2c = w0 / total, w1 / total, w2 / total
@@ -670,25 +710,26 @@ def _advance_rows(hit, t_hit, t, b, a, st, ss, o, d, p0, nrm, have, opp, terms, 
             p0c = p1c = p2c = 1.0 / 3.0
         denom = 0.0
         for c, pc in ((0, p0c), (1, p1c), (2, p2c)):
-            pdf = _step_pdf(st[i, c], ti, hit[i])
+            sc = state[i, stc + c]
+            pdf = _step_pdf(sc, ti, hit[i])
             if scatter:
-                steered = _step_pdf(terms[i, 4] * st[i, c], ti, hit[i]) * terms[i, 2]
-                if have[i]:
-                    away = _step_pdf(terms[i, 5] * st[i, c], ti, hit[i]) * terms[i, 3]
+                steered = _step_pdf(terms[i, 4] * sc, ti, hit[i]) * terms[i, 2]
+                if state[i, HAVE] > 0:
+                    away = _step_pdf(terms[i, 5] * sc, ti, hit[i]) * terms[i, 3]
                     steered = (1.0 - terms[i, 1]) * steered + terms[i, 1] * away
                 pdf = (1.0 - terms[i, 0]) * pdf + terms[i, 0] * steered
             denom += pc * pdf
         largest = 0.0
         for c in range(3):
-            tr = np.exp(-st[i, c] * ti)
-            f = tr if hit[i] else ss[i, c] * tr
-            v = b[i, c] * f / denom if denom != 0 else np.nan
+            tr = np.exp(-state[i, stc + c] * ti)
+            f = tr if hit[i] else state[i, ssc + c] * tr
+            v = state[i, B + c] * f / denom if denom != 0 else np.nan
             v = v if np.isfinite(v) else 0.0
-            b[i, c] = v
+            state[i, B + c] = v
             largest = v if c == 0 else max(largest, v)
-        o[i, 0] += d[i, 0] * ti
-        o[i, 1] += d[i, 1] * ti
-        o[i, 2] += d[i, 2] * ti
+        state[i, O] += state[i, D] * ti
+        state[i, O + 1] += state[i, D + 1] * ti
+        state[i, O + 2] += state[i, D + 2] * ti
         done[i] = hit[i] or largest < THROUGHPUT_EPSILON
 
 
@@ -703,17 +744,17 @@ def _step_pdf(st, t, hit):
 
 def _local_hits(ctx, o, d, tmax, instance):
     """The first hit on each ray's own object within tmax: (hit (N,) bool,
-    t, global prim, barycentrics (N, 2))."""
+    t, global prim, barycentrics (N, 2)); the rows come sorted by object."""
     n = len(o)
     hit, t, prim, bary = np.zeros(n, bool), np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros((n, 2))
-    for inst in np.unique(instance):
-        rows = np.flatnonzero(instance == inst)
-        accel, prims = local_accel(ctx.accel, ctx.triangles, int(inst))
-        ti, pi, bu, bv = accel.intersect(o[rows], d[rows], tmax[rows])
-        found = (pi >= 0) & (ti <= tmax[rows])
-        r = rows[found]
-        hit[r], t[r], prim[r] = True, ti[found], prims[pi[found]]
-        bary[r, 0], bary[r, 1] = bu[found], bv[found]
+    bounds = np.concatenate([[0], np.flatnonzero(instance[1:] != instance[:-1]) + 1, [n]])
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        accel, prims = local_accel(ctx.accel, ctx.triangles, int(instance[lo]))
+        ti, pi, bu, bv = accel.intersect(o[lo:hi], d[lo:hi], tmax[lo:hi])
+        found = (pi >= 0) & (ti <= tmax[lo:hi])
+        hit[lo:hi], t[lo:hi] = found, np.where(found, ti, np.inf)
+        prim[lo:hi][found] = prims[pi[found]]
+        bary[lo:hi, 0], bary[lo:hi, 1] = bu, bv
     return hit, t, prim, bary
 
 

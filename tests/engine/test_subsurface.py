@@ -209,26 +209,24 @@ def test_walk_kernels_agree():
     b[:20] = 0.0
     a = rng.uniform(0.2, 0.999999, (n, 3))
     st = rng.uniform(0.1, 10.0, (n, 3))
-    ss = st * a
-    dl, plog, gf = ss_mod.guide_terms(a, g, True)
     o, p0 = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
     hit = rng.random(n) < 0.3
     t_hit = rng.random(n)
-    for scatter in (False, True):
-        have = rng.random(n) < 0.5
-        opp = rng.uniform(-0.5, 3.0, n)
+    state = ss_mod._walk_state(o, d, b, st, a, g, nrm, p0, True)
+    for scatter, similar in ((False, False), (True, False), (True, True)):
+        state[:, ss_mod.HAVE] = rng.random(n) < 0.5
+        state[:, ss_mod.OPP] = rng.uniform(-0.5, 3.0, n)
         results = []
         for jit in (False, True):
             kernels.configure(jit)
-            dd, t, tmax, terms = d.copy(), np.empty(n), np.empty(n), np.empty((n, 6))
-            hh, oo, hv, op = have.copy(), o.copy(), hit.copy(), opp.copy()
-            ss_mod._direction_rows(u, u2, dd, g, gf, b, a, st, oo, p0, nrm, hh, op, dl, plog, scatter, t, tmax, terms)
-            bb, t2, done = b.copy(), t.copy(), np.empty(n, bool)
-            ss_mod._advance_rows(hv, t_hit, t2, bb, a, st, ss, oo, dd, p0, nrm, hh, op, terms, scatter, done)
-            results.append((dd, t, tmax, terms, bb, oo, t2, op, hh, hv, done))
-        for x, y in zip(results[0][:8], results[1][:8]):
+            st8, t, tmax, terms = state.copy(), np.empty(n), np.empty(n), np.empty((n, 6))
+            ss_mod._direction_rows(u, u2, st8, scatter, similar, 0.75, t, tmax, terms)
+            hv, t2, done = hit.copy(), t.copy(), np.empty(n, bool)
+            ss_mod._advance_rows(hv, t_hit, t2, st8, terms, scatter, similar, done)
+            results.append((t, tmax, terms, st8, t2, hv, done))
+        for x, y in zip(results[0][:5], results[1][:5]):
             np.testing.assert_allclose(y, x, rtol=1e-9, atol=1e-12)
-        for x, y in zip(results[0][8:], results[1][8:]):
+        for x, y in zip(results[0][5:], results[1][5:]):
             assert np.array_equal(x, y)
 
 
