@@ -746,6 +746,13 @@ def _local_hits(ctx, o, d, tmax, instance):
     """The first hit on each ray's own object within tmax: (hit (N,) bool,
     t, global prim, barycentrics (N, 2)); the rows come sorted by object."""
     n = len(o)
+    if instance[0] == instance[-1]:   # one object (sorted rows): no gathering
+        accel, prims = local_accel(ctx.accel, ctx.triangles, int(instance[0]))
+        ti, pi, bu, bv = accel.intersect(o, d, tmax)
+        hit = (pi >= 0) & (ti <= tmax)
+        prim = np.full(n, -1, np.int64)
+        prim[hit] = prims[pi[hit]]
+        return hit, np.where(hit, ti, np.inf), prim, np.column_stack([bu, bv])
     hit, t, prim, bary = np.zeros(n, bool), np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros((n, 2))
     bounds = np.concatenate([[0], np.flatnonzero(instance[1:] != instance[:-1]) + 1, [n]])
     for lo, hi in zip(bounds[:-1], bounds[1:]):
