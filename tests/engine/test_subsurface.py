@@ -120,6 +120,24 @@ def test_guided_walk_matches_the_classic_walk(g):
         assert abs(mg - mc) < z_threshold(level) * se
 
 
+def test_hostile_walk_coefficients_stay_finite():
+    """Extreme walks (albedo at Cycles' clamps, g near +-1, extinctions of
+    1e-12 and 1e12, a normal along the ray): finite throughputs, no NaN."""
+    ctx = prepare(_slab(2.0), RenderSettings(samples=1, seed=2, sampling_pattern="random"))
+    n = 600
+    rng = np.random.default_rng(8)
+    o = np.tile([0.0, 0.0, -1e-4], (n, 1))
+    d = np.tile([0.0, 0.0, -1.0], (n, 1))
+    sigma_t = rng.choice([1e-12, 1e-3, 1.0, 1e12], (n, 3))
+    alpha = rng.choice([0.2, 0.5, 0.999999], (n, 3))
+    g = rng.choice([-0.999, -0.5, 0.0, 0.9, 0.999], n)
+    beta, out_o, out_d, prim, _ = ss.random_walk(ctx, o, d, np.ones((n, 3)), sigma_t, alpha, g, np.zeros(n, np.int64),
+                                                 ctx.sampler.pixel_seeds(np.arange(n)), np.zeros(n, np.uint32), 0,
+                                                 normal=-d)
+    assert np.isfinite(beta).all() and np.isfinite(out_o).all() and np.isfinite(out_d).all()
+    assert (prim >= 0).any()
+
+
 def test_cycles_coefficients():
     """Cycles' maps at known points: the single-scattering albedo fit is
     0 at 0 and close to 1 at 1; the Skin radius remap is sqrt(3 (1 - a'))
