@@ -158,7 +158,16 @@ def hash32(x):
 
 
 def _hash_scalar(x):
-    return int(hash32(np.array([x & 0xFFFFFFFF], np.uint32))[0])
+    """``hash32`` of one integer (its low 32 bits) in Python integers: the
+    same value without NumPy's per-call cost (it runs once per dimension
+    set a batch asks for: every bounce of a subsurface walk)."""
+    x = int(x) & 0xFFFFFFFF
+    x ^= x >> 16
+    x = (x * 0x7FEB352D) & 0xFFFFFFFF
+    x ^= x >> 15
+    x = (x * 0x846CA68B) & 0xFFFFFFFF
+    x ^= x >> 16
+    return x
 
 
 def owen_reversed(x, seed):

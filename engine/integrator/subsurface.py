@@ -41,7 +41,7 @@ from ..lobes.subsurface import G_RANGE, IDS, IOR_RANGE, SUBSURFACE_BURLEY, SUBSU
 from ..lobes.subsurface import entry as lobe_entry
 from ..lobes import REGISTRY, SUBSURFACE, kinds_of_class
 from ..media import open_meshes
-from ..kernels import loop_kernel
+from ..kernels import helper, loop_kernel
 from ..media.phase import G_LIMIT
 from ..vec import frame_of
 from ..nodes.rays import NodeRays, local_accel, make_orthonormals
@@ -256,7 +256,7 @@ def _walk_rows(ctx, paths, v, rows, slot, depth):
     sigma_t, alpha, factor = coefficients(albedo, radius, g)
     instance = ctx.triangles.shading.instance[v.hit.prim[rows]]
     return random_walk(ctx, paths.o[rows], paths.d[rows], paths.beta[rows] * factor, sigma_t, alpha, g, instance,
-                       paths.pseed[rows], paths.sample[rows], depth)
+                       paths.pseed[rows], paths.sample[rows], depth, normal=v.hit.ns[rows], entry=v.hit.p[rows])
 
 
 def _leave(ctx, paths, rows, beta, o, d, exit_prim, exit_bary):
@@ -388,49 +388,96 @@ def disk(ctx, paths, v, rows, slot, depth):
     return beta, out_o, out_d, exit_prim, bary
 
 
-def random_walk(ctx, o, d, beta, sigma_t, alpha, g, instance, pseed, sample, depth):
-    """Cycles' subsurface_random_walk (without its guiding) for N walks from
-    o along d inside objects ``instance`` with extinction sigma_t (N, 3),
-    single-scattering albedo alpha (N, 3) and Henyey-Greenstein g (N,),
-    throughput beta (N, 3).  Returns (beta, exit points, directions there,
-    exit triangle (-1: no exit), its barycentrics).  The walks in progress
-    are kept dense (finished ones written out and dropped); each bounce is
-    two compiled row loops (``_direction_rows``, ``_advance_rows``) around
-    the intersection."""
+# Columns of a walk's state row (``_walk_state``): position, direction,
+# throughput, extinction and scattering (and their reduced forms past the
+# similarity level), single-scattering albedo, g, entry normal and point,
+# whether an opposite side was found and its distance, the guide's
+# diffusion length, log term and guided share.
+O, D, B, ST, SS, ST_STAR, SS_STAR, A, G, N, P0, HAVE, OPP, DL, PLOG, GF = (
+    0, 3, 6, 9, 12, 15, 18, 21, 24, 25, 28, 31, 32, 33, 34, 35)
+WIDTH = 36
+
+
+def random_walk(ctx, o, d, beta, sigma_t, alpha, g, instance, pseed, sample, depth, normal=None, entry=None,
+                guided=True):
+    """Cycles' subsurface_random_walk for N walks from o along d inside
+    objects ``instance`` with extinction sigma_t (N, 3), single-scattering
+    albedo alpha (N, 3) and Henyey-Greenstein g (N,), throughput beta
+    (N, 3); ``normal`` (N, 3) is the entry's shading normal (outwards,
+    default -d) and ``entry`` the entry point (default o), which the guided
+    sampling steers by (``guided`` False: the classic walk alone).  Returns
+    (beta, exit points, directions there, exit triangle (-1: no exit), its
+    barycentrics).  The walks in progress are rows of one state array,
+    kept dense (finished ones written out and dropped) and sorted by
+    object; each bounce is two compiled row loops (``_direction_rows``,
+    ``_advance_rows``) around one intersection call per object for all
+    its live walks."""
     n = len(o)
-    g = np.array(np.broadcast_to(np.asarray(g, np.float64), (n,)))
-    sigma_t = np.ascontiguousarray(sigma_t, np.float64)
-    alpha = np.ascontiguousarray(alpha, np.float64)
-    sigma_s = sigma_t * alpha
-    # Past the similarity level: isotropic with the reduced scattering coefficient.
-    sigma_s_star = sigma_s * (1.0 - g)[:, None]
-    sigma_t_star = sigma_t - sigma_s + sigma_s_star
+    state = _walk_state(o, d, beta, sigma_t, alpha, g, normal, entry, guided)
     out_beta, out_o, out_d = np.zeros((n, 3)), np.array(o, np.float64), np.array(d, np.float64)
     exit_prim = np.full(n, -1, np.int64)
     exit_bary = np.zeros((n, 2))
-    live = [np.arange(n), out_o.copy(), out_d.copy(), np.array(beta, np.float64), sigma_t, sigma_s, sigma_t_star,
-            sigma_s_star, alpha, g, instance, pseed, sample]
+    # Cycles gives up on a walk whose diffusion length is 1 (an infinite guided phase).
+    ok = np.isfinite(state[:, DL]) & (state[:, DL] > 1.0)
+    instance = np.asarray(instance, np.int64)
+    start = np.flatnonzero(ok)
+    start = start[np.argsort(instance[start], kind="stable")]
+    rows, inst = start, instance[start]
+    pseed, sample, state = np.asarray(pseed)[start], np.asarray(sample)[start], state[start]
+    similar_fraction = 0.75 if guided else 0.0   # Cycles' isotropic heuristic past the similarity level
     for bounce in range(MAX_BOUNCES):
-        rows, o, d, b, st, ss, st_star, ss_star, a, gg, inst, ps, sm = live
         m = len(rows)
         if m == 0:
             break
-        u = np.ascontiguousarray(ctx.sampler.get(ps, sm, subsurface_set(depth, bounce, 0)), np.float64)
-        similar = bounce > SIMILARITY_LEVEL
-        if similar:
-            st, ss, gg = st_star, ss_star, np.zeros(m)
-        t = np.empty(m)
-        _direction_rows(u, d, gg, b, a, st, bounce > 0, t)
-        hit, t_hit, prim, bary = _local_hits(ctx, o, d, t, inst)
+        scatter, similar = bounce > 0, bounce > SIMILARITY_LEVEL
+        u = np.ascontiguousarray(ctx.sampler.get(pseed, sample, subsurface_set(depth, bounce, 0)), np.float64)
+        u2 = np.ascontiguousarray(ctx.sampler.get(pseed, sample, subsurface_set(depth, bounce, 1)), np.float64) \
+            if scatter else u
+        t, tmax, terms = np.empty(m), np.empty(m), np.empty((m, 6))
+        _direction_rows(u, u2, state, scatter, similar, similar_fraction, t, tmax, terms)
+        hit, t_hit, prim, bary = _local_hits(ctx, state[:, O:O + 3], state[:, D:D + 3], tmax, inst)
         done = np.empty(m, bool)
-        _advance_rows(hit, t_hit, t, u, b, a, st, ss, o, d, done)
+        _advance_rows(hit, t_hit, t, state, terms, scatter, similar, done)
         if done.any():
             r = rows[hit]
-            out_beta[r], out_o[r], out_d[r] = b[hit], o[hit], d[hit]
+            out_beta[r], out_o[r], out_d[r] = state[hit, B:B + 3], state[hit, O:O + 3], state[hit, D:D + 3]
             exit_prim[r], exit_bary[r] = prim[hit], bary[hit]
             keep = np.flatnonzero(~done)
-            live = [x.take(keep, axis=0) for x in live]
+            rows, inst, pseed, sample, state = rows[keep], inst[keep], pseed[keep], sample[keep], state[keep]
     return out_beta, out_o, out_d, exit_prim, exit_bary
+
+
+def _walk_state(o, d, beta, sigma_t, alpha, g, normal, entry, guided):
+    """The (N, WIDTH) state rows of N walks at their start."""
+    n = len(o)
+    g = np.array(np.broadcast_to(np.asarray(g, np.float64), (n,)))
+    sigma_t = np.asarray(sigma_t, np.float64)
+    alpha = np.asarray(alpha, np.float64)
+    sigma_s = sigma_t * alpha
+    # Past the similarity level: isotropic with the reduced scattering coefficient.
+    sigma_s_star = sigma_s * (1.0 - g)[:, None]
+    state = np.zeros((n, WIDTH))
+    state[:, O:O + 3], state[:, D:D + 3], state[:, B:B + 3] = o, d, beta
+    state[:, ST:ST + 3], state[:, SS:SS + 3] = sigma_t, sigma_s
+    state[:, ST_STAR:ST_STAR + 3], state[:, SS_STAR:SS_STAR + 3] = sigma_t - sigma_s + sigma_s_star, sigma_s_star
+    state[:, A:A + 3], state[:, G] = alpha, g
+    state[:, N:N + 3] = -np.asarray(d, np.float64) if normal is None else normal
+    state[:, P0:P0 + 3] = o if entry is None else entry
+    state[:, DL], state[:, PLOG], state[:, GF] = guide_terms(alpha, g, guided)
+    return state
+
+
+def guide_terms(alpha, g, guided):
+    """Cycles' guiding constants per walk: the Dwivedi diffusion length of
+    the largest single-scattering albedo (Eq. 67 of d'Eon and Krivanek
+    2020), log((v + 1) / (v - 1)) for its phase, and the share of guided
+    steps, 1 - max(0.5, |g|^(1/8)) (0 when not ``guided``)."""
+    a = np.max(alpha, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        length = 1.0 / np.sqrt(1.0 - a ** (2.44294 - 0.0215813 * a + 0.578637 / a))
+        phase_log = np.log((length + 1.0) / (length - 1.0))
+    fraction = 1.0 - np.maximum(0.5, np.abs(g) ** 0.125) if guided else np.zeros(len(a))
+    return length, phase_log, fraction
 
 
 def _channel_pdf(b, a):
@@ -440,121 +487,281 @@ def _channel_pdf(b, a):
     return np.where(total[:, None] > 0, w / np.where(total > 0, total, 1.0)[:, None], 1.0 / 3.0)
 
 
-def _direction_numpy(u, d, g, b, a, st, scatter, t):
-    """The next direction (Henyey-Greenstein about d, in place, when
-    ``scatter``), the colour channel by u[:, 0] and a free-flight distance
-    t of its extinction by u[:, 1]."""
-    if scatter:
-        gc = np.clip(g, -G_LIMIT, G_LIMIT)
-        iso = np.abs(gc) < 1e-3
-        gs = np.where(iso, 0.5, gc)
-        k = (1.0 - gs * gs) / (1.0 - gs + 2.0 * gs * u[:, 2])
-        cos = np.clip(np.where(iso, 1.0 - 2.0 * u[:, 2], (1.0 + gs * gs - k * k) / (2.0 * gs)), -1.0, 1.0)
-        sin = np.sqrt(np.maximum(1.0 - cos * cos, 0.0))
-        phi = 2.0 * np.pi * u[:, 3]
-        x, y = sin * np.cos(phi), sin * np.sin(phi)
-        sign = 2.0 * (d[:, 2] >= 0.0) - 1.0
-        q = -1.0 / (sign + d[:, 2])
-        r = d[:, 0] * d[:, 1] * q
-        s0, s1, s2 = 1.0 + sign * d[:, 0] * d[:, 0] * q, sign * r, -sign * d[:, 0]
-        t0, t1, t2 = r, sign + d[:, 1] * d[:, 1] * q, -d[:, 1]
-        new = np.stack([x * s0 + y * t0 + cos * d[:, 0], x * s1 + y * t1 + cos * d[:, 1],
-                        x * s2 + y * t2 + cos * d[:, 2]], axis=1)
-        d[:] = new / np.sqrt(np.sum(new * new, axis=1))[:, None]
-    cpdf = _channel_pdf(b, a)
+def _coefficients_now(state, similar, similar_fraction):
+    """(sigma_t, sigma_s, g, guided share) of this bounce's walks."""
+    if similar:
+        m = len(state)
+        return (state[:, ST_STAR:ST_STAR + 3], state[:, SS_STAR:SS_STAR + 3], np.zeros(m),
+                np.full(m, similar_fraction))
+    return state[:, ST:ST + 3], state[:, SS:SS + 3], state[:, G], state[:, GF]
+
+
+def _hg_numpy(cos, g):
+    """phase_henyey_greenstein (g already clamped)."""
+    fac = 1.0 + g * (g - 2.0 * cos)
+    return np.where(np.abs(g) < 1e-3, 0.25 / np.pi, (1.0 - g * g) / (4.0 * np.pi * fac * np.sqrt(np.maximum(fac, 0.0))))
+
+
+def _around_numpy(axis, cos, u):
+    """The unit direction at polar cosine ``cos`` about ``axis`` (N, 3), azimuth 2 pi u."""
+    sin = np.sqrt(np.maximum(1.0 - cos * cos, 0.0))
+    phi = 2.0 * np.pi * u
+    x, y = sin * np.cos(phi), sin * np.sin(phi)
+    sign = 2.0 * (axis[:, 2] >= 0.0) - 1.0
+    q = -1.0 / (sign + axis[:, 2])
+    r = axis[:, 0] * axis[:, 1] * q
+    s = np.stack([1.0 + sign * axis[:, 0] * axis[:, 0] * q, sign * r, -sign * axis[:, 0]], axis=1)
+    t = np.stack([r, sign + axis[:, 1] * axis[:, 1] * q, -axis[:, 1]], axis=1)
+    new = x[:, None] * s + y[:, None] * t + cos[:, None] * axis
+    return new / np.sqrt(np.sum(new * new, axis=1))[:, None]
+
+
+def _direction_numpy(u, u2, state, scatter, similar, similar_fraction, t, tmax, terms):
+    """The next direction (in place, when ``scatter``): guided (Dwivedi's
+    phase about the entry normal, towards the entry side or, near an
+    opposite side, mirrored away from it) with the guided share's
+    probability by u2[:, 0], else Henyey-Greenstein about d; the colour
+    channel by u[:, 0] and a free-flight distance t of its extinction
+    (stretched when guided) by u[:, 1]; tmax the distance to trace (the
+    first step looks 10 mean free paths ahead for an opposite side).
+    ``terms`` keeps what the pdf needs after the ray-cast: guided share,
+    backward share, the guided forward and backward phase over
+    Henyey-Greenstein's, the forward and backward stretchings."""
+    m = len(t)
+    st, _, g, gf = _coefficients_now(state, similar, similar_fraction)
+    d, o, nrm, p0 = state[:, D:D + 3], state[:, O:O + 3], state[:, N:N + 3], state[:, P0:P0 + 3]
+    have, opp, dl, plog = state[:, HAVE] > 0, state[:, OPP], state[:, DL], state[:, PLOG]
+    cpdf = _channel_pdf(state[:, B:B + 3], state[:, A:A + 3])
     channel = (u[:, 0] >= cpdf[:, 0]).astype(np.int64) + (u[:, 0] >= cpdf[:, 0] + cpdf[:, 1])
-    t[:] = -np.log1p(-u[:, 1]) / st[np.arange(len(t)), channel]
+    sample_st = st[np.arange(m), channel]
+    if not scatter:
+        terms[:] = (0.0, 0.0, 1.0, 1.0, 1.0, 1.0)
+        t[:] = -np.log1p(-u[:, 1]) / sample_st
+        tmax[:] = np.maximum(t, 10.0 / st.min(axis=1))
+        return
+    gc = np.clip(g, -G_LIMIT, G_LIMIT)
+    guided = u2[:, 0] < gf
+    x = np.minimum(np.maximum(np.sum((o - p0) * -nrm, axis=1), 0.0), opp)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        back_share = np.where(have, 1.0 / (1.0 + np.exp((opp - 2.0 * x) / dl)), 0.0)
+    backward = have & (u2[:, 1] < back_share)
+    # classic: Henyey-Greenstein about d
+    iso = np.abs(gc) < 1e-3
+    gs = np.where(iso, 0.5, gc)
+    k = (1.0 - gs * gs) / (1.0 - gs + 2.0 * gs * u[:, 2])
+    cos_hg = np.clip(np.where(iso, 1.0 - 2.0 * u[:, 2], (1.0 + gs * gs - k * k) / (2.0 * gs)), -1.0, 1.0)
+    classic = _around_numpy(d, cos_hg, u[:, 3])
+    # guided: Dwivedi's phase about the entry normal
+    cos_g = dl - (dl + 1.0) * np.exp(-u[:, 2] * plog)
+    cos_g = np.where(backward, -cos_g, cos_g)
+    steered = _around_numpy(nrm, np.clip(cos_g, -1.0, 1.0), u[:, 3])
+    hg = _hg_numpy(np.where(guided, np.sum(d * steered, axis=1), cos_hg), gc)
+    new = np.where(guided[:, None], steered, classic)
+    cos = np.where(guided, cos_g, np.sum(new * nrm, axis=1))
+    state[:, D:D + 3] = new
+    with np.errstate(divide="ignore", invalid="ignore"):
+        forward = 1.0 / ((dl - cos) * plog) / (2.0 * np.pi * hg)
+        mirrored = 1.0 / ((dl + cos) * plog) / (2.0 * np.pi * hg)
+    stretch_f, stretch_b = 1.0 - cos / dl, 1.0 + cos / dl
+    terms[:] = np.stack([gf, back_share, forward, mirrored, stretch_f, stretch_b], axis=1)
+    sample_st = sample_st * np.where(guided, np.where(backward, stretch_b, stretch_f), 1.0)
+    t[:] = -np.log1p(-u[:, 1]) / sample_st
+    tmax[:] = t
 
 
-@loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[::1], float64[:, ::1], float64[:, ::1], "
-             "float64[:, ::1], boolean, float64[::1])", _direction_numpy)
-def _direction_rows(u, d, g, b, a, st, scatter, t):
+@loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[:, ::1], boolean, boolean, float64, float64[::1], "
+             "float64[::1], float64[:, ::1])", _direction_numpy)
+def _direction_rows(u, u2, state, scatter, similar, similar_fraction, t, tmax, terms):
+    stc = ST_STAR if similar else ST
     for i in range(len(t)):
-        if scatter:
-            gc = min(max(g[i], -G_LIMIT), G_LIMIT)
+        w0, w1, w2 = (abs(state[i, B] * state[i, A]), abs(state[i, B + 1] * state[i, A + 1]),
+                      abs(state[i, B + 2] * state[i, A + 2]))
+        total = w0 + w1 + w2
+        p0c, p1c = (w0 / total, w1 / total) if total > 0 else (1.0 / 3.0, 1.0 / 3.0)
+        c = (1 if u[i, 0] >= p0c else 0) + (1 if u[i, 0] >= p0c + p1c else 0)
+        sample_st = state[i, stc + c]
+        if not scatter:
+            terms[i, 0], terms[i, 1], terms[i, 2], terms[i, 3], terms[i, 4], terms[i, 5] = 0.0, 0.0, 1.0, 1.0, 1.0, 1.0
+            t[i] = -np.log1p(-u[i, 1]) / sample_st
+            tmax[i] = max(t[i], 10.0 / min(state[i, stc], min(state[i, stc + 1], state[i, stc + 2])))
+            continue
+        gc = 0.0 if similar else min(max(state[i, G], -G_LIMIT), G_LIMIT)
+        gf = similar_fraction if similar else state[i, GF]
+        dl, plog = state[i, DL], state[i, PLOG]
+        guided = u2[i, 0] < gf
+        back_share = 0.0
+        backward = False
+        if state[i, HAVE] > 0:
+            x = -((state[i, O] - state[i, P0]) * state[i, N] + (state[i, O + 1] - state[i, P0 + 1]) * state[i, N + 1]
+                  + (state[i, O + 2] - state[i, P0 + 2]) * state[i, N + 2])
+            x = min(max(x, 0.0), state[i, OPP])
+            back_share = 1.0 / (1.0 + np.exp((state[i, OPP] - 2.0 * x) / dl))
+            backward = u2[i, 1] < back_share
+        if guided:
+            cos = dl - (dl + 1.0) * np.exp(-u[i, 2] * plog)
+            if backward:
+                cos = -cos
+            n0, n1, n2 = _around(state[i, N], state[i, N + 1], state[i, N + 2], min(max(cos, -1.0), 1.0), u[i, 3])
+            cos_d = state[i, D] * n0 + state[i, D + 1] * n1 + state[i, D + 2] * n2
+        else:
             if abs(gc) < 1e-3:
-                cos = 1.0 - 2.0 * u[i, 2]
+                cos_d = 1.0 - 2.0 * u[i, 2]
             else:
                 k = (1.0 - gc * gc) / (1.0 - gc + 2.0 * gc * u[i, 2])
-                cos = (1.0 + gc * gc - k * k) / (2.0 * gc)
-            cos = min(max(cos, -1.0), 1.0)
-            sin = np.sqrt(max(1.0 - cos * cos, 0.0))
-            phi = 2.0 * np.pi * u[i, 3]
-            x, y = sin * np.cos(phi), sin * np.sin(phi)
-            s0, s1, s2, t0, t1, t2 = frame_of(d[i, 0], d[i, 1], d[i, 2])
-            n0 = x * s0 + y * t0 + cos * d[i, 0]
-            n1 = x * s1 + y * t1 + cos * d[i, 1]
-            n2 = x * s2 + y * t2 + cos * d[i, 2]
-            length = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-            d[i, 0], d[i, 1], d[i, 2] = n0 / length, n1 / length, n2 / length
-        w0, w1, w2 = abs(b[i, 0] * a[i, 0]), abs(b[i, 1] * a[i, 1]), abs(b[i, 2] * a[i, 2])
-        total = w0 + w1 + w2
-        p0, p1 = (w0 / total, w1 / total) if total > 0 else (1.0 / 3.0, 1.0 / 3.0)
-        c = (1 if u[i, 0] >= p0 else 0) + (1 if u[i, 0] >= p0 + p1 else 0)
-        t[i] = -np.log1p(-u[i, 1]) / st[i, c]
+                cos_d = (1.0 + gc * gc - k * k) / (2.0 * gc)
+            cos_d = min(max(cos_d, -1.0), 1.0)
+            n0, n1, n2 = _around(state[i, D], state[i, D + 1], state[i, D + 2], cos_d, u[i, 3])
+            cos = n0 * state[i, N] + n1 * state[i, N + 1] + n2 * state[i, N + 2]
+        state[i, D], state[i, D + 1], state[i, D + 2] = n0, n1, n2
+        hg = _hg(cos_d, gc)
+        terms[i, 0], terms[i, 1] = gf, back_share
+        terms[i, 2] = 1.0 / ((dl - cos) * plog) / (2.0 * np.pi * hg)
+        terms[i, 3] = 1.0 / ((dl + cos) * plog) / (2.0 * np.pi * hg)
+        terms[i, 4], terms[i, 5] = 1.0 - cos / dl, 1.0 + cos / dl
+        if guided:
+            sample_st *= terms[i, 5] if backward else terms[i, 4]
+        t[i] = -np.log1p(-u[i, 1]) / sample_st
+        tmax[i] = t[i]
 
 
-def _advance_numpy(hit, t_hit, t, u, b, a, st, ss, o, d, done):
-    """Cycles' update after the ray-cast: the distance (to the exit where
-    the segment met the surface), the throughput by one-sample MIS over the
-    channels (transmittance, times sigma_s at a scattering), the point
-    moved on (all in place); ``done``: exited or faded."""
+@helper
+def _hg(cos, g):
+    """phase_henyey_greenstein (g already clamped)."""
+    if abs(g) < 1e-3:
+        return 0.25 / np.pi
+    fac = 1.0 + g * (g - 2.0 * cos)
+    return (1.0 - g * g) / (4.0 * np.pi * fac * np.sqrt(max(fac, 0.0)))
+
+
+@helper
+def _around(a0, a1, a2, cos, u):
+    """The unit direction at polar cosine ``cos`` about the unit axis a, azimuth 2 pi u."""
+    sin = np.sqrt(max(1.0 - cos * cos, 0.0))
+    phi = 2.0 * np.pi * u
+    x, y = sin * np.cos(phi), sin * np.sin(phi)
+    s0, s1, s2, t0, t1, t2 = frame_of(a0, a1, a2)
+    n0 = x * s0 + y * t0 + cos * a0
+    n1 = x * s1 + y * t1 + cos * a1
+    n2 = x * s2 + y * t2 + cos * a2
+    length = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    return n0 / length, n1 / length, n2 / length
+
+
+def _advance_numpy(hit, t_hit, t, state, terms, scatter, similar, done):
+    """Cycles' update after the ray-cast: on the first step a hit within
+    the look-ahead records the opposite side's distance along -normal and
+    counts as an exit only within t; the distance (to the exit where the
+    segment met the surface), the throughput by one-sample MIS over the
+    channels and, after the first step, the classic, guided and backward
+    guided samplings (transmittance, times sigma_s at a scattering), the
+    point moved on (all in place); ``done``: exited or faded."""
+    st, ss, _, _ = _coefficients_now(state, similar, 0.0)
+    o, d, b = state[:, O:O + 3], state[:, D:D + 3], state[:, B:B + 3]
+    if not scatter:
+        far = o + d * np.where(hit, t_hit, 0.0)[:, None]
+        state[:, OPP] = np.where(hit, np.sum((far - state[:, P0:P0 + 3]) * -state[:, N:N + 3], axis=1), state[:, OPP])
+        state[:, HAVE] = np.where(hit, 1.0, state[:, HAVE])
+        hit &= t_hit < t
+    have = state[:, HAVE] > 0
     t[:] = np.where(hit, t_hit, t)
-    cpdf = _channel_pdf(b, a)
-    tr = np.exp(-st * t[:, None])
-    pdf = np.where(hit[:, None], tr, st * tr)
+    cpdf = _channel_pdf(b, state[:, A:A + 3])
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        tr = np.exp(-st * t[:, None])
+        pdf = _distance_pdf(st, t, hit)
+        if scatter:
+            gf, back_share, forward, mirrored, stretch_f, stretch_b = (terms[:, k, None] for k in range(6))
+            steered = _distance_pdf(stretch_f * st, t, hit) * forward
+            away = _distance_pdf(stretch_b * st, t, hit) * mirrored
+            steered = np.where(have[:, None], (1.0 - back_share) * steered + back_share * away, steered)
+            pdf = (1.0 - gf) * pdf + gf * steered
         step = b * np.where(hit[:, None], tr, ss * tr) / np.sum(cpdf * pdf, axis=1)[:, None]
     b[:] = np.where(np.isfinite(step), step, 0.0)
     o += d * t[:, None]
     done[:] = hit | (np.max(b, axis=1) < THROUGHPUT_EPSILON)
 
 
-@loop_kernel("void(boolean[::1], float64[::1], float64[::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], "
-             "float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], boolean[::1])", _advance_numpy)
-def _advance_rows(hit, t_hit, t, u, b, a, st, ss, o, d, done):
+def _distance_pdf(st, t, hit):
+    """subsurface_random_walk_pdf: transmittance at an exit, sigma_t times it at a scattering."""
+    tr = np.exp(-st * t[:, None])
+    return np.where(hit[:, None], tr, st * tr)
+
+
+@loop_kernel("void(boolean[::1], float64[::1], float64[::1], float64[:, ::1], float64[:, ::1], boolean, boolean, "
+             "boolean[::1])", _advance_numpy)
+def _advance_rows(hit, t_hit, t, state, terms, scatter, similar, done):
+    stc = ST_STAR if similar else ST
+    ssc = SS_STAR if similar else SS
     for i in range(len(t)):
+        if not scatter and hit[i]:
+            state[i, OPP] = -((state[i, O] + state[i, D] * t_hit[i] - state[i, P0]) * state[i, N]
+                              + (state[i, O + 1] + state[i, D + 1] * t_hit[i] - state[i, P0 + 1]) * state[i, N + 1]
+                              + (state[i, O + 2] + state[i, D + 2] * t_hit[i] - state[i, P0 + 2]) * state[i, N + 2])
+            state[i, HAVE] = 1.0
+            hit[i] = t_hit[i] < t[i]
         if hit[i]:
             t[i] = t_hit[i]
         ti = t[i]
-        w0, w1, w2 = abs(b[i, 0] * a[i, 0]), abs(b[i, 1] * a[i, 1]), abs(b[i, 2] * a[i, 2])
+        w0, w1, w2 = (abs(state[i, B] * state[i, A]), abs(state[i, B + 1] * state[i, A + 1]),
+                      abs(state[i, B + 2] * state[i, A + 2]))
         total = w0 + w1 + w2
         if total > 0:
-            p0, p1, p2 = w0 / total, w1 / total, w2 / total
+            p0c, p1c, p2c = w0 / total, w1 / total, w2 / total
         else:
-            p0 = p1 = p2 = 1.0 / 3.0
-        tr0, tr1, tr2 = np.exp(-st[i, 0] * ti), np.exp(-st[i, 1] * ti), np.exp(-st[i, 2] * ti)
-        if hit[i]:
-            denom = p0 * tr0 + p1 * tr1 + p2 * tr2
-            f0, f1, f2 = tr0, tr1, tr2
-        else:
-            denom = p0 * st[i, 0] * tr0 + p1 * st[i, 1] * tr1 + p2 * st[i, 2] * tr2
-            f0, f1, f2 = ss[i, 0] * tr0, ss[i, 1] * tr1, ss[i, 2] * tr2
+            p0c = p1c = p2c = 1.0 / 3.0
+        denom = 0.0
+        for c, pc in ((0, p0c), (1, p1c), (2, p2c)):
+            sc = state[i, stc + c]
+            pdf = _step_pdf(sc, ti, hit[i])
+            if scatter:
+                steered = _step_pdf(terms[i, 4] * sc, ti, hit[i]) * terms[i, 2]
+                if state[i, HAVE] > 0:
+                    away = _step_pdf(terms[i, 5] * sc, ti, hit[i]) * terms[i, 3]
+                    steered = (1.0 - terms[i, 1]) * steered + terms[i, 1] * away
+                pdf = (1.0 - terms[i, 0]) * pdf + terms[i, 0] * steered
+            denom += pc * pdf
         largest = 0.0
-        for c, f in ((0, f0), (1, f1), (2, f2)):
-            v = b[i, c] * f / denom if denom != 0 else np.nan
+        for c in range(3):
+            tr = np.exp(-state[i, stc + c] * ti)
+            f = tr if hit[i] else state[i, ssc + c] * tr
+            v = state[i, B + c] * f / denom if denom != 0 else np.nan
             v = v if np.isfinite(v) else 0.0
-            b[i, c] = v
+            state[i, B + c] = v
             largest = v if c == 0 else max(largest, v)
-        o[i, 0] += d[i, 0] * ti
-        o[i, 1] += d[i, 1] * ti
-        o[i, 2] += d[i, 2] * ti
+        state[i, O] += state[i, D] * ti
+        state[i, O + 1] += state[i, D + 1] * ti
+        state[i, O + 2] += state[i, D + 2] * ti
         done[i] = hit[i] or largest < THROUGHPUT_EPSILON
+
+
+@helper
+def _step_pdf(st, t, hit):
+    """subsurface_random_walk_pdf of one channel."""
+    tr = np.exp(-st * t)
+    if hit:
+        return tr
+    return st * tr
 
 
 def _local_hits(ctx, o, d, tmax, instance):
     """The first hit on each ray's own object within tmax: (hit (N,) bool,
-    t, global prim, barycentrics (N, 2))."""
+    t, global prim, barycentrics (N, 2)); the rows come sorted by object."""
     n = len(o)
+    if instance[0] == instance[-1]:   # one object (sorted rows): no gathering
+        accel, prims = local_accel(ctx.accel, ctx.triangles, int(instance[0]))
+        ti, pi, bu, bv = accel.intersect(o, d, tmax)
+        hit = (pi >= 0) & (ti <= tmax)
+        prim = np.full(n, -1, np.int64)
+        prim[hit] = prims[pi[hit]]
+        return hit, np.where(hit, ti, np.inf), prim, np.column_stack([bu, bv])
     hit, t, prim, bary = np.zeros(n, bool), np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros((n, 2))
-    for inst in np.unique(instance):
-        rows = np.flatnonzero(instance == inst)
-        accel, prims = local_accel(ctx.accel, ctx.triangles, int(inst))
-        ti, pi, bu, bv = accel.intersect(o[rows], d[rows], tmax[rows])
-        found = (pi >= 0) & (ti <= tmax[rows])
-        r = rows[found]
-        hit[r], t[r], prim[r] = True, ti[found], prims[pi[found]]
-        bary[r, 0], bary[r, 1] = bu[found], bv[found]
+    bounds = np.concatenate([[0], np.flatnonzero(instance[1:] != instance[:-1]) + 1, [n]])
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        accel, prims = local_accel(ctx.accel, ctx.triangles, int(instance[lo]))
+        ti, pi, bu, bv = accel.intersect(o[lo:hi], d[lo:hi], tmax[lo:hi])
+        found = (pi >= 0) & (ti <= tmax[lo:hi])
+        hit[lo:hi], t[lo:hi] = found, np.where(found, ti, np.inf)
+        prim[lo:hi][found] = prims[pi[found]]
+        bary[lo:hi, 0], bary[lo:hi, 1] = bu, bv
     return hit, t, prim, bary
 
 

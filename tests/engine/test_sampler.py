@@ -226,3 +226,11 @@ def test_adaptive_defaults_follow_cycles():
     assert (threshold, min_samples, step) == (0.05, 64, 16)
     assert adaptive_parameters(RenderSettings(adaptive_threshold=0.1))[1] == 32
     assert adaptive_parameters(RenderSettings(adaptive_threshold=0.1, adaptive_min_samples=2))[1] == 4
+
+
+def test_scalar_hash_is_hash32():
+    """The Python-integer hash of one dimension-set id equals hash32's (low 32 bits taken)."""
+    xs = [0, 1, 0xFFFFFFFF, 0x1234567890, -3, smp.subsurface_set(7, 255, 1)]
+    xs += [int(x) for x in np.random.default_rng(1).integers(0, 2 ** 40, 500)]
+    for x in xs:
+        assert smp._hash_scalar(x) == int(smp.hash32(np.array([x & 0xFFFFFFFF], np.uint32))[0])

@@ -78,6 +78,66 @@ def test_walk_reflects_the_half_space_albedo(a):
     assert np.all(beta[:, 0] == beta[:, 1]) and np.all(beta[:, 0] == beta[:, 2])   # grey: channels agree
 
 
+SLAB_CASES = (0.0, 0.6)
+
+
+def _slab(thickness):
+    """A box 2000 wide, ``thickness`` deep, its top face z = 0."""
+    mesh = box((2000.0, 2000.0, thickness))
+    mesh.positions = np.asarray(mesh.positions, np.float64) - np.array([0.0, 0.0, 0.5 * thickness])
+    cam = Camera(look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0)), resolution=(4, 4))
+    mat = Material("slab", (Lobe("subsurface", (0.5, 0.5, 0.5)),))
+    return Scene([mesh], [Instance(0, materials=[0], name="slab")], [mat], [], World((0, 0, 0)), cam)
+
+
+@pytest.mark.parametrize("g", SLAB_CASES)
+def test_guided_walk_matches_the_classic_walk(g):
+    """Through a slab 2 mean free paths thick (its far side within the
+    first step's look-ahead: Cycles' backward guiding is on) the guided
+    walk reflects and transmits what the classic walk does: a two-sample
+    test per side on independent walks (other seeds); the guided walk's
+    variance printed against the classic one's."""
+    ctx = prepare(_slab(2.0), RenderSettings(samples=1, seed=5, sampling_pattern="random"))
+    n = WALKS
+    o = np.tile([0.0, 0.0, -1e-4], (n, 1))
+    d = np.tile([0.0, 0.0, -1.0], (n, 1))
+    ones = np.ones((n, 3))
+    alpha = ones * np.array([0.95, 0.8, 0.6])
+    sides = {}
+    for guided, first in ((True, 0), (False, n)):
+        pseed = ctx.sampler.pixel_seeds(np.arange(first, first + n))
+        beta, out_o, _, prim, _ = ss.random_walk(ctx, o, d, ones, ones, alpha, np.full(n, g), np.zeros(n, np.int64),
+                                                 pseed, np.zeros(n, np.uint32), 0, guided=guided)
+        value = np.where(prim >= 0, beta[:, 0], 0.0)
+        top = out_o[:, 2] > -1.0
+        sides[guided] = [(x.mean(), x.std(ddof=1) / math.sqrt(n)) for x in (value * top, value * ~top)]
+    level = family_level(f"{__name__}.guided_slab", 2 * len(SLAB_CASES))
+    for k, side in enumerate(("reflected", "transmitted")):
+        (mg, sg), (mc, sc) = sides[True][k], sides[False][k]
+        se = math.hypot(sg, sc)
+        print(f"g {g} {side}: guided {mg:.4f} +- {sg:.4f}, classic {mc:.4f} +- {sc:.4f} "
+              f"(variance ratio {(sg / sc) ** 2:.2f}); detects {detectable(se, level):.4f}")
+        assert abs(mg - mc) < z_threshold(level) * se
+
+
+def test_hostile_walk_coefficients_stay_finite():
+    """Extreme walks (albedo at Cycles' clamps, g near +-1, extinctions of
+    1e-12 and 1e12, a normal along the ray): finite throughputs, no NaN."""
+    ctx = prepare(_slab(2.0), RenderSettings(samples=1, seed=2, sampling_pattern="random"))
+    n = 600
+    rng = np.random.default_rng(8)
+    o = np.tile([0.0, 0.0, -1e-4], (n, 1))
+    d = np.tile([0.0, 0.0, -1.0], (n, 1))
+    sigma_t = rng.choice([1e-12, 1e-3, 1.0, 1e12], (n, 3))
+    alpha = rng.choice([0.2, 0.5, 0.999999], (n, 3))
+    g = rng.choice([-0.999, -0.5, 0.0, 0.9, 0.999], n)
+    beta, out_o, out_d, prim, _ = ss.random_walk(ctx, o, d, np.ones((n, 3)), sigma_t, alpha, g, np.zeros(n, np.int64),
+                                                 ctx.sampler.pixel_seeds(np.arange(n)), np.zeros(n, np.uint32), 0,
+                                                 normal=-d)
+    assert np.isfinite(beta).all() and np.isfinite(out_o).all() and np.isfinite(out_d).all()
+    assert (prim >= 0).any()
+
+
 def test_cycles_coefficients():
     """Cycles' maps at known points: the single-scattering albedo fit is
     0 at 0 and close to 1 at 1; the Skin radius remap is sqrt(3 (1 - a'))
@@ -149,34 +209,43 @@ def test_open_mesh_is_named(mesh):
 
 def test_walk_kernels_agree():
     """The walk's two row loops, compiled, against their NumPy forms (to
-    rounding: numba calls libm, NumPy its own transcendentals)."""
+    rounding: numba calls libm, NumPy its own transcendentals), on the
+    first step (look-ahead, opposite side) and later ones (classic,
+    guided forward and backward)."""
     from engine import kernels
     rng = np.random.default_rng(4)
     n = 5000
-    u = rng.random((n, 4))
+    u, u2 = rng.random((n, 4)), rng.random((n, 4))
     d = rng.normal(size=(n, 3))
     d /= np.linalg.norm(d, axis=1)[:, None]
     d[:5] = [[0, 0, 1], [0, 0, -1], [1, 0, 0], [0, -1, 0], [0.6, 0, -0.8]]
+    nrm = rng.normal(size=(n, 3))
+    nrm /= np.linalg.norm(nrm, axis=1)[:, None]
     g = rng.uniform(-1.0, 1.0, n)
     g[:50] = 0.0
     b = rng.random((n, 3))
     b[:20] = 0.0
-    a = rng.random((n, 3))
+    a = rng.uniform(0.2, 0.999999, (n, 3))
     st = rng.uniform(0.1, 10.0, (n, 3))
-    ss = st * a
+    o, p0 = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
     hit = rng.random(n) < 0.3
     t_hit = rng.random(n)
-    for jit in (False, True):
-        kernels.configure(jit)
-        dd, t = d.copy(), np.empty(n)
-        ss_mod._direction_rows(u, dd, g, b, a, st, True, t)
-        bb, o, t2, done = b.copy(), np.zeros((n, 3)), t.copy(), np.empty(n, bool)
-        ss_mod._advance_rows(hit, t_hit, t2, u, bb, a, st, ss, o, dd, done)
-        if not jit:
-            ref = dd, t, bb, o, done
-    for x, y in zip(ref[:4], (dd, t, bb, o)):
-        np.testing.assert_allclose(y, x, rtol=1e-9, atol=1e-12)
-    assert np.array_equal(ref[4], done)
+    state = ss_mod._walk_state(o, d, b, st, a, g, nrm, p0, True)
+    for scatter, similar in ((False, False), (True, False), (True, True)):
+        state[:, ss_mod.HAVE] = rng.random(n) < 0.5
+        state[:, ss_mod.OPP] = rng.uniform(-0.5, 3.0, n)
+        results = []
+        for jit in (False, True):
+            kernels.configure(jit)
+            st8, t, tmax, terms = state.copy(), np.empty(n), np.empty(n), np.empty((n, 6))
+            ss_mod._direction_rows(u, u2, st8, scatter, similar, 0.75, t, tmax, terms)
+            hv, t2, done = hit.copy(), t.copy(), np.empty(n, bool)
+            ss_mod._advance_rows(hv, t_hit, t2, st8, terms, scatter, similar, done)
+            results.append((t, tmax, terms, st8, t2, hv, done))
+        for x, y in zip(results[0][:5], results[1][:5]):
+            np.testing.assert_allclose(y, x, rtol=1e-9, atol=1e-12)
+        for x, y in zip(results[0][5:], results[1][5:]):
+            assert np.array_equal(x, y)
 
 
 def test_burley_root_inverts_its_cdf():
