@@ -154,16 +154,24 @@ def test_lobes_are_cycles(kind):
 # ----------------------------------------------------------------------------
 # The samplers against their own density
 
-def chi2_grid(roughness, radial):
-    """(phi, theta) edges about the fibre's axis x: theta fine about the
-    cone the samples gather on (theta = pi/2 + theta_r - 2 offset)."""
-    cone = HALF_PI + math.asin(WO[0]) - 2 * 0.05
-    pe = np.linspace(0.0, 2.0 * math.pi, 49)
-    te = C.mixture_edges(0.0, math.pi, cone, max(2.0 * roughness, 0.02), 48)
-    return pe, te
-
-
 FX = C.frame((1.0, 0.0, 0.0))
+
+
+def chi2_grid(roughness):
+    """(phi, theta) edges about the fibre's axis x: phi from the azimuth of
+    locy in 40 cells, so that the samplers' edges (|phi| = pi / 2,
+    0.3 pi) are cell edges; theta fine about the cone the samples gather on
+    (theta = pi/2 + theta_r - 2 offset), with edges at the rejected caps."""
+    locy = np.array([0.0, WO[1], WO[2]]) / math.hypot(WO[1], WO[2])
+    s, t, _ = FX
+    phi0 = math.atan2(locy @ t, locy @ s)
+    pe = phi0 + np.linspace(0.0, 2.0 * math.pi, 41)
+    cone = HALF_PI + math.asin(WO[0]) - 2 * 0.05
+    # The rejected caps within POLE of the axis are cells of their own (no
+    # density: their samples are the rejected ones, the 'rest' cell).
+    cap = hair_bsdf.POLE
+    te = np.concatenate([[0.0], C.mixture_edges(cap, math.pi - cap, cone, max(2.0 * roughness, 0.02), 48), [math.pi]])
+    return pe, te
 
 
 @pytest.mark.parametrize("kind,radial", CHI2_CASES)
@@ -180,7 +188,7 @@ def test_chi2_against_the_sampler_density(kind, radial):
         return hair_bsdf.sampler_pdf(one, rows, 0, np.tile(WO, (len(v), 1)), v, transmission)
 
     valid = pdf > 0
-    pe, te = chi2_grid(0.25, radial)
+    pe, te = chi2_grid(0.25)
     res = direction_chi2(wi[valid], density, FX, pe, te, N, rest=int((~valid).sum()))
     print(f"chi2 {kind} RoughnessV {radial}: {res.power_line(LEVEL)}")
     assert res.p > LEVEL, f"{kind} RoughnessV {radial}: chi-square rejects the sampler: {res} (level {LEVEL:.3g})"
