@@ -1,7 +1,8 @@
 """Blender shader node trees -> engine.scene.Material (a weighted set of lobes).
 
 Covered: Diffuse (Oren-Nayar at Roughness > 0), Glossy (anisotropic),
-Metallic, Glass, Refraction, Translucent, Transparent, Sheen, Emission,
+Metallic, Glass, Refraction, Translucent, Transparent, Sheen, Emission, Hair BSDF,
+Principled Hair BSDF (Chiang),
 Principled BSDF (Cycles' layering, Anisotropic, Diffuse Roughness, Thin
 Film, emission dimmed by sheen and coat), Mix Shader and Add Shader; anisotropic lobes
 take the material's tangent (the Tangent input, Cycles' radial tangent

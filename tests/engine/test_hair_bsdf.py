@@ -268,7 +268,8 @@ def test_mix_estimate_is_cycles_estimator():
     z_max = C.z_threshold(LEVEL / 3)     # three channels
     print(f"mix: Ember {ember.mean(axis=0)}, Cycles {cycles.mean(axis=0)}, diff {diff} +- {se} "
           f"(detectable {z_max * se}); eval-based weights would give {by_eval.mean(axis=0)}")
-    assert np.all(np.abs(diff) < z_max * se), f"mix {ember.mean(axis=0)} vs Cycles' {cycles.mean(axis=0)}: z {diff / se}"
+    assert np.all(np.abs(diff) < z_max * se), f"mix {ember.mean(axis=0)} vs Cycles' {cycles.mean(axis=0)}: " \
+                                              f"z {diff / se}"
 
 
 # ----------------------------------------------------------------------------
