@@ -727,13 +727,23 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None, bent=None):
 def _own_weight_rows(lobes, u_lobe, sel, delta):
     """(rows, slots) whose chosen lobe reported its own value and pdf
     (registry.OWN_WEIGHT), or None."""
-    ids = registry.with_flag(registry.OWN_WEIGHT)
+    ids = _own_weight_ids()
     if not ids or not kind_in(lobes.kind, ids).any():
         return None
     chosen, any_lobe = chosen_lobe(sel, u_lobe)
     kind = lobes.kind[np.arange(len(chosen)), chosen]
     rows = np.flatnonzero(any_lobe & ~delta & kind_in(kind, ids))
     return (rows, chosen[rows]) if len(rows) else None
+
+
+def _own_weight_ids():
+    key = len(registry.REGISTRY)
+    if _OWN_IDS.get("key") != key:
+        _OWN_IDS.update(key=key, ids=registry.with_flag(registry.OWN_WEIGHT))
+    return _OWN_IDS["ids"]
+
+
+_OWN_IDS = {}
 
 
 def _eval_with_own(lobes, wo, wi, sel, w, own, weight, pdf):

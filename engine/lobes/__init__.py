@@ -6,4 +6,5 @@ from . import (anisotropic, diffuse, ggx, glass, hair, hair_bsdf, oren_nayar, sh
                subsurface, transparent)                                           # its lobes)
 from .registry import (BY_ID, DELTA, DELTA_WHEN_SMOOTH, EXTRA_PARAMS, FILM_CUTOFF, NONE, OWN_WEIGHT,  # noqa: F401
                        PARAM, PARAMS, PASS_CLASSES, REFLECTION, REGISTRY, STRAIGHT, SUBSURFACE, TRANSMISSION,
-                       LobeDef, Param, SampleBatch, fill_array, kind_ids, kinds, kinds_of_class, register, table_value, with_flag)
+                       LobeDef, Param, SampleBatch, fill_array, kind_ids, kinds, kinds_of_class, register, table_value,
+                       with_flag)
