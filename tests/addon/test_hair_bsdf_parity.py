@@ -11,8 +11,9 @@ out of range, a linked Tangent).
 Cycles' Hair BSDF samplers are not consistent with its eval (the
 reflection sampler spreads its azimuths over pi RoughnessV, its eval stops
 at pi / 2): parity needs the sampled closure's own value and pdf
-(registry.OWN_WEIGHT); with the eval's instead this scene renders
-differently wherever the BSDF-sampled light dominates."""
+(registry.OWN_WEIGHT); with the eval's instead Ember rendered this scene
+-2.74 % +- 0.07 % darker (t -37, 15 of 18 block-channels off).  Measured:
++0.006 % +- 0.074 % (image mean detects 0.34 %, median block 1.4 %)."""
 import math
 
 import bpy
