@@ -18,8 +18,9 @@ import math
 
 import bpy
 import numpy as np
+import pytest
 
-from ember_testlib import (check_against_reference, empty_factory_scene, render_for_reference)
+from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference
 from test_curves_parity import strands
 
 SPP = 256
@@ -90,3 +91,19 @@ def test_hair_bsdf_hostile_inputs_render_finite(tmp_path, tapped_engine):
     assert np.isfinite(image).all()
     warnings = ember_engine.RENDER_LOG[-1].get('warnings') or []
     assert any("Tangent" in w for w in warnings), warnings
+
+
+def test_hair_bsdf_export(factory_scene):
+    """What the export makes of the node (no statistics): one lobe per
+    component, its colour, RoughnessU as the roughness, RoughnessV and
+    Offset as they are (the engine negates the offset and clamps as Cycles)."""
+    from addon.export import material as material_export
+    translated, warning = material_export.translate(hair_bsdf_material("export"))
+    assert warning is None
+    reflection, transmission = translated.lobes
+    assert (reflection.kind, transmission.kind) == ('hair_reflection', 'hair_transmission')
+    assert reflection.weight == transmission.weight == 0.5
+    assert reflection.color == pytest.approx((0.9, 0.7, 0.5)) and transmission.color == pytest.approx((0.8, 0.5, 0.3))
+    assert (reflection.roughness, reflection.radial_roughness) == pytest.approx((0.15, 1.0))
+    assert (transmission.roughness, transmission.radial_roughness) == pytest.approx((0.3, 0.6))
+    assert reflection.offset == pytest.approx(math.radians(2.0)) == transmission.offset
