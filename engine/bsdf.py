@@ -683,7 +683,7 @@ _sample_kernel = _Loop(loops.sample_loop,
                        "boolean[::1], boolean[::1])", _sample_twin)
 
 
-def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None, bent=None):
+def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None, bent=None, labels=None):
     """Sample wi.  Returns wi, weight (= f cos / pdf), pdf, delta (bool).
 
     A sample with weight 0 is an absorbed path.  For delta samples pdf is the
@@ -693,10 +693,15 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None, bent=None):
     Transmitted samples have wi.z < 0.  ``w``/``sel`` (weights, selection for
     this wo) may be passed when the caller has them already.  ``bent``, an
     (N,) bool array, receives which samples a bent-normal lobe drew on rows
-    with a second normal (bump_correction.sided).
+    with a second normal (bump_correction.sided).  ``labels``, an (N,) int8
+    array, receives the kind of the OWN_WEIGHT lobe that drew each sample
+    (NONE elsewhere): Cycles labels those samples by their closure, not by
+    the side they leave to.
     """
     if bent is not None:
         bent[:] = False
+    if labels is not None:
+        labels[:] = NONE
     if lobes.kind.shape[1] == 1 and _simple(lobes) and lobes.diffuse_split is None:
         return _sample_single(lobes, wo, u1, u2)
     n = len(wo)
@@ -720,6 +725,8 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None, bent=None):
         fs, ps = eval_pdf(lobes, wo, wi, sel, w, sampled=True)
     else:
         fs, ps = _eval_with_own(lobes, wo, wi, sel, w, own, weight, pdf)
+        if labels is not None:
+            labels[own[0]] = lobes.kind[own]
     _finish_kernel(wo, wi, smooth, fs, ps, weight, pdf)
     return wi, weight, pdf, delta
 

@@ -20,7 +20,8 @@ import bpy
 import numpy as np
 import pytest
 
-from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference
+from ember_testlib import (ReferenceCheck, check_against_reference, empty_factory_scene, live_cycles_reference,
+                           render_for_reference)
 from test_curves_parity import strands
 
 SPP = 256
@@ -71,6 +72,53 @@ def test_hair_bsdf_parity_with_cycles(tmp_path, tapped_engine):
     image, var = render_for_reference(scene, tmp_path, 'hair_bsdf', tapped_engine, SPP, 2, bounces)
     check = check_against_reference('hair_bsdf_strands', scene, bounces, image, var, SPP, BLOCK)
     check.assert_agrees(0.005, 0.02)
+
+
+def reflection_strands(scene):
+    """The strands with the Reflection component alone (RoughnessV 1: a
+    third of its samples leave below N)."""
+    strands(scene)
+    mat = bpy.data.materials.new("reflection")
+    mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    nodes.clear()
+    node = nodes.new('ShaderNodeBsdfHair')
+    node.inputs['Color'].default_value = (0.9, 0.8, 0.7, 1.0)
+    node.inputs['RoughnessU'].default_value = 0.2
+    node.inputs['RoughnessV'].default_value = 1.0
+    links.new(node.outputs[0], nodes.new('ShaderNodeOutputMaterial').inputs['Surface'])
+    obj = bpy.data.objects['strands']
+    obj.data.materials.clear()
+    obj.data.materials.append(mat)
+    return 4
+
+
+def one_glossy_bounce(settings):
+    settings.glossy_bounces = 1
+
+
+LABEL_SEEDS, LABEL_SPP = 4, 256
+
+
+@pytest.mark.xfail(strict=True, reason="Glossy bounces 1: Ember -2.99 % +- 0.09 % against Cycles (without the "
+                   "labels +2.47 %); cause not found")
+def test_hair_bsdf_labels_parity_with_live_cycles(tmp_path, tapped_engine):
+    """Glossy bounces 1 of 4: Cycles counts every Reflection sample a glossy
+    bounce, also those below N (its label; Ember: bsdf.sample's labels,
+    visibility._labelled), against live Cycles seeds.  Measured -2.99 % +-
+    0.09 % (t -32; 17 of 18 block-channels off); with the ray kinds by side
+    instead of the labels +2.47 % +- 0.10 %: Cycles lies between, so
+    something else about these paths differs (at Max Bounces for every kind
+    the scene agrees, test_hair_bsdf_parity_with_cycles)."""
+    scene = empty_factory_scene()
+    bounces = reflection_strands(scene)
+    ref, ref_var, header = live_cycles_reference(scene, tmp_path, 'labels', LABEL_SEEDS, LABEL_SPP, bounces,
+                                                 configure=one_glossy_bounce)
+    image, var = render_for_reference(scene, tmp_path, 'labels', tapped_engine, SPP, 2, bounces,
+                                      configure=one_glossy_bounce)
+    check = ReferenceCheck('hair_bsdf_labels', image[..., :3].astype(np.float64), var, SPP, ref, ref_var, header,
+                           BLOCK)
+    check.assert_agrees(0.01)
 
 
 def test_hair_bsdf_hostile_inputs_render_finite(tmp_path, tapped_engine):

@@ -295,3 +295,29 @@ def test_hostile_parameters_stay_finite(kind):
     assert np.isfinite(f).all() and np.isfinite(p).all() and (f >= 0).all()
     sane = np.isfinite(lob.offset[:, 0]) & (np.abs(lob.offset[:, 0]) < 0.1) & (np.arange(n) >= 200)
     assert (pdf[sane] > 0).mean() > 0.9      # zero / NaN roughness clamps as Cycles, it does not absorb
+
+
+def test_samples_are_labelled_by_component():
+    """bsdf.sample's ``labels``: the kind of the Hair BSDF lobe that drew a
+    sample (Cycles labels it by the closure: a Reflection sample below N is
+    still a glossy reflection), NONE for the other lobes' samples; the
+    integrator's ray kinds take those labels (visibility._labelled)."""
+    from engine.geometry import VIS_GLOSSY, VIS_TRANSMISSION
+    from engine.integrator.visibility import _labelled
+    n = 20_000
+    lobe = [S.Lobe(kind, c, 0.25, radial_roughness=MIX_RADIAL, offset=0.05) if kind != "diffuse"
+            else S.Lobe(kind, c) for kind, c in MIX]
+    lob = bsdf.MaterialTable([S.Material("mix", tuple(lobe))]).gather(np.zeros(n, np.int64))
+    view = np.tile(WO, (n, 1))
+    u = np.random.default_rng(71).random((3, n))
+    labels = np.empty(n, np.int8)
+    wi, weight, _, _ = bsdf.sample(lob, view, *u, labels=labels)
+    chosen, _ = bsdf.chosen_lobe(bsdf.selection(lob, view), u[0])
+    live = np.any(weight > 0, axis=1)
+    expect = np.where(chosen == 2, bsdf.NONE, lob.kind[np.arange(n), chosen])
+    assert np.array_equal(labels[live], expect[live])
+    below = live & (labels == hair_bsdf.HAIR_REFLECTION) & (wi[:, 2] < 0)
+    above = live & (labels == hair_bsdf.HAIR_TRANSMISSION) & (wi[:, 2] > 0)
+    assert below.sum() > n // 50 and above.sum() > n // 50
+    kind = _labelled(np.where(wi[:, 2] < 0, VIS_TRANSMISSION, VIS_GLOSSY).astype(np.uint8), labels)
+    assert np.all(kind[below] == VIS_GLOSSY) and np.all(kind[above] == VIS_TRANSMISSION)
