@@ -20,7 +20,8 @@ Sampling picks one lobe with probability proportional to its estimated
 reflectance (one-sample MIS over lobes): for a non-delta lobe the returned
 f and pdf are the sums over all non-delta lobes, so ``eval``/``pdf`` and
 ``sample`` always agree.  Delta lobes (mirror, smooth glass, transparent)
-return their own weight.
+return their own weight; the Hair BSDF's lobes (OWN_WEIGHT) report their
+sample's own value and pdf, which stand in for their eval there.
 
 Each lobe kind is an entry of the registry engine/lobes/ (its parameters,
 light class, sample flags, NumPy kernels and test cases): the batch code
@@ -682,18 +683,25 @@ _sample_kernel = _Loop(loops.sample_loop,
                        "boolean[::1], boolean[::1])", _sample_twin)
 
 
-def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None, bent=None):
+def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None, bent=None, labels=None):
     """Sample wi.  Returns wi, weight (= f cos / pdf), pdf, delta (bool).
 
     A sample with weight 0 is an absorbed path.  For delta samples pdf is the
     probability of that discrete choice (only its being > 0 matters downstream).
+    A lobe flagged OWN_WEIGHT that drew the sample counts with the value and
+    pdf its sample reported, the other lobes with their eval (as Cycles).
     Transmitted samples have wi.z < 0.  ``w``/``sel`` (weights, selection for
     this wo) may be passed when the caller has them already.  ``bent``, an
     (N,) bool array, receives which samples a bent-normal lobe drew on rows
-    with a second normal (bump_correction.sided).
+    with a second normal (bump_correction.sided).  ``labels``, an (N,) int8
+    array, receives the kind of the OWN_WEIGHT lobe that drew each sample
+    (NONE elsewhere): Cycles labels those samples by their closure, not by
+    the side they leave to.
     """
     if bent is not None:
         bent[:] = False
+    if labels is not None:
+        labels[:] = NONE
     if lobes.kind.shape[1] == 1 and _simple(lobes) and lobes.diffuse_split is None:
         return _sample_single(lobes, wo, u1, u2)
     n = len(wo)
@@ -712,9 +720,50 @@ def sample(lobes, wo, u_lobe, u1, u2, sel=None, w=None, bent=None):
             bent[:] = drawn
     # Every row evaluated (rarely not needed; no copies of the lobes), the
     # smooth ones' weight and pdf taken from it.
-    fs, ps = eval_pdf(lobes, wo, wi, sel, w, sampled=True)
+    own = _own_weight_rows(lobes, u_lobe, sel, delta)
+    if own is None:
+        fs, ps = eval_pdf(lobes, wo, wi, sel, w, sampled=True)
+    else:
+        fs, ps = _eval_with_own(lobes, wo, wi, sel, w, own, weight, pdf)
+        if labels is not None:
+            labels[own[0]] = lobes.kind[own]
     _finish_kernel(wo, wi, smooth, fs, ps, weight, pdf)
     return wi, weight, pdf, delta
+
+
+def _own_weight_rows(lobes, u_lobe, sel, delta):
+    """(rows, slots) whose chosen lobe reported its own value and pdf
+    (registry.OWN_WEIGHT), or None."""
+    ids = _own_weight_ids()
+    if not ids or not kind_in(lobes.kind, ids).any():
+        return None
+    chosen, any_lobe = chosen_lobe(sel, u_lobe)
+    kind = lobes.kind[np.arange(len(chosen)), chosen]
+    rows = np.flatnonzero(any_lobe & ~delta & kind_in(kind, ids))
+    return (rows, chosen[rows]) if len(rows) else None
+
+
+def _own_weight_ids():
+    key = len(registry.REGISTRY)
+    if _OWN_IDS.get("key") != key:
+        _OWN_IDS.update(key=key, ids=registry.with_flag(registry.OWN_WEIGHT))
+    return _OWN_IDS["ids"]
+
+
+_OWN_IDS = {}
+
+
+def _eval_with_own(lobes, wo, wi, sel, w, own, weight, pdf):
+    """eval_pdf with the chosen OWN_WEIGHT lobe's eval replaced by what its
+    sample reported (Cycles: the sampled closure's eval and pdf from
+    bsdf_sample, every other closure's from bsdf_eval)."""
+    rows, slots = own
+    kind = lobes.kind.copy()
+    kind[rows, slots] = NONE
+    fs, ps = eval_pdf(replace(lobes, kind=kind), wo, wi, sel, w, sampled=True)
+    fs[rows] += weight[rows]
+    ps[rows] += pdf[rows]
+    return fs, ps
 
 
 def chosen_lobe(sel, u_lobe):

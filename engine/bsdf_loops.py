@@ -21,7 +21,7 @@ from .kernels import clip
 from .lobes import EXTRA_PARAMS, FILM_CUTOFF, PARAMS
 from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, GLOSSY_ANISOTROPIC, MIN_ALPHA,
                        MIRROR, NONE, OREN_NAYAR, REFRACTION, SHEEN, SUBSURFACE_BURLEY, SUBSURFACE_RANDOM_WALK,
-                       SUBSURFACE_SKIN, TRANSLUCENT, TRANSPARENT, HAIR_CHIANG)
+                       SUBSURFACE_SKIN, TRANSLUCENT, TRANSPARENT, HAIR_CHIANG, HAIR_REFLECTION, HAIR_TRANSMISSION)
 from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect_terms, pow5
 
 _NUMBA_TYPES = {np.dtype(np.int8): "int8", np.dtype(np.float64): "float64", np.dtype(np.bool_): "boolean"}
@@ -919,6 +919,100 @@ def _hair_sample(lobes, i, k, wox, woy, woz, u_lobe, u1, u2, ap, energy, tilt):
     return sin_i, cos_i * np.cos(phi_i), cos_i * np.sin(phi_i)
 
 
+# ----------------------------------------------------------------------------
+# hair_reflection / hair_transmission (engine/lobes/hair_bsdf.py for one ray)
+
+HALF_PI = 0.5 * np.pi
+HAIR_POLE = 1e-3   # as hair_bsdf.POLE
+
+
+@helper
+def _hair_bsdf_view(alpha, radial, offset, wox, woy, woz):
+    """hair_bsdf.View: (r1, r2, offset, theta_r, ly, lz, a, b, ok)."""
+    r1 = clip(np.sqrt(alpha) if alpha > 0 else 0.0, 0.001, 1.0)
+    r2 = clip(radial if radial > 0 else 0.0, 0.001, 1.0)
+    off = -offset if np.isfinite(offset) else 0.0
+    theta_r = np.arcsin(clip(wox, -1.0, 1.0))
+    yz = np.hypot(woy, woz)
+    ok = yz > 1e-12
+    ly, lz = (woy / yz, woz / yz) if ok else (woy, woz)
+    b = np.arctan(((-HALF_PI + theta_r) * 0.5 - off) / r1)
+    a = np.arctan(((HALF_PI + theta_r) * 0.5 - off) / r1)
+    return r1, r2, off, theta_r, ly, lz, a, b, ok
+
+
+@helper
+def _hair_theta_pdf(r1, off, theta_r, a, b, theta_i):
+    t = (theta_i + theta_r) * 0.5 - off
+    d = 2.0 * (t * t + r1 * r1) * (a - b) * np.cos(theta_i)
+    return r1 / d if d != 0.0 else np.inf
+
+
+@helper
+def _hair_phi_pdf(transmission, r2, phi):
+    """Cycles' reported azimuthal pdf: phi the reflection's scaled azimuth,
+    or the transmission's p = azimuth - pi."""
+    if transmission:
+        c = 2.0 * np.arctan(HALF_PI / r2)
+        return r2 / (c * (phi * phi + r2 * r2))
+    return np.cos(phi * 0.5) * 0.25 / r2
+
+
+@helper
+def _hair_bsdf_result(pdf, wiz, ok):
+    """(f, pdf): f = pdf / |cos|, both 0 where rejected or not finite."""
+    cos = np.abs(wiz)
+    if not (ok and cos > 1e-12 and np.isfinite(pdf) and pdf > 0):
+        return 0.0, 0.0
+    f = pdf / cos
+    if not np.isfinite(f):
+        return 0.0, 0.0
+    return f, pdf
+
+
+@helper
+def _hair_bsdf_eval(transmission, alpha, radial, offset, wox, woy, woz, wix, wiy, wiz):
+    """hair_bsdf.eval_hair_bsdf_f for one ray."""
+    r1, r2, off, theta_r, ly, lz, a, b, ok = _hair_bsdf_view(alpha, radial, offset, wox, woy, woz)
+    theta_i = np.arcsin(clip(wix, -1.0, 1.0))
+    yz = np.hypot(wiy, wiz)
+    cos_phi = clip((wiy * ly + wiz * lz) / yz, -1.0, 1.0) if yz > 0 else 1.0
+    ok = ok and yz > 0 and HALF_PI - np.abs(theta_i) >= HAIR_POLE
+    if transmission:
+        ok = ok and wiz < 0.0
+        phi = np.pi - np.arccos(cos_phi)
+    else:
+        ok = ok and wiz >= 0.0 and cos_phi >= 0.0
+        phi = min(np.arccos(cos_phi) / r2, np.pi)
+    if not ok:
+        return 0.0, 0.0
+    pdf = _hair_phi_pdf(transmission, r2, phi) * _hair_theta_pdf(r1, off, theta_r, a, b, theta_i)
+    return _hair_bsdf_result(pdf, wiz, ok)
+
+
+@helper
+def _hair_bsdf_sample(transmission, alpha, radial, offset, wox, woy, woz, u1, u2):
+    """hair_bsdf.sample_hair_bsdf_dir for one ray: (x, y, z, f, pdf)."""
+    r1, r2, off, theta_r, ly, lz, a, b, ok = _hair_bsdf_view(alpha, radial, offset, wox, woy, woz)
+    t = r1 * np.tan(u1 * (a - b) + b)
+    theta_i = 2.0 * (t + off) - theta_r
+    if transmission:
+        p = r2 * np.tan(2.0 * np.arctan(HALF_PI / r2) * (u2 - 0.5))
+        phi = p + np.pi
+        phi_pdf = _hair_phi_pdf(True, r2, p)
+    else:
+        phi = 2.0 * np.arcsin(1.0 - 2.0 * u2) * r2
+        phi_pdf = _hair_phi_pdf(False, r2, phi)
+    c = np.cos(theta_i)
+    cp, sp = np.cos(phi) * c, np.sin(phi) * c
+    x, y, z = np.sin(theta_i), cp * ly - sp * lz, cp * lz + sp * ly
+    ok = ok and HALF_PI - np.abs(theta_i) >= HAIR_POLE and np.isfinite(x) and np.isfinite(y) and np.isfinite(z)
+    f, pdf = _hair_bsdf_result(np.abs(phi_pdf * _hair_theta_pdf(r1, off, theta_r, a, b, theta_i)), z, ok)
+    if pdf == 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0
+    return x, y, z, f, pdf
+
+
 def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f, pdf):
     """bsdf.eval_pdf into f (N, 3) and pdf (N,); diffuse_term and keep
     are bsdf.bump_shadowing's arrays, or empty without a moved normal."""
@@ -949,6 +1043,13 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
                 f_0 += w[i, k, 0] * h0
                 f_1 += w[i, k, 1] * h1
                 f_2 += w[i, k, 2] * h2
+                p += sel[i, k] * pk
+            elif (kd == HAIR_REFLECTION and upper) or (kd == HAIR_TRANSMISSION and lower):
+                h, pk = _hair_bsdf_eval(kd == HAIR_TRANSMISSION, alpha[i, k], lobes[RADIAL_ROUGHNESS][i, k],
+                                        lobes[OFFSET][i, k], wox, woy, woz, wix, wiy, wiz)
+                f_0 += w[i, k, 0] * h
+                f_1 += w[i, k, 1] * h
+                f_2 += w[i, k, 2] * h
                 p += sel[i, k] * pk
             elif kd == OREN_NAYAR and upper:
                 single, e_avg, ms = _oren_nayar(lobes[DIFFUSE_ROUGHNESS][i, k], wox, woy, woz, wix, wiy, wiz)
@@ -1165,6 +1266,14 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
                 kd = NONE
         elif kd == HAIR_CHIANG:
             x, y, z = _hair_sample(lobes, i, k, wox, woy, woz, u_sub, u1[i], u2[i], ap, energy, tilt)
+        elif kd == HAIR_REFLECTION or kd == HAIR_TRANSMISSION:
+            # OWN_WEIGHT: its f (weighted) and pdf, which bsdf.sample adds to the others' eval.
+            x, y, z, h, pk = _hair_bsdf_sample(kd == HAIR_TRANSMISSION, alpha[i, k], lobes[RADIAL_ROUGHNESS][i, k],
+                                               lobes[OFFSET][i, k], wox, woy, woz, u1[i], u2[i])
+            r0, r1, r2 = w[i, k, 0] * h, w[i, k, 1] * h, w[i, k, 2] * h
+            p = p_lobe * pk
+            if pk == 0.0:
+                kd = NONE
         elif kd == SHEEN:
             x, y, z = _sample_sheen(t_sheen, np.sqrt(alpha[i, k]), wox, woy, woz, u1[i], u2[i])
         elif kd == MIRROR:

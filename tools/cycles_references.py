@@ -72,6 +72,7 @@ REFERENCES['points_heap'] = ('test_points_parity', 'heap', 1024)
 REFERENCES['curves_strands'] = ('test_curves_parity', 'strands', 1024)
 REFERENCES['bump_correction_sphere'] = ('test_bump_correction_parity', 'sphere', 512)
 REFERENCES['hair_particles'] = ('test_hair_parity', 'particles', 1024)
+REFERENCES['hair_bsdf_strands'] = ('test_hair_bsdf_parity', 'strands', 1024)
 for _scene in ('emissive', 'glossy_lights', 'hdri', 'interior', 'many_lights', 'principled', 'procedural'):
     REFERENCES['yardstick_' + _scene] = ('test_yardstick_parity', _scene, 1024)
 # the scenes built here: (width, height, max bounces)

@@ -1,7 +1,8 @@
 """Blender shader node trees -> engine.scene.Material (a weighted set of lobes).
 
 Covered: Diffuse (Oren-Nayar at Roughness > 0), Glossy (anisotropic),
-Metallic, Glass, Refraction, Translucent, Transparent, Sheen, Emission,
+Metallic, Glass, Refraction, Translucent, Transparent, Sheen, Emission, Hair BSDF,
+Principled Hair BSDF (Chiang),
 Principled BSDF (Cycles' layering, Anisotropic, Diffuse Roughness, Thin
 Film, emission dimmed by sheen and coat), Mix Shader and Add Shader; anisotropic lobes
 take the material's tangent (the Tangent input, Cycles' radial tangent
@@ -384,6 +385,19 @@ class NodeTranslator:
         return Closure([_scene().Lobe('hair_chiang', (1.0, 1.0, 1.0), roughness, ior=c('IOR', 1.55),
                                       absorption=sigma, radial_roughness=radial, coat=_clamp01(c('Coat', 0.0)),
                                       offset=c('Offset', 2.0 * math.pi / 180.0))])
+
+    def _node_bsdf_hair(self, node):
+        """Cycles' Hair BSDF (bsdf_hair.h): one Reflection or Transmission
+        lobe about the curve's tangent (engine/lobes/hair_bsdf.py); RoughnessV
+        and Offset as constants.  A linked Tangent input is read as the
+        curve's tangent, with a warning."""
+        if self._value_linked(node, 'Tangent'):
+            self._approximate(node, "Tangent input read as the curve's tangent")
+        kind = 'hair_transmission' if getattr(node, 'component', 'Reflection') == 'Transmission' else 'hair_reflection'
+        roughness = _clamp01(self._finite_value(node, 'RoughnessU', self.value(node, 'RoughnessU', 0.1), 0.1))
+        return Closure([_scene().Lobe(kind, self.color(node, 'Color'), roughness,
+                                      radial_roughness=_clamp01(self._hair_constant(node, 'RoughnessV', 1.0)),
+                                      offset=self._hair_constant(node, 'Offset', 0.0))])
 
     def _node_subsurface_scattering(self, node):
         """Cycles' Subsurface Scattering node (Random Walk, Skin, Christensen-Burley)."""

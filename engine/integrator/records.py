@@ -180,6 +180,9 @@ class Vertex:
     # Rows of the batch's paths these vertices are (None: all, in order):
     # set on the row subsets light sampling makes.
     path_rows: object = None
+    # The kind of the OWN_WEIGHT lobe that drew each BSDF sample (NONE:
+    # another lobe; None: not recorded), set by stages.scatter.
+    sampled_labels: object = None
 
     def __len__(self):
         return len(self.wo_l)

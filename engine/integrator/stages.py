@@ -672,7 +672,9 @@ def scatter(ctx, paths, v, depth):
         bent = v.sampled_bent
     else:
         bent = np.zeros(len(u), bool)
-        wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u[:, 0], u[:, 1], u[:, 2], *v.lobes_wo, bent=bent)
+        v.sampled_labels = np.empty(len(u), np.int8)   # the Hair BSDF's samples' kinds (visibility.ray_kind)
+        wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u[:, 0], u[:, 1], u[:, 2], *v.lobes_wo, bent=bent,
+                                               labels=v.sampled_labels)
     wi = v.world(wi_l)
     # Rows with a second normal (Bump Map Correction) judge a sample's side by its lobe's.
     side_l = bump_correction.sided(v.lobes, wi_l, reflected=bent)

@@ -8,7 +8,7 @@ from dataclasses import fields, replace
 import numpy as np
 
 from .. import bsdf
-from ..lobes import kinds_of_class
+from ..lobes import OWN_WEIGHT, REGISTRY, kinds_of_class
 from ..geometry import VIS_DIFFUSE, VIS_GLOSSY, VIS_SHADOW, VIS_TRANSMISSION
 from ..sampler import KIND, vertex_set
 from ..vec import dot, to_local
@@ -159,6 +159,21 @@ def ray_kind(ctx, v, paths, depth):
         u = ctx.sampler.get(paths.pseed[mixed], paths.sample[mixed], vertex_set(depth, KIND))[:, 0]
         kind[mixed] = np.where(u < p_d, VIS_DIFFUSE, VIS_GLOSSY)
     kind[dot(paths.d, hit.ng) < 0] = VIS_TRANSMISSION
+    return _labelled(kind, v.sampled_labels)
+
+
+_LABELS = {"diffuse": VIS_DIFFUSE, "glossy": VIS_GLOSSY, "transmission": VIS_TRANSMISSION}
+
+
+def _labelled(kind, labels):
+    """Samples an OWN_WEIGHT lobe drew take its light class wherever they
+    went (Cycles' Hair BSDF labels a Reflection sample a reflection even
+    below N, a Transmission sample a transmission even above)."""
+    if labels is None:
+        return kind
+    for d in REGISTRY.values():
+        if d.has(OWN_WEIGHT) and d.pass_class in _LABELS:
+            kind[labels == d.id] = _LABELS[d.pass_class]
     return kind
 
 

@@ -22,8 +22,9 @@ Kernel conventions (directions in the shading frame, wo.z > 0):
   wi reach it: 'upper' (reflection), 'lower' (transmission) or 'both'.
 * ``sample(lobes, rows, batch)``: directions for the ``rows`` that chose
   this lobe, written into the ``SampleBatch``; delta lobes also write their
-  weight (f |cos| / pdf) and pdf and set ``delta``; a sample the lobe
-  rejects sets ``kind`` to NONE (absorbed).
+  weight (f |cos| / pdf) and pdf and set ``delta``; OWN_WEIGHT lobes write
+  their own f (w applied, without |cos|) into weight and p_lobe x their pdf
+  into pdf; a sample the lobe rejects sets ``kind`` to NONE (absorbed).
 * ``albedo_guess(lobes, k, mu) -> (N,)``: a cheap estimate of the lobe's
   albedo for choosing lobes (any positive guess is unbiased); None: 1.
 
@@ -46,6 +47,10 @@ DELTA = 4                 # always a singular direction (no eval, no pdf)
 DELTA_WHEN_SMOOTH = 8     # singular at alpha <= MIN_ALPHA (smooth glass)
 STRAIGHT = 16             # wi = -wo: the path continues as if no surface were there
 SUBSURFACE = 32           # a BSSRDF: no BSDF value; the integrator's subsurface stage walks it
+# Its sample reports the value and pdf of the direction it drew (Cycles'
+# bsdf_sample's eval and pdf), which bsdf.sample uses in place of its eval
+# there (the Hair BSDF: its sampler and eval disagree, engine/lobes/hair_bsdf.py).
+OWN_WEIGHT = 64
 # Below this alpha, GGX is numerically a mirror (glass: a smooth refractor);
 # Cycles switches to a singular lobe at alpha^2 <= 2e-10.
 MIN_ALPHA = 1e-3
@@ -147,11 +152,13 @@ PARAMS = (
           "melanin and colour).",
           to_table=lambda lobe: np.nan_to_num(np.maximum(getattr(lobe, "absorption", (0.0, 0.0, 0.0)), 0.0),
                                               nan=0.0, posinf=1e30)),
-    Param("radial_roughness", float, 0.3, np.float64, (), "hair_chiang: azimuthal roughness in [0, 1].",
+    Param("radial_roughness", float, 0.3, np.float64, (), "hair_chiang: azimuthal roughness in [0, 1] "
+          "(hair_reflection / _transmission: RoughnessV).",
           to_table=lambda lobe: _finite_or(getattr(lobe, "radial_roughness", 0.3), 0.3)),
     Param("coat", float, 0.0, np.float64, (), "hair_chiang: Coat in [0, 1] (the R lobe's roughness is "
           "(1 - coat) roughness).", to_table=lambda lobe: _finite_or(getattr(lobe, "coat", 0.0), 0.0)),
-    Param("offset", float, 0.0, np.float64, (), "hair_chiang: the cuticle tilt in radians (the node's Offset).",
+    Param("offset", float, 0.0, np.float64, (), "hair_chiang, hair_reflection / _transmission: the "
+          "cuticle tilt in radians (the node's Offset).",
           to_table=lambda lobe: _finite_or(getattr(lobe, "offset", 0.0), 0.0)),
     Param("thin_film_thickness", float, 0.0, np.float64, (), "thin-film iridescence over the lobe's Fresnel "
           "(glossy 'dielectric' and 'f82', mirror, glass): the film's thickness in nm; at most 0.1 (Cycles' "
@@ -236,7 +243,7 @@ class LobeDef:
     id: int
     name: str
     pass_class: str                # 'diffuse', 'glossy', 'transmission' or 'transparent'
-    flags: int                     # REFLECTION | TRANSMISSION | DELTA | DELTA_WHEN_SMOOTH | STRAIGHT
+    flags: int                     # REFLECTION | TRANSMISSION | DELTA | DELTA_WHEN_SMOOTH | STRAIGHT | OWN_WEIGHT
     sample: Callable               # (lobes, rows, SampleBatch) -> None
     eval: Optional[Callable] = None        # None: a delta lobe
     side: str = "upper"            # which wi eval sees: 'upper', 'lower', 'both'

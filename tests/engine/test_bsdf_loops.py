@@ -13,11 +13,11 @@ import pytest
 from engine import bsdf, kernels
 from engine.bsdf import (DIFFUSE, GLASS, GLOSSY, GLOSSY_ANISOTROPIC, Lobes, MIN_ALPHA, MIRROR, NONE, REFRACTION,
                          SHEEN, TRANSLUCENT, TRANSPARENT)
-from engine.lobe_ids import HAIR_CHIANG, OREN_NAYAR
+from engine.lobe_ids import HAIR_CHIANG, HAIR_REFLECTION, HAIR_TRANSMISSION, OREN_NAYAR
 from test_kernels import assert_agree, both_ways, compiled_ready
 
 KINDS = np.array([NONE, DIFFUSE, MIRROR, GLOSSY, GLASS, REFRACTION, TRANSLUCENT, TRANSPARENT, SHEEN,
-                  GLOSSY_ANISOTROPIC, OREN_NAYAR, HAIR_CHIANG], np.int8)
+                  GLOSSY_ANISOTROPIC, OREN_NAYAR, HAIR_CHIANG, HAIR_REFLECTION, HAIR_TRANSMISSION], np.int8)
 
 
 def random_lobes(rng, n, k=4, bump=False):
@@ -112,7 +112,8 @@ def test_sample_agrees(jit, bump):
     assert np.isfinite(weight).all() and np.isfinite(wi).all()
 
 
-@pytest.mark.parametrize("kind", [DIFFUSE, MIRROR, GLOSSY, GLASS, REFRACTION, TRANSLUCENT, TRANSPARENT, SHEEN])
+@pytest.mark.parametrize("kind", [DIFFUSE, MIRROR, GLOSSY, GLASS, REFRACTION, TRANSLUCENT, TRANSPARENT, SHEEN,
+                                  HAIR_REFLECTION, HAIR_TRANSMISSION])
 def test_each_lobe_kind_agrees(jit, kind):
     """One lobe kind at a time (the others emptied to NONE), so every branch
     of the loops is reached: evaluated with a nonzero pdf, or sampled."""
@@ -134,7 +135,7 @@ def test_each_lobe_kind_agrees(jit, kind):
         assert delta[wo[:, 2] > 0].all()
     else:
         assert (plain[1] > 0).sum() > n // 20 and (~delta & (pdf > 0)).sum() > n // 20
-    if kind in (GLASS, REFRACTION, TRANSLUCENT, TRANSPARENT):
+    if kind in (GLASS, REFRACTION, TRANSLUCENT, TRANSPARENT, HAIR_TRANSMISSION):
         assert (wi_s[:, 2] < 0).sum() > n // 20     # transmitted samples
 
 

@@ -1,0 +1,158 @@
+"""Cycles parity of the Hair BSDF node (engine/lobes/hair_bsdf.py, the
+export's ``_node_bsdf_hair``) on test_curves_parity's Curves object (400
+wavy strands, a tapering radius attribute, 3D curves, a diffuse floor under
+an area light, seen from above; four bounces): a Mix Shader (0.5) of the
+Reflection component (tinted, RoughnessU 0.15, RoughnessV 1, Offset 2
+degrees) and the Transmission component (RoughnessU 0.3, RoughnessV 0.6),
+against a converged Cycles reference (tools/cycles_references.py
+hair_bsdf_strands), and hostile inputs (NaN / zero roughness, an offset far
+out of range, a linked Tangent).
+
+Cycles' Hair BSDF samplers are not consistent with its eval (the
+reflection sampler spreads its azimuths over pi RoughnessV, its eval stops
+at pi / 2): parity needs the sampled closure's own value and pdf
+(registry.OWN_WEIGHT); with the eval's instead Ember rendered this scene
+-2.74 % +- 0.07 % darker (t -37, 15 of 18 block-channels off).  Measured:
++0.006 % +- 0.074 % (image mean detects 0.34 %, median block 1.4 %)."""
+import math
+
+import bpy
+import numpy as np
+import pytest
+
+from ember_testlib import (ReferenceCheck, check_against_reference, empty_factory_scene, live_cycles_reference,
+                           render_for_reference)
+from test_curves_parity import strands
+
+SPP = 256
+BLOCK = 16
+
+
+def hair_bsdf_material(name="hair_bsdf", roughness_u=(0.15, 0.3), roughness_v=(1.0, 0.6),
+                       offset=math.radians(2.0)):
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    nodes.clear()
+    out = nodes.new('ShaderNodeOutputMaterial')
+    mix = nodes.new('ShaderNodeMixShader')
+    mix.inputs[0].default_value = 0.5
+    colours = ((0.9, 0.7, 0.5, 1.0), (0.8, 0.5, 0.3, 1.0))
+    for i, component in enumerate(('Reflection', 'Transmission')):
+        node = nodes.new('ShaderNodeBsdfHair')
+        node.component = component
+        node.inputs['Color'].default_value = colours[i]
+        node.inputs['RoughnessU'].default_value = roughness_u[i]
+        node.inputs['RoughnessV'].default_value = roughness_v[i]
+        node.inputs['Offset'].default_value = offset
+        links.new(node.outputs[0], mix.inputs[1 + i])
+    links.new(mix.outputs[0], out.inputs['Surface'])
+    return mat
+
+
+def hair_bsdf_strands(scene):
+    strands(scene)
+    obj = bpy.data.objects['strands']
+    obj.data.materials.clear()
+    obj.data.materials.append(hair_bsdf_material())
+    return 4
+
+
+SCENES = {'strands': hair_bsdf_strands}
+
+
+def reference_scene(name, folder=None):
+    """The scene ``name`` and its bounces (as tools/cycles_references.py renders it)."""
+    scene = empty_factory_scene()
+    return scene, SCENES[name](scene)
+
+
+def test_hair_bsdf_parity_with_cycles(tmp_path, tapped_engine):
+    scene, bounces = reference_scene('strands')
+    image, var = render_for_reference(scene, tmp_path, 'hair_bsdf', tapped_engine, SPP, 2, bounces)
+    check = check_against_reference('hair_bsdf_strands', scene, bounces, image, var, SPP, BLOCK)
+    check.assert_agrees(0.005, 0.02)
+
+
+def reflection_strands(scene):
+    """The strands with the Reflection component alone (RoughnessV 1: a
+    third of its samples leave below N)."""
+    strands(scene)
+    mat = bpy.data.materials.new("reflection")
+    mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    nodes.clear()
+    node = nodes.new('ShaderNodeBsdfHair')
+    node.inputs['Color'].default_value = (0.9, 0.8, 0.7, 1.0)
+    node.inputs['RoughnessU'].default_value = 0.2
+    node.inputs['RoughnessV'].default_value = 1.0
+    links.new(node.outputs[0], nodes.new('ShaderNodeOutputMaterial').inputs['Surface'])
+    obj = bpy.data.objects['strands']
+    obj.data.materials.clear()
+    obj.data.materials.append(mat)
+    return 4
+
+
+def one_glossy_bounce(settings):
+    settings.glossy_bounces = 1
+
+
+LABEL_SEEDS, LABEL_SPP = 4, 256
+
+
+@pytest.mark.xfail(strict=True, reason="Glossy bounces 1: Ember -2.99 % +- 0.09 % against Cycles (without the "
+                   "labels +2.47 %); cause not found")
+def test_hair_bsdf_labels_parity_with_live_cycles(tmp_path, tapped_engine):
+    """Glossy bounces 1 of 4: Cycles counts every Reflection sample a glossy
+    bounce, also those below N (its label; Ember: bsdf.sample's labels,
+    visibility._labelled), against live Cycles seeds.  Measured -2.99 % +-
+    0.09 % (t -32; 17 of 18 block-channels off); with the ray kinds by side
+    instead of the labels +2.47 % +- 0.10 %, Ember at Glossy bounces 2
+    +5.3 %: Cycles lies between, so something else about these paths
+    differs (at Max Bounces for every kind the scene agrees,
+    test_hair_bsdf_parity_with_cycles; Chiang strands at Glossy 1 agree)."""
+    scene = empty_factory_scene()
+    bounces = reflection_strands(scene)
+    ref, ref_var, header = live_cycles_reference(scene, tmp_path, 'labels', LABEL_SEEDS, LABEL_SPP, bounces,
+                                                 configure=one_glossy_bounce)
+    image, var = render_for_reference(scene, tmp_path, 'labels', tapped_engine, SPP, 2, bounces,
+                                      configure=one_glossy_bounce)
+    check = ReferenceCheck('hair_bsdf_labels', image[..., :3].astype(np.float64), var, SPP, ref, ref_var, header,
+                           BLOCK)
+    check.assert_agrees(0.01)
+
+
+def test_hair_bsdf_hostile_inputs_render_finite(tmp_path, tapped_engine):
+    """NaN and zero roughness, an offset of 1e6 radians and a linked Tangent
+    input render finite pixels; the linked tangent is named."""
+    from addon import engine as ember_engine
+    scene = empty_factory_scene()
+    bounces = strands(scene, curves=60)
+    mat = hair_bsdf_material("hostile", roughness_u=(float('nan'), 0.0), roughness_v=(0.0, float('nan')),
+                             offset=1e6)
+    tree = mat.node_tree
+    hair = next(n for n in tree.nodes if n.type == 'BSDF_HAIR')
+    tree.links.new(tree.nodes.new('ShaderNodeTangent').outputs[0], hair.inputs['Tangent'])
+    obj = bpy.data.objects['strands']
+    obj.data.materials.clear()
+    obj.data.materials.append(mat)
+    image, _ = render_for_reference(scene, tmp_path, 'hostile', tapped_engine, 4, 2, bounces)
+    assert np.isfinite(image).all()
+    warnings = ember_engine.RENDER_LOG[-1].get('warnings') or []
+    assert any("Tangent" in w for w in warnings), warnings
+
+
+def test_hair_bsdf_export(factory_scene):
+    """What the export makes of the node (no statistics): one lobe per
+    component, its colour, RoughnessU as the roughness, RoughnessV and
+    Offset as they are (the engine negates the offset and clamps as Cycles)."""
+    from addon.export import material as material_export
+    translated, warning = material_export.translate(hair_bsdf_material("export"))
+    assert warning is None
+    reflection, transmission = translated.lobes
+    assert (reflection.kind, transmission.kind) == ('hair_reflection', 'hair_transmission')
+    assert reflection.weight == transmission.weight == 0.5
+    assert reflection.color == pytest.approx((0.9, 0.7, 0.5)) and transmission.color == pytest.approx((0.8, 0.5, 0.3))
+    assert (reflection.roughness, reflection.radial_roughness) == pytest.approx((0.15, 1.0))
+    assert (transmission.roughness, transmission.radial_roughness) == pytest.approx((0.3, 0.6))
+    assert reflection.offset == pytest.approx(math.radians(2.0)) == transmission.offset
