@@ -37,6 +37,7 @@ def has_motion(scene):
     """Whether anything in the scene moves during the shutter."""
     cam = scene.camera
     return (getattr(cam, "motion", None) is not None
+            or getattr(cam, "lens_motion", None) is not None
             or any(getattr(inst, "motion", None) is not None for inst in scene.instances)
             or any(getattr(mesh, "motion", None) is not None for mesh in scene.meshes))
 
