@@ -236,9 +236,31 @@ def test_shutter_curve_and_rolling_shutter_parity(name, tmp_path, tapped_engine)
 
 
 def test_moving_lamp_stays_at_the_shutter_centre_as_cycles(tmp_path, tapped_engine):
+    """Parity; and the same blocks tell the reference from a lamp swept
+    over the shutter (stood in for by 7 still lamps along its path, each
+    1/7 of its power)."""
     scene, bounces = reference_scene('moving_lamp')
     image, var = render_for_reference(scene, tmp_path, 'moving_lamp', tapped_engine, SPP, 2, bounces)
-    check_against_reference('motion_moving_lamp', scene, bounces, image, var, SPP, BLOCK).assert_agrees(0.005, 0.02)
+    check = check_against_reference('motion_moving_lamp', scene, bounces, image, var, SPP, BLOCK)
+    check.assert_agrees(0.005, 0.02)
+    swept, _ = reference_scene('moving_lamp')
+    lamp = bpy.data.objects['spot']
+    lamp.animation_data_clear()
+    lamp.data.energy /= 7.0
+    for k, x in enumerate(np.linspace(-1.5, 1.5, 7)):
+        copy = lamp if k == 0 else lamp.copy()
+        if k:
+            swept.collection.objects.link(copy)
+        copy.location = (x, 0.8, 3.0)
+    other, other_var = render_for_reference(swept, tmp_path, 'swept_lamp', tapped_engine, SPP // 2, 2, bounces)
+    ref, ref_var, _ = load_reference('motion_moving_lamp')
+    a, va = stats.block_means_var(other[..., :3].astype(np.float64), other_var, BLOCK)
+    b, vb = stats.block_means_var(ref, ref_var, BLOCK)
+    t = np.abs(a - b) / np.sqrt(va + vb)
+    limit = stats.t_threshold(check.details['level'], SPP // 2 - 1)
+    print(f"motion_moving_lamp: a swept lamp against the reference: max block |t| {t.max():.1f} "
+          f"(limit {limit:.1f}), {(t > limit).sum()} of {t.size} blocks beyond")
+    assert (t > limit).any(), "the test cannot tell a still lamp from a moving one"
 
 
 def test_shutter_settings_are_exported(tmp_path, tapped_engine, monkeypatch):
