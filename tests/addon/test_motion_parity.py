@@ -152,8 +152,23 @@ def moving_lamp(scene):
     return BOUNCES
 
 
+def moving_emitter(scene):
+    """A glowing bar sliding 2 units in the shutter of 1 frame, 0.6 above
+    a floor it lights (no lamp): Cycles samples the bar's triangles where
+    they are at each path's time."""
+    plane("floor", material("floor", 'diffuse'))
+    top_camera(scene, 6.0)
+    bar = box("bar", material("glow", 'emission', color=(1.0, 0.8, 0.5), strength=6.0), (0.0, 0.0, 0.6),
+              (0.4, 2.4, 0.1))
+    _linear_keys(bar, 'location', [(-2.0, 0.0, 0.6), (2.0, 0.0, 0.6)])
+    _blur(scene)
+    scene.render.motion_blur_shutter = 1.0
+    return BOUNCES
+
+
 WITHOUT = {'late_shutter': ('curve', 'zoom'), 'rolling': ('on',)}   # the features each scene tests
-SCENES = {'objects': objects, 'late_shutter': late_shutter, 'rolling': rolling, 'moving_lamp': moving_lamp}
+SCENES = {'objects': objects, 'late_shutter': late_shutter, 'rolling': rolling, 'moving_lamp': moving_lamp,
+          'moving_emitter': moving_emitter}
 
 
 def reference_scene(name, folder=None):
@@ -171,14 +186,21 @@ def test_motion_blur_parity_with_cycles(tmp_path, tapped_engine, name='objects')
     still = empty_factory_scene()
     SCENES[name](still, blur=False)
     sharp, sharp_var = render_for_reference(still, tmp_path, name + '_still', tapped_engine, SPP // 2, 2, bounces)
+    assert _blocks_beyond(name, sharp, sharp_var, check.details['level'], "a sharp render"), \
+        f"the test cannot tell {name}'s motion blur from none"
+
+
+def _blocks_beyond(name, image, var, level, what):
+    """Whether any block of an Ember render (SPP / 2 samples) differs from
+    reference ``name`` at ``level`` (a test's power check), printed."""
     ref, ref_var, _ = load_reference('motion_' + name)
-    a, va = stats.block_means_var(sharp[..., :3].astype(np.float64), sharp_var, BLOCK)
+    a, va = stats.block_means_var(image[..., :3].astype(np.float64), var, BLOCK)
     b, vb = stats.block_means_var(ref, ref_var, BLOCK)
     t = np.abs(a - b) / np.sqrt(va + vb)
-    limit = stats.t_threshold(check.details['level'], SPP // 2 - 1)
-    print(f"motion_{name}: a sharp render against the blurred reference: max block |t| {t.max():.1f} "
+    limit = stats.t_threshold(level, SPP // 2 - 1)
+    print(f"motion_{name}: {what} against the reference: max block |t| {t.max():.1f} "
           f"(limit {limit:.1f}), {(t > limit).sum()} of {t.size} blocks beyond")
-    assert (t > limit).any(), f"the test cannot tell {name}'s motion blur from none"
+    return bool((t > limit).any())
 
 
 def _exported_scene(monkeypatch):
@@ -221,18 +243,12 @@ def test_shutter_curve_and_rolling_shutter_parity(name, tmp_path, tapped_engine)
     image, var = render_for_reference(scene, tmp_path, name, tapped_engine, SPP, 2, bounces)
     check = check_against_reference('motion_' + name, scene, bounces, image, var, SPP, BLOCK)
     check.assert_agrees(0.005, 0.02)
-    ref, ref_var, _ = load_reference('motion_' + name)
-    b, vb = stats.block_means_var(ref, ref_var, BLOCK)
-    limit = stats.t_threshold(check.details['level'], SPP // 2 - 1)
     for without in WITHOUT[name]:
         plain = empty_factory_scene()
         SCENES[name](plain, **{without: False})
         other, other_var = render_for_reference(plain, tmp_path, name + '_plain', tapped_engine, SPP // 2, 2, bounces)
-        a, va = stats.block_means_var(other[..., :3].astype(np.float64), other_var, BLOCK)
-        t = np.abs(a - b) / np.sqrt(va + vb)
-        print(f"motion_{name}: without {without} against the reference: max block |t| {t.max():.1f} "
-              f"(limit {limit:.1f}), {(t > limit).sum()} of {t.size} blocks beyond")
-        assert (t > limit).any(), f"the test cannot tell {name} from its render without {without}"
+        assert _blocks_beyond(name, other, other_var, check.details['level'], f"without {without}"), \
+            f"the test cannot tell {name} from its render without {without}"
 
 
 def test_moving_lamp_stays_at_the_shutter_centre_as_cycles(tmp_path, tapped_engine):
@@ -253,14 +269,8 @@ def test_moving_lamp_stays_at_the_shutter_centre_as_cycles(tmp_path, tapped_engi
             swept.collection.objects.link(copy)
         copy.location = (x, 0.8, 3.0)
     other, other_var = render_for_reference(swept, tmp_path, 'swept_lamp', tapped_engine, SPP // 2, 2, bounces)
-    ref, ref_var, _ = load_reference('motion_moving_lamp')
-    a, va = stats.block_means_var(other[..., :3].astype(np.float64), other_var, BLOCK)
-    b, vb = stats.block_means_var(ref, ref_var, BLOCK)
-    t = np.abs(a - b) / np.sqrt(va + vb)
-    limit = stats.t_threshold(check.details['level'], SPP // 2 - 1)
-    print(f"motion_moving_lamp: a swept lamp against the reference: max block |t| {t.max():.1f} "
-          f"(limit {limit:.1f}), {(t > limit).sum()} of {t.size} blocks beyond")
-    assert (t > limit).any(), "the test cannot tell a still lamp from a moving one"
+    assert _blocks_beyond('moving_lamp', other, other_var, check.details['level'], "a swept lamp"), \
+        "the test cannot tell a still lamp from a moving one"
 
 
 def test_shutter_settings_are_exported(tmp_path, tapped_engine, monkeypatch):
@@ -296,3 +306,11 @@ def test_hostile_shutter_settings_render_finite(case, tmp_path, tapped_engine):
                 curve.keyframe_points[-1].co[1] = float('nan')
     image, _ = render_for_reference(scene, tmp_path, 'hostile_' + case, tapped_engine, 4, 2, bounces)
     assert np.isfinite(image).all()
+
+
+def test_moving_emitter_parity(tmp_path, tapped_engine):
+    """Parity of a moving emissive mesh lighting a floor (light sampling at
+    the path's time, MIS with BSDF rays)."""
+    scene, bounces = reference_scene('moving_emitter')
+    image, var = render_for_reference(scene, tmp_path, 'moving_emitter', tapped_engine, SPP, 2, bounces)
+    check_against_reference('motion_moving_emitter', scene, bounces, image, var, SPP, BLOCK).assert_agrees(0.005, 0.02)
