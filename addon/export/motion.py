@@ -8,7 +8,10 @@ camera's and the vertex positions of deforming meshes.  Objects take
 2^(motion_steps - 1) + 1 steps (Object > Motion Blur > Steps, default 1: 3
 steps); Object > Motion Blur off keeps an object still, Deformation off
 keeps its mesh undeformed.  An object whose steps all equal its centre gets
-no motion, so a still scene renders as without motion blur.
+no motion, so a still scene renders as without motion blur.  The camera's
+lens is read at the shutter's ends too (focal-length animation), and the
+shutter curve and rolling shutter go to the engine camera (set_shutter).
+Lamps are not read at the steps: Cycles keeps them at the centre.
 
 The render engine's ``frame_set`` re-evaluates the render's depsgraph; the
 original frame is set again afterwards.
