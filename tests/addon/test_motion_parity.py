@@ -316,3 +316,21 @@ def test_moving_emitter_parity(tmp_path, tapped_engine):
     spp = 4 * SPP   # (a small light whose light varies much over the shutter: noisier than the others)
     image, var = render_for_reference(scene, tmp_path, 'moving_emitter', tapped_engine, spp, 2, bounces)
     check_against_reference('motion_moving_emitter', scene, bounces, image, var, spp, BLOCK).assert_agrees(0.01, 0.05)
+
+
+def test_rolling_shutter_in_a_border_keeps_full_frame_rows(tmp_path, tapped_engine):
+    """A render border (the top half, cropped) rolls by the full frame's
+    rows, as Cycles' (its y and height are the full frame's): the window
+    matches the top half of the full-frame reference."""
+    from ember_testlib import ReferenceCheck
+    scene, bounces = reference_scene('rolling')
+    render = scene.render
+    render.use_border, render.use_crop_to_border = True, True
+    render.border_min_x, render.border_max_x, render.border_min_y, render.border_max_y = 0.0, 1.0, 0.5, 1.0
+    image, var = render_for_reference(scene, tmp_path, 'rolling_border', tapped_engine, SPP, 2, bounces)
+    ref, ref_var, header = load_reference('motion_rolling')
+    rows = ref.shape[0] // 2
+    assert image.shape[0] == rows and var.shape[0] == rows, (image.shape, var.shape)
+    check = ReferenceCheck('motion_rolling_border', image[..., :3].astype(np.float64), var, SPP, ref[:rows],
+                           ref_var[:rows], header, BLOCK)
+    check.assert_agrees(0.01, 0.02)
