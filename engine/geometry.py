@@ -13,7 +13,7 @@ from typing import Optional
 
 import numpy as np
 
-from . import kernels
+from . import instance_columns, kernels
 from .nodes import SceneShading
 from .scene import DEFAULT_MATERIAL, Bump, NormalMap
 from .vec import frame
@@ -96,10 +96,10 @@ class Triangles:
         return v
 
 
-def _slot_table(inst, n_materials):
+def _slot_table(materials, n_materials):
     """Map material slot -> compiled material id; the last id is the default."""
     default = n_materials  # compiled table appends DEFAULT_MATERIAL
-    ids = [m if 0 <= m < n_materials else default for m in inst.materials]
+    ids = [m if 0 <= m < n_materials else default for m in materials]
     return np.array(ids + [default], dtype=np.int32)
 
 
@@ -107,21 +107,16 @@ def flatten(scene, with_instance=False, threads=0):
     """Build Triangles for every instance; degenerate triangles are dropped.
     with_instance: also record each triangle's instance index (passes);
     threads: at most this many for a big scene (0: every core)."""
-    mesh_cache = {}
-    placed = []   # (instance index, instance, its mesh's arrays)
-    for index, inst in enumerate(scene.instances):
-        mesh = scene.meshes[inst.mesh]
-        if len(mesh.triangles) == 0:
-            continue
-        if inst.mesh not in mesh_cache:
-            mesh_cache[inst.mesh] = _MeshArrays.of(mesh)
-        placed.append((index, inst, mesh_cache[inst.mesh]))
-    tris = _place(placed, len(scene.materials), threads)
-    counts = np.array([arrays.count for _, _, arrays in placed], np.int64)
-    owner = np.repeat(np.array([index for index, _, _ in placed], np.int64), counts)
+    cols = instance_columns.columns(scene.instances)
+    sizes = np.array([len(mesh.triangles) for mesh in scene.meshes] + [0], np.int64)
+    placed = np.flatnonzero(sizes[cols.mesh] > 0)   # the instances with triangles, in order
+    arrays = {int(k): _MeshArrays.of(scene.meshes[k]) for k in np.unique(cols.mesh[placed])}
+    tris = _place(cols, placed, arrays, len(scene.materials), threads)
+    counts = sizes[cols.mesh[placed]]
+    owner = np.repeat(placed.astype(np.int64), counts)
     first_row = np.cumsum(counts) - counts
     local = np.arange(len(owner)) - np.repeat(first_row, counts)   # triangle index in its mesh
-    if placed and with_instance:
+    if len(placed) and with_instance:
         tris.instance = _take_kept(owner.astype(np.int32), tris.kept)
     tris.shading = _scene_shading(scene, _take_kept(owner, tris.kept), _take_kept(local, tris.kept))
     if _needs_tangents(scene):
@@ -154,14 +149,13 @@ class _MeshArrays:
 class _Out:
     """flatten's output arrays, rows in instance order."""
 
-    def __init__(self, placed):
-        total = sum(arrays.count for _, _, arrays in placed)
-        self.vertices = np.empty((sum(len(arrays.positions) for _, _, arrays in placed), 3))
+    def __init__(self, total, vertices, used):
+        self.vertices = np.empty((vertices, 3))
         self.indices = np.empty((total, 3), np.int64)
         self.p0, self.e1, self.e2, self.ng = (np.empty((total, 3)) for _ in range(4))
         self.clen = np.empty(total)
-        self.ns = np.empty((total, 3, 3)) if any(a.normals is not None for _, _, a in placed) else None
-        self.uv = np.zeros((total, 3, 2)) if any(a.uv is not None for _, _, a in placed) else None
+        self.ns = np.empty((total, 3, 3)) if any(a.normals is not None for a in used) else None
+        self.uv = np.zeros((total, 3, 2)) if any(a.uv is not None for a in used) else None
         self.material = np.empty(total, np.int32)
         self.smooth = np.empty(total, bool)
         self.visibility = np.empty(total, np.uint8)
@@ -172,29 +166,33 @@ class _Out:
 CHUNK_ROWS = 1 << 16
 
 
-def _place(placed, n_mat, threads=0):
-    """Triangles of every (index, instance, mesh arrays) in ``placed``.
-    Per instance only what differs between instances is computed
-    (vertices, normals, materials), for the instances of one mesh at once;
-    edges, face normals and unit shading normals then row by row."""
-    if not placed:
+def _place(cols, placed, arrays, n_mat, threads=0):
+    """Triangles of the instances ``placed`` (indices into the
+    InstanceColumns ``cols``), with ``arrays`` their meshes' _MeshArrays by
+    mesh index.  Per instance only what differs between instances is
+    computed (vertices, normals, materials), for the instances of one mesh
+    at once; edges, face normals and unit shading normals then row by row."""
+    if not len(placed):
         empty3 = np.zeros((0, 3))
         return Triangles(empty3, empty3, empty3, empty3, None, np.zeros(0, bool), None,
                          np.zeros(0, np.int32), np.zeros(0))
-    out = _Out(placed)
-    rows = np.array([arrays.count for _, _, arrays in placed], np.int64)
-    verts = np.array([len(arrays.positions) for _, _, arrays in placed], np.int64)
+    meshes = cols.mesh[placed]
+    table = max(arrays) + 1
+    tri_count, vertex_count = np.zeros(table, np.int64), np.zeros(table, np.int64)
+    for k, a in arrays.items():
+        tri_count[k], vertex_count[k] = a.count, len(a.positions)
+    rows, verts = tri_count[meshes], vertex_count[meshes]
+    out = _Out(int(rows.sum()), int(verts.sum()), arrays.values())
     first_row, first_vertex = np.cumsum(rows) - rows, np.cumsum(verts) - verts
-    groups = {}
-    for number, (_, _, arrays) in enumerate(placed):
-        groups.setdefault(id(arrays), []).append(number)
+    order = np.argsort(meshes, kind="stable")   # the placed instances of each mesh, in order
+    bounds = np.flatnonzero(np.diff(meshes[order])) + 1
     jobs = []
-    for numbers in groups.values():
-        arrays = placed[numbers[0]][2]
-        step = max(1, CHUNK_ROWS // arrays.count)
+    for numbers in np.split(order, bounds):
+        mesh_arrays = arrays[int(meshes[numbers[0]])]
+        step = max(1, CHUNK_ROWS // mesh_arrays.count)
         for lo in range(0, len(numbers), step):
-            some = np.array(numbers[lo:lo + step])
-            jobs.append((arrays, [placed[n][1] for n in some], first_row[some], first_vertex[some]))
+            some = numbers[lo:lo + step]
+            jobs.append((mesh_arrays, placed[some], first_row[some], first_vertex[some]))
     keep = np.empty(len(out.p0), bool)
     ns = out.ns if out.ns is not None else np.empty((0, 3, 3))
 
@@ -204,7 +202,7 @@ def _place(placed, n_mat, threads=0):
                     ns[lo:hi] if out.ns is not None else ns, keep[lo:hi])
     with _Workers(len(keep), threads) as run:
         # Jobs write disjoint rows; NumPy and the compiled loop release the GIL.
-        run(lambda job: _place_instances(out, *job, n_mat), jobs)
+        run(lambda job: _place_instances(out, cols, *job, n_mat), jobs)
         run(lambda bounds: place_rows(*bounds), _ranges(len(keep), run.threads))
     dropped = int(len(keep) - np.count_nonzero(keep))
     keep = None if dropped == 0 else keep
@@ -261,11 +259,12 @@ def _rows_of(first, count):
     return (first[:, None] + np.arange(count)).reshape(-1)
 
 
-def _place_instances(out, arrays, insts, first_row, first_vertex, n_mat):
-    """Instances of one mesh: world-space vertices, vertex indices,
-    materials, flags, UVs and (not yet unit) shading normals."""
+def _place_instances(out, cols, arrays, insts, first_row, first_vertex, n_mat):
+    """Instances ``insts`` (indices into ``cols``) of one mesh: world-space
+    vertices, vertex indices, materials, flags, UVs and (not yet unit)
+    shading normals."""
     k, n = len(insts), arrays.count
-    m = np.array([np.asarray(inst.matrix, dtype=np.float64) for inst in insts])
+    m = cols.matrix[insts]
     lin, off = m[:, :3, :3], m[:, :3, 3]
     rows = _rows_of(first_row, n)
     # Vertices, not corners: a third of the work, and each instance's
@@ -273,9 +272,9 @@ def _place_instances(out, arrays, insts, first_row, first_vertex, n_mat):
     world = np.matmul(arrays.positions, lin.transpose(0, 2, 1)) + off[:, None, :]
     out.vertices[_rows_of(first_vertex, len(arrays.positions))] = world.reshape(-1, 3)
     out.indices[rows] = (arrays.triangles + first_vertex[:, None, None]).reshape(-1, 3)
-    out.material[rows] = _materials(arrays.slots, n, insts, n_mat).reshape(-1)
+    out.material[rows] = _materials(arrays.slots, n, cols.slot_set[insts], cols.slot_sets, n_mat).reshape(-1)
     out.smooth[rows] = arrays.normals is not None
-    out.visibility[rows] = np.repeat(np.array([visibility_bits(inst) for inst in insts], np.uint8), n)
+    out.visibility[rows] = np.repeat(cols.visibility[insts], n)
     if arrays.uv is not None:
         out.uv[rows] = np.broadcast_to(arrays.uv, (k,) + arrays.uv.shape).reshape(-1, 3, 2)
     if out.ns is not None and arrays.normals is None:
@@ -291,17 +290,19 @@ def _place_instances(out, arrays, insts, first_row, first_vertex, n_mat):
         out.ns[rows] = ns.reshape(-1, 3, 3)
 
 
-def _materials(slots, n, insts, n_mat):
-    """(K, n) compiled material ids of K instances' triangles."""
-    tables = [_slot_table(inst, n_mat) for inst in insts]
+def _materials(slots, n, set_of_instance, slot_sets, n_mat):
+    """(K, n) compiled material ids of K instances' triangles, from each
+    instance's material-slot set (an index into ``slot_sets``)."""
+    distinct, which = np.unique(set_of_instance, return_inverse=True)
+    tables = [_slot_table(slot_sets[k], n_mat) for k in distinct]
     if slots is None:
-        return np.repeat(np.array([t[0] for t in tables], np.int32)[:, None], n, axis=1)
+        return np.repeat(np.array([t[0] for t in tables], np.int32)[which][:, None], n, axis=1)
     width = max(len(t) for t in tables)
     padded = np.full((len(tables), width), n_mat, np.int32)
     for row, table in zip(padded, tables):
         row[:len(table)] = table
     last = np.array([len(t) - 1 for t in tables])
-    return padded[np.arange(len(tables))[:, None], np.minimum(slots[None, :], last[:, None])]
+    return padded[np.arange(len(tables))[:, None], np.minimum(slots[None, :], last[:, None])][which]
 
 
 def _place_rows_numpy(vertices, indices, smooth, has_ns, p0, e1, e2, ng, clen, ns, keep):

@@ -27,7 +27,7 @@ import time as _time
 
 import numpy as np
 
-from . import embree_c
+from . import embree_c, instance_columns
 from .accel import Accel, OFFSET_SCALE
 
 CENTRE = 0.5   # the shutter time the scene's own arrays (Triangles) are at
@@ -38,7 +38,7 @@ def has_motion(scene):
     cam = scene.camera
     return (getattr(cam, "motion", None) is not None
             or getattr(cam, "lens_motion", None) is not None
-            or any(getattr(inst, "motion", None) is not None for inst in scene.instances)
+            or bool(instance_columns.columns(scene.instances).moving.any())
             or any(getattr(mesh, "motion", None) is not None for mesh in scene.meshes))
 
 

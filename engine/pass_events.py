@@ -32,7 +32,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from . import bsdf
+from . import bsdf, instance_columns
 from .lights import scene_lights_in_order
 from .lobes import kinds_of_class
 from .passes import (AOV_COLOR, CRYPTO, LIGHT_CLASSES, STRATEGY, VOLUME_PASSES, PassConfig, crypto_manifest,
@@ -66,7 +66,7 @@ def configure(scene, settings):
         object_names=tuple(i.name for i in scene.instances),
         material_names=tuple(m.name for m in mats),
         asset_names=tuple(i.asset or i.name for i in scene.instances),
-        object_pass_index=tuple(int(getattr(i, "pass_index", 0)) for i in scene.instances),
+        object_pass_index=tuple(instance_columns.columns(scene.instances).pass_index.astype(int).tolist()),
         material_pass_index=tuple(int(getattr(m, "pass_index", 0)) for m in mats))
 
 

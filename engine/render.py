@@ -25,7 +25,7 @@ from . import vector_pass
 from .blas import single_threaded_blas
 from .bsdf import MaterialTable, bump_model
 from .camera import CameraModel, PixelFilter
-from . import kernels, media, pass_events, points
+from . import instance_columns, kernels, media, pass_events, points
 from .film import Film
 from .geometry import flatten, material_table
 from .integrator.catcher import catcher_triangles
@@ -80,6 +80,11 @@ def prepare(scene, settings, bake=None):
     """Validate and compile a Scene into the read-only Context batches share.
     ``bake``: an integrator.bake_paths.BakeTarget, the camera of a light
     bake (its texels are the film's pixels), or None."""
+    with instance_columns.prepared():   # each instance list read once by every stage
+        return _prepare(scene, settings, bake)
+
+
+def _prepare(scene, settings, bake):
     kernels.configure(getattr(settings, "use_jit", True))   # flatten has a kernel too
     validate_scene(scene)
     validate_settings(settings)
@@ -150,7 +155,7 @@ def holdout_weights(scene, tris):
     material's Holdout shader weight."""
     mats = material_table(scene)
     per_material = np.array([float(getattr(m, "holdout", 0.0)) for m in mats])
-    per_instance = np.array([bool(getattr(i, "holdout", False)) for i in scene.instances] + [False])
+    per_instance = np.append(instance_columns.columns(scene.instances).holdout, False)
     if not (per_material.any() or per_instance.any()) or len(tris.material) == 0:
         return None
     weights = per_material[np.asarray(tris.material, np.int64)]

@@ -4,6 +4,7 @@ import numpy as np
 from .lights import validate_light   # each light type validates its own (engine/lights/)
 from .scene import ENV_INTERPOLATIONS, LOBE_KINDS, SceneError
 
+from . import instance_columns
 from . import scene as _scene
 from .nodes import REGISTRY
 from .passes import unknown as unknown_passes
@@ -110,32 +111,24 @@ def validate_instances(instances, n_meshes, n_materials):
         for i, inst in enumerate(instances):
             validate_instance(inst, i, n_meshes, n_materials)
         return
-    bad = _first_bad_instance(instances, n_meshes, n_materials)
+    cols = instance_columns.columns(instances)
+    bad = _first_bad_instance(cols, n_meshes, n_materials)
     if bad is not None:
         validate_instance(instances[bad], bad, n_meshes, n_materials)
-    for i, inst in enumerate(instances):
-        if getattr(inst, "motion", None) is not None:
-            validate_instance(inst, i, n_meshes, n_materials)
+    for i in np.flatnonzero(cols.moving):
+        validate_instance(instances[i], int(i), n_meshes, n_materials)
 
 
-def _first_bad_instance(instances, n_meshes, n_materials):
+def _first_bad_instance(cols, n_meshes, n_materials):
     """Index of the first instance that may fail validate_instance, or None."""
-    meshes = np.fromiter((inst.mesh for inst in instances), np.int64, len(instances))
-    suspects = [np.flatnonzero((meshes < 0) | (meshes >= n_meshes))]
-    try:
-        matrices = np.array([inst.matrix for inst in instances], dtype=np.float64)
-    except (ValueError, TypeError):
-        matrices = None
-    if matrices is None or matrices.shape != (len(instances), 4, 4):
-        suspects.append(np.arange(len(instances)))  # a wrong shape somewhere: check one by one
+    suspects = [np.flatnonzero((cols.mesh < 0) | (cols.mesh >= n_meshes))]
+    if cols.matrix is None:
+        suspects.append(np.arange(len(cols)))  # a wrong shape somewhere: check one by one
     else:
-        suspects.append(np.flatnonzero(~np.isfinite(matrices).all(axis=(1, 2))))
-    slot_sets = {}
-    for i, inst in enumerate(instances):
-        slot_sets.setdefault(tuple(inst.materials), i)
-    for slots, i in slot_sets.items():
+        suspects.append(np.flatnonzero(~np.isfinite(cols.matrix).all(axis=(1, 2))))
+    for k, slots in enumerate(cols.slot_sets):
         if any(not -1 <= mat < n_materials for mat in slots):
-            suspects.append(np.array([i]))
+            suspects.append(np.flatnonzero(cols.slot_set == k)[:1])
     found = np.concatenate(suspects)
     return int(found.min()) if found.size else None
 

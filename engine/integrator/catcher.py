@@ -15,12 +15,14 @@ transparent film, or over the background the camera sees otherwise.
 """
 import numpy as np
 
+from .. import instance_columns
+
 
 def catcher_triangles(scene, tris):
     """(T,) whether each triangle belongs to a shadow catcher (not a holdout
     object: Cycles never splits at those), or None without catchers."""
-    per_instance = np.array([bool(getattr(i, "shadow_catcher", False)) and not bool(getattr(i, "holdout", False))
-                             for i in scene.instances] + [False])
+    cols = instance_columns.columns(scene.instances)
+    per_instance = np.append(cols.shadow_catcher & ~cols.holdout, False)
     owner = getattr(tris.shading, "instance", None)
     if not per_instance.any() or owner is None or len(tris.material) == 0:
         return None

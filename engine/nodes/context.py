@@ -17,6 +17,8 @@ included, moves consistently with the position.
 """
 import numpy as np
 
+from .. import instance_columns
+
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 # What the Light Path node reads of the path besides its ray kind and depth
 # (ShadingContext.path, filled by the integrator where a material uses it).
@@ -37,16 +39,15 @@ class SceneShading:
         self.scene = scene
         self.instance = np.asarray(instance_of_triangle, np.int32)   # (T,) index into scene.instances
         self.local = np.asarray(local_triangle, np.int32)            # (T,) triangle index in its mesh
-        inst = scene.instances
-        mats = np.array([np.asarray(i.matrix, dtype=np.float64) for i in inst]).reshape(-1, 4, 4)
+        cols = instance_columns.columns(scene.instances)
+        mats = cols.matrix.reshape(-1, 4, 4)
         self.matrix = mats
         self.inverse = safe_inverses(mats)
         self.location = mats[:, :3, 3] if len(mats) else np.zeros((0, 3))
-        self.color = np.array([tuple(getattr(i, "color", (1.0, 1.0, 1.0)))[:3] for i in inst],
-                              dtype=np.float64).reshape(-1, 3)
-        self.pass_index = np.array([float(getattr(i, "pass_index", 0)) for i in inst]).reshape(-1)
-        self.random = np.array([float(getattr(i, "random", 0.0)) for i in inst]).reshape(-1)
-        self.mesh_of_instance = np.array([i.mesh for i in inst], dtype=np.int64).reshape(-1)
+        self.color = cols.color
+        self.pass_index = cols.pass_index
+        self.random = cols.random
+        self.mesh_of_instance = cols.mesh
         self._instance_attributes = {}
         self._corners = {}
 

@@ -248,6 +248,31 @@ def test_geometry_nodes_instances(empty_scene):
     np.testing.assert_allclose(positions, expected, atol=1e-5)
 
 
+def test_instance_random_is_cycles_float32_of_random_id(empty_scene):
+    """Object Info Random of geometry-nodes copies: random_id as uint32 in
+    float32 times 2^-32, as Cycles (the export computes it without NumPy
+    scalars: checked here against them, and on rounding edge cases)."""
+    from addon.export.instances import uint32_unit_float32
+    import importlib.util
+    import os
+    edges = [0, 1, 2 ** 24 - 1, 2 ** 24 + 1, 2 ** 24 + 3, 2 ** 25 + 2, 2 ** 31 + 192, 2 ** 32 - 129, 2 ** 32 - 1]
+    for rid in edges + list(np.random.default_rng(2).integers(0, 2 ** 32, 5000)):
+        assert uint32_unit_float32(int(rid)) == float(np.float32(int(rid)) * np.float32(2.0 ** -32)), rid
+    spec = importlib.util.spec_from_file_location('build_scenes', os.path.join(SCENES_DIR, 'build_scenes.py'))
+    build_scenes = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build_scenes)
+    bpy.ops.mesh.primitive_ico_sphere_add(location=(0, 0, -50))
+    ball = bpy.context.object
+    build_scenes._geometry_nodes_instancer(empty_scene, ball)
+    bpy.context.view_layer.update()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    ids = sorted(float(np.float32(inst.random_id & 0xFFFFFFFF) * np.float32(2.0 ** -32))
+                 for inst in depsgraph.object_instances if inst.is_instance)
+    exported = export()
+    got = sorted(inst.random for inst in exported.scene.instances if inst.matrix[2, 3] > -40)
+    assert len(ids) == 9 and got == ids
+
+
 def test_particle_instances(empty_scene):
     bpy.ops.mesh.primitive_cube_add(size=0.1, location=(0, 0, -50))
     bpy.context.object.data.name = 'PCube'
