@@ -11,6 +11,7 @@ import numpy as np
 from . import kernels
 from .motion import decompose, transform_at
 from .sampling import concentric_disk, upper_bound
+from .shutter import Shutter
 from .vec import column
 
 FILTER_TABLE_SIZE = 4096
@@ -152,6 +153,26 @@ def view_plane(cam):
     return xmin * pixsize, ymin * pixsize, pixsize, pixsize * ycor
 
 
+def _zoom_steps(cam):
+    """The view plane's scale at the shutter's start and end relative to
+    its centre (tan of the half field of view goes as 1 / lens), or None:
+    Cycles interpolates the ray's point on the near plane linearly between
+    them (perspective only, its use_perspective_motion)."""
+    lenses = getattr(cam, "lens_motion", None)
+    if lenses is None or cam.kind != "PERSP":
+        return None
+    pre, post = (float(x) for x in lenses)
+    if not all(np.isfinite(x) and x > 0 for x in (pre, post)) or (pre == cam.lens and post == cam.lens):
+        return None
+    return cam.lens / pre, cam.lens / post
+
+
+def _zoom_at(zoom, time):
+    pre, post = zoom
+    time = np.asarray(time, np.float64)
+    return np.where(time < 0.5, pre + (1.0 - pre) * (2.0 * time), 1.0 + (post - 1.0) * (2.0 * time - 1.0))
+
+
 class CameraModel:
     def __init__(self, cam, pixel_filter):
         self.cam = cam
@@ -169,6 +190,8 @@ class CameraModel:
         motion = getattr(cam, "motion", None)
         # Camera motion blur: the decomposed camera-to-world at the shutter's steps.
         self.motion = None if motion is None else decompose(motion)
+        self.shutter = Shutter(cam)
+        self.zoom = _zoom_steps(cam)
 
     @property
     def forward(self):
@@ -186,6 +209,9 @@ class CameraModel:
         fy = self.y0 + (self.height - 1 - py) + 0.5 + self.filter.sample(u_fy)
         sx = self.xmin + fx * self.pw
         sy = self.ymin + fy * self.ph
+        if self.zoom is not None and time is not None:
+            scale = _zoom_at(self.zoom, time)
+            sx, sy = sx * scale, sy * scale
         n = len(pixel)
         if self.cam.kind == "ORTHO":
             o = np.stack([sx, sy, np.zeros(n)], axis=1)
@@ -205,6 +231,12 @@ class CameraModel:
             rot = rot / np.linalg.norm(rot, axis=1, keepdims=True)   # rigid, as self.rot
             return np.einsum("nij,nj->ni", rot, o) + pos, np.einsum("nij,nj->ni", rot, d), tmax
         return o @ self.rot.T + self.pos, d @ self.rot.T, tmax
+
+    def shutter_times(self, pixel, u):
+        """Each camera sample's time in the shutter from its number ``u``
+        (the shutter curve, and the rolling shutter by the pixel's row)."""
+        row = self.y0 + (self.height - 1 - np.asarray(pixel) // self.width)
+        return self.shutter.times(u, row)
 
     def _thin_lens(self, o, d, u1, u2):
         lx, ly = concentric_disk(u1, u2)

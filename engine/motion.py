@@ -37,6 +37,7 @@ def has_motion(scene):
     """Whether anything in the scene moves during the shutter."""
     cam = scene.camera
     return (getattr(cam, "motion", None) is not None
+            or getattr(cam, "lens_motion", None) is not None
             or bool(instance_columns.columns(scene.instances).moving.any())
             or any(getattr(mesh, "motion", None) is not None for mesh in scene.meshes))
 
@@ -222,6 +223,25 @@ class MotionGeometry:
                               part.decomposition.astype(np.float32)))
         return instances
 
+    def corners_at(self, tris, prim, time):
+        """(p0, e1, e2) float64 of triangles ``prim`` at each ray's time
+        (still rows as Triangles holds them)."""
+        p0, e1, e2 = tris.p0[prim].copy(), tris.e1[prim].copy(), tris.e2[prim].copy()
+        which = self.part[prim]
+        for j in np.unique(which[which >= 0]):
+            r = np.flatnonzero(which == j)
+            w, _ = self._world(j, prim[r], time[r])
+            p0[r], e1[r], e2[r] = w[:, 0], w[:, 1] - w[:, 0], w[:, 2] - w[:, 0]
+        return p0, e1, e2
+
+    def _world(self, j, prim, time):
+        """World corners (n, 3, 3) of part j's rows ``prim`` at ``time``,
+        and the placement's linear part L (n, 3, 3)."""
+        part = self.parts[j]
+        L, T = transform_at(part.decomposition, time)
+        c = _lerp_steps(part.corners, self.slot[prim], time)          # (n, 3, 3) object space
+        return np.einsum("nij,nkj->nki", L, c) + T[:, None, :], L
+
     def at(self, tris, prim, time):
         """(p0, ng, ns) of triangles ``prim`` at each ray's time: float64
         rows as Triangles holds them (ns None when the scene is all flat)."""
@@ -231,9 +251,7 @@ class MotionGeometry:
         for j in np.unique(which[which >= 0]):
             r = np.flatnonzero(which == j)
             part, k, t = self.parts[j], self.slot[prim[r]], time[r]
-            L, T = transform_at(part.decomposition, t)
-            c = _lerp_steps(part.corners, k, t)                      # (n, 3, 3) object space
-            w = np.einsum("nij,nkj->nki", L, c) + T[:, None, :]
+            w, L = self._world(j, prim[r], t)
             n = np.cross(w[:, 1] - w[:, 0], w[:, 2] - w[:, 0])
             n /= np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
             p0[r], ng[r] = w[:, 0], n

@@ -226,17 +226,16 @@ def curve_rows(strands, prim):
     return np.where(prim >= 0, strands.curve[np.maximum(prim, 0)], -1)
 
 
-def unlit_rows(n_rows, spheres, motion, strands=None):
-    """(T,) bool: the rows no light samples (points, moving triangles: the
-    light set holds still triangles only), or None when there are none.
-    Their emission is found by BSDF rays alone, with MIS weight 1: unbiased."""
+def unlit_rows(n_rows, spheres, strands=None):
+    """(T,) bool: the rows no light samples (points and curve segments),
+    or None when there are none.  Their emission is found by BSDF rays
+    alone, with MIS weight 1: unbiased.  (Moving triangles are sampled at
+    the path's time: lights/mesh.py.)"""
     rows = np.zeros(n_rows, bool)
     if spheres is not None:
         rows[spheres.rows] = True
     if strands is not None:
         rows[strands.rows] = True
-    if motion is not None and motion.moving:
-        rows |= motion.part >= 0
     return rows if rows.any() else None
 
 

@@ -95,11 +95,12 @@ def _prepare(scene, settings, bake):
     spheres = points.spheres_of(tris, scene, point_owners, point_radii)
     strands = points.strands_of(tris, curve_owners)
     motion = MotionGeometry(scene, tris) if has_motion(source) else None
-    unlit = points.unlit_rows(len(tris), spheres, motion, strands)
+    unlit = points.unlit_rows(len(tris), spheres, strands)
     materials = MaterialTable(material_table(scene))
     lights = LightSet(scene, points.for_lights(tris, unlit, len(scene.materials)), materials,
                       settings.light_selection,
-                      env_compensation=settings.mis_compensation and settings.strategy == "mis")
+                      env_compensation=settings.mis_compensation and settings.strategy == "mis",
+                      motion=motion if motion is not None and motion.moving else None)
     # 'auto' stays only where it samples every light at glossy vertices;
     # else it is the light tree.
     chosen = ("auto" if lights.every_at_glossy else "ris" if lights.resampled

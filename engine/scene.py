@@ -592,10 +592,20 @@ class Camera:
     pixel_aspect: Tuple[float, float] = (1.0, 1.0)
     border: Optional[Tuple[float, float, float, float]] = None
     # Camera motion blur: camera-to-world (S, 4, 4) at the shutter's S evenly
-    # spaced steps; None: a still camera.  Rays take their time uniformly
-    # over the shutter (the sampler's time dimension) and the camera at that
-    # time (rotation by quaternion, translation linearly, as Cycles).
+    # spaced steps; None: a still camera.  Rays take their time over the
+    # shutter from the sampler's time dimension (by the shutter curve and
+    # rolling shutter below) and the camera at that time (rotation by
+    # quaternion, translation linearly, as Cycles).
     motion: Optional[np.ndarray] = None
+    # The shutter (engine/shutter.py), read only when something moves: the
+    # shutter curve's 256 values over the shutter (None: flat), the rolling
+    # shutter ('NONE' or 'TOP': Cycles' Top-Bottom) and its duration in [0, 1].
+    shutter_curve: Optional[np.ndarray] = None
+    rolling_shutter: str = "NONE"
+    rolling_duration: float = 0.1
+    # Focal-length animation (perspective): the lens in mm at the shutter's
+    # start and end, None: constant (Cycles' fov_pre / fov_post).
+    lens_motion: Optional[Tuple[float, float]] = None
     # The Vector pass: camera-to-world (3, 4, 4) at frame - 1, frame, frame + 1.
     vector_motion: Optional[np.ndarray] = None
 

@@ -68,6 +68,8 @@ REFERENCES['thinfilm_films'] = ('test_thinfilm_parity', 'films', 1024)
 for _scene in ('spheres', 'backlit'):
     REFERENCES['subsurface_' + _scene] = ('test_subsurface_parity', _scene, 1024)
 REFERENCES['motion_objects'] = ('test_motion_parity', 'objects', 2048)
+for _scene in ('late_shutter', 'rolling', 'moving_lamp', 'moving_emitter'):
+    REFERENCES['motion_' + _scene] = ('test_motion_parity', _scene, 2048)
 REFERENCES['points_heap'] = ('test_points_parity', 'heap', 1024)
 REFERENCES['curves_strands'] = ('test_curves_parity', 'strands', 1024)
 REFERENCES['bump_correction_sphere'] = ('test_bump_correction_parity', 'sphere', 512)

@@ -8,7 +8,10 @@ camera's and the vertex positions of deforming meshes.  Objects take
 2^(motion_steps - 1) + 1 steps (Object > Motion Blur > Steps, default 1: 3
 steps); Object > Motion Blur off keeps an object still, Deformation off
 keeps its mesh undeformed.  An object whose steps all equal its centre gets
-no motion, so a still scene renders as without motion blur.
+no motion, so a still scene renders as without motion blur.  The camera's
+lens is read at the shutter's ends too (focal-length animation), and the
+shutter curve and rolling shutter go to the engine camera (set_shutter).
+Lamps are not read at the steps: Cycles keeps them at the centre.
 
 The render engine's ``frame_set`` re-evaluates the render's depsgraph; the
 original frame is set again afterwards.
@@ -87,10 +90,13 @@ def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, s
             wanted.setdefault(steps, []).append(index)
     camera_steps = steps_for(camera_object.original)
     all_steps = sorted(set(wanted) | ({camera_steps} if camera_steps >= 2 else set()))
-    times = sorted({t for s in all_steps for t in _step_times(centre, length, s)})
+    # Cycles always reads the camera at the shutter's ends (its fov_pre / fov_post)
+    ends = (centre - 0.5 * length, centre + 0.5 * length)
+    times = sorted({t for s in all_steps for t in _step_times(centre, length, s)} | set(ends))
     matrices = {}        # time -> {instance key: matrix}
     positions = {}       # time -> {mesh index: engine Mesh there}
     cameras = {}
+    lenses = {}
     deforming = {}
     for index, key in enumerate(keys):
         if key is not None and key[3] and _deforms(key[2]) and key[2].is_deform_modified(scene, 'RENDER'):
@@ -102,6 +108,7 @@ def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, s
                        for inst in depsgraph.object_instances if instance_key(inst) is not None}
         cam = camera_object.original.evaluated_get(depsgraph)
         cameras[t] = np.array(cam.matrix_world, np.float64)
+        lenses[t] = float(getattr(cam.data, 'lens', 0.0))
         positions[t] = {}
         for mesh_index, key in deforming.items():
             obj = key[2].evaluated_get(depsgraph)
@@ -141,12 +148,36 @@ def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, s
             mesh.motion = stack
             if mesh.normals is not None and all(m.normals is not None for m in found):
                 mesh.motion_normals = np.array([m.normals for m in found], np.float64)
+    set_shutter(result.camera, scene, [lenses[t] for t in ends])
     if camera_steps >= 2:
         stack = np.array([mesh_export_unit_axes(cameras[t]) for t in _step_times(centre, length, camera_steps)])
         if np.isfinite(stack).all() and not np.allclose(stack, np.asarray(result.camera.matrix)[None],
                                                         rtol=0.0, atol=1e-9):
             result.camera.motion = stack
     return warnings
+
+
+def set_shutter(camera, scene, end_lenses):
+    """The engine camera's shutter curve, rolling shutter and lens at the
+    shutter's ends (Cycles' sync_camera and sync_camera_motion)."""
+    camera.shutter_curve = shutter_curve(scene.render)
+    props = getattr(scene, 'cycles', None)
+    camera.rolling_shutter = str(getattr(props, 'rolling_shutter_type', 'NONE'))
+    camera.rolling_duration = float(getattr(props, 'rolling_shutter_duration', 0.1))
+    if camera.kind == 'PERSP' and any(lens != camera.lens for lens in end_lenses):
+        camera.lens_motion = tuple(end_lenses)
+
+
+def shutter_curve(render, size=256):
+    """Render > Motion Blur > Shutter Curve at ``size`` points (Cycles'
+    curvemapping_to_array), None when it is flat at 1 (the default)."""
+    mapping = getattr(render, 'motion_blur_shutter_curve', None)
+    if mapping is None:
+        return None
+    mapping.update()
+    curve = mapping.curves[0]
+    values = np.array([mapping.evaluate(curve, i / (size - 1)) for i in range(size)], np.float64)
+    return None if np.all(values == 1.0) else values
 
 
 def mesh_export_unit_axes(matrix):
@@ -189,6 +220,7 @@ def add_vector_motion(engine, depsgraph, exported, keys, frame, camera_object):
     warnings = add_motion(engine, depsgraph, exported, keys, (2.0, 'CENTER'), frame, camera_object,
                           steps_of=lambda obj: 3)
     result = exported.scene
+    result.camera.lens_motion = None     # (the render stays still)
     for item in list(result.instances) + list(result.meshes) + [result.camera]:
         item.vector_motion, item.motion = item.motion, None
         if hasattr(item, 'motion_normals'):

@@ -54,7 +54,7 @@ def trace_batch(ctx, pix, sample, tile):
         time = np.zeros((n, 0))
         o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3])
     else:   # motion blur: the sample's time, its own dimension set
-        time = ctx.sampler.get(pseed, sample, TIME)[:, :1]
+        time = ctx.camera.shutter_times(pix, ctx.sampler.get(pseed, sample, TIME)[:, 0])[:, None]
         o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3], time=time[:, 0])
     paths = Paths(pix, o, d, tmax, np.ones((n, 3)), np.zeros((n, 3)),
                   np.ones(n), np.ones(n, bool), o, np.zeros((n, 3)), np.zeros(n, bool),

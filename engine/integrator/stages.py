@@ -195,7 +195,7 @@ def surface_emission(ctx, paths, hit, depth, obs):
                                                   dot(sub.wo, sub.ns), emission[em])
     if ctx.settings.strategy == "mis":
         emitter = ctx.lights.emitter_of_triangle(hit.mat[em])
-        if ctx.unlit is not None:   # no light samples points or moving triangles: BSDF rays find them
+        if ctx.unlit is not None:   # no light samples points or curves: BSDF rays find them
             emitter = np.where(ctx.unlit[hit.prim[em]], -1, emitter)
         w = np.ones(len(em))
         # A surface that is no light (its emission's estimate is 0) is found
@@ -203,7 +203,9 @@ def surface_emission(ctx, paths, hit, depth, obs):
         lit = np.flatnonzero(emitter >= 0)
         if len(lit):
             rows = em[lit]
-            pdf = ctx.lights.triangle_pdf(hit.prim[rows], paths.mis_o[rows], hit.p[rows], hit.ng[rows])
+            time = path_time(paths)
+            pdf = ctx.lights.triangle_pdf(hit.prim[rows], paths.mis_o[rows], hit.p[rows], hit.ng[rows],
+                                          time=None if time is None else time[rows])
             w[lit] = mis_hit(ctx, paths, rows, emitter[lit], pdf)
     else:
         w = mis_hit(ctx, paths, em, None, None)
@@ -538,8 +540,10 @@ def resampled_light_sample(ctx, paths, v, depth, m=None):
     # of vertex i in row k n + i): the light types' loops run once.
     rows = np.tile(np.arange(n), m)
     path = light_sample_path(ctx, paths, hit)
+    time = path_time(paths)
     ls = ctx.lights.sample(e.T.ravel(), hit.p[rows], *np.concatenate([uk[:, 1:] for uk in u]).T,
-                           path=None if path is None else (path[0][rows], path[1][rows]))
+                           path=None if path is None else (path[0][rows], path[1][rows]),
+                           time=None if time is None else time[rows])
     candidates = [unshadowed(ctx, paths, v, e[:, k], p_sel[:, k], None, resampled_mis_pmf(p_sel[:, k], m),
                              ls=_rows_of_sample(ls, k * n, (k + 1) * n)) for k in range(m)]
     # Candidate 1's spare number makes the choice.
@@ -595,7 +599,8 @@ def unshadowed(ctx, paths, v, e, p_sel, u, p_mis=None, ls=None):
     drawn already (else drawn by u)."""
     hit = v.hit
     if ls is None:
-        ls = ctx.lights.sample(e, hit.p, u[:, 0], u[:, 1], u[:, 2], path=light_sample_path(ctx, paths, hit))
+        ls = ctx.lights.sample(e, hit.p, u[:, 0], u[:, 1], u[:, 2], path=light_sample_path(ctx, paths, hit),
+                               time=path_time(paths))
     wi_l = v.local(ls.wi)
     f, pdf_b = bsdf.eval_pdf(v.lobes, v.wo_l, wi_l, *v.lobes_wo)
     if ctx.light_excludes:

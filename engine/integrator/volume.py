@@ -21,6 +21,7 @@ from .. import media
 from ..pass_events import NO_PASSES
 from ..lights.point import PointLights
 from ..media import equiangular, tracking
+from ..motion import path_time
 from ..accel import shadow_rays
 from ..sampler import BSDF, LIGHT, MEDIUM, emitter_set, vertex_set
 from ..sampling import power_heuristic
@@ -100,7 +101,7 @@ def _direct_setup(ctx, on, t_end, may, u_distance, depth):
     o = on.o[cand]
     ul = ctx.sampler.get(on.pseed[cand], on.sample[cand], vertex_set(depth, LIGHT))
     e, p_sel = ctx.lights.select(ul[:, 0], o, np.zeros_like(o))
-    ls = ctx.lights.sample(e, o, ul[:, 1], ul[:, 2], ul[:, 3])
+    ls = ctx.lights.sample(e, o, ul[:, 1], ul[:, 2], ul[:, 3], time=_time(on, cand))
     ok = (ls.pdf > 0) & (p_sel > 0)
     cand, method, e, p_sel = cand[ok], method[ok], e[ok], p_sel[ok]
     finite = np.isfinite(ls.dist[ok])
@@ -364,11 +365,16 @@ def direct_light(ctx, paths, p, phase, depth, obs=NO_PASSES):
                 _light_sample(ctx, paths, p, phase, np.full(n, e), np.ones(n), u[:, :3], obs=obs)
 
 
+def _time(paths, rows):
+    time = path_time(paths)
+    return None if time is None else time[rows]
+
+
 def _light_sample(ctx, paths, p, phase, e, p_sel, u, p_mis=None, obs=NO_PASSES):
     """One light sample per scattering point, MIS-weighted against phase
     sampling (power heuristic; with the selection probability ``p_mis``
     where given, else p_sel), its shadow ray attenuated by the media."""
-    ls = ctx.lights.sample(e, p, u[:, 0], u[:, 1], u[:, 2])
+    ls = ctx.lights.sample(e, p, u[:, 0], u[:, 1], u[:, 2], time=path_time(paths))
     f = media.phase_eval(dot(paths.d, ls.wi), phase)
     p_light = p_sel * ls.pdf
     if ctx.settings.strategy == "mis":

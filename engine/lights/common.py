@@ -29,6 +29,9 @@ class LightSample:
     # What a Light Path node in an emission reads of the sampling path:
     # (depth (N,), PATH_COLUMNS (N, 6)) or None (see LightSet.sample).
     path: object = None
+    # The sampling paths' shutter times (N,), None in a still scene: moving
+    # emissive triangles are sampled where they are then.
+    time: object = None
 
 
 def selection_power(rgb):

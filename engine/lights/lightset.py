@@ -65,11 +65,11 @@ class LightSet:
     unbiased when BSDF sampling is combined by MIS: RenderSettings
     ``mis_compensation`` with strategy 'mis')."""
 
-    def __init__(self, scene, triangles, materials, strategy="power", env_compensation=False):
+    def __init__(self, scene, triangles, materials, strategy="power", env_compensation=False, motion=None):
         self.groups, base = [], 0
         for d in ordered():
             inputs = BuildInputs(lights_of(d, scene.lights), scene, triangles, materials, strategy,
-                                 env_compensation, LightTree)
+                                 env_compensation, LightTree, motion)
             group = _Group(d, d.build(inputs), base)
             self.groups.append(group)
             base = group.stop
@@ -171,14 +171,15 @@ class LightSet:
         return self.dist.pmf[emitter]
 
     # -- NEE ----------------------------------------------------------------
-    def sample(self, emitter, p, u1, u2, u3, n=None, path=None):
+    def sample(self, emitter, p, u1, u2, u3, n=None, path=None, time=None):
         """Sample a point on each ray's emitter as seen from p (normal n: a
         mesh group picks its triangle by importance there, the light tree
         strategy only).  ``path``: (depth, PATH_COLUMNS) of the sampling
-        paths, for emissions that read a Light Path node (None: none does)."""
+        paths, for emissions that read a Light Path node (None: none does);
+        ``time``: their shutter times (moving emissive triangles)."""
         m = len(p)
         out = LightSample(np.zeros((m, 3)), np.full(m, np.inf), np.zeros((m, 3)),
-                          np.zeros(m), np.zeros(m, bool), np.zeros(m, bool), path)
+                          np.zeros(m), np.zeros(m, bool), np.zeros(m, bool), path, time)
         kind = self.kind[emitter]
         local = self.local[emitter]
         for g in self.groups:
@@ -258,10 +259,11 @@ class LightSet:
             return None
         return world.base, world.table.map.eval(d), world.table.map.pdf(d)
 
-    def triangle_pdf(self, prim, o, p_hit, ng, n=None):
+    def triangle_pdf(self, prim, o, p_hit, ng, n=None, time=None):
         """Solid-angle pdf of NEE picking this emissive triangle's point from o
-        (n: the normal ``sample`` had there, as for ``selection_pdf``)."""
-        return self._surface.table.pdf(prim, o, p_hit, ng, n)
+        (n: the normal ``sample`` had there, as for ``selection_pdf``) at
+        the rays' shutter ``time``."""
+        return self._surface.table.pdf(prim, o, p_hit, ng, n, time)
 
     def emitter_of_triangle(self, material):
         return self.mesh_emitter[material]

@@ -2,6 +2,8 @@
 emission (constant or textured), two-sided.  A triangle of the group is
 picked by area or by a tree over the group; triangles near the shading
 point's plane are sampled by solid angle (Arvo), as Cycles."""
+from dataclasses import dataclass
+
 import numpy as np
 
 from .. import testscenes
@@ -42,9 +44,13 @@ class MeshLights(LightTable):
     keep area selection: the tree is built in Python (about 60 us per
     triangle).  make_tree(bounds): the tree to build over them."""
 
-    def __init__(self, triangles, materials, by_importance=False, make_tree=None):
+    def __init__(self, triangles, materials, by_importance=False, make_tree=None, motion=None):
         emissive = materials.emissive
         self.tris = triangles
+        # Moving triangles are picked by their area and bounds at the
+        # shutter's centre and sampled where they are at the path's time, as
+        # Cycles (light/triangle.h: its CDF's area at a fixed time).
+        self.motion = motion if motion is not None and motion.moving else None
         mats = np.unique(triangles.material[emissive[triangles.material]]) if len(triangles) else []
         self.material = np.array(mats, np.int64)
         self.count = len(self.material)
@@ -91,12 +97,13 @@ class MeshLights(LightTable):
     def sample(self, out, idx, j, p, u1, u2, u3, n=None):
         tri, p_tri = self._pick(j, p, u3, n)
         b1, b2 = uniform_triangle(u1, u2)
-        tr = self.tris
-        q = tr.p0[tri] + b1[:, None] * tr.e1[tri] + b2[:, None] * tr.e2[tri]
-        sph, solid_angle = self._spherical(tri, p)
+        tr = self._at(tri, None if out.time is None else out.time[idx])
+        tri_at = np.arange(len(tri))      # rows of ``tr``
+        q = tr.p0 + b1[:, None] * tr.e1 + b2[:, None] * tr.e2
+        sph, solid_angle = _spherical(tr, tri_at, p)
         s = np.nonzero(sph)[0]
         if len(s):
-            ts = tri[s]
+            ts = s
             d, _ = spherical_triangle(p[s], tr.p0[ts], tr.p0[ts] + tr.e1[ts], tr.p0[ts] + tr.e2[ts],
                                       u1[s], u2[s])
             # The point where the sampled direction meets the triangle's plane.
@@ -107,14 +114,31 @@ class MeshLights(LightTable):
         v = q - p
         t = np.linalg.norm(v, axis=1)
         wi = v / np.maximum(t, 1e-30)[:, None]
-        cos_l = np.abs(dot(wi, tr.ng[tri]))
+        cos_l = np.abs(dot(wi, tr.ng))
+        q_tex = q
+        if self.motion is not None and out.time is not None:
+            # textures read the centre's triangle at the point's barycentrics
+            bary = _barycentrics(tr, q)
+            q_tex = self.tris.p0[tri] + bary[0][:, None] * self.tris.e1[tri] + bary[1][:, None] * self.tris.e2[tri]
         path = None if out.path is None else (out.path[0][idx], out.path[1][idx])
-        Le = self._radiance(tri, q, self.L[j], path, t)
+        Le = self._radiance(tri, q_tex, self.L[j], path, t)
         if self.materials.emission_layers:
-            Le = self._dimmed(tri, q, wi, Le)
+            Le = self._dimmed(tri, q_tex, wi, Le)
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, Le
-        out.pdf[idx] = self._pdf(tri, p_tri, t * t, cos_l, sph, solid_angle)
+        out.pdf[idx] = _pdf(tr.area, tri_at, p_tri, t * t, cos_l, sph, solid_angle)
         out.on_surface[idx] = True
+
+    def _at(self, tri, time):
+        """The triangles ``tri`` (rows of the result: p0, e1, e2, ng, area)
+        where they are at ``time``; the still table itself when nothing moves."""
+        if self.motion is None or time is None:
+            return _Rows(self.tris.p0[tri], self.tris.e1[tri], self.tris.e2[tri], self.tris.ng[tri],
+                         self.tris.area[tri])
+        p0, e1, e2 = self.motion.corners_at(self.tris, tri, np.asarray(time, np.float64).reshape(-1))
+        cross = np.cross(e1, e2)
+        length = np.linalg.norm(cross, axis=1)
+        ng = cross / np.maximum(length, 1e-300)[:, None]
+        return _Rows(p0, e1, e2, ng, 0.5 * length)
 
     def _pick(self, j, p, u, n):
         """A triangle of each ray's group j and its probability within the group."""
@@ -145,16 +169,6 @@ class MeshLights(LightTable):
                 prob[sel] = self.dists[g].pmf[k]
         return prob
 
-    def _pdf(self, tri, p_tri, t2, cos_l, sph, solid_angle):
-        """Solid-angle pdf of a point on triangle tri: p_tri times the
-        triangle's own (area or solid-angle) pdf."""
-        area = self.tris.area[tri]
-        ok = (cos_l > 1e-12) & (t2 > 0) & (area > 0)
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            pdf = np.where(ok, p_tri * t2 / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
-            pdf = np.where(ok & sph, p_tri / solid_angle, pdf)
-        return np.where(np.isfinite(pdf), pdf, 0.0)
-
     def _radiance(self, tri, q, L, path=None, t=None):
         """Emission at points q on triangles tri: the constant, or the
         material's emission texture evaluated at q's UVs (and, for a Light
@@ -180,50 +194,79 @@ class MeshLights(LightTable):
 
     def _shading(self, tri, q):
         tr = self.tris
-        d = q - tr.p0[tri]
-        e1, e2 = tr.e1[tri], tr.e2[tri]
-        d00, d01, d11 = dot(e1, e1), dot(e1, e2), dot(e2, e2)
-        d20, d21 = dot(d, e1), dot(d, e2)
-        denom = np.where(d00 * d11 - d01 * d01 > 0, d00 * d11 - d01 * d01, 1.0)
-        b1 = (d11 * d20 - d01 * d21) / denom
-        b2 = (d00 * d21 - d01 * d20) / denom
+        b1, b2 = _barycentrics(_Rows(tr.p0[tri], tr.e1[tri], tr.e2[tri], None, None), q)
         # No ray kind: Cycles evaluates a light sample's emission with
         # PATH_RAY_EMISSION, so Light Path's 'Is ... Ray' outputs read 0.
         return ShadingContext.at(tr, tri, b1, b2, ray=np.zeros(len(tri), np.uint8))
 
-    def _spherical(self, tri, p):
-        """Which shading points sample their triangle by solid angle (Arvo),
-        and that solid angle: as Cycles (light/triangle.h), those nearer to
-        the triangle's plane than its longest edge, where area sampling's
-        pdf varies much over the triangle; farther, area sampling is about
-        as good and far cheaper.  The solid-angle limits guard the warp."""
-        tr = self.tris
-        e1, e2 = tr.e1[tri], tr.e2[tri]
-        e3 = e2 - e1
-        longest2 = np.maximum(np.maximum(dot(e1, e1), dot(e2, e2)), dot(e3, e3))
-        plane = dot(tr.p0[tri] - p, tr.ng[tri])
-        close = np.nonzero(longest2 > plane * plane)[0]
-        solid_angle = np.zeros(len(tri))
-        if len(close):
-            tc = tri[close]
-            solid_angle[close] = triangle_solid_angle(p[close], tr.p0[tc], tr.p0[tc] + tr.e1[tc],
-                                                      tr.p0[tc] + tr.e2[tc])[0]
-        return (solid_angle >= common.MIN_SPHERICAL) & (solid_angle <= common.MAX_SPHERICAL), solid_angle
-
-    def pdf(self, prim, o, p_hit, ng, n=None):
-        """Solid-angle pdf of ``sample`` from o (normal n) giving p_hit on prim."""
+    def pdf(self, prim, o, p_hit, ng, n=None, time=None):
+        """Solid-angle pdf of ``sample`` from o (normal n) giving p_hit on
+        prim (the triangle where it is at the rays' ``time``)."""
         v = p_hit - o
         t2 = dot(v, v)
         cos_l = np.abs(dot(v, ng)) / np.sqrt(np.maximum(t2, 1e-300))
-        sph, solid_angle = self._spherical(prim, o)
-        return self._pdf(prim, self._pick_pmf(prim, o, n), t2, cos_l, sph, solid_angle)
+        tr = self._at(prim, time)
+        rows = np.arange(len(prim))
+        sph, solid_angle = _spherical(tr, rows, o)
+        return _pdf(tr.area, rows, self._pick_pmf(prim, o, n), t2, cos_l, sph, solid_angle)
+
+
+@dataclass
+class _Rows:
+    """Triangles as MeshLights samples them (one row each)."""
+    p0: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+    ng: np.ndarray
+    area: np.ndarray
+
+
+def _barycentrics(rows, q):
+    """(b1, b2) of points q on triangle rows (q = p0 + b1 e1 + b2 e2)."""
+    d = q - rows.p0
+    e1, e2 = rows.e1, rows.e2
+    d00, d01, d11 = dot(e1, e1), dot(e1, e2), dot(e2, e2)
+    d20, d21 = dot(d, e1), dot(d, e2)
+    denom = np.where(d00 * d11 - d01 * d01 > 0, d00 * d11 - d01 * d01, 1.0)
+    return (d11 * d20 - d01 * d21) / denom, (d00 * d21 - d01 * d20) / denom
+
+
+def _pdf(area, tri, p_tri, t2, cos_l, sph, solid_angle):
+    """Solid-angle pdf of a point on triangle tri: p_tri times the
+    triangle's own (area or solid-angle) pdf."""
+    area = area[tri]
+    ok = (cos_l > 1e-12) & (t2 > 0) & (area > 0)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        pdf = np.where(ok, p_tri * t2 / (np.maximum(cos_l, 1e-12) * np.maximum(area, 1e-300)), 0.0)
+        pdf = np.where(ok & sph, p_tri / solid_angle, pdf)
+    return np.where(np.isfinite(pdf), pdf, 0.0)
+
+
+def _spherical(tr, tri, p):
+    """Which shading points sample their triangle (rows ``tri`` of
+    ``tr``) by solid angle (Arvo), and that solid angle: as Cycles
+    (light/triangle.h), those nearer to the triangle's plane than its
+    longest edge, where area sampling's pdf varies much over the triangle;
+    farther, area sampling is about as good and far cheaper.  The
+    solid-angle limits guard the warp."""
+    e1, e2 = tr.e1[tri], tr.e2[tri]
+    e3 = e2 - e1
+    longest2 = np.maximum(np.maximum(dot(e1, e1), dot(e2, e2)), dot(e3, e3))
+    plane = dot(tr.p0[tri] - p, tr.ng[tri])
+    close = np.nonzero(longest2 > plane * plane)[0]
+    solid_angle = np.zeros(len(tri))
+    if len(close):
+        tc = tri[close]
+        solid_angle[close] = triangle_solid_angle(p[close], tr.p0[tc], tr.p0[tc] + tr.e1[tc],
+                                                  tr.p0[tc] + tr.e2[tc])[0]
+    return (solid_angle >= common.MIN_SPHERICAL) & (solid_angle <= common.MAX_SPHERICAL), solid_angle
 
 
 
 
 def _build(inputs):
     tree = inputs.strategy in ("tree", "auto", "tree_bsdf")
-    return MeshLights(inputs.triangles, inputs.materials, tree, inputs.make_tree)
+    return MeshLights(inputs.triangles, inputs.materials, tree, inputs.make_tree, inputs.motion)
 
 
 def _glow_scene(corners, emission=(2.0, 1.0, 0.5)):

@@ -37,6 +37,7 @@ class BuildInputs:
     strategy: str
     env_compensation: bool
     make_tree: Callable
+    motion: object = None   # engine.motion.MotionGeometry of a scene with moving triangles, else None
 
 
 class LightTable:

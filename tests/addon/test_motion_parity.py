@@ -96,7 +96,80 @@ def _shearing_box():
             point.interpolation = 'LINEAR'
 
 
-SCENES = {'objects': objects}
+def _sliding_cube(scene, travel=2.0):
+    """The stage and a cube sliding along x by ``travel`` per frame."""
+    _stage(scene)
+    cube = box("cube", material("red", 'diffuse', color=(0.8, 0.15, 0.1)), (0.0, 0.0, 0.4), (0.8, 0.8, 0.8))
+    _linear_keys(cube, 'location', [(-travel, 0.0, 0.4), (travel, 0.0, 0.4)])
+    return cube
+
+
+def late_shutter(scene, curve=True, zoom=True):
+    """A cube sliding 2 units in the shutter of 1 frame, seen by a camera
+    zooming from lens 25 to 45 over the shutter (focal-length animation),
+    the shutter opening slowly (Shutter Curve through (0, 0), (0.5, 0.2),
+    (1, 1)): the blur is brighter towards its end.  ``curve`` False keeps
+    the flat default curve, ``zoom`` False the lens (the power checks)."""
+    _sliding_cube(scene)
+    if zoom:
+        _linear_keys(scene.camera.data, 'lens', [15.0, 55.0])
+    else:
+        scene.camera.data.lens = 35.0
+    _blur(scene)
+    scene.render.motion_blur_shutter = 1.0
+    if curve:
+        mapping = scene.render.motion_blur_shutter_curve
+        points = mapping.curves[0].points
+        points[0].location = (0.0, 0.0)
+        points[1].location = (0.5, 0.2)
+        points[2].location = (1.0, 1.0)
+        mapping.update()
+    return BOUNCES
+
+
+def rolling(scene, on=True):
+    """The sliding cube under a rolling shutter (Top-Bottom, duration
+    0.25) of 1 frame: rows lower in the frame see the cube later, so it
+    leans; ``on`` False: no rolling shutter (the power check)."""
+    _sliding_cube(scene)
+    _blur(scene)
+    scene.render.motion_blur_shutter = 1.0
+    scene.cycles.rolling_shutter_type = 'TOP' if on else 'NONE'
+    scene.cycles.rolling_shutter_duration = 0.25
+    return BOUNCES
+
+
+def moving_lamp(scene):
+    """A spot lamp sweeping 3 units along x in the shutter of 1 frame and
+    the sliding cube: Cycles syncs lamps at the shutter's centre only
+    (BlenderSync::sync_object skips lights at motion steps; scene/light.cpp
+    reads the object's centre transform), so the lamp must not blur."""
+    _sliding_cube(scene, 1.0)
+    lamp = light('SPOT', (0.0, 0.8, 3.0), 300.0, spot_size=math.radians(40.0), spot_blend=0.1)
+    _linear_keys(lamp, 'location', [(-3.0, 0.8, 3.0), (3.0, 0.8, 3.0)])
+    _blur(scene)
+    scene.render.motion_blur_shutter = 1.0
+    return BOUNCES
+
+
+def moving_emitter(scene):
+    """A glowing bar sliding 2 units in the shutter of 1 frame, 0.6 above
+    a floor it lights (no lamp), unseen by the camera: Cycles samples the bar's triangles where
+    they are at each path's time."""
+    plane("floor", material("floor", 'diffuse'))
+    top_camera(scene, 6.0)
+    bar = box("bar", material("glow", 'emission', color=(1.0, 0.8, 0.5), strength=6.0), (0.0, 0.0, 0.6),
+              (0.4, 2.4, 0.1))
+    _linear_keys(bar, 'location', [(-2.0, 0.0, 0.6), (2.0, 0.0, 0.6)])
+    bar.visible_camera = False   # (the test is of the light it casts; its own blur is the objects scene's)
+    _blur(scene)
+    scene.render.motion_blur_shutter = 1.0
+    return BOUNCES
+
+
+WITHOUT = {'late_shutter': ('curve', 'zoom'), 'rolling': ('on',)}   # the features each scene tests
+SCENES = {'objects': objects, 'late_shutter': late_shutter, 'rolling': rolling, 'moving_lamp': moving_lamp,
+          'moving_emitter': moving_emitter}
 
 
 def reference_scene(name, folder=None):
@@ -114,14 +187,21 @@ def test_motion_blur_parity_with_cycles(tmp_path, tapped_engine, name='objects')
     still = empty_factory_scene()
     SCENES[name](still, blur=False)
     sharp, sharp_var = render_for_reference(still, tmp_path, name + '_still', tapped_engine, SPP // 2, 2, bounces)
+    assert _blocks_beyond(name, sharp, sharp_var, check.details['level'], "a sharp render"), \
+        f"the test cannot tell {name}'s motion blur from none"
+
+
+def _blocks_beyond(name, image, var, level, what):
+    """Whether any block of an Ember render (SPP / 2 samples) differs from
+    reference ``name`` at ``level`` (a test's power check), printed."""
     ref, ref_var, _ = load_reference('motion_' + name)
-    a, va = stats.block_means_var(sharp[..., :3].astype(np.float64), sharp_var, BLOCK)
+    a, va = stats.block_means_var(image[..., :3].astype(np.float64), var, BLOCK)
     b, vb = stats.block_means_var(ref, ref_var, BLOCK)
     t = np.abs(a - b) / np.sqrt(va + vb)
-    limit = stats.t_threshold(check.details['level'], SPP // 2 - 1)
-    print(f"motion_{name}: a sharp render against the blurred reference: max block |t| {t.max():.1f} "
+    limit = stats.t_threshold(level, SPP // 2 - 1)
+    print(f"motion_{name}: {what} against the reference: max block |t| {t.max():.1f} "
           f"(limit {limit:.1f}), {(t > limit).sum()} of {t.size} blocks beyond")
-    assert (t > limit).any(), f"the test cannot tell {name}'s motion blur from none"
+    return bool((t > limit).any())
 
 
 def _exported_scene(monkeypatch):
@@ -153,3 +233,104 @@ def test_shutter_lengths_and_positions(shutter, position, tmp_path, tapped_engin
     expect = [np.clip(2.0 * (f - 2.0) - 1.2, -3.2, 0.8) for f in (centre - shutter / 2, centre, centre + shutter / 2)]
     assert np.allclose(x, expect, atol=1e-4), (x, expect)
     assert np.isclose(cube.matrix[0, 3], expect[1], atol=1e-4)
+
+
+@pytest.mark.parametrize("name", ['late_shutter', 'rolling'])
+def test_shutter_curve_and_rolling_shutter_parity(name, tmp_path, tapped_engine):
+    """Cycles parity of the shutter curve with a zooming camera, and of the
+    rolling shutter; the same block test, at the same level, tells the
+    reference from Ember's render without the curve / the rolling shutter."""
+    scene, bounces = reference_scene(name)
+    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, SPP, 2, bounces)
+    check = check_against_reference('motion_' + name, scene, bounces, image, var, SPP, BLOCK)
+    check.assert_agrees(0.005, 0.02)
+    for without in WITHOUT[name]:
+        plain = empty_factory_scene()
+        SCENES[name](plain, **{without: False})
+        other, other_var = render_for_reference(plain, tmp_path, name + '_plain', tapped_engine, SPP // 2, 2, bounces)
+        assert _blocks_beyond(name, other, other_var, check.details['level'], f"without {without}"), \
+            f"the test cannot tell {name} from its render without {without}"
+
+
+def test_moving_lamp_stays_at_the_shutter_centre_as_cycles(tmp_path, tapped_engine):
+    """Parity; and the same blocks tell the reference from a lamp swept
+    over the shutter (stood in for by 7 still lamps along its path, each
+    1/7 of its power)."""
+    scene, bounces = reference_scene('moving_lamp')
+    image, var = render_for_reference(scene, tmp_path, 'moving_lamp', tapped_engine, SPP, 2, bounces)
+    check = check_against_reference('motion_moving_lamp', scene, bounces, image, var, SPP, BLOCK)
+    check.assert_agrees(0.005, 0.02)
+    swept, _ = reference_scene('moving_lamp')
+    lamp = bpy.data.objects['spot']
+    lamp.animation_data_clear()
+    lamp.data.energy /= 7.0
+    for k, x in enumerate(np.linspace(-1.5, 1.5, 7)):
+        copy = lamp if k == 0 else lamp.copy()
+        if k:
+            swept.collection.objects.link(copy)
+        copy.location = (x, 0.8, 3.0)
+    other, other_var = render_for_reference(swept, tmp_path, 'swept_lamp', tapped_engine, SPP // 2, 2, bounces)
+    assert _blocks_beyond('moving_lamp', other, other_var, check.details['level'], "a swept lamp"), \
+        "the test cannot tell a still lamp from a moving one"
+
+
+def test_shutter_settings_are_exported(tmp_path, tapped_engine, monkeypatch):
+    """The curve's 256 values, the rolling shutter and the lens at the
+    shutter's ends reach the engine camera (Cycles' sync_camera_motion)."""
+    seen = _exported_scene(monkeypatch)
+    scene, bounces = reference_scene('late_shutter')
+    scene.cycles.rolling_shutter_type = 'TOP'
+    scene.cycles.rolling_shutter_duration = 0.4
+    render_for_reference(scene, tmp_path, 'settings', tapped_engine, 2, 2, bounces)
+    cam = seen[-1].camera
+    assert cam.shutter_curve.shape == (256,) and abs(cam.shutter_curve[0]) < 1e-6
+    assert abs(cam.shutter_curve[-1] - 1.0) < 1e-6 and abs(cam.shutter_curve[128] - 0.2) < 0.05
+    assert cam.rolling_shutter == 'TOP' and abs(cam.rolling_duration - 0.4) < 1e-6
+    assert np.allclose(cam.lens_motion, (25.0, 45.0), atol=1e-4) and abs(cam.lens - 35.0) < 1e-4
+
+
+@pytest.mark.parametrize("case", ['zero_curve', 'rolling_0', 'rolling_1', 'nan_keys'])
+def test_hostile_shutter_settings_render_finite(case, tmp_path, tapped_engine):
+    """A flat-zero shutter curve, rolling durations 0 and 1, NaN keyframes of
+    the lens and the cube's location: finite pixels."""
+    scene, bounces = reference_scene('late_shutter')
+    if case == 'zero_curve':
+        for point in scene.render.motion_blur_shutter_curve.curves[0].points:
+            point.location = (point.location[0], 0.0)
+        scene.render.motion_blur_shutter_curve.update()
+    elif case.startswith('rolling'):
+        scene.cycles.rolling_shutter_type = 'TOP'
+        scene.cycles.rolling_shutter_duration = float(case[-1])
+    else:
+        for ident in (scene.camera.data, bpy.data.objects['cube']):
+            for curve in _fcurves(ident.animation_data.action):
+                curve.keyframe_points[-1].co[1] = float('nan')
+    image, _ = render_for_reference(scene, tmp_path, 'hostile_' + case, tapped_engine, 4, 2, bounces)
+    assert np.isfinite(image).all()
+
+
+def test_moving_emitter_parity(tmp_path, tapped_engine):
+    """Parity of a moving emissive mesh lighting a floor (light sampling at
+    the path's time, MIS with BSDF rays)."""
+    scene, bounces = reference_scene('moving_emitter')
+    spp = 4 * SPP   # (a small light whose light varies much over the shutter: noisier than the others)
+    image, var = render_for_reference(scene, tmp_path, 'moving_emitter', tapped_engine, spp, 2, bounces)
+    check_against_reference('motion_moving_emitter', scene, bounces, image, var, spp, BLOCK).assert_agrees(0.01, 0.05)
+
+
+def test_rolling_shutter_in_a_border_keeps_full_frame_rows(tmp_path, tapped_engine):
+    """A render border (the top half, cropped) rolls by the full frame's
+    rows, as Cycles' (its y and height are the full frame's): the window
+    matches the top half of the full-frame reference."""
+    from ember_testlib import ReferenceCheck
+    scene, bounces = reference_scene('rolling')
+    render = scene.render
+    render.use_border, render.use_crop_to_border = True, True
+    render.border_min_x, render.border_max_x, render.border_min_y, render.border_max_y = 0.0, 1.0, 0.5, 1.0
+    image, var = render_for_reference(scene, tmp_path, 'rolling_border', tapped_engine, SPP, 2, bounces)
+    ref, ref_var, header = load_reference('motion_rolling')
+    rows = ref.shape[0] // 2
+    assert image.shape[0] == rows and var.shape[0] == rows, (image.shape, var.shape)
+    check = ReferenceCheck('motion_rolling_border', image[..., :3].astype(np.float64), var, SPP, ref[:rows],
+                           ref_var[:rows], header, BLOCK)
+    check.assert_agrees(0.01, 0.02)
