@@ -12,6 +12,10 @@ from .export import material as material_export
 from .export import mesh as mesh_export
 
 
+# Bake types of the whole exported scene besides the light bakes.
+SCENE_WIDE = ('SHADOW', 'ENVIRONMENT')
+
+
 class BakeError(Exception):
     """A bake Ember cannot do; the message is meant for the user."""
 
@@ -41,7 +45,7 @@ def _bake(engine, depsgraph, obj, pass_type, pass_filter, width, height):
     mesh = mesh_export.mesh_from_object(evaluated, name)
     if mesh is None:
         raise BakeError(f"object '{name}' has no triangles to bake")
-    if pass_type in renderer.bake.LIGHT and mesh.uvs is None:
+    if pass_type in renderer.bake.LIGHT + SCENE_WIDE and mesh.uvs is None:
         raise BakeError(f"object '{name}' has no UV map: a {pass_type} bake needs one to place its texels")
     matrix = np.array(evaluated.matrix_world, np.float64)
     result = engine.begin_result(0, 0, width, height, layer=depsgraph.view_layer.name, view="")
@@ -56,7 +60,7 @@ def _bake(engine, depsgraph, obj, pass_type, pass_filter, width, height):
         flat = np.empty(width * height * channels, np.float32)
         primitive_pass.rect.foreach_get(flat)
         prim, u, v = renderer.bake.unpack_primitives(flat.reshape(-1, channels))
-        if pass_type in renderer.bake.LIGHT:
+        if pass_type in renderer.bake.LIGHT + SCENE_WIDE:
             rgba = _bake_light(engine, renderer, depsgraph, evaluated, pass_type, pass_filter, prim, u, v,
                                _differentials(layer, width * height))
             if rgba is None:
@@ -120,10 +124,10 @@ class _BakeProgress:
 
 
 def _bake_light(engine, renderer, depsgraph, obj, pass_type, pass_filter, prim, u, v, diff):
-    """A DIFFUSE / GLOSSY / TRANSMISSION / COMBINED bake: the whole scene
-    (every object casts, reflects and emits light), traced by the render
-    integrator from the object's texels with Render > Samples; None when
-    the user cancelled."""
+    """A DIFFUSE / GLOSSY / TRANSMISSION / COMBINED / SHADOW bake: the
+    whole scene (every object casts, reflects and emits light), traced by
+    the render integrator from the object's texels with Render > Samples
+    (ENVIRONMENT: the world only); None when the user cancelled."""
     from .export import scene as scene_export
     backend.require_ray_tracer()
     exported = scene_export.export_scene(depsgraph, require_camera=False)
@@ -136,8 +140,13 @@ def _bake_light(engine, renderer, depsgraph, obj, pass_type, pass_filter, prim, 
     settings = scene_export.render_settings(depsgraph.scene)
     progress = _BakeProgress(engine, settings.samples)
     try:
-        baked = renderer.bake.bake_light(scene, index, prim, u, v, pass_type, filter_names(pass_filter), settings,
-                                         diff=diff, progress=progress)
+        if pass_type == 'SHADOW':
+            baked = renderer.bake.bake_shadow(scene, index, prim, u, v, settings, diff=diff, progress=progress)
+        elif pass_type == 'ENVIRONMENT':
+            baked = renderer.bake.bake_background(scene, index, prim, u, v, settings, diff=diff)
+        else:
+            baked = renderer.bake.bake_light(scene, index, prim, u, v, pass_type, filter_names(pass_filter),
+                                             settings, diff=diff, progress=progress)
     except renderer.Cancelled:
         return None
     for warning in getattr(baked.result, 'warnings', None) or ():

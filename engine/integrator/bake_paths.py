@@ -23,12 +23,12 @@ and without Direct light vertex 0 samples no light and its BSDF rays see no
 lamp and no world (the emissive meshes they meet still count, as Cycles).
 Without Indirect the render stops at max_bounces 0 (engine/bake.py).
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .. import bsdf
-from ..lobe_ids import GLASS, SUBSURFACE_BURLEY, SUBSURFACE_RANDOM_WALK, SUBSURFACE_SKIN
+from ..lobe_ids import GLASS, NONE, SUBSURFACE_BURLEY, SUBSURFACE_RANDOM_WALK, SUBSURFACE_SKIN
 from ..lobes import kinds_of_class
 from .records import RayHits
 
@@ -42,6 +42,9 @@ class BakeFilter:
     direct: bool = True          # light sampled at vertex 0 / met by its BSDF rays
     subsurface: bool = True      # subsurface lobes scatter at vertex 0
     texel_emission: bool = True  # the baked surface's own emission (vertex 0)
+    # Which of a glass lobe's events count at vertex 0: +1 its reflection
+    # (a Glossy bake), -1 its refraction (a Transmission bake), 0 both.
+    glass_side: int = 0
 
     def emits(self, depth):
         """Whether surface emission met at wavefront step ``depth`` counts."""
@@ -134,6 +137,55 @@ class BakeTarget:
         if drop.any():
             w = np.where(drop[:, :, None], 0.0, w)
         return w
+
+
+    def glass_f(self, v, wi_l, f, first):
+        """f of the vertices ``v`` towards wi_l without the glass lobes'
+        part on the side the bake's pass does not count, at the vertices 0
+        (``first``): Cycles keeps the glass closure but counts its light as
+        glossy above the closure's normal and as transmission below
+        (film/light_passes.h bsdf_eval_init), as the render's passes."""
+        rows = self._glass_rows(v, wi_l, first)
+        if len(rows) == 0:
+            return f
+        f = np.array(f, copy=True)
+        f[rows] = np.maximum(f[rows] - self._glass_part(v, wi_l, rows), 0.0)
+        return f
+
+    def glass_weight(self, v, wi_l, weight, delta, first):
+        """The BSDF samples' weights (f / pdf) of ``v`` with glass_f's rule:
+        a sample on the side left out keeps only the other lobes' share of
+        f; a delta one there (a smooth glass lobe's) brings nothing."""
+        rows = self._glass_rows(v, wi_l, first)
+        if len(rows) == 0:
+            return weight
+        weight = np.array(weight, copy=True)
+        delta = np.broadcast_to(np.asarray(delta, bool), (len(wi_l),))
+        smooth = rows[delta[rows]]
+        weight[smooth] = 0.0
+        rows = rows[~delta[rows]]
+        if len(rows):
+            sub = v.take(rows)
+            f = bsdf.eval_pdf(sub.lobes, sub.wo_l, wi_l[rows], *sub.lobes_wo)[0]
+            rest = np.maximum(f - self._glass_part(v, wi_l, rows), 0.0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                weight[rows] *= np.where(f > 0, rest / np.where(f > 0, f, 1.0), 0.0)
+        return weight
+
+    def _glass_rows(self, v, wi_l, first):
+        side = self.filter.glass_side
+        if side == 0:
+            return np.zeros(0, np.int64)
+        left_out = (wi_l[:, 2] < 0) if side > 0 else (wi_l[:, 2] > 0)
+        has_glass = (v.lobes.kind == GLASS).any(axis=1)
+        return np.flatnonzero(first & left_out & has_glass)
+
+    def _glass_part(self, v, wi_l, rows):
+        """(R, 3) the glass lobes' f at rows of ``v`` (their effective colours)."""
+        sub = v.take(rows)
+        kind = np.where(sub.lobes.kind == GLASS, sub.lobes.kind, NONE).astype(sub.lobes.kind.dtype)
+        glass = replace(sub.lobes, kind=kind)
+        return bsdf.eval_pdf(glass, sub.wo_l, wi_l[rows], *sub.lobes_wo)[0]
 
 
 def _mirror(x, top):
