@@ -117,6 +117,7 @@ def bake_shaded(scene, kind, prim, u, v):
     roughness sqrt(alpha) averaged with their colour weights (1 for
     diffuse lobes)."""
     from types import SimpleNamespace
+    from . import bsdf
     from .integrator import _interaction
     from .nodes.context import ShadingContext
     from .render import prepare
@@ -154,7 +155,10 @@ def bake_shaded(scene, kind, prim, u, v):
         if mats.textures.emission:
             value = mats.textures.emission_at(h.mat, shading, value)
     elif kind == "ROUGHNESS":
-        value = np.repeat(average_roughness(mats.gather(h.mat, shading))[:, None], 3, axis=1)
+        lobes = mats.gather(h.mat, shading)
+        # Seen along the shading normal: the closures' weights at wo = N (energy compensation included).
+        wo_l = np.tile([0.0, 0.0, 1.0], (len(rows), 1))
+        value = np.repeat(average_roughness(lobes, bsdf.weights(lobes, wo_l))[:, None], 3, axis=1)
     else:
         raise ValueError(f"{kind} is not a shaded bake type")
     value = np.where(np.isfinite(value), value, 0.0)
@@ -163,24 +167,34 @@ def bake_shaded(scene, kind, prim, u, v):
     return out
 
 
-def average_roughness(lobes):
-    """Cycles' ROUGHNESS bake: per point, the lobes' roughness averaged with
-    their weights |mean colour| x mix weight; a microfacet lobe's roughness
-    is sqrt(alpha), an Oren-Nayar lobe's its sigma.  Measured on bpy 5.0.1:
-    a Lambert Diffuse does not enter the average (Glossy 0.4 mixed with a
-    Diffuse bakes 0.4) and a point without such lobes bakes 1 (a Diffuse
-    alone bakes 1); the other lobes (translucent, sheen, subsurface,
-    transparent) are assumed to behave as Lambert's."""
-    from .lobe_ids import GLASS, GLOSSY, MIRROR, OREN_NAYAR, REFRACTION
+def average_roughness(lobes, w=None):
+    """Cycles' ROUGHNESS bake (surface_shader_average_roughness,
+    bsdf_get_roughness_pass_squared): per point, the lobes' roughness
+    averaged with weights |mean of the closure weight|: ``w`` (N, K, 3), the
+    lobes' effective colours (bsdf.weights: colour x mix weight x the
+    multiscatter GGX energy compensation and the layering Cycles folds into
+    closure weights; None: colour x mix weight).  A microfacet lobe's
+    roughness is sqrt(alpha) (sqrt(sqrt(alpha_x alpha_y)) when anisotropic),
+    an Oren-Nayar lobe's its sigma, a transparent lobe's 0 (singular), a hair
+    lobe's 1; the diffuse class (Lambert, sheen, translucent) and subsurface
+    do not enter the average, and a point without such lobes bakes 1
+    (measured on bpy 5.0.1)."""
+    from .lobe_ids import GLASS, GLOSSY, GLOSSY_ANISOTROPIC, MIRROR, OREN_NAYAR, REFRACTION, TRANSPARENT
+    from .lobes import kinds_of_class
     kind = np.asarray(lobes.kind)
-    weight = np.abs(np.asarray(lobes.color).mean(axis=2))
-    if lobes.weight is not None:
-        weight = weight * np.asarray(lobes.weight)
-    microfacet = np.isin(kind, (GLOSSY, MIRROR, GLASS, REFRACTION))
-    rough = np.sqrt(np.clip(np.asarray(lobes.alpha), 0.0, None))
+    if w is None:
+        weight = np.abs(np.asarray(lobes.color).mean(axis=2))
+        if lobes.weight is not None:
+            weight = weight * np.asarray(lobes.weight)
+    else:
+        weight = np.abs(np.asarray(w).mean(axis=2))
+    microfacet = np.isin(kind, (GLOSSY, GLOSSY_ANISOTROPIC, MIRROR, GLASS, REFRACTION))
+    rough = np.where(microfacet, np.sqrt(np.clip(np.asarray(lobes.alpha), 0.0, None)), 1.0)
+    rough = np.where(kind == TRANSPARENT, 0.0, rough)
     if lobes.diffuse_roughness is not None:
         rough = np.where(kind == OREN_NAYAR, np.clip(lobes.diffuse_roughness, 0.0, 1.0), rough)
-    weight = weight * (microfacet | (kind == OREN_NAYAR))
+    left_out = np.isin(kind, kinds_of_class("diffuse")) & (kind != OREN_NAYAR)
+    weight = weight * ~left_out * (kind >= 0)
     total = weight.sum(axis=1)
     return np.where(total > 0, (weight * rough).sum(axis=1) / np.maximum(total, 1e-30), 1.0)
 
@@ -332,8 +346,10 @@ def _texel_target(scene, instance, prim, u, v, diff, bake_filter=None):
     if len(ok) == 0:
         return ok, None
     first = sum(len(scene.meshes[i.mesh].triangles) for i in scene.instances[:instance])
+    # Cycles 3.5 changed how samples are jittered across a texel.
+    rejection = tuple(getattr(scene, "cycles_version", (5, 0, 0)))[:2] >= (3, 5)
     return ok, BakeTarget(first + prim[ok], u[ok], v[ok], None if diff is None else np.asarray(diff)[ok],
-                          bake_filter or BakeFilter())
+                          bake_filter or BakeFilter(), rejection=rejection)
 
 
 def bake_shadow(scene, instance, prim, u, v, settings, diff=None, progress=None):

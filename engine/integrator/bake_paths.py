@@ -72,9 +72,11 @@ class BakeTarget:
     ``diff``: (N, 4) Blender's BakeDifferential (du/dx, du/dy, dv/dx, dv/dy)
     or None (every sample at the texel's centre).  After ``bind``,
     ``valid`` says which texels kept their triangle (flatten drops
-    degenerate ones; the others are traced on row 0 and must be ignored)."""
+    degenerate ones; the others are traced on row 0 and must be ignored).
+    ``rejection``: jitter as Cycles 3.5+ (retried until inside the triangle),
+    else as before (mirrored back at its edges)."""
 
-    def __init__(self, scene_rows, u, v, diff=None, bake_filter=BakeFilter()):
+    def __init__(self, scene_rows, u, v, diff=None, bake_filter=BakeFilter(), rejection=True):
         self.scene_rows = np.asarray(scene_rows, np.int64)
         self.rows = np.zeros(len(self.scene_rows), np.int64)
         self.valid = np.ones(len(self.scene_rows), bool)
@@ -82,6 +84,7 @@ class BakeTarget:
         self.v = np.asarray(v, np.float64)
         self.diff = None if diff is None else np.asarray(diff, np.float64)
         self.filter = bake_filter
+        self.rejection = bool(rejection)
         self.width, self.height = len(self.scene_rows), 1
         self.tris = None
         self._dropped = bake_filter.dropped_kinds()
@@ -106,11 +109,14 @@ class BakeTarget:
         u, v = self.u[pix], self.v[pix]
         if self.diff is not None:
             jitter = np.asarray(sample) > 0
-            fx = np.where(jitter, u0, 0.5) - 0.5
-            fy = np.where(jitter, u1, 0.5) - 0.5
             d = self.diff[pix]
-            u = np.where(jitter, _mirror(u + d[:, 0] * fx + d[:, 1] * fy, 1.0), u)
-            v = np.where(jitter, _mirror(v + d[:, 2] * fx + d[:, 3] * fy, 1.0 - u), v)
+            if self.rejection:
+                u, v = _jitter_inside(u, v, d, jitter, u0, u1)
+            else:
+                fx = np.where(jitter, u0, 0.5) - 0.5
+                fy = np.where(jitter, u1, 0.5) - 0.5
+                u = np.where(jitter, _mirror(u + d[:, 0] * fx + d[:, 1] * fy, 1.0), u)
+                v = np.where(jitter, _mirror(v + d[:, 2] * fx + d[:, 3] * fy, 1.0 - u), v)
         k = self.rows[pix]
         bu, bv = v, 1.0 - u - v          # Blender's (u, v) -> Embree's
         tr = self.tris
@@ -186,6 +192,28 @@ class BakeTarget:
         kind = np.where(sub.lobes.kind == GLASS, sub.lobes.kind, NONE).astype(sub.lobes.kind.dtype)
         glass = replace(sub.lobes, kind=kind)
         return bsdf.eval_pdf(glass, sub.wo_l, wi_l[rows], *sub.lobes_wo)[0]
+
+
+def _jitter_inside(u, v, d, jitter, r0, r1, tries=10):
+    """Cycles' bake_jitter_barycentric (3.5+): the texel's (u, v) moved by
+    its differentials d times (r - 0.5), retried with r hashed
+    (hash_float2_to_float2) until inside the triangle, the centre after
+    ``tries`` misses; rows not ``jitter`` stay at the centre."""
+    from ..nodes.hashing import hash_to_float2
+    u, v = np.array(u, np.float64), np.array(v, np.float64)
+    todo = np.flatnonzero(jitter)
+    r = np.stack([np.asarray(r0, np.float64)[todo], np.asarray(r1, np.float64)[todo]], axis=1)
+    for _ in range(tries):
+        if len(todo) == 0:
+            break
+        fx, fy = r[:, 0] - 0.5, r[:, 1] - 0.5
+        ju = u[todo] + fx * d[todo, 0] + fy * d[todo, 1]
+        jv = v[todo] + fx * d[todo, 2] + fy * d[todo, 3]
+        inside = (ju > 0) & (jv > 0) & (ju + jv < 1)
+        u[todo[inside]], v[todo[inside]] = ju[inside], jv[inside]
+        todo, r = todo[~inside], r[~inside]
+        r = hash_to_float2(r[:, 0].astype(np.float32), r[:, 1].astype(np.float32)).astype(np.float64)
+    return u, v
 
 
 def _mirror(x, top):

@@ -214,6 +214,16 @@ def _shaded_material(obj, kind):
             links.new(shader.outputs[0], mix.inputs[1])
             links.new(nodes.new('ShaderNodeBsdfDiffuse').outputs[0], mix.inputs[2])
             shader = mix
+        elif kind == 'two_glossy':   # with a second, rougher and tinted Glossy by a 0.4 mix: Cycles
+            # weighs each by its closure weight, the multiscatter GGX energy compensation included
+            mix = nodes.new('ShaderNodeMixShader')
+            mix.inputs['Fac'].default_value = 0.4
+            other = nodes.new('ShaderNodeBsdfGlossy')
+            other.inputs['Roughness'].default_value = 0.8
+            other.inputs['Color'].default_value = (0.3, 0.5, 0.9, 1.0)
+            links.new(shader.outputs[0], mix.inputs[1])
+            links.new(other.outputs[0], mix.inputs[2])
+            shader = mix
         elif kind == 'oren_nayar':   # a Diffuse BSDF with that roughness: Oren-Nayar's sigma
             shader = nodes.new('ShaderNodeBsdfDiffuse')
             links.new(ramp.outputs['Result'], shader.inputs['Roughness'])
@@ -225,7 +235,8 @@ def _shaded_material(obj, kind):
 
 @pytest.mark.parametrize("kind,material", [('EMIT', 'emission'), ('EMIT', 'principled'),
                                            ('ROUGHNESS', 'roughness'), ('ROUGHNESS', 'mix'),
-                                           ('ROUGHNESS', 'oren_nayar'), ('ROUGHNESS', 'principled_roughness')])
+                                           ('ROUGHNESS', 'oren_nayar'), ('ROUGHNESS', 'principled_roughness'),
+                                           ('ROUGHNESS', 'two_glossy')])
 def test_shaded_bakes_match_cycles(kind, material):
     """Emit and Roughness bakes of textured closures: Ember's node evaluation
     at the texel against Cycles' per texel (1 sample: the texel centre),
