@@ -156,9 +156,9 @@ def bake_shaded(scene, kind, prim, u, v):
             value = mats.textures.emission_at(h.mat, shading, value)
     elif kind == "ROUGHNESS":
         lobes = mats.gather(h.mat, shading)
-        # Seen along the shading normal: the closures' weights at wo = N (energy compensation included).
+        # Seen along the shading normal: the closures' weights at wo = N, as Cycles holds them.
         wo_l = np.tile([0.0, 0.0, 1.0], (len(rows), 1))
-        value = np.repeat(average_roughness(lobes, bsdf.weights(lobes, wo_l))[:, None], 3, axis=1)
+        value = np.repeat(average_roughness(lobes, bsdf.closure_weights(lobes, wo_l))[:, None], 3, axis=1)
     else:
         raise ValueError(f"{kind} is not a shaded bake type")
     value = np.where(np.isfinite(value), value, 0.0)
@@ -171,9 +171,9 @@ def average_roughness(lobes, w=None):
     """Cycles' ROUGHNESS bake (surface_shader_average_roughness,
     bsdf_get_roughness_pass_squared): per point, the lobes' roughness
     averaged with weights |mean of the closure weight|: ``w`` (N, K, 3), the
-    lobes' effective colours (bsdf.weights: colour x mix weight x the
-    multiscatter GGX energy compensation and the layering Cycles folds into
-    closure weights; None: colour x mix weight).  A microfacet lobe's
+    lobes' weights as Cycles' closures hold them (bsdf.closure_weights:
+    colour x mix weight x the multiscatter Fresnel darkening and the
+    layering; None: colour x mix weight).  A microfacet lobe's
     roughness is sqrt(alpha) (sqrt(sqrt(alpha_x alpha_y)) when anisotropic),
     an Oren-Nayar lobe's its sigma, a transparent lobe's 0 (singular), a hair
     lobe's 1; the diffuse class (Lambert, sheen, translucent) and subsurface
