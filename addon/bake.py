@@ -66,7 +66,7 @@ def _bake(engine, depsgraph, obj, pass_type, pass_filter, width, height):
             if rgba is None:
                 return   # cancelled: Blender keeps the image as it was
         elif pass_type == 'AO':
-            scene, index = _whole_scene(renderer, depsgraph, evaluated, engine)
+            scene, index = _exported_scene(engine, depsgraph, evaluated)
             world = depsgraph.scene.world
             distance = world.light_settings.distance if world is not None else 10.0
             rgba = renderer.bake.bake_ao(scene, index, prim, u, v, depsgraph.scene.ember.samples, distance,
@@ -130,13 +130,7 @@ def _bake_light(engine, renderer, depsgraph, obj, pass_type, pass_filter, prim, 
     (ENVIRONMENT: the world only); None when the user cancelled."""
     from .export import scene as scene_export
     backend.require_ray_tracer()
-    exported = scene_export.export_scene(depsgraph, require_camera=False)
-    for warning in exported.warnings:
-        engine.report({'WARNING'}, f"Ember: {warning}")
-    scene = exported.scene
-    index = next((i for i, inst in enumerate(scene.instances) if inst.name == obj.name), None)
-    if index is None:
-        raise BakeError(f"object '{obj.name}' is not rendered in this view layer: nothing to bake")
+    scene, index = _exported_scene(engine, depsgraph, obj)
     settings = scene_export.render_settings(depsgraph.scene)
     progress = _BakeProgress(engine, settings.samples)
     try:
@@ -167,17 +161,16 @@ def _object_scene(renderer, depsgraph, obj, mesh, matrix, engine):
                           cycles_version=tuple(bpy.app.version))
 
 
-def _whole_scene(renderer, depsgraph, obj, engine):
-    """Every mesh instance of the depsgraph as an engine Scene (the
-    occluders of an AO bake) and the index of the baked object's instance."""
-    from .export import instances as instance_export
-    override = getattr(depsgraph.view_layer, 'material_override', None)
-    materials = material_export.MaterialTable(override)
-    meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots)
-    index = next((i for i, inst in enumerate(instances) if inst.name == obj.name), None)
+def _exported_scene(engine, depsgraph, obj):
+    """The whole scene as the render exports it (meshes, point clouds,
+    curves, lights, world: what casts, occludes and emits) and the index of
+    the baked object's instance; the export's warnings reach the user."""
+    from .export import scene as scene_export
+    exported = scene_export.export_scene(depsgraph, require_camera=False)
+    for warning in exported.warnings:
+        engine.report({'WARNING'}, f"Ember: {warning}")
+    scene = exported.scene
+    index = next((i for i, inst in enumerate(scene.instances) if inst.name == obj.name), None)
     if index is None:
         raise BakeError(f"object '{obj.name}' is not rendered in this view layer: nothing to bake")
-    for warning in materials.warnings + warnings:
-        engine.report({'WARNING'}, f"Ember: {warning}")
-    return renderer.Scene(meshes=meshes, instances=instances, materials=materials.materials,
-                          cycles_version=tuple(bpy.app.version)), index
+    return scene, index

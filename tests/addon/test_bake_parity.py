@@ -266,17 +266,31 @@ AO_SAMPLES = 256
 AO_BLOCK = 4
 
 
-def test_ao_bake_matches_cycles():
+def _ao_points():
+    """40 spheres (radius 0.05-0.12) hovering 0.15-0.4 over the plane: a point cloud made by geometry nodes."""
+    from test_points_parity import point_object
+    rng = np.random.default_rng(7)
+    positions = np.c_[rng.uniform(-0.8, 0.8, (40, 2)), rng.uniform(0.15, 0.4, 40)]   # none cuts the plane
+    point_object("ao_points", positions, rng.uniform(0.05, 0.12, 40), np.ones((40, 4)),
+                 bpy.data.materials.new("points"))
+
+
+@pytest.mark.parametrize("occluder", ['cube', 'points'])
+def test_ao_bake_matches_cycles(occluder):
     """AO bake of a plane under a tilted cube (the cube occludes; the world's
-    AO distance 0.8 cuts the far rays) against Cycles' AO bake, both at 256
-    samples: the means of 4 x 4 texel blocks, z-tested with binomial
-    variances p (1 - p) / S per texel (an upper bound for Cycles' stratified
-    samples), Sidak over the blocks; one statistical family."""
+    AO distance 0.8 cuts the far rays), or under a point cloud, against
+    Cycles' AO bake, both at 256 samples: the means of 4 x 4 texel blocks,
+    z-tested with binomial variances p (1 - p) / S per texel (an upper bound
+    for Cycles' stratified samples), Sidak over the blocks; one statistical
+    family each."""
     from ember_stats import detectable, family_level, z_scores, z_threshold
     scene = empty_factory_scene()
     bpy.ops.mesh.primitive_plane_add(size=2.0)
     plane = bpy.context.active_object
-    bpy.ops.mesh.primitive_cube_add(size=0.6, location=(0.2, -0.1, 0.45), rotation=(0.3, 0.2, 0.4))
+    if occluder == 'cube':
+        bpy.ops.mesh.primitive_cube_add(size=0.6, location=(0.2, -0.1, 0.45), rotation=(0.3, 0.2, 0.4))
+    else:
+        _ao_points()
     mat, image = bake_target_material()
     plane.data.materials.append(mat)
     for o in scene.objects:
@@ -309,11 +323,11 @@ def test_ao_bake_matches_cycles():
         return blocks(np.clip(img * (1 - img), 1.0 / AO_SAMPLES, None) / AO_SAMPLES) / AO_BLOCK ** 2
     a, b, va, vb = blocks(ember), blocks(cycles), block_var(ember), block_var(cycles)
     count = a.size
-    level = family_level("bake AO blocks", count)
+    level = family_level("bake AO blocks" if occluder == 'cube' else f"bake AO {occluder}", count)
     z = z_scores(a, va, b, vb)
     se = float(np.sqrt(np.median(va + vb)))
-    print(f"AO: Cycles mean {cycles.mean():.4f} (min {cycles.min():.3f}), Ember mean {ember.mean():.4f} "
+    print(f"AO under the {occluder}: Cycles mean {cycles.mean():.4f} (min {cycles.min():.3f}), Ember mean {ember.mean():.4f} "
           f"(min {ember.min():.3f}); {count} blocks, max |z| {np.abs(z).max():.2f} (threshold "
           f"{z_threshold(level):.2f}); detectable block difference {detectable(se, level):.4f}")
-    assert cycles.min() < 0.6, "the cube did not occlude: the test would not see a wrong AO"
+    assert cycles.min() < 0.6, f"the {occluder} did not occlude: the test would not see a wrong AO"
     assert np.abs(z).max() < z_threshold(level)
