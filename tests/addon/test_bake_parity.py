@@ -275,7 +275,24 @@ def _ao_points():
                  bpy.data.materials.new("points"))
 
 
-@pytest.mark.parametrize("occluder", ['cube', 'points'])
+def _ao_curves(scene):
+    """60 round (3D) strands of 5 points, 0.15-0.55 over the plane, radius 0.03 to 0.01."""
+    rng = np.random.default_rng(8)
+    count, points = 60, 5
+    base = np.c_[rng.uniform(-0.8, 0.8, (count, 2)), np.full(count, 0.15)]
+    k = np.arange(points)[None, :, None]
+    lean = np.c_[rng.uniform(-0.1, 0.1, (count, 2)), np.full(count, 0.1)][:, None, :]
+    positions = base[:, None, :] + k * lean
+    data = bpy.data.hair_curves.new("ao_strands")
+    data.add_curves([points] * count)
+    data.attributes['position'].data.foreach_set('vector', positions.reshape(-1).astype(np.float32))
+    radius = data.attributes.new('radius', 'FLOAT', 'POINT')
+    radius.data.foreach_set('value', np.tile(np.linspace(0.03, 0.01, points), count).astype(np.float32))
+    scene.collection.objects.link(bpy.data.objects.new("ao_strands", data))
+    scene.cycles_curves.shape = 'THICK'
+
+
+@pytest.mark.parametrize("occluder", ['cube', 'points', 'curves'])
 def test_ao_bake_matches_cycles(occluder):
     """AO bake of a plane under a tilted cube (the cube occludes; the world's
     AO distance 0.8 cuts the far rays), or under a point cloud, against
@@ -289,8 +306,10 @@ def test_ao_bake_matches_cycles(occluder):
     plane = bpy.context.active_object
     if occluder == 'cube':
         bpy.ops.mesh.primitive_cube_add(size=0.6, location=(0.2, -0.1, 0.45), rotation=(0.3, 0.2, 0.4))
-    else:
+    elif occluder == 'points':
         _ao_points()
+    else:
+        _ao_curves(scene)
     mat, image = bake_target_material()
     plane.data.materials.append(mat)
     for o in scene.objects:
