@@ -167,7 +167,7 @@ def bake_scene(case=None):
 
 
 def diffuse_floor():
-    """GLASSY's floor: a Diffuse BSDF (the Principled floor of TRANSMISSIVE shows TRANSMISSION_GAP)."""
+    """GLASSY's floor: a Diffuse BSDF."""
     return node_material("floor", 'ShaderNodeBsdfDiffuse', {'Color': (0.8, 0.3, 0.2, 1.0)})
 
 
@@ -325,14 +325,21 @@ def _assert_agrees(case, result, threshold):
 BLOCK_TESTS = 3 * (SIZE // BLOCK) ** 2 + 1   # block-channels and the image mean of one bake
 
 
-# Found by this test, cause not found yet: Ember's Transmission bake of the
-# Refraction BSDF is about 10 % low in blue (red and green agree) in the
-# quadrant whose floor the point light lights (block |z| up to 27).
-TRANSMISSION_GAP = pytest.mark.xfail(strict=True, reason="Transmission bake ~10 % low in blue where the floor "
-                                                         "below is lit (cause not found)")
+# Found by this test: the Transmission bake of the Refraction BSDF is 10 %
+# low in blue where a point light sits below the plane at a grazing angle
+# (block |z| 27), and the Glass BSDF's 1.6 % +- 0.2 % low (z -8): all in the
+# Direct part (Cycles 0.0009, Ember 0; Indirect agrees to 0.1 %).  Cause:
+# Ember's rough refraction returns 0 for directions no microfacet refracts
+# into (pbrt's check), Cycles evaluates them (bsdf_microfacet_eval: "TODO:
+# check if the refraction configuration is valid"), so its light sampling
+# brings light from outside the refraction cone.  Evaluating them as Cycles
+# passes both (+0.24 % +- 0.60 %, -0.42 % +- 0.19 %) but makes eval's pdf
+# disagree with the sampler (test_lobe_registry's chi-square): not done.
+CYCLES_REFRACTION = pytest.mark.xfail(strict=True, reason="Cycles evaluates refraction pairs no microfacet "
+                                                          "joins; Ember does not (Direct transmission 0)")
 
 
-@pytest.mark.parametrize("case", ['diffuse', 'glossy', pytest.param('transmission', marks=TRANSMISSION_GAP)])
+@pytest.mark.parametrize("case", ['diffuse', 'glossy', pytest.param('transmission', marks=CYCLES_REFRACTION)])
 def test_light_bake_matches_cycles(case):
     from ember_stats import family_level, z_threshold
     level = family_level(f"light bake {case}", BLOCK_TESTS)
@@ -349,17 +356,12 @@ def test_shadow_and_environment_bakes_match_cycles(case):
     _assert_agrees(case, compare(case, level), z_threshold(level))
 
 
-GLASS_TRANSMISSION_GAP = pytest.mark.xfail(strict=True, reason="Transmission bake of a rough Glass BSDF "
-                                                               "1.6 % low (z -8; cause not found)")
-
-
-@pytest.mark.parametrize("case", ['glass_glossy', pytest.param('glass_transmission', marks=GLASS_TRANSMISSION_GAP)])
+@pytest.mark.parametrize("case", ['glass_glossy', pytest.param('glass_transmission', marks=CYCLES_REFRACTION)])
 def test_glass_bakes_split_like_cycles(case):
     """A Glass BSDF in a Glossy bake brings only its reflected light and in
     a Transmission bake only its refracted light (Cycles counts one glass
-    closure's light by the side it leaves to: film/light_passes.h).  Found
-    by this test: the Transmission bake of the glass is 1.6 % +- 0.2 % low
-    (over a Diffuse floor, so not the Principled floor of TRANSMISSION_GAP)."""
+    closure's light by the side it leaves to: film/light_passes.h).  The
+    Transmission bake is 1.6 % +- 0.2 % low: CYCLES_REFRACTION."""
     from ember_stats import family_level, z_threshold
     level = family_level(f"light bake {case}", BLOCK_TESTS)
     _assert_agrees(case, compare(case, level), z_threshold(level))
