@@ -1,5 +1,5 @@
-"""Light bakes (issue 26): Diffuse, Glossy and Combined bakes with Blender's
-pass filter, Ember against Cycles' own bake of the same object.
+"""Light bakes (issue 26): Diffuse, Glossy, Transmission, Combined, Shadow and
+Environment bakes with Blender's pass filter, Ember against Cycles' own bake of the same object.
 
 Scene: a 2 x 2 plane (the baked object, 32 x 32 float image, margin 0) with
 a Mix of a checker-coloured Diffuse (0.7) and a GGX Glossy (roughness 0.3,
@@ -15,6 +15,10 @@ blocks per channel and on the whole image's mean, one statistical family
 per case (4: diffuse, glossy, transmission, combined), power printed and
 asserted. The Transmission case bakes a variant of the scene: a Refraction
 BSDF with the checker colour over a floor lit by a point light below the plane.
+Shadow and Environment bakes and a Glass BSDF's Glossy / Transmission bakes
+(GLASSY: the glass over a Diffuse floor under a world coloured by the
+direction) are one family each; the Shadow bake has no per-texel variance
+(a ratio), so Ember bakes it with ENGINE_SEEDS seeds and uses their scatter.
 Diffuse Color alone is a colour pass (the closure colour at the texel
 centre at 1 sample): compared per texel, no statistics.
 """
