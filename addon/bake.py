@@ -12,6 +12,10 @@ from .export import material as material_export
 from .export import mesh as mesh_export
 
 
+# Bake types of the whole exported scene besides the light bakes.
+SCENE_WIDE = ('SHADOW', 'ENVIRONMENT')
+
+
 class BakeError(Exception):
     """A bake Ember cannot do; the message is meant for the user."""
 
@@ -41,7 +45,7 @@ def _bake(engine, depsgraph, obj, pass_type, pass_filter, width, height):
     mesh = mesh_export.mesh_from_object(evaluated, name)
     if mesh is None:
         raise BakeError(f"object '{name}' has no triangles to bake")
-    if pass_type in renderer.bake.LIGHT and mesh.uvs is None:
+    if pass_type in renderer.bake.LIGHT + SCENE_WIDE and mesh.uvs is None:
         raise BakeError(f"object '{name}' has no UV map: a {pass_type} bake needs one to place its texels")
     matrix = np.array(evaluated.matrix_world, np.float64)
     result = engine.begin_result(0, 0, width, height, layer=depsgraph.view_layer.name, view="")
@@ -56,13 +60,13 @@ def _bake(engine, depsgraph, obj, pass_type, pass_filter, width, height):
         flat = np.empty(width * height * channels, np.float32)
         primitive_pass.rect.foreach_get(flat)
         prim, u, v = renderer.bake.unpack_primitives(flat.reshape(-1, channels))
-        if pass_type in renderer.bake.LIGHT:
+        if pass_type in renderer.bake.LIGHT + SCENE_WIDE:
             rgba = _bake_light(engine, renderer, depsgraph, evaluated, pass_type, pass_filter, prim, u, v,
                                _differentials(layer, width * height))
             if rgba is None:
                 return   # cancelled: Blender keeps the image as it was
         elif pass_type == 'AO':
-            scene, index = _whole_scene(renderer, depsgraph, evaluated, engine)
+            scene, index = _exported_scene(engine, depsgraph, evaluated)
             world = depsgraph.scene.world
             distance = world.light_settings.distance if world is not None else 10.0
             rgba = renderer.bake.bake_ao(scene, index, prim, u, v, depsgraph.scene.ember.samples, distance,
@@ -120,24 +124,23 @@ class _BakeProgress:
 
 
 def _bake_light(engine, renderer, depsgraph, obj, pass_type, pass_filter, prim, u, v, diff):
-    """A DIFFUSE / GLOSSY / TRANSMISSION / COMBINED bake: the whole scene
-    (every object casts, reflects and emits light), traced by the render
-    integrator from the object's texels with Render > Samples; None when
-    the user cancelled."""
+    """A DIFFUSE / GLOSSY / TRANSMISSION / COMBINED / SHADOW bake: the
+    whole scene (every object casts, reflects and emits light), traced by
+    the render integrator from the object's texels with Render > Samples
+    (ENVIRONMENT: the world only); None when the user cancelled."""
     from .export import scene as scene_export
     backend.require_ray_tracer()
-    exported = scene_export.export_scene(depsgraph, require_camera=False)
-    for warning in exported.warnings:
-        engine.report({'WARNING'}, f"Ember: {warning}")
-    scene = exported.scene
-    index = next((i for i, inst in enumerate(scene.instances) if inst.name == obj.name), None)
-    if index is None:
-        raise BakeError(f"object '{obj.name}' is not rendered in this view layer: nothing to bake")
+    scene, index = _exported_scene(engine, depsgraph, obj)
     settings = scene_export.render_settings(depsgraph.scene)
     progress = _BakeProgress(engine, settings.samples)
     try:
-        baked = renderer.bake.bake_light(scene, index, prim, u, v, pass_type, filter_names(pass_filter), settings,
-                                         diff=diff, progress=progress)
+        if pass_type == 'SHADOW':
+            baked = renderer.bake.bake_shadow(scene, index, prim, u, v, settings, diff=diff, progress=progress)
+        elif pass_type == 'ENVIRONMENT':
+            baked = renderer.bake.bake_background(scene, index, prim, u, v, settings, diff=diff)
+        else:
+            baked = renderer.bake.bake_light(scene, index, prim, u, v, pass_type, filter_names(pass_filter),
+                                             settings, diff=diff, progress=progress)
     except renderer.Cancelled:
         return None
     for warning in getattr(baked.result, 'warnings', None) or ():
@@ -158,17 +161,16 @@ def _object_scene(renderer, depsgraph, obj, mesh, matrix, engine):
                           cycles_version=tuple(bpy.app.version))
 
 
-def _whole_scene(renderer, depsgraph, obj, engine):
-    """Every mesh instance of the depsgraph as an engine Scene (the
-    occluders of an AO bake) and the index of the baked object's instance."""
-    from .export import instances as instance_export
-    override = getattr(depsgraph.view_layer, 'material_override', None)
-    materials = material_export.MaterialTable(override)
-    meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots)
-    index = next((i for i, inst in enumerate(instances) if inst.name == obj.name), None)
+def _exported_scene(engine, depsgraph, obj):
+    """The whole scene as the render exports it (meshes, point clouds,
+    curves, lights, world: what casts, occludes and emits) and the index of
+    the baked object's instance; the export's warnings reach the user."""
+    from .export import scene as scene_export
+    exported = scene_export.export_scene(depsgraph, require_camera=False)
+    for warning in exported.warnings:
+        engine.report({'WARNING'}, f"Ember: {warning}")
+    scene = exported.scene
+    index = next((i for i, inst in enumerate(scene.instances) if inst.name == obj.name), None)
     if index is None:
         raise BakeError(f"object '{obj.name}' is not rendered in this view layer: nothing to bake")
-    for warning in materials.warnings + warnings:
-        engine.report({'WARNING'}, f"Ember: {warning}")
-    return renderer.Scene(meshes=meshes, instances=instances, materials=materials.materials,
-                          cycles_version=tuple(bpy.app.version)), index
+    return scene, index

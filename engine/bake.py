@@ -101,7 +101,10 @@ TRACED = ("AO",)
 # Bake types of the light arriving at the texel: paths of the integrator
 # start there (integrator/bake_paths.py), under Blender's pass filter.
 LIGHT = ("DIFFUSE", "GLOSSY", "TRANSMISSION", "COMBINED")
-SUPPORTED = GEOMETRIC + SHADED + TRACED + LIGHT
+# SHADOW: the render's Shadow Catcher pass with the baked object as a
+# catcher (bake_shadow); ENVIRONMENT: the world seen along each texel's
+# world position (bake_environment).
+SUPPORTED = GEOMETRIC + SHADED + TRACED + LIGHT + ("SHADOW", "ENVIRONMENT")
 
 
 def bake_shaded(scene, kind, prim, u, v):
@@ -114,6 +117,7 @@ def bake_shaded(scene, kind, prim, u, v):
     roughness sqrt(alpha) averaged with their colour weights (1 for
     diffuse lobes)."""
     from types import SimpleNamespace
+    from . import bsdf
     from .integrator import _interaction
     from .nodes.context import ShadingContext
     from .render import prepare
@@ -151,7 +155,10 @@ def bake_shaded(scene, kind, prim, u, v):
         if mats.textures.emission:
             value = mats.textures.emission_at(h.mat, shading, value)
     elif kind == "ROUGHNESS":
-        value = np.repeat(average_roughness(mats.gather(h.mat, shading))[:, None], 3, axis=1)
+        lobes = mats.gather(h.mat, shading)
+        # Seen along the shading normal: the closures' weights at wo = N, as Cycles holds them.
+        wo_l = np.tile([0.0, 0.0, 1.0], (len(rows), 1))
+        value = np.repeat(average_roughness(lobes, bsdf.closure_weights(lobes, wo_l))[:, None], 3, axis=1)
     else:
         raise ValueError(f"{kind} is not a shaded bake type")
     value = np.where(np.isfinite(value), value, 0.0)
@@ -160,24 +167,34 @@ def bake_shaded(scene, kind, prim, u, v):
     return out
 
 
-def average_roughness(lobes):
-    """Cycles' ROUGHNESS bake: per point, the lobes' roughness averaged with
-    their weights |mean colour| x mix weight; a microfacet lobe's roughness
-    is sqrt(alpha), an Oren-Nayar lobe's its sigma.  Measured on bpy 5.0.1:
-    a Lambert Diffuse does not enter the average (Glossy 0.4 mixed with a
-    Diffuse bakes 0.4) and a point without such lobes bakes 1 (a Diffuse
-    alone bakes 1); the other lobes (translucent, sheen, subsurface,
-    transparent) are assumed to behave as Lambert's."""
-    from .lobe_ids import GLASS, GLOSSY, MIRROR, OREN_NAYAR, REFRACTION
+def average_roughness(lobes, w=None):
+    """Cycles' ROUGHNESS bake (surface_shader_average_roughness,
+    bsdf_get_roughness_pass_squared): per point, the lobes' roughness
+    averaged with weights |mean of the closure weight|: ``w`` (N, K, 3), the
+    lobes' weights as Cycles' closures hold them (bsdf.closure_weights:
+    colour x mix weight x the multiscatter Fresnel darkening and the
+    layering; None: colour x mix weight).  A microfacet lobe's
+    roughness is sqrt(alpha) (sqrt(sqrt(alpha_x alpha_y)) when anisotropic),
+    an Oren-Nayar lobe's its sigma, a transparent lobe's 0 (singular), a hair
+    lobe's 1; the diffuse class (Lambert, sheen, translucent) and subsurface
+    do not enter the average, and a point without such lobes bakes 1
+    (measured on bpy 5.0.1)."""
+    from .lobe_ids import GLASS, GLOSSY, GLOSSY_ANISOTROPIC, MIRROR, OREN_NAYAR, REFRACTION, TRANSPARENT
+    from .lobes import kinds_of_class
     kind = np.asarray(lobes.kind)
-    weight = np.abs(np.asarray(lobes.color).mean(axis=2))
-    if lobes.weight is not None:
-        weight = weight * np.asarray(lobes.weight)
-    microfacet = np.isin(kind, (GLOSSY, MIRROR, GLASS, REFRACTION))
-    rough = np.sqrt(np.clip(np.asarray(lobes.alpha), 0.0, None))
+    if w is None:
+        weight = np.abs(np.asarray(lobes.color).mean(axis=2))
+        if lobes.weight is not None:
+            weight = weight * np.asarray(lobes.weight)
+    else:
+        weight = np.abs(np.asarray(w).mean(axis=2))
+    microfacet = np.isin(kind, (GLOSSY, GLOSSY_ANISOTROPIC, MIRROR, GLASS, REFRACTION))
+    rough = np.where(microfacet, np.sqrt(np.clip(np.asarray(lobes.alpha), 0.0, None)), 1.0)
+    rough = np.where(kind == TRANSPARENT, 0.0, rough)
     if lobes.diffuse_roughness is not None:
         rough = np.where(kind == OREN_NAYAR, np.clip(lobes.diffuse_roughness, 0.0, 1.0), rough)
-    weight = weight * (microfacet | (kind == OREN_NAYAR))
+    left_out = np.isin(kind, kinds_of_class("diffuse")) & (kind != OREN_NAYAR)
+    weight = weight * ~left_out * (kind >= 0)
     total = weight.sum(axis=1)
     return np.where(total > 0, (weight * rough).sum(axis=1) / np.maximum(total, 1e-30), 1.0)
 
@@ -268,7 +285,8 @@ def light_filter(kind, pass_filter):
         raise ValueError(f"{kind} is not a light bake type")
     cls = kind.lower()
     value = "color" if not (direct or indirect) else ("combined" if "COLOR" in names else "light")
-    return BakeFilter((cls,), True, direct, cls == "diffuse", texel_emission=False), indirect, value
+    side = {"glossy": 1, "transmission": -1}.get(cls, 0)
+    return BakeFilter((cls,), True, direct, cls == "diffuse", texel_emission=False, glass_side=side), indirect, value
 
 
 def bake_light(scene, instance, prim, u, v, kind, pass_filter, settings, diff=None, progress=None):
@@ -282,7 +300,6 @@ def bake_light(scene, instance, prim, u, v, kind, pass_filter, settings, diff=No
     should_stop).  Returns a LightBake; texels without a primitive (or on a
     degenerate triangle) are 0 with alpha 0."""
     import dataclasses
-    from .integrator.bake_paths import BakeTarget
     from .render import render
     from .validate import validate_settings
 
@@ -290,12 +307,9 @@ def bake_light(scene, instance, prim, u, v, kind, pass_filter, settings, diff=No
     bake_filter, indirect, value = light_filter(kind, pass_filter)
     n = len(prim)
     out = np.zeros((n, 4), np.float32)
-    mesh = scene.meshes[scene.instances[instance].mesh]
-    ok = np.flatnonzero((prim >= 0) & (prim < len(mesh.triangles)))
-    if len(ok) == 0:
+    ok, target = _texel_target(scene, instance, prim, u, v, diff, bake_filter)
+    if target is None:
         return LightBake(out, np.zeros((n, 3)), None)
-    first = sum(len(scene.meshes[i.mesh].triangles) for i in scene.instances[:instance])
-    target = BakeTarget(first + prim[ok], u[ok], v[ok], None if diff is None else np.asarray(diff)[ok], bake_filter)
     colour = kind.capitalize() + " Color"
     passes = (colour,) if value != "combined" else ()
     settings = dataclasses.replace(settings, passes=tuple(passes), aovs=(), transparent=False,
@@ -321,3 +335,99 @@ def bake_light(scene, instance, prim, u, v, kind, pass_filter, settings, diff=No
         variance = np.zeros((n, 3))
         variance[rows] = texel_var[good]
     return LightBake(out, variance, result)
+
+
+def _texel_target(scene, instance, prim, u, v, diff, bake_filter=None):
+    """(rows of the texels with a primitive, their BakeTarget) of
+    ``scene.instances[instance]``; (rows, None) when no texel has one."""
+    from .integrator.bake_paths import BakeFilter, BakeTarget
+    mesh = scene.meshes[scene.instances[instance].mesh]
+    ok = np.flatnonzero((prim >= 0) & (prim < len(mesh.triangles)))
+    if len(ok) == 0:
+        return ok, None
+    first = sum(len(scene.meshes[i.mesh].triangles) for i in scene.instances[:instance])
+    # Cycles 3.5 changed how samples are jittered across a texel.
+    rejection = tuple(getattr(scene, "cycles_version", (5, 0, 0)))[:2] >= (3, 5)
+    return ok, BakeTarget(first + prim[ok], u[ok], v[ok], None if diff is None else np.asarray(diff)[ok],
+                          bake_filter or BakeFilter(), rejection=rejection)
+
+
+def bake_shadow(scene, instance, prim, u, v, settings, diff=None, progress=None):
+    """Cycles' SHADOW bake (blender/session.cpp bake_setup_pass): the baked
+    object is made a shadow catcher for the bake and the value is the
+    render's Shadow Catcher pass at its texels (every light class, direct
+    and indirect, a transparent film), 1 where nothing shadows.  Returns a
+    LightBake without variance (the pass is a ratio of estimates)."""
+    import dataclasses
+    from .render import render
+    from .validate import validate_settings
+
+    validate_settings(settings)
+    n = len(prim)
+    out = np.zeros((n, 4), np.float32)
+    instances = list(scene.instances)
+    instances[instance] = dataclasses.replace(instances[instance], shadow_catcher=True, holdout=False)
+    scene = dataclasses.replace(scene, instances=instances)
+    ok, target = _texel_target(scene, instance, prim, u, v, diff)
+    if target is None:
+        return LightBake(out, None, None)
+    settings = dataclasses.replace(settings, passes=("Shadow Catcher",), aovs=(), transparent=True)
+    result = render(scene, settings, progress, bake=target)
+    shadow = result.passes["Shadow Catcher"][0, :, :3].astype(np.float64)
+    rows = ok[target.valid]
+    out[rows, :3] = np.where(np.isfinite(shadow[target.valid]), shadow[target.valid], 0.0)
+    out[rows, 3] = 1.0
+    return LightBake(out, None, result)
+
+
+def bake_background(scene, instance, prim, u, v, settings, diff=None):
+    """Cycles' ENVIRONMENT bake (init_from_bake.h): per sample, the world
+    the camera would see along normalize(P), P the texel's world-space
+    point (jittered across the texel after sample 0 as the light bakes);
+    nothing is traced.  Returns a LightBake with the variance of each
+    texel's mean."""
+    from .render import prepare
+    from .validate import validate_settings
+
+    validate_settings(settings)
+    n = len(prim)
+    out = np.zeros((n, 4), np.float32)
+    variance = np.zeros((n, 3))
+    ok, target = _texel_target(scene, instance, prim, u, v, diff)
+    if target is None:
+        return LightBake(out, variance, None)
+    ctx = prepare(scene, settings, bake=target)
+    rows = np.flatnonzero(target.valid)
+    rng = np.random.default_rng([int(settings.seed), 0xE7])
+    total = np.zeros((len(rows), 3))
+    squares = np.zeros((len(rows), 3))
+    samples = int(settings.samples)
+    for sample in range(samples):
+        o, d, _tmax, _first = target.generate(rows, rng.random(len(rows)), rng.random(len(rows)),
+                                              np.full(len(rows), sample))
+        p = o + d
+        length = np.linalg.norm(p, axis=1, keepdims=True)
+        # A texel at the origin has no direction: Cycles' normalize gives 0, the world's +z here.
+        direction = np.where(length > 1e-30, p / np.maximum(length, 1e-30), np.array([0.0, 0.0, 1.0]))
+        value = np.asarray(world_along(ctx, scene.world, direction), np.float64)
+        value = np.where(np.isfinite(value), value, 0.0)
+        total += value
+        squares += value * value
+    mean = total / samples
+    out[ok[rows], :3] = mean
+    out[ok[rows], 3] = 1.0
+    if samples > 1:
+        variance[ok[rows]] = np.maximum(squares - total * mean, 0.0) / (samples * (samples - 1))
+    return LightBake(out, variance, None)
+
+
+def world_along(ctx, world, d):
+    """(N, 3) the world the camera sees along directions d: a procedural
+    world's expression shaded per direction as Cycles' background (renders
+    read its baked map), else what the render's camera rays see."""
+    from .environment import compile_world
+    from .integrator.catcher import background
+    texture = world.texture
+    if texture is not None and texture.shader is None and texture.expression is not None:
+        return compile_world(texture.expression)(d) * float(texture.strength)
+    return background(ctx, d)

@@ -295,6 +295,23 @@ def weights(lobes, wo):
     return out
 
 
+def closure_weights(lobes, wo):
+    """(N, K, 3) the lobes' weights as Cycles keeps them in a closure's
+    weight (what its Roughness bake averages with): ``weights`` without the
+    multiscatter GGX energy scale 1 / E(mu), which Cycles applies in eval
+    (bsdf->energy_scale); the multiple-bounce Fresnel darkening stays."""
+    w = weights(lobes, wo)
+    mu = np.clip(wo[:, 2], 0.0, 1.0)
+    for k in range(lobes.kind.shape[1]):
+        ms = np.nonzero(lobes.multiscatter[:, k] & kind_in(lobes.kind[:, k], (GLOSSY, GLOSSY_ANISOTROPIC, GLASS)))[0]
+        glass = lobes.kind[ms, k] == GLASS
+        for part in (ms[glass], ms[~glass]):
+            if len(part):
+                factor, darkening = _energy(lobes, k, part, mu[part])
+                w[part, k] *= np.where(factor > 0, darkening / np.where(factor > 0, factor, 1.0), 1.0)
+    return w
+
+
 def _weights_numpy(lobes, wo):
     n, kk = lobes.kind.shape
     mu = np.clip(wo[:, 2], 0.0, 1.0)

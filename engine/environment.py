@@ -147,7 +147,7 @@ class EnvironmentMap:
         # Mean luminance over the sphere (solid-angle weighted).
         self.mean_luminance = float((lum * sin_rows).sum() / (sin_rows.sum() * lum.shape[1]))
         self.dist = Distribution2D(self._table(lum, compensate))
-        self.shader = _compile(texture.shader) if getattr(texture, "shader", None) is not None else None
+        self.shader = compile_world(texture.shader) if getattr(texture, "shader", None) is not None else None
         self.sun = _Sun(texture.sun) if getattr(texture, "sun", None) is not None else None
 
     def _table(self, lum, compensate):
@@ -238,7 +238,7 @@ def _downsample(cells):
     return cells.reshape(h // k, k, w // k, k).sum(axis=(1, 3))
 
 
-def _compile(expression):
+def compile_world(expression):
     """A world colour expression as a function of directions (N, 3): the
     shading context Cycles gives the background (P = Generated = the
     direction, N = incoming = -direction, a camera ray)."""

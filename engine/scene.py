@@ -529,6 +529,9 @@ class EnvironmentTexture:
     # by its cone as Cycles' sun guiding does (``SunGuide``).
     shader: Optional[object] = None
     sun: Optional["SunGuide"] = None
+    # The procedural world's expression even where renders read the baked
+    # pixels: an Environment bake shades it exactly per direction (engine/bake.py).
+    expression: Optional[object] = None
 
 
 @dataclass

@@ -160,7 +160,7 @@ def _bake_node_tree(socket, strength, notes):
     # A sky's sun disc is smaller than a texel: such worlds are shaded per
     # direction (the bake only builds the sampling table).
     texture = renderer.EnvironmentTexture(pixels, strength, np.eye(3), 'Linear', name='baked world nodes',
-                                       shader=expr if skies else None, sun=sun)
+                                       shader=expr if skies else None, sun=sun, expression=expr)
     mean = tuple(float(c) * strength for c in pixels.reshape(-1, 3).mean(axis=0))
     return mean, texture
 

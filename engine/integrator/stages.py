@@ -603,6 +603,8 @@ def unshadowed(ctx, paths, v, e, p_sel, u, p_mis=None, ls=None):
                                time=path_time(paths))
     wi_l = v.local(ls.wi)
     f, pdf_b = bsdf.eval_pdf(v.lobes, v.wo_l, wi_l, *v.lobes_wo)
+    if ctx.bake is not None:   # a Glossy / Transmission bake counts one side of glass lobes
+        f = ctx.bake.glass_f(v, wi_l, f, paths.bounce == 0)
     if ctx.light_excludes:
         f = visibility.visible_lobes_f(ctx, v, wi_l, ls.wi, e, f)
     side_l = bump_correction.sided(v.lobes, wi_l, ls.wi, hit.ng)
@@ -680,6 +682,8 @@ def scatter(ctx, paths, v, depth):
         v.sampled_labels = np.empty(len(u), np.int8)   # the Hair BSDF's samples' kinds (visibility.ray_kind)
         wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u[:, 0], u[:, 1], u[:, 2], *v.lobes_wo, bent=bent,
                                                labels=v.sampled_labels)
+    if depth == 0 and ctx.bake is not None:
+        weight = ctx.bake.glass_weight(v, wi_l, weight, delta, np.ones(len(wi_l), bool))
     wi = v.world(wi_l)
     # Rows with a second normal (Bump Map Correction) judge a sample's side by its lobe's.
     side_l = bump_correction.sided(v.lobes, wi_l, reflected=bent)

@@ -122,11 +122,15 @@ def test_margin_applied_by_blender():
 
 
 @pytest.mark.parametrize("case", ["unsupported_type", "no_uv", "non_mesh"])
-def test_hostile_bakes_report_clearly(case):
+def test_hostile_bakes_report_clearly(case, monkeypatch):
     scene, obj, image = _scene()
     scene.render.engine = 'EMBER'
     kind = 'POSITION'
     if case == "unsupported_type":
+        # Ember bakes every type Blender offers: a type it does not know is played by SHADOW
+        from addon import backend
+        bake = backend.engine().bake
+        monkeypatch.setattr(bake, 'SUPPORTED', tuple(k for k in bake.SUPPORTED if k != 'SHADOW'))
         kind = 'SHADOW'
     elif case == "no_uv":
         obj.data.uv_layers.remove(obj.data.uv_layers[0])
@@ -214,6 +218,16 @@ def _shaded_material(obj, kind):
             links.new(shader.outputs[0], mix.inputs[1])
             links.new(nodes.new('ShaderNodeBsdfDiffuse').outputs[0], mix.inputs[2])
             shader = mix
+        elif kind == 'two_glossy':   # with a second, rougher and tinted Glossy by a 0.4 mix: Cycles
+            # weighs each by its closure weight, the multiscatter GGX energy compensation included
+            mix = nodes.new('ShaderNodeMixShader')
+            mix.inputs['Fac'].default_value = 0.4
+            other = nodes.new('ShaderNodeBsdfGlossy')
+            other.inputs['Roughness'].default_value = 0.8
+            other.inputs['Color'].default_value = (0.3, 0.5, 0.9, 1.0)
+            links.new(shader.outputs[0], mix.inputs[1])
+            links.new(other.outputs[0], mix.inputs[2])
+            shader = mix
         elif kind == 'oren_nayar':   # a Diffuse BSDF with that roughness: Oren-Nayar's sigma
             shader = nodes.new('ShaderNodeBsdfDiffuse')
             links.new(ramp.outputs['Result'], shader.inputs['Roughness'])
@@ -225,7 +239,8 @@ def _shaded_material(obj, kind):
 
 @pytest.mark.parametrize("kind,material", [('EMIT', 'emission'), ('EMIT', 'principled'),
                                            ('ROUGHNESS', 'roughness'), ('ROUGHNESS', 'mix'),
-                                           ('ROUGHNESS', 'oren_nayar'), ('ROUGHNESS', 'principled_roughness')])
+                                           ('ROUGHNESS', 'oren_nayar'), ('ROUGHNESS', 'principled_roughness'),
+                                           ('ROUGHNESS', 'two_glossy')])
 def test_shaded_bakes_match_cycles(kind, material):
     """Emit and Roughness bakes of textured closures: Ember's node evaluation
     at the texel against Cycles' per texel (1 sample: the texel centre),
@@ -251,17 +266,50 @@ AO_SAMPLES = 256
 AO_BLOCK = 4
 
 
-def test_ao_bake_matches_cycles():
+def _ao_points():
+    """40 spheres (radius 0.05-0.12) hovering 0.15-0.4 over the plane: a point cloud made by geometry nodes."""
+    from test_points_parity import point_object
+    rng = np.random.default_rng(7)
+    positions = np.c_[rng.uniform(-0.8, 0.8, (40, 2)), rng.uniform(0.15, 0.4, 40)]   # none cuts the plane
+    point_object("ao_points", positions, rng.uniform(0.05, 0.12, 40), np.ones((40, 4)),
+                 bpy.data.materials.new("points"))
+
+
+def _ao_curves(scene):
+    """60 round (3D) strands of 5 points, 0.15-0.55 over the plane, radius 0.03 to 0.01."""
+    rng = np.random.default_rng(8)
+    count, points = 60, 5
+    base = np.c_[rng.uniform(-0.8, 0.8, (count, 2)), np.full(count, 0.15)]
+    k = np.arange(points)[None, :, None]
+    lean = np.c_[rng.uniform(-0.1, 0.1, (count, 2)), np.full(count, 0.1)][:, None, :]
+    positions = base[:, None, :] + k * lean
+    data = bpy.data.hair_curves.new("ao_strands")
+    data.add_curves([points] * count)
+    data.attributes['position'].data.foreach_set('vector', positions.reshape(-1).astype(np.float32))
+    radius = data.attributes.new('radius', 'FLOAT', 'POINT')
+    radius.data.foreach_set('value', np.tile(np.linspace(0.03, 0.01, points), count).astype(np.float32))
+    scene.collection.objects.link(bpy.data.objects.new("ao_strands", data))
+    scene.cycles_curves.shape = 'THICK'
+
+
+@pytest.mark.parametrize("occluder", ['cube', 'points', 'curves'])
+def test_ao_bake_matches_cycles(occluder):
     """AO bake of a plane under a tilted cube (the cube occludes; the world's
-    AO distance 0.8 cuts the far rays) against Cycles' AO bake, both at 256
-    samples: the means of 4 x 4 texel blocks, z-tested with binomial
-    variances p (1 - p) / S per texel (an upper bound for Cycles' stratified
-    samples), Sidak over the blocks; one statistical family."""
+    AO distance 0.8 cuts the far rays), or under a point cloud, against
+    Cycles' AO bake, both at 256 samples: the means of 4 x 4 texel blocks,
+    z-tested with binomial variances p (1 - p) / S per texel (an upper bound
+    for Cycles' stratified samples), Sidak over the blocks; one statistical
+    family each."""
     from ember_stats import detectable, family_level, z_scores, z_threshold
     scene = empty_factory_scene()
     bpy.ops.mesh.primitive_plane_add(size=2.0)
     plane = bpy.context.active_object
-    bpy.ops.mesh.primitive_cube_add(size=0.6, location=(0.2, -0.1, 0.45), rotation=(0.3, 0.2, 0.4))
+    if occluder == 'cube':
+        bpy.ops.mesh.primitive_cube_add(size=0.6, location=(0.2, -0.1, 0.45), rotation=(0.3, 0.2, 0.4))
+    elif occluder == 'points':
+        _ao_points()
+    else:
+        _ao_curves(scene)
     mat, image = bake_target_material()
     plane.data.materials.append(mat)
     for o in scene.objects:
@@ -294,11 +342,11 @@ def test_ao_bake_matches_cycles():
         return blocks(np.clip(img * (1 - img), 1.0 / AO_SAMPLES, None) / AO_SAMPLES) / AO_BLOCK ** 2
     a, b, va, vb = blocks(ember), blocks(cycles), block_var(ember), block_var(cycles)
     count = a.size
-    level = family_level("bake AO blocks", count)
+    level = family_level("bake AO blocks" if occluder == 'cube' else f"bake AO {occluder}", count)
     z = z_scores(a, va, b, vb)
     se = float(np.sqrt(np.median(va + vb)))
-    print(f"AO: Cycles mean {cycles.mean():.4f} (min {cycles.min():.3f}), Ember mean {ember.mean():.4f} "
+    print(f"AO under the {occluder}: Cycles mean {cycles.mean():.4f} (min {cycles.min():.3f}), Ember mean {ember.mean():.4f} "
           f"(min {ember.min():.3f}); {count} blocks, max |z| {np.abs(z).max():.2f} (threshold "
           f"{z_threshold(level):.2f}); detectable block difference {detectable(se, level):.4f}")
-    assert cycles.min() < 0.6, "the cube did not occlude: the test would not see a wrong AO"
+    assert cycles.min() < 0.6, f"the {occluder} did not occlude: the test would not see a wrong AO"
     assert np.abs(z).max() < z_threshold(level)

@@ -1,5 +1,5 @@
-"""Light bakes (issue 26): Diffuse, Glossy and Combined bakes with Blender's
-pass filter, Ember against Cycles' own bake of the same object.
+"""Light bakes (issue 26): Diffuse, Glossy, Transmission, Combined, Shadow and
+Environment bakes with Blender's pass filter, Ember against Cycles' own bake of the same object.
 
 Scene: a 2 x 2 plane (the baked object, 32 x 32 float image, margin 0) with
 a Mix of a checker-coloured Diffuse (0.7) and a GGX Glossy (roughness 0.3,
@@ -15,6 +15,10 @@ blocks per channel and on the whole image's mean, one statistical family
 per case (4: diffuse, glossy, transmission, combined), power printed and
 asserted. The Transmission case bakes a variant of the scene: a Refraction
 BSDF with the checker colour over a floor lit by a point light below the plane.
+Shadow and Environment bakes and a Glass BSDF's Glossy / Transmission bakes
+(GLASSY: the glass over a Diffuse floor under a world coloured by the
+direction) are one family each; the Shadow bake has no per-texel variance
+(a ratio), so Ember bakes it with ENGINE_SEEDS seeds and uses their scatter.
 Diffuse Color alone is a colour pass (the closure colour at the texel
 centre at 1 sample): compared per texel, no statistics.
 """
@@ -30,7 +34,7 @@ for _path in (HERE, os.path.dirname(HERE)):
     if _path not in sys.path:
         sys.path.insert(0, _path)
 
-from ember_testlib import empty_factory_scene, scene_fingerprint  # noqa: E402
+from ember_testlib import empty_factory_scene, node_material, scene_fingerprint  # noqa: E402
 
 SIZE = 32
 BLOCK = 4
@@ -54,11 +58,23 @@ CASES = {
     'combined_indirect': ('COMBINED', {'INDIRECT', 'EMIT', 'DIFFUSE', 'GLOSSY'}, 0.005, 0.02),
     # The plane of TRANSMISSIVE: light through its Refraction BSDF (the world and the floor below).
     'transmission': ('TRANSMISSION', {'DIRECT', 'INDIRECT', 'COLOR'}, 0.01, 0.05),
+    # Cycles' Shadow bake: the plane as a shadow catcher, its Shadow Catcher pass (the cube's shadow).
+    'shadow': ('SHADOW', set(), 0.01, 0.05),
+    # The world seen along each texel's position (GLASSY's world: its colour is the direction).
+    'environment': ('ENVIRONMENT', set(), 0.01, 0.05),
+    # A Glass BSDF in place of the Glossy: its reflection alone in a Glossy bake, its refraction alone
+    # in a Transmission bake (Cycles splits one glass closure between the two passes).
+    # (Dim, noisy light: 1024 samples hold 2.5 % on the image mean; the bug this holds was +500 %.)
+    'glass_glossy': ('GLOSSY', {'DIRECT', 'INDIRECT', 'COLOR'}, 0.025, 0.2),
+    'glass_transmission': ('TRANSMISSION', {'DIRECT', 'INDIRECT', 'COLOR'}, 0.015, 0.12),
 }
 # Cases baked on the scene variant with a Refraction BSDF in place of the Glossy.
 TRANSMISSIVE = ('transmission',)
+# Cases baked on the variant with a Glass BSDF there, over the lit floor, under a world whose colour
+# varies with the direction.
+GLASSY = ('environment', 'glass_glossy', 'glass_transmission')
 # Ember's samples where EMBER_SAMPLES leaves too little power (dim, noisy indirect light).
-SAMPLES = {'combined_indirect': 1024}
+SAMPLES = {'combined_indirect': 1024, 'glass_glossy': 1024, 'glass_transmission': 1024}
 # One statistical family each for Diffuse and Glossy; the Combined bake and
 # the filtered bakes share one (test_filtered_bakes_match_cycles).
 FILTERED = ('combined', 'diffuse_direct', 'combined_indirect')
@@ -69,6 +85,7 @@ def bake_scene(case=None):
     cases: a Refraction BSDF with the checker's colour in place of the
     Glossy, over a lit floor that it sees through)."""
     transmissive = case in TRANSMISSIVE
+    glassy = case in GLASSY
     scene = empty_factory_scene()
     bpy.ops.mesh.primitive_plane_add(size=2.0)
     plane = bpy.context.active_object
@@ -88,7 +105,12 @@ def bake_scene(case=None):
     links.new(coords.outputs['UV'], checker.inputs['Vector'])
     diffuse = nodes.new('ShaderNodeBsdfDiffuse')
     links.new(checker.outputs['Color'], diffuse.inputs['Color'])
-    if transmissive:
+    if glassy:
+        glossy = nodes.new('ShaderNodeBsdfGlass')
+        glossy.distribution = 'GGX'
+        glossy.inputs['IOR'].default_value = 1.45
+        glossy.inputs['Color'].default_value = (0.9, 0.85, 0.7, 1.0)
+    elif transmissive:
         glossy = nodes.new('ShaderNodeBsdfRefraction')
         glossy.distribution = 'GGX'
         glossy.inputs['IOR'].default_value = 1.45
@@ -123,9 +145,9 @@ def bake_scene(case=None):
     bsdf.inputs['Roughness'].default_value = 1.0
     cube.data.materials.append(red)
 
-    if transmissive:   # a white floor below, lit by a point light beside the plane
+    if transmissive or glassy:   # a floor below, lit by a point light beside the plane
         bpy.ops.mesh.primitive_plane_add(size=6.0, location=(0.0, 0.0, -0.8))
-        bpy.context.active_object.data.materials.append(red)
+        bpy.context.active_object.data.materials.append(diffuse_floor() if glassy else red)
         bpy.ops.object.light_add(type='POINT', location=(1.8, -1.5, -0.2))
         bpy.context.active_object.data.energy = 150.0
     bpy.ops.object.light_add(type='AREA', location=(-0.8, 0.6, 2.2), rotation=(0.3, -0.3, 0.0))
@@ -138,12 +160,33 @@ def bake_scene(case=None):
     scene.world.use_nodes = True
     scene.world.node_tree.nodes['Background'].inputs['Color'].default_value = (0.25, 0.25, 0.3, 1.0)
     scene.world.node_tree.nodes['Background'].inputs['Strength'].default_value = 1.0
+    if glassy:
+        world_by_direction(scene.world.node_tree)
     scene.render.bake.margin = 0
     for obj in scene.objects:
         obj.select_set(False)
     plane.select_set(True)
     bpy.context.view_layer.objects.active = plane
     return scene, plane, image
+
+
+def diffuse_floor():
+    """GLASSY's floor: a Diffuse BSDF."""
+    return node_material("floor", 'ShaderNodeBsdfDiffuse', {'Color': (0.8, 0.3, 0.2, 1.0)})
+
+
+def world_by_direction(tree):
+    """The world's colour |direction| x 0.5 + 0.05 per channel (its Generated coordinates are the direction)."""
+    coords = tree.nodes.new('ShaderNodeTexCoord')
+    absolute = tree.nodes.new('ShaderNodeVectorMath')
+    absolute.operation = 'ABSOLUTE'
+    scale = tree.nodes.new('ShaderNodeVectorMath')
+    scale.operation = 'MULTIPLY_ADD'
+    scale.inputs[1].default_value = (0.5, 0.5, 0.5)
+    scale.inputs[2].default_value = (0.05, 0.05, 0.05)
+    tree.links.new(coords.outputs['Generated'], absolute.inputs[0])
+    tree.links.new(absolute.outputs[0], scale.inputs[0])
+    tree.links.new(scale.outputs[0], tree.nodes['Background'].inputs['Color'])
 
 
 def run_bake(scene, image, engine, kind, pass_filter, samples, seed=0):
@@ -185,37 +228,61 @@ def load_reference(case, scene):
     return ref['mean'], ref['var']
 
 
-def ember_bake(scene, image, kind, pass_filter, samples=EMBER_SAMPLES):
+# The engine functions behind the add-on's light, Shadow and Environment bakes.
+BAKE_FUNCTIONS = ('bake_light', 'bake_shadow', 'bake_background')
+# Cases whose value has no per-texel variance (Shadow: a ratio of estimates): Ember bakes them
+# with this many seeds, their scatter giving the variance of the mean.
+ENGINE_SEEDS = {'shadow': 4}
+# Relative rounding added to the blocks' standard error where a bake has noise-free blocks (the
+# environment's blue is 0.05 everywhere: Cycles' float arithmetic gives 0.0499995).
+ROUNDING = {'shadow': 1e-5, 'environment': 1e-4}
+
+
+def ember_bake(scene, image, kind, pass_filter, samples=EMBER_SAMPLES, seed=0):
     """Ember's bake through bpy.ops.object.bake (what a user gets) and the
     same bake's per-texel variance from the engine (same seed and
-    samples: the same numbers)."""
-    from addon import bake as addon_bake
+    samples: the same numbers; None for a Shadow bake)."""
+    from addon import backend
+    engine = backend.engine()
     captured = {}
-    original = addon_bake._bake_light
+    originals = {name: getattr(engine.bake, name) for name in BAKE_FUNCTIONS}
 
-    def spy(engine, renderer, depsgraph, obj, pass_type, pass_filter_, prim, u, v, diff):
-        real = renderer.bake.bake_light
-
+    def spy(real):
         def keep(*args, **kwargs):
             captured['baked'] = result = real(*args, **kwargs)
-            captured['prim'] = prim
             return result
-        renderer.bake.bake_light = keep
-        try:
-            return original(engine, renderer, depsgraph, obj, pass_type, pass_filter_, prim, u, v, diff)
-        finally:
-            renderer.bake.bake_light = real
-    addon_bake._bake_light = spy
+        return keep
+    for name, real in originals.items():
+        setattr(engine.bake, name, spy(real))
     try:
-        pixels = run_bake(scene, image, 'EMBER', kind, pass_filter, samples)
+        pixels = run_bake(scene, image, 'EMBER', kind, pass_filter, samples, seed)
     finally:
-        addon_bake._bake_light = original
+        for name, real in originals.items():
+            setattr(engine.bake, name, real)
     baked = captured['baked']
-    assert baked.variance is not None
-    var = baked.variance.reshape(SIZE, SIZE, 3)
     assert np.allclose(baked.rgba.reshape(SIZE, SIZE, 4)[..., :3], pixels[..., :3], atol=1e-6), \
         "the image is not the bake the engine returned"
+    var = None if baked.variance is None else baked.variance.reshape(SIZE, SIZE, 3)
     return pixels[..., :3], var, baked.result
+
+
+def ember_estimate(case, scene, image, kind, pass_filter, samples):
+    """(mean, variance of the mean, samples per bake, seconds) of Ember's bake of ``case``."""
+    seeds = ENGINE_SEEDS.get(case)
+    if seeds is None:
+        ember, var, result = ember_bake(scene, image, kind, pass_filter, samples)
+        assert var is not None
+        if result is not None:
+            assert result.samples == samples
+        return ember, var, (result.stats.get('seconds', 0) if result is not None else 0.0)
+    bakes, seconds = [], 0.0
+    for seed in range(1, seeds + 1):
+        ember, _var, result = ember_bake(scene, image, kind, pass_filter, samples, seed)
+        assert result.samples == samples
+        bakes.append(ember)
+        seconds += result.stats.get('seconds', 0)
+    bakes = np.stack(bakes)
+    return bakes.mean(axis=0), bakes.var(axis=0, ddof=1) / seeds, seconds
 
 
 def _blocks(img):
@@ -230,10 +297,11 @@ def compare(case, level):
     scene, plane, image = bake_scene(case)
     ref, ref_var = load_reference(case, scene)
     samples = SAMPLES.get(case, EMBER_SAMPLES)
-    ember, var, result = ember_bake(scene, image, kind, pass_filter, samples)
-    assert result.samples == samples
+    ember, var, seconds = ember_estimate(case, scene, image, kind, pass_filter, samples)
     a, b = _blocks(ember), _blocks(ref)
     va, vb = _blocks(var) / BLOCK ** 2, _blocks(ref_var) / BLOCK ** 2
+    if case in ROUNDING:   # blocks without noise (the Shadow Catcher pass is 1 in the open) differ by rounding
+        vb = vb + (ROUNDING[case] * b) ** 2
     z = (a - b) / np.sqrt(va + vb)
     mean_a, mean_b = ember.mean(), ref.mean()
     se_mean = float(np.sqrt(var.sum() + ref_var.sum()) / ember.size)
@@ -244,7 +312,7 @@ def compare(case, level):
     print(f"{case}: Cycles mean {mean_b:.4f}, Ember {mean_a:.4f} ({(mean_a / mean_b - 1) * 100:+.2f} % "
           f"+- {se_mean / mean_b * 100:.2f} %, z {z_mean:+.2f}); {a.size} block-channels, max |z| "
           f"{np.abs(z).max():.2f} at {worst}; detects {image_power * 100:.2f} % (image), "
-          f"{block_power * 100:.1f} % (median block); {result.stats.get('seconds', 0):.1f} s")
+          f"{block_power * 100:.1f} % (median block); {seconds:.1f} s")
     assert b.min() > 0 and np.ptp(b) > 0.05 * b.max(), "the bake did not vary: the test would see little"
     return z, z_mean, image_power, block_power
 
@@ -261,15 +329,43 @@ def _assert_agrees(case, result, threshold):
 BLOCK_TESTS = 3 * (SIZE // BLOCK) ** 2 + 1   # block-channels and the image mean of one bake
 
 
-# Found by this test, cause not found yet: Ember's Transmission bake of the
-# Refraction BSDF is about 10 % low in blue (red and green agree) in the
-# quadrant whose floor the point light lights (block |z| up to 27).
-TRANSMISSION_GAP = pytest.mark.xfail(strict=True, reason="Transmission bake ~10 % low in blue where the floor "
-                                                         "below is lit (cause not found)")
+# Found by this test: the Transmission bake of the Refraction BSDF is 10 %
+# low in blue where a point light sits below the plane at a grazing angle
+# (block |z| 27), and the Glass BSDF's 1.6 % +- 0.2 % low (z -8): all in the
+# Direct part (Cycles 0.0009, Ember 0; Indirect agrees to 0.1 %).  Cause:
+# Ember's rough refraction returns 0 for directions no microfacet refracts
+# into (pbrt's check), Cycles evaluates them (bsdf_microfacet_eval: "TODO:
+# check if the refraction configuration is valid"), so its light sampling
+# brings light from outside the refraction cone.  Evaluating them as Cycles
+# passes both (+0.24 % +- 0.60 %, -0.42 % +- 0.19 %) but makes eval's pdf
+# disagree with the sampler (test_lobe_registry's chi-square): not done.
+CYCLES_REFRACTION = pytest.mark.xfail(strict=True, reason="Cycles evaluates refraction pairs no microfacet "
+                                                          "joins; Ember does not (Direct transmission 0)")
 
 
-@pytest.mark.parametrize("case", ['diffuse', 'glossy', pytest.param('transmission', marks=TRANSMISSION_GAP)])
+@pytest.mark.parametrize("case", ['diffuse', 'glossy', pytest.param('transmission', marks=CYCLES_REFRACTION)])
 def test_light_bake_matches_cycles(case):
+    from ember_stats import family_level, z_threshold
+    level = family_level(f"light bake {case}", BLOCK_TESTS)
+    _assert_agrees(case, compare(case, level), z_threshold(level))
+
+
+@pytest.mark.parametrize("case", ['shadow', 'environment'])
+def test_shadow_and_environment_bakes_match_cycles(case):
+    """Shadow: the plane as Cycles bakes it, a shadow catcher for the bake,
+    its Shadow Catcher pass (the cube's shadow, 1 in the open); Environment:
+    the world (its colour the direction) along each texel's position."""
+    from ember_stats import family_level, z_threshold
+    level = family_level(f"light bake {case}", BLOCK_TESTS)
+    _assert_agrees(case, compare(case, level), z_threshold(level))
+
+
+@pytest.mark.parametrize("case", ['glass_glossy', pytest.param('glass_transmission', marks=CYCLES_REFRACTION)])
+def test_glass_bakes_split_like_cycles(case):
+    """A Glass BSDF in a Glossy bake brings only its reflected light and in
+    a Transmission bake only its refracted light (Cycles counts one glass
+    closure's light by the side it leaves to: film/light_passes.h).  The
+    Transmission bake is 1.6 % +- 0.2 % low: CYCLES_REFRACTION."""
     from ember_stats import family_level, z_threshold
     level = family_level(f"light bake {case}", BLOCK_TESTS)
     _assert_agrees(case, compare(case, level), z_threshold(level))
@@ -326,6 +422,52 @@ def test_light_bake_hostile():
     with pytest.raises(ValueError) as err:
         engine.bake.light_filter('DIFFUSE', {'DIRECT', 'SHADOW'})
     assert "SHADOW" in str(err.value)
+
+
+def test_shadow_environment_glass_bakes_hostile():
+    """Hostile input for the Shadow and Environment bakes and the glass
+    split: Blender refuses an object without a UV map; the engine bakes a
+    mesh with a zero-area triangle, texels off the mesh and NaN
+    barycentrics to finite pixels (alpha 0 on the degenerate triangle and
+    off the mesh), a texel at the world origin included."""
+    from addon import backend
+    engine = backend.engine()
+    scene, plane, image = bake_scene()
+    scene.render.engine = 'EMBER'
+    plane.data.uv_layers.remove(plane.data.uv_layers[0])
+    for kind in ('SHADOW', 'ENVIRONMENT'):
+        with pytest.raises(RuntimeError) as err:
+            bpy.ops.object.bake(type=kind, margin=0)
+        print(kind, "without UV ->", str(err.value).strip())
+        assert "UV" in str(err.value)
+    positions = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [2, 2, 0], [2, 2, 0], [3, 3, 0]], np.float64)
+    corners = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    mesh = engine.Mesh(positions, np.array([[0, 1, 2], [3, 4, 5]]), uvs=np.stack([corners, corners]))
+    glass = engine.Material("glass", (engine.Lobe("glass", (0.9, 0.9, 0.9), 0.3, ior=1.45),))
+    world = engine.World((0.2, 0.3, 0.4))
+    below = np.eye(4)
+    below[2, 3] = -1.0
+    tiny = engine.Scene(meshes=[mesh], world=world, materials=[glass],   # the baked object second
+                        instances=[engine.Instance(mesh=0, matrix=below, materials=[0], name="other"),
+                                   engine.Instance(mesh=0, materials=[0], name="baked")])
+    prim = np.array([0, 0, 1, -1, 7, 0])
+    u = np.array([0.3, 0.5, 0.2, 0.5, 0.5, np.nan])   # texel 1 is at the world origin
+    v = np.array([0.3, 0.0, 0.2, 0.5, 0.5, 0.2])
+    settings = engine.RenderSettings(samples=3, max_bounces=2)
+    bakes = {
+        'shadow': engine.bake.bake_shadow(tiny, 1, prim, u, v, settings),
+        'environment': engine.bake.bake_background(tiny, 1, prim, u, v, settings),
+        'glossy': engine.bake.bake_light(tiny, 1, prim, u, v, 'GLOSSY', {'DIRECT', 'INDIRECT', 'COLOR'}, settings),
+        'transmission': engine.bake.bake_light(tiny, 1, prim, u, v, 'TRANSMISSION', {'DIRECT', 'INDIRECT'},
+                                               settings),
+    }
+    for name, baked in bakes.items():
+        print(name, baked.rgba.tolist())
+        assert np.isfinite(baked.rgba).all(), name
+        assert baked.rgba[:2, 3].tolist() == [1.0, 1.0] and baked.rgba[2:5, 3].tolist() == [0.0, 0.0, 0.0], name
+    assert np.allclose(bakes['environment'].rgba[:2, :3], (0.2, 0.3, 0.4))
+    empty = engine.bake.bake_background(tiny, 1, np.zeros(0, np.int64), np.zeros(0), np.zeros(0), settings)
+    assert empty.rgba.shape == (0, 4)
 
 
 def test_light_bake_progress_and_cancel(monkeypatch):

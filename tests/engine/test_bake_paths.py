@@ -56,3 +56,36 @@ def test_mirror_repeat_stays_in_range_and_is_cycles():
         assert np.allclose(m[inside], x[inside])
     assert np.isclose(_mirror(np.array([1.2]), 1.0)[0], 0.8)      # mirrored back, not wrapped
     assert np.isclose(_mirror(np.array([-0.1]), 1.0)[0], 0.1)
+
+
+def test_jitter_stays_inside_the_triangle_as_cycles():
+    """Cycles 3.5+'s bake_jitter_barycentric: a jitter outside the triangle
+    is retried with hashed numbers, the centre kept after 10 misses; sample
+    0 (not jittered) stays at the centre."""
+    from engine.integrator.bake_paths import _jitter_inside
+    rng = np.random.default_rng(3)
+    n = 2000
+    u, v = np.full(n, 0.05), np.full(n, 0.05)           # near a corner: most jitters leave the triangle
+    d = np.tile([0.4, 0.0, 0.0, 0.4], (n, 1))
+    jitter = np.arange(n) > 0
+    ju, jv = _jitter_inside(u, v, d, jitter, rng.random(n), rng.random(n))
+    moved = (ju != u) | (jv != v)
+    assert ju[0] == u[0] and jv[0] == v[0]
+    inside = (ju > 0) & (jv > 0) & (ju + jv < 1)
+    assert inside.all()
+    assert moved[1:].mean() > 0.9                      # the retries find the triangle's part of the texel
+    assert np.all(np.abs(ju - u) <= 0.2 + 1e-12) and np.all(np.abs(jv - v) <= 0.2 + 1e-12)
+    # Inside the texel's part of the triangle the positions are uniform: as many left as right of its middle.
+    part = moved & (ju > 0.0) & (ju < 0.25)
+    assert abs((ju[part] < 0.125).mean() - 0.5) < 0.05
+    # A texel on a sliver of a triangle: every try misses, the centre is kept.
+    su, sv = _jitter_inside(np.array([0.5]), np.array([1e-9]), np.array([[0.0, 0.0, 0.0, 1e3]]),
+                            np.array([True]), np.array([0.9]), np.array([0.9]))
+    assert (su[0], sv[0]) == (0.5, 1e-9)
+
+
+def test_glossy_and_transmission_bakes_count_one_side_of_glass():
+    assert light_filter('GLOSSY', {'DIRECT', 'INDIRECT', 'COLOR'})[0].glass_side == 1
+    assert light_filter('TRANSMISSION', {'DIRECT'})[0].glass_side == -1
+    assert light_filter('DIFFUSE', {'DIRECT'})[0].glass_side == 0
+    assert light_filter('COMBINED', {'DIRECT', 'GLOSSY'})[0].glass_side == 0   # Cycles keeps glass whole there
