@@ -159,7 +159,11 @@ def _curve_fields():
     Instance's placement fields."""
     skip = {"positions", "radii", "attributes"}
     return ([("points", np.ndarray), ("radii", np.ndarray), ("offsets", np.ndarray)]
-            + [f for f in _point_cloud_fields() if f[0] not in skip])
+            + [f for f in _point_cloud_fields() if f[0] not in skip]
+            + [("point_attributes", Optional[dict], field(default=None)),
+               ("curve_attributes", Optional[dict], field(default=None)),
+               ("uv", Optional[str], field(default=None)),
+               ("first_curve", int, field(default=0))])
 
 
 HairCurves = make_dataclass("HairCurves", _curve_fields())
@@ -168,7 +172,13 @@ HairCurves.__doc__ = """Strands (Blender's Curves objects): round Catmull-Rom cu
 
     points: (N, 3) object-space control points; radii: (N,) per point (the
     radius attribute); offsets: (C + 1,) first point of each curve and the
-    total (Blender's curve_offset_data); the other fields as ``Instance``'s.
+    total (Blender's curve_offset_data); point_attributes {name: (N, C)} per
+    control point (mixed linearly along a segment, as Cycles), curve_attributes
+    {name: (C, K)} per curve, read by the Attribute, Color Attribute and UV Map
+    nodes; uv: the name of the 2-column attribute that is the strands' active
+    UV map (None: no UV map); first_curve: the index of the first curve among
+    those of its Cycles Hair (an emitter's particle systems are one): the
+    Curves Info node's Random hashes it; the other fields as ``Instance``'s.
     """
 
 

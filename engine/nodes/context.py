@@ -25,6 +25,14 @@ LUMA = np.array([0.2126, 0.7152, 0.0722])
 # name holds a NUL).
 POINTINESS = "\x00pointiness"
 RANDOM_PER_ISLAND = "\x00random_per_island"
+# Reserved names of the Curves Info node's per-strand data (engine.curve_attributes
+# gives them to curve segments only; elsewhere they read 0, as Cycles' missing
+# attribute): intercept and thickness along the strand, its length and random.
+CURVE_INTERCEPT = "\x00curve_intercept"
+CURVE_THICKNESS = "\x00curve_thickness"
+CURVE_LENGTH = "\x00curve_length"
+CURVE_RANDOM = "\x00curve_random"
+IS_STRAND = "\x00is_strand"
 
 PATH_COLUMNS = ("Diffuse Depth", "Glossy Depth", "Transmission Depth", "Transparent Depth", "Ray Length",
                 "Is Singular Ray")
@@ -189,10 +197,11 @@ class ShadingContext:
     made from UVs alone).  rays: the renderer's handle for nodes that cast
     rays from the points (engine.nodes.rays.NodeRays: AO, Bevel), or None
     where Cycles does not ray-trace in shaders (light samples, shadow rays,
-    worlds): those nodes then return their no-ray value."""
+    worlds): those nodes then return their no-ray value.  fibre (N, 3) or
+    None: on curve segments the strand's dC/du (Cycles' dPdu), 0 elsewhere."""
 
     def __init__(self, n, tris=None, prim=None, bary=None, p=None, ng=None, ns=None, wo=None,
-                 back=None, depth=None, ray=None, uv=None, path=None):
+                 back=None, depth=None, ray=None, uv=None, path=None, fibre=None):
         self.n = n
         self.tris = tris
         self.prim = prim
@@ -205,6 +214,7 @@ class ShadingContext:
         self.depth = np.zeros(n, np.int32) if depth is None else depth
         self.ray = np.ones(n, np.uint8) if ray is None else ray
         self.path = path
+        self.fibre = fibre
         self.rays = None
         self._cache = {}
         if uv is not None:
@@ -228,7 +238,8 @@ class ShadingContext:
             bary = getattr(hit, "bary", None)
             ctx = cls(len(hit.p), tris, hit.prim, bary, hit.p, hit.ng, hit.ns, hit.wo,
                       getattr(hit, "back", None), getattr(hit, "depth", None), getattr(hit, "ray", None),
-                      uv=None if bary is not None else hit.uv, path=getattr(hit, "path", None))
+                      uv=None if bary is not None else hit.uv, path=getattr(hit, "path", None),
+                      fibre=getattr(hit, "fibre", None))
             hit.shading = ctx
         return ctx
 
@@ -255,7 +266,7 @@ class ShadingContext:
         out = ShadingContext.__new__(ShadingContext)
         out.n = len(rows)
         out.tris = self.tris
-        for name in ("prim", "bary", "p", "ng", "ns", "wo", "back", "depth", "ray", "path"):
+        for name in ("prim", "bary", "p", "ng", "ns", "wo", "back", "depth", "ray", "path", "fibre"):
             value = getattr(self, name)
             setattr(out, name, None if value is None else value[rows])
         out.rays = None if self.rays is None else self.rays.take(rows)
@@ -275,7 +286,7 @@ class ShadingContext:
         pick = (lambda a: None if a is None else a[rows])
         out = ShadingContext(k * n, self.tris, pick(self.prim), None, self.p[rows] + dp, self.ng[rows],
                              self.ns[rows], self.wo[rows], self.back[rows], self.depth[rows], self.ray[rows],
-                             path=pick(self.path))
+                             path=pick(self.path), fibre=pick(self.fibre))
         out.rays = None if self.rays is None else self.rays.take(rows)
         if self.bary is not None and self.tris is not None:
             moves = [_bary_of_offset(self.tris, self.prim, step) for step in steps]
@@ -288,7 +299,7 @@ class ShadingContext:
         """The same points moved by world offsets dp (N, 3) within their
         triangles' planes; interpolated attributes move with them."""
         out = ShadingContext(self.n, self.tris, self.prim, None, self.p + dp, self.ng, self.ns, self.wo,
-                             self.back, self.depth, self.ray, path=self.path)
+                             self.back, self.depth, self.ray, path=self.path, fibre=self.fibre)
         out.rays = self.rays
         if self.bary is not None and self.tris is not None:
             d = _bary_of_offset(self.tris, self.prim, dp)
