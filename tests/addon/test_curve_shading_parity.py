@@ -250,3 +250,42 @@ def test_curves_without_attributes_and_nan_attributes_render_finite(tmp_path, ta
     curves = {c.name: c for c in seen[-1].curves}
     assert curves['bare'].point_attributes is None and curves['bare'].uv is None
     assert np.isfinite(curves['hostile'].point_attributes['col']).all()
+
+
+def random_hair(scene):
+    """Principled Hair Chiang (Melanin 0.5, redness 0.3) with Random Color
+    0.8 and Random Roughness 0.6 on two Curves objects over a diffuse floor
+    under an area light: on the left Random unlinked (the Curves Info
+    node's Random, as Cycles' attr_random), on the right Random linked to
+    the curve attribute 'f'; four bounces."""
+    from parity_scenes import light, material, plane
+    from test_hair_parity import hair_material
+    plane("floor", material("floor", 'diffuse'))
+    light('AREA', (0.5, -0.5, 4.0), 300.0, size=2.0)
+    for name, x, linked in (("unlinked", -0.8, False), ("linked", 0.8, True)):
+        mat = hair_material("random_" + name, melanin=0.5, redness=0.3)
+        node = mat.node_tree.nodes['Principled Hair BSDF']
+        node.inputs['Random Color'].default_value = 0.8
+        node.inputs['Random Roughness'].default_value = 0.6
+        if linked:
+            attr = mat.node_tree.nodes.new('ShaderNodeAttribute')
+            attr.attribute_name = 'f'
+            mat.node_tree.links.new(attr.outputs['Fac'], node.inputs['Random'])
+        strand_data(name, x, curves=250).data.materials.append(mat)
+    top_camera(scene, 4.0)
+    small_resolution(scene, 48, 32)
+    scene.cycles_curves.shape = 'THICK'
+    return 4
+
+
+SCENES['random_hair'] = random_hair
+
+
+def test_principled_hair_random_parity_with_cycles(tmp_path, tapped_engine):
+    """Random Color and Random Roughness per strand against Cycles: the
+    image, 2 x 2 regions (the columns) and 16 x 16 blocks."""
+    scene, bounces = reference_scene('random_hair')
+    ref, ref_var, header = live_cycles_reference(scene, tmp_path, 'random_hair', CYCLES_SEEDS, CYCLES_SPP, bounces)
+    image, var = render_for_reference(scene, tmp_path, 'random_hair', tapped_engine, SPP, 2, bounces)
+    check = ReferenceCheck('random_hair', image[..., :3].astype(np.float64), var, SPP, ref, ref_var, header, BLOCK)
+    check.assert_agrees(0.005, 0.03)
