@@ -2,9 +2,9 @@
 svm_node_closure_bsdf): the hair lobe's roughness, radial roughness and
 absorption become the expression engine/nodes/hair_random.py evaluates per
 shading point, from the node's Random input, or, unlinked, the Curves Info
-node's Random (Cycles reads ATTR_STD_CURVE_RANDOM then; on a mesh, where
-Cycles falls back to the socket's value, Ember's Curves Info Random is 0).
-bpy-free but for the node handed in."""
+node's Random on strands (Cycles reads ATTR_STD_CURVE_RANDOM then) and the
+socket's value elsewhere (Cycles' fallback where no curve attribute is
+found)."""
 from .. import backend
 
 
@@ -16,11 +16,14 @@ def lobe_fields(translator, node, props):
         return {}
     scene = backend.engine()
     socket = node.inputs.get('Random')
+    props = dict(props)
     if socket is not None and socket.is_linked:
-        random = translator.value(node, 'Random', 0.0)
+        inputs = {'Random': translator.value(node, 'Random', 0.0), 'Is Strand': 1.0}
     else:
-        random = scene.NodeOutput(scene.NodeCall('ShaderNodeHairInfo', {}, {}), 'Random')
-    call = scene.NodeCall('EmberPrincipledHairRandom', {'Random': random}, dict(props))
+        info = scene.NodeCall('ShaderNodeHairInfo', {}, {})
+        inputs = {'Random': scene.NodeOutput(info, 'Random'), 'Is Strand': scene.NodeOutput(info, 'Is Strand')}
+        props['random_default'] = translator._hair_constant(node, 'Random', 0.0)
+    call = scene.NodeCall('EmberPrincipledHairRandom', inputs, props)
     return {'roughness': scene.NodeOutput(call, 'Roughness'),
             'radial_roughness': scene.NodeOutput(call, 'Radial Roughness'),
             'absorption': scene.NodeOutput(call, 'Absorption')}

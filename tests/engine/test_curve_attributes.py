@@ -143,3 +143,13 @@ def test_hair_randomization_follows_the_parametrization(random, amount):
     assert np.allclose(out["Roughness"], 0.3 * factor) and np.allclose(out["Radial Roughness"], 0.3 * factor)
     expect = hair.sigma_from_melanin(0.6, 0.3, (1.0, 1.0, 1.0), 0.3 * factor, random=random, random_color=amount)
     assert np.allclose(out["Absorption"][0], expect)
+
+
+def test_hair_randomization_off_strands_reads_the_socket_value():
+    """Cycles reads the Random socket where no curve attribute is found (a mesh)."""
+    entry = REGISTRY["EmberPrincipledHairRandom"]
+    props = {name: default for name, default in entry.props}
+    props.update(random_roughness=1.0, random_default=0.8)
+    out = entry.evaluate(ShadingContext(2), {"Random": np.array([0.1, 0.1]), "Is Strand": np.array([1.0, 0.0])},
+                         props)
+    assert np.allclose(out["Roughness"], [0.3 * (1 + 2 * (0.1 - 0.5)), 0.3 * (1 + 2 * (0.8 - 0.5))])
