@@ -17,7 +17,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from .nodes.context import CURVE_INTERCEPT, CURVE_LENGTH, CURVE_RANDOM, CURVE_THICKNESS, IS_STRAND
+from .nodes.context import (CURVE_INTERCEPT, CURVE_LENGTH, CURVE_RANDOM, CURVE_THICKNESS, IS_STRAND,
+                            POSITION_TEXSPACE)
 from .nodes.hashing import hash_uint, to_float
 
 
@@ -144,3 +145,17 @@ def uv_maps(strands):
                 maps[name] = corners(a)
     active = getattr(strands, "uv", None)
     return maps.get(active), maps
+
+
+def generated(strands):
+    """(texspace, orco) of a curve set's stand-in mesh for Generated
+    coordinates: with the emitter's texture space (particle hair) each
+    strand's root mapped through it (Cycles' sync_particle_hair: constant
+    per strand); without one, the object-space position (Cycles' fallback:
+    Curves objects carry no generated attribute)."""
+    space = getattr(strands, "texspace", None)
+    if space is None:
+        return POSITION_TEXSPACE, None
+    seg = SegmentCorners(strands)
+    roots = np.asarray(strands.points, np.float64).reshape(-1, 3)[seg.offsets[:-1]]
+    return space, seg.of_curves(roots)

@@ -163,7 +163,8 @@ def _curve_fields():
             + [("point_attributes", Optional[dict], field(default=None)),
                ("curve_attributes", Optional[dict], field(default=None)),
                ("uv", Optional[str], field(default=None)),
-               ("first_curve", int, field(default=0))])
+               ("first_curve", int, field(default=0)),
+               ("texspace", Optional[tuple], field(default=None))])
 
 
 HairCurves = make_dataclass("HairCurves", _curve_fields())
@@ -178,7 +179,10 @@ HairCurves.__doc__ = """Strands (Blender's Curves objects): round Catmull-Rom cu
     nodes; uv: the name of the 2-column attribute that is the strands' active
     UV map (None: no UV map); first_curve: the index of the first curve among
     those of its Cycles Hair (an emitter's particle systems are one): the
-    Curves Info node's Random hashes it; the other fields as ``Instance``'s.
+    Curves Info node's Random hashes it; texspace: (location, size) of the
+    emitter's texture space (particle hair: Generated is each strand's root
+    mapped through it, as Cycles; None: the object-space position, as
+    Cycles' Curves objects); the other fields as ``Instance``'s.
     """
 
 

@@ -370,6 +370,9 @@ def validate_curves(strands, index, n_materials):
             if arr.ndim not in (1, 2) or len(arr) != count or arr.dtype.kind not in "fi":
                 raise SceneError(f"{what}: {domain} {name!r} must be ({count}, C) numbers, got {arr.shape}")
             _finite(arr, f"{what} {domain} {name!r}")
+    space = getattr(strands, "texspace", None)
+    if space is not None:
+        _finite(_array(space, f"{what} texspace", (3,), "fi"), f"{what} texspace")
     uv = getattr(strands, "uv", None)
     if uv is not None and uv not in {**(strands.point_attributes or {}), **(strands.curve_attributes or {})}:
         raise SceneError(f"{what}: the UV map {uv!r} is none of its attributes")

@@ -211,6 +211,7 @@ class InstanceCollector:
                 offsets=strands.offsets.astype(np.int32), matrix=matrix,
                 materials=[slots[slot]] if len(slots) else slots, name=f"{obj.name} {strands.name}",
                 curve_attributes=strands.curve_attributes or None, uv=strands.uv, first_curve=strands.first_curve,
+                texspace=mesh_export.texspace_of(obj.data),
                 **ray_visibility(inst), **object_info(inst),
                 pass_index=int(getattr(obj, 'pass_index', 0))))
 

@@ -33,6 +33,9 @@ CURVE_THICKNESS = "\x00curve_thickness"
 CURVE_LENGTH = "\x00curve_length"
 CURVE_RANDOM = "\x00curve_random"
 IS_STRAND = "\x00is_strand"
+# A Mesh.texspace meaning "Generated is the object-space position" (Cycles'
+# fallback where a geometry has no generated attribute: Curves objects).
+POSITION_TEXSPACE = "object position"
 
 PATH_COLUMNS = ("Diffuse Depth", "Glossy Depth", "Transmission Depth", "Transparent Depth", "Ray Length",
                 "Is Singular Ray")
@@ -70,6 +73,16 @@ class SceneShading:
                     table[k] = value
             self._instance_attributes[key] = table
         return self._instance_attributes[key]
+
+    def position_generated(self):
+        """(T,) whether each triangle's Generated coordinates are its
+        object-space position (a mesh whose texspace is POSITION_TEXSPACE)."""
+        if "position_generated" not in self._corners:
+            per_mesh = np.array([_is_position_texspace(mesh) for mesh in self.scene.meshes] + [False])
+            mesh = self.mesh_of_instance[self.instance] if len(self.mesh_of_instance) else \
+                np.full(len(self.instance), -1)
+            self._corners["position_generated"] = per_mesh[mesh]
+        return self._corners["position_generated"]
 
     def has_uv(self):
         """(T,) whether each triangle's mesh has a UV map (Cycles' UV pass is
@@ -147,11 +160,16 @@ def _mesh_corner_data(mesh, key):
         data = np.asarray(data, dtype=np.float64)
         return data[..., None] if data.ndim == 2 else data
     if key[0] == "generated":
-        return generated_corners(mesh)
+        return None if _is_position_texspace(mesh) else generated_corners(mesh)
     if key[0] == "tangent":
         tangents = getattr(mesh, "tangents", None)
         return None if tangents is None else np.asarray(tangents, dtype=np.float64)
     raise KeyError(key)
+
+
+def _is_position_texspace(mesh):
+    space = getattr(mesh, "texspace", None)
+    return isinstance(space, str) and space == POSITION_TEXSPACE
 
 
 def generated_corners(mesh):
@@ -174,7 +192,7 @@ def texture_space(mesh):
     it maps the object-space point)."""
     pos = np.asarray(mesh.positions, dtype=np.float64)
     space = getattr(mesh, "texspace", None)
-    if space is None:
+    if space is None or _is_position_texspace(mesh):
         lo, hi = (pos.min(axis=0), pos.max(axis=0)) if len(pos) else (np.zeros(3), np.zeros(3))
         loc, size = 0.5 * (lo + hi), 0.5 * (hi - lo)
         size = np.where(size == 0.0, 1.0, np.where(size < 1e-5, 1e-5, size))
@@ -404,9 +422,17 @@ class ShadingContext:
 
     @property
     def generated(self):
-        """(N, 3) Generated coordinates (object-space P without a mesh)."""
+        """(N, 3) Generated coordinates (object-space P without a mesh, and
+        on geometry whose Generated is its position)."""
         value = self._interpolate(("generated",))
-        return self.object_coords if value is None else value
+        if value is None:
+            return self.object_coords
+        shading, _ = self.instance
+        if shading is not None:
+            at_p = shading.position_generated()[self.prim]
+            if at_p.any():
+                value = np.where(at_p[:, None], self.object_coords, value)
+        return value
 
     def instance_attribute(self, key):
         """(N, 4) RGBA of an Object / Instancer / View Layer attribute."""

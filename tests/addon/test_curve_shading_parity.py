@@ -13,11 +13,13 @@ each a column of the region tests' 4 x 4 regions:
 3. the same strands emitting the mix of a point-domain colour attribute and
    (UV map x, UV map y, a curve-domain float): Cycles' CURVE_KEY (mixed
    along the segment) and CURVE (constant) attributes, the first 2D curve
-   attribute as the UV map;
+   attribute as the UV map; mixed with Generated (Cycles' fallback on
+   Curves objects: the object-space position);
 4. a sphere with 300 particle hairs (from faces, no children: Blender places
    children differently in every process) emitting the emitter's UV map
    and its byte colour attribute at each root (ObtainCacheParticleUV /
-   Vcol), the sphere itself emitting its Geometry Tangent (triangles:
+   Vcol) mixed with Generated (the root's, in the emitter's texture
+   space), the sphere itself emitting its Geometry Tangent (triangles:
    the radial tangent about Z of the Generated coordinates).
 Against live Cycles (8 seeds of 256 spp, rendered by the test: Blender
 places particles from faces differently in every process, so a stored
@@ -96,6 +98,22 @@ def attribute_colour(nodes, links):
     mix.inputs['Factor'].default_value = 0.5
     links.new(col.outputs['Color'], mix.inputs['A'])
     links.new(_combine(nodes, links, (sep.outputs['X'], sep.outputs['Y'], f.outputs['Fac'])), mix.inputs['B'])
+    return _with_generated(nodes, links, mix.outputs['Result'])
+
+
+def _with_generated(nodes, links, colour):
+    """colour mixed half and half with Generated x 0.25 + 0.5."""
+    coords = nodes.new('ShaderNodeTexCoord')
+    scaled = nodes.new('ShaderNodeVectorMath')
+    scaled.operation = 'MULTIPLY_ADD'
+    links.new(coords.outputs['Generated'], scaled.inputs[0])
+    scaled.inputs[1].default_value = (0.25, 0.25, 0.25)
+    scaled.inputs[2].default_value = (0.5, 0.5, 0.5)
+    mix = nodes.new('ShaderNodeMix')
+    mix.data_type = 'RGBA'
+    mix.inputs['Factor'].default_value = 0.5
+    links.new(colour, mix.inputs['A'])
+    links.new(scaled.outputs[0], mix.inputs['B'])
     return mix.outputs['Result']
 
 
@@ -108,7 +126,7 @@ def particle_colour(nodes, links):
     mix.inputs['Factor'].default_value = 0.5
     links.new(uv.outputs['UV'], mix.inputs['A'])
     links.new(col.outputs['Color'], mix.inputs['B'])
-    return mix.outputs['Result']
+    return _with_generated(nodes, links, mix.outputs['Result'])
 
 
 def tangent_only(nodes, links):
