@@ -153,3 +153,16 @@ def test_hair_randomization_off_strands_reads_the_socket_value():
     out = entry.evaluate(ShadingContext(2), {"Random": np.array([0.1, 0.1]), "Is Strand": np.array([1.0, 0.0])},
                          props)
     assert np.allclose(out["Roughness"], [0.3 * (1 + 2 * (0.1 - 0.5)), 0.3 * (1 + 2 * (0.8 - 0.5))])
+
+
+@needs_embree
+def test_generated_on_strands_is_cycles():
+    """Curves objects: the object-space position (Cycles' fallback without a
+    generated attribute); particle hair (a texture space given): the root
+    mapped through it, constant along the strand."""
+    sc, hit, _ = _hits(_strands())
+    assert np.allclose(sc.generated, hit.p / SCALE)
+    loc, size = np.array([0.1, 0.0, 0.2]), np.array([2.0, 1.0, 0.5])
+    sc, hit, _ = _hits(_strands(texspace=(tuple(loc), tuple(size))))
+    root = np.array([0.5, 0.0, 0.0])          # strand 1's first key, object space
+    assert np.allclose(sc.generated, (root - loc) * 0.5 / size + 0.5)
