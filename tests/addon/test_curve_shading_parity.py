@@ -93,50 +93,46 @@ def attribute_colour(nodes, links):
     uv = nodes.new('ShaderNodeUVMap')
     sep = nodes.new('ShaderNodeSeparateXYZ')
     links.new(uv.outputs['UV'], sep.inputs[0])
+    uvf = _combine(nodes, links, (sep.outputs['X'], sep.outputs['Y'], f.outputs['Fac']))
+    return _with_generated(nodes, links, _half(nodes, links, col.outputs['Color'], uvf))
+
+
+def _half(nodes, links, a, b):
+    """The colour mix of sockets a and b at factor 0.5."""
     mix = nodes.new('ShaderNodeMix')
     mix.data_type = 'RGBA'
     mix.inputs['Factor'].default_value = 0.5
-    links.new(col.outputs['Color'], mix.inputs['A'])
-    links.new(_combine(nodes, links, (sep.outputs['X'], sep.outputs['Y'], f.outputs['Fac'])), mix.inputs['B'])
-    return _with_generated(nodes, links, mix.outputs['Result'])
+    links.new(a, mix.inputs['A'])
+    links.new(b, mix.inputs['B'])
+    return mix.outputs['Result']
 
 
 def _with_generated(nodes, links, colour):
     """colour mixed half and half with Generated x 0.25 + 0.5."""
     coords = nodes.new('ShaderNodeTexCoord')
-    scaled = nodes.new('ShaderNodeVectorMath')
-    scaled.operation = 'MULTIPLY_ADD'
-    links.new(coords.outputs['Generated'], scaled.inputs[0])
-    scaled.inputs[1].default_value = (0.25, 0.25, 0.25)
-    scaled.inputs[2].default_value = (0.5, 0.5, 0.5)
-    mix = nodes.new('ShaderNodeMix')
-    mix.data_type = 'RGBA'
-    mix.inputs['Factor'].default_value = 0.5
-    links.new(colour, mix.inputs['A'])
-    links.new(scaled.outputs[0], mix.inputs['B'])
-    return mix.outputs['Result']
+    return _half(nodes, links, colour, _affine(nodes, links, coords.outputs['Generated'], 0.25))
+
+
+def _affine(nodes, links, vector, scale):
+    """vector x scale + 0.5 (Vector Math Multiply Add)."""
+    node = nodes.new('ShaderNodeVectorMath')
+    node.operation = 'MULTIPLY_ADD'
+    links.new(vector, node.inputs[0])
+    node.inputs[1].default_value = (scale,) * 3
+    node.inputs[2].default_value = (0.5, 0.5, 0.5)
+    return node.outputs[0]
 
 
 def particle_colour(nodes, links):
     uv = nodes.new('ShaderNodeUVMap')
     col = nodes.new('ShaderNodeVertexColor')
     col.layer_name = 'paint'
-    mix = nodes.new('ShaderNodeMix')
-    mix.data_type = 'RGBA'
-    mix.inputs['Factor'].default_value = 0.5
-    links.new(uv.outputs['UV'], mix.inputs['A'])
-    links.new(col.outputs['Color'], mix.inputs['B'])
-    return _with_generated(nodes, links, mix.outputs['Result'])
+    return _with_generated(nodes, links, _half(nodes, links, uv.outputs['UV'], col.outputs['Color']))
 
 
 def tangent_only(nodes, links):
     geo = nodes.new('ShaderNodeNewGeometry')
-    add = nodes.new('ShaderNodeVectorMath')
-    add.operation = 'MULTIPLY_ADD'
-    links.new(geo.outputs['Tangent'], add.inputs[0])
-    add.inputs[1].default_value = (0.5, 0.5, 0.5)
-    add.inputs[2].default_value = (0.5, 0.5, 0.5)
-    return add.outputs[0]
+    return _affine(nodes, links, geo.outputs['Tangent'], 0.5)
 
 
 def strand_data(name, x, rng_seed=33, curves=CURVES, nan_attributes=False):
