@@ -18,6 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from . import curve_attributes
 from .scene import Instance, Mesh
 
 
@@ -72,7 +73,11 @@ def expand_curves(scene):
         points = np.asarray(strands.points, np.float64).reshape(-1, 3)
         starts = segment_starts(np.asarray(strands.offsets, np.int64))
         corners = _stand_ins(points[starts[0]])
-        mesh = Mesh(corners.reshape(-1, 3), np.arange(3 * len(corners)).reshape(-1, 3), name=strands.name)
+        uvs, uv_maps = curve_attributes.uv_maps(strands)
+        texspace, orco = curve_attributes.generated(strands)
+        mesh = Mesh(corners.reshape(-1, 3), np.arange(3 * len(corners)).reshape(-1, 3), uvs=uvs,
+                    name=strands.name, uv_maps=uv_maps or None,
+                    attributes=curve_attributes.corner_attributes(strands), texspace=texspace, orco=orco)
         owners.append((len(instances), strands))
         instances.append(_placed(strands, len(meshes)))
         meshes.append(mesh)

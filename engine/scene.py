@@ -163,7 +163,12 @@ def _curve_fields():
     Instance's placement fields."""
     skip = {"positions", "radii", "attributes"}
     return ([("points", np.ndarray), ("radii", np.ndarray), ("offsets", np.ndarray)]
-            + [f for f in _point_cloud_fields() if f[0] not in skip])
+            + [f for f in _point_cloud_fields() if f[0] not in skip]
+            + [("point_attributes", Optional[dict], field(default=None)),
+               ("curve_attributes", Optional[dict], field(default=None)),
+               ("uv", Optional[str], field(default=None)),
+               ("first_curve", int, field(default=0)),
+               ("texspace", Optional[tuple], field(default=None))])
 
 
 HairCurves = make_dataclass("HairCurves", _curve_fields())
@@ -172,7 +177,16 @@ HairCurves.__doc__ = """Strands (Blender's Curves objects): round Catmull-Rom cu
 
     points: (N, 3) object-space control points; radii: (N,) per point (the
     radius attribute); offsets: (C + 1,) first point of each curve and the
-    total (Blender's curve_offset_data); the other fields as ``Instance``'s.
+    total (Blender's curve_offset_data); point_attributes {name: (N, C)} per
+    control point (mixed linearly along a segment, as Cycles), curve_attributes
+    {name: (C, K)} per curve, read by the Attribute, Color Attribute and UV Map
+    nodes; uv: the name of the 2-column attribute that is the strands' active
+    UV map (None: no UV map); first_curve: the index of the first curve among
+    those of its Cycles Hair (an emitter's particle systems are one): the
+    Curves Info node's Random hashes it; texspace: (location, size) of the
+    emitter's texture space (particle hair: Generated is each strand's root
+    mapped through it, as Cycles; None: the object-space position, as
+    Cycles' Curves objects); the other fields as ``Instance``'s.
     """
 
 

@@ -357,6 +357,18 @@ def validate_curves(strands, index, n_materials):
     offsets = _array(strands.offsets, f"{what} offsets", (), "iu")
     if len(offsets) < 1 or offsets[0] != 0 or offsets[-1] != len(pos) or np.any(np.diff(offsets) < 1):
         raise SceneError(f"{what}: offsets must rise from 0 to {len(pos)} with every curve holding a point")
+    for domain, count in (("point_attributes", len(pos)), ("curve_attributes", len(offsets) - 1)):
+        for name, values in (getattr(strands, domain, None) or {}).items():
+            arr = np.asarray(values)
+            if arr.ndim not in (1, 2) or len(arr) != count or arr.dtype.kind not in "fi":
+                raise SceneError(f"{what}: {domain} {name!r} must be ({count}, C) numbers, got {arr.shape}")
+            _finite(arr, f"{what} {domain} {name!r}")
+    space = getattr(strands, "texspace", None)
+    if space is not None:
+        _finite(_array(space, f"{what} texspace", (3,), "fi"), f"{what} texspace")
+    uv = getattr(strands, "uv", None)
+    if uv is not None and uv not in {**(strands.point_attributes or {}), **(strands.curve_attributes or {})}:
+        raise SceneError(f"{what}: the UV map {uv!r} is none of its attributes")
 
 
 def validate_scene(scene):

@@ -9,6 +9,7 @@ data block of their own, so they are never merged by mistake).
 import numpy as np
 
 from .. import backend
+from . import curve_attributes
 from . import mesh as mesh_export
 from . import fluid
 from . import object_attributes
@@ -181,19 +182,25 @@ class InstanceCollector:
         offsets = np.empty(count + 1, np.int32)
         data.curve_offset_data.foreach_get('value', offsets)
         bad_point = ~(np.isfinite(positions).all(axis=1) & np.isfinite(radii))
+        keep_points = keep_curves = None
         if bad_point.any():
             per_curve = np.add.reduceat(bad_point.astype(np.int64), offsets[:-1]) > 0
             self._warn_once(('curves', obj.name), f"Object '{obj.name}': {int(per_curve.sum())} curves with "
                             "a NaN or infinite point or radius were skipped")
             keep = np.repeat(~per_curve, np.diff(offsets))
+            keep_points, keep_curves = keep, ~per_curve
             positions, radii = positions[keep], radii[keep]
             sizes = np.diff(offsets)[~per_curve]
             offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int32)
             if len(sizes) == 0:
                 return
+        point_attrs, curve_attrs, uv = curve_attributes.curve_attributes(
+            data, keep_points, keep_curves,
+            lambda text: self._warn_once(('curve attributes', obj.name, text), f"Object '{obj.name}': {text}"))
         self.curves.append(backend.engine().HairCurves(
             points=positions, radii=np.maximum(radii, 0.0), offsets=offsets, matrix=matrix,
-            materials=self.material_index(obj), name=obj.name,
+            materials=self.material_index(obj), name=obj.name, point_attributes=point_attrs or None,
+            curve_attributes=curve_attrs or None, uv=uv,
             **ray_visibility(inst), **object_info(inst),
             pass_index=int(getattr(inst.object, 'pass_index', 0))))
 
@@ -217,6 +224,8 @@ class InstanceCollector:
                 points=strands.points.astype(np.float32), radii=strands.radii.astype(np.float32),
                 offsets=strands.offsets.astype(np.int32), matrix=matrix,
                 materials=[slots[slot]] if len(slots) else slots, name=f"{obj.name} {strands.name}",
+                curve_attributes=strands.curve_attributes or None, uv=strands.uv, first_curve=strands.first_curve,
+                texspace=mesh_export.texspace_of(obj.data),
                 **ray_visibility(inst), **object_info(inst),
                 pass_index=int(getattr(obj, 'pass_index', 0))))
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import backend
-from . import compat, fluid, nodes, subsurface
+from . import compat, fluid, hair_random, nodes, subsurface
 
 GREY = (0.8, 0.8, 0.8)
 # Principled BSDF inputs (3.x and 4.x names) whose features are not rendered
@@ -363,15 +363,12 @@ class NodeTranslator:
         """Cycles' Principled Hair BSDF, Chiang model (svm_node_closure_bsdf):
         the absorption from Direct Coloring, Melanin Concentration or the
         Absorption Coefficient; roughness, radial roughness, coat, IOR and
-        offset as constants.  Huang (4.0+) renders as Chiang, and Random
-        Roughness / Random Color as 0, with a warning."""
+        offset as constants; Random Roughness and Random Color per strand
+        (hair_random.py).  Huang (4.0+) renders as Chiang, with a warning."""
         if getattr(node, 'model', 'CHIANG') != 'CHIANG':
             self._approximate(node, "Huang hair model rendered as Chiang")
         c = lambda name, default: self._hair_constant(node, name, default)  # noqa: E731
         roughness, radial = _clamp01(c('Roughness', 0.3)), _clamp01(c('Radial Roughness', 0.3))
-        for name in ('Random Roughness', 'Random Color'):
-            if c(name, 0.0) != 0.0:
-                self._approximate(node, f"{name} read as 0")
         mode = getattr(node, 'parametrization', 'COLOR')
         if mode == 'ABSORPTION':
             sigma = _constant_color(self, node, 'Absorption Coefficient', (0.245531, 0.52, 1.365))
@@ -382,9 +379,16 @@ class NodeTranslator:
             sigma = _scene().hair_sigma_from_color(
                 _constant_color(self, node, 'Color', (0.017513, 0.005763, 0.002059)), radial)
         sigma = tuple(float(x) for x in np.nan_to_num(np.maximum(sigma, 0.0), nan=0.0, posinf=1e30))
-        return Closure([_scene().Lobe('hair_chiang', (1.0, 1.0, 1.0), roughness, ior=c('IOR', 1.55),
-                                      absorption=sigma, radial_roughness=radial, coat=_clamp01(c('Coat', 0.0)),
-                                      offset=c('Offset', 2.0 * math.pi / 180.0))])
+        fields = dict(roughness=roughness, absorption=sigma, radial_roughness=radial)
+        fields.update(hair_random.lobe_fields(self, node, dict(
+            parametrization=mode, melanin=c('Melanin', 0.8), redness=c('Melanin Redness', 1.0),
+            tint=_constant_color(self, node, 'Tint', (1.0, 1.0, 1.0)),
+            color=_constant_color(self, node, 'Color', (0.017513, 0.005763, 0.002059)),
+            absorption=_constant_color(self, node, 'Absorption Coefficient', (0.245531, 0.52, 1.365)),
+            roughness=roughness, radial_roughness=radial, random_roughness=c('Random Roughness', 0.0),
+            random_color=c('Random Color', 0.0))))
+        return Closure([_scene().Lobe('hair_chiang', (1.0, 1.0, 1.0), ior=c('IOR', 1.55), coat=_clamp01(c('Coat', 0.0)),
+                                      offset=c('Offset', 2.0 * math.pi / 180.0), **fields)])
 
     def _node_bsdf_hair(self, node):
         """Cycles' Hair BSDF (bsdf_hair.h): one Reflection or Transmission

@@ -178,7 +178,7 @@ def mesh_from_blender(mesh, name, tangents=False, check=None, derived=()):
         uv_maps=_named_uv_maps(mesh, loops),
         attributes=_with_derived(_color_attributes(mesh, triangles, loops),
                                  _derived_attributes(mesh, triangles, derived)),
-        texspace=_texspace(mesh),
+        texspace=texspace_of(mesh),
     )
 
 
@@ -238,7 +238,7 @@ def _with_derived(attributes, derived):
     return dict(attributes or {}, **derived)
 
 
-def _texspace(mesh):
+def texspace_of(mesh):
     """(location, size) of the mesh's texture space (Generated coordinates)."""
     loc = getattr(mesh, 'texspace_location', None)
     size = getattr(mesh, 'texspace_size', None)

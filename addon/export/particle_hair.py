@@ -10,8 +10,20 @@ Cycles' ``shaperadius`` of its arc-length position t along the strand:
 (1 - t) shaped by Hair Shape, from radius_scale / 2 x Diameter Root to
 radius_scale / 2 x Tip, 0 at the last key with Close Tip.  The material is
 the settings' material slot.  bpy only; no engine import (the collector
-makes the scene objects)."""
+makes the scene objects).
+
+Per strand, as Cycles' ObtainCacheParticleUV / ObtainCacheParticleVcol: the
+emitter's UV maps and byte colour attributes at the strand's root
+(``ParticleSystem.uv_on_emitter`` / ``mcol_on_emitter``; colours sRGB there,
+linearized as Cycles), read only when the system's material reads surface
+data.  Each strand's number among the emitter's (its systems in order) is
+``first_curve``: Cycles hashes it for the Curves Info node's Random."""
 import numpy as np
+
+from .mesh import node_trees
+
+# Shader nodes through which a material reads UV maps or colour attributes.
+_SURFACE_READERS = {'UVMAP', 'TEX_COORD', 'TEX_IMAGE', 'ATTRIBUTE', 'VERTEX_COLOR', 'NORMAL_MAP', 'TANGENT'}
 
 
 class ParticleStrands:
@@ -23,6 +35,7 @@ class ParticleStrands:
     def __init__(self, points, radii, offsets, slot, name, skipped):
         self.points, self.radii, self.offsets = points, radii, offsets
         self.slot, self.name, self.skipped = slot, name, skipped
+        self.curve_attributes, self.uv, self.first_curve = {}, None, 0
 
 
 def shape_radius(shape, root, tip, t):
@@ -43,7 +56,7 @@ def _systems(obj, render):
         psys = mod.particle_system
         settings = psys.settings
         if settings.type == 'HAIR' and settings.render_type == 'PATH':
-            yield psys, settings
+            yield mod, psys, settings
 
 
 def _strand_indices(psys, settings, render):
@@ -89,7 +102,8 @@ def particle_strands(obj, render=True, check=lambda: None):
     ParticleStrands, one per system with strands."""
     out = []
     world_to_object = None
-    for psys, settings in _systems(obj, render):
+    first_curve = 0
+    for mod, psys, settings in _systems(obj, render):
         steps = (1 << int(settings.render_step if render else settings.display_step)) + 1
         if settings.kink == 'SPIRAL':
             steps += int(settings.kink_extra_steps)
@@ -108,7 +122,58 @@ def particle_strands(obj, render=True, check=lambda: None):
         good = np.isfinite(co).all(axis=(1, 2)) & np.isfinite(radii).all(axis=1)
         co, radii = co[good], radii[good]
         slot = max(int(settings.material) - 1, 0)
-        out.append(ParticleStrands(co.reshape(-1, 3), np.maximum(radii, 0.0).reshape(-1),
-                                   np.arange(len(co) + 1, dtype=np.int64) * steps, slot, psys.name,
-                                   int((~good).sum())))
+        made = ParticleStrands(co.reshape(-1, 3), np.maximum(radii, 0.0).reshape(-1),
+                               np.arange(len(co) + 1, dtype=np.int64) * steps, slot, psys.name,
+                               int((~good).sum()))
+        made.first_curve = first_curve
+        first_curve += len(strands)
+        if _reads_surface(obj, slot):
+            made.curve_attributes, made.uv = _root_data(obj, mod, psys, strands, check)
+            made.curve_attributes = {k: v[good] for k, v in made.curve_attributes.items()}
+        out.append(made)
     return out
+
+
+def _reads_surface(obj, slot):
+    """Whether the material in the emitter's ``slot`` reads UV maps or
+    colour attributes (node groups included)."""
+    slots = getattr(obj, 'material_slots', ())
+    material = slots[min(slot, len(slots) - 1)].material if len(slots) else None
+    tree = getattr(material, 'node_tree', None) if material else None
+    return any(n.type in _SURFACE_READERS for t in node_trees(tree, set()) for n in t.nodes)
+
+
+def _srgb_to_linear(c):
+    c = np.asarray(c, np.float64)
+    return np.where(c < 0.04045, np.where(c < 0.0, 0.0, c / 12.92), ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _root_data(obj, mod, psys, strands, check):
+    """({name: (S, 2) UV or (S, 4) RGBA per strand}, the active render UV
+    map's name or None) from the emitter at each strand's root, as Cycles:
+    a child strand passes the first particle (Cycles' particle iterator
+    stops at the parents)."""
+    mesh = obj.data
+    out, active = {}, None
+    particles = psys.particles
+    first = particles[0] if len(particles) else None
+
+    def particle(number):
+        return particles[number] if number < len(particles) else first
+
+    layers = list(getattr(mesh, 'uv_layers', ()))
+    for k, layer in enumerate(layers):
+        check()
+        out[layer.name] = np.array([psys.uv_on_emitter(mod, particle(i), particle_no=i, uv_no=k)
+                                    for i in strands], np.float64).reshape(-1, 2)
+        if layer.active_render:
+            active = layer.name
+    colours = [a for a in getattr(mesh, 'attributes', ())
+               if a.data_type == 'BYTE_COLOR' and a.domain == 'CORNER']
+    for k, attr in enumerate(colours):
+        check()
+        rgb = np.array([psys.mcol_on_emitter(mod, particle(i), particle_no=i, vcol_no=k) for i in strands],
+                       np.float64).reshape(-1, 3)
+        out.setdefault(attr.name, np.c_[_srgb_to_linear(rgb), np.ones(len(rgb))])
+    out = {k: np.where(np.isfinite(v), v, 0.0).astype(np.float32) for k, v in out.items()}
+    return out, active

@@ -10,6 +10,7 @@ from . import converter_nodes, input_nodes, ray_nodes, sky, texture_nodes  # noq
 # its Camera-coordinate quad must stay where its values are positive.
 from . import gabor  # noqa: F401,E402
 from . import ies  # noqa: F401,E402  (after gabor: the parity scene's quad order)
+from . import hair_random  # noqa: F401,E402  (no Blender node: the parity scene skips it)
 from .context import SceneShading, ShadingContext, as_context
 from .rays import NodeRays
 from .registry import REGISTRY, NodeDef, lookup

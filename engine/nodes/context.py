@@ -27,6 +27,17 @@ LUMA = np.array([0.2126, 0.7152, 0.0722])
 # name holds a NUL).
 POINTINESS = "\x00pointiness"
 RANDOM_PER_ISLAND = "\x00random_per_island"
+# Reserved names of the Curves Info node's per-strand data (engine.curve_attributes
+# gives them to curve segments only; elsewhere they read 0, as Cycles' missing
+# attribute): intercept and thickness along the strand, its length and random.
+CURVE_INTERCEPT = "\x00curve_intercept"
+CURVE_THICKNESS = "\x00curve_thickness"
+CURVE_LENGTH = "\x00curve_length"
+CURVE_RANDOM = "\x00curve_random"
+IS_STRAND = "\x00is_strand"
+# A Mesh.texspace meaning "Generated is the object-space position" (Cycles'
+# fallback where a geometry has no generated attribute: Curves objects).
+POSITION_TEXSPACE = "object position"
 
 PATH_COLUMNS = ("Diffuse Depth", "Glossy Depth", "Transmission Depth", "Transparent Depth", "Ray Length",
                 "Is Singular Ray")
@@ -63,6 +74,16 @@ class SceneShading:
                     table[k] = value
             self._instance_attributes[key] = table
         return self._instance_attributes[key]
+
+    def position_generated(self):
+        """(T,) whether each triangle's Generated coordinates are its
+        object-space position (a mesh whose texspace is POSITION_TEXSPACE)."""
+        if "position_generated" not in self._corners:
+            per_mesh = np.array([_is_position_texspace(mesh) for mesh in self.scene.meshes] + [False])
+            mesh = self.mesh_of_instance[self.instance] if len(self.mesh_of_instance) else \
+                np.full(len(self.instance), -1)
+            self._corners["position_generated"] = per_mesh[mesh]
+        return self._corners["position_generated"]
 
     def has_uv(self):
         """(T,) whether each triangle's mesh has a UV map (Cycles' UV pass is
@@ -140,11 +161,16 @@ def _mesh_corner_data(mesh, key):
         data = np.asarray(data, dtype=np.float64)
         return data[..., None] if data.ndim == 2 else data
     if key[0] == "generated":
-        return generated_corners(mesh)
+        return None if _is_position_texspace(mesh) else generated_corners(mesh)
     if key[0] == "tangent":
         tangents = getattr(mesh, "tangents", None)
         return None if tangents is None else np.asarray(tangents, dtype=np.float64)
     raise KeyError(key)
+
+
+def _is_position_texspace(mesh):
+    space = getattr(mesh, "texspace", None)
+    return isinstance(space, str) and space == POSITION_TEXSPACE
 
 
 def generated_corners(mesh):
@@ -167,7 +193,7 @@ def texture_space(mesh):
     it maps the object-space point)."""
     pos = np.asarray(mesh.positions, dtype=np.float64)
     space = getattr(mesh, "texspace", None)
-    if space is None:
+    if space is None or _is_position_texspace(mesh):
         lo, hi = (pos.min(axis=0), pos.max(axis=0)) if len(pos) else (np.zeros(3), np.zeros(3))
         loc, size = 0.5 * (lo + hi), 0.5 * (hi - lo)
         size = np.where(size == 0.0, 1.0, np.where(size < 1e-5, 1e-5, size))
@@ -192,12 +218,14 @@ class ShadingContext:
     where Cycles does not ray-trace in shaders (light samples, shadow rays,
     worlds): those nodes then return their no-ray value.  voxels: the
     engine.media.voxels.Voxels of the object a medium point lies in (a
-    fluid domain's grids, read by name as attributes), or None."""
+    fluid domain's grids, read by name as attributes), or None.  fibre
+    (N, 3) or None: on curve segments the strand's dC/du (Cycles' dPdu), 0
+    elsewhere."""
 
     voxels = None
 
     def __init__(self, n, tris=None, prim=None, bary=None, p=None, ng=None, ns=None, wo=None,
-                 back=None, depth=None, ray=None, uv=None, path=None):
+                 back=None, depth=None, ray=None, uv=None, path=None, fibre=None):
         self.n = n
         self.tris = tris
         self.prim = prim
@@ -210,6 +238,7 @@ class ShadingContext:
         self.depth = np.zeros(n, np.int32) if depth is None else depth
         self.ray = np.ones(n, np.uint8) if ray is None else ray
         self.path = path
+        self.fibre = fibre
         self.rays = None
         self._cache = {}
         if uv is not None:
@@ -233,7 +262,8 @@ class ShadingContext:
             bary = getattr(hit, "bary", None)
             ctx = cls(len(hit.p), tris, hit.prim, bary, hit.p, hit.ng, hit.ns, hit.wo,
                       getattr(hit, "back", None), getattr(hit, "depth", None), getattr(hit, "ray", None),
-                      uv=None if bary is not None else hit.uv, path=getattr(hit, "path", None))
+                      uv=None if bary is not None else hit.uv, path=getattr(hit, "path", None),
+                      fibre=getattr(hit, "fibre", None))
             hit.shading = ctx
         return ctx
 
@@ -260,7 +290,7 @@ class ShadingContext:
         out = ShadingContext.__new__(ShadingContext)
         out.n = len(rows)
         out.tris = self.tris
-        for name in ("prim", "bary", "p", "ng", "ns", "wo", "back", "depth", "ray", "path"):
+        for name in ("prim", "bary", "p", "ng", "ns", "wo", "back", "depth", "ray", "path", "fibre"):
             value = getattr(self, name)
             setattr(out, name, None if value is None else value[rows])
         out.rays = None if self.rays is None else self.rays.take(rows)
@@ -280,7 +310,7 @@ class ShadingContext:
         pick = (lambda a: None if a is None else a[rows])
         out = ShadingContext(k * n, self.tris, pick(self.prim), None, self.p[rows] + dp, self.ng[rows],
                              self.ns[rows], self.wo[rows], self.back[rows], self.depth[rows], self.ray[rows],
-                             path=pick(self.path))
+                             path=pick(self.path), fibre=pick(self.fibre))
         out.rays = None if self.rays is None else self.rays.take(rows)
         if self.bary is not None and self.tris is not None:
             moves = [_bary_of_offset(self.tris, self.prim, step) for step in steps]
@@ -293,7 +323,7 @@ class ShadingContext:
         """The same points moved by world offsets dp (N, 3) within their
         triangles' planes; interpolated attributes move with them."""
         out = ShadingContext(self.n, self.tris, self.prim, None, self.p + dp, self.ng, self.ns, self.wo,
-                             self.back, self.depth, self.ray, path=self.path)
+                             self.back, self.depth, self.ray, path=self.path, fibre=self.fibre)
         out.rays = self.rays
         if self.bary is not None and self.tris is not None:
             d = _bary_of_offset(self.tris, self.prim, dp)
@@ -401,9 +431,17 @@ class ShadingContext:
 
     @property
     def generated(self):
-        """(N, 3) Generated coordinates (object-space P without a mesh)."""
+        """(N, 3) Generated coordinates (object-space P without a mesh, and
+        on geometry whose Generated is its position)."""
         value = self._interpolate(("generated",))
-        return self.object_coords if value is None else value
+        if value is None:
+            return self.object_coords
+        shading, _ = self.instance
+        if shading is not None:
+            at_p = shading.position_generated()[self.prim]
+            if at_p.any():
+                value = np.where(at_p[:, None], self.object_coords, value)
+        return value
 
     def instance_attribute(self, key):
         """(N, 4) RGBA of an Object / Instancer / View Layer attribute."""

@@ -3,7 +3,8 @@ Fresnel / Layer Weight, and Mapping (kernel/svm/tex_coord.h, geometry.h,
 fresnel.h, attribute.h, light_path.h, mapping_util.h)."""
 import numpy as np
 
-from .context import PATH_COLUMNS, POINTINESS, RANDOM_PER_ISLAND
+from .context import (CURVE_INTERCEPT, CURVE_LENGTH, CURVE_RANDOM, CURVE_THICKNESS, IS_STRAND, PATH_COLUMNS,
+                      POINTINESS, RANDOM_PER_ISLAND)
 from .registry import node, one_of, wanted
 
 VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION, VIS_SHADOW = 1, 2, 4, 8, 16
@@ -103,16 +104,66 @@ def uv_map(ctx, i, p):
 
 @node("ShaderNodeNewGeometry", outputs=(("Position", "vector"), ("Normal", "vector"), ("True Normal", "vector"),
                                         ("Incoming", "vector"), ("Parametric", "vector"), ("Backfacing", "float"),
-                                        ("Pointiness", "float"), ("Random Per Island", "float")),
-      unsupported_outputs=("Tangent",), cases=[{}],
+                                        ("Pointiness", "float"), ("Random Per Island", "float"),
+                                        ("Tangent", "vector")),
+      cases=[{}],
       bounds=lambda p: {"Pointiness": (0.0, 1.0), "Random Per Island": (0.0, 1.0)})
 def geometry(ctx, i, p):
     """Cycles' geometry.h; Pointiness and Random Per Island are the mesh
     attributes engine.mesh_attributes computes at export (0 on geometry
-    without them, as Cycles' missing attribute)."""
-    return {"Position": ctx.p, "Normal": ctx.ns, "True Normal": ctx.ng, "Incoming": ctx.wo,
-            "Parametric": _parametric(ctx), "Backfacing": ctx.back.astype(np.float64),
-            "Pointiness": _derived(ctx, POINTINESS), "Random Per Island": _derived(ctx, RANDOM_PER_ISLAND)}
+    without them, as Cycles' missing attribute); Tangent is primitive_tangent."""
+    out = {"Position": ctx.p, "Normal": ctx.ns, "True Normal": ctx.ng, "Incoming": ctx.wo,
+           "Parametric": _parametric(ctx), "Backfacing": ctx.back.astype(np.float64),
+           "Pointiness": _derived(ctx, POINTINESS), "Random Per Island": _derived(ctx, RANDOM_PER_ISLAND)}
+    if wanted(p, "Tangent"):
+        out["Tangent"] = primitive_tangent(ctx)
+    return out
+
+
+def _on_fibre(ctx):
+    """(N,) bool: the points on a strand (a non-zero dC/du)."""
+    if ctx.fibre is None:
+        return np.zeros(len(ctx), bool)
+    return np.any(ctx.fibre != 0.0, axis=1)
+
+
+def primitive_tangent(ctx):
+    """Cycles' primitive_tangent: on curves normalize(dPdu); on triangles
+    the radial tangent about Z of the Generated coordinates, in world space
+    as a normal, made perpendicular to the shading normal."""
+    out = _radial_tangent(ctx, "Z")
+    fibre = _on_fibre(ctx)
+    if fibre.any():
+        out[fibre] = _normalize(ctx.fibre[fibre])
+    return out
+
+
+@node("ShaderNodeHairInfo", outputs=(("Is Strand", "float"), ("Intercept", "float"), ("Length", "float"),
+                                     ("Thickness", "float"), ("Tangent Normal", "vector"), ("Random", "float")),
+      bounds=lambda p: {"Is Strand": (0.0, 1.0), "Intercept": (0.0, 1.0), "Random": (0.0, 1.0)}, cases=[{}])
+def curves_info(ctx, i, p):
+    """Cycles' svm_node_hair_info (the Curves Info node; Hair Info before
+    Blender 3.5): Intercept, Length and Random are the curve attributes
+    Cycles' export writes (engine.curve_attributes), Thickness
+    curve_thickness (twice the radius mixed between the segment's keys),
+    Tangent Normal curve_tangent_normal (the view direction made
+    perpendicular to dPdu); all 0 off strands."""
+    out = {"Is Strand": _derived(ctx, IS_STRAND), "Intercept": _derived(ctx, CURVE_INTERCEPT),
+           "Length": _derived(ctx, CURVE_LENGTH), "Thickness": _derived(ctx, CURVE_THICKNESS),
+           "Random": _derived(ctx, CURVE_RANDOM)}
+    if wanted(p, "Tangent Normal"):
+        out["Tangent Normal"] = _tangent_normal(ctx)
+    return out
+
+
+def _tangent_normal(ctx):
+    out = np.zeros((len(ctx), 3))
+    on = _on_fibre(ctx)
+    if on.any():
+        d, wi = ctx.fibre[on], ctx.wo[on]
+        tg = wi - d * (_dot(d, wi) / _dot(d, d))[:, None]
+        out[on] = _normalize(tg)
+    return out
 
 
 def _derived(ctx, name):
@@ -303,7 +354,6 @@ def tangent(ctx, i, p):
     computes; zero without one, as Cycles without the attribute); carried to
     world space as a normal (object_normal_transform) and made perpendicular
     to the shading normal."""
-    zero = np.zeros(len(ctx))
     if p.get("direction_type", "RADIAL") == "UV_MAP":
         t = ctx.uv_tangent
         if t is None:
@@ -311,8 +361,14 @@ def tangent(ctx, i, p):
         t = ctx.to_world_normal(t)
         n = ctx.ns
         return {"Tangent": _cross(n, _normalize(_cross(t, n)))}
+    return {"Tangent": _radial_tangent(ctx, p.get("axis", "Z"))}
+
+
+def _radial_tangent(ctx, axis):
+    """A tangent about the object's axis from Generated coordinates, in
+    world space as a normal, perpendicular to the shading normal."""
+    zero = np.zeros(len(ctx))
     g = ctx.generated - 0.5
-    axis = p.get("axis", "Z")
     if axis == "X":
         t = np.stack([zero, -g[:, 2], g[:, 1]], axis=1)
     elif axis == "Y":
@@ -321,4 +377,4 @@ def tangent(ctx, i, p):
         t = np.stack([-g[:, 1], g[:, 0], zero], axis=1)
     t = ctx.to_world_normal(t)
     n = ctx.ns
-    return {"Tangent": _cross(n, _normalize(_cross(t, n)))}
+    return _cross(n, _normalize(_cross(t, n)))
