@@ -46,7 +46,8 @@ def free_flights(ctx, paths, found, depth):
     may = ~transparency.last_vertices(ctx, on)   # past max_bounces or volume_bounces: no scattering
     u = ctx.sampler.get(on.pseed, on.sample, vertex_set(depth, MEDIUM))
     u_distance = u[:, 1].copy()
-    direct = _direct_setup(ctx, on, t_end, may, u_distance, depth)
+    mixed = ctx.media.stack_media(on.stack)   # the stacks' summed homogeneous coefficients, phase media
+    direct = _direct_setup(ctx, on, mixed[1], t_end, may, u_distance, depth)
     lit = np.flatnonzero(found.light[inside])
     x_light = np.full(len(inside), np.inf)
     if len(lit):
@@ -57,9 +58,9 @@ def free_flights(ctx, paths, found, depth):
         x_light[lit] = x
     _tracked_points(ctx, on, direct, u)
     flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u_distance,
-                               on.o, on.d, tracking_rng(ctx, on.pseed, on.sample, depth, 1), x_light)
+                               on.o, on.d, tracking_rng(ctx, on.pseed, on.sample, depth, 1), x_light, mixed)
     flight.rows = inside
-    _direct_points(ctx, on, flight, direct, u, depth)
+    _direct_points(ctx, on, flight, direct, u, depth, mixed[1])
     if len(lit):
         rows = inside[lit]
         x = x_light[lit]
@@ -71,7 +72,7 @@ def free_flights(ctx, paths, found, depth):
 # ----------------------------------------------------------------------------
 # where a segment's direct light is estimated (Cycles' direct scatter)
 
-def _direct_setup(ctx, on, t_end, may, u_distance, depth):
+def _direct_setup(ctx, on, ss, t_end, may, u_distance, depth):
     """Segments in scattering media that may scatter get a direct-light
     point of their own, as Cycles 5.0's: a light is sampled from the ray's
     start (its emitter is the one the point samples), and the stack's
@@ -90,7 +91,6 @@ def _direct_setup(ctx, on, t_end, may, u_distance, depth):
     s = ctx.settings
     if ctx.lights.count == 0 or s.strategy != "mis" or s.light_selection == "all":
         return None
-    _, ss, _, _ = ctx.media.coefficients(on.stack)
     het = ctx.media.heterogeneous(on.stack)
     method = equiangular.stack_method(ctx.media.sampling, on.stack)
     cand = np.flatnonzero(may & np.where(het, method != equiangular.DISTANCE, np.any(ss > 0, axis=1)))
@@ -163,7 +163,7 @@ def _lit_segment(ctx, o, d, e, t_end):
     return t0, t1
 
 
-def _direct_points(ctx, on, flight, direct, u, depth):
+def _direct_points(ctx, on, flight, direct, u, depth, sigma_s):
     """Sets flight.nee_scale (the factor on the light sampled at a free
     flight's scattering point: 1, or 0 for the segments ``_direct_setup``
     chose a direct-light point for) and flight.direct: (rows, t, throughput
@@ -207,7 +207,7 @@ def _direct_points(ctx, on, flight, direct, u, depth):
     keep = np.flatnonzero(good)
     if len(keep) == 0:
         return
-    _, ss, _, _ = ctx.media.coefficients(on.stack[rows[keep]])
+    ss = sigma_s[rows[keep]]
     T = np.exp(-st[keep] * t[keep, None])
     hk = np.flatnonzero(het[keep])
     if len(hk):   # the textured media's scattering at the point, the tracker's transmittance to it
