@@ -27,7 +27,7 @@ from ..sampling import power_heuristic
 from ..vec import dot, row_any_positive
 from . import transparency, visibility
 from .records import RowView
-from .stages import nee_rounds
+from .stages import finish, nee_rounds
 from .visibility import VIS_INDIRECT
 
 
@@ -251,17 +251,19 @@ def tracking_rng(ctx, pseed, sample, depth, salt):
     return np.random.default_rng([int(ctx.settings.seed) & 0xFFFFFFFF, first[0], first[1], depth, salt, n])
 
 
-def after_flights(ctx, paths, found, ended, flight, depth, obs=NO_PASSES):
+def after_flights(ctx, paths, ended, flight, depth, tile, obs=NO_PASSES):
     """Apply the flights: emission, the throughput; the paths that scattered
     (and did not end at a light first) make a volume vertex and leave this
-    bounce.  Returns (paths, found, ended) of the others and the scattered
-    paths moved on (None when none).  ``obs``: the pass observer, told of
-    the light added here (engine.pass_events)."""
+    bounce.  Returns ``ended`` with the scattered rows set too, the
+    scattered paths moved on (None when none) and the mask of their rows,
+    which the bounce's compaction drops without finishing them (one take
+    per bounce, not one here and one there).  ``obs``: the pass observer,
+    told of the light added here (engine.pass_events)."""
     r = flight.rows
     if flight.direct is not None:   # equiangular direct-light points, lit with the throughput at the start
         k, t, w, e, p_sel = flight.direct
         rows = r[k]
-        at = paths.take(rows)
+        at = RowView(paths, rows, len(paths.pix))   # the few fields light sampling reads
         at.beta = at.beta * w
         before = at.L.copy()
         phase = ctx.media.vertex_phase(flight.g[k], flight.phase_medium[k])
@@ -281,16 +283,19 @@ def after_flights(ctx, paths, found, ended, flight, depth, obs=NO_PASSES):
     paths.beta[r] *= flight.weight
     sc = flight.scatter & ~ended[r]
     if not sc.any():
-        return paths, found, ended, None
+        return ended, None, None
     rows = r[sc]
-    keep = np.ones(len(paths.pix), bool)
-    keep[rows] = False
+    held = np.zeros(len(paths.pix), bool)
+    held[rows] = True
     moved = paths.take(rows)
     p = moved.o + moved.d * flight.t[sc, None]
     volume_vertex(ctx, moved, p, ctx.media.vertex_phase(flight.g[sc], flight.phase_medium[sc]), depth,
                   flight.nee_scale[sc], obs)
-    moved = moved.take(row_any_positive(moved.beta))
-    return paths.take(keep), found.take(keep), ended[keep], moved
+    alive = row_any_positive(moved.beta)
+    if not alive.all():   # no throughput left: their light so far goes to the film
+        finish(ctx, moved, tile, ~alive)
+        moved = moved.take(alive)
+    return ended | held, moved, held
 
 
 # ----------------------------------------------------------------------------
@@ -320,7 +325,7 @@ def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None, obs=NO_PASSES):
     else:
         lit = np.flatnonzero(nee_scale > 0)
         if len(lit):
-            at = paths.take(lit)
+            at = RowView(paths, lit, n)
             at.beta = at.beta * nee_scale[lit, None]
             before = at.L.copy()
             direct_light(ctx, at, p[lit], phase_rows(phase, lit), depth, obs)

@@ -127,11 +127,10 @@ def _cone_segment_rows(o, d, apex, axis, cos_half, t_end, t0, t1):
         if not disc >= -1e-9 * (B * B + abs(4.0 * A * C)):   # a tangent ray's double root, within rounding
             r1, r2 = np.nan, np.nan
         end = t_end[i] if np.isfinite(t_end[i]) else np.inf
-        cuts[0], cuts[3] = 0.0, end
-        for j, r in ((1, r1), (2, r2)):
-            r = 0.0 if np.isnan(r) else min(max(r, -big), big)   # np.nan_to_num
-            cuts[j] = min(max(r, 0.0), end)
-        cuts.sort()
+        # np.nan_to_num, then clipped to [0, end]: both cuts lie between 0 and end.
+        c1 = min(max(0.0 if np.isnan(r1) else min(max(r1, -big), big), 0.0), end)
+        c2 = min(max(0.0 if np.isnan(r2) else min(max(r2, -big), big), 0.0), end)
+        cuts[0], cuts[1], cuts[2], cuts[3] = 0.0, min(c1, c2), max(c1, c2), end
         lo, hi = np.inf, -np.inf
         for k in range(3):
             a, b = cuts[k], cuts[k + 1]
