@@ -20,7 +20,7 @@ import numpy as np
 from .. import media
 from ..pass_events import NO_PASSES
 from ..lights.point import PointLights
-from ..media import equiangular, tracking
+from ..media import direct as direct_points, equiangular, tracking
 from ..accel import shadow_rays
 from ..sampler import BSDF, LIGHT, MEDIUM, emitter_set, vertex_set
 from ..sampling import power_heuristic
@@ -134,9 +134,9 @@ def _tracked_points(ctx, on, direct, u):
     q = equi[h]
     e, k = np.flatnonzero(q), np.flatnonzero(~q)
     t[e], _ = equiangular.sample(o[e], d[e], P[h[e]], t0[h[e]], t1[h[e]], xi[e])
-    t[k] = _truncated_exponential(sigma[k], t0[h[k]], t1[h[k]], xi[k])
+    t[k] = direct_points.truncated_exponential(sigma[k], t0[h[k]], t1[h[k]], xi[k])
     p_e = equiangular.pdf(o, d, P[h], t0[h], t1[h], t)
-    p_d = _truncated_pdf(np.ones((len(h), 1)), sigma[:, None], t0[h], t1[h], t)
+    p_d = direct_points.truncated_pdf(np.ones((len(h), 1)), sigma[:, None], t0[h], t1[h], t)
     direct[9] = (h, t, p_e, p_d)
 
 
@@ -187,16 +187,7 @@ def _direct_points(ctx, on, flight, direct, u, depth, sigma_s):
     o, d = on.o[rows], on.d[rows]
     pc, st = flight.channel_pdf[rows], flight.sigma_t[rows]
     xi, uc = u[rows, 2], u[rows, 3]
-    t = np.zeros(len(rows))
-    p_e = np.zeros(len(rows))
-    e = np.flatnonzero(equi & ~het)
-    t[e], p_e[e] = equiangular.sample(o[e], d[e], P[e], t0[e], t1[e], xi[e])
-    k = np.flatnonzero(~equi & ~het)
-    if len(k):
-        c = np.minimum((uc[k, None] >= np.cumsum(pc[k], axis=1)).sum(axis=1), 2)
-        t[k] = _truncated_exponential(st[k, c], t0[k], t1[k], xi[k])
-        p_e[k] = equiangular.pdf(o[k], d[k], P[k], t0[k], t1[k], t[k])
-    p_d = _truncated_pdf(pc, st, t0, t1, t)
+    t, p_e, p_d = direct_points.sample_points(o, d, P, t0, t1, xi, uc, pc, st, equi, het)
     if tracked is not None:   # heterogeneous rows: sampled before their flight
         h = tracked[0]
         t[h], p_e[h], p_d[h] = tracked[1], tracked[2], tracked[3]
@@ -217,29 +208,6 @@ def _direct_points(ctx, on, flight, direct, u, depth, sigma_s):
         rng = tracking_rng(ctx, on.pseed[r], on.sample[r], depth, 4)
         T[hk] = tracking.field_transmittance(ctx.media, on.stack[r], on.o[r], on.d[r], t[keep[hk]], rng)
     flight.direct = (rows[keep], t[keep], ss * T * (w[keep] / p[keep])[:, None], emitter[keep], p_sel[keep])
-
-
-def _truncated_exponential(sigma, t0, t1, xi):
-    """Distances in [t0, t1] of density sigma exp(-sigma (t - t0)),
-    renormalized (uniform where sigma is 0)."""
-    length = t1 - t0
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        mass = -np.expm1(-sigma * length)
-        t = t0 - np.log1p(-xi * mass) / np.where(sigma > 0, sigma, 1.0)
-        t = np.where(sigma > 0, t, t0 + xi * np.where(np.isfinite(length), length, 0.0))
-    return np.clip(t, t0, t1)
-
-
-def _truncated_pdf(pc, sigma, t0, t1, t):
-    """The channel mixture's pdf of ``_truncated_exponential`` distances."""
-    length = (t1 - t0)[:, None]
-    x = (t - t0)[:, None]
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        mass = -np.expm1(-sigma * length)
-        each = np.where(sigma > 0, sigma * np.exp(-sigma * x) / np.where(mass > 0, mass, 1.0),
-                        np.where(np.isfinite(length), 1.0 / np.where(length > 0, length, 1.0), 0.0))
-    out = (pc * np.where(np.isfinite(each), each, 0.0)).sum(axis=1)
-    return np.where((t >= t0) & (t <= t1) & (t1 > t0), out, 0.0)
 
 
 def tracking_rng(ctx, pseed, sample, depth, salt):
