@@ -5,14 +5,22 @@ their NumPy reference forms: within rounding on random and hostile inputs
 compiled free flight's estimates against the reference's with independent
 random numbers by a two-sample z-test (one family)."""
 import numpy as np
+import pytest
 
 from ember_stats import detectable, family_level, z_threshold
 from engine import kernels, media
 from engine.media import equiangular
 from engine.scene import Volume
-from test_kernels import Reference, assert_agree, both_ways, jit  # noqa: F401 - the fixture
+from test_kernels import Reference, assert_agree, both_ways, compiled_ready
 
 HOSTILE = (0.0, 1e-300, 1e30, 1e8)
+
+
+@pytest.fixture
+def jit():
+    compiled_ready()
+    yield
+    kernels.configure(True)
 
 
 def _table(rng, m=5):
@@ -36,7 +44,7 @@ def _stacks(rng, n, m):
     return stack
 
 
-def test_stack_media_agrees(jit):  # noqa: F811
+def test_stack_media_agrees(jit):
     rng = np.random.default_rng(5)
     table = _table(rng)
     stack = _stacks(rng, 4000, 5)
@@ -71,7 +79,7 @@ def _flight_inputs(rng, n):
     return sa, ss, em, beta, t_end, may
 
 
-def test_free_flight_agrees(jit):  # noqa: F811
+def test_free_flight_agrees(jit):
     """Same random numbers: the same flights within rounding; finite
     everywhere, also for 1e30 coefficients and endless segments."""
     from engine.media.flight import _flight_rows
@@ -96,7 +104,7 @@ def test_free_flight_agrees(jit):  # noqa: F811
         assert np.isfinite(a).all()
 
 
-def test_compiled_free_flight_is_the_reference_estimator(jit):  # noqa: F811
+def test_compiled_free_flight_is_the_reference_estimator(jit):
     """Independent random numbers: the compiled and the reference free
     flights' mean pass and scattering weights agree per channel (one
     family, 6 two-sample z-tests; power printed)."""
@@ -123,7 +131,7 @@ def test_compiled_free_flight_is_the_reference_estimator(jit):  # noqa: F811
     assert np.abs(z).max() < z_threshold(level)
 
 
-def test_cone_segment_agrees(jit):  # noqa: F811
+def test_cone_segment_agrees(jit):
     rng = np.random.default_rng(3)
     n = 5000
     o = rng.normal(0.0, 2.0, (n, 3))
@@ -147,7 +155,7 @@ def test_cone_segment_agrees(jit):  # noqa: F811
     assert not np.isnan(got[0]).any() and not np.isnan(got[1]).any()
 
 
-def test_direct_points_agree(jit):  # noqa: F811
+def test_direct_points_agree(jit):
     """Equiangular and truncated-distance direct-light points and both
     pdfs: compiled against the reference within rounding (endless and
     empty lit parts, zero and huge extinction, the light on the ray)."""
