@@ -135,11 +135,12 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES, first=None):
 
 
 def _join(paths, *others):
-    """The paths and the others that go on (None or empty: none)."""
-    for other in others:
-        if other is not None and len(other.pix):
-            paths = other if len(paths.pix) == 0 else paths.concat(other)
-    return paths
+    """The paths and the others that go on (None or empty: none), in one
+    concatenation."""
+    parts = [p for p in (paths,) + others if p is not None and len(p.pix)]
+    if len(parts) < 2:
+        return parts[0] if parts else paths
+    return parts[0].concat(*parts[1:])
 
 
 def _compact(ctx, paths, arrays, go_on, tile, held=None):
