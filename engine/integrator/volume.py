@@ -244,10 +244,11 @@ def after_flights(ctx, paths, ended, flight, depth, tile, obs=NO_PASSES):
         p_mis = ctx.lights.selection_pdf(e, p, np.zeros_like(p))
         _light_sample(ctx, at, p, phase, e, p_sel, u[:, 1:], p_mis, obs)
         paths.L[rows] += at.L - before
-    emitted = paths.beta[r] * flight.emitted
-    paths.L[r] += emitted
-    if obs.active:
-        obs.volume_emission(paths, r, emitted)
+    if flight.emitted.any():   # most media emit nothing: no row gathers then
+        emitted = paths.beta[r] * flight.emitted
+        paths.L[r] += emitted
+        if obs.active:
+            obs.volume_emission(paths, r, emitted)
     paths.beta[r] *= flight.weight
     sc = flight.scatter & ~ended[r]
     if not sc.any():
