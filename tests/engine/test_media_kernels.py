@@ -23,6 +23,20 @@ def jit():
     kernels.configure(True)
 
 
+def _rays(rng, n, spread):
+    o = rng.normal(0.0, spread, (n, 3))
+    d = rng.normal(0.0, 1.0, (n, 3))
+    return o, d / np.linalg.norm(d, axis=1)[:, None]
+
+
+def _agree_where(ref, got, same):
+    """Compiled against reference within rounding on the rows ``same``
+    (infinities read as 0)."""
+    plain = Reference(tuple(np.where(np.isfinite(a), a, 0.0)[same] for a in ref))
+    plain.spread = [np.asarray(sp)[same] for sp in ref.spread]
+    assert_agree(plain, tuple(np.where(np.isfinite(a), a, 0.0)[same] for a in got))
+
+
 def _table(rng, m=5):
     vols = []
     for i in range(m):
@@ -97,9 +111,9 @@ def test_free_flight_agrees(jit):
     # a threshold: compare the rows where both forms chose alike.
     same = (ref[0] == got[0]) & (ref[6] == got[6])
     assert same.mean() > 0.999
-    plain = Reference(tuple(np.where(np.isfinite(a), a, 0.0)[same] for a in ref[1:6]))
-    plain.spread = [np.asarray(sp)[same] for sp in ref.spread[1:6]]
-    assert_agree(plain, tuple(np.where(np.isfinite(a), a, 0.0)[same] for a in got[1:6]))
+    sub = Reference(ref[1:6])
+    sub.spread = ref.spread[1:6]
+    _agree_where(sub, got[1:6], same)
     for a in got[2:6]:
         assert np.isfinite(a).all()
 
@@ -134,9 +148,7 @@ def test_compiled_free_flight_is_the_reference_estimator(jit):
 def test_cone_segment_agrees(jit):
     rng = np.random.default_rng(3)
     n = 5000
-    o = rng.normal(0.0, 2.0, (n, 3))
-    d = rng.normal(0.0, 1.0, (n, 3))
-    d /= np.linalg.norm(d, axis=1)[:, None]
+    o, d = _rays(rng, n, 2.0)
     apex = rng.normal(0.0, 1.0, (n, 3))
     axis = rng.normal(0.0, 1.0, (n, 3))
     axis /= np.linalg.norm(axis, axis=1)[:, None]
@@ -149,9 +161,7 @@ def test_cone_segment_agrees(jit):
     # compare where both forms agree that the interval is empty or not.
     same = (ref[1] > ref[0]) == (got[1] > got[0])
     assert same.mean() > 0.998 and (ref[1] > ref[0]).mean() > 0.2
-    plain = Reference(tuple(np.where(np.isfinite(a), a, 0.0)[same] for a in ref))
-    plain.spread = [np.asarray(sp)[same] for sp in ref.spread]
-    assert_agree(plain, tuple(np.where(np.isfinite(a), a, 0.0)[same] for a in got))
+    _agree_where(ref, got, same)
     assert not np.isnan(got[0]).any() and not np.isnan(got[1]).any()
 
 
@@ -162,9 +172,7 @@ def test_direct_points_agree(jit):
     from engine.media import direct
     rng = np.random.default_rng(17)
     n = 6000
-    o = rng.normal(0.0, 1.0, (n, 3))
-    d = rng.normal(0.0, 1.0, (n, 3))
-    d /= np.linalg.norm(d, axis=1)[:, None]
+    o, d = _rays(rng, n, 1.0)
     P = rng.normal(0.0, 2.0, (n, 3))
     P[:40] = o[:40] + d[:40] * 2.0                  # the light point on the ray's line
     t0 = rng.random(n) * 2.0
@@ -180,7 +188,5 @@ def test_direct_points_agree(jit):
     # Rows whose channel choice sits within rounding of a threshold may differ.
     same = np.isclose(ref[0], got[0], rtol=1e-6, atol=1e-9) | (np.isinf(ref[0]) & np.isinf(got[0]))
     assert same.mean() > 0.999
-    plain = Reference(tuple(np.where(np.isfinite(a), a, 0.0)[same] for a in ref))
-    plain.spread = [np.asarray(sp)[same] for sp in ref.spread]
-    assert_agree(plain, tuple(np.where(np.isfinite(a), a, 0.0)[same] for a in got))
+    _agree_where(ref, got, same)
     assert all(np.isfinite(a).all() for a in got[1:])
