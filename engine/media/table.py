@@ -212,11 +212,9 @@ class MediumTable:
         return self.stack_media(stack)[:4]
 
     def extinction(self, stack):
-        out = np.zeros((len(stack), 3))
-        for k in self._used_slots(stack):
-            m = stack[:, k]
-            out += np.take(self.sigma_a, m, axis=0) + np.take(self.sigma_s, m, axis=0)
-        return out
+        """(N, 3) the stacks' summed homogeneous extinction (shadow rays' transmittance)."""
+        sa, ss = self.stack_media(stack)[:2]
+        return sa + ss
 
     @staticmethod
     def _used_slots(stack):
