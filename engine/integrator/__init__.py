@@ -92,11 +92,11 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES, first=None):
         stages.camera_aovs(ctx, paths, found, tile)
     flight = None if ctx.media is None else volume.free_flights(ctx, paths, found, depth)
     ended = stages.emitters(ctx, paths, found, obs)              # lights on the ray
-    scattered = None
+    scattered = held = None
     if flight is not None:                                       # volume vertices: NEE, phase sample
-        paths, found, ended, scattered = volume.after_flights(ctx, paths, found, ended, flight, depth, obs)
+        ended, scattered, held = volume.after_flights(ctx, paths, ended, flight, depth, tile, obs)
     stages.escaped(ctx, paths, np.flatnonzero((found.prim < 0) & ~ended), tile, obs)
-    paths, surface = _compact(ctx, paths, found.surface, (found.prim >= 0) & ~ended, tile)
+    paths, surface = _compact(ctx, paths, found.surface, (found.prim >= 0) & ~ended, tile, held)
     if len(paths.pix) == 0:
         return _join(paths, scattered)
     hit = stages.interaction(ctx, paths, *surface)               # Hit
@@ -135,19 +135,21 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES, first=None):
 
 
 def _join(paths, *others):
-    """The paths and the others that go on (None or empty: none)."""
-    for other in others:
-        if other is not None and len(other.pix):
-            paths = other if len(paths.pix) == 0 else paths.concat(other)
-    return paths
+    """The paths and the others that go on (None or empty: none), in one
+    concatenation."""
+    parts = [p for p in (paths,) + others if p is not None and len(p.pix)]
+    if len(parts) < 2:
+        return parts[0] if parts else paths
+    return parts[0].concat(*parts[1:])
 
 
-def _compact(ctx, paths, arrays, go_on, tile):
-    """End the paths not ``go_on`` and keep the others, and those rows of
-    ``arrays``: dense arrays for every stage after, no index indirection."""
+def _compact(ctx, paths, arrays, go_on, tile, held=None):
+    """End the paths not ``go_on`` (nor ``held``: moved on elsewhere, the
+    volume vertices) and keep the others, and those rows of ``arrays``:
+    dense arrays for every stage after, no index indirection."""
     if go_on.all():
         return paths, arrays
-    stages.finish(ctx, paths, tile, ~go_on)
+    stages.finish(ctx, paths, tile, ~go_on if held is None else ~go_on & ~held)
     rows = np.flatnonzero(go_on)
     return paths.take(rows), tuple(a.take(rows) for a in arrays)
 

@@ -98,9 +98,9 @@ class Paths:
         idx = rows_of(keep)
         return np.take(self.pix, idx), np.take(self.L, idx, axis=0), np.take(self.sample, idx)
 
-    def concat(self, other):
-        return Paths(*(np.concatenate([getattr(self, f), getattr(other, f)])
-                       for f in self.__dataclass_fields__))
+    def concat(self, *others):
+        parts = (self,) + others
+        return Paths(*(np.concatenate([getattr(p, f) for p in parts]) for f in self.__dataclass_fields__))
 
 
 @dataclass

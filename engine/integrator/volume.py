@@ -20,7 +20,7 @@ import numpy as np
 from .. import media
 from ..pass_events import NO_PASSES
 from ..lights.point import PointLights
-from ..media import equiangular, tracking
+from ..media import direct as direct_points, equiangular, tracking
 from ..motion import path_time
 from ..accel import shadow_rays
 from ..sampler import BSDF, LIGHT, MEDIUM, emitter_set, vertex_set
@@ -28,7 +28,7 @@ from ..sampling import power_heuristic
 from ..vec import dot, row_any_positive
 from . import transparency, visibility
 from .records import RowView
-from .stages import nee_rounds
+from .stages import finish, nee_rounds
 from .visibility import VIS_INDIRECT
 
 
@@ -47,7 +47,8 @@ def free_flights(ctx, paths, found, depth):
     may = ~transparency.last_vertices(ctx, on)   # past max_bounces or volume_bounces: no scattering
     u = ctx.sampler.get(on.pseed, on.sample, vertex_set(depth, MEDIUM))
     u_distance = u[:, 1].copy()
-    direct = _direct_setup(ctx, on, t_end, may, u_distance, depth)
+    mixed = ctx.media.stack_media(on.stack)   # the stacks' summed homogeneous coefficients, phase media
+    direct = _direct_setup(ctx, on, mixed[1], t_end, may, u_distance, depth)
     lit = np.flatnonzero(found.light[inside])
     x_light = np.full(len(inside), np.inf)
     if len(lit):
@@ -58,9 +59,9 @@ def free_flights(ctx, paths, found, depth):
         x_light[lit] = x
     _tracked_points(ctx, on, direct, u)
     flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u_distance,
-                               on.o, on.d, tracking_rng(ctx, on.pseed, on.sample, depth, 1), x_light)
+                               on.o, on.d, tracking_rng(ctx, on.pseed, on.sample, depth, 1), x_light, mixed)
     flight.rows = inside
-    _direct_points(ctx, on, flight, direct, u, depth)
+    _direct_points(ctx, on, flight, direct, u, depth, mixed[1])
     if len(lit):
         rows = inside[lit]
         x = x_light[lit]
@@ -72,7 +73,7 @@ def free_flights(ctx, paths, found, depth):
 # ----------------------------------------------------------------------------
 # where a segment's direct light is estimated (Cycles' direct scatter)
 
-def _direct_setup(ctx, on, t_end, may, u_distance, depth):
+def _direct_setup(ctx, on, ss, t_end, may, u_distance, depth):
     """Segments in scattering media that may scatter get a direct-light
     point of their own, as Cycles 5.0's: a light is sampled from the ray's
     start (its emitter is the one the point samples), and the stack's
@@ -91,7 +92,6 @@ def _direct_setup(ctx, on, t_end, may, u_distance, depth):
     s = ctx.settings
     if ctx.lights.count == 0 or s.strategy != "mis" or s.light_selection == "all":
         return None
-    _, ss, _, _ = ctx.media.coefficients(on.stack)
     het = ctx.media.heterogeneous(on.stack)
     method = equiangular.stack_method(ctx.media.sampling, on.stack)
     cand = np.flatnonzero(may & np.where(het, method != equiangular.DISTANCE, np.any(ss > 0, axis=1)))
@@ -135,9 +135,9 @@ def _tracked_points(ctx, on, direct, u):
     q = equi[h]
     e, k = np.flatnonzero(q), np.flatnonzero(~q)
     t[e], _ = equiangular.sample(o[e], d[e], P[h[e]], t0[h[e]], t1[h[e]], xi[e])
-    t[k] = _truncated_exponential(sigma[k], t0[h[k]], t1[h[k]], xi[k])
+    t[k] = direct_points.truncated_exponential(sigma[k], t0[h[k]], t1[h[k]], xi[k])
     p_e = equiangular.pdf(o, d, P[h], t0[h], t1[h], t)
-    p_d = _truncated_pdf(np.ones((len(h), 1)), sigma[:, None], t0[h], t1[h], t)
+    p_d = direct_points.truncated_pdf(np.ones((len(h), 1)), sigma[:, None], t0[h], t1[h], t)
     direct[9] = (h, t, p_e, p_d)
 
 
@@ -164,7 +164,7 @@ def _lit_segment(ctx, o, d, e, t_end):
     return t0, t1
 
 
-def _direct_points(ctx, on, flight, direct, u, depth):
+def _direct_points(ctx, on, flight, direct, u, depth, sigma_s):
     """Sets flight.nee_scale (the factor on the light sampled at a free
     flight's scattering point: 1, or 0 for the segments ``_direct_setup``
     chose a direct-light point for) and flight.direct: (rows, t, throughput
@@ -188,16 +188,7 @@ def _direct_points(ctx, on, flight, direct, u, depth):
     o, d = on.o[rows], on.d[rows]
     pc, st = flight.channel_pdf[rows], flight.sigma_t[rows]
     xi, uc = u[rows, 2], u[rows, 3]
-    t = np.zeros(len(rows))
-    p_e = np.zeros(len(rows))
-    e = np.flatnonzero(equi & ~het)
-    t[e], p_e[e] = equiangular.sample(o[e], d[e], P[e], t0[e], t1[e], xi[e])
-    k = np.flatnonzero(~equi & ~het)
-    if len(k):
-        c = np.minimum((uc[k, None] >= np.cumsum(pc[k], axis=1)).sum(axis=1), 2)
-        t[k] = _truncated_exponential(st[k, c], t0[k], t1[k], xi[k])
-        p_e[k] = equiangular.pdf(o[k], d[k], P[k], t0[k], t1[k], t[k])
-    p_d = _truncated_pdf(pc, st, t0, t1, t)
+    t, p_e, p_d = direct_points.sample_points(o, d, P, t0, t1, xi, uc, pc, st, equi, het)
     if tracked is not None:   # heterogeneous rows: sampled before their flight
         h = tracked[0]
         t[h], p_e[h], p_d[h] = tracked[1], tracked[2], tracked[3]
@@ -208,7 +199,7 @@ def _direct_points(ctx, on, flight, direct, u, depth):
     keep = np.flatnonzero(good)
     if len(keep) == 0:
         return
-    _, ss, _, _ = ctx.media.coefficients(on.stack[rows[keep]])
+    ss = sigma_s[rows[keep]]
     T = np.exp(-st[keep] * t[keep, None])
     hk = np.flatnonzero(het[keep])
     if len(hk):   # the textured media's scattering at the point, the tracker's transmittance to it
@@ -220,29 +211,6 @@ def _direct_points(ctx, on, flight, direct, u, depth):
     flight.direct = (rows[keep], t[keep], ss * T * (w[keep] / p[keep])[:, None], emitter[keep], p_sel[keep])
 
 
-def _truncated_exponential(sigma, t0, t1, xi):
-    """Distances in [t0, t1] of density sigma exp(-sigma (t - t0)),
-    renormalized (uniform where sigma is 0)."""
-    length = t1 - t0
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        mass = -np.expm1(-sigma * length)
-        t = t0 - np.log1p(-xi * mass) / np.where(sigma > 0, sigma, 1.0)
-        t = np.where(sigma > 0, t, t0 + xi * np.where(np.isfinite(length), length, 0.0))
-    return np.clip(t, t0, t1)
-
-
-def _truncated_pdf(pc, sigma, t0, t1, t):
-    """The channel mixture's pdf of ``_truncated_exponential`` distances."""
-    length = (t1 - t0)[:, None]
-    x = (t - t0)[:, None]
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        mass = -np.expm1(-sigma * length)
-        each = np.where(sigma > 0, sigma * np.exp(-sigma * x) / np.where(mass > 0, mass, 1.0),
-                        np.where(np.isfinite(length), 1.0 / np.where(length > 0, length, 1.0), 0.0))
-    out = (pc * np.where(np.isfinite(each), each, 0.0)).sum(axis=1)
-    return np.where((t >= t0) & (t <= t1) & (t1 > t0), out, 0.0)
-
-
 def tracking_rng(ctx, pseed, sample, depth, salt):
     """The random numbers of null-scattering tracking (a ray's collisions
     are unbounded in number, so they come from a generator seeded by the
@@ -252,17 +220,19 @@ def tracking_rng(ctx, pseed, sample, depth, salt):
     return np.random.default_rng([int(ctx.settings.seed) & 0xFFFFFFFF, first[0], first[1], depth, salt, n])
 
 
-def after_flights(ctx, paths, found, ended, flight, depth, obs=NO_PASSES):
+def after_flights(ctx, paths, ended, flight, depth, tile, obs=NO_PASSES):
     """Apply the flights: emission, the throughput; the paths that scattered
     (and did not end at a light first) make a volume vertex and leave this
-    bounce.  Returns (paths, found, ended) of the others and the scattered
-    paths moved on (None when none).  ``obs``: the pass observer, told of
-    the light added here (engine.pass_events)."""
+    bounce.  Returns ``ended`` with the scattered rows set too, the
+    scattered paths moved on (None when none) and the mask of their rows,
+    which the bounce's compaction drops without finishing them (one take
+    per bounce, not one here and one there).  ``obs``: the pass observer,
+    told of the light added here (engine.pass_events)."""
     r = flight.rows
     if flight.direct is not None:   # equiangular direct-light points, lit with the throughput at the start
         k, t, w, e, p_sel = flight.direct
         rows = r[k]
-        at = paths.take(rows)
+        at = RowView(paths, rows, len(paths.pix))   # the few fields light sampling reads
         at.beta = at.beta * w
         before = at.L.copy()
         phase = ctx.media.vertex_phase(flight.g[k], flight.phase_medium[k])
@@ -275,23 +245,27 @@ def after_flights(ctx, paths, found, ended, flight, depth, obs=NO_PASSES):
         p_mis = ctx.lights.selection_pdf(e, p, np.zeros_like(p))
         _light_sample(ctx, at, p, phase, e, p_sel, u[:, 1:], p_mis, obs)
         paths.L[rows] += at.L - before
-    emitted = paths.beta[r] * flight.emitted
-    paths.L[r] += emitted
-    if obs.active:
-        obs.volume_emission(paths, r, emitted)
+    if flight.emitted.any():   # most media emit nothing: no row gathers then
+        emitted = paths.beta[r] * flight.emitted
+        paths.L[r] += emitted
+        if obs.active:
+            obs.volume_emission(paths, r, emitted)
     paths.beta[r] *= flight.weight
     sc = flight.scatter & ~ended[r]
     if not sc.any():
-        return paths, found, ended, None
+        return ended, None, None
     rows = r[sc]
-    keep = np.ones(len(paths.pix), bool)
-    keep[rows] = False
+    held = np.zeros(len(paths.pix), bool)
+    held[rows] = True
     moved = paths.take(rows)
     p = moved.o + moved.d * flight.t[sc, None]
     volume_vertex(ctx, moved, p, ctx.media.vertex_phase(flight.g[sc], flight.phase_medium[sc]), depth,
                   flight.nee_scale[sc], obs)
-    moved = moved.take(row_any_positive(moved.beta))
-    return paths.take(keep), found.take(keep), ended[keep], moved
+    alive = row_any_positive(moved.beta)
+    if not alive.all():   # no throughput left: their light so far goes to the film
+        finish(ctx, moved, tile, ~alive)
+        moved = moved.take(alive)
+    return ended | held, moved, held
 
 
 # ----------------------------------------------------------------------------
@@ -321,7 +295,7 @@ def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None, obs=NO_PASSES):
     else:
         lit = np.flatnonzero(nee_scale > 0)
         if len(lit):
-            at = paths.take(lit)
+            at = RowView(paths, lit, n)
             at.beta = at.beta * nee_scale[lit, None]
             before = at.L.copy()
             direct_light(ctx, at, p[lit], phase_rows(phase, lit), depth, obs)

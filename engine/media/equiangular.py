@@ -11,6 +11,8 @@ a light near the ray.
 """
 import numpy as np
 
+from .. import kernels
+
 DISTANCE, EQUIANGULAR, MIS = 0, 1, 2
 METHODS = {"DISTANCE": DISTANCE, "EQUIANGULAR": EQUIANGULAR, "MULTIPLE_IMPORTANCE": MIS}
 
@@ -63,6 +65,15 @@ def cone_segment(o, d, apex, axis, cos_half, t_end):
     empty interval has t1 <= t0.  A convex cone meets a line in one
     interval: the roots of the cone's quadratic split the ray, and the
     pieces whose middles are inside make it."""
+    n = len(o)
+    t0, t1 = np.empty(n), np.empty(n)
+    f64 = np.float64
+    _cone_segment_rows(*(np.ascontiguousarray(a, f64) for a in (o, d, apex, axis, cos_half, t_end)), t0, t1)
+    return t0, t1
+
+
+def _cone_segment_numpy(o, d, apex, axis, cos_half, t_end, t0, t1):
+    """The reference form of ``_cone_segment_rows``."""
     v = o - apex
     da, va = np.einsum("ij,ij->i", d, axis), np.einsum("ij,ij->i", v, axis)
     dv, vv = np.einsum("ij,ij->i", d, v), np.einsum("ij,ij->i", v, v)
@@ -89,7 +100,49 @@ def cone_segment(o, d, apex, axis, cos_half, t_end):
         lo = np.where(inside, np.minimum(lo, a), lo)
         hi = np.where(inside, np.maximum(hi, b), hi)
     empty = ~(hi > lo)
-    return np.where(empty, 0.0, lo), np.where(empty, 0.0, hi)
+    t0[:], t1[:] = np.where(empty, 0.0, lo), np.where(empty, 0.0, hi)
+
+
+
+@kernels.loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], "
+                     "float64[::1], float64[::1], float64[::1])", _cone_segment_numpy)
+def _cone_segment_rows(o, d, apex, axis, cos_half, t_end, t0, t1):
+    big = 1.7976931348623157e308   # np.finfo(np.float64).max
+    cuts = np.empty(4)
+    for i in range(o.shape[0]):
+        v0, v1, v2 = o[i, 0] - apex[i, 0], o[i, 1] - apex[i, 1], o[i, 2] - apex[i, 2]
+        da = d[i, 0] * axis[i, 0] + d[i, 1] * axis[i, 1] + d[i, 2] * axis[i, 2]
+        va = v0 * axis[i, 0] + v1 * axis[i, 1] + v2 * axis[i, 2]
+        dv = d[i, 0] * v0 + d[i, 1] * v1 + d[i, 2] * v2
+        vv = v0 * v0 + v1 * v1 + v2 * v2
+        c2 = cos_half[i] * cos_half[i]
+        A, B, C = da * da - c2, 2.0 * (da * va - c2 * dv), va * va - c2 * vv
+        disc = B * B - 4.0 * A * C
+        sq = np.sqrt(max(disc, 0.0))
+        if abs(A) < 1e-12:
+            r1 = -C / B if B != 0 else np.nan
+            r2 = np.nan
+        else:
+            r1, r2 = (-B - sq) / (2.0 * A), (-B + sq) / (2.0 * A)
+        if not disc >= -1e-9 * (B * B + abs(4.0 * A * C)):   # a tangent ray's double root, within rounding
+            r1, r2 = np.nan, np.nan
+        end = t_end[i] if np.isfinite(t_end[i]) else np.inf
+        # np.nan_to_num, then clipped to [0, end]: both cuts lie between 0 and end.
+        c1 = min(max(0.0 if np.isnan(r1) else min(max(r1, -big), big), 0.0), end)
+        c2 = min(max(0.0 if np.isnan(r2) else min(max(r2, -big), big), 0.0), end)
+        cuts[0], cuts[1], cuts[2], cuts[3] = 0.0, min(c1, c2), max(c1, c2), end
+        lo, hi = np.inf, -np.inf
+        for k in range(3):
+            a, b = cuts[k], cuts[k + 1]
+            mid = 0.5 * (a + b) if np.isfinite(b) else a + 1.0 + abs(a)
+            x0, x1, x2 = v0 + d[i, 0] * mid, v1 + d[i, 1] * mid, v2 + d[i, 2] * mid
+            xa = x0 * axis[i, 0] + x1 * axis[i, 1] + x2 * axis[i, 2]
+            if b > a and xa >= cos_half[i] * np.sqrt(x0 * x0 + x1 * x1 + x2 * x2):
+                lo, hi = min(lo, a), max(hi, b)
+        if hi > lo:
+            t0[i], t1[i] = lo, hi
+        else:
+            t0[i], t1[i] = 0.0, 0.0
 
 
 def stack_method(methods, stack):

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import kernels
 from .tracking import track, transmittance
 
 
@@ -81,14 +82,16 @@ def channel_pdf(beta, sigma_s, sigma_t):
 
 
 def free_flight(table, stack, beta, t_end, may_scatter, u_channel, u_distance, o=None, d=None, rng=None,
-                x_light=None):
+                x_light=None, media=None):
     """The FreeFlight of segments of length t_end (inf: no end) in the
     media of ``stack`` (rows of the paths in a medium); ``may_scatter``:
     the path has scattering events left.  Rows whose stack holds a
     heterogeneous medium are tracked along o + t d (tracking.py, random
-    numbers from ``rng``; ``x_light``: where a light on the ray is)."""
-    flight = _homogeneous_flight(table, stack, beta, t_end, may_scatter, u_channel, u_distance)
-    flight.phase_medium = table.phase_medium(stack)
+    numbers from ``rng``; ``x_light``: where a light on the ray is).
+    ``media``: table.stack_media(stack) when the caller has it."""
+    sa, ss, em, g, phase_medium = table.stack_media(stack) if media is None else media
+    flight = _homogeneous_flight(sa, ss, em, g, beta, t_end, may_scatter, u_channel, u_distance)
+    flight.phase_medium = phase_medium
     het = table.heterogeneous(stack)
     flight.tracked = het
     if het.any():
@@ -105,21 +108,35 @@ def free_flight(table, stack, beta, t_end, may_scatter, u_channel, u_distance, o
     return flight
 
 
-def _homogeneous_flight(table, stack, beta, t_end, may_scatter, u_channel, u_distance):
-    n = len(stack)
-    sa, ss, em, g = table.coefficients(stack)
-    st = sa + ss
-    emitted = emission_integral(em, st, t_end)
-    samples = may_scatter & np.any(ss > 0, axis=1)
-    pc = np.where(samples[:, None], channel_pdf(beta, ss, st), 0.0)
+def _homogeneous_flight(sa, ss, em, g, beta, t_end, may_scatter, u_channel, u_distance):
+    n = len(sa)
+    scatter, samples = np.empty(n, bool), np.empty(n, bool)
+    t = np.empty(n)
+    weight, emitted, st, pc = (np.empty((n, 3)) for _ in range(4))
+    f64 = np.float64
+    _flight_rows(np.ascontiguousarray(sa, f64), np.ascontiguousarray(ss, f64), np.ascontiguousarray(em, f64),
+                 np.ascontiguousarray(beta, f64), np.ascontiguousarray(t_end, f64),
+                 np.ascontiguousarray(may_scatter, bool), np.ascontiguousarray(u_channel, f64),
+                 np.ascontiguousarray(u_distance, f64), scatter, t, weight, emitted, st, pc, samples)
+    return FreeFlight(None, t_end, scatter, t, weight, emitted, g, st, pc, samples)
+
+
+def _flight_numpy(sa, ss, em, beta, t_end, may_scatter, u_channel, u_distance,
+                  scatter, t, weight, emitted, st, pc, samples):
+    """The reference form of ``_flight_rows`` (the module's docstring)."""
+    n = len(sa)
+    st[:] = sa + ss
+    emitted[:] = emission_integral(em, st, t_end)
+    samples[:] = may_scatter & np.any(ss > 0, axis=1)
+    pc[:] = np.where(samples[:, None], channel_pdf(beta, ss, st), 0.0)
     c = np.minimum((u_channel[:, None] >= np.cumsum(pc, axis=1)).sum(axis=1), 2)
     sig_c = st[np.arange(n), c]
     with np.errstate(divide="ignore"):
-        t = np.where(samples & (sig_c > 0), -np.log1p(-np.minimum(u_distance, 1.0 - 2 ** -53))
-                     / np.where(sig_c > 0, sig_c, 1.0), np.inf)
-    scatter = t < t_end
+        t[:] = np.where(samples & (sig_c > 0), -np.log1p(-np.minimum(u_distance, 1.0 - 2 ** -53))
+                        / np.where(sig_c > 0, sig_c, 1.0), np.inf)
+    scatter[:] = t < t_end
     T_end = _exp_neg(st, t_end[:, None])
-    weight = T_end.copy()
+    weight[:] = T_end
     s = np.flatnonzero(scatter)
     if len(s):
         T_t = _exp_neg(st[s], t[s, None])
@@ -129,7 +146,60 @@ def _homogeneous_flight(table, stack, beta, t_end, may_scatter, u_channel, u_dis
     if len(p):
         P = (pc[p] * T_end[p]).sum(axis=1)
         weight[p] = np.where(P[:, None] > 0, T_end[p] / np.where(P > 0, P, 1.0)[:, None], 0.0)
-    return FreeFlight(None, t_end, scatter, t, weight, emitted, g, st, pc, samples)
+
+
+@kernels.loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], "
+                     "boolean[::1], float64[::1], float64[::1], boolean[::1], float64[::1], float64[:, ::1], "
+                     "float64[:, ::1], float64[:, ::1], float64[:, ::1], boolean[::1])", _flight_numpy)
+def _flight_rows(sa, ss, em, beta, t_end, may_scatter, u_channel, u_distance,
+                 scatter, t, weight, emitted, st, pc, samples):
+    for i in range(sa.shape[0]):
+        te = t_end[i]
+        any_s = False
+        total = 0.0
+        for c in range(3):
+            s = sa[i, c] + ss[i, c]
+            st[i, c] = s
+            if s > 0:
+                e = (1.0 - np.exp(-s * te)) / s
+            else:
+                e = te if np.isfinite(te) else 0.0
+            emitted[i, c] = em[i, c] * e
+            any_s = any_s or ss[i, c] > 0
+            pc[i, c] = abs(beta[i, c] * (ss[i, c] / s if s > 0 else 0.0))
+            total += pc[i, c]
+        smp = may_scatter[i] and any_s
+        samples[i] = smp
+        for c in range(3):
+            pc[i, c] = (pc[i, c] / total if total > 0 else 1.0 / 3.0) if smp else 0.0
+        # The channel: the first whose cumulative pdf passes u (Cycles' volume_sample_channel).
+        ch, cum = 0, pc[i, 0]
+        while ch < 2 and u_channel[i] >= cum:
+            ch += 1
+            cum += pc[i, ch]
+        sig = st[i, ch]
+        ti = np.inf
+        if smp and sig > 0:
+            ti = -np.log1p(-min(u_distance[i], 1.0 - 2.0 ** -53)) / sig
+        t[i] = ti
+        sc = ti < te
+        scatter[i] = sc
+        pdf, P = 0.0, 0.0
+        for c in range(3):
+            s = st[i, c]
+            T = np.exp(-s * te) if s > 0 else 1.0
+            weight[i, c] = T
+            P += pc[i, c] * T
+            if sc:
+                T_t = np.exp(-s * ti) if s > 0 else 1.0
+                weight[i, c] = ss[i, c] * T_t
+                pdf += pc[i, c] * s * T_t
+        if sc:
+            for c in range(3):
+                weight[i, c] /= max(pdf, 1e-300)
+        elif smp:
+            for c in range(3):
+                weight[i, c] = weight[i, c] / P if P > 0 else 0.0
 
 
 def light_factor(flight, k, x):

@@ -12,6 +12,7 @@ every stack entry.
 """
 import numpy as np
 
+from .. import kernels
 from . import equiangular
 from .field import build_fields, is_heterogeneous
 from .phase import HG, mixture_of
@@ -111,18 +112,20 @@ class MediumTable:
         follows where it is not Henyey-Greenstein (-1: Henyey-Greenstein of
         the scattering-weighted mean g): the medium scattering most (a
         heterogeneous one before any homogeneous)."""
+        return self.stack_media(stack)[4]
+
+    def stack_media(self, stack):
+        """(sigma_a, sigma_s, emission (N, 3), g (N,), phase medium (N,)) of
+        stacks (N, K) in one compiled pass (``coefficients``,
+        ``phase_medium``)."""
         n = len(stack)
-        best, best_w = np.full(n, -1), np.full(n, -np.inf)
+        out = (np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n), np.empty(n, np.int64))
         het = np.zeros(len(self.has), bool)
         het[self.first_field:self.first_field + len(self.fields)] = True
-        for k in self._used_slots(stack):
-            m = stack[:, k]
-            w = np.where(m < 0, -np.inf, np.where(het[m], np.inf, np.take(self.sigma_s, m, axis=0).mean(axis=1)))
-            take = w > best_w
-            best, best_w = np.where(take, m, best), np.where(take, w, best_w)
-        ph = self.phase[np.maximum(best, 0)]
-        plain = (ph[:, 0] == HG) & (ph[:, 6] == 0)
-        return np.where((best < 0) | plain, -1, best)
+        plain = (self.phase[:, 0] == HG) & (self.phase[:, 6] == 0)
+        _stack_media_rows(np.ascontiguousarray(stack, np.int32), self.sigma_a, self.sigma_s, self.emission,
+                          self.g, het, plain, *out)
+        return out
 
     def vertex_phase(self, g, medium):
         """The 7 arrays of the phase mixtures at scattering points: HG of g
@@ -207,33 +210,17 @@ class MediumTable:
     # -- a stack's medium ------------------------------------------------------
     def coefficients(self, stack):
         """(sigma_a, sigma_s, emission (N, 3), g (N,)) of stacks (N, K): the
-        sums over their media; g is the scattering-weighted mean of theirs.
-        Only the slots some path uses are read (mostly the first)."""
-        n = len(stack)
-        sa, ss, em = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
-        gw, w = np.zeros(n), np.zeros(n)
-        for k in self._used_slots(stack):
-            m = stack[:, k]
-            sa += np.take(self.sigma_a, m, axis=0)
-            s = np.take(self.sigma_s, m, axis=0)
-            ss += s
-            em += np.take(self.emission, m, axis=0)
-            wk = s.mean(axis=1)
-            w += wk
-            gw += wk * np.take(self.g, m)
-        g = np.where(w > 0, gw / np.where(w > 0, w, 1.0), 0.0)
-        return sa, ss, em, g
+        sums over their media; g is the scattering-weighted mean of theirs."""
+        return self.stack_media(stack)[:4]
 
     def extinction(self, stack):
-        out = np.zeros((len(stack), 3))
-        for k in self._used_slots(stack):
-            m = stack[:, k]
-            out += np.take(self.sigma_a, m, axis=0) + np.take(self.sigma_s, m, axis=0)
-        return out
+        """(N, 3) the stacks' summed homogeneous extinction (shadow rays' transmittance)."""
+        sa, ss = self.stack_media(stack)[:2]
+        return sa + ss
 
     @staticmethod
     def _used_slots(stack):
-        return [k for k in range(stack.shape[1]) if (stack[:, k] >= 0).any()]
+        return _used_slots(stack)
 
     # -- entering and leaving ---------------------------------------------------
     def cross(self, stack, rows, mat, back):
@@ -255,6 +242,64 @@ class MediumTable:
         put = np.flatnonzero(enter & empty.any(axis=1))
         sub[put, slot[put]] = mat[put]
         stack[rows] = sub
+
+
+def _used_slots(stack):
+    return [k for k in range(stack.shape[1]) if (stack[:, k] >= 0).any()]
+
+
+def _stack_media_numpy(stack, sigma_a, sigma_s, emission, g_table, het, plain, sa, ss, em, g, phase_medium):
+    """The reference form of ``_stack_media_rows``: sums of the stacks'
+    rows (an empty slot, -1, reads the zero row at the end), g the
+    scattering-weighted mean, and the phase medium (the one scattering
+    most, a heterogeneous one first; -1 where that is plain HG)."""
+    n = len(stack)
+    sa[:], ss[:], em[:] = 0.0, 0.0, 0.0
+    gw, w = np.zeros(n), np.zeros(n)
+    best, best_w = np.full(n, -1), np.full(n, -np.inf)
+    for k in _used_slots(stack):
+        m = stack[:, k]
+        sa += np.take(sigma_a, m, axis=0)
+        s = np.take(sigma_s, m, axis=0)
+        ss += s
+        em += np.take(emission, m, axis=0)
+        wk = s.mean(axis=1)
+        w += wk
+        gw += wk * np.take(g_table, m)
+        pw = np.where(m < 0, -np.inf, np.where(het[m], np.inf, wk))
+        better = pw > best_w
+        best, best_w = np.where(better, m, best), np.where(better, pw, best_w)
+    g[:] = np.where(w > 0, gw / np.where(w > 0, w, 1.0), 0.0)
+    phase_medium[:] = np.where((best < 0) | plain[np.maximum(best, 0)], -1, best)
+
+
+@kernels.loop_kernel("void(int32[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], "
+                     "boolean[::1], boolean[::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], "
+                     "float64[::1], int64[::1])", _stack_media_numpy)
+def _stack_media_rows(stack, sigma_a, sigma_s, emission, g_table, het, plain, sa, ss, em, g, phase_medium):
+    for i in range(stack.shape[0]):
+        for c in range(3):
+            sa[i, c] = 0.0
+            ss[i, c] = 0.0
+            em[i, c] = 0.0
+        gw, w = 0.0, 0.0
+        best, best_w = -1, -np.inf
+        for k in range(stack.shape[1]):
+            m = stack[i, k]
+            if m < 0:
+                continue
+            for c in range(3):
+                sa[i, c] += sigma_a[m, c]
+                ss[i, c] += sigma_s[m, c]
+                em[i, c] += emission[m, c]
+            wk = (sigma_s[m, 0] + sigma_s[m, 1] + sigma_s[m, 2]) / 3.0
+            w += wk
+            gw += wk * g_table[m]
+            pw = np.inf if het[m] else wk
+            if pw > best_w:
+                best, best_w = m, pw
+        g[i] = gw / w if w > 0 else 0.0
+        phase_medium[i] = -1 if best < 0 or plain[best] else best
 
 
 def _pass_through(material):

@@ -1,0 +1,192 @@
+"""The compiled media loops (engine/media/table.py ``_stack_media_rows``,
+flight.py ``_flight_rows``, equiangular.py ``_cone_segment_rows``) against
+their NumPy reference forms: within rounding on random and hostile inputs
+(empty stacks, zero and 1e30 coefficients, endless segments), and the
+compiled free flight's estimates against the reference's with independent
+random numbers by a two-sample z-test (one family)."""
+import numpy as np
+import pytest
+
+from ember_stats import detectable, family_level, z_threshold
+from engine import kernels, media
+from engine.media import equiangular
+from engine.scene import Volume
+from test_kernels import Reference, assert_agree, both_ways, compiled_ready
+
+HOSTILE = (0.0, 1e-300, 1e30, 1e8)
+
+
+@pytest.fixture
+def jit():
+    compiled_ready()
+    yield
+    kernels.configure(True)
+
+
+def _rays(rng, n, spread):
+    o = rng.normal(0.0, spread, (n, 3))
+    d = rng.normal(0.0, 1.0, (n, 3))
+    return o, d / np.linalg.norm(d, axis=1)[:, None]
+
+
+def _agree_where(ref, got, same):
+    """Compiled against reference within rounding on the rows ``same``
+    (infinities read as 0)."""
+    plain = Reference(tuple(np.where(np.isfinite(a), a, 0.0)[same] for a in ref))
+    plain.spread = [np.asarray(sp)[same] for sp in ref.spread]
+    assert_agree(plain, tuple(np.where(np.isfinite(a), a, 0.0)[same] for a in got))
+
+
+def _table(rng, m=5):
+    vols = []
+    for i in range(m):
+        a, s = rng.random(3) * 3.0, rng.random(3) * 2.0
+        if i == 1:
+            a, s = np.zeros(3), np.zeros(3)            # an empty medium
+        if i == 2:
+            a, s = np.array([1e30, 0.0, 1e-300]), np.array([0.0, 1e8, 0.0])
+        vols.append(Volume(absorption=tuple(a), scattering=tuple(s), emission=tuple(rng.random(3)),
+                           anisotropy=float(rng.uniform(-0.9, 0.9))))
+    table = media.MediumTable(vols, [f"m{i}" for i in range(m)])
+    table.phase[3:5, 0] += 1     # two media with a non-HG phase function
+    return table
+
+
+def _stacks(rng, n, m):
+    stack = rng.integers(-1, m, (n, media.STACK_SIZE)).astype(np.int32)
+    stack[: n // 10] = -1                          # paths in no medium
+    return stack
+
+
+def test_stack_media_agrees(jit):
+    rng = np.random.default_rng(5)
+    table = _table(rng)
+    stack = _stacks(rng, 4000, 5)
+    n = len(stack)
+    het = np.zeros(len(table.has), bool)
+    het[4] = True                                  # pretend medium 4 is textured: it wins the phase choice
+    plain = table.phase[:, 0] == 0
+    outs = (np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n), np.empty(n, np.int64))
+    args = (stack, table.sigma_a, table.sigma_s, table.emission, table.g, het, plain)
+    kernels.configure(False)
+    ref = tuple(a.copy() for a in outs)
+    from engine.media.table import _stack_media_rows
+    _stack_media_rows(*args, *ref)
+    kernels.configure(True)
+    _stack_media_rows(*args, *outs)
+    assert_agree(ref[:4], outs[:4])
+    np.testing.assert_array_equal(ref[4], outs[4])
+    assert (outs[4][(stack == 4).any(axis=1)] == 4).all()
+
+
+def _flight_inputs(rng, n):
+    sa = rng.random((n, 3)) * 2.0
+    ss = rng.random((n, 3)) * 2.0
+    pick = rng.random((n, 3)) < 0.1
+    sa[pick] = rng.choice(HOSTILE, pick.sum())
+    pick = rng.random((n, 3)) < 0.1
+    ss[pick] = rng.choice(HOSTILE, pick.sum())
+    em = rng.random((n, 3))
+    beta = rng.random((n, 3)) * np.where(rng.random((n, 1)) < 0.05, 0.0, 1.0)
+    t_end = np.where(rng.random(n) < 0.1, np.inf, rng.random(n) * 4.0)
+    may = rng.random(n) < 0.8
+    return sa, ss, em, beta, t_end, may
+
+
+def test_free_flight_agrees(jit):
+    """Same random numbers: the same flights within rounding; finite
+    everywhere, also for 1e30 coefficients and endless segments."""
+    from engine.media.flight import _flight_rows
+    rng = np.random.default_rng(11)
+    n = 6000
+    ins = _flight_inputs(rng, n) + (rng.random(n), rng.random(n))
+
+    def run(*args):
+        out = (np.empty(n, bool), np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)),
+               np.empty((n, 3)), np.empty(n, bool))
+        _flight_rows(*args, *out)
+        return out
+    ref, got = both_ways(run, *ins)
+    # A channel or scattering choice may flip where u sits within rounding of
+    # a threshold: compare the rows where both forms chose alike.
+    same = (ref[0] == got[0]) & (ref[6] == got[6])
+    assert same.mean() > 0.999
+    sub = Reference(ref[1:6])
+    sub.spread = ref.spread[1:6]
+    _agree_where(sub, got[1:6], same)
+    for a in got[2:6]:
+        assert np.isfinite(a).all()
+
+
+def test_compiled_free_flight_is_the_reference_estimator(jit):
+    """Independent random numbers: the compiled and the reference free
+    flights' mean pass and scattering weights agree per channel (one
+    family, 6 two-sample z-tests; power printed)."""
+    n = 200_000
+    table = media.MediumTable([Volume(absorption=(0.2, 0.5, 1.5), scattering=(1.0, 0.4, 0.1))], ["m"])
+    stack = np.full((n, media.STACK_SIZE), -1, np.int32)
+    stack[:, 0] = 0
+    beta = np.tile([0.2, 1.0, 3.0], (n, 1))
+    t_end = np.full(n, 0.8)
+    means = []
+    for on, seed in ((False, 1), (True, 2)):
+        kernels.configure(on)
+        rng = np.random.default_rng(seed)
+        f = media.free_flight(table, stack, beta, t_end, np.ones(n, bool), rng.random(n), rng.random(n))
+        w = np.concatenate([np.where(f.scatter[:, None], 0.0, f.weight), np.where(f.scatter[:, None], f.weight, 0.0)],
+                           axis=1)
+        means.append((w.mean(axis=0), w.var(axis=0) / n))
+    kernels.configure(True)
+    level = family_level(f"{__name__}.compiled_flight", 6)
+    se = np.sqrt(means[0][1] + means[1][1])
+    z = (means[1][0] - means[0][0]) / se
+    print(f"|z| {np.abs(z).max():.2f} (limit {z_threshold(level):.2f}), detects "
+          f"{detectable(se / np.abs(means[0][0]), level).max():.2%} of a weight")
+    assert np.abs(z).max() < z_threshold(level)
+
+
+def test_cone_segment_agrees(jit):
+    rng = np.random.default_rng(3)
+    n = 5000
+    o, d = _rays(rng, n, 2.0)
+    apex = rng.normal(0.0, 1.0, (n, 3))
+    axis = rng.normal(0.0, 1.0, (n, 3))
+    axis /= np.linalg.norm(axis, axis=1)[:, None]
+    axis[:50] = -d[:50]                             # rays along the axis
+    o[50:100] = apex[50:100]                       # starting at the apex
+    cos_half = rng.uniform(0.0, 0.999, n)
+    t_end = np.where(rng.random(n) < 0.2, np.inf, rng.random(n) * 6.0)
+    ref, got = both_ways(equiangular.cone_segment, o, d, apex, axis, cos_half, t_end)
+    # Whether a tangent ray grazes the cone is decided within rounding:
+    # compare where both forms agree that the interval is empty or not.
+    same = (ref[1] > ref[0]) == (got[1] > got[0])
+    assert same.mean() > 0.998 and (ref[1] > ref[0]).mean() > 0.2
+    _agree_where(ref, got, same)
+    assert not np.isnan(got[0]).any() and not np.isnan(got[1]).any()
+
+
+def test_direct_points_agree(jit):
+    """Equiangular and truncated-distance direct-light points and both
+    pdfs: compiled against the reference within rounding (endless and
+    empty lit parts, zero and huge extinction, the light on the ray)."""
+    from engine.media import direct
+    rng = np.random.default_rng(17)
+    n = 6000
+    o, d = _rays(rng, n, 1.0)
+    P = rng.normal(0.0, 2.0, (n, 3))
+    P[:40] = o[:40] + d[:40] * 2.0                  # the light point on the ray's line
+    t0 = rng.random(n) * 2.0
+    t1 = t0 + np.where(rng.random(n) < 0.1, np.inf, rng.random(n) * 3.0)
+    t1[40:80] = t0[40:80]                          # empty lit parts
+    st = rng.random((n, 3)) * 3.0
+    pick = rng.random((n, 3)) < 0.1
+    st[pick] = rng.choice(HOSTILE, pick.sum())
+    pc = rng.random((n, 3))
+    pc /= pc.sum(axis=1)[:, None]
+    equi, skip = rng.random(n) < 0.5, rng.random(n) < 0.05
+    ref, got = both_ways(direct.sample_points, o, d, P, t0, t1, rng.random(n), rng.random(n), pc, st, equi, skip)
+    # Rows whose channel choice sits within rounding of a threshold may differ.
+    same = np.isclose(ref[0], got[0], rtol=1e-6, atol=1e-9) | (np.isinf(ref[0]) & np.isinf(got[0]))
+    assert same.mean() > 0.999
+    _agree_where(ref, got, same)
+    assert all(np.isfinite(a).all() for a in got[1:])
