@@ -320,9 +320,13 @@ def cache_lock(folder, give_up=lambda: False, poll=0.1):
     machine) can leave an index pointing at the other's machine code, and
     the next process to load it crashes (seen: a segfault loading a gufunc).
     The later process waits here, then loads what the first one wrote.
+    The lock is this engine copy's: numba files another copy's kernels
+    (the add-on vendored into a Blender, a checkout's venvs) apart by
+    their source folder, so one copy's compile never waits for another's
+    (a Blender 3.4 render waited minutes for the venvs' compiles).
     Yields False when ``give_up()`` turned true while waiting."""
     os.makedirs(folder, exist_ok=True)
-    with open(os.path.join(folder, ".lock"), "a+b") as handle:
+    with open(os.path.join(folder, f".lock-{_copy_key()}"), "a+b") as handle:
         while not _try_lock(handle):
             if give_up():
                 yield False
@@ -430,8 +434,12 @@ def import_all():
 def _complete_marker():
     """numba keys its cache by the source files' folder, so a copy of the
     engine elsewhere (the add-on's vendored one) has a cache of its own."""
-    where = hashlib.sha1(_ENGINE_DIR.encode()).hexdigest()[:12]
-    return os.path.join(cache_dir(), f".complete-{where}")
+    return os.path.join(cache_dir(), f".complete-{_copy_key()}")
+
+
+def _copy_key():
+    """This engine copy's name in the shared cache folder (its source folder, hashed)."""
+    return hashlib.sha1(_ENGINE_DIR.encode()).hexdigest()[:12]
 
 
 def cache_complete():

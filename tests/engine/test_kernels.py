@@ -824,3 +824,15 @@ def test_fbm_3d_agrees(jit):
     lac = rng.uniform(1.0, 3.0, n).astype(np.float32)
     for normalize in (True, False):
         assert_agree(*both_ways(lambda *a: fbm(*a, normalize), p, detail, rough, lac), f"fbm normalize={normalize}")
+
+
+def test_cache_lock_is_per_engine_copy(tmp_path, monkeypatch):
+    """Another copy of the engine (the add-on vendored into a Blender) does
+    not wait for this copy's compile: numba files their kernels apart."""
+    with kernels.cache_lock(str(tmp_path)) as held:
+        assert held
+        with kernels.cache_lock(str(tmp_path), give_up=lambda: True) as same_copy:
+            assert not same_copy          # flock: a second open of the same lock file waits
+        monkeypatch.setattr(kernels, "_ENGINE_DIR", "/elsewhere/ember/engine")
+        with kernels.cache_lock(str(tmp_path), give_up=lambda: True) as other_copy:
+            assert other_copy
