@@ -47,10 +47,19 @@ def start():
 
 
 def request():
-    """One preview job at a time: a new one cancels the one running."""
+    """One preview job at a time: a new one cancels the one running.  While
+    Blender draws or ends the last job the operator refuses ("can't modify
+    blend data in this state"): then it is asked again at the next tick."""
     window = bpy.context.window_manager.windows[0]
-    with bpy.context.temp_override(window=window, screen=window.screen, id=state['queue'][0]):
-        bpy.ops.ed.lib_id_generate_preview()
+    try:
+        with bpy.context.temp_override(window=window, screen=window.screen, id=state['queue'][0]):
+            bpy.ops.ed.lib_id_generate_preview()
+    except RuntimeError as exc:
+        if "can't modify blend data in this state" not in str(exc):
+            raise
+        state['asked'] = False
+        return
+    state['asked'] = True
 
 
 def pixels(datablock):
@@ -62,6 +71,9 @@ def pixels(datablock):
 
 def wait():
     try:
+        if not state.get('asked') and time.perf_counter() - state['started'] <= TIMEOUT:
+            request()
+            return 0.1
         image = pixels(state['queue'][0])
         if image is not None and image[:, :3].max() > 0 and not bpy.app.is_job_running('RENDER_PREVIEW'):
             state['queue'].pop(0)
