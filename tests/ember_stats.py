@@ -232,6 +232,18 @@ def power_line(name, relative_se, level, dof=math.inf):
             f"{detectable(relative_se, level, dof):.2%} with probability 1/2 (level {level:.1e})")
 
 
+def median_block_detects(limit, mean_b, var_a, var_b=0.0):
+    """Power of a block z-test with threshold ``limit``: the relative bias
+    the median lit block (its se over its mean ``mean_b``) shows with
+    probability 1/2.  var_*: variances of the block means compared."""
+    mean_b = np.abs(np.asarray(mean_b, float))
+    lit = mean_b > 0
+    if not lit.any():
+        return 0.0
+    se = np.sqrt(np.broadcast_to(np.asarray(var_a, float) + var_b, mean_b.shape))
+    return float(limit * np.median(se[lit] / mean_b[lit]))
+
+
 # ----------------------------------------------------------------------------
 # Blocks, regions and batches
 

@@ -42,13 +42,19 @@ class Chi2Result:
         cells (weighted by their probability) that the test at ``level``
         detects with probability about 1/2: its noncentrality N eps^2 puts
         the statistic's mean dof + N eps^2 on the threshold."""
-        if self.dof < 1 or self.total <= 0:
-            return float("nan")
-        return math.sqrt(max(chi2_threshold(level, self.dof) - self.dof, 0.0) / self.total)
+        return density_error_detected(level, self.dof, self.total)
 
     def power_line(self, level):
         return (f"{self}; detects a density error of {self.detects(level):.2%} (rms over the cells) "
                 f"with probability 1/2 at level {level:.2g}")
+
+
+def density_error_detected(level, dof, total):
+    """``Chi2Result.detects`` of a chi-square test with ``dof`` degrees of
+    freedom over ``total`` samples."""
+    if dof < 1 or total <= 0:
+        return float("nan")
+    return math.sqrt(max(chi2_threshold(level, dof) - dof, 0.0) / total)
 
 
 def chi2_threshold(level, dof):

@@ -30,7 +30,7 @@ from engine.sampling import Distribution2D  # noqa: E402
 from engine.scene import (Camera, EnvironmentTexture, Instance, Lobe, Material,  # noqa: E402
                           RenderSettings, Scene, SceneError, World)
 from engine.testscenes import look_at, quad, uv_sphere  # noqa: E402
-from ember_stats import block_means_var, z_scores  # noqa: E402
+from ember_stats import block_means_var, median_block_detects, z_scores  # noqa: E402
 
 
 N = 1_000_000
@@ -78,7 +78,8 @@ def hdri(width=24, height=12, sun=2000.0, seed=5, black=True):
 
 def assert_z(mean, target, se, what):
     z = (mean - target) / se if se > 0 else (0.0 if mean == target else math.inf)
-    print(f"{what}: {mean:.6g} vs {target:.6g} (se {se:.3g}, z {z:+.2f}, |z| < {Z_MAX:.2f})")
+    print(f"{what}: {mean:.6g} vs {target:.6g} (se {se:.3g}, z {z:+.2f}, |z| < {Z_MAX:.2f}); detects "
+          f"{Z_MAX * se / abs(target):.2%} with probability 1/2")
     assert abs(z) < Z_MAX, f"{what}: {mean} vs {target}, z = {z:.2f}"
 
 
@@ -287,8 +288,10 @@ def test_white_furnace_under_constant_hdri(strategy):
     a, va = block_means_var(img, var, 4)
     z = np.abs(a - 1.0) / np.sqrt(np.maximum(va, 1e-30))
     z = np.where(np.abs(a - 1.0) < 1e-9, 0.0, z)
-    print(f"furnace {strategy}: max block |z| {z.max():.2f}")
-    assert z.max() < C.z_threshold(C.sidak(LEVEL, z.size))
+    limit = C.z_threshold(C.sidak(LEVEL, z.size))
+    print(f"furnace {strategy}: max block |z| {z.max():.2f} (limit {limit:.2f}); the median block detects "
+          f"{median_block_detects(limit, a, va):.2%} with probability 1/2")
+    assert z.max() < limit
 
 
 def plane_irradiance(px, strength=1.0):
@@ -362,7 +365,8 @@ def test_strategies_agree_under_hdri(monkeypatch):
         limit = C.z_threshold(C.sidak(LEVEL, z.size))
         print(f"{name} vs {ref_name}: mean {img.mean():.4f} vs {ref.mean():.4f}, relative "
               f"{img.mean() / ref.mean() - 1:+.4f}; per-sample variance {per_sample[name]:.4g} vs "
-              f"{per_sample[ref_name]:.4g}; max |z| {np.abs(z).max():.2f} (limit {limit:.2f})")
+              f"{per_sample[ref_name]:.4g}; max |z| {np.abs(z).max():.2f} (limit {limit:.2f}); the median block "
+              f"detects {median_block_detects(limit, b, va, vb):.1%} with probability 1/2")
         assert np.abs(z).max() < limit, f"{name} disagrees with {ref_name}"
     assert per_sample["mis"] < 0.5 * per_sample["bsdf"]
     assert per_sample["mis+comp"] < per_sample["mis"]

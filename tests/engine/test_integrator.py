@@ -15,7 +15,8 @@ from engine.testscenes import box, look_at, quad, uv_sphere, veach_plates
 
 from analytic import (analytic_scene, big_plane, check_against, directional_albedo, disk_irradiance,  # noqa: F401
                       furnace_plane, ortho_camera, pixel_centres)
-from ember_stats import block_means_var, detectable, family_level, family_z, z_scores, z_threshold
+from ember_stats import (block_means_var, detectable, family_level, family_z, median_block_detects, z_scores,
+                         z_threshold)
 
 
 
@@ -113,8 +114,10 @@ def test_mutation_bsdf_pdf_101_is_caught(monkeypatch):
     monkeypatch.setattr(bsdf, "sample", pdf_too_high)
     mean, se = glossy_furnace(10 / 31, 22 / 31)
     z = furnace_z(mean, se, CYCLES_GGX_E[(22, 10)])
-    print(f"pdf x 1.01: rendered {mean:.5f} +- {se:.5f}, Cycles' E {CYCLES_GGX_E[(22, 10)]}, z {z:+.2f}")
-    assert z < -family_z(__name__, 1), "a 1 % error in the BSDF pdf went unnoticed"
+    zc = family_z(__name__, 1)
+    print(f"pdf x 1.01: rendered {mean:.5f} +- {se:.5f}, Cycles' E {CYCLES_GGX_E[(22, 10)]}, z {z:+.2f} "
+          f"(limit {zc:.2f}; detects {zc * se / CYCLES_GGX_E[(22, 10)]:.2%} with probability 1/2)")
+    assert z < -zc, "a 1 % error in the BSDF pdf went unnoticed"
 
 
 def test_mixed_lobes_furnace():
@@ -201,9 +204,10 @@ def test_soft_falloff_point_light_is_cycles_disk(d):
     est = ls.Le[:, 0] * np.maximum(ls.wi[:, 2], 0) / ls.pdf
     expected = P / (4 * np.pi * (d * d + r_light * r_light))
     se = est.std() / np.sqrt(n)
+    zc = family_z(__name__, 2)
     print(f"soft falloff d={d}: E {est.mean():.5f} +- {se:.5f}, expected {expected:.5f}, "
-          f"ratio to sphere {est.mean() / (P / (4 * np.pi * d * d)):.4f}")
-    assert abs(est.mean() - expected) < family_z(__name__, 2) * se
+          f"ratio to sphere {est.mean() / (P / (4 * np.pi * d * d)):.4f}; detects {zc * se / expected:.2%}")
+    assert abs(est.mean() - expected) < zc * se
 
 
 # ----------------------------------------------------------------------------
@@ -236,7 +240,8 @@ def test_strategies_agree_and_mis_has_lowest_variance():
         z = z_scores(*blocks[a], *blocks[b])[keep]
         worst[(a, b)] = np.abs(z).max()
         print(f"{a} vs {b}: {keep.sum()} block-channels, max |z| {worst[(a, b)]:.2f} (limit {zc:.2f}), "
-              f"means {blocks[a][0][keep].mean():.4f} / {blocks[b][0][keep].mean():.4f}")
+              f"means {blocks[a][0][keep].mean():.4f} / {blocks[b][0][keep].mean():.4f}; the median block "
+              f"detects {median_block_detects(zc, blocks[b][0][keep], blocks[a][1][keep], blocks[b][1][keep]):.1%}")
     assert keep.sum() >= 30  # the plates and lights, not the black background
     assert max(worst.values()) < zc
     assert variances["mis"] < variances["light"]

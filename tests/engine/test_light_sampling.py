@@ -319,7 +319,7 @@ def test_triangle_tree_render_agrees_with_area_picks_and_strategies():
     block by block; the tree's MIS image has lower variance than area picks'."""
     from engine.render import render
     from engine.testscenes import box, look_at, quad
-    from ember_stats import block_means_var, family_z, z_scores
+    from ember_stats import block_means_var, family_z, median_block_detects, z_scores
     cube = box((0.4, 0.4, 0.4))
     floor = quad([[-3, -3, 0], [3, -3, 0], [3, 6, 0], [-3, 6, 0]])
     bar = quad([[-2.0, 5.0, 1.0], [2.0, 5.0, 1.0], [2.0, 5.0, 3.0], [-2.0, 5.0, 3.0]])
@@ -346,7 +346,8 @@ def test_triangle_tree_render_agrees_with_area_picks_and_strategies():
     for a, b in pairs:
         z = z_scores(*out[a], *out[b])[keep]
         print(f"{a} vs {b}: max |z| {np.abs(z).max():.2f} (limit {limit:.2f}), means "
-              f"{out[a][0][keep].mean():.4f} / {out[b][0][keep].mean():.4f}")
+              f"{out[a][0][keep].mean():.4f} / {out[b][0][keep].mean():.4f}; the median block detects "
+              f"{median_block_detects(limit, out[b][0][keep], out[a][1][keep], out[b][1][keep]):.1%}")
         assert np.abs(z).max() < limit
     print({k: f"{v:.4g}" for k, v in out.items() if k.endswith("var")})
     assert keep.sum() > 100
@@ -525,7 +526,7 @@ def test_light_tree_render_agrees_and_lowers_variance():
     with power selection block by block, with clearly lower variance."""
     import time
     from engine.render import render
-    from ember_stats import block_means_var, family_z, z_scores
+    from ember_stats import block_means_var, family_z, median_block_detects, z_scores
     out = {}
     for sel in ("power", "tree"):
         scene, settings = floor_scene(sel)
@@ -541,7 +542,8 @@ def test_light_tree_render_agrees_and_lowers_variance():
     rel = abs(mb.sum() - ma.sum()) / ma.sum()
     print(f"\nmany lights: mean pixel variance power {var_power:.4g}, tree {var_tree:.4g} "
           f"(ratio {var_power / var_tree:.2f}); relative mean difference {rel:.4f}; max |z| "
-          f"{np.abs(z).max():.2f} (limit {limit:.2f}); seconds power {out['power_s']:.1f}, "
+          f"{np.abs(z).max():.2f} (limit {limit:.2f}), the median block detects "
+          f"{median_block_detects(limit, ma, va, vb):.1%}; seconds power {out['power_s']:.1f}, "
           f"tree {out['tree_s']:.1f}")
     assert np.abs(z).max() < limit
     assert var_tree < 0.5 * var_power
@@ -557,7 +559,7 @@ def test_shadow_and_camera_invisible_object_is_absent():
     from engine import geometry
     from engine.render import render
     from engine.testscenes import box, look_at, quad
-    from ember_stats import block_means_var, family_z, z_scores
+    from ember_stats import block_means_var, family_z, median_block_detects, z_scores
     floor = quad([[-3, -3, 0], [3, -3, 0], [3, 3, 0], [-3, 3, 0]])
     cube = box((0.8, 0.8, 0.8))
     mats = [S.Material("floor", (S.Lobe("diffuse", (0.8, 0.8, 0.8)),))]
@@ -579,9 +581,11 @@ def test_shadow_and_camera_invisible_object_is_absent():
     ma, va = block_means_var(a.image[..., :3].astype(float), a.variance.astype(float), 4)
     mb, vb = block_means_var(b.image[..., :3].astype(float), b.variance.astype(float), 4)
     z = z_scores(ma, va, mb, vb)
-    print(f"\ninvisible box: max |z| {np.abs(z).max():.2f}, relative mean difference "
-          f"{abs(ma.sum() - mb.sum()) / mb.sum():.4f}")
-    assert np.abs(z).max() < family_z(__name__, z.size)
+    limit = family_z(__name__, z.size)
+    print(f"\ninvisible box: max |z| {np.abs(z).max():.2f} (limit {limit:.2f}), relative mean difference "
+          f"{abs(ma.sum() - mb.sum()) / mb.sum():.4f}; the median block detects "
+          f"{median_block_detects(limit, mb, va, vb):.1%}")
+    assert np.abs(z).max() < limit
     visible = S.Scene([floor, cube], [S.Instance(0, materials=[0]), S.Instance(1, m, [0])], mats, light,
                       S.World((0, 0, 0)), cam)
     c = render(visible, settings)

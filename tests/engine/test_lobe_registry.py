@@ -194,7 +194,9 @@ def test_energy(name, i, cos_o):
         assert np.all(mean <= 1.0 + FP_RTOL), f"{name}-{i}: delta albedo {mean} above 1"
         return
     albedo = albedo_by_quadrature(name, i, cos_o)
-    print(f"{name}-{i} cos_o={cos_o}: albedo {albedo}, mean weight {mean} +- {se}")
+    rel_se = np.sqrt(se ** 2 + (QUADRATURE_RTOL * albedo) ** 2) / np.maximum(albedo, 1e-30)
+    print(f"{name}-{i} cos_o={cos_o}: albedo {albedo}, mean weight {mean} +- {se}; detects "
+          f"{Z_MAX * rel_se.max():.2%} with probability 1/2")
     bound = 1.0 + QUADRATURE_RTOL + MULTISCATTER_EXCESS * bool(lobes.REGISTRY[name].cases[i].get("multiscatter"))
     assert np.all(albedo <= bound), f"{name}-{i}: albedo {albedo} above 1"
     z = (mean - albedo) / np.sqrt(se ** 2 + (QUADRATURE_RTOL * albedo) ** 2)

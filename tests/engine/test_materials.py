@@ -319,7 +319,8 @@ def test_multiscatter_ggx_keeps_energy(roughness, mu):
     mean, se = furnace_value(multi, mu)
     z = (mean - expected) / se
     print(f"multiscatter roughness {roughness} mu {mu}: single-scatter albedo {e:.4f} "
-          f"(loses {1 - e:.4f}); multiscatter renders {mean:.5f} +- {se:.5f} (expected {expected:.5f}), z {z:+.2f}")
+          f"(loses {1 - e:.4f}); multiscatter renders {mean:.5f} +- {se:.5f} (expected {expected:.5f}), z {z:+.2f}; "
+          f"detects {Z_MAX * se / expected:.2%} with probability 1/2")
     assert abs(z) < Z_MAX
 
 
@@ -335,7 +336,8 @@ def test_tinted_multiscatter_darkens_like_cycles():
     fms = c * e_avg / (1 - c * (1 - e_avg))
     expected = c * e * (1 + fms * (1 - e_t) / e_t)
     mean, se = furnace_value(mat, mu)
-    print(f"tinted multiscatter: {mean:.5f} +- {se:.5f}, expected {expected:.5f}")
+    print(f"tinted multiscatter: {mean:.5f} +- {se:.5f}, expected {expected:.5f}; detects "
+          f"{Z_MAX * se / expected:.2%} with probability 1/2")
     assert abs(mean - expected) < Z_MAX * se
 
 
@@ -444,7 +446,8 @@ def test_smooth_glass_sphere_furnace():
     expected = 1.0 - trapped
     z = (img.mean() - expected) / math.hypot(se, trapped_se)
     print(f"smooth glass sphere: mean {img.mean():.5f} +- {se:.5f}, expected 1 - {trapped:.5f} "
-          f"+- {trapped_se:.5f} (trapped), z {z:+.2f}")
+          f"+- {trapped_se:.5f} (trapped), z {z:+.2f}; detects {Z_MAX * math.hypot(se, trapped_se) / expected:.2%} "
+          f"with probability 1/2")
     assert abs(z) < Z_MAX
 
 
@@ -490,7 +493,8 @@ def test_rough_multiscatter_glass_plane_albedo(mu, back):
     mean, se = furnace_value(Material("g", (ROUGH_GLASS,)), mu if not back else -mu, spp=64)
     z = (mean - expected) / math.hypot(se, quadrature_error)
     print(f"rough glass plane mu {mu} back {back}: {mean:.5f} +- {se:.5f}, quadrature {expected:.5f} "
-          f"+- {quadrature_error:.1e}, z {z:+.2f}")
+          f"+- {quadrature_error:.1e}, z {z:+.2f}; detects {Z_MAX * math.hypot(se, quadrature_error) / expected:.2%} "
+          f"with probability 1/2")
     assert abs(z) < Z_MAX
 
 
@@ -513,5 +517,5 @@ def test_rough_multiscatter_glass_sphere_furnace():
     low, high = k_mean * d_low, k_mean * ((1.0 + d_high) ** limit - 1.0) / limit
     print(f"rough glass sphere: mean {img.mean():.5f} +- {se:.5f}, min {img.min():.4f}; albedos in "
           f"[{1 - d_low:.4f}, {1 + d_high:.4f}], rays per path {k_mean:.2f}: expected in [{1 - low:.4f}, "
-          f"{1 + high:.4f}]")
+          f"{1 + high:.4f}]; detects an error of {Z_MAX * se:.2%} beyond those bounds with probability 1/2")
     assert 1.0 - low - Z_MAX * se < img.mean() < 1.0 + high + Z_MAX * se

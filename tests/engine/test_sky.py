@@ -17,7 +17,6 @@ and the sun-guided sampling of sky worlds (engine/environment.py).
 import json
 import os
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -232,7 +231,8 @@ def test_sun_guided_sampling_estimates_the_sky_integral(sky_map):
     mean, se = estimates.mean(axis=0), estimates.std(axis=0, ddof=1) / np.sqrt(batches)
     z = (mean - exact) / se
     limit = ember_stats.family_z("sky sun-guided estimator", 3)
-    print(f"\nsky integral {exact}, estimate {mean} +- {se} (z {z}); relative se {se / exact}")
+    print(f"\nsky integral {exact}, estimate {mean} +- {se} (z {z}); relative se {se / exact}; detects "
+          f"{(limit * se / exact).max():.2%} with probability 1/2 (limit {limit:.2f})")
     assert np.all(np.abs(z) < limit), (z, limit)
     assert np.all(se / exact < 0.01)     # the disc is found by its cone
 
