@@ -472,8 +472,11 @@ def test_shadow_environment_glass_bakes_hostile():
 
 def test_light_bake_progress_and_cancel(monkeypatch):
     """A bake of 10^6 samples reports its progress and stops at Esc (the
-    render's break flag, asked between batches) within seconds, leaving
-    finite pixels; no error is reported."""
+    render's break flag, asked between batches) long before its last sample,
+    leaving finite pixels; no error is reported.  How soon is printed, not
+    asserted (issue 27: a wall-clock bound fails on a busy machine and proves
+    nothing on a fast one; the stop poll's timing is tested with an injected
+    clock in tests/engine/test_render_api.py)."""
     import time
     from addon import bake as addon_bake
     from addon import output
@@ -491,7 +494,6 @@ def test_light_bake_progress_and_cancel(monkeypatch):
     seconds = time.perf_counter() - start
     print(f"cancelled after passes {seen} in {seconds:.1f} s")
     assert len(seen) >= 2 and seen[-1] < 1_000_000
-    assert seconds < 30
     assert np.isfinite(pixels).all()
 
 

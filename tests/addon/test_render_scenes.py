@@ -20,11 +20,14 @@ PARITY = {
     # name: (Ember samples, block side in pixels, image and block power asserted)
     'instances_lights': (384, 16, (0.005, 0.02)),
     # Veach's plates reflect four small, very bright lights, and the lights
-    # themselves are in view: the image and block means are dominated by a
-    # few pixels' rare bright samples in both renderers (at 256 samples the
-    # image mean resolves 5.4 %).  Held to what 512 samples resolve; the
-    # targets (0.5 %, 2 %) would take some 100 times more.
-    'veach_mis': (512, 16, (0.045, 0.03)),
+    # themselves are in view: ten pixels on the lights' rims hold 90 % of the
+    # image's variance in both renderers (the pixel filter's samples), so the
+    # image target of 0.5 % would take some 20 times more samples.  The image
+    # mean is held to the power derived from the reference: what it resolves
+    # at Cycles' noise per sample and Ember's 512 samples (2.9 %; measured
+    # 2.3 %); the blocks to the suite's 2 % (measured 1.5 %).  Issue 27: it
+    # was a hand-set 4.5 %, 3 %.
+    'veach_mis': (512, 16, ('cycles', 0.02)),
 }
 REFERENCE_NAMES = {'cornell': 'cornell', 'veach_mis': 'scenes_veach_mis',
                    'instances_lights': 'scenes_instances_lights'}
