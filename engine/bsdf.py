@@ -31,6 +31,7 @@ per-ray loops over the lobe slots once numba has built them
 (engine/bsdf_loops.py); the batch NumPy code here is their twin (JIT off),
 equal to float64 rounding.
 """
+import math
 from dataclasses import field, make_dataclass, replace
 from typing import Optional
 
@@ -668,7 +669,9 @@ def _gather_groups(tables, out):
 
 
 def _flat2d(a):
-    return a.reshape(a.shape[0], int(np.prod(a.shape[1:])))
+    # math.prod, not np.prod: this runs some 50 times a bounce, and np.prod
+    # of a shape tuple costs several microseconds of interpreter each time.
+    return a.reshape(a.shape[0], math.prod(a.shape[1:]))
 
 
 class _Loop(LoopKernel):
