@@ -616,7 +616,10 @@ _NO_TERM, _NO_KEEP = np.empty(0), np.empty(0, bool)
 
 def _c(a, dtype=np.float64):
     """C-contiguous and writable (numba's signatures take no read-only
-    arrays): a copy only where the array is not so already."""
+    arrays): a copy only where the array is not so already.  The checks
+    first: most arrays already are, and this runs some 150 times a bounce."""
+    if type(a) is np.ndarray and a.ndim and a.dtype == dtype and a.flags.c_contiguous and a.flags.writeable:
+        return a
     a = np.ascontiguousarray(a, dtype)
     return a if a.flags.writeable else a.copy()
 
