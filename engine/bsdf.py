@@ -31,6 +31,7 @@ per-ray loops over the lobe slots once numba has built them
 (engine/bsdf_loops.py); the batch NumPy code here is their twin (JIT off),
 equal to float64 rounding.
 """
+import math
 from dataclasses import field, make_dataclass, replace
 from typing import Optional
 
@@ -615,7 +616,10 @@ _NO_TERM, _NO_KEEP = np.empty(0), np.empty(0, bool)
 
 def _c(a, dtype=np.float64):
     """C-contiguous and writable (numba's signatures take no read-only
-    arrays): a copy only where the array is not so already."""
+    arrays): a copy only where the array is not so already.  The checks
+    first: most arrays already are, and this runs some 150 times a bounce."""
+    if type(a) is np.ndarray and a.ndim and a.dtype == dtype and a.flags.c_contiguous and a.flags.writeable:
+        return a
     a = np.ascontiguousarray(a, dtype)
     return a if a.flags.writeable else a.copy()
 
@@ -668,7 +672,9 @@ def _gather_groups(tables, out):
 
 
 def _flat2d(a):
-    return a.reshape(a.shape[0], int(np.prod(a.shape[1:])))
+    # math.prod, not np.prod: this runs some 50 times a bounce, and np.prod
+    # of a shape tuple costs several microseconds of interpreter each time.
+    return a.reshape(a.shape[0], math.prod(a.shape[1:]))
 
 
 class _Loop(LoopKernel):
