@@ -102,3 +102,12 @@ def meshes_of(instances):
     if isinstance(instances, InstanceBatch):
         return np.array([t.mesh for t in instances.templates], np.int64)[instances.template]
     return np.array([inst.mesh for inst in instances], np.int64)
+
+
+def extended(instances, extra):
+    """``instances`` followed by the Instances ``extra`` (a batch stays a
+    batch: its rows are not made into Instances)."""
+    if isinstance(instances, InstanceBatch):
+        run = (instances.templates, instances.template, instances.matrix, instances.random)
+        return join([run, *extra])
+    return list(instances) + list(extra)

@@ -42,7 +42,11 @@ def random_ids(object_name, persistent_ids, root_name=None):
     levels = ids.astype(np.uint32)   # int -> uint, as C's uint() cast (two's complement)
     mixed = h.copy()
     for level in range(MAX_DUPLI_RECUR):
-        mixed = np.where(ids[:, level] != UNUSED_LEVEL, hash_uint(mixed, levels[:, level]), mixed)
+        here = ids[:, level] != UNUSED_LEVEL
+        if here.all():
+            mixed = hash_uint(mixed, levels[:, level])
+        elif here.any():
+            mixed = np.where(here, hash_uint(mixed, levels[:, level]), mixed)
     h = np.where(used, mixed, hash_uint(h, np.uint32(0)))
     if root_name is not None:
         h ^= hash_uint(np.uint32(hash_string(root_name)), np.uint32(0))
