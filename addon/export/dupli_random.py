@@ -4,13 +4,13 @@ Blender gives each instance a uint32 made in make_dupli
 (blenkernel/intern/object_dupli.cc): the hash of the instanced object's
 name, mixed with each used level of the instance's persistent id
 (innermost level first; unused levels hold INT_MAX and are not mixed in
-Blender 5.0, where older releases mixed all MAX_DUPLI_RECUR), and, when the instanced
+Blender 5.0 and 5.1, where 4.5 mixes all MAX_DUPLI_RECUR), and, when the instanced
 object is not the scene-level instancer itself, xor-ed with the hash of that
 instancer's name.  Reproduced here so that a geometry-nodes instancer's
 copies can be read in bulk (instances.BulkInstances) without asking the
 depsgraph for each copy's random_id; tests/addon/test_dupli_random.py checks
 it bit for bit against ``depsgraph.object_instances`` for every kind of
-instance.  No bpy here (the hash is the engine's).
+instance.  No bpy here but its version (the hash is the engine's).
 """
 import numpy as np
 
@@ -29,20 +29,24 @@ def hash_string(name):
     return h
 
 
-def random_ids(object_name, persistent_ids, root_name=None):
+def random_ids(object_name, persistent_ids, root_name=None, all_levels=None):
     """(N,) uint32 random_id of N instances of the object ``object_name``
     with ``persistent_ids`` (N, MAX_DUPLI_RECUR) ints (as
     DepsgraphObjectInstance.persistent_id); ``root_name``: the scene-level
     instancer's name when it is another object than the instanced one
-    (None when they are the same object)."""
+    (None when they are the same object); ``all_levels``: mix unused
+    levels too (Blender before 5.0; None: as this bpy)."""
     hash_uint = backend.engine().hash_uint   # lookup3 of 2 keys: BLI_hash_int_2d
+    if all_levels is None:
+        import bpy
+        all_levels = mixes_all_levels(bpy.app.version)
     ids = np.asarray(persistent_ids, dtype=np.int64).reshape(-1, MAX_DUPLI_RECUR)
     h = np.full(len(ids), hash_string(object_name), np.uint32)
     used = ids[:, 0] != UNUSED_LEVEL
     levels = ids.astype(np.uint32)   # int -> uint, as C's uint() cast (two's complement)
     mixed = h.copy()
     for level in range(MAX_DUPLI_RECUR):
-        here = ids[:, level] != UNUSED_LEVEL
+        here = np.ones(len(ids), bool) if all_levels else ids[:, level] != UNUSED_LEVEL
         if here.all():
             mixed = hash_uint(mixed, levels[:, level])
         elif here.any():
@@ -51,6 +55,12 @@ def random_ids(object_name, persistent_ids, root_name=None):
     if root_name is not None:
         h ^= hash_uint(np.uint32(hash_string(root_name)), np.uint32(0))
     return h.astype(np.uint32)
+
+
+def mixes_all_levels(version):
+    """Whether Blender ``version`` mixes all MAX_DUPLI_RECUR levels into
+    random_id (4.5 does, measured; 5.0 and 5.1 mix the used ones only)."""
+    return tuple(version[:2]) < (5, 0)
 
 
 def geometry_instance_ids(instance_ids, extra_level=None):
