@@ -158,3 +158,23 @@ def test_hostile_nan_and_zero_instances(factory_scene, monkeypatch):
     names = [i.name for i in bulk.scene.instances]
     assert names.count('GNNaN') == 15 and 'GNEmpty' not in names
     assert any("'GNNaN'" in w and 'NaN' in w for w in bulk.warnings)
+
+
+def test_bulk_scene_renders_the_walks_image(factory_scene, monkeypatch, needs_engine):
+    """Both exports of one geometry-nodes scene rendered by the engine with
+    one seed, Cryptomatte object names included: the same image (matrices
+    agree to float32 rounding, so a pixel may differ where a ray grazes an
+    edge; none does here)."""
+    import dataclasses
+    from addon import backend
+    dupli_scenes.gn_instancer('GNGrid', 'grid', side=20, rotate=True)
+    factory_scene.render.resolution_x, factory_scene.render.resolution_y = 32, 24
+    bulk, walked = _export(True, monkeypatch), _export(False, monkeypatch)
+    settings = dataclasses.replace(scene_export.render_settings(factory_scene), samples=2, threads=1,
+                                   passes=('CryptoObject',))
+    renderer = backend.engine()
+    a, b = renderer.render(bulk.scene, settings), renderer.render(walked.scene, settings)
+    np.testing.assert_allclose(a.image, b.image, atol=1e-5)
+    assert a.passes and set(a.passes) == set(b.passes) and a.pass_metadata == b.pass_metadata
+    for name in a.passes:
+        np.testing.assert_allclose(a.passes[name], b.passes[name], atol=1e-5, err_msg=name)

@@ -2,6 +2,7 @@
 reads as the list of Instances it stands for: same columns, same items, same
 render."""
 import dataclasses
+import pickle
 
 import numpy as np
 import pytest
@@ -51,6 +52,8 @@ def test_batch_columns_and_items_equal_the_list():
     assert instance_batch.meshes_of(batch).tolist() == [r.mesh for r in rows]
     with pytest.raises(IndexError):
         batch[50]
+    again = pickle.loads(pickle.dumps(batch))   # the farm pickles scenes
+    np.testing.assert_array_equal(instance_columns.read(again).matrix, a.matrix)
 
 
 def test_hostile_batches():
