@@ -45,17 +45,22 @@ class InstanceCollector:
         self.want_keys = True     # motion.instance_key per instance (motion blur, the Vector pass)
         self._groups = {}         # InstanceCollector._group's cache
         self._instance_type = backend.engine().Instance
+        self.bulk = False         # note hosts for bulk_instances (collect_instances)
+        self.host = None          # the last add()'s object when it may be a bulk instancer
 
     def add(self, inst):
         # Each RNA read costs about a microsecond, and a geometry-nodes
         # instancer brings 10^6 copies: every field is read once here.
         obj = inst.object  # for instances: the instanced (possibly temporary) object
         kind = obj.type
+        self.host = None
         if kind == 'LIGHT':   # (whatever show_self says, as light.collect_lights)
             if self.light_sink is not None:
                 self.light_sink(obj, np.array(inst.matrix_world, dtype=np.float64))
             return
         is_instance = inst.is_instance
+        # a mesh object that may instance by geometry nodes (bulk_instances)
+        self.host = obj if self.bulk and kind == 'MESH' and not is_instance else None
         if kind == 'MESH' and inst.show_particles and len(obj.particle_systems):
             self._add_particle_hair(inst)
         if not is_instance and not inst.show_self:
@@ -402,14 +407,14 @@ def collect_instances(depsgraph, material_index, check=None, keys=None, points=N
         cache.begin(depsgraph, getattr(view_layer, 'name', ''))
         collector.meshes, collector.mesh_of_key = cache.meshes, cache.mesh_of_key
         collector.mesh_warnings = cache.warnings_of
-    bulk = bulk and keys is None and cache is None
+    collector.bulk = bulk and keys is None and cache is None
     walk = iter(depsgraph.object_instances)
     for count, inst in enumerate(walk):
         if count % 256 == 255:
             collector.check()
         collector.add(inst)
-        if bulk and not inst.is_instance and inst.object.type == 'MESH':
-            plan = bulk_instances.plan(inst.object)
+        if collector.host is not None:
+            plan = bulk_instances.plan(collector.host)
             if plan is not None:
                 bulk_instances.take(collector, walk, plan)
     collector.drop_nonfinite()
