@@ -24,6 +24,8 @@ from .nodes import REGISTRY as NODE_REGISTRY
 from .nodes import ShadingContext
 from .nodes.hashing import hash_uint
 from . import mesh_attributes
+from .instance_batch import InstanceBatch, distinct as distinct_instances, join as join_instances
+from .instance_batch import meshes_of as instance_meshes
 from .nodes.input_nodes import instance_attribute_key
 from .nodes.sky import sun_guide as sky_sun_guide
 from .passes import PassConfig, murmur3_32
@@ -39,7 +41,8 @@ from .validate import validate_camera, validate_scene, validate_settings
 
 __all__ = [
     # scene data the exporter builds (engine.scene)
-    "Scene", "Mesh", "Instance", "LinkSet", "Material", "Lobe", "Volume", "Camera", "World", "EnvironmentTexture",
+    "Scene", "Mesh", "Instance", "InstanceBatch", "distinct_instances", "join_instances", "instance_meshes",
+    "LinkSet", "Material", "Lobe", "Volume", "Camera", "World", "EnvironmentTexture",
     "SunGuide",
     "PointLight", "SpotLight", "SunLight", "AreaLight", "PointCloud", "HairCurves",
     "TextureImage", "ImageTexture", "MixColor", "Math", "NormalMap", "Bump", "NodeCall", "NodeOutput",

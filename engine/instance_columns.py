@@ -70,7 +70,10 @@ def _matrices(values):
 
 
 def read(instances):
-    """InstanceColumns of a sequence of Instances, in one pass over them."""
+    """InstanceColumns of a sequence of Instances, in one pass over them
+    (an engine.instance_batch.InstanceBatch gives its own, from arrays)."""
+    if hasattr(instances, "columns"):
+        return instances.columns()
     n = len(instances)
     if n == 0:
         cols = [()] * len(FIELDS)

@@ -32,7 +32,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from . import bsdf, instance_columns
+from . import bsdf, instance_batch, instance_columns
 from .lights import scene_lights_in_order
 from .lobes import kinds_of_class
 from .passes import (AOV_COLOR, CRYPTO, LIGHT_CLASSES, STRATEGY, VOLUME_PASSES, PassConfig, crypto_manifest,
@@ -63,9 +63,10 @@ def configure(scene, settings):
         cfg,
         group_parts=_group_parts(scene, mats, cfg, settings.passes),
         aov_tables=_aov_tables(mats, settings.passes),
-        object_names=tuple(i.name for i in scene.instances),
+        object_names=tuple(instance_batch.field_of_each(scene.instances, "name")),
         material_names=tuple(m.name for m in mats),
-        asset_names=tuple(i.asset or i.name for i in scene.instances),
+        asset_names=tuple(a or n for a, n in zip(instance_batch.field_of_each(scene.instances, "asset"),
+                                                  instance_batch.field_of_each(scene.instances, "name"))),
         object_pass_index=tuple(instance_columns.columns(scene.instances).pass_index.astype(int).tolist()),
         material_pass_index=tuple(int(getattr(m, "pass_index", 0)) for m in mats))
 
@@ -99,7 +100,7 @@ def _group_parts(scene, materials, cfg, names):
         return None
     of = cfg.lightgroup_of
     material = np.full(len(materials), -1, np.int64)
-    for inst in scene.instances:
+    for inst in instance_batch.distinct(scene.instances):   # (in order of first use)
         g = groups.get(of.get(inst.name, ""), -1)
         for m in inst.materials:
             if g >= 0 and 0 <= m < len(material) and material[m] < 0:

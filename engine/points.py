@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from . import curve_attributes
+from . import curve_attributes, instance_batch
 from .scene import Instance, Mesh
 
 
@@ -67,7 +67,7 @@ def expand_curves(scene):
     sets = list(getattr(scene, "curves", ()) or ())
     if not sets:
         return scene, []
-    meshes, instances = list(scene.meshes), list(scene.instances)
+    meshes, instances, added = list(scene.meshes), scene.instances, []
     owners = []
     for strands in sets:
         points = np.asarray(strands.points, np.float64).reshape(-1, 3)
@@ -78,10 +78,10 @@ def expand_curves(scene):
         mesh = Mesh(corners.reshape(-1, 3), np.arange(3 * len(corners)).reshape(-1, 3), uvs=uvs,
                     name=strands.name, uv_maps=uv_maps or None,
                     attributes=curve_attributes.corner_attributes(strands), texspace=texspace, orco=orco)
-        owners.append((len(instances), strands))
-        instances.append(_placed(strands, len(meshes)))
+        owners.append((len(instances) + len(added), strands))
+        added.append(_placed(strands, len(meshes)))
         meshes.append(mesh)
-    return replace(scene, meshes=meshes, instances=instances), owners
+    return replace(scene, meshes=meshes, instances=instance_batch.extended(instances, added)), owners
 
 
 def segment_starts(offsets):
@@ -102,7 +102,7 @@ def expand(scene):
     clouds = list(getattr(scene, "points", ()) or ())
     if not clouds:
         return scene, [], []
-    meshes, instances = list(scene.meshes), list(scene.instances)
+    meshes, instances, added = list(scene.meshes), scene.instances, []
     owners, radii = [], []
     for cloud in clouds:
         p = np.asarray(cloud.positions, np.float64).reshape(-1, 3)
@@ -113,11 +113,11 @@ def expand(scene):
         mesh = Mesh(corners.reshape(-1, 3), np.arange(3 * len(p)).reshape(-1, 3),
                     material_slots=None, name=cloud.name, attributes=attributes or None,
                     texspace=None)
-        owners.append(len(instances))
+        owners.append(len(instances) + len(added))
         radii.append(r)
-        instances.append(_placed(cloud, len(meshes)))
+        added.append(_placed(cloud, len(meshes)))
         meshes.append(mesh)
-    return replace(scene, meshes=meshes, instances=instances), owners, radii
+    return replace(scene, meshes=meshes, instances=instance_batch.extended(instances, added)), owners, radii
 
 
 def spheres_of(tris, scene, owners, radii):

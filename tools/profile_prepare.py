@@ -3,6 +3,7 @@ the add-on's export (bpy module):
 
     .venv/bin/python -P tools/profile_prepare.py --scene instanced --repeat 3
     .venv/bin/python -P tools/profile_prepare.py --scene instanced --profile
+    .venv/bin/python -P tools/profile_prepare.py --instances 1000000   # fuzz_scenes' many_instances
 
 Stages: export (depsgraph -> engine Scene), flatten (instances -> world-space
 Triangles), accel (Embree upload and BVH commit), prepare (all of
@@ -24,14 +25,20 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def setup(name):
+def setup(name, instances=0):
     os.environ.setdefault('BLENDER_USER_RESOURCES', tempfile.mkdtemp(prefix='ember-prepare-'))
-    for path in (ROOT, os.path.join(ROOT, 'tools')):
+    for path in (ROOT, os.path.join(ROOT, 'tools'), os.path.join(ROOT, 'tests', 'addon')):
         if path not in sys.path:
             sys.path.insert(0, path)
     import addon
     import bench_scenes
     addon.register()
+    if instances:
+        import numpy as np
+        import fuzz_scenes
+        scene = fuzz_scenes.reset_scene()
+        fuzz_scenes.many_instances(scene, np.random.default_rng(0), tempfile.mkdtemp(), count=instances)
+        return scene
     return bench_scenes.SCENES[name][1]()
 
 
@@ -59,10 +66,11 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--scene', default='instanced')
     parser.add_argument('--repeat', type=int, default=3)
+    parser.add_argument('--instances', type=int, default=0, help="fuzz_scenes.many_instances of this many copies")
     parser.add_argument('--profile', action='store_true', help="cProfile one prepare instead")
     parser.add_argument('--no-jit', action='store_true', help="NumPy forms of the kernels (as EMBER_JIT=0)")
     args = parser.parse_args(argv)
-    scene = setup(args.scene)
+    scene = setup(args.scene, args.instances)
     from engine import kernels, render  # noqa: F401 - every kernel defined before compiling
     # As a render after the first: the compiled kernels ready (flatten has one).
     print(f"compiled kernels: {kernels.configure(not args.no_jit) and kernels.wait(900)}")

@@ -9,6 +9,7 @@ data block of their own, so they are never merged by mistake).
 import numpy as np
 
 from .. import backend
+from . import bulk_instances
 from . import curve_attributes
 from . import mesh as mesh_export
 from . import fluid
@@ -44,17 +45,22 @@ class InstanceCollector:
         self.want_keys = True     # motion.instance_key per instance (motion blur, the Vector pass)
         self._groups = {}         # InstanceCollector._group's cache
         self._instance_type = backend.engine().Instance
+        self.bulk = False         # note hosts for bulk_instances (collect_instances)
+        self.host = None          # the last add()'s object when it may be a bulk instancer
 
     def add(self, inst):
         # Each RNA read costs about a microsecond, and a geometry-nodes
         # instancer brings 10^6 copies: every field is read once here.
         obj = inst.object  # for instances: the instanced (possibly temporary) object
         kind = obj.type
+        self.host = None
         if kind == 'LIGHT':   # (whatever show_self says, as light.collect_lights)
             if self.light_sink is not None:
                 self.light_sink(obj, np.array(inst.matrix_world, dtype=np.float64))
             return
         is_instance = inst.is_instance
+        # a mesh object that may instance by geometry nodes (bulk_instances)
+        self.host = obj if self.bulk and kind == 'MESH' and not is_instance else None
         if kind == 'MESH' and inst.show_particles and len(obj.particle_systems):
             self._add_particle_hair(inst)
         if not is_instance and not inst.show_self:
@@ -260,18 +266,34 @@ class InstanceCollector:
 
     def drop_nonfinite(self):
         """Leave out the instances whose transform is NaN or infinite, with
-        a warning naming the object (one vectorized test of every matrix)."""
-        if not self.instances:
+        a warning naming the object (one vectorized test of every matrix;
+        bulk runs, bulk_instances.take's, test theirs)."""
+        runs = [item for item in self.instances if isinstance(item, tuple)]
+        single = [inst for inst in self.instances if not isinstance(inst, tuple)]
+        if runs:
+            self.instances = [self._finite_run(item) if isinstance(item, tuple) else item for item in self.instances]
+        if not single:
             return
-        bad = ~np.isfinite(np.stack([inst.matrix for inst in self.instances]).reshape(len(self.instances), -1)).all(1)
+        bad = ~np.isfinite(np.stack([inst.matrix for inst in single]).reshape(len(single), -1)).all(1)
         if not bad.any():
             return
-        for index in np.flatnonzero(bad):
-            name = self.instances[index].name
-            self._warn_once(('matrix', name), f"Object '{name}' skipped: its transform is NaN or infinite")
-        self.instances = [inst for inst, b in zip(self.instances, bad) if not b]
+        bad_ids = {id(inst) for inst, b in zip(single, bad) if b}
+        for inst in single:
+            if id(inst) in bad_ids:
+                self._warn_once(('matrix', inst.name), f"Object '{inst.name}' skipped: its transform is NaN or infinite")
         if self.want_keys:
-            self.keys = [key for key, b in zip(self.keys, bad) if not b]
+            self.keys = [key for key, inst in zip(self.keys, self.instances) if id(inst) not in bad_ids]
+        self.instances = [inst for inst in self.instances if isinstance(inst, tuple) or id(inst) not in bad_ids]
+
+    def _finite_run(self, run):
+        templates, which, matrices, randoms = run
+        good = np.isfinite(matrices).all(axis=(1, 2))
+        if good.all():
+            return run
+        for k in np.unique(which[~good]):
+            name = templates[k].name
+            self._warn_once(('matrix', name), f"Object '{name}' skipped: its transform is NaN or infinite")
+        return templates, which[good], matrices[good], randoms[good]
 
     def _warn_once(self, key, message):
         if key not in self._warned:
@@ -364,14 +386,18 @@ def _geometry_name(obj):
 
 
 def collect_instances(depsgraph, material_index, check=None, keys=None, points=None, curves=None, cache=None,
-                      light_sink=None):
+                      light_sink=None, bulk=False):
     """Walk every object instance; returns (meshes, instances, warnings).
     ``check()`` (which raises to cancel) runs every 256 instances and before
     each mesh is exported; ``keys`` (a list) receives each instance's key;
     ``light_sink(object, matrix)`` (light.LightCollector.add) each light
     instance's, so one walk serves both (10^6 instances: 1.6 s a walk).
     ``cache``: a persistent.MeshCache whose meshes serve where the
-    depsgraph's updates left them valid (Persistent Data)."""
+    depsgraph's updates left them valid (Persistent Data).  ``bulk``: read
+    geometry-nodes instancers' copies in bulk (bulk_instances; not with
+    ``keys`` or ``cache``), the instances then an engine InstanceBatch;
+    raises bulk_instances.BulkMismatch when the depsgraph's copies were not
+    the ones foreseen (export again without)."""
     view_layer = getattr(depsgraph, 'view_layer', None)
     collector = InstanceCollector(material_index, check, view_layer, getattr(depsgraph, 'scene', None),
                                   render=getattr(depsgraph, 'mode', 'RENDER') == 'RENDER')
@@ -381,10 +407,16 @@ def collect_instances(depsgraph, material_index, check=None, keys=None, points=N
         cache.begin(depsgraph, getattr(view_layer, 'name', ''))
         collector.meshes, collector.mesh_of_key = cache.meshes, cache.mesh_of_key
         collector.mesh_warnings = cache.warnings_of
-    for count, inst in enumerate(depsgraph.object_instances):
+    collector.bulk = bulk and keys is None and cache is None
+    walk = iter(depsgraph.object_instances)
+    for count, inst in enumerate(walk):
         if count % 256 == 255:
             collector.check()
         collector.add(inst)
+        if collector.host is not None:
+            plan = bulk_instances.plan(collector.host)
+            if plan is not None:
+                bulk_instances.take(collector, walk, plan)
     collector.drop_nonfinite()
     if keys is not None:
         keys.extend(collector.keys)
@@ -397,7 +429,7 @@ def collect_instances(depsgraph, material_index, check=None, keys=None, points=N
     if cache is not None:
         meshes, instances = cache.end(collector.used, collector.instances, collector.exported)
         return meshes, instances, warnings
-    return collector.meshes, collector.instances, warnings
+    return collector.meshes, backend.engine().join_instances(collector.instances), warnings
 
 
 def _pass_fields(inst):

@@ -3,6 +3,7 @@ import time
 from dataclasses import dataclass, field
 
 import bpy
+import numpy as np
 
 from .. import backend
 from . import camera as camera_export
@@ -113,10 +114,15 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None, camera
     scene = depsgraph.scene
     override = getattr(depsgraph.view_layer, 'material_override', None)
     materials = material_export.MaterialTable(override)
-    points, curves, links = [], [], {}
-    light_collector = light_export.LightCollector(links)
-    meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots, check, keys, points,
-                                                                    curves, cache, light_collector.add)
+    for bulk in (True, False):
+        points, curves, links = [], [], {}
+        light_collector = light_export.LightCollector(links)
+        try:
+            meshes, instances, warnings = instance_export.collect_instances(
+                depsgraph, materials.slots, check, keys, points, curves, cache, light_collector.add, bulk=bulk)
+            break
+        except instance_export.bulk_instances.BulkMismatch as mismatch:
+            print(f"Ember: geometry-nodes instances read one by one ({mismatch})")
     check()
     lights, light_warnings = light_collector.lights, light_collector.warnings
     world, world_warning = world_export.world_from_blender(scene.world)
@@ -134,7 +140,8 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None, camera
         warnings.append(f"Curves are rendered as 3D curves; Ember has no {shape.lower()} (Render > Curves > Shape)")
     if world_warning:
         warnings.append(world_warning)
-    triangles = sum(len(meshes[inst.mesh].triangles) for inst in instances)
+    sizes = np.array([len(mesh.triangles) for mesh in meshes] + [0], np.int64)
+    triangles = int(sizes[renderer.instance_meshes(instances)].sum()) if len(instances) else 0
     return Export(result, warnings, time.perf_counter() - start, triangles)
 
 
@@ -153,7 +160,7 @@ def _catcher_notes(scene):
     """A shadow catcher that emits light (Cycles renders it: its emission
     enters the shadow ratio, which can exceed 1) is named in a warning."""
     notes, seen = [], set()
-    for inst in scene.instances:
+    for inst in backend.engine().distinct_instances(scene.instances):
         if not getattr(inst, 'shadow_catcher', False) or inst.name in seen:
             continue
         seen.add(inst.name)

@@ -13,6 +13,8 @@ import dataclasses
 
 import numpy as np
 
+from .. import backend
+
 
 def corner_tiles(uv):
     """Tile numbers of (..., 2) UV corners as Attribute::get_uv_tiles:
@@ -75,7 +77,7 @@ def _uv_map_name(node):
 def cull_tiles(scene):
     """Drop the tiles no mesh of the material has a UV corner in (in place)."""
     users = {}
-    for inst in scene.instances:
+    for inst in backend.engine().distinct_instances(scene.instances):
         for m in inst.materials:
             users.setdefault(m, set()).add(inst.mesh)
     for index, material in enumerate(scene.materials):

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import instance_batch
 from ..lights import scene_lights_in_order
 
 
@@ -35,7 +36,7 @@ class LightLinks:
         links = getattr(scene, "light_links", None) or {}
         if not links or lights.count == 0:
             return None
-        names = [inst.name for inst in scene.instances]
+        names = instance_batch.field_of_each(scene.instances, "name")
         index = {id(light): i for i, light in enumerate(scene.lights)}
         ordered = scene_lights_in_order(scene.lights)
         receivers, blockers, recv_rows, block_rows = [], [], [], []

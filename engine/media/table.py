@@ -12,7 +12,7 @@ every stack entry.
 """
 import numpy as np
 
-from .. import kernels
+from .. import instance_batch, kernels
 from . import equiangular
 from .field import build_fields, is_heterogeneous
 from .phase import HG, mixture_of
@@ -358,7 +358,7 @@ def open_meshes(scene, uses):
     exactly two of them)."""
     out = []
     checked = {}
-    for inst in scene.instances:
+    for inst in instance_batch.distinct(scene.instances):
         mesh = scene.meshes[inst.mesh]
         tris = np.asarray(mesh.triangles).reshape(-1, 3)
         if len(tris) == 0:
