@@ -249,6 +249,8 @@ def _with_node_tree(light, data, matrix=None, info=None):
     expr = nodes.scale(nodes._as_color(color), strength)
     _give_object_info(expr, info)
     factor, varies = _constant_rgb(nodes._as_color(color), strength)
+    # Outputs the export's probe points cannot vary (no camera, no distance).
+    varies = varies or any(key in _PER_LIGHT_POINT for key in _expr_nodes(expr))
     light = dataclasses.replace(light, **falloff)
     names = {f.name for f in dataclasses.fields(light)}
     if varies and 'shader' in names:
@@ -280,6 +282,10 @@ _OFF_ON_LIGHTS = {
 _OFF_OUTPUTS = {('ShaderNodeLightPath', name): f"Light Path's {name} reads 0 on lights"
                 for name in ('Ray Depth', 'Diffuse Depth', 'Glossy Depth', 'Transmission Depth',
                              'Transparent Depth')}
+
+
+_PER_LIGHT_POINT = {('ShaderNodeTexCoord', 'Camera'), ('ShaderNodeTexCoord', 'Window'),
+                    ('ShaderNodeLightPath', 'Ray Length')}
 
 
 def object_info_of(obj, inst=None):
