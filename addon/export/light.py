@@ -8,7 +8,7 @@ at every point (e.g. a Blackbody of a fixed temperature) scales the light
 (the fast path); one that varies over the light (textures on the light's
 Texture Coordinate or Geometry outputs) becomes the engine light's
 ``shader``, evaluated per light sample and per BSDF-ray hit as Cycles does
-(engine/lights/shader.py); suns keep its mean, with a note.  A Light
+(engine/lights/shader.py; suns per direction, engine/lights/sun.py).  A Light
 Falloff node on the Strength (Quadratic, Linear or Constant output, Smooth)
 becomes the engine light's ``falloff`` / ``falloff_smooth``.
 
@@ -365,7 +365,6 @@ def _strength_and_falloff(reader, emission, light):
     falloff (Cycles' svm_node_light_falloff, evaluated per light sample at
     its distance).  Suns have none: Cycles ignores the node on distant
     lights.  Returns (strength, fields, notes)."""
-    from . import nodes
     node, out = reader.linked_node(emission.inputs['Strength'])
     if node is None or node.type != 'LIGHT_FALLOFF' or node.mute:
         return reader.value_input(emission, 'Strength'), {}, []

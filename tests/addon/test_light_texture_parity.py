@@ -44,6 +44,19 @@ def _checker(obj, node_type, output, scale, strength=1.0):
     tree.links.new(checker.outputs['Color'], emission.inputs['Color'])
 
 
+def _view(scene, location, rotation, lens):
+    """The camera, the small resolution and a black world; returns the bounces (2)."""
+    cam = scene.camera
+    cam.location = location
+    cam.rotation_euler = rotation
+    cam.data.lens = lens
+    small_resolution(scene, WIDTH, HEIGHT)
+    scene.world.color = (0.0, 0.0, 0.0)
+    if scene.world.node_tree is not None and 'Background' in scene.world.node_tree.nodes:
+        scene.world.node_tree.nodes['Background'].inputs['Color'].default_value = (0, 0, 0, 1)
+    return 2
+
+
 def light_textures(scene, textured=True):
     plane("floor", material("floor", 'diffuse'))
     area = light('AREA', (-0.9, 0.4, 0.9), 30.0, rotation=(-1.0, 0.0, 0.3), shape='RECTANGLE', size=1.2,
@@ -64,15 +77,7 @@ def light_textures(scene, textured=True):
         for obj, strength in ((area, 1.0), (point, 1.0), (sphere, 1.5), (spot, 1.0)):
             obj.data.color = mean
             obj.data.energy *= strength
-    cam = scene.camera
-    cam.location = (0.0, -3.2, 2.6)
-    cam.rotation_euler = (math.atan2(3.4, 2.3), 0.0, 0.0)
-    cam.data.lens = 30.0
-    small_resolution(scene, WIDTH, HEIGHT)
-    scene.world.color = (0.0, 0.0, 0.0)
-    if scene.world.node_tree is not None and 'Background' in scene.world.node_tree.nodes:
-        scene.world.node_tree.nodes['Background'].inputs['Color'].default_value = (0, 0, 0, 1)
-    return 2
+    return _view(scene, (0.0, -3.2, 2.6), (math.atan2(3.4, 2.3), 0.0, 0.0), 30.0)
 
 
 def _light_inputs(obj, output_of, strength=1.0):
@@ -155,15 +160,7 @@ def light_inputs(scene, textured=True):
         _light_inputs(area, _window)
         _light_inputs(point, _camera_abs)
         _light_inputs(sphere, _ray_length)
-    cam = scene.camera
-    cam.location = (0.0, -2.6, 1.1)
-    cam.rotation_euler = (math.radians(97.0), 0.0, 0.0)
-    cam.data.lens = 20.0
-    small_resolution(scene, WIDTH, HEIGHT)
-    scene.world.color = (0.0, 0.0, 0.0)
-    if scene.world.node_tree is not None and 'Background' in scene.world.node_tree.nodes:
-        scene.world.node_tree.nodes['Background'].inputs['Color'].default_value = (0, 0, 0, 1)
-    return 2
+    return _view(scene, (0.0, -2.6, 1.1), (math.radians(97.0), 0.0, 0.0), 20.0)
 
 
 SCENES = {'light_textures': light_textures, 'light_inputs': light_inputs}
@@ -175,37 +172,30 @@ def reference_scene(name, folder=None):
     return scene, SCENES[name](scene)
 
 
-def test_light_textures_match_cycles(tmp_path, tapped_engine):
-    scene, bounces = reference_scene('light_textures')
-    image, var = render_for_reference(scene, tmp_path, 'light_textures', tapped_engine, SPP, 2, bounces)
+def _check_scene(name, seed, tmp_path, taps):
+    """Scene ``name`` by Ember against its Cycles reference (no light
+    warning allowed), and against the same scene with untextured lights,
+    which must differ by over 10 % per pixel (the trees have their effect)."""
+    scene, bounces = reference_scene(name)
+    image, var = render_for_reference(scene, tmp_path, name, taps, SPP, seed, bounces)
     from addon import engine as ember_engine
     warnings = ember_engine.RENDER_LOG[-1].get('warnings', ())
     assert not [w for w in warnings if 'Light' in w], warnings
-    check = check_against_reference('light_textures', scene, bounces, image, var, SPP, BLOCK)
+    check = check_against_reference(name, scene, bounces, image, var, SPP, BLOCK)
     plain = empty_factory_scene()
-    light_textures(plain, textured=False)
-    mean, _ = render_for_reference(plain, tmp_path, 'light_means', tapped_engine, 32, 2, bounces)
+    SCENES[name](plain, textured=False)
+    mean, _ = render_for_reference(plain, tmp_path, name + '_plain', taps, 32, seed, bounces)
     diff = abs(image[..., :3] - mean[..., :3]).mean() / mean[..., :3].mean()
-    print(f"light_textures: mean |textured - mean colours| / mean {diff:.3f}")
-    assert diff > 0.1, f"the light textures change little against their mean colours ({diff:.3f})"
+    print(f"{name}: mean |textured - untextured| / mean {diff:.3f}")
+    assert diff > 0.1, f"{name}: the light trees change little ({diff:.3f})"
     check.assert_agrees(0.005, 0.02)
+
+
+def test_light_textures_match_cycles(tmp_path, tapped_engine):
+    _check_scene('light_textures', 2, tmp_path, tapped_engine)
 
 
 def test_light_inputs_match_cycles(tmp_path, tapped_engine):
     """Suns per direction (UV checker, |Incoming|), Window and Camera
-    coordinates and Ray Length on lights against Cycles; no light warning;
-    the untextured lights give a different image (the trees have their
-    effect)."""
-    scene, bounces = reference_scene('light_inputs')
-    image, var = render_for_reference(scene, tmp_path, 'light_inputs', tapped_engine, SPP, 3, bounces)
-    from addon import engine as ember_engine
-    warnings = ember_engine.RENDER_LOG[-1].get('warnings', ())
-    assert not [w for w in warnings if 'Light' in w], warnings
-    check = check_against_reference('light_inputs', scene, bounces, image, var, SPP, BLOCK)
-    plain = empty_factory_scene()
-    light_inputs(plain, textured=False)
-    mean, _ = render_for_reference(plain, tmp_path, 'light_inputs_plain', tapped_engine, 32, 3, bounces)
-    diff = abs(image[..., :3] - mean[..., :3]).mean() / mean[..., :3].mean()
-    print(f"light_inputs: mean |textured - untextured| / mean {diff:.3f}")
-    assert diff > 0.1, f"the light trees change little ({diff:.3f})"
-    check.assert_agrees(0.005, 0.02)
+    coordinates and Ray Length on lights against Cycles."""
+    _check_scene('light_inputs', 3, tmp_path, tapped_engine)
