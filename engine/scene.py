@@ -481,6 +481,12 @@ class SunLight:
     visible_glossy: bool = True
     visible_transmission: bool = True
     visible_shadow: bool = True
+    # The light's node tree where it varies over the sun's disk (a colour
+    # expression, engine/lights/sun.py); None: constant.  matrix: the sun
+    # object's (4, 4) light-to-world (its UV axes and Object coordinates;
+    # None: a frame at the origin whose -Z is ``direction``).
+    shader: object = None
+    matrix: Optional[np.ndarray] = None
 
 
 AREA_SHAPES = ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE")

@@ -56,7 +56,7 @@ class InstanceCollector:
         self.host = None
         if kind == 'LIGHT':   # (whatever show_self says, as light.collect_lights)
             if self.light_sink is not None:
-                self.light_sink(obj, np.array(inst.matrix_world, dtype=np.float64))
+                self.light_sink(obj, np.array(inst.matrix_world, dtype=np.float64), inst)
             return
         is_instance = inst.is_instance
         # a mesh object that may instance by geometry nodes (bulk_instances)
@@ -390,7 +390,7 @@ def collect_instances(depsgraph, material_index, check=None, keys=None, points=N
     """Walk every object instance; returns (meshes, instances, warnings).
     ``check()`` (which raises to cancel) runs every 256 instances and before
     each mesh is exported; ``keys`` (a list) receives each instance's key;
-    ``light_sink(object, matrix)`` (light.LightCollector.add) each light
+    ``light_sink(object, matrix, inst)`` (light.LightCollector.add) each light
     instance's, so one walk serves both (10^6 instances: 1.6 s a walk).
     ``cache``: a persistent.MeshCache whose meshes serve where the
     depsgraph's updates left them valid (Persistent Data).  ``bulk``: read

@@ -8,7 +8,7 @@ at every point (e.g. a Blackbody of a fixed temperature) scales the light
 (the fast path); one that varies over the light (textures on the light's
 Texture Coordinate or Geometry outputs) becomes the engine light's
 ``shader``, evaluated per light sample and per BSDF-ray hit as Cycles does
-(engine/lights/shader.py); suns keep its mean, with a note.  A Light
+(engine/lights/shader.py; suns per direction, engine/lights/sun.py).  A Light
 Falloff node on the Strength (Quadratic, Linear or Constant output, Smooth)
 becomes the engine light's ``falloff`` / ``falloff_smooth``.
 
@@ -117,8 +117,10 @@ class LightCollector:
     def __init__(self, links=None):
         self.lights, self.warnings, self.links = [], [], links
 
-    def add(self, obj, matrix):
-        light = self._light(obj, matrix)
+    def add(self, obj, matrix, inst=None):
+        """One light instance (``inst``: the depsgraph's, read at once for
+        its Object Info random number; None: not an instance's)."""
+        light = self._light(obj, matrix, inst)
         if light is None:
             return
         self.lights.append(light)
@@ -127,7 +129,7 @@ class LightCollector:
             if linked != (None, None):
                 self.links[len(self.lights) - 1] = linked
 
-    def _light(self, obj, matrix):
+    def _light(self, obj, matrix, inst=None):
         """The engine light, or None (black, or skipped with a warning)."""
         warnings = self.warnings
         try:
@@ -145,7 +147,7 @@ class LightCollector:
         if _is_black(light):
             return None
         if compat.uses_nodes(obj.data) and _has_light_nodes(obj.data):
-            light, note = _with_node_tree(light, obj.data, matrix)
+            light, note = _with_node_tree(light, obj.data, matrix, object_info_of(obj, inst))
             if note:
                 warnings.append(f"Light '{obj.name}': {note}")
             if _nonfinite_field(light):
@@ -167,7 +169,7 @@ def collect_lights(depsgraph, check=None, links=None):
             check()
         obj = inst.object  # for instances: the instanced (possibly temporary) object
         if obj.type == 'LIGHT':
-            collector.add(obj, np.array(inst.matrix_world, dtype=np.float64))
+            collector.add(obj, np.array(inst.matrix_world, dtype=np.float64), inst)
     return collector.lights, collector.warnings
 
 
@@ -222,7 +224,7 @@ def _nonfinite_field(light):
     return None
 
 
-def _with_node_tree(light, data, matrix=None):
+def _with_node_tree(light, data, matrix=None, info=None):
     """The light scaled by its node tree's emission (Color x Strength of the
     Emission node feeding the Light Output), and a note or None; where the
     emission varies over the light and the light type can evaluate it per
@@ -230,7 +232,8 @@ def _with_node_tree(light, data, matrix=None):
     lights with their object ``matrix``, which Object and Normal
     coordinates read).  A Light Falloff node on the Strength gives the light
     its falloff (the node's Strength scales the light, its output and
-    Smooth go to the engine)."""
+    Smooth go to the engine).  info: the light object's Object Info values
+    (``object_info_of``), which its Object Info nodes read."""
     output = nodes.output_node(data.node_tree, 'OUTPUT_LIGHT')
     if output is None:
         return light, None
@@ -244,12 +247,17 @@ def _with_node_tree(light, data, matrix=None):
     if reader.unsupported:
         return light, "light nodes " + ", ".join(reader.unsupported) + " are ignored"
     expr = nodes.scale(nodes._as_color(color), strength)
+    _give_object_info(expr, info)
     factor, varies = _constant_rgb(nodes._as_color(color), strength)
+    # Outputs the export's probe points cannot vary (no camera, no distance).
+    varies = varies or any(key in _PER_LIGHT_POINT for key in _expr_nodes(expr))
     light = dataclasses.replace(light, **falloff)
     names = {f.name for f in dataclasses.fields(light)}
     if varies and 'shader' in names:
         notes += _unsupported_on_lights(expr)
-        extra = {'matrix': np.array(matrix, dtype=np.float64)} if 'position' in names and matrix is not None else {}
+        extra = {}
+        if 'matrix' in names and getattr(light, 'matrix', None) is None and matrix is not None:
+            extra['matrix'] = np.array(matrix, dtype=np.float64)
         return dataclasses.replace(light, shader=expr, **extra), "; ".join(notes) or None
     if varies:
         notes.append("the light's node tree varies over the light: its mean is used")
@@ -261,17 +269,66 @@ def _with_node_tree(light, data, matrix=None):
     return light, note
 
 
-# Nodes whose light-shader values Ember does not give as Cycles does: no
-# object data, camera or path on a light point (rendered with the value
-# named).  Outputs not listed read the light point as Cycles' lamp shader.
+# Nodes whose light-shader values Ember does not give as Cycles does
+# (rendered with the value named).  Outputs not listed read the light point
+# as Cycles' lamp shader: Camera and Window of the point, the light object's
+# Object Info, Light Path's ray kinds (0: PATH_RAY_EMISSION) and Ray Length.
 _OFF_ON_LIGHTS = {
-    'ShaderNodeObjectInfo': "the Object Info node reads no light object (0, colour 1)",
-    'ShaderNodeLightPath': "the Light Path node reads no path on lights (0)",
     'ShaderNodeWireframe': "the Wireframe node reads no mesh on lights",
     'ShaderNodeParticleInfo': "the Particle Info node reads no particle on lights",
 }
-_OFF_OUTPUTS = {('ShaderNodeTexCoord', 'Camera'): "Texture Coordinate's Camera output is world Position on lights",
-                ('ShaderNodeTexCoord', 'Window'): "Texture Coordinate's Window output is 0 on lights"}
+# Cycles reads the shading path's bounce counts there (Ray Depth: + 1 for a
+# light sample, + 2 for a BSDF ray that hits the light): Ember gives 0.
+_OFF_OUTPUTS = {('ShaderNodeLightPath', name): f"Light Path's {name} reads 0 on lights"
+                for name in ('Ray Depth', 'Diffuse Depth', 'Glossy Depth', 'Transmission Depth',
+                             'Transparent Depth')}
+
+
+_PER_LIGHT_POINT = {('ShaderNodeTexCoord', 'Camera'), ('ShaderNodeTexCoord', 'Window'),
+                    ('ShaderNodeLightPath', 'Ray Length')}
+
+
+def object_info_of(obj, inst=None):
+    """The Object Info node's outputs on a light object (Cycles reads the
+    light's object: location, colour, alpha, pass index, random number)."""
+    from . import instances
+    random = 0.0
+    if inst is not None:
+        random = instances.object_info(inst)['random']
+    color = tuple(float(c) for c in tuple(getattr(obj, 'color', (1.0, 1.0, 1.0, 1.0))))
+    matrix = np.array(getattr(inst, 'matrix_world', obj.matrix_world), dtype=np.float64)
+    return {'Location': tuple(float(v) for v in matrix[:3, 3]), 'Color': color[:3],
+            'Alpha': float(color[3]) if len(color) > 3 else 1.0,
+            'Object Index': float(getattr(obj, 'pass_index', 0)), 'Random': random}
+
+
+def _give_object_info(expr, info):
+    """Hand the light object's values to every Object Info node of the
+    light's expression (the node's private prop ``_object``)."""
+    for call in _calls(expr, set()):
+        if call.idname == 'ShaderNodeObjectInfo':
+            call.props = dict(call.props, _object=dict(info or _NO_OBJECT))
+
+
+_NO_OBJECT = {'Location': (0.0, 0.0, 0.0), 'Color': (1.0, 1.0, 1.0), 'Alpha': 1.0, 'Object Index': 0.0,
+              'Random': 0.0}
+
+
+def _calls(expr, seen):
+    """Every NodeCall of an engine expression, once each."""
+    if id(expr) in seen or not nodes.is_expr(expr):
+        return
+    seen.add(id(expr))
+    call = getattr(expr, 'call', None)
+    if call is not None:
+        if id(call) not in seen:
+            seen.add(id(call))
+            yield call
+            for value in call.inputs.values():
+                yield from _calls(value, seen)
+        return
+    for f in dataclasses.fields(expr):
+        yield from _calls(getattr(expr, f.name), seen)
 
 
 def _unsupported_on_lights(expr):
@@ -308,7 +365,6 @@ def _strength_and_falloff(reader, emission, light):
     falloff (Cycles' svm_node_light_falloff, evaluated per light sample at
     its distance).  Suns have none: Cycles ignores the node on distant
     lights.  Returns (strength, fields, notes)."""
-    from . import nodes
     node, out = reader.linked_node(emission.inputs['Strength'])
     if node is None or node.type != 'LIGHT_FALLOFF' or node.mute:
         return reader.value_input(emission, 'Strength'), {}, []

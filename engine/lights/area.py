@@ -19,11 +19,11 @@ AREA = 2
 
 
 class AreaLights(LightTable):
-    def __init__(self, lights):
+    def __init__(self, lights, camera=None):
         self.count = len(lights)
         self.lights = list(lights)
         self.falloff = Falloff.of(lights)
-        self.shaders = LightShaders.of(lights, [l.matrix for l in lights])
+        self.shaders = LightShaders.of(lights, [l.matrix for l in lights], camera)
         u, v, c, n, area, ell = [], [], [], [], [], []
         for l in lights:
             m = np.asarray(l.matrix, float)
@@ -153,17 +153,17 @@ class AreaLights(LightTable):
         wi = np.stack([wx, wy, wz], axis=1)
         Le = self.L[j]
         if self.shaders is not None:
-            Le = Le * self._shader(j, p + wi * t[:, None], -wi)
+            Le = Le * self._shader(j, p + wi * t[:, None], -wi, t)
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, Le
         out.pdf[idx] = pdf
 
-    def _shader(self, j, q, wo):
+    def _shader(self, j, q, wo, dist=None):
         """The lights' node trees at points q (Incoming wo): UV = Parametric =
         the point in the light's axes shifted to [0, 1] (Cycles' area.h u, v)."""
         rel = q - self.c[j]
         uv = np.stack([dot_rows(rel, self.du[j]) + 0.5, dot_rows(rel, self.dv[j]) + 0.5], axis=1)
         n = np.broadcast_to(self.n[j], q.shape)
-        return self.shaders.factor(j, q, n, wo, uv)
+        return self.shaders.factor(j, q, n, wo, uv, dist)
 
     def _solid_angle_pdf(self, j, o):
         """Which rays from o NEE samples by solid angle, and that pdf."""
@@ -194,7 +194,7 @@ class AreaLights(LightTable):
         Le = np.tile(self.L[j], (n, 1))
         if self.shaders is not None and ok.any():
             rows = np.flatnonzero(ok)
-            Le[rows] *= self._shader(j, o[rows] + d[rows] * th[rows, None], -d[rows])
+            Le[rows] *= self._shader(j, o[rows] + d[rows] * th[rows, None], -d[rows], th[rows])
         if self.rect[j] and ok.any():
             # The pdf NEE has for this point: the same choice of strategy.
             sph, solid_angle_pdf = self._solid_angle_pdf(j, o[ok])
@@ -292,7 +292,7 @@ def _set(field, value):
 
 
 register(LightDef(
-    "area", AREA, 2, lambda inputs: AreaLights(inputs.lights), RAY, "areas", scene_types=(AreaLight,),
+    "area", AREA, 2, lambda inputs: AreaLights(inputs.lights, getattr(inputs.scene, "camera", None)), RAY, "areas", scene_types=(AreaLight,),
     validate=validate, examples=_examples,
     hostile=(("NaN power", _set("power", (1.0, 1.0, np.nan)), "power"),
              ("negative power", _set("power", (1.0, -1.0, 1.0)), "power"),

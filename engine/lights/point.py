@@ -26,11 +26,11 @@ SPOT_MARGIN = 1e-3
 class PointLights(LightTable):
     """Point and spot lights (sphere, soft-falloff disk, or delta)."""
 
-    def __init__(self, lights):
+    def __init__(self, lights, camera=None):
         self.count = len(lights)
         self.lights = list(lights)
         self.falloff = Falloff.of(lights)
-        self.shaders = LightShaders.of(lights, [_matrix(l) for l in lights])
+        self.shaders = LightShaders.of(lights, [_matrix(l) for l in lights], camera)
         self.pos = np.array([l.position for l in lights], float).reshape(-1, 3)
         self.radius = np.array([max(0.0, l.radius) for l in lights], float)
         self.sphere = np.array([not l.soft_falloff for l in lights], bool)
@@ -107,11 +107,11 @@ class PointLights(LightTable):
                       column(u1, n, np.float64), column(u2, n, np.float64), self.pos, self.radius, self.sphere,
                       self.L, self.spot, self.dir, self.cos_half, self.smooth, wi, t, le, pdf, delta)
         if self.shaders is not None:
-            le *= self._shader(np.broadcast_to(j, (n,)), p + wi * t[:, None], -wi)
+            le *= self._shader(np.broadcast_to(j, (n,)), p + wi * t[:, None], -wi, t)
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, le
         out.pdf[idx], out.delta[idx] = pdf, delta
 
-    def _shader(self, j, q, wo):
+    def _shader(self, j, q, wo, dist=None):
         """The lights' node trees at points q seen along Incoming wo: N is the
         sphere's normal at q, or (soft falloff, delta) Incoming itself, the disk
         facing the shading point; UV = Parametric = map_to_sphere of N in
@@ -121,7 +121,7 @@ class PointLights(LightTable):
         with np.errstate(invalid="ignore", divide="ignore"):
             radial = (q - self.pos[j]) / np.maximum(self.radius[j], 1e-300)[:, None]
         n = np.where(sphere, radial, wo)
-        return self.shaders.factor(j, q, n, wo, self._shader_uv(j, n, wo))
+        return self.shaders.factor(j, q, n, wo, self._shader_uv(j, n, wo), dist)
 
     def _shader_uv(self, j, n, wo):
         uv = self.shaders.sphere_uv(j, n)
@@ -162,7 +162,7 @@ class PointLights(LightTable):
             j = index[rows]
             Le[rows] = self.L[j] * self._spot_factor(j, -d[rows])[:, None]
             if self.shaders is not None:
-                Le[rows] *= self._shader(j, o[rows] + d[rows] * hit_t[rows, None], -d[rows])
+                Le[rows] *= self._shader(j, o[rows] + d[rows] * hit_t[rows, None], -d[rows], hit_t[rows])
         return hit_t, index, Le, pdf
 
 
@@ -441,7 +441,7 @@ def _spot(**kw):
 
 
 register(LightDef(
-    "point", POINT, 0, lambda inputs: PointLights(inputs.lights), RAY, "points",
+    "point", POINT, 0, lambda inputs: PointLights(inputs.lights, getattr(inputs.scene, "camera", None)), RAY, "points",
     scene_types=(PointLight, SpotLight), validate=validate, examples=_examples,
     hostile=(("NaN power", _set("power", (np.nan, 1.0, 1.0)), "power"),
              ("negative power", _set("power", (-1.0, 1.0, 1.0)), "power"),

@@ -27,27 +27,43 @@ everywhere in Ember's textures).
 import numpy as np
 
 from ..nodes import ShadingContext
+from ..nodes.context import PATH_COLUMNS
 from ..vec import dot
 
 # Per-ray values are held to what validation lets constants be.
 MAX_VALUE = 1e30
+# Cycles' ray length of a sun (ls->t = FLT_MAX), the largest float32.
+FLT_MAX = float(np.finfo(np.float32).max)
+RAY_LENGTH = PATH_COLUMNS.index("Ray Length")
 
 
 class LightContext(ShadingContext):
     """Shading points on lights: coordinates in the light object's space
-    (``matrix``, ``inverse`` per point) and the light's UV."""
+    (``matrix``, ``inverse`` per point), the light's UV, the distance from
+    the shading point (Light Path's Ray Length: Cycles' ls->t, FLT_MAX for
+    suns; the other path columns read 0) and the scene camera (Camera and
+    Window coordinates of the light point, as on surfaces)."""
 
-    def __init__(self, p, n, wo, uv, matrix, inverse):
-        super().__init__(len(p), p=p, ng=n, ns=n, wo=wo, ray=np.zeros(len(p), np.uint8))
+    def __init__(self, p, n, wo, uv, matrix, inverse, dist=None, camera=None):
+        path = np.zeros((len(p), len(PATH_COLUMNS)))
+        if dist is not None:
+            path[:, RAY_LENGTH] = np.minimum(dist, FLT_MAX)
+        super().__init__(len(p), p=p, ng=n, ns=n, wo=wo, ray=np.zeros(len(p), np.uint8), path=path)
         self.matrix, self.inverse = matrix, inverse
+        self._camera = camera
         self._cache[("uv", "")] = uv
         # Geometry > Parametric reads (1 - bu - bv, bu): Cycles' lights give the UV there.
         self.bary = np.stack([uv[:, 1], 1.0 - uv[:, 0] - uv[:, 1]], axis=1)
 
     def take(self, rows):
         out = super().take(rows)
-        out.matrix, out.inverse = self.matrix[rows], self.inverse[rows]
+        out.__class__ = LightContext
+        out.matrix, out.inverse, out._camera = self.matrix[rows], self.inverse[rows], self._camera
         return out
+
+    @property
+    def camera(self):
+        return self._camera
 
     @property
     def object_coords(self):
@@ -69,25 +85,28 @@ class LightContext(ShadingContext):
 class LightShaders:
     """The node trees of one light table's lights (None where constant).
 
-    lights: the scene lights; matrices: (count, 4, 4) light-to-world."""
+    lights: the scene lights; matrices: (count, 4, 4) light-to-world;
+    camera: the scene's engine.scene.Camera (or None)."""
 
-    def __init__(self, lights, matrices):
+    def __init__(self, lights, matrices, camera=None):
         from ..textures import Compiler
         compiler = Compiler()
         self.fns = {j: compiler.color(l.shader) for j, l in enumerate(lights) if l.shader is not None}
         self.matrix = np.asarray(matrices, np.float64).reshape(-1, 4, 4)
         self.inverse = np.array([_safe_inverse(m) for m in self.matrix]).reshape(-1, 4, 4)
+        self.camera = camera
 
     @classmethod
-    def of(cls, lights, matrices):
+    def of(cls, lights, matrices, camera=None):
         """The table's shaders, or None when every light is constant."""
         if any(getattr(l, "shader", None) is not None for l in lights):
-            return cls(lights, matrices)
+            return cls(lights, matrices, camera)
         return None
 
-    def factor(self, j, q, n, wo, uv):
+    def factor(self, j, q, n, wo, uv, dist=None):
         """(N, 3) emission of light j (per row, or one int) at points q with
-        light normals n, Incoming wo and UVs uv (N, 2); 1 for constant lights."""
+        light normals n, Incoming wo, UVs uv (N, 2) and distances dist from
+        the shading points (N,) or None (0); 1 for constant lights."""
         m = len(q)
         out = np.ones((m, 3))
         j = np.broadcast_to(np.asarray(j, np.int64), (m,))
@@ -95,7 +114,8 @@ class LightShaders:
             rows = np.flatnonzero(j == k)
             if not len(rows):
                 continue
-            ctx = LightContext(q[rows], n[rows], wo[rows], uv[rows], self.matrix[j[rows]], self.inverse[j[rows]])
+            ctx = LightContext(q[rows], n[rows], wo[rows], uv[rows], self.matrix[j[rows]], self.inverse[j[rows]],
+                               None if dist is None else np.broadcast_to(dist, (m,))[rows], self.camera)
             with np.errstate(all="ignore"):
                 value = np.asarray(fn(ctx), np.float64)
             value = np.nan_to_num(value, nan=0.0, posinf=MAX_VALUE, neginf=0.0)

@@ -380,6 +380,12 @@ class ShadingContext:
         return value
 
     @property
+    def camera(self):
+        """The scene's engine.scene.Camera (Camera and Window coordinates), or None."""
+        shading = getattr(self.tris, "shading", None) if self.tris is not None else None
+        return getattr(getattr(shading, "scene", None), "camera", None)
+
+    @property
     def instance(self):
         shading = getattr(self.tris, "shading", None) if self.tris is not None else None
         if shading is None or self.prim is None:

@@ -30,8 +30,7 @@ def _object_matrix_inverse(n):
 def _camera_coords(ctx):
     """World to camera space as Cycles' worldtocamera: the camera's matrix
     without scale, its z axis flipped (Cycles' camera looks down +z)."""
-    shading = getattr(ctx.tris, "shading", None) if ctx.tris is not None else None
-    camera = getattr(getattr(shading, "scene", None), "camera", None)
+    camera = ctx.camera
     if camera is None:
         return ctx.p
     m = np.asarray(camera.matrix, dtype=np.float64)
@@ -45,8 +44,7 @@ def _window_coords(ctx):
     """Cycles' NODE_TEXCO_WINDOW: the point projected into the camera's
     full frame, (0, 0) at its bottom-left corner and (1, 1) at the top
     right (camera_world_to_ndc), z = 0."""
-    shading = getattr(ctx.tris, "shading", None) if ctx.tris is not None else None
-    camera = getattr(getattr(shading, "scene", None), "camera", None)
+    camera = ctx.camera
     out = np.zeros((len(ctx), 3))
     if camera is None:
         return out
@@ -186,9 +184,21 @@ def _parametric(ctx):
                                        ("Object Index", "float"), ("Random", "float")),
       unsupported_outputs=("Material Index",), bounds=lambda p: {"Random": (0.0, 1.0)}, cases=[{}])
 def object_info(ctx, i, p):
+    """Cycles' object_location / color / alpha / pass_id / random_number of
+    the shading point's object.  On lights the exporter gives the light
+    object's values as the private prop ``_object`` (constant per light)."""
+    light = p.get("_object")
+    if light is not None:
+        return {name: _constant(ctx, light[name]) for name in ("Location", "Color", "Alpha", "Object Index",
+                                                                "Random")}
     return {"Location": ctx.object_info("location"), "Color": ctx.object_info("color"),
             "Alpha": np.ones(len(ctx)), "Object Index": ctx.object_info("pass_index"),
             "Random": ctx.object_info("random")}
+
+
+def _constant(ctx, value):
+    value = np.asarray(value, np.float64)
+    return np.broadcast_to(value, (len(ctx),) + value.shape).copy()
 
 
 INSTANCE_ATTRIBUTE_TYPES = ("GEOMETRY", "OBJECT", "INSTANCER", "VIEW_LAYER")

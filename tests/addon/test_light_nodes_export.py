@@ -1,9 +1,11 @@
 """Export of light node trees (addon/export/light.py): a tree that varies
 over the light becomes the engine light's ``shader`` (evaluated per light
 point, engine/lights/shader.py) with the light's own power; a constant tree
-keeps the fast path (the power scaled, no shader); suns, which evaluate no
-tree per point, keep the mean with a note; nodes Ember evaluates otherwise
-than Cycles on a light are named in the light's warning."""
+keeps the fast path (the power scaled, no shader); suns get theirs too
+(evaluated per direction) with their object matrix; Object Info reads the
+light object (a tree of Object Info alone is constant: the fast path); nodes
+Ember evaluates otherwise than Cycles on a light are named in the light's
+warning."""
 import bpy
 import numpy as np
 import pytest
@@ -57,22 +59,38 @@ def test_constant_tree_keeps_the_fast_path(empty_scene):
     assert light.power[0] > 2 * light.power[2] > 0      # 2000 K, folded into the power
 
 
-def test_sun_keeps_the_mean_with_a_note(empty_scene):
-    textured_light(empty_scene, 'SUN', energy=3.0)
+def test_sun_tree_becomes_the_sun_shader(empty_scene):
+    obj, _, _ = textured_light(empty_scene, 'SUN', energy=3.0, angle=0.5)
     exported = export()
     (sun,) = exported.scene.lights
-    assert not hasattr(sun, 'shader')
-    assert any("its mean is used" in w for w in exported.warnings), exported.warnings
+    assert sun.shader is not None and sun.strength == pytest.approx((3.0, 3.0, 3.0))
+    np.testing.assert_allclose(sun.matrix, np.array(obj.matrix_world))
+    assert not [w for w in exported.warnings if 'Light' in w], exported.warnings
+
+
+def test_object_info_reads_the_light_object(empty_scene):
+    """Object Info's Color and Alpha on a light are its object's: constant
+    over the light, so folded into the power (no shader, no warning)."""
+    obj, tree, emission = textured_light(empty_scene, 'POINT', source=None, energy=10.0)
+    obj.color = (0.5, 0.25, 1.0, 0.8)
+    info = tree.nodes.new('ShaderNodeObjectInfo')
+    tree.links.new(info.outputs['Color'], emission.inputs['Color'])
+    bpy.context.view_layer.update()
+    exported = export()
+    (light,) = exported.scene.lights
+    assert light.shader is None
+    assert light.power == pytest.approx((5.0, 2.5, 10.0))
+    assert not [w for w in exported.warnings if 'Light' in w], exported.warnings
 
 
 def test_nodes_evaluated_otherwise_on_lights_are_named(empty_scene):
     _, tree, emission = textured_light(empty_scene, 'AREA', energy=10.0)
-    info = tree.nodes.new('ShaderNodeObjectInfo')
+    path = tree.nodes.new('ShaderNodeLightPath')
     mix = tree.nodes.new('ShaderNodeMix')
     mix.data_type = 'RGBA'
     tree.links.new(emission.inputs['Color'].links[0].from_socket, mix.inputs[6])
-    tree.links.new(info.outputs['Location'], mix.inputs[7])
+    tree.links.new(path.outputs['Ray Depth'], mix.inputs[0])
     tree.links.new(mix.outputs[2], emission.inputs['Color'])
     exported = export()
     assert exported.scene.lights[0].shader is not None
-    assert [w for w in exported.warnings if "Light 'AREA'" in w and "Object Info" in w], exported.warnings
+    assert [w for w in exported.warnings if "Light 'AREA'" in w and "Ray Depth" in w], exported.warnings

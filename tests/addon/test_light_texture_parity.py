@@ -19,7 +19,7 @@ Beside it Ember's image must differ from the same lights with their mean
 colours (the texture has its effect, not only its average)."""
 import math
 
-from parity_scenes import light, material, plane
+from parity_scenes import box, light, material, plane
 from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
 
 WIDTH, HEIGHT = 48, 32
@@ -44,6 +44,19 @@ def _checker(obj, node_type, output, scale, strength=1.0):
     tree.links.new(checker.outputs['Color'], emission.inputs['Color'])
 
 
+def _view(scene, location, rotation, lens):
+    """The camera, the small resolution and a black world; returns the bounces (2)."""
+    cam = scene.camera
+    cam.location = location
+    cam.rotation_euler = rotation
+    cam.data.lens = lens
+    small_resolution(scene, WIDTH, HEIGHT)
+    scene.world.color = (0.0, 0.0, 0.0)
+    if scene.world.node_tree is not None and 'Background' in scene.world.node_tree.nodes:
+        scene.world.node_tree.nodes['Background'].inputs['Color'].default_value = (0, 0, 0, 1)
+    return 2
+
+
 def light_textures(scene, textured=True):
     plane("floor", material("floor", 'diffuse'))
     area = light('AREA', (-0.9, 0.4, 0.9), 30.0, rotation=(-1.0, 0.0, 0.3), shape='RECTANGLE', size=1.2,
@@ -64,18 +77,93 @@ def light_textures(scene, textured=True):
         for obj, strength in ((area, 1.0), (point, 1.0), (sphere, 1.5), (spot, 1.0)):
             obj.data.color = mean
             obj.data.energy *= strength
-    cam = scene.camera
-    cam.location = (0.0, -3.2, 2.6)
-    cam.rotation_euler = (math.atan2(3.4, 2.3), 0.0, 0.0)
-    cam.data.lens = 30.0
-    small_resolution(scene, WIDTH, HEIGHT)
-    scene.world.color = (0.0, 0.0, 0.0)
-    if scene.world.node_tree is not None and 'Background' in scene.world.node_tree.nodes:
-        scene.world.node_tree.nodes['Background'].inputs['Color'].default_value = (0, 0, 0, 1)
-    return 2
+    return _view(scene, (0.0, -3.2, 2.6), (math.atan2(3.4, 2.3), 0.0, 0.0), 30.0)
 
 
-SCENES = {'light_textures': light_textures}
+def _light_inputs(obj, output_of, strength=1.0):
+    """The light's Emission Color from output_of(tree): the node output."""
+    data = obj.data
+    data.use_nodes = True
+    tree = data.node_tree
+    emission = next(n for n in tree.nodes if n.type == 'EMISSION')
+    emission.inputs['Strength'].default_value = strength
+    tree.links.new(output_of(tree), emission.inputs['Color'])
+
+
+def _vector_math(tree, operation, socket, value=None):
+    node = tree.nodes.new('ShaderNodeVectorMath')
+    node.operation = operation
+    tree.links.new(socket, node.inputs[0])
+    if value is not None:
+        node.inputs[1].default_value = value
+    return node.outputs['Vector']
+
+
+def _window(tree):
+    return tree.nodes.new('ShaderNodeTexCoord').outputs['Window']
+
+
+def _camera_abs(tree):
+    return _vector_math(tree, 'ABSOLUTE', tree.nodes.new('ShaderNodeTexCoord').outputs['Camera'])
+
+
+def _ray_length(tree):
+    """Colour (1, 0.5, 0.2) x Ray Length: a 1/d falloff instead of 1/d^2."""
+    node = tree.nodes.new('ShaderNodeMath')
+    node.operation = 'MULTIPLY'
+    tree.links.new(tree.nodes.new('ShaderNodeLightPath').outputs['Ray Length'], node.inputs[0])
+    node.inputs[1].default_value = 1.0
+    mix = tree.nodes.new('ShaderNodeMix')
+    mix.data_type = 'RGBA'
+    mix.blend_type = 'MULTIPLY'
+    mix.inputs[0].default_value = 1.0
+    tree.links.new(node.outputs[0], mix.inputs[6])
+    mix.inputs[7].default_value = (1.0, 0.5, 0.2, 1.0)
+    return mix.outputs[2]
+
+
+def _sun_uv_checker(tree):
+    coord = tree.nodes.new('ShaderNodeTexCoord')
+    checker = tree.nodes.new('ShaderNodeTexChecker')
+    checker.inputs['Scale'].default_value = 3.0
+    checker.inputs['Color1'].default_value = COLOURS[0]
+    checker.inputs['Color2'].default_value = COLOURS[1]
+    tree.links.new(coord.outputs['UV'], checker.inputs['Vector'])
+    return checker.outputs['Color']
+
+
+def _sun_incoming(tree):
+    """|Incoming| + 0.1 per channel: Incoming is the direction the sun's light travels."""
+    incoming = tree.nodes.new('ShaderNodeNewGeometry').outputs['Incoming']
+    return _vector_math(tree, 'ADD', _vector_math(tree, 'ABSOLUTE', incoming), (0.1, 0.1, 0.1))
+
+
+def light_inputs(scene, textured=True):
+    """Suns evaluated per direction and the light-point inputs of issue 23:
+    a wide sun seen by the camera (Checker on its UV) over a floor with a
+    box casting its penumbra, a second sun (|Incoming| + 0.1) from the
+    side, an area light seen by the camera coloured by its Window
+    coordinates, a point light by |Camera| and a sphere light whose colour
+    is scaled by Light Path's Ray Length."""
+    plane("floor", material("floor", 'diffuse'))
+    box("box", material("box", 'diffuse', color=(0.6, 0.6, 0.6)), (0.0, 1.2, 0.35), (0.7, 0.7, 0.7))
+    sun = light('SUN', (0.0, 0.0, 3.0), 2.0, rotation=(-math.radians(70.0), 0.0, 0.3), angle=0.6)
+    sun.visible_camera = True
+    side = light('SUN', (1.0, 0.0, 3.0), 1.0, rotation=(0.0, math.radians(55.0), 0.4), angle=0.3)
+    area = light('AREA', (-1.4, 0.8, 0.9), 20.0, rotation=(-1.2, 0.0, -0.4), size=0.8)
+    area.visible_camera = True
+    point = light('POINT', (1.2, -0.4, 0.8), 30.0, shadow_soft_size=0.2)
+    sphere = light('POINT', (-0.6, -0.8, 0.6), 15.0, shadow_soft_size=0.15, use_soft_falloff=False)
+    if textured:
+        _light_inputs(sun, _sun_uv_checker)
+        _light_inputs(side, _sun_incoming)
+        _light_inputs(area, _window)
+        _light_inputs(point, _camera_abs)
+        _light_inputs(sphere, _ray_length)
+    return _view(scene, (0.0, -2.6, 1.1), (math.radians(97.0), 0.0, 0.0), 20.0)
+
+
+SCENES = {'light_textures': light_textures, 'light_inputs': light_inputs}
 
 
 def reference_scene(name, folder=None):
@@ -84,17 +172,30 @@ def reference_scene(name, folder=None):
     return scene, SCENES[name](scene)
 
 
-def test_light_textures_match_cycles(tmp_path, tapped_engine):
-    scene, bounces = reference_scene('light_textures')
-    image, var = render_for_reference(scene, tmp_path, 'light_textures', tapped_engine, SPP, 2, bounces)
+def _check_scene(name, seed, tmp_path, taps):
+    """Scene ``name`` by Ember against its Cycles reference (no light
+    warning allowed), and against the same scene with untextured lights,
+    which must differ by over 10 % per pixel (the trees have their effect)."""
+    scene, bounces = reference_scene(name)
+    image, var = render_for_reference(scene, tmp_path, name, taps, SPP, seed, bounces)
     from addon import engine as ember_engine
     warnings = ember_engine.RENDER_LOG[-1].get('warnings', ())
     assert not [w for w in warnings if 'Light' in w], warnings
-    check = check_against_reference('light_textures', scene, bounces, image, var, SPP, BLOCK)
+    check = check_against_reference(name, scene, bounces, image, var, SPP, BLOCK)
     plain = empty_factory_scene()
-    light_textures(plain, textured=False)
-    mean, _ = render_for_reference(plain, tmp_path, 'light_means', tapped_engine, 32, 2, bounces)
+    SCENES[name](plain, textured=False)
+    mean, _ = render_for_reference(plain, tmp_path, name + '_plain', taps, 32, seed, bounces)
     diff = abs(image[..., :3] - mean[..., :3]).mean() / mean[..., :3].mean()
-    print(f"light_textures: mean |textured - mean colours| / mean {diff:.3f}")
-    assert diff > 0.1, f"the light textures change little against their mean colours ({diff:.3f})"
+    print(f"{name}: mean |textured - untextured| / mean {diff:.3f}")
+    assert diff > 0.1, f"{name}: the light trees change little ({diff:.3f})"
     check.assert_agrees(0.005, 0.02)
+
+
+def test_light_textures_match_cycles(tmp_path, tapped_engine):
+    _check_scene('light_textures', 2, tmp_path, tapped_engine)
+
+
+def test_light_inputs_match_cycles(tmp_path, tapped_engine):
+    """Suns per direction (UV checker, |Incoming|), Window and Camera
+    coordinates and Ray Length on lights against Cycles."""
+    _check_scene('light_inputs', 3, tmp_path, tapped_engine)

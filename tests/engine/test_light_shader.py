@@ -268,3 +268,81 @@ def test_light_selection_weighs_the_tree():
     points, areas = power[:2], power[2:]
     assert areas[1] / areas[0] == pytest.approx(15.0, rel=0.02)
     assert points[1] / points[0] == pytest.approx(15.0, rel=0.02)
+
+
+def sun_coordinates(m, angle, wi):
+    """What Cycles 5.0's distant light shader reads along directions wi
+    towards a sun of object matrix m: P = N = Incoming = -wi; UV: the
+    direction on the disk, radius sin(theta / 2) / (2 sin(angle / 4)) for
+    theta the angle to the sun's axis, turned as the direction's object x, y."""
+    axis = m[:3, 2] / np.linalg.norm(m[:3, 2])            # towards the sun (object +Z)
+    theta = np.arccos(np.clip(wi @ axis, -1.0, 1.0))
+    local = wi @ np.linalg.inv(m)[:3, :3].T
+    phi = np.arctan2(local[:, 1], local[:, 0])
+    r = np.sin(0.5 * theta) / (2.0 * np.sin(0.25 * angle))
+    uv = np.zeros_like(wi)
+    uv[:, 0], uv[:, 1] = 0.5 + r * np.cos(phi), 0.5 + r * np.sin(phi)
+    inv = np.linalg.inv(m)
+    travel = -wi
+    return {("ShaderNodeTexCoord", "UV"): uv, ("ShaderNodeNewGeometry", "Parametric"): uv,
+            ("ShaderNodeNewGeometry", "Incoming"): travel, ("ShaderNodeNewGeometry", "Normal"): travel,
+            ("ShaderNodeNewGeometry", "Position"): travel,
+            ("ShaderNodeTexCoord", "Object"): travel @ inv[:3, :3].T + inv[:3, 3]}
+
+
+SUN_M = object_matrix((0.4, -0.3, 0.3), (0.5, -0.3, 0.8), (1.0, 1.0, 1.0))
+
+
+@pytest.mark.parametrize("idname, output", sorted(sun_coordinates(SUN_M, 0.5, np.ones((1, 3)) / np.sqrt(3))),
+                         ids=lambda v: v if isinstance(v, str) and not v.startswith("Shader") else "")
+def test_sun_shader_reads_cycles_coordinates(idname, output):
+    """Each NEE sample of a textured sun carries the tree at the sampled
+    direction, and the escaping ray along it sees the same radiance."""
+    from engine.scene import SunLight
+    angle = 0.5
+    light = SunLight(tuple(-SUN_M[:3, 2]), (2.0, 3.0, 4.0), angle, shader=shifted(node(idname, output)), matrix=SUN_M)
+    scene = Scene(lights=[light])
+    ls = lights.LightSet(scene, geometry.flatten(scene), bsdf.MaterialTable(geometry.material_table(scene)), "power")
+    u = np.random.default_rng(7).random((3, N))
+    s = ls.sample(np.zeros(N, np.int64), np.zeros((N, 3)), *u)
+    base = np.array([2.0, 3.0, 4.0]) / (np.pi * np.sin(0.5 * angle) ** 2)
+    want = sun_coordinates(SUN_M, angle, s.wi)[(idname, output)] + 2.0
+    np.testing.assert_allclose(s.Le / base, want, rtol=1e-9, atol=1e-9)
+    ((mask, _, seen, pdf),) = ls.sun_hits(s.wi)
+    assert mask.all()
+    np.testing.assert_allclose(seen, s.Le, rtol=1e-9)
+    np.testing.assert_allclose(pdf, s.pdf, rtol=1e-9)
+
+
+def test_light_path_ray_length_on_lights():
+    """Light Path's Ray Length on a light point is the distance from the
+    shading point (Cycles' ls->t); on a sun FLT_MAX (held to MAX_VALUE)."""
+    from engine.scene import SunLight
+    length = node("ShaderNodeLightPath", "Ray Length")
+    colour = MixColor("MULTIPLY", 1.0, (1.0, 1.0, 1.0), length, clamp_factor=False)
+    point = PointLight((0.0, 0.0, 2.0), (1.0, 1.0, 1.0), radius=0.2, shader=colour)
+    sun = SunLight((0.0, 0.0, -1.0), (1.0, 1.0, 1.0), 0.2, shader=colour)
+    for light, want in ((point, None), (sun, MAX_VALUE)):
+        scene = Scene(lights=[light])
+        ls = lights.LightSet(scene, geometry.flatten(scene), bsdf.MaterialTable(geometry.material_table(scene)))
+        u = np.random.default_rng(3).random((3, 256))
+        s = ls.sample(np.zeros(256, np.int64), np.zeros((256, 3)), *u)
+        ok = s.pdf > 0
+        plain = lights.LightSet(Scene(lights=[type(light)(**{**light.__dict__, "shader": None})]),
+                                geometry.flatten(scene), bsdf.MaterialTable(geometry.material_table(scene)))
+        base = plain.sample(np.zeros(256, np.int64), np.zeros((256, 3)), *u).Le
+        ratio = s.Le[ok, 0] / base[ok, 0]
+        np.testing.assert_allclose(ratio, s.dist[ok] if want is None else want, rtol=1e-9)
+
+
+def test_nan_producing_sun_tree_renders_finite():
+    """A sun seen by the camera whose tree gives NaN and infinity renders
+    finite pixels (NaN emission is none)."""
+    from engine.scene import SunLight
+    huge = MixColor("MULTIPLY", 1.0, (1e200, 1e200, 1e200), node("ShaderNodeTexCoord", "UV"), clamp_factor=False)
+    nan = MixColor("SUBTRACT", 1.0, huge, huge, clamp_factor=False)
+    for shader in (nan, huge):
+        scene, _ = analytic_scene(SunLight((0.0, 0.0, -1.0), (1.0, 1.0, 1.0), 3.0, visible_camera=True,
+                                           shader=shader))
+        r = render(scene, RenderSettings(samples=4, samples_per_pass=4, seed=1))
+        assert np.isfinite(r.image).all() and np.isfinite(r.variance).all()
