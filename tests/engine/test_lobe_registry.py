@@ -108,6 +108,14 @@ def test_sample_agrees_with_eval_and_flags(name, i, cos_o):
     assert np.all(weight[~ok] == 0), f"{name}: zero-pdf samples must be absorbed"
 
 
+def joined(name, rows, wo, wi):
+    """1 where the lobe's sampler can draw wi, 0 on the pairs its eval
+    scores as Cycles' but no microfacet joins (LobeDef.unjoined):
+    test_unjoined_refraction holds those."""
+    unjoined = lobes.REGISTRY[name].unjoined
+    return 1.0 if unjoined is None else (~unjoined(rows, 0, wo, wi)).astype(float)
+
+
 def sphere_grid(name, i, cos_o):
     """(phi, theta) edges over the whole sphere, dense about the mirror
     direction and the refracted one where the lobe is narrow."""
@@ -133,7 +141,8 @@ def test_chi2(name, i, cos_o):
     def pdf_fn(v):
         rows = bsdf.Lobes(**{f: (np.repeat(a, len(v), 0) if isinstance(a, np.ndarray) else a)
                              for f, a in vars(one).items()})
-        return bsdf.eval_pdf(rows, wo_for(cos_o, len(v)), v)[1]
+        wo = wo_for(cos_o, len(v))
+        return bsdf.eval_pdf(rows, wo, v)[1] * joined(name, rows, wo, v)
 
     pe, te = sphere_grid(name, i, cos_o)
     res = direction_chi2(wi[valid], pdf_fn, FZ, pe, te, N, rest=int((~valid).sum()))
@@ -170,7 +179,8 @@ def albedo_by_quadrature(name, i, cos_o):
             v = C.from_phi_theta(ph, th, fr)
             rows = bsdf.Lobes(**{f: (np.repeat(a, len(v), 0) if isinstance(a, np.ndarray) else a)
                                  for f, a in vars(one).items()})
-            f = bsdf.eval_pdf(rows, wo_for(cos_o, len(v)), v)[0][:, c]
+            wo = wo_for(cos_o, len(v))
+            f = bsdf.eval_pdf(rows, wo, v)[0][:, c] * joined(name, rows, wo, v)
             return f * np.abs(v[:, 2]) * np.sin(th)
         out.append(C.integrate_cells(density, pe, te, n=8, periodic_x=True).sum())
     return np.array(out)
