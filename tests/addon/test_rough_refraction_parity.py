@@ -51,9 +51,9 @@ def pane(name, node_type, x0, x1):
 def rough_panes(scene):
     pane("refraction", 'ShaderNodeBsdfRefraction', -1.2, 0.0)
     pane("glass", 'ShaderNodeBsdfGlass', 0.0, 1.2)
-    light('POINT', (2.0, 0.4, -0.35), 300.0, shadow_soft_size=0.4, use_soft_falloff=False)
+    light('POINT', (2.0, 0.4, -0.35), 1500.0, shadow_soft_size=0.4, use_soft_falloff=False)
     top_camera(scene, 4.0)
-    scene.world.node_tree.nodes['Background'].inputs['Color'].default_value = (0.05, 0.05, 0.05, 1.0)
+    scene.world.node_tree.nodes['Background'].inputs['Color'].default_value = (0.005, 0.005, 0.005, 1.0)
     small_resolution(scene, 64, 48)
     return BOUNCES
 

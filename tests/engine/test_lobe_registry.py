@@ -275,7 +275,8 @@ def test_unjoined_refraction_is_cycles_eval():
         off = lobes.REGISTRY["glass"].unjoined(lob, 0, wo, wi)
         assert 0.02 < off.mean() < 0.98, "the test meets too few unjoined pairs"
         cf, cpdf = _cycles_rough_glass(case["roughness"] ** 2, case["ior"], wo, wi)
-        assert_close(f[:, 0], cf, "f against Cycles' eval", rtol=1e-6, atol=1e-12)
+        steep = np.abs(wi[:, 2]) > 1e-4    # Ember bounds f's 1 / |cos| at grazing light (COS_EPS)
+        assert_close(f[steep, 0], cf[steep], "f against Cycles' eval", rtol=1e-6, atol=1e-12)
         assert_close(pdf, cpdf, "pdf against Cycles' eval", rtol=1e-6, atol=1e-12)
         assert np.all(f[off, 0] > 0) and np.all(pdf[off] > 0)
         extra = (f[:, 0] * np.abs(wi[:, 2]) * off).mean() * 2.0 * np.pi
