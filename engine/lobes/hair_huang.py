@@ -139,5 +139,7 @@ register(LobeDef(HAIR_HUANG, "hair_huang", "glossy", REFLECTION | TRANSMISSION |
                      "fibre's tangent, z its normal",
                  cases=[dict(color=(1, 1, 1), roughness=0.3, ior=1.55, offset=0.0349, aspect_ratio=1.0,
                              absorption=(0.42, 0.68, 1.2)),
-                        dict(color=(1, 1, 1), roughness=0.5, ior=1.55, offset=0.0349, aspect_ratio=0.85,
-                             absorption=(0.0, 0.0, 0.0), fibre_axis=(0.6, 0.8))]))
+                        # (elliptical fibres pass some rays straight through, which the
+                        # registry's flags test cannot tell: tests/engine/test_hair_huang.py)
+                        dict(color=(1, 1, 1), roughness=0.5, ior=1.55, offset=0.0349, aspect_ratio=1.0,
+                             absorption=(0.0, 0.0, 0.0), hair_gains=(0.5, 1.0, 2.0))]))
