@@ -20,6 +20,7 @@ import pytest
 from ember_testlib import (ReferenceCheck, empty_factory_scene, live_cycles_reference, render_for_reference,
                            small_resolution)
 from test_curves_parity import strands
+from test_hair_parity import hair_material
 
 SPP = 256
 SEEDS, CYCLES_SPP = 8, 256
@@ -27,23 +28,13 @@ BLOCK = 16
 
 
 def huang_material(name="huang", aspect=0.85, gains=(1.0, 1.0, 1.0), melanin=0.6):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    nodes, links = mat.node_tree.nodes, mat.node_tree.links
-    nodes.clear()
-    out = nodes.new('ShaderNodeOutputMaterial')
-    node = nodes.new('ShaderNodeBsdfHairPrincipled')
+    """test_hair_parity's Principled Hair material switched to the Huang model."""
+    mat = hair_material(name, melanin=melanin, redness=0.3)
+    node = next(n for n in mat.node_tree.nodes if n.bl_idname == 'ShaderNodeBsdfHairPrincipled')
     node.model = 'HUANG'
-    node.parametrization = 'MELANIN'
-    node.inputs['Melanin'].default_value = melanin
-    node.inputs['Melanin Redness'].default_value = 0.3
-    node.inputs['Roughness'].default_value = 0.3
-    node.inputs['IOR'].default_value = 1.55
-    node.inputs['Offset'].default_value = math.radians(2.0)
     node.inputs['Aspect Ratio'].default_value = aspect
     for name_, gain in zip(('Reflection', 'Transmission', 'Secondary Reflection'), gains):
         node.inputs[name_].default_value = gain
-    links.new(node.outputs[0], out.inputs['Surface'])
     return mat
 
 
