@@ -21,7 +21,8 @@ from .kernels import clip
 from .lobes import EXTRA_PARAMS, FILM_CUTOFF, PARAMS
 from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, GLOSSY_ANISOTROPIC, MIN_ALPHA,
                        MIRROR, NONE, OREN_NAYAR, REFRACTION, SHEEN, SUBSURFACE_BURLEY, SUBSURFACE_RANDOM_WALK,
-                       SUBSURFACE_SKIN, TRANSLUCENT, TRANSPARENT, HAIR_CHIANG, HAIR_REFLECTION, HAIR_TRANSMISSION)
+                       SUBSURFACE_SKIN, TRANSLUCENT, TRANSPARENT, HAIR_CHIANG, HAIR_REFLECTION, HAIR_TRANSMISSION,
+                       HAIR_HUANG)
 from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect_terms, pow5
 
 _NUMBA_TYPES = {np.dtype(np.int8): "int8", np.dtype(np.float64): "float64", np.dtype(np.bool_): "boolean"}
@@ -46,6 +47,10 @@ ABSORPTION = [name for name, _, _ in LOBE_FIELDS].index("absorption")   # hair_c
 RADIAL_ROUGHNESS = [name for name, _, _ in LOBE_FIELDS].index("radial_roughness")
 COAT = [name for name, _, _ in LOBE_FIELDS].index("coat")
 OFFSET = [name for name, _, _ in LOBE_FIELDS].index("offset")
+ASPECT_RATIO = [name for name, _, _ in LOBE_FIELDS].index("aspect_ratio")   # hair_huang's
+HAIR_GAINS = [name for name, _, _ in LOBE_FIELDS].index("hair_gains")
+FIBRE_AXIS = [name for name, _, _ in LOBE_FIELDS].index("fibre_axis")
+PIXEL_COVERAGE = [name for name, _, _ in LOBE_FIELDS].index("pixel_coverage")
 FILM_THICKNESS = [name for name, _, _ in LOBE_FIELDS].index("thin_film_thickness")   # thin films
 FILM_IOR = [name for name, _, _ in LOBE_FIELDS].index("thin_film_ior")
 # MaterialTable's arrays gathered per ray (bsdf.Lobes' fields up to back).
@@ -1014,6 +1019,608 @@ def _hair_bsdf_sample(transmission, alpha, radial, offset, wox, woy, woz, u1, u2
     return x, y, z, f, pdf
 
 
+# ----------------------------------------------------------------------------
+# hair_huang (engine/lobes/hair_huang.py): Cycles' bsdf_principled_hair_huang.h
+# for one ray, in Cycles' local frame (X the major axis or the normal to the
+# view, Y the fibre's tangent, Z = X x Y); "wi" is the view and "wo" the light
+# as Cycles names them.  These are the only source: the registry's NumPy
+# kernels call them row by row.
+
+LCG_MASK = 0xFFFFFFFF
+
+
+@helper
+def _lcg(state):
+    """Cycles' lcg_step_float: (next state, float in [0, 1])."""
+    state = (1103515245 * state + 12345) & LCG_MASK
+    return state, state * (1.0 / 4294967295.0)
+
+
+@helper
+def _lcg_seed(a, b, c):
+    """A state from three floats (directions or random numbers): Ember's
+    stand-in for Cycles' per-shading-point lcg_state."""
+    a = a if np.isfinite(a) else 0.0
+    b = b if np.isfinite(b) else 0.0
+    c = c if np.isfinite(c) else 0.0
+    s = (np.int64(a * 2147483647.0) * 73856093) ^ (np.int64(b * 2147483647.0) * 19349663)
+    s = (s ^ (np.int64(c * 2147483647.0) * 83492791)) & LCG_MASK
+    for _ in range(3):
+        s = (1103515245 * s + 12345) & LCG_MASK
+    return s
+
+
+@helper
+def _huang_lambda(alpha2, cos_n):
+    c2 = cos_n * cos_n
+    if c2 <= 0.0:
+        return np.inf
+    return 0.5 * (np.sqrt(1.0 + alpha2 * max(1.0 / c2 - 1.0, 0.0)) - 1.0)
+
+
+@helper
+def _huang_g(alpha2, cos_i, cos_o):
+    """bsdf_G<GGX>."""
+    return 1.0 / (1.0 + _huang_lambda(alpha2, cos_i) + _huang_lambda(alpha2, cos_o))
+
+
+@helper
+def _huang_go(alpha2, cos_i, cos_o):
+    """bsdf_Go: the shadowing-masking over the masking from wi."""
+    li = _huang_lambda(alpha2, cos_i)
+    lo = _huang_lambda(alpha2, cos_o)
+    if not np.isfinite(li + lo):
+        return 0.0
+    return (1.0 + li) / (1.0 + li + lo)
+
+
+@helper
+def _huang_d(alpha2, cos_h):
+    c2 = cos_h * cos_h
+    t = (1.0 - c2) + alpha2 * c2
+    return alpha2 / (np.pi * t * t)
+
+
+@helper
+def _huang_scale(t_ge, t_gie, mu, rough, eta):
+    """bsdf_hair_huang_energy_scale: 1 / the glass albedo table (rough = sqrt(roughness))."""
+    z = np.sqrt(np.abs((eta - 1.0) / (eta + 1.0)))
+    e = _lookup3(t_gie, rough, mu, z) if eta < 1.0 else _lookup3(t_ge, rough, mu, z)
+    return 1.0 / e if e > 0 else 0.0
+
+
+@helper
+def _huang_fresnel(cos_i, eta):
+    """Cycles' fresnel_dielectric with its (negative) cos_theta_t (0 under total reflection)."""
+    f, cos_t = _fresnel_dielectric(cos_i, eta)
+    return f, -cos_t
+
+
+@helper
+def _dot3(ax, ay, az, bx, by, bz):
+    return ax * bx + ay * by + az * bz
+
+
+@helper
+def _cos_theta(x, z):
+    return np.sqrt(x * x + z * z)
+
+
+@helper
+def _dir_phi(x, z):
+    return np.arctan2(x, z)
+
+
+@helper
+def _to_phi(gamma, b):
+    if b == 1.0:
+        return gamma
+    return np.arctan2(b * np.sin(gamma), np.cos(gamma))
+
+
+@helper
+def _to_gamma(phi, b):
+    if b == 1.0:
+        return phi
+    return np.arctan2(np.sin(phi), b * np.cos(phi))
+
+
+@helper
+def _sincos_phi(x, y, z):
+    c = _cos_theta(x, z)
+    if c <= 0.0:
+        return 0.0, 1.0
+    return x / c, z / c
+
+
+@helper
+def _phi_to_h(phi, b, ix, iy, iz):
+    if b == 1.0:
+        return -np.sin(phi)
+    g = _to_gamma(phi, b)
+    sp, cp = _sincos_phi(ix, iy, iz)
+    return -cp * np.sin(g) + b * sp * np.cos(g)
+
+
+@helper
+def _h_to_gamma(h, b, ix, iz):
+    if b == 1.0:
+        return -np.arcsin(clip(h, -1.0, 1.0))
+    return np.arctan2(iz, -b * ix) - np.arccos(clip(-h, -1.0, 1.0))
+
+
+@helper
+def _d_gamma_d_h(sp, cp, gamma, b):
+    if b == 1.0:
+        d = np.cos(gamma)
+    else:
+        d = cp * np.cos(gamma) + b * sp * np.sin(gamma)
+    return 1.0 / d if d != 0.0 else 0.0
+
+
+@helper
+def _sphg_dir(theta, gamma, b):
+    st, ct = np.sin(theta), np.cos(theta)
+    sg, cg = np.sin(gamma), np.cos(gamma)
+    if b == 1.0 or np.abs(cg) < 1e-6:
+        sp, cp = sg, cg
+    else:
+        tan_phi = b * sg / cg
+        cp = (1.0 if cg > 0 else (-1.0 if cg < 0 else 0.0)) / np.sqrt(tan_phi * tan_phi + 1.0)
+        sp = cp * tan_phi
+    return sp * ct, st, cp * ct
+
+
+@helper
+def _arc_length(e2, gamma):
+    if e2 == 0.0:
+        return 1.0
+    s = np.sin(gamma)
+    return np.sqrt(max(1.0 - e2 * s * s, 0.0))
+
+
+@helper
+def _point_distance(g1, g2, b):
+    """len(to_point(g1, b) - to_point(g2, b))."""
+    dx = np.sin(g1) - np.sin(g2)
+    dy = b * (np.cos(g1) - np.cos(g2))
+    return np.sqrt(dx * dx + dy * dy)
+
+
+@helper
+def _visible(vx, vy, vz, mx, my, mz, hx, hy, hz):
+    """microfacet_visible(v, m, h)."""
+    return _dot3(vx, vy, vz, hx, hy, hz) > 0.0 and _dot3(vx, vy, vz, mx, my, mz) > 0.0
+
+
+@helper
+def _sample_wh(rough, ix, iy, iz, mx, my, mz, u1, u2):
+    """sample_wh: a GGX visible normal about the mesonormal m."""
+    # make_orthonormals(m): any frame (the VNDF is isotropic about m)
+    if np.abs(mx) > 0.5:
+        sx, sy, sz = -my, mx, 0.0
+    else:
+        sx, sy, sz = 0.0, -mz, my
+    ls = np.sqrt(sx * sx + sy * sy + sz * sz)
+    sx, sy, sz = sx / ls, sy / ls, sz / ls
+    tx, ty, tz = my * sz - mz * sy, mz * sx - mx * sz, mx * sy - my * sx
+    lx, ly, lz = _dot3(ix, iy, iz, sx, sy, sz), _dot3(ix, iy, iz, tx, ty, tz), _dot3(ix, iy, iz, mx, my, mz)
+    hx, hy, hz = _vndf(lx, ly, lz, rough, u1, u2)
+    return hx * sx + hy * tx + hz * mx, hx * sy + hy * ty + hz * my, hx * sz + hy * tz + hz * mz
+
+
+@helper
+def _refract_angle(ix, iy, iz, nx, ny, nz, cos_t, inv_eta):
+    c = inv_eta * _dot3(nx, ny, nz, ix, iy, iz) + cos_t
+    return c * nx - inv_eta * ix, c * ny - inv_eta * iy, c * nz - inv_eta * iz
+
+
+@helper
+def _normalized(x, y, z):
+    length = np.sqrt(x * x + y * y + z * z)
+    if length <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    return x / length, y / length, z / length, 1.0 / length
+
+
+@helper
+def _huang_axes(b, axis_y, axis_z, woy, woz):
+    """Cycles' X (bsdf->N) in the shading frame's (y, z): perpendicular to
+    the view on round fibres, the ellipse's major axis (per ray) otherwise."""
+    if b == 1.0:
+        ay, az = -woz, woy
+    else:
+        ay, az = axis_y, axis_z
+    length = np.sqrt(ay * ay + az * az)
+    if length > 0.0:
+        return ay / length, az / length
+    return 0.0, 1.0
+
+
+@helper
+def _huang_setup(aspect, axis_y, axis_z, wox, woy, woz):
+    """bsdf_hair_huang_setup: (b, Xy, Xz, local view (x, y, z), h, radius, e2)."""
+    b = aspect if np.isfinite(aspect) else 1.0
+    b = max(b, 1e-3)
+    if b > 1.0:
+        b = 1.0 / b
+    xy, xz = _huang_axes(b, axis_y, axis_z, woy, woz)
+    ix, iy, iz = woy * xy + woz * xz, wox, woy * xz - woz * xy
+    yz = np.sqrt(woy * woy + woz * woz)
+    h = clip(-woy / yz, -1.0, 1.0) if yz > 0 else 0.0
+    e2 = 1.0 - b * b
+    radius = 1.0
+    if e2 != 0.0:
+        d = ix * ix + iz * iz
+        radius = np.sqrt(max(1.0 - e2 * ix * ix / d, 0.0)) if d > 0 else 1.0
+    return b, xy, xz, ix, iy, iz, h, radius, e2
+
+
+@helper
+def _huang_transparent(aspect, axis_y, axis_z, wox, woy, woz):
+    """A hit outside the ellipse's projected width: Cycles makes the closure transparent."""
+    b, xy, xz, ix, iy, iz, h, radius, e2 = _huang_setup(aspect, axis_y, axis_z, wox, woy, woz)
+    return np.abs(h) >= radius
+
+
+@helper
+def _huang_eval_r(t_ge, t_gie, gain, rough, tilt, eta, b, e2, h_lo, h_hi, ix, iy, iz, ox, oy, oz):
+    if gain <= 0.0:
+        return 0.0
+    hx, hy, hz, _ = _normalized(ix + ox, iy + oy, iz + oz)
+    r2 = rough * rough
+    sp, cp = _sincos_phi(ix, iy, iz)
+    res = rough * 0.7
+    h_range = h_hi - h_lo
+    intervals = 2 * np.int64(np.ceil(h_range / res * 0.5))
+    res = h_range / intervals
+    integral = 0.0
+    for i in range(intervals + 1):
+        h = h_lo + i * res
+        gm = _h_to_gamma(h, b, ix, iz)
+        mx, my, mz = _sphg_dir(tilt, gm, b)
+        if (_visible(ix, iy, iz, mx, 0.0, mz, hx, hy, hz) and _visible(ox, oy, oz, mx, 0.0, mz, hx, hy, hz)):
+            weight = (0.5 if i == 0 or i == intervals else (i % 2 + 1)) * _d_gamma_d_h(sp, cp, gm, b)
+            cos_mi = _dot3(mx, my, mz, ix, iy, iz)
+            g = _huang_g(r2, cos_mi, _dot3(mx, my, mz, ox, oy, oz))
+            integral += (weight * _huang_d(r2, _dot3(mx, my, mz, hx, hy, hz)) * g * _arc_length(e2, gm)
+                         * _huang_scale(t_ge, t_gie, cos_mi, np.sqrt(rough), eta))
+    integral *= 2.0 / 3.0 * res
+    f = _fresnel_dielectric_cos(_dot3(ix, iy, iz, hx, hy, hz), eta)
+    return gain * 0.25 * f * integral
+
+
+@helper
+def _huang_trrt(t, r, a):
+    """bsdf_hair_huang_eval_trrt for one channel."""
+    t_avg = max(1.0 - r, 1e-5)
+    return t * r * r * t_avg * a * a * a / (1.0 - a * (1.0 - t_avg))
+
+
+@helper
+def _huang_eval_residual(t_ge, t_gie, tt_gain, trt_gain, sigma, rough, tilt, eta, b, e2, h_lo, h_hi,
+                         ix, iy, iz, ox, oy, oz, state, out):
+    """bsdf_hair_huang_eval_residual into out (3,): TT and TRT by Monte
+    Carlo-Simpson quadrature (the LCG from state), TRRT+ by Chiang's M."""
+    out[0] = out[1] = out[2] = 0.0
+    if tt_gain <= 0.0 and trt_gain <= 0.0:
+        return
+    inv_eta = 1.0 / eta
+    r2 = rough * rough
+    sqrt_r = np.sqrt(rough)
+    sp, cp = _sincos_phi(ix, iy, iz)
+    res = rough * 0.8
+    h_range = h_hi - h_lo
+    intervals = 2 * np.int64(np.ceil(h_range / res * 0.5))
+    res = h_range / intervals
+    s_tt0 = s_tt1 = s_tt2 = s_trt0 = s_trt1 = s_trt2 = s_r0 = s_r1 = s_r2 = 0.0
+    for i in range(intervals + 1):
+        h = h_lo + i * res
+        gmi = _h_to_gamma(h, b, ix, iz)
+        mix_, miy, miz = _sphg_dir(tilt, gmi, b)
+        nix, niy, niz = _sphg_dir(0.0, gmi, b)
+        state, u1 = _lcg(state)
+        state, u2 = _lcg(state)
+        h1x, h1y, h1z = _sample_wh(rough, ix, iy, iz, mix_, miy, miz, u1, u2)
+        cos_hi1 = _dot3(ix, iy, iz, h1x, h1y, h1z)
+        if not cos_hi1 > 0.0:
+            continue
+        cos_mi1 = _dot3(ix, iy, iz, mix_, miy, miz)
+        f1, cos_t1 = _huang_fresnel(cos_hi1, eta)
+        t1 = 1.0 - f1
+        scale1 = _huang_scale(t_ge, t_gie, cos_mi1, sqrt_r, eta)
+        wtx, wty, wtz = _refract_angle(ix, iy, iz, h1x, h1y, h1z, cos_t1, inv_eta)
+        phi_t = _dir_phi(wtx, wtz)
+        gmt = 2.0 * _to_phi(phi_t, b) - gmi
+        mtx, mty, mtz = _sphg_dir(-tilt, gmt, b)
+        ntx, nty, ntz = _sphg_dir(0.0, gmt, b)
+        cos_mo1 = -_dot3(wtx, wty, wtz, mix_, miy, miz)
+        cos_mi2 = -_dot3(wtx, wty, wtz, mtx, mty, mtz)
+        g1o = _huang_go(r2, cos_mi1, cos_mo1)
+        if not (_visible(ix, iy, iz, mix_, miy, miz, h1x, h1y, h1z)
+                and _visible(-wtx, -wty, -wtz, mix_, miy, miz, h1x, h1y, h1z)
+                and _visible(ix, iy, iz, nix, niy, niz, h1x, h1y, h1z)
+                and _visible(-wtx, -wty, -wtz, nix, niy, niz, h1x, h1y, h1z)):
+            continue
+        weight = (0.5 if i == 0 or i == intervals else (i % 2 + 1)) * _d_gamma_d_h(sp, cp, gmi, b)
+        ct = _cos_theta(wtx, wtz)
+        if b == 1.0:
+            path = 2.0 * np.cos(gmi - phi_t)
+        else:
+            path = -_point_distance(gmi, gmt + np.pi, b)
+        a0 = np.exp(sigma[0] / ct * path)
+        a1 = np.exp(sigma[1] / ct * path)
+        a2 = np.exp(sigma[2] / ct * path)
+        scale2 = _huang_scale(t_ge, t_gie, cos_mi2, sqrt_r, inv_eta)
+        if tt_gain > 0.0 and _dot3(ox, oy, oz, wtx, wty, wtz) >= inv_eta - 1e-5:
+            hx, hy, hz, rcp = _normalized(-wtx + inv_eta * ox, -wty + inv_eta * oy, -wtz + inv_eta * oz)
+            cos_mh2 = _dot3(mtx, mty, mtz, hx, hy, hz)
+            if cos_mh2 >= 0.0:
+                cos_hi2 = -_dot3(wtx, wty, wtz, hx, hy, hz)
+                cos_ho2 = -_dot3(ox, oy, oz, hx, hy, hz)
+                cos_mo2 = -_dot3(ox, oy, oz, mtx, mty, mtz)
+                t2 = (1.0 - _fresnel_dielectric_cos(cos_hi2, inv_eta)) * scale2
+                common = (weight * t1 * scale1 * t2 * _huang_d(r2, cos_mh2) * g1o * _huang_g(r2, cos_mi2, cos_mo2)
+                          / cos_mo1 * cos_mi1 * cos_hi2 * cos_ho2 * rcp * rcp)
+                arc = tt_gain * _arc_length(e2, gmt)
+                if np.isfinite(common * a0) and np.isfinite(common * a1) and np.isfinite(common * a2):
+                    s_tt0 += arc * common * a0
+                    s_tt1 += arc * common * a1
+                    s_tt2 += arc * common * a2
+        if trt_gain > 0.0:
+            state, u1 = _lcg(state)
+            state, u2 = _lcg(state)
+            h2x, h2y, h2z = _sample_wh(rough, -wtx, -wty, -wtz, mtx, mty, mtz, u1, u2)
+            cos_hi2 = -_dot3(wtx, wty, wtz, h2x, h2y, h2z)
+            if not cos_hi2 > 0.0:
+                continue
+            r2f = _fresnel_dielectric_cos(cos_hi2, inv_eta)
+            trx, try_, trz = _reflect(wtx, wty, wtz, h2x, h2y, h2z)   # -reflect(wt, wh2)
+            if -_dot3(trx, try_, trz, ox, oy, oz) < inv_eta - 1e-5:   # total internal reflection
+                s_r0 += weight * _huang_trrt(t1, r2f, a0)
+                s_r1 += weight * _huang_trrt(t1, r2f, a1)
+                s_r2 += weight * _huang_trrt(t1, r2f, a2)
+                continue
+            if not (_visible(-wtx, -wty, -wtz, mtx, mty, mtz, h2x, h2y, h2z)
+                    and _visible(-trx, -try_, -trz, mtx, mty, mtz, h2x, h2y, h2z)
+                    and _visible(-wtx, -wty, -wtz, ntx, nty, ntz, h2x, h2y, h2z)
+                    and _visible(-trx, -try_, -trz, ntx, nty, ntz, h2x, h2y, h2z)):
+                continue
+            phi_tr = _dir_phi(trx, trz)
+            gmtr = gmi - 2.0 * (_to_phi(phi_t, b) - _to_phi(phi_tr, b)) + np.pi
+            mrx, mry, mrz = _sphg_dir(-tilt, gmtr, b)
+            nrx, nry, nrz = _sphg_dir(0.0, gmtr, b)
+            hx, hy, hz, rcp = _normalized(trx + inv_eta * ox, try_ + inv_eta * oy, trz + inv_eta * oz)
+            cos_mh3 = _dot3(mrx, mry, mrz, hx, hy, hz)
+            if (cos_mh3 < 0.0 or not (_visible(trx, try_, trz, mrx, mry, mrz, hx, hy, hz)
+                                      and _visible(-ox, -oy, -oz, mrx, mry, mrz, hx, hy, hz)
+                                      and _visible(trx, try_, trz, nrx, nry, nrz, hx, hy, hz)
+                                      and _visible(-ox, -oy, -oz, nrx, nry, nrz, hx, hy, hz))):
+                s_r0 += weight * _huang_trrt(t1, r2f, a0)
+                s_r1 += weight * _huang_trrt(t1, r2f, a1)
+                s_r2 += weight * _huang_trrt(t1, r2f, a2)
+                continue
+            cos_hi3 = _dot3(hx, hy, hz, trx, try_, trz)
+            cos_ho3 = -_dot3(hx, hy, hz, ox, oy, oz)
+            cos_mi3 = _dot3(mrx, mry, mrz, trx, try_, trz)
+            t3 = (1.0 - _fresnel_dielectric_cos(cos_hi3, inv_eta)) * _huang_scale(t_ge, t_gie, cos_mi3, sqrt_r,
+                                                                                  inv_eta)
+            ctr = _cos_theta(trx, trz)
+            if b == 1.0:
+                path2 = -2.0 * np.abs(np.cos(phi_tr - gmt))
+            else:
+                path2 = -_point_distance(gmtr, gmt, b)
+            cos_mo2 = -_dot3(mtx, mty, mtz, trx, try_, trz)
+            common = (weight * t1 * scale1 * r2f * scale2 * t3 * _huang_d(r2, cos_mh3) * g1o
+                      * _huang_go(r2, cos_mi2, cos_mo2) * _huang_g(r2, cos_mi3, -_dot3(mrx, mry, mrz, ox, oy, oz))
+                      / (cos_mo1 * cos_mo2) * cos_mi1 * cos_mi2 * cos_hi3 * cos_ho3 * rcp * rcp)
+            arc = trt_gain * _arc_length(e2, gmtr)
+            v0 = common * a0 * np.exp(sigma[0] / ctr * path2)
+            v1 = common * a1 * np.exp(sigma[1] / ctr * path2)
+            v2 = common * a2 * np.exp(sigma[2] / ctr * path2)
+            if np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2):
+                s_trt0 += arc * v0
+                s_trt1 += arc * v1
+                s_trt2 += arc * v2
+            s_r0 += weight * _huang_trrt(t1, r2f, a0)
+            s_r1 += weight * _huang_trrt(t1, r2f, a1)
+            s_r2 += weight * _huang_trrt(t1, r2f, a2)
+    m = _hair_mp(iy, _cos_theta(ix, iz), oy, _cos_theta(ox, oz), 4.0 * rough)
+    trrt = m / (2.0 * np.pi) * (2.0 / np.pi)
+    c = 2.0 / 3.0 * res
+    ie2 = inv_eta * inv_eta
+    out[0] = ((s_tt0 + s_trt0) * ie2 + s_r0 * trrt) * c
+    out[1] = ((s_tt1 + s_trt1) * ie2 + s_r1 * trrt) * c
+    out[2] = ((s_tt2 + s_trt2) * ie2 + s_r2 * trrt) * c
+
+
+@helper
+def _huang_params(alpha, ior, offset):
+    """(roughness, tilt, eta) as bsdf_hair_huang_setup (Offset negated;
+    NaN roughness 0.001, NaN or non-positive IOR 1.55)."""
+    rough = clip(np.sqrt(alpha) if alpha > 0 else 0.0, 0.001, 1.0)
+    tilt = -offset if np.isfinite(offset) else 0.0
+    eta = ior if (np.isfinite(ior) and ior > 0.0) else 1.55
+    return rough, tilt, eta
+
+
+@helper
+def _huang_eval(t_ge, t_gie, alpha, ior, sigma, offset, aspect, axis, gains, coverage,
+                wox, woy, woz, wix, wiy, wiz, out):
+    """bsdf_hair_huang_eval: f (its value over the shading frame's |wi.z|)
+    into out (3,); returns the pdf Cycles reports (1; 0 where the closure
+    is transparent, outside the ellipse's projected width)."""
+    out[0] = out[1] = out[2] = 0.0
+    b, xy, xz, ix, iy, iz, h, radius, e2 = _huang_setup(aspect, axis[0], axis[1], wox, woy, woz)
+    if not np.abs(h) < radius:
+        return 0.0
+    rough, tilt, eta = _huang_params(alpha, ior, offset)
+    ox, oy, oz = wiy * xy + wiz * xz, wix, wiy * xz - wiz * xy
+    tan_tilt = np.tan(tilt)
+    co, ci = _cos_theta(ox, oz), _cos_theta(ix, iz)
+    if ci <= 0.0 or np.abs(wiz) < 1e-12:
+        return 1.0
+    if co > 0.0 and tan_tilt * (oy / co) < -1.0:   # dot(wo, wmo) < 0 everywhere
+        return 1.0
+    arg = max(-tan_tilt * (iy / ci), 0.0)
+    if arg > 1.0:   # dot(wi, wmi) < 0 everywhere
+        return 1.0
+    half_span = np.arccos(arg)
+    phi_i = 0.0 if b == 1.0 else _dir_phi(ix, iz)
+    h_lo = _phi_to_h(phi_i + half_span, b, ix, iy, iz)
+    h_hi = _phi_to_h(phi_i - half_span, b, ix, iy, iz)
+    dh = 2.0
+    if radius > coverage:   # near field: the part of the width this pixel sees
+        n_lo, n_hi = max(-radius, h - coverage), min(radius, h + coverage)
+        dh = (n_hi - n_lo) / radius
+        h_lo, h_hi = max(h_lo, n_lo), min(h_hi, n_hi)
+    h_lo, h_hi = max(h_lo / radius, -0.999), min(h_hi / radius, 0.999)
+    if not h_lo < h_hi:
+        return 1.0
+    fr = _huang_eval_r(t_ge, t_gie, gains[0], rough, tilt, eta, b, e2, h_lo, h_hi, ix, iy, iz, ox, oy, oz)
+    state = _lcg_seed(wix - 0.5 * wox, wiy + 0.25 * woy, wiz - 0.125 * woz)
+    _huang_eval_residual(t_ge, t_gie, gains[1], gains[2], sigma, rough, tilt, eta, b, e2, h_lo, h_hi,
+                         ix, iy, iz, ox, oy, oz, state, out)
+    scale = 1.0 / (ci * dh * np.abs(wiz))
+    for c in range(3):
+        v = (out[c] + fr) * scale
+        out[c] = v if np.isfinite(v) else 0.0
+    return 1.0
+
+
+@helper
+def _huang_sample(t_ge, t_gie, alpha, ior, sigma, offset, aspect, axis, gains, coverage,
+                  wox, woy, woz, u_lobe, u1, u2, out):
+    """bsdf_hair_huang_sample: (x, y, z, ok) in the shading frame and its
+    eval (f |cos|, the weight at pdf 1) into out (3,); rand = (u_lobe, u1,
+    u2), the rest from an LCG seeded by them."""
+    out[0] = out[1] = out[2] = 0.0
+    b, xy, xz, ix, iy, iz, h, radius, e2 = _huang_setup(aspect, axis[0], axis[1], wox, woy, woz)
+    rough, tilt, eta = _huang_params(alpha, ior, offset)
+    state = _lcg_seed(u_lobe, u1, u2)
+    state, h1y = _lcg(state)
+    state, h2x_ = _lcg(state)
+    state, h2y_ = _lcg(state)
+    state, h3x_ = _lcg(state)
+    state, h3y_ = _lcg(state)
+    # The far field samples h (the hit's own h may be numerically poor).
+    h_div_r = h / radius if radius > coverage else u1 * 2.0 - 1.0
+    gmi = _h_to_gamma(h_div_r, b, ix, iz)
+    nix, niy, niz = _sphg_dir(0.0, gmi, b)
+    st, ct = np.sin(tilt), np.cos(tilt)
+    mix_, miy, miz = nix * ct, st, niz * ct
+    cos_mi1 = _dot3(mix_, miy, miz, ix, iy, iz)
+    if cos_mi1 < 0.0 or _dot3(nix, niy, niz, ix, iy, iz) < 0.0:
+        return 0.0, 0.0, 1.0, False
+    r2 = rough * rough
+    sqrt_r = np.sqrt(rough)
+    h1x, h1y, h1z = _sample_wh(rough, ix, iy, iz, mix_, miy, miz, u2, h1y)
+    wrx, wry, wrz = _reflect(ix, iy, iz, h1x, h1y, h1z)
+    if not _visible(ix, iy, iz, nix, niy, niz, h1x, h1y, h1z):
+        return 0.0, 0.0, 1.0, False
+    f1, cos_t1 = _huang_fresnel(_dot3(ix, iy, iz, h1x, h1y, h1z), eta)
+    scale1 = _huang_scale(t_ge, t_gie, cos_mi1, sqrt_r, eta)
+    r_val = 0.0
+    if _visible(wrx, wry, wrz, nix, niy, niz, h1x, h1y, h1z):
+        r_val = gains[0] * f1 * scale1 * _huang_go(r2, cos_mi1, _dot3(mix_, miy, miz, wrx, wry, wrz))
+    inv_eta = 1.0 / eta
+    wtx, wty, wtz = _refract_angle(ix, iy, iz, h1x, h1y, h1z, cos_t1, inv_eta)
+    phi_t = _dir_phi(wtx, wtz)
+    gmt = 2.0 * _to_phi(phi_t, b) - gmi
+    mtx, mty, mtz = _sphg_dir(-tilt, gmt, b)
+    ntx, nty, ntz = _sphg_dir(0.0, gmt, b)
+    h2x, h2y, h2z = _sample_wh(rough, -wtx, -wty, -wtz, mtx, mty, mtz, h2x_, h2y_)
+    trx, try_, trz = _reflect(wtx, wty, wtz, h2x, h2y, h2z)
+    tt0 = tt1 = tt2 = trt0 = trt1 = trt2 = rr0 = rr1 = rr2 = 0.0
+    ttx = tty = ttz = rtx = rty = rtz = qx = qy = qz = 0.0
+    cos_mi2 = -_dot3(wtx, wty, wtz, mtx, mty, mtz)
+    if (cos_mi2 > 0.0 and _visible(-wtx, -wty, -wtz, nix, niy, niz, h1x, h1y, h1z)
+            and _visible(-wtx, -wty, -wtz, ntx, nty, ntz, h2x, h2y, h2z)):
+        if b == 1.0:
+            path = 2.0 * np.cos(phi_t - gmi)
+        else:
+            path = -_point_distance(gmi, gmt + np.pi, b)
+        ct_t = _cos_theta(wtx, wtz)
+        a0 = np.exp(sigma[0] / ct_t * path)
+        a1 = np.exp(sigma[1] / ct_t * path)
+        a2 = np.exp(sigma[2] / ct_t * path)
+        f2, cos_t2 = _huang_fresnel(-_dot3(wtx, wty, wtz, h2x, h2y, h2z), inv_eta)
+        t1 = (1.0 - f1) * scale1 * _huang_go(r2, cos_mi1, -_dot3(mix_, miy, miz, wtx, wty, wtz))
+        t2 = 1.0 - f2
+        scale2 = _huang_scale(t_ge, t_gie, cos_mi2, sqrt_r, inv_eta)
+        ttx, tty, ttz = _refract_angle(-wtx, -wty, -wtz, h2x, h2y, h2z, cos_t2, eta)
+        if (-_dot3(mtx, mty, mtz, ttx, tty, ttz) > 0.0 and t2 > 0.0
+                and _visible(-ttx, -tty, -ttz, ntx, nty, ntz, h2x, h2y, h2z)):
+            g = gains[1] * t1 * t2 * scale2 * _huang_go(r2, cos_mi2, -_dot3(mtx, mty, mtz, ttx, tty, ttz))
+            tt0, tt1, tt2 = g * a0, g * a1, g * a2
+        phi_tr = _dir_phi(trx, trz)
+        gmtr = gmi - 2.0 * (_to_phi(phi_t, b) - _to_phi(phi_tr, b)) + np.pi
+        mrx, mry, mrz = _sphg_dir(-tilt, gmtr, b)
+        h3x, h3y, h3z = _sample_wh(rough, trx, try_, trz, mrx, mry, mrz, h3x_, h3y_)
+        f3, cos_t3 = _huang_fresnel(_dot3(trx, try_, trz, h3x, h3y, h3z), inv_eta)
+        rtx, rty, rtz = _refract_angle(trx, try_, trz, h3x, h3y, h3z, cos_t3, eta)
+        cos_mi3 = _dot3(mrx, mry, mrz, trx, try_, trz)
+        if cos_mi3 > 0.0:
+            if b == 1.0:
+                path2 = -2.0 * np.abs(np.cos(phi_tr - gmt))
+            else:
+                path2 = -_point_distance(gmt, gmtr, b)
+            ct_r = _cos_theta(trx, trz)
+            b0 = np.exp(sigma[0] / ct_r * path2)
+            b1 = np.exp(sigma[1] / ct_r * path2)
+            b2 = np.exp(sigma[2] / ct_r * path2)
+            tr = (t1 * f2 * scale2 * _huang_scale(t_ge, t_gie, cos_mi3, sqrt_r, inv_eta)
+                  * _huang_go(r2, cos_mi2, -_dot3(mtx, mty, mtz, trx, try_, trz)))
+            t3 = 1.0 - f3
+            if (t3 > 0.0 and _visible(trx, try_, trz, mrx, 0.0, mrz, h3x, h3y, h3z)
+                    and _visible(-rtx, -rty, -rtz, mrx, 0.0, mrz, h3x, h3y, h3z)):
+                g = gains[2] * tr * t3 * _huang_go(r2, cos_mi3, -_dot3(mrx, mry, mrz, rtx, rty, rtz))
+                trt0, trt1, trt2 = g * a0 * b0, g * a1 * b1, g * a2 * b2
+            # TRRT+: Chiang's longitudinal lobe, a uniform azimuth
+            state, rt = _lcg(state)
+            rt = max(rt, 1e-5)
+            fac = 1.0 + 4.0 * rough * np.log(rt + (1.0 - rt) * np.exp(-0.5 / rough))
+            state, uc = _lcg(state)
+            sin_o = -fac * iy + _cos_from_sin(fac) * np.cos(2.0 * np.pi * uc) * _cos_theta(ix, iz)
+            cos_o = _cos_from_sin(sin_o)
+            state, up = _lcg(state)
+            qx, qy, qz = np.sin(2.0 * np.pi * up) * cos_o, sin_o, np.cos(2.0 * np.pi * up) * cos_o
+            t_avg = max(0.5 * (t2 + t3), 1e-5)
+            sx, sy, sz = _reflect(trx, try_, trz, h3x, h3y, h3z)
+            g = tr * f3 * _huang_go(r2, cos_mi3, _dot3(mrx, mry, mrz, sx, sy, sz))
+            avg = np.sqrt(a0 * b0)
+            rr0 = g * a0 * b0 * avg * t_avg / (1.0 - avg * (1.0 - t_avg))
+            avg = np.sqrt(a1 * b1)
+            rr1 = g * a1 * b1 * avg * t_avg / (1.0 - avg * (1.0 - t_avg))
+            avg = np.sqrt(a2 * b2)
+            rr2 = g * a2 * b2 * avg * t_avg / (1.0 - avg * (1.0 - t_avg))
+    tt = (tt0 + tt1 + tt2) / 3.0
+    trt = (trt0 + trt1 + trt2) / 3.0
+    trrt = (rr0 + rr1 + rr2) / 3.0
+    total = r_val + tt + trt + trrt
+    if not (total > 0.0 and np.isfinite(total)):
+        return 0.0, 0.0, 1.0, False
+    pick = u_lobe * total
+    if pick < r_val:
+        lx, ly, lz = wrx, wry, wrz
+        out[0] = out[1] = out[2] = total
+    elif pick < r_val + tt:
+        lx, ly, lz = ttx, tty, ttz
+        out[0], out[1], out[2] = tt0 / tt * total, tt1 / tt * total, tt2 / tt * total
+    elif pick < r_val + tt + trt:
+        lx, ly, lz = rtx, rty, rtz
+        out[0], out[1], out[2] = trt0 / trt * total, trt1 / trt * total, trt2 / trt * total
+    else:
+        lx, ly, lz = qx, qy, qz
+        out[0], out[1], out[2] = rr0 / trrt * total, rr1 / trrt * total, rr2 / trrt * total
+    x, y, z = ly, lx * xy + lz * xz, lx * xz - lz * xy
+    ok = np.isfinite(x) and np.isfinite(y) and np.isfinite(z)
+    for c in range(3):
+        if not np.isfinite(out[c]):
+            ok = False
+    return x, y, z, ok
+
+
 def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f, pdf):
     """bsdf.eval_pdf into f (N, 3) and pdf (N,); diffuse_term and keep
     are bsdf.bump_shadowing's arrays, or empty without a moved normal."""
@@ -1023,6 +1630,7 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
     thickness, film_ior = lobes[FILM_THICKNESS], lobes[FILM_IOR]
     bump = len(diffuse_term) > 0
     ap, energy, tilt = np.empty((4, 3)), np.empty(4), np.empty((3, 2))
+    hb = np.empty(3)
     for i in range(len(wo)):
         wox, woy, woz, wix, wiy, wiz = wo[i, 0], wo[i, 1], wo[i, 2], wi[i, 0], wi[i, 1], wi[i, 2]
         f_0 = f_1 = f_2 = p = 0.0
@@ -1044,6 +1652,15 @@ def eval_pdf_loop(lobes, tables, wo, wi, sel, w, diffuse_term, keep, sampled, f,
                 f_0 += w[i, k, 0] * h0
                 f_1 += w[i, k, 1] * h1
                 f_2 += w[i, k, 2] * h2
+                p += sel[i, k] * pk
+            elif kd == HAIR_HUANG and woz > COS_EPS:
+                pk = _huang_eval(tables[2], tables[3], alpha[i, k], ior[i, k], lobes[ABSORPTION][i, k],
+                                 lobes[OFFSET][i, k], lobes[ASPECT_RATIO][i, k], lobes[FIBRE_AXIS][i, k],
+                                 lobes[HAIR_GAINS][i, k], lobes[PIXEL_COVERAGE][i, k],
+                                 wox, woy, woz, wix, wiy, wiz, hb)
+                f_0 += w[i, k, 0] * hb[0]
+                f_1 += w[i, k, 1] * hb[1]
+                f_2 += w[i, k, 2] * hb[2]
                 p += sel[i, k] * pk
             elif (kd == HAIR_REFLECTION and upper) or (kd == HAIR_TRANSMISSION and lower):
                 h, pk = _hair_bsdf_eval(kd == HAIR_TRANSMISSION, alpha[i, k], lobes[RADIAL_ROUGHNESS][i, k],
@@ -1216,6 +1833,7 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
     thickness, film_ior = lobes[FILM_THICKNESS], lobes[FILM_IOR]
     kk = kind.shape[1]
     ap, energy, tilt = np.empty((4, 3)), np.empty(4), np.empty((3, 2))
+    hb = np.empty(3)
     for i in range(len(wo)):
         wox, woy, woz = wo[i, 0], wo[i, 1], wo[i, 2]
         # The lobe: u_lobe against the running sum of the selection
@@ -1267,6 +1885,26 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
                 kd = NONE
         elif kd == HAIR_CHIANG:
             x, y, z = _hair_sample(lobes, i, k, wox, woy, woz, u_sub, u1[i], u2[i], ap, energy, tilt)
+        elif kd == HAIR_HUANG:
+            # OWN_WEIGHT (Cycles' pdf 1); outside the ellipse's projected width a transparent pass.
+            if _huang_transparent(lobes[ASPECT_RATIO][i, k], lobes[FIBRE_AXIS][i, k, 0], lobes[FIBRE_AXIS][i, k, 1],
+                                  wox, woy, woz):
+                x, y, z = -wox, -woy, -woz
+                r0, r1, r2 = w[i, k, 0] / p_lobe, w[i, k, 1] / p_lobe, w[i, k, 2] / p_lobe
+                is_delta = True
+                p = p_lobe
+            else:
+                x, y, z, ok = _huang_sample(tables[2], tables[3], alpha[i, k], ior[i, k], lobes[ABSORPTION][i, k],
+                                            lobes[OFFSET][i, k], lobes[ASPECT_RATIO][i, k], lobes[FIBRE_AXIS][i, k],
+                                            lobes[HAIR_GAINS][i, k], lobes[PIXEL_COVERAGE][i, k],
+                                            wox, woy, woz, u_sub, u1[i], u2[i], hb)
+                cos = np.abs(z)
+                if ok and cos > 1e-12:
+                    r0, r1, r2 = w[i, k, 0] * hb[0] / cos, w[i, k, 1] * hb[1] / cos, w[i, k, 2] * hb[2] / cos
+                    p = p_lobe
+                else:
+                    x, y, z = 0.0, 0.0, 1.0
+                    kd = NONE
         elif kd == HAIR_REFLECTION or kd == HAIR_TRANSMISSION:
             # OWN_WEIGHT: its f (weighted) and pdf, which bsdf.sample adds to the others' eval.
             x, y, z, h, pk = _hair_bsdf_sample(kd == HAIR_TRANSMISSION, alpha[i, k], lobes[RADIAL_ROUGHNESS][i, k],

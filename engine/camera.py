@@ -232,6 +232,20 @@ class CameraModel:
             return np.einsum("nij,nj->ni", rot, o) + pos, np.einsum("nij,nj->ni", rot, d), tmax
         return o @ self.rot.T + self.pos, d @ self.rot.T, tmax
 
+    def spread(self, d):
+        """Cycles' compact differentials of camera rays along world directions
+        d (N, 3), per pixel: (dP at the origin, dD per unit distance), what
+        a hit's sd->dP = dP + t dD is made of (lens and zoom left out)."""
+        c = np.asarray(d, np.float64) @ self.rot
+        n = len(c)
+        if self.cam.kind == "ORTHO":
+            return np.full(n, 0.5 * (self.pw + self.ph)), np.zeros(n)
+        z = np.maximum(-c[:, 2], 1e-12)
+        sx, sy = c[:, 0] / z, c[:, 1] / z
+        l2 = sx * sx + sy * sy + 1.0
+        # |d normalize(P) / dx| = sqrt(|P|^2 - x^2) / |P|^2 for P = (x, y, -1)
+        return np.zeros(n), 0.5 * (self.pw * np.sqrt(sy * sy + 1.0) + self.ph * np.sqrt(sx * sx + 1.0)) / l2
+
     def shutter_times(self, pixel, u):
         """Each camera sample's time in the shutter from its number ``u``
         (the shutter curve, and the rolling shutter by the pixel's row)."""

@@ -142,9 +142,11 @@ class Strands(_Rows):
     each row's first control point there (4 consecutive ones make a
     segment)."""
 
-    def __init__(self, rows, cvs, start, n_rows, curve=None):
+    def __init__(self, rows, cvs, start, n_rows, curve=None, normals=None):
         super().__init__(rows, n_rows)
         self.cvs, self.start = cvs, start
+        # (V, 3) world-space curve normals beside cvs (zero where a set has none)
+        self.normals = normals
         self.is_curve = self.mask
         # (n_rows,) the curve (strand) each segment row belongs to, numbered
         # over every curve set, -1 on other rows: rays leaving a strand pass
@@ -159,7 +161,7 @@ def strands_of(tris, owners):
     if not owners:
         return None
     owner = tris.shading.instance
-    rows, cvs, starts, curves = [], [], [], []
+    rows, cvs, starts, curves, normals = [], [], [], [], []
     base = curve_base = 0
     for inst_index, strands in owners:
         mine = np.flatnonzero(owner == inst_index)
@@ -180,10 +182,35 @@ def strands_of(tris, owners):
         starts.append(start[local] + base)
         curves.append(curve[local] + curve_base)
         cvs.append(padded)
+        normals.append(_world_normals(strands, m)[index])
         base += len(padded)
         curve_base += len(first)
     return Strands(np.concatenate(rows), np.concatenate(cvs), np.concatenate(starts), len(tris),
-                   np.concatenate(curves))
+                   np.concatenate(curves), np.concatenate(normals))
+
+
+def _world_normals(strands, m):
+    """(N, 3) a curve set's normals in world space (the normal matrix; NaN
+    and missing ones zero)."""
+    n = getattr(strands, "normals", None)
+    count = len(strands.points)
+    if n is None or np.shape(n) != (count, 3):
+        return np.zeros((count, 3))
+    with np.errstate(all="ignore"):
+        try:
+            normal_matrix = np.linalg.inv(m[:3, :3]).T
+        except np.linalg.LinAlgError:
+            normal_matrix = np.zeros((3, 3))
+        out = np.asarray(n, np.float64) @ normal_matrix.T
+    return np.where(np.isfinite(out).all(axis=1)[:, None], out, 0.0)
+
+
+def curve_key_mix(strands, prim, u, values):
+    """Cycles' curve_attribute of per-key ``values`` (padded as cvs) at
+    segment rows ``prim``: the two keys of the segment mixed linearly by u."""
+    start = strands.start[strands.slot[prim]]
+    u = np.clip(u, 0.0, 1.0)[:, None]
+    return (1.0 - u) * values[start + 1] + u * values[start + 2]
 
 
 def _catmull_rom(t):

@@ -168,6 +168,7 @@ def _curve_fields():
                ("curve_attributes", Optional[dict], field(default=None)),
                ("uv", Optional[str], field(default=None)),
                ("first_curve", int, field(default=0)),
+               ("normals", Optional[np.ndarray], field(default=None)),
                ("texspace", Optional[tuple], field(default=None))])
 
 
@@ -186,7 +187,10 @@ HairCurves.__doc__ = """Strands (Blender's Curves objects): round Catmull-Rom cu
     Curves Info node's Random hashes it; texspace: (location, size) of the
     emitter's texture space (particle hair: Generated is each strand's root
     mapped through it, as Cycles; None: the object-space position, as
-    Cycles' Curves objects); the other fields as ``Instance``'s.
+    Cycles' Curves objects); normals: (N, 3) object-space curve normals per
+    control point (Blender's, what Cycles' Huang hair aligns an elliptical
+    fibre's major axis with; None: none, as Cycles' particle hair); the
+    other fields as ``Instance``'s.
     """
 
 

@@ -205,6 +205,7 @@ class InstanceCollector:
             lambda text: self._warn_once(('curve attributes', obj.name, text), f"Object '{obj.name}': {text}"))
         self.curves.append(backend.engine().HairCurves(
             points=positions, radii=np.maximum(radii, 0.0), offsets=offsets, matrix=matrix,
+            normals=_curve_normals(data, n, keep_points),
             materials=self.material_index(obj), name=obj.name, point_attributes=point_attrs or None,
             curve_attributes=curve_attrs or None, uv=uv,
             **ray_visibility(inst), **object_info(inst),
@@ -383,6 +384,18 @@ def mesh_key(obj):
 def _geometry_name(obj):
     data = obj.data
     return data.name if data is not None else obj.name
+
+
+def _curve_normals(data, n, keep_points):
+    """(N, 3) Blender's curve normals per point (Curves.normals: what Cycles'
+    Huang hair aligns elliptical fibres with), or None where bpy has none."""
+    normals = getattr(data, 'normals', None)
+    if normals is None or len(normals) != n:
+        return None
+    out = np.empty(n * 3, np.float32)
+    normals.foreach_get('vector', out)
+    out = out.reshape(n, 3)
+    return out if keep_points is None else out[keep_points]
 
 
 def collect_instances(depsgraph, material_index, check=None, keys=None, points=None, curves=None, cache=None,

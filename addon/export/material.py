@@ -364,11 +364,13 @@ class NodeTranslator:
         the absorption from Direct Coloring, Melanin Concentration or the
         Absorption Coefficient; roughness, radial roughness, coat, IOR and
         offset as constants; Random Roughness and Random Color per strand
-        (hair_random.py).  Huang (4.0+) renders as Chiang, with a warning."""
-        if getattr(node, 'model', 'CHIANG') != 'CHIANG':
-            self._approximate(node, "Huang hair model rendered as Chiang")
+        (hair_random.py).  The Huang model (4.0+): its Aspect Ratio and the
+        Reflection / Transmission / Secondary Reflection gains as constants,
+        the radial roughness its roughness (as Cycles' svm node)."""
+        huang = getattr(node, 'model', 'CHIANG') == 'HUANG'
         c = lambda name, default: self._hair_constant(node, name, default)  # noqa: E731
-        roughness, radial = _clamp01(c('Roughness', 0.3)), _clamp01(c('Radial Roughness', 0.3))
+        roughness = _clamp01(c('Roughness', 0.3))
+        radial = roughness if huang else _clamp01(c('Radial Roughness', 0.3))
         mode = getattr(node, 'parametrization', 'COLOR')
         if mode == 'ABSORPTION':
             sigma = _constant_color(self, node, 'Absorption Coefficient', (0.245531, 0.52, 1.365))
@@ -387,6 +389,14 @@ class NodeTranslator:
             absorption=_constant_color(self, node, 'Absorption Coefficient', (0.245531, 0.52, 1.365)),
             roughness=roughness, radial_roughness=radial, random_roughness=c('Random Roughness', 0.0),
             random_color=c('Random Color', 0.0))))
+        if huang:
+            gains = tuple(max(c(name, 1.0), 0.0) for name in ('Reflection', 'Transmission', 'Secondary Reflection'))
+            if not any(gains):
+                return Closure([])   # Cycles allocates no closure
+            fields.pop('radial_roughness', None)
+            return Closure([_scene().Lobe('hair_huang', (1.0, 1.0, 1.0), ior=c('IOR', 1.55),
+                                          offset=c('Offset', 2.0 * math.pi / 180.0),
+                                          aspect_ratio=c('Aspect Ratio', 0.85), hair_gains=gains, **fields)])
         return Closure([_scene().Lobe('hair_chiang', (1.0, 1.0, 1.0), ior=c('IOR', 1.55), coat=_clamp01(c('Coat', 0.0)),
                                       offset=c('Offset', 2.0 * math.pi / 180.0), **fields)])
 

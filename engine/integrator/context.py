@@ -14,6 +14,7 @@ import numpy as np
 
 from .. import bsdf, kernels, pass_events
 from ..geometry import VIS_SHADOW
+from ..lobes.hair_huang import HAIR_HUANG
 from ..sampler import Sampler
 from . import subsurface
 from .visibility import VIS_INDIRECT
@@ -100,7 +101,9 @@ class Context:
             sampler = Sampler(settings.seed, settings.sampling_pattern)
         if pass_config is None:
             pass_config = pass_events.PassConfig()
-        transparent_mat = np.any(materials.kind == bsdf.TRANSPARENT, axis=1)
+        # Elliptical Huang hair is transparent outside its projected width (Cycles).
+        transparent_mat = np.any((materials.kind == bsdf.TRANSPARENT)
+                                 | ((materials.kind == HAIR_HUANG) & (materials.aspect_ratio != 1.0)), axis=1)
         light_path = bool(getattr(materials.textures, "light_path", False))
         return cls(accel, triangles, materials, lights, camera, world, settings, sampler, bump_model,
                    kernels.enabled(), _delta_emitters(lights), np.arange(lights.count),

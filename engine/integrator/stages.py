@@ -14,7 +14,9 @@ from .. import bsdf, bump_correction, nee, throughput
 from ..accel import shadow_rays, shadow_rays_f32
 from ..hits import hit_geometry
 from ..motion import path_time, triangles_at
-from ..points import curve_hits, curve_tangents, curve_rows, sphere_hits
+from ..lobes import hair_huang
+from ..lobes.hair_huang import HAIR_HUANG
+from ..points import curve_hits, curve_key_mix, curve_tangents, curve_rows, sphere_hits
 from ..nodes import NodeRays, ShadingContext
 from ..nodes.context import PATH_COLUMNS
 from ..sampler import BSDF, LIGHT, candidate_set, emitter_set, vertex_set
@@ -330,6 +332,7 @@ def shade(ctx, paths, hit, depth):
     ctx.materials.textures.tangent_frames(hit.mat, sc, hit.ns, tt, bb)
     if hit.fibre is not None:
         fibre_frames(hit.fibre, hit.ns, tt, bb)
+        hair_inputs(ctx, paths, hit, lobes, tt, bb, depth)
     wo_l = to_local(hit.wo, tt, bb, hit.ns)
     if smooth is not None and not (np.array_equal(smooth, hit.ns) and np.array_equal(bent, hit.ns)):
         # Cycles' bump shadowing term (bsdf.bump_shadowing) needs the smooth
@@ -359,6 +362,34 @@ def fibre_frames(fibre, ns, tt, bb):
     y = y / np.where(ok, length, 1.0)[:, None]
     tt[ok] = np.cross(y, ns)[ok]
     bb[ok] = y[ok]
+
+
+def hair_inputs(ctx, paths, hit, lobes, tt, bb, depth):
+    """The Huang hair lobes' per-ray inputs on strands (engine/lobes/
+    hair_huang.py): the ellipse's major axis from the curve's normal, and on
+    camera rays half the pixel's footprint over the fibre's radius (Cycles'
+    pixel_coverage, which switches its near-field model on)."""
+    huang = lobes.kind == HAIR_HUANG
+    if not huang.any():
+        return
+    rows = np.flatnonzero(huang.any(axis=1) & ctx.strands.is_curve[hit.prim])
+    if not len(rows):
+        return
+    slots = np.flatnonzero(huang[rows].any(axis=0))
+    prim, u = hit.prim[rows], hit.bary[rows, 0]
+    normal = curve_key_mix(ctx.strands, prim, u, ctx.strands.normals)
+    axes = hair_huang.ellipse_axes(hit.fibre[rows], normal, tt[rows], bb[rows], hit.ns[rows])
+    for k in slots:
+        lobes.fibre_axis[rows, k] = axes
+    if depth == 0 and hasattr(ctx.camera, "spread"):
+        radius = curve_key_mix(ctx.strands, prim, u, ctx.strands.cvs[:, 3:4])[:, 0]
+        dp, dd = ctx.camera.spread(-hit.wo[rows])
+        footprint = dp + np.linalg.norm(hit.p[rows] - paths.o[rows], axis=1) * dd
+        with np.errstate(divide="ignore", invalid="ignore"):
+            coverage = 0.5 * footprint / radius
+        coverage = np.where(np.isfinite(coverage) & (radius > 0), coverage, 1.0)
+        for k in slots:
+            lobes.pixel_coverage[rows, k] = coverage
 
 
 def filter_glossy(ctx, paths, lobes):

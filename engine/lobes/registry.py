@@ -160,6 +160,19 @@ PARAMS = (
     Param("offset", float, 0.0, np.float64, (), "hair_chiang, hair_reflection / _transmission: the "
           "cuticle tilt in radians (the node's Offset).",
           to_table=lambda lobe: _finite_or(getattr(lobe, "offset", 0.0), 0.0)),
+    Param("aspect_ratio", float, 1.0, np.float64, (), "hair_huang: the fibre's Aspect Ratio (minor over major "
+          "axis; above 1 inverted as Cycles; NaN 1, at least 1e-3).",
+          to_table=lambda lobe: max(_finite_or(getattr(lobe, "aspect_ratio", 1.0), 1.0), 1e-3)),
+    Param("hair_gains", RGB, (1.0, 1.0, 1.0), np.float64, (3,), "hair_huang: the Reflection, Transmission and "
+          "Secondary Reflection gains of its R, TT and TRT lobes (negative and NaN 0).",
+          to_table=lambda lobe: np.nan_to_num(np.maximum(getattr(lobe, "hair_gains", (1.0, 1.0, 1.0)), 0.0),
+                                              nan=0.0, posinf=1e30)),
+    Param("fibre_axis", Tuple[float, float], (0.0, 1.0), np.float64, (2,), "hair_huang: the ellipse's major axis "
+          "in the shading frame's (y, z), set per ray by the integrator from the curve's normal "
+          "(engine/lobes/hair_huang.py)."),
+    Param("pixel_coverage", float, 1.0, np.float64, (), "hair_huang: half a pixel's width over the fibre's "
+          "radius; the near field model where the fibre is wider (set per camera ray by the integrator; 1: far "
+          "field)."),
     Param("thin_film_thickness", float, 0.0, np.float64, (), "thin-film iridescence over the lobe's Fresnel "
           "(glossy 'dielectric' and 'f82', mirror, glass): the film's thickness in nm; at most 0.1 (Cycles' "
           "THINFILM_THICKNESS_CUTOFF) is no film (engine/thinfilm.py).",
