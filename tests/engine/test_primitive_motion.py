@@ -84,6 +84,7 @@ def test_moving_spheres_are_hit_where_they_are_at_the_ray_time():
     t_ref = root[np.arange(n), first]
     hit_sphere = (prim >= 0) & spheres.is_point[np.maximum(prim, 0)]
     edge = np.abs(disc[np.arange(n), first]) < 1e-4
+    edge |= (prim >= 0) & ~hit_sphere & (t < t_ref)   # (the floor before a sphere that sank below it)
     assert np.array_equal(hit_sphere[~edge], np.isfinite(t_ref)[~edge])
     both = hit_sphere & np.isfinite(t_ref) & ~edge
     assert both.sum() > 500
@@ -91,7 +92,7 @@ def test_moving_spheres_are_hit_where_they_are_at_the_ray_time():
     assert np.allclose(t[both], t_ref[both], rtol=1e-4, atol=1e-4)
     p, ng, back = sphere_hits(spheres, o[both], d[both], t[both], prim[both], time[both])
     c, r = centres[both, first[both]], radii[both, first[both]]
-    assert np.allclose(np.linalg.norm(p - c, axis=1), r, rtol=1e-9, atol=1e-9)
+    assert np.allclose(np.linalg.norm(p - c, axis=1), r, rtol=0, atol=1e-6)   # (steps kept in float32)
     assert np.all(np.einsum("ij,ij->i", ng, d[both]) <= 0) and not back.any()
 
 
