@@ -79,11 +79,11 @@ def export_scene(depsgraph, camera_override=None, should_stop=None, engine=None,
     centre = motion_export.centre_time(scene, blur)
     try:
         motion_export.set_time(engine, centre)
-        keys = []
-        exported = _export(depsgraph, camera_override, should_stop, keys)
+        keys, sources = [], []
+        exported = _export(depsgraph, camera_override, should_stop, keys, sources=sources)
         start = time.perf_counter()
         exported.warnings += motion_export.add_motion(engine, depsgraph, exported, keys, blur, centre,
-                                                      scene_camera(depsgraph, camera_override))
+                                                      scene_camera(depsgraph, camera_override), sources=sources)
         exported.seconds += time.perf_counter() - start
     finally:
         motion_export.set_time(engine, frame)
@@ -106,7 +106,7 @@ def _export_with_vector(engine, depsgraph, camera_override, should_stop):
     return exported
 
 
-def _export(depsgraph, camera_override=None, should_stop=None, keys=None, camera=True, cache=None):
+def _export(depsgraph, camera_override=None, should_stop=None, keys=None, camera=True, cache=None, sources=None):
     check = stop_checker(should_stop)
     start = time.perf_counter()
     renderer = backend.engine()
@@ -116,7 +116,7 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None, camera
     points, curves, links = [], [], {}
     light_collector = light_export.LightCollector(links)
     meshes, instances, warnings = instance_export.collect_instances(depsgraph, materials.slots, check, keys, points,
-                                                                    curves, cache, light_collector.add)
+                                                                    curves, cache, light_collector.add, sources)
     check()
     lights, light_warnings = light_collector.lights, light_collector.warnings
     world, world_warning = world_export.world_from_blender(scene.world)
