@@ -13,17 +13,15 @@ import bpy
 import numpy as np
 import pytest
 
-import ember_stats as stats
-from ember_testlib import (check_against_reference, empty_factory_scene, load_reference, record_engine_scenes,
-                           render_for_reference, small_resolution)
+from ember_testlib import (empty_factory_scene, record_engine_scenes, render_for_reference,
+                           small_resolution)
 from parity_scenes import light, material, plane, top_camera
 from test_curves_parity import strands
 from test_hair_parity import hair_material, hairy_sphere
-from test_motion_parity import FRAME, _linear_keys
+from test_motion_parity import FRAME, _linear_keys, check_blur_parity
 from test_points_parity import _points_material, point_object
 
 BLOCK = 16   # (8-pixel blocks resolved 2.1-2.7 % at 256 spp: most of a block is floor)
-SPP = 256
 
 
 def _blur(scene, on=True, shutter=1.0):
@@ -116,40 +114,19 @@ def sliding_hair(scene, blur=True):
     return 4
 
 
-SCENES = {'sliding_curves': sliding_curves, 'swaying_curves': swaying_curves, 'sliding_points': sliding_points,
-          'sliding_hair': sliding_hair}
+SCENES = dict(sliding_curves=sliding_curves, swaying_curves=swaying_curves, sliding_points=sliding_points,
+              sliding_hair=sliding_hair)
 
 
 def reference_scene(name, folder=None):
     """The scene ``name`` and its bounces (as tools/cycles_references.py renders it)."""
-    scene = empty_factory_scene()
-    return scene, SCENES[name](scene)
-
-
-def _blocks_beyond(name, image, var, level, spp):
-    """Whether any block of an Ember render (``spp`` samples) differs from
-    reference ``name`` at ``level`` (the power check), printed."""
-    ref, ref_var, _ = load_reference('curve_motion_' + name)
-    a, va = stats.block_means_var(image[..., :3].astype(np.float64), var, BLOCK)
-    b, vb = stats.block_means_var(ref, ref_var, BLOCK)
-    t = np.abs(a - b) / np.sqrt(va + vb)
-    limit = stats.t_threshold(level, spp - 1)
-    print(f"curve_motion_{name}: a sharp render against the reference: max block |t| {t.max():.1f} "
-          f"(limit {limit:.1f}), {(t > limit).sum()} of {t.size} blocks beyond")
-    return bool((t > limit).any())
+    build, scene = SCENES[name], empty_factory_scene()
+    return scene, build(scene)
 
 
 @pytest.mark.parametrize("name", list(SCENES))
 def test_curve_and_point_motion_blur_parity_with_cycles(name, tmp_path, tapped_engine):
-    scene, bounces = reference_scene(name)
-    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, SPP, 2, bounces)
-    check = check_against_reference('curve_motion_' + name, scene, bounces, image, var, SPP, BLOCK)
-    check.assert_agrees(0.005, 0.02)
-    still = empty_factory_scene()
-    SCENES[name](still, blur=False)
-    sharp, sharp_var = render_for_reference(still, tmp_path, name + '_still', tapped_engine, SPP // 2, 2, bounces)
-    assert _blocks_beyond(name, sharp, sharp_var, check.details['level'], SPP // 2), \
-        f"the test cannot tell {name}'s motion blur from none"
+    check_blur_parity(name, SCENES[name], 'curve_motion_', tmp_path, tapped_engine, BLOCK)
 
 
 def test_motion_reaches_the_engine_scene(tmp_path, tapped_engine, monkeypatch):
