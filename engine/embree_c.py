@@ -168,9 +168,13 @@ class TriangleScene:
     geometry, or None.  ``curves``: (control points and radii (V, 4), the
     first control point of each segment (S,), prims (S,), tessellation
     rate) for one RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE geometry (as
-    Cycles' 3D curves), or None."""
+    Cycles' 3D curves), or None.  ``moving``: moving points or curves, a
+    list of (kind, control points (S, K, 4) object space per time step,
+    each segment's first control point (P,) or None for points, prims (P,),
+    tessellation rate or None, transforms (S'', 16)): each one geometry
+    of S time steps in a scene of its own, placed as ``instances``."""
 
-    def __init__(self, parts, instances=(), spheres=None, curves=None):
+    def __init__(self, parts, instances=(), spheres=None, curves=None, moving=()):
         lib = library()
         if lib is None:
             raise RuntimeError("libembree4 (bundled with embreex) is not available")
@@ -213,6 +217,19 @@ class TriangleScene:
                        (RTC_BUFFER_TYPE_INDEX, RTC_FORMAT_UINT, 4, np.ascontiguousarray(starts, np.uint32))]
             first = self._primitives(RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE, buffers, prims, rate, offsets, order,
                                      first)
+        for kind, steps, starts, prims, rate, transforms in moving:
+            child = lib.rtcNewScene(self.device)
+            self.children.append(child)
+            buffers = [(RTC_BUFFER_TYPE_VERTEX, RTC_FORMAT_FLOAT4, 16, np.ascontiguousarray(step, np.float32))
+                       for step in steps]
+            if starts is not None:
+                buffers.append((RTC_BUFFER_TYPE_INDEX, RTC_FORMAT_UINT, 4, np.ascontiguousarray(starts, np.uint32)))
+            self._primitives(kind, buffers, prims, rate, [], [], 0, scene=child, steps=len(steps))
+            lib.rtcCommitScene(child)
+            self._instance(child, np.ascontiguousarray(transforms, np.float32), len(offsets))
+            offsets.append(first)
+            order.append(np.asarray(prims, np.int64))
+            first += len(prims)
         lib.rtcCommitScene(self.scene)
         self._check("commit the scene")
         self.offsets = np.array(offsets or [0], np.int64)
@@ -265,9 +282,11 @@ class TriangleScene:
                               f"(error {self.lib.rtcGetDeviceError(self.device)})")
         ctypes.memmove(buffer, array.ctypes.data, array.nbytes)
 
-    def _primitives(self, kind, buffers, prims, rate, offsets, order, first):
+    def _primitives(self, kind, buffers, prims, rate, offsets, order, first, scene=None, steps=1):
         """One geometry of points or curves from its buffers (kind, format,
-        stride, array); its primitives are ``prims``.  Returns the next first."""
+        stride, array; ``steps`` vertex buffers come first, one per time
+        step) in ``scene`` (the top one); its primitives are ``prims``.
+        Returns the next first."""
         lib = self.lib
         geom = lib.rtcNewGeometry(self.device, kind)
         if not geom:
@@ -275,10 +294,11 @@ class TriangleScene:
         try:
             if rate is not None:
                 lib.rtcSetGeometryTessellationRate(geom, float(rate))
-            for buffer_kind, fmt, stride, array in buffers:
-                self._fill_raw(geom, buffer_kind, fmt, stride, array)
+            lib.rtcSetGeometryTimeStepCount(geom, steps)
+            for slot, (buffer_kind, fmt, stride, array) in enumerate(buffers):
+                self._fill_raw(geom, buffer_kind, fmt, stride, array, slot if slot < steps else 0)
             lib.rtcCommitGeometry(geom)
-            got = lib.rtcAttachGeometry(self.scene, geom)
+            got = lib.rtcAttachGeometry(self.scene if scene is None else scene, geom)
         finally:
             lib.rtcReleaseGeometry(geom)
         if got != len(offsets):
@@ -289,8 +309,8 @@ class TriangleScene:
         self.nbytes += sum(array.nbytes for *_, array in buffers)
         return first + len(prims)
 
-    def _fill_raw(self, geom, kind, fmt, stride, array):
-        buffer = self.lib.rtcSetNewGeometryBuffer(geom, kind, 0, fmt, stride, len(array))
+    def _fill_raw(self, geom, kind, fmt, stride, array, slot=0):
+        buffer = self.lib.rtcSetNewGeometryBuffer(geom, kind, slot, fmt, stride, len(array))
         if not buffer:
             raise MemoryError(f"Embree could not allocate a buffer of {len(array)} rows")
         ctypes.memmove(buffer, array.ctypes.data, array.nbytes)

@@ -39,7 +39,9 @@ def has_motion(scene):
     return (getattr(cam, "motion", None) is not None
             or getattr(cam, "lens_motion", None) is not None
             or bool(instance_columns.columns(scene.instances).moving.any())
-            or any(getattr(mesh, "motion", None) is not None for mesh in scene.meshes))
+            or any(getattr(mesh, "motion", None) is not None for mesh in scene.meshes)
+            or any(getattr(item, "motion", None) is not None or getattr(item, "motion_positions", None) is not None
+                   for item in list(getattr(scene, "points", ()) or ()) + list(getattr(scene, "curves", ()) or ())))
 
 
 # ----------------------------------------------------------------------------
@@ -317,13 +319,21 @@ class MotionAccel(Accel):
                 parts.append((corners.reshape(1, -1, 3), np.arange(3 * len(corners)).reshape(-1, 3), still))
             points = None
             if spheres is not None and len(spheres):
-                points = (np.concatenate([spheres.centres, spheres.radii[:, None]], axis=1), spheres.rows)
+                k = _still_slots(spheres)
+                if len(k):
+                    points = (np.concatenate([spheres.centres[k], spheres.radii[k, None]], axis=1), spheres.rows[k])
             instances = motion.embree_instances() if motion is not None else []
             curves = None
             if strands is not None and len(strands):
-                curves = (strands.cvs, strands.start, strands.rows, self.CURVE_RATE)
+                k = _still_slots(strands)
+                if len(k):
+                    curves = (strands.cvs, strands.start[k], strands.rows[k], self.CURVE_RATE)
                 self.self_key = strands.curve   # rays leaving a strand pass all of it
-            self.scene = embree_c.TriangleScene(parts, instances, points, curves)
+            moving = ([(embree_c.RTC_GEOMETRY_TYPE_SPHERE_POINT, m.steps, None, m.rows, None,
+                        m.decomposition.astype(np.float32)) for m in _moving_sets(spheres)]
+                      + [(embree_c.RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE, m.steps, m.index, m.rows,
+                          self.CURVE_RATE, m.decomposition.astype(np.float32)) for m in _moving_sets(strands)])
+            self.scene = embree_c.TriangleScene(parts, instances, points, curves, moving)
 
     def intersect(self, origins, directions, tmax, time=None):
         n = len(origins)
@@ -346,6 +356,19 @@ class MotionAccel(Accel):
     @classmethod
     def offset_scale(cls, p):
         return cls.OFFSET * (1.0 + np.max(np.abs(p), axis=1))
+
+
+def _moving_sets(holder):
+    """The moving point clouds or curve sets of a points.Spheres / Strands
+    (engine.primitive_motion.MovingSet), none when it is None or still."""
+    moving = getattr(holder, "moving", None) if holder is not None else None
+    return moving.sets if moving else []
+
+
+def _still_slots(holder):
+    """The slots of a Spheres / Strands that do not move."""
+    moving = getattr(holder, "moving", None)
+    return np.arange(len(holder)) if not moving else np.flatnonzero(moving.part < 0)
 
 
 def path_time(paths):

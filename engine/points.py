@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from . import curve_attributes, instance_batch
+from . import curve_attributes, instance_batch, primitive_motion
 from .scene import Instance, Mesh
 
 
@@ -44,6 +44,12 @@ class Spheres(_Rows):
         super().__init__(rows, n_rows)
         self.centres, self.radii = centres, radii
         self.is_point = self.mask
+        self.moving = None   # primitive_motion.MovingRows of moving clouds
+
+    def rows_at(self, slots, time=None):
+        """(n, 1, 4) world (centre, radius) of spheres ``slots`` at each ray's time."""
+        return primitive_motion.world_rows(
+            self, slots, time, 1, lambda k: np.concatenate([self.centres[k], self.radii[k, None]], axis=1)[:, None])
 
 
 def _placed(cloud, mesh_index):
@@ -120,8 +126,9 @@ def expand(scene):
     return replace(scene, meshes=meshes, instances=instance_batch.extended(instances, added)), owners, radii
 
 
-def spheres_of(tris, scene, owners, radii):
-    """Spheres of the flattened stand-in rows (None without points)."""
+def spheres_of(tris, scene, owners, radii, clouds=()):
+    """Spheres of the flattened stand-in rows (None without points);
+    ``clouds`` the PointClouds of ``owners`` (their motion blur)."""
     if not owners:
         return None
     owner, local = tris.shading.instance, tris.shading.local
@@ -133,7 +140,9 @@ def spheres_of(tris, scene, owners, radii):
         rows.append(mine)
         r_world.append(r[local[mine]] * scale)
     rows = np.concatenate(rows)
-    return Spheres(rows, tris.p0[rows].copy(), np.concatenate(r_world), len(tris))
+    spheres = Spheres(rows, tris.p0[rows].copy(), np.concatenate(r_world), len(tris))
+    primitive_motion.attach_points(spheres, tris, owners, clouds)
+    return spheres
 
 
 class Strands(_Rows):
@@ -148,12 +157,33 @@ class Strands(_Rows):
         # (V, 3) world-space curve normals beside cvs (zero where a set has none)
         self.normals = normals
         self.is_curve = self.mask
+        self.moving = None   # primitive_motion.MovingRows of moving curve sets
         # (n_rows,) the curve (strand) each segment row belongs to, numbered
         # over every curve set, -1 on other rows: rays leaving a strand pass
         # all of its segments (curve_rows).
         self.curve = np.full(n_rows, -1, np.int64)
         if curve is not None:
             self.curve[rows] = curve
+
+    def rows_at(self, prim, time=None):
+        """(n, 4, 4) world control points (x, y, z, r) of segment rows
+        ``prim`` at each ray's time."""
+        slots = self.slot[prim]
+        return primitive_motion.world_rows(
+            self, slots, time, 4, lambda k: self.cvs[self.start[k][:, None] + np.arange(4)[None, :]])
+
+
+def padded_index(offsets):
+    """Embree's control points of curves ``offsets`` as indices of their
+    points: each curve's first and last point doubled (Cycles' Catmull-Rom layout)."""
+    first, last = offsets[:-1], offsets[1:] - 1
+    return (np.concatenate([np.r_[a, np.arange(a, b + 1), b] for a, b in zip(first, last)])
+            if len(first) else np.zeros(0, np.int64))
+
+
+def segment_padded_starts(offsets):
+    """Each segment's first control point in padded_index's order."""
+    return segment_starts(offsets)[1]
 
 
 def strands_of(tris, owners):
@@ -170,10 +200,8 @@ def strands_of(tris, owners):
         offsets = np.asarray(strands.offsets, np.int64)
         p = np.asarray(strands.points, np.float64) @ m[:3, :3].T + m[:3, 3]
         r = np.asarray(strands.radii, np.float64) * scale
-        # each curve's first and last control point doubled (Cycles' Catmull-Rom layout)
         first, last = offsets[:-1], offsets[1:] - 1
-        index = (np.concatenate([np.r_[a, np.arange(a, b + 1), b] for a, b in zip(first, last)])
-                 if len(first) else np.zeros(0, np.int64))
+        index = padded_index(offsets)
         padded = np.concatenate([p[index], r[index, None]], axis=1)
         _, start = segment_starts(offsets)
         curve = np.repeat(np.arange(len(first)), np.maximum(last - first, 0))   # each segment's curve
@@ -185,8 +213,10 @@ def strands_of(tris, owners):
         normals.append(_world_normals(strands, m)[index])
         base += len(padded)
         curve_base += len(first)
-    return Strands(np.concatenate(rows), np.concatenate(cvs), np.concatenate(starts), len(tris),
-                   np.concatenate(curves), np.concatenate(normals))
+    strands = Strands(np.concatenate(rows), np.concatenate(cvs), np.concatenate(starts), len(tris),
+                      np.concatenate(curves), np.concatenate(normals))
+    primitive_motion.attach_curves(strands, tris, owners, padded_index, segment_padded_starts)
+    return strands
 
 
 def _world_normals(strands, m):
@@ -225,20 +255,19 @@ def _catmull_rom_derivative(t):
     return 0.5 * np.stack([-3 * t2 + 4 * t - 1, 9 * t2 - 10 * t, -9 * t2 + 8 * t + 1, 3 * t2 - 2 * t], axis=1)
 
 
-def curve_tangents(strands, prim, u):
-    """The strands' tangents dC/du (unnormalized) at segment rows ``prim``, parameter u."""
-    start = strands.start[strands.slot[prim]]
-    cv = strands.cvs[start[:, None] + np.arange(4)[None, :]]
+def curve_tangents(strands, prim, u, time=None):
+    """The strands' tangents dC/du (unnormalized) at segment rows ``prim``,
+    parameter u, at each ray's time."""
+    cv = strands.rows_at(prim, time)
     return np.einsum("nk,nkj->nj", _catmull_rom_derivative(np.clip(u, 0.0, 1.0)), cv[:, :, :3])
 
 
-def curve_hits(strands, o, d, t, prim, u):
+def curve_hits(strands, o, d, t, prim, u, time=None):
     """(p, ng, back, radius) of rays (o, d) meeting segment rows ``prim`` at
-    Embree's distance t and curve parameter u: the point moved onto the
-    round curve's surface around its centre C(u) (radius r(u)), the normal
-    from C(u) to it, facing the ray."""
-    start = strands.start[strands.slot[prim]]
-    cv = strands.cvs[start[:, None] + np.arange(4)[None, :]]            # (n, 4, 4)
+    Embree's distance t and curve parameter u (at each ray's time): the
+    point moved onto the round curve's surface around its centre C(u)
+    (radius r(u)), the normal from C(u) to it, facing the ray."""
+    cv = strands.rows_at(prim, time)                                     # (n, 4, 4)
     w = _catmull_rom(np.clip(u, 0.0, 1.0))
     centre = np.einsum("nk,nkj->nj", w, cv[:, :, :3])
     radius = np.maximum(np.einsum("nk,nk->n", w, cv[:, :, 3]), 0.0)
@@ -281,12 +310,12 @@ def for_lights(tris, unlit, default_material):
     return replace(tris, material=material)
 
 
-def sphere_hits(spheres, o, d, t, prim):
+def sphere_hits(spheres, o, d, t, prim, time=None):
     """(p, ng, back) of rays (o, d) meeting sphere rows ``prim`` near
-    Embree's distance t: the root of |o + t d - c| = r closest to it, in
-    float64; ng faces the ray."""
-    k = spheres.slot[prim]
-    c, r = spheres.centres[k], spheres.radii[k]
+    Embree's distance t (at each ray's time): the root of |o + t d - c| = r
+    closest to it, in float64; ng faces the ray."""
+    rows = spheres.rows_at(spheres.slot[prim], time)[:, 0]
+    c, r = rows[:, :3], rows[:, 3]
     oc = o - c
     b = np.einsum("ij,ij->i", oc, d)
     q = np.einsum("ij,ij->i", oc, oc) - r * r

@@ -92,7 +92,7 @@ def _prepare(scene, settings, bake):
     scene, point_owners, point_radii = points.expand(scene)   # point clouds and curves as stand-in rows
     scene, curve_owners = points.expand_curves(scene)
     tris = flatten(scene, with_instance=bool(settings.passes), threads=settings.threads)
-    spheres = points.spheres_of(tris, scene, point_owners, point_radii)
+    spheres = points.spheres_of(tris, scene, point_owners, point_radii, list(getattr(source, "points", ()) or ()))
     strands = points.strands_of(tris, curve_owners)
     motion = MotionGeometry(scene, tris) if has_motion(source) else None
     unlit = points.unlit_rows(len(tris), spheres, strands)

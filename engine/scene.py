@@ -137,13 +137,19 @@ def _point_cloud_fields():
     defaults, then the per-point attributes."""
     out = [("positions", np.ndarray), ("radii", np.ndarray)]
     for f in fields(Instance):
-        if f.name in ("mesh", "asset", "motion", "vector_motion", "voxels"):
+        if f.name in ("mesh", "asset", "vector_motion", "voxels"):
             continue
         default = {} if f.default is MISSING else {"default": "points" if f.name == "name" else f.default}
         if f.default_factory is not MISSING:
             default = {"default_factory": f.default_factory}
         out.append((f.name, f.type, field(**default)))
-    return out + [("attributes", Optional[dict], field(default=None))]
+    # Deformation motion blur (Cycles' motion positions attribute): object-space
+    # positions (S, N, 3) at the ``motion`` steps' times (S evenly spaced over
+    # the shutter), and for points their radii there (S, N) (curves keep their
+    # radii, as Cycles' Embree setup); None: no deformation.
+    return out + [("attributes", Optional[dict], field(default=None)),
+                  ("motion_positions", Optional[np.ndarray], field(default=None)),
+                  ("motion_radii", Optional[np.ndarray], field(default=None))]
 
 
 PointCloud = make_dataclass("PointCloud", _point_cloud_fields())
@@ -154,14 +160,17 @@ PointCloud.__doc__ = """Spheres (Blender's point cloud objects, geometry nodes' 
     attribute); matrix: object-to-world (radii scale by cbrt|det|, as
     Cycles); materials: scene material per slot (one slot: the cloud's
     material); attributes: {name: (N, C)} per-point values shader nodes read
-    as colour attributes; the other fields as ``Instance``'s.
+    as colour attributes; motion: object-to-world (S, 4, 4) over the shutter
+    (transform motion blur); motion_positions (S, N, 3) / motion_radii (S, N):
+    the points at the shutter's steps (deformation motion blur); the other
+    fields as ``Instance``'s.
     """
 
 
 def _curve_fields():
     """HairCurves' fields: control points, radii and curve offsets, then
     Instance's placement fields."""
-    skip = {"positions", "radii", "attributes"}
+    skip = {"positions", "radii", "attributes", "motion_radii"}
     return ([("points", np.ndarray), ("radii", np.ndarray), ("offsets", np.ndarray)]
             + [f for f in _point_cloud_fields() if f[0] not in skip]
             + [("point_attributes", Optional[dict], field(default=None)),
@@ -189,8 +198,10 @@ HairCurves.__doc__ = """Strands (Blender's Curves objects): round Catmull-Rom cu
     mapped through it, as Cycles; None: the object-space position, as
     Cycles' Curves objects); normals: (N, 3) object-space curve normals per
     control point (Blender's, what Cycles' Huang hair aligns an elliptical
-    fibre's major axis with; None: none, as Cycles' particle hair); the
-    other fields as ``Instance``'s.
+    fibre's major axis with; None: none, as Cycles' particle hair); motion:
+    object-to-world (S, 4, 4) over the shutter; motion_positions (S, N, 3):
+    the control points at the shutter's steps (deformation motion blur;
+    radii stay); the other fields as ``Instance``'s.
     """
 
 

@@ -338,9 +338,28 @@ def _radii_and_matrix(item, positions, name, what):
     return pos
 
 
+def _validate_primitive_motion(item, what, n_points):
+    """Transform steps (S, 4, 4) and positions (S, N, 3) / radii (S, N) at
+    the steps of a point cloud or curve set, finite, radii >= 0."""
+    if getattr(item, "motion", None) is not None:
+        _steps(item.motion, f"{what} motion", (4, 4))
+    if getattr(item, "motion_positions", None) is not None:
+        steps = _steps(item.motion_positions, f"{what} motion_positions", (n_points, 3))
+        radii = getattr(item, "motion_radii", None)
+        if radii is not None:
+            radii = _steps(radii, f"{what} motion_radii", (n_points,))
+            if len(radii) != len(steps):
+                raise SceneError(f"{what}: {len(radii)} steps of motion radii for {len(steps)} of positions")
+            if radii.size and radii.min() < 0:
+                raise SceneError(f"{what}: negative motion radius {radii.min()}")
+    elif getattr(item, "motion_radii", None) is not None:
+        raise SceneError(f"{what}: motion_radii without motion_positions")
+
+
 def validate_point_cloud(cloud, index, n_materials):
     what = f"point cloud {index} ({cloud.name!r})"
     pos = _radii_and_matrix(cloud, cloud.positions, "positions", what)
+    _validate_primitive_motion(cloud, what, len(pos))
     for slot, mat in enumerate(cloud.materials):
         if not -1 <= mat < n_materials:
             raise SceneError(f"{what}: slot {slot} names material {mat}, but the scene has {n_materials}")
@@ -354,6 +373,7 @@ def validate_point_cloud(cloud, index, n_materials):
 def validate_curves(strands, index, n_materials):
     what = f"curves {index} ({strands.name!r})"
     pos = _radii_and_matrix(strands, strands.points, "points", what)
+    _validate_primitive_motion(strands, what, len(pos))
     offsets = _array(strands.offsets, f"{what} offsets", (), "iu")
     if len(offsets) < 1 or offsets[0] != 0 or offsets[-1] != len(pos) or np.any(np.diff(offsets) < 1):
         raise SceneError(f"{what}: offsets must rise from 0 to {len(pos)} with every curve holding a point")

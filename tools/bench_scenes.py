@@ -14,6 +14,7 @@ import os
 import sys
 
 import bpy
+import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BLEND_DIR = os.path.join(ROOT, 'blend_scenes')
@@ -392,6 +393,90 @@ def build_interior():
     return finish(scene, cam, (-2.0, 1.2, 0.9))
 
 
+def _linear_keys(obj, path, values, frames=(1, 3)):
+    """``obj.path`` keyframed to ``values`` at ``frames``, interpolated linearly."""
+    for frame, value in zip(frames, values):
+        setattr(obj, path, value)
+        obj.keyframe_insert(path, frame=frame)
+    action = obj.animation_data.action
+    curves = list(getattr(action, 'fcurves', None) or [])
+    for layer in getattr(action, 'layers', ()):   # Blender 5's layered actions
+        for strip in layer.strips:
+            for bag in strip.channelbags:
+                curves.extend(bag.fcurves)
+    for curve in curves:
+        for key in curve.keyframe_points:
+            key.interpolation = 'LINEAR'
+
+
+def build_motion():
+    """Motion blur (shutter 0.5, centre, frame 2): a sliding cube, a
+    tumbling torus, a sliding Curves object and a moving camera."""
+    scene = bs.reset()
+    grey = principled("Floor", (0.5, 0.5, 0.5), roughness=0.6)
+    floor(scene, grey)
+    cube = bs.box(scene, "Cube", (0.8, 0.8, 0.8), (-1.2, 0.0, 0.4), 0.0, principled("Red", (0.8, 0.15, 0.1)))
+    _linear_keys(cube, 'location', [(-3.2, 0.0, 0.4), (0.8, 0.0, 0.4)])
+    torus = bs.uv_sphere(scene, "Ball", 0.5, (1.0, 0.0, 1.0), principled("Green", (0.2, 0.7, 0.2)))
+    torus.scale = (1.0, 0.5, 1.0)
+    _linear_keys(torus, 'rotation_euler', [(math.radians(-60.0), 0.0, 0.0), (math.radians(180.0), 0.0, 0.0)])
+    rng = np.random.default_rng(3)
+    count, keys = 2000, 5
+    base = np.c_[rng.uniform(-1.5, 1.5, (count, 2)) + [0.0, -1.2], np.zeros(count)]
+    points = base[:, None, :] + np.arange(keys)[None, :, None] * [0.02, 0.0, 0.12]
+    data = bpy.data.hair_curves.new("Grass")
+    data.add_curves([keys] * count)
+    data.attributes['position'].data.foreach_set('vector', points.reshape(-1).astype(np.float32))
+    data.attributes.new('radius', 'FLOAT', 'POINT').data.foreach_set(
+        'value', np.tile(np.linspace(0.015, 0.004, keys), count).astype(np.float32))
+    data.materials.append(principled("Grass", (0.3, 0.6, 0.1)))
+    grass = bpy.data.objects.new("Grass", data)
+    bs.link(scene, grass)
+    _linear_keys(grass, 'location', [(-0.5, 0.0, 0.0), (0.5, 0.0, 0.0)])
+    bs.light(scene, "Area", 'AREA', (0.5, -0.5, 4.0), 500.0, size=2.0)
+    cam = bs.camera(scene, (0.0, -5.0, 3.0), (0, 0, 0), lens=32.0)
+    _linear_keys(cam, 'location', [(-0.3, -5.0, 3.0), (0.3, -5.0, 3.0)])
+    bs.world(scene, (0.05, 0.05, 0.05))
+    scene.render.use_motion_blur = True
+    scene.render.motion_blur_shutter = 0.5
+    scene.render.motion_blur_position = 'CENTER'
+    if hasattr(scene, 'cycles_curves'):
+        scene.cycles_curves.shape = 'THICK'
+    scene.frame_set(2)
+    return finish(scene, cam, (0.0, 0.0, 0.4))
+
+
+def build_hair():
+    """Particle hair (2000 strands, Principled Hair Chiang, melanin 0.6) on a sphere."""
+    scene = bs.reset()
+    floor(scene, principled("Floor", (0.5, 0.5, 0.5), roughness=0.6))
+    head = bs.uv_sphere(scene, "Head", 0.6, (0.0, 0.0, 0.7), principled("Skin", (0.6, 0.5, 0.45)),
+                        segments=48, rings=24)
+    hair = bpy.data.materials.new("Hair")
+    hair.use_nodes = True
+    nodes = hair.node_tree.nodes
+    nodes.clear()
+    node = nodes.new('ShaderNodeBsdfHairPrincipled')
+    if hasattr(node, 'model'):
+        node.model = 'CHIANG'
+    node.parametrization = 'MELANIN'
+    node.inputs['Melanin'].default_value = 0.6
+    hair.node_tree.links.new(node.outputs[0], nodes.new('ShaderNodeOutputMaterial').inputs['Surface'])
+    head.data.materials.append(hair)
+    settings = head.modifiers.new("Hair", 'PARTICLE_SYSTEM').particle_system.settings
+    settings.type = 'HAIR'
+    settings.count = 2000
+    settings.hair_length = 0.4
+    settings.radius_scale = 0.01
+    settings.material = 2
+    bs.light(scene, "Area", 'AREA', (0.8, -1.0, 3.0), 300.0, size=1.5)
+    cam = bs.camera(scene, (0.0, -3.0, 1.4), (0, 0, 0), lens=40.0)
+    bs.world(scene, (0.1, 0.1, 0.12))
+    if hasattr(scene, 'cycles_curves'):
+        scene.cycles_curves.shape = 'THICK'
+    return finish(scene, cam, (0.0, 0.0, 0.7))
+
+
 SCENES = {
     'cornell': ("Cornell box, one rectangle light", lambda: open_blend('cornell')),
     'veach_mis': ("Veach MIS (4 GGX plates, 4 sphere lights)", lambda: open_blend('veach_mis')),
@@ -405,6 +490,8 @@ SCENES = {
     'subsurface': ("random-walk subsurface sphere and torus, front and rim light", build_subsurface),
     'glossy_lights': ("7 lights of 5 kinds over glossy plates", build_glossy_lights),
     'interior': ("a room lit through a window by sun and sky (indirect light)", build_interior),
+    'motion': ("motion blur: sliding cube, tumbling ball, sliding curves, moving camera", build_motion),
+    'hair': ("particle hair (2000 strands, Principled Hair Chiang) on a sphere", build_hair),
 }
 BLEND_FILES = {'cornell', 'veach_mis'}
 

@@ -76,6 +76,9 @@ REFERENCES['curves_strands'] = ('test_curves_parity', 'strands', 1024)
 REFERENCES['bump_correction_sphere'] = ('test_bump_correction_parity', 'sphere', 512)
 REFERENCES['hair_particles'] = ('test_hair_parity', 'particles', 1024)
 REFERENCES['hair_bsdf_strands'] = ('test_hair_bsdf_parity', 'strands', 1024)
+for _scene, _spp in (('sliding_curves', 1024), ('swaying_curves', 1024), ('sliding_points', 1024),
+                     ('sliding_hair', 512)):
+    REFERENCES['curve_motion_' + _scene] = ('test_curve_motion_parity', _scene, _spp)
 for _scene in ('emissive', 'glossy_lights', 'hdri', 'interior', 'many_lights', 'principled', 'procedural'):
     REFERENCES['yardstick_' + _scene] = ('test_yardstick_parity', _scene, 1024)
 # the scenes built here: (width, height, max bounces)

@@ -16,6 +16,7 @@ from . import fluid
 from . import object_attributes
 from . import particle_hair
 from .motion import instance_key
+from .primitive_motion import Source, primitive_key
 
 
 class InstanceCollector:
@@ -34,6 +35,7 @@ class InstanceCollector:
         self.keys = []      # per instance: motion.instance_key (motion blur finds it at other times)
         self.points = []    # engine PointClouds (point cloud objects, geometry nodes' Points)
         self.curves = []    # engine HairCurves (Curves objects, hair particle systems)
+        self.sources = []   # primitive_motion.Source of each of those (motion blur finds them again)
         self.light_sink = None  # light.LightCollector.add: light instances, read during the walk
         self._warned = set()
         self.check = check or (lambda: None)
@@ -155,6 +157,7 @@ class InstanceCollector:
                 attr.data.foreach_get('color', rgba)   # linear (Blender converts byte colours)
                 attributes[attr.name] = rgba.reshape(n, 4)
         good = np.isfinite(positions).all(axis=1) & np.isfinite(radii)
+        keep = None if good.all() else good
         if not good.all():
             self._warn_once(('points', obj.name), f"Object '{obj.name}': {int((~good).sum())} points with "
                             "a NaN or infinite position or radius were skipped")
@@ -167,6 +170,7 @@ class InstanceCollector:
             materials=self.material_index(obj), name=obj.name, attributes=attributes or None,
             **ray_visibility(inst), **object_info(inst),
             pass_index=int(getattr(inst.object, 'pass_index', 0))))
+        self._source(self.points[-1], inst, 'points', keep)
 
     def _add_curves(self, inst):
         """A Curves object as round Catmull-Rom strands of its radius
@@ -210,6 +214,7 @@ class InstanceCollector:
             curve_attributes=curve_attrs or None, uv=uv,
             **ray_visibility(inst), **object_info(inst),
             pass_index=int(getattr(inst.object, 'pass_index', 0))))
+        self._source(self.curves[-1], inst, 'curves', keep_points)
 
     def _add_particle_hair(self, inst):
         """The emitter's hair particle systems as strands (particle_hair.py),
@@ -235,6 +240,13 @@ class InstanceCollector:
                 texspace=mesh_export.texspace_of(obj.data),
                 **ray_visibility(inst), **object_info(inst),
                 pass_index=int(getattr(obj, 'pass_index', 0))))
+            self._source(self.curves[-1], inst, 'hair', system=strands.name)
+
+    def _source(self, item, inst, kind, keep=None, system=None):
+        """Remember where a point cloud or curve set came from (motion blur)."""
+        if self.want_keys:
+            parent = inst.parent if inst.is_instance and inst.parent is not None else inst.object
+            self.sources.append(Source(item, primitive_key(inst), kind, parent.original, keep, system))
 
     def _mesh_id(self, obj):
         """Index of the object's geometry in self.meshes, exporting it once."""
@@ -399,7 +411,7 @@ def _curve_normals(data, n, keep_points):
 
 
 def collect_instances(depsgraph, material_index, check=None, keys=None, points=None, curves=None, cache=None,
-                      light_sink=None, bulk=False):
+                      light_sink=None, sources=None, bulk=False):
     """Walk every object instance; returns (meshes, instances, warnings).
     ``check()`` (which raises to cancel) runs every 256 instances and before
     each mesh is exported; ``keys`` (a list) receives each instance's key;
@@ -437,6 +449,8 @@ def collect_instances(depsgraph, material_index, check=None, keys=None, points=N
         points.extend(collector.points)
     if curves is not None:
         curves.extend(collector.curves)
+    if sources is not None:
+        sources.extend(collector.sources)
     warnings = collector.warnings + [f"Ember skips {kind.lower()} objects (not supported yet)"
                 for kind in sorted(collector.skipped_types)]
     if cache is not None:

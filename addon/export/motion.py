@@ -21,6 +21,7 @@ import math
 import numpy as np
 
 from . import mesh as mesh_export
+from .primitive_motion import PrimitiveMotion
 
 
 def shutter(scene, is_preview=False):
@@ -63,21 +64,28 @@ def object_steps(obj):
 
 
 def _deforms(obj):
-    props = getattr(obj, 'cycles', None)
-    return obj.type == 'MESH' and getattr(props, 'use_deform_motion', True)
+    return obj.type == 'MESH' and _deform_motion_on(obj)
+
+
+def _deform_motion_on(obj):
+    """Object > Motion Blur > Deformation."""
+    return bool(getattr(getattr(obj, 'cycles', None), 'use_deform_motion', True))
 
 
 def _step_times(centre, length, steps):
     return [centre + (-1.0 + 2.0 * k / (steps - 1)) * 0.5 * length for k in range(steps)]
 
 
-def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, steps_of=None):
+def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, steps_of=None, sources=()):
     """Fill Instance.motion, Mesh.motion and Camera.motion of ``exported``
     (exported at the shutter's centre, frame ``centre``; ``keys`` names each
-    instance as ``instance_key`` does) by evaluating the scene at every
-    step (``steps_of(object)``: Cycles' object_steps unless given).  Returns
-    warnings."""
+    instance as ``instance_key`` does), and the motion of its point clouds
+    and curve sets (``sources``: primitive_motion.Source of each) by
+    evaluating the scene at every step (``steps_of(object)``: Cycles'
+    object_steps unless given).  Returns warnings."""
     steps_for = steps_of or object_steps
+    primitives = PrimitiveMotion(sources, steps_for, _deform_motion_on,
+                                 render=getattr(depsgraph, 'mode', 'RENDER') == 'RENDER')
     scene = depsgraph.scene
     length = blur[0]
     result = exported.scene
@@ -89,7 +97,7 @@ def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, s
         if steps >= 2:
             wanted.setdefault(steps, []).append(index)
     camera_steps = steps_for(camera_object.original)
-    all_steps = sorted(set(wanted) | ({camera_steps} if camera_steps >= 2 else set()))
+    all_steps = sorted(set(wanted) | ({camera_steps} if camera_steps >= 2 else set()) | primitives.step_counts())
     # Cycles always reads the camera at the shutter's ends (its fov_pre / fov_post)
     ends = (centre - 0.5 * length, centre + 0.5 * length)
     times = sorted({t for s in all_steps for t in _step_times(centre, length, s)} | set(ends))
@@ -104,8 +112,12 @@ def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, s
     warnings = []
     for t in times:
         set_time(engine, t)
-        matrices[t] = {instance_key(inst)[:2]: np.array(inst.matrix_world, np.float64)
-                       for inst in depsgraph.object_instances if instance_key(inst) is not None}
+        matrices[t] = {}
+        for inst in depsgraph.object_instances:
+            key = instance_key(inst)
+            if key is not None:
+                matrices[t][key[:2]] = np.array(inst.matrix_world, np.float64)
+            primitives.visit(t, inst)
         cam = camera_object.original.evaluated_get(depsgraph)
         cameras[t] = np.array(cam.matrix_world, np.float64)
         lenses[t] = float(getattr(cam.data, 'lens', 0.0))
@@ -148,6 +160,7 @@ def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, s
             mesh.motion = stack
             if mesh.normals is not None and all(m.normals is not None for m in found):
                 mesh.motion_normals = np.array([m.normals for m in found], np.float64)
+    warnings += primitives.finish(lambda steps: _step_times(centre, length, steps))
     set_shutter(result.camera, scene, [lenses[t] for t in ends])
     if camera_steps >= 2:
         stack = np.array([mesh_export_unit_axes(cameras[t]) for t in _step_times(centre, length, camera_steps)])

@@ -80,11 +80,11 @@ def export_scene(depsgraph, camera_override=None, should_stop=None, engine=None,
     centre = motion_export.centre_time(scene, blur)
     try:
         motion_export.set_time(engine, centre)
-        keys = []
-        exported = _export(depsgraph, camera_override, should_stop, keys)
+        keys, sources = [], []
+        exported = _export(depsgraph, camera_override, should_stop, keys, sources=sources)
         start = time.perf_counter()
         exported.warnings += motion_export.add_motion(engine, depsgraph, exported, keys, blur, centre,
-                                                      scene_camera(depsgraph, camera_override))
+                                                      scene_camera(depsgraph, camera_override), sources=sources)
         exported.seconds += time.perf_counter() - start
     finally:
         motion_export.set_time(engine, frame)
@@ -107,7 +107,7 @@ def _export_with_vector(engine, depsgraph, camera_override, should_stop):
     return exported
 
 
-def _export(depsgraph, camera_override=None, should_stop=None, keys=None, camera=True, cache=None):
+def _export(depsgraph, camera_override=None, should_stop=None, keys=None, camera=True, cache=None, sources=None):
     check = stop_checker(should_stop)
     start = time.perf_counter()
     renderer = backend.engine()
@@ -119,7 +119,8 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None, camera
         light_collector = light_export.LightCollector(links)
         try:
             meshes, instances, warnings = instance_export.collect_instances(
-                depsgraph, materials.slots, check, keys, points, curves, cache, light_collector.add, bulk=bulk)
+                depsgraph, materials.slots, check, keys, points, curves, cache, light_collector.add, sources,
+                bulk=bulk)
             break
         except instance_export.bulk_instances.BulkMismatch as mismatch:
             print(f"Ember: geometry-nodes instances read one by one ({mismatch})")

@@ -223,7 +223,8 @@ def interaction(ctx, paths, t, prim, bu, bv):
     """The Hit of rays (paths.o, paths.d) on triangles ``prim``."""
     tr = ctx.triangles
     d = paths.d
-    time = path_time(paths) if ctx.motion is not None and ctx.motion.moving else None
+    ray_time = path_time(paths) if ctx.motion is not None else None   # (points and curves move too)
+    time = ray_time if ctx.motion is not None and ctx.motion.moving else None
     if time is None:
         p, ng, ns, back = hit_geometry(tr, paths.o, d, t, prim, bu, bv)
     else:   # the triangles where they are at each ray's time
@@ -232,17 +233,19 @@ def interaction(ctx, paths, t, prim, bu, bv):
     if ctx.spheres is not None:   # points: the sphere's point and normal
         on = np.flatnonzero(ctx.spheres.is_point[prim])
         if len(on):
-            p[on], ng[on], back[on] = sphere_hits(ctx.spheres, paths.o[on], d[on], t[on], prim[on])
+            p[on], ng[on], back[on] = sphere_hits(ctx.spheres, paths.o[on], d[on], t[on], prim[on],
+                                                    _rows(ray_time, on))
             ns[on] = ng[on]
     curve_eps = fibre = None
     if ctx.strands is not None:   # curves: the point on the round curve, its normal and tangent
         on = np.flatnonzero(ctx.strands.is_curve[prim])
         if len(on):
-            p[on], ng[on], back[on], radius = curve_hits(ctx.strands, paths.o[on], d[on], t[on], prim[on], bu[on])
+            p[on], ng[on], back[on], radius = curve_hits(ctx.strands, paths.o[on], d[on], t[on], prim[on], bu[on],
+                                                            _rows(ray_time, on))
             ns[on] = ng[on]
             curve_eps = (on, radius)
             fibre = np.zeros_like(p)
-            fibre[on] = curve_tangents(ctx.strands, prim[on], bu[on])
+            fibre[on] = curve_tangents(ctx.strands, prim[on], bu[on], _rows(ray_time, on))
     uv = _hit_uv(tr, prim, bu, bv)
     hit = Hit(p, ng, ns, -d, np.take(tr.material, prim), prim, ctx.accel.offset_scale(p), uv, back=back,
               bary=np.stack([bu, bv], axis=1), depth=getattr(paths, "bounce", None),
@@ -260,6 +263,11 @@ def interaction(ctx, paths, t, prim, bu, bv):
         hit.tangent = np.einsum("nk,nkj->nj", w, tr.tangent[prim])
         hit.tangent_sign = np.where(np.einsum("nk,nk->n", w, tr.tangent_sign[prim]) < 0, -1.0, 1.0)
     return hit
+
+
+def _rows(values, rows):
+    """values[rows], or None without values (a still scene's ray times)."""
+    return None if values is None else values[rows]
 
 
 def path_columns(paths, p):

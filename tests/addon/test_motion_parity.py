@@ -179,27 +179,33 @@ def reference_scene(name, folder=None):
 
 
 def test_motion_blur_parity_with_cycles(tmp_path, tapped_engine, name='objects'):
-    scene, bounces = reference_scene(name)
-    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, SPP, 2, bounces)
-    check = check_against_reference('motion_' + name, scene, bounces, image, var, SPP, BLOCK)
+    check_blur_parity(name, SCENES[name], 'motion_', tmp_path, tapped_engine)
+
+
+def check_blur_parity(name, build, prefix, tmp_path, taps, block=BLOCK):
+    """Parity of ``build``'s scene with reference ``prefix + name``; the same
+    blocks at the same level tell Cycles' blurred image from a sharp one."""
+    scene = empty_factory_scene()
+    bounces = build(scene)
+    image, var = render_for_reference(scene, tmp_path, name, taps, SPP, 2, bounces)
+    check = check_against_reference(prefix + name, scene, bounces, image, var, SPP, block)
     check.assert_agrees(0.005, 0.02)
-    # The same blocks at the same level tell Cycles' blurred image from a sharp one.
     still = empty_factory_scene()
-    SCENES[name](still, blur=False)
-    sharp, sharp_var = render_for_reference(still, tmp_path, name + '_still', tapped_engine, SPP // 2, 2, bounces)
-    assert _blocks_beyond(name, sharp, sharp_var, check.details['level'], "a sharp render"), \
+    build(still, blur=False)
+    sharp, sharp_var = render_for_reference(still, tmp_path, name + '_still', taps, SPP // 2, 2, bounces)
+    assert _blocks_beyond(name, sharp, sharp_var, check.details['level'], "a sharp render", prefix, block), \
         f"the test cannot tell {name}'s motion blur from none"
 
 
-def _blocks_beyond(name, image, var, level, what):
-    """Whether any block of an Ember render (SPP / 2 samples) differs from
-    reference ``name`` at ``level`` (a test's power check), printed."""
-    ref, ref_var, _ = load_reference('motion_' + name)
-    a, va = stats.block_means_var(image[..., :3].astype(np.float64), var, BLOCK)
-    b, vb = stats.block_means_var(ref, ref_var, BLOCK)
+def _blocks_beyond(name, image, var, level, what, prefix='motion_', block=BLOCK, spp=SPP // 2):
+    """Whether any block of an Ember render (``spp`` samples) differs from
+    reference ``prefix + name`` at ``level`` (a test's power check), printed."""
+    ref, ref_var, _ = load_reference(prefix + name)
+    a, va = stats.block_means_var(image[..., :3].astype(np.float64), var, block)
+    b, vb = stats.block_means_var(ref, ref_var, block)
     t = np.abs(a - b) / np.sqrt(va + vb)
-    limit = stats.t_threshold(level, SPP // 2 - 1)
-    print(f"motion_{name}: {what} against the reference: max block |t| {t.max():.1f} "
+    limit = stats.t_threshold(level, spp - 1)
+    print(f"{prefix}{name}: {what} against the reference: max block |t| {t.max():.1f} "
           f"(limit {limit:.1f}), {(t > limit).sum()} of {t.size} blocks beyond")
     return bool((t > limit).any())
 

@@ -1,0 +1,137 @@
+"""Motion blur of point clouds, Curves objects and particle hair (Cycles'
+sync_pointcloud_motion, export_hair_curves_motion and the particle hair's
+motion keys, read at each motion step by BlenderSync::sync_motion).
+
+At every shutter step motion.add_motion sets, each exported cloud or curve
+set is found again among the depsgraph's instances (by the instance it came
+from: ``primitive_key``; particle hair by its emitter and system) and its
+object-to-world matrix and points are read.  A set whose steps all equal
+its centre gets no motion; one whose point count changes, or whose steps
+are NaN or infinite, gets none either and is named in a warning (Cycles
+drops the motion attribute when the count changes).  Object > Motion Blur
+off keeps it still, Deformation off keeps its points.  Curves keep their
+radii over the shutter (Cycles' Embree setup reads the centre's), points
+take theirs at each step.
+"""
+import numpy as np
+
+from . import particle_hair
+
+
+class Source:
+    """Where an exported PointCloud / HairCurves (``item``) came from: its
+    instance's ``key``, ``kind`` ('points', 'curves' or 'hair'), the
+    original object, the mask of points the export kept (None: all), and
+    for hair the particle system's name."""
+
+    def __init__(self, item, key, kind, obj, keep=None, system=None):
+        self.item, self.key, self.kind, self.obj = item, key, kind, obj
+        self.keep, self.system = keep, system
+
+
+def primitive_key(inst):
+    """(kind, name or persistent id) of a depsgraph instance, stable across frames."""
+    if inst.is_instance:
+        parent = inst.parent.original.name if inst.parent is not None else ''
+        return ('instance', (parent, tuple(inst.persistent_id)))
+    return ('object', inst.object.original.name)
+
+
+def _read(source, inst, render):
+    """(positions (N, 3), radii (N,) or None) of the source's points in the instance now."""
+    obj = inst.object
+    if source.kind == 'hair':
+        for strands in particle_hair.particle_strands(obj, render):
+            if strands.name == source.system:
+                return np.asarray(strands.points, np.float64), None
+        return None, None
+    data = obj.data
+    n = len(data.points)
+    positions = np.empty(n * 3, np.float32)
+    data.attributes['position'].data.foreach_get('vector', positions)
+    positions = positions.reshape(n, 3).astype(np.float64)
+    radii = None
+    if source.kind == 'points':
+        radii = np.full(n, float(np.asarray(source.item.radii).max(initial=0.0)), np.float32)
+        if 'radius' in data.attributes:
+            data.attributes['radius'].data.foreach_get('value', radii)
+        radii = radii.astype(np.float64)
+    if source.keep is not None:
+        if len(source.keep) != n:
+            return np.zeros((0, 3)), None   # the count changed: no deformation blur
+        positions = positions[source.keep]
+        radii = radii[source.keep] if radii is not None else None
+    return positions, radii
+
+
+class PrimitiveMotion:
+    """The sources' matrices and points at the shutter's steps."""
+
+    def __init__(self, sources, steps_for, deforms, render=True):
+        self.sources = [s for s in sources if steps_for(s.obj) >= 2]
+        self.steps = [steps_for(s.obj) for s in self.sources]
+        self.deforms = [deforms(s.obj) for s in self.sources]
+        self.render = render
+        self.by_key = {}
+        for index, source in enumerate(self.sources):
+            self.by_key.setdefault(source.key, []).append(index)
+        self.seen = {}   # time -> {source index: (matrix, positions, radii)}
+
+    def step_counts(self):
+        return set(self.steps)
+
+    def visit(self, time, inst):
+        """Read the sources this depsgraph instance holds at ``time``."""
+        wanted = self.by_key.get(primitive_key(inst)) if self.by_key else None
+        if not wanted:
+            return
+        matrix = np.array(inst.matrix_world, np.float64)
+        for index in wanted:
+            source = self.sources[index]
+            if source.kind == 'hair' and inst.object.type != 'MESH':
+                continue
+            positions, radii = _read(self.sources[index], inst, self.render) if self.deforms[index] else (None, None)
+            self.seen.setdefault(time, {})[index] = (matrix, positions, radii)
+
+    def finish(self, step_times):
+        """Fill the items' motion (``step_times(steps)``: the times of a
+        count of steps); returns warnings."""
+        warnings = []
+        for index, source in enumerate(self.sources):
+            found = [self.seen.get(t, {}).get(index) for t in step_times(self.steps[index])]
+            if any(f is None for f in found):
+                continue   # not there at every step: no motion (Cycles' rule)
+            item = source.item
+            name = source.obj.name
+            stack = np.array([f[0] for f in found])
+            if not np.isfinite(stack).all():
+                warnings.append(f"Object '{name}': its transform is NaN or infinite during the shutter, "
+                                "rendered without motion blur")
+            elif not np.allclose(stack, np.asarray(item.matrix)[None], rtol=0.0, atol=1e-9):
+                item.motion = stack
+            if self.deforms[index]:
+                warnings += _deformation(item, name, found, source.kind)
+        return warnings
+
+
+def _deformation(item, name, found, kind):
+    """Set item.motion_positions (and a cloud's motion_radii) from the
+    steps' points, or return the warning why not."""
+    centre = np.asarray(item.points if kind != 'points' else item.positions, np.float64)
+    if any(f[1] is None or f[1].shape != centre.shape for f in found):
+        return [f"Object '{name}': its points change during the shutter, rendered without deformation blur"]
+    steps = np.array([f[1] for f in found])
+    radii = np.array([f[2] for f in found]) if kind == 'points' else None
+    if not np.isfinite(steps).all() or (radii is not None and not np.isfinite(radii).all()):
+        return [f"Object '{name}': NaN or infinite points during the shutter, rendered without deformation blur"]
+    # (particle hair's keys come back through the emitter's inverse matrix: a little rounding)
+    atol = 1e-6 if kind == 'hair' else 1e-7
+    still = np.allclose(steps, centre[None], rtol=0.0, atol=atol)
+    if radii is not None:
+        radii = np.maximum(radii, 0.0)
+        still = still and np.allclose(radii, np.asarray(item.radii, np.float64)[None], rtol=0.0, atol=1e-9)
+    if not still:
+        item.motion_positions = steps
+        if radii is not None:
+            item.motion_radii = radii
+    return []
