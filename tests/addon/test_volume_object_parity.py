@@ -45,6 +45,9 @@ def test_vdb_volume_object_matches_cycles(tmp_path, tapped_engine):
     from addon import engine as ember_engine
     warnings = ember_engine.RENDER_LOG[-1].get('warnings', ())
     assert not [w for w in warnings if 'Volume' in w or 'aterial' in w], warnings
+    import os
+    if os.environ.get('EMBER_VDB_DUMP'):
+        np.savez(os.environ['EMBER_VDB_DUMP'], ref=ref, ref_var=ref_var, image=image[..., :3], var=var)
     check = ReferenceCheck('vdb_volume_object', image[..., :3].astype(np.float64), var, EMBER_SPP, ref, ref_var,
                            header, BLOCK)
     check.assert_agrees(*POWER)

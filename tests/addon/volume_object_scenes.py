@@ -61,7 +61,10 @@ def scene_vdb_smoke(scene, folder):
     under a point light and a grey world."""
     _floor((0.6, 0.6, 0.6))
     path = write_vdb(os.path.join(folder, "ball.vdb"), {"density": sphere_density()})
-    obj = volume_object(path, smoke_material())
+    material = smoke_material()
+    if os.environ.get('EMBER_VDB_SAMPLING'):
+        material.cycles.volume_sampling = os.environ['EMBER_VDB_SAMPLING']
+    obj = volume_object(path, material)
     obj.location = (0.1, 0.0, 1.2)
     obj.rotation_euler = (0.3, 0.0, 0.9)
     obj.scale = (2.2, 1.6, 2.0)
