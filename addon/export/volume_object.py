@@ -82,7 +82,7 @@ def value_offset():
     Blender 5.0+) or 0.5 (its centre, Blender before 5.0)."""
     try:
         import bpy
-        return float(os.environ.get("EMBER_VDB_OFFSET", 0.0 if bpy.app.version >= (5, 0, 0) else 0.5))
+        return 0.0 if bpy.app.version >= (5, 0, 0) else 0.5
     except ImportError:
         return 0.0
 

@@ -25,7 +25,7 @@ WIDTH, HEIGHT = 64, 48
 EMBER_SPP = 256
 CYCLES_SEEDS, CYCLES_SPP = 4, 256
 BLOCK = 8
-POWER = (0.02, 0.15)     # asserted: what the test resolves at these samples (measured below)
+POWER = (0.005, 0.02)    # asserted (issue 12's targets); measured: image 0.05%, median block 0.3% (Distance)
 
 
 def _openvdb():
@@ -34,10 +34,16 @@ def _openvdb():
         pytest.skip("this bpy has no openvdb module (bpy 4.2)")
 
 
-def test_vdb_volume_object_matches_cycles(tmp_path, tapped_engine):
+@pytest.mark.parametrize("sampling", [
+    'DISTANCE',
+    pytest.param('MULTIPLE_IMPORTANCE', marks=pytest.mark.xfail(strict=True, reason=(
+        "Ember's direct-light points in textured media (engine/integrator/volume.py _tracked_points) are "
+        "biased here: up to +10% in blocks at the ball's lit edge, image +0.36% +- 0.02%; Cycles' MIS and "
+        "Distance agree within 0.1%, and so do Ember's Distance and Cycles")))])
+def test_vdb_volume_object_matches_cycles(sampling, tmp_path, tapped_engine):
     _openvdb()
     scene = empty_factory_scene()
-    bounces = scenes.scene_vdb_smoke(scene, str(tmp_path))
+    bounces = scenes.scene_vdb_smoke(scene, str(tmp_path), sampling)
     small_resolution(scene, WIDTH, HEIGHT)
     ref, ref_var, header = live_cycles_reference(scene, tmp_path, 'vdb', CYCLES_SEEDS, CYCLES_SPP, bounces)
     scene.render.engine = 'EMBER'
@@ -45,10 +51,7 @@ def test_vdb_volume_object_matches_cycles(tmp_path, tapped_engine):
     from addon import engine as ember_engine
     warnings = ember_engine.RENDER_LOG[-1].get('warnings', ())
     assert not [w for w in warnings if 'Volume' in w or 'aterial' in w], warnings
-    import os
-    if os.environ.get('EMBER_VDB_DUMP'):
-        np.savez(os.environ['EMBER_VDB_DUMP'], ref=ref, ref_var=ref_var, image=image[..., :3], var=var)
-    check = ReferenceCheck('vdb_volume_object', image[..., :3].astype(np.float64), var, EMBER_SPP, ref, ref_var,
+    check = ReferenceCheck(f'vdb_volume_object_{sampling.lower()}', image[..., :3].astype(np.float64), var, EMBER_SPP, ref, ref_var,
                            header, BLOCK)
     check.assert_agrees(*POWER)
 

@@ -56,14 +56,15 @@ def smoke_material(density=6.0):
     return _material("VDBSmoke", volume=volume)
 
 
-def scene_vdb_smoke(scene, folder):
+def scene_vdb_smoke(scene, folder, sampling=None):
     """A rotated, scaled, moved VDB ball of rising density over a floor
-    under a point light and a grey world."""
+    under a point light and a grey world (``sampling``: the material's
+    Volume > Sampling, default Multiple Importance)."""
     _floor((0.6, 0.6, 0.6))
     path = write_vdb(os.path.join(folder, "ball.vdb"), {"density": sphere_density()})
     material = smoke_material()
-    if os.environ.get('EMBER_VDB_SAMPLING'):
-        material.cycles.volume_sampling = os.environ['EMBER_VDB_SAMPLING']
+    if sampling is not None:
+        material.cycles.volume_sampling = sampling
     obj = volume_object(path, material)
     obj.location = (0.1, 0.0, 1.2)
     obj.rotation_euler = (0.3, 0.0, 0.9)
