@@ -130,12 +130,18 @@ class InstanceCollector:
         key = ('volume', obj.original.as_pointer(), obj.data.as_pointer(), inst.is_instance)
         if key not in self._groups:
             self.check()
+            materials = self.material_index(obj)
+            if not any(m >= 0 for m in materials):
+                self._warn_once(('volume', obj.name), f"Volume object '{obj.name}' not rendered: it has no "
+                                "material (Cycles renders its default volume)")
+                self._groups[key] = None
+                return
             grids = volume_object.read_volume(obj)
             for text in grids.warnings:
                 self._warn_once(('volume', obj.name, text), text)
             group = None
             if grids.bounds is not None:
-                fields = dict(mesh=self._box_id(obj, grids.bounds), materials=self.material_index(obj), name=obj.name,
+                fields = dict(mesh=self._box_id(obj, grids.bounds), materials=materials, name=obj.name,
                               **ray_visibility(inst), holdout=is_holdout(inst, self.view_layer),
                               **_pass_fields(inst), **object_info(inst),
                               voxels=grids.arrays, voxel_placements=grids.placements)

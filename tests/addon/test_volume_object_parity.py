@@ -79,7 +79,7 @@ def _hostile_scene(tmp_path, grids, name):
     return scene
 
 
-@pytest.mark.parametrize("case", ["nan_inf", "empty", "missing", "wide"])
+@pytest.mark.parametrize("case", ["nan_inf", "empty", "missing", "wide", "no_material"])
 def test_hostile_volume_objects_are_finite_and_named(case, tmp_path, needs_engine):
     _openvdb()
     ball = scenes.sphere_density()
@@ -91,9 +91,13 @@ def test_hostile_volume_objects_are_finite_and_named(case, tmp_path, needs_engin
         grids, words = {"density": np.zeros((4, 4, 4), np.float32)}, ("no active voxels",)
     elif case == "missing":
         grids, words = None, ("not rendered",)
-    else:
+    elif case == "wide":
         grids, words = None, ("averaged over blocks",)
+    else:
+        grids, words = {"density": ball}, ("no material",)
     scene = _hostile_scene(tmp_path, grids, case)
+    if case == "no_material":
+        bpy.data.objects[case].data.materials.clear()
     if case == "wide":
         _write_wide(str(tmp_path / "wide.vdb"))
     warnings = _render_warnings(scene, tmp_path, case)
@@ -147,7 +151,10 @@ def test_geometry_nodes_volume_cube_is_read(empty_scene):
     tree.interface.new_socket("Geometry", in_out='OUTPUT', socket_type='NodeSocketGeometry')
     out = tree.nodes.new('NodeGroupOutput')
     cube = tree.nodes.new('GeometryNodeVolumeCube')
-    tree.links.new(cube.outputs[0], out.inputs[0])
+    paint = tree.nodes.new('GeometryNodeSetMaterial')
+    paint.inputs['Material'].default_value = scenes.smoke_material()
+    tree.links.new(cube.outputs[0], paint.inputs['Geometry'])
+    tree.links.new(paint.outputs[0], out.inputs[0])
     obj.modifiers.new("gn", 'NODES').node_group = tree
     exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
     volumes = [inst for inst in exported.scene.instances if inst.voxel_placements]
