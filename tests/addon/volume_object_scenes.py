@@ -69,10 +69,8 @@ def scene_vdb_smoke(scene, folder, sampling=None):
     obj.location = (0.1, 0.0, 1.2)
     obj.rotation_euler = (0.3, 0.0, 0.9)
     obj.scale = (2.2, 1.6, 2.0)
-    lamp = bpy.data.lights.new("Lamp", 'POINT')
-    lamp.energy = 500.0
-    lamp.shadow_soft_size = 0.5
-    light = bpy.data.objects.new("Lamp", lamp)
+    light = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", 'POINT'))
+    light.data.energy, light.data.shadow_soft_size = 500.0, 0.5
     light.location = (-1.5, -1.0, 3.2)
     scene.collection.objects.link(light)
     _world(scene, (0.25, 0.28, 0.32))
