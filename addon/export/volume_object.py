@@ -18,7 +18,8 @@ attribute inputs).
 
 The grids are read through the ``openvdb`` Python module that bpy 4.5 and
 newer bundle (bpy/<ver>/python/lib/python3.x/site-packages), or a
-``pyopenvdb`` / ``openvdb`` on the path: from the file of the current frame
+``pyopenvdb`` / ``openvdb`` on the path (Debian's python3-openvdb in its
+Blender 3.4; loaded by file in bpy 4.2, whose CPython 3.11 it was built for): from the file of the current frame
 (``grids.frame_filepath``, so frame sequences follow the scene), or, for
 grids only in memory (Geometry Nodes, packed files), from a temporary file
 ``grids.save`` writes.  A grid whose box holds more than MAX_VOXELS voxels
@@ -61,20 +62,34 @@ def _find_module():
     # Loaded by file, not by adding Blender's site-packages to sys.path
     # (its other modules would shadow the add-on's).
     for path in glob.glob(os.path.join(root, 'python', 'lib', 'python3*', 'site-packages', 'openvdb*.so')):
-        try:
-            spec = importlib.util.spec_from_file_location('openvdb', path)
-            module = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(module)
-            sys.modules['openvdb'] = module
+        module = _load('openvdb', path)
+        if module is not None:
             return module
-        except ImportError:
-            continue
     for name in ('openvdb', 'pyopenvdb'):
         try:
             return importlib.import_module(name)
         except ImportError:
             continue
+    # Debian's python3-openvdb, built for the system Python: bpy 4.2 (no
+    # bundled module) runs on the same CPython 3.11 and loads it.
+    tag = f"cpython-{sys.version_info[0]}{sys.version_info[1]}"
+    for path in glob.glob(f'/usr/lib/python3/dist-packages/pyopenvdb.{tag}-*.so'):
+        module = _load('pyopenvdb', path)
+        if module is not None:
+            return module
     return None
+
+
+def _load(name, path):
+    """A compiled module loaded from its file (None: it does not load)."""
+    try:
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    except ImportError:
+        return None
+    sys.modules[name] = module
+    return module
 
 
 def value_offset():
@@ -116,7 +131,7 @@ def read_volume(obj, wanted=None):
     module = openvdb_module()
     if module is None:
         out.warnings.append(f"Volume object '{obj.name}' not rendered: this Blender has no openvdb Python module "
-                            "(bpy 4.5 and newer bundle one)")
+                            "(bpy 4.5 and newer bundle one; Debian's python3-openvdb serves Blender 3.4 and bpy 4.2)")
         return out
     grids = _file_grids(module, obj, out)
     if grids is None:
