@@ -31,7 +31,7 @@ POWER = (0.005, 0.02)    # asserted (issue 12's targets); measured: image 0.05%,
 def _openvdb():
     from addon.export.volume_object import openvdb_module
     if openvdb_module() is None:
-        pytest.skip("this bpy has no openvdb module (bpy 4.2)")
+        pytest.skip("no openvdb module loads here (bpy 4.2 without Debian's python3-openvdb)")
 
 
 @pytest.mark.parametrize("sampling", [
