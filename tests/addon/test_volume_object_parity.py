@@ -163,3 +163,23 @@ def test_geometry_nodes_volume_cube_is_read(empty_scene):
     assert density.max() == pytest.approx(1.0) and density.min() == 0.0   # the padding
     box = exported.scene.meshes[volumes[0].mesh].positions
     assert np.allclose(box.min(axis=0), -1.0, atol=0.1) and np.allclose(box.max(axis=0), 1.0, atol=0.1)
+
+
+def test_frame_sequence_follows_the_scene_frame(tmp_path, registered_addon):
+    """A .vdb sequence (name_0001.vdb, name_0002.vdb) reads the file of the
+    scene's frame (grids.frame_filepath)."""
+    _openvdb()
+    from addon.export import volume_object
+    for frame in (1, 2):
+        scenes.write_vdb(str(tmp_path / f"seq_{frame:04d}.vdb"), {"density": scenes.sphere_density() * frame})
+    data = bpy.data.volumes.new("seq")
+    data.filepath = str(tmp_path / "seq_0001.vdb")
+    data.is_sequence, data.frame_start, data.frame_duration = True, 1, 2
+    obj = bpy.data.objects.new("seq", data)
+    bpy.context.scene.collection.objects.link(obj)
+    peaks = []
+    for frame in (1, 2):
+        bpy.context.scene.frame_set(frame)
+        read = volume_object.read_volume(obj.evaluated_get(bpy.context.evaluated_depsgraph_get()))
+        peaks.append(float(read.arrays["density"].max()))
+    assert peaks[1] == pytest.approx(2 * peaks[0], rel=1e-6) and peaks[0] > 1.0, peaks
