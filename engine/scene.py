@@ -129,6 +129,13 @@ class Instance:
     # its mesh's texture space (engine/media/voxels.py), read by its
     # volume material's attribute lookups; None: no grids.
     voxels: Optional[dict] = None
+    # A Volume object's grids are placed: {name: object-to-unit 4x4}
+    # (addon/export/volume_object.py); grids without one use Generated.
+    voxel_placements: Optional[dict] = None
+    # A factor on every coefficient of the object's textured media (Cycles'
+    # object_volume_density: a Volume object whose Render > Space is Object
+    # has 1 / |M (1, 1, 1) / sqrt 3|, so its density follows its scale).
+    volume_density: float = 1.0
 
 
 def _point_cloud_fields():
@@ -137,7 +144,7 @@ def _point_cloud_fields():
     defaults, then the per-point attributes."""
     out = [("positions", np.ndarray), ("radii", np.ndarray)]
     for f in fields(Instance):
-        if f.name in ("mesh", "asset", "vector_motion", "voxels"):
+        if f.name in ("mesh", "asset", "vector_motion", "voxels", "voxel_placements", "volume_density"):
             continue
         default = {} if f.default is MISSING else {"default": "points" if f.name == "name" else f.default}
         if f.default_factory is not MISSING:

@@ -9,10 +9,11 @@
 set -eu
 cd "$(dirname "$0")/.."
 
-if ! command -v blender >/dev/null 2>&1 || ! /usr/bin/python3 -c 'import numpy' 2>/dev/null; then
+# python3-openvdb: Blender 3.4's Python reads Volume objects' grids with it.
+if ! command -v blender >/dev/null 2>&1 || ! /usr/bin/python3 -c 'import numpy, pyopenvdb' 2>/dev/null; then
     if [ "$(id -u)" = 0 ]; then SUDO=; else SUDO=sudo; fi
     $SUDO apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq blender python3-numpy >/dev/null
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq blender python3-numpy python3-openvdb >/dev/null
 fi
 
 if ! command -v node >/dev/null 2>&1; then

@@ -15,6 +15,7 @@ from . import mesh as mesh_export
 from . import fluid
 from . import object_attributes
 from . import particle_hair
+from . import volume_object
 from .motion import instance_key
 from .primitive_motion import Source, primitive_key
 
@@ -75,11 +76,7 @@ class InstanceCollector:
             return
         if kind not in mesh_export.MESHABLE_TYPES:
             if kind == 'VOLUME':
-                # No bpy release (4.2 to 5.3 checked) has an openvdb module or
-                # any Python access to a Volume's voxels: named, not rendered.
-                self._warn_once(('volume', obj.name),
-                                f"Volume object '{obj.name}' not rendered: Blender's Python API gives no access "
-                                "to its OpenVDB voxels")
+                self._add_volume(inst)
             elif kind in ('GPENCIL', 'GREASEPENCIL'):
                 self.skipped_types.add(kind)
             return
@@ -132,6 +129,52 @@ class InstanceCollector:
         if warning:
             self._warn_once(('fluid', obj.name), warning)
         return {'voxels': grids} if grids else {}
+
+    def _add_volume(self, inst):
+        """A Volume object: its grids read through openvdb (volume_object.py)
+        inside a box mesh with the Volume's material; one that cannot be
+        read is named in a warning."""
+        obj = inst.object
+        key = ('volume', obj.original.as_pointer(), obj.data.as_pointer(), inst.is_instance)
+        if key not in self._groups:
+            self.check()
+            materials = self.material_index(obj)
+            if not any(m >= 0 for m in materials):
+                self._warn_once(('volume', obj.name), f"Volume object '{obj.name}' not rendered: it has no "
+                                "material (Cycles renders its default volume)")
+                self._groups[key] = None
+                return
+            grids = volume_object.read_volume(obj)
+            for text in grids.warnings:
+                self._warn_once(('volume', obj.name, text), text)
+            group = None
+            if grids.bounds is not None:
+                fields = dict(mesh=self._box_id(obj, grids.bounds), materials=materials, name=obj.name,
+                              **ray_visibility(inst), holdout=is_holdout(inst, self.view_layer),
+                              **_pass_fields(inst), **object_info(inst),
+                              voxels=grids.arrays, voxel_placements=grids.placements)
+                group = fields
+            self._groups[key] = group
+        fields = self._groups[key]
+        if fields is None:
+            return
+        matrix = np.array(inst.matrix_world, dtype=np.float64)
+        random = _instance_random(inst) if inst.is_instance else fields['random']
+        density = volume_object.density_factor(obj, matrix)
+        self.instances.append(self._instance_type(matrix=matrix, volume_density=density,
+                                                  **dict(fields, random=random)))
+        if self.want_keys:
+            self.keys.append(instance_key(inst))
+
+    def _box_id(self, obj, bounds):
+        """Index of a Volume object's box mesh (kept by a persistent cache
+        while its bounds stay)."""
+        key = ('volume box', obj.name_full) + tuple(float(v) for b in bounds for v in b)
+        if key not in self.mesh_of_key:
+            self.mesh_of_key[key] = len(self.meshes)
+            self.meshes.append(volume_object.box_mesh(*bounds, _geometry_name(obj)))
+        self.used.setdefault(key, set()).add(obj.name_full)
+        return self.mesh_of_key[key]
 
     def _add_points(self, inst):
         """A point cloud as spheres of its radius attribute (Cycles' default

@@ -57,10 +57,10 @@ def is_heterogeneous(volume):
 class Field:
     """The medium of material ``material`` inside scene instance ``instance``."""
 
-    def __init__(self, material, name, volume, matrix, mesh, tri, tris, compiler, voxels=None):
+    def __init__(self, material, name, volume, matrix, mesh, tri, tris, compiler, voxels=None, density=1.0):
         self.material, self.name = material, name
         self.voxels = voxels
-        self.fns = [compiler.color(getattr(volume, f)) for f in FIELDS]
+        self.fns = [_scaled(compiler.color(getattr(volume, f)), density) for f in FIELDS]
         self.g = float(volume.anisotropy)
         m = np.asarray(matrix, np.float64).reshape(4, 4)
         self.matrix = m
@@ -129,7 +129,9 @@ class Field:
         d = np.tile([0.0, 0.0, 1.0], (len(p), 1))
         ctx = self.context(p, d, q)
         if self.voxels is not None:
-            ctx.voxels = self.voxels.dilated(_reach(self.voxels))
+            reach = self.voxels.placed_reach((self.hi - self.lo) / (GRID * LATTICE))
+            plain = _reach(self.voxels)
+            ctx.voxels = self.voxels.dilated({k: reach.get(k, plain) for k in self.voxels.grids})
         raw = [np.broadcast_to(fn(ctx), (len(p), 3)) for fn in self.fns]
         # Negative values inside the mesh's bounds (not on the padded edge)
         # are the texture's own: counted.
@@ -192,6 +194,14 @@ class Field:
         return mu, dist
 
 
+def _scaled(fn, factor):
+    """fn times the object's volume density factor (1: fn itself)."""
+    factor = float(factor) if np.isfinite(factor) and factor > 0 else 1.0
+    if factor == 1.0:
+        return fn
+    return lambda ctx: np.asarray(fn(ctx)) * factor
+
+
 def _reach(voxels):
     """Voxels to max-filter over so that lookups at the lattice's points
     bound the lookups anywhere between them: half the lattice spacing plus
@@ -229,12 +239,14 @@ def build_fields(table, materials, scene, tris):
             if i not in voxels:
                 voxels[i] = instance_voxels(instance)
             fields.append(Field(mat, materials[mat].name, materials[mat].volume, instance.matrix,
-                                scene.meshes[instance.mesh], rows[first[j]], tris, compiler, voxels[i]))
+                                scene.meshes[instance.mesh], rows[first[j]], tris, compiler, voxels[i],
+                                getattr(instance, "volume_density", 1.0)))
         tri_medium[rows] = table.first_field + inverse
     return fields, tri_medium
 
 
 def instance_voxels(instance):
-    """The Voxels of an instance's grids (a fluid domain), or None."""
+    """The Voxels of an instance's grids (a fluid domain's, a Volume
+    object's placed ones), or None."""
     grids = getattr(instance, "voxels", None)
-    return Voxels(grids, instance.name) if grids else None
+    return Voxels(grids, instance.name, getattr(instance, "voxel_placements", None)) if grids else None

@@ -15,6 +15,11 @@ Grids are (Z, Y, X) or (Z, Y, X, C) arrays, x fastest as Blender's
 ``domain_settings.*_grid`` arrays are.  Hostile values are made finite once
 here: NaN is 0 and +-inf +-LIMIT, counted for a warning naming the object;
 a grid with a zero-sized axis reads 0 everywhere.
+
+A Volume object's grids (addon/export/volume_object.py) are *placed*: each
+has its own 4x4 object-to-unit matrix (the inverse of its OpenVDB index-to-
+object transform, scaled to its padded box), so they are read at the
+point's Object coordinates instead of Generated ones.
 """
 import numpy as np
 
@@ -24,9 +29,10 @@ LIMIT = 1e30
 class Voxels:
     """The named grids of one object."""
 
-    def __init__(self, grids, name="object"):
+    def __init__(self, grids, name="object", placements=None):
         self.name = name
         self.grids = {}
+        self.placements = {k: np.asarray(m, np.float64).reshape(4, 4) for k, m in (placements or {}).items()}
         self.repaired = {"NaN": 0, "infinite": 0}
         for key, grid in grids.items():
             self.grids[key] = self._checked(key, grid)
@@ -59,12 +65,38 @@ class Voxels:
         """(N, 4) RGBA of grid ``key`` at Generated coordinates u (N, 3)."""
         return trilinear(self.grids[key], u)
 
+    def read(self, key, ctx):
+        """(N, 4) RGBA of grid ``key`` at a ShadingContext's points: placed
+        grids at its Object coordinates, the others at its Generated ones."""
+        m = self.placements.get(key)
+        if m is None:
+            return self.lookup(key, ctx.generated)
+        q = ctx.object_coords
+        return trilinear(self.grids[key], q @ m[:3, :3].T + m[:3, 3])
+
     def dilated(self, reach):
         """A copy whose every voxel holds the largest value within ``reach``
-        voxels along each axis: its lookups bound this one's from above
-        anywhere within reach - 1 voxels (the majorant lattice's)."""
+        voxels along each axis (an int, or {grid: int}): its lookups bound
+        this one's from above anywhere within reach - 1 voxels (the majorant
+        lattice's)."""
         out = Voxels({}, self.name)
-        out.grids = {k: _max_filter(g, reach) for k, g in self.grids.items()}
+        out.placements = self.placements
+        out.grids = {k: _max_filter(g, reach[k] if isinstance(reach, dict) else reach)
+                     for k, g in self.grids.items()}
+        return out
+
+    def placed_reach(self, spacing):
+        """{grid: voxels} to max-filter each placed grid over so that lookups
+        at a lattice of ``spacing`` (3,) object units bound the lookups
+        between its points: half a lattice step in the grid's voxels plus
+        the one voxel trilinear interpolation reaches."""
+        out = {}
+        for key, g in self.grids.items():
+            m = self.placements.get(key)
+            if m is None or min(g.shape[:3]) == 0:
+                continue
+            voxels = (np.abs(m[:3, :3]) @ np.asarray(spacing, np.float64)) * np.array(g.shape[:3][::-1])
+            out[key] = int(min(np.ceil(0.5 * voxels.max()), max(g.shape[:3]))) + 1
         return out
 
     def voxel_size(self):

@@ -366,7 +366,7 @@ class ShadingContext:
         """(N, 4) RGBA of a colour attribute (or (N, C) padded), None if absent;
         inside a fluid domain's medium its voxel grids of that name."""
         if self.voxels is not None and name in self.voxels:
-            return self.voxels.lookup(name, self.generated)
+            return self.voxels.read(name, self)
         value = self._interpolate(("attr", name))
         if value is None:
             return None

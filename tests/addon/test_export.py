@@ -650,12 +650,10 @@ def test_every_ember_panel_draws(factory_scene):
 
 
 def test_volume_object_is_named_in_a_warning(factory_scene):
-    """No bpy release has Python access to a Volume object's OpenVDB voxels
-    (no openvdb module, VolumeGrid exposes no values): the object is named."""
-    import importlib.util
-    assert importlib.util.find_spec("openvdb") is None and importlib.util.find_spec("pyopenvdb") is None, \
-        "this bpy has an openvdb module: read Volume objects' grids with it"
+    """A Volume object Ember cannot render (here: no file, no grids, no
+    material; in bpy 4.2: no openvdb module) is named in a warning
+    (tests/addon/test_volume_object_parity.py renders real ones)."""
     obj = bpy.data.objects.new("CloudVDB", bpy.data.volumes.new("CloudVDB"))
     factory_scene.collection.objects.link(obj)
     exported = export()
-    assert any("CloudVDB" in w and "OpenVDB" in w for w in exported.warnings), exported.warnings
+    assert any("CloudVDB" in w and "not rendered" in w for w in exported.warnings), exported.warnings

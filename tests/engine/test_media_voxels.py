@@ -123,3 +123,43 @@ def test_empty_and_misshapen_grids():
     with pytest.raises(SceneError, match="'domain'"):
         render(slab(volume, {"density": np.zeros((4, 4), np.float32)}, size=(4, 4)), RenderSettings(samples=1))
     assert Voxels({"density": np.ones((2, 2, 2))}, "d").warning() is None
+
+
+def test_placed_grids_read_at_object_coordinates_and_are_bounded():
+    """A Volume object's grid (addon/export/volume_object.py) is placed by
+    its object-to-unit matrix: a rotated, scaled placement reads the voxel
+    whose centre a point maps to, and the Field's majorant cells (the grid
+    max-filtered over its placed reach) bound lookups at random points."""
+    rng = np.random.default_rng(11)
+    grid = (rng.uniform(0, 1, (10, 12, 14)) ** 6 * 40).astype(np.float32)   # (Z, Y, X)
+    res = np.array([14, 12, 10], np.float64)
+    c, s = np.cos(0.6), np.sin(0.6)
+    index_to_object = np.array([[0.1 * c, -0.1 * s, 0, -0.3], [0.1 * s, 0.1 * c, 0, -0.2],
+                                [0, 0, 0.15, -0.7], [0, 0, 0, 1]])
+    unit_from_index = np.diag([1 / res[0], 1 / res[1], 1 / res[2], 1.0])
+    unit_from_index[:3, 3] = 0.5 / res          # element a at index position a
+    placement = unit_from_index @ np.linalg.inv(index_to_object)
+    voxels = Voxels({"density": grid}, "vdb", {"density": placement})
+    idx = np.array([[3, 4, 5], [0, 0, 0], [13, 11, 9]], np.float64)
+    q = np.c_[idx, np.ones(3)] @ index_to_object.T
+
+    class Ctx:
+        object_coords = q[:, :3]
+    got = voxels.read("density", Ctx())[:, 0]
+    np.testing.assert_allclose(got, [grid[5, 4, 3], grid[0, 0, 0], grid[9, 11, 13]], rtol=1e-6)
+    corners = np.array([[x, y, z, 1.0] for x in (0, 1) for y in (0, 1) for z in (0, 1)]) @ np.linalg.inv(placement).T
+    lo, hi = corners[:, :3].min(axis=0), corners[:, :3].max(axis=0)
+    mesh = box(tuple(hi - lo))
+    mesh.positions = np.asarray(mesh.positions) + 0.5 * (lo + hi)
+    inst = Instance(0, np.eye(4), [0], "vdb", voxels={"density": grid}, voxel_placements={"density": placement})
+    scene = Scene([mesh], [inst], [Material("smoke", PASS, volume=Volume(absorption=by_density((1, 1, 1))))], [],
+                  World((1, 1, 1)), Camera(look_at((0, -6, 0), (0, 0, 0)), resolution=(4, 4)))
+    field = prepare(scene, RenderSettings(samples=1)).media.fields[0]
+    p = rng.uniform(lo, hi, (20000, 3))
+    sa, _, _ = field.evaluate(p, np.tile([0.0, 0.0, 1.0], (len(p), 1)))
+    u = p @ placement[:3, :3].T + placement[:3, 3]
+    np.testing.assert_allclose(sa[:, 0], trilinear(grid[..., None], u)[:, 0], rtol=1e-5, atol=1e-6)
+    cell = np.clip(np.floor((p - field.lo) / field.cell), 0, fieldmod.GRID - 1).astype(int)
+    bound = field.grid[cell[:, 0], cell[:, 1], cell[:, 2]]
+    assert (sa[:, 0] <= bound * (1 + 1e-6)).all(), (sa[:, 0] - bound).max()
+    assert sa[:, 0].max() > 1.0    # the grid is seen, not empty
