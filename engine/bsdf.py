@@ -635,6 +635,9 @@ def _table_arrays():
     return tuple(t[name] for name, _ in loops.TABLES)
 
 
+registry.hair_huang.bind(_table_arrays, loops)
+
+
 def _lobes_of(arrays):
     kind, color, alpha, fresnel, *rest = arrays
     return Lobes(kind, color, alpha, fresnel == F_SCHLICK, fresnel, *rest)

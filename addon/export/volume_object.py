@@ -65,11 +65,16 @@ def _find_module():
         module = _load('openvdb', path)
         if module is not None:
             return module
-    for name in ('openvdb', 'pyopenvdb'):
-        try:
-            return importlib.import_module(name)
-        except ImportError:
-            continue
+    try:
+        import openvdb
+        return openvdb
+    except ImportError:
+        pass
+    try:
+        import pyopenvdb
+        return pyopenvdb
+    except ImportError:
+        pass
     # Debian's python3-openvdb, built for the system Python: bpy 4.2 (no
     # bundled module) runs on the same CPython 3.11 and loads it.
     tag = f"cpython-{sys.version_info[0]}{sys.version_info[1]}"

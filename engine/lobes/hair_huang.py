@@ -35,9 +35,21 @@ PARAMS = ("roughness", "ior", "absorption", "offset", "aspect_ratio", "hair_gain
           "pixel_coverage")
 
 
+# The compiled helpers this NumPy form runs row by row live in
+# engine/bsdf_loops.py, which imports the lobe registry: engine/bsdf.py binds
+# them here when it is imported (an import of them here would be a cycle).
+_BOUND = {}
+
+
+def bind(table_arrays, loops):
+    """Called by engine/bsdf.py: its table tuple function and bsdf_loops."""
+    _BOUND.update(table_arrays=table_arrays, loops=loops)
+
+
 def _loops():
-    from .. import bsdf, bsdf_loops   # import cycle: bsdf_loops imports the registry
-    return bsdf, bsdf_loops
+    if not _BOUND:
+        raise RuntimeError("engine.lobes.hair_huang runs through engine.bsdf: import engine.bsdf first")
+    return _BOUND["table_arrays"], _BOUND["loops"]
 
 
 def _rows(lobes, rows):
@@ -53,8 +65,8 @@ def _row_args(lobes, r, k):
 
 def eval_huang_f(lobes, rows, k, wo, wi):
     """(f (N, 3) without the weight, pdf (N,)) row by row."""
-    bsdf, loops = _loops()
-    tables = bsdf._table_arrays()
+    table_arrays, loops = _loops()
+    tables = table_arrays()
     rows = _rows(lobes, rows)
     f, pdf, out = np.zeros((len(rows), 3)), np.zeros(len(rows)), np.empty(3)
     for j, r in enumerate(rows):
@@ -71,8 +83,8 @@ def eval_huang(lobes, rows, k, wo, wi, w, sel, term, sampled):
 
 def sample_huang_dir(lobes, rows, k, wo, u_lobe, u1, u2):
     """(wi, value f |cos| (N, 3), ok, transparent) row by row."""
-    bsdf, loops = _loops()
-    tables = bsdf._table_arrays()
+    table_arrays, loops = _loops()
+    tables = table_arrays()
     rows = _rows(lobes, rows)
     n = len(rows)
     wi, value = np.tile([0.0, 0.0, 1.0], (n, 1)), np.zeros((n, 3))
