@@ -162,5 +162,5 @@ def test_blocks_with_pixel_variances_and_float32_floor():
     zero = np.zeros_like(sky)
     failures, _ = stats.failing_blocks_var(sky, zero, 63, cycles_like, zero, 7, 4, float32_sums_b=2048)
     assert len(failures) == 0
-    failures, _ = stats.failing_blocks_var(sky * 1.001, zero, 63, cycles_like, zero, 7, 4, float32_sums_b=2048)
+    failures, _ = stats.failing_blocks_var(sky * 1.002, zero, 63, cycles_like, zero, 7, 4, float32_sums_b=2048)
     assert len(failures) == 4 * 3
