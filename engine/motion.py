@@ -154,10 +154,12 @@ def matrix_at(rows, time):
 
 
 def _lerp_steps(steps, index, time):
-    """(N, ...) float64 rows ``index`` of per-step arrays (S, M, ...) at each time."""
+    """(N, ...) float64 rows ``index`` (N,) or (N, W) of per-step arrays
+    (S, M, ...) at each of the N times."""
     k, a = _step_weights(len(steps), time)
     if len(steps) == 1:
         return np.asarray(steps[0][index], np.float64)
+    k = k.reshape((-1,) + (1,) * (np.ndim(index) - 1))    # each row's step, for every column of index
     lo = np.asarray(steps[k, index], np.float64)
     hi = np.asarray(steps[k + 1, index], np.float64)
     a = a.reshape((-1,) + (1,) * (lo.ndim - 1))

@@ -17,7 +17,7 @@ points take theirs at each step (the motion attribute's w).
 """
 import numpy as np
 
-from .motion import decompose, transform_at
+from .motion import _lerp_steps, decompose, transform_at
 
 
 class MovingSet:
@@ -106,19 +106,6 @@ def attach_curves(strands, tris, owners, padded_index, segment_start):
     strands.moving = moving if moving else None
 
 
-def _lerp(steps, index, time):
-    """(n, w, 4) float64 rows ``index`` (n, w) of per-step arrays (S, K, 4)
-    at each time (Embree's linear rule between steps)."""
-    s = len(steps)
-    if s == 1:
-        return steps[0][index].astype(np.float64)
-    f = np.clip(np.asarray(time, np.float64), 0.0, 1.0) * (s - 1)
-    k = np.minimum(np.floor(f).astype(np.int64), s - 2)
-    a = (f - k)[:, None, None]
-    lo = steps[k[:, None], index].astype(np.float64)
-    return lo + (steps[k[:, None] + 1, index].astype(np.float64) - lo) * a
-
-
 def world_rows(holder, slots, time, width, still):
     """(n, width, 4) world (x, y, z, r) control rows of primitives
     ``slots`` at each ray's time: ``still(slots)`` gives them for slots that
@@ -133,7 +120,7 @@ def world_rows(holder, slots, time, width, still):
         r = np.flatnonzero(part == j)
         moving_set = moving.sets[j]
         index = moving.first[slots[r]][:, None] + np.arange(width)[None, :]
-        c = _lerp(moving_set.steps, index, time[r])
+        c = _lerp_steps(moving_set.steps, index, time[r])
         L, T = transform_at(moving_set.decomposition, time[r])
         scale = np.abs(np.linalg.det(L)) ** (1.0 / 3.0)
         out[r, :, :3] = np.einsum("nij,nkj->nki", L, c[..., :3]) + T[:, None, :]
