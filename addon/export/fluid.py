@@ -63,12 +63,13 @@ def _read(settings, prop, res, channels):
     return out.reshape(shape + ((channels,) if channels > 1 else ()))
 
 
-def material_in_domain(material_name):
-    """Whether a gas fluid domain uses the material (its Principled Volume
-    then reads the domain's grids, as Cycles' attribute inputs do)."""
+def material_on_grids(material_name):
+    """Whether a gas fluid domain or a Volume object uses the material (its
+    Principled Volume then reads the object's grids by its attribute
+    inputs, as Cycles')."""
     import bpy
     for obj in bpy.data.objects:
-        if gas_domain(obj) is not None and any(
+        if (obj.type == 'VOLUME' or gas_domain(obj) is not None) and any(
                 slot.material is not None and slot.material.name == material_name for slot in obj.material_slots):
             return True
     return False

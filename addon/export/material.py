@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import backend
-from . import compat, fluid, hair_random, nodes, subsurface, volume_object
+from . import compat, fluid, hair_random, nodes, subsurface
 
 GREY = (0.8, 0.8, 0.8)
 # Principled BSDF inputs (3.x and 4.x names) whose features are not rendered
@@ -618,8 +618,7 @@ class NodeTranslator:
         material, Density, Color and Temperature are multiplied by the
         domain's grids their attribute inputs name (Cycles: where the
         object has such an attribute); so in a Volume object's material."""
-        fluid_grids = fluid.material_in_domain(self.material_name) or volume_object.material_on_volume(
-            self.material_name)
+        fluid_grids = fluid.material_on_grids(self.material_name)
         color = self._volume_input(node, 'Color', (0.5, 0.5, 0.5), color=True)
         d = self._density(node)
         if fluid_grids:

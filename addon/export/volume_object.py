@@ -322,17 +322,6 @@ def _padded(dense, background):
     return out
 
 
-def material_on_volume(material_name):
-    """Whether a Volume object uses the material (its Principled Volume then
-    reads the object's grids by its attribute inputs, as Cycles')."""
-    import bpy
-    for obj in bpy.data.objects:
-        if obj.type == 'VOLUME' and any(slot.material is not None and slot.material.name == material_name
-                                        for slot in obj.material_slots):
-            return True
-    return False
-
-
 def density_factor(obj, matrix):
     """Cycles' object_volume_density: with Render > Space 'OBJECT' (the
     default) the density is per object-space length, 1 / |M (1, 1, 1) /
