@@ -9,6 +9,16 @@
 set -eu
 cd "$(dirname "$0")/.."
 
+# need_space GIB WHAT: stop with a plain message, before pip does, when the disk cannot hold WHAT
+# (a full disk otherwise shows up as pip's "OSError: [Errno 28]" halfway through a wheel).
+need_space() {
+    free_kib=$(df -Pk . | awk 'NR == 2 {print $4}')
+    if [ "$free_kib" -lt $(($1 * 1024 * 1024)) ]; then
+        echo "error: $2 needs about $1 GiB of free disk; $(($free_kib / 1024)) MiB are free on $(df -P . | awk 'NR == 2 {print $6}')" >&2
+        exit 1
+    fi
+}
+
 # python3-openvdb: Blender 3.4's Python reads Volume objects' grids with it.
 if ! command -v blender >/dev/null 2>&1 || ! /usr/bin/python3 -c 'import numpy, pyopenvdb' 2>/dev/null; then
     if [ "$(id -u)" = 0 ]; then SUDO=; else SUDO=sudo; fi
@@ -23,6 +33,7 @@ if ! command -v node >/dev/null 2>&1; then
 fi
 
 if [ ! -x build/venv-bpy42/bin/python ] || ! build/venv-bpy42/bin/python -c 'import bpy, pytest' 2>/dev/null; then
+    need_space 2 "the bpy 4.2 venv (build/venv-bpy42)"
     PY=$(command -v python3.11 || echo .venv/bin/python)
     "$PY" -m venv build/venv-bpy42
     build/venv-bpy42/bin/pip install -q 'bpy==4.2.23' 'numpy==1.26.4' pytest
@@ -66,6 +77,7 @@ echo "$BLENDER_VENVS" | while read -r venv bpy numpy pyver; do
         continue
     fi
     if ! "$dir/bin/python" -c 'import bpy, embreex, numba, OpenImageIO, pytest' 2>/dev/null; then
+        need_space 3 "the $bpy venv ($dir)"
         [ -x "$dir/bin/python" ] || "$PY" -m venv "$dir"
         "$dir/bin/pip" install -q --only-binary=:all: "$numpy" $RENDER_WHEELS
         "$dir/bin/pip" install -q --only-binary=:all: --no-deps "$bpy"

@@ -180,6 +180,11 @@ def main(argv=None):
     note = bc.setup()
     import bench_scenes
     names = args.scenes.split(',') if args.scenes else list(bench_scenes.SCENES)
+    unknown = [name for name in names if name not in bench_scenes.SCENES]
+    if unknown:  # before any render: a typo must not cost the minutes of the scenes before it
+        print(f"unknown scene(s) {', '.join(unknown)}; tools/bench_scenes.py has: "
+              f"{', '.join(bench_scenes.SCENES)}", file=sys.stderr)
+        return 2
     rows = []
     with tempfile.TemporaryDirectory(prefix='ember-yardstick-') as folder:
         for name in names:
