@@ -644,8 +644,9 @@ def _eval_sheen(t_sheen, rough, wox, woy, woz, wix, wiy, wiz):
 @helper
 def _refraction(alpha, eta, wox, woy, woz, wix, wiy, wiz):
     """The refraction half of bsdf._eval_glass: D G / ... (what multiplies
-    the transmittance in f, 0 where invalid), the pdf's common factor and
-    cos(wo, h)."""
+    the transmittance in f), the pdf's common factor and |cos(wo, h)|.
+    Pairs no microfacet refracts between are scored too, as Cycles'
+    bsdf_microfacet_eval (engine/lobes/glass.py: unjoined)."""
     hx = -(eta * wix + wox)
     hy = -(eta * wiy + woy)
     hz = -(eta * wiz + woz)
@@ -654,13 +655,13 @@ def _refraction(alpha, eta, wox, woy, woz, wix, wiy, wiz):
     hx, hy, hz = hx * scale, hy * scale, hz * scale
     c_o = wox * hx + woy * hy + woz * hz
     c_i = wix * hx + wiy * hy + wiz * hz
-    if not ((hz > 0) and (c_o > 0) and (c_i < 0) and (length > 0)):
+    if not length > 0:
         return 0.0, 0.0, c_o, 0.0
     lo = ggx_lambda(woz, alpha)
     li = ggx_lambda(wiz, alpha)
     q = eta / length
     common = ggx_d(hz, alpha) / max(woz, COS_EPS) * (q * q) * np.abs(c_o * c_i)
-    return common / ((1.0 + lo + li) * -wiz), common, c_o, 1.0 + lo
+    return common / ((1.0 + lo + li) * -wiz), common, np.abs(c_o), 1.0 + lo
 
 
 @helper

@@ -81,10 +81,13 @@ def eval_glass_f(lobes, rows, k, wo, wi):
     if down.any():
         t = np.nonzero(down & ok_o)[0]
         h, length = mf.refraction_half(wo[t], wi[t], eta[t])
-        c_o = mf.row_dot(wo[t], h)
+        # Every pair is scored, also those no microfacet refracts between
+        # (unjoined below): Cycles' bsdf_microfacet_eval does ("TODO: check
+        # if the refraction configuration is valid"), so its light sampling
+        # brings light from outside the refraction cone; its Fresnel reads |cos|.
+        c_o = np.abs(mf.row_dot(wo[t], h))
         c_i = mf.row_dot(wi[t], h)
-        # Only microfacets that face wo and refract into wi (pbrt's check).
-        valid = (h[:, 2] > 0) & (c_o > 0) & (c_i < 0) & (length > 0)
+        valid = length > 0
         _, trans, p_refl, _ = dielectric(lobes, rows[t], k, c_o, eta[t])
         a = alpha[t]
         lo, li = ggx_lambda(wo[t, 2], a), ggx_lambda(wi[t, 2], a)
@@ -93,6 +96,17 @@ def eval_glass_f(lobes, rows, k, wo, wi):
         f[t] = np.where(valid[:, None], trans * (common / ((1.0 + lo + li) * -wi[t, 2]))[:, None], 0.0)
         pdf[t] = np.where(valid, common * (1.0 - p_refl) / (1.0 + lo), 0.0)
     return f, pdf
+
+
+def unjoined(lobes, k, wo, wi):
+    """(N,) bool: refraction pairs wo -> wi no microfacet refracts between
+    (pbrt's check: h faces both, wo above and wi below it).  eval scores
+    them as Cycles does, the sampler never draws them: the registry tests
+    leave them out of the sampler's density and the albedo."""
+    eta = eta_of(lobes, k)
+    h, length = mf.refraction_half(wo, wi, eta)
+    joined = (h[:, 2] > 0) & (mf.row_dot(wo, h) > 0) & (mf.row_dot(wi, h) < 0) & (length > 0)
+    return (wi[:, 2] < 0) & rough(lobes, k) & ~joined
 
 
 def eval_glass(lobes, rows, k, wo, wi, w, sel, term, sampled):
@@ -145,7 +159,7 @@ def sample_glass(lobes, rows, s):
 
 _PARAMS = ("roughness", "ior", "f0", "transmission_tint", "multiscatter", "thin_film_thickness", "thin_film_ior")
 register(LobeDef(GLASS, "glass", "glossy", REFLECTION | TRANSMISSION | DELTA_WHEN_SMOOTH, sample_glass,
-                 eval_glass, "both", evaluates=rough, params=_PARAMS, reciprocal=False,
+                 eval_glass, "both", evaluates=rough, params=_PARAMS, reciprocal=False, unjoined=unjoined,
                  doc="GGX dielectric: reflection and refraction (Glass BSDF, Principled transmission); its "
                      "refraction is told by direction in the passes",
                  cases=[dict(color=(1, 1, 1), roughness=0.4, ior=1.5),
@@ -157,7 +171,7 @@ register(LobeDef(GLASS, "glass", "glossy", REFLECTION | TRANSMISSION | DELTA_WHE
                         dict(color=(1, 1, 1), roughness=0.2, ior=1.33, thin_film_thickness=500.0,
                              thin_film_ior=1.4)]))
 register(LobeDef(REFRACTION, "refraction", "transmission", TRANSMISSION | DELTA_WHEN_SMOOTH, sample_glass,
-                 eval_glass, "both", evaluates=rough, params=_PARAMS, reciprocal=False,
+                 eval_glass, "both", evaluates=rough, params=_PARAMS, reciprocal=False, unjoined=unjoined,
                  doc="Refraction BSDF: GGX refraction only",
                  cases=[dict(color=(0.9, 0.9, 1.0), roughness=0.3, ior=1.4),
                         dict(color=(1, 1, 1), roughness=0.0, ior=1.4)]))

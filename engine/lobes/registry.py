@@ -265,6 +265,9 @@ class LobeDef:
     evaluates: Optional[Callable] = None
     params: tuple = ()             # the scene.Lobe fields it reads besides color and weight
     reciprocal: bool = True        # f(wo, wi) = f(wi, wo) (tested where true)
+    # (lobes, k, wo, wi) -> (N,) bool: pairs eval scores that sample never
+    # draws (Cycles' rough refraction); the registry tests leave them out
+    unjoined: Optional[Callable] = None
     doc: str = ""
     # scene.Lobe keyword sets the registry tests render (each one lobe)
     cases: list = field(default_factory=list)
