@@ -27,7 +27,11 @@ import time
 from dataclasses import dataclass
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-COPY_IGNORE = shutil.ignore_patterns('.git', 'out', 'dist', '__pycache__', '.pytest_cache', '*.pyc')
+COPY_IGNORE = shutil.ignore_patterns('.git', 'out', 'dist', '__pycache__', '.pytest_cache', '*.pyc',
+                                     '.venv', 'build')
+# The environments are linked, not copied: no mutation edits them, and a copy
+# of .venv (over 1 GiB) per mutation was most of a run's time.
+SHARED_DIRS = ('.venv', 'build')
 
 
 @dataclass
@@ -100,6 +104,10 @@ MUTATIONS = [
 def copy_tree(folder):
     target = os.path.join(folder, 'tree')
     shutil.copytree(ROOT, target, symlinks=True, ignore=COPY_IGNORE)
+    for name in SHARED_DIRS:
+        source = os.path.join(ROOT, name)
+        if os.path.exists(source):
+            os.symlink(os.path.realpath(source), os.path.join(target, name))
     return target
 
 
