@@ -1,17 +1,18 @@
 """The Vector pass of curves and points against live Cycles (issue 24):
 test_curve_motion_parity's sliding strands (object motion), swaying
-strands (geometry-nodes deformation: control points at frame 1 and 3) and
-sliding points, without their floor, on a transparent film, rendered at
-frame 2 with motion blur off (Cycles writes the pass only then), SEEDS
-seeds of SPP samples per renderer at 48 x 32.
+strands (geometry-nodes deformation: control points at frame 1 and 3),
+sliding points and sliding particle hair (on its sliding sphere), without
+their floor, on a transparent film, rendered at frame 2 with motion blur
+off (Cycles writes the pass only then), SCENES[name] seeds of SPP samples
+per renderer at the scenes' 48 x 32 (hair 64 x 48).
 
 The pass is a ratio over the samples that hit, so each seed's alpha says
 which pixels it is defined in:
 
 * background (no seed of either renderer hit): both write exactly 0;
 * covered (every seed of both hit): away from the silhouettes, Welch's t
-  per pixel and channel over the seeds, a float32 rounding floor FLOOR
-  added to its variance, all within the family level;
+  per pixel and channel over the seeds, a float32 rounding floor
+  (``_floor``) added to its variance, all within the family level;
 * edges (some seeds hit, others not: the silhouette the seeds saw): the
   seeds that hit are compared alike; a pixel every seed of one renderer
   hits and no seed of the other is a geometry mismatch and must not occur;
@@ -34,15 +35,17 @@ from ember_testlib import empty_factory_scene, multilayer_output, read_multilaye
 import ember_stats as stats
 import test_curve_motion_parity as motion_scenes
 
-SEEDS, SPP = 16, 32   # (the swaying strands' image mean resolves 1 % with room at this count)
-WIDTH = 48                     # raster pixels across (the scenes' 48 x 32)
-# Cycles projects in float32: a raster position of up to WIDTH pixels is
-# rounded to 2^-24 WIDTH; 8 such roundings along the projection and the
-# difference (measured gaps on pixels both renderers see alike: <= 5e-7).
-FLOOR = 8 * 2.0 ** -24 * WIDTH
+SPP = 32
+# Cycles projects in float32: a raster position of up to the image's width
+# in pixels is rounded to 2^-24 width; FLOOR_ULPS such roundings along the
+# projection and the difference (measured gaps on pixels both renderers see
+# alike: <= 5e-7 px at 48 wide).
+FLOOR_ULPS = 8
 EDGE_SHARE = 0.02
 MOVING = 0.1                   # channels whose image mean is at least this many pixels
-SCENES = ('sliding_curves', 'swaying_curves', 'sliding_points')
+# Seeds per renderer: the swaying strands' vectors vary most within a pixel;
+# 16 seeds let their image mean resolve a 1 % scale with room (t 8.6).
+SCENES = {'sliding_curves': 8, 'swaying_curves': 16, 'sliding_points': 8, 'sliding_hair': 8}
 
 
 def _scene(name):
@@ -65,15 +68,16 @@ def _render(scene, folder, engine, seed):
 
 @pytest.fixture(scope="module")
 def renders(registered_addon, tmp_path_factory):
+    from addon import engine as ember_engine
     out = {}
-    for name in SCENES:
+    for name, seeds in SCENES.items():
         folder = tmp_path_factory.mktemp(name)
         scene = _scene(name)
         for engine in ('EMBER', 'CYCLES'):
-            runs = [_render(scene, folder, engine, seed) for seed in range(SEEDS)]
+            runs = [_render(scene, folder, engine, seed) for seed in range(seeds)]
             out[name, engine] = (np.array([r[0] for r in runs]), np.array([r[1] for r in runs]))
-    from addon import engine as ember_engine
-    assert all(entry['error'] is None for entry in ember_engine.RENDER_LOG[-SEEDS:])
+            if engine == 'EMBER':
+                assert all(entry['error'] is None for entry in ember_engine.RENDER_LOG[-seeds:])
     return out
 
 
@@ -86,13 +90,17 @@ def _conditional(vectors, hit):
     return mean, var, n
 
 
+def _floor(vectors):
+    return FLOOR_ULPS * 2.0 ** -24 * vectors.shape[2]
+
+
 def _pixel_t(e, c):
-    """Welch's t and dof per pixel-channel of the seeds that hit, FLOOR
+    """Welch's t and dof per pixel-channel of the seeds that hit, the floor
     added to the variance as a deterministic allowance (no degrees of
     freedom of its own: where both renderers' seeds agree exactly, the test
-    is |gap| against the normal threshold times FLOOR)."""
+    is |gap| against the normal threshold times the floor)."""
     (me, ve, ne), (mc, vc, nc) = _conditional(*e), _conditional(*c)
-    se2 = ve + vc + FLOOR ** 2
+    se2 = ve + vc + _floor(e[0]) ** 2
     with np.errstate(divide='ignore', invalid='ignore'):
         dof = se2 ** 2 / (ve ** 2 / np.maximum(ne - 1, 1) + vc ** 2 / np.maximum(nc - 1, 1))
     dof = np.minimum(np.where(np.isfinite(dof), np.maximum(dof, np.minimum(ne, nc) - 1.0), 1e6), 1e6)
@@ -147,7 +155,7 @@ def check(name, e, c, levels=None):
     return ok, levels, lines
 
 
-@pytest.mark.parametrize("name", SCENES)
+@pytest.mark.parametrize("name", list(SCENES))
 def test_vector_pass_of_curves_and_points_matches_cycles(name, renders):
     e, c = renders[name, 'EMBER'], renders[name, 'CYCLES']
     ok, levels, lines = check(name, e, c)
@@ -164,14 +172,15 @@ def test_vector_pass_of_curves_and_points_matches_cycles(name, renders):
 
 def test_vector_steps_reach_the_engine_scene(registered_addon, tmp_path, monkeypatch):
     """The export hands the engine the steps at frame 1 and 3 and a still
-    render: the sliding strands' object-to-world 1 unit apart in x, the
-    swaying strands' keys (their tips either side), no motion blur steps."""
+    render: the sliding strands', points' and particle hair's
+    object-to-world 1 unit apart in x, the swaying strands' keys (their
+    tips either side), no motion blur steps."""
     from ember_testlib import record_engine_scenes
     seen = record_engine_scenes(monkeypatch)
-    for name in ('sliding_curves', 'swaying_curves', 'sliding_points'):
+    for name in ('sliding_curves', 'swaying_curves', 'sliding_points', 'sliding_hair'):
         _render(_scene(name), tmp_path, 'EMBER', 0)
-    sliding, swaying, points = seen[0].curves[0], seen[1].curves[0], seen[2].points[0]
-    for item in (sliding, swaying, points):
+    sliding, swaying, points, hair = seen[0].curves[0], seen[1].curves[0], seen[2].points[0], seen[3].curves[0]
+    for item in (sliding, swaying, points, hair):
         assert item.motion is None and getattr(item, 'motion_positions', None) is None
     assert np.allclose(np.asarray(sliding.vector_motion)[:, 0, 3], [-1.0, 0.0, 1.0], atol=1e-4)
     assert sliding.vector_positions is None and swaying.vector_motion is None
@@ -179,6 +188,7 @@ def test_vector_steps_reach_the_engine_scene(registered_addon, tmp_path, monkeyp
     dx = steps[:, :, 0] - np.asarray(swaying.points)[None, :, 0]
     assert np.allclose(dx, np.array([-1.0, 0.0, 1.0])[:, None] * np.asarray(swaying.points)[None, :, 2], atol=1e-4)
     assert np.allclose(np.asarray(points.vector_motion)[:, 0, 3], [-1.0, 0.0, 1.0], atol=1e-4)
+    assert np.allclose(np.asarray(hair.vector_motion)[:, 0, 3], [-1.0, 0.0, 1.0], atol=1e-4)
 
 
 def test_infinite_steps_give_a_finite_pass_and_a_named_warning(registered_addon, tmp_path):
