@@ -210,3 +210,19 @@ def test_infinite_steps_give_a_finite_pass_and_a_named_warning(registered_addon,
     assert np.isfinite(vector).all() and hit.any()
     assert np.all(vector == 0.0)            # the strands taken as still, the camera is
     assert any("'strands'" in w and "Vector" in w for w in warnings), warnings
+
+
+def test_the_objects_motion_blur_switches_do_not_change_the_pass(registered_addon, tmp_path):
+    """Cycles' MOTION_PASS gives every object 3 steps and its deformation
+    whatever Object > Motion Blur (and its Deformation) says: the swaying
+    strands' pass is the same with both off, in both renderers (same seed:
+    equal to float rounding), and it moves."""
+    scene = _scene('swaying_curves')
+    obj = bpy.data.objects['strands']
+    for engine in ('EMBER', 'CYCLES'):
+        obj.cycles.use_motion_blur = obj.cycles.use_deform_motion = True
+        on, _ = _render(scene, tmp_path, engine, 0)
+        obj.cycles.use_motion_blur = obj.cycles.use_deform_motion = False
+        off, _ = _render(scene, tmp_path, engine, 0)
+        assert np.abs(on).max() > 5.0, engine
+        assert np.allclose(on, off, rtol=0.0, atol=1e-5), (engine, np.abs(on - off).max())
