@@ -250,7 +250,8 @@ def first_hit(ctx, paths, hit, lobes, w, tt, bb, tile):
     if tile.wants("Mist"):
         add("Mist", pix, 1.0 - _mist(ctx, cfg, hit.p))
     if cfg.vector is not None and tile.wants("Vector"):
-        add("Vector", pix, cfg.vector.vectors(hit.p, hit.prim))
+        u = hit.bary[:, 0] if hit.bary is not None else None   # a curve hit's u (Cycles' sd->u)
+        add("Vector", pix, cfg.vector.vectors(hit.p, hit.prim, u))
         add("Vector:n", pix, np.ones(len(pix)))
     inst = ctx.triangles.instance[hit.prim] if ctx.triangles.instance is not None else np.zeros(len(pix), int)
     for name, table in (cfg.aov_tables or {}).items():

@@ -118,11 +118,12 @@ def _prepare(scene, settings, bake):
     accel = (MotionAccel(tris, motion if moving else None, spheres, strands) if special
              else Accel(tris, reuse=persistent_bvh(settings)))
     world = np.asarray(scene.world.color, dtype=np.float64)
+    primitives = (spheres, point_owners, list(getattr(source, "points", ()) or ()), strands, curve_owners)
     ctx = Context.build(accel, tris, materials, lights, camera, world, settings,
                         sampler=Sampler(settings.seed, settings.sampling_pattern),
                         bump_model=bump_model(getattr(scene, "cycles_version", (5, 0, 0))),
                         pass_config=_with_vector(pass_events.configure(scene, settings), source, scene, tris,
-                                                 settings),
+                                                 settings, primitives),
                         media=_media(scene, accel, tris, camera, bake is None), holdout=holdout_weights(scene, tris),
                         links=LightLinks.build(scene, lights, tris), catcher=catcher_triangles(scene, tris),
                         motion=motion, spheres=spheres, unlit=unlit, strands=strands)
@@ -142,11 +143,12 @@ def persistent_bvh(settings):
     return None
 
 
-def _with_vector(cfg, source, scene, tris, settings):
-    """The pass config with the Vector pass's motion when that pass is written."""
+def _with_vector(cfg, source, scene, tris, settings, primitives):
+    """The pass config with the Vector pass's motion when that pass is written
+    (``primitives``: the points' and curves' rows, for VectorMotion)."""
     if not vector_pass.wanted(source, settings.passes):
         return cfg
-    return dataclasses.replace(cfg, vector=vector_pass.VectorMotion(scene, tris))
+    return dataclasses.replace(cfg, vector=vector_pass.VectorMotion(scene, tris, primitives))
 
 
 def holdout_weights(scene, tris):
@@ -237,6 +239,9 @@ def warnings_for(ctx):
         out.extend(ctx.media.warnings)
         out.extend(ctx.media.field_warnings())
     out.extend(ctx.subsurface_warnings)
+    vector = getattr(ctx.pass_config, "vector", None)
+    if vector is not None:
+        out.extend(vector.warnings)
     if ctx.transparent_shadows and ctx.links is not None and ctx.links.any_blockers:
         out.append("shadow linking is not applied to shadow rays through transparent surfaces: "
                    "every object casts the shadows of shadow-linked lights in this scene")

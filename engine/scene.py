@@ -144,7 +144,7 @@ def _point_cloud_fields():
     defaults, then the per-point attributes."""
     out = [("positions", np.ndarray), ("radii", np.ndarray)]
     for f in fields(Instance):
-        if f.name in ("mesh", "asset", "vector_motion", "voxels", "voxel_placements", "volume_density"):
+        if f.name in ("mesh", "asset", "voxels", "voxel_placements", "volume_density"):
             continue
         default = {} if f.default is MISSING else {"default": "points" if f.name == "name" else f.default}
         if f.default_factory is not MISSING:
@@ -153,10 +153,14 @@ def _point_cloud_fields():
     # Deformation motion blur (Cycles' motion positions attribute): object-space
     # positions (S, N, 3) at the ``motion`` steps' times (S evenly spaced over
     # the shutter), and for points their radii there (S, N) (curves keep their
-    # radii, as Cycles' Embree setup); None: no deformation.
+    # radii, as Cycles' Embree setup); None: no deformation.  The Vector
+    # pass (engine/vector_pass.py): ``vector_motion`` (3, 4, 4), Instance's,
+    # and ``vector_positions`` (3, N, 3), the points at frame - 1, frame,
+    # frame + 1 (None: not deformed).
     return out + [("attributes", Optional[dict], field(default=None)),
                   ("motion_positions", Optional[np.ndarray], field(default=None)),
-                  ("motion_radii", Optional[np.ndarray], field(default=None))]
+                  ("motion_radii", Optional[np.ndarray], field(default=None)),
+                  ("vector_positions", Optional[np.ndarray], field(default=None))]
 
 
 PointCloud = make_dataclass("PointCloud", _point_cloud_fields())
@@ -169,8 +173,10 @@ PointCloud.__doc__ = """Spheres (Blender's point cloud objects, geometry nodes' 
     material); attributes: {name: (N, C)} per-point values shader nodes read
     as colour attributes; motion: object-to-world (S, 4, 4) over the shutter
     (transform motion blur); motion_positions (S, N, 3) / motion_radii (S, N):
-    the points at the shutter's steps (deformation motion blur); the other
-    fields as ``Instance``'s.
+    the points at the shutter's steps (deformation motion blur);
+    vector_motion (3, 4, 4) / vector_positions (3, N, 3): the matrix and
+    points at frame - 1, frame, frame + 1 for the Vector pass (motion blur
+    off); the other fields as ``Instance``'s.
     """
 
 
@@ -208,7 +214,9 @@ HairCurves.__doc__ = """Strands (Blender's Curves objects): round Catmull-Rom cu
     fibre's major axis with; None: none, as Cycles' particle hair); motion:
     object-to-world (S, 4, 4) over the shutter; motion_positions (S, N, 3):
     the control points at the shutter's steps (deformation motion blur;
-    radii stay); the other fields as ``Instance``'s.
+    radii stay); vector_motion / vector_positions: the Vector pass's steps
+    (frame - 1, frame, frame + 1), as PointCloud's; the other fields as
+    ``Instance``'s.
     """
 
 

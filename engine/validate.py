@@ -354,6 +354,19 @@ def _validate_primitive_motion(item, what, n_points):
                 raise SceneError(f"{what}: negative motion radius {radii.min()}")
     elif getattr(item, "motion_radii", None) is not None:
         raise SceneError(f"{what}: motion_radii without motion_positions")
+    for name, tail in (("vector_motion", (4, 4)), ("vector_positions", (n_points, 3))):
+        value = getattr(item, name, None)
+        if value is not None:
+            _vector_steps(value, f"{what} {name}", tail)
+
+
+def _vector_steps(value, what, tail):
+    """The Vector pass's 3 steps (frame - 1, frame, frame + 1) of the right
+    shape; NaN or infinite ones are dropped by engine/vector_pass.py (the
+    item is taken as still, with a warning), not refused."""
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "fi" or tuple(arr.shape) != (3,) + tail:
+        raise SceneError(f"{what}: expected shape (3, {', '.join(map(str, tail))}), got {arr.shape}")
 
 
 def validate_point_cloud(cloud, index, n_materials):

@@ -63,10 +63,6 @@ def object_steps(obj):
     return (2 << (steps - 1)) + 1
 
 
-def _deforms(obj):
-    return obj.type == 'MESH' and _deform_motion_on(obj)
-
-
 def _deform_motion_on(obj):
     """Object > Motion Blur > Deformation."""
     return bool(getattr(getattr(obj, 'cycles', None), 'use_deform_motion', True))
@@ -76,15 +72,19 @@ def _step_times(centre, length, steps):
     return [centre + (-1.0 + 2.0 * k / (steps - 1)) * 0.5 * length for k in range(steps)]
 
 
-def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, steps_of=None, sources=()):
+def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, steps_of=None, sources=(),
+               deforms_of=None):
     """Fill Instance.motion, Mesh.motion and Camera.motion of ``exported``
     (exported at the shutter's centre, frame ``centre``; ``keys`` names each
     instance as ``instance_key`` does), and the motion of its point clouds
     and curve sets (``sources``: primitive_motion.Source of each) by
     evaluating the scene at every step (``steps_of(object)``: Cycles'
-    object_steps unless given).  Returns warnings."""
+    object_steps unless given; ``deforms_of(object)``: whether its
+    deformation counts, Object > Motion Blur > Deformation unless given).
+    Returns warnings."""
     steps_for = steps_of or object_steps
-    primitives = PrimitiveMotion(sources, steps_for, _deform_motion_on,
+    deform_on = deforms_of or _deform_motion_on
+    primitives = PrimitiveMotion(sources, steps_for, deform_on,
                                  render=getattr(depsgraph, 'mode', 'RENDER') == 'RENDER')
     scene = depsgraph.scene
     length = blur[0]
@@ -107,7 +107,8 @@ def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, s
     lenses = {}
     deforming = {}
     for index, key in enumerate(keys):
-        if key is not None and key[3] and _deforms(key[2]) and key[2].is_deform_modified(scene, 'RENDER'):
+        if (key is not None and key[3] and key[2].type == 'MESH' and deform_on(key[2])
+                and key[2].is_deform_modified(scene, 'RENDER')):
             deforming.setdefault(result.instances[index].mesh, key)
     warnings = []
     for t in times:
@@ -225,19 +226,26 @@ def wants_vector(depsgraph, blur, is_preview):
     return blur is None and not is_preview and bool(getattr(depsgraph.view_layer, 'use_pass_vector', False))
 
 
-def add_vector_motion(engine, depsgraph, exported, keys, frame, camera_object):
+def add_vector_motion(engine, depsgraph, exported, keys, frame, camera_object, sources=()):
     """Fill ``vector_motion`` of ``exported`` (exported at ``frame``) with
     the scene at frame - 1, frame, frame + 1 (Cycles' MOTION_PASS: three
-    steps for every object, whatever its motion blur settings), leaving the
-    render still.  Returns warnings."""
+    steps for every object and its deformation, whatever its motion blur
+    settings), and ``vector_positions`` of its point clouds and curve sets
+    (``sources``, as add_motion's), leaving the render still.  Returns
+    warnings."""
     warnings = add_motion(engine, depsgraph, exported, keys, (2.0, 'CENTER'), frame, camera_object,
-                          steps_of=lambda obj: 3)
+                          steps_of=lambda obj: 3, sources=sources, deforms_of=lambda obj: True)
     result = exported.scene
     result.camera.lens_motion = None     # (the render stays still)
     for item in list(result.instances) + list(result.meshes) + [result.camera]:
         item.vector_motion, item.motion = item.motion, None
         if hasattr(item, 'motion_normals'):
             item.motion_normals = None
+    for item in list(getattr(result, 'points', ()) or ()) + list(getattr(result, 'curves', ()) or ()):
+        item.vector_motion, item.motion = item.motion, None
+        item.vector_positions, item.motion_positions = item.motion_positions, None
+        if hasattr(item, 'motion_radii'):
+            item.motion_radii = None
     return [w.replace("rendered without motion blur", "its Vector pass is 0")
              .replace("rendered without deformation blur", "its Vector pass ignores deformation")
             for w in warnings]

@@ -95,12 +95,12 @@ def _export_with_vector(engine, depsgraph, camera_override, should_stop):
     """The scene at its frame, with frame - 1 and frame + 1 for the Vector pass."""
     scene = depsgraph.scene
     frame = scene.frame_current + scene.frame_subframe
-    keys = []
-    exported = _export(depsgraph, camera_override, should_stop, keys)
+    keys, sources = [], []
+    exported = _export(depsgraph, camera_override, should_stop, keys, sources=sources)
     start = time.perf_counter()
     try:
         exported.warnings += motion_export.add_vector_motion(engine, depsgraph, exported, keys, frame,
-                                                             scene_camera(depsgraph, camera_override))
+                                                             scene_camera(depsgraph, camera_override), sources)
     finally:
         motion_export.set_time(engine, frame)
     exported.seconds += time.perf_counter() - start
