@@ -61,7 +61,7 @@ def free_flights(ctx, paths, found, depth):
     flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u_distance,
                                on.o, on.d, tracking_rng(ctx, on.pseed, on.sample, depth, 1), x_light, mixed)
     flight.rows = inside
-    _direct_points(ctx, on, flight, direct, u, depth, mixed[1])
+    _direct_points(ctx, on, flight, direct, u, depth, mixed[1], mixed[3])
     if len(lit):
         rows = inside[lit]
         x = x_light[lit]
@@ -164,11 +164,12 @@ def _lit_segment(ctx, o, d, e, t_end):
     return t0, t1
 
 
-def _direct_points(ctx, on, flight, direct, u, depth, sigma_s):
+def _direct_points(ctx, on, flight, direct, u, depth, sigma_s, g):
     """Sets flight.nee_scale (the factor on the light sampled at a free
     flight's scattering point: 1, or 0 for the segments ``_direct_setup``
     chose a direct-light point for) and flight.direct: (rows, t, throughput
-    factor, emitter, its selection probability) of those points,
+    factor, emitter, its selection probability, Henyey-Greenstein g) of
+    those points,
     sigma_s T(t) / pdf, inside the part of the segment the light can reach
     (a spot's cone): equiangular, or under MIS either equiangular or a
     distance (in homogeneous media the free flight's channel mixture of
@@ -177,7 +178,8 @@ def _direct_points(ctx, on, flight, direct, u, depth, sigma_s):
     volume_direct_scatter_mis).  In heterogeneous media T(t) is the
     homogeneous media's transmittance in closed form times a ratio-tracking
     estimate of the textured ones' (tracking.field_transmittance), and
-    sigma_s is evaluated there."""
+    sigma_s and g are evaluated there (``sigma_s``, ``g``: the stacks'
+    homogeneous media's, MediumTable.stack_media)."""
     n = len(flight.t_end)
     flight.nee_scale = np.ones(n)
     flight.direct = None
@@ -200,15 +202,29 @@ def _direct_points(ctx, on, flight, direct, u, depth, sigma_s):
     if len(keep) == 0:
         return
     ss = sigma_s[rows[keep]]
+    gk = g[rows[keep]]
     T = np.exp(-st[keep] * t[keep, None])
     hk = np.flatnonzero(het[keep])
-    if len(hk):   # the textured media's scattering at the point, the tracker's transmittance to it
+    if len(hk):   # the textured media's scattering and g at the point, the tracker's transmittance to it
         r = rows[keep[hk]]
         x = on.o[r] + on.d[r] * t[keep[hk], None]
-        ss[hk] += ctx.media.local(on.stack[r], x, on.d[r])[1]
+        _, s_at, _, gw_at = ctx.media.local(on.stack[r], x, on.d[r])
+        gk[hk] = _mean_g(ss[hk], gk[hk], s_at, gw_at)
+        ss[hk] += s_at
         rng = tracking_rng(ctx, on.pseed[r], on.sample[r], depth, 4)
         T[hk] = tracking.field_transmittance(ctx.media, on.stack[r], on.o[r], on.d[r], t[keep[hk]], rng)
-    flight.direct = (rows[keep], t[keep], ss * T * (w[keep] / p[keep])[:, None], emitter[keep], p_sel[keep])
+    flight.direct = (rows[keep], t[keep], ss * T * (w[keep] / p[keep])[:, None], emitter[keep], p_sel[keep], gk)
+
+
+def _mean_g(ss, g, s_at, gw_at):
+    """The scattering-weighted mean g at points where homogeneous media
+    (sigma_s ``ss``, mean g ``g``) and textured ones (sigma_s ``s_at``,
+    summed mean(sigma_s) x g ``gw_at``, MediumTable.local) overlap: the
+    point's own, not the free flight's (which is 0 where it did not
+    scatter)."""
+    w = ss.mean(axis=1) + s_at.mean(axis=1)
+    gw = ss.mean(axis=1) * g + gw_at
+    return np.where(w > 0, gw / np.where(w > 0, w, 1.0), 0.0)
 
 
 def tracking_rng(ctx, pseed, sample, depth, salt):
@@ -230,12 +246,12 @@ def after_flights(ctx, paths, ended, flight, depth, tile, obs=NO_PASSES):
     told of the light added here (engine.pass_events)."""
     r = flight.rows
     if flight.direct is not None:   # equiangular direct-light points, lit with the throughput at the start
-        k, t, w, e, p_sel = flight.direct
+        k, t, w, e, p_sel, g = flight.direct
         rows = r[k]
         at = RowView(paths, rows, len(paths.pix))   # the few fields light sampling reads
         at.beta = at.beta * w
         before = at.L.copy()
-        phase = ctx.media.vertex_phase(flight.g[k], flight.phase_medium[k])
+        phase = ctx.media.vertex_phase(g, flight.phase_medium[k])
         p = at.o + at.d * t[:, None]
         # The emitter picked at the segment's start (the point was sampled
         # for it), divided by the probability it had; its MIS weight against

@@ -51,7 +51,8 @@ class FreeFlight:
     phase_medium: np.ndarray = None
     # Set by the integrator (engine/integrator/volume.py): the factor on the
     # light sampled at the scattering point, and the equiangular direct-light
-    # points (rows, t, throughput factor) or None.
+    # points (rows, t, throughput factor, emitter, its selection
+    # probability, g at the point) or None.
     nee_scale: np.ndarray = None
     direct: tuple = None
 
