@@ -247,22 +247,82 @@ def texspace_of(mesh):
     return (tuple(float(v) for v in loc), tuple(float(v) for v in size))
 
 
-def _undeformed_corners(obj, mesh):
-    """Corner positions (T, 3, 3) of the original (undeformed) mesh, which
-    Cycles' Generated coordinates use (Blender's orco), when modifiers or
-    shape keys moved the vertices without changing their count; None when
-    nothing moved or the count changed (then the evaluated positions stand
-    in, and the texture space is the evaluated one)."""
+# Modifier types Blender evaluates as deform-only (ModifierTypeType::OnlyDeform
+# in their MOD_*.cc): the stack's orco (undeformed coordinates, which Cycles'
+# Generated reads) skips them, as it skips the shape keys.
+DEFORM_ONLY = frozenset({
+    'ARMATURE', 'CAST', 'CLOTH', 'COLLISION', 'CORRECTIVE_SMOOTH', 'CURVE', 'DISPLACE', 'HOOK',
+    'LAPLACIANDEFORM', 'LAPLACIANSMOOTH', 'LATTICE', 'MESH_CACHE', 'MESH_DEFORM', 'PARTICLE_SYSTEM',
+    'SHRINKWRAP', 'SIMPLE_DEFORM', 'SMOOTH', 'SOFT_BODY', 'SURFACE', 'SURFACE_DEFORM', 'WARP', 'WAVE',
+})
+# Constructive modifiers that leave the orco mesh as it is (Fluid returns its
+# input under MOD_APPLY_ORCO): off in the orco evaluation too.
+ORCO_SKIPS = frozenset({'FLUID'})
+
+
+def _enabled_modifiers(obj, render):
+    flag = 'show_render' if render else 'show_viewport'
+    return [m for m in getattr(obj, 'modifiers', ()) if getattr(m, flag, False)]
+
+
+def _undeformed_corners(obj, mesh, depsgraph=None):
+    """Corner positions (T, 3, 3) of Blender's orco, the undeformed mesh
+    Cycles' Generated coordinates use (blenkernel mesh_calc_modifiers): the
+    original vertices when only deform-only modifiers and shape keys act;
+    the constructive modifiers applied to the original vertices (a second
+    evaluation without the deform-only ones, ``depsgraph`` needed) when both
+    kinds act and the vertex count stays that of the final mesh.  None when
+    the orco is the final positions (no deformation, or the counts differ,
+    where Blender falls back to the final positions too)."""
     original = getattr(getattr(obj, 'original', None), 'data', None)
-    if original is None or original is obj.data or len(original.vertices) != len(mesh.positions):
+    if original is None or original is obj.data:
         return None
-    positions = _get(original.vertices, 'co', len(original.vertices), 3, np.float32)
+    render = getattr(depsgraph, 'mode', 'VIEWPORT') == 'RENDER'
+    modifiers = _enabled_modifiers(obj, render)
+    if all(m.type in DEFORM_ONLY for m in modifiers):
+        if len(original.vertices) != len(mesh.positions):
+            return None
+        positions = _get(original.vertices, 'co', len(original.vertices), 3, np.float32)
+    else:
+        deformed = getattr(original, 'shape_keys', None) is not None or any(
+            m.type in DEFORM_ONLY | ORCO_SKIPS for m in modifiers)
+        if not deformed or depsgraph is None or not getattr(obj, 'is_evaluated', False):
+            return None
+        positions = _constructive_positions(obj, depsgraph, render)
+        if positions is None or len(positions) != len(mesh.positions):
+            return None
     if np.array_equal(positions, mesh.positions):
         return None
     return positions[mesh.triangles]
 
 
-def mesh_from_object(obj, name, check=None):
+def _constructive_positions(obj, depsgraph, render):
+    """Vertex positions of the evaluated object's stack run again without its
+    deform-only modifiers and with only the reference shape key: Blender's
+    parallel orco mesh.  Only the evaluated copy's flags change, and they are
+    restored; the original object and file are untouched."""
+    flag = 'show_render' if render else 'show_viewport'
+    switched = [m for m in _enabled_modifiers(obj, render) if m.type in DEFORM_ONLY | ORCO_SKIPS]
+    key = getattr(obj.data, 'shape_keys', None) or getattr(obj.original.data, 'shape_keys', None)
+    saved = (obj.show_only_shape_key, obj.active_shape_key_index)
+    try:
+        for m in switched:
+            setattr(m, flag, False)
+        if key is not None and key.reference_key is not None:
+            obj.show_only_shape_key = True
+            obj.active_shape_key_index = list(key.key_blocks).index(key.reference_key)
+        result = obj.to_mesh(preserve_all_data_layers=True, depsgraph=depsgraph)
+        if result is None:
+            return None
+        return _get(result.vertices, 'co', len(result.vertices), 3, np.float32)
+    finally:
+        obj.to_mesh_clear()
+        for m in switched:
+            setattr(m, flag, True)
+        obj.show_only_shape_key, obj.active_shape_key_index = saved
+
+
+def mesh_from_object(obj, name, check=None, depsgraph=None):
     """Export an evaluated object's geometry (modifiers applied).
 
     ``to_mesh`` on an evaluated object returns the final geometry for meshes,
@@ -272,7 +332,7 @@ def mesh_from_object(obj, name, check=None):
         # The evaluated mesh already has the modifiers applied: no copy needed.
         out = mesh_from_blender(obj.data, name, needs_tangents(obj), check, needs_derived(obj))
         if out is not None:
-            out.orco = _undeformed_corners(obj, out)
+            out.orco = _undeformed_corners(obj, out, depsgraph)
         return out
     mesh = obj.to_mesh()
     try:
