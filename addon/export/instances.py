@@ -298,11 +298,14 @@ class InstanceCollector:
         if key not in self.mesh_of_key:
             self.check()
             self.exported += 1
-            mesh = mesh_export.mesh_from_object(obj, _geometry_name(obj), self.check, self.depsgraph)
+            told = []
+            mesh = mesh_export.mesh_from_object(obj, _geometry_name(obj), self.check, self.depsgraph, told.append)
             dropped = mesh_export.drop_nonfinite_triangles(mesh) if mesh is not None else 0
             if dropped:
-                self.mesh_warnings[key] = (f"Object '{obj.name}': {dropped} triangles with "
-                                           "NaN or infinite vertex positions were skipped")
+                told.append(f"Object '{obj.name}': {dropped} triangles with "
+                            "NaN or infinite vertex positions were skipped")
+            if told:
+                self.mesh_warnings[key] = "; ".join(told)
             if mesh is None or len(mesh.triangles) == 0:
                 self.mesh_of_key[key] = None
             else:

@@ -351,3 +351,58 @@ def test_generated_coordinates_through_constructive_modifiers_match_cycles(regis
     for obj in objects.values():   # the user's objects are left as they were
         assert all(m.show_viewport and m.show_render for m in obj.modifiers)
         assert not obj.show_only_shape_key
+
+
+def test_orco_evaluation_leaves_the_depsgraph_and_objects_alone(registered_addon):
+    """The second evaluation switches modifiers and shape keys off on the
+    evaluated copies only: after the export nothing is tagged for an update
+    (a viewport render would otherwise export again and again), the user's
+    flags read as before, and every case got its undeformed coordinates."""
+    from addon.export.scene import export_scene
+    _, objects = build_constructive_scene()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    depsgraph.update()
+    updated = []
+
+    def note(scene, graph):
+        updated.extend(u.id.name for u in graph.updates)
+
+    bpy.app.handlers.depsgraph_update_post.append(note)
+    try:
+        exported = export_scene(depsgraph)
+        depsgraph.update()
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(note)
+    assert not exported.warnings, exported.warnings
+    assert updated == [], updated
+    for obj in objects.values():
+        assert all(m.show_viewport and m.show_render for m in obj.modifiers)
+        assert not obj.show_only_shape_key
+        if obj.data.shape_keys is not None:
+            assert obj.data.shape_keys.key_blocks[-1].value == 1.0
+    # all but the mirror merge and the geometry-nodes move (orco = final positions there)
+    with_orco = [m.name for m in exported.scene.meshes if m.orco is not None]
+    assert len(with_orco) == len(objects) - 2, with_orco
+
+
+def test_unreachable_generated_coordinates_are_named(registered_addon):
+    """Where the second evaluation cannot give Blender's orco, a warning
+    names the object and the reason: absolute shape keys (zeroing values
+    does not take them out) and a Texture Mesh (Cycles reads its vertices)."""
+    from addon.export.scene import export_scene
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    bpy.context.scene.collection.objects.link(cam)
+    bpy.context.scene.camera = cam
+    v, f = _bumpy_grid("grid", 3, 2.0, 5, (0.0, 0.0))
+    absolute = _link("absolute", v, f, _generated_material("absolute"), (0.0, 0.0, 0.0))
+    _shape_key(absolute, lambda k, co: (co.x + 0.2, co.y, co.z))
+    absolute.data.shape_keys.use_relative = False
+    _subsurf(absolute, 1)
+    textured = _link("texture mesh", v, f, _generated_material("texture mesh"), (3.0, 0.0, 0.0))
+    textured.data.texco_mesh = bpy.data.meshes.new("texture space")
+    textured.data.texco_mesh.from_pydata([(x * 1.1, y, z) for x, y, z in v], [], f)
+    _subsurf(_displace(textured).id_data, 1)
+    warnings = export_scene(bpy.context.evaluated_depsgraph_get()).warnings
+    assert any("'absolute'" in w and "absolute" in w.split(":", 2)[2] for w in warnings), warnings
+    assert any("'texture mesh'" in w and "Texture Mesh" in w for w in warnings), warnings
