@@ -406,3 +406,35 @@ def test_unreachable_generated_coordinates_are_named(registered_addon):
     warnings = export_scene(bpy.context.evaluated_depsgraph_get()).warnings
     assert any("'absolute'" in w and "absolute" in w.split(":", 2)[2] for w in warnings), warnings
     assert any("'texture mesh'" in w and "Texture Mesh" in w for w in warnings), warnings
+
+
+def test_final_render_reaches_the_same_undeformed_coordinates(registered_addon, tmp_path, monkeypatch):
+    """A final render's depsgraph (render mode: the modifiers' Render
+    switches) gives the same orco as the viewport depsgraph the parity test
+    exports (the scene's subdivision levels agree), and leaves the user's
+    flags as they were."""
+    from addon.export import mesh as mesh_export
+    from addon.export.scene import export_scene
+    from ember_testlib import render_array, setup_ember
+    scene, objects = build_constructive_scene()
+    viewport = {m.name: m.orco for m in export_scene(bpy.context.evaluated_depsgraph_get()).scene.meshes}
+    seen = {}
+    reach = mesh_export._undeformed_corners
+
+    def recorded(obj, mesh, depsgraph=None, warn=None):
+        seen[mesh.name] = (getattr(depsgraph, 'mode', None), reach(obj, mesh, depsgraph, warn))
+        return seen[mesh.name][1]
+
+    monkeypatch.setattr(mesh_export, '_undeformed_corners', recorded)
+    setup_ember(scene, samples=1, seed=1, max_bounces=0)
+    render_array(scene, tmp_path, "orco_render")
+    assert set(seen) == set(viewport), (sorted(seen), sorted(viewport))
+    for name, (mode, orco) in seen.items():
+        assert mode == 'RENDER', (name, mode)
+        if viewport[name] is None:
+            assert orco is None, name
+        else:
+            np.testing.assert_array_equal(orco, viewport[name], err_msg=name)
+    assert sum(orco is not None for _, orco in seen.values()) == len(objects) - 2
+    for obj in objects.values():
+        assert all(m.show_viewport and m.show_render for m in obj.modifiers)
