@@ -465,3 +465,30 @@ def test_final_render_reaches_the_same_undeformed_coordinates(registered_addon, 
     assert sum(orco is not None for orco in render.values()) == len(objects) - 2, render.keys()
     for obj in objects.values():
         assert all(m.show_viewport and m.show_render for m in obj.modifiers)
+
+
+def test_second_evaluation_only_where_generated_is_read(registered_addon, monkeypatch):
+    """The stack is evaluated again only for an object whose material may
+    read Generated (here a Noise texture's unlinked Vector), never for one
+    that cannot (a plain Emission)."""
+    from addon.export import mesh as mesh_export
+    from addon.export.scene import export_scene
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    bpy.context.scene.collection.objects.link(cam)
+    bpy.context.scene.camera = cam
+    v, f = _bumpy_grid("grid", 3, 2.0, 5, (0.0, 0.0))
+    plain, _, _ = emission_material("plain")
+    noisy, tree, emission = emission_material("noisy")
+    noise = tree.nodes.new('ShaderNodeTexNoise')
+    tree.links.new(noise.outputs['Color'], emission.inputs['Color'])
+    for name, material in (("plain", plain), ("noisy", noisy)):
+        obj = _link(name, v, f, material, (0.0, 0.0, 0.0))
+        _subsurf(_displace(obj).id_data, 1)
+    runs = []
+    run = mesh_export._constructive_positions
+    monkeypatch.setattr(mesh_export, '_constructive_positions',
+                        lambda obj, *args: runs.append(obj.name) or run(obj, *args))
+    exported = export_scene(bpy.context.evaluated_depsgraph_get())
+    assert runs == ["noisy"], runs
+    assert sum(m.orco is not None for m in exported.scene.meshes) == 1
