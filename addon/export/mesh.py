@@ -356,7 +356,8 @@ class _Field:
     address.  The orco evaluation switches modifiers and shape keys off on
     the evaluated copy this way: the RNA setters would tag the original for
     an update (a viewport render would export again, endlessly).  The write
-    is checked against what RNA reads back, and undone when it disagrees."""
+    is made only where the field reads as RNA does, checked against what
+    RNA reads back, and undone when it disagrees."""
 
     def __init__(self, struct, offset, kind):
         import ctypes
@@ -383,6 +384,8 @@ def _switch_off(obj, depsgraph, render):
         for m in _enabled_modifiers(obj, render):
             if m.type in DEFORM_ONLY | ORCO_SKIPS:
                 field = _Field(m, MODIFIER_MODE_OFFSET, 'int')
+                if any(bool(field.saved & bit) != getattr(m, name) for name, bit in MODE_BITS.items()):
+                    raise ValueError(m.name)   # not the layout assumed: nothing written
                 fields.append(field)
                 field.cell.value = field.saved & ~MODE_BITS[flag]
                 if getattr(m, flag):
@@ -391,6 +394,8 @@ def _switch_off(obj, depsgraph, render):
         for block in key.key_blocks if key is not None else ():
             if block != key.reference_key and block.value != 0.0:
                 field = _Field(block, KEYBLOCK_CURVAL_OFFSET, 'float')
+                if field.saved != np.float32(block.value):
+                    raise ValueError(block.name)
                 fields.append(field)
                 field.cell.value = 0.0
                 if block.value != 0.0:

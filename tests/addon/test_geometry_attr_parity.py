@@ -492,3 +492,23 @@ def test_second_evaluation_only_where_generated_is_read(registered_addon, monkey
     exported = export_scene(bpy.context.evaluated_depsgraph_get())
     assert runs == ["noisy"], runs
     assert sum(m.orco is not None for m in exported.scene.meshes) == 1
+
+
+def test_an_unexpected_struct_layout_is_named_not_written(registered_addon, monkeypatch):
+    """Were a Blender's modifier struct laid out otherwise (here: the offset
+    of its type field instead of its mode), the field does not read as RNA
+    says, nothing is written and a warning names the object."""
+    from addon.export import mesh as mesh_export
+    from addon.export.scene import export_scene
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    bpy.context.scene.collection.objects.link(cam)
+    bpy.context.scene.camera = cam
+    v, f = _bumpy_grid("grid", 3, 2.0, 5, (0.0, 0.0))
+    obj = _link("displaced", v, f, _generated_material("displaced"), (0.0, 0.0, 0.0))
+    _subsurf(_displace(obj).id_data, 1)
+    monkeypatch.setattr(mesh_export, 'MODIFIER_MODE_OFFSET', 16)
+    exported = export_scene(bpy.context.evaluated_depsgraph_get())
+    assert any("'displaced'" in w and "could not switch" in w for w in exported.warnings), exported.warnings
+    assert [m.type for m in obj.modifiers] == ['DISPLACE', 'SUBSURF']
+    assert all(m.show_viewport and m.show_render for m in obj.modifiers)
