@@ -42,7 +42,7 @@ def _bake(engine, depsgraph, obj, pass_type, pass_filter, width, height):
         raise BakeError(f"bake type {pass_type} is not supported yet (Ember bakes "
                         f"{', '.join(renderer.bake.SUPPORTED)})")
     evaluated = obj.evaluated_get(depsgraph) if hasattr(obj, 'evaluated_get') else obj
-    mesh = mesh_export.mesh_from_object(evaluated, name)
+    mesh = mesh_export.mesh_from_object(evaluated, name, depsgraph=depsgraph)
     if mesh is None:
         raise BakeError(f"object '{name}' has no triangles to bake")
     if pass_type in renderer.bake.LIGHT + SCENE_WIDE and mesh.uvs is None:

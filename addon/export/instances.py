@@ -41,6 +41,7 @@ class InstanceCollector:
         self._warned = set()
         self.check = check or (lambda: None)
         self.scene = scene
+        self.depsgraph = None     # the walked depsgraph (a mesh's orco may need a second evaluation)
         self._attribute_requests = {}   # materials -> Attribute nodes of object / instancer / view layer type
         self.used = {}            # geometry key -> names of the objects and instancers that used it
         self.mesh_warnings = {}   # geometry key -> its export's warning
@@ -297,11 +298,14 @@ class InstanceCollector:
         if key not in self.mesh_of_key:
             self.check()
             self.exported += 1
-            mesh = mesh_export.mesh_from_object(obj, _geometry_name(obj), self.check)
+            told = []
+            mesh = mesh_export.mesh_from_object(obj, _geometry_name(obj), self.check, self.depsgraph, told.append)
             dropped = mesh_export.drop_nonfinite_triangles(mesh) if mesh is not None else 0
             if dropped:
-                self.mesh_warnings[key] = (f"Object '{obj.name}': {dropped} triangles with "
-                                           "NaN or infinite vertex positions were skipped")
+                told.append(f"Object '{obj.name}': {dropped} triangles with "
+                            "NaN or infinite vertex positions were skipped")
+            if told:
+                self.mesh_warnings[key] = "; ".join(told)
             if mesh is None or len(mesh.triangles) == 0:
                 self.mesh_of_key[key] = None
             else:
@@ -470,6 +474,7 @@ def collect_instances(depsgraph, material_index, check=None, keys=None, points=N
     collector = InstanceCollector(material_index, check, view_layer, getattr(depsgraph, 'scene', None),
                                   render=getattr(depsgraph, 'mode', 'RENDER') == 'RENDER')
     collector.want_keys = keys is not None
+    collector.depsgraph = depsgraph
     collector.light_sink = light_sink
     if cache is not None:
         cache.begin(depsgraph, getattr(view_layer, 'name', ''))

@@ -115,6 +115,30 @@ def needs_derived(obj):
     return out
 
 
+# Texture nodes whose unlinked Vector is not Generated (UV, direction, object space).
+_NOT_GENERATED_BY_DEFAULT = frozenset({'TEX_IMAGE', 'TEX_ENVIRONMENT', 'TEX_SKY', 'TEX_IES', 'TEX_POINTDENSITY'})
+
+
+def needs_generated(obj):
+    """True if a material of the object may read Generated coordinates (a
+    Texture Coordinate node's Generated, a procedural texture with its
+    Vector unlinked, a radial Tangent), erring towards True."""
+    seen = set()
+    for slot in getattr(obj, 'material_slots', ()):
+        tree = getattr(slot.material, 'node_tree', None) if slot.material else None
+        for t in node_trees(tree, seen):
+            for n in t.nodes:
+                if n.type == 'TEX_COORD' and n.outputs['Generated'].is_linked:
+                    return True
+                if n.type == 'TANGENT' and n.direction_type == 'RADIAL':
+                    return True
+                if n.type.startswith('TEX_') and n.type not in _NOT_GENERATED_BY_DEFAULT:
+                    vector = n.inputs.get('Vector')
+                    if vector is not None and not vector.is_linked:
+                        return True
+    return False
+
+
 def _derived_attributes(mesh, triangles, wanted):
     """{reserved name: (T, 3) corners} of Pointiness and Random Per Island
     (engine.mesh_attributes), computed as Cycles does at sync."""
@@ -247,32 +271,181 @@ def texspace_of(mesh):
     return (tuple(float(v) for v in loc), tuple(float(v) for v in size))
 
 
-def _undeformed_corners(obj, mesh):
-    """Corner positions (T, 3, 3) of the original (undeformed) mesh, which
-    Cycles' Generated coordinates use (Blender's orco), when modifiers or
-    shape keys moved the vertices without changing their count; None when
-    nothing moved or the count changed (then the evaluated positions stand
-    in, and the texture space is the evaluated one)."""
+# Modifier types Blender evaluates as deform-only (ModifierTypeType::OnlyDeform
+# in their MOD_*.cc): the stack's orco (undeformed coordinates, which Cycles'
+# Generated reads) skips them, as it skips the shape keys.
+DEFORM_ONLY = frozenset({
+    'ARMATURE', 'CAST', 'CLOTH', 'COLLISION', 'CORRECTIVE_SMOOTH', 'CURVE', 'DISPLACE', 'HOOK',
+    'LAPLACIANDEFORM', 'LAPLACIANSMOOTH', 'LATTICE', 'MESH_CACHE', 'MESH_DEFORM', 'PARTICLE_SYSTEM',
+    'SHRINKWRAP', 'SIMPLE_DEFORM', 'SMOOTH', 'SOFT_BODY', 'SURFACE', 'SURFACE_DEFORM', 'WARP', 'WAVE',
+})
+# Constructive modifiers that leave the orco mesh as it is (Fluid returns its
+# input under MOD_APPLY_ORCO): off in the orco evaluation too.
+ORCO_SKIPS = frozenset({'FLUID'})
+
+
+def _enabled_modifiers(obj, render):
+    flag = 'show_render' if render else 'show_viewport'
+    return [m for m in getattr(obj, 'modifiers', ()) if getattr(m, flag, False)]
+
+
+def _undeformed_corners(obj, mesh, depsgraph=None, warn=None):
+    """Corner positions (T, 3, 3) of Blender's orco, the undeformed mesh
+    Cycles' Generated coordinates use (blenkernel mesh_calc_modifiers): the
+    original vertices when only deform-only modifiers and shape keys act;
+    the constructive modifiers applied to the original vertices (a second
+    evaluation without the deform-only ones, ``depsgraph`` needed) when both
+    kinds act and the vertex count stays that of the final mesh.  None when
+    the orco is the final positions (no deformation, or the counts differ,
+    where Blender falls back to the final positions too), or when it cannot
+    be reached (then ``warn(text)`` says why)."""
     original = getattr(getattr(obj, 'original', None), 'data', None)
-    if original is None or original is obj.data or len(original.vertices) != len(mesh.positions):
+    if original is None or original is obj.data:
         return None
-    positions = _get(original.vertices, 'co', len(original.vertices), 3, np.float32)
+    render = getattr(depsgraph, 'mode', 'VIEWPORT') == 'RENDER'
+    modifiers = _enabled_modifiers(obj, render)
+    key = getattr(original, 'shape_keys', None)
+    deformed = key is not None or any(m.type in DEFORM_ONLY | ORCO_SKIPS for m in modifiers)
+    if deformed and getattr(original, 'texco_mesh', None) is not None:
+        _tell(warn, obj, "its Texture Mesh is not read (Cycles takes the undeformed vertices from it)")
+        return None
+    if all(m.type in DEFORM_ONLY for m in modifiers):
+        if len(original.vertices) != len(mesh.positions):
+            return None
+        positions = _get(original.vertices, 'co', len(original.vertices), 3, np.float32)
+    else:
+        if not deformed or depsgraph is None or not getattr(obj, 'is_evaluated', False) or not needs_generated(obj):
+            return None   # (without Generated in a material, the second evaluation is not worth it)
+        reason = _unreachable(original, key)
+        positions = _constructive_positions(obj, depsgraph, render) if reason is None else None
+        if positions is None:
+            _tell(warn, obj, reason or "the undeformed evaluation could not switch its deform-only modifiers off")
+            return None
+        if len(positions) != len(mesh.positions):
+            return None
     if np.array_equal(positions, mesh.positions):
         return None
     return positions[mesh.triangles]
 
 
-def mesh_from_object(obj, name, check=None):
+def _tell(warn, obj, reason):
+    if warn is not None:
+        warn(f"Object '{obj.name}': Generated coordinates follow the deformed mesh: {reason}")
+
+
+def _unreachable(original, key):
+    """Why the second evaluation would not give Blender's orco, or None:
+    it leaves shape keys out by zeroing the relative keys' values, so the
+    reference key must hold the mesh's own vertices (Blender's orco)."""
+    if key is None:
+        return None
+    if not key.use_relative:
+        return "its shape keys are absolute (Cycles reads the vertices without them)"
+    count = len(original.vertices)
+    reference = key.reference_key
+    if reference is None or len(reference.data) != count:
+        return "its shape keys do not match its vertices"
+    if not np.array_equal(_get(reference.data, 'co', count, 3, np.float32),
+                          _get(original.vertices, 'co', count, 3, np.float32)):
+        return "its reference shape key differs from its vertices (Cycles reads the vertices)"
+    return None
+
+
+class _Field:
+    """One int or float of a Blender struct, written in place through its
+    address.  The orco evaluation switches modifiers and shape keys off on
+    the evaluated copy this way: the RNA setters would tag the original for
+    an update (a viewport render would export again, endlessly).  The write
+    is made only where the field reads as RNA does, checked against what
+    RNA reads back, and undone when it disagrees."""
+
+    def __init__(self, struct, offset, kind):
+        import ctypes
+        self.cell = (ctypes.c_int if kind == 'int' else ctypes.c_float).from_address(struct.as_pointer() + offset)
+        self.saved = self.cell.value
+
+    def restore(self):
+        self.cell.value = self.saved
+
+
+# DNA offsets (makesdna): ModifierData {next, prev, int type, int mode};
+# KeyBlock {next, prev, float pos, float curval}.
+MODIFIER_MODE_OFFSET, KEYBLOCK_CURVAL_OFFSET = 20, 20
+MODE_BITS = {'show_viewport': 1, 'show_render': 2}   # eModifierMode_Realtime, _Render
+
+
+def _switch_off(obj, depsgraph, render):
+    """Fields written to leave the deform-only modifiers and the shape keys
+    out of the evaluated object's stack; None when a write does not read
+    back as meant (everything undone then)."""
+    flag = 'show_render' if render else 'show_viewport'
+    fields = []
+    try:
+        for m in _enabled_modifiers(obj, render):
+            if m.type in DEFORM_ONLY | ORCO_SKIPS:
+                field = _Field(m, MODIFIER_MODE_OFFSET, 'int')
+                if any(bool(field.saved & bit) != getattr(m, name) for name, bit in MODE_BITS.items()):
+                    raise ValueError(m.name)   # not the layout assumed: nothing written
+                fields.append(field)
+                field.cell.value = field.saved & ~MODE_BITS[flag]
+                if getattr(m, flag):
+                    raise ValueError(m.name)
+        key = _evaluated_key(obj, depsgraph)
+        for block in key.key_blocks if key is not None else ():
+            if block != key.reference_key and block.value != 0.0:
+                field = _Field(block, KEYBLOCK_CURVAL_OFFSET, 'float')
+                if field.saved != np.float32(block.value):
+                    raise ValueError(block.name)
+                fields.append(field)
+                field.cell.value = 0.0
+                if block.value != 0.0:
+                    raise ValueError(block.name)
+    except (ValueError, TypeError, AttributeError):
+        for field in reversed(fields):
+            field.restore()
+        return None
+    return fields
+
+
+def _evaluated_key(obj, depsgraph):
+    key = getattr(getattr(obj, 'original', obj).data, 'shape_keys', None)
+    return key.evaluated_get(depsgraph) if key is not None else None
+
+
+def _constructive_positions(obj, depsgraph, render):
+    """Vertex positions of the evaluated object's stack run again without its
+    deform-only modifiers and shape keys: Blender's parallel orco mesh.  None
+    when the switches cannot be made.  Only the evaluated copy changes, for
+    the length of one ``to_mesh``; the original object and file are left
+    alone."""
+    fields = _switch_off(obj, depsgraph, render)
+    if fields is None:
+        return None
+    try:
+        result = obj.to_mesh(preserve_all_data_layers=True, depsgraph=depsgraph)
+        if result is None:
+            return None
+        return _get(result.vertices, 'co', len(result.vertices), 3, np.float32)
+    finally:
+        obj.to_mesh_clear()
+        for field in reversed(fields):
+            field.restore()
+
+
+def mesh_from_object(obj, name, check=None, depsgraph=None, warn=None):
     """Export an evaluated object's geometry (modifiers applied).
 
     ``to_mesh`` on an evaluated object returns the final geometry for meshes,
     curves, text and metaballs; the temporary mesh is freed right after copy.
+    ``depsgraph`` (the one ``obj`` comes from) lets a mesh's Generated
+    coordinates follow constructive modifiers as Cycles' do; ``warn(text)``
+    hears where they cannot.
     """
     if obj.type == 'MESH':
         # The evaluated mesh already has the modifiers applied: no copy needed.
         out = mesh_from_blender(obj.data, name, needs_tangents(obj), check, needs_derived(obj))
         if out is not None:
-            out.orco = _undeformed_corners(obj, out)
+            out.orco = _undeformed_corners(obj, out, depsgraph, warn)
         return out
     mesh = obj.to_mesh()
     try:
