@@ -139,18 +139,14 @@ class InstanceCollector:
         key = ('volume', obj.original.as_pointer(), obj.data.as_pointer(), inst.is_instance)
         if key not in self._groups:
             self.check()
-            materials = self.material_index(obj)
-            if not any(m >= 0 for m in materials):
-                self._warn_once(('volume', obj.name), f"Volume object '{obj.name}' not rendered: it has no "
-                                "material (Cycles renders its default volume)")
-                self._groups[key] = None
-                return
+            materials = self.material_index(obj)   # no material: Cycles' default volume (MaterialTable)
             grids = volume_object.read_volume(obj)
             for text in grids.warnings:
                 self._warn_once(('volume', obj.name, text), text)
             group = None
             if grids.bounds is not None:
-                fields = dict(mesh=self._box_id(obj, grids.bounds), materials=materials, name=obj.name,
+                fields = dict(mesh=self._box_id(obj, grids.bounds, grids.generated), materials=materials,
+                              name=obj.name,
                               **ray_visibility(inst), holdout=is_holdout(inst, self.view_layer),
                               **_pass_fields(inst), **object_info(inst),
                               voxels=grids.arrays, voxel_placements=grids.placements)
@@ -167,13 +163,14 @@ class InstanceCollector:
         if self.want_keys:
             self.keys.append(instance_key(inst))
 
-    def _box_id(self, obj, bounds):
+    def _box_id(self, obj, bounds, generated=None):
         """Index of a Volume object's box mesh (kept by a persistent cache
-        while its bounds stay)."""
-        key = ('volume box', obj.name_full) + tuple(float(v) for b in bounds for v in b)
+        while its bounds and its Generated box stay)."""
+        corners = tuple(bounds) + tuple(generated or ())
+        key = ('volume box', obj.name_full) + tuple(float(v) for c in corners for v in np.ravel(c))
         if key not in self.mesh_of_key:
             self.mesh_of_key[key] = len(self.meshes)
-            self.meshes.append(volume_object.box_mesh(*bounds, _geometry_name(obj)))
+            self.meshes.append(volume_object.box_mesh(*bounds, _geometry_name(obj), generated))
         self.used.setdefault(key, set()).add(obj.name_full)
         return self.mesh_of_key[key]
 

@@ -648,12 +648,7 @@ class NodeTranslator:
         return str(socket.default_value) if socket is not None else ''
 
     def _attribute(self, name, output):
-        """An Attribute node's output for a volume attribute input: 1 where
-        the object has no such attribute (Cycles' primitive_density = 1)."""
-        renderer = backend.engine()
-        call = renderer.NodeCall('ShaderNodeAttribute', {}, {'attribute_name': name, 'attribute_type': 'GEOMETRY',
-                                                             '_missing': 1.0})
-        return renderer.NodeOutput(call, output)
+        return grid_attribute(name, output)
 
     def _by_attribute(self, node, socket_name, value, color=False):
         name = self._attribute_name(node, socket_name)
@@ -1045,6 +1040,37 @@ def _holdout_weight(translator, holdout):
     return min(max(holdout, 0.0), 1.0) if math.isfinite(holdout) else 0.0
 
 
+def grid_attribute(name, output):
+    """An Attribute node's output for a volume attribute input: 1 where
+    the object has no such attribute (Cycles' primitive_density = 1)."""
+    renderer = backend.engine()
+    call = renderer.NodeCall('ShaderNodeAttribute', {}, {'attribute_name': name, 'attribute_type': 'GEOMETRY',
+                                                         '_missing': 1.0})
+    return renderer.NodeOutput(call, output)
+
+
+DEFAULT_VOLUME = 'default_volume'
+
+
+def default_volume():
+    """Cycles' default volume shader (scene/shader.cpp add_default), which a
+    Volume object without a material renders with: a Principled Volume of
+    Cycles' own defaults (scene/shader_nodes.cpp: Color 0.5, Density 1 times
+    the 'density' grid, the Density Attribute its constructor sets, no
+    Color Attribute, Anisotropy 0, no emission or blackbody), so scattering
+    and absorption are each 0.5 x max(density grid, 0); no surface (a
+    pass-through boundary) and the Shader's default Multiple Importance
+    sampling."""
+    renderer = _scene()
+    density = nodes.at_least(grid_attribute('density', 'Fac'), 0.0)
+    half = _times((0.5, 0.5, 0.5), density)
+    volume = volume_of(VolumeClosure(absorption=half, scattering=half))
+    volume.sampling = 'MULTIPLE_IMPORTANCE'
+    material = renderer.Material(DEFAULT_VOLUME, (renderer.Lobe('transparent', (1.0, 1.0, 1.0)),))
+    material.volume = volume
+    return material
+
+
 def _volume(translator, output):
     """The engine Volume of a Material Output's linked Volume socket (None
     when unlinked)."""
@@ -1154,6 +1180,14 @@ class MaterialTable:
         self.index_of = {}
         self.override = override
         self.slots_cache = {}
+        self.default_volume_index = None
+
+    def default_volume(self):
+        """Index of Cycles' default volume (default_volume()), added once."""
+        if self.default_volume_index is None:
+            self.default_volume_index = len(self.materials)
+            self.materials.append(default_volume())
+        return self.default_volume_index
 
     def index(self, material):
         if material is None:
@@ -1181,7 +1215,12 @@ class MaterialTable:
             slots = [slot.material for slot in obj.material_slots]
             if not slots and obj.data is not None and hasattr(obj.data, 'materials'):
                 slots = list(obj.data.materials)
-            self.slots_cache[key] = [self.index(m) for m in slots]
+            indices = [self.index(m) for m in slots]
+            if getattr(obj, 'type', None) == 'VOLUME':
+                # Cycles (blender/geometry.cpp sync_geometry): a Volume
+                # object's empty slots, or no slots, use the default volume.
+                indices = [m if m >= 0 else self.default_volume() for m in indices] or [self.default_volume()]
+            self.slots_cache[key] = indices
         return self.slots_cache[key]
 
 

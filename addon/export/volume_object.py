@@ -97,6 +97,14 @@ def _load(name, path):
     return module
 
 
+def _blender_version():
+    try:
+        import bpy
+        return tuple(bpy.app.version)
+    except ImportError:
+        return NORMALISED_GENERATED
+
+
 def value_offset():
     """Where a voxel's value sits in index space: 0 (its lower corner,
     Blender 5.0+) or 0.5 (its centre, Blender before 5.0)."""
@@ -110,12 +118,14 @@ def value_offset():
 class VolumeGrids:
     """The grids of one evaluated Volume: ``arrays`` {name: (Z, Y, X[, C])},
     ``placements`` {name: object-to-unit 4x4}, ``bounds`` (lo, hi) in object
-    space (None: nothing to render), ``warnings``."""
+    space (None: nothing to render), ``generated`` (lo, hi): the box its
+    Generated coordinates run 0..1 over, ``warnings``."""
 
     def __init__(self, name):
         self.name = name
         self.arrays, self.placements = {}, {}
         self.bounds = None
+        self.generated = None
         self.warnings = []
 
     def add(self, key, array, placement):
@@ -149,7 +159,42 @@ def read_volume(obj, wanted=None):
     if out.bounds is None and not out.warnings:
         out.warnings.append(f"Volume object '{obj.name}' not rendered: it has no active voxels in a float or "
                             "vector grid")
+    if out.bounds is not None:
+        out.generated = generated_bounds(obj, out.bounds)
     return out
+
+
+# The first Blender whose Cycles normalises a Volume object's Generated
+# coordinates to its bounds (measured: 4.2, 4.5, 5.0 and 5.1 do not).
+NORMALISED_GENERATED = (5, 2, 0)
+
+
+def generated_bounds(obj, fallback, version=None):
+    """(lo, hi) in object space that a Volume object's Generated coordinates
+    map to 0..1 in the Cycles of Blender ``version`` (None: the running one).
+
+    Before 5.2 Cycles gives a Volume object no generated transform
+    (kernel/geom/volume.h volume_normalized_position then returns the
+    object-space point): the unit box, Generated = Object coordinates.
+    From 5.2 (blender/volume.cpp sync_volume_object) it is made from
+    BKE_volume_min_max: every grid's leaf-node box (8^3-voxel blocks, not
+    the active voxels) grown by half a voxel, in object space, which is the
+    evaluated object's bound_box; ``fallback`` (the grids' padded box) where
+    that is not finite or is flat."""
+    if version is None:
+        version = _blender_version()
+    if tuple(version) < NORMALISED_GENERATED:
+        return np.zeros(3), np.ones(3)
+    try:
+        corners = np.array([tuple(c) for c in obj.bound_box], np.float64)
+    except (AttributeError, TypeError, ValueError):
+        return fallback
+    if corners.shape != (8, 3) or not np.isfinite(corners).all():
+        return fallback
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    if not (hi > lo).all():
+        return fallback
+    return lo, hi
 
 
 def _file_grids(module, obj, out):
@@ -333,13 +378,18 @@ def density_factor(obj, matrix):
     return 1.0 / length if np.isfinite(length) and length > 1e-30 else 1.0
 
 
-def box_mesh(lo, hi, name):
-    """The 12 outward-facing triangles of the box lo..hi (object space)."""
+def box_mesh(lo, hi, name, generated=None):
+    """The 12 outward-facing triangles of the box lo..hi (object space),
+    whose texture space maps ``generated`` (lo, hi; None: the box itself)
+    to Generated 0..1 (engine/nodes/context.py texture_space)."""
     from .. import backend
+    g_lo, g_hi = (np.asarray(v, np.float64) for v in (generated if generated is not None else (lo, hi)))
+    texspace = (0.5 * (g_lo + g_hi), 0.5 * (g_hi - g_lo))
     x = np.array([[lo[0], hi[0]][i & 1] for i in range(8)])
     y = np.array([[lo[1], hi[1]][(i >> 1) & 1] for i in range(8)])
     z = np.array([[lo[2], hi[2]][(i >> 2) & 1] for i in range(8)])
     positions = np.stack([x, y, z], axis=1).astype(np.float32)
     quads = ((0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5))
     tris = [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]
-    return backend.engine().Mesh(positions=positions, triangles=np.array(tris, np.int32), name=name)
+    return backend.engine().Mesh(positions=positions, triangles=np.array(tris, np.int32), name=name,
+                                 texspace=texspace)

@@ -650,8 +650,8 @@ def test_every_ember_panel_draws(factory_scene):
 
 
 def test_volume_object_is_named_in_a_warning(factory_scene):
-    """A Volume object Ember cannot render (here: no file, no grids, no
-    material; in bpy 4.2: no openvdb module) is named in a warning
+    """A Volume object Ember cannot render (here: no file, no grids; in
+    bpy 4.2: no openvdb module) is named in a warning
     (tests/addon/test_volume_object_parity.py renders real ones)."""
     obj = bpy.data.objects.new("CloudVDB", bpy.data.volumes.new("CloudVDB"))
     factory_scene.collection.objects.link(obj)

@@ -6,7 +6,10 @@ Ember against live Cycles (null scattering) by the image and region totals
 and block by block (ember_testlib.ReferenceCheck, power printed).  The
 density rising along x makes a mirrored axis, a wrong rotation or a shifted
 grid show in the blocks; the scale checks Cycles' object-space density
-(Volume > Render > Space 'Object': 1 / |M (1, 1, 1) / sqrt 3|).
+(Volume > Render > Space 'Object': 1 / |M (1, 1, 1) / sqrt 3|).  Cycles'
+defaults too: a Volume object without a material renders with its default
+volume, and Generated coordinates are the object-space point (bpy 5.0;
+from 5.2 normalised to the grids' leaf-node box).
 
 Hostile Volume objects render finite pixels and name the object: NaN / inf
 voxels, an empty grid, a missing file, a grid whose active box is 10^6
@@ -43,15 +46,43 @@ def test_vdb_volume_object_matches_cycles(sampling, tmp_path, tapped_engine):
     _openvdb()
     scene = empty_factory_scene()
     bounces = scenes.scene_vdb_smoke(scene, str(tmp_path), sampling)
+    _assert_matches_live_cycles(f'vdb_volume_object_{sampling.lower()}', scene, bounces, tmp_path, tapped_engine)
+
+
+def test_vdb_without_material_renders_the_default_volume(tmp_path, tapped_engine):
+    """A Volume object with no material renders as Cycles' default volume
+    (scene/shader.cpp add_default: a Principled Volume of Cycles' defaults,
+    Density 1 x the 'density' grid; Multiple Importance sampling), not as
+    nothing (Ember before: the ball missing, a warning)."""
+    _openvdb()
+    scene = empty_factory_scene()
+    bounces = scenes.scene_vdb_default(scene, str(tmp_path))
+    _assert_matches_live_cycles('vdb_default_volume', scene, bounces, tmp_path, tapped_engine)
+
+
+def test_vdb_generated_coordinates_match_cycles(tmp_path, tapped_engine):
+    """Generated coordinates inside a Volume object as this Blender's Cycles
+    gives them (volume_object.generated_bounds: bpy 5.0, the object-space
+    point; 5.2+, normalised to the grids' leaf-node box), not normalised to
+    the active voxels' box (Ember before): a density of 12 gx gy on a ball
+    off-centre in its leaf nodes (volume_object_scenes.GENERATED_OFFSET)."""
+    _openvdb()
+    scene = empty_factory_scene()
+    bounces = scenes.scene_vdb_generated(scene, str(tmp_path))
+    _assert_matches_live_cycles('vdb_generated', scene, bounces, tmp_path, tapped_engine)
+
+
+def _assert_matches_live_cycles(name, scene, bounces, tmp_path, taps):
+    """Ember against Cycles rendered now, image, regions and blocks (no
+    warning about the Volume or a material)."""
     small_resolution(scene, WIDTH, HEIGHT)
-    ref, ref_var, header = live_cycles_reference(scene, tmp_path, 'vdb', CYCLES_SEEDS, CYCLES_SPP, bounces)
+    ref, ref_var, header = live_cycles_reference(scene, tmp_path, name, CYCLES_SEEDS, CYCLES_SPP, bounces)
     scene.render.engine = 'EMBER'
-    image, var = render_for_reference(scene, tmp_path, 'vdb', tapped_engine, EMBER_SPP, 1, bounces)
+    image, var = render_for_reference(scene, tmp_path, name, taps, EMBER_SPP, 1, bounces)
     from addon import engine as ember_engine
     warnings = ember_engine.RENDER_LOG[-1].get('warnings', ())
     assert not [w for w in warnings if 'Volume' in w or 'aterial' in w], warnings
-    check = ReferenceCheck(f'vdb_volume_object_{sampling.lower()}', image[..., :3].astype(np.float64), var, EMBER_SPP, ref, ref_var,
-                           header, BLOCK)
+    check = ReferenceCheck(name, image[..., :3].astype(np.float64), var, EMBER_SPP, ref, ref_var, header, BLOCK)
     check.assert_agrees(*POWER)
 
 
@@ -78,7 +109,7 @@ def _hostile_scene(tmp_path, grids, name):
     return scene
 
 
-@pytest.mark.parametrize("case", ["nan_inf", "empty", "missing", "wide", "no_material"])
+@pytest.mark.parametrize("case", ["nan_inf", "empty", "missing", "wide"])
 def test_hostile_volume_objects_are_finite_and_named(case, tmp_path, needs_engine):
     _openvdb()
     ball = scenes.sphere_density()
@@ -90,13 +121,9 @@ def test_hostile_volume_objects_are_finite_and_named(case, tmp_path, needs_engin
         grids, words = {"density": np.zeros((4, 4, 4), np.float32)}, ("no active voxels",)
     elif case == "missing":
         grids, words = None, ("not rendered",)
-    elif case == "wide":
-        grids, words = None, ("averaged over blocks",)
     else:
-        grids, words = {"density": ball}, ("no material",)
+        grids, words = None, ("averaged over blocks",)
     scene = _hostile_scene(tmp_path, grids, case)
-    if case == "no_material":
-        bpy.data.objects[case].data.materials.clear()
     if case == "wide":
         _write_wide(str(tmp_path / "wide.vdb"))
     warnings = _render_warnings(scene, tmp_path, case)
@@ -136,6 +163,60 @@ def test_wide_grid_reads_in_bounded_memory(tmp_path, registered_addon):
     assert any("averaged over blocks" in w for w in read.warnings), read.warnings
     total = float(grid.astype(np.float64).sum())
     assert total * step ** 3 == pytest.approx(2 * 512 * 2.0, rel=0.05), (total, step)
+
+
+def test_empty_slots_use_the_default_volume(empty_scene, tmp_path):
+    """A Volume object without materials, or with an empty slot, gets
+    Cycles' default volume in each slot (one material for the scene); a
+    mesh's empty slot stays the default surface (-1)."""
+    _openvdb()
+    from addon.export.material import DEFAULT_VOLUME, MaterialTable
+    path = scenes.write_vdb(str(tmp_path / "bare.vdb"), {"density": scenes.sphere_density()})
+    bare = scenes.volume_object(path, name="bare")
+    slotted = scenes.volume_object(path, name="slotted")
+    slotted.data.materials.append(None)
+    slotted.data.materials.append(scenes.smoke_material())
+    bpy.ops.mesh.primitive_cube_add()
+    cube = bpy.context.active_object
+    cube.data.materials.append(None)
+    table = MaterialTable()
+    default = table.slots(bare)
+    assert len(default) == 1 and table.materials[default[0]].name == DEFAULT_VOLUME
+    assert table.slots(slotted)[0] == default[0] and table.slots(slotted)[1] not in (default[0], -1)
+    assert table.slots(cube) == [-1]
+    volume = table.materials[default[0]].volume
+    assert volume.sampling == 'MULTIPLE_IMPORTANCE' and volume.anisotropy == 0.0
+
+
+def test_generated_box_follows_the_blender_version(tmp_path, registered_addon):
+    """The box a Volume object's Generated coordinates run 0..1 over
+    (read_volume's ``generated``): before Blender 5.2 the unit box (Generated
+    is the object-space point: measured in the Cycles of 4.2, 4.5, 5.0 and
+    5.1); from 5.2 its bound_box, each grid's leaf-node box
+    (evalLeafBoundingBox) grown by half a voxel in object space
+    (BKE_volume_min_max), which for scene_vdb_generated's ball is
+    24 x 24 x 16 voxels where its active voxels' box is 14^3."""
+    _openvdb()
+    from addon.export import volume_object
+    n, offset = scenes.GENERATED_N, np.array(scenes.GENERATED_OFFSET)
+    origin = tuple(float(v) for v in -0.5 - offset / n)
+    path = scenes.write_vdb(str(tmp_path / "offset.vdb"), {"density": scenes.sphere_density(n)}, voxel=1.0 / n,
+                            origin=origin, ijk=scenes.GENERATED_OFFSET)
+    obj = scenes.volume_object(path, name="offset")
+    evaluated = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    read = volume_object.read_volume(evaluated)
+    grid = volume_object.openvdb_module().readAll(path)[0][0]
+    lo, hi = (np.array(c, np.float64) for c in grid.evalLeafBoundingBox())
+    leaf_box = (np.array(origin) + (lo - 0.5) / n, np.array(origin) + (hi + 0.5) / n)
+    later = volume_object.generated_bounds(evaluated, read.bounds, volume_object.NORMALISED_GENERATED)
+    assert np.allclose(np.array(later), np.array(leaf_box), atol=1e-6), (later, leaf_box)
+    unit = volume_object.generated_bounds(evaluated, read.bounds, (5, 1, 0))
+    assert np.allclose(np.array(unit), [[0, 0, 0], [1, 1, 1]]), unit
+    now = leaf_box if bpy.app.version >= volume_object.NORMALISED_GENERATED else unit
+    assert np.allclose(np.array(read.generated), np.array(now), atol=1e-6), (read.generated, now)
+    assert tuple(hi - lo + 1) == (24, 24, 16), (lo, hi)
+    first, last = (np.array(c) for c in grid.evalActiveVoxelBoundingBox())
+    assert tuple(last - first + 1) == (14, 14, 14), (first, last)
 
 
 def test_geometry_nodes_volume_cube_is_read(empty_scene):
