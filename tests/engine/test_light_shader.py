@@ -392,3 +392,21 @@ def test_light_path_depths_on_lights(output):
         hit = emitter >= 0
         assert hit.sum() > n // 2
         np.testing.assert_allclose(le[hit, 0] / le_plain[hit, 0], want[hit], rtol=1e-9)
+
+
+def test_sun_tree_rows_follow_ray_visibility():
+    """A sun with a tree, unseen by glossy rays: sun_hits keeps the tree's
+    radiance of the rows that still see it (a Light Path tree tracks the
+    ray kinds, so the mask and the per-row radiance must stay aligned)."""
+    from engine.geometry import VIS_DIFFUSE, VIS_GLOSSY
+    from engine.scene import SunLight
+    sun = SunLight((0.0, 0.0, -1.0), (1.0, 1.0, 1.0), 0.3, visible_glossy=False,
+                   shader=shifted(node("ShaderNodeTexCoord", "UV")))
+    scene = Scene(lights=[sun])
+    ls = lights.LightSet(scene, geometry.flatten(scene), bsdf.MaterialTable(geometry.material_table(scene)))
+    n = 256
+    s = ls.sample(np.zeros(n, np.int64), np.zeros((n, 3)), *np.random.default_rng(7).random((3, n)))
+    ray = np.where(np.arange(n) % 2 == 0, VIS_DIFFUSE, VIS_GLOSSY).astype(np.uint8)
+    ((mask, _, seen, _),) = ls.sun_hits(s.wi, ray)
+    assert mask.sum() == n // 2 and not mask[1::2].any()
+    np.testing.assert_allclose(seen, s.Le[mask], rtol=1e-9)
