@@ -9,6 +9,9 @@ diffuse floor and cube before a mirror wall at 3 bounces, with
   bounce b with Ray Depth b + 1, so the light reaching the camera's first
   hits directly is 1x and the light they get through one diffuse bounce
   10x;
+* a second point light of no size at 1 + 9 (Diffuse Depth == 1): the
+  per-kind depths are the path's counts, with no + 1 (the first hits' light
+  samples read 0, 1x; after one diffuse bounce 1, 10x);
 * a sphere light seen by the camera and by glossy rays only (no diffuse
   visibility: no light sample takes it) whose Strength is
   1 + 9 (Ray Depth == 1): a camera ray that hits it reads 1 (10x), the
@@ -63,6 +66,11 @@ def _bounced_tenfold(tree, path):
     return _math(tree, 'MULTIPLY_ADD', _math(tree, 'COMPARE', path.outputs['Ray Depth'], 2.0, 0.5), 9.0, 1.0)
 
 
+def _diffuse_bounced_tenfold(tree, path):
+    """1 + 9 (Diffuse Depth == 1)."""
+    return _math(tree, 'MULTIPLY_ADD', _math(tree, 'COMPARE', path.outputs['Diffuse Depth'], 1.0, 0.5), 9.0, 1.0)
+
+
 def _direct_tenfold(tree, path):
     """1 + 9 (Ray Depth == 1)."""
     return _math(tree, 'MULTIPLY_ADD', _math(tree, 'COMPARE', path.outputs['Ray Depth'], 1.0, 0.5), 9.0, 1.0)
@@ -81,12 +89,14 @@ def light_tree_path(scene, with_trees=True):
     box("mirror", material("mirror", 'glossy', color=(0.9, 0.9, 0.9), roughness=0.0), (0.0, 1.3, 0.9),
         (4.0, 0.1, 1.8))
     point = light('POINT', (-0.3, -0.9, 1.1), 40.0, shadow_soft_size=0.0)
+    diffuse = light('POINT', (1.3, 0.4, 1.2), 30.0, shadow_soft_size=0.0)
     sphere = light('POINT', (0.8, -0.3, 0.45), 20.0, shadow_soft_size=0.3, use_soft_falloff=False)
     sphere.visible_camera = True
     sphere.visible_diffuse = False
     area = light('AREA', (0.9, 0.6, 1.5), 30.0, rotation=(0.4, 0.0, 0.0), size=0.8)
     if with_trees:
         _strength_from(point, _bounced_tenfold)
+        _strength_from(diffuse, _diffuse_bounced_tenfold)
         _strength_from(sphere, _direct_tenfold)
         _strength_from(area, _ray_kinds)
     cam = scene.camera
