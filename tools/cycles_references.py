@@ -43,6 +43,7 @@ for _scene in ('rect_close', 'light_over_lit_world', 'big_triangle', 'spot_blend
                'glossy_invisible_light', 'diffuse_camera_invisible'):
     REFERENCES['light_' + _scene] = ('test_light_parity', _scene, 2048)
 REFERENCES['light_falloff'] = ('test_light_falloff_parity', 'falloff', 2048)
+REFERENCES['light_tree_path'] = ('test_light_tree_path_parity', 'light_tree_path', 4096)
 REFERENCES['light_textures'] = ('test_light_texture_parity', 'light_textures', 1024)
 REFERENCES['light_inputs'] = ('test_light_texture_parity', 'light_inputs', 1024)
 for _scene in ('point_light', 'area_light'):

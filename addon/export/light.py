@@ -244,12 +244,14 @@ def _with_node_tree(light, data, matrix=None, info=None):
         return light, f"light nodes ({name} at the output) are ignored"
     color = reader.input(source, 'Color')
     strength, falloff, notes = _strength_and_falloff(reader, source, light)
+    # As in materials: a node Ember cannot translate gives its input's
+    # default value, named once; the rest of the tree still applies.
     if reader.unsupported:
-        return light, "light nodes " + ", ".join(reader.unsupported) + " are ignored"
+        notes.append("texture node " + ", ".join(reader.unsupported) + " not translated")
+    notes += reader.warnings
     expr = nodes.scale(nodes._as_color(color), strength)
     _give_object_info(expr, info)
     factor, varies = _constant_rgb(nodes._as_color(color), strength)
-    # Outputs the export's probe points cannot vary (no camera, no distance).
     varies = varies or any(key in _PER_LIGHT_POINT for key in _expr_nodes(expr))
     light = dataclasses.replace(light, **falloff)
     names = {f.name for f in dataclasses.fields(light)}
@@ -272,20 +274,20 @@ def _with_node_tree(light, data, matrix=None, info=None):
 # Nodes whose light-shader values Ember does not give as Cycles does
 # (rendered with the value named).  Outputs not listed read the light point
 # as Cycles' lamp shader: Camera and Window of the point, the light object's
-# Object Info, Light Path's ray kinds (0: PATH_RAY_EMISSION) and Ray Length.
+# Object Info, Light Path's ray kinds (0: PATH_RAY_EMISSION), Ray Length and
+# depths (the path reaching the light: engine/lights/shader.emission_path).
+# Nodes the engine has no kernel for (Wireframe) are the reader's
+# unsupported nodes, named as in materials.
 _OFF_ON_LIGHTS = {
-    'ShaderNodeWireframe': "the Wireframe node reads no mesh on lights",
     'ShaderNodeParticleInfo': "the Particle Info node reads no particle on lights",
 }
-# Cycles reads the shading path's bounce counts there (Ray Depth: + 1 for a
-# light sample, + 2 for a BSDF ray that hits the light): Ember gives 0.
-_OFF_OUTPUTS = {('ShaderNodeLightPath', name): f"Light Path's {name} reads 0 on lights"
-                for name in ('Ray Depth', 'Diffuse Depth', 'Glossy Depth', 'Transmission Depth',
-                             'Transparent Depth')}
 
-
+# Outputs the export's probe points cannot vary (no camera, no distance, no
+# path): a tree reading one is evaluated per light point.
 _PER_LIGHT_POINT = {('ShaderNodeTexCoord', 'Camera'), ('ShaderNodeTexCoord', 'Window'),
-                    ('ShaderNodeLightPath', 'Ray Length')}
+                    ('ShaderNodeLightPath', 'Ray Length')} | {
+    ('ShaderNodeLightPath', name) for name in ('Ray Depth', 'Diffuse Depth', 'Glossy Depth',
+                                               'Transmission Depth', 'Transparent Depth')}
 
 
 def object_info_of(obj, inst=None):
@@ -336,7 +338,7 @@ def _unsupported_on_lights(expr):
     differently from Cycles on a light point."""
     notes = []
     for idname, output in _expr_nodes(expr):
-        note = _OFF_ON_LIGHTS.get(idname) or _OFF_OUTPUTS.get((idname, output))
+        note = _OFF_ON_LIGHTS.get(idname)
         if note and note not in notes:
             notes.append(note)
     return notes
@@ -391,7 +393,10 @@ def _constant_rgb(color, strength):
     n = 64
     d = rng.normal(size=(n, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    ctx = renderer.ShadingContext(n, p=rng.uniform(-1.0, 1.0, (n, 3)), ng=d, ns=d, wo=d, uv=rng.random((n, 2)))
+    # No ray kind: Cycles evaluates lights with PATH_RAY_EMISSION, where Is
+    # Camera Ray and the other kinds read 0 (as engine/lights/shader.py).
+    ctx = renderer.ShadingContext(n, p=rng.uniform(-1.0, 1.0, (n, 3)), ng=d, ns=d, wo=d, uv=rng.random((n, 2)),
+                                  ray=np.zeros(n, np.uint8))
     values = renderer.TextureCompiler().color(expr)(ctx)
     mean = values.mean(axis=0)
     varies = bool(np.abs(values - mean).max() > 1e-6 * max(1.0, float(np.abs(mean).max())))

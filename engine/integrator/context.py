@@ -56,8 +56,9 @@ class Context:
     # count their bounces by kind only when some limit is below max_bounces.
     count_kinds: bool
     kind_limits: np.ndarray
-    # Some material reads a Light Path node: paths track their ray kind and
-    # count their bounces by kind, and hits carry the node's path columns.
+    # Some material or light reads a Light Path node: paths track their ray
+    # kind and count their bounces by kind, and hits carry the node's path
+    # columns.
     light_path: bool
     # Extra passes: their PassConfig, the light group of each emitter (None
     # without light groups) and the centre-ray record.
@@ -104,7 +105,8 @@ class Context:
         # Elliptical Huang hair is transparent outside its projected width (Cycles).
         transparent_mat = np.any((materials.kind == bsdf.TRANSPARENT)
                                  | ((materials.kind == HAIR_HUANG) & (materials.aspect_ratio != 1.0)), axis=1)
-        light_path = bool(getattr(materials.textures, "light_path", False))
+        # A light's node tree may read it too (LightSet.light_path).
+        light_path = bool(getattr(materials.textures, "light_path", False) or getattr(lights, "light_path", False))
         return cls(accel, triangles, materials, lights, camera, world, settings, sampler, bump_model,
                    kernels.enabled(), _delta_emitters(lights), np.arange(lights.count),
                    **_visibility(lights, triangles, light_path),

@@ -19,6 +19,7 @@ from ..lobes.hair_huang import HAIR_HUANG
 from ..points import curve_hits, curve_key_mix, curve_tangents, curve_rows, sphere_hits
 from ..nodes import NodeRays, ShadingContext
 from ..nodes.context import PATH_COLUMNS
+from ..lights.shader import emission_path, path_rows
 from ..sampler import BSDF, LIGHT, candidate_set, emitter_set, vertex_set
 from ..sampling import power_heuristic
 from ..vec import dot, frame, row_any_positive, row_max, to_local
@@ -60,13 +61,14 @@ def _lights_along(ctx, paths, tmax):
         o = paths.mis_o
         tmax = tmax + dot(paths.o - o, paths.d)
     camera = paths.bounce == 0
+    path = light_hit_path(ctx, paths)
     if camera.all() or not camera.any():
-        return ctx.lights.intersect(o, paths.d, tmax, camera=bool(camera.all()), ray=ray)
+        return ctx.lights.intersect(o, paths.d, tmax, camera=bool(camera.all()), ray=ray, path=path)
     n = len(o)
     out = (np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros((n, 3)), np.zeros(n))
     for rows in (np.nonzero(camera)[0], np.nonzero(~camera)[0]):
         res = ctx.lights.intersect(o[rows], paths.d[rows], tmax[rows], camera=bool(camera[rows[0]]),
-                                   ray=None if ray is None else ray[rows])
+                                   ray=None if ray is None else ray[rows], path=path_rows(path, rows))
         for a, r in zip(out, res):
             a[rows] = r
     return out
@@ -166,7 +168,8 @@ def escaped(ctx, paths, i, tile, obs):
             paths.L[sky] += paths.beta[sky] * ctx.world
         if obs.active:
             obs.emitter(paths, sky, paths.beta[sky] * ctx.world, np.ones(len(sky)), world=True, bsdf_only=True)
-    for mask, emitter, Le, pdf in ctx.lights.sun_hits(paths.d[i], paths.ray[i] if ctx.track_rays else None):
+    path = path_rows(light_hit_path(ctx, paths), i)
+    for mask, emitter, Le, pdf in ctx.lights.sun_hits(paths.d[i], paths.ray[i] if ctx.track_rays else None, path):
         j = i[mask]
         if len(j):
             w = linking_hits(ctx, paths, j, emitter, mis_hit(ctx, paths, j, np.full(len(j), emitter),
@@ -287,14 +290,33 @@ def path_columns(paths, p):
 
 def light_sample_path(ctx, paths, hit):
     """What a Light Path node in a light sample's emission reads (None when
-    no material has one): as Cycles' light_path.h for PATH_RAY_EMISSION, the
-    depth one bounce further than the vertex, its bounces by kind and
-    transparent passes, not singular; the ray length is the sample's."""
+    no material or light has one): as Cycles' light_path.h for
+    PATH_RAY_EMISSION, the depth one bounce further than the vertex, its
+    bounces by kind and transparent passes, not singular; the ray length is
+    the sample's."""
+    return points_path(ctx, paths, hit.p)
+
+
+def points_path(ctx, paths, p):
+    """``light_sample_path`` of light samples taken at points p (a hit's,
+    or scattering points in a volume: Cycles' volume direct light reads the
+    path's bounce there + 1 too)."""
     if not ctx.light_path:
         return None
-    columns = path_columns(paths, hit.p)
+    columns = path_columns(paths, p)
     columns[:, PATH_COLUMNS.index("Is Singular Ray")] = 0.0
-    return paths.bounce + 1, columns
+    return emission_path(paths.bounce, columns)
+
+
+def light_hit_path(ctx, paths):
+    """What a Light Path node in the tree of a light that the rays hit
+    reads (None when no light has one): Cycles' shade_light evaluates it as
+    a light sample's, from the path's state after the bounce that cast the
+    ray, so Ray Depth is the rays' bounce + 1 (a BSDF ray from vertex b:
+    b + 2; a camera ray: 1) and the per-kind depths count that bounce."""
+    if not (ctx.light_path and getattr(ctx.lights, "light_path", False)):
+        return None
+    return emission_path(paths.bounce, path_columns(paths, paths.o))
 
 
 def _hit_uv(tr, prim, bu, bv):

@@ -28,7 +28,7 @@ from ..sampling import power_heuristic
 from ..vec import dot, row_any_positive
 from . import transparency, visibility
 from .records import RowView
-from .stages import finish, nee_rounds
+from .stages import finish, nee_rounds, points_path
 from .visibility import VIS_INDIRECT
 
 
@@ -101,7 +101,9 @@ def _direct_setup(ctx, on, ss, t_end, may, u_distance, depth):
     o = on.o[cand]
     ul = ctx.sampler.get(on.pseed[cand], on.sample[cand], vertex_set(depth, LIGHT))
     e, p_sel = ctx.lights.select(ul[:, 0], o, np.zeros_like(o))
-    ls = ctx.lights.sample(e, o, ul[:, 1], ul[:, 2], ul[:, 3], time=_time(on, cand))
+    path = points_path(ctx, on, on.o)
+    ls = ctx.lights.sample(e, o, ul[:, 1], ul[:, 2], ul[:, 3], time=_time(on, cand),
+                           path=None if path is None else (path[0][cand], path[1][cand]))
     ok = (ls.pdf > 0) & (p_sel > 0)
     cand, method, e, p_sel = cand[ok], method[ok], e[ok], p_sel[ok]
     finite = np.isfinite(ls.dist[ok])
@@ -364,7 +366,7 @@ def _light_sample(ctx, paths, p, phase, e, p_sel, u, p_mis=None, obs=NO_PASSES):
     """One light sample per scattering point, MIS-weighted against phase
     sampling (power heuristic; with the selection probability ``p_mis``
     where given, else p_sel), its shadow ray attenuated by the media."""
-    ls = ctx.lights.sample(e, p, u[:, 0], u[:, 1], u[:, 2], time=path_time(paths))
+    ls = ctx.lights.sample(e, p, u[:, 0], u[:, 1], u[:, 2], time=path_time(paths), path=points_path(ctx, paths, p))
     f = media.phase_eval(dot(paths.d, ls.wi), phase)
     p_light = p_sel * ls.pdf
     if ctx.settings.strategy == "mis":

@@ -13,7 +13,7 @@ from ..scene import AREA_SHAPES, AreaLight, Scene, SceneError
 from . import common
 from .common import Falloff, check_falloff, check_rgb, check_size, selection_power, uniform_index, unit
 from .registry import RAY, LightDef, LightExample, LightTable, register
-from .shader import LightShaders, checker_of, spread_directions
+from .shader import LightShaders, checker_of, path_rows, spread_directions
 
 AREA = 2
 
@@ -114,7 +114,7 @@ class AreaLights(LightTable):
             boxes.append(box_corners(c, np.array([ax * (half_x + pad), ay * (half_y + pad), n * pad])))
         return boxes
 
-    def nearest(self, o, d, t, ray, bits, camera):
+    def nearest(self, o, d, t, ray, bits, camera, path=None):
         """As PointLights.nearest, one light at a time."""
         n = len(o)
         hit_t = np.full(n, np.inf)
@@ -127,7 +127,7 @@ class AreaLights(LightTable):
             sees = True if ray is None else (ray & bits[j]) != 0
             if not np.any(sees):
                 continue
-            th, le, pw = self.intersect(j, o, d)
+            th, le, pw = self.intersect(j, o, d, path)
             closer = (th < t) & sees
             if closer.any():
                 t[closer] = th[closer]
@@ -153,17 +153,17 @@ class AreaLights(LightTable):
         wi = np.stack([wx, wy, wz], axis=1)
         Le = self.L[j]
         if self.shaders is not None:
-            Le = Le * self._shader(j, p + wi * t[:, None], -wi, t)
+            Le = Le * self._shader(j, p + wi * t[:, None], -wi, t, path_rows(out.path, idx))
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, Le
         out.pdf[idx] = pdf
 
-    def _shader(self, j, q, wo, dist=None):
+    def _shader(self, j, q, wo, dist=None, path=None):
         """The lights' node trees at points q (Incoming wo): UV = Parametric =
         the point in the light's axes shifted to [0, 1] (Cycles' area.h u, v)."""
         rel = q - self.c[j]
         uv = np.stack([dot_rows(rel, self.du[j]) + 0.5, dot_rows(rel, self.dv[j]) + 0.5], axis=1)
         n = np.broadcast_to(self.n[j], q.shape)
-        return self.shaders.factor(j, q, n, wo, uv, dist)
+        return self.shaders.factor(j, q, n, wo, uv, dist, path)
 
     def _solid_angle_pdf(self, j, o):
         """Which rays from o NEE samples by solid angle, and that pdf."""
@@ -172,7 +172,7 @@ class AreaLights(LightTable):
         use = (s >= common.MIN_SPHERICAL) & (min_nz2 < 1.0 - 1e-8)
         return use, 1.0 / np.maximum(s, 1e-300)
 
-    def intersect(self, j, o, d):
+    def intersect(self, j, o, d, path=None):
         n = len(o)
         t = np.full(n, np.inf)
         pdf = np.zeros(n)
@@ -194,7 +194,7 @@ class AreaLights(LightTable):
         Le = np.tile(self.L[j], (n, 1))
         if self.shaders is not None and ok.any():
             rows = np.flatnonzero(ok)
-            Le[rows] *= self._shader(j, o[rows] + d[rows] * th[rows, None], -d[rows], th[rows])
+            Le[rows] *= self._shader(j, o[rows] + d[rows] * th[rows, None], -d[rows], th[rows], path_rows(path, rows))
         if self.rect[j] and ok.any():
             # The pdf NEE has for this point: the same choice of strategy.
             sph, solid_angle_pdf = self._solid_angle_pdf(j, o[ok])

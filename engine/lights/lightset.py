@@ -19,6 +19,7 @@ from ..lighttree import LightTree
 from ..sampling import Distribution1D
 from ..vec import count, subset
 from .common import LightSample, normals
+from .shader import path_rows
 from .registry import ESCAPE, RAY, SURFACE, WORLD, BuildInputs, lights_of, ordered
 
 # Light selection 'auto' picks one light by the light tree, except at
@@ -98,6 +99,10 @@ class LightSet:
         self._world = self._only(WORLD)
         self.mesh_emitter = self._surface.base + self._surface.table.group_of_material
         self.mesh_emitter[self._surface.table.group_of_material < 0] = -1
+        # Some light's node tree reads a Light Path node (its depths): the
+        # integrator then hands the paths to sample, intersect and sun_hits.
+        self.light_path = any(getattr(getattr(g.table, "shaders", None), "light_path", False)
+                              for g in self.groups)
 
     def __getattr__(self, name):
         """A type's table by its registry ``attr`` (points, suns, areas, env,
@@ -192,29 +197,32 @@ class LightSet:
         return out
 
     # -- what BSDF rays see -------------------------------------------------
-    def intersect(self, o, d, tmax, camera=False, ray=None):
+    def intersect(self, o, d, tmax, camera=False, ray=None, path=None):
         """Closest light a ray can hit (the types with hit RAY: point, spot,
         area) before tmax.
 
         camera: the rays are camera rays, which see only lights with
         ``visible_camera``; ray: per-ray VIS_* bits (camera, diffuse, glossy,
-        transmission), when set, see only lights with a common bit.  Returns
+        transmission), when set, see only lights with a common bit; path:
+        what the lights' node trees read of the rays' paths
+        (shader.emission_path), None where none reads it.  Returns
         t (inf = none), emitter index, Le and the solid-angle pdf of sampling
         that point from o.  With several lights only the rays their proxies
         (engine/lightproxy.py) say may meet one are tested exactly."""
         n = len(o)
         if self.proxies is None:
-            return self._intersect_exact(o, d, tmax, camera, ray)
+            return self._intersect_exact(o, d, tmax, camera, ray, path)
         rows = np.flatnonzero(self.proxies.candidates(o, d, tmax))
         out = (np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros((n, 3)), np.zeros(n))
         if len(rows):
             tm = np.broadcast_to(tmax, (n,))[rows]
-            found = self._intersect_exact(o[rows], d[rows], tm, camera, None if ray is None else ray[rows])
+            found = self._intersect_exact(o[rows], d[rows], tm, camera, None if ray is None else ray[rows],
+                                          path_rows(path, rows))
             for whole, part in zip(out, found):
                 whole[rows] = part
         return out
 
-    def _intersect_exact(self, o, d, tmax, camera, ray):
+    def _intersect_exact(self, o, d, tmax, camera, ray, path=None):
         n = len(o)
         t = np.array(tmax, dtype=np.float64, copy=True)
         hit_t = np.full(n, np.inf)
@@ -225,7 +233,7 @@ class LightSet:
             if g.definition.hit != RAY or not g.table.count:
                 continue
             # Each type's nearest only reports hits closer than t, and lowers t.
-            th, index, le, pw = g.table.nearest(o, d, t, ray, self.visibility[g.base:g.stop], camera)
+            th, index, le, pw = g.table.nearest(o, d, t, ray, self.visibility[g.base:g.stop], camera, path)
             rows = np.flatnonzero(index >= 0)
             if len(rows) == 0:
                 continue
@@ -235,19 +243,22 @@ class LightSet:
             Le[rows], pdf[rows] = le[rows], pw[rows]
         return hit_t, emitter, Le, pdf
 
-    def sun_hits(self, d, ray=None):
+    def sun_hits(self, d, ray=None, path=None):
         """Radiance of sun disks along escaping directions, with MIS pdfs;
-        ray: per-ray VIS_* bits, as in ``intersect``.
+        ray: per-ray VIS_* bits, path: the rays' paths, as in ``intersect``.
 
         Returns a list of (mask, emitter, Le, pdf) per sun with angle > 0."""
         hits = []
         for g in self.groups:
             if g.definition.hit != ESCAPE:
                 continue
-            for mask, j, Le, pdf in g.table.escape_hits(d):
+            for mask, j, Le, pdf in g.table.escape_hits(d, path):
                 e = g.base + j
                 if ray is not None:
-                    mask = mask & ((ray & self.visibility[e]) != 0)
+                    seen = (ray & self.visibility[e]) != 0
+                    if np.ndim(Le) == 2:   # a tree's Le per masked row: keep the rows that stay
+                        Le = Le[seen[mask]]
+                    mask = mask & seen
                 hits.append((mask, e, Le, pdf))
         return hits
 

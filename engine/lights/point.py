@@ -16,7 +16,7 @@ from ..vec import column, dot, frame, frame_of, rows3, to_world
 from .common import (Falloff, check_direction, check_falloff, check_rgb, check_size, selection_power,
                      smoothstep, unit)
 from .registry import RAY, LightDef, LightExample, LightTable, register
-from .shader import LightShaders, checker_of, spread_directions
+from .shader import LightShaders, checker_of, path_rows, spread_directions
 
 POINT = 0
 # Half-angle of emission beyond a spot cone: its light ends at the cone edge.
@@ -107,11 +107,11 @@ class PointLights(LightTable):
                       column(u1, n, np.float64), column(u2, n, np.float64), self.pos, self.radius, self.sphere,
                       self.L, self.spot, self.dir, self.cos_half, self.smooth, wi, t, le, pdf, delta)
         if self.shaders is not None:
-            le *= self._shader(np.broadcast_to(j, (n,)), p + wi * t[:, None], -wi, t)
+            le *= self._shader(np.broadcast_to(j, (n,)), p + wi * t[:, None], -wi, t, path_rows(out.path, idx))
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, t, le
         out.pdf[idx], out.delta[idx] = pdf, delta
 
-    def _shader(self, j, q, wo, dist=None):
+    def _shader(self, j, q, wo, dist=None, path=None):
         """The lights' node trees at points q seen along Incoming wo: N is the
         sphere's normal at q, or (soft falloff, delta) Incoming itself, the disk
         facing the shading point; UV = Parametric = map_to_sphere of N in
@@ -121,7 +121,7 @@ class PointLights(LightTable):
         with np.errstate(invalid="ignore", divide="ignore"):
             radial = (q - self.pos[j]) / np.maximum(self.radius[j], 1e-300)[:, None]
         n = np.where(sphere, radial, wo)
-        return self.shaders.factor(j, q, n, wo, self._shader_uv(j, n, wo), dist)
+        return self.shaders.factor(j, q, n, wo, self._shader_uv(j, n, wo), dist, path)
 
     def _shader_uv(self, j, n, wo):
         uv = self.shaders.sphere_uv(j, n)
@@ -141,12 +141,14 @@ class PointLights(LightTable):
             f = np.where(z > 0, self.half_cot[j] / np.where(z > 0, z, 1.0), 0.0)
         return np.stack([x * f + 0.5, y * f + 0.5], axis=1)
 
-    def nearest(self, o, d, t, ray, bits, camera):
+    def nearest(self, o, d, t, ray, bits, camera, path=None):
         """The nearest of these lights each ray meets before t: t (updated
         in place), the hit distance (inf = none), light index (-1), Le and
         pdf.  ray: per-ray VIS_* bits or None (every ray sees every light);
         bits: the lights' VIS_* bits; camera: camera rays, which see only
-        lights with visible_camera.  All lights in one compiled loop."""
+        lights with visible_camera; path: what the node trees read of the
+        rays' paths (shader.emission_path) or None.  All lights in one
+        compiled loop."""
         n = len(o)
         light_bits = bits if ray is not None else np.full(self.count, 0xFF)
         if camera:
@@ -162,7 +164,8 @@ class PointLights(LightTable):
             j = index[rows]
             Le[rows] = self.L[j] * self._spot_factor(j, -d[rows])[:, None]
             if self.shaders is not None:
-                Le[rows] *= self._shader(j, o[rows] + d[rows] * hit_t[rows, None], -d[rows], hit_t[rows])
+                Le[rows] *= self._shader(j, o[rows] + d[rows] * hit_t[rows, None], -d[rows], hit_t[rows],
+                                         path_rows(path, rows))
         return hit_t, index, Le, pdf
 
 

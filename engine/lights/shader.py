@@ -35,20 +35,43 @@ MAX_VALUE = 1e30
 # Cycles' ray length of a sun (ls->t = FLT_MAX), the largest float32.
 FLT_MAX = float(np.finfo(np.float32).max)
 RAY_LENGTH = PATH_COLUMNS.index("Ray Length")
+SINGULAR = PATH_COLUMNS.index("Is Singular Ray")
+
+
+def emission_path(depth, columns):
+    """What a Light Path node in a light's tree reads of the path that
+    reaches the light, as Cycles' svm_node_light_path for PATH_RAY_EMISSION:
+    Ray Depth is the path's bounce count there + 1 (``depth``: for a light
+    sample the vertex's bounce b, reading b + 1; for a ray that hits the
+    light the bounces before the ray, b + 1 after vertex b, reading b + 2),
+    the per-kind depths and Transparent Depth the path's counts unchanged
+    (``columns``: PATH_COLUMNS rows); Ray Length is the light's own."""
+    return np.asarray(depth, np.int64) + 1, columns
+
+
+def path_rows(path, rows):
+    """Rows of a (depth, columns) path, or None."""
+    return None if path is None else (path[0][rows], path[1][rows])
 
 
 class LightContext(ShadingContext):
     """Shading points on lights: coordinates in the light object's space
     (``matrix``, ``inverse`` per point), the light's UV, the distance from
     the shading point (Light Path's Ray Length: Cycles' ls->t, FLT_MAX for
-    suns; the other path columns read 0) and the scene camera (Camera and
-    Window coordinates of the light point, as on surfaces)."""
+    suns), the path that reaches the light (``path``: (depth, PATH_COLUMNS)
+    per point, see ``emission_path``; None: every depth reads 0) and the
+    scene camera (Camera and Window coordinates of the light point, as on
+    surfaces).  No ray kind: Cycles evaluates lights with PATH_RAY_EMISSION,
+    so Is Camera Ray and the other kinds read 0."""
 
-    def __init__(self, p, n, wo, uv, matrix, inverse, dist=None, camera=None):
-        path = np.zeros((len(p), len(PATH_COLUMNS)))
+    def __init__(self, p, n, wo, uv, matrix, inverse, dist=None, camera=None, path=None):
+        depth, columns = (None, np.zeros((len(p), len(PATH_COLUMNS)))) if path is None else path
+        columns = np.array(columns, np.float64)
+        columns[:, SINGULAR] = 0.0   # PATH_RAY_EMISSION: no singular ray either
         if dist is not None:
-            path[:, RAY_LENGTH] = np.minimum(dist, FLT_MAX)
-        super().__init__(len(p), p=p, ng=n, ns=n, wo=wo, ray=np.zeros(len(p), np.uint8), path=path)
+            columns[:, RAY_LENGTH] = np.minimum(dist, FLT_MAX)
+        super().__init__(len(p), p=p, ng=n, ns=n, wo=wo, ray=np.zeros(len(p), np.uint8), path=columns,
+                         depth=None if depth is None else np.asarray(depth, np.int32))
         self.matrix, self.inverse = matrix, inverse
         self._camera = camera
         self._cache[("uv", "")] = uv
@@ -92,6 +115,9 @@ class LightShaders:
         from ..textures import Compiler
         compiler = Compiler()
         self.fns = {j: compiler.color(l.shader) for j, l in enumerate(lights) if l.shader is not None}
+        # A Light Path node reads the path's depths: the integrator then
+        # tracks them (integrator Context.light_path).
+        self.light_path = any(call.idname == "ShaderNodeLightPath" for call, _ in compiler.calls.values())
         self.matrix = np.asarray(matrices, np.float64).reshape(-1, 4, 4)
         self.inverse = np.array([_safe_inverse(m) for m in self.matrix]).reshape(-1, 4, 4)
         self.camera = camera
@@ -103,10 +129,11 @@ class LightShaders:
             return cls(lights, matrices, camera)
         return None
 
-    def factor(self, j, q, n, wo, uv, dist=None):
+    def factor(self, j, q, n, wo, uv, dist=None, path=None):
         """(N, 3) emission of light j (per row, or one int) at points q with
-        light normals n, Incoming wo, UVs uv (N, 2) and distances dist from
-        the shading points (N,) or None (0); 1 for constant lights."""
+        light normals n, Incoming wo, UVs uv (N, 2), distances dist from
+        the shading points (N,) or None (0) and the paths' (depth, columns)
+        there (``emission_path``; None: 0); 1 for constant lights."""
         m = len(q)
         out = np.ones((m, 3))
         j = np.broadcast_to(np.asarray(j, np.int64), (m,))
@@ -115,7 +142,8 @@ class LightShaders:
             if not len(rows):
                 continue
             ctx = LightContext(q[rows], n[rows], wo[rows], uv[rows], self.matrix[j[rows]], self.inverse[j[rows]],
-                               None if dist is None else np.broadcast_to(dist, (m,))[rows], self.camera)
+                               None if dist is None else np.broadcast_to(dist, (m,))[rows], self.camera,
+                               path_rows(path, rows))
             with np.errstate(all="ignore"):
                 value = np.asarray(fn(ctx), np.float64)
             value = np.nan_to_num(value, nan=0.0, posinf=MAX_VALUE, neginf=0.0)

@@ -20,7 +20,7 @@ from ..scene import Scene, SceneError, SunLight
 from ..vec import column, frame, frame_of, to_world
 from .common import check_direction, check_rgb, check_size, selection_power, unit
 from .registry import ESCAPE, LightDef, LightExample, LightTable, register
-from .shader import FLT_MAX, LightShaders, checker_of
+from .shader import FLT_MAX, LightShaders, checker_of, path_rows
 
 SUN = 1
 
@@ -71,10 +71,11 @@ class SunLights(LightTable):
         fac = np.where(np.isfinite(fac), fac, 0.0)
         return np.stack([local[:, 0] * fac + 0.5, local[:, 1] * fac + 0.5], axis=1)
 
-    def _shader(self, j, d):
-        """(N, 3) the suns' node trees along directions d towards them."""
+    def _shader(self, j, d, path=None):
+        """(N, 3) the suns' node trees along directions d towards them
+        (path: shader.emission_path of the rays, or None)."""
         travel = -d
-        return self.shaders.factor(j, travel, travel, travel, self._uv(j, d), np.full(len(d), FLT_MAX))
+        return self.shaders.factor(j, travel, travel, travel, self._uv(j, d), np.full(len(d), FLT_MAX), path)
 
     def is_delta(self):
         return self.delta
@@ -89,14 +90,15 @@ class SunLights(LightTable):
                     -self.dir, self.one_minus_cos, self.delta, wi, pdf)
         Le = self.L[j]
         if self.shaders is not None:
-            Le = Le * self._shader(np.broadcast_to(j, (n,)), wi)
+            Le = Le * self._shader(np.broadcast_to(j, (n,)), wi, path_rows(out.path, idx))
         out.wi[idx], out.dist[idx], out.Le[idx] = wi, np.inf, Le
         out.pdf[idx], out.delta[idx] = pdf, self.delta[j]
 
-    def escape_hits(self, d):
+    def escape_hits(self, d, path=None):
         """(mask, sun, Le, pdf) per sun disk with angle > 0 that rays leaving
         the scene in directions d may see; Le is (3,), or per masked row
-        (mask.sum(), 3) for a sun with a node tree."""
+        (mask.sum(), 3) for a sun with a node tree (path: what the trees
+        read of the rays' paths, shader.emission_path, or None)."""
         hits = []
         for j in range(self.count):
             res = self.hit(j, d)
@@ -105,7 +107,7 @@ class SunLights(LightTable):
             mask, Le, pdf = res
             if self.shaders is not None and j in self.shaders.fns:
                 rows = np.flatnonzero(mask)
-                Le = Le * self._shader(np.full(len(rows), j), d[rows])
+                Le = Le * self._shader(np.full(len(rows), j), d[rows], path_rows(path, rows))
             hits.append((mask, j, Le, pdf))
         return hits
 

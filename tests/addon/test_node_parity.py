@@ -568,3 +568,43 @@ def test_light_node_tree_scales_the_light(registered_addon):
     assert not warnings, warnings
     assert lights[0].shader is not None
     np.testing.assert_allclose(lights[0].power, 100.0 * np.array(data.color), rtol=1e-6)
+
+
+def test_light_tree_path_outputs_and_unsupported_nodes(registered_addon):
+    """In a light's tree, as Cycles evaluates it (PATH_RAY_EMISSION): a
+    Light Path ray kind reads 0 (an 'Is Camera Ray' x 9 + 1 Strength is a
+    plain light), a depth makes the tree the light's per-point shader; a
+    node Ember cannot translate (Wireframe) gives its input's default and is
+    named once, as in materials, while the rest of the tree still applies."""
+    from addon.export.light import collect_lights
+    bpy.ops.wm.read_factory_settings()
+    data = bpy.data.objects['Light'].data
+    data.energy = 100.0
+    data.use_nodes = True
+    tree = data.node_tree
+    emission = next(n for n in tree.nodes if n.type == 'EMISSION')
+    path = tree.nodes.new('ShaderNodeLightPath')
+    gain = tree.nodes.new('ShaderNodeMath')
+    gain.operation = 'MULTIPLY_ADD'
+    gain.inputs[1].default_value = 9.0
+    gain.inputs[2].default_value = 1.0
+    tree.links.new(path.outputs['Is Camera Ray'], gain.inputs[0])
+    tree.links.new(gain.outputs[0], emission.inputs['Strength'])
+    lights, warnings = collect_lights(bpy.context.evaluated_depsgraph_get())
+    assert not warnings, warnings
+    assert lights[0].shader is None
+    np.testing.assert_allclose(lights[0].power, 100.0 * np.array(data.color), rtol=1e-6)
+    tree.links.new(path.outputs['Ray Depth'], gain.inputs[0])
+    lights, warnings = collect_lights(bpy.context.evaluated_depsgraph_get())
+    assert not warnings, warnings
+    assert lights[0].shader is not None
+    wire = tree.nodes.new('ShaderNodeWireframe')
+    mix = tree.nodes.new('ShaderNodeMix')
+    mix.data_type = 'RGBA'
+    mix.inputs['A'].default_value = (1.0, 0.0, 0.0, 1.0)
+    mix.inputs['B'].default_value = (0.0, 0.0, 1.0, 1.0)
+    tree.links.new(wire.outputs['Fac'], mix.inputs['Factor'])
+    tree.links.new(mix.outputs['Result'], emission.inputs['Color'])
+    lights, warnings = collect_lights(bpy.context.evaluated_depsgraph_get())
+    assert len(warnings) == 1 and wire.name in warnings[0] and 'not translated' in warnings[0], warnings
+    assert lights[0].shader is not None   # the Ray Depth Strength still applies

@@ -346,3 +346,67 @@ def test_nan_producing_sun_tree_renders_finite():
                                            shader=shader))
         r = render(scene, RenderSettings(samples=4, samples_per_pass=4, seed=1))
         assert np.isfinite(r.image).all() and np.isfinite(r.variance).all()
+
+
+@pytest.mark.parametrize("output", ["Ray Depth", "Diffuse Depth", "Transparent Depth", "Is Camera Ray"])
+def test_light_path_depths_on_lights(output):
+    """A light tree's Light Path reads the path that reaches the light
+    (shader.emission_path, as Cycles' PATH_RAY_EMISSION): Ray Depth is the
+    bounce handed over + 1, the per-kind and transparent depths are the
+    path's columns, and every ray kind reads 0; light samples, BSDF rays
+    that hit the light and sun hits alike.  2 + the output, so a 0 is seen."""
+    from engine.lights.shader import emission_path
+    from engine.nodes.context import PATH_COLUMNS
+    from engine.scene import SunLight
+    colour = shifted(MixColor("MULTIPLY", 1.0, (1.0, 1.0, 1.0), node("ShaderNodeLightPath", output),
+                              clamp_factor=False))
+    n = 64
+    rng = np.random.default_rng(5)
+    bounce = rng.integers(0, 4, n)
+    columns = rng.integers(0, 3, (n, len(PATH_COLUMNS))).astype(float)
+    path = emission_path(bounce, columns)
+    want = {"Ray Depth": bounce + 1.0, "Is Camera Ray": np.zeros(n)}.get(output)
+    want = 2.0 + (columns[:, PATH_COLUMNS.index(output)] if want is None else want)
+    at = np.eye(4)
+    at[2, 3] = 2.0   # emitting along -Z, towards the origin
+    area = AreaLight(at, (1.0, 1.0, 1.0), "SQUARE", 1.0, shader=colour)
+    sun = SunLight((0.0, 0.0, -1.0), (1.0, 1.0, 1.0), 0.2, shader=colour)
+    for light in (PointLight((0.0, 0.0, 2.0), (1.0, 1.0, 1.0), radius=0.2, shader=colour), area, sun):
+        scene = Scene(lights=[light])
+        ls = lights.LightSet(scene, geometry.flatten(scene), bsdf.MaterialTable(geometry.material_table(scene)))
+        assert ls.light_path
+        plain = lights.LightSet(Scene(lights=[type(light)(**{**light.__dict__, "shader": None})]),
+                                geometry.flatten(scene), bsdf.MaterialTable(geometry.material_table(scene)))
+        u = rng.random((3, n))
+        o = np.zeros((n, 3))
+        s = ls.sample(np.zeros(n, np.int64), o, *u, path=path)
+        base = plain.sample(np.zeros(n, np.int64), o, *u).Le
+        ok = s.pdf > 0
+        np.testing.assert_allclose(s.Le[ok, 0] / base[ok, 0], want[ok], rtol=1e-9)
+        if isinstance(light, SunLight):
+            ((mask, _, seen, _),) = ls.sun_hits(s.wi, path=path)
+            np.testing.assert_allclose(seen[:, 0] / base[mask, 0], want[mask], rtol=1e-9)
+            continue
+        t, emitter, le, _ = ls.intersect(o, s.wi, np.full(n, np.inf), path=path)
+        _, _, le_plain, _ = plain.intersect(o, s.wi, np.full(n, np.inf))
+        hit = emitter >= 0
+        assert hit.sum() > n // 2
+        np.testing.assert_allclose(le[hit, 0] / le_plain[hit, 0], want[hit], rtol=1e-9)
+
+
+def test_sun_tree_rows_follow_ray_visibility():
+    """A sun with a tree, unseen by glossy rays: sun_hits keeps the tree's
+    radiance of the rows that still see it (a Light Path tree tracks the
+    ray kinds, so the mask and the per-row radiance must stay aligned)."""
+    from engine.geometry import VIS_DIFFUSE, VIS_GLOSSY
+    from engine.scene import SunLight
+    sun = SunLight((0.0, 0.0, -1.0), (1.0, 1.0, 1.0), 0.3, visible_glossy=False,
+                   shader=shifted(node("ShaderNodeTexCoord", "UV")))
+    scene = Scene(lights=[sun])
+    ls = lights.LightSet(scene, geometry.flatten(scene), bsdf.MaterialTable(geometry.material_table(scene)))
+    n = 256
+    s = ls.sample(np.zeros(n, np.int64), np.zeros((n, 3)), *np.random.default_rng(7).random((3, n)))
+    ray = np.where(np.arange(n) % 2 == 0, VIS_DIFFUSE, VIS_GLOSSY).astype(np.uint8)
+    ((mask, _, seen, _),) = ls.sun_hits(s.wi, ray)
+    assert mask.sum() == n // 2 and not mask[1::2].any()
+    np.testing.assert_allclose(seen, s.Le[mask], rtol=1e-9)

@@ -288,3 +288,30 @@ def test_camera_inside_a_volume():
     r = render(scene, RenderSettings(samples=2, samples_per_pass=2))
     # The faceted sphere's inscribed radius is between 2 cos(pi/32)^2 and 2.
     assert np.all(r.image[..., :3] < np.exp(-0.5 * 1.98)) and np.all(r.image[..., :3] > np.exp(-0.5 * 2.0) * 0.999)
+
+
+def test_light_tree_depth_in_volume_light_samples():
+    """A light sample from a scattering point hands the light's tree the
+    path's depth (bounce + 1, as Cycles' volume direct light), so an area
+    light gated by Ray Depth >= 1 renders the medium as the plain light
+    does (it rendered black where the depth read 0).  Light sampling alone
+    (the gate reads 1 in every light sample), image means by their
+    variances (one test of the family of this module's budget)."""
+    import dataclasses
+    from engine.scene import Math, NodeCall, NodeOutput
+    gate = Math("GREATER_THAN", NodeOutput(NodeCall("ShaderNodeLightPath", {}), "Ray Depth"), 0.5)
+    colour = NodeOutput(NodeCall("ShaderNodeCombineXYZ", {"X": gate, "Y": gate, "Z": gate}), "Vector")
+    means = []
+    for seed, shader in ((31, None), (32, colour)):
+        scene = lit_medium()
+        scene = dataclasses.replace(scene, lights=[dataclasses.replace(scene.lights[0], shader=shader)])
+        r = render(scene, RenderSettings(samples=64, samples_per_pass=64, seed=seed, strategy="light",
+                                         max_bounces=4, volume_bounces=2))
+        image = r.image[..., :3].astype(np.float64)
+        means.append((image.sum(), r.variance[..., :3].astype(np.float64).sum()))
+    (a, va), (b, vb) = means
+    z = (b - a) / np.sqrt(va + vb)
+    level = family_level(__name__ + ".light_tree_depth", 1)
+    print(f"volume light samples, gated / plain light: {b / a:.4f}, z {z:.2f}, detects "
+          f"{detectable(np.sqrt(va + vb) / a, level):.2%}")
+    assert abs(z) < z_threshold(level), (b / a, z)
