@@ -58,7 +58,11 @@ def _bake(engine, depsgraph, obj, pass_type, pass_filter, width, height):
             raise BakeError("Blender gave no BakePrimitive pass")
         channels = primitive_pass.channels
         flat = np.empty(width * height * channels, np.float32)
-        primitive_pass.rect.foreach_get(flat)
+        try:
+            primitive_pass.rect.foreach_get(flat)
+        except (RuntimeError, TypeError, ValueError) as err:   # a result of another size than asked
+            raise BakeError(f"object '{name}': Blender's bake result does not hold {width} x {height} "
+                            f"texels ({err})") from None
         prim, u, v = renderer.bake.unpack_primitives(flat.reshape(-1, channels))
         if pass_type in renderer.bake.LIGHT + SCENE_WIDE:
             rgba = _bake_light(engine, renderer, depsgraph, evaluated, pass_type, pass_filter, prim, u, v,

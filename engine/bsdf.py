@@ -487,7 +487,11 @@ def _selection_numpy(lobes, wo, w):
         legacy = lobes.fresnel[:, k] == F_SCHLICK
         if legacy.any():
             col = np.where(legacy[:, None], schlick(lobes.color[:, k], cos_o) * w[:, k], col)
-        sel[:, k] = _luminance(col) * _albedo_guess(lobes, k, cos_o)
+        # Cycles' closure sample weight: the mean of the weight's channels
+        # (bsdf_alloc: fabsf(average(weight))), not its luminance: the lobe
+        # choice sets the BSDF pdf that MIS weighs, and a bake without Emit keeps
+        # only the light-sampled share (+0.7 % with luminance on a checker mix).
+        sel[:, k] = col.mean(axis=1) * _albedo_guess(lobes, k, cos_o)
     sel = np.maximum(sel, 0.0)
     total = sel[:, 0]
     for k in range(1, sel.shape[1]):

@@ -594,9 +594,9 @@ def selection_loop(lobes, tables, wo, w, out):
                 r = (color[i, k, 0] + (1.0 - color[i, k, 0]) * s5) * w[i, k, 0]
                 g = (color[i, k, 1] + (1.0 - color[i, k, 1]) * s5) * w[i, k, 1]
                 b = (color[i, k, 2] + (1.0 - color[i, k, 2]) * s5) * w[i, k, 2]
-                lum = _luminance(r, g, b)
+                lum = (r + g + b) / 3.0   # Cycles' sample weight: average(weight) (bsdf._selection_numpy)
             else:
-                lum = _luminance(w[i, k, 0], w[i, k, 1], w[i, k, 2])
+                lum = (w[i, k, 0] + w[i, k, 1] + w[i, k, 2]) / 3.0
             guess = 1.0
             if kind[i, k] == NONE:
                 guess = 0.0

@@ -245,14 +245,22 @@ def _pdf(area, tri, p_tri, t2, cos_l, sph, solid_angle):
 def _spherical(tr, tri, p):
     """Which shading points sample their triangle (rows ``tri`` of
     ``tr``) by solid angle (Arvo), and that solid angle: as Cycles
-    (light/triangle.h), those nearer to the triangle's plane than its
+    (light/triangle.h), those near the triangle's plane against its
     longest edge, where area sampling's pdf varies much over the triangle;
-    farther, area sampling is about as good and far cheaper.  The
-    solid-angle limits guard the warp."""
+    farther, area sampling is about as good and far cheaper.  Cycles'
+    "distance to the plane" is dot(N0, V0 - P) / dot(N0, N0) with N0 the
+    unnormalized cross product, i.e. the distance divided by twice the
+    area: matched, as the choice sets the light pdf that MIS weighs, and a
+    bake without Emit (or any split of BSDF-hit and light-sampled emission)
+    keeps only the light-sampled share (+20 % under a 0.8 m panel with the
+    plain distance).  The solid-angle limits guard the warp."""
     e1, e2 = tr.e1[tri], tr.e2[tri]
     e3 = e2 - e1
     longest2 = np.maximum(np.maximum(dot(e1, e1), dot(e2, e2)), dot(e3, e3))
-    plane = dot(tr.p0[tri] - p, tr.ng[tri])
+    twice_area = 2.0 * np.asarray(tr.area[tri], np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        plane = dot(tr.p0[tri] - p, tr.ng[tri]) / twice_area
+    plane = np.where(np.isfinite(plane), plane, np.inf)   # a zero-area triangle: area sampling (pdf 0)
     close = np.nonzero(longest2 > plane * plane)[0]
     solid_angle = np.zeros(len(tri))
     if len(close):

@@ -350,3 +350,136 @@ def test_ao_bake_matches_cycles(occluder):
           f"{z_threshold(level):.2f}); detectable block difference {detectable(se, level):.4f}")
     assert cycles.min() < 0.6, f"the {occluder} did not occlude: the test would not see a wrong AO"
     assert np.abs(z).max() < z_threshold(level)
+
+
+# Hostile bake input (issue 26), fuzz-style: each hazard with every kind of bake Ember does
+# (a closed form, a shaded, a traced and a light bake); each must give finite pixels or stop
+# with one clear message (Blender's own refusal or Ember's report), never a crash, a hang, a
+# leaked exception type or a NaN.
+HOSTILE_KINDS = ('POSITION', 'NORMAL', 'EMIT', 'AO', 'DIFFUSE', 'COMBINED')
+HOSTILE_FLOATS = {'nan': float('nan'), 'inf': float('inf'), 'negative': -0.5}
+
+
+def _hostile_scene(hazard):
+    """The sphere scene broken in one way; returns (scene, image, bake keyword arguments)."""
+    scene, obj, image = _scene()
+    settings = {}
+    if hazard == 'zero_area_uv':   # every UV of the first 40 loops collapsed to one point
+        uv = obj.data.uv_layers.active.data
+        for loop in range(min(40, len(uv))):
+            uv[loop].uv = (0.25, 0.25)
+    elif hazard == 'one_pixel':
+        image.scale(1, 1)
+    elif hazard == 'odd_size':    # a second slot baking into an image of another, non-square size
+        mat, other = bake_target_material()
+        other.scale(7, 3)
+        obj.data.materials.append(mat)
+        for i, poly in enumerate(obj.data.polygons):
+            poly.material_index = i % 2
+    elif hazard == 'no_uv':
+        obj.data.uv_layers.remove(obj.data.uv_layers[0])
+    else:                         # (nan | inf | negative)_(extrusion | cage): selected to active
+        value, which = hazard.split('_', 1)
+        bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=1, radius=1.05, location=obj.location)
+        high = bpy.context.active_object
+        high.select_set(True)
+        obj.select_set(True)
+        bpy.context.view_layer.objects.active = obj
+        settings = {'use_selected_to_active': True}
+        if which == 'cage':
+            settings.update(use_cage=True, cage_extrusion=HOSTILE_FLOATS[value])
+        else:
+            settings['cage_extrusion'] = HOSTILE_FLOATS[value]
+            settings['max_ray_distance'] = HOSTILE_FLOATS[value]
+    return scene, image, settings
+
+
+HAZARDS = ('zero_area_uv', 'one_pixel', 'odd_size', 'no_uv') + tuple(
+    f"{value}_{which}" for value in HOSTILE_FLOATS for which in ('extrusion', 'cage'))
+
+
+def _classify(message, pixels):
+    """'baked' (finite pixels), 'refused' (one clear message) or 'FAILED: why'."""
+    if not np.isfinite(pixels).all():
+        return f"FAILED: {int((~np.isfinite(pixels)).sum())} non-finite values"
+    if message is None:
+        return 'baked'
+    text = message.strip()
+    leaked = any(f"{name}:" in text for name in ('TypeError', 'ValueError', 'IndexError', 'KeyError',
+                                                  'AttributeError', 'ZeroDivisionError', 'FloatingPointError'))
+    if not text or leaked or 'bake failed' in text:
+        return f"FAILED: {text!r}"
+    return 'refused'
+
+
+@pytest.mark.parametrize("hazard", HAZARDS)
+def test_hostile_bake_input(hazard):
+    import time
+    outcomes = {}
+    for kind in HOSTILE_KINDS:
+        scene, image, settings = _hostile_scene(hazard)
+        scene.render.engine = 'EMBER'
+        scene.ember.samples = 2
+        scene.render.bake.margin = 0
+        message = None
+        start = time.perf_counter()
+        try:
+            bpy.ops.object.bake(type=kind, margin=0, **settings)
+        except RuntimeError as err:
+            message = str(err)
+        seconds = time.perf_counter() - start
+        pixels = np.empty(len(image.pixels), np.float32)
+        image.pixels.foreach_get(pixels)
+        outcomes[kind] = _classify(message, pixels)
+        print(f"{hazard} {kind}: {outcomes[kind]} in {seconds:.1f} s"
+              + (f" ({message.strip()[:120]})" if message else f", pixel range {pixels.min():.3g}..{pixels.max():.3g}"))
+    failed = {k: v for k, v in outcomes.items() if v.startswith('FAILED')}
+    assert not failed, failed
+    if hazard in ('zero_area_uv', 'one_pixel', 'odd_size'):
+        assert set(outcomes.values()) == {'baked'}, "a valid (if odd) bake was refused"
+
+
+def test_bake_result_of_another_size_is_refused_clearly():
+    """A bake result that does not hold width x height texels (Blender
+    asking for one size and handing another) ends in one report naming the
+    object and the size, not a leaked exception; width or height 0 too."""
+    from addon import bake as addon_bake
+    scene, obj, image = _scene()
+
+    class Rect:
+        def __init__(self, count):
+            self.values = np.zeros(count, np.float32)
+
+        def foreach_get(self, out):
+            if len(out) != len(self.values):
+                raise RuntimeError("internal error setting the array")
+            out[:] = self.values
+
+        foreach_set = foreach_get
+
+    class Pass:
+        def __init__(self, name, channels, count):
+            self.name, self.channels, self.rect = name, channels, Rect(count * channels)
+
+    class Engine:
+        def __init__(self, texels):
+            self.reports, self.texels = [], texels
+
+        def report(self, kind, message):
+            self.reports.append(message)
+
+        def begin_result(self, *args, **kwargs):
+            passes = [Pass("BakePrimitive", 3, self.texels), Pass("Combined", 4, self.texels)]
+            return type("Result", (), {"layers": [type("Layer", (), {"passes": passes})()]})()
+
+        def end_result(self, result):
+            pass
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    for texels, width, height in ((10, 4, 4), (16, 0, 4)):
+        engine = Engine(texels)
+        addon_bake.bake(engine, depsgraph, obj, 'POSITION', set(), width, height)
+        print(f"{texels} texels for {width} x {height} ->", engine.reports)
+        assert len(engine.reports) == 1
+        assert obj.name in engine.reports[0] and "bake failed" not in engine.reports[0]
+        assert f"{width} x {height}" in engine.reports[0]
