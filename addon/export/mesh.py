@@ -166,7 +166,7 @@ def mesh_from_blender(mesh, name, tangents=False, check=None, derived=()):
     corner_tangents, signs = _corner_tangents(mesh, loops) if tangents else (None, None)
     normals = _corner_normals(mesh, tri_count)
     check()
-    return renderer.Mesh(
+    out = renderer.Mesh(
         positions=positions,
         triangles=triangles,
         normals=normals,
@@ -180,6 +180,11 @@ def mesh_from_blender(mesh, name, tangents=False, check=None, derived=()):
                                  _derived_attributes(mesh, triangles, derived)),
         texspace=texspace_of(mesh),
     )
+    if normals is not None and hasattr(out, 'smooth'):
+        # Which faces are smooth: true displacement recomputes only their vertex normals.
+        smooth = _get(mesh.loop_triangles, 'use_smooth', tri_count, 1, bool)
+        out.smooth = None if smooth.all() else smooth
+    return out
 
 
 def drop_nonfinite_triangles(mesh):
