@@ -22,6 +22,7 @@ import dataclasses
 import numpy as np
 
 from . import instance_columns
+from .geometry import flatten
 from .nodes.context import ShadingContext, texture_space, _is_position_texspace
 from .scene import SceneError
 from .textures import Compiler
@@ -167,7 +168,6 @@ def _vertex_offsets(scene, mesh, inst, tri, mat_of_tri, displacing, disp):
 def _single_instance_triangles(scene, mesh, inst):
     """The mesh's triangles placed by ``inst`` alone (kept: local triangles
     that are not degenerate), with the shading data nodes read."""
-    from .geometry import flatten   # geometry imports the node context, which imports nothing of this
     one = dataclasses.replace(scene, meshes=[mesh], instances=[dataclasses.replace(inst, mesh=0)])
     with instance_columns.prepared():
         tris = flatten(one, threads=1)
