@@ -103,6 +103,9 @@ def displace_mesh(scene, m, inst, slots):
     true_disp = np.array([d is not None and d.method == "DISPLACEMENT" for d in disp] + [False])[mat_of_tri]
     out = dataclasses.replace(mesh, positions=moved.astype(np.asarray(mesh.positions).dtype, copy=False),
                               **_kept_generated(mesh, pos, tri))
+    both = np.array([d is not None and d.method == "BOTH" for d in disp] + [False])[mat_of_tri]
+    if both.any():
+        out.undisplaced = pos     # the bump of "Both" differentiates on the undisplaced surface
     if mesh.normals is not None and true_disp.any():
         out.normals = _recomputed_normals(mesh.normals, moved, tri, true_disp, _smooth(mesh))
     if mesh.motion is not None:

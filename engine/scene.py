@@ -83,6 +83,9 @@ class Mesh:
     # (T,) bool: which faces are shaded smooth (None: every face with corner
     # normals); true displacement gives only smooth faces vertex normals.
     smooth: Optional[np.ndarray] = None
+    # (V, 3) vertex positions before true displacement (engine/displacement.py
+    # sets it where a material displaces with "Both"); None: not displaced.
+    undisplaced: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -422,6 +425,10 @@ class Bump:
     distance: object = 1.0
     invert: bool = False
     normal: Optional[NormalMap] = None
+    # A "Displacement and Bump" material's bump: differentiated on the
+    # surface before true displacement, as Cycles' NODE_ENTER_BUMP_EVAL
+    # (the undisplaced position's derivatives).
+    undisplaced: bool = False
 
 
 @dataclass(eq=False)

@@ -1142,7 +1142,10 @@ def _displacement_bump(translator, output, inner, method='BUMP'):
         return inner, displacement
     if not nodes.is_expr(height):
         return inner, displacement   # a constant height bends nothing
-    return _over(inner, _scene().Bump(height, 1.0, 1.0, False, None)), displacement
+    bumped = _scene().Bump(height, 1.0, 1.0, False, None)
+    if method == 'BOTH' and hasattr(bumped, 'undisplaced'):
+        bumped.undisplaced = True   # Cycles bumps with the undisplaced surface's derivatives
+    return _over(inner, bumped), displacement
 
 
 def _over(normal, displaced):

@@ -93,3 +93,22 @@ def test_non_finite_heights_move_nothing(bad):
 def test_huge_heights_are_named():
     with pytest.raises(S.SceneError, match="displacement"):
         prepare(one(grid(), S.Math("MULTIPLY", uv_x(), 1e300)), S.RenderSettings())
+
+
+def test_both_bumps_with_the_undisplaced_derivatives():
+    """The bump of "Both" sees the undisplaced plane: on the plane z = x
+    displaced from z = 0, a height gradient along the displaced surface
+    maps back to the flat plane's (Cycles' NODE_ENTER_BUMP_EVAL)."""
+    from engine.geometry import flatten
+    from engine.textures import _on_undisplaced
+    out = displaced_scene(one(grid(), uv_x(), method="BOTH"))
+    assert out.meshes[0].undisplaced is not None
+    tris = flatten(out)
+    prim = np.arange(len(tris.ng))
+    ctx = type("Ctx", (), {"prim": prim})()
+    # H = u rises by 1 per unit x; along the tilted surface (x, 0, x) / sqrt 2 that is a
+    # gradient (1, 0, 1) / 2 in the displaced triangle's plane.
+    grad = np.tile([0.5, 0.0, 0.5], (len(prim), 1))
+    grad0, ng0 = _on_undisplaced(grad, tris.ng[prim], tris, ctx)
+    np.testing.assert_allclose(grad0, np.tile([1.0, 0.0, 0.0], (len(prim), 1)), atol=1e-12)
+    np.testing.assert_allclose(ng0, np.tile([0.0, 0.0, 1.0], (len(prim), 1)), atol=1e-12)
