@@ -98,8 +98,9 @@ def displace_mesh(scene, m, inst, slots):
     offsets = _vertex_offsets(scene, mesh, inst, tri, mat_of_tri, displacing, disp)
     moved = pos + offsets
     if not np.isfinite(moved).all() or np.abs(moved).max(initial=0.0) > LIMIT:
-        raise SceneError(f"mesh {mesh.name!r}: its displacement moves vertices beyond {LIMIT:g} "
-                         f"(object space); lower the displacement's scale")
+        names = sorted({mats[k].name for k in np.unique(mat_of_tri[displacing])})
+        raise SceneError(f"mesh {mesh.name!r}: the displacement of material {', '.join(map(repr, names))} "
+                         f"moves vertices beyond {LIMIT:g} (object space); lower its scale")
     true_disp = np.array([d is not None and d.method == "DISPLACEMENT" for d in disp] + [False])[mat_of_tri]
     out = dataclasses.replace(mesh, positions=moved.astype(np.asarray(mesh.positions).dtype, copy=False),
                               **_kept_generated(mesh, pos, tri))
