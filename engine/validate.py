@@ -64,6 +64,12 @@ def validate_mesh(mesh, index):
             raise SceneError(f"{what}: {len(slots)} material slots for {n} triangles")
         if n and slots.min() < 0:
             raise SceneError(f"{what}: negative material slot {slots.min()}")
+    smooth = getattr(mesh, "smooth", None)
+    if smooth is not None and np.shape(smooth) != (n,):
+        raise SceneError(f"{what}: smooth has shape {np.shape(smooth)}, expected ({n},)")
+    undisplaced = getattr(mesh, "undisplaced", None)
+    if undisplaced is not None and np.shape(undisplaced) != np.shape(pos):
+        raise SceneError(f"{what}: undisplaced has shape {np.shape(undisplaced)}, expected {np.shape(pos)}")
     _validate_mesh_motion(mesh, what, len(pos), n)
 
 

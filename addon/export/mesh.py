@@ -224,7 +224,7 @@ def drop_nonfinite_triangles(mesh):
         return 0
     keep = finite[mesh.triangles].all(axis=1)
     mesh.positions = np.where(finite[:, None], mesh.positions, np.float32(0.0))
-    for name in ('triangles', 'normals', 'uvs', 'material_slots', 'tangents', 'tangent_signs', 'orco'):
+    for name in ('triangles', 'normals', 'uvs', 'material_slots', 'tangents', 'tangent_signs', 'orco', 'smooth'):
         value = getattr(mesh, name)
         if value is not None:
             setattr(mesh, name, value[keep])
