@@ -429,6 +429,9 @@ class Bump:
     # surface before true displacement, as Cycles' NODE_ENTER_BUMP_EVAL
     # (the undisplaced position's derivatives).
     undisplaced: bool = False
+    # The Material Output's displacement as bump: Cycles' SetNormal makes it
+    # the smooth normal (sd->N), so the bump shadowing term leaves it alone.
+    sets_normal: bool = False
 
 
 @dataclass(eq=False)

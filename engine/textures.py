@@ -611,6 +611,7 @@ class MaterialTextures:
         self.lobe_fields = []    # (material, lobe, field, fn)
         self.emission = {}       # material -> fn
         self.normals = {}        # material -> NormalMap | Bump
+        self.sets_normal = set()  # materials whose bump is the smooth normal (a displacement's)
         self.tangents = {}       # material -> fn (its anisotropic lobes' tangent)
         self.constants = [self._constant_material(i, m) for i, m in enumerate(materials)]
         self.any = bool(self.lobe_fields or self.emission)
@@ -631,6 +632,8 @@ class MaterialTextures:
         normal = getattr(mat, "normal", None)
         if normal is not None:
             self.normals[i] = self._compile_normal(normal)
+            if isinstance(normal, Bump) and getattr(normal, "sets_normal", False) and normal.normal is None:
+                self.sets_normal.add(i)
         tangent = getattr(mat, "tangent", None)
         if tangent is not None:
             self.tangents[i] = self.compiler.color(tangent)
@@ -714,6 +717,13 @@ class MaterialTextures:
             x = np.cross(y, n)
             tt[rows] = np.where(ok[:, None], x, tt[rows])
             bb[rows] = np.where(ok[:, None], y, bb[rows])
+
+    def normal_is_smooth(self, mat):
+        """(N,) rows whose bent normal is also the smooth one (Cycles'
+        displacement bump sets sd->N), or None."""
+        if not self.sets_normal:
+            return None
+        return np.isin(mat, list(self.sets_normal))
 
     def perturb(self, hit, triangles):
         """Shading normals with each material's normal map / bump applied."""

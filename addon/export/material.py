@@ -1143,6 +1143,8 @@ def _displacement_bump(translator, output, inner, method='BUMP'):
     if not nodes.is_expr(height):
         return inner, displacement   # a constant height bends nothing
     bumped = _scene().Bump(height, 1.0, 1.0, False, None)
+    if hasattr(bumped, 'sets_normal'):
+        bumped.sets_normal = True   # Cycles' SetNormal: sd->N is the displacement's bump
     if method == 'BOTH' and hasattr(bumped, 'undisplaced'):
         bumped.undisplaced = True   # Cycles bumps with the undisplaced surface's derivatives
     return _over(inner, bumped), displacement

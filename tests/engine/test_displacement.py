@@ -50,8 +50,8 @@ def test_displacement_only_recomputes_the_normals_and_both_keeps_them():
     mesh = grid()
     only = displaced_scene(one(mesh, uv_x())).meshes[0]
     # z = x: the displaced plane's normal is (-1, 0, 1) / sqrt 2 everywhere.
-    np.testing.assert_allclose(only.normals.reshape(-1, 3), np.tile([-2 ** -0.5, 0, 2 ** -0.5], (only.normals.size // 3, 1)),
-                               atol=1e-6)
+    expected = np.tile([-2 ** -0.5, 0, 2 ** -0.5], (only.normals.size // 3, 1))
+    np.testing.assert_allclose(only.normals.reshape(-1, 3), expected, atol=1e-6)
     both = displaced_scene(one(mesh, uv_x(), method="BOTH")).meshes[0]
     np.testing.assert_array_equal(both.normals, mesh.normals)
     np.testing.assert_allclose(both.positions, only.positions)
