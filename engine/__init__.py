@@ -31,10 +31,9 @@ from .nodes.sky import sun_guide as sky_sun_guide
 from .passes import PassConfig, murmur3_32
 from .render import RenderResult, prepare, render
 from .scene import (FALLOFFS, MATH_OPERATIONS, MIX_BLENDS, TEXTURE_TYPES, AreaLight, Bump, Camera, Cancelled,
-                    EnvironmentTexture, HairCurves, ImageTexture, Instance, LinkSet, Lobe, Material, Math, Mesh,
-                    MixColor, NodeCall, NodeOutput, NormalMap, PointCloud, PointLight, RenderSettings, Scene,
-                    SceneError,
-                    SpotLight, SunGuide, SunLight, TextureImage, Volume, World)
+                    Displacement, EnvironmentTexture, HairCurves, ImageTexture, Instance, LinkSet, Lobe,
+                    Material, Math, Mesh, MixColor, NodeCall, NodeOutput, NormalMap, PointCloud, PointLight,
+                    RenderSettings, Scene, SceneError, SpotLight, SunGuide, SunLight, TextureImage, Volume, World)
 from .textures import Compiler as TextureCompiler
 from .textures import value_range
 from .validate import validate_camera, validate_scene, validate_settings
@@ -46,6 +45,7 @@ __all__ = [
     "SunGuide",
     "PointLight", "SpotLight", "SunLight", "AreaLight", "PointCloud", "HairCurves",
     "TextureImage", "ImageTexture", "MixColor", "Math", "NormalMap", "Bump", "NodeCall", "NodeOutput",
+    "Displacement",
     "TEXTURE_TYPES", "MIX_BLENDS", "MATH_OPERATIONS", "FALLOFFS",
     "RenderSettings", "SceneError", "Cancelled",
     # validation (engine.validate)

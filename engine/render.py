@@ -25,6 +25,7 @@ from . import vector_pass
 from .blas import single_threaded_blas
 from .bsdf import MaterialTable, bump_model
 from .camera import CameraModel, PixelFilter
+from .displacement import displaced_scene
 from . import instance_columns, kernels, media, pass_events, points
 from .film import Film
 from .geometry import flatten, material_table
@@ -88,6 +89,7 @@ def _prepare(scene, settings, bake):
     kernels.configure(getattr(settings, "use_jit", True))   # flatten has a kernel too
     validate_scene(scene)
     validate_settings(settings)
+    scene = displaced_scene(scene)   # true displacement moves vertices before anything is placed
     source = scene
     scene, point_owners, point_radii = points.expand(scene)   # point clouds and curves as stand-in rows
     scene, curve_owners = points.expand_curves(scene)

@@ -80,6 +80,12 @@ class Mesh:
     # The Vector pass (engine/vector_pass.py): vertex positions (3, V, 3) at
     # frame - 1, frame, frame + 1 when that pass is on and motion blur off.
     vector_motion: Optional[np.ndarray] = None
+    # (T,) bool: which faces are shaded smooth (None: every face with corner
+    # normals); true displacement gives only smooth faces vertex normals.
+    smooth: Optional[np.ndarray] = None
+    # (V, 3) vertex positions before true displacement (engine/displacement.py
+    # sets it where a material displaces with "Both"); None: not displaced.
+    undisplaced: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -300,6 +306,23 @@ class Material:
     # alpha by it, whatever Film > Transparent says; other rays see its part
     # as black.
     holdout: float = 0.0
+    # True displacement (engine/displacement.py): a Displacement, or None.
+    displacement: Optional["Displacement"] = None
+
+
+@dataclass(eq=False)
+class Displacement:
+    """A material's true displacement (Cycles' Displacement Only / Both): the
+    vertices move by height along their normal in ``space`` ('OBJECT' or
+    'WORLD', the Displacement node's); ``method`` 'DISPLACEMENT' recomputes
+    the normals, 'BOTH' keeps them (the material's bump bends them)."""
+    height: object
+    space: str = "OBJECT"
+    method: str = "DISPLACEMENT"
+
+
+DISPLACEMENT_SPACES = ("OBJECT", "WORLD")
+DISPLACEMENT_METHODS = ("DISPLACEMENT", "BOTH")
 
 
 DEFAULT_MATERIAL = Material("default", (Lobe("diffuse", (0.8, 0.8, 0.8)),))
@@ -410,6 +433,13 @@ class Bump:
     distance: object = 1.0
     invert: bool = False
     normal: Optional[NormalMap] = None
+    # A "Displacement and Bump" material's bump: differentiated on the
+    # surface before true displacement, as Cycles' NODE_ENTER_BUMP_EVAL
+    # (the undisplaced position's derivatives).
+    undisplaced: bool = False
+    # The Material Output's displacement as bump: Cycles' SetNormal makes it
+    # the smooth normal (sd->N), so the bump shadowing term leaves it alone.
+    sets_normal: bool = False
 
 
 @dataclass(eq=False)

@@ -611,6 +611,7 @@ class MaterialTextures:
         self.lobe_fields = []    # (material, lobe, field, fn)
         self.emission = {}       # material -> fn
         self.normals = {}        # material -> NormalMap | Bump
+        self.sets_normal = set()  # materials whose bump is the smooth normal (a displacement's)
         self.tangents = {}       # material -> fn (its anisotropic lobes' tangent)
         self.constants = [self._constant_material(i, m) for i, m in enumerate(materials)]
         self.any = bool(self.lobe_fields or self.emission)
@@ -631,6 +632,8 @@ class MaterialTextures:
         normal = getattr(mat, "normal", None)
         if normal is not None:
             self.normals[i] = self._compile_normal(normal)
+            if isinstance(normal, Bump) and getattr(normal, "sets_normal", False) and normal.normal is None:
+                self.sets_normal.add(i)
         tangent = getattr(mat, "tangent", None)
         if tangent is not None:
             self.tangents[i] = self.compiler.color(tangent)
@@ -660,7 +663,8 @@ class MaterialTextures:
         if isinstance(expr, Bump):
             inner = None if expr.normal is None else self._compile_normal(expr.normal)
             return ("bump", self.compiler.value(expr.height), self.compiler.value(expr.strength),
-                    self.compiler.value(expr.distance), expr.invert, inner, _bump_step(expr))
+                    self.compiler.value(expr.distance), expr.invert, inner, _bump_step(expr),
+                    bool(getattr(expr, "undisplaced", False)))
         if isinstance(expr, NodeOutput):
             # A vector node's output (e.g. Bevel): Cycles normalizes it.
             return ("vector", self.compiler.color(expr))
@@ -713,6 +717,13 @@ class MaterialTextures:
             x = np.cross(y, n)
             tt[rows] = np.where(ok[:, None], x, tt[rows])
             bb[rows] = np.where(ok[:, None], y, bb[rows])
+
+    def normal_is_smooth(self, mat):
+        """(N,) rows whose bent normal is also the smooth one (Cycles'
+        displacement bump sets sd->N), or None."""
+        if not self.sets_normal:
+            return None
+        return np.isin(mat, list(self.sets_normal))
 
     def perturb(self, hit, triangles):
         """Shading normals with each material's normal map / bump applied."""
@@ -824,11 +835,34 @@ def _evaluate_normal(normal, hit, rows, triangles, ns, ctx):
         if normal[3] != "TANGENT":
             return space_normal_map(hit, rows, ns, normal[1], normal[2], normal[3], ctx)
         return normal_map(hit, rows, ns, normal[1], normal[2], ctx)
-    _, height, strength, distance, invert, inner, step = normal
+    _, height, strength, distance, invert, inner, step, undisplaced = normal
     base = ns if inner is None else _unit(_evaluate_normal(inner, hit, rows, triangles, ns, ctx), ns)
     grad = surface_gradient(height, ctx, step, triangles)
     ng = triangles.ng[ctx.prim] if ctx.prim is not None else None
+    if undisplaced and ctx.prim is not None:
+        grad, ng = _on_undisplaced(grad, ng, triangles, ctx)
     return bump(base, grad, strength(ctx), distance(ctx), invert, ng)
+
+
+def _on_undisplaced(grad, ng, triangles, ctx):
+    """The height's gradient and the face normal on the triangles as they
+    were before true displacement ("Both": Cycles bumps with the undisplaced
+    surface's derivatives): the derivatives along the edges (grad . e) are
+    the same on both, so grad is rebuilt from the undisplaced edges."""
+    shading = getattr(triangles, "shading", None)
+    edges = shading.undisplaced_edges(ctx.prim) if shading is not None else None
+    if edges is None:
+        return grad, ng
+    a, b = edges
+    du = np.einsum("ij,ij->i", grad, triangles.e1[ctx.prim])
+    dv = np.einsum("ij,ij->i", grad, triangles.e2[ctx.prim])
+    c = np.cross(a, b)
+    cc = np.einsum("ij,ij->i", c, c)
+    ok = np.isfinite(cc) & (cc > 1e-30)
+    inv = np.where(ok, 1.0 / np.where(ok, cc, 1.0), 0.0)[:, None]
+    grad0 = (du[:, None] * np.cross(b, c) + dv[:, None] * np.cross(c, a)) * inv
+    ng0 = c * np.sqrt(inv)
+    return np.where(ok[:, None], grad0, grad), np.where(ok[:, None], ng0, ng)
 
 
 def normal_map(hit, rows, ns, color_fn, strength_fn, ctx):

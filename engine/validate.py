@@ -64,6 +64,12 @@ def validate_mesh(mesh, index):
             raise SceneError(f"{what}: {len(slots)} material slots for {n} triangles")
         if n and slots.min() < 0:
             raise SceneError(f"{what}: negative material slot {slots.min()}")
+    smooth = getattr(mesh, "smooth", None)
+    if smooth is not None and np.shape(smooth) != (n,):
+        raise SceneError(f"{what}: smooth has shape {np.shape(smooth)}, expected ({n},)")
+    undisplaced = getattr(mesh, "undisplaced", None)
+    if undisplaced is not None and np.shape(undisplaced) != np.shape(pos):
+        raise SceneError(f"{what}: undisplaced has shape {np.shape(undisplaced)}, expected {np.shape(pos)}")
     _validate_mesh_motion(mesh, what, len(pos), n)
 
 
@@ -148,6 +154,8 @@ def validate_material(mat, index):
         validate_normal(mat.normal, f"{what} normal")
     if getattr(mat, "tangent", None) is not None:
         validate_texture(mat.tangent, f"{what} tangent")
+    if getattr(mat, "displacement", None) is not None:
+        validate_displacement(mat.displacement, f"{what} displacement")
     for k in getattr(mat, "emission_layers", ()):
         if not (isinstance(k, (int, np.integer)) and 0 <= k < len(mat.lobes)):
             raise SceneError(f"{what}: emission layer {k!r} is no lobe of its {len(mat.lobes)}")
@@ -169,6 +177,17 @@ def validate_material(mat, index):
     holdout = getattr(mat, "holdout", 0.0)
     if not (np.isfinite(holdout) and 0.0 <= holdout <= 1.0):
         raise SceneError(f"{what}: holdout must lie in [0, 1], got {holdout}")
+
+
+def validate_displacement(disp, what):
+    if disp.space not in _scene.DISPLACEMENT_SPACES:
+        raise SceneError(f"{what}: unknown space {disp.space!r} (expected one of {_scene.DISPLACEMENT_SPACES})")
+    if disp.method not in _scene.DISPLACEMENT_METHODS:
+        raise SceneError(f"{what}: unknown method {disp.method!r} (expected one of {_scene.DISPLACEMENT_METHODS})")
+    if is_texture(disp.height):
+        validate_texture(disp.height, f"{what} height")
+    elif not np.isfinite(np.asarray(disp.height, dtype=np.float64)).all():
+        raise SceneError(f"{what}: height is not finite")
 
 
 def validate_volume(vol, what):

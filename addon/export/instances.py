@@ -310,6 +310,9 @@ class InstanceCollector:
                 self.meshes.append(mesh)
         if key in self.mesh_warnings:   # also for geometry a persistent cache kept
             self._warn_once(('vertices', key), self.mesh_warnings[key])
+        if mesh_export.uses_adaptive_subdivision(obj):
+            self._warn_once(('adaptive', obj.name), f"Object '{obj.name}': adaptive subdivision is not rendered "
+                            "(its displacement moves the vertices of the modifiers' mesh)")
         return self.mesh_of_key[key]
 
     def _note_use(self, inst, obj):

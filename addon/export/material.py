@@ -1009,8 +1009,8 @@ def translate(material):
     if output is None:
         return scene.Material(name, ()), f"Material '{name}': no Material Output node, rendered black"
     closure = translator.surface(output.inputs['Surface'])
-    normal = _displacement_bump(translator, output, _material_normal(translator, output),
-                                _displacement_method(material))
+    normal, displacement = _displacement_bump(translator, output, _material_normal(translator, output),
+                                              _displacement_method(material))
     lobes, volume = tuple(closure.lobes), _volume(translator, output)
     if volume is not None and not output.inputs['Surface'].is_linked:
         # Only a Volume output: Cycles' surface is a pass-through boundary.
@@ -1020,6 +1020,8 @@ def translate(material):
     if volume is not None:
         volume.sampling = sampling
         material.volume = volume
+    if displacement is not None:
+        material.displacement = displacement
     if translator.tangent is not None and any(lobe.kind == 'glossy_anisotropic' for lobe in lobes):
         material.tangent = translator.tangent
     if closure.emission_layers and hasattr(material, 'emission_layers'):
@@ -1126,36 +1128,52 @@ def _displacement_method(material):
 
 
 def _displacement_bump(translator, output, inner, method='BUMP'):
-    """The Material Output's Displacement as Cycles' default "Bump Only": a
-    bump whose height is the displacement along the normal (a Displacement
-    node's (Height - Midlevel) * Scale, or a float linked directly), over the
-    BSDF's own normal map / bump.  Other displacement methods render as bump
-    too (with a warning)."""
+    """The Material Output's Displacement as Cycles renders it: "Bump Only"
+    is a bump whose height is the displacement along the normal (a
+    Displacement node's (Height - Midlevel) * Scale, or a float linked
+    directly), over the BSDF's own normal map / bump.  "Displacement Only"
+    and "Displacement and Bump" of a Displacement node move the mesh's
+    vertices (engine/displacement.py, returned second), "Both" bumps with
+    the same height too.  Returns (normal, engine Displacement or None)."""
     socket = output.inputs.get('Displacement')
     if socket is None or not socket.is_linked:
-        return inner
+        return inner, None
     node, _ = translator._linked_node(socket)
     if node is None:
-        return inner
+        return inner, None
     reader = translator.reader
-    if method not in ('BUMP', None):
-        reader.warnings.append(f"displacement method {method.lower()} rendered as bump (true displacement "
-                               "is not rendered)")
+    true = method in ('DISPLACEMENT', 'BOTH')
     if node.type == 'DISPLACEMENT' and not node.mute:
-        if getattr(node, 'space', 'OBJECT') != 'OBJECT':
-            reader.warnings.append(f"'{node.name}' {node.space.lower()}-space displacement read as object space")
         height = nodes.math('MULTIPLY', nodes.math('SUBTRACT', reader.value_input(node, 'Height'),
                                                    reader.value_input(node, 'Midlevel')),
                             reader.value_input(node, 'Scale'))
+        space = getattr(node, 'space', 'OBJECT')
+        if space not in (('OBJECT', 'WORLD') if true else ('OBJECT',)):
+            reader.warnings.append(f"'{node.name}' {space.lower()}-space displacement read as object space")
+            space = 'OBJECT'
+        if true and node.inputs['Normal'].is_linked:
+            reader.warnings.append(f"'{node.name}': its Normal input is not read (the vertex normal is used)")
     else:
+        if true:
+            reader.warnings.append(f"displacement method {method.lower()} of '{node.name}' ({node.bl_idname}) "
+                                   "rendered as bump (true displacement reads a Displacement node)")
+            true, method = False, 'BUMP'
         value = reader.read(socket)
         if value is None:
-            return inner
+            return inner, None
         height = nodes.as_value(value)
+        space = 'OBJECT'
+    displacement = _scene().Displacement(height, space, method) if true else None
+    if method == 'DISPLACEMENT':
+        return inner, displacement
     if not nodes.is_expr(height):
-        return inner   # a constant displacement moves nothing
-    displaced = _scene().Bump(height, 1.0, 1.0, False, None)
-    return _over(inner, displaced)
+        return inner, displacement   # a constant height bends nothing
+    bumped = _scene().Bump(height, 1.0, 1.0, False, None)
+    if hasattr(bumped, 'sets_normal'):
+        bumped.sets_normal = True   # Cycles' SetNormal: sd->N is the displacement's bump
+    if method == 'BOTH' and hasattr(bumped, 'undisplaced'):
+        bumped.undisplaced = True   # Cycles bumps with the undisplaced surface's derivatives
+    return _over(inner, bumped), displacement
 
 
 def _over(normal, displaced):

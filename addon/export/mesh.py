@@ -3,6 +3,7 @@
 Everything is read with ``foreach_get`` into preallocated NumPy arrays: a
 Python loop over vertices would cost seconds on a million triangles.
 """
+import bpy
 import numpy as np
 
 from .. import backend
@@ -190,7 +191,7 @@ def mesh_from_blender(mesh, name, tangents=False, check=None, derived=()):
     corner_tangents, signs = _corner_tangents(mesh, loops) if tangents else (None, None)
     normals = _corner_normals(mesh, tri_count)
     check()
-    return renderer.Mesh(
+    out = renderer.Mesh(
         positions=positions,
         triangles=triangles,
         normals=normals,
@@ -204,6 +205,39 @@ def mesh_from_blender(mesh, name, tangents=False, check=None, derived=()):
                                  _derived_attributes(mesh, triangles, derived)),
         texspace=texspace_of(mesh),
     )
+    if normals is not None and hasattr(out, 'smooth'):
+        # Which faces are smooth: true displacement recomputes only their vertex normals.
+        smooth = _get(mesh.loop_triangles, 'use_smooth', tri_count, 1, bool)
+        out.smooth = None if smooth.all() else smooth
+    return out
+
+
+def uses_adaptive_subdivision(obj):
+    """Whether Cycles would subdivide the object adaptively (5.0: the last
+    modifier is a Subdivision Surface with Adaptive Subdivision on; before:
+    the object's Cycles setting under the Experimental feature set) and one
+    of its materials displaces the surface (Ember does not dice: it
+    displaces the evaluated mesh)."""
+    original = getattr(obj, 'original', obj)
+    mods = list(getattr(original, 'modifiers', ()) or ())
+    last = mods[-1] if mods else None
+    adaptive = bool(last is not None and last.type == 'SUBSURF' and getattr(last, 'use_adaptive_subdivision', False)
+                    and last.show_render)
+    if not adaptive:
+        cycles = getattr(original, 'cycles', None)
+        scene_cycles = getattr(getattr(bpy.context, 'scene', None), 'cycles', None)
+        adaptive = (bool(getattr(cycles, 'use_adaptive_subdivision', False))
+                    and getattr(scene_cycles, 'feature_set', '') == 'EXPERIMENTAL')
+    if not adaptive:
+        return False
+    for slot in getattr(original, 'material_slots', ()):
+        material = slot.material
+        method = getattr(material, 'displacement_method', None) if material is not None else None
+        if method is None and material is not None:
+            method = getattr(getattr(material, 'cycles', None), 'displacement_method', 'BUMP')
+        if method in ('DISPLACEMENT', 'BOTH'):
+            return True
+    return False
 
 
 def drop_nonfinite_triangles(mesh):
@@ -214,7 +248,7 @@ def drop_nonfinite_triangles(mesh):
         return 0
     keep = finite[mesh.triangles].all(axis=1)
     mesh.positions = np.where(finite[:, None], mesh.positions, np.float32(0.0))
-    for name in ('triangles', 'normals', 'uvs', 'material_slots', 'tangents', 'tangent_signs', 'orco'):
+    for name in ('triangles', 'normals', 'uvs', 'material_slots', 'tangents', 'tangent_signs', 'orco', 'smooth'):
         value = getattr(mesh, name)
         if value is not None:
             setattr(mesh, name, value[keep])

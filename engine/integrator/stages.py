@@ -364,6 +364,10 @@ def shade(ctx, paths, hit, depth):
         fibre_frames(hit.fibre, hit.ns, tt, bb)
         hair_inputs(ctx, paths, hit, lobes, tt, bb, depth)
     wo_l = to_local(hit.wo, tt, bb, hit.ns)
+    if smooth is not None:
+        own = ctx.materials.textures.normal_is_smooth(hit.mat)
+        if own is not None and own.any():
+            smooth = np.where(own[:, None], bent, smooth)   # no bump shadowing against it
     if smooth is not None and not (np.array_equal(smooth, hit.ns) and np.array_equal(bent, hit.ns)):
         # Cycles' bump shadowing term (bsdf.bump_shadowing) needs the smooth
         # normal in the shading frame, in the scene's Blender version's form.

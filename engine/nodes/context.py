@@ -95,6 +95,26 @@ class SceneShading:
             self._corners["has_uv"] = per_mesh[mesh]
         return self._corners["has_uv"]
 
+    def undisplaced_edges(self, prim):
+        """World-space edges (e1, e2) of triangles prim before true
+        displacement (meshes displaced with "Both" keep their undisplaced
+        positions), or None when no mesh has them."""
+        meshes = self.scene.meshes
+        if not any(getattr(m, "undisplaced", None) is not None for m in meshes):
+            return None
+        inst, local = self.instance[prim], self.local[prim]
+        mesh = self.mesh_of_instance[inst]
+        e1, e2 = np.zeros((len(prim), 3)), np.zeros((len(prim), 3))
+        for m in np.unique(mesh):
+            rows = np.flatnonzero(mesh == m)
+            data = meshes[m]
+            pos = data.undisplaced if getattr(data, "undisplaced", None) is not None else data.positions
+            p = np.asarray(pos, np.float64)[np.asarray(data.triangles, np.int64)[local[rows]]]
+            mats = self.matrix[inst[rows]][:, :3, :3]
+            e1[rows] = np.einsum("nij,nj->ni", mats, p[:, 1] - p[:, 0])
+            e2[rows] = np.einsum("nij,nj->ni", mats, p[:, 2] - p[:, 0])
+        return e1, e2
+
     def corners(self, key):
         """(T, 3, C) per-corner data of every triangle, or None when no mesh
         has it.  key: ('uv', name), ('attr', name) or ('generated',)."""

@@ -173,6 +173,23 @@ def huge_vertices(scene, rng, folder):
     return ['Cube']
 
 
+def hostile_displacement(scene, rng, folder):
+    """True displacement (engine/displacement.py) whose scale is NaN,
+    infinite or huge: finite geometry or a named refusal."""
+    obj = cube(scene)
+    mat = material_on(obj, 'FuzzDisplaceMat')
+    mat.displacement_method = str(rng.choice(['DISPLACEMENT', 'BOTH']))
+    tree = mat.node_tree
+    noise = tree.nodes.new('ShaderNodeTexNoise')
+    disp = tree.nodes.new('ShaderNodeDisplacement')
+    disp.space = str(rng.choice(['OBJECT', 'WORLD']))
+    disp.inputs['Scale'].default_value = float(rng.choice([NAN, INF, -INF, 1e30, -1e20, 1e10, 3.0]))
+    tree.links.new(noise.outputs['Fac'], disp.inputs['Height'])
+    out = next(n for n in tree.nodes if n.type == 'OUTPUT_MATERIAL')
+    tree.links.new(disp.outputs['Displacement'], out.inputs['Displacement'])
+    return ['Cube', 'FuzzDisplaceMat']
+
+
 def degenerate_triangles(scene, rng, folder):
     verts = [(0, 0, 1.5), (1, 0, 1.5), (0, 1, 1.5), (2, 0, 1.5), (0, 0, 1.5)]
     faces = [(0, 1, 2), (0, 1, 3), (0, 1, 2), (0, 4, 1), (1, 2, 0)]  # collinear, duplicate, repeated vertex
@@ -609,6 +626,7 @@ def wrong_shapes(scene, rng, folder):
 HAZARDS = {
     'nan_vertices': (nan_vertices, False, False),
     'huge_vertices': (huge_vertices, False, False),
+    'hostile_displacement': (hostile_displacement, False, False),
     'degenerate_triangles': (degenerate_triangles, False, False),
     'empty_meshes': (empty_meshes, False, False),
     'nan_transform': (nan_transform, False, False),

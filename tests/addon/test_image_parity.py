@@ -282,8 +282,9 @@ def test_images_agree_with_cycles(name, tmp_path, tapped_engine):
 
 def test_packed_udim_tiles_and_displacement_method(tmp_path, registered_addon):
     """A packed tiled image is read tile by tile from its packed files; a
-    displacement method other than Bump Only is named in the warning (it
-    renders as bump)."""
+    Displacement node under "Displacement Only" is true displacement (no
+    warning, no bump), while a float linked straight into the output is
+    named in the warning and renders as bump."""
     from addon.export import material as material_export
     grid_scene()
     image = tiled_image(str(tmp_path), "packed.<UDIM>.png", {
@@ -299,9 +300,14 @@ def test_packed_udim_tiles_and_displacement_method(tmp_path, registered_addon):
     tree.links.new(displacement.outputs[0], tree.nodes['Material Output'].inputs['Displacement'])
     mat.displacement_method = 'DISPLACEMENT'
     translated, warning = material_export.translate(mat)
-    assert warning is not None and "displacement method displacement rendered as bump" in warning, warning
-    assert "magenta" not in warning, warning
+    assert not warning or ("displacement" not in warning and "magenta" not in warning), warning
+    assert translated.displacement is not None and translated.displacement.method == 'DISPLACEMENT'
+    assert translated.normal is None
     tiles = dict(translated.lobes[0].color.image.tiles)
     assert sorted(tiles) == [1001, 1002]
     np.testing.assert_allclose(tiles[1001].pixels[..., :3].mean(axis=(0, 1)), (1.0, 0.0, 0.0), atol=1e-6)
     np.testing.assert_allclose(tiles[1002].pixels[..., :3].mean(axis=(0, 1)), (0.0, 0.0, 1.0), atol=1e-6)
+    tree.links.new(image_node(tree, image).outputs['Alpha'], tree.nodes['Material Output'].inputs['Displacement'])
+    translated, warning = material_export.translate(mat)
+    assert warning is not None and "displacement method displacement" in warning and "rendered as bump" in warning
+    assert translated.displacement is None

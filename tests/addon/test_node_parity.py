@@ -538,6 +538,17 @@ def test_displacement_output_becomes_bump_only(registered_addon):
     height = Compiler().value(bump.height)(ctx)
     fac = Compiler().value(scene.NodeOutput(bump.height.a.a.call, 'Fac'))(ctx)
     np.testing.assert_allclose(height, (fac - 0.4) * 0.2, rtol=1e-6)
+    assert translated.displacement is None
+    # "Displacement and Bump": the same bump, on the undisplaced surface, plus true displacement.
+    mat.displacement_method = 'BOTH'
+    both, warning = material_export.translate(mat)
+    assert warning is None, warning
+    assert isinstance(both.normal, scene.Bump) and both.normal.undisplaced
+    assert both.displacement.method == 'BOTH' and both.displacement.space == 'OBJECT'
+    np.testing.assert_allclose(Compiler().value(both.displacement.height)(ctx), height, rtol=1e-6)
+    mat.displacement_method = 'DISPLACEMENT'
+    only, _ = material_export.translate(mat)
+    assert isinstance(only.normal, scene.NormalMap) and only.displacement.method == 'DISPLACEMENT'
 
 
 def test_light_node_tree_scales_the_light(registered_addon):
