@@ -84,6 +84,9 @@ def test_object_info_reads_the_light_object(empty_scene):
 
 
 def test_nodes_evaluated_otherwise_on_lights_are_named(empty_scene):
+    """A Light Path output Ember does not evaluate on lights (Is Volume
+    Scatter Ray) is named with the light; Ray Depth, which it evaluates per
+    light point as Cycles (test_light_tree_path_parity), is not."""
     _, tree, emission = textured_light(empty_scene, 'AREA', energy=10.0)
     path = tree.nodes.new('ShaderNodeLightPath')
     mix = tree.nodes.new('ShaderNodeMix')
@@ -93,4 +96,8 @@ def test_nodes_evaluated_otherwise_on_lights_are_named(empty_scene):
     tree.links.new(mix.outputs[2], emission.inputs['Color'])
     exported = export()
     assert exported.scene.lights[0].shader is not None
-    assert [w for w in exported.warnings if "Light 'AREA'" in w and "Ray Depth" in w], exported.warnings
+    assert not [w for w in exported.warnings if "Ray Depth" in w], exported.warnings
+    tree.links.new(path.outputs['Is Volume Scatter Ray'], mix.inputs[0])
+    exported = export()
+    assert exported.scene.lights[0].shader is not None
+    assert [w for w in exported.warnings if "Light 'AREA'" in w and "Is Volume Scatter Ray" in w], exported.warnings
