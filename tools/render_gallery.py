@@ -10,13 +10,14 @@ import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = ("cornell", "veach_mis", "instances_lights", "materials", "subsurface", "lobes", "motion", "smoke",
-          "points", "bump", "thinfilm", "hair", "light_textures")
+          "points", "bump", "thinfilm", "hair", "light_textures", "displacement")
 # Gallery scenes that are parity scenes of tests/addon (module, scene name, upscale of its resolution).
 PARITY = {"subsurface": ("test_subsurface_parity", "spheres", 6), "lobes": ("test_lobe_parity", "lobes", 4),
           "motion": ("test_motion_parity", "objects", 4), "smoke": ("test_volume_field_parity", "smoke_in_fog", 10),
           "points": ("test_points_parity", "heap", 4), "bump": ("test_bump_correction_parity", "sphere", 4),
           "thinfilm": ("test_thinfilm_parity", "films", 5), "hair": ("test_hair_parity", "particles", 5),
-          "light_textures": ("test_light_texture_parity", "light_textures", 5)}
+          "light_textures": ("test_light_texture_parity", "light_textures", 5),
+          "displacement": ("test_displacement_parity", "only", 6)}
 
 
 def build_parity_scene(name):

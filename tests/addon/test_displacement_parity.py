@@ -64,6 +64,14 @@ def relief(scene, method, scale=0.6):
     small_resolution(scene, *SIZE)
 
 
+def reference_scene(name, folder=None):
+    """The relief with Displacement Only ('only') or Both ('both') at scale
+    0.6, and its bounces (tools/render_gallery.py's 'displacement')."""
+    scene = empty_factory_scene()
+    relief(scene, {'only': 'DISPLACEMENT', 'both': 'BOTH'}[name])
+    return scene, BOUNCES
+
+
 def _ember(scene, tmp_path, tapped_engine, name):
     image, var = render_for_reference(scene, tmp_path, name, tapped_engine, EMBER_SPP, 3, BOUNCES)
     from addon import engine as ember_engine
