@@ -440,6 +440,12 @@ class Bump:
     # The Material Output's displacement as bump: Cycles' SetNormal makes it
     # the smooth normal (sd->N), so the bump shadowing term leaves it alone.
     sets_normal: bool = False
+    # The Material Output's "Both" bump (Cycles' bump_from_displacement):
+    # computed in object space (the BumpNode's use_object_space) on the
+    # height dot(displacement vector in world space, N), which for an
+    # Object-space Displacement node is the height times |M^T N|.  None:
+    # an ordinary world-space bump; else the Displacement node's space.
+    displacement_space: Optional[str] = None
 
 
 @dataclass(eq=False)

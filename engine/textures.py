@@ -664,7 +664,7 @@ class MaterialTextures:
             inner = None if expr.normal is None else self._compile_normal(expr.normal)
             return ("bump", self.compiler.value(expr.height), self.compiler.value(expr.strength),
                     self.compiler.value(expr.distance), expr.invert, inner, _bump_step(expr),
-                    bool(getattr(expr, "undisplaced", False)))
+                    bool(getattr(expr, "undisplaced", False)), getattr(expr, "displacement_space", None))
         if isinstance(expr, NodeOutput):
             # A vector node's output (e.g. Bevel): Cycles normalizes it.
             return ("vector", self.compiler.color(expr))
@@ -835,13 +835,38 @@ def _evaluate_normal(normal, hit, rows, triangles, ns, ctx):
         if normal[3] != "TANGENT":
             return space_normal_map(hit, rows, ns, normal[1], normal[2], normal[3], ctx)
         return normal_map(hit, rows, ns, normal[1], normal[2], ctx)
-    _, height, strength, distance, invert, inner, step, undisplaced = normal
+    _, height, strength, distance, invert, inner, step, undisplaced, space = normal
     base = ns if inner is None else _unit(_evaluate_normal(inner, hit, rows, triangles, ns, ctx), ns)
     grad = surface_gradient(height, ctx, step, triangles)
     ng = triangles.ng[ctx.prim] if ctx.prim is not None else None
     if undisplaced and ctx.prim is not None:
         grad, ng = _on_undisplaced(grad, ng, triangles, ctx)
+    if space is not None and ng is not None and ctx.instance[0] is not None:
+        return _object_space_bump(base, grad, ng, space, strength(ctx), distance(ctx), invert, ctx)
     return bump(base, grad, strength(ctx), distance(ctx), invert, ng)
+
+
+def _object_space_bump(base, grad, ng, space, strength, distance, invert, ctx):
+    """The displacement bump of "Both" as Cycles' bump_from_displacement
+    builds it: svm_node_set_bump with use_object_space (the normal and the
+    differentials taken to object space, the result brought back with the
+    inverse transpose), on the height dot(D, N) of the world-space
+    displacement vector D: for an Object-space Displacement node D = M (h n)
+    with n = unit(M^T N), so the height is h |M^T N|; for World space it is
+    h.  On an unscaled object both reduce to the world-space bump of h."""
+    shading, inst = ctx.instance
+    m = shading.matrix[inst][:, :3, :3]
+    mt = np.swapaxes(m, 1, 2)
+    base_o = np.einsum("nij,nj->ni", mt, base)        # M^T N (object_inverse_normal_transform)
+    if space == "OBJECT":
+        grad = grad * np.linalg.norm(base_o, axis=1, keepdims=True)
+    ng_o = _unit(np.einsum("nij,nj->ni", mt, ng), ng)
+    # The height's derivatives along the surface are the same in both spaces
+    # (dh = grad_w . M dp_o): grad_o is M^T grad_w, kept in the object plane.
+    grad_o = np.einsum("nij,nj->ni", mt, grad)
+    grad_o = grad_o - np.einsum("ij,ij->i", grad_o, ng_o)[:, None] * ng_o
+    out_o = bump(_unit(base_o, ng_o), grad_o, strength, distance, invert, ng_o)
+    return ctx.to_world_normal(out_o)
 
 
 def _on_undisplaced(grad, ng, triangles, ctx):

@@ -1173,6 +1173,8 @@ def _displacement_bump(translator, output, inner, method='BUMP'):
         bumped.sets_normal = True   # Cycles' SetNormal: sd->N is the displacement's bump
     if method == 'BOTH' and hasattr(bumped, 'undisplaced'):
         bumped.undisplaced = True   # Cycles bumps with the undisplaced surface's derivatives
+    if method == 'BOTH' and hasattr(bumped, 'displacement_space'):
+        bumped.displacement_space = space   # Cycles' object-space bump of dot(D, N)
     return _over(inner, bumped), displacement
 
 
