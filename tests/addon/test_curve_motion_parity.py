@@ -74,6 +74,19 @@ def sway_modifier(obj, amount=1.0):
     return modifier
 
 
+def infinite_sway():
+    """Blow sway_modifier's sway up to 1e38 x 1e38 x (frame - 2): infinite at
+    frames 1 and 3, 0 at frame 2 (hostile motion steps)."""
+    tree = bpy.data.node_groups['sway']
+    scaled = next(n for n in tree.nodes if n.type == 'MATH' and n.inputs[1].default_value == 1.0)
+    scaled.inputs[1].default_value = 1e38
+    again = tree.nodes.new('ShaderNodeMath')
+    again.operation = 'MULTIPLY'
+    again.inputs[1].default_value = 1e38
+    tree.links.new(scaled.outputs[0], again.inputs[0])
+    tree.links.new(again.outputs[0], next(n for n in tree.nodes if n.type == 'COMBXYZ').inputs['X'])
+
+
 def swaying_curves(scene, blur=True):
     """The strands (200) swaying by sway_modifier: deformation motion."""
     strands(scene, curves=200)
@@ -172,14 +185,7 @@ def test_hostile_curve_and_point_motion_renders_finite(case, tmp_path, tapped_en
     elif case == 'shutter_10':
         scene.render.motion_blur_shutter = 10.0
     else:   # 1e38 x 1e38 x (frame - 2): infinite at the shutter's steps, 0 at its centre
-        tree = bpy.data.node_groups['sway']
-        scaled = next(n for n in tree.nodes if n.type == 'MATH' and n.inputs[1].default_value == 1.0)
-        scaled.inputs[1].default_value = 1e38
-        again = tree.nodes.new('ShaderNodeMath')
-        again.operation = 'MULTIPLY'
-        again.inputs[1].default_value = 1e38
-        tree.links.new(scaled.outputs[0], again.inputs[0])
-        tree.links.new(again.outputs[0], next(n for n in tree.nodes if n.type == 'COMBXYZ').inputs['X'])
+        infinite_sway()
     image, _ = render_for_reference(scene, tmp_path, 'hostile_' + case, tapped_engine, 4, 2, bounces)
     assert np.isfinite(image).all()
     curves = seen[-1].curves[0]

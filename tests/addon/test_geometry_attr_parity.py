@@ -171,10 +171,9 @@ def test_window_coordinates_match_cycles_in_perspective(registered_addon, tmp_pa
     np.testing.assert_allclose(got, want, atol=3e-5)
 
 
-def test_generated_coordinates_of_deformed_meshes_match_cycles(registered_addon, tmp_path):
-    """Generated coordinates come from the undeformed mesh (Blender's orco),
-    as Cycles reads them: a grid bent by a Simple Deform modifier, one
-    moved by a shape key, and one whose texture space is set by hand."""
+def _top_ortho_scene():
+    """An empty scene seen from above by an orthographic camera 16 units
+    wide (off the pixel grid by a fraction of a pixel)."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     cam_data = bpy.data.cameras.new("cam")
@@ -183,6 +182,14 @@ def test_generated_coordinates_of_deformed_meshes_match_cycles(registered_addon,
     cam.location = (0.013, 0.021, 10.0)
     scene.collection.objects.link(cam)
     scene.camera = cam
+    return scene
+
+
+def test_generated_coordinates_of_deformed_meshes_match_cycles(registered_addon, tmp_path):
+    """Generated coordinates come from the undeformed mesh (Blender's orco),
+    as Cycles reads them: a grid bent by a Simple Deform modifier, one
+    moved by a shape key, and one whose texture space is set by hand."""
+    scene = _top_ortho_scene()
     small_resolution(scene, WIDTH, HEIGHT)
     mat, tree, emission = emission_material("generated")
     coords = tree.nodes.new('ShaderNodeTexCoord')
@@ -299,14 +306,7 @@ def _armature(obj, location):
 def build_constructive_scene():
     """Objects whose stack both deforms and changes the vertex count, each
     with its own material (one row of ``_link`` per case, 3.4 units apart)."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    cam_data = bpy.data.cameras.new("cam")
-    cam_data.type, cam_data.ortho_scale = 'ORTHO', 16.0
-    cam = bpy.data.objects.new("cam", cam_data)
-    cam.location = (0.013, 0.021, 10.0)
-    scene.collection.objects.link(cam)
-    scene.camera = cam
+    scene = _top_ortho_scene()
     small_resolution(scene, 96, 72)   # 1.5 times the suite's 64 x 48: the array and mirror cases are thin
     v, f = _bumpy_grid("grid", 4, 3.0, 7, (0.0, 0.0))
     objects = {}

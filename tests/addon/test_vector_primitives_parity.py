@@ -197,14 +197,7 @@ def test_infinite_steps_give_a_finite_pass_and_a_named_warning(registered_addon,
     them, the pass is finite."""
     from addon import engine as ember_engine
     scene = _scene('swaying_curves')
-    tree = bpy.data.node_groups['sway']
-    scaled = next(n for n in tree.nodes if n.type == 'MATH' and n.inputs[1].default_value == 1.0)
-    scaled.inputs[1].default_value = 1e38
-    again = tree.nodes.new('ShaderNodeMath')
-    again.operation = 'MULTIPLY'
-    again.inputs[1].default_value = 1e38
-    tree.links.new(scaled.outputs[0], again.inputs[0])
-    tree.links.new(again.outputs[0], next(n for n in tree.nodes if n.type == 'COMBXYZ').inputs['X'])
+    motion_scenes.infinite_sway()
     vector, hit = _render(scene, tmp_path, 'EMBER', 0)
     warnings = ember_engine.RENDER_LOG[-1].get('warnings') or []
     assert np.isfinite(vector).all() and hit.any()
