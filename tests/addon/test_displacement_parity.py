@@ -12,7 +12,7 @@ The old fallback (the same material rendered as bump, what Ember did for
 both methods before) must fail the same tests against the Displacement
 Only reference: its difference is printed.
 The transformed cases: the relief scaled (2, 1, 0.5), rotated and parented,
-Object and World space, each method.
+Object and World space, each method."""
 import math
 
 import bpy
