@@ -25,7 +25,7 @@ import math
 import numpy as np
 
 SUITE_ALPHA = 0.01       # probability that a correct engine fails anywhere in the suite
-FAMILIES = 370           # upper bound on the statistical families the suite runs
+FAMILIES = 450           # upper bound on the statistical families the suite runs
 FAMILY_ALPHA = SUITE_ALPHA / FAMILIES
 _families_used = []
 
