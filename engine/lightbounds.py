@@ -10,9 +10,12 @@ import numpy as np
 class Bounds:
     """Light bounds of one emitter or node: a box, the power phi, an
     orientation cone (axis w, cos theta_o of the normals' spread, cos
-    theta_e of the emission about a normal) and whether both sides emit."""
+    theta_e of the emission about a normal) and whether both sides emit.
+    ``rect``: an area light's (centre, full edge u, full edge v), which the
+    tree tests as Cycles does at points without transmission (None: none)."""
 
-    def __init__(self, lo, hi, phi, w, cos_o, cos_e, two_sided):
+    def __init__(self, lo, hi, phi, w, cos_o, cos_e, two_sided, rect=None):
+        self.rect = rect
         self.lo, self.hi = np.asarray(lo, float), np.asarray(hi, float)
         self.phi = float(phi)
         self.w = np.asarray(w, float)

@@ -46,6 +46,7 @@ class LightTree:
             self._build([(e, bounds[e]) for e in finite], nodes)
         self._pack(nodes)
         self._paths(nodes)
+        self._leaves(bounds, nodes)
 
     # -- construction ---------------------------------------------------------
     def _build(self, items, nodes):
@@ -106,6 +107,21 @@ class LightTree:
             for k, (node, left) in enumerate(path):
                 self.path_node[e, k], self.path_left[e, k] = node, left
 
+    def _leaves(self, bounds, nodes):
+        """Per emitter: its leaf node (-1: none) and, for area lights, the
+        rectangle Cycles tests for visibility (centre, full edges u and v)."""
+        self.leaf_node = np.full(self.count, -1, np.int64)
+        for k, node in enumerate(nodes):
+            if node[3] >= 0:
+                self.leaf_node[node[3]] = k
+        self.rect = np.zeros((self.count, 9))
+        self.has_rect = np.zeros(self.count, bool)
+        for e, b in enumerate(bounds):
+            rect = getattr(b, "rect", None)
+            if rect is not None:
+                self.rect[e] = np.concatenate([np.asarray(x, float) for x in rect])
+                self.has_rect[e] = True
+
     # -- importance -------------------------------------------------------------
     def _tree_arrays(self):
         return (self.center, self.radius, self.w, self.two_sided_f, self.sin_o, self.cos_o, self.cos_e,
@@ -116,6 +132,7 @@ class LightTree:
         """Emitter index and its selection probability for each shading point
         (lobe: (N, LOBE_COLUMNS) glossy-lobe terms, None: none)."""
         lobe = _lobes(lobe, len(u))
+        n = _sided(n)
         m = len(u)
         emitter = np.zeros(m, np.int64)
         prob = np.ones(m)
@@ -137,6 +154,7 @@ class LightTree:
             _descend(np.ascontiguousarray(u[rows]), _rows(p, rows), _rows(n, rows), _rows(lobe, rows),
                      *self._tree_arrays(),
                      self.leaf_emitter, picked, p_rows)
+            p_rows *= self._leaf_visible(picked, p[rows], n[rows])
             emitter[rows], prob[rows] = picked, p_rows
         return emitter, prob
 
@@ -149,6 +167,7 @@ class LightTree:
         u = np.asarray(u, float)
         m, k = u.shape
         lobe = _lobes(lobe, m)
+        n = _sided(n)
         emitter = np.zeros((m, k), np.int64)
         prob = np.ones((m, k))
         tree = np.ones((m, k), bool)
@@ -166,12 +185,16 @@ class LightTree:
             prob[tree] = 1.0 - self.p_infinite
             _descend_many(np.ascontiguousarray(uu), np.ascontiguousarray(tree), _rows(p, np.arange(m)),
                           _rows(n, np.arange(m)), _rows(lobe, np.arange(m)), *self._tree_arrays(), self.leaf_emitter, emitter, prob)
+            for j in range(k):
+                rows = np.flatnonzero(tree[:, j])
+                prob[rows, j] *= self._leaf_visible(emitter[rows, j], p[rows], n[rows])
         return emitter, prob
 
     def pmf(self, emitter, p, n, lobe=None):
         """Probability that ``select`` picks ``emitter`` at p (same products)."""
         emitter = np.asarray(emitter, np.int64)
         lobe = _lobes(lobe, len(emitter))
+        n = _sided(n)
         prob = np.ones(len(emitter))
         inf = np.zeros(len(emitter), bool)
         if len(self.infinite):
@@ -183,8 +206,42 @@ class LightTree:
             _path_pmf(np.ascontiguousarray(emitter[rows]), _rows(p, rows), _rows(n, rows), _rows(lobe, rows),
                       *self._tree_arrays(),
                       self.path_node, self.path_left, self.path_len, p_rows)
-            prob[rows] = p_rows
+            prob[rows] = p_rows * self._leaf_visible(emitter[rows], p[rows], n[rows])
         return prob
+
+    def _leaf_visible(self, emitter, p, n):
+        """1, or 0 where the tree's emitter cannot light p from above its
+        normal at a point whose closures have no transmission (n[:, 3] 1):
+        Cycles' light_tree_emitter_importance is 0 there, so its light
+        sampling never picks the emitter at p and a BSDF ray that meets it
+        is weighed by MIS as if light sampling could not (weight 1).  Its own
+        bounds decide, an area light by Cycles' area_light_tree_parameters."""
+        out = np.ones(len(emitter))
+        if len(emitter) == 0:
+            return out
+        k = self.leaf_node[emitter]
+        rows = np.flatnonzero((n[:, 3] > 0) & np.any(n[:, :3] != 0.0, axis=1) & (k >= 0))
+        if len(rows) == 0:
+            return out
+        e, kr, pr, nr = emitter[rows], k[rows], p[rows], n[rows]
+        vis = _node_importance(kr, pr, nr, self.center, self.radius, self.w, self.two_sided_f, self.sin_o,
+                               self.cos_o, self.cos_e, self.phi) > 0.0
+        sq = np.flatnonzero(self.has_rect[e])
+        if len(sq):
+            rc, wn, ps, ns = self.rect[e[sq]], self.w[kr[sq]], pr[sq], nr[sq]
+            vis[sq] = _rect_visible(ps[:, 0], ps[:, 1], ps[:, 2], ns[:, 0], ns[:, 1], ns[:, 2],
+                                    *(rc[:, j] for j in range(9)), wn[:, 0], wn[:, 1], wn[:, 2]) > 0.0
+        out[rows] = vis
+        return out
+
+
+def _sided(n):
+    """Normals as the tree reads them, (N, 4): a fourth column 1 where the
+    point's closures have no transmission (0 when not given: both sides)."""
+    n = np.asarray(n, float)
+    if n.shape[1] == 4:
+        return n
+    return np.concatenate([n, np.zeros((len(n), 1))], axis=1)
 
 
 def _lobes(lobe, m):
@@ -209,7 +266,7 @@ def _p_left_numpy(node, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, 
 
 def _node_importance(node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi):
     c, wn = center[node], w[node]
-    return _importance(p[:, 0], p[:, 1], p[:, 2], n[:, 0], n[:, 1], n[:, 2],
+    return _importance(p[:, 0], p[:, 1], p[:, 2], n[:, 0], n[:, 1], n[:, 2], n[:, 3],
                        c[:, 0], c[:, 1], c[:, 2], radius[node], wn[:, 0], wn[:, 1], wn[:, 2],
                        two_sided[node], sin_o[node], cos_o[node], cos_e[node], phi[node])
 
@@ -254,10 +311,13 @@ def _path_pmf_numpy(emitter, p, n, lobe, center, radius, w, two_sided, sin_o, co
         prob[rows] *= np.where(path_left[e, k], pl, 1.0 - pl)
 
 
-@kernel(18)
-def _importance(px, py, pz, nx, ny, nz, cx, cy, cz, r, wx, wy, wz, two_sided, sin_o, cos_o, cos_e, phi):
+@kernel(19)
+def _importance(px, py, pz, nx, ny, nz, one_sided, cx, cy, cz, r, wx, wy, wz, two_sided, sin_o, cos_o, cos_e, phi):
     """pbrt-v4 LightBounds::Importance of one node for one shading point (normal
-    (0, 0, 0): none), as ``_descend`` and ``_path_pmf`` weigh the children."""
+    (0, 0, 0): none), as ``_descend`` and ``_path_pmf`` weigh the children.
+    one_sided 1: the point's closures have no transmission (Cycles'
+    light_tree_importance without SD_BSDF_HAS_TRANSMISSION): the incidence
+    cosine is signed, so a node wholly behind n gets 0."""
     tx, ty, tz = px - cx, py - cy, pz - cz
     d2_true = tx * tx + ty * ty + tz * tz
     d2 = np.maximum(d2_true, r * r)
@@ -275,8 +335,12 @@ def _importance(px, py, pz, nx, ny, nz, cx, cy, cz, r, wx, wy, wz, two_sided, si
     sin_x = _sin_sub(sin_w, cos_w, sin_o, cos_o)
     cos_p = _cos_sub(sin_x, cos_x, sin_b, cos_b)
     imp = where(cos_p > cos_e, phi * cos_p / d2, 0.0)
-    cos_i = np.abs(ix * nx + iy * ny + iz * nz)
+    # i points from the node to p: cos_i is the cosine at p towards the node.
+    cos_n = ix * nx + iy * ny + iz * nz
+    cos_i = where(one_sided > 0.0, -cos_n, np.abs(cos_n))
     has_n = nx * nx + ny * ny + nz * nz > 0.0
+    # cos(max(0, theta_i - theta_b)); negative (the node wholly behind n,
+    # one-sided) makes the importance 0 below.
     cos_pi = _cos_sub(_sin(cos_i), cos_i, sin_b, cos_b)
     imp = imp * where(has_n, cos_pi, 1.0)
     return np.maximum(imp, 0.0)
@@ -297,6 +361,38 @@ def _cos_sub(sin_a, cos_a, sin_b, cos_b):
 def _sin_sub(sin_a, cos_a, sin_b, cos_b):
     """sin(max(0, a - b))."""
     return where(cos_a > cos_b, 0.0, sin_a * cos_b - cos_a * sin_b)
+
+
+@kernel(18)
+def _rect_visible(px, py, pz, nx, ny, nz, cx, cy, cz, ux, uy, uz, vx, vy, vz, ax, ay, az):
+    """1 where an area light (centre c, full edges u and v, facing a) may
+    light p above its normal n, else 0: Cycles' area_light_tree_parameters
+    (p in front of the light and the plane test with the full edges, as
+    Cycles writes it) and light_tree_importance's incidence test (the cone
+    from p through the four corners wholly behind n: 0)."""
+    dx, dy, dz = cx - px, cy - py, cz - pz
+    dist = np.sqrt(dx * dx + dy * dy + dz * dz)
+    inv = where(dist > 0.0, 1.0 / np.maximum(dist, 1e-300), 0.0)   # safe_normalize
+    tx, ty, tz = dx * inv, dy * inv, dz * inv
+    cos_u = np.minimum(np.minimum(_corner_cos(dx, dy, dz, tx, ty, tz, ux, uy, uz, vx, vy, vz, -0.5, -0.5),
+                                  _corner_cos(dx, dy, dz, tx, ty, tz, ux, uy, uz, vx, vy, vz, 0.5, -0.5)),
+                       np.minimum(_corner_cos(dx, dy, dz, tx, ty, tz, ux, uy, uz, vx, vy, vz, -0.5, 0.5),
+                                  _corner_cos(dx, dy, dz, tx, ty, tz, ux, uy, uz, vx, vy, vz, 0.5, 0.5)))
+    front = ax * tx + ay * ty + az * tz < 0.0
+    above = (nx * dx + ny * dy + nz * dz) + np.abs(nx * ux + ny * uy + nz * uz) + np.abs(nx * vx + ny * vy + nz * vz) > 0.0
+    cos_i = tx * nx + ty * ny + tz * nz
+    cos_min = where(cos_i >= cos_u, 1.0, cos_i * cos_u + _sin(cos_i) * _sin(cos_u))
+    return where(front, where(above, where(cos_min > 0.0, 1.0, 0.0), 0.0), 0.0)
+
+
+@helper
+def _corner_cos(dx, dy, dz, tx, ty, tz, ux, uy, uz, vx, vy, vz, su, sv):
+    """Cosine between the direction to the centre (t) and to the corner
+    c + su u + sv v (d = c - p), as Cycles' safe_normalize_len."""
+    qx, qy, qz = dx + su * ux + sv * vx, dy + su * uy + sv * vy, dz + su * uz + sv * vz
+    length = np.sqrt(qx * qx + qy * qy + qz * qz)
+    inv = where(length > 0.0, 1.0 / np.maximum(length, 1e-300), 0.0)
+    return (tx * qx + ty * qy + tz * qz) * inv
 
 
 # -- the glossy lobe's term (light selection 'tree_bsdf') --------------------
@@ -339,7 +435,7 @@ _importance_one = helper(_importance.fn)
 
 @helper
 def _importance_at(i, k, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi):
-    return _importance_one(p[i, 0], p[i, 1], p[i, 2], n[i, 0], n[i, 1], n[i, 2],
+    return _importance_one(p[i, 0], p[i, 1], p[i, 2], n[i, 0], n[i, 1], n[i, 2], n[i, 3],
                            center[k, 0], center[k, 1], center[k, 2], radius[k], w[k, 0], w[k, 1], w[k, 2],
                            two_sided[k], sin_o[k], cos_o[k], cos_e[k], phi[k])
 

@@ -8,7 +8,8 @@ without MIS), the radiance it adds if unoccluded, beta f Le |cos| w /
 need a shadow ray).  A sample counts where its pdf is positive and its
 direction leaves on the same side of the geometric and the shading surface
 (lights behind the surface count for transmitting lobes, whose f is 0
-otherwise).  The compiled row loop and the NumPy form agree bit for bit.
+otherwise) and its light was picked with a positive probability (the light
+tree gives 0 to lights behind a point without transmission).  The compiled row loop and the NumPy form agree bit for bit.
 ``add_rows`` adds the light of the samples whose shadow rays are free.
 
 ``resample`` is resampled importance sampling (Talbot et al. 2005) over a
@@ -32,7 +33,7 @@ def _contribution_numpy(wi_l, wi, ng, light_pdf, p_sel, p_mis, pdf_b, delta, mis
     cos = np.abs(wi_l[:, 2])
     p_light = p_sel * light_pdf
     g = dot(wi, ng)
-    ok = (light_pdf > 0) & (cos > 0) & (g != 0) & ((g > 0) == (wi_l[:, 2] > 0))
+    ok = (light_pdf > 0) & (p_sel > 0) & (cos > 0) & (g != 0) & ((g > 0) == (wi_l[:, 2] > 0))
     w[:] = np.where(delta, 1.0, power_heuristic(p_mis * light_pdf, pdf_b)) if mis else 1.0
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         scale = np.where(ok, cos * w / np.where(ok, p_light, 1.0), 0.0)
@@ -49,7 +50,7 @@ def _contribution_rows(wi_l, wi, ng, light_pdf, p_sel, p_mis, pdf_b, delta, mis,
         cos = abs(z)
         p_light = p_sel[i] * light_pdf[i]
         g = (wi[i, 0] * ng[i, 0] + wi[i, 2] * ng[i, 2]) + wi[i, 1] * ng[i, 1]   # einsum's order
-        ok = light_pdf[i] > 0 and cos > 0 and g != 0 and (g > 0) == (z > 0)
+        ok = light_pdf[i] > 0 and p_sel[i] > 0 and cos > 0 and g != 0 and (g > 0) == (z > 0)
         weight = 1.0
         if mis and not delta[i]:
             q = p_mis[i] * light_pdf[i]

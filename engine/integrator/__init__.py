@@ -57,7 +57,7 @@ def trace_batch(ctx, pix, sample, tile):
         time = ctx.camera.shutter_times(pix, ctx.sampler.get(pseed, sample, TIME)[:, 0])[:, None]
         o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3], time=time[:, 0])
     paths = Paths(pix, o, d, tmax, np.ones((n, 3)), np.zeros((n, 3)),
-                  np.ones(n), np.ones(n, bool), o, np.zeros((n, 3)), np.zeros(n, bool),
+                  np.ones(n), np.ones(n, bool), o, np.zeros((n, 4)), np.zeros(n, bool),
                   np.full(n, VIS_CAMERA, np.uint8),
                   o, np.zeros(n, np.int32), np.zeros(n, np.int32), pseed, sample,
                   np.zeros((n, pass_events.aux_width(ctx.settings)), np.float32),

@@ -26,8 +26,9 @@ class Paths:
     L: np.ndarray
     prev_pdf: np.ndarray
     prev_delta: np.ndarray
-    # The previous path vertex and its geometric normal: the light tree's
-    # selection probability at that vertex weighs emitters hit by MIS.
+    # The previous path vertex and its normal as the light tree reads it
+    # (N, 4: stages.tree_normals): the tree's selection probability at that
+    # vertex weighs emitters hit by MIS.
     prev_p: np.ndarray
     prev_n: np.ndarray
     # NEE sampled every light at the previous vertex (light selection

@@ -15,6 +15,7 @@ from ..accel import shadow_rays, shadow_rays_f32
 from ..hits import hit_geometry
 from ..motion import path_time, triangles_at
 from ..lobes import hair_huang
+from ..lobes import registry as lobe_registry
 from ..lobes.hair_huang import HAIR_HUANG
 from ..points import curve_hits, curve_key_mix, curve_tangents, curve_rows, sphere_hits
 from ..nodes import NodeRays, ShadingContext
@@ -518,6 +519,21 @@ def lobe_terms(ctx, v):
     return out
 
 
+def tree_normals(v):
+    """(N, 4) per vertex, the normal the light tree reads: the shading
+    normal (Cycles' sd->N) and 1 where none of the vertex's lobes has
+    transmission (Cycles' SD_BSDF_HAS_TRANSMISSION unset, registry
+    ``has_transmission``): there the tree gives lights wholly behind the
+    normal probability 0, in light sampling and in the MIS of BSDF rays
+    that meet them (engine/lighttree.py)."""
+    lobes = v.lobes
+    through = np.isin(lobes.kind, lobe_registry.transmitting()) & (v.weights.max(axis=2) > 0)
+    out = np.empty((len(v), 4))
+    out[:, :3] = v.hit.ns
+    out[:, 3] = ~through.any(axis=1)
+    return out
+
+
 def light_samples(ctx, paths, v, depth, every):
     """Every light sample of the vertices ``v`` that brings light, as
     ShadowBatches (one per round, made when the previous one is traced)."""
@@ -529,7 +545,7 @@ def light_samples(ctx, paths, v, depth, every):
             batches = [resampled_light_sample(ctx, on, at, depth)]
         elif mode == "select":
             u = uniforms(ctx, on, vertex_set(depth, LIGHT))
-            e, p_sel = ctx.lights.select(u[:, 0], at.hit.p, at.hit.ng, lobe_terms(ctx, at))
+            e, p_sel = ctx.lights.select(u[:, 0], at.hit.p, tree_normals(at), lobe_terms(ctx, at))
             batches = [light_sample(ctx, on, at, e, p_sel, u[:, 1:])]
         else:
             batches = (light_sample(ctx, on, at, np.full(n, e), np.ones(n),
@@ -599,7 +615,7 @@ def resampled_light_sample(ctx, paths, v, depth, m=None):
     # candidate alone is then no unbiased estimate, but their mean is, and
     # that is all nee.resample needs.
     strata = np.minimum((u[0][:, :1] + np.arange(m)) / m, _U_BELOW_1)
-    e, p_sel = ctx.lights.select_many(strata, hit.p, hit.ng)
+    e, p_sel = ctx.lights.select_many(strata, hit.p, tree_normals(v))
     n = len(v)
     # Every candidate's light point in one pass over m n rows (candidate k
     # of vertex i in row k n + i): the light types' loops run once.
@@ -782,7 +798,7 @@ def remember_vertex(ctx, paths, v, through, every, ray, depth):
     of the ray it cast (``ray``: the kind before this bounce)."""
     hit = v.hit
     paths.prev_p = unless(through, paths.prev_p, hit.p)
-    paths.prev_n = unless(through, paths.prev_n, hit.ng)
+    paths.prev_n = unless(through, paths.prev_n, tree_normals(v))
     if ctx.links is not None:
         paths.prev_inst = unless(through, paths.prev_inst, instance_of(ctx, hit.prim).astype(np.int32))
     if every is not None:

@@ -306,7 +306,6 @@ def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None, obs=NO_PASSES):
     1) and the phase-function sample of the next ray; moves the paths in
     place."""
     n = len(paths.pix)
-    zeros = np.zeros((n, 3))
     obs.volume_vertex(paths)
     if nee_scale is None:
         direct_light(ctx, paths, p, phase, depth, obs)
@@ -323,7 +322,7 @@ def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None, obs=NO_PASSES):
     paths.o, paths.d, paths.mis_o, paths.prev_p = p, wi, p, p
     paths.self_prim = np.full(n, -1, np.int64)
     paths.tmax = np.full(n, np.inf)
-    paths.prev_n = zeros
+    paths.prev_n = np.zeros((n, 4))   # no normal (the tree's n, stages.tree_normals)
     paths.prev_pdf = pdf
     paths.prev_delta = np.zeros(n, bool)
     paths.prev_every = np.zeros(n, bool)

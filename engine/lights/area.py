@@ -88,7 +88,7 @@ class AreaLights(LightTable):
         c, u, v = self.c[j], self.u[j], self.v[j]
         corners = c + 0.5 * np.array([u + v, u - v, -u + v, -u - v])
         # One-sided Lambertian: normals all equal (theta_o = 0), emission up to 90 degrees.
-        return Bounds(corners.min(axis=0), corners.max(axis=0), phi, self.n[j], 1.0, 0.0, False)
+        return Bounds(corners.min(axis=0), corners.max(axis=0), phi, self.n[j], 1.0, 0.0, False, rect=(c, u, v))
 
     def proxy_boxes(self):
         """Thin boxes around rectangles, squares, disks and ellipses.  The exact

@@ -39,5 +39,5 @@ register(LobeDef(DIFFUSE, "diffuse", "diffuse", REFLECTION, sample_diffuse, eval
                  doc="Lambert (Diffuse BSDF, the Principled base)",
                  cases=[dict(color=(0.8, 0.6, 0.4))]))
 register(LobeDef(TRANSLUCENT, "translucent", "diffuse", TRANSMISSION, sample_translucent, eval_translucent,
-                 "lower", doc="Lambert on the other side (Translucent BSDF)",
+                 "lower", doc="Lambert on the other side (Translucent BSDF)", has_transmission=True,
                  cases=[dict(color=(0.5, 0.8, 0.5))]))

@@ -160,6 +160,7 @@ def sample_glass(lobes, rows, s):
 _PARAMS = ("roughness", "ior", "f0", "transmission_tint", "multiscatter", "thin_film_thickness", "thin_film_ior")
 register(LobeDef(GLASS, "glass", "glossy", REFLECTION | TRANSMISSION | DELTA_WHEN_SMOOTH, sample_glass,
                  eval_glass, "both", evaluates=rough, params=_PARAMS, reciprocal=False, unjoined=unjoined,
+                 has_transmission=True,
                  doc="GGX dielectric: reflection and refraction (Glass BSDF, Principled transmission); its "
                      "refraction is told by direction in the passes",
                  cases=[dict(color=(1, 1, 1), roughness=0.4, ior=1.5),
@@ -172,6 +173,7 @@ register(LobeDef(GLASS, "glass", "glossy", REFLECTION | TRANSMISSION | DELTA_WHE
                              thin_film_ior=1.4)]))
 register(LobeDef(REFRACTION, "refraction", "transmission", TRANSMISSION | DELTA_WHEN_SMOOTH, sample_glass,
                  eval_glass, "both", evaluates=rough, params=_PARAMS, reciprocal=False, unjoined=unjoined,
+                 has_transmission=True,
                  doc="Refraction BSDF: GGX refraction only",
                  cases=[dict(color=(0.9, 0.9, 1.0), roughness=0.3, ior=1.4),
                         dict(color=(1, 1, 1), roughness=0.0, ior=1.4)]))

@@ -306,7 +306,7 @@ def sample_hair(lobes, rows, s):
 
 register(LobeDef(HAIR_CHIANG, "hair_chiang", "glossy", REFLECTION | TRANSMISSION, sample_hair, eval_hair, "both",
                  params=("roughness", "ior", "absorption", "radial_roughness", "coat", "offset"),
-                 reciprocal=False,
+                 reciprocal=False, has_transmission=True,
                  doc="Principled Hair BSDF, Chiang model (Cycles' bsdf_principled_hair_chiang.h) on curves: x "
                      "the fibre's tangent, z its normal",
                  cases=[dict(color=(1, 1, 1), roughness=0.3, radial_roughness=0.3, ior=1.55, offset=0.0349,

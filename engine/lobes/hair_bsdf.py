@@ -187,6 +187,6 @@ register(LobeDef(HAIR_REFLECTION, "hair_reflection", "glossy", REFLECTION | TRAN
                  doc="Hair BSDF node, Reflection (Cycles' bsdf_hair_reflection) on curves: x the fibre's tangent",
                  cases=_CASES))
 register(LobeDef(HAIR_TRANSMISSION, "hair_transmission", "transmission", REFLECTION | TRANSMISSION | OWN_WEIGHT,
-                 _sampler(True), eval_transmission, "lower", params=_PARAMS, reciprocal=False,
+                 _sampler(True), eval_transmission, "lower", params=_PARAMS, reciprocal=False, has_transmission=True,
                  doc="Hair BSDF node, Transmission (Cycles' bsdf_hair_transmission) on curves",
                  cases=_CASES))

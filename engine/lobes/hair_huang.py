@@ -146,7 +146,7 @@ def ellipse_axes(tangent, normal, tt, bb, ns):
 
 
 register(LobeDef(HAIR_HUANG, "hair_huang", "glossy", REFLECTION | TRANSMISSION | OWN_WEIGHT, sample_huang,
-                 eval_huang, "both", params=PARAMS, reciprocal=False,
+                 eval_huang, "both", params=PARAMS, reciprocal=False, has_transmission=True,
                  doc="Principled Hair BSDF, Huang model (Cycles' bsdf_principled_hair_huang.h) on curves: x the "
                      "fibre's tangent, z its normal",
                  cases=[dict(color=(1, 1, 1), roughness=0.3, ior=1.55, offset=0.0349, aspect_ratio=1.0,

@@ -271,6 +271,12 @@ class LobeDef:
     doc: str = ""
     # scene.Lobe keyword sets the registry tests render (each one lobe)
     cases: list = field(default_factory=list)
+    # Cycles' setup of the closure sets SD_BSDF_HAS_TRANSMISSION: its light
+    # tree then keeps lights behind the normal (|cos|); without it, at a
+    # point none of whose closures has it, they get importance 0
+    # (engine/lighttree.py).  Not the sample flags: the Hair BSDF's
+    # Reflection samples below the normal, yet Cycles does not set it.
+    has_transmission: bool = False
 
     def has(self, flag):
         return bool(self.flags & flag)
@@ -316,3 +322,8 @@ def kinds_of_class(pass_class):
 
 def with_flag(flag):
     return tuple(sorted(d.id for d in REGISTRY.values() if d.has(flag)))
+
+
+def transmitting():
+    """The ids of the lobes whose Cycles closure has SD_BSDF_HAS_TRANSMISSION."""
+    return tuple(sorted(d.id for d in REGISTRY.values() if d.has_transmission))

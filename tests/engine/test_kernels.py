@@ -136,13 +136,31 @@ def test_light_tree_importance_agrees(jit):
     from engine.lighttree import _importance
     rng = np.random.default_rng(6)
     n = 20000
-    args = [mixed(rng, n, 2.0) for _ in range(9)]                 # p, n, centre
+    args = [mixed(rng, n, 2.0) for _ in range(6)]                 # p, n
+    args += [(rng.random(n) < 0.5).astype(float)]                  # one-sided (no transmission)
+    args += [mixed(rng, n, 2.0) for _ in range(3)]                 # centre
     args += [np.abs(mixed(rng, n))] + [mixed(rng, n) for _ in range(3)]   # radius, axis
     args += [(rng.random(n) < 0.5).astype(float)]                  # two-sided
     cos_o, cos_e = np.cos(rng.random(n) * np.pi), np.cos(rng.random(n) * np.pi / 2)
     args += [np.sqrt(1.0 - cos_o ** 2), cos_o, cos_e, np.abs(mixed(rng, n))]
     args[3][:100] = args[4][:100] = args[5][:100] = 0.0           # no normal
     assert_agree(*both_ways(_importance, *args))
+
+
+def test_area_light_visibility_agrees(jit):
+    """Cycles' area-light test at vertices without transmission
+    (lighttree._rect_visible), compiled and NumPy, over random lights
+    about p, some behind it, some edge-on, some at p itself."""
+    from engine.lighttree import _rect_visible
+    rng = np.random.default_rng(9)
+    n = 20000
+    args = [mixed(rng, n, 2.0) for _ in range(18)]
+    args[6][:50] = args[0][:50]
+    args[7][:50] = args[1][:50]
+    args[8][:50] = args[2][:50]                                    # the centre at p
+    plain, compiled = both_ways(_rect_visible, *args)
+    assert_agree(plain, compiled)
+    assert 0.2 < np.mean(plain[0]) < 0.8, np.mean(plain[0])
 
 
 def test_sobol_sampler_agrees(jit):
