@@ -58,18 +58,25 @@ def _lights_along(ctx, paths, tmax):
     rays (bounce 0) see only camera-visible lights."""
     ray = paths.ray if ctx.track_rays else None
     o = paths.o
+    tmin = None
     if ctx.transparent_shadows:
+        # Only past the ray's current start (Cycles' ray tmin): a light the
+        # line passed before a transparent surface or volume boundary was
+        # collected then, and is not met again.
         o = paths.mis_o
-        tmax = tmax + dot(paths.o - o, paths.d)
+        tmin = dot(paths.o - o, paths.d)
+        tmax = tmax + tmin
+        tmin = np.where(tmin > 0, tmin, 0.0)
     camera = paths.bounce == 0
     path = light_hit_path(ctx, paths)
     if camera.all() or not camera.any():
-        return ctx.lights.intersect(o, paths.d, tmax, camera=bool(camera.all()), ray=ray, path=path)
+        return ctx.lights.intersect(o, paths.d, tmax, camera=bool(camera.all()), ray=ray, path=path, tmin=tmin)
     n = len(o)
     out = (np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros((n, 3)), np.zeros(n))
     for rows in (np.nonzero(camera)[0], np.nonzero(~camera)[0]):
         res = ctx.lights.intersect(o[rows], paths.d[rows], tmax[rows], camera=bool(camera[rows[0]]),
-                                   ray=None if ray is None else ray[rows], path=path_rows(path, rows))
+                                   ray=None if ray is None else ray[rows], path=path_rows(path, rows),
+                                   tmin=None if tmin is None else tmin[rows])
         for a, r in zip(out, res):
             a[rows] = r
     return out

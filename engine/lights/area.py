@@ -114,7 +114,7 @@ class AreaLights(LightTable):
             boxes.append(box_corners(c, np.array([ax * (half_x + pad), ay * (half_y + pad), n * pad])))
         return boxes
 
-    def nearest(self, o, d, t, ray, bits, camera, path=None):
+    def nearest(self, o, d, t, ray, bits, camera, path=None, tmin=None):
         """As PointLights.nearest, one light at a time."""
         n = len(o)
         hit_t = np.full(n, np.inf)
@@ -128,7 +128,7 @@ class AreaLights(LightTable):
             if not np.any(sees):
                 continue
             th, le, pw = self.intersect(j, o, d, path)
-            closer = (th < t) & sees
+            closer = (th < t) & sees if tmin is None else (th < t) & (th > tmin) & sees
             if closer.any():
                 t[closer] = th[closer]
                 hit_t[closer] = th[closer]

@@ -197,9 +197,9 @@ class LightSet:
         return out
 
     # -- what BSDF rays see -------------------------------------------------
-    def intersect(self, o, d, tmax, camera=False, ray=None, path=None):
+    def intersect(self, o, d, tmax, camera=False, ray=None, path=None, tmin=None):
         """Closest light a ray can hit (the types with hit RAY: point, spot,
-        area) before tmax.
+        area) past tmin (per ray; None: 0) and before tmax.
 
         camera: the rays are camera rays, which see only lights with
         ``visible_camera``; ray: per-ray VIS_* bits (camera, diffuse, glossy,
@@ -211,18 +211,18 @@ class LightSet:
         (engine/lightproxy.py) say may meet one are tested exactly."""
         n = len(o)
         if self.proxies is None:
-            return self._intersect_exact(o, d, tmax, camera, ray, path)
+            return self._intersect_exact(o, d, tmax, camera, ray, path, tmin)
         rows = np.flatnonzero(self.proxies.candidates(o, d, tmax))
         out = (np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros((n, 3)), np.zeros(n))
         if len(rows):
             tm = np.broadcast_to(tmax, (n,))[rows]
             found = self._intersect_exact(o[rows], d[rows], tm, camera, None if ray is None else ray[rows],
-                                          path_rows(path, rows))
+                                          path_rows(path, rows), None if tmin is None else tmin[rows])
             for whole, part in zip(out, found):
                 whole[rows] = part
         return out
 
-    def _intersect_exact(self, o, d, tmax, camera, ray, path=None):
+    def _intersect_exact(self, o, d, tmax, camera, ray, path=None, tmin=None):
         n = len(o)
         t = np.array(tmax, dtype=np.float64, copy=True)
         hit_t = np.full(n, np.inf)
@@ -233,7 +233,7 @@ class LightSet:
             if g.definition.hit != RAY or not g.table.count:
                 continue
             # Each type's nearest only reports hits closer than t, and lowers t.
-            th, index, le, pw = g.table.nearest(o, d, t, ray, self.visibility[g.base:g.stop], camera, path)
+            th, index, le, pw = g.table.nearest(o, d, t, ray, self.visibility[g.base:g.stop], camera, path, tmin)
             rows = np.flatnonzero(index >= 0)
             if len(rows) == 0:
                 continue

@@ -141,10 +141,10 @@ class PointLights(LightTable):
             f = np.where(z > 0, self.half_cot[j] / np.where(z > 0, z, 1.0), 0.0)
         return np.stack([x * f + 0.5, y * f + 0.5], axis=1)
 
-    def nearest(self, o, d, t, ray, bits, camera, path=None):
-        """The nearest of these lights each ray meets before t: t (updated
-        in place), the hit distance (inf = none), light index (-1), Le and
-        pdf.  ray: per-ray VIS_* bits or None (every ray sees every light);
+    def nearest(self, o, d, t, ray, bits, camera, path=None, tmin=None):
+        """The nearest of these lights each ray meets past tmin (None: 0) and
+        before t: t (updated in place), the hit distance (inf = none), light
+        index (-1), Le and pdf.  ray: per-ray VIS_* bits or None (every ray sees every light);
         bits: the lights' VIS_* bits; camera: camera rays, which see only
         lights with visible_camera; path: what the node trees read of the
         rays' paths (shader.emission_path) or None.  All lights in one
@@ -155,7 +155,8 @@ class PointLights(LightTable):
             light_bits = np.where(self.visible_camera, light_bits, 0)
         ray_bits = ray if ray is not None else np.full(n, 0xFF, np.uint8)
         hit_t, index, pdf = np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros(n)
-        _nearest_point(np.ascontiguousarray(o, np.float64), np.ascontiguousarray(d, np.float64), t,
+        tmin = np.zeros(n) if tmin is None else np.array(np.broadcast_to(tmin, (n,)), np.float64)
+        _nearest_point(np.ascontiguousarray(o, np.float64), np.ascontiguousarray(d, np.float64), t, tmin,
                        np.ascontiguousarray(ray_bits, np.uint8), self.pos, self.radius, self.sphere,
                        np.ascontiguousarray(light_bits, np.uint8), hit_t, index, pdf)
         Le = np.zeros((n, 3))
@@ -310,13 +311,13 @@ def _point_hit(o, d, c, r, sphere):
     return t, pdf
 
 
-def _nearest_point_numpy(o, d, t, ray_bits, pos, radius, sphere, light_bits, hit_t, index, pdf):
+def _nearest_point_numpy(o, d, t, tmin, ray_bits, pos, radius, sphere, light_bits, hit_t, index, pdf):
     for j in range(len(radius)):
         sees = (ray_bits & light_bits[j]) != 0
         if radius[j] <= 0 or not sees.any():
             continue
         th, pw = _point_hit(o, d, pos[j], radius[j], sphere[j])
-        closer = (th < t) & sees
+        closer = (th < t) & (th > tmin) & sees
         t[closer] = hit_t[closer] = th[closer]
         index[closer] = j
         pdf[closer] = pw[closer]
@@ -328,9 +329,12 @@ def _dot3(ax, ay, az, bx, by, bz):
     return (ax * bx + az * bz) + ay * by
 
 
-@loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[::1], uint8[::1], float64[:, ::1], float64[::1], "
-             "boolean[::1], uint8[::1], float64[::1], int64[::1], float64[::1])", _nearest_point_numpy)
-def _nearest_point(o, d, t, ray_bits, pos, radius, sphere, light_bits, hit_t, index, pdf):
+@loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], uint8[::1], float64[:, ::1], "
+             "float64[::1], boolean[::1], uint8[::1], float64[::1], int64[::1], float64[::1])", _nearest_point_numpy)
+def _nearest_point(o, d, t, tmin, ray_bits, pos, radius, sphere, light_bits, hit_t, index, pdf):
+    """The nearest point or spot light past tmin and before t per ray (a
+    light already passed on the ray's straight line, before a transparent
+    surface, is not met again)."""
     for i in range(len(t)):
         dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
         for j in range(len(radius)):
@@ -343,7 +347,7 @@ def _nearest_point(o, d, t, ray_bits, pos, radius, sphere, light_bits, hit_t, in
                 b = _dot3(ox, oy, oz, dx, dy, dz)
                 disc = b * b - (d2 - r * r)
                 th = -b - np.sqrt(np.maximum(disc, 0.0))
-                if not (disc >= 0 and d2 > r * r and th > 0 and th < t[i]):
+                if not (disc >= 0 and d2 > r * r and th > tmin[i] and th < t[i]):
                     continue
                 x = r * r / d2
                 omc = 0.5 * x + 0.125 * x * x if x < 0.0004 else 1.0 - np.sqrt(np.maximum(0.0, 1.0 - x))
@@ -356,7 +360,7 @@ def _nearest_point(o, d, t, ray_bits, pos, radius, sphere, light_bits, hit_t, in
                 qx = (o[i, 0] + dx * th) - pos[j, 0]
                 qy = (o[i, 1] + dy * th) - pos[j, 1]
                 qz = (o[i, 2] + dz * th) - pos[j, 2]
-                if not (denom < 0 and th > 0 and (qx * qx + qy * qy) + qz * qz <= r * r and th < t[i]):
+                if not (denom < 0 and th > tmin[i] and (qx * qx + qy * qy) + qz * qz <= r * r and th < t[i]):
                     continue
                 pw = th * th / (np.pi * r * r * np.abs(denom))
             t[i] = th

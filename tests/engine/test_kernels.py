@@ -350,7 +350,8 @@ def test_hit_geometry_agrees(jit):
 def test_nearest_point_light_agrees(jit):
     """The compiled nearest-light loop over spheres and soft-falloff disks,
     against the NumPy loop over lights, bit for bit: visibility bits, lights
-    of radius 0, rays starting inside a sphere, a closer tmax."""
+    of radius 0, rays starting inside a sphere, a closer tmax, a tmin past
+    some hits (those rays meet the next light or none)."""
     from engine.lights import _nearest_point
     rng = np.random.default_rng(16)
     n, lights = 20000, 24
@@ -366,14 +367,22 @@ def test_nearest_point_light_agrees(jit):
     d /= np.maximum(np.linalg.norm(d, axis=1), 1e-30)[:, None]
     ray_bits = rng.integers(0, 16, n).astype(np.uint8)
     tmax = np.where(rng.random(n) < 0.2, rng.random(n) * 3.0, np.inf)
+    tmin = np.where(rng.random(n) < 0.3, rng.random(n) * 4.0, 0.0)
 
-    def run():
+    def run(tmin):
         outs = (tmax.copy(), np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros(n))
-        _nearest_point(o, d, outs[0], ray_bits, pos, radius, sphere, light_bits, *outs[1:])
+        _nearest_point(o, d, outs[0], tmin, ray_bits, pos, radius, sphere, light_bits, *outs[1:])
         return outs
-    plain, compiled = both_ways(run)
+    plain, compiled = both_ways(run, np.zeros(n))
     assert_agree(plain, compiled)
     assert (plain[2] >= 0).sum() > n // 4
+    past, compiled = both_ways(run, tmin)
+    assert_agree(past, compiled)
+    hit = past[2] >= 0
+    assert (past[1][hit] > tmin[hit]).all()
+    # Rays whose first hit lies before tmin lose it: some meet no light then, some a farther one.
+    lost = (plain[2] >= 0) & (plain[1] <= tmin)
+    assert lost.sum() > 500 and (past[2][lost] < 0).any() and (past[2][lost] >= 0).any()
 
 
 def _double_plus_one(x):

@@ -213,3 +213,21 @@ def test_camera_invisible_plate_still_blocks_bsdf_rays():
     under = np.maximum(np.abs(x), np.abs(y)) < 0.9
     assert r.image[..., 0][under].max() == 0.0
     assert r.image[..., 0][~under].mean() > 0.0
+
+
+@pytest.mark.parametrize("soft", [False, True])
+def test_light_passed_before_a_transparent_plate_is_met_once(soft):
+    """BSDF rays from the floor that pass a point light (sphere, or soft
+    falloff's disk) and then a fully transparent plate above it: the second
+    segment starts past the light, so it must not meet the light again
+    (Cycles' ray tmin).  Same seed with and without the plate: the light is
+    reached on the first segment either way, so the images agree to
+    rounding; counting it again doubled what the rays through the plate
+    collected (the fog bench's worst fireflies, 2026-12-06)."""
+    clear = Material("clear", (Lobe("transparent", (1.0, 1.0, 1.0)),))
+    light = PointLight((0, 0, 1.0), (50.0, 50.0, 50.0), radius=0.3, soft_falloff=soft)
+    cfg = settings(strategy="bsdf", samples=16, samples_per_pass=16, seed=5)
+    without = render(plate_scene(light, [], clear), cfg).image
+    with_plate = render(plate_scene(light, [(1.5, 3.0)], clear), cfg).image
+    assert without[..., 0].mean() > 0.01   # the floor sees the light
+    np.testing.assert_allclose(with_plate, without, rtol=1e-9, atol=1e-12)
