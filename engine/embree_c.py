@@ -421,3 +421,71 @@ def _aligned(words):
     raw = np.empty(words + 16, np.float32)
     start = (-raw.ctypes.data % 64) // 4
     return raw[start:start + words]
+
+
+# -- calls into Embree from cached compiled loops ---------------------------------
+# The loops above call rtcIntersect1 through a ctypes function pointer, a
+# constant of this process, so numba compiles them again in every process.
+# ``rtc_call`` instead takes the function's address as an argument (an
+# integer cast to a function pointer in the generated code), so a loop calling
+# it is an ordinary cached kernel (engine.kernels): the subsurface walk
+# (engine/integrator/subsurface.py) traces its steps with it.
+
+def rtc_call(fn, a, b, c):
+    """In compiled code: call the C function at address ``fn`` with three
+    pointer-sized arguments (``rtcIntersect1(scene, rayhit, NULL)``), all
+    uint64.  Registered with numba by ``register_rtc_call``."""
+    raise RuntimeError("rtc_call runs in compiled code only")
+
+
+def register_rtc_call(numba):
+    """Make ``rtc_call`` callable from nopython code (once per process)."""
+    with _lock:
+        if _state.get("rtc_call"):
+            return
+        from llvmlite import ir
+        from numba.core import types
+        from numba.extending import intrinsic, overload
+
+        @intrinsic
+        def _call(typingctx, fn, a, b, c):
+            sig = types.void(types.uint64, types.uint64, types.uint64, types.uint64)
+
+            def codegen(context, builder, signature, args):
+                i64 = ir.IntType(64)
+                pointer = builder.inttoptr(args[0], ir.FunctionType(ir.VoidType(), [i64, i64, i64]).as_pointer())
+                builder.call(pointer, list(args[1:]))
+                return context.get_dummy_value()
+            return sig, codegen
+
+        @overload(rtc_call)
+        def _rtc_call(fn, a, b, c):
+            def impl(fn, a, b, c):
+                _call(fn, a, b, c)
+            return impl
+        _state["rtc_call"] = True
+
+
+def intersect1_address():
+    """The address of rtcIntersect1 in the loaded libembree4 (0 without it)."""
+    lib = library()
+    return 0 if lib is None else int(ctypes.cast(lib.rtcIntersect1, ctypes.c_void_p).value)
+
+
+def ray_buffer():
+    """One RTCRayHit's words, 64-byte aligned, for ``rtc_call`` loops."""
+    return _aligned(RAYHIT_WORDS)
+
+
+def embree_loop_kernel(signature, numpy_fn):
+    """engine.kernels.loop_kernel for a loop that calls ``rtc_call``."""
+    from . import kernels
+
+    class Loop(kernels.LoopKernel):
+        def build(self, numba):
+            register_rtc_call(numba)
+            return super().build(numba)
+
+    def wrap(fn):
+        return Loop(fn, signature, numpy_fn)
+    return wrap

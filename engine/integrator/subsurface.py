@@ -25,15 +25,20 @@ no bounce: the exit vertex has the entry's bounce count (and the entry
 counts no bounce kind).  A walk that leaves no exit
 within 256 bounces, or whose throughput falls below 1e-6, ends the path.
 
-Cycles also guides the walk's directions towards and away from the surface
-(Dwivedi sampling, MIS-combined with the classic walk); that changes only
-the variance, and is not done here.  Its similarity relation past the 9th
-bounce (isotropic with the reduced scattering coefficient) changes the
-result and is kept.
+The walk is Cycles' guided one (Dwivedi sampling towards and away from
+the surface, MIS-combined with the classic walk), with its similarity
+relation past the 9th bounce (isotropic with the reduced scattering
+coefficient).  Each walk runs start to exit in one compiled loop
+(``_walk_paths``), tracing every step with rtcIntersect1 in an Embree scene
+of the object's own triangles; its NumPy form is the wavefront
+(``_wavefront``: all walks a bounce at a time).
 """
+import threading
+import weakref
+
 import numpy as np
 
-from .. import bsdf
+from .. import bsdf, embree_c
 from ..bsdf import kind_in
 from ..lobe_ids import DIFFUSE, NONE
 from ..lobes import EXTRA_PARAMS, table_value
@@ -45,7 +50,10 @@ from ..kernels import helper, loop_kernel
 from ..media.phase import G_LIMIT
 from ..vec import frame_of
 from ..nodes.rays import NodeRays, local_accel, make_orthonormals
-from ..sampler import subsurface_set
+from ..sampler import RANDOM, SOBOL, _hash_scalar, hash32, subsurface_set
+# The sampler's own per-path Sobol arithmetic and tables (``_numbers_one``).
+from ..sampler import _16, _24, _8, _B8L, _BYTES, _DIM_SALT64, _HI, _LO, _M32, _SHUFFLE64, _TO_UNIT
+from ..sampler import _owen64, _rev32, _sobol4_into
 from ..scene import Lobe
 
 MAX_BOUNCES = 256           # BSSRDF_MAX_BOUNCES
@@ -399,7 +407,7 @@ WIDTH = 36
 
 
 def random_walk(ctx, o, d, beta, sigma_t, alpha, g, instance, pseed, sample, depth, normal=None, entry=None,
-                guided=True):
+                guided=True, whole=True):
     """Cycles' subsurface_random_walk for N walks from o along d inside
     objects ``instance`` with extinction sigma_t (N, 3), single-scattering
     albedo alpha (N, 3) and Henyey-Greenstein g (N,), throughput beta
@@ -407,11 +415,11 @@ def random_walk(ctx, o, d, beta, sigma_t, alpha, g, instance, pseed, sample, dep
     default -d) and ``entry`` the entry point (default o), which the guided
     sampling steers by (``guided`` False: the classic walk alone).  Returns
     (beta, exit points, directions there, exit triangle (-1: no exit), its
-    barycentrics).  The walks in progress are rows of one state array,
-    kept dense (finished ones written out and dropped) and sorted by
-    object; each bounce is two compiled row loops (``_direction_rows``,
-    ``_advance_rows``) around one intersection call per object for all
-    its live walks."""
+    barycentrics).  Each walk runs from start to exit in one compiled loop
+    (``_walk_paths``: every step traced by rtcIntersect1 in the object's
+    own Embree scene); its NumPy form, and the form without Embree's C API
+    (or ``whole`` False), is the wavefront ``_wavefront``: one state row per
+    live walk, all walks a bounce at a time."""
     n = len(o)
     state = _walk_state(o, d, beta, sigma_t, alpha, g, normal, entry, guided)
     out_beta, out_o, out_d = np.zeros((n, 3)), np.array(o, np.float64), np.array(d, np.float64)
@@ -422,20 +430,47 @@ def random_walk(ctx, o, d, beta, sigma_t, alpha, g, instance, pseed, sample, dep
     instance = np.asarray(instance, np.int64)
     start = np.flatnonzero(ok)
     start = start[np.argsort(instance[start], kind="stable")]
-    rows, inst = start, instance[start]
-    pseed, sample, state = np.asarray(pseed)[start], np.asarray(sample)[start], state[start]
+    if len(start) == 0:
+        return out_beta, out_o, out_d, exit_prim, exit_bary
+    inst = instance[start]
+    pseed = np.ascontiguousarray(np.asarray(pseed)[start], np.uint32)
+    sample = np.ascontiguousarray(np.asarray(sample)[start], np.uint32)
+    state = np.ascontiguousarray(state[start])
     similar_fraction = 0.75 if guided else 0.0   # Cycles' isotropic heuristic past the similarity level
+    outs = (out_beta[start], out_o[start], out_d[start], exit_prim[start], exit_bary[start])
+    pattern = getattr(ctx.sampler, "pattern", None)
+    scenes = _local_scenes(ctx, np.unique(inst)) if whole and pattern in (SOBOL, RANDOM) else None
+    if scenes is None:
+        numbers = _sampler_numbers(ctx.sampler, pseed, sample, depth)
+        _wavefront(state, numbers, _accel_hits(ctx, inst), similar_fraction, outs)
+    else:
+        handles, prim_start, prims, index = scenes
+        _walk_paths(state, index[inst], pseed, sample, _set_hashes(depth), pattern == RANDOM, handles, prim_start,
+                    prims, np.uint64(embree_c.intersect1_address()), similar_fraction, _DIM_SALT64, _BYTES,
+                    embree_c.ray_buffer(), *outs)
+    out_beta[start], out_o[start], out_d[start], exit_prim[start], exit_bary[start] = outs
+    return out_beta, out_o, out_d, exit_prim, exit_bary
+
+
+def _wavefront(state, numbers, hits, similar_fraction, outs):
+    """The walks a bounce at a time: the live ones are rows of ``state``,
+    kept dense (finished ones written into ``outs`` and dropped); each
+    bounce is two row loops (``_direction_rows``, ``_advance_rows``) around
+    one intersection call for all live walks.  ``numbers(bounce, which,
+    rows)``: the (M, 4) sample values of the rows' walks; ``hits(o, d,
+    tmax, rows)``: (hit, t, global prim, barycentrics) on their objects."""
+    out_beta, out_o, out_d, exit_prim, exit_bary = outs
+    rows = np.arange(len(state))
     for bounce in range(MAX_BOUNCES):
         m = len(rows)
         if m == 0:
             break
         scatter, similar = bounce > 0, bounce > SIMILARITY_LEVEL
-        u = np.ascontiguousarray(ctx.sampler.get(pseed, sample, subsurface_set(depth, bounce, 0)), np.float64)
-        u2 = np.ascontiguousarray(ctx.sampler.get(pseed, sample, subsurface_set(depth, bounce, 1)), np.float64) \
-            if scatter else u
+        u = np.ascontiguousarray(numbers(bounce, 0, rows), np.float64)
+        u2 = np.ascontiguousarray(numbers(bounce, 1, rows), np.float64) if scatter else u
         t, tmax, terms = np.empty(m), np.empty(m), np.empty((m, 6))
         _direction_rows(u, u2, state, scatter, similar, similar_fraction, t, tmax, terms)
-        hit, t_hit, prim, bary = _local_hits(ctx, state[:, O:O + 3], state[:, D:D + 3], tmax, inst)
+        hit, t_hit, prim, bary = hits(state[:, O:O + 3], state[:, D:D + 3], tmax, rows)
         done = np.empty(m, bool)
         _advance_rows(hit, t_hit, t, state, terms, scatter, similar, done)
         if done.any():
@@ -443,8 +478,90 @@ def random_walk(ctx, o, d, beta, sigma_t, alpha, g, instance, pseed, sample, dep
             out_beta[r], out_o[r], out_d[r] = state[hit, B:B + 3], state[hit, O:O + 3], state[hit, D:D + 3]
             exit_prim[r], exit_bary[r] = prim[hit], bary[hit]
             keep = np.flatnonzero(~done)
-            rows, inst, pseed, sample, state = rows[keep], inst[keep], pseed[keep], sample[keep], state[keep]
-    return out_beta, out_o, out_d, exit_prim, exit_bary
+            rows, state = rows[keep], state[keep]
+
+
+def _sampler_numbers(sampler, pseed, sample, depth):
+    """``numbers`` for ``_wavefront`` from a sampler."""
+    return lambda bounce, which, rows: sampler.get(pseed[rows], sample[rows], subsurface_set(depth, bounce, which))
+
+
+def _hashed_numbers(pseed, sample, hashes, random):
+    """``numbers`` for ``_wavefront`` from the dimension sets' hashes (the
+    sampler's own functions, as ``_numbers_one`` computes them per walk)."""
+    def numbers(bounce, which, rows):
+        out = np.empty((len(rows), 4))
+        if random:
+            out[:] = _random4_hashed(pseed[rows], sample[rows], hashes[bounce, which])
+        else:
+            _sobol4_into(pseed[rows], sample[rows], hashes[bounce, which], out, _HI, _LO, _DIM_SALT64, _BYTES)
+        return out
+    return numbers
+
+
+def _random4_hashed(pseed, sample, set_hash):
+    """sampler.random4 given its dimension set's hash."""
+    base = hash32(pseed ^ hash32(np.asarray(sample, np.uint32) + np.uint32(set_hash)))
+    return np.stack([hash32(base ^ np.uint32(salt)) for salt in _DIM_SALT64], axis=1) * _TO_UNIT
+
+
+_HASHES = {}
+
+
+def _set_hashes(depth):
+    """(MAX_BOUNCES, 2) uint32: the hash of subsurface_set(depth, bounce, which)."""
+    table = _HASHES.get(depth)
+    if table is None:
+        table = np.array([[_hash_scalar(subsurface_set(depth, b, w)) for w in (0, 1)] for b in range(MAX_BOUNCES)],
+                         np.uint32)
+        _HASHES[depth] = table
+    return table
+
+
+def _accel_hits(ctx, inst):
+    """``hits`` for ``_wavefront`` through the objects' own Accels (``local_accel``)."""
+    return lambda o, d, tmax, rows: _local_hits(ctx, o, d, tmax, inst[rows])
+
+
+# ----------------------------------------------------------------------------
+# the objects' own Embree scenes (Cycles' same-object rule), for ``_walk_paths``
+
+_SCENES = weakref.WeakKeyDictionary()   # scene Accel -> {instance: embree_c.TriangleScene}
+_BY_HANDLE = weakref.WeakValueDictionary()   # handle -> TriangleScene (``_walk_paths_numpy``)
+_SCENES_LOCK = threading.Lock()
+
+
+def _local_scenes(ctx, instances):
+    """(handles (K,) uint64, each scene's first row in ``prims`` (K + 1,),
+    the global triangle of each scene's triangles, instance -> index into
+    handles (max instance + 1,)) for the objects ``instances`` (built once
+    per render and object, shared by the threads); None without Embree's C
+    API."""
+    if not embree_c.available():
+        return None
+    with _SCENES_LOCK:
+        per_scene = _SCENES.setdefault(ctx.accel, {})
+        for inst in instances:
+            if int(inst) not in per_scene:
+                per_scene[int(inst)] = _object_scene(ctx.triangles, int(inst))
+        built = [(inst, per_scene[int(inst)]) for inst in instances]
+    index = np.full(int(instances.max()) + 1, -1, np.int64)
+    index[instances] = np.arange(len(instances))
+    handles = np.array([scene.handle for _, scene in built], np.uint64)
+    counts = [len(scene.order) for _, scene in built]
+    prim_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    prims = np.concatenate([scene.order for _, scene in built]).astype(np.int64)
+    return handles, prim_start, prims, index
+
+
+def _object_scene(triangles, instance):
+    """An Embree scene of one object's triangles (a corner soup, as the Accel)."""
+    prims = np.flatnonzero(triangles.shading.instance == instance)
+    p0, e1, e2 = triangles.p0[prims], triangles.e1[prims], triangles.e2[prims]
+    corners = np.stack([p0, p0 + e1, p0 + e2], axis=1).astype(np.float32).reshape(1, -1, 3)
+    scene = embree_c.TriangleScene([(corners, np.arange(3 * len(prims)).reshape(-1, 3), prims)])
+    _BY_HANDLE[scene.handle] = scene
+    return scene
 
 
 def _walk_state(o, d, beta, sigma_t, alpha, g, normal, entry, guided):
@@ -572,56 +689,60 @@ def _direction_numpy(u, u2, state, scatter, similar, similar_fraction, t, tmax, 
 @loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[:, ::1], boolean, boolean, float64, float64[::1], "
              "float64[::1], float64[:, ::1])", _direction_numpy)
 def _direction_rows(u, u2, state, scatter, similar, similar_fraction, t, tmax, terms):
-    stc = ST_STAR if similar else ST
     for i in range(len(t)):
-        w0, w1, w2 = (abs(state[i, B] * state[i, A]), abs(state[i, B + 1] * state[i, A + 1]),
-                      abs(state[i, B + 2] * state[i, A + 2]))
-        total = w0 + w1 + w2
-        p0c, p1c = (w0 / total, w1 / total) if total > 0 else (1.0 / 3.0, 1.0 / 3.0)
-        c = (1 if u[i, 0] >= p0c else 0) + (1 if u[i, 0] >= p0c + p1c else 0)
-        sample_st = state[i, stc + c]
-        if not scatter:
-            terms[i, 0], terms[i, 1], terms[i, 2], terms[i, 3], terms[i, 4], terms[i, 5] = 0.0, 0.0, 1.0, 1.0, 1.0, 1.0
-            t[i] = -np.log1p(-u[i, 1]) / sample_st
-            tmax[i] = max(t[i], 10.0 / min(state[i, stc], min(state[i, stc + 1], state[i, stc + 2])))
-            continue
-        gc = 0.0 if similar else min(max(state[i, G], -G_LIMIT), G_LIMIT)
-        gf = similar_fraction if similar else state[i, GF]
-        dl, plog = state[i, DL], state[i, PLOG]
-        guided = u2[i, 0] < gf
-        back_share = 0.0
-        backward = False
-        if state[i, HAVE] > 0:
-            x = -((state[i, O] - state[i, P0]) * state[i, N] + (state[i, O + 1] - state[i, P0 + 1]) * state[i, N + 1]
-                  + (state[i, O + 2] - state[i, P0 + 2]) * state[i, N + 2])
-            x = min(max(x, 0.0), state[i, OPP])
-            back_share = 1.0 / (1.0 + np.exp((state[i, OPP] - 2.0 * x) / dl))
-            backward = u2[i, 1] < back_share
-        if guided:
-            cos = dl - (dl + 1.0) * np.exp(-u[i, 2] * plog)
-            if backward:
-                cos = -cos
-            n0, n1, n2 = _around(state[i, N], state[i, N + 1], state[i, N + 2], min(max(cos, -1.0), 1.0), u[i, 3])
-            cos_d = state[i, D] * n0 + state[i, D + 1] * n1 + state[i, D + 2] * n2
+        t[i], tmax[i] = _direction_one(u[i], u2[i], state[i], scatter, similar, similar_fraction, terms[i])
+
+
+@helper
+def _direction_one(u, u2, s, scatter, similar, similar_fraction, terms):
+    """``_direction_numpy`` of one walk (state row s, its terms row):
+    returns (t, tmax)."""
+    stc = ST_STAR if similar else ST
+    w0, w1, w2 = abs(s[B] * s[A]), abs(s[B + 1] * s[A + 1]), abs(s[B + 2] * s[A + 2])
+    total = w0 + w1 + w2
+    p0c, p1c = (w0 / total, w1 / total) if total > 0 else (1.0 / 3.0, 1.0 / 3.0)
+    c = (1 if u[0] >= p0c else 0) + (1 if u[0] >= p0c + p1c else 0)
+    sample_st = s[stc + c]
+    if not scatter:
+        terms[0], terms[1], terms[2], terms[3], terms[4], terms[5] = 0.0, 0.0, 1.0, 1.0, 1.0, 1.0
+        t = -np.log1p(-u[1]) / sample_st
+        return t, max(t, 10.0 / min(s[stc], min(s[stc + 1], s[stc + 2])))
+    gc = 0.0 if similar else min(max(s[G], -G_LIMIT), G_LIMIT)
+    gf = similar_fraction if similar else s[GF]
+    dl, plog = s[DL], s[PLOG]
+    guided = u2[0] < gf
+    back_share = 0.0
+    backward = False
+    if s[HAVE] > 0:
+        x = -((s[O] - s[P0]) * s[N] + (s[O + 1] - s[P0 + 1]) * s[N + 1] + (s[O + 2] - s[P0 + 2]) * s[N + 2])
+        x = min(max(x, 0.0), s[OPP])
+        back_share = 1.0 / (1.0 + np.exp((s[OPP] - 2.0 * x) / dl))
+        backward = u2[1] < back_share
+    if guided:
+        cos = dl - (dl + 1.0) * np.exp(-u[2] * plog)
+        if backward:
+            cos = -cos
+        n0, n1, n2 = _around(s[N], s[N + 1], s[N + 2], min(max(cos, -1.0), 1.0), u[3])
+        cos_d = s[D] * n0 + s[D + 1] * n1 + s[D + 2] * n2
+    else:
+        if abs(gc) < 1e-3:
+            cos_d = 1.0 - 2.0 * u[2]
         else:
-            if abs(gc) < 1e-3:
-                cos_d = 1.0 - 2.0 * u[i, 2]
-            else:
-                k = (1.0 - gc * gc) / (1.0 - gc + 2.0 * gc * u[i, 2])
-                cos_d = (1.0 + gc * gc - k * k) / (2.0 * gc)
-            cos_d = min(max(cos_d, -1.0), 1.0)
-            n0, n1, n2 = _around(state[i, D], state[i, D + 1], state[i, D + 2], cos_d, u[i, 3])
-            cos = n0 * state[i, N] + n1 * state[i, N + 1] + n2 * state[i, N + 2]
-        state[i, D], state[i, D + 1], state[i, D + 2] = n0, n1, n2
-        hg = _hg(cos_d, gc)
-        terms[i, 0], terms[i, 1] = gf, back_share
-        terms[i, 2] = 1.0 / ((dl - cos) * plog) / (2.0 * np.pi * hg)
-        terms[i, 3] = 1.0 / ((dl + cos) * plog) / (2.0 * np.pi * hg)
-        terms[i, 4], terms[i, 5] = 1.0 - cos / dl, 1.0 + cos / dl
-        if guided:
-            sample_st *= terms[i, 5] if backward else terms[i, 4]
-        t[i] = -np.log1p(-u[i, 1]) / sample_st
-        tmax[i] = t[i]
+            k = (1.0 - gc * gc) / (1.0 - gc + 2.0 * gc * u[2])
+            cos_d = (1.0 + gc * gc - k * k) / (2.0 * gc)
+        cos_d = min(max(cos_d, -1.0), 1.0)
+        n0, n1, n2 = _around(s[D], s[D + 1], s[D + 2], cos_d, u[3])
+        cos = n0 * s[N] + n1 * s[N + 1] + n2 * s[N + 2]
+    s[D], s[D + 1], s[D + 2] = n0, n1, n2
+    hg = _hg(cos_d, gc)
+    terms[0], terms[1] = gf, back_share
+    terms[2] = 1.0 / ((dl - cos) * plog) / (2.0 * np.pi * hg)
+    terms[3] = 1.0 / ((dl + cos) * plog) / (2.0 * np.pi * hg)
+    terms[4], terms[5] = 1.0 - cos / dl, 1.0 + cos / dl
+    if guided:
+        sample_st *= terms[5] if backward else terms[4]
+    t = -np.log1p(-u[1]) / sample_st
+    return t, t
 
 
 @helper
@@ -689,48 +810,52 @@ def _distance_pdf(st, t, hit):
 @loop_kernel("void(boolean[::1], float64[::1], float64[::1], float64[:, ::1], float64[:, ::1], boolean, boolean, "
              "boolean[::1])", _advance_numpy)
 def _advance_rows(hit, t_hit, t, state, terms, scatter, similar, done):
+    for i in range(len(t)):
+        hit[i], t[i], done[i] = _advance_one(hit[i], t_hit[i], t[i], state[i], terms[i], scatter, similar)
+
+
+@helper
+def _advance_one(hit, t_hit, t, s, terms, scatter, similar):
+    """``_advance_numpy`` of one walk (state row s, its terms row):
+    returns (hit, t, done)."""
     stc = ST_STAR if similar else ST
     ssc = SS_STAR if similar else SS
-    for i in range(len(t)):
-        if not scatter and hit[i]:
-            state[i, OPP] = -((state[i, O] + state[i, D] * t_hit[i] - state[i, P0]) * state[i, N]
-                              + (state[i, O + 1] + state[i, D + 1] * t_hit[i] - state[i, P0 + 1]) * state[i, N + 1]
-                              + (state[i, O + 2] + state[i, D + 2] * t_hit[i] - state[i, P0 + 2]) * state[i, N + 2])
-            state[i, HAVE] = 1.0
-            hit[i] = t_hit[i] < t[i]
-        if hit[i]:
-            t[i] = t_hit[i]
-        ti = t[i]
-        w0, w1, w2 = (abs(state[i, B] * state[i, A]), abs(state[i, B + 1] * state[i, A + 1]),
-                      abs(state[i, B + 2] * state[i, A + 2]))
-        total = w0 + w1 + w2
-        if total > 0:
-            p0c, p1c, p2c = w0 / total, w1 / total, w2 / total
-        else:
-            p0c = p1c = p2c = 1.0 / 3.0
-        denom = 0.0
-        for c, pc in ((0, p0c), (1, p1c), (2, p2c)):
-            sc = state[i, stc + c]
-            pdf = _step_pdf(sc, ti, hit[i])
-            if scatter:
-                steered = _step_pdf(terms[i, 4] * sc, ti, hit[i]) * terms[i, 2]
-                if state[i, HAVE] > 0:
-                    away = _step_pdf(terms[i, 5] * sc, ti, hit[i]) * terms[i, 3]
-                    steered = (1.0 - terms[i, 1]) * steered + terms[i, 1] * away
-                pdf = (1.0 - terms[i, 0]) * pdf + terms[i, 0] * steered
-            denom += pc * pdf
-        largest = 0.0
-        for c in range(3):
-            tr = np.exp(-state[i, stc + c] * ti)
-            f = tr if hit[i] else state[i, ssc + c] * tr
-            v = state[i, B + c] * f / denom if denom != 0 else np.nan
-            v = v if np.isfinite(v) else 0.0
-            state[i, B + c] = v
-            largest = v if c == 0 else max(largest, v)
-        state[i, O] += state[i, D] * ti
-        state[i, O + 1] += state[i, D + 1] * ti
-        state[i, O + 2] += state[i, D + 2] * ti
-        done[i] = hit[i] or largest < THROUGHPUT_EPSILON
+    if not scatter and hit:
+        s[OPP] = -((s[O] + s[D] * t_hit - s[P0]) * s[N] + (s[O + 1] + s[D + 1] * t_hit - s[P0 + 1]) * s[N + 1]
+                   + (s[O + 2] + s[D + 2] * t_hit - s[P0 + 2]) * s[N + 2])
+        s[HAVE] = 1.0
+        hit = t_hit < t
+    if hit:
+        t = t_hit
+    w0, w1, w2 = abs(s[B] * s[A]), abs(s[B + 1] * s[A + 1]), abs(s[B + 2] * s[A + 2])
+    total = w0 + w1 + w2
+    if total > 0:
+        p0c, p1c, p2c = w0 / total, w1 / total, w2 / total
+    else:
+        p0c = p1c = p2c = 1.0 / 3.0
+    denom = 0.0
+    for c, pc in ((0, p0c), (1, p1c), (2, p2c)):
+        sc = s[stc + c]
+        pdf = _step_pdf(sc, t, hit)
+        if scatter:
+            steered = _step_pdf(terms[4] * sc, t, hit) * terms[2]
+            if s[HAVE] > 0:
+                away = _step_pdf(terms[5] * sc, t, hit) * terms[3]
+                steered = (1.0 - terms[1]) * steered + terms[1] * away
+            pdf = (1.0 - terms[0]) * pdf + terms[0] * steered
+        denom += pc * pdf
+    largest = 0.0
+    for c in range(3):
+        tr = np.exp(-s[stc + c] * t)
+        f = tr if hit else s[ssc + c] * tr
+        v = s[B + c] * f / denom if denom != 0 else np.nan
+        v = v if np.isfinite(v) else 0.0
+        s[B + c] = v
+        largest = v if c == 0 else max(largest, v)
+    s[O] += s[D] * t
+    s[O + 1] += s[D + 1] * t
+    s[O + 2] += s[D + 2] * t
+    return hit, t, hit or largest < THROUGHPUT_EPSILON
 
 
 @helper
@@ -740,6 +865,103 @@ def _step_pdf(st, t, hit):
     if hit:
         return tr
     return st * tr
+
+
+_15, _HASH_A, _HASH_B = np.uint64(15), np.uint64(0x7FEB352D), np.uint64(0x846CA68B)   # sampler.hash32
+
+
+@helper
+def _mix32(x):
+    """sampler.hash32 of a uint64 holding 32 bits."""
+    x ^= x >> _16
+    x = (x * _HASH_A) & _M32
+    x ^= x >> _15
+    x = (x * _HASH_B) & _M32
+    return x ^ (x >> _16)
+
+
+@helper
+def _numbers_one(ps, smp, set_hash, random, salts, byte_table, out):
+    """The four sample values of one walk's dimension set (hash ``set_hash``)
+    into ``out``: sampler.sobol4 (the loop of sampler._sobol4_into) or
+    sampler.random4 for one path."""
+    if random:
+        base = _mix32(np.uint64(ps) ^ _mix32((np.uint64(smp) + np.uint64(set_hash)) & _M32))
+        for d in range(4):
+            out[d] = np.float64(np.int64(_mix32(base ^ salts[d]))) * _TO_UNIT
+        return
+    seed = np.uint64(ps ^ set_hash)
+    idx = _owen64(_rev32(np.uint64(smp)), seed ^ _SHUFFLE64)
+    b0 = np.int64(idx & _B8L)
+    b1 = np.int64((idx >> _8) & _B8L)
+    b2 = np.int64((idx >> _16) & _B8L)
+    b3 = np.int64(idx >> _24)
+    for d in range(4):
+        r = np.uint64(byte_table[0, b0, d] ^ byte_table[1, b1, d] ^ byte_table[2, b2, d] ^ byte_table[3, b3, d])
+        out[d] = np.float64(np.int64(_rev32(_owen64(r, seed ^ salts[d])))) * _TO_UNIT
+
+
+def _walk_paths_numpy(state, obj, pseed, sample, hashes, random, handles, prim_start, prims, fn, similar_fraction,
+                      salts, byte_table, buf, out_beta, out_o, out_d, exit_prim, exit_bary):
+    """``_walk_paths``' NumPy form: the wavefront, tracing by Embree packets."""
+    scenes = [_BY_HANDLE[int(h)] for h in handles]
+
+    def hits(o, d, tmax, rows):
+        hit, t, prim, bary = np.zeros(len(rows), bool), np.full(len(rows), np.inf), np.full(len(rows), -1), \
+            np.zeros((len(rows), 2))
+        for k in np.unique(obj[rows]):
+            part = np.flatnonzero(obj[rows] == k)
+            tk, pk, uk, vk = scenes[k].intersect(o[part], d[part], tmax[part], 0.0, loops=())
+            found = (pk >= 0) & (tk <= tmax[part])
+            hit[part], t[part] = found, np.where(found, tk, np.inf)
+            prim[part] = np.where(found, pk, -1)
+            bary[part, 0], bary[part, 1] = uk, vk
+        return hit, t, prim, bary
+
+    _wavefront(state, _hashed_numbers(pseed, sample, hashes, random), hits, similar_fraction,
+               (out_beta, out_o, out_d, exit_prim, exit_bary))
+
+
+@embree_c.embree_loop_kernel(
+    "void(float64[:, ::1], int64[::1], uint32[::1], uint32[::1], uint32[:, ::1], boolean, uint64[::1], int64[::1], "
+    "int64[::1], uint64, float64, uint64[::1], uint32[:, :, ::1], float32[::1], float64[:, ::1], float64[:, ::1], "
+    "float64[:, ::1], int64[::1], float64[:, ::1])", _walk_paths_numpy)
+def _walk_paths(state, obj, pseed, sample, hashes, random, handles, prim_start, prims, fn, similar_fraction,
+                salts, byte_table, buf, out_beta, out_o, out_d, exit_prim, exit_bary):
+    """Each walk from start to exit or fade (``_direction_one``, a ray in
+    its object's scene, ``_advance_one``), written into the outputs on an
+    exit; ``buf`` one RTCRayHit."""
+    w = buf.view(np.uint32)
+    addr = np.uint64(buf.ctypes.data)
+    u, u2, terms = np.empty(4), np.empty(4), np.empty(6)
+    for i in range(len(state)):
+        s = state[i]
+        k = obj[i]
+        handle = handles[k]
+        for bounce in range(MAX_BOUNCES):
+            scatter, similar = bounce > 0, bounce > SIMILARITY_LEVEL
+            _numbers_one(pseed[i], sample[i], hashes[bounce, 0], random, salts, byte_table, u)
+            if scatter:
+                _numbers_one(pseed[i], sample[i], hashes[bounce, 1], random, salts, byte_table, u2)
+            t, tmax = _direction_one(u, u2, s, scatter, similar, similar_fraction, terms)
+            buf[0], buf[1], buf[2], buf[3] = s[O], s[O + 1], s[O + 2], 0.0
+            buf[4], buf[5], buf[6], buf[7] = s[D], s[D + 1], s[D + 2], 0.0
+            buf[8] = 1e37 if tmax > 1e37 else tmax   # NaN stays NaN (no hit), as np.minimum
+            w[9], w[10], w[11] = 0xFFFFFFFF, 0, 0
+            w[18], w[19] = 0xFFFFFFFF, 0xFFFFFFFF
+            embree_c.rtc_call(fn, handle, addr, np.uint64(0))
+            t_hit = np.float64(buf[8])
+            hit = w[18] != 0xFFFFFFFF and t_hit <= tmax
+            if not hit:
+                t_hit = np.inf
+            hit, t, done = _advance_one(hit, t_hit, t, s, terms, scatter, similar)
+            if done:
+                if hit:
+                    for c in range(3):
+                        out_beta[i, c], out_o[i, c], out_d[i, c] = s[B + c], s[O + c], s[D + c]
+                    exit_prim[i] = prims[prim_start[k] + np.int64(w[17])]
+                    exit_bary[i, 0], exit_bary[i, 1] = np.float64(buf[15]), np.float64(buf[16])
+                break
 
 
 def _local_hits(ctx, o, d, tmax, instance):
