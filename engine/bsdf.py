@@ -46,7 +46,7 @@ from .kernels import LoopKernel
 # The lobe codes live in lobe_ids (shared with bsdf_loops); bsdf.NONE etc. stay the public names.
 from .lobe_ids import GLOSSY_ANISOTROPIC  # noqa: E402
 from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FRESNEL_IDS, GLASS, GLOSSY,  # noqa: F401
-                       KIND_IDS, MIN_ALPHA, MIRROR, NONE, REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
+                       KIND_IDS, MIN_ALPHA, MIRROR, NONE, RAY_PORTAL, REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
 from .lobes.ggx import fresnel as _fresnel, fresnel_of as _fresnel_of, ggx_pdf, schlick  # noqa: F401
 from .lobes.ggx import eval_glossy_f as _eval_glossy, ggx_reflect_rows as _ggx_reflect  # noqa: F401
 from .lobes.ggx import film_fresnel as _film_fresnel, has_film as _has_film
@@ -434,7 +434,10 @@ def transparency(lobes):
     colour of its transparent lobes (Cycles' closure_transparent_extinction),
     what a shadow ray keeps crossing it.  The exporter never puts a
     transparent lobe under a layer, so this is also its entry in ``weights``."""
-    t = lobes.color * (lobes.weight * (lobes.kind == TRANSPARENT))[:, :, None]
+    # A Ray Portal's weight counts too (Cycles' bsdf_ray_portal_setup): what
+    # a path past its last vertex crosses; shadow rays stop at portals
+    # (integrator/transparency.transmittance).
+    t = lobes.color * (lobes.weight * ((lobes.kind == TRANSPARENT) | (lobes.kind == RAY_PORTAL)))[:, :, None]
     return np.maximum(t.sum(axis=1), 0.0)
 
 

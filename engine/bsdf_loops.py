@@ -21,7 +21,7 @@ from .kernels import clip
 from .lobes import EXTRA_PARAMS, FILM_CUTOFF, PARAMS
 from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, GLOSSY_ANISOTROPIC, MIN_ALPHA,
                        MIRROR, NONE, OREN_NAYAR, REFRACTION, SHEEN, SUBSURFACE_BURLEY, SUBSURFACE_RANDOM_WALK,
-                       SUBSURFACE_SKIN, TRANSLUCENT, TRANSPARENT, HAIR_CHIANG, HAIR_REFLECTION, HAIR_TRANSMISSION,
+                       SUBSURFACE_SKIN, TRANSLUCENT, TRANSPARENT, RAY_PORTAL, HAIR_CHIANG, HAIR_REFLECTION, HAIR_TRANSMISSION,
                        HAIR_HUANG)
 from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect_terms, pow5
 
@@ -1922,7 +1922,7 @@ def sample_loop(lobes, tables, wo, u_lobe, u1, u2, sel, w, wi, weight, pdf, delt
             r0, r1, r2 = w[i, k, 0] * a0 / p_lobe, w[i, k, 1] * a1 / p_lobe, w[i, k, 2] * a2 / p_lobe
             is_delta = True
             p = p_lobe
-        elif kd == TRANSPARENT:
+        elif kd == TRANSPARENT or kd == RAY_PORTAL:   # the portal moves the ray after (integrator/portal.py)
             x, y, z = -wox, -woy, -woz
             r0, r1, r2 = w[i, k, 0] / p_lobe, w[i, k, 1] / p_lobe, w[i, k, 2] / p_lobe
             is_delta = True

@@ -21,6 +21,10 @@ from .vec import frame
 # Ray visibility bits (Blender's Object > Visibility > Ray Visibility).
 VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION, VIS_SHADOW = 1, 2, 4, 8, 16
 VIS_ALL = 31
+# Not an object visibility bit: set on paths.ray beside VIS_INDIRECT for rays a
+# volume scattered (Cycles' PATH_RAY_VOLUME_SCATTER, the Light Path node's
+# Is Volume Scatter Ray); visibility tests AND with VIS_ALL bits, so it changes none.
+VIS_VOLUME = 32
 
 
 def visibility_bits(item):

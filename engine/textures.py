@@ -753,7 +753,21 @@ FIELD_FLOORS = {"color": 0.0, "weight": 0.0, "f0": 0.0, "transmission_tint": 0.0
                 "thin_film_thickness": 0.0, "thin_film_ior": 1e-5}
 
 
+# Lobe fields where NaN means "not given" (the Ray Portal's hit point and
+# incoming direction, engine/lobes/ray_portal.py): kept NaN, not made 0.
+NAN_DEFAULT_FIELDS = ("portal_position", "portal_direction")
+
+
 def _store(lobes, name, rows, j, value, is_color, min_alpha):
+    if name in NAN_DEFAULT_FIELDS:
+        value = np.asarray(value, np.float64)
+        value = np.where(np.isfinite(value) & (np.abs(value) < MAX_TEXTURE_VALUE), value, np.nan)
+        if value.ndim == 1:
+            value = np.repeat(value[:, None], 3, axis=1)
+        bad = np.isnan(value).any(axis=1)
+        value[bad] = np.nan   # one bad component: the whole vector is not given
+        getattr(lobes, name)[rows, j] = value
+        return
     value = _renderable(value)
     if name == "roughness":
         r = np.clip(value @ LUMA if is_color else value, 0.0, 1.0)

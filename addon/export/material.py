@@ -1,7 +1,7 @@
 """Blender shader node trees -> engine.scene.Material (a weighted set of lobes).
 
 Covered: Diffuse (Oren-Nayar at Roughness > 0), Glossy (anisotropic),
-Metallic, Glass, Refraction, Translucent, Transparent, Sheen, Emission, Hair BSDF,
+Metallic, Glass, Refraction, Translucent, Transparent, Ray Portal, Sheen, Emission, Hair BSDF,
 Principled Hair BSDF (Chiang),
 Principled BSDF (Cycles' layering, Anisotropic, Diffuse Roughness, Thin
 Film, emission dimmed by sheen and coat), Mix Shader and Add Shader; anisotropic lobes
@@ -342,6 +342,19 @@ class NodeTranslator:
 
     def _node_bsdf_transparent(self, node):
         return Closure([_scene().Lobe('transparent', self.color(node, 'Color', (1.0, 1.0, 1.0)))])
+
+    def _node_bsdf_ray_portal(self, node):
+        """Ray Portal BSDF (4.2+, engine/lobes/ray_portal.py): an unlinked
+        Position is the hit point (Cycles' LINK_POSITION), left NaN; an
+        unlinked or zero Direction the incoming ray's."""
+        socket = node.inputs.get('Position')
+        linked = socket is not None and self._linked_node(socket)[0] is not None
+        position = self.color(node, 'Position') if linked else (float('nan'),) * 3
+        direction = self.color(node, 'Direction', (0.0, 0.0, 0.0))
+        if not nodes.is_expr(direction) and not any(direction):
+            direction = (float('nan'),) * 3
+        return Closure([_scene().Lobe('ray_portal', self.color(node, 'Color', (1.0, 1.0, 1.0)),
+                                      portal_position=position, portal_direction=direction)])
 
     def _node_bsdf_sheen(self, node):
         """Blender 4.0+ Sheen BSDF (Microfiber: Cycles' LTC sheen)."""

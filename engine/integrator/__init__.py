@@ -64,7 +64,7 @@ def trace_batch(ctx, pix, sample, tile):
                   np.zeros((n, 3 if ctx.count_kinds else 0), np.int16), np.full(n, np.inf),
                   start_stack(ctx.media, n), np.zeros(n, np.int16), np.full(n, -1, np.int64), np.zeros((n, 3)),
                   np.full(n, -1, np.int32), np.zeros(n, np.int8), time, np.zeros(n, bool),
-                  np.full(n, -1, np.int64), np.zeros((n, 5)))
+                  np.full(n, -1, np.int64), np.zeros((n, 5)), np.zeros(n, np.int16), np.zeros(n, bool))
     obs = pass_events.observer(ctx, tile)
     obs.start(paths)
     # Every step raises a live path's bounce or its transparent bounce

@@ -91,6 +91,9 @@ class Context:
     unlit: object = None
     # Hair curves (engine.points.Strands: which rows are curve segments), None without.
     strands: object = None
+    # Ray Portal BSDF (integrator/portal.py): (M,) which materials have a
+    # portal lobe, None without one (the stage is skipped).
+    portal_mat: object = None
 
     @classmethod
     def build(cls, accel, triangles, materials, lights, camera, world, settings, sampler=None,
@@ -103,14 +106,16 @@ class Context:
         if pass_config is None:
             pass_config = pass_events.PassConfig()
         # Elliptical Huang hair is transparent outside its projected width (Cycles).
+        portal_mat = np.any(materials.kind == bsdf.RAY_PORTAL, axis=1)
         transparent_mat = np.any((materials.kind == bsdf.TRANSPARENT)
-                                 | ((materials.kind == HAIR_HUANG) & (materials.aspect_ratio != 1.0)), axis=1)
+                                 | ((materials.kind == HAIR_HUANG) & (materials.aspect_ratio != 1.0)), axis=1) | portal_mat
         # A light's node tree may read it too (LightSet.light_path).
         light_path = bool(getattr(materials.textures, "light_path", False) or getattr(lights, "light_path", False))
         return cls(accel, triangles, materials, lights, camera, world, settings, sampler, bump_model,
                    kernels.enabled(), _delta_emitters(lights), np.arange(lights.count),
                    **_visibility(lights, triangles, light_path),
                    transparent_mat=transparent_mat, transparent_shadows=bool(transparent_mat.any()),
+                   portal_mat=portal_mat if portal_mat.any() else None,
                    transparent_limit=max(int(settings.transparent_max_bounces), 1),
                    **_kind_limits(settings, light_path), light_path=light_path,
                    pass_config=pass_config, emitter_groups=pass_events.emitter_groups(pass_config, lights),

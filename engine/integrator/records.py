@@ -83,6 +83,13 @@ class Paths:
     # Light selection 'tree_bsdf': the previous vertex's glossy-lobe terms
     # (stages.lobe_terms), for the tree's selection pdf in MIS; (N, 5).
     prev_lobe: np.ndarray
+    # Ray Portal BSDF (engine/lobes/ray_portal.py): portals passed so far
+    # (Cycles' portal_bounce, the Light Path node's Portal Depth), and
+    # whether the ray left one since the last vertex: Cycles sets
+    # PATH_RAY_MIS_SKIP, so emitters it finds count whole, as after a
+    # singular bounce (prev_delta keeps the last vertex's own kind).
+    portal: np.ndarray
+    mis_skip: np.ndarray
 
     def __len__(self):
         return len(self.pix)

@@ -24,7 +24,7 @@ from ..lights.shader import emission_path, path_rows
 from ..sampler import BSDF, LIGHT, candidate_set, emitter_set, vertex_set
 from ..sampling import power_heuristic
 from ..vec import dot, frame, row_any_positive, row_max, to_local
-from . import catcher, subsurface, transparency, visibility
+from . import catcher, portal, subsurface, transparency, visibility
 from .linking import instance_of
 from .records import Hit, LightSample, RayHits, ShadowBatch, Vertex, RowView, rows_of
 from ..geometry import VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION
@@ -113,7 +113,7 @@ def camera_aovs(ctx, paths, found, tile):
 def mis_hit(ctx, paths, i, emitter, pdf_light):
     """MIS weight for emitters found by BSDF sampling."""
     s = ctx.settings
-    prev_delta = paths.prev_delta[i]
+    prev_delta = paths.prev_delta[i] | paths.mis_skip[i]   # a portal since the vertex: Cycles' MIS skip
     if s.strategy == "bsdf":
         return np.ones(len(i))
     if s.strategy == "light":
@@ -293,7 +293,8 @@ def path_columns(paths, p):
         kinds = np.zeros((n, 3))   # camera rays of a probe (engine/nodes/probe.py): no bounces yet
     length = np.linalg.norm(p - getattr(paths, "mis_o", paths.o), axis=1)
     singular = getattr(paths, "prev_delta", np.zeros(n, bool)) & (getattr(paths, "bounce", zeros) > 0)
-    return np.column_stack([kinds, getattr(paths, "tbounce", zeros), length, singular]).astype(np.float64)
+    return np.column_stack([kinds, getattr(paths, "tbounce", zeros), length, singular,
+                            getattr(paths, "portal", zeros)]).astype(np.float64)
 
 
 def light_sample_path(ctx, paths, hit):
@@ -777,6 +778,7 @@ def scatter(ctx, paths, v, depth):
     side_l = bump_correction.sided(v.lobes, wi_l, reflected=bent)
     ok, paths.beta = throughput.update(wi, hit.ng, side_l, weight, paths.beta, paths.bounce, s.rr_depth, u[:, 3])
     through = transparency.sampled_transparent(ctx, hit, delta, wi_l, v.wo_l)
+    gone = portal.chosen(v, u[:, 0], through) if ctx.portal_mat is not None else None
     if through.any():
         # A transparent pass is not a vertex: the path keeps its direction,
         # MIS pdf and segment start (Cycles moves only the ray's tmin).
@@ -795,6 +797,8 @@ def scatter(ctx, paths, v, depth):
     paths.min_pdf = np.where(delta, paths.min_pdf, np.minimum(paths.min_pdf, pdf))
     paths.bounce = paths.bounce + ~through
     paths.tbounce = paths.tbounce + through
+    if gone is not None:   # Ray Portal samples: the ray moves to the portal's exit
+        portal.move(ctx, paths, v, *gone, through)
     return ok, through
 
 

@@ -8,6 +8,7 @@ import numpy as np
 
 from .. import bsdf
 from ..geometry import VIS_SHADOW
+from ..lobes.ray_portal import portal_rows
 from ..media import transmittance_factor
 from ..nodes import ShadingContext
 from ..points import curve_rows
@@ -135,8 +136,11 @@ def transmittance(ctx, origin, wi, tmax, emitter, tbounce, stack=None, rng=None,
         c = np.nonzero(crosses)[0]
         if len(c) == 0:
             break
-        T = bsdf.transparency(ctx.materials.gather(mat[c], ShadingContext.at(
-            ctx.triangles, prim[c], bu[c], bv[c], wo=-d[c], ray=np.full(len(c), VIS_SHADOW, np.uint8))))
+        lobes = ctx.materials.gather(mat[c], ShadingContext.at(
+            ctx.triangles, prim[c], bu[c], bv[c], wo=-d[c], ray=np.full(len(c), VIS_SHADOW, np.uint8)))
+        T = bsdf.transparency(lobes)
+        if ctx.portal_mat is not None:   # Cycles: no transparent shadow through a ray portal
+            T[portal_rows(lobes)] = 0.0
         out[idx[c]] *= T
         c = c[row_any_positive(T)]
         # Go on from just past the surface, towards the same end point.

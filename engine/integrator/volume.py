@@ -29,6 +29,7 @@ from ..vec import dot, row_any_positive
 from . import transparency, visibility
 from .records import RowView
 from .stages import finish, nee_rounds, points_path
+from ..geometry import VIS_VOLUME
 from .visibility import VIS_INDIRECT
 
 
@@ -325,6 +326,7 @@ def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None, obs=NO_PASSES):
     paths.prev_n = np.zeros((n, 4))   # no normal (the tree's n, stages.tree_normals)
     paths.prev_pdf = pdf
     paths.prev_delta = np.zeros(n, bool)
+    paths.mis_skip = np.zeros(n, bool)
     paths.prev_every = np.zeros(n, bool)
     paths.prev_lobe = np.zeros((n, 5))
     paths.min_pdf = np.minimum(paths.min_pdf, pdf)   # Cycles' min_ray_pdf takes the phase pdf too
@@ -332,8 +334,9 @@ def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None, obs=NO_PASSES):
     paths.vbounce = paths.vbounce + 1
     if ctx.track_rays or ctx.triangles.visibility is not None:
         # Blender's Volume Scatter ray visibility is not exported: volume
-        # rays see what indirect rays see.
-        paths.ray = np.full(n, VIS_INDIRECT, np.uint8)
+        # rays see what indirect rays see; VIS_VOLUME tells the Light Path
+        # node they left a volume scatter event.
+        paths.ray = np.full(n, VIS_INDIRECT | VIS_VOLUME, np.uint8)
 
 
 def phase_rows(phase, rows):

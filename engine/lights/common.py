@@ -27,7 +27,7 @@ class LightSample:
     delta: np.ndarray     # (N,) bool
     on_surface: np.ndarray  # (N,) bool: the point lies on a triangle (shorten the shadow ray)
     # What a Light Path node in an emission reads of the sampling path:
-    # (depth (N,), PATH_COLUMNS (N, 6)) or None (see LightSet.sample).
+    # (depth (N,), PATH_COLUMNS (N, 7)) or None (see LightSet.sample).
     path: object = None
     # The sampling paths' shutter times (N,), None in a still scene: moving
     # emissive triangles are sampled where they are then.

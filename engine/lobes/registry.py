@@ -99,6 +99,9 @@ def _ior(lobe):
     return float(getattr(lobe, "ior", 1.5))
 
 
+NAN = float("nan")   # the portal vectors' "not given"
+
+
 # color and roughness are converted by bsdf.MaterialTable itself (roughness
 # to alpha, with the glossy -> mirror switch); the others by to_table.
 PARAMS = (
@@ -177,6 +180,12 @@ PARAMS = (
           "(glossy 'dielectric' and 'f82', mirror, glass): the film's thickness in nm; at most 0.1 (Cycles' "
           "THINFILM_THICKNESS_CUTOFF) is no film (engine/thinfilm.py).",
           to_table=lambda lobe: film_thickness(getattr(lobe, "thin_film_thickness", 0.0))),
+    Param("portal_position", RGB, (NAN,) * 3, np.float64, (3,), "ray_portal: the world position the path goes "
+          "on from (NaN, the default: the hit point, as Blender's unlinked Position).",
+          to_table=lambda lobe: _portal_vector(getattr(lobe, "portal_position", (NAN,) * 3))),
+    Param("portal_direction", RGB, (NAN,) * 3, np.float64, (3,), "ray_portal: the direction it goes on in "
+          "(normalized; NaN, the default, or zero: the incoming ray's, as Cycles).",
+          to_table=lambda lobe: _portal_vector(getattr(lobe, "portal_direction", (NAN,) * 3))),
     Param("thin_film_ior", float, 1.33, np.float64, (), "the thin film's IOR (at least 1e-5, as Cycles; divided "
           "by the glass IOR on back faces of glass lobes).",
           to_table=lambda lobe: film_ior(getattr(lobe, "thin_film_ior", 1.33))),
@@ -196,6 +205,13 @@ def film_thickness(value):
 def film_ior(value):
     """A film IOR for the tables: at least 1e-5 (Cycles' fmaxf), NaN the default."""
     return float(min(max(_finite_or(value, 1.33), 1e-5), FILM_MAX))
+
+
+def _portal_vector(value):
+    """A portal position or direction for the tables: non-finite (or infinite,
+    out of reach of a ray) components make it NaN, its default."""
+    v = np.asarray(value, np.float64).reshape(3)
+    return v if np.all(np.isfinite(v)) and np.all(np.abs(v) < 1e30) else np.full(3, np.nan)
 
 
 def _finite_or(value, fallback):

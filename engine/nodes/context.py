@@ -40,7 +40,7 @@ IS_STRAND = "\x00is_strand"
 POSITION_TEXSPACE = "object position"
 
 PATH_COLUMNS = ("Diffuse Depth", "Glossy Depth", "Transmission Depth", "Transparent Depth", "Ray Length",
-                "Is Singular Ray")
+                "Is Singular Ray", "Portal Depth")
 
 
 class SceneShading:
@@ -231,7 +231,7 @@ class ShadingContext:
     face, depth (N,) bounces before this hit (0: camera ray), ray (N,)
     VIS_* bit of the ray (camera, diffuse, glossy, transmission, shadow;
     0 where Cycles evaluates with PATH_RAY_EMISSION: a light sample's
-    emission), path (N, 6) or None: the Light Path node's PATH_COLUMNS.
+    emission), path (N, 7) or None: the Light Path node's PATH_COLUMNS.
     prim/bary locate the point on the scene's triangles (None for a context
     made from UVs alone).  rays: the renderer's handle for nodes that cast
     rays from the points (engine.nodes.rays.NodeRays: AO, Bevel), or None

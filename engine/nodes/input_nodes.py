@@ -8,6 +8,7 @@ from .context import (CURVE_INTERCEPT, CURVE_LENGTH, CURVE_RANDOM, CURVE_THICKNE
 from .registry import node, one_of, wanted
 
 VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION, VIS_SHADOW = 1, 2, 4, 8, 16
+VIS_VOLUME = 32   # engine.geometry.VIS_VOLUME: the ray left a volume scatter event
 
 
 def _dot(a, b):
@@ -245,19 +246,23 @@ def color_attribute(ctx, i, p):
 @node("ShaderNodeLightPath",
       outputs=(("Is Camera Ray", "float"), ("Is Shadow Ray", "float"), ("Is Diffuse Ray", "float"),
                ("Is Glossy Ray", "float"), ("Is Reflection Ray", "float"), ("Is Transmission Ray", "float"),
-               ("Ray Depth", "float")) + tuple((name, "float") for name in PATH_COLUMNS),
-      unsupported_outputs=("Is Volume Scatter Ray", "Portal Depth"),
+               ("Is Volume Scatter Ray", "float"), ("Ray Depth", "float"))
+      + tuple((name, "float") for name in PATH_COLUMNS),
       cases=[{}])
 def light_path(ctx, i, p):
     """Cycles' light_path.h.  The path columns come from the integrator
     (ShadingContext.path); where it evaluates no path (a light sample's
     emission, a world, a bake) they read 0, as Cycles' PATH_RAY_EMISSION
-    evaluation reads no ray kind."""
+    evaluation reads no ray kind.  A ray a volume scattered (VIS_VOLUME)
+    is no diffuse, glossy, reflection or transmission ray: Cycles'
+    path_state_next clears those flags and sets PATH_RAY_VOLUME_SCATTER."""
     ray = ctx.ray.astype(np.int64)
     flag = lambda bits: ((ray & bits) != 0).astype(np.float64)
+    surface = 1.0 - flag(VIS_VOLUME)
     out = {"Is Camera Ray": flag(VIS_CAMERA), "Is Shadow Ray": flag(VIS_SHADOW),
-           "Is Diffuse Ray": flag(VIS_DIFFUSE), "Is Glossy Ray": flag(VIS_GLOSSY),
-           "Is Reflection Ray": flag(VIS_DIFFUSE | VIS_GLOSSY), "Is Transmission Ray": flag(VIS_TRANSMISSION),
+           "Is Diffuse Ray": flag(VIS_DIFFUSE) * surface, "Is Glossy Ray": flag(VIS_GLOSSY) * surface,
+           "Is Reflection Ray": flag(VIS_DIFFUSE | VIS_GLOSSY) * surface,
+           "Is Transmission Ray": flag(VIS_TRANSMISSION) * surface, "Is Volume Scatter Ray": flag(VIS_VOLUME),
            "Ray Depth": ctx.depth.astype(np.float64)}
     path = ctx.path if ctx.path is not None else np.zeros((ctx.n, len(PATH_COLUMNS)))
     for column, name in enumerate(PATH_COLUMNS):
