@@ -242,26 +242,29 @@ def register():
 
 
 def _warm_kernels():
-    """Once per Ember version (after an install or update), compile the
-    kernels in the background soon after the add-on is enabled, so that the
-    first F12 does not wait for them ('Compiling kernels' in the status bar
-    while it does).  Later starts find the cache complete and do nothing."""
+    """Soon after the add-on is enabled, make the kernels ready in the
+    background: compile them once per Ember version (after an install or
+    update; 'Compiling kernels' in the status bar while an F12 waits), and
+    in later sessions load them from the disk cache, so that the first F12
+    of a session does not wait for that either (1-2 s: it was 2.4x the
+    CPU of a later 64x64 render, docs/benchmarks.md)."""
     try:
         renderer = backend.engine()
-        if renderer.kernel_cache_complete():
-            return None
+        complete = renderer.kernel_cache_complete()   # also True with the JIT off: then only imports
         backend.require_ray_tracer()   # embreex with its own Embree, in this thread
-        threading.Thread(target=_warm_quietly, args=(renderer,), name="ember-warm", daemon=True).start()
+        threading.Thread(target=_warm_quietly, args=(renderer, not complete), name="ember-warm",
+                         daemon=True).start()
     except Exception as err:  # noqa: BLE001 - a render compiles them anyway, and says so
         print(f"Ember: kernels not compiled ahead: {_message(err)}")
     return None
 
 
-def _warm_quietly(renderer):
+def _warm_quietly(renderer, say_why=True):
     try:
         renderer.warm_kernel_cache()
     except Exception as err:  # noqa: BLE001 - a render compiles them anyway, and says so
-        print(f"Ember: kernels not compiled ahead: {_message(err)}")
+        if say_why:
+            print(f"Ember: kernels not compiled ahead: {_message(err)}")
 
 
 def unregister():

@@ -267,18 +267,24 @@ PASS_PATHS = 1 << 20
 
 def _batches(pixels, spp, settings, threads, barrier=False):
     """Pixel lists for one pass: at most max_paths / threads paths each
-    (memory); two per thread where that leaves at least MIN_BATCH_PATHS
-    paths each, so a thread that finishes early takes more work instead of
-    idling at the end of the pass; at least one per thread.  Before a
-    barrier (an adaptive check, the end) the last ``threads`` batches are cut
-    in TAIL_SPLIT, so the threads run out of work at nearly the same time.
+    (memory).  Passes overlap (a thread that ends one batch takes the next,
+    of this pass or the next), so only a pass before a barrier (an adaptive
+    check, the end) needs cutting for balance: there two batches per thread
+    where that leaves at least MIN_BATCH_PATHS paths each, at least one per
+    thread, and the last ``threads`` batches cut in TAIL_SPLIT, so the
+    threads run out of work at nearly the same time.  Other passes keep
+    batches as large as memory allows: a batch's fixed cost (~12 ms of
+    Python per batch on the Cornell box) is most of a small pass's time.
     ``pixels`` is a sorted index array (all pixels, or the unconverged ones).
     How pixels are grouped never changes the image: each pixel's samples of
     a pass are binned in one batch and merged in pass order."""
     per_thread = max(1024, settings.max_paths // threads)
     n = len(pixels)
-    balanced = max(MIN_BATCH_PATHS, -(-n * spp // (2 * threads)))
-    size = max(1, min(min(per_thread, balanced) // spp, -(-n // threads)))
+    if barrier:
+        balanced = max(MIN_BATCH_PATHS, -(-n * spp // (2 * threads)))
+        size = max(1, min(min(per_thread, balanced) // spp, -(-n // threads)))
+    else:
+        size = max(1, per_thread // spp)
     starts = list(range(0, n, size))
     if barrier and len(starts) > threads:
         tail = starts[-threads]

@@ -95,19 +95,23 @@ def test_time_limit_stops_early():
 
 def test_batches_bound_paths_in_flight():
     s = RenderSettings(max_paths=1 << 16)
-    for npix, spp in ((3840 * 2160, 1), (512 * 512, 16), (7, 3), (256 * 256, 1)):
-        batches = _batches(np.arange(npix), spp, s, threads=2)
-        assert len(batches) >= min(2, npix)
+    for npix, spp in ((3840 * 2160, 1), (512 * 512, 16), (7, 3), (256 * 256, 1), (64 * 64, 2)):
+        # Before a barrier (the end, an adaptive check): balanced, at least one batch per thread.
+        tail = _batches(np.arange(npix), spp, s, threads=2, barrier=True)
+        assert len(tail) >= min(2, npix)
+        np.testing.assert_array_equal(np.concatenate(tail), np.arange(npix))
+        assert max(len(b) for b in tail) * spp <= max(s.max_paths // 2, spp)
         # Load balance: two batches per thread when each keeps MIN_BATCH_PATHS paths.
         if npix * spp >= 4 * 2 * (1 << 15):
-            assert len(batches) >= 4
+            assert len(tail) >= 4
+        # Elsewhere passes overlap: batches as large as memory allows (few
+        # batches, each with its fixed cost), the same pixels in order.
+        batches = _batches(np.arange(npix), spp, s, threads=2)
         np.testing.assert_array_equal(np.concatenate(batches), np.arange(npix))
         assert max(len(b) for b in batches) * spp <= max(s.max_paths // 2, spp)
-        # Before a barrier the last batches are cut smaller, the same pixels in order.
-        tail = _batches(np.arange(npix), spp, s, threads=2, barrier=True)
-        np.testing.assert_array_equal(np.concatenate(tail), np.arange(npix))
-        if len(batches) > 2:
-            assert len(tail) > len(batches)
+        assert len(batches) == -(-npix // max(1, (s.max_paths // 2) // spp))
+        # The last batches before a barrier are cut smaller.
+        if len(tail) > 2 and npix * spp > s.max_paths:
             assert max(len(b) for b in tail[-2:]) * 2 <= max(len(b) for b in batches)
 
 
