@@ -744,8 +744,10 @@ MAX_TEXTURE_VALUE = 1e30
 
 
 def _renderable(value):
-    return np.clip(np.nan_to_num(value, nan=0.0, posinf=MAX_TEXTURE_VALUE, neginf=-MAX_TEXTURE_VALUE),
-                   -MAX_TEXTURE_VALUE, MAX_TEXTURE_VALUE)
+    # The clip sends +-inf to +-MAX_TEXTURE_VALUE (as nan_to_num would), so
+    # only NaN needs a pass of its own: a third of nan_to_num's cost.
+    value = np.clip(value, -MAX_TEXTURE_VALUE, MAX_TEXTURE_VALUE)
+    return np.where(np.isnan(value), 0.0, value)
 
 
 # Lower bounds of textured fields, as the constant tables clamp them.

@@ -306,16 +306,33 @@ class ShadingContext:
                    ng if wo is None else wo, back, depth, ray)
 
     def take(self, rows):
-        """The context of a subset of the points (cached values carried)."""
+        """The context of a subset of the points (cached values carried).
+        Its arrays are picked from this context's on first read: a material's
+        nodes read a few of them (a texture of Object coordinates: p and
+        prim), so the others are never copied."""
         out = ShadingContext.__new__(ShadingContext)
         out.n = len(rows)
         out.tris = self.tris
-        for name in ("prim", "bary", "p", "ng", "ns", "wo", "back", "depth", "ray", "path", "fibre"):
-            value = getattr(self, name)
-            setattr(out, name, None if value is None else value[rows])
+        out._lazy = {name: _pick(self._deferred(name), rows) for name in _ROW_FIELDS}
         out.rays = None if self.rays is None else self.rays.take(rows)
-        out._cache = {k: None if v is None else v[rows] for k, v in self._cache.items()}
+        out._cache = _LazyCache(_deferred_cache(self._cache, rows))
         return out
+
+    def _deferred(self, name):
+        """A row field as it stands: its array, or its pending _Rows."""
+        if name in self.__dict__:
+            return self.__dict__[name]
+        return self.__dict__["_lazy"][name]
+
+    def __getattr__(self, name):
+        # Only called for what the instance lacks: a field take() deferred.
+        lazy = self.__dict__.get("_lazy")
+        if lazy is None or name not in lazy:
+            raise AttributeError(name)
+        entry = lazy[name]
+        value = None if entry is None else entry.get()
+        self.__dict__[name] = value
+        return value
 
     def shifted_pairs(self, steps):
         """The points moved by +s and by -s for each world offset s (N, 3)
@@ -323,17 +340,21 @@ class ShadingContext:
         +s0, -s0, +s1, ...: the bump's central differences evaluate the
         height once (one pass through its nodes, not four).  Each copy holds
         what ``shifted`` gives; a -s copy's barycentric change is the +s
-        one's negated (exactly: the map is linear)."""
+        one's negated (exactly: the map is linear).  The fields the move
+        keeps (normals, direction, ray kind, ...) are picked on first read."""
         n, k = self.n, 2 * len(steps)
         rows = np.tile(np.arange(n), k)
         dp = np.concatenate([x for step in steps for x in (step, -step)])
-        pick = (lambda a: None if a is None else a[rows])
-        out = ShadingContext(k * n, self.tris, pick(self.prim), None, self.p[rows] + dp, self.ng[rows],
-                             self.ns[rows], self.wo[rows], self.back[rows], self.depth[rows], self.ray[rows],
-                             path=pick(self.path), fibre=pick(self.fibre))
+        out = ShadingContext.__new__(ShadingContext)
+        out.n = k * n
+        out.tris = self.tris
+        out._lazy = {name: _pick(self._deferred(name), rows) for name in _ROW_FIELDS if name not in ("p", "bary")}
+        out.p = self.p[rows] + dp
+        out.bary = None
         out.rays = None if self.rays is None else self.rays.take(rows)
+        out._cache = {}
         if self.bary is not None and self.tris is not None:
-            moves = [_bary_of_offset(self.tris, self.prim, step) for step in steps]
+            moves = _bary_of_offsets(self.tris, self.prim, steps)
             out.bary = self.bary[rows] + np.concatenate([x for d in moves for x in (d, -d)])
         else:
             out._cache[("uv", "")] = self.uv[rows] + dp[:, :2]
@@ -490,15 +511,79 @@ class ShadingContext:
 def _bary_of_offset(tris, prim, dp):
     """Barycentric change (dbu, dbv) of a world offset dp projected onto the
     plane of each triangle."""
+    return _bary_of_offsets(tris, prim, (dp,))[0]
+
+
+def _bary_of_offsets(tris, prim, offsets):
+    """_bary_of_offset of each (N, 3) offset, the triangles' Gram matrix
+    gathered and inverted once for all of them."""
     e1, e2 = tris.e1[prim], tris.e2[prim]
     d00 = np.einsum("ij,ij->i", e1, e1)
     d01 = np.einsum("ij,ij->i", e1, e2)
     d11 = np.einsum("ij,ij->i", e2, e2)
-    d20 = np.einsum("ij,ij->i", dp, e1)
-    d21 = np.einsum("ij,ij->i", dp, e2)
     det = d00 * d11 - d01 * d01
     inv = np.where(np.abs(det) > 1e-300, 1.0 / np.where(det != 0, det, 1.0), 0.0)
-    return np.stack([(d11 * d20 - d01 * d21) * inv, (d00 * d21 - d01 * d20) * inv], axis=1)
+    out = []
+    for dp in offsets:
+        d20 = np.einsum("ij,ij->i", dp, e1)
+        d21 = np.einsum("ij,ij->i", dp, e2)
+        move = np.empty((len(dp), 2))
+        move[:, 0] = (d11 * d20 - d01 * d21) * inv
+        move[:, 1] = (d00 * d21 - d01 * d20) * inv
+        out.append(move)
+    return out
+
+
+_ROW_FIELDS = ("prim", "bary", "p", "ng", "ns", "wo", "back", "depth", "ray", "path", "fibre")
+
+
+class _Rows:
+    """Rows of an array, picked when read (ShadingContext.take)."""
+    __slots__ = ("array", "rows")
+
+    def __init__(self, array, rows):
+        self.array, self.rows = array, rows
+
+    def get(self):
+        return self.array[self.rows]
+
+    def sub(self, rows):
+        return _Rows(self.array, self.rows[rows])
+
+
+def _pick(value, rows):
+    """value's rows, deferred (value: an array, a _Rows or None)."""
+    if value is None:
+        return None
+    return value.sub(rows) if isinstance(value, _Rows) else _Rows(value, rows)
+
+
+def _deferred_cache(cache, rows):
+    """A cache's entries for a row subset, each a deferred pick (or None)."""
+    pending = getattr(cache, "pending", {})
+    out = {k: _pick(v, rows) for k, v in cache.items()}   # a _LazyCache: its read entries
+    for k, v in pending.items():
+        if k not in out:
+            out[k] = _pick(v, rows)
+    return out
+
+
+class _LazyCache(dict):
+    """A subset context's cache: the parent's values, their rows picked on
+    first read."""
+
+    def __init__(self, pending):
+        super().__init__()
+        self.pending = pending   # key -> _Rows or None
+
+    def __contains__(self, key):
+        return dict.__contains__(self, key) or key in self.pending
+
+    def __getitem__(self, key):
+        if not dict.__contains__(self, key):
+            entry = self.pending[key]
+            dict.__setitem__(self, key, None if entry is None else entry.get())
+        return dict.__getitem__(self, key)
 
 
 def _normalize(v):

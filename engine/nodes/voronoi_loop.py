@@ -108,6 +108,55 @@ def _metric(v, dim, metric):
     return total
 
 
+@kernels.helper
+def _bound(off, local, r, dim, metric, squared, gap):
+    """A lower bound of the distance (as the loop measures it) from the
+    point to any feature point of the cell at offset off: each axis' gap
+    between the point and the cell's box [off, off + r], shrunk by 1e-5
+    (far above the float32 rounding of the distance, coordinates being
+    O(1) there), so that the measured distance exceeds it whenever it is
+    positive.  Rounding is monotonic, so the same sum over the gaps stays
+    at or below the measured one."""
+    zero = np.float32(0.0)
+    eps = np.float32(1e-5)
+    for j in range(dim):
+        lo = off[j] - local[j]
+        hi = lo + r
+        g = zero
+        if lo > zero:
+            g = lo - eps
+        elif hi < zero:
+            g = -hi - eps
+        gap[j] = g if g > zero else zero
+    if squared:
+        total = zero
+        for j in range(dim):
+            total += gap[j] * gap[j]
+    else:
+        total = _metric(gap, dim, metric)
+    return total
+
+
+@kernels.helper
+def _cell_distance(cell_i, off, local, r, dim, metric, squared, key, h, point, v):
+    """The distance (squared for Euclidean F1) to the feature point of the
+    cell at offset off, its point (relative to the point's cell) in point."""
+    inv = np.float32(1.0 / 2147483648.0)
+    for j in range(dim):
+        key[j] = _i32(cell_i[j] + np.int64(off[j]))
+    _pcg_into(key, dim, h)
+    for j in range(dim):
+        point[j] = off[j] + (np.float32(h[j]) * inv) * r
+        v[j] = point[j] - local[j]
+    if squared:
+        dd = np.float32(0.0)
+        for j in range(dim):
+            dd += v[j] * v[j]
+    else:
+        dd = _metric(v, dim, metric)
+    return dd
+
+
 @kernels.loop_kernel("void(float32[:, ::1], float32[::1], float32[::1], float32[::1], int64, int64, "
                      "float32[::1], float32[:, ::1], float32[:, ::1])", _numpy_octave)
 def voronoi_octave_loop(q, rand, expo, smooth, feature, metric, dist, color, pos):
@@ -128,6 +177,8 @@ def voronoi_octave_loop(q, rand, expo, smooth, feature, metric, dist, color, pos
     off = np.empty(4, np.float32)
     point = np.empty(4, np.float32)
     v = np.empty(4, np.float32)
+    gap = np.empty(4, np.float32)
+    d0 = big
     o1 = np.zeros(4, np.float32)
     o2 = np.zeros(4, np.float32)
     p1 = np.zeros(4, np.float32)
@@ -155,22 +206,22 @@ def voronoi_octave_loop(q, rand, expo, smooth, feature, metric, dist, color, pos
             sp[j] = zero
         for j in range(3):
             sc[j] = zero
+        if feature == 0:
+            # F1: the point's own cell first; a cell whose box lies farther
+            # cannot hold the nearest point and is not hashed.  Exact: the
+            # cells skipped measure more than one that is visited, so the
+            # first nearest in Cycles' order is the same (NaN skips none).
+            for j in range(dim):
+                off[j] = zero
+            d0 = _cell_distance(cell_i, off, local, r, dim, metric, squared, key, h, point, v)
         for idx in range(count):
             rest = idx
             for j in range(dim):
                 off[j] = np.float32(rest % side - reach)
                 rest //= side
-                key[j] = _i32(cell_i[j] + np.int64(off[j]))
-            _pcg_into(key, dim, h)
-            for j in range(dim):
-                point[j] = off[j] + (np.float32(h[j]) * inv) * r
-                v[j] = point[j] - local[j]
-            if squared:
-                dd = zero
-                for j in range(dim):
-                    dd += v[j] * v[j]
-            else:
-                dd = _metric(v, dim, metric)
+            if feature == 0 and _bound(off, local, r, dim, metric, squared, gap) > d0:
+                continue
+            dd = _cell_distance(cell_i, off, local, r, dim, metric, squared, key, h, point, v)
             if feature == 2:
                 if idx == 0:
                     w = one
