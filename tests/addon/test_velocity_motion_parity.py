@@ -251,3 +251,35 @@ def test_hostile_velocity_renders_finite(case, tmp_path, tapped_engine, monkeypa
     assert engine_scene.curves[0].motion_positions is None
     for name in ('grid', 'cloud', 'strands'):
         assert any(f"'{name}'" in w and 'velocity' in w for w in warnings), warnings
+
+
+VECTOR_SEEDS = 8
+
+
+def test_vector_pass_from_velocity_matches_cycles(registered_addon, tmp_path):
+    """The shapes' Vector pass (motion blur off, no floor, a transparent
+    film) against live Cycles, VECTOR_SEEDS seeds each, with
+    test_vector_primitives_parity's check (covered and edge pixels, image
+    means); that check must fail on Ember's vectors 1 % longer and on the
+    steps swapped (what it detects, printed)."""
+    from ember_testlib import multilayer_output
+    from test_vector_primitives_parity import _render, check
+    scene, _ = reference_scene('shapes')
+    _blur(scene, on=False)
+    bpy.data.objects.remove(bpy.data.objects['floor'])
+    scene.render.film_transparent = True
+    bpy.context.view_layer.use_pass_vector = True
+    multilayer_output(scene)
+    runs = {}
+    for engine in ('EMBER', 'CYCLES'):
+        seeds = [_render(scene, tmp_path, engine, seed) for seed in range(VECTOR_SEEDS)]
+        runs[engine] = (np.array([s[0] for s in seeds]), np.array([s[1] for s in seeds]))
+    e, c = runs['EMBER'], runs['CYCLES']
+    ok, levels, lines = check('velocity shapes', e, c)
+    scaled, _, scaled_lines = check('velocity shapes', (1.01 * e[0], e[1]), c, levels)
+    swapped, _, swapped_lines = check('velocity shapes', (-e[0][..., [2, 3, 0, 1]], e[1]), c, levels)
+    print("\n" + "\n".join(lines))
+    print("  x 1.01: " + "; ".join(s.strip() for s in scaled_lines[2:]))
+    print("  steps swapped: " + swapped_lines[0].split(": ", 1)[1])
+    assert ok, lines
+    assert not scaled and not swapped, (scaled_lines, swapped_lines)
