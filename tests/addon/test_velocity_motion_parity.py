@@ -254,11 +254,23 @@ def test_hostile_velocity_renders_finite(case, tmp_path, tapped_engine, monkeypa
 
 
 VECTOR_SEEDS = 8
+# Cycles 5.0 writes the same Vector pass for a point cloud whatever moves
+# its points (velocity or deformation steps): pre = post, on this cloud an
+# image mean of (-13.6, -6.0, +13.6, +6.0) px with a velocity of 1 unit per
+# frame along x and with a sway along x alike (Ember: (-17.2, 0, -17.2, 0)
+# px, the velocity's); its object motion is right (test_vector_primitives_parity).
+CLOUD_VECTOR_GAP = ("Cycles 5.0's Vector pass of a point cloud ignores its motion positions (pre = post, image "
+                    "mean (-13.6, -6.0, 13.6, 6.0) px for velocity and sway alike; Ember (-17.2, 0, -17.2, 0), "
+                    "the velocity's; per-pixel gap median 31 px)")
 
 
-def test_vector_pass_from_velocity_matches_cycles(registered_addon, tmp_path):
-    """The shapes' Vector pass (motion blur off, no floor, a transparent
-    film) against live Cycles, VECTOR_SEEDS seeds each, with
+@pytest.mark.parametrize("shown", [('grid', 'strands'),
+                                   pytest.param(('cloud',), marks=pytest.mark.xfail(strict=True,
+                                                                                   reason=CLOUD_VECTOR_GAP))],
+                         ids=['grid_and_strands', 'cloud'])
+def test_vector_pass_from_velocity_matches_cycles(shown, registered_addon, tmp_path):
+    """The Vector pass of the shapes ``shown`` (motion blur off, no floor,
+    a transparent film) against live Cycles, VECTOR_SEEDS seeds each, with
     test_vector_primitives_parity's check (covered and edge pixels, image
     means); that check must fail on Ember's vectors 1 % longer and on the
     steps swapped (what it detects, printed)."""
@@ -266,7 +278,9 @@ def test_vector_pass_from_velocity_matches_cycles(registered_addon, tmp_path):
     from test_vector_primitives_parity import _render, check
     scene, _ = reference_scene('shapes')
     _blur(scene, on=False)
-    bpy.data.objects.remove(bpy.data.objects['floor'])
+    for name in ('floor', 'grid', 'cloud', 'strands'):
+        if name not in shown:
+            bpy.data.objects.remove(bpy.data.objects[name])
     scene.render.film_transparent = True
     bpy.context.view_layer.use_pass_vector = True
     multilayer_output(scene)
@@ -275,9 +289,10 @@ def test_vector_pass_from_velocity_matches_cycles(registered_addon, tmp_path):
         seeds = [_render(scene, tmp_path, engine, seed) for seed in range(VECTOR_SEEDS)]
         runs[engine] = (np.array([s[0] for s in seeds]), np.array([s[1] for s in seeds]))
     e, c = runs['EMBER'], runs['CYCLES']
-    ok, levels, lines = check('velocity shapes', e, c)
-    scaled, _, scaled_lines = check('velocity shapes', (1.01 * e[0], e[1]), c, levels)
-    swapped, _, swapped_lines = check('velocity shapes', (-e[0][..., [2, 3, 0, 1]], e[1]), c, levels)
+    label = 'velocity ' + ' '.join(shown)
+    ok, levels, lines = check(label, e, c)
+    scaled, _, scaled_lines = check(label, (1.01 * e[0], e[1]), c, levels)
+    swapped, _, swapped_lines = check(label, (-e[0][..., [2, 3, 0, 1]], e[1]), c, levels)
     print("\n" + "\n".join(lines))
     print("  x 1.01: " + "; ".join(s.strip() for s in scaled_lines[2:]))
     print("  steps swapped: " + swapped_lines[0].split(": ", 1)[1])
