@@ -44,26 +44,61 @@ _VELOCITY_READ = {'FLOAT_VECTOR': ('vector', 3), 'FLOAT2': ('vector', 2), 'FLOAT
 
 def velocity_of(data, count):
     """(a geometry's ``velocity`` attribute as (count, 3) float32 units per
-    second, or None; a warning or None): Cycles reads it on the points as
-    a vector (a float as (f, f, f), a colour's r, g, b); one on another
-    domain is not read (named)."""
+    second on its points, or None; a warning or None), as Cycles reads it
+    (``get<float3>(AttrDomain::Point)``): a float as (f, f, f), a colour's
+    r, g, b; a mesh's faces, corners or edges averaged onto their points
+    and a curve's value on each of its points (Blender's domain
+    interpolation); other types or domains are named and not read."""
     attributes = getattr(data, 'attributes', None)
     attr = attributes.get('velocity') if attributes is not None else None
     if attr is None:
         return None, None
     read = _VELOCITY_READ.get(attr.data_type)
-    if attr.domain != 'POINT' or read is None or len(attr.data) != count:
-        return None, (f"its 'velocity' attribute ({attr.data_type.lower()} on {attr.domain.lower()}) is not read: "
-                      "Ember takes motion from a vector on the points")
+    if read is None or (attr.domain != 'POINT' and attr.data_type == 'BOOLEAN'):
+        return None, f"its 'velocity' attribute ({attr.data_type.lower()}) is not read: Ember reads vectors and numbers"
     prop, width = read
-    raw = np.empty(count * width, {'INT': np.int32, 'BOOLEAN': bool}.get(attr.data_type, np.float32))
+    size = len(attr.data)
+    raw = np.empty(size * width, {'INT': np.int32, 'BOOLEAN': bool}.get(attr.data_type, np.float32))
     attr.data.foreach_get(prop, raw)
-    raw = raw.reshape(count, width).astype(np.float32)
+    raw = raw.reshape(size, width).astype(np.float32)
     if width == 1:
-        return np.repeat(raw, 3, axis=1), None
-    if width == 2:
-        return np.concatenate([raw, np.zeros((count, 1), np.float32)], axis=1), None
-    return np.ascontiguousarray(raw[:, :3]), None
+        raw = np.repeat(raw, 3, axis=1)
+    elif width == 2:
+        raw = np.concatenate([raw, np.zeros((size, 1), np.float32)], axis=1)
+    values = np.ascontiguousarray(raw[:, :3])
+    if attr.domain != 'POINT':
+        values = _onto_points(data, attr.domain, values, count)
+    if values is None or len(values) != count:
+        return None, f"its 'velocity' attribute (on {attr.domain.lower()}) is not read: its size does not match"
+    return values, None
+
+
+def _onto_points(data, domain, values, count):
+    """Per-point values of a mesh's face, corner or edge values (their mean
+    over the point's, 0 on a point with none) or of a curve's (repeated on
+    its points); None for another domain."""
+    if domain == 'CURVE' and hasattr(data, 'curve_offset_data'):
+        offsets = np.empty(len(data.curves) + 1, np.int32)
+        data.curve_offset_data.foreach_get('value', offsets)
+        return np.repeat(values, np.diff(offsets), axis=0)
+    if domain not in ('FACE', 'CORNER', 'EDGE') or not hasattr(data, 'loops'):
+        return None
+    if domain == 'EDGE':
+        ids = np.empty(len(data.edges) * 2, np.int32)
+        data.edges.foreach_get('vertices', ids)
+        per = np.repeat(values, 2, axis=0)
+    else:
+        ids = np.empty(len(data.loops), np.int32)
+        data.loops.foreach_get('vertex_index', ids)
+        per = values
+        if domain == 'FACE':
+            sizes = np.empty(len(data.polygons), np.int32)
+            data.polygons.foreach_get('loop_total', sizes)
+            per = np.repeat(values, sizes, axis=0)
+    sums = np.zeros((count, 3), np.float64)
+    np.add.at(sums, ids, per)
+    hits = np.bincount(ids, minlength=count)[:count]
+    return (sums / np.maximum(hits, 1)[:, None]).astype(np.float32)
 
 
 def velocity_steps(positions, velocity, seconds):

@@ -197,6 +197,26 @@ def test_velocity_gives_the_motion_steps(tmp_path, tapped_engine, monkeypatch):
     assert all(getattr(item, 'velocity', None) is None for item in engine_scene.meshes)
 
 
+def test_velocity_on_faces_and_curves_is_read_on_their_points(tmp_path, tapped_engine, monkeypatch):
+    """A velocity stored on the grid's faces (without spin: (0, 24, 0) on
+    each) and on the strands' curves reaches every point as Blender's
+    domain interpolation gives it (the faces' mean, the curve's value)."""
+    scene, _ = reference_scene('shapes')
+    for name, domain in (('grid', 'FACE'), ('strands', 'CURVE')):
+        tree = bpy.data.node_groups[name + '_velocity']
+        next(n for n in tree.nodes if n.type == 'STORE_NAMED_ATTRIBUTE').domain = domain
+        next(n for n in tree.nodes if n.type == 'VECT_MATH' and n.operation == 'CROSS_PRODUCT').inputs[0] \
+            .default_value = (0.0, 0.0, 0.0)
+    engine_scene, _, warnings = _exported('domains', tmp_path, tapped_engine, monkeypatch, scene)
+    half = 0.5 * SHUTTER / FPS
+    for item, centre in ((_mesh_of(engine_scene, 'grid'), 'positions'), (engine_scene.curves[0], 'points')):
+        steps = getattr(item, 'motion' if centre == 'positions' else 'motion_positions')
+        moved = np.asarray(steps) - np.asarray(getattr(item, centre), np.float64)[None]
+        assert np.allclose(moved[..., 1], np.array([-half, 0.0, half])[:, None] * SLIDE, atol=1e-5)
+        assert np.allclose(moved[..., [0, 2]], 0.0, atol=1e-6)
+    assert not [w for w in warnings if 'velocity' in w], warnings
+
+
 def test_velocity_gives_the_vector_pass_steps(tmp_path, tapped_engine, monkeypatch):
     """With motion blur off and the Vector pass on, the steps are a frame
     either side (Cycles' motion_shutter_time of 2 frames): P -+ v / fps."""
