@@ -197,8 +197,8 @@ def shutter_seconds(scene, length):
 
 def _velocity_motion(meshes, moving, seconds):
     """Mesh.motion of the meshes ``moving`` (index -> instance key) from
-    their velocity attribute (Cycles' three steps; the shading normals stay
-    the centre's); returns warnings."""
+    their velocity attribute (Cycles' three steps) and their shading
+    normals there (``_step_normals``); returns warnings."""
     warnings = []
     for mesh_index, key in moving.items():
         mesh = meshes[mesh_index]
@@ -208,7 +208,31 @@ def _velocity_motion(meshes, moving, seconds):
                             "range over the shutter), rendered without motion blur from it")
         elif np.asarray(mesh.velocity).any():
             mesh.motion = steps
+            if mesh.normals is not None:
+                mesh.motion_normals = _step_normals(mesh, steps)
     return warnings
+
+
+def _step_normals(mesh, steps):
+    """Per-corner shading normals (3, T, 3, 3) at velocity's three steps:
+    the centre's, and at the ends Cycles' Mesh::add_vertex_normals of the
+    moved vertices (a velocity gives no motion normals, so Cycles computes
+    them: each vertex the normalized sum of its triangles' unit normals, a
+    triangle of no area counting as (1, 0, 0))."""
+    tri = np.asarray(mesh.triangles, np.int64)
+    out = []
+    for k, p in enumerate(steps):
+        if k == 1:
+            out.append(np.asarray(mesh.normals, np.float64))
+            continue
+        face = np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])
+        length = np.linalg.norm(face, axis=1)
+        face = np.where(length[:, None] > 0, face / np.where(length > 0, length, 1.0)[:, None], [1.0, 0.0, 0.0])
+        vertex = np.zeros_like(p)
+        np.add.at(vertex, tri.ravel(), np.repeat(face, 3, axis=0))
+        vertex /= np.maximum(np.linalg.norm(vertex, axis=1), 1e-300)[:, None]
+        out.append(vertex[tri])
+    return np.array(out)
 
 
 def _drop_velocities(scene):

@@ -68,8 +68,10 @@ def velocity_of(data, count):
     values = np.ascontiguousarray(raw[:, :3])
     if attr.domain != 'POINT':
         values = _onto_points(data, attr.domain, values, count)
-    if values is None or len(values) != count:
-        return None, f"its 'velocity' attribute (on {attr.domain.lower()}) is not read: its size does not match"
+        if values is None:
+            return None, f"its 'velocity' attribute (on {attr.domain.lower()}) is not read: Ember reads it on points"
+    if len(values) != count:
+        return None, "its 'velocity' attribute is not read: its size is not the point count"
     return values, None
 
 

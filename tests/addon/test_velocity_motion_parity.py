@@ -2,21 +2,26 @@
 addon/export/motion.py, addon/export/primitive_motion.py): geometry nodes
 store a float vector ``velocity`` (units per second) on the points of a
 grid mesh (spinning and sliding), of a point cloud (sliding along x) and of
-a Curves object (sliding along y), and delete a frame-dependent share of
+a Curves object (sliding along y) and of a smooth-shaded flap (tilting
+about y: its shading changes by the normals Cycles computes at the
+steps), and delete a frame-dependent share of
 their faces, points or curves, so their topology changes between the
 shutter's steps and deformation steps are impossible: Cycles (and Ember)
 move them by P +- v s / 2 (s: the shutter, 0.5 frames at 24 fps, in
 seconds).  Rendered at frame 2 against a converged Cycles reference
 (tools/cycles_references.py velocity_shapes); the same block test must tell
-the reference from Ember's sharp render.  Also: the exported steps, the
-Vector pass's, Deformation off, and hostile velocities (NaN, 1e30, 1e38)."""
+the reference from Ember's sharp render and from Ember keeping the centre's
+normals.  Also: the exported steps, velocity on faces and curves, the
+Vector pass (against live Cycles), Deformation off, and hostile velocities
+(NaN, 1e30, the largest float over a long shutter)."""
 import bpy
 import numpy as np
 import pytest
 
-from ember_testlib import empty_factory_scene, record_engine_scenes, render_for_reference, small_resolution
+from ember_testlib import (check_against_reference, empty_factory_scene, record_engine_scenes, render_for_reference,
+                           small_resolution)
 from parity_scenes import light, material, plane, top_camera
-from test_motion_parity import FRAME, check_blur_parity
+from test_motion_parity import FRAME, SPP, _blocks_beyond
 from test_points_parity import _points_material, point_object
 
 BLOCK = 8
@@ -24,6 +29,7 @@ FPS = 24
 SHUTTER = 0.5
 SLIDE = 24.0            # units per second: 1 unit per frame, 0.5 in the shutter
 SPIN = 12.0             # radians per second about z (the grid's shear: +- 0.125 rad)
+TILT = 96.0             # the flap's: its steps' z -+ x (+- 45 degrees)
 
 
 def _tree(name):
@@ -44,10 +50,10 @@ def _math(tree, operation, a, b):
     return node.outputs[0]
 
 
-def velocity_modifier(obj, domain, keep, velocity=(SLIDE, 0.0, 0.0), spin=0.0):
+def velocity_modifier(obj, domain, keep, velocity=(SLIDE, 0.0, 0.0), spin=0.0, axis=(0.0, 0.0, 1.0)):
     """Geometry nodes keeping the first keep + 4 frame elements of
     ``domain`` (FACE, POINT or CURVE: a count that changes with every
-    quarter frame) and storing velocity = ``velocity`` + spin z x position."""
+    quarter frame) and storing velocity = ``velocity`` + spin axis x position."""
     tree, group_in, group_out = _tree(obj.name + "_velocity")
     nodes, links = tree.nodes, tree.links
     time = nodes.new('GeometryNodeInputSceneTime')
@@ -65,7 +71,7 @@ def velocity_modifier(obj, domain, keep, velocity=(SLIDE, 0.0, 0.0), spin=0.0):
     position = nodes.new('GeometryNodeInputPosition')
     turn = nodes.new('ShaderNodeVectorMath')
     turn.operation = 'CROSS_PRODUCT'
-    turn.inputs[0].default_value = (0.0, 0.0, spin)
+    turn.inputs[0].default_value = tuple(spin * a for a in axis)
     links.new(position.outputs[0], turn.inputs[1])
     total = nodes.new('ShaderNodeVectorMath')
     total.operation = 'ADD'
@@ -122,6 +128,21 @@ def _curves(count=60, points=6):
     return obj
 
 
+def _flap():
+    """A smooth-shaded 0.8 x 0.8 grid tilting about y by its velocity
+    (v_z = 96 x: the steps' z is -+ x): seen from above its outline
+    stays, its shading changes by the normals at the steps (Cycles
+    computes them from the moved vertices; the centre's would keep it lit
+    as a flat floor)."""
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=8, y_subdivisions=8, size=0.8, location=(1.5, -1.0, 0.5))
+    obj = bpy.context.active_object
+    obj.name = "flap"
+    bpy.ops.object.shade_smooth()
+    obj.data.materials.append(material("yellow", 'diffuse', color=(0.9, 0.8, 0.3)))
+    velocity_modifier(obj, 'FACE', 100000, velocity=(0.0, 0.0, 0.0), spin=-TILT, axis=(0.0, 1.0, 0.0))
+    return obj
+
+
 def _blur(scene, on=True):
     scene.render.fps, scene.render.fps_base = FPS, 1.0
     scene.render.use_motion_blur = on
@@ -131,7 +152,7 @@ def _blur(scene, on=True):
 
 
 def velocity_shapes(scene, blur=True):
-    """The grid, the cloud and the strands on a floor under an area light."""
+    """The grid, the cloud, the strands and the flap on a floor under an area light."""
     plane("floor", material("floor", 'diffuse'))
     light('AREA', (0.5, -0.5, 4.0), 300.0, size=2.0)
     top_camera(scene, 4.0)
@@ -140,6 +161,7 @@ def velocity_shapes(scene, blur=True):
     _grid()
     _points()
     _curves()
+    _flap()
     _blur(scene, blur)
     return 2
 
@@ -153,8 +175,25 @@ def reference_scene(name, folder=None):
     return scene, SCENES[name](scene)
 
 
-def test_velocity_motion_blur_parity_with_cycles(tmp_path, tapped_engine):
-    check_blur_parity('shapes', velocity_shapes, 'velocity_', tmp_path, tapped_engine, BLOCK)
+def test_velocity_motion_blur_parity_with_cycles(tmp_path, tapped_engine, monkeypatch):
+    """Parity with the reference; the same blocks at the same level tell
+    it from Ember's sharp render and from Ember keeping the centre's
+    shading normals at the steps (the flap's shading)."""
+    from addon.export import motion as motion_export
+    scene, bounces = reference_scene('shapes')
+    image, var = render_for_reference(scene, tmp_path, 'shapes', tapped_engine, SPP, 2, bounces)
+    check = check_against_reference('velocity_shapes', scene, bounces, image, var, SPP, BLOCK)
+    check.assert_agrees(0.005, 0.02)
+    level = check.details['level']
+    still = empty_factory_scene()
+    velocity_shapes(still, blur=False)
+    sharp, sharp_var = render_for_reference(still, tmp_path, 'shapes_still', tapped_engine, SPP // 4, 2, bounces)
+    assert _blocks_beyond('shapes', sharp, sharp_var, level, "a sharp render", 'velocity_', BLOCK, SPP // 4)
+    monkeypatch.setattr(motion_export, '_step_normals', lambda mesh, steps: None)
+    scene, bounces = reference_scene('shapes')
+    centre, centre_var = render_for_reference(scene, tmp_path, 'shapes_centre', tapped_engine, SPP // 4, 2, bounces)
+    assert _blocks_beyond('shapes', centre, centre_var, level, "the centre's normals at every step", 'velocity_', BLOCK,
+                          SPP // 4)
 
 
 def _exported(name, tmp_path, taps, monkeypatch, scene=None, spp=1):
@@ -270,7 +309,7 @@ def test_hostile_velocity_renders_finite(case, tmp_path, tapped_engine, monkeypa
     assert grid_mesh.motion is None and engine_scene.points[0].motion_positions is None
     assert engine_scene.curves[0].motion_positions is None
     for name in ('grid', 'cloud', 'strands'):
-        assert any(f"'{name}'" in w and 'velocity' in w for w in warnings), warnings
+        assert any(f"'{name}'" in w and 'without motion blur from it' in w for w in warnings), warnings
 
 
 VECTOR_SEEDS = 8
@@ -284,10 +323,10 @@ CLOUD_VECTOR_GAP = ("Cycles 5.0's Vector pass of a point cloud ignores its motio
                     "the velocity's; per-pixel gap median 31 px)")
 
 
-@pytest.mark.parametrize("shown", [('grid', 'strands'),
+@pytest.mark.parametrize("shown", [('grid', 'strands', 'flap'),
                                    pytest.param(('cloud',), marks=pytest.mark.xfail(strict=True,
                                                                                    reason=CLOUD_VECTOR_GAP))],
-                         ids=['grid_and_strands', 'cloud'])
+                         ids=['grid_strands_flap', 'cloud'])
 def test_vector_pass_from_velocity_matches_cycles(shown, registered_addon, tmp_path):
     """The Vector pass of the shapes ``shown`` (motion blur off, no floor,
     a transparent film) against live Cycles, VECTOR_SEEDS seeds each, with
@@ -298,7 +337,7 @@ def test_vector_pass_from_velocity_matches_cycles(shown, registered_addon, tmp_p
     from test_vector_primitives_parity import _render, check
     scene, _ = reference_scene('shapes')
     _blur(scene, on=False)
-    for name in ('floor', 'grid', 'cloud', 'strands'):
+    for name in ('floor', 'grid', 'cloud', 'strands', 'flap'):
         if name not in shown:
             bpy.data.objects.remove(bpy.data.objects[name])
     scene.render.film_transparent = True
