@@ -80,6 +80,7 @@ REFERENCES['hair_bsdf_strands'] = ('test_hair_bsdf_parity', 'strands', 1024)
 for _scene, _spp in (('sliding_curves', 1024), ('swaying_curves', 1024), ('sliding_points', 1024),
                      ('sliding_hair', 512)):
     REFERENCES['curve_motion_' + _scene] = ('test_curve_motion_parity', _scene, _spp)
+REFERENCES['velocity_shapes'] = ('test_velocity_motion_parity', 'shapes', 1024)
 for _scene in ('emissive', 'glossy_lights', 'hdri', 'interior', 'many_lights', 'principled', 'procedural'):
     REFERENCES['yardstick_' + _scene] = ('test_yardstick_parity', _scene, 1024)
 # the scenes built here: (width, height, max bounces)

@@ -17,7 +17,7 @@ from . import object_attributes
 from . import particle_hair
 from . import volume_object
 from .motion import instance_key
-from .primitive_motion import Source, primitive_key
+from .primitive_motion import Source, primitive_key, velocity_of
 
 
 class InstanceCollector:
@@ -47,6 +47,7 @@ class InstanceCollector:
         self.mesh_warnings = {}   # geometry key -> its export's warning
         self.exported = 0         # meshes exported by this walk
         self.want_keys = True     # motion.instance_key per instance (motion blur, the Vector pass)
+        self.want_velocity = False   # read velocity attributes (motion blur, the Vector pass)
         self._groups = {}         # InstanceCollector._group's cache
         self._instance_type = backend.engine().Instance
         self.bulk = False         # note hosts for bulk_instances (collect_instances)
@@ -211,6 +212,8 @@ class InstanceCollector:
             materials=self.material_index(obj), name=obj.name, attributes=attributes or None,
             **ray_visibility(inst), **object_info(inst),
             pass_index=int(getattr(inst.object, 'pass_index', 0))))
+        if self.want_velocity:
+            self.points[-1].velocity = self._velocity(obj, data, n, keep)
         self._source(self.points[-1], inst, 'points', keep)
 
     def _add_curves(self, inst):
@@ -255,6 +258,8 @@ class InstanceCollector:
             curve_attributes=curve_attrs or None, uv=uv,
             **ray_visibility(inst), **object_info(inst),
             pass_index=int(getattr(inst.object, 'pass_index', 0))))
+        if self.want_velocity:
+            self.curves[-1].velocity = self._velocity(obj, data, n, keep_points)
         self._source(self.curves[-1], inst, 'curves', keep_points)
 
     def _add_particle_hair(self, inst):
@@ -308,12 +313,23 @@ class InstanceCollector:
             else:
                 self.mesh_of_key[key] = len(self.meshes)
                 self.meshes.append(mesh)
+                if self.want_velocity and obj.type == 'MESH':
+                    mesh.velocity = self._velocity(obj, obj.data, len(mesh.positions))
         if key in self.mesh_warnings:   # also for geometry a persistent cache kept
             self._warn_once(('vertices', key), self.mesh_warnings[key])
         if mesh_export.uses_adaptive_subdivision(obj):
             self._warn_once(('adaptive', obj.name), f"Object '{obj.name}': adaptive subdivision is not rendered "
                             "(its displacement moves the vertices of the modifiers' mesh)")
         return self.mesh_of_key[key]
+
+    def _velocity(self, obj, data, count, keep=None):
+        """The geometry's velocity attribute (primitive_motion.velocity_of)
+        for the points the export kept, or None; a velocity Ember cannot
+        read is named once."""
+        velocity, warning = velocity_of(data, count)
+        if warning:
+            self._warn_once(('velocity', obj.name), f"Object '{obj.name}': {warning}")
+        return velocity if velocity is None or keep is None else velocity[keep]
 
     def _note_use(self, inst, obj):
         """Record which objects use each geometry key (Persistent Data
@@ -473,7 +489,7 @@ def collect_instances(depsgraph, material_index, check=None, keys=None, points=N
     view_layer = getattr(depsgraph, 'view_layer', None)
     collector = InstanceCollector(material_index, check, view_layer, getattr(depsgraph, 'scene', None),
                                   render=getattr(depsgraph, 'mode', 'RENDER') == 'RENDER')
-    collector.want_keys = keys is not None
+    collector.want_keys = collector.want_velocity = keys is not None
     collector.depsgraph = depsgraph
     collector.light_sink = light_sink
     if cache is not None:

@@ -13,6 +13,15 @@ lens is read at the shutter's ends too (focal-length animation), and the
 shutter curve and rolling shutter go to the engine camera (set_shutter).
 Lamps are not read at the steps: Cycles keeps them at the centre.
 
+Geometry with a ``velocity`` attribute (units per second: point clouds,
+Alembic caches, geometry nodes' Store Named Attribute) moves by it instead
+of its steps, as Cycles' attr_create_motion_from_velocity: three steps
+P - v s / 2, P, P + v s / 2 with s the shutter in seconds (frames over
+fps / fps_base; the Vector pass's 2 frames), whatever the object's Steps,
+its vertices never read at the steps (sync_motion skips geometry whose
+motion an attribute gave), so meshes whose topology changes between frames
+blur too.  Object > Motion Blur off or Deformation off: no velocity blur.
+
 The render engine's ``frame_set`` re-evaluates the render's depsgraph; the
 original frame is set again afterwards.
 """
@@ -21,7 +30,7 @@ import math
 import numpy as np
 
 from . import mesh as mesh_export
-from .primitive_motion import PrimitiveMotion
+from .primitive_motion import PrimitiveMotion, velocity_steps
 
 
 def shutter(scene, is_preview=False):
@@ -84,10 +93,11 @@ def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, s
     Returns warnings."""
     steps_for = steps_of or object_steps
     deform_on = deforms_of or _deform_motion_on
-    primitives = PrimitiveMotion(sources, steps_for, deform_on,
-                                 render=getattr(depsgraph, 'mode', 'RENDER') == 'RENDER')
     scene = depsgraph.scene
     length = blur[0]
+    seconds = shutter_seconds(scene, length)
+    primitives = PrimitiveMotion(sources, steps_for, deform_on,
+                                 render=getattr(depsgraph, 'mode', 'RENDER') == 'RENDER', seconds=seconds)
     result = exported.scene
     wanted = {}          # steps -> instance indices
     for index, key in enumerate(keys):
@@ -106,11 +116,17 @@ def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, s
     cameras = {}
     lenses = {}
     deforming = {}
+    moving_by_velocity = {}   # mesh index -> the key of an instance using it
     for index, key in enumerate(keys):
-        if (key is not None and key[3] and key[2].type == 'MESH' and deform_on(key[2])
-                and key[2].is_deform_modified(scene, 'RENDER')):
-            deforming.setdefault(result.instances[index].mesh, key)
-    warnings = []
+        if key is None or not deform_on(key[2]):
+            continue
+        mesh_index = result.instances[index].mesh
+        if getattr(result.meshes[mesh_index], 'velocity', None) is not None:
+            if steps_for(key[2]) >= 2:
+                moving_by_velocity.setdefault(mesh_index, key)
+        elif key[3] and key[2].type == 'MESH' and key[2].is_deform_modified(scene, 'RENDER'):
+            deforming.setdefault(mesh_index, key)
+    warnings = _velocity_motion(result.meshes, moving_by_velocity, seconds)
     for t in times:
         set_time(engine, t)
         matrices[t] = {}
@@ -162,6 +178,7 @@ def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, s
             if mesh.normals is not None and all(m.normals is not None for m in found):
                 mesh.motion_normals = np.array([m.normals for m in found], np.float64)
     warnings += primitives.finish(lambda steps: _step_times(centre, length, steps))
+    _drop_velocities(result)
     set_shutter(result.camera, scene, [lenses[t] for t in ends])
     if camera_steps >= 2:
         stack = np.array([mesh_export_unit_axes(cameras[t]) for t in _step_times(centre, length, camera_steps)])
@@ -169,6 +186,59 @@ def add_motion(engine, depsgraph, exported, keys, blur, centre, camera_object, s
                                                         rtol=0.0, atol=1e-9):
             result.camera.motion = stack
     return warnings
+
+
+def shutter_seconds(scene, length):
+    """The shutter of ``length`` frames in seconds (0 for a frame rate that is 0 or not finite)."""
+    rate = float(scene.render.fps) / float(scene.render.fps_base or 1.0)
+    seconds = length / rate if rate > 0.0 else 0.0
+    return seconds if math.isfinite(seconds) else 0.0
+
+
+def _velocity_motion(meshes, moving, seconds):
+    """Mesh.motion of the meshes ``moving`` (index -> instance key) from
+    their velocity attribute (Cycles' three steps) and their shading
+    normals there (``_step_normals``); returns warnings."""
+    warnings = []
+    for mesh_index, key in moving.items():
+        mesh = meshes[mesh_index]
+        steps = velocity_steps(mesh.positions, mesh.velocity, seconds)
+        if steps is None:
+            warnings.append(f"Object '{key[2].name}': its velocity attribute is NaN or infinite (or beyond float "
+                            "range over the shutter), rendered without motion blur from it")
+        elif np.asarray(mesh.velocity).any():
+            mesh.motion = steps
+            if mesh.normals is not None:
+                mesh.motion_normals = _step_normals(mesh, steps)
+    return warnings
+
+
+def _step_normals(mesh, steps):
+    """Per-corner shading normals (3, T, 3, 3) at velocity's three steps:
+    the centre's, and at the ends Cycles' Mesh::add_vertex_normals of the
+    moved vertices (a velocity gives no motion normals, so Cycles computes
+    them: each vertex the normalized sum of its triangles' unit normals, a
+    triangle of no area counting as (1, 0, 0))."""
+    tri = np.asarray(mesh.triangles, np.int64)
+    out = []
+    for k, p in enumerate(steps):
+        if k == 1:
+            out.append(np.asarray(mesh.normals, np.float64))
+            continue
+        face = np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])
+        length = np.linalg.norm(face, axis=1)
+        face = np.where(length[:, None] > 0, face / np.where(length > 0, length, 1.0)[:, None], [1.0, 0.0, 0.0])
+        vertex = np.zeros_like(p)
+        np.add.at(vertex, tri.ravel(), np.repeat(face, 3, axis=0))
+        vertex /= np.maximum(np.linalg.norm(vertex, axis=1), 1e-300)[:, None]
+        out.append(vertex[tri])
+    return np.array(out)
+
+
+def _drop_velocities(scene):
+    """Forget the velocity attributes read for motion (the engine does not use them)."""
+    for item in list(scene.meshes) + list(getattr(scene, 'points', ()) or ()) + list(getattr(scene, 'curves', ()) or ()):
+        vars(item).pop('velocity', None)
 
 
 def set_shutter(camera, scene, end_lenses):
