@@ -357,3 +357,22 @@ def test_vector_pass_from_velocity_matches_cycles(shown, registered_addon, tmp_p
     print("  steps swapped: " + swapped_lines[0].split(": ", 1)[1])
     assert ok, lines
     assert not scaled and not swapped, (scaled_lines, swapped_lines)
+
+
+def test_velocity_keeps_three_steps_under_more_transform_steps(tmp_path, tapped_engine, monkeypatch):
+    """Object > Motion Blur > Steps 2 (5 transform steps) on the grid,
+    keyframed to slide: its placement takes 5 steps, its vertices the
+    velocity's 3 (Cycles forces 3 for motion from velocity), and the
+    render is finite."""
+    from test_motion_parity import _linear_keys
+    scene, _ = reference_scene('shapes')
+    grid = bpy.data.objects['grid']
+    grid.cycles.motion_steps = 2
+    _linear_keys(grid, 'location', [(-1.4, 0.3, 0.3), (-0.4, 0.3, 0.3)])
+    scene.frame_set(FRAME)
+    engine_scene, image, _ = _exported('five_steps', tmp_path, tapped_engine, monkeypatch, scene, spp=4)
+    inst = next(inst for inst in engine_scene.instances if inst.name == 'grid')
+    assert inst.motion is not None and len(inst.motion) == 5
+    assert np.allclose(np.asarray(inst.motion)[:, 0, 3], -0.9 + 0.5 * np.linspace(-0.25, 0.25, 5), atol=1e-4)
+    assert _mesh_of(engine_scene, 'grid').motion.shape[0] == 3
+    assert np.isfinite(image).all()
