@@ -217,21 +217,10 @@ class LightTree:
         is weighed by MIS as if light sampling could not (weight 1).  Its own
         bounds decide, an area light by Cycles' area_light_tree_parameters."""
         out = np.ones(len(emitter))
-        if len(emitter) == 0:
-            return out
-        k = self.leaf_node[emitter]
-        rows = np.flatnonzero((n[:, 3] > 0) & np.any(n[:, :3] != 0.0, axis=1) & (k >= 0))
-        if len(rows) == 0:
-            return out
-        e, kr, pr, nr = emitter[rows], k[rows], p[rows], n[rows]
-        vis = _node_importance(kr, pr, nr, self.center, self.radius, self.w, self.two_sided_f, self.sin_o,
-                               self.cos_o, self.cos_e, self.phi) > 0.0
-        sq = np.flatnonzero(self.has_rect[e])
-        if len(sq):
-            rc, wn, ps, ns = self.rect[e[sq]], self.w[kr[sq]], pr[sq], nr[sq]
-            vis[sq] = _rect_visible(ps[:, 0], ps[:, 1], ps[:, 2], ns[:, 0], ns[:, 1], ns[:, 2],
-                                    *(rc[:, j] for j in range(9)), wn[:, 0], wn[:, 1], wn[:, 2]) > 0.0
-        out[rows] = vis
+        if len(emitter) and self.has_tree:
+            _leaf_rows(np.ascontiguousarray(emitter, np.int64), _rows(p, np.arange(len(p))),
+                       _rows(n, np.arange(len(n))), self.leaf_node, self.center, self.radius, self.w,
+                       self.two_sided_f, self.sin_o, self.cos_o, self.cos_e, self.phi, self.rect, self.has_rect, out)
         return out
 
 
@@ -559,3 +548,42 @@ def _descend_many(u, use, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o
                 level += 1
             valid = min(level, _CACHED_LEVELS)
             emitter[i, k] = leaf[node]
+
+
+# -- the leaf test at points without transmission (LightTree._leaf_visible)
+
+def _leaf_rows_numpy(emitter, p, n, leaf_node, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, rect, has_rect,
+                     out):
+    k = leaf_node[emitter]
+    rows = np.flatnonzero((n[:, 3] > 0) & np.any(n[:, :3] != 0.0, axis=1) & (k >= 0))
+    if len(rows) == 0:
+        return
+    e, kr, pr, nr = emitter[rows], k[rows], p[rows], n[rows]
+    vis = _node_importance(kr, pr, nr, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi) > 0.0
+    sq = np.flatnonzero(has_rect[e])
+    if len(sq):
+        rc, wn, ps, ns = rect[e[sq]], w[kr[sq]], pr[sq], nr[sq]
+        vis[sq] = _rect_visible(ps[:, 0], ps[:, 1], ps[:, 2], ns[:, 0], ns[:, 1], ns[:, 2],
+                                *(rc[:, j] for j in range(9)), wn[:, 0], wn[:, 1], wn[:, 2]) > 0.0
+    out[rows] = vis
+
+
+_rect_one = helper(_rect_visible.fn)
+
+
+@loop_kernel("void(int64[::1], float64[:, ::1], float64[:, ::1], int64[::1], float64[:, ::1], float64[::1], "
+             "float64[:, ::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[:, ::1], "
+             "boolean[::1], float64[::1])", _leaf_rows_numpy)
+def _leaf_rows(emitter, p, n, leaf_node, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, rect, has_rect, out):
+    for i in range(len(emitter)):
+        e = emitter[i]
+        k = leaf_node[e]
+        if n[i, 3] <= 0.0 or k < 0 or (n[i, 0] == 0.0 and n[i, 1] == 0.0 and n[i, 2] == 0.0):
+            continue
+        if has_rect[e]:
+            v = _rect_one(p[i, 0], p[i, 1], p[i, 2], n[i, 0], n[i, 1], n[i, 2], rect[e, 0], rect[e, 1], rect[e, 2],
+                          rect[e, 3], rect[e, 4], rect[e, 5], rect[e, 6], rect[e, 7], rect[e, 8], w[k, 0], w[k, 1],
+                          w[k, 2])
+        else:
+            v = _importance_at(i, k, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
+        out[i] = 1.0 if v > 0.0 else 0.0

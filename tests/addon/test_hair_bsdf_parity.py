@@ -13,7 +13,9 @@ reflection sampler spreads its azimuths over pi RoughnessV, its eval stops
 at pi / 2): parity needs the sampled closure's own value and pdf
 (registry.OWN_WEIGHT); with the eval's instead Ember rendered this scene
 -2.74 % +- 0.07 % darker (t -37, 15 of 18 block-channels off).  Measured:
-+0.006 % +- 0.074 % (image mean detects 0.34 %, median block 1.4 %)."""
++0.006 % +- 0.074 % (image mean detects 0.34 %, median block 1.4 %); with
+the light tree's culling at the diffuse floor -0.020 % +- 0.074 % (the Mix
+transmits, so the strands cull nothing)."""
 import math
 
 import bpy
@@ -107,8 +109,9 @@ def test_hair_bsdf_reflection_parity_with_live_cycles(tmp_path, tapped_engine):
     the light from there: Cycles' light tree gives the light no importance
     at a point without a transmission closure when the light is wholly
     behind N (engine/lighttree.py), so those hits weigh 1.  Measured with
-    that rule -0.19 % +- 0.12 % (median block-channel |t| < 3); with |cos|
-    for every closure (Ember before) -3.75 % +- 0.09 % (t -41)."""
+    that rule -0.41 % +- 0.17 % (t -2.4; image mean detects 0.89 %; at twice
+    the samples -0.19 % +- 0.12 %, one quadrant -0.61 % +- 0.21 %); with
+    |cos| for every closure (Ember before) -3.75 % +- 0.09 % (t -41)."""
     scene = empty_factory_scene()
     bounces = reflection_strands(scene)
     spp = SPP // 2   # half the labels test's samples: the 3.75 % it guards against needs no more

@@ -283,8 +283,9 @@ def test_light_tree_descent_agrees(jit):
         r = rng.random() * 0.3
         w = rng.normal(size=3)
         cos_o = np.cos(rng.random() * np.pi)
+        rect = (c, rng.normal(size=3) * r, rng.normal(size=3) * r) if k % 3 == 0 else None   # an area light's
         bounds.append(Bounds(c - r, c + r, rng.random() * 10.0 * (k % 7 != 0), w / np.linalg.norm(w),
-                             cos_o, np.cos(rng.random() * np.pi / 2), k % 2 == 0))
+                             cos_o, np.cos(rng.random() * np.pi / 2), k % 2 == 0, rect=rect))
     tree = LightTree(bounds)
     n = 20000
     p = rng.normal(size=(n, 3)) * 4.0
@@ -316,6 +317,14 @@ def test_light_tree_descent_agrees(jit):
     plain, compiled = both_ways(tree.select, u, p, nn, lobe)
     assert_agree(plain, compiled)
     assert_agree(*both_ways(tree.pmf, plain[0], p, nn, lobe))
+    # Points without transmission (a fourth column 1 on half the rows): the
+    # signed incidence and the leaf test, in both forms.
+    sided = np.concatenate([nn, (rng.random((n, 1)) < 0.5).astype(float)], axis=1)
+    one_plain, one_compiled = both_ways(tree.select, u, p, sided)
+    assert_agree(one_plain, one_compiled)
+    assert (one_plain[1] == 0).mean() > 0.05
+    assert_agree(*both_ways(tree.pmf, emitter, p, sided))
+    assert_agree(*both_ways(tree.select_many, strata, p, sided))
     np.testing.assert_allclose(tree.pmf(plain[0], p, nn, lobe), plain[1], rtol=64 * np.finfo(float).eps, atol=0)
 
 
