@@ -18,7 +18,7 @@ from ..geometry import VIS_ALL
 from ..scene import SceneError
 
 # How a BSDF-sampled ray finds a light of the type:
-RAY = "ray"          # LightSet.intersect: the table's nearest(o, d, t, ray, bits, camera)
+RAY = "ray"          # LightSet.intersect: the table's nearest(o, d, t, ray, bits, camera, path, tmin)
 ESCAPE = "escape"    # LightSet.sun_hits: rays that leave the scene, escape_hits(d)
 WORLD = "world"      # LightSet.environment_hits: the HDRI world, eval(d) and pdf(d)
 SURFACE = "surface"  # emissive triangles, found by the scene's own ray casts
