@@ -287,7 +287,7 @@ _OFF_ON_LIGHTS = {
 _PER_LIGHT_POINT = {('ShaderNodeTexCoord', 'Camera'), ('ShaderNodeTexCoord', 'Window'),
                     ('ShaderNodeLightPath', 'Ray Length')} | {
     ('ShaderNodeLightPath', name) for name in ('Ray Depth', 'Diffuse Depth', 'Glossy Depth',
-                                               'Transmission Depth', 'Transparent Depth')}
+                                               'Transmission Depth', 'Transparent Depth', 'Portal Depth')}
 
 
 def object_info_of(obj, inst=None):

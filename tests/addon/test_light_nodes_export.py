@@ -84,9 +84,10 @@ def test_object_info_reads_the_light_object(empty_scene):
 
 
 def test_nodes_evaluated_otherwise_on_lights_are_named(empty_scene):
-    """A Light Path output Ember does not evaluate on lights (Is Volume
-    Scatter Ray) is named with the light; Ray Depth, which it evaluates per
-    light point as Cycles (test_light_tree_path_parity), is not."""
+    """A node output Ember does not evaluate (Object Info's Material Index)
+    is named with the light; Ray Depth, which it evaluates per light point
+    as Cycles (test_light_tree_path_parity), and Is Volume Scatter Ray,
+    read from the ray's kind as Is Diffuse Ray, are not."""
     _, tree, emission = textured_light(empty_scene, 'AREA', energy=10.0)
     path = tree.nodes.new('ShaderNodeLightPath')
     mix = tree.nodes.new('ShaderNodeMix')
@@ -100,4 +101,8 @@ def test_nodes_evaluated_otherwise_on_lights_are_named(empty_scene):
     tree.links.new(path.outputs['Is Volume Scatter Ray'], mix.inputs[0])
     exported = export()
     assert exported.scene.lights[0].shader is not None
-    assert [w for w in exported.warnings if "Light 'AREA'" in w and "Is Volume Scatter Ray" in w], exported.warnings
+    assert not [w for w in exported.warnings if "Is Volume Scatter Ray" in w], exported.warnings
+    tree.links.new(tree.nodes.new('ShaderNodeObjectInfo').outputs['Material Index'], mix.inputs[0])
+    exported = export()
+    assert exported.scene.lights[0].shader is not None
+    assert [w for w in exported.warnings if "Light 'AREA'" in w and "Material Index" in w], exported.warnings

@@ -482,9 +482,10 @@ def test_node_structures_match_cycles_per_pixel(parity, name):
 
 
 def test_unevaluated_node_variants_fall_back_with_one_warning(registered_addon):
-    """A Light Path Portal Depth and an Object Info Material Index feed
-    inputs: each falls back to the socket's constant, both named in one
-    warning.  (It was a Geometry Tangent, which is rendered now.)"""
+    """An Object Info Material Index feeds an input: it falls back to the
+    socket's constant, named in the warning; a Light Path Portal Depth,
+    rendered now, is not.  (It was a Geometry Tangent, which is rendered
+    now too.)"""
     from addon.export import material as material_export
     bpy.ops.wm.read_factory_settings()
     mat = bpy.data.materials.new("Unrendered")
@@ -497,12 +498,13 @@ def test_unevaluated_node_variants_fall_back_with_one_warning(registered_addon):
     tree.links.new(geometry.outputs['Material Index'], principled.inputs['Metallic'])
     translated, warning = material_export.translate(mat)
     assert warning is not None and warning.count("'Unrendered'") == 1, warning
-    assert coords.name in warning and geometry.name in warning and "'Portal Depth'" in warning
+    assert geometry.name in warning and "'Material Index'" in warning
+    assert "'Portal Depth'" not in warning and coords.name not in warning, warning
     from addon import backend
     textures = backend.engine().TEXTURE_TYPES
     assert translated.lobes
-    assert not [lobe for lobe in translated.lobes
-                if isinstance(lobe.roughness, textures) or isinstance(lobe.weight, textures)]
+    assert [lobe for lobe in translated.lobes if isinstance(lobe.roughness, textures)]
+    assert not [lobe for lobe in translated.lobes if isinstance(lobe.weight, textures)]
 
 
 def test_displacement_output_becomes_bump_only(registered_addon):

@@ -348,7 +348,8 @@ def test_nan_producing_sun_tree_renders_finite():
         assert np.isfinite(r.image).all() and np.isfinite(r.variance).all()
 
 
-@pytest.mark.parametrize("output", ["Ray Depth", "Diffuse Depth", "Transparent Depth", "Is Camera Ray"])
+@pytest.mark.parametrize("output", ["Ray Depth", "Diffuse Depth", "Transparent Depth", "Portal Depth", "Is Camera Ray",
+                                    "Is Volume Scatter Ray"])
 def test_light_path_depths_on_lights(output):
     """A light tree's Light Path reads the path that reaches the light
     (shader.emission_path, as Cycles' PATH_RAY_EMISSION): Ray Depth is the
@@ -365,7 +366,7 @@ def test_light_path_depths_on_lights(output):
     bounce = rng.integers(0, 4, n)
     columns = rng.integers(0, 3, (n, len(PATH_COLUMNS))).astype(float)
     path = emission_path(bounce, columns)
-    want = {"Ray Depth": bounce + 1.0, "Is Camera Ray": np.zeros(n)}.get(output)
+    want = {"Ray Depth": bounce + 1.0, "Is Camera Ray": np.zeros(n), "Is Volume Scatter Ray": np.zeros(n)}.get(output)
     want = 2.0 + (columns[:, PATH_COLUMNS.index(output)] if want is None else want)
     at = np.eye(4)
     at[2, 3] = 2.0   # emitting along -Z, towards the origin
