@@ -969,7 +969,7 @@ def surface_gradient(height_fn, ctx, uv_step, triangles):
     s1, s2 = t1 * h[:, None], t2 * h[:, None]
     n = len(ctx)
     values = height_fn(ctx.shifted_pairs((s1, s2))) if n else np.zeros(0)
-    up1, down1, up2, down2 = (values[k * n:(k + 1) * n] for k in range(4))
+    up1, down1, up2, down2 = (values[k::4] for k in range(4))   # a point's four copies are consecutive
     d1, d2 = (up1 - down1) / (2.0 * h), (up2 - down2) / (2.0 * h)
     return d1[:, None] * t1 + d2[:, None] * t2
 

@@ -336,15 +336,17 @@ class ShadingContext:
 
     def shifted_pairs(self, steps):
         """The points moved by +s and by -s for each world offset s (N, 3)
-        of ``steps``, as one context of 2 len(steps) N points in the order
-        +s0, -s0, +s1, ...: the bump's central differences evaluate the
-        height once (one pass through its nodes, not four).  Each copy holds
-        what ``shifted`` gives; a -s copy's barycentric change is the +s
-        one's negated (exactly: the map is linear).  The fields the move
-        keeps (normals, direction, ray kind, ...) are picked on first read."""
+        of ``steps``, as one context of 2 len(steps) N points, a point's
+        copies consecutive (+s0, -s0, +s1, ... of point 0, then of point 1:
+        neighbours in memory share their noise cells, engine/nodes/noise.py):
+        the bump's central differences evaluate the height once (one pass
+        through its nodes, not four).  Each copy holds what ``shifted``
+        gives; a -s copy's barycentric change is the +s one's negated
+        (exactly: the map is linear).  The fields the move keeps (normals,
+        direction, ray kind, ...) are picked on first read."""
         n, k = self.n, 2 * len(steps)
-        rows = np.tile(np.arange(n), k)
-        dp = np.concatenate([x for step in steps for x in (step, -step)])
+        rows = np.repeat(np.arange(n), k)
+        dp = np.stack([x for step in steps for x in (step, -step)], axis=1).reshape(k * n, 3)
         out = ShadingContext.__new__(ShadingContext)
         out.n = k * n
         out.tris = self.tris
@@ -355,7 +357,7 @@ class ShadingContext:
         out._cache = {}
         if self.bary is not None and self.tris is not None:
             moves = _bary_of_offsets(self.tris, self.prim, steps)
-            out.bary = self.bary[rows] + np.concatenate([x for d in moves for x in (d, -d)])
+            out.bary = self.bary[rows] + np.stack([x for d in moves for x in (d, -d)], axis=1).reshape(k * n, 2)
         else:
             out._cache[("uv", "")] = self.uv[rows] + dp[:, :2]
         return out

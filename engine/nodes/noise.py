@@ -202,29 +202,45 @@ def _wrap(x):
 
 
 @kernels.helper
-def _snoise3(x, y, z):
+def _snoise3(x, y, z, memo, octave):
     """snoise_3d of one point (float32), unrolled: the generic loop keeps
-    its corners in small arrays, at about 4x the cost."""
+    its corners in small arrays, at about 4x the cost.  memo[octave] holds
+    the last lattice cell (columns 0-2) and its eight corner hashes (3-10):
+    the bump's four copies of a point (engine/nodes/context.py
+    shifted_pairs: consecutive rows) nearly always share their cells, so
+    three of four skip the hashing, the dearest part (the hashes are a
+    function of the cell: the values are the same)."""
     one = np.float32(1.0)
     x, y, z = _wrap(x), _wrap(y), _wrap(z)
     fx, fy, fz = np.float32(np.floor(x)), np.float32(np.floor(y)), np.float32(np.floor(z))
     ix, iy, iz = np.int64(fx), np.int64(fy), np.int64(fz)
+    m = memo[max(0, min(octave, memo.shape[0] - 1))]   # a shared row only misses more
+    if ix != m[0] or iy != m[1] or iz != m[2]:
+        a0, a1 = ix & _M32, (ix + 1) & _M32
+        b0, b1 = iy & _M32, (iy + 1) & _M32
+        c0, c1 = iz & _M32, (iz + 1) & _M32
+        m[0], m[1], m[2] = ix, iy, iz
+        m[3] = _lookup3(3, a0, b0, c0, 0)
+        m[4] = _lookup3(3, a1, b0, c0, 0)
+        m[5] = _lookup3(3, a0, b1, c0, 0)
+        m[6] = _lookup3(3, a1, b1, c0, 0)
+        m[7] = _lookup3(3, a0, b0, c1, 0)
+        m[8] = _lookup3(3, a1, b0, c1, 0)
+        m[9] = _lookup3(3, a0, b1, c1, 0)
+        m[10] = _lookup3(3, a1, b1, c1, 0)
     x, y, z = x - fx, y - fy, z - fz
     u = x * x * x * (x * (x * np.float32(6.0) - np.float32(15.0)) + np.float32(10.0))
     v = y * y * y * (y * (y * np.float32(6.0) - np.float32(15.0)) + np.float32(10.0))
     w = z * z * z * (z * (z * np.float32(6.0) - np.float32(15.0)) + np.float32(10.0))
     x1, y1, z1 = x - one, y - one, z - one
-    a0, a1 = ix & _M32, (ix + 1) & _M32
-    b0, b1 = iy & _M32, (iy + 1) & _M32
-    c0, c1 = iz & _M32, (iz + 1) & _M32
-    v000 = _grad3(_lookup3(3, a0, b0, c0, 0), x, y, z)
-    v100 = _grad3(_lookup3(3, a1, b0, c0, 0), x1, y, z)
-    v010 = _grad3(_lookup3(3, a0, b1, c0, 0), x, y1, z)
-    v110 = _grad3(_lookup3(3, a1, b1, c0, 0), x1, y1, z)
-    v001 = _grad3(_lookup3(3, a0, b0, c1, 0), x, y, z1)
-    v101 = _grad3(_lookup3(3, a1, b0, c1, 0), x1, y, z1)
-    v011 = _grad3(_lookup3(3, a0, b1, c1, 0), x, y1, z1)
-    v111 = _grad3(_lookup3(3, a1, b1, c1, 0), x1, y1, z1)
+    v000 = _grad3(m[3], x, y, z)
+    v100 = _grad3(m[4], x1, y, z)
+    v010 = _grad3(m[5], x, y1, z)
+    v110 = _grad3(m[6], x1, y1, z)
+    v001 = _grad3(m[7], x, y, z1)
+    v101 = _grad3(m[8], x1, y, z1)
+    v011 = _grad3(m[9], x, y1, z1)
+    v111 = _grad3(m[10], x1, y1, z1)
     # Lerp along x, then y, then z (as the generic loop and Cycles' tri_mix).
     e00 = (one - u) * v000 + u * v100
     e10 = (one - u) * v010 + u * v110
@@ -245,6 +261,9 @@ def _fbm3_loop(p, detail, roughness, lacunarity, normalize, out):
     """noise_fbm in 3D, all octaves of a point in one pass (the NumPy form
     makes a temporary per octave and operation)."""
     one, half = np.float32(1.0), np.float32(0.5)
+    # One cell memo per octave (detail <= 15: 16 octaves and the partial
+    # one); no int64 cell of a float32 below 1e5 is -2^62.
+    memo = np.full((17, 11), -(1 << 62), np.int64)
     for i in range(p.shape[0]):
         px, py, pz = p[i, 0], p[i, 1], p[i, 2]
         d, rough, lac = detail[i], roughness[i], lacunarity[i]
@@ -253,8 +272,9 @@ def _fbm3_loop(p, detail, roughness, lacunarity, normalize, out):
             continue
         fscale, amp = one, one
         maxamp, total = np.float32(0.0), np.float32(0.0)
-        for _ in range(np.int64(d) + 1):
-            t = _snoise3(fscale * px, fscale * py, fscale * pz)
+        octaves = np.int64(d) + 1
+        for o in range(octaves):
+            t = _snoise3(fscale * px, fscale * py, fscale * pz, memo, o)
             total = total + t * amp
             maxamp = maxamp + amp
             amp = amp * rough
@@ -262,7 +282,7 @@ def _fbm3_loop(p, detail, roughness, lacunarity, normalize, out):
         rmd = np.float32(d - np.float32(np.floor(d)))
         a = half * total / maxamp + half if normalize != 0 else total
         if rmd != 0:
-            t = _snoise3(fscale * px, fscale * py, fscale * pz)
+            t = _snoise3(fscale * px, fscale * py, fscale * pz, memo, octaves)
             sum2 = total + t * amp
             b = half * sum2 / (maxamp + amp) + half if normalize != 0 else sum2
             a = (one - rmd) * a + rmd * b

@@ -845,6 +845,28 @@ def test_voronoi_octave_agrees(jit):
                 assert_agree(*both_ways(octave, q, rand, expo, smooth), f"voronoi {dim}D {feature} {metric}")
 
 
+def test_voronoi_f1_skipping_cells_agrees(jit):
+    """The compiled F1 skips neighbour cells whose box lies beyond the own
+    cell's feature point: points a hair from cell faces, edges and corners,
+    randomness 0, tiny and 1, every compiled metric, agree with the NumPy
+    form that measures every cell (a bound off by more than rounding would
+    pick a farther point somewhere here)."""
+    from engine.nodes.texture_nodes import _octave
+    rng = np.random.default_rng(33)
+    near = np.array([0.0, 1e-7, 1e-5, 2e-5, 0.5, 1.0 - 2e-5, 1.0 - 1e-5, 1.0 - 1e-7], np.float32)
+    for dim in (2, 3, 4):
+        n = 3000
+        cell = rng.integers(-50, 50, (n, dim)).astype(np.float32)
+        local = np.where(rng.random((n, dim)) < 0.7, rng.choice(near, (n, dim)), rng.random((n, dim)))
+        q = (cell + local.astype(np.float32)).astype(np.float32)
+        rand = rng.choice(np.array([0.0, 1e-6, 0.3, 1.0], np.float32), n)
+        ones = np.ones(n, np.float32)
+        for metric in ("EUCLIDEAN", "MANHATTAN", "CHEBYCHEV"):
+            def octave(q, rand):
+                return _octave(q, "F1", metric, ones, rand, ones, True, True)
+            assert_agree(*both_ways(octave, q, rand), f"voronoi F1 {dim}D {metric}")
+
+
 def test_fbm_3d_agrees(jit):
     """3D fBm noise (engine/nodes/noise.py): the fused loop of all octaves
     against the NumPy form, integer and fractional detail, normalized or
@@ -860,6 +882,27 @@ def test_fbm_3d_agrees(jit):
     lac = rng.uniform(1.0, 3.0, n).astype(np.float32)
     for normalize in (True, False):
         assert_agree(*both_ways(lambda *a: fbm(*a, normalize), p, detail, rough, lac), f"fbm normalize={normalize}")
+
+
+def test_fbm_3d_cell_memo_agrees(jit):
+    """The fused fBm keeps each octave's last lattice cell and its corner
+    hashes (the bump's four copies of a point are consecutive rows): runs
+    of nearby points, some straddling a cell face at one octave or another,
+    with details that change along the run (a memo row shared by octaves
+    of different runs), agree with the NumPy form, which hashes every
+    point."""
+    from engine.nodes.noise import fbm
+    rng = np.random.default_rng(34)
+    base = rng.normal(0.0, 5.0, (1500, 3))
+    base[:300] = np.round(base[:300])                    # on cell corners: copies straddle them
+    p = np.repeat(base, 4, axis=0) + rng.normal(0.0, 1e-4, (6000, 3))
+    p[::7] = -p[::7]
+    p = p.astype(np.float32)
+    detail = np.repeat(rng.choice([0.0, 1.0, 2.0, 2.5, 15.0], 1500), 4).astype(np.float32)
+    detail[::5] = 3.7
+    rough, lac = np.full(6000, 0.5, np.float32), np.full(6000, 2.0, np.float32)
+    for normalize in (True, False):
+        assert_agree(*both_ways(lambda *a: fbm(*a, normalize), p, detail, rough, lac), f"fbm memo normalize={normalize}")
 
 
 def test_cache_lock_is_per_engine_copy(tmp_path, monkeypatch):

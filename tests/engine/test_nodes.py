@@ -254,6 +254,45 @@ def test_context_subsets_keep_missing_attributes_missing():
     assert sub.attribute("Nope") is None and len(sub) == 1
 
 
+def test_subset_contexts_read_their_parents_rows():
+    """take() and shifted_pairs() pick a field's rows when it is first read:
+    every field, nested subsets and cached values equal the eager gathers,
+    a value cached after the subset was taken stays the subset's own, and
+    a field set on a subset replaces the deferred one."""
+    scene = quad_scene(Material("m"))
+    pts = np.random.default_rng(4).uniform(-0.9, 0.9, (40, 2))
+    ctx = _hit_context(scene, pts)
+    ctx.depth = np.arange(40, dtype=np.int32)
+    obj = ctx.object_coords.copy()
+    rows = np.arange(40)[::-3]
+    sub = ctx.take(rows)
+    inner = sub.take(np.array([4, 0, 2]))
+    for name in ("prim", "bary", "p", "ng", "ns", "wo", "back", "depth", "ray"):
+        np.testing.assert_array_equal(getattr(sub, name), getattr(ctx, name)[rows], err_msg=name)
+        np.testing.assert_array_equal(getattr(inner, name), getattr(ctx, name)[rows[[4, 0, 2]]], err_msg=name)
+    assert sub.path is None and inner.fibre is None
+    np.testing.assert_array_equal(inner.object_coords, obj[rows[[4, 0, 2]]])
+    np.testing.assert_allclose(sub.uv, ctx.uv[rows])
+    sub.depth = np.zeros(len(rows), np.int32)
+    assert not sub.depth.any() and ctx.depth[rows].any()
+    with pytest.raises(AttributeError):
+        sub.no_such_field
+    steps = (np.full((40, 3), [1e-3, 0.0, 0.0]), np.full((40, 3), [0.0, 1e-3, 0.0]))
+    pairs = sub.shifted_pairs(tuple(s[rows] for s in steps))
+    # A point's four copies are consecutive: +s0, -s0, +s1, -s1.
+    repeated = np.repeat(np.arange(len(rows)), 4)
+    for name in ("prim", "ng", "ns", "wo", "back", "depth", "ray"):
+        np.testing.assert_array_equal(getattr(pairs, name), getattr(sub, name)[repeated], err_msg=name)
+    moves = np.array([[1e-3, 0.0, 0.0], [-1e-3, 0.0, 0.0], [0.0, 1e-3, 0.0], [0.0, -1e-3, 0.0]])
+    np.testing.assert_allclose(pairs.p, ctx.p[rows][repeated] + np.tile(moves, (len(rows), 1)), atol=1e-12)
+    # The quad's object is unscaled: Object coordinates move with the point;
+    # so do the barycentrics (the interpolated position is the moved point).
+    np.testing.assert_allclose(pairs.object_coords[1::4], obj[rows] - [1e-3, 0.0, 0.0], atol=1e-12)
+    tris = ctx.tris
+    moved = (tris.p0[pairs.prim] + pairs.bary[:, :1] * tris.e1[pairs.prim] + pairs.bary[:, 1:] * tris.e2[pairs.prim])
+    np.testing.assert_allclose(moved, pairs.p, atol=1e-6)   # float32 hit barycentrics
+
+
 def test_pointiness_welds_and_blurs_as_cycles():
     """A tetrahedron's tip is pointier than a flat vertex (0.5); a copy of
     a vertex at the same place is welded (same value); the blur averages a
