@@ -245,20 +245,27 @@ def _owen64(x, seed):
     return x
 
 
+@kernels.helper
+def _sobol4_one(ps, smp, set_hash, salts, byte_table, out):
+    """The four values of one path's dimension set into ``out`` (the
+    compiled loop below, and the subsurface walk's per-step numbers)."""
+    seed = np.uint64(ps ^ set_hash)
+    idx = _owen64(_rev32(np.uint64(smp)), seed ^ _SHUFFLE64)
+    b0 = np.int64(idx & _B8L)
+    b1 = np.int64((idx >> _8) & _B8L)
+    b2 = np.int64((idx >> _16) & _B8L)
+    b3 = np.int64(idx >> _24)
+    for d in range(4):
+        r = np.uint64(byte_table[0, b0, d] ^ byte_table[1, b1, d] ^ byte_table[2, b2, d] ^ byte_table[3, b3, d])
+        # via int64: numba converts uint64 to float64 slowly
+        out[d] = np.float64(np.int64(_rev32(_owen64(r, seed ^ salts[d])))) * _TO_UNIT
+
+
 @kernels.loop_kernel("void(uint32[::1], uint32[::1], uint32, float64[:, ::1], uint32[:, ::1], uint32[:, ::1], "
                      "uint64[::1], uint32[:, :, ::1])", _sobol4_numpy)
 def _sobol4_into(pseed, sample, set_hash, out, hi_table, lo_table, salts, byte_table):
     for i in range(len(pseed)):
-        seed = np.uint64(pseed[i] ^ set_hash)
-        idx = _owen64(_rev32(np.uint64(sample[i])), seed ^ _SHUFFLE64)
-        b0 = np.int64(idx & _B8L)
-        b1 = np.int64((idx >> _8) & _B8L)
-        b2 = np.int64((idx >> _16) & _B8L)
-        b3 = np.int64(idx >> _24)
-        for d in range(4):
-            r = np.uint64(byte_table[0, b0, d] ^ byte_table[1, b1, d] ^ byte_table[2, b2, d] ^ byte_table[3, b3, d])
-            # via int64: numba converts uint64 to float64 slowly
-            out[i, d] = np.float64(np.int64(_rev32(_owen64(r, seed ^ salts[d])))) * _TO_UNIT
+        _sobol4_one(pseed[i], sample[i], set_hash, salts, byte_table, out[i])
 
 
 def random4(pseed, sample, dim_set):

@@ -52,8 +52,8 @@ from ..vec import frame_of
 from ..nodes.rays import NodeRays, local_accel, make_orthonormals
 from ..sampler import RANDOM, SOBOL, _hash_scalar, hash32, subsurface_set
 # The sampler's own per-path Sobol arithmetic and tables (``_numbers_one``).
-from ..sampler import _16, _24, _8, _B8L, _BYTES, _DIM_SALT64, _HI, _LO, _M32, _SHUFFLE64, _TO_UNIT
-from ..sampler import _owen64, _rev32, _sobol4_into
+from ..sampler import _16, _BYTES, _DIM_SALT64, _HI, _LO, _M32, _TO_UNIT
+from ..sampler import _sobol4_into, _sobol4_one
 from ..scene import Lobe
 
 MAX_BOUNCES = 256           # BSSRDF_MAX_BOUNCES
@@ -890,15 +890,7 @@ def _numbers_one(ps, smp, set_hash, random, salts, byte_table, out):
         for d in range(4):
             out[d] = np.float64(np.int64(_mix32(base ^ salts[d]))) * _TO_UNIT
         return
-    seed = np.uint64(ps ^ set_hash)
-    idx = _owen64(_rev32(np.uint64(smp)), seed ^ _SHUFFLE64)
-    b0 = np.int64(idx & _B8L)
-    b1 = np.int64((idx >> _8) & _B8L)
-    b2 = np.int64((idx >> _16) & _B8L)
-    b3 = np.int64(idx >> _24)
-    for d in range(4):
-        r = np.uint64(byte_table[0, b0, d] ^ byte_table[1, b1, d] ^ byte_table[2, b2, d] ^ byte_table[3, b3, d])
-        out[d] = np.float64(np.int64(_rev32(_owen64(r, seed ^ salts[d])))) * _TO_UNIT
+    _sobol4_one(ps, smp, set_hash, salts, byte_table, out)
 
 
 def _walk_paths_numpy(state, obj, pseed, sample, hashes, random, handles, prim_start, prims, fn, similar_fraction,
