@@ -6,8 +6,9 @@ import pytest
 
 from engine.bake import light_filter
 from engine.integrator.bake_paths import BakeFilter, _mirror
-from engine.lobe_ids import (DIFFUSE, GLASS, GLOSSY, OREN_NAYAR, REFRACTION, SUBSURFACE_RANDOM_WALK,
+from engine.lobe_ids import (DIFFUSE, GLASS, GLOSSY, OREN_NAYAR, RAY_PORTAL, REFRACTION, SUBSURFACE_RANDOM_WALK,
                              TRANSLUCENT, TRANSPARENT)
+from engine.lobes import kinds_of_class
 
 
 def test_class_bakes_keep_their_lobes_as_cycles():
@@ -20,7 +21,9 @@ def test_class_bakes_keep_their_lobes_as_cycles():
     transmission = set(BakeFilter(("transmission",), subsurface=False).dropped_kinds())
     assert GLASS not in transmission and REFRACTION not in transmission and GLOSSY in transmission
     everything = set(BakeFilter().dropped_kinds())
-    assert everything == {TRANSPARENT}                        # a bake sees the object itself
+    # a bake sees the object itself: the lobes rays pass straight through
+    # (Transparent, Ray Portal) are dropped at the texel, nothing else
+    assert everything == set(kinds_of_class("transparent")) and {TRANSPARENT, RAY_PORTAL} <= everything
 
 
 @pytest.mark.parametrize("kind,names,expect", [

@@ -311,6 +311,8 @@ def test_whole_walk_agrees_with_the_wavefront(pattern):
             & np.all(np.isclose(got[1], ref[1], rtol=1e-6, atol=1e-9), axis=1)
         diff = np.where(got[3] >= 0, got[0][:, 0], 0.0) - np.where(ref[3] >= 0, ref[0][:, 0], 0.0)
         se = max(diff.std(ddof=1) / math.sqrt(n), 1e-12)
-        print(f"{pattern} {name}: {same.mean():.5f} of walks agree; mean difference {diff.mean():.2e} +- {se:.1e}")
+        mean = max(abs(ref[0][:, 0][ref[3] >= 0]).mean(), 1e-12)
+        print(f"{pattern} {name}: {same.mean():.5f} of walks agree; mean difference {diff.mean():.2e} +- {se:.1e}"
+              f" (detects a relative mean exit-throughput difference of {detectable(se, level) / mean:.1e})")
         assert same.mean() > 0.998
         assert abs(diff.mean()) < z_threshold(level) * se or abs(diff.mean()) < 1e-9
