@@ -191,6 +191,9 @@ class Vertex:
     # The kind of the OWN_WEIGHT lobe that drew each BSDF sample (NONE:
     # another lobe; None: not recorded), set by stages.scatter.
     sampled_labels: object = None
+    # (N, 4) stages.tree_normals, made on first use: light selection, the
+    # candidates' selection and the next bounce's MIS all read it.
+    tree_n: object = None
 
     def __len__(self):
         return len(self.wo_l)
@@ -211,7 +214,8 @@ class Vertex:
         n = len(self)
         return Vertex(RowView(self.hit, rows, n), self.tt[rows], self.bb[rows], self.wo_l[rows],
                       take_arrays(self.lobes, rows, n), self.weights[rows], self.selection[rows],
-                      rows if self.path_rows is None else self.path_rows[rows])
+                      rows if self.path_rows is None else self.path_rows[rows],
+                      tree_n=None if self.tree_n is None else self.tree_n[rows])
 
 
 @dataclass

@@ -534,12 +534,13 @@ def tree_normals(v):
     ``has_transmission``): there the tree gives lights wholly behind the
     normal probability 0, in light sampling and in the MIS of BSDF rays
     that meet them (engine/lighttree.py)."""
-    lobes = v.lobes
-    through = np.isin(lobes.kind, lobe_registry.transmitting()) & (v.weights.max(axis=2) > 0)
-    out = np.empty((len(v), 4))
-    out[:, :3] = v.hit.ns
-    out[:, 3] = ~through.any(axis=1)
-    return out
+    if v.tree_n is None:
+        through = np.isin(v.lobes.kind, lobe_registry.transmitting()) & (v.weights.max(axis=2) > 0)
+        out = np.empty((len(v), 4))
+        out[:, :3] = v.hit.ns
+        out[:, 3] = ~through.any(axis=1)
+        v.tree_n = out
+    return v.tree_n
 
 
 def light_samples(ctx, paths, v, depth, every):
