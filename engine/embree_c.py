@@ -9,9 +9,10 @@ geometries with ``rtcSetGeometryTimeStepCount`` (one vertex buffer per time
 step; Embree interpolates linearly between steps at each ray's time) and
 queries by ``rtcIntersect1`` / ``rtcOccluded1``.
 
-The per-ray loop is a numba function calling the C function pointers
-(nopython, nogil: threads trace in parallel, as with embreex); without numba
-(or with ``EMBER_JIT=0``) the same queries go through ``rtcIntersect16`` /
+The per-ray loops are cached numba kernels (``_intersect_rays``,
+``_occluded_rays``: nopython, nogil, so threads trace in parallel as with
+embreex) calling rtcIntersect1 / rtcOccluded1 by address (``rtc_call``);
+with the JIT off the same queries go through ``rtcIntersect16`` /
 ``rtcOccluded16`` packets filled by NumPy, one ctypes call per 16 rays.
 
 Struct layouts (Embree 4's ``rtcore_ray.h``): ``RTCRay`` is 12 four-byte
@@ -28,7 +29,7 @@ import threading
 
 import numpy as np
 
-from . import embree_upload
+from . import embree_upload, kernels
 
 RTC_GEOMETRY_TYPE_TRIANGLE = 0
 RTC_GEOMETRY_TYPE_INSTANCE = 121
@@ -49,7 +50,7 @@ PACKET_WORDS = 21 * PACKET   # RTCRayHit16 with room for instPrimID
 ORG, TNEAR, DIR, TIME, TFAR, MASK, ID, FLAGS = 0, 3, 4, 7, 8, 9, 10, 11
 HIT_U, HIT_V, HIT_PRIM, HIT_GEOM, HIT_INST = 15, 16, 17, 18, 19
 
-_state = {"lib": None, "loops": None, "loops_tried": False}
+_state = {"lib": None}
 _lock = threading.Lock()
 
 
@@ -93,63 +94,16 @@ def available():
 
 
 def _compiled_loops():
-    """(intersect, occluded): numba loops over rays calling rtcIntersect1 /
-    rtcOccluded1, or None without numba or with the JIT off.  Compiled once
-    per process on first use (a motion scene's first query; ~1 s): they call
-    C function addresses of this process, so numba does not cache them."""
-    from . import kernels
-    if not kernels.enabled():   # the render's choice: NumPy forms throughout
+    """(intersect, occluded): the compiled loops over rays calling
+    rtcIntersect1 / rtcOccluded1 (``_intersect_rays``, ``_occluded_rays``,
+    ordinary cached kernels through ``rtc_call``), or None with the JIT off
+    (the render's choice: NumPy forms throughout)."""
+    if not kernels.enabled():
         return None
-    with _lock:
-        if _state["loops_tried"]:
-            return _state["loops"]
-        _state["loops_tried"] = True
-        try:
-            import numba   # optional dependency, loaded late
-        except ImportError:
-            return None
-        lib = library()
-        proto = ctypes.CFUNCTYPE(None, ctypes.c_uint64, ctypes.c_uint64, ctypes.c_uint64)
-        c_intersect = proto(ctypes.cast(lib.rtcIntersect1, ctypes.c_void_p).value)
-        c_occluded = proto(ctypes.cast(lib.rtcOccluded1, ctypes.c_void_p).value)
-
-        @numba.njit(inline="always")
-        def ray(buf, w, o, d, tfar, time, i):
-            """Ray i into the RTCRay words of buf (w: the same words as uint32)."""
-            buf[0], buf[1], buf[2], buf[3] = o[i, 0], o[i, 1], o[i, 2], 0.0
-            buf[4], buf[5], buf[6], buf[7] = d[i, 0], d[i, 1], d[i, 2], time[i]
-            buf[8] = tfar[i]
-            w[9], w[10], w[11] = 0xFFFFFFFF, 0, 0
-
-        @numba.njit(nogil=True)
-        def intersect(scene, o, d, tfar, time, offsets, order, buf, t_out, prim_out, u_out, v_out):
-            w = buf.view(np.uint32)
-            addr = buf.ctypes.data
-            for i in range(len(tfar)):
-                ray(buf, w, o, d, tfar, time, i)
-                w[18], w[19] = 0xFFFFFFFF, 0xFFFFFFFF
-                c_intersect(scene, addr, 0)
-                g = w[19] if w[19] != 0xFFFFFFFF else w[18]   # an instance's id, or the geometry's
-                if w[18] == 0xFFFFFFFF:
-                    prim_out[i] = -1
-                    t_out[i] = np.inf
-                else:
-                    prim_out[i] = order[offsets[g] + w[17]]
-                    t_out[i] = buf[8]
-                    u_out[i] = buf[15]
-                    v_out[i] = buf[16]
-
-        @numba.njit(nogil=True)
-        def occluded(scene, o, d, tfar, time, buf, blocked):
-            w = buf.view(np.uint32)
-            addr = buf.ctypes.data
-            for i in range(len(tfar)):
-                ray(buf, w, o, d, tfar, time, i)
-                c_occluded(scene, addr, 0)
-                blocked[i] = buf[8] < 0.0
-
-        _state["loops"] = (intersect, occluded)
-        return _state["loops"]
+    try:
+        return tuple(k.compiled or kernels._wait_for(k) for k in (_intersect_rays, _occluded_rays))
+    except RuntimeError:   # numba missing or failing: the packets serve
+        return None
 
 
 class TriangleScene:
@@ -355,10 +309,10 @@ class TriangleScene:
         v = np.zeros(n, np.float32)
         loops = _compiled_loops() if loops is None else loops
         if loops:
-            buf = _aligned(RAYHIT_WORDS)
-            loops[0](self.handle, o, d, tfar, time, self.offsets, self.order, buf, t, prim, u, v)
+            loops[0](np.uint64(self.handle), _address("rtcIntersect1"), o, d, tfar, time, self.offsets, self.order,
+                     _aligned(RAYHIT_WORDS), t, prim, u, v)
         else:
-            self._packets(o, d, tfar, time, (t, prim, u, v))
+            _packets(self.lib, self.handle, self.offsets, self.order, o, d, tfar, time, (t, prim, u, v))
         return t.astype(np.float64), prim, u.astype(np.float64), v.astype(np.float64)
 
     def occluded(self, o, d, tfar, time, loops=None):
@@ -367,53 +321,55 @@ class TriangleScene:
         blocked = np.empty(len(tfar), np.bool_)
         loops = _compiled_loops() if loops is None else loops
         if loops:
-            loops[1](self.handle, o, d, tfar, time, _aligned(RAYHIT_WORDS), blocked)
+            loops[1](np.uint64(self.handle), _address("rtcOccluded1"), o, d, tfar, time, _aligned(RAYHIT_WORDS),
+                     blocked)
         else:
-            self._packets(o, d, tfar, time, None, blocked)
+            _packets(self.lib, self.handle, self.offsets, self.order, o, d, tfar, time, None, blocked)
         return blocked
 
-    def _packets(self, o, d, tfar, time, hits, blocked=None):
-        """The queries as RTCRayHit16 packets filled by NumPy (no numba)."""
-        n = len(tfar)
-        count = -(-n // PACKET)
-        pad = count * PACKET - n
-        buf = _aligned(count * PACKET_WORDS).reshape(count, 21, PACKET)
-        words = buf.view(np.uint32)
 
-        def put(row, values):
-            lane = np.zeros(count * PACKET, np.float32)
-            lane[:n] = values
-            buf[:, row, :] = lane.reshape(count, PACKET)
+def _packets(lib, handle, offsets, order, o, d, tfar, time, hits, blocked=None):
+    """The queries as RTCRayHit16 packets filled by NumPy (no numba)."""
+    n = len(tfar)
+    count = -(-n // PACKET)
+    pad = count * PACKET - n
+    buf = _aligned(count * PACKET_WORDS).reshape(count, 21, PACKET)
+    words = buf.view(np.uint32)
 
-        for k in range(3):
-            put(ORG + k, o[:, k])
-            put(DIR + k, d[:, k])
-        buf[:, TNEAR] = 0.0
-        put(TIME, time)
-        put(TFAR, tfar)
-        words[:, MASK], words[:, ID], words[:, FLAGS] = INVALID_ID, 0, 0
-        words[:, 12 + 6] = INVALID_ID    # hit.geomID (hit words start at 12)
-        words[:, 12 + 7] = INVALID_ID    # hit.instID[0]
-        valid = _aligned(count * PACKET).view(np.int32)   # read as one aligned 64-byte vector
-        valid[:] = -1
-        valid[n:] = 0
-        fn = self.lib.rtcOccluded16 if hits is None else self.lib.rtcIntersect16
-        base, vbase, step = buf.ctypes.data, valid.ctypes.data, PACKET_WORDS * 4
-        for k in range(count):
-            fn(vbase + 64 * k, self.handle, base + step * k, None)
-        if hits is None:
-            blocked[:] = buf[:, TFAR, :].reshape(-1)[:n] < 0.0
-            return
-        t, prim, u, v = hits
-        geom = words[:, 12 + 6, :].reshape(-1)[:n]
-        inst = words[:, 12 + 7, :].reshape(-1)[:n]
-        local = words[:, 12 + 5, :].reshape(-1)[:n].astype(np.int64)
-        hit = geom != INVALID_ID
-        g = np.where(hit, np.where(inst != INVALID_ID, inst, geom), 0).astype(np.int64)
-        prim[:] = np.where(hit, self.order[np.where(hit, self.offsets[g] + local, 0)], -1)
-        t[:] = np.where(hit, buf[:, TFAR, :].reshape(-1)[:n], np.inf)
-        u[:] = np.where(hit, buf[:, 12 + 3, :].reshape(-1)[:n], 0.0)
-        v[:] = np.where(hit, buf[:, 12 + 4, :].reshape(-1)[:n], 0.0)
+    def put(row, values):
+        lane = np.zeros(count * PACKET, np.float32)
+        lane[:n] = values
+        buf[:, row, :] = lane.reshape(count, PACKET)
+
+    for k in range(3):
+        put(ORG + k, o[:, k])
+        put(DIR + k, d[:, k])
+    buf[:, TNEAR] = 0.0
+    put(TIME, time)
+    put(TFAR, tfar)
+    words[:, MASK], words[:, ID], words[:, FLAGS] = INVALID_ID, 0, 0
+    words[:, 12 + 6] = INVALID_ID    # hit.geomID (hit words start at 12)
+    words[:, 12 + 7] = INVALID_ID    # hit.instID[0]
+    valid = _aligned(count * PACKET).view(np.int32)   # read as one aligned 64-byte vector
+    valid[:] = -1
+    valid[n:] = 0
+    fn = lib.rtcOccluded16 if hits is None else lib.rtcIntersect16
+    base, vbase, step = buf.ctypes.data, valid.ctypes.data, PACKET_WORDS * 4
+    for k in range(count):
+        fn(vbase + 64 * k, handle, base + step * k, None)
+    if hits is None:
+        blocked[:] = buf[:, TFAR, :].reshape(-1)[:n] < 0.0
+        return
+    t, prim, u, v = hits
+    geom = words[:, 12 + 6, :].reshape(-1)[:n]
+    inst = words[:, 12 + 7, :].reshape(-1)[:n]
+    local = words[:, 12 + 5, :].reshape(-1)[:n].astype(np.int64)
+    hit = geom != INVALID_ID
+    g = np.where(hit, np.where(inst != INVALID_ID, inst, geom), 0).astype(np.int64)
+    prim[:] = np.where(hit, order[np.where(hit, offsets[g] + local, 0)], -1)
+    t[:] = np.where(hit, buf[:, TFAR, :].reshape(-1)[:n], np.inf)
+    u[:] = np.where(hit, buf[:, 12 + 3, :].reshape(-1)[:n], 0.0)
+    v[:] = np.where(hit, buf[:, 12 + 4, :].reshape(-1)[:n], 0.0)
 
 
 def _aligned(words):
@@ -489,3 +445,70 @@ def embree_loop_kernel(signature, numpy_fn):
     def wrap(fn):
         return Loop(fn, signature, numpy_fn)
     return wrap
+
+
+def _address(name):
+    """np.uint64 address of ``name`` (rtcIntersect1, rtcOccluded1) in the loaded libembree4."""
+    key = "address " + name
+    if key not in _state:
+        _state[key] = np.uint64(ctypes.cast(getattr(library(), name), ctypes.c_void_p).value)
+    return _state[key]
+
+
+# -- the per-ray query loops ----------------------------------------------------
+
+@kernels.helper
+def _ray_words(buf, w, o, d, tfar, time, i):
+    """Ray i into the RTCRay words of buf (w: the same words as uint32)."""
+    buf[0], buf[1], buf[2], buf[3] = o[i, 0], o[i, 1], o[i, 2], 0.0
+    buf[4], buf[5], buf[6], buf[7] = d[i, 0], d[i, 1], d[i, 2], time[i]
+    buf[8] = tfar[i]
+    w[9], w[10], w[11] = 0xFFFFFFFF, 0, 0
+
+
+# Cached kernels (no compile per process: the loops used to call ctypes
+# function pointers, constants numba compiled again in every process, 1-3 s
+# on a motion scene's first query).  Their NumPy forms are the packet queries.
+
+def _intersect_numpy(scene, fn, o, d, tfar, time, offsets, order, buf, t_out, prim_out, u_out, v_out):
+    _packets(library(), int(scene), offsets, order, o, d, tfar, time, (t_out, prim_out, u_out, v_out))
+
+
+def _occluded_numpy(scene, fn, o, d, tfar, time, buf, blocked):
+    _packets(library(), int(scene), None, None, o, d, tfar, time, None, blocked)
+
+
+@embree_loop_kernel("void(uint64, uint64, float32[:, ::1], float32[:, ::1], float32[::1], float32[::1], int64[::1], "
+                    "int64[::1], float32[::1], float32[::1], int64[::1], float32[::1], float32[::1])",
+                    _intersect_numpy)
+def _intersect_rays(scene, fn, o, d, tfar, time, offsets, order, buf, t_out, prim_out, u_out, v_out):
+    """Closest hits of rays at their times, one rtcIntersect1 (at ``fn``)
+    each: t inf and prim -1 on a miss, else prim the global row
+    (``order[offsets[geometry or instance] + primID]``)."""
+    w = buf.view(np.uint32)
+    addr = np.uint64(buf.ctypes.data)
+    for i in range(len(tfar)):
+        _ray_words(buf, w, o, d, tfar, time, i)
+        w[18], w[19] = 0xFFFFFFFF, 0xFFFFFFFF
+        rtc_call(fn, scene, addr, np.uint64(0))
+        if w[18] == 0xFFFFFFFF:
+            prim_out[i] = -1
+            t_out[i] = np.inf
+        else:
+            g = w[19] if w[19] != 0xFFFFFFFF else w[18]   # an instance's id, or the geometry's
+            prim_out[i] = order[offsets[np.int64(g)] + np.int64(w[17])]
+            t_out[i] = buf[8]
+            u_out[i] = buf[15]
+            v_out[i] = buf[16]
+
+
+@embree_loop_kernel("void(uint64, uint64, float32[:, ::1], float32[:, ::1], float32[::1], float32[::1], float32[::1], "
+                    "boolean[::1])", _occluded_numpy)
+def _occluded_rays(scene, fn, o, d, tfar, time, buf, blocked):
+    """Whether anything lies on each ray before tfar at its time (rtcOccluded1 at ``fn``)."""
+    w = buf.view(np.uint32)
+    addr = np.uint64(buf.ctypes.data)
+    for i in range(len(tfar)):
+        _ray_words(buf, w, o, d, tfar, time, i)
+        rtc_call(fn, scene, addr, np.uint64(0))
+        blocked[i] = buf[8] < 0.0
