@@ -296,3 +296,21 @@ def test_motion_with_transparency_volumes_and_passes_renders_finite():
     for name in ("Ambient Occlusion", "Depth", "Vector"):
         assert np.isfinite(result.passes[name]).all()
     assert not result.passes["Vector"].any()   # Cycles' rule with motion blur on
+
+
+def test_query_loops_are_cached_kernels():
+    """A moving scene's first query compiles nothing: the per-ray loops are
+    kernels numba caches on disk (they were closures over ctypes function
+    pointers, compiled again in every process: 1.8-2.2 s, docs/benchmarks.md)."""
+    before = kernels.enabled()
+    if not kernels.configure(True):
+        pytest.skip(str(kernels.UNAVAILABLE))
+    try:
+        assert kernels.wait(900)
+        loops = embree_c._compiled_loops()
+        assert loops is not None
+        for loop, kernel in zip(loops, (embree_c._intersect_rays, embree_c._occluded_rays)):
+            assert kernel in kernels.KERNELS and loop is kernel.compiled
+            assert type(loop._cache).__name__ == "FunctionCache"
+    finally:
+        kernels.configure(before)
