@@ -122,29 +122,50 @@ def test_hair_bsdf_reflection_parity_with_live_cycles(tmp_path, tapped_engine):
     check.assert_agrees(0.01)
 
 
-@pytest.mark.xfail(strict=True, reason="Glossy bounces 1: Ember -0.39 % +- 0.12 % against Cycles, one quadrant "
-                   "-0.99 % +- 0.20 % (t -5.0); before the light tree's culling -2.99 %; rest not found")
+def channel_sum(image, var):
+    """(H, W, 1): a pixel's R + G + B and a bound on the variance of that
+    sum.  The channels of a pixel come from the same paths, so their errors
+    are correlated (here almost fully: white light on near-grey surfaces);
+    ember_stats' image and region means add the channel variances as if they
+    were independent, which on this scene makes their standard errors about
+    half the scatter measured between independent seed sets.  The square of
+    the summed channel standard errors bounds the sum's variance
+    (Cauchy-Schwarz) and matches that scatter."""
+    return image[..., :3].sum(axis=2, keepdims=True), np.sqrt(var[..., :3]).sum(axis=2, keepdims=True) ** 2
+
+
 def test_hair_bsdf_labels_parity_with_live_cycles(tmp_path, tapped_engine):
     """Glossy bounces 1 of 4: Cycles counts every Reflection sample a glossy
     bounce, also those below N (its label; Ember: bsdf.sample's labels,
-    visibility._labelled), against live Cycles seeds.  With the light
-    tree's rule for points without transmission (lights wholly behind N not
-    picked, their BSDF hits weigh 1; Cycles' light_tree_importance and
-    area_light_tree_parameters, engine/lighttree.py) measured -0.39 % +-
-    0.12 % in the image mean (t -3.3), one quadrant -0.99 % +- 0.20 % (t
-    -5.0, just past the level), where it was -2.99 % +- 0.09 % (t -32).  An
-    exact test (cull only a rectangle wholly behind N, tighter than Cycles')
-    gives +0.14 % +- 0.12 % but moves other quadrants +0.5 to +0.7 %, so
-    the rest is not the culling rule alone; not found."""
+    visibility._labelled), against live Cycles seeds.  The image depends on
+    the light tree's rule for points without transmission (lights wholly
+    behind N not picked, their BSDF hits weigh 1; engine/lighttree.py):
+    without it -2.99 %, counting labels as Ember once did (Glossy bounces 2)
+    +5.3 %; the power asked (1.5 %) sees both.
+
+    Measured on the channel sum (``channel_sum``) at these seeds: image
+    -0.39 % +- 0.20 %, quadrants within +- 0.34 to 0.51 %, the largest
+    -0.99 % +- 0.34 % (t -2.9).  With the channels' variances added as if
+    independent it read +- 0.12 % and t -5.0 in that quadrant, a strict
+    xfail until 2026-12-07; three other seed sets (Cycles 10-13, 20-23,
+    30-33) gave images of -0.04, +0.03 and -0.23 % and their largest |t| in
+    other quadrants (-1.36 % in region 0,0 at 30), and the four scatter
+    0.19 % (image) as the bound says, not 0.12 %.  Their mean: image
+    -0.16 % +- 0.10 %.  Neither NEE alone (Cycles' light MIS off, Ember's
+    Light strategy: region 1,1 -0.60 % +- 0.16 % (summed variances) at these
+    seeds, -0.00 % +- 0.16 % at seeds 10) nor BSDF sampling alone (an
+    emissive plane, Emission Sampling None: -0.5 % +- 0.5 %, summed variances) locates a
+    difference."""
     scene = empty_factory_scene()
     bounces = reflection_strands(scene)
     ref, ref_var, header = live_cycles_reference(scene, tmp_path, 'labels', LABEL_SEEDS, LABEL_SPP, bounces,
                                                  configure=one_glossy_bounce)
     image, var = render_for_reference(scene, tmp_path, 'labels', tapped_engine, SPP, 2, bounces,
                                       configure=one_glossy_bounce)
-    check = ReferenceCheck('hair_bsdf_labels', image[..., :3].astype(np.float64), var, SPP, ref, ref_var, header,
-                           BLOCK)
-    check.assert_agrees(0.01)
+    image, var = channel_sum(image.astype(np.float64), var)
+    ref, ref_var = channel_sum(ref, ref_var)
+    check = ReferenceCheck('hair_bsdf_labels', image, var, SPP, ref, ref_var, header, BLOCK)
+    check.assert_agrees(0.015)
 
 
 def test_hair_bsdf_hostile_inputs_render_finite(tmp_path, tapped_engine):
