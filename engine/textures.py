@@ -891,7 +891,7 @@ def footprint_bump(height, ctx, base, triangles, params, undisplaced=False, spac
     "Both" bump, 'OBJECT' or 'WORLD'): the bump is taken in object space
     (use_object_space) on the height dot(D, N)."""
     strength, distance, invert, width = params
-    width = np.asarray(width, np.float64)
+    width = np.broadcast_to(np.asarray(width, np.float64), (len(ctx),))
     a, b = make_orthonormals(ctx.ng)
     dx, dy = a * ctx.dp[:, None], b * ctx.dp[:, None]
     values = height(ctx.shifted_copies([None, dx * width[:, None], dy * width[:, None]]))
