@@ -246,6 +246,13 @@ class CameraModel:
         # |d normalize(P) / dx| = sqrt(|P|^2 - x^2) / |P|^2 for P = (x, y, -1)
         return np.zeros(n), 0.5 * (self.pw * np.sqrt(sy * sy + 1.0) + self.ph * np.sqrt(sx * sx + 1.0)) / l2
 
+    def origin_spread(self, d):
+        """``spread`` at the rays' origins on the near clip plane, as Cycles
+        moves ray->dP by nearclip * ray->dD there."""
+        dp, dd = self.spread(d)
+        z = np.maximum(-(np.asarray(d, np.float64) @ self.rot)[:, 2], 1e-12)
+        return dp + dd * (self.cam.clip_start / z), dd
+
     def shutter_times(self, pixel, u):
         """Each camera sample's time in the shutter from its number ``u``
         (the shutter curve, and the rolling shutter by the pixel's row)."""

@@ -446,6 +446,9 @@ class Bump:
     # Object-space Displacement node is the height times |M^T N|.  None:
     # an ordinary world-space bump; else the Displacement node's space.
     displacement_space: Optional[str] = None
+    # The Bump node's Filter Width (Blender 4.3+): Cycles evaluates the
+    # height at P + width dPdx and P + width dPdy (engine.textures.footprint_bump).
+    filter_width: object = 0.1
 
 
 @dataclass(eq=False)

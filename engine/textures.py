@@ -21,6 +21,8 @@ import numpy as np
 
 from .nodes import REGISTRY, ShadingContext, as_context
 from .nodes.color_math import EXTRA_BLENDS
+from .nodes.context import _bary_of_offsets
+from .nodes.rays import make_orthonormals
 from .scene import (TEXTURE_TYPES, Bump, ImageTexture, Math, MixColor, NodeOutput, NormalMap)
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
@@ -664,7 +666,8 @@ class MaterialTextures:
             inner = None if expr.normal is None else self._compile_normal(expr.normal)
             return ("bump", self.compiler.value(expr.height), self.compiler.value(expr.strength),
                     self.compiler.value(expr.distance), expr.invert, inner, _bump_step(expr),
-                    bool(getattr(expr, "undisplaced", False)), getattr(expr, "displacement_space", None))
+                    bool(getattr(expr, "undisplaced", False)), getattr(expr, "displacement_space", None),
+                    self.compiler.value(getattr(expr, "filter_width", BUMP_FILTER_WIDTH)))
         if isinstance(expr, NodeOutput):
             # A vector node's output (e.g. Bevel): Cycles normalizes it.
             return ("vector", self.compiler.color(expr))
@@ -805,10 +808,15 @@ def f0_of_ior(ior):
     return Math("MULTIPLY", ratio, ratio)
 
 
+# Cycles' default Filter Width of the Bump node (Blender 4.3+; before, and
+# for a displacement's bump, the same constant).
+BUMP_FILTER_WIDTH = 0.1
+
+
 def _bump_step(expr):
-    """UV step of the bump's finite differences: a tenth of a texel of the
-    finest image in the height expression (Cycles differentiates at a
-    fraction of a pixel footprint), or 1e-4 without images."""
+    """UV step of the limit bump's central differences (points without a
+    ray footprint: surface_gradient): a tenth of a texel of the finest
+    image in the height expression, or 1e-4 without images."""
     sizes = [max(np.shape(tile.pixels)[:2]) for img in _images_in(expr.height)
              for tile in (img, *(t for _, t in img.tiles))]
     return 0.1 / max(sizes) if sizes else 1e-4
@@ -851,15 +859,92 @@ def _evaluate_normal(normal, hit, rows, triangles, ns, ctx):
         if normal[3] != "TANGENT":
             return space_normal_map(hit, rows, ns, normal[1], normal[2], normal[3], ctx)
         return normal_map(hit, rows, ns, normal[1], normal[2], ctx)
-    _, height, strength, distance, invert, inner, step, undisplaced, space = normal
+    _, height, strength, distance, invert, inner, step, undisplaced, space, width = normal
     base = ns if inner is None else _unit(_evaluate_normal(inner, hit, rows, triangles, ns, ctx), ns)
+    object_space = space is not None and ctx.prim is not None and ctx.instance[0] is not None
+    if _has_footprint(ctx):
+        return footprint_bump(height, ctx, base, triangles, (strength(ctx), distance(ctx), invert, width(ctx)),
+                              undisplaced, space if object_space else None)
     grad = surface_gradient(height, ctx, step, triangles)
     ng = triangles.ng[ctx.prim] if ctx.prim is not None else None
     if undisplaced and ctx.prim is not None:
         grad, ng = _on_undisplaced(grad, ng, triangles, ctx)
-    if space is not None and ng is not None and ctx.instance[0] is not None:
+    if object_space and ng is not None:
         return _object_space_bump(base, grad, ng, space, strength(ctx), distance(ctx), invert, ctx)
     return bump(base, grad, strength(ctx), distance(ctx), invert, ng)
+
+
+def _has_footprint(ctx):
+    """Points on triangles with a ray footprint (camera paths): Cycles'
+    scheme; others (bakes, probes) keep the limit bump."""
+    dp = getattr(ctx, "dp", None)
+    return dp is not None and ctx.prim is not None and len(dp) > 0 and bool(np.all(np.isfinite(dp) & (dp > 0)))
+
+
+def footprint_bump(height, ctx, base, triangles, params, undisplaced=False, space=None):
+    """Cycles 5.0's bump: the height at P, P + w dPdx and P + w dPdy (w
+    the Filter Width, dPdx and dPdy the compact ray differential made
+    full, differential_from_compact: dP times make_orthonormals(Ng)), one
+    pass through the height's nodes on the three copies of each point;
+    then svm_node_set_bump.  ``undisplaced`` ("Both"): the differentials
+    are the undisplaced surface's (NODE_ENTER_BUMP_EVAL); ``space`` (a
+    "Both" bump, 'OBJECT' or 'WORLD'): the bump is taken in object space
+    (use_object_space) on the height dot(D, N)."""
+    strength, distance, invert, width = params
+    width = np.broadcast_to(np.asarray(width, np.float64), (len(ctx),))
+    a, b = make_orthonormals(ctx.ng)
+    dx, dy = a * ctx.dp[:, None], b * ctx.dp[:, None]
+    values = height(ctx.shifted_copies([None, dx * width[:, None], dy * width[:, None]]))
+    heights = np.asarray(values, np.float64).reshape(-1, 3)
+    if undisplaced:
+        dx, dy = _undisplaced_differentials(dx, dy, triangles, ctx)
+    if space is None:
+        return set_bump(base, dx, dy, heights, strength, distance, invert, width)
+    shading, inst = ctx.instance
+    mt = np.swapaxes(shading.matrix[inst][:, :3, :3], 1, 2)
+    inv = shading.inverse[inst][:, :3, :3]
+    base_o = np.einsum("nij,nj->ni", mt, base)          # object_inverse_normal_transform
+    if space == "OBJECT":
+        # dot(D, N) with D = M (h unit(M^T N)): h |M^T N|, the same factor on the three copies.
+        heights = heights * np.linalg.norm(base_o, axis=1, keepdims=True)
+    dx_o, dy_o = (np.einsum("nij,nj->ni", inv, d) for d in (dx, dy))   # object_inverse_dir_transform
+    out_o = set_bump(_unit(base_o, base), dx_o, dy_o, heights, strength, distance, invert, width)
+    return ctx.to_world_normal(out_o)
+
+
+def set_bump(normal, dx, dy, heights, strength, distance, invert, width):
+    """Cycles' svm_node_set_bump (5.0) on rows: heights (N, 3) at the
+    centre, the x and the y copy; normalize(w |det| n - d sign(det) g) with
+    g = (h_x - h_c) (dy x n) + (h_y - h_c) (n x dx), det = dx . (dy x n),
+    then mixed with n by the strength.  A zero result (no footprint, a
+    zero width) keeps n."""
+    rx, ry = np.cross(dy, normal), np.cross(normal, dx)
+    det = np.einsum("ij,ij->i", dx, rx)
+    grad = (heights[:, 1] - heights[:, 0])[:, None] * rx + (heights[:, 2] - heights[:, 0])[:, None] * ry
+    d = -distance if invert else distance
+    d = np.broadcast_to(np.asarray(d, np.float64), det.shape)
+    w = np.broadcast_to(width, det.shape)
+    out = (w * np.abs(det))[:, None] * normal - (d * np.sign(det))[:, None] * grad
+    # |det| goes as dP^2: normalized at any scale (Cycles' safe_normalize), zero keeps n.
+    length = np.linalg.norm(out, axis=1, keepdims=True)
+    ok = np.isfinite(length) & (length > 0)
+    out = np.where(ok, out / np.where(ok, length, 1.0), normal)
+    s = np.maximum(np.broadcast_to(np.asarray(strength, np.float64), det.shape), 0.0)[:, None]
+    return _unit(s * out + (1.0 - s) * normal, normal)
+
+
+def _undisplaced_differentials(dx, dy, triangles, ctx):
+    """dPdx, dPdy of the points on the triangles as they were before true
+    displacement ("Both": Cycles' NODE_ENTER_BUMP_EVAL differentiates the
+    undisplaced position attribute with the displaced hit's du, dv): the
+    same barycentric moves along the undisplaced edges."""
+    shading = getattr(triangles, "shading", None)
+    edges = shading.undisplaced_edges(ctx.prim) if shading is not None else None
+    if edges is None:
+        return dx, dy
+    a, b = edges
+    moves = _bary_of_offsets(triangles, ctx.prim, (dx, dy))
+    return tuple(m[:, :1] * a + m[:, 1:] * b for m in moves)
 
 
 def _object_space_bump(base, grad, ng, space, strength, distance, invert, ctx):

@@ -350,6 +350,17 @@ class SocketReader:
         value = _as_kind(self.input(node, name_or_index), 'float', self._source_is_vector(socket))
         return as_value(value)
 
+    def _filter_width(self, node):
+        """The Bump node's Filter Width (Blender 4.3+) as a constant: Cycles
+        moves the height's copies by the socket's value (a link is not
+        followed there), clamped at 0 here (a negative width would flip the
+        bent normal)."""
+        socket = node.inputs['Filter Width']
+        if socket.is_linked:
+            self._note(f"'{node.name}' Filter Width: its link is not read (the socket's value {socket.default_value:g})")
+        width = float(socket.default_value)
+        return max(width, 0.0) if width == width else 0.1
+
     def _unsupported(self, node):
         label = f"'{node.name}' ({node.bl_idname})"
         if label not in self.unsupported:
@@ -465,8 +476,11 @@ class SocketReader:
             return renderer.NormalMap(self.input(node, 'Color'), self.value_input(node, 'Strength'), node.space)
         if node.type == 'BUMP' and not node.mute:
             inner = self.normal(node.inputs['Normal']) if node.inputs['Normal'].is_linked else None
-            return renderer.Bump(self.value_input(node, 'Height'), self.value_input(node, 'Strength'),
+            bump = renderer.Bump(self.value_input(node, 'Height'), self.value_input(node, 'Strength'),
                                  self.value_input(node, 'Distance'), bool(node.invert), inner)
+            if 'Filter Width' in node.inputs and hasattr(bump, 'filter_width'):
+                bump.filter_width = self._filter_width(node)
+            return bump
         value = self.read(socket)
         if isinstance(value, renderer.NodeOutput) and _registry()[value.call.idname].output_kind(value.output) == 'vector':
             return value   # a vector node (e.g. Bevel): the normal itself, normalized by the engine

@@ -56,6 +56,8 @@ def trace_batch(ctx, pix, sample, tile):
     else:   # motion blur: the sample's time, its own dimension set
         time = ctx.camera.shutter_times(pix, ctx.sampler.get(pseed, sample, TIME)[:, 0])[:, None]
         o, d, tmax = ctx.camera.generate(pix, u[:, 0], u[:, 1], u[:, 2], u[:, 3], time=time[:, 0])
+    spread = (np.column_stack(ctx.camera.origin_spread(d)) if ctx.bake is None and hasattr(ctx.camera, "origin_spread")
+              else np.full((n, 2), np.nan))
     paths = Paths(pix, o, d, tmax, np.ones((n, 3)), np.zeros((n, 3)),
                   np.ones(n), np.ones(n, bool), o, np.zeros((n, 4)), np.zeros(n, bool),
                   np.full(n, VIS_CAMERA, np.uint8),
@@ -64,7 +66,7 @@ def trace_batch(ctx, pix, sample, tile):
                   np.zeros((n, 3 if ctx.count_kinds else 0), np.int16), np.full(n, np.inf),
                   start_stack(ctx.media, n), np.zeros(n, np.int16), np.full(n, -1, np.int64), np.zeros((n, 3)),
                   np.full(n, -1, np.int32), np.zeros(n, np.int8), time, np.zeros(n, bool),
-                  np.full(n, -1, np.int64), np.zeros((n, 5)), np.zeros(n, np.int16), np.zeros(n, bool))
+                  np.full(n, -1, np.int64), np.zeros((n, 5)), np.zeros(n, np.int16), np.zeros(n, bool), spread)
     obs = pass_events.observer(ctx, tile)
     obs.start(paths)
     # Every step raises a live path's bounce or its transparent bounce

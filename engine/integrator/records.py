@@ -90,6 +90,11 @@ class Paths:
     # singular bounce (prev_delta keeps the last vertex's own kind).
     portal: np.ndarray
     mis_skip: np.ndarray
+    # Cycles' compact ray differentials (N, 2): the footprint's radius at
+    # mis_o (the ray's dP) and its growth per unit length (the camera ray's
+    # dD, kept at bounces as Cycles keeps ray->dD); NaN: none (a bake's
+    # texels).  A hit's footprint is stages.footprint.
+    spread: np.ndarray
 
     def __len__(self):
         return len(self.pix)
@@ -163,6 +168,9 @@ class Hit:
     # Curves (points.Strands): the strand's tangent dC/du (N, 3) at curve hits,
     # zero elsewhere; None without curves.  The shading frame's x on strands.
     fibre: object = None
+    # The ray footprint's radius at the points (Cycles' compact sd->dP), the
+    # bump's differentials; None without (engine.textures._has_footprint).
+    dp: object = None
     # The ShadingContext of these points, made on first use
     # (ShadingContext.of_hit); a taken Hit makes its own.
     shading: object = None

@@ -268,12 +268,33 @@ def interaction(ctx, paths, t, prim, bu, bv):
         hit.eps[on] = np.maximum(hit.eps[on], 1e-3 * radius)
     if ctx.light_path:
         hit.path = path_columns(paths, p)
+    hit.dp = footprint(paths, p)
     if getattr(tr, "tangent", None) is not None:
         w = np.stack([1.0 - bu - bv, bu, bv], axis=1)
         # Unnormalised, as Cycles interpolates its tangent attribute.
         hit.tangent = np.einsum("nk,nkj->nj", w, tr.tangent[prim])
         hit.tangent_sign = np.where(np.einsum("nk,nk->n", w, tr.tangent_sign[prim]) < 0, -1.0, 1.0)
     return hit
+
+
+def footprint(paths, p):
+    """The ray footprint's radius at points p of the paths' rays, Cycles'
+    compact sd->dP = ray dP + t dD (t from the ray's last vertex: a
+    transparent pass moves only tmin there), or None without differentials."""
+    spread = getattr(paths, "spread", None)
+    if spread is None or not len(spread) or np.isnan(spread[:, 0]).any():
+        return None
+    return spread[:, 0] + np.linalg.norm(p - paths.mis_o, axis=1) * spread[:, 1]
+
+
+def spread_from(paths, p, at=None):
+    """The paths' spread for rays leaving points p (a new vertex): Cycles'
+    bounce sets ray->dP to the point's sd->dP and keeps ray->dD.  ``at``:
+    the footprint there when known (the Hit's dp)."""
+    at = footprint(paths, p) if at is None else at
+    if at is None:
+        return paths.spread
+    return np.column_stack([at, paths.spread[:, 1]])
 
 
 def _rows(values, rows):
@@ -790,6 +811,7 @@ def scatter(ctx, paths, v, depth):
     if ctx.strands is not None:   # the next ray passes the strand it leaves (into it: through it)
         paths.self_prim = curve_rows(ctx.strands, hit.prim)
     paths.tmax = unless(through, paths.tmax - dot(o - paths.o, wi), np.full(len(wi), np.inf))
+    paths.spread = unless(through, paths.spread, spread_from(paths, hit.p, getattr(hit, "dp", None)))
     paths.mis_o = unless(through, paths.mis_o, o)
     paths.o = o
     paths.d = wi

@@ -28,7 +28,7 @@ from ..sampling import power_heuristic
 from ..vec import dot, row_any_positive
 from . import transparency, visibility
 from .records import RowView
-from .stages import finish, nee_rounds, points_path
+from .stages import finish, nee_rounds, points_path, spread_from
 from ..geometry import VIS_VOLUME
 from .visibility import VIS_INDIRECT
 
@@ -320,6 +320,7 @@ def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None, obs=NO_PASSES):
             paths.L[lit] += at.L - before
     u = ctx.sampler.get(paths.pseed, paths.sample, vertex_set(depth, BSDF))
     wi, pdf = media.phase_sample(paths.d, phase, u[:, 0], u[:, 1])
+    paths.spread = spread_from(paths, p)   # Cycles' volume bounce: ray->dP = sd->dP
     paths.o, paths.d, paths.mis_o, paths.prev_p = p, wi, p, p
     paths.self_prim = np.full(n, -1, np.int64)
     paths.tmax = np.full(n, np.inf)

@@ -240,12 +240,14 @@ class ShadingContext:
     engine.media.voxels.Voxels of the object a medium point lies in (a
     fluid domain's grids, read by name as attributes), or None.  fibre
     (N, 3) or None: on curve segments the strand's dC/du (Cycles' dPdu), 0
-    elsewhere."""
+    elsewhere.  dp (N,) or None: the ray footprint's radius at the points
+    (Cycles' compact sd->dP, the camera ray's differentials carried along
+    the path: integrator.stages.footprint), the bump's step."""
 
     voxels = None
 
     def __init__(self, n, tris=None, prim=None, bary=None, p=None, ng=None, ns=None, wo=None,
-                 back=None, depth=None, ray=None, uv=None, path=None, fibre=None):
+                 back=None, depth=None, ray=None, uv=None, path=None, fibre=None, dp=None):
         self.n = n
         self.tris = tris
         self.prim = prim
@@ -259,6 +261,7 @@ class ShadingContext:
         self.ray = np.ones(n, np.uint8) if ray is None else ray
         self.path = path
         self.fibre = fibre
+        self.dp = dp
         self.rays = None
         self._cache = {}
         if uv is not None:
@@ -283,7 +286,7 @@ class ShadingContext:
             ctx = cls(len(hit.p), tris, hit.prim, bary, hit.p, hit.ng, hit.ns, hit.wo,
                       getattr(hit, "back", None), getattr(hit, "depth", None), getattr(hit, "ray", None),
                       uv=None if bary is not None else hit.uv, path=getattr(hit, "path", None),
-                      fibre=getattr(hit, "fibre", None))
+                      fibre=getattr(hit, "fibre", None), dp=getattr(hit, "dp", None))
             hit.shading = ctx
         return ctx
 
@@ -344,9 +347,19 @@ class ShadingContext:
         gives; a -s copy's barycentric change is the +s one's negated
         (exactly: the map is linear).  The fields the move keeps (normals,
         direction, ray kind, ...) are picked on first read."""
-        n, k = self.n, 2 * len(steps)
+        return self.shifted_copies([x for step in steps for x in (step, -step)], negated_pairs=True)
+
+    def shifted_copies(self, offsets, negated_pairs=False):
+        """The points moved by each world offset (N, 3) of ``offsets`` (None:
+        not moved), as one context of len(offsets) N points, a point's copies
+        consecutive; Cycles' bump evaluates its height at P, P + dPdx and
+        P + dPdy in one pass this way.  ``negated_pairs``: offsets come as
+        (s, -s) pairs, whose barycentric moves are computed once each."""
+        n, k = self.n, len(offsets)
         rows = np.repeat(np.arange(n), k)
-        dp = np.stack([x for step in steps for x in (step, -step)], axis=1).reshape(k * n, 3)
+        zero = np.zeros((n, 3))
+        offsets = [zero if o is None else o for o in offsets]
+        dp = np.stack(offsets, axis=1).reshape(k * n, 3)
         out = ShadingContext.__new__(ShadingContext)
         out.n = k * n
         out.tris = self.tris
@@ -356,8 +369,12 @@ class ShadingContext:
         out.rays = None if self.rays is None else self.rays.take(rows)
         out._cache = {}
         if self.bary is not None and self.tris is not None:
-            moves = _bary_of_offsets(self.tris, self.prim, steps)
-            out.bary = self.bary[rows] + np.stack([x for d in moves for x in (d, -d)], axis=1).reshape(k * n, 2)
+            if negated_pairs:
+                moves = _bary_of_offsets(self.tris, self.prim, offsets[::2])
+                moves = [x for d in moves for x in (d, -d)]
+            else:
+                moves = _bary_of_offsets(self.tris, self.prim, offsets)
+            out.bary = self.bary[rows] + np.stack(moves, axis=1).reshape(k * n, 2)
         else:
             out._cache[("uv", "")] = self.uv[rows] + dp[:, :2]
         return out
@@ -366,7 +383,7 @@ class ShadingContext:
         """The same points moved by world offsets dp (N, 3) within their
         triangles' planes; interpolated attributes move with them."""
         out = ShadingContext(self.n, self.tris, self.prim, None, self.p + dp, self.ng, self.ns, self.wo,
-                             self.back, self.depth, self.ray, path=self.path, fibre=self.fibre)
+                             self.back, self.depth, self.ray, path=self.path, fibre=self.fibre, dp=self.dp)
         out.rays = self.rays
         if self.bary is not None and self.tris is not None:
             d = _bary_of_offset(self.tris, self.prim, dp)
@@ -536,7 +553,7 @@ def _bary_of_offsets(tris, prim, offsets):
     return out
 
 
-_ROW_FIELDS = ("prim", "bary", "p", "ng", "ns", "wo", "back", "depth", "ray", "path", "fibre")
+_ROW_FIELDS = ("prim", "bary", "p", "ng", "ns", "wo", "back", "depth", "ray", "path", "fibre", "dp")
 
 
 class _Rows:

@@ -553,6 +553,29 @@ def test_displacement_output_becomes_bump_only(registered_addon):
     assert isinstance(only.normal, scene.NormalMap) and only.displacement.method == 'DISPLACEMENT'
 
 
+def test_bump_filter_width_is_exported(registered_addon):
+    """The Bump node's Filter Width (Blender 4.3+) reaches the engine's Bump
+    (Cycles moves the height's copies by it); a linked width is its
+    socket's value, named in the warning."""
+    from addon.export import material as material_export
+    bpy.ops.wm.read_factory_settings()
+    mat = bpy.data.materials.new("Bumped")
+    mat.use_nodes = True
+    tree = mat.node_tree
+    noise = tree.nodes.new('ShaderNodeTexNoise')
+    bump = tree.nodes.new('ShaderNodeBump')
+    tree.links.new(noise.outputs['Fac'], bump.inputs['Height'])
+    tree.links.new(bump.outputs['Normal'], tree.nodes['Principled BSDF'].inputs['Normal'])
+    bump.inputs['Filter Width'].default_value = 0.35
+    translated, warning = material_export.translate(mat)
+    assert warning is None, warning
+    assert translated.normal.filter_width == pytest.approx(0.35, rel=1e-6)
+    tree.links.new(noise.outputs['Fac'], bump.inputs['Filter Width'])
+    translated, warning = material_export.translate(mat)
+    assert translated.normal.filter_width == pytest.approx(0.35, rel=1e-6)
+    assert warning is not None and "Filter Width" in warning, warning
+
+
 def test_light_node_tree_scales_the_light(registered_addon):
     """A light whose Emission colour is a Blackbody (and strength 2) emits
     colour x energy x Blackbody x 2; a tree varying over the light becomes

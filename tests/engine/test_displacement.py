@@ -112,3 +112,23 @@ def test_both_bumps_with_the_undisplaced_derivatives():
     grad0, ng0 = _on_undisplaced(grad, tris.ng[prim], tris, ctx)
     np.testing.assert_allclose(grad0, np.tile([1.0, 0.0, 0.0], (len(prim), 1)), atol=1e-12)
     np.testing.assert_allclose(ng0, np.tile([0.0, 0.0, 1.0], (len(prim), 1)), atol=1e-12)
+
+
+def test_both_takes_the_footprint_differentials_of_the_undisplaced_surface():
+    """The footprint bump of "Both" (engine.textures.footprint_bump): the
+    hit's dPdx, dPdy on the displaced plane z = x become the same
+    barycentric moves on the flat plane, as Cycles' NODE_ENTER_BUMP_EVAL
+    differentiates the undisplaced position: (1, 0, 1) s / sqrt 2 there is
+    (s / sqrt 2, 0, 0) here, and (0, s, 0) stays."""
+    from engine.geometry import flatten
+    from engine.textures import _undisplaced_differentials
+    out = displaced_scene(one(grid(), uv_x(), method="BOTH"))
+    tris = flatten(out)
+    prim = np.arange(len(tris.ng))
+    ctx = type("Ctx", (), {"prim": prim})()
+    s = 0.01
+    dx = np.tile([s / np.sqrt(2.0), 0.0, s / np.sqrt(2.0)], (len(prim), 1))
+    dy = np.tile([0.0, s, 0.0], (len(prim), 1))
+    dx0, dy0 = _undisplaced_differentials(dx, dy, tris, ctx)
+    np.testing.assert_allclose(dx0, np.tile([s / np.sqrt(2.0), 0.0, 0.0], (len(prim), 1)), atol=1e-12)
+    np.testing.assert_allclose(dy0, dy, atol=1e-12)
