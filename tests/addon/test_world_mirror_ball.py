@@ -7,6 +7,9 @@ rotated Mapping, as the HDRI tests do.
 
 * export: the projection comes through, no warning; an unlinked Mapping
   Vector reads the ball's centre (Cycles' zero vector);
+* a diffuse and a glossy sphere on a plane lit by a ball with a small
+  bright spot (so the environment's sampling table matters) against live
+  Cycles: image, quadrant and block tests with their power printed;
 * the background seen by the camera against live Cycles pixel by pixel: a
   long lens on 'Closest' texels, so a pixel inside one texel is that
   texel's value in both renderers (deterministic), and one across texel
@@ -18,8 +21,9 @@ import bpy
 import numpy as np
 import pytest
 
-from ember_testlib import render_array, setup_cycles, setup_ember
-from test_world_hdri import EXACT_RTOL, ROTATION, export, hdri_world, sky_only
+from ember_testlib import (ReferenceCheck, live_cycles_reference, render_array, render_for_reference, setup_cycles,
+                           setup_ember, small_resolution)
+from test_world_hdri import EXACT_RTOL, ROTATION, export, hdri_world, sky_only, spheres_on_a_plane
 
 SIZE = 32
 # Points per pixel side at which the footprint's texels are found: finer than
@@ -36,10 +40,10 @@ def ball_pixels(seed=11):
     return px
 
 
-def mirror_ball_world(scene, interpolation='Closest', rotation=ROTATION):
+def mirror_ball_world(scene, interpolation='Closest', rotation=ROTATION, pixels=None):
     env = hdri_world(scene, None, rotation=rotation, interpolation=interpolation)
     image = bpy.data.images.new("mirror_ball", SIZE, SIZE, alpha=True, float_buffer=True)
-    image.pixels.foreach_set(ball_pixels().ravel())
+    image.pixels.foreach_set((ball_pixels() if pixels is None else pixels).ravel())
     env.image = image
     env.projection = 'MIRROR_BALL'
     return env
@@ -122,3 +126,23 @@ def test_mirror_ball_texels_match_cycles_exactly(view, factory_scene, tmp_path, 
         outside = ~((image >= low - slack) & (image <= high + slack)).all(axis=2)
         assert not outside.any(), (f"{name}: pixels {np.argwhere(outside)[:5].tolist()} lie outside the "
                                    f"values of the texels their footprint covers")
+
+
+EMBER_SPP, CYCLES_SEEDS, CYCLES_SPP, BOUNCES, BLOCK = 128, 4, 64, 2, 8
+
+
+def test_lit_by_a_mirror_ball_matches_cycles(tmp_path, tapped_engine):
+    bpy.ops.wm.read_factory_settings()
+    scene = bpy.context.scene
+    pixels = ball_pixels()
+    pixels[20:22, 9:11, :3] = (60.0, 50.0, 40.0)      # a bright spot: the table must find it
+    mirror_ball_world(scene, 'Linear', pixels=pixels)
+    spheres_on_a_plane(scene)
+    small_resolution(scene, 32, 24)
+    ref, ref_var, header = live_cycles_reference(scene, tmp_path, "mirror_ball", CYCLES_SEEDS, CYCLES_SPP, BOUNCES)
+    image, var = render_for_reference(scene, tmp_path, "mirror_ball", tapped_engine, EMBER_SPP, 3, BOUNCES)
+    image, var = image[..., :3].astype(np.float64), var[..., :3]
+    print(f"mirror ball spheres: Ember mean {image.mean():.5g}, Cycles {ref.mean():.5g} "
+          f"(ratio {image.mean() / ref.mean():.4f})")
+    check = ReferenceCheck("mirror_ball_spheres", image, var, EMBER_SPP, ref, ref_var, header, BLOCK)
+    check.assert_agrees(0.02, 0.15)
