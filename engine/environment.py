@@ -56,6 +56,26 @@ def direction_to_equirect(e):
     return u, v
 
 
+def direction_to_mirrorball(e):
+    """(u, v) in [0, 1] of lookup vectors e (N, 3) on the image of a mirror
+    ball photographed from -Y (Cycles' direction_to_mirrorball after
+    safe_normalize): the centre reflects -Y, the rim +Y; a zero vector
+    reads the centre, as in Cycles."""
+    length = np.sqrt(np.einsum("ij,ij->i", e, e))
+    d = e / np.where(length > 0, length, 1.0)[:, None]
+    y = d[:, 1] - 1.0
+    div = 2.0 * np.sqrt(np.maximum(-0.5 * y, 0.0))
+    scale = np.where(div > 0, 1.0 / np.where(div > 0, div, 1.0), 1.0)
+    return 0.5 * (d[:, 0] * scale + 1.0), 0.5 * (d[:, 2] * scale + 1.0)
+
+
+def to_uv(e, projection):
+    """Image (u, v) of lookup vectors for the node's projection."""
+    if projection == "MIRROR_BALL":
+        return direction_to_mirrorball(e)
+    return direction_to_equirect(e)
+
+
 def equirect_to_direction(u, v):
     """Unit directions for (u, v): phi = pi - 2 pi u, theta = pi (1 - v)."""
     phi = np.pi - 2.0 * np.pi * u
@@ -142,7 +162,8 @@ class EnvironmentMap:
         self.matrix = np.asarray(texture.matrix, dtype=np.float64)
         self.inverse = np.linalg.inv(self.matrix)
         self.det = abs(float(np.linalg.det(self.matrix)))
-        lum = np.maximum(luminance(self.image.astype(np.float64)), 0.0)
+        self.projection = getattr(texture, "projection", "EQUIRECTANGULAR")
+        lum = np.maximum(luminance(self._equirect_pixels()), 0.0)
         sin_rows = np.sin(np.pi * (np.arange(lum.shape[0]) + 0.5) / lum.shape[0])[:, None]
         # Mean luminance over the sphere (solid-angle weighted).
         self.mean_luminance = float((lum * sin_rows).sum() / (sin_rows.sum() * lum.shape[1]))
@@ -150,8 +171,28 @@ class EnvironmentMap:
         self.shader = compile_world(texture.shader) if getattr(texture, "shader", None) is not None else None
         self.sun = _Sun(texture.sun) if getattr(texture, "sun", None) is not None else None
 
+    def _equirect_pixels(self):
+        """The map over equirectangular (u, v) of the lookup vector, which the
+        sampling table covers.  A mirror ball is looked up at the texel
+        centres of a 2N x N grid (as Cycles' background map evaluates the
+        world's shader on its own equirectangular grid): the pdf stays exact
+        (the table is sampled in equirect (u, v)), only its fit is approximate."""
+        image = self.image.astype(np.float64)
+        if self.projection != "MIRROR_BALL":
+            return image
+        n = min(max(image.shape[:2]), MAX_TABLE_WIDTH // 2)
+        u = (np.arange(2 * n) + 0.5) / (2 * n)
+        v = (np.arange(n) + 0.5) / n                        # row 0 = bottom, as self.image
+        uu, vv = np.meshgrid(u, v)
+        e = equirect_to_direction(uu.reshape(-1), vv.reshape(-1))
+        mu, mv = direction_to_mirrorball(e)
+        return lookup(self.image, mu, mv, self.closest).reshape(n, 2 * n, 3)
+
     def _table(self, lum, compensate):
-        cells = lum if self.closest else _cover_neighbours(lum)
+        # Closest lookups of an equirect map are constant per cell; a
+        # resampled mirror ball is not, so its cells see their neighbours too.
+        exact_cells = self.closest and self.projection != "MIRROR_BALL"
+        cells = lum if exact_cells else _cover_neighbours(lum)
         cells = _downsample(cells)
         h = cells.shape[0]
         sin_rows = np.sin(np.pi * (np.arange(h) + 0.5) / h)[:, None]
@@ -171,7 +212,7 @@ class EnvironmentMap:
         """Radiance (N, 3) arriving from world directions d (N, 3)."""
         if self.shader is not None:
             return self.shader(d) * self.strength
-        u, v = direction_to_equirect(d @ self.matrix.T)
+        u, v = to_uv(d @ self.matrix.T, self.projection)
         return lookup(self.image, u, v, self.closest)
 
     def sample(self, u1, u2):

@@ -592,6 +592,7 @@ Light = Union[PointLight, SpotLight, SunLight, AreaLight]
 
 
 ENV_INTERPOLATIONS = ("Linear", "Closest")
+ENV_PROJECTIONS = ("EQUIRECTANGULAR", "MIRROR_BALL")
 
 
 @dataclass
@@ -621,6 +622,10 @@ class EnvironmentTexture:
     # The procedural world's expression even where renders read the baked
     # pixels: an Environment bake shades it exactly per direction (engine/bake.py).
     expression: Optional[object] = None
+    # The node's projection: 'EQUIRECTANGULAR' or 'MIRROR_BALL' (Cycles'
+    # direction_to_mirrorball; the sampling table is then resampled onto
+    # an equirectangular grid, engine/environment.py).
+    projection: str = "EQUIRECTANGULAR"
 
 
 @dataclass

@@ -2,7 +2,7 @@
 import numpy as np
 
 from .lights import validate_light   # each light type validates its own (engine/lights/)
-from .scene import ENV_INTERPOLATIONS, LOBE_KINDS, SceneError
+from .scene import ENV_INTERPOLATIONS, ENV_PROJECTIONS, LOBE_KINDS, SceneError
 
 from . import instance_columns
 from . import scene as _scene
@@ -266,6 +266,8 @@ def validate_world(world):
     if tex.interpolation not in ENV_INTERPOLATIONS:
         raise SceneError(f"{what}: unknown interpolation {tex.interpolation!r} "
                          f"(expected one of {ENV_INTERPOLATIONS})")
+    if getattr(tex, "projection", "EQUIRECTANGULAR") not in ENV_PROJECTIONS:
+        raise SceneError(f"{what}: unknown projection {tex.projection!r} (expected one of {ENV_PROJECTIONS})")
     sun = getattr(tex, "sun", None)
     if sun is not None:
         axis = np.asarray(sun.direction, dtype=np.float64)

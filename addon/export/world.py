@@ -4,7 +4,7 @@ Radiance = Background colour * strength of the node linked to the World
 Output, as Cycles; without nodes, ``world.color``; no world renders black, as
 in Cycles.
 
-The Background's Color may come from an Environment Texture (equirectangular)
+The Background's Color may come from an Environment Texture (equirectangular or mirror ball)
 whose Vector is unlinked or comes from a Texture Coordinate node (Generated,
 or Object: the ray direction, through the chosen object's inverse rotation)
 through any number of Mapping nodes.  Mapping rotation and scale become the
@@ -241,7 +241,7 @@ def _direction_matrix(vector):
 def _environment(node, strength, fallback, notes):
     """The Environment Texture as (constant rgb, EnvironmentTexture or None)."""
     renderer = backend.engine()
-    if node.projection != 'EQUIRECTANGULAR':
+    if node.projection not in ('EQUIRECTANGULAR', 'MIRROR_BALL'):
         notes.add(f"'{node.name}' {node.projection} projection is not supported: the "
                   "Background's constant colour is used")
         return fallback, None
@@ -256,9 +256,12 @@ def _environment(node, strength, fallback, notes):
     mean = tuple(float(c) * strength for c in pixels.reshape(-1, 3).mean(axis=0))
     if matrix is None:
         # Cycles looks up the zero vector: (u, v) = (0, 0), one colour.
-        value = renderer.environment_lookup(pixels[::-1], np.zeros(1), np.zeros(1), interpolation == 'Closest')[0]
+        # (a mirror ball's zero vector reads its centre: Cycles' direction_to_mirrorball)
+        at = np.full(1, 0.5 if node.projection == 'MIRROR_BALL' else 0.0)
+        value = renderer.environment_lookup(pixels[::-1], at, at, interpolation == 'Closest')[0]
         return tuple(float(c) * strength for c in value), None
-    texture = renderer.EnvironmentTexture(pixels, strength, matrix, interpolation, name=node.image.name)
+    texture = renderer.EnvironmentTexture(pixels, strength, matrix, interpolation, name=node.image.name,
+                                          projection=node.projection)
     return mean, texture
 
 

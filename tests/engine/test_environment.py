@@ -24,11 +24,12 @@ import ember_stats
 from engine import lights as lights_module  # noqa: E402
 render_module = importlib.import_module("engine.render")  # the module: engine.render is the function
 from engine.environment import (EnvironmentMap, direction_to_equirect,  # noqa: E402
-                                equirect_to_direction)
+                                direction_to_mirrorball, equirect_to_direction, lookup)
 from engine.render import render  # noqa: E402
 from engine.sampling import Distribution2D  # noqa: E402
 from engine.scene import (Camera, EnvironmentTexture, Instance, Lobe, Material,  # noqa: E402
                           RenderSettings, Scene, SceneError, World)
+from engine.vec import luminance  # noqa: E402
 from engine.testscenes import look_at, quad, uv_sphere  # noqa: E402
 from ember_stats import block_means_var, median_block_detects, z_scores  # noqa: E402
 
@@ -40,6 +41,7 @@ SAMPLER_CASES = [(m, interp, comp) for m in MATRICES for interp in ("Linear", "C
 PLANE_CASES = [(s, c) for s in ("mis", "light", "bsdf") for c in (False, True) if s == "mis" or not c]
 N_TESTS = (1                              # Distribution2D chi2
            + 2 * len(SAMPLER_CASES)       # chi2 + mean(1/pdf)
+           + 2 * 2                        # the same for mirror balls
            + 2                            # furnace (mis, light)
            + len(PLANE_CASES)             # analytic irradiance
            + 3)                           # strategy agreement (light, mis, mis + compensation vs bsdf)
@@ -177,7 +179,14 @@ def env_for(matrix, interp, comp):
 @pytest.mark.parametrize("matrix,interp,comp", SAMPLER_CASES)
 def test_environment_sampler(matrix, interp, comp):
     env = env_for(matrix, interp, comp)
-    u = np.random.default_rng(100 + SAMPLER_CASES.index((matrix, interp, comp))).random((2, N))
+    seed = 100 + SAMPLER_CASES.index((matrix, interp, comp))
+    check_sampler(env, seed, f"{matrix} {interp} compensate={comp}", interp == "Linear" and not comp)
+
+
+def check_sampler(env, seed, what, full_support):
+    """sample() against pdf(): chi-square in texture space and mean(1/pdf)
+    against the solid angle of the support."""
+    u = np.random.default_rng(seed).random((2, N))
     d, pdf = env.sample(u[0], u[1])
     np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-12)
     ok = pdf > 0
@@ -213,7 +222,7 @@ def test_environment_sampler(matrix, interp, comp):
     obs = np.append(counts.ravel(), outside + (~ok).sum())
     exp = np.append(N * mass.ravel(), max(N - N * mass.sum(), 0.0))
     res = C.chi2_test(obs, exp)
-    print(f"chi2 environment {matrix} {interp} compensate={comp}: {res.power_line(LEVEL)}")
+    print(f"chi2 environment {what}: {res.power_line(LEVEL)}")
     assert res.p > LEVEL
 
     # mean(1/pdf) = the world solid angle of the support: 4 pi, but for the
@@ -221,11 +230,75 @@ def test_environment_sampler(matrix, interp, comp):
     support = C.integrate_cells(
         lambda ph, th: (pdf_e(C.from_phi_theta(ph, th, XYZ)) > 0) * np.sin(th)
         * _jacobian(a, C.from_phi_theta(ph, th, XYZ)), phi_edges, theta_edges, periodic_x=True).sum()
-    if interp == "Linear" and not comp:
+    if full_support:
         assert support == pytest.approx(4 * np.pi, rel=1e-9)
     inv = 1.0 / pdf
-    assert_z(inv.mean(), support, inv.std(ddof=1) / math.sqrt(len(inv)),
-             f"mean(1/pdf) {matrix} {interp} compensate={comp}")
+    assert_z(inv.mean(), support, inv.std(ddof=1) / math.sqrt(len(inv)), f"mean(1/pdf) {what}")
+
+
+# ----------------------------------------------------------------------------
+# Mirror-ball projection (Cycles' direction_to_mirrorball)
+
+def cycles_mirrorball_to_direction(u, v):
+    """Cycles' mirrorball_to_direction (kernel/camera/projection.h)."""
+    x, z = 2.0 * u - 1.0, 2.0 * v - 1.0
+    y = -np.sqrt(np.maximum(1.0 - x * x - z * z, 0.0))
+    dot = -y                                   # dot(dir, I) with I = (0, -1, 0)
+    return np.stack([2 * dot * x, 2 * dot * y + 1.0, 2 * dot * z], axis=1)
+
+
+def test_mirror_ball_convention_is_cycles():
+    """The centre reflects -Y; +X and +Z lie 1/sqrt(2) of the radius out;
+    +Y and the zero vector read the centre (Cycles' division guard); the
+    mapping inverts Cycles' mirrorball_to_direction; length does not matter."""
+    d = np.array([[0, -1.0, 0], [1.0, 0, 0], [0, 0, 1.0], [0, 1.0, 0], [0, 0, 0]])
+    u, v = direction_to_mirrorball(d)
+    r = 0.5 * (1 + 1 / math.sqrt(2))
+    np.testing.assert_allclose(u, [0.5, r, 0.5, 0.5, 0.5], atol=1e-15)
+    np.testing.assert_allclose(v, [0.5, 0.5, r, 0.5, 0.5], atol=1e-15)
+    rng = np.random.default_rng(2)
+    uv = rng.random((4000, 2))
+    uv = uv[np.hypot(uv[:, 0] - 0.5, uv[:, 1] - 0.5) < 0.49]
+    e = cycles_mirrorball_to_direction(uv[:, 0], uv[:, 1])
+    np.testing.assert_allclose(np.linalg.norm(e, axis=1), 1.0, atol=1e-12)
+    u, v = direction_to_mirrorball(e * 2.5)
+    np.testing.assert_allclose(np.stack([u, v], axis=1), uv, atol=1e-9)
+
+
+def mirror_ball(size=16, seed=7):
+    """A square mirror-ball image (row 0 = top): noise, a 2x2 bright spot."""
+    rng = np.random.default_rng(seed)
+    px = (0.2 + rng.random((size, size, 3))).astype(np.float32)
+    px[4:6, 9:11] = np.array([800.0, 700.0, 500.0], np.float32)
+    return px
+
+
+@pytest.mark.parametrize("interp", ["Linear", "Closest"])
+def test_mirror_ball_eval_is_the_lookup(interp):
+    """Radiance along d is the image read at direction_to_mirrorball(M d)."""
+    px = mirror_ball()
+    m = matrix_for("rotation")
+    env = EnvironmentMap(EnvironmentTexture(px, 2.0, m, interp, projection="MIRROR_BALL"))
+    d = np.random.default_rng(3).normal(size=(500, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    u, v = direction_to_mirrorball(d @ m.T)
+    want = lookup(np.ascontiguousarray(px[::-1]) * np.float32(2.0), u, v, interp == "Closest")
+    np.testing.assert_allclose(env.eval(d), want, rtol=1e-12)
+    # not the equirect reading of the same pixels
+    assert not np.allclose(EnvironmentMap(EnvironmentTexture(px, 2.0, m, interp)).eval(d), want)
+
+
+@pytest.mark.parametrize("interp", ["Linear", "Closest"])
+def test_mirror_ball_sampler(interp):
+    """The sampling table of a mirror ball (resampled onto equirect (u, v))
+    matches its pdf, and finds the bright spot: most samples land where the
+    radiance is."""
+    env = EnvironmentMap(EnvironmentTexture(mirror_ball(), 1.0, matrix_for("rotation"), interp,
+                                            projection="MIRROR_BALL"))
+    check_sampler(env, 300 + (interp == "Closest"), f"mirror ball {interp}", True)
+    d, pdf = env.sample(*np.random.default_rng(9).random((2, 20000)))
+    bright = luminance(env.eval(d)) > 100
+    assert bright.mean() > 0.5, f"only {bright.mean():.1%} of the samples see the bright spot"
 
 
 def _jacobian(a, e):
@@ -391,6 +464,7 @@ def test_transparent_film_hides_the_hdri_but_keeps_its_light():
     (dict(matrix=np.diag([1.0, 0.0, 1.0])), "singular"),
     (dict(matrix=np.eye(4)), "3x3"),
     (dict(interpolation="Cubic"), "interpolation"),
+    (dict(projection="CUBE"), "projection"),
     (dict(strength=float("inf")), "strength"),
 ])
 def test_bad_environment_is_a_scene_error(change, message):
