@@ -2,6 +2,7 @@
 
     .venv/bin/python -P tools/compare_blends.py FOLDER_OR_FILE ... [--width 160]
         [--ember-samples 32] [--cycles-samples 128] [--timeout 600] [--json out.json]
+        [--images DIR] [--markdown docs/real_scenes.md]
 
 Per file: Cycles at --cycles-samples (the reference), Cycles at
 --ember-samples with another seed (what Cycles' own noise at Ember's sample
@@ -41,6 +42,9 @@ def parse_args(argv):
     parser.add_argument('--cycles-samples', type=int, default=128)
     parser.add_argument('--timeout', type=float, default=600.0, help="seconds per file")
     parser.add_argument('--json', help="also write the rows to this file")
+    parser.add_argument('--images', help="keep each file's images (Ember, Cycles' reference and its "
+                                         "low-sample render) in DIR/<name>.npz for per-block looks")
+    parser.add_argument('--markdown', help="also write the table as Markdown (date, commit, load) here")
     parser.add_argument('--one', help=argparse.SUPPRESS)       # internal: one file, JSON on stdout
     parser.add_argument('--out', help=argparse.SUPPRESS)
     return parser.parse_args(argv)
@@ -74,7 +78,9 @@ def image_errors(image, reference):
     import numpy as np
     img, ref = _luminance(image), _luminance(reference)
     ref_mean = float(ref.mean())
-    ratio = float(img.mean()) / ref_mean if ref_mean > 0 else float('nan')
+    if ref_mean <= 0:   # a black reference: equal only if Ember's is black too
+        return (1.0 if float(img.mean()) <= 0 else float('inf')), 0.0
+    ratio = float(img.mean()) / ref_mean
     if not image.shape[0] >= BLOCK <= image.shape[1]:
         return ratio, float('nan')
     bi, br = _blocks(img), _blocks(ref)
@@ -109,6 +115,31 @@ def _same_settings(scene, width):
     ember.filter_width = getattr(cycles, 'filter_width', 1.5)
 
 
+def _frame_camera(bpy, scene):
+    """A camera looking at the scene's visible geometry (files made as
+    asset libraries or templates carry none); False when there is nothing."""
+    from mathutils import Vector
+    corners = [obj.matrix_world @ Vector(c) for obj in scene.objects
+               if obj.type in ('MESH', 'CURVE', 'CURVES', 'POINTCLOUD', 'VOLUME', 'META', 'FONT', 'SURFACE')
+               and obj.visible_get() and not obj.hide_render for c in obj.bound_box]
+    if not corners:
+        return False
+    lo = Vector([min(c[i] for c in corners) for i in range(3)])
+    hi = Vector([max(c[i] for c in corners) for i in range(3)])
+    centre, radius = (lo + hi) / 2, max((hi - lo).length / 2, 1e-3)
+    data = bpy.data.cameras.new("compare camera")
+    data.lens = 50.0
+    cam = bpy.data.objects.new("compare camera", data)
+    scene.collection.objects.link(cam)
+    # From the front-right and above, far enough for the bounding sphere to fit the 36 mm sensor.
+    direction = Vector((0.6, -1.0, 0.5)).normalized()
+    cam.location = centre + direction * (radius * 2.0 * data.lens / 36.0 + radius)
+    cam.rotation_euler = (centre - cam.location).to_track_quat('-Z', 'Y').to_euler()
+    data.clip_end = max(data.clip_end, 10.0 * radius * 4)
+    scene.camera = cam
+    return True
+
+
 def _render(bpy, scene, folder, name):
     scene.render.image_settings.file_format = 'OPEN_EXR'
     scene.render.image_settings.color_depth = '32'
@@ -141,8 +172,9 @@ def compare_one(path, args):
     addon.register()
     bpy.ops.wm.open_mainfile(filepath=os.path.abspath(path))
     scene = bpy.context.scene
-    if scene.camera is None:
-        return {'file': path, 'error': "no camera"}
+    framed = scene.camera is None
+    if framed and not _frame_camera(bpy, scene):
+        return {'file': path, 'error': "no camera and nothing to frame"}
     _same_settings(scene, args.width)
     folder = tempfile.mkdtemp(prefix='ember-compare-')
     scene.render.engine = 'CYCLES'
@@ -157,12 +189,15 @@ def compare_one(path, args):
     log = ember_engine.RENDER_LOG[-1] if ember_engine.RENDER_LOG else {}
     if args.out:
         import numpy as np
-        np.savez_compressed(args.out, ember=image, cycles=reference)
+        np.savez_compressed(args.out, ember=image, cycles=reference, cycles_low=cycles_low)
     ratio, p90 = image_errors(image, reference)
     c_ratio, c_p90 = image_errors(cycles_low, reference)
+    warnings = sorted(set(log.get('warnings') or ()))
+    if framed:
+        warnings.insert(0, "(no scene camera: one framing the visible geometry was added)")
     return {'file': path, 'mean': ratio, 'p90': p90, 'cycles_mean': c_ratio, 'cycles_p90': c_p90,
             'ember_seconds': ember_seconds, 'cycles_seconds': cycles_seconds,
-            'error': log.get('error'), 'warnings': sorted(set(log.get('warnings') or ())),
+            'error': log.get('error'), 'warnings': warnings,
             'finite': bool(__import__('numpy').isfinite(image).all())}
 
 
@@ -184,6 +219,9 @@ def run_child(path, args):
     cmd = [sys.executable, '-P', os.path.abspath(__file__), '--one', path,
            '--width', str(args.width), '--ember-samples', str(args.ember_samples),
            '--cycles-samples', str(args.cycles_samples)]
+    if args.images:
+        os.makedirs(args.images, exist_ok=True)
+        cmd += ['--out', os.path.join(args.images, os.path.splitext(os.path.basename(path))[0] + '.npz')]
     env = dict(os.environ, PYTHONPATH=ROOT)
     try:
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=args.timeout, env=env)
@@ -216,6 +254,36 @@ def print_table(rows):
     print(', '.join(f"{k}: {v}" for k, v in sorted(counts.items())), f"(of {len(rows)})")
 
 
+def _commit():
+    try:
+        done = subprocess.run(['git', '-C', ROOT, 'log', '-1', '--format=%h %cd', '--date=iso'],
+                              capture_output=True, text=True, timeout=10)
+        return done.stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def write_markdown(path, rows, args, loads, started):
+    """The table as Markdown: when, which commit, the machine's load."""
+    lines = [f"Run {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime(started))} on commit {_commit()}; "
+             f"load average (1 min) {loads[0]:.1f} at the start, {loads[1]:.1f} at the end (2 cores); "
+             f"width {args.width}, Ember {args.ember_samples} spp, Cycles {args.cycles_samples} spp "
+             f"(and {args.ember_samples} with another seed: its own noise).", "",
+             "| file | mean | p90 | Cycles mean | Cycles p90 | verdict | Ember s | Cycles s | warnings / error |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        name = os.path.basename(row['file'])
+        note = (row.get('error') or '; '.join(row.get('warnings') or ())).replace('|', '/')
+        if 'mean' not in row:
+            lines.append(f"| {name} | | | | | error | | | {note} |")
+            continue
+        lines.append(f"| {name} | {row['mean']:.3f} | {row['p90']:.3f} | {row['cycles_mean']:.3f} | "
+                     f"{row['cycles_p90']:.3f} | {verdict(row)} | {row['ember_seconds']:.1f} | "
+                     f"{row['cycles_seconds']:.1f} | {note} |")
+    with open(path, 'w') as fh:
+        fh.write('\n'.join(lines) + '\n')
+
+
 def main(argv):
     args = parse_args(argv)
     if args.one:
@@ -229,7 +297,7 @@ def main(argv):
     if not files:
         print("no .blend files found", file=sys.stderr)
         return 1
-    rows = []
+    rows, started, load_start = [], time.time(), os.getloadavg()[0]
     for path in files:
         print(f"... {path}", file=sys.stderr, flush=True)
         rows.append(run_child(path, args))
@@ -237,6 +305,8 @@ def main(argv):
     if args.json:
         with open(args.json, 'w') as fh:
             json.dump(rows, fh, indent=1)
+    if args.markdown:
+        write_markdown(args.markdown, rows, args, (load_start, os.getloadavg()[0]), started)
     return 0
 
 
