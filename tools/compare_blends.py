@@ -2,7 +2,7 @@
 
     .venv/bin/python -P tools/compare_blends.py FOLDER_OR_FILE ... [--width 160]
         [--ember-samples 32] [--cycles-samples 128] [--timeout 600] [--json out.json]
-        [--images DIR] [--markdown docs/real_scenes.md]
+        [--images DIR] [--markdown docs/real_scenes.md] [--jobs 1]
 
 Per file: Cycles at --cycles-samples (the reference), Cycles at
 --ember-samples with another seed (what Cycles' own noise at Ember's sample
@@ -42,6 +42,8 @@ def parse_args(argv):
     parser.add_argument('--cycles-samples', type=int, default=128)
     parser.add_argument('--timeout', type=float, default=600.0, help="seconds per file")
     parser.add_argument('--json', help="also write the rows to this file")
+    parser.add_argument('--jobs', type=int, default=1, help="files rendered at once (times then include "
+                                                             "the others' contention)")
     parser.add_argument('--images', help="keep each file's images (Ember, Cycles' reference and its "
                                          "low-sample render) in DIR/<name>.npz for per-block looks")
     parser.add_argument('--markdown', help="also write the table as Markdown (date, commit, load) here")
@@ -116,9 +118,14 @@ def _same_settings(scene, width):
 
 
 def _frame_camera(bpy, scene):
-    """A camera looking at the scene's visible geometry (files made as
-    asset libraries or templates carry none); False when there is nothing."""
+    """The scene's first camera object, else a new one looking at its
+    visible geometry (asset libraries and templates may set none); False
+    when there is nothing to look at."""
     from mathutils import Vector
+    cameras = [obj for obj in scene.objects if obj.type == 'CAMERA']
+    if cameras:
+        scene.camera = cameras[0]
+        return True
     corners = [obj.matrix_world @ Vector(c) for obj in scene.objects
                if obj.type in ('MESH', 'CURVE', 'CURVES', 'POINTCLOUD', 'VOLUME', 'META', 'FONT', 'SURFACE')
                and obj.visible_get() and not obj.hide_render for c in obj.bound_box]
@@ -194,7 +201,7 @@ def compare_one(path, args):
     c_ratio, c_p90 = image_errors(cycles_low, reference)
     warnings = sorted(set(log.get('warnings') or ()))
     if framed:
-        warnings.insert(0, "(no scene camera: one framing the visible geometry was added)")
+        warnings.insert(0, "(no scene camera: its first camera object or a new one framing the geometry)")
     return {'file': path, 'mean': ratio, 'p90': p90, 'cycles_mean': c_ratio, 'cycles_p90': c_p90,
             'ember_seconds': ember_seconds, 'cycles_seconds': cycles_seconds,
             'error': log.get('error'), 'warnings': warnings,
@@ -234,13 +241,24 @@ def run_child(path, args):
     return {'file': path, 'error': f"exit {done.returncode}: {tail[0][:200]}"}
 
 
+def label(path):
+    """A short unique name: the last two folders' names for files of an
+    installed Blender (bpy-5.0/... or debian/...), else the file's name."""
+    import re
+    match = re.search(r'site-packages/bpy/([0-9.]+)/(.*)$', path) or re.search(r'/usr/share/(blender)/(.*)$', path)
+    if match:
+        head = 'debian' if match.group(1) == 'blender' else 'bpy-' + match.group(1)
+        return head + '/' + '/'.join(match.group(2).split('/')[-2:])
+    return os.path.basename(path)
+
+
 def print_table(rows):
     head = f"{'file':40s} {'mean':>6s} {'p90':>6s} {'cyc mean':>8s} {'cyc p90':>7s} {'verdict':>8s} " \
            f"{'ember s':>7s} {'cycles s':>8s}  warnings / error"
     print(head)
     print('-' * len(head))
     for row in rows:
-        name = os.path.basename(row['file'])[:40]
+        name = label(row['file'])[-40:]
         note = row.get('error') or '; '.join(row.get('warnings') or ())
         if 'mean' not in row:
             print(f"{name:40s} {'':>6s} {'':>6s} {'':>8s} {'':>7s} {'error':>8s} {'':>7s} {'':>8s}  {note}")
@@ -272,7 +290,7 @@ def write_markdown(path, rows, args, loads, started):
              "| file | mean | p90 | Cycles mean | Cycles p90 | verdict | Ember s | Cycles s | warnings / error |",
              "|---|---|---|---|---|---|---|---|---|"]
     for row in rows:
-        name = os.path.basename(row['file'])
+        name = label(row['file'])
         note = (row.get('error') or '; '.join(row.get('warnings') or ())).replace('|', '/')
         if 'mean' not in row:
             lines.append(f"| {name} | | | | | error | | | {note} |")
@@ -298,9 +316,13 @@ def main(argv):
         print("no .blend files found", file=sys.stderr)
         return 1
     rows, started, load_start = [], time.time(), os.getloadavg()[0]
-    for path in files:
+    from concurrent.futures import ThreadPoolExecutor
+
+    def one(path):
         print(f"... {path}", file=sys.stderr, flush=True)
-        rows.append(run_child(path, args))
+        return run_child(path, args)
+    with ThreadPoolExecutor(max(args.jobs, 1)) as pool:   # threads only wait on the children
+        rows = list(pool.map(one, files))
     print_table(rows)
     if args.json:
         with open(args.json, 'w') as fh:

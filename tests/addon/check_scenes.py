@@ -383,8 +383,8 @@ def point_light_falloff(folder=None):
     scene = _fresh()
     floor = _floor(10.0, (0.6, 0.6, 0.6))
     _plane('wall', floor.data.materials[0], 10.0, (0, 2.0, 2.0), (math.pi / 2, 0, 0))
-    for location, output, strength, smooth in (((-1.2, 0.5, 0.6), 'Linear', 60.0, 0.0),
-                                               ((1.2, 0.5, 0.6), 'Quadratic', 150.0, 0.5)):
+    for location, output, strength, smooth in (((-1.2, 0.5, 0.6), 'Linear', 0.6, 0.0),
+                                               ((1.2, 0.5, 0.6), 'Quadratic', 1.0, 0.5)):
         light = _light('POINT', location, 100.0, shadow_soft_size=0.1)
         light.data.use_nodes = True
         tree = light.data.node_tree
@@ -445,24 +445,30 @@ def glass_absorption(folder=None):
     tree.links.new(absorb.outputs[0], tree.nodes['Material Output'].inputs['Volume'])
     _sphere('tinted', mat, (-0.6, 0, 0.6), 0.6)
     clear, _ = _shader('clear glass', 'ShaderNodeBsdfGlass', Roughness=0.1, IOR=1.45)
-    _box('glass cube', clear, (0.8, 0.3, 0.4), (0.8, 0.8, 0.8))
+    # 2 mm above the floor: resting on it exactly is coincident_faces' case.
+    _box('glass cube', clear, (0.8, 0.3, 0.402), (0.8, 0.8, 0.8))
     _light('AREA', (1.0, -1.0, 3.0), 250.0, size=1.0)
     _world(scene, (0.05, 0.05, 0.05))
     _camera((0, -4.0, 2.0), (0, 0, 0.5))
     return scene
 
 
-def fog_spot(folder=None):
-    """A spot light cone through a room-sized box of homogeneous fog
-    (Principled Volume, no surface) with objects in it."""
-    scene = _fresh()
-    _floor(12.0)
+def _fog(location, size):
     fog, tree, out = _nodes_material('fog')
     volume = tree.nodes.new('ShaderNodeVolumePrincipled')
     volume.inputs['Density'].default_value = 0.15
     volume.inputs['Anisotropy'].default_value = 0.3
     tree.links.new(volume.outputs[0], out.inputs['Volume'])
-    _box('fog', fog, (0, 0, 1.5), (6, 6, 3))
+    return _box('fog', fog, location, size)
+
+
+def fog_spot(folder=None):
+    """A spot light cone through a room-sized box of homogeneous fog
+    (Principled Volume, no surface) with objects in it; the box reaches
+    below the floor (coincident_faces has its bottom on the floor)."""
+    scene = _fresh()
+    _floor(12.0)
+    _fog((0, 0, 1.4), (6, 6, 3.2))
     red, _ = _material('red', **{'Base Color': (0.8, 0.2, 0.1, 1), 'Roughness': 0.5})
     _sphere('ball', red, (0.3, 0.5, 0.5))
     _box('block', red, (-1.0, 0.8, 0.4), (0.6, 0.6, 0.8))
@@ -473,20 +479,37 @@ def fog_spot(folder=None):
     return scene
 
 
+def coincident_faces(folder=None):
+    """What scenes often do and Ember and Cycles resolve differently: a
+    fog box's bottom face and a glass cube's lying exactly in the floor's
+    plane.  Cycles renders the floor under both as if absent (black under
+    the fog, dark under the cube); Ember finds the floor (lit in the fog,
+    lit through the glass): see docs/real_scenes.md."""
+    scene = fog_spot()
+    fog = bpy.data.objects['fog']
+    fog.location.z, fog.scale.z = 1.5, 3.0
+    clear, _ = _shader('clear glass', 'ShaderNodeBsdfGlass', Roughness=0.1, IOR=1.45)
+    _box('glass cube', clear, (1.1, -0.3, 0.3), (0.6, 0.6, 0.6))
+    return scene
+
+
 def world_volume(folder=None):
-    """A world volume (Volume Scatter, density 0.03) around spheres under a
-    sun: the air between the camera and the scene scatters."""
+    """A world volume (Volume Scatter, density 0.05, a black background:
+    a sun's light would not get through the unbounded medium) around
+    spheres lit by a point and a spot light."""
     scene = _fresh()
     _floor(40.0)
-    world = _world(scene, (0.3, 0.4, 0.6), 0.5)
+    world = _world(scene, (0.0, 0.0, 0.0))
     tree = world.node_tree
     scatter = tree.nodes.new('ShaderNodeVolumeScatter')
-    scatter.inputs['Density'].default_value = 0.03
+    scatter.inputs['Density'].default_value = 0.05
     tree.links.new(scatter.outputs[0], tree.nodes['World Output'].inputs['Volume'])
     grey, _ = _material('grey', **{'Base Color': (0.7, 0.7, 0.7, 1)})
     for k in range(4):
         _sphere(f'ball{k}', grey, (-2.0 + 1.3 * k, 1.5 * k, 0.5))
-    _light('SUN', (0, 0, 5), 3.0, (math.radians(50), 0, math.radians(30)))
+    _point((-1.0, 1.0, 2.0), 400.0, 0.1)
+    _light('SPOT', (1.5, 3.0, 3.0), 800.0, (math.radians(30), 0, math.radians(150)),
+           spot_size=math.radians(35), shadow_soft_size=0.05)
     _camera((0, -5.0, 1.5), (0, 2.0, 0.5))
     return scene
 
@@ -536,6 +559,14 @@ def hair(folder=None):
     settings.material = 2
     _light('AREA', (1.0, -1.5, 2.5), 150.0, size=1.0)
     _camera((0, -3.0, 1.2), (0, 0, 0.6))
+    return scene
+
+
+def hair_3d_curves(folder=None):
+    """``hair`` with Render > Curves > Shape at 3D Curves (the factory
+    file's is Ribbons, which Ember renders as 3D curves and names)."""
+    scene = hair()
+    scene.cycles_curves.shape = 'THICK'
     return scene
 
 
@@ -619,7 +650,9 @@ SCENES = {'glossy_spheres_point_lights': glossy_spheres_point_lights, 'emissive_
           'terrain_heightmap': terrain_heightmap, 'office_interior': office_interior,
           'hosek_sky': hosek_sky, 'udim_image': udim_image, 'point_light_falloff': point_light_falloff,
           'image_alpha_plane': image_alpha_plane, 'glass_absorption': glass_absorption, 'fog_spot': fog_spot,
-          'world_volume': world_volume, 'subsurface': subsurface, 'hair': hair, 'point_cloud': point_cloud,
+          'coincident_faces': coincident_faces,
+          'world_volume': world_volume, 'subsurface': subsurface, 'hair': hair,
+          'hair_3d_curves': hair_3d_curves, 'point_cloud': point_cloud,
           'motion_blur': motion_blur, 'ray_portal': ray_portal}
 
 
