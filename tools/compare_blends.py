@@ -179,6 +179,8 @@ def compare_one(path, args):
     addon.register()
     bpy.ops.wm.open_mainfile(filepath=os.path.abspath(path))
     scene = bpy.context.scene
+    if not any(layer.use for layer in scene.view_layers):
+        return {'file': path, 'error': "no view layer is enabled for rendering (Blender renders nothing)"}
     framed = scene.camera is None
     if framed and not _frame_camera(bpy, scene):
         return {'file': path, 'error': "no camera and nothing to frame"}
