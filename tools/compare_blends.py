@@ -15,7 +15,9 @@ filter, so the table measures rendering, not settings.  Columns:
   (reference + 1% of the image mean);
 * the same two for Cycles at Ember's samples (its noise floor);
 * verdict: 'match' when Ember's mean is within max(5%, Cycles' own) and its
-  p90 within max(15%, Cycles' own), as issue 23 defines it;
+  p90 within max(15%, Cycles' own), as issue 23 defines it; 'blocks' when
+  it passes that but its p90 is over 3x Cycles' own (and over 3%): a local
+  difference the loose tolerances let through;
 * Ember's time (export + render, seconds), Cycles' time at the reference
   samples, and Ember's warnings or error.
 
@@ -221,7 +223,14 @@ def verdict(row):
     mean_tol = max(0.05, abs(row['cycles_mean'] - 1.0))
     p90_tol = max(0.15, row['cycles_p90'])
     ok = abs(row['mean'] - 1.0) <= mean_tol and row['p90'] <= p90_tol
-    return 'match' if ok else 'differs'
+    if not ok:
+        return 'differs'
+    # Within the issue's tolerances, yet blocks far off Cycles' own noise: a
+    # local bias the image mean hides (a light missing from a tenth of the
+    # image); 3x leaves room for Ember's own noise (0.3-1.05x Cycles' variance).
+    if row['p90'] > max(3.0 * row['cycles_p90'], 0.03):
+        return 'blocks'
+    return 'match'
 
 
 def run_child(path, args):
