@@ -1,8 +1,8 @@
 """Scenes of the kinds third-party files showed differing from Cycles
 (issue 23's silent differences), built from scratch for side-by-side runs:
 
-    .venv/bin/python -P tests/addon/check_scenes.py out/check      # writes out/check/*.blend
-    .venv/bin/python -P tools/compare_blends.py out/check
+    .venv/bin/python -P tests/addon/check_scenes.py out/check [NAME ...]   # out/check/*.blend
+    .venv/bin/python -P tools/compare_blends.py out/check --width 120 --jobs 2
 
 Each builder makes a scene in the factory file with Cycles' default
 settings (what a third-party file carries), so the comparison also covers
