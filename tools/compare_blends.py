@@ -2,6 +2,7 @@
 
     .venv/bin/python -P tools/compare_blends.py FOLDER_OR_FILE ... [--width 160]
         [--ember-samples 32] [--cycles-samples 128] [--timeout 600] [--json out.json]
+        [--images DIR] [--markdown docs/real_scenes.md] [--jobs 1]
 
 Per file: Cycles at --cycles-samples (the reference), Cycles at
 --ember-samples with another seed (what Cycles' own noise at Ember's sample
@@ -14,7 +15,9 @@ filter, so the table measures rendering, not settings.  Columns:
   (reference + 1% of the image mean);
 * the same two for Cycles at Ember's samples (its noise floor);
 * verdict: 'match' when Ember's mean is within max(5%, Cycles' own) and its
-  p90 within max(15%, Cycles' own), as issue 23 defines it;
+  p90 within max(15%, Cycles' own), as issue 23 defines it; 'blocks' when
+  it passes that but its p90 is over 3x Cycles' own (and over 3%): a local
+  difference the loose tolerances let through;
 * Ember's time (export + render, seconds), Cycles' time at the reference
   samples, and Ember's warnings or error.
 
@@ -41,6 +44,11 @@ def parse_args(argv):
     parser.add_argument('--cycles-samples', type=int, default=128)
     parser.add_argument('--timeout', type=float, default=600.0, help="seconds per file")
     parser.add_argument('--json', help="also write the rows to this file")
+    parser.add_argument('--jobs', type=int, default=1, help="files rendered at once (times then include "
+                                                             "the others' contention)")
+    parser.add_argument('--images', help="keep each file's images (Ember, Cycles' reference and its "
+                                         "low-sample render) in DIR/<name>.npz for per-block looks")
+    parser.add_argument('--markdown', help="also write the table as Markdown (date, commit, load) here")
     parser.add_argument('--one', help=argparse.SUPPRESS)       # internal: one file, JSON on stdout
     parser.add_argument('--out', help=argparse.SUPPRESS)
     return parser.parse_args(argv)
@@ -74,7 +82,9 @@ def image_errors(image, reference):
     import numpy as np
     img, ref = _luminance(image), _luminance(reference)
     ref_mean = float(ref.mean())
-    ratio = float(img.mean()) / ref_mean if ref_mean > 0 else float('nan')
+    if ref_mean <= 0:   # a black reference: equal only if Ember's is black too
+        return (1.0 if float(img.mean()) <= 0 else float('inf')), 0.0
+    ratio = float(img.mean()) / ref_mean
     if not image.shape[0] >= BLOCK <= image.shape[1]:
         return ratio, float('nan')
     bi, br = _blocks(img), _blocks(ref)
@@ -109,6 +119,36 @@ def _same_settings(scene, width):
     ember.filter_width = getattr(cycles, 'filter_width', 1.5)
 
 
+def _frame_camera(bpy, scene):
+    """The scene's first camera object, else a new one looking at its
+    visible geometry (asset libraries and templates may set none); False
+    when there is nothing to look at."""
+    from mathutils import Vector
+    cameras = [obj for obj in scene.objects if obj.type == 'CAMERA']
+    if cameras:
+        scene.camera = cameras[0]
+        return True
+    corners = [obj.matrix_world @ Vector(c) for obj in scene.objects
+               if obj.type in ('MESH', 'CURVE', 'CURVES', 'POINTCLOUD', 'VOLUME', 'META', 'FONT', 'SURFACE')
+               and obj.visible_get() and not obj.hide_render for c in obj.bound_box]
+    if not corners:
+        return False
+    lo = Vector([min(c[i] for c in corners) for i in range(3)])
+    hi = Vector([max(c[i] for c in corners) for i in range(3)])
+    centre, radius = (lo + hi) / 2, max((hi - lo).length / 2, 1e-3)
+    data = bpy.data.cameras.new("compare camera")
+    data.lens = 50.0
+    cam = bpy.data.objects.new("compare camera", data)
+    scene.collection.objects.link(cam)
+    # From the front-right and above, far enough for the bounding sphere to fit the 36 mm sensor.
+    direction = Vector((0.6, -1.0, 0.5)).normalized()
+    cam.location = centre + direction * (radius * 2.0 * data.lens / 36.0 + radius)
+    cam.rotation_euler = (centre - cam.location).to_track_quat('-Z', 'Y').to_euler()
+    data.clip_end = max(data.clip_end, 10.0 * radius * 4)
+    scene.camera = cam
+    return True
+
+
 def _render(bpy, scene, folder, name):
     scene.render.image_settings.file_format = 'OPEN_EXR'
     scene.render.image_settings.color_depth = '32'
@@ -141,8 +181,11 @@ def compare_one(path, args):
     addon.register()
     bpy.ops.wm.open_mainfile(filepath=os.path.abspath(path))
     scene = bpy.context.scene
-    if scene.camera is None:
-        return {'file': path, 'error': "no camera"}
+    if not any(layer.use for layer in scene.view_layers):
+        return {'file': path, 'error': "no view layer is enabled for rendering (Blender renders nothing)"}
+    framed = scene.camera is None
+    if framed and not _frame_camera(bpy, scene):
+        return {'file': path, 'error': "no camera and nothing to frame"}
     _same_settings(scene, args.width)
     folder = tempfile.mkdtemp(prefix='ember-compare-')
     scene.render.engine = 'CYCLES'
@@ -157,12 +200,15 @@ def compare_one(path, args):
     log = ember_engine.RENDER_LOG[-1] if ember_engine.RENDER_LOG else {}
     if args.out:
         import numpy as np
-        np.savez_compressed(args.out, ember=image, cycles=reference)
+        np.savez_compressed(args.out, ember=image, cycles=reference, cycles_low=cycles_low)
     ratio, p90 = image_errors(image, reference)
     c_ratio, c_p90 = image_errors(cycles_low, reference)
+    warnings = sorted(set(log.get('warnings') or ()))
+    if framed:
+        warnings.insert(0, "(no scene camera: its first camera object or a new one framing the geometry)")
     return {'file': path, 'mean': ratio, 'p90': p90, 'cycles_mean': c_ratio, 'cycles_p90': c_p90,
             'ember_seconds': ember_seconds, 'cycles_seconds': cycles_seconds,
-            'error': log.get('error'), 'warnings': sorted(set(log.get('warnings') or ())),
+            'error': log.get('error'), 'warnings': warnings,
             'finite': bool(__import__('numpy').isfinite(image).all())}
 
 
@@ -177,13 +223,23 @@ def verdict(row):
     mean_tol = max(0.05, abs(row['cycles_mean'] - 1.0))
     p90_tol = max(0.15, row['cycles_p90'])
     ok = abs(row['mean'] - 1.0) <= mean_tol and row['p90'] <= p90_tol
-    return 'match' if ok else 'differs'
+    if not ok:
+        return 'differs'
+    # Within the issue's tolerances, yet blocks far off Cycles' own noise: a
+    # local bias the image mean hides (a light missing from a tenth of the
+    # image); 3x leaves room for Ember's own noise (0.3-1.05x Cycles' variance).
+    if row['p90'] > max(3.0 * row['cycles_p90'], 0.03):
+        return 'blocks'
+    return 'match'
 
 
 def run_child(path, args):
     cmd = [sys.executable, '-P', os.path.abspath(__file__), '--one', path,
            '--width', str(args.width), '--ember-samples', str(args.ember_samples),
            '--cycles-samples', str(args.cycles_samples)]
+    if args.images:
+        os.makedirs(args.images, exist_ok=True)
+        cmd += ['--out', os.path.join(args.images, os.path.splitext(os.path.basename(path))[0] + '.npz')]
     env = dict(os.environ, PYTHONPATH=ROOT)
     try:
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=args.timeout, env=env)
@@ -196,13 +252,24 @@ def run_child(path, args):
     return {'file': path, 'error': f"exit {done.returncode}: {tail[0][:200]}"}
 
 
+def label(path):
+    """A short unique name: the last two folders' names for files of an
+    installed Blender (bpy-5.0/... or debian/...), else the file's name."""
+    import re
+    match = re.search(r'site-packages/bpy/([0-9.]+)/(.*)$', path) or re.search(r'/usr/share/(blender)/(.*)$', path)
+    if match:
+        head = 'debian' if match.group(1) == 'blender' else 'bpy-' + match.group(1)
+        return head + '/' + '/'.join(match.group(2).split('/')[-2:])
+    return os.path.basename(path)
+
+
 def print_table(rows):
     head = f"{'file':40s} {'mean':>6s} {'p90':>6s} {'cyc mean':>8s} {'cyc p90':>7s} {'verdict':>8s} " \
            f"{'ember s':>7s} {'cycles s':>8s}  warnings / error"
     print(head)
     print('-' * len(head))
     for row in rows:
-        name = os.path.basename(row['file'])[:40]
+        name = label(row['file'])[-40:]
         note = row.get('error') or '; '.join(row.get('warnings') or ())
         if 'mean' not in row:
             print(f"{name:40s} {'':>6s} {'':>6s} {'':>8s} {'':>7s} {'error':>8s} {'':>7s} {'':>8s}  {note}")
@@ -214,6 +281,36 @@ def print_table(rows):
     for row in rows:
         counts[verdict(row)] = counts.get(verdict(row), 0) + 1
     print(', '.join(f"{k}: {v}" for k, v in sorted(counts.items())), f"(of {len(rows)})")
+
+
+def _commit():
+    try:
+        done = subprocess.run(['git', '-C', ROOT, 'log', '-1', '--format=%h %cd', '--date=iso'],
+                              capture_output=True, text=True, timeout=10)
+        return done.stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def write_markdown(path, rows, args, loads, started):
+    """The table as Markdown: when, which commit, the machine's load."""
+    lines = [f"Run {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime(started))} on commit {_commit()}; "
+             f"load average (1 min) {loads[0]:.1f} at the start, {loads[1]:.1f} at the end (2 cores); "
+             f"width {args.width}, Ember {args.ember_samples} spp, Cycles {args.cycles_samples} spp "
+             f"(and {args.ember_samples} with another seed: its own noise).", "",
+             "| file | mean | p90 | Cycles mean | Cycles p90 | verdict | Ember s | Cycles s | warnings / error |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        name = label(row['file'])
+        note = (row.get('error') or '; '.join(row.get('warnings') or ())).replace('|', '/')
+        if 'mean' not in row:
+            lines.append(f"| {name} | | | | | error | | | {note} |")
+            continue
+        lines.append(f"| {name} | {row['mean']:.3f} | {row['p90']:.3f} | {row['cycles_mean']:.3f} | "
+                     f"{row['cycles_p90']:.3f} | {verdict(row)} | {row['ember_seconds']:.1f} | "
+                     f"{row['cycles_seconds']:.1f} | {note} |")
+    with open(path, 'w') as fh:
+        fh.write('\n'.join(lines) + '\n')
 
 
 def main(argv):
@@ -229,14 +326,20 @@ def main(argv):
     if not files:
         print("no .blend files found", file=sys.stderr)
         return 1
-    rows = []
-    for path in files:
+    rows, started, load_start = [], time.time(), os.getloadavg()[0]
+    from concurrent.futures import ThreadPoolExecutor
+
+    def one(path):
         print(f"... {path}", file=sys.stderr, flush=True)
-        rows.append(run_child(path, args))
+        return run_child(path, args)
+    with ThreadPoolExecutor(max(args.jobs, 1)) as pool:   # threads only wait on the children
+        rows = list(pool.map(one, files))
     print_table(rows)
     if args.json:
         with open(args.json, 'w') as fh:
             json.dump(rows, fh, indent=1)
+    if args.markdown:
+        write_markdown(args.markdown, rows, args, (load_start, os.getloadavg()[0]), started)
     return 0
 
 
