@@ -808,7 +808,10 @@ def scatter(ctx, paths, v, depth):
     o = ctx.accel.offset_origin(hit.p, hit.ng, wi, hit.eps)
     if ctx.strands is not None:   # the next ray passes the strand it leaves (into it: through it)
         paths.self_prim = curve_rows(ctx.strands, hit.prim)
-    paths.tmax = unless(through, paths.tmax - dot(o - paths.o, wi), np.full(len(wi), np.inf))
+    if through.any():   # what is left of the ray past the transparent surface
+        paths.tmax = np.where(through, paths.tmax - dot(o - paths.o, wi), np.inf)
+    else:
+        paths.tmax = np.full(len(wi), np.inf)
     paths.mis_o = unless(through, paths.mis_o, o)
     paths.o = o
     paths.d = wi
