@@ -136,7 +136,7 @@ class LightTree:
         m = len(u)
         emitter = np.zeros(m, np.int64)
         prob = np.ones(m)
-        u = np.asarray(u, float).copy()
+        u = np.asarray(u, float)
         tree = np.ones(m, bool)
         if len(self.infinite):
             pick_inf = (u < self.p_infinite) | (not self.has_tree)
@@ -148,15 +148,21 @@ class LightTree:
             if self.has_tree:   # else every emitter is infinite and p_infinite is 1
                 u = np.where(tree, (u - self.p_infinite) / (1.0 - self.p_infinite), u)
         rows = np.nonzero(tree)[0]
-        if len(rows):
-            picked = np.empty(len(rows), np.int64)
-            p_rows = np.full(len(rows), 1.0 - self.p_infinite)
-            _descend(np.ascontiguousarray(u[rows]), _rows(p, rows), _rows(n, rows), _rows(lobe, rows),
-                     *self._tree_arrays(),
-                     self.leaf_emitter, picked, p_rows)
-            p_rows *= self._leaf_visible(picked, p[rows], n[rows])
-            emitter[rows], prob[rows] = picked, p_rows
+        if len(rows) == m:   # no infinite light picked: the whole arrays, no row copies
+            emitter, prob = self._descend_rows(u, p, n, lobe)
+        elif len(rows):
+            emitter[rows], prob[rows] = self._descend_rows(u[rows], _rows(p, rows), _rows(n, rows), _rows(lobe, rows))
         return emitter, prob
+
+    def _descend_rows(self, u, p, n, lobe):
+        """``select``'s tree part at every row given: (emitter, probability)."""
+        p, n, lobe = (np.ascontiguousarray(a, dtype=np.float64) for a in (p, n, lobe))
+        picked = np.empty(len(u), np.int64)
+        prob = np.full(len(u), 1.0 - self.p_infinite)
+        _descend(np.ascontiguousarray(u, dtype=np.float64), p, n, lobe, *self._tree_arrays(), self.leaf_emitter,
+                 picked, prob)
+        prob *= self._leaf_visible(picked, p, n)
+        return picked, prob
 
     def select_many(self, u, p, n, lobe=None):
         """``select`` for several numbers per shading point, u (N, M), each
@@ -201,13 +207,19 @@ class LightTree:
             inf = np.isin(emitter, self.infinite)
             prob[inf] = self.p_infinite / len(self.infinite)
         rows = np.nonzero(~inf)[0]
+        if len(rows) == len(emitter):   # no infinite light: the whole arrays, no row copies
+            return self._pmf_rows(emitter, p, n, lobe)
         if len(rows):
-            p_rows = np.full(len(rows), 1.0 - self.p_infinite)
-            _path_pmf(np.ascontiguousarray(emitter[rows]), _rows(p, rows), _rows(n, rows), _rows(lobe, rows),
-                      *self._tree_arrays(),
-                      self.path_node, self.path_left, self.path_len, p_rows)
-            prob[rows] = p_rows * self._leaf_visible(emitter[rows], p[rows], n[rows])
+            prob[rows] = self._pmf_rows(emitter[rows], _rows(p, rows), _rows(n, rows), _rows(lobe, rows))
         return prob
+
+    def _pmf_rows(self, emitter, p, n, lobe):
+        """``pmf`` of tree emitters at every row given."""
+        emitter = np.ascontiguousarray(emitter)
+        p, n, lobe = (np.ascontiguousarray(a, dtype=np.float64) for a in (p, n, lobe))
+        prob = np.full(len(emitter), 1.0 - self.p_infinite)
+        _path_pmf(emitter, p, n, lobe, *self._tree_arrays(), self.path_node, self.path_left, self.path_len, prob)
+        return prob * self._leaf_visible(emitter, p, n)
 
     def _leaf_visible(self, emitter, p, n):
         """1, or 0 where the tree's emitter cannot light p from above its
@@ -218,8 +230,8 @@ class LightTree:
         bounds decide, an area light by Cycles' area_light_tree_parameters."""
         out = np.ones(len(emitter))
         if len(emitter) and self.has_tree:
-            _leaf_rows(np.ascontiguousarray(emitter, np.int64), _rows(p, np.arange(len(p))),
-                       _rows(n, np.arange(len(n))), self.leaf_node, self.center, self.radius, self.w,
+            _leaf_rows(np.ascontiguousarray(emitter, np.int64), np.ascontiguousarray(p, dtype=np.float64),
+                       np.ascontiguousarray(n, dtype=np.float64), self.leaf_node, self.center, self.radius, self.w,
                        self.two_sided_f, self.sin_o, self.cos_o, self.cos_e, self.phi, self.rect, self.has_rect, out)
         return out
 

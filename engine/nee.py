@@ -125,3 +125,53 @@ def resample(targets, u):
     with np.errstate(divide="ignore", invalid="ignore"):
         factor = np.where(chosen > 0, total / (m * np.where(chosen > 0, chosen, 1.0)), 0.0)
     return kept, factor
+
+
+def tree_normals(ns, kind, weights, transmitting):
+    """(N, 4) the normal the light tree reads at each vertex (its shading
+    normal ns) and 1 where no lobe of ``kind`` (N, K) int8 with a positive
+    weight (N, K, 3) is one of the ``transmitting`` kinds (Cycles'
+    SD_BSDF_HAS_TRANSMISSION unset), in one compiled pass."""
+    out = np.empty((len(ns), 4))
+    _tree_normals_rows(ns, np.asarray(kind, np.int8), weights, _kind_table(transmitting), out)
+    return out
+
+
+_KIND_TABLES = {}
+
+
+def _kind_table(kinds):
+    """A 256-entry table, True at the int8 lobe ids ``kinds`` (as uint8)."""
+    table = _KIND_TABLES.get(kinds)
+    if table is None:
+        table = np.zeros(256, bool)
+        table[np.asarray(kinds, np.int8).view(np.uint8)] = True
+        _KIND_TABLES[kinds] = table
+    return table
+
+
+def _tree_normals_numpy(ns, kind, weights, table, out):
+    through = table[kind.view(np.uint8)] & (weights.max(axis=2) > 0)
+    out[:, :3] = ns
+    out[:, 3] = ~through.any(axis=1)
+
+
+@kernels.loop_kernel("void(float64[:, :], int8[:, :], float64[:, :, :], boolean[::1], float64[:, ::1])",
+                     _tree_normals_numpy)
+def _tree_normals_rows(ns, kind, weights, table, out):
+    for i in range(len(ns)):
+        for c in range(3):
+            out[i, c] = ns[i, c]
+        one_sided = 1.0
+        for k in range(kind.shape[1]):
+            if not table[kind[i, k] & 255]:
+                continue
+            # weights.max(axis=2) > 0, NaN included (a NaN max is not > 0)
+            positive, nan = False, False
+            for c in range(weights.shape[2]):
+                x = weights[i, k, c]
+                nan = nan or x != x
+                positive = positive or x > 0
+            if positive and not nan:
+                one_sided = 0.0
+        out[i, 3] = one_sided

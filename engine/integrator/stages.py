@@ -488,7 +488,9 @@ def nee_rounds(ctx, v, every):
     emitters) with mode 'select' (one light picked per vertex), 'resample'
     (light selection 'ris': one kept of several candidates; points in
     media pick as 'select') or 'each' (one round per emitter).  Light selection 'auto' samples every light at
-    the vertices ``every`` and picks one at the others."""
+    the vertices ``every`` and picks one at the others: a 'mixed' round
+    (its third item the mask ``every``: a picked light elsewhere, the first
+    emitter there), then 'each' rounds of the other emitters at those."""
     s = ctx.settings
     if ctx.lights.count == 0 or len(v) == 0:
         return []
@@ -502,8 +504,14 @@ def nee_rounds(ctx, v, every):
         return [(v, "select", None)]
     if every.all():
         return [(v, "each", ctx.all_emitters)]
-    return [(v.take(np.flatnonzero(~every)), "select", None),
-            (v.take(np.flatnonzero(every)), "each", ctx.all_emitters)]
+    # The first round over every vertex ('mixed': a picked light at the
+    # others, the first emitter at those that sample every light), the
+    # other emitters at the latter alone: one subset of the vertices, not
+    # two (each row's numbers and order of adding light are as in a
+    # 'select' round and 'each' rounds).
+    tree_normals(v)   # made once, before the subset takes its rows
+    rest = ctx.all_emitters[1:]
+    return [(v, "mixed", every)] + ([(v.take(np.flatnonzero(every)), "each", rest)] if len(rest) else [])
 
 
 # Light selection 'auto' samples every light at vertices where lobes this
@@ -556,11 +564,7 @@ def tree_normals(v):
     normal probability 0, in light sampling and in the MIS of BSDF rays
     that meet them (engine/lighttree.py)."""
     if v.tree_n is None:
-        through = np.isin(v.lobes.kind, lobe_registry.transmitting()) & (v.weights.max(axis=2) > 0)
-        out = np.empty((len(v), 4))
-        out[:, :3] = v.hit.ns
-        out[:, 3] = ~through.any(axis=1)
-        v.tree_n = out
+        v.tree_n = nee.tree_normals(v.hit.ns, v.lobes.kind, v.weights, lobe_registry.transmitting())
     return v.tree_n
 
 
@@ -573,16 +577,31 @@ def light_samples(ctx, paths, v, depth, every):
         n = len(at)
         if mode == "resample":
             batches = [resampled_light_sample(ctx, on, at, depth)]
-        elif mode == "select":
+        elif mode in ("select", "mixed"):
             u = uniforms(ctx, on, vertex_set(depth, LIGHT))
             e, p_sel = ctx.lights.select(u[:, 0], at.hit.p, tree_normals(at), lobe_terms(ctx, at))
-            batches = [light_sample(ctx, on, at, e, p_sel, u[:, 1:])]
+            u = u[:, 1:]
+            if mode == "mixed":   # emitters: the vertices that sample every light
+                e, p_sel, u = _first_emitter(ctx, on, depth, emitters, e, p_sel, u)
+            batches = [light_sample(ctx, on, at, e, p_sel, u)]
         else:
             batches = (light_sample(ctx, on, at, np.full(n, e), np.ones(n),
                                     uniforms(ctx, on, emitter_set(depth, e))[:, :3]) for e in emitters)
         for batch in batches:
             if batch is not None:
                 yield batch
+
+
+def _first_emitter(ctx, paths, depth, every, e, p_sel, u):
+    """The light sample's emitter, selection probability and numbers where
+    ``every``: the first emitter, probability 1, that emitter's numbers (as
+    an 'each' round draws them)."""
+    rows = np.flatnonzero(every)
+    first = ctx.all_emitters[0]
+    e, p_sel, u = e.copy(), p_sel.copy(), np.array(u)
+    e[rows], p_sel[rows] = first, 1.0
+    u[rows] = uniforms(ctx, RowView(paths, rows, len(paths.pix)), emitter_set(depth, first))[:, :3]
+    return e, p_sel, u
 
 
 def linking_nee(ctx, e, prim, contrib, w, live):
@@ -810,7 +829,10 @@ def scatter(ctx, paths, v, depth):
     o = ctx.accel.offset_origin(hit.p, hit.ng, wi, hit.eps)
     if ctx.strands is not None:   # the next ray passes the strand it leaves (into it: through it)
         paths.self_prim = curve_rows(ctx.strands, hit.prim)
-    paths.tmax = unless(through, paths.tmax - dot(o - paths.o, wi), np.full(len(wi), np.inf))
+    if through.any():   # what is left of the ray past the transparent surface
+        paths.tmax = np.where(through, paths.tmax - dot(o - paths.o, wi), np.inf)
+    else:
+        paths.tmax = np.full(len(wi), np.inf)
     paths.spread = unless(through, paths.spread, spread_from(paths, hit.p, getattr(hit, "dp", None)))
     paths.mis_o = unless(through, paths.mis_o, o)
     paths.o = o

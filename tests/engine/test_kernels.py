@@ -760,6 +760,32 @@ def test_add_rows_agrees(jit):
         assert set(changed) <= set(rows) and len(changed) > 0.9 * len(rows)
 
 
+def test_tree_normals_agree(jit):
+    """The light tree's normals (engine/nee.py tree_normals): the shading
+    normal and the no-transmission flag, compiled loop against the NumPy
+    form, with lobe kinds NONE (-1) and transmitting or not, weights with
+    zeros, negatives and NaN; the flag is set exactly where expected."""
+    from engine import nee
+    rng = np.random.default_rng(37)
+    n, k = 4000, 3
+    transmitting = (2, 5)
+    ns = rng.normal(size=(n, 3))
+    kind = rng.integers(-1, 7, size=(n, k)).astype(np.int8)
+    weights = rng.normal(size=(n, k, 3))
+    weights[rng.random((n, k)) < 0.3] = 0.0
+    weights[rng.random((n, k, 3)) < 0.02] = np.nan
+    out = []
+    for on in (False, True):
+        kernels.configure(on)
+        out.append(nee.tree_normals(ns, kind, weights, transmitting))
+    np.testing.assert_array_equal(out[0], out[1])   # copies and a flag: no rounding
+    with np.errstate(invalid="ignore"):
+        through = np.isin(kind, transmitting) & (weights.max(axis=2) > 0)
+    np.testing.assert_array_equal(out[1][:, 3], ~through.any(axis=1))
+    assert 0.2 < out[1][:, 3].mean() < 0.8
+    np.testing.assert_array_equal(out[1][:, :3], ns)
+
+
 def test_a_kernel_called_before_it_compiled_waits_for_the_compile(jit):
     """With the JIT on, a kernel not compiled yet (a module imported late)
     compiles when first called: a render never mixes the two forms."""

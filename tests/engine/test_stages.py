@@ -103,3 +103,16 @@ def test_batches_without_extra_passes_get_the_no_op_observer():
     assert pass_events.observer(ctx, Film(12, 12, ()).new_tile(0, 144)) is pass_events.NO_PASSES
     with_passes = Film(12, 12, (), passes=("Emission",)).new_tile(0, 144)
     assert isinstance(pass_events.observer(ctx, with_passes), pass_events.PassObserver)
+
+
+def test_take_rows_is_np_take_also_for_arrays_without_columns():
+    """rows.take_rows (Paths.take, RowView, take_arrays): np.take's rows,
+    shape and dtype, an (N, 0) array's made without NumPy's per-row take."""
+    from engine.rows import take_rows
+    rng = np.random.default_rng(3)
+    idx = np.sort(rng.choice(1000, 300, replace=False))
+    for a in (rng.random(1000), rng.random((1000, 3)), np.zeros((1000, 0), np.int16),
+              np.zeros((1000, 0, 2)), rng.integers(0, 9, (1000, 2, 3)).astype(np.int8)):
+        got, want = take_rows(a, idx), np.take(a, idx, axis=0)
+        assert got.shape == want.shape and got.dtype == want.dtype
+        np.testing.assert_array_equal(got, want)
