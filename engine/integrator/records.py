@@ -90,6 +90,9 @@ class Paths:
     # singular bounce (prev_delta keeps the last vertex's own kind).
     portal: np.ndarray
     mis_skip: np.ndarray
+    # Volume scattering probability guiding (volume_guide.py): (N, COLUMNS)
+    # where the film guides camera rays in media, else (N, 0).
+    guide: np.ndarray
 
     def __len__(self):
         return len(self.pix)
