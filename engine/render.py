@@ -445,6 +445,7 @@ class _Plan:
         self.settings, self.adaptive, self.threads = settings, adaptive, threads
         self.film = film
         self.guide = None if film is None else film.guide   # integrator/volume_guide.py
+        self.guided = 0   # samples in the film when the guide was last rebuilt (0: never)
         self.done = self.planned = self.checked = 0
         self.batches = collections.deque()  # (pass, pixels) not submitted yet
 
@@ -459,15 +460,19 @@ class _Plan:
             return False
         if self.planned > self.done and adaptive.checks_at(self.planned, self.checked):
             return False  # wait for the film to reach the check
-        if self.guide is not None:
-            # Volume guiding reads the samples so far: a pass waits for the last
-            # to merge, so all its batches see the same guide whatever the timing.
+        if self.guide is not None and self.planned >= 2 * self.guided:
+            # Volume guiding reads the samples so far, rebuilt when they have
+            # doubled (1, 2, 4, ... as the automatic passes): that pass waits
+            # for the last to merge, so every batch reads the guide of the
+            # same samples whatever the timing.
             if self.planned > self.done:
                 return False
             self.guide.update(self.film.count)
+            self.guided = max(self.planned, 1)
         spp = _pass_samples(settings, self.planned, len(adaptive.active), adaptive.params)
         end = self.planned + spp
-        barrier = end >= settings.samples or adaptive.checks_at(end, self.checked) or self.guide is not None
+        rebuild = self.guide is not None and end >= 2 * self.guided   # the next pass waits for this one
+        barrier = end >= settings.samples or adaptive.checks_at(end, self.checked) or rebuild
         batches = _batches(adaptive.active, spp, settings, self.threads, barrier)
         run = _Pass(spp, settings.sample_start + self.planned, len(adaptive.active), len(batches))
         self.batches.extend((run, pixels) for pixels in batches)
