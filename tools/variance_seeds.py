@@ -18,6 +18,10 @@ Pixel samples never leave their pixel (the filter is importance sampled), so
 a subset of pixels renders exactly as in the full image (its CPU figure is
 that of those pixels' paths, not the image's).
 
+In a scene with a volume the camera rays are guided as in a render (the
+guide rebuilt between passes 1, 1, 2, 4, ... samples); --guide off / both
+compares without it, --size renders a smaller image of the same scene.
+
 This measures Ember's own spread, the reference's noise and any bias left
 out; tools/variance_regions.py compares with Cycles through Blender (slow:
 eight seeds give a ratio only to +-15-20 % in veach_mis, where a few pixels'
