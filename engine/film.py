@@ -28,8 +28,12 @@ STATE_VERSION = 1
 class Tile:
     """float64 sums for the pixels [lo, hi), filled by one batch."""
 
-    def __init__(self, lo, hi, aovs=tuple(AOV_CHANNELS), aux=False, passes=()):
+    def __init__(self, lo, hi, aovs=tuple(AOV_CHANNELS), aux=False, passes=(), guide=None):
         self.lo, self.hi = lo, hi
+        # Volume scattering probability guiding (integrator/volume_guide.py):
+        # the film's filtered view this batch reads, and the sums it adds.
+        self.guide = None if guide is None else guide.view
+        self.guide_sums = None
         self.extra = extra_passes.Sums(passes, lo, hi) if passes else None
         n = hi - lo
         self.rgb = np.zeros((n, 3))
@@ -41,6 +45,16 @@ class Tile:
         self.aux = np.zeros((n, 3)) if aux else None
         self.catcher = None
         self._pending = []
+
+    def add_guide(self, pix, guide, L):
+        """Finished paths' guide sums (their Paths.guide rows)."""
+        from .integrator import volume_guide
+        part = volume_guide.sums(self.lo, self.hi, pix, guide, L)
+        if self.guide_sums is None:
+            self.guide_sums = part
+        else:
+            for a, b in zip(self.guide_sums, part):
+                a += b
 
     def _bin(self, pix, w):
         return np.bincount(pix - self.lo, weights=w, minlength=self.hi - self.lo)
@@ -118,7 +132,8 @@ class Tile:
 class Film:
     """Per-pixel sample statistics of a whole frame (row 0 at the top)."""
 
-    def __init__(self, width, height, aovs=tuple(AOV_CHANNELS), adaptive=False, passes=(), crypto_levels=6):
+    def __init__(self, width, height, aovs=tuple(AOV_CHANNELS), adaptive=False, passes=(), crypto_levels=6,
+                 guide=False):
         unknown = set(aovs) - set(AOV_CHANNELS)
         if unknown:
             raise ValueError(f"unknown AOVs {sorted(unknown)}; known: {sorted(AOV_CHANNELS)}")
@@ -136,12 +151,17 @@ class Film:
         self.aovs = {name: np.zeros((n, AOV_CHANNELS[name]), np.float32) for name in aovs}
         # Adaptive sampling: sum of the class-A samples' radiance.
         self.aux = np.zeros((n, 3), np.float32) if adaptive else None
+        # Camera rays in media guided by the samples so far (integrator/volume_guide.py).
+        self.guide = None
+        if guide:
+            from .integrator.volume_guide import Guide
+            self.guide = Guide(width, height)
         self._lock = threading.Lock()
 
     # -- accumulation ------------------------------------------------------
 
     def new_tile(self, lo, hi):
-        return Tile(lo, hi, tuple(self.aovs), self.aux is not None, self.passes)
+        return Tile(lo, hi, tuple(self.aovs), self.aux is not None, self.passes, self.guide)
 
     def merge(self, tile):
         tile.flush()
@@ -166,6 +186,8 @@ class Film:
                 self.aux[s] += tile.aux
             if self.extra is not None and tile.extra is not None:
                 self.extra.merge(tile.extra, tile.lo)
+            if self.guide is not None and tile.guide_sums is not None:
+                self.guide.merge(tile.lo, tile.guide_sums)
 
     def _combine(self, s, nb, mean_b, m2_b):
         """Chan et al.'s pairwise update of (count, mean, M2)."""

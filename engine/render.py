@@ -360,6 +360,12 @@ def render(scene, settings=None, progress=None, bake=None):
         return _render(scene, settings or RenderSettings(), progress, bake)
 
 
+def _guides(ctx, settings):
+    """Whether camera rays in media are guided (Cycles 5.0 always guides
+    them where the scene has a volume; not for a bake)."""
+    return ctx.media is not None and ctx.bake is None and settings.volume_guiding
+
+
 def _render(scene, settings, progress, bake=None):
     t_start = time.perf_counter()
     kernel_mode = _choose_kernels(settings, progress)
@@ -368,7 +374,7 @@ def _render(scene, settings, progress, bake=None):
     cam = ctx.camera
     adaptive = _Adaptive(settings, cam.width * cam.height)
     film = Film(cam.width, cam.height, settings.aovs, adaptive.params is not None, settings.passes,
-                ctx.pass_config.crypto_levels)
+                ctx.pass_config.crypto_levels, guide=_guides(ctx, settings))
     threads = settings.threads or os.cpu_count() or 1
     stats = {"samples": 0, "samples_total": settings.samples, "kernels": kernel_mode,
              "compile_wait_seconds": compile_wait, "prepare_seconds": time.perf_counter() - t_start - compile_wait,
@@ -376,7 +382,7 @@ def _render(scene, settings, progress, bake=None):
     t_trace = time.perf_counter()
     image = None  # the last pass's image: the film does not change after it
     with _AbandonablePool(threads, film) as pool:
-        plan = _Plan(settings, adaptive, threads)
+        plan = _Plan(settings, adaptive, threads, film)
         queue = collections.deque()  # (pass, batch job), in planned order
         stop_poll = _StopPoll(progress)
         while True:
@@ -435,8 +441,11 @@ class _Plan:
     except past an adaptive convergence check, whose outcome (the pixels
     still sampling) needs the film up to it."""
 
-    def __init__(self, settings, adaptive, threads):
+    def __init__(self, settings, adaptive, threads, film=None):
         self.settings, self.adaptive, self.threads = settings, adaptive, threads
+        self.film = film
+        self.guide = None if film is None else film.guide   # integrator/volume_guide.py
+        self.guided = 0   # samples in the film when the guide was last rebuilt (0: never)
         self.done = self.planned = self.checked = 0
         self.batches = collections.deque()  # (pass, pixels) not submitted yet
 
@@ -451,9 +460,19 @@ class _Plan:
             return False
         if self.planned > self.done and adaptive.checks_at(self.planned, self.checked):
             return False  # wait for the film to reach the check
+        if self.guide is not None and self.planned >= 2 * self.guided:
+            # Volume guiding reads the samples so far, rebuilt when they have
+            # doubled (1, 2, 4, ... as the automatic passes): that pass waits
+            # for the last to merge, so every batch reads the guide of the
+            # same samples whatever the timing.
+            if self.planned > self.done:
+                return False
+            self.guide.update(self.film.count)
+            self.guided = max(self.planned, 1)
         spp = _pass_samples(settings, self.planned, len(adaptive.active), adaptive.params)
         end = self.planned + spp
-        barrier = end >= settings.samples or adaptive.checks_at(end, self.checked)
+        rebuild = self.guide is not None and end >= 2 * self.guided   # the next pass waits for this one
+        barrier = end >= settings.samples or adaptive.checks_at(end, self.checked) or rebuild
         batches = _batches(adaptive.active, spp, settings, self.threads, barrier)
         run = _Pass(spp, settings.sample_start + self.planned, len(adaptive.active), len(batches))
         self.batches.extend((run, pixels) for pixels in batches)

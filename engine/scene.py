@@ -767,6 +767,12 @@ class RenderSettings:
     # every random number is addressed by (seed, pixel, sample index,
     # dimension), so disjoint ranges merge into the render of their union.
     sample_start: int = 0
+    # Cycles 5.0's volume scattering probability guiding of camera rays in
+    # homogeneous media (integrator/volume_guide.py): the scattering choice
+    # follows what earlier passes saw.  Unbiased either way; a guided render
+    # of disjoint sample ranges merges to the same estimate statistically,
+    # not to the float of one render (each range builds its own guide).
+    volume_guiding: bool = True
     # 'sobol' (shuffled Owen-scrambled Sobol, Cycles' default) or 'random'.
     sampling_pattern: str = "sobol"
     # Adaptive sampling as Cycles: a pixel stops once its error estimate

@@ -18,6 +18,10 @@ Pixel samples never leave their pixel (the filter is importance sampled), so
 a subset of pixels renders exactly as in the full image (its CPU figure is
 that of those pixels' paths, not the image's).
 
+In a scene with a volume the camera rays are guided as in a render (the
+guide rebuilt between passes 1, 1, 2, 4, ... samples); --guide off / both
+compares without it, --size renders a smaller image of the same scene.
+
 This measures Ember's own spread, the reference's noise and any bias left
 out; tools/variance_regions.py compares with Cycles through Blender (slow:
 eight seeds give a ratio only to +-15-20 % in veach_mis, where a few pixels'
@@ -48,6 +52,9 @@ def parse_args(argv):
                         help="light selections to compare (auto, tree, ris, ris:M with M candidates, power, uniform, "
                              "all); default: the scene's")
     parser.add_argument('--bright', action='store_true', help="only pixels the reference shows brighter than 1")
+    parser.add_argument('--size', type=int, default=0, help="render at size x size pixels instead of the pickle's")
+    parser.add_argument('--guide', choices=('on', 'off', 'both'), default='on',
+                        help="volume scattering probability guiding (scenes with a volume); both: A/B, alternated")
     return parser.parse_args(argv)
 
 
@@ -62,7 +69,18 @@ def bright_pixels(name, width, height):
     return np.flatnonzero(ref.mean(axis=1) > 1.0)
 
 
-def render_seeds(ctx, pixels, samples, seeds, first_seed):
+def pass_starts(samples, passes, guided):
+    """First samples of the passes: ``passes`` samples each, or with volume
+    guiding the renderer's schedule 1, 1, 2, 4, ... up to ``passes`` (the
+    guide is updated between passes, engine/render.py)."""
+    starts, start = [], 0
+    while start < samples:
+        starts.append(start)
+        start += min(max(start, 1), passes) if guided else passes
+    return starts + [samples]
+
+
+def render_seeds(ctx, pixels, samples, seeds, first_seed, guided=False):
     """Pixel means (seeds, len(pixels), 3) and the thread CPU seconds spent tracing."""
     from engine.film import Film
     from engine.integrator import trace_batch
@@ -72,11 +90,14 @@ def render_seeds(ctx, pixels, samples, seeds, first_seed):
     cpu = 0.0
     # Batches of about BATCH paths, whole sample passes each (the renderer's own batch size).
     passes = max(1, BATCH // len(pixels))
+    starts = pass_starts(samples, passes, guided)
     for k in range(seeds):
         seeded = dataclasses.replace(ctx, sampler=Sampler(first_seed + k, ctx.settings.sampling_pattern))
-        film = Film(width, height, ())
-        for start in range(0, samples, passes):
-            sample = np.arange(start, min(start + passes, samples), dtype=np.uint32)
+        film = Film(width, height, (), guide=guided)
+        for start, end in zip(starts, starts[1:]):
+            sample = np.arange(start, end, dtype=np.uint32)
+            if film.guide is not None:
+                film.guide.update(film.count)
             tile = film.new_tile(int(pixels.min()), int(pixels.max()) + 1)
             t0 = time.thread_time()
             trace_batch(seeded, np.tile(pixels, len(sample)), np.repeat(sample, len(pixels)), tile)
@@ -105,6 +126,8 @@ def main(argv=None):
     from engine.render import prepare
     from profile_scene import load
     scene, settings = load(args.scene)
+    if args.size:
+        scene = replace(scene, camera=replace(scene.camera, resolution=(args.size, args.size)))
     kernels.configure(True)
     kernels.wait(900)
     from engine.integrator import stages
@@ -118,14 +141,18 @@ def main(argv=None):
         image_pixels = ctx.camera.width * ctx.camera.height
         pixels = (bright_pixels(args.scene, ctx.camera.width, ctx.camera.height) if args.bright
                   else np.arange(image_pixels))
-        with single_threaded_blas():
-            means, cpu = render_seeds(ctx, pixels, args.samples, args.seeds, args.first_seed)
-        v, error = summary(means, args.samples, image_pixels)
-        per_64k = cpu / (args.seeds * args.samples * len(pixels)) * 65536
-        label = chosen.light_selection + (f":{stages.RIS_CANDIDATES}" if chosen.light_selection == "ris" else "")
-        print(f"{args.scene} ({label}, {args.samples} spp, {args.seeds} seeds, "
-              f"{len(pixels)} px): variance per sample {v:.4f} +- {error:.4f}, "
-              f"{per_64k:.3f} CPU-s per 64k paths, product {v * per_64k:.4f}", flush=True)
+        modes = {'on': [True], 'off': [False], 'both': [False, True]}[args.guide]
+        guided = [g and ctx.media is not None and ctx.bake is None for g in modes]
+        for g in guided:
+            with single_threaded_blas():
+                means, cpu = render_seeds(ctx, pixels, args.samples, args.seeds, args.first_seed, g)
+            v, error = summary(means, args.samples, image_pixels)
+            per_64k = cpu / (args.seeds * args.samples * len(pixels)) * 65536
+            label = chosen.light_selection + (f":{stages.RIS_CANDIDATES}" if chosen.light_selection == "ris" else "")
+            label += ", volume guiding" if g else ""
+            print(f"{args.scene} ({label}, {args.samples} spp, {args.seeds} seeds, "
+                  f"{len(pixels)} px): variance per sample {v:.4f} +- {error:.4f}, "
+                  f"{per_64k:.3f} CPU-s per 64k paths, product {v * per_64k:.4f}", flush=True)
     return 0
 
 

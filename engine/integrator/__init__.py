@@ -29,7 +29,7 @@ from ..media import start_stack
 from ..nee import add_rows as _add_rows
 from ..sampler import CAMERA, TIME
 from ..vec import dot
-from . import catcher, stages, subsurface, transparency, volume
+from . import catcher, stages, subsurface, transparency, volume, volume_guide
 from .context import Context
 from .records import Hit, LightSample, Paths, RayHits, ShadowBatch, Vertex, rows_of
 from .stages import every_light as _every_light, interaction as _interaction
@@ -66,7 +66,8 @@ def trace_batch(ctx, pix, sample, tile):
                   np.zeros((n, 3 if ctx.count_kinds else 0), np.int16), np.full(n, np.inf),
                   start_stack(ctx.media, n), np.zeros(n, np.int16), np.full(n, -1, np.int64), np.zeros((n, 3)),
                   np.full(n, -1, np.int32), np.zeros(n, np.int8), time, np.zeros(n, bool),
-                  np.full(n, -1, np.int64), np.zeros((n, 5)), np.zeros(n, np.int16), np.zeros(n, bool), spread)
+                  np.full(n, -1, np.int64), np.zeros((n, 5)), np.zeros(n, np.int16), np.zeros(n, bool), spread,
+                  np.zeros((n, volume_guide.COLUMNS if getattr(tile, "guide", None) is not None else 0)))
     obs = pass_events.observer(ctx, tile)
     obs.start(paths)
     # Every step raises a live path's bounce or its transparent bounce
@@ -94,7 +95,7 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES, first=None):
         stages.camera_aovs(ctx, paths, found, tile)
     # A bake's given first hit has no segment to fly through: Cycles' init_from_bake goes straight
     # to shading the texel (no intersect or volume kernel for the P + N -> P stand-in ray).
-    flight = None if ctx.media is None or first is not None else volume.free_flights(ctx, paths, found, depth)
+    flight = None if ctx.media is None or first is not None else volume.free_flights(ctx, paths, found, depth, tile)
     ended = stages.emitters(ctx, paths, found, obs)              # lights on the ray
     scattered = held = None
     if flight is not None:                                       # volume vertices: NEE, phase sample

@@ -95,6 +95,9 @@ class Paths:
     # dD, kept at bounces as Cycles keeps ray->dD); NaN: none (a bake's
     # texels).  A hit's footprint is stages.footprint.
     spread: np.ndarray
+    # Volume scattering probability guiding (volume_guide.py): (N, COLUMNS)
+    # where the film guides camera rays in media, else (N, 0).
+    guide: np.ndarray
 
     def __len__(self):
         return len(self.pix)

@@ -906,6 +906,8 @@ def finish(ctx, paths, tile, keep=None):
     if clamp > 0:
         m = row_max(L)
         L = L * np.where(m > clamp, clamp / np.maximum(m, 1e-30), 1.0)[:, None]
+    if paths.guide.shape[1]:   # the volume guide's sums (volume_guide.py)
+        tile.add_guide(pix, paths.guide if keep is None else np.take(paths.guide, rows_of(keep), axis=0), L)
     if ctx.catcher is not None:
         flag = paths.catcher if keep is None else np.take(paths.catcher, rows_of(keep))
         tile.add_catcher(pix, L, flag)

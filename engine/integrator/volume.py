@@ -26,20 +26,21 @@ from ..accel import shadow_rays
 from ..sampler import BSDF, LIGHT, MEDIUM, emitter_set, vertex_set
 from ..sampling import power_heuristic
 from ..vec import dot, row_any_positive
-from . import transparency, visibility
+from . import transparency, visibility, volume_guide
 from .records import RowView
 from .stages import finish, nee_rounds, points_path, spread_from
 from ..geometry import VIS_VOLUME
 from .visibility import VIS_INDIRECT
 
 
-def free_flights(ctx, paths, found, depth):
+def free_flights(ctx, paths, found, depth, tile=None):
     """The FreeFlight of the paths in a medium (None when none is): lights
     met on the way are scaled by what reaches them, and hidden where the
     path scattered first.  The throughput changes later (``after_flights``):
     the emitters stage weighs lights by the throughput at the ray's start.
     Segments in homogeneous media also choose where their direct light is
-    estimated (``_direct_setup``)."""
+    estimated (``_direct_setup``); camera rays' segments scatter with the
+    probability the film's volume guide gives (``_camera_guide``)."""
     inside = np.flatnonzero((paths.stack >= 0).any(axis=1))
     if len(inside) == 0:
         return None
@@ -62,13 +63,37 @@ def free_flights(ctx, paths, found, depth):
     flight = media.free_flight(ctx.media, on.stack, on.beta, t_end, may, u[:, 0], u_distance,
                                on.o, on.d, tracking_rng(ctx, on.pseed, on.sample, depth, 1), x_light, mixed)
     flight.rows = inside
+    _camera_guide(paths, on, inside, flight, mixed[1], u[:, 0], u_distance, getattr(tile, "guide", None))
     _direct_points(ctx, on, flight, direct, u, depth, mixed[1], mixed[3])
     if len(lit):
         rows = inside[lit]
         x = x_light[lit]
-        found.Le[rows] *= media.light_factor(flight, lit, x)
+        found.Le[rows] *= volume_guide.light_factor(flight, lit, x, media.light_factor(flight, lit, x))
         found.light[rows] = flight.t[lit] > x
     return flight
+
+
+def _camera_guide(paths, on, inside, flight, sigma_s, u_channel, u_distance, view):
+    """Camera rays' segments (bounce 0) in homogeneous media redo their
+    scattering choice with the guide's probability (volume_guide.py) where
+    the film has a guide ``view``."""
+    if view is None or paths.guide.shape[1] == 0:
+        return
+    first = np.flatnonzero(on.bounce == 0)
+    if len(first) == 0:
+        return
+    volume_guide.enter(paths.guide, inside[first], paths.L, flight.sigma_t[first], flight.t_end[first])
+    homogeneous = flight.samples[first] if flight.tracked is None else flight.samples[first] & ~flight.tracked[first]
+    k = first[homogeneous]
+    if len(k) == 0:
+        return
+    with np.errstate(invalid="ignore", over="ignore"):
+        att = -np.expm1(-flight.sigma_t[k] * flight.t_end[k, None])
+    att = np.where(flight.sigma_t[k] > 0, att, 0.0)
+    scattered, transmitted, depth = view
+    pix = on.pix[k]
+    q = volume_guide.scatter_probability(att, scattered[pix], transmitted[pix], depth[pix])
+    volume_guide.guided_flight(flight, k, q, sigma_s[k], u_channel[k], u_distance[k])
 
 
 # ----------------------------------------------------------------------------
@@ -264,6 +289,9 @@ def after_flights(ctx, paths, ended, flight, depth, tile, obs=NO_PASSES):
         p_mis = ctx.lights.selection_pdf(e, p, np.zeros_like(p))
         _light_sample(ctx, at, p, phase, e, p_sel, u[:, 1:], p_mis, obs)
         paths.L[rows] += at.L - before
+        if paths.guide.shape[1]:   # direct light at camera rays' volume points: the guide's L_s
+            cam = paths.bounce[rows] == 0
+            paths.guide[rows[cam], volume_guide.LS] += (at.L - before)[cam]
     if flight.emitted.any():   # most media emit nothing: no row gathers then
         emitted = paths.beta[r] * flight.emitted
         paths.L[r] += emitted
@@ -274,6 +302,8 @@ def after_flights(ctx, paths, ended, flight, depth, tile, obs=NO_PASSES):
     if not sc.any():
         return ended, None, None
     rows = r[sc]
+    if paths.guide.shape[1]:   # scattered in the camera ray's media: the rest is the guide's L_s
+        paths.guide[rows[paths.bounce[rows] == 0], volume_guide.SCAT] = 1.0
     held = np.zeros(len(paths.pix), bool)
     held[rows] = True
     moved = paths.take(rows)
