@@ -861,6 +861,8 @@ def _evaluate_normal(normal, hit, rows, triangles, ns, ctx):
         return normal_map(hit, rows, ns, normal[1], normal[2], ctx)
     _, height, strength, distance, invert, inner, step, undisplaced, space, width = normal
     base = ns if inner is None else _unit(_evaluate_normal(inner, hit, rows, triangles, ns, ctx), ns)
+    if undisplaced and inner is None and ctx.prim is not None:
+        base = _flat_undisplaced(base, triangles, ctx)
     object_space = space is not None and ctx.prim is not None and ctx.instance[0] is not None
     if _has_footprint(ctx):
         return footprint_bump(height, ctx, base, triangles, (strength(ctx), distance(ctx), invert, width(ctx)),
@@ -872,6 +874,27 @@ def _evaluate_normal(normal, hit, rows, triangles, ns, ctx):
     if object_space and ng is not None:
         return _object_space_bump(base, grad, ng, space, strength(ctx), distance(ctx), invert, ctx)
     return bump(base, grad, strength(ctx), distance(ctx), invert, ng)
+
+
+def _flat_undisplaced(ns, triangles, ctx):
+    """ns, but on flat faces of a "Both" mesh the undisplaced face normal
+    (turned to ns' side): Cycles' bump starts from the undisplaced normal
+    (svm_node_enter_bump_eval sets sd->N from ATTR_STD_NORMAL_UNDISPLACED),
+    and on a flat face ns is the displaced triangle's normal, which the
+    relief would then bend a second time (a 2 M-triangle heightmap terrain
+    rendered 11 % dark).  Smooth faces keep their undisplaced normals
+    already (engine/displacement.py)."""
+    shading = getattr(triangles, "shading", None)
+    smooth = getattr(triangles, "smooth", None)
+    edges = shading.undisplaced_edges(ctx.prim) if shading is not None and smooth is not None else None
+    if edges is None:
+        return ns
+    flat = ~np.asarray(smooth)[ctx.prim]
+    if not flat.any():
+        return ns
+    n0 = _unit(np.cross(edges[0], edges[1]), ns)
+    n0 = np.where((np.einsum("ij,ij->i", n0, ns) < 0.0)[:, None], -n0, n0)
+    return np.where(flat[:, None], n0, ns)
 
 
 def _has_footprint(ctx):

@@ -48,10 +48,10 @@ def displaced_material(method, scale=0.6):
     return mat
 
 
-def relief(scene, method, scale=0.6):
+def relief(scene, method, scale=0.6, smooth=True):
     obj = plane('relief', displaced_material(method, scale), half=1.0)
     for poly in obj.data.polygons:
-        poly.use_smooth = True
+        poly.use_smooth = smooth
     sub = obj.modifiers.new('subdivide', 'SUBSURF')
     sub.subdivision_type = 'SIMPLE'
     sub.levels = sub.render_levels = LEVELS
@@ -82,9 +82,9 @@ def _ember(scene, tmp_path, tapped_engine, name):
     return image[..., :3].astype(np.float64), var
 
 
-def _against_cycles(tmp_path, tapped_engine, method, scale, name):
+def _against_cycles(tmp_path, tapped_engine, method, scale, name, smooth=True):
     scene = empty_factory_scene()
-    relief(scene, method, scale)
+    relief(scene, method, scale, smooth)
     ref, ref_var, header = live_cycles_reference(scene, tmp_path, name, CYCLES_SEEDS, CYCLES_SPP, BOUNCES)
     image, var = _ember(scene, tmp_path, tapped_engine, name)
     print(f"{name}: Ember mean {image.mean():.5g}, Cycles {ref.mean():.5g} (ratio {image.mean() / ref.mean():.4f})")
@@ -112,6 +112,25 @@ def test_displacement_and_bump_matches_cycles(tmp_path, tapped_engine):
     """"Both" at a moderate height (scale 0.15)."""
     _, _, _, _, check = _against_cycles(tmp_path, tapped_engine, 'BOTH', 0.15, 'displacement_both')
     check.assert_agrees(0.02, 0.15)
+
+
+def test_flat_displacement_and_bump_matches_cycles(tmp_path, tapped_engine, monkeypatch):
+    """"Both" on flat faces: the bump starts from the undisplaced face
+    normal as Cycles' (svm_node_enter_bump_eval reads the undisplaced
+    normal), not the displaced triangle's, which the relief would bend a
+    second time (a flat 2 M-triangle heightmap terrain was 11 % dark in
+    tools/compare_blends.py).  That old start must fail the same tests."""
+    scene, ref, ref_var, header, check = _against_cycles(tmp_path, tapped_engine, 'BOTH', 0.15,
+                                                         'displacement_both_flat', smooth=False)
+    check.assert_agrees(0.02, 0.15)
+    from engine import textures
+    monkeypatch.setattr(textures, "_flat_undisplaced", lambda ns, triangles, ctx: ns)
+    twice, twice_var = _ember(scene, tmp_path, tapped_engine, 'displacement_both_flat_twice')
+    old = ReferenceCheck('displacement_both_flat_bent_twice', twice, twice_var, EMBER_SPP, ref, ref_var, header,
+                         BLOCK)
+    print(f"bent twice: image mean ratio {twice.mean() / ref.mean():.4f}, {len(old.blocks)} failing "
+          f"block-channels, {len(old.mean_failures)} failing region means")
+    assert len(old.blocks) or old.mean_failures, "bending the displaced normal again passes: the test sees nothing"
 
 
 @pytest.mark.parametrize("method", ['BOTH', 'BUMP'])
