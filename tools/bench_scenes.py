@@ -272,6 +272,53 @@ def build_fog():
     return finish(scene, cam, (0.0, 0.0, 0.9))
 
 
+def build_smoke():
+    """A smoke cube (Principled Volume whose density is 3D noise in Object
+    coordinates through a colour ramp: a heterogeneous medium, tracked
+    against its majorant grid) on a floor before a backdrop, under a sun and
+    a sky colour; Cycles' default single scattering (volume bounces 0)."""
+    scene = bs.reset()
+    white = bs.node_material("White", 'diffuse', (0.6, 0.6, 0.6))
+    floor(scene, white)
+    backdrop(scene, white)
+    smoke = bpy.data.materials.new("Smoke")
+    smoke.use_nodes = True
+    tree = smoke.node_tree
+    for node in list(tree.nodes):
+        if node.type != 'OUTPUT_MATERIAL':
+            tree.nodes.remove(node)
+    coords = tree.nodes.new('ShaderNodeTexCoord')
+    noise = tree.nodes.new('ShaderNodeTexNoise')
+    noise.inputs['Scale'].default_value = 2.5
+    noise.inputs['Detail'].default_value = 2.0
+    tree.links.new(coords.outputs['Object'], noise.inputs['Vector'])
+    ramp = tree.nodes.new('ShaderNodeValToRGB')
+    ramp.color_ramp.elements[0].position = 0.4
+    ramp.color_ramp.elements[0].color = (0.0, 0.0, 0.0, 1.0)
+    ramp.color_ramp.elements[1].position = 0.65
+    ramp.color_ramp.elements[1].color = (1.0, 1.0, 1.0, 1.0)
+    tree.links.new(noise.outputs['Fac'], ramp.inputs['Fac'])
+    scale = tree.nodes.new('ShaderNodeMath')
+    scale.operation = 'MULTIPLY'
+    scale.inputs[1].default_value = 4.0
+    tree.links.new(ramp.outputs['Color'], scale.inputs[0])
+    volume = tree.nodes.new('ShaderNodeVolumePrincipled')
+    volume.inputs['Color'].default_value = (0.8, 0.78, 0.75, 1.0)
+    volume.inputs['Anisotropy'].default_value = 0.2
+    tree.links.new(scale.outputs[0], volume.inputs['Density'])
+    output = next(n for n in tree.nodes if n.type == 'OUTPUT_MATERIAL')
+    tree.links.new(volume.outputs[0], output.inputs['Volume'])
+    bs.box(scene, "Smoke", (2.0, 1.6, 2.0), (0.0, 0.0, 1.1), 0.5, smoke)
+    bs.light(scene, "Sun", 'SUN', (0, 0, 5), 3.0, (1.0, 0.95, 0.85),
+             rotation=(math.radians(40), 0.0, math.radians(-30)), angle=math.radians(2))
+    cam = bs.camera(scene, (0.0, -5.5, 2.0), (0, 0, 0), lens=35.0)
+    bs.world(scene, (0.2, 0.25, 0.3))
+    scene.cycles.volume_bounces = 0
+    if hasattr(scene, 'ember'):
+        scene.ember.volume_bounces = 0
+    return finish(scene, cam, (0.0, 0.0, 1.0))
+
+
 def _subsurface_material(name, color, radius, scale, method='RANDOM_WALK'):
     material = principled(name, color, roughness=0.4)
     node = next(n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
@@ -487,6 +534,7 @@ SCENES = {
     'hdri': ("spheres under an HDRI (courtyard.exr)", build_hdri),
     'procedural': ("procedural nodes (Noise, Voronoi, Brick, Wave, ramps, a group)", build_procedural),
     'fog': ("a fog room lit by a spot (homogeneous volume, single scattering)", build_fog),
+    'smoke': ("a noise-textured smoke cube under a sun (heterogeneous volume, single scattering)", build_smoke),
     'subsurface': ("random-walk subsurface sphere and torus, front and rim light", build_subsurface),
     'glossy_lights': ("7 lights of 5 kinds over glossy plates", build_glossy_lights),
     'interior': ("a room lit through a window by sun and sky (indirect light)", build_interior),

@@ -112,11 +112,16 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES, first=None):
     if ctx.catcher is not None:                                  # shadow catchers: split paths
         paths, hit = catcher.split(ctx, paths, hit, tile)
     stages.surface_emission(ctx, paths, hit, depth, obs)
+    passed = None
+    if ctx.media is not None and first is None:                 # volume boundaries: crossed, no vertex
+        paths, hit, passed = volume.pass_boundaries(ctx, paths, hit, obs)
+        if paths is None:
+            return _join(passed, scattered)
     paths, hit, carried = _past_last_vertex(ctx, paths, hit, tile)
     if carried is not None and ctx.subsurface:
         carried.exit_prim[:] = -1
     if len(paths.pix) == 0:
-        return _join(paths, carried, scattered)
+        return _join(paths, carried, scattered, passed)
     v = stages.shade(ctx, paths, hit, depth)                     # Vertex
     obs.vertex(paths, v, depth)
     every = stages.sampling_every_light(ctx, v)
@@ -136,7 +141,7 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES, first=None):
     held = through | subsurface.walking(paths) if ctx.subsurface else through
     stages.remember_vertex(ctx, paths, v, held, every, ray, depth)
     paths = _end(ctx, paths, alive, tile)
-    return _join(paths, carried, scattered)
+    return _join(paths, carried, scattered, passed)
 
 
 def _join(paths, *others):
@@ -192,10 +197,16 @@ def _past_last_vertex(ctx, paths, hit, tile):
     last = transparency.last_vertices(ctx, paths)
     if not last.any():
         return paths, hit, None
-    if last.all() and not ctx.transparent_shadows:
-        stages.finish(ctx, paths, tile)
-        return paths.take(np.zeros(len(paths.pix), bool)), hit, None
-    carried, at = paths.take(last), hit.take(last)
+    # Only paths at a material with a transparent lobe may cross: the
+    # others end here, without a copy of their rows.
+    may = last & ctx.transparent_mat[hit.mat] if ctx.transparent_shadows else np.zeros(len(last), bool)
+    ends = last & ~may
+    if ends.any():
+        stages.finish(ctx, paths, tile, ends)
+    if not may.any():
+        rest = np.flatnonzero(~last)
+        return paths.take(rest), hit.take(rest), None
+    carried, at = paths.take(may), hit.take(may)
     go = transparency.pass_last(ctx, carried, at, lambda h: stages.shading(ctx, h))
     if not go.all():
         stages.finish(ctx, carried, tile, ~go)

@@ -472,6 +472,38 @@ def cross_surfaces(ctx, paths, hit, crossing, passed):
         paths.tbounce = paths.tbounce - free
 
 
+def pass_boundaries(ctx, paths, hit, obs=NO_PASSES):
+    """Paths at a volume boundary (the pass-through surface of a
+    volume-only material, MediumTable.boundary) cross it as Cycles'
+    integrate_surface_volume_only_bounds: into or out of its medium, on
+    along the same ray, with no vertex, shading, light sample or Russian
+    roulette, and no transparent bounce counted.  The full bounce did the
+    same through the transparent lobe (a white one of weight 1: weight 1),
+    at the cost of shading and sampling it.  Returns (the other paths and
+    their hits, or None, None when every path crossed; the paths that
+    crossed, or None).  With extra passes (``obs`` active) boundaries are
+    left to the full bounce, which reports them."""
+    at = ctx.media.boundary[hit.mat]
+    if obs.active or not at.any():
+        return paths, hit, None
+    if at.all():
+        _cross_boundary(ctx, paths, hit)
+        return None, None, paths
+    rows, rest = np.flatnonzero(at), np.flatnonzero(~at)
+    moved = paths.take(rows)
+    _cross_boundary(ctx, moved, hit.take(rows))
+    return paths.take(rest), hit.take(rest), moved
+
+
+def _cross_boundary(ctx, paths, hit):
+    """Move paths on past the volume boundaries ``hit``, in place."""
+    transparency.step_through(ctx, paths, hit)
+    every = np.ones(len(paths.pix), bool)
+    cross_surfaces(ctx, paths, hit, every, every)   # takes back step_through's transparent bounce
+    if ctx.subsurface:
+        paths.exit_prim[:] = -1
+
+
 # Wavefront steps per bounce for volume-boundary crossings, which count no
 # transparent bounce (Cycles allows VOLUME_BOUNDS_MAX = 1024 per bounce;
 # paths still going after the last step are finished with what they have).

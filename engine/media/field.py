@@ -32,6 +32,7 @@ material.
 """
 import numpy as np
 
+from .. import kernels
 from ..nodes import ShadingContext
 from ..nodes.context import texture_space
 from ..textures import Compiler, is_texture
@@ -76,7 +77,7 @@ class Field:
         self.tri, self.tris = int(tri), tris
         self.repaired = {"NaN": 0, "negative": 0, "too large": 0}
         self.evaluated = 0     # points evaluated (statistics)
-        self.grid = self._majorants()
+        self.grid = np.ascontiguousarray(self._majorants(), np.float64)
 
     # -- coefficients at points -----------------------------------------------
     def context(self, p, d, q=None):
@@ -159,39 +160,91 @@ class Field:
         majorant in the cells of the segment's bounding box, the segment
         reaching at most STEP cells along any axis (and ending where the
         ray leaves the grid's box).  Outside the box mu is 0 and dist the
-        distance to it (inf: it is not ahead)."""
-        q = self.to_object(p)
-        dq = d @ self.inverse[:3, :3].T
-        inside = np.all((q >= self.lo) & (q < self.hi), axis=1)
-        mu = np.zeros(len(p))
-        dist = np.full(len(p), np.inf)
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            t0 = (self.lo - q) / dq
-            t1 = (self.hi - q) / dq
-            near = np.max(np.where(np.isnan(t0), -np.inf, np.minimum(t0, t1)), axis=1)
-            far = np.min(np.where(np.isnan(t1), np.inf, np.maximum(t0, t1)), axis=1)
-            i = np.flatnonzero(inside)
-            if len(i):
-                reach = STEP * np.min(np.where(dq[i] != 0, self.cell / np.abs(dq[i]), np.inf), axis=1)
-                length = np.minimum(reach, far[i])
-                q1 = q[i] + dq[i] * np.where(np.isfinite(length), length, 0.0)[:, None]
-                a = np.clip(np.floor((np.minimum(q[i], q1) - self.lo) / self.cell), 0, GRID - 1).astype(np.int64)
-                b = np.clip(np.floor((np.maximum(q[i], q1) - self.lo) / self.cell), 0, GRID - 1).astype(np.int64)
-                best = np.zeros(len(i))
-                for ox in range(STEP + 1):
-                    x = np.minimum(a[:, 0] + ox, b[:, 0])
-                    for oy in range(STEP + 1):
-                        y = np.minimum(a[:, 1] + oy, b[:, 1])
-                        for oz in range(STEP + 1):
-                            z = np.minimum(a[:, 2] + oz, b[:, 2])
-                            best = np.maximum(best, self.grid[x, y, z])
-                mu[i] = best
-                dist[i] = length
-            o = np.flatnonzero(~inside)
-            if len(o):
-                ahead = (far[o] >= np.maximum(near[o], 0.0)) & (near[o] >= 0)
-                dist[o] = np.where(ahead, near[o], np.inf)
+        distance to it (inf: it is not ahead).  One compiled pass
+        (``_majorant_rows``)."""
+        q = np.ascontiguousarray(self.to_object(p), np.float64)
+        dq = np.ascontiguousarray(d @ self.inverse[:3, :3].T, np.float64)
+        mu, dist = np.empty(len(p)), np.empty(len(p))
+        _majorant_rows(q, dq, self.lo, self.hi, self.cell, self.grid, mu, dist)
         return mu, dist
+
+
+def _majorant_numpy(q, dq, lo, hi, cell, grid, mu, dist):
+    """The reference form of ``_majorant_rows`` (Field.majorant), rays in
+    object space (q, dq)."""
+    inside = np.all((q >= lo) & (q < hi), axis=1)
+    mu[:] = 0.0
+    dist[:] = np.inf
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        t0 = (lo - q) / dq
+        t1 = (hi - q) / dq
+        near = np.max(np.where(np.isnan(t0), -np.inf, np.minimum(t0, t1)), axis=1)
+        far = np.min(np.where(np.isnan(t1), np.inf, np.maximum(t0, t1)), axis=1)
+        i = np.flatnonzero(inside)
+        if len(i):
+            reach = STEP * np.min(np.where(dq[i] != 0, cell / np.abs(dq[i]), np.inf), axis=1)
+            length = np.minimum(reach, far[i])
+            q1 = q[i] + dq[i] * np.where(np.isfinite(length), length, 0.0)[:, None]
+            a = np.clip(np.floor((np.minimum(q[i], q1) - lo) / cell), 0, GRID - 1).astype(np.int64)
+            b = np.clip(np.floor((np.maximum(q[i], q1) - lo) / cell), 0, GRID - 1).astype(np.int64)
+            best = np.zeros(len(i))
+            for ox in range(STEP + 1):
+                x = np.minimum(a[:, 0] + ox, b[:, 0])
+                for oy in range(STEP + 1):
+                    y = np.minimum(a[:, 1] + oy, b[:, 1])
+                    for oz in range(STEP + 1):
+                        z = np.minimum(a[:, 2] + oz, b[:, 2])
+                        best = np.maximum(best, grid[x, y, z])
+            mu[i] = best
+            dist[i] = length
+        o = np.flatnonzero(~inside)
+        if len(o):
+            ahead = (far[o] >= np.maximum(near[o], 0.0)) & (near[o] >= 0)
+            dist[o] = np.where(ahead, near[o], np.inf)
+
+
+@kernels.loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], float64[::1], "
+                     "float64[:, :, ::1], float64[::1], float64[::1])", _majorant_numpy)
+def _majorant_rows(q, dq, lo, hi, cell, grid, mu, dist):
+    nan = np.nan
+    for i in range(q.shape[0]):
+        inside = True
+        near, far, reach = -np.inf, np.inf, np.inf
+        for a in range(3):
+            inside = inside and q[i, a] >= lo[a] and q[i, a] < hi[a]
+            t0 = (lo[a] - q[i, a]) / dq[i, a]
+            t1 = (hi[a] - q[i, a]) / dq[i, a]
+            # NumPy's rules as the reference's: minimum / maximum / max
+            # propagate NaN, a NaN t0 (t1) reads as -inf (inf).
+            lo_t = -np.inf if t0 != t0 else (nan if t1 != t1 else min(t0, t1))
+            hi_t = np.inf if t1 != t1 else (nan if t0 != t0 else max(t0, t1))
+            near = nan if (near != near or lo_t != lo_t) else max(near, lo_t)
+            far = nan if (far != far or hi_t != hi_t) else min(far, hi_t)
+            if dq[i, a] != 0:
+                reach = min(reach, cell[a] / abs(dq[i, a]))
+        mu[i] = 0.0
+        dist[i] = np.inf
+        if inside:
+            reach *= STEP
+            length = nan if far != far else min(reach, far)
+            step = length if np.isfinite(length) else 0.0
+            lo_c = np.empty(3, np.int64)
+            hi_c = np.empty(3, np.int64)
+            for a in range(3):
+                q1 = q[i, a] + dq[i, a] * step
+                x0 = np.floor((min(q[i, a], q1) - lo[a]) / cell[a])
+                x1 = np.floor((max(q[i, a], q1) - lo[a]) / cell[a])
+                lo_c[a] = int(min(max(x0, 0.0), GRID - 1.0))
+                hi_c[a] = int(min(max(x1, 0.0), GRID - 1.0))
+            best = 0.0
+            for x in range(lo_c[0], min(lo_c[0] + STEP, hi_c[0]) + 1):
+                for y in range(lo_c[1], min(lo_c[1] + STEP, hi_c[1]) + 1):
+                    for z in range(lo_c[2], min(lo_c[2] + STEP, hi_c[2]) + 1):
+                        best = max(best, grid[x, y, z])
+            mu[i] = best
+            dist[i] = length
+        elif far >= max(near, 0.0) and near >= 0:
+            dist[i] = near
 
 
 def _scaled(fn, factor):

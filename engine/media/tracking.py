@@ -29,6 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import kernels
+
 MAX_EVENTS = 512
 # Tentative collisions drawn per row at once: shadow rays use them all;
 # a free flight often stops at its first real collision.
@@ -57,9 +59,10 @@ def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=
     out = Tracked(w, np.zeros(n, bool), np.full(n, np.inf), np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)))
     if n == 0:
         return out
-    beta = np.ones((n, 3)) if beta is None else np.abs(beta)
-    may_scatter = np.zeros(n, bool) if may_scatter is None else np.asarray(may_scatter, bool)
-    x_light = np.full(n, np.inf) if x_light is None else np.asarray(x_light, np.float64)
+    beta = np.ones((n, 3)) if beta is None else np.ascontiguousarray(np.abs(beta), np.float64)
+    may_scatter = np.zeros(n, bool) if may_scatter is None else np.ascontiguousarray(may_scatter, bool)
+    x_light = np.full(n, np.inf) if x_light is None else np.ascontiguousarray(x_light, np.float64)
+    t_end = np.ascontiguousarray(t_end, np.float64)
     hsa, hss, hem, hg = table.coefficients(stack)
     if not homogeneous:
         hsa, hss, hem = np.zeros_like(hsa), np.zeros_like(hss), np.zeros_like(hem)
@@ -76,7 +79,7 @@ def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=
         mu = mu + hmu[live]
         step_end = np.minimum(tl + eps[live] + dist, t_end[live])
         # K tentative collisions per row at once (one shader evaluation for
-        # all of them), resolved in order below.
+        # all of them), resolved in order by one compiled pass.
         K = BATCH[mode]
         u = rng.random((len(live), K, 4))
         with np.errstate(divide="ignore"):
@@ -94,27 +97,9 @@ def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=
         ss += hss[live][:, None]
         em += hem[live][:, None]
         gw += hgw[live][:, None]
-        going = np.ones(len(live), bool)     # still collides in this batch
         done = np.zeros(len(live), bool)
-        for j in range(K):
-            c = np.flatnonzero(going & valid[:, j])
-            out_of = np.flatnonzero(going & ~valid[:, j])
-            if len(out_of):   # past the cell (or the segment's end) before collision j
-                rows = live[out_of]
-                _light(out.light_w, w, x_light, rows, t[rows], step_end[out_of])
-                t[rows] = step_end[out_of]
-                done[out_of] = step_end[out_of] >= t_end[rows]
-                going[out_of] = False
-            if len(c) == 0:
-                continue
-            rows = live[c]
-            tn = tk[c, j]
-            _light(out.light_w, w, x_light, rows, t[rows], tn)
-            t[rows] = tn
-            stop = _collide(out, w, rows, tn, mu[c], sa[c, j], ss[c, j], em[c, j], gw[c, j], u[c, j], mode,
-                            beta, may_scatter)
-            done[c] |= stop
-            going[c] &= ~stop
+        _resolve_rows(live, t, w, tk, valid, step_end, t_end, mu, sa, ss, em, gw, u, MODES[mode], beta,
+                      may_scatter, x_light, out.light_w, out.emitted, out.scatter, out.t, out.g, done)
         events[live] += K
         live = live[~done & (events[live] < MAX_EVENTS)]
         live = live[t[live] < t_end[live]]
@@ -124,6 +109,111 @@ def track(table, stack, o, d, t_end, rng, mode="flight", beta=None, may_scatter=
         w[left] = 0.0
         table.note_truncated(stack[left])
     return out
+
+
+MODES = {"flight": 0, "ratio": 1, "delta": 2}
+_MODE_NAMES = ("flight", "ratio", "delta")
+
+
+def _resolve_numpy(live, t, w, tk, valid, step_end, t_end, mu, sa, ss, em, gw, u, mode, beta, may_scatter,
+                   x_light, light_w, emitted, scatter, t_out, g, done):
+    """The reference form of ``_resolve_rows``: one batch of K tentative
+    collisions of the rows ``live``, resolved in order (sets ``done``)."""
+    out = Tracked(w, scatter, t_out, emitted, g, light_w)
+    name = _MODE_NAMES[mode]
+    K = tk.shape[1]
+    going = np.ones(len(live), bool)     # still collides in this batch
+    for j in range(K):
+        c = np.flatnonzero(going & valid[:, j])
+        out_of = np.flatnonzero(going & ~valid[:, j])
+        if len(out_of):   # past the cell (or the segment's end) before collision j
+            rows = live[out_of]
+            _light(light_w, w, x_light, rows, t[rows], step_end[out_of])
+            t[rows] = step_end[out_of]
+            done[out_of] = step_end[out_of] >= t_end[rows]
+            going[out_of] = False
+        if len(c) == 0:
+            continue
+        rows = live[c]
+        tn = tk[c, j]
+        _light(light_w, w, x_light, rows, t[rows], tn)
+        t[rows] = tn
+        stop = _collide(out, w, rows, tn, mu[c], sa[c, j], ss[c, j], em[c, j], gw[c, j], u[c, j], name,
+                        beta, may_scatter)
+        done[c] |= stop
+        going[c] &= ~stop
+
+
+@kernels.loop_kernel("void(int64[::1], float64[::1], float64[:, ::1], float64[:, ::1], boolean[:, ::1], "
+                     "float64[::1], float64[::1], float64[::1], float64[:, :, ::1], float64[:, :, ::1], "
+                     "float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1], int64, float64[:, ::1], "
+                     "boolean[::1], float64[::1], float64[:, ::1], float64[:, ::1], boolean[::1], float64[::1], "
+                     "float64[::1], boolean[::1])", _resolve_numpy)
+def _resolve_rows(live, t, w, tk, valid, step_end, t_end, mu, sa, ss, em, gw, u, mode, beta, may_scatter,
+                  x_light, light_w, emitted, scatter, t_out, g, done):
+    K = tk.shape[1]
+    wr = np.empty(3)
+    sn = np.empty(3)
+    for i in range(live.shape[0]):
+        r = live[i]
+        for j in range(K):
+            t1 = step_end[i] if not valid[i, j] else tk[i, j]
+            if t[r] < x_light[r] and x_light[r] <= t1:   # the light on the ray is passed: the weight there
+                for c in range(3):
+                    light_w[r, c] = w[r, c]
+            t[r] = t1
+            if not valid[i, j]:   # past the cell (or the segment's end) before collision j
+                done[i] = t1 >= t_end[r]
+                break
+            m = mu[i]
+            any_s = False
+            a, b, mean_ss, mean_sn = 0.0, 0.0, 0.0, 0.0
+            for c in range(3):
+                wr[c] = w[r, c]
+                sn[c] = m - sa[i, j, c] - ss[i, j, c]
+                any_s = any_s or ss[i, j, c] > 0
+                a += abs(beta[r, c] * wr[c] * ss[i, j, c]) / 3.0
+                b += abs(beta[r, c] * wr[c] * sn[c]) / 3.0
+                mean_ss += ss[i, j, c] / 3.0
+                mean_sn += abs(sn[c]) / 3.0
+            stop = False
+            if mode == 0:
+                for c in range(3):
+                    emitted[r, c] += wr[c] * em[i, j, c] / m
+                ps = a / (a + b) if (may_scatter[r] and any_s and a + b > 0) else 0.0
+                sc = u[i, j, 1] < ps
+                ps_c = ps if sc else 1.0 - ps
+                for c in range(3):
+                    wr[c] = (ss[i, j, c] if sc else sn[c]) * wr[c] / (m * (ps_c if ps_c > 0 else 1.0))
+                if sc:
+                    scatter[r] = True
+                    t_out[r] = t1
+                    g[r] = gw[i, j] / mean_ss if mean_ss > 0 else 0.0
+                    stop = True
+            elif mode == 1:
+                for c in range(3):
+                    wr[c] = wr[c] * sn[c] / m
+            else:
+                P = min(mean_sn / m, 1.0)
+                survive = u[i, j, 1] < P
+                for c in range(3):
+                    wr[c] = wr[c] * sn[c] / (m * (P if P > 0 else 1.0)) if survive else 0.0
+                stop = not survive
+            # Russian roulette on small weights (not on a scattering's).
+            level = max(abs(wr[0]), max(abs(wr[1]), abs(wr[2])))
+            if not stop and level < RR_LEVEL:
+                if u[i, j, 2] * RR_LEVEL < level:
+                    for c in range(3):
+                        wr[c] = wr[c] * (RR_LEVEL / (level if level > 0 else 1.0))
+                else:
+                    for c in range(3):
+                        wr[c] = 0.0
+                    stop = True
+            for c in range(3):
+                w[r, c] = wr[c]
+            if stop:
+                done[i] = True
+                break
 
 
 def _light(into, w, x, rows, t0, t1):
