@@ -240,6 +240,17 @@ def build_procedural():
     return finish(scene, cam, (0.0, 0.0, 0.5))
 
 
+def empty_material(name):
+    """A node material holding only its Material Output (for volumes)."""
+    material = bpy.data.materials.new(name)
+    material.use_nodes = True
+    tree = material.node_tree
+    for node in list(tree.nodes):
+        if node.type != 'OUTPUT_MATERIAL':
+            tree.nodes.remove(node)
+    return material, tree
+
+
 def build_fog():
     """A fog room lit by a spot (its beam): a Principled Volume cube on a
     floor before a backdrop, Cycles' default single scattering (volume
@@ -248,12 +259,7 @@ def build_fog():
     white = bs.node_material("White", 'diffuse', (0.6, 0.6, 0.6))
     floor(scene, white)
     backdrop(scene, white)
-    fog = bpy.data.materials.new("Fog")
-    fog.use_nodes = True
-    tree = fog.node_tree
-    for node in list(tree.nodes):
-        if node.type != 'OUTPUT_MATERIAL':
-            tree.nodes.remove(node)
+    fog, tree = empty_material("Fog")
     volume = tree.nodes.new('ShaderNodeVolumePrincipled')
     volume.inputs['Color'].default_value = (0.85, 0.8, 0.7, 1.0)
     volume.inputs['Density'].default_value = 0.4
@@ -281,12 +287,7 @@ def build_smoke():
     white = bs.node_material("White", 'diffuse', (0.6, 0.6, 0.6))
     floor(scene, white)
     backdrop(scene, white)
-    smoke = bpy.data.materials.new("Smoke")
-    smoke.use_nodes = True
-    tree = smoke.node_tree
-    for node in list(tree.nodes):
-        if node.type != 'OUTPUT_MATERIAL':
-            tree.nodes.remove(node)
+    smoke, tree = empty_material("Smoke")
     coords = tree.nodes.new('ShaderNodeTexCoord')
     noise = tree.nodes.new('ShaderNodeTexNoise')
     noise.inputs['Scale'].default_value = 2.5
