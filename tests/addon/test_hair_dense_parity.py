@@ -136,3 +136,4 @@ def test_coincident_strands_counted():
     co[4] = co[1]
     assert coincident_strands(co) == 2
 
+
