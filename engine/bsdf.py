@@ -55,6 +55,9 @@ from .lobes.glass import dielectric as _dielectric, eta_of as _eta, mean3 as _me
 from .lobes.glass import eval_glass_f as _eval_glass, sample_glass_dir as _sample_glass  # noqa: F401
 from .lobes.sheen import eval_sheen_f as _eval_sheen, sample_sheen_dir as _sample_sheen  # noqa: F401
 from .lobes.sheen import ltc as _ltc, sheen_frame as _sheen_frame, sheen_ltc as _sheen_ltc  # noqa: F401
+from .lobes import hair as _hair
+from .lobes.hair import HAIR_CHIANG
+from .lobes.hair_huang import HAIR_HUANG
 from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect, ggx_sample_vndf  # noqa: F401
 from .sampling import cosine_hemisphere
 from .rows import take_arrays
@@ -947,7 +950,7 @@ def _sample_single_numpy(lobes, wo, u1, u2):
 
 
 # Cycles' Filter Glossy: the lobes bsdf_blur widens (microfacet ones; a
-# mirror becomes a glossy lobe).
+# mirror becomes a glossy lobe; the Principled Hair closures: _blur_hair).
 BLURRED_KINDS = (GLOSSY, GLOSSY_ANISOTROPIC, GLASS, REFRACTION)
 
 
@@ -972,3 +975,19 @@ def blur(lobes, rows, roughness):
     if lobes.multiscatter is not None:
         smooth = widen & (alpha <= MIN_ALPHA) & (r > alpha)
         lobes.multiscatter[rows] = lobes.multiscatter[rows] & ~smooth
+    _blur_hair(lobes, rows, roughness)
+
+
+def _blur_hair(lobes, rows, roughness):
+    """Cycles blurs the Principled Hair closures too: Chiang's mapped
+    variances and scale (hair.blur), Huang's roughness (bsdf_hair_huang_blur:
+    max(blur, roughness), here on alpha = roughness^2)."""
+    kind = lobes.kind[rows]
+    for k in range(kind.shape[1]):
+        chiang = np.flatnonzero(kind[:, k] == HAIR_CHIANG)
+        if len(chiang):
+            _hair.blur(lobes, rows[chiang], k, roughness[chiang])
+        huang = np.flatnonzero(kind[:, k] == HAIR_HUANG)
+        if len(huang):
+            a = lobes.alpha[rows[huang], k]
+            lobes.alpha[rows[huang], k] = np.maximum(a, np.minimum(roughness[huang], 1.0) ** 2)

@@ -275,6 +275,12 @@ class InstanceCollector:
                 self._warn_once(('particle hair', obj.name, strands.name),
                                 f"Object '{obj.name}', particle system '{strands.name}': {strands.skipped} strands "
                                 "with a NaN or infinite key were skipped")
+            if strands.coincident:
+                self._warn_once(('coincident hair', obj.name, strands.name),
+                                f"Object '{obj.name}', particle system '{strands.name}': {strands.coincident} strands "
+                                "coincide exactly with another (Distribution Jittered places some hairs twice); Cycles "
+                                "renders such twins darker than one strand, Ember as one (rendered brighter; "
+                                "Distribution Random avoids them)")
             if len(strands.offsets) < 2:
                 continue
             slot = min(strands.slot, len(slots) - 1) if len(slots) else 0

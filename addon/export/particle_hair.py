@@ -36,6 +36,22 @@ class ParticleStrands:
         self.points, self.radii, self.offsets = points, radii, offsets
         self.slot, self.name, self.skipped = slot, name, skipped
         self.curve_attributes, self.uv, self.first_curve = {}, None, 0
+        self.coincident = 0   # strands lying exactly on another of the system (coincident_strands)
+
+
+def coincident_strands(co):
+    """How many of the strands (S, K, 3) repeat another's keys exactly.
+    Blender's Jittered distribution can place two hairs at one point of a
+    face (about 1 in 6 of 1,500 on a 512-face sphere), and the twins grow
+    along the same normal: one tube traced twice.  Cycles renders such
+    strands much darker than a single one (each one's light is blocked by
+    its twin: measured 0.62 of the image with every strand doubled), Ember
+    as one strand (0.95), so a file with them differs (docs/real_scenes.md
+    hair)."""
+    if len(co) < 2:
+        return 0
+    rows = np.ascontiguousarray(co.reshape(len(co), -1))
+    return int(len(rows) - len(np.unique(rows, axis=0)))
 
 
 def shape_radius(shape, root, tip, t):
@@ -126,6 +142,7 @@ def particle_strands(obj, render=True, check=lambda: None):
                                np.arange(len(co) + 1, dtype=np.int64) * steps, slot, psys.name,
                                int((~good).sum()))
         made.first_curve = first_curve
+        made.coincident = coincident_strands(co)
         first_curve += len(strands)
         if _reads_surface(obj, slot):
             made.curve_attributes, made.uv = _root_data(obj, mod, psys, strands, check)

@@ -74,6 +74,38 @@ def setup(roughness, radial_roughness, coat):
     return variance(r), logistic_scale(radial_roughness), variance(m0)
 
 
+def _invert(fn, target, lo=0.001, hi=1.0, steps=60):
+    """x in [lo, hi] with fn(x) = target for an increasing fn (bisection,
+    vectorized): the roughness whose mapped variance or scale is target."""
+    a = np.full(np.shape(target), lo)
+    b = np.full(np.shape(target), hi)
+    for _ in range(steps):
+        m = 0.5 * (a + b)
+        below = fn(m) < target
+        a = np.where(below, m, a)
+        b = np.where(below, b, m)
+    return 0.5 * (a + b)
+
+
+def blur(lobes, rows, k, roughness):
+    """Cycles' bsdf_hair_chiang_blur (Filter Glossy) on slot k at ``rows``:
+    the mapped v, s and m0 (variances and logistic scale, not the node's
+    roughnesses) raised to at least ``roughness``.  Ember keeps the node's
+    values, so the blurred ones are mapped back: roughness and radial
+    roughness whose setup gives max(roughness, v) and max(roughness, s),
+    and the coat that gives max(roughness, m0).  In place."""
+    r = np.clip(np.sqrt(lobes.alpha[rows, k]), 0.001, 1.0)
+    v, s, m0 = setup(r, lobes.radial_roughness[rows, k], lobes.coat[rows, k])
+    r0 = np.clip((1.0 - np.clip(lobes.coat[rows, k], 0.0, 1.0)) * r, 0.001, 1.0)
+    r_new = np.where(roughness > v, _invert(variance, roughness), r)
+    r0_new = np.where(roughness > m0, _invert(variance, roughness), r0)
+    lobes.alpha[rows, k] = np.where(roughness > v, r_new * r_new, lobes.alpha[rows, k])
+    lobes.radial_roughness[rows, k] = np.where(roughness > s, _invert(logistic_scale, roughness),
+                                               lobes.radial_roughness[rows, k])
+    lobes.coat[rows, k] = np.where((roughness > v) | (roughness > m0), np.clip(1.0 - r0_new / r_new, 0.0, 1.0),
+                                   lobes.coat[rows, k])
+
+
 # ----------------------------------------------------------------------------
 # The model's terms (vectorized)
 
