@@ -1,0 +1,180 @@
+"""Panoramic cameras against live Cycles (issue 23; engine/panorama.py):
+every panorama_type of Blender 5.0 (equirectangular with a latitude and
+longitude range, the equiangular cubemap face, the mirror ball, the
+equidistant, equisolid and polynomial fisheyes, the central cylinder),
+each with the frame shifted, on a 40 x 28 frame (the fisheyes' sensor fit
+and aspect matter) of a room whose six walls have six colours, open at the
+top onto a transparent film, with emitting objects about the camera.
+Emission only (no bounce): what is compared is where each ray goes.  Both
+renderers' RGBA seeds by seed_block_test (Welch t per 4 x 4 block and of
+the image mean, power printed).  Beyond a fisheye's rim both are black and
+opaque (Cycles traces nothing there, transparent film or not).  Also: the
+panoramic depth of field, camera motion blur, and the Vector pass of a
+moving panoramic camera against Cycles' pixel by pixel."""
+import math
+import os
+
+import bpy
+import numpy as np
+import pytest
+
+from ember_testlib import (add_object, empty_factory_scene, multilayer_output, node_material, read_multilayer_exr,
+                           render_array, seed_block_test, setup_cycles, setup_ember, small_resolution)
+from test_motion_parity import _linear_keys
+
+WIDTH, HEIGHT = 40, 28
+SEEDS, SPP = 4, 8
+
+# Each type's settings, away from Blender's defaults where it has any.
+PANORAMAS = {
+    'EQUIRECTANGULAR': dict(latitude_min=-1.2, latitude_max=1.4, longitude_min=-2.8, longitude_max=2.6),
+    'EQUIANGULAR_CUBEMAP_FACE': {},
+    'MIRRORBALL': {},
+    'FISHEYE_EQUIDISTANT': dict(fisheye_fov=3.4),
+    'FISHEYE_EQUISOLID': dict(fisheye_lens=6.0, fisheye_fov=3.2),
+    'FISHEYE_LENS_POLYNOMIAL': dict(fisheye_fov=2.0, fisheye_polynomial_k0=-1e-4, fisheye_polynomial_k1=-0.06,
+                                    fisheye_polynomial_k2=1e-5, fisheye_polynomial_k3=2e-6,
+                                    fisheye_polynomial_k4=-2e-8),
+    'CENTRAL_CYLINDRICAL': dict(central_cylindrical_range_u_min=-2.0, central_cylindrical_range_u_max=2.2,
+                                central_cylindrical_range_v_min=-1.1, central_cylindrical_range_v_max=0.9,
+                                central_cylindrical_radius=1.3),
+}
+WALLS = ((0.9, 0.2, 0.2), (0.2, 0.8, 0.3), (0.2, 0.3, 0.9), (0.9, 0.8, 0.2), (0.7, 0.2, 0.8), (0.2, 0.8, 0.8))
+
+
+def emission(name, color, strength=1.0):
+    return node_material(name, 'ShaderNodeEmission', {'Color': (*color, 1.0), 'Strength': strength})
+
+
+def room(scene, open_top=True):
+    """A 12 m cube about the origin, one colour a wall; its top face removed
+    (the world, on a transparent film, shows there) when ``open_top``."""
+    import bmesh
+    cube = add_object(bpy.ops.mesh.primitive_cube_add, "room", emission("wall0", WALLS[0]), size=12.0)
+    for k, color in enumerate(WALLS[1:], 1):
+        cube.data.materials.append(emission(f"wall{k}", color))
+    mesh = bmesh.new()
+    mesh.from_mesh(cube.data)
+    mesh.faces.ensure_lookup_table()
+    top = None
+    for k, face in enumerate(mesh.faces):
+        face.material_index = k
+        if face.calc_center_median().z > 5.9:
+            top = face
+    if open_top:
+        bmesh.ops.delete(mesh, geom=[top], context='FACES_ONLY')
+    mesh.to_mesh(cube.data)
+    mesh.free()
+    things = ((bpy.ops.mesh.primitive_uv_sphere_add, (3.0, 1.0, 0.5), (1.0, 0.6, 0.3), dict(radius=0.9)),
+              (bpy.ops.mesh.primitive_cube_add, (-2.0, 3.0, -1.0), (0.3, 1.0, 0.6), dict(size=1.4)),
+              (bpy.ops.mesh.primitive_uv_sphere_add, (0.5, -3.0, 2.0), (2.0, 2.0, 2.0), dict(radius=0.6)),
+              (bpy.ops.mesh.primitive_cone_add, (1.0, 0.5, -3.0), (0.2, 0.4, 1.5), dict(radius1=1.0, depth=1.5)),
+              (bpy.ops.mesh.primitive_cube_add, (-3.5, -1.5, 1.5), (1.2, 1.2, 0.1), dict(size=1.0)))
+    for k, (op, location, color, kwargs) in enumerate(things):
+        add_object(op, f"thing{k}", emission(f"thing{k}", color), location=location, **kwargs)
+    scene.world.color = (0.4, 0.4, 0.4)
+    scene.render.film_transparent = True
+
+
+def panoramic_scene(kind, open_top=True):
+    scene = empty_factory_scene()
+    room(scene, open_top)
+    camera = scene.camera
+    camera.location = (0.3, -0.2, 0.1)
+    camera.rotation_euler = (math.radians(80.0), math.radians(10.0), math.radians(30.0))
+    data = camera.data
+    data.type = 'PANO'
+    data.panorama_type = kind
+    for name, value in PANORAMAS[kind].items():
+        setattr(data, name, value)
+    data.shift_x, data.shift_y = 0.03, -0.02
+    small_resolution(scene, WIDTH, HEIGHT)
+    return scene
+
+
+def seeds(scene, folder, name, spp=SPP, count=SEEDS):
+    out = {}
+    for engine, setup in (('EMBER', setup_ember), ('CYCLES', setup_cycles)):
+        images = []
+        for seed in range(count):
+            setup(scene, spp, seed, 0)
+            images.append(render_array(scene, folder, f"{name}_{engine}_{seed}").astype(np.float64))
+        out[engine] = np.array(images)
+    from addon import engine as ember_engine
+    log = ember_engine.RENDER_LOG[-1]
+    assert log['error'] is None, log['error']
+    assert not [w for w in log.get('warnings', ()) if 'camera' in w.lower()], log.get('warnings')
+    return out['EMBER'], out['CYCLES']
+
+
+@pytest.mark.parametrize("kind", list(PANORAMAS))
+def test_panorama_matches_cycles(kind, registered_addon, needs_engine, tmp_path):
+    require_type(kind)
+    scene = panoramic_scene(kind)
+    ember, cycles = seeds(scene, tmp_path, kind.lower())
+    # the view must see several walls, the objects and, but for the cubemap face, the open top
+    assert len(np.unique(np.round(cycles.mean(axis=0)[..., :3], 2).reshape(-1, 3), axis=0)) > 6
+    if kind.startswith('FISHEYE') or kind == 'MIRRORBALL':
+        rim = (cycles[..., :3].max(axis=(0, 3)) == 0) & (cycles[..., 3].min(axis=0) == 1)
+        assert rim.sum() >= 20, "the frame must reach beyond the rim"
+        assert (ember[..., :3].max(axis=(0, 3))[rim] == 0).all() and (ember[..., 3][:, rim] == 1).all()
+    seed_block_test(f"panorama {kind} blocks", f"panorama {kind} mean", f"panorama {kind}", ember, cycles)
+
+
+def require_type(kind):
+    from ember_testlib import require
+    items = bpy.types.Camera.bl_rna.properties['panorama_type'].enum_items.keys()
+    require(kind in items, f"this Blender has no {kind} panorama")
+
+
+def test_panoramic_depth_of_field_matches_cycles(registered_addon, needs_engine, tmp_path):
+    """Cycles' panoramic lens: the aperture perpendicular to each ray, the
+    focus at a distance along the ray (objects at 3 to 4 m, focused at 2)."""
+    scene = panoramic_scene('EQUIRECTANGULAR')
+    dof = scene.camera.data.dof
+    dof.use_dof, dof.focus_distance, dof.aperture_fstop = True, 2.0, 0.04
+    ember, cycles = seeds(scene, tmp_path, "pano_dof", spp=16)
+    seed_block_test("panorama dof blocks", "panorama dof mean", "panorama depth of field", ember, cycles)
+
+
+def test_panoramic_camera_motion_blur_matches_cycles(registered_addon, needs_engine, tmp_path):
+    """A fisheye turning 30 degrees and moving 0.4 m over the shutter."""
+    scene = panoramic_scene('FISHEYE_EQUIDISTANT')
+    camera = scene.camera
+    start = tuple(camera.rotation_euler)
+    _linear_keys(camera, 'rotation_euler', [start, (start[0], start[1], start[2] + math.radians(60.0))])
+    _linear_keys(camera, 'location', [(0.3, -0.6, 0.1), (0.3, 0.2, 0.1)])
+    scene.render.use_motion_blur = True
+    scene.render.motion_blur_shutter = 0.5
+    scene.frame_set(2)
+    ember, cycles = seeds(scene, tmp_path, "pano_blur", spp=16)
+    seed_block_test("panorama blur blocks", "panorama blur mean", "panorama camera motion blur", ember, cycles)
+
+
+def test_panoramic_vector_pass_matches_cycles(registered_addon, needs_engine, tmp_path):
+    """The Vector pass of an equisolid fisheye moving and turning between
+    frames 1 and 3 (motion blur off, frame 2; Cycles' direction_to_panorama
+    at each step), in a closed room, per block over the seeds."""
+    scene = panoramic_scene('FISHEYE_EQUISOLID', open_top=False)
+    camera = scene.camera
+    start = tuple(camera.rotation_euler)
+    _linear_keys(camera, 'rotation_euler', [(start[0] - 0.2, start[1], start[2] - 0.3),
+                                            (start[0] + 0.2, start[1], start[2] + 0.3)])
+    _linear_keys(camera, 'location', [(0.3, -0.8, 0.1), (0.3, 0.4, 0.4)])
+    scene.frame_set(2)
+    bpy.context.view_layer.use_pass_vector = True
+    multilayer_output(scene)
+    out = {}
+    for engine, setup in (('EMBER', setup_ember), ('CYCLES', setup_cycles)):
+        images = []
+        for seed in range(SEEDS):
+            setup(scene, SPP, seed, 0)
+            scene.render.filepath = os.path.join(str(tmp_path), f"{engine}_{seed}.exr")
+            bpy.ops.render.render(write_still=True)
+            images.append(read_multilayer_exr(scene.render.filepath)['Vector'])
+        out[engine] = np.array(images, np.float64)
+    ember, cycles = out['EMBER'], out['CYCLES']
+    inside = np.abs(cycles).max(axis=(0, 3)) > 0
+    assert inside.mean() > 0.5 and (np.abs(cycles.mean(axis=0))[inside] > 0.5).mean() > 0.5
+    np.testing.assert_array_equal(np.abs(ember).max(axis=(0, 3)) > 0, inside)   # zero beyond the rim
+    seed_block_test("panorama vector blocks", "panorama vector mean", "panorama Vector", ember, cycles)
