@@ -177,7 +177,7 @@ def _media(scene, accel, tris, camera, from_camera=True):
     if table is None:
         return None
     table.attach(material_table(scene), scene, tris)
-    if from_camera and scene.camera.kind == "PERSP":
+    if from_camera and scene.camera.kind in ("PERSP", "PANO"):   # rays from one point
         media.camera_media(table, accel, tris, np.asarray(scene.camera.matrix, np.float64)[:3, 3], camera.forward)
     table.warnings = [f"object {name!r}: its volume mesh is not closed; paths may never leave the volume"
                       for name in media.open_volume_meshes(scene)]
