@@ -229,3 +229,24 @@ def test_validation():
         with pytest.raises(SceneError):
             validate_camera(cam)
     validate_camera(pano_camera("FISHEYE_EQUISOLID"))
+
+
+def test_window_coordinate():
+    """Cycles' camera_world_to_ndc for a panoramic camera: (u, v) of the
+    point's direction (direction_to_panorama, no shift), z = 0."""
+    from engine.nodes.input_nodes import _window_coords
+
+    class Points:
+        def __init__(self, camera, p):
+            self.camera, self.p = camera, p
+
+        def __len__(self):
+            return len(self.p)
+    cam = pano_camera("FISHEYE_EQUIDISTANT", matrix=LEVEL.copy(), shift_x=0.1)
+    cam.matrix[:3, 3] = (1.0, 2.0, 3.0)
+    pano = Panorama(cam)
+    u, v = np.array([0.5, 0.3, 0.62]), np.array([0.5, 0.7, 0.41])
+    d = pano.to_local(pano.to_direction(u, v)) @ LEVEL[:3, :3].T
+    points = np.array([1.0, 2.0, 3.0]) + d * np.array([[2.0], [0.5], [7.0]])
+    out = _window_coords(Points(cam, points))
+    np.testing.assert_allclose(out, np.stack([u, v, np.zeros(3)], axis=1), atol=1e-12)
