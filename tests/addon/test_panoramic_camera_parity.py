@@ -23,7 +23,7 @@ from ember_testlib import (add_object, empty_factory_scene, multilayer_output, n
 from test_motion_parity import _linear_keys
 
 WIDTH, HEIGHT = 40, 28
-SEEDS, SPP = 4, 8
+SEEDS, SPP = 6, 8
 CYCLES_FACTOR = 16
 VECTOR_SEEDS = 6
 
