@@ -10,6 +10,7 @@ import numpy as np
 
 from . import kernels
 from .motion import decompose, transform_at
+from .panorama import Panorama
 from .sampling import concentric_disk, upper_bound
 from .shutter import Shutter
 from .vec import column
@@ -192,6 +193,7 @@ class CameraModel:
         self.motion = None if motion is None else decompose(motion)
         self.shutter = Shutter(cam)
         self.zoom = _zoom_steps(cam)
+        self.pano = Panorama(cam) if cam.kind == "PANO" else None
 
     @property
     def forward(self):
@@ -203,10 +205,10 @@ class CameraModel:
 
         Returns world origins, unit directions and the distance to the far clip.
         """
-        px = pixel % self.width
-        py = pixel // self.width
-        fx = self.x0 + px + 0.5 + self.filter.sample(u_fx)
-        fy = self.y0 + (self.height - 1 - py) + 0.5 + self.filter.sample(u_fy)
+        fx, fy = self._raster(pixel, u_fx, u_fy)
+        if self.pano is not None:
+            o, d = self._panoramic(fx, fy, u_l1, u_l2)
+            return self._to_world(o, d, time) + (np.full(len(d), self.cam.clip_end - self.cam.clip_start),)
         sx = self.xmin + fx * self.pw
         sy = self.ymin + fy * self.ph
         if self.zoom is not None and time is not None:
@@ -226,11 +228,51 @@ class CameraModel:
         inv_z = 1.0 / np.maximum(-d[:, 2], 1e-12)
         o = o + d * (self.cam.clip_start * inv_z)[:, None]
         tmax = (self.cam.clip_end - self.cam.clip_start) * inv_z
+        return self._to_world(o, d, time) + (tmax,)
+
+    def _raster(self, pixel, u_fx, u_fy):
+        """Full-frame raster positions (y up) of camera samples in window pixels."""
+        px = pixel % self.width
+        py = pixel // self.width
+        fx = self.x0 + px + 0.5 + self.filter.sample(u_fx)
+        fy = self.y0 + (self.height - 1 - py) + 0.5 + self.filter.sample(u_fy)
+        return fx, fy
+
+    def _to_world(self, o, d, time):
+        """Camera-frame rays in the world, by the camera at ``time`` when it moves."""
         if self.motion is not None and time is not None:
             rot, pos = transform_at(self.motion, time)
             rot = rot / np.linalg.norm(rot, axis=1, keepdims=True)   # rigid, as self.rot
-            return np.einsum("nij,nj->ni", rot, o) + pos, np.einsum("nij,nj->ni", rot, d), tmax
-        return o @ self.rot.T + self.pos, d @ self.rot.T, tmax
+            return np.einsum("nij,nj->ni", rot, o) + pos, np.einsum("nij,nj->ni", rot, d)
+        return o @ self.rot.T + self.pos, d @ self.rot.T
+
+    def _pano_uv(self, fx, fy):
+        full_w, full_h = float(self.cam.resolution[0]), float(self.cam.resolution[1])
+        return fx / full_w + self.pano.shift[0], fy / full_h + self.pano.shift[1]
+
+    def _panoramic(self, fx, fy, u_l1, u_l2):
+        """Camera-frame rays of a panoramic camera (Cycles'
+        camera_sample_panorama), starting at the near clip along the ray
+        (not the view axis).  Samples beyond a fisheye's rim get the view
+        axis: ``outside`` tells them, and they are not traced."""
+        p = self.pano.to_direction(*self._pano_uv(fx, fy))
+        p[~p.any(axis=1)] = self.pano.from_local(np.array([[0.0, 0.0, -1.0]]))[0]
+        o = np.zeros_like(p)
+        if self.aperture > 0:
+            lx, ly = concentric_disk(u_l1, u_l2)
+            o, p = self.pano.aperture(p, lx * self.aperture, ly * self.aperture, self.cam.focus_distance)
+        o, d = self.pano.to_local(o), self.pano.to_local(p)
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        return o + d * self.cam.clip_start, d
+
+    def outside(self, pixel, u_fx, u_fy):
+        """Which camera samples fall beyond a fisheye's or mirror ball's rim
+        (all False for other cameras): Cycles counts them with nothing
+        written (a zero throughput), so they add 0 to the pixel's mean."""
+        if self.pano is None:
+            return np.zeros(len(pixel), bool)
+        p = self.pano.to_direction(*self._pano_uv(*self._raster(pixel, u_fx, u_fy)))
+        return ~p.any(axis=1)
 
     def spread(self, d):
         """Cycles' compact differentials of camera rays along world directions
@@ -238,6 +280,8 @@ class CameraModel:
         a hit's sd->dP = dP + t dD is made of (lens and zoom left out)."""
         c = np.asarray(d, np.float64) @ self.rot
         n = len(c)
+        if self.pano is not None:
+            return np.zeros(n), self._pano_spread(c)
         if self.cam.kind == "ORTHO":
             return np.full(n, 0.5 * (self.pw + self.ph)), np.zeros(n)
         z = np.maximum(-c[:, 2], 1e-12)
@@ -246,10 +290,33 @@ class CameraModel:
         # |d normalize(P) / dx| = sqrt(|P|^2 - x^2) / |P|^2 for P = (x, y, -1)
         return np.zeros(n), 0.5 * (self.pw * np.sqrt(sy * sy + 1.0) + self.ph * np.sqrt(sx * sx + 1.0)) / l2
 
+    def _pano_spread(self, c):
+        """Cycles' dD of panoramic rays along camera-frame directions c: the
+        mean length of the unit direction's change one pixel right and one
+        up (one pixel back where that leaves the rim; 0 where neither is
+        defined)."""
+        p = self.pano.from_local(c)
+        u, v = self.pano.from_direction(p)
+        centre = p / np.maximum(np.linalg.norm(p, axis=1, keepdims=True), 1e-300)
+        step = 1.0 / float(self.cam.resolution[0]), 1.0 / float(self.cam.resolution[1])
+        total = np.zeros(len(c))
+        for du, dv in ((step[0], 0.0), (0.0, step[1])):
+            done = np.zeros(len(c), bool)
+            for sign in (1.0, -1.0):
+                q = self.pano.to_direction(u + sign * du, v + sign * dv)
+                length = np.linalg.norm(q, axis=1)
+                ok = (length > 0) & ~done
+                total[ok] += np.linalg.norm(q[ok] / length[ok, None] - centre[ok], axis=1)
+                done |= ok
+        return np.where(np.isfinite(total), 0.5 * total, 0.0)
+
     def origin_spread(self, d):
         """``spread`` at the rays' origins on the near clip plane, as Cycles
-        moves ray->dP by nearclip * ray->dD there."""
+        moves ray->dP by nearclip * ray->dD there (along the ray for a
+        panoramic camera)."""
         dp, dd = self.spread(d)
+        if self.pano is not None:
+            return dp + dd * self.cam.clip_start, dd
         z = np.maximum(-(np.asarray(d, np.float64) @ self.rot)[:, 2], 1e-12)
         return dp + dd * (self.cam.clip_start / z), dd
 

@@ -33,7 +33,7 @@ from .integrator.catcher import catcher_triangles
 from .integrator.linking import LightLinks
 from .integrator import Context, subsurface, trace_batch
 from .lights import LightSet
-from .sampler import Sampler
+from .sampler import CAMERA, Sampler
 from .scene import Cancelled, RenderSettings, SceneError
 from .validate import validate_scene, validate_settings
 
@@ -177,7 +177,7 @@ def _media(scene, accel, tris, camera, from_camera=True):
     if table is None:
         return None
     table.attach(material_table(scene), scene, tris)
-    if from_camera and scene.camera.kind == "PERSP":
+    if from_camera and scene.camera.kind in ("PERSP", "PANO"):   # rays from one point
         media.camera_media(table, accel, tris, np.asarray(scene.camera.matrix, np.float64)[:3, 3], camera.forward)
     table.warnings = [f"object {name!r}: its volume mesh is not closed; paths may never leave the volume"
                       for name in media.open_volume_meshes(scene)]
@@ -596,9 +596,26 @@ def _run_batch(ctx, film, pixels, spp, first):
     tile = film.new_tile(int(pixels[0]), int(pixels[-1]) + 1)
     pix = np.repeat(pixels, spp)
     sample = np.tile(np.arange(first, first + spp, dtype=np.uint32), len(pixels))
-    trace_batch(ctx, pix, sample, tile)
+    pix, sample = _beyond_the_rim(ctx, tile, pix, sample)
+    if len(pix):
+        trace_batch(ctx, pix, sample, tile)
     tile.flush()  # binned here, on the batch's thread; merged in order by the caller
     return tile
+
+
+def _beyond_the_rim(ctx, tile, pix, sample):
+    """A fisheye's or mirror ball's camera samples beyond its rim are
+    counted and nothing else (Cycles' zero camera throughput: black and
+    opaque, transparent film or not); the others are returned to trace."""
+    if ctx.bake is not None or getattr(ctx.camera, "pano", None) is None:
+        return pix, sample
+    u = ctx.sampler.get(ctx.sampler.pixel_seeds(pix), sample, CAMERA)
+    out = ctx.camera.outside(pix, u[:, 0], u[:, 1])
+    if out.any():
+        n = int(out.sum())
+        tile.add_camera(pix[out], np.ones(n), np.zeros(n), np.zeros((n, 3)), np.zeros((n, 3)))
+        pix, sample = pix[~out], sample[~out]
+    return pix, sample
 
 
 def _stats(ctx, stats, done, paths, t_trace, settings):

@@ -662,7 +662,7 @@ class Camera:
     """A Blender camera plus the render resolution that frames it.
 
     matrix: (4, 4) camera-to-world; the camera looks down local -Z, +Y up.
-    kind: 'PERSP' or 'ORTHO'.  lens in mm, sensor sizes in mm,
+    kind: 'PERSP', 'ORTHO' or 'PANO' (panoramic).  lens in mm, sensor sizes in mm,
     sensor_fit 'AUTO' | 'HORIZONTAL' | 'VERTICAL', shift in units of the
     fitted sensor size, ortho_scale in metres.
     Depth of field is on when ``aperture_radius > 0`` (metres) or
@@ -705,6 +705,18 @@ class Camera:
     lens_motion: Optional[Tuple[float, float]] = None
     # The Vector pass: camera-to-world (3, 4, 4) at frame - 1, frame, frame + 1.
     vector_motion: Optional[np.ndarray] = None
+    # Panoramic cameras (kind 'PANO', engine/panorama.py): Blender's
+    # panorama_type and its settings (angles in radians, lengths in mm but
+    # the cylinder's, which are in its radius' units).
+    panorama_type: str = "FISHEYE_EQUISOLID"
+    fisheye_fov: float = np.pi
+    fisheye_lens: float = 10.5
+    latitude: Tuple[float, float] = (-0.5 * np.pi, 0.5 * np.pi)
+    longitude: Tuple[float, float] = (-np.pi, np.pi)
+    # k0..k4 of the polynomial fisheye: theta = -(k0 + k1 r + ... + k4 r^4)
+    fisheye_polynomial: Tuple[float, ...] = (-1.17351e-05, -0.0199887, -3.3525e-06, 3.0993e-06, -2.61e-08)
+    # The central cylinder: longitude min, max, height min, max, radius.
+    cylinder: Tuple[float, ...] = (-np.pi, np.pi, -1.0, 1.0, 1.0)
 
 
 # ----------------------------------------------------------------------------

@@ -286,8 +286,10 @@ def validate_camera(cam):
     _finite(m, "camera matrix")
     if getattr(cam, "motion", None) is not None:
         _steps(cam.motion, "camera motion", (4, 4))
-    if cam.kind not in ("PERSP", "ORTHO"):
-        raise SceneError(f"camera: unsupported type {cam.kind!r} (PERSP or ORTHO)")
+    if cam.kind not in ("PERSP", "ORTHO", "PANO"):
+        raise SceneError(f"camera: unsupported type {cam.kind!r} (PERSP, ORTHO or PANO)")
+    if cam.kind == "PANO":
+        _validate_panorama(cam)
     w, h = cam.resolution
     if int(w) < 1 or int(h) < 1:
         raise SceneError(f"camera: resolution {w}x{h} has no pixels")
@@ -297,6 +299,23 @@ def validate_camera(cam):
         raise SceneError(f"camera: unknown sensor fit {cam.sensor_fit!r}")
     if not 0 <= cam.clip_start < cam.clip_end:
         raise SceneError(f"camera: clip start {cam.clip_start} must be below clip end {cam.clip_end}")
+
+
+def _validate_panorama(cam):
+    from .panorama import TYPES
+    kind = getattr(cam, "panorama_type", None)
+    if kind not in TYPES:
+        raise SceneError(f"camera: unknown panorama type {kind!r} (one of {', '.join(TYPES)})")
+    for name in ("fisheye_fov", "fisheye_lens", "sensor_width", "sensor_height"):
+        value = float(getattr(cam, name))
+        if not (np.isfinite(value) and value > 0):
+            raise SceneError(f"camera: {name} must be finite and > 0, got {value}")
+    for name, size in (("latitude", 2), ("longitude", 2), ("fisheye_polynomial", 5), ("cylinder", 5)):
+        values = np.asarray(getattr(cam, name), np.float64)
+        if values.shape != (size,) or not np.isfinite(values).all():
+            raise SceneError(f"camera: {name} must be {size} finite numbers, got {getattr(cam, name)!r}")
+    if not cam.cylinder[4] > 0:
+        raise SceneError(f"camera: the central cylinder's radius must be > 0, got {cam.cylinder[4]}")
 
 
 def validate_settings(s):

@@ -8,7 +8,8 @@ the render stays still.  At a camera ray's first hit the point is carried to
 the previous and next step (the same barycentrics on the moved triangle, the
 instance's transform there) and projected by the camera at that step:
 channels (pre - centre, centre - post) in raster pixels, y up (Cycles'
-raster).  Rows that do not move, and the background, hold 0 where the
+raster; a panoramic camera's (u, v) of the direction to the point times
+the frame's size).  Rows that do not move, and the background, hold 0 where the
 camera is still.
 
 Points and curves follow the same rule with Cycles' centre for them: a
@@ -27,6 +28,7 @@ import numpy as np
 
 from .motion import MotionGeometry, _lerp_steps, transform_at
 from .camera import border_window, view_plane
+from .panorama import Panorama
 from .points import padded_index
 
 STEPS = (0.0, 0.5, 1.0)   # previous frame, the frame, next frame
@@ -76,7 +78,10 @@ class VectorMotion:
         self.x0, self.y0, _, _ = border_window(cam)
         self.xmin, self.ymin, self.pw, self.ph = view_plane(cam)
         self.ortho = cam.kind == "ORTHO"
-        self.panoramic = cam.kind not in ("ORTHO", "PERSP")
+        # Panoramic cameras: Cycles projects by direction_to_panorama (u, v)
+        # times the frame's size, with no shift (primitive_motion_vector).
+        self.pano = Panorama(cam) if cam.kind == "PANO" else None
+        self.size = float(cam.resolution[0]), float(cam.resolution[1])
 
     def _primitives(self, tris, spheres, point_owners, clouds, strands, curve_owners):
         """World (pre, post) of each sphere's centre and each strand key."""
@@ -122,6 +127,9 @@ class VectorMotion:
         m = self.cameras[step]
         rot = m[:3, :3] / np.maximum(np.linalg.norm(m[:3, :3], axis=0, keepdims=True), 1e-300)
         local = (p - m[:3, 3]) @ rot
+        if self.pano is not None:
+            u, v = self.pano.from_direction(self.pano.from_local(local))
+            return np.stack([u * self.size[0], v * self.size[1]], axis=1)
         if self.ortho:
             sx, sy = local[:, 0], local[:, 1]
         else:
@@ -173,8 +181,6 @@ class VectorMotion:
     def vectors(self, p, prim, u=None):
         """(N, 4) Cycles' Vector of first hits at ``p`` on rows ``prim``
         (``u``: Embree's curve parameter of curve hits)."""
-        if self.panoramic:
-            return np.zeros((len(p), 4))
         centre, pre, post = self.centres(p, np.asarray(prim, np.int64), u)
         with np.errstate(over="ignore", invalid="ignore"):
             at = self._raster(centre, 1)

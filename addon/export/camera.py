@@ -64,7 +64,7 @@ def camera_from_blender(cam_obj, render):
     data = cam_obj.data
     matrix = _without_scale(cam_obj.matrix_world)
     kind = data.type
-    if kind not in ('PERSP', 'ORTHO'):
+    if kind not in ('PERSP', 'ORTHO', 'PANO'):
         warnings.append(f"Camera '{cam_obj.name}': {kind.lower()} cameras are not supported, "
                         "rendered as perspective")
         kind = 'PERSP'
@@ -76,8 +76,8 @@ def camera_from_blender(cam_obj, render):
     fstop = float(data.dof.aperture_fstop) if data.dof.use_dof else 0.0
     aperture = 0.0
     if fstop > 0.0:
-        # Cycles: aperture radius = focal length / (2 f-stop); 1/(2 f) for ortho.
-        aperture = (data.lens * 1e-3 if kind == 'PERSP' else 1.0) / (2.0 * max(fstop, 1e-5))
+        # Cycles: aperture radius = focal length / (2 f-stop) (panoramic too); 1/(2 f) for ortho.
+        aperture = (data.lens * 1e-3 if kind != 'ORTHO' else 1.0) / (2.0 * max(fstop, 1e-5))
     camera = renderer.Camera(
         matrix=matrix, kind=kind, lens=float(data.lens),
         sensor_width=float(data.sensor_width), sensor_height=float(data.sensor_height),
@@ -86,6 +86,34 @@ def camera_from_blender(cam_obj, render):
         clip_end=float(data.clip_end), focus_distance=focus_distance(cam_obj, matrix),
         fstop=fstop, aperture_radius=aperture, resolution=(width, height),
         pixel_aspect=(float(render.pixel_aspect_x), float(render.pixel_aspect_y)),
-        border=border,
+        border=border, **(panorama(data) if kind == 'PANO' else {}),
     )
     return camera, warnings
+
+
+# Blender's panorama settings and their defaults (Blender 5.0's DNA defaults).
+PANORAMA_DEFAULTS = (
+    ("panorama_type", "FISHEYE_EQUISOLID"), ("fisheye_fov", np.pi), ("fisheye_lens", 10.5),
+    ("latitude_min", -0.5 * np.pi), ("latitude_max", 0.5 * np.pi), ("longitude_min", -np.pi),
+    ("longitude_max", np.pi), ("fisheye_polynomial_k0", -1.1735100088117179e-05),
+    ("fisheye_polynomial_k1", -0.019988736137747765), ("fisheye_polynomial_k2", -3.3525000162626384e-06),
+    ("fisheye_polynomial_k3", 3.099300101894187e-06), ("fisheye_polynomial_k4", -2.6100000383166844e-08),
+    ("central_cylindrical_range_u_min", -np.pi), ("central_cylindrical_range_u_max", np.pi),
+    ("central_cylindrical_range_v_min", -1.0), ("central_cylindrical_range_v_max", 1.0),
+    ("central_cylindrical_radius", 1.0))
+
+
+def panorama(data):
+    """A panoramic camera's settings, as Cycles' blender_camera_from_object
+    reads them: on the Camera datablock since Blender 4.0 (on its ``cycles``
+    settings before; the central cylinder is Blender 4.4's)."""
+    source = data if hasattr(data, 'panorama_type') else getattr(data, 'cycles', data)
+    got = {name: getattr(source, name, default) for name, default in PANORAMA_DEFAULTS}
+    number = {name: float(value) for name, value in got.items() if name != 'panorama_type'}
+    return dict(
+        panorama_type=str(got['panorama_type']), fisheye_fov=number['fisheye_fov'],
+        fisheye_lens=number['fisheye_lens'], latitude=(number['latitude_min'], number['latitude_max']),
+        longitude=(number['longitude_min'], number['longitude_max']),
+        fisheye_polynomial=tuple(number[f"fisheye_polynomial_k{i}"] for i in range(5)),
+        cylinder=tuple(number["central_cylindrical_" + name]
+                       for name in ("range_u_min", "range_u_max", "range_v_min", "range_v_max", "radius")))

@@ -53,6 +53,11 @@ def _window_coords(ctx):
     m = np.asarray(camera.matrix, dtype=np.float64)
     rot = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0, keepdims=True)
     local = (ctx.p - m[:3, 3]) @ rot
+    if camera.kind == "PANO":   # the direction's panorama (u, v), unshifted
+        from ..panorama import Panorama
+        pano = Panorama(camera)
+        out[:, 0], out[:, 1] = pano.from_direction(pano.from_local(local))
+        return np.where(np.isfinite(out), out, 0.0)
     if camera.kind == "ORTHO":
         sx, sy = local[:, 0], local[:, 1]
     else:
