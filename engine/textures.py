@@ -23,6 +23,7 @@ from .nodes import REGISTRY, ShadingContext, as_context
 from .nodes.color_math import EXTRA_BLENDS
 from .nodes.context import _bary_of_offsets
 from .nodes.rays import make_orthonormals
+from .projection import to_uv
 from .scene import (TEXTURE_TYPES, Bump, ImageTexture, Math, MixColor, NodeOutput, NormalMap)
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
@@ -284,8 +285,6 @@ class Compiler:
         """The Environment Texture's image UV: its Vector (the world
         position when unlinked) as a direction, equirectangular or mirror
         ball (svm_node_tex_environment)."""
-        # engine.environment imports this module: imported here, not at the top.
-        from .environment import to_uv
         vector = (lambda ctx: ctx.p) if node.uv is None else self.color(node.uv)
 
         def coords(ctx):

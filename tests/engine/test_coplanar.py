@@ -1,0 +1,103 @@
+"""Coincident faces between objects (engine.coplanar): found where two
+objects' faces share a plane and overlap, not where they only touch, lie
+apart or sit off the plane; the same under a tilt and for instance batches;
+cheap for 2 M triangles."""
+import time
+
+import numpy as np
+
+from engine.coplanar import coincident_pairs
+from engine.instance_batch import InstanceBatch
+from engine.scene import Instance, Mesh, Scene
+from engine.testscenes import box, quad
+
+
+def moved(x, y, z, scale=1.0):
+    m = np.eye(4)
+    m[:3, :3] *= scale
+    m[:3, 3] = x, y, z
+    return m
+
+
+def tilt():
+    a, b = 0.4, 0.9
+    rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    rz = np.array([[np.cos(b), -np.sin(b), 0], [np.sin(b), np.cos(b), 0], [0, 0, 1]])
+    m = np.eye(4)
+    m[:3, :3] = rz @ rx
+    m[:3, 3] = 0.3, -1.7, 2.2
+    return m
+
+
+def floor(size=12.0):
+    h = size / 2
+    return quad([[-h, -h, 0], [h, -h, 0], [h, h, 0], [-h, h, 0]])
+
+
+def scene_of(meshes, placements, names):
+    """placements: (mesh index, matrix) per instance."""
+    instances = [Instance(m, matrix=matrix, name=name) for (m, matrix), name in zip(placements, names)]
+    return Scene(meshes=meshes, instances=instances)
+
+
+def test_a_box_resting_on_a_floor_is_named():
+    scene = scene_of([floor(), box()], [(0, np.eye(4)), (1, moved(0.2, 0.1, 0.5)), (1, moved(3, 0, 0.5001))],
+                     ["Floor", "Glass", "Raised"])
+    pairs, left_out = coincident_pairs(scene)
+    assert pairs == [("Floor", "Glass")] and left_out == 0
+
+
+def test_touching_apart_and_parallel_faces_are_not():
+    scene = scene_of([floor(2.0), box()], [
+        (0, np.eye(4)), (0, moved(2.0, 0, 0)),        # two floor tiles sharing an edge
+        (0, moved(5.0, 0, 0)),                        # a third far away
+        (1, moved(0, 0, 0.5 + 1e-4)),                 # a box 0.1 mm up
+        (1, moved(0, 0, -0.5))],                      # a box below the floor: its top touches it from below
+        ["TileA", "TileB", "TileC", "Up", "Below"])
+    pairs, _ = coincident_pairs(scene)
+    # The box below shares the floor's plane with its top face (it overlaps it).
+    assert pairs == [("TileA", "Below")]
+
+
+def test_found_under_a_tilt_with_opposite_normals():
+    """The box's bottom faces down, the floor up: one plane either way; the
+    whole arrangement rotated, so the float planes differ in their last bits."""
+    m = tilt()
+    scene = scene_of([floor(), box()], [(0, m), (1, m @ moved(0.2, 0.1, 0.5))], ["Floor", "Box"])
+    assert coincident_pairs(scene)[0] == [("Floor", "Box")]
+    lifted = scene_of([floor(), box()], [(0, m), (1, m @ moved(0.2, 0.1, 0.5 + 1e-4))], ["Floor", "Box"])
+    assert coincident_pairs(lifted)[0] == []
+
+
+def test_instance_batches_and_the_budget():
+    templates = [Instance(1, name="Crate")]
+    matrices = np.array([moved(x, 0, 0.5) for x in (-3.0, 0.0, 3.0)] + [moved(0, 3, 0.7)])
+    batch = InstanceBatch(templates, np.zeros(4, np.int64), matrices, np.zeros(4))
+    scene = Scene(meshes=[floor(), box()], instances=batch)
+    # A batch has no Floor: the crates touch nothing coplanar but each other's planes apart.
+    assert coincident_pairs(scene) == ([], 0)
+    both = InstanceBatch([Instance(0, name="Floor"), Instance(1, name="Crate")], np.array([0, 1, 1, 1, 1]),
+                         np.concatenate([[np.eye(4)], matrices]), np.zeros(5))
+    assert coincident_pairs(Scene(meshes=[floor(), box()], instances=both)) == ([("Floor", "Crate")], 0)
+    pairs, left_out = coincident_pairs(Scene(meshes=[floor(), box()], instances=both), budget=2 + 12)
+    assert pairs == [("Floor", "Crate")] and left_out == 3 * 12
+
+
+def grid(n):
+    """A (n x n)-quad heightmap, 2 n^2 triangles, flat at z = 0 in its middle."""
+    x, y = np.meshgrid(np.linspace(-10, 10, n + 1), np.linspace(-10, 10, n + 1))
+    z = np.where(np.hypot(x, y) < 3.0, 0.0, 0.3 * np.sin(x) * np.cos(0.7 * y))
+    positions = np.stack([x, y, z], axis=-1).reshape(-1, 3)
+    i = np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]
+    a, b, c, d = i.ravel(), i.ravel() + 1, i.ravel() + n + 2, i.ravel() + n + 1
+    return Mesh(positions, np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]))
+
+
+def test_two_million_triangles_stay_cheap():
+    scene = scene_of([grid(1000), box()], [(0, np.eye(4)), (1, moved(0.5, 0.5, 0.5))], ["Terrain", "Box"])
+    start = time.perf_counter()
+    pairs, _ = coincident_pairs(scene)
+    seconds = time.perf_counter() - start
+    print(f"coincident faces over {2 * 1000 ** 2 + 12} triangles: {seconds:.2f} s")
+    assert pairs == [("Terrain", "Box")]
+    assert seconds < 20.0
