@@ -11,9 +11,12 @@ origin off the plane).  The renderers cannot agree there, so the exporter
 names such pairs (``coincident_pairs``).
 
 The test: unit normals equal within NORMAL_TOL (quantized), plane offsets
-within REL_TOL of the scene's size (sorted runs), and the two objects'
-triangles' bounds overlapping in the plane by more than that tolerance.
-Pure NumPy, about one sort of the scene's triangles (docs/benchmarks.md).
+within REL_TOL of the scene's size (sorted runs), and two faces of the two
+objects overlapping in the plane by more than that tolerance (bounds, then
+separating axes).  Faces facing opposite ways (a box's bottom on a floor)
+count only when one object lets rays inside (a volume or a PASSABLE lobe):
+a closed opaque box hides both from every ray.  Pure NumPy, about one sort
+of the scene's triangles (docs/benchmarks.md).
 """
 import numpy as np
 
@@ -25,24 +28,29 @@ NORMAL_TOL = 1e-5
 # and per batch of copies of one mesh.
 BUDGET = 8_000_000
 CHUNK = 1 << 17
+QUANTA = int(round(1.0 / NORMAL_TOL)) + 1   # a quantized component lies in [-QUANTA, QUANTA]
+# Lobes that let a ray inside an object (or through its face).
+PASSABLE = ("glass", "refraction", "translucent", "transparent", "ray_portal")
 # Sign reference for the normals: no common plane is perpendicular to it, so
 # coplanar faces facing either way get the same canonical normal.
-QUANTA = int(round(1.0 / NORMAL_TOL)) + 1   # a quantized component lies in [-QUANTA, QUANTA]
 SIGN_REFERENCE = np.array([0.8017837, 0.5345225, 0.2672612]) + np.array([0.0, 1e-3, -2e-3])
 
 
 def coincident_pairs(scene, budget=BUDGET):
     """([(name_a, name_b), ...] of instances with coincident faces, in
-    order of first appearance; number of triangles left unchecked)."""
+    order of first appearance; number of triangles left unchecked).  Faces
+    facing opposite ways (a box's bottom on a floor) only count when one of
+    the two objects lets rays inside (PASSABLE): closed opaque objects hide
+    them from every ray."""
     rows, left_out = _plane_rows(scene, budget)
     if rows is None:
         return [], left_out
-    normal, offset, lo, hi, owner = rows
-    tol = REL_TOL * max(float((hi.max(axis=0) - lo.min(axis=0)).max()), 1e-30)
-    groups = _plane_groups(normal, offset, owner, tol)
+    tol = REL_TOL * max(float((rows["hi"].max(axis=0) - rows["lo"].min(axis=0)).max()), 1e-30)
+    groups = _plane_groups(rows["normal"], rows["offset"], rows["owner"], tol)
+    plane = _Plane(scene, rows, tol)
     names = field_of_each(scene.instances, "name", "object")
     pairs = []
-    for a, b in _overlapping_owners(groups, normal, lo, hi, owner, tol):
+    for a, b in _overlapping_owners(groups, plane):
         pair = (names[a], names[b])
         if pair not in pairs:
             pairs.append(pair)
@@ -75,11 +83,11 @@ def _plane_rows(scene, budget):
             copies = which[start:start + step]
             for first in range(0, t, CHUNK):
                 local = positions[triangles[first:first + CHUNK]]
-                parts.append(_rows_of(local, matrices[copies], copies))
+                parts.append(_rows_of(local, matrices[copies], copies, first))
         used += len(which) * t
     if not parts:
         return None, left_out
-    return tuple(np.concatenate(column) for column in zip(*parts)), left_out
+    return {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}, left_out
 
 
 def _matrices(instances):
@@ -88,21 +96,23 @@ def _matrices(instances):
     return np.array([np.asarray(inst.matrix, np.float64) for inst in instances]).reshape(-1, 4, 4)
 
 
-def _rows_of(local, matrices, owners):
-    """_plane_rows' columns for the copies ``matrices`` (K, 4, 4) of one mesh."""
+def _rows_of(local, matrices, owners, first):
+    """_plane_rows' columns for the copies ``matrices`` (K, 4, 4) of one
+    mesh's triangles first.. (``local``, object space)."""
     world = _corners(local, matrices)
     v0, v1, v2 = world[:, 0], world[:, 1], world[:, 2]
     n = _cross(v1 - v0, v2 - v0)
     length = np.sqrt(n[:, 0] ** 2 + n[:, 1] ** 2 + n[:, 2] ** 2)
     keep = length > 0
     n = n[keep] / length[keep, None]
-    n *= np.where(n @ SIGN_REFERENCE < 0, -1.0, 1.0)[:, None]
+    facing = np.where(n @ SIGN_REFERENCE < 0, -1, 1).astype(np.int8)
+    n *= facing[:, None]
     v0, v1, v2 = v0[keep], v1[keep], v2[keep]
-    offset = n[:, 0] * v0[:, 0] + n[:, 1] * v0[:, 1] + n[:, 2] * v0[:, 2]
-    lo = np.minimum(np.minimum(v0, v1), v2).astype(np.float32)
-    hi = np.maximum(np.maximum(v0, v1), v2).astype(np.float32)
-    owner = np.repeat(np.asarray(owners, np.int32), len(local))[keep]
-    return n.astype(np.float32), offset, lo, hi, owner
+    tri = np.tile(np.arange(first, first + len(local), dtype=np.int32), len(matrices))[keep]
+    return dict(normal=n.astype(np.float32), offset=n[:, 0] * v0[:, 0] + n[:, 1] * v0[:, 1] + n[:, 2] * v0[:, 2],
+                lo=np.minimum(np.minimum(v0, v1), v2).astype(np.float32),
+                hi=np.maximum(np.maximum(v0, v1), v2).astype(np.float32),
+                owner=np.repeat(np.asarray(owners, np.int32), len(local))[keep], tri=tri, facing=facing)
 
 
 def _corners(local, matrices):
@@ -152,12 +162,43 @@ def _plane_groups(normal, offset, owner, tol):
     return order, np.flatnonzero(new)
 
 
-def _overlapping_owners(groups, normal, lo, hi, owner, tol):
-    """(a, b) instance pairs, a < b, whose faces of one plane group overlap
-    in the plane (bounds, less the group's dominant normal axis)."""
+class _Plane:
+    """What the pair stage reads: the rows, each instance's mesh, matrix and
+    whether rays get inside it, and the tolerance."""
+
+    def __init__(self, scene, rows, tol):
+        self.scene, self.rows, self.tol = scene, rows, tol
+        self.mesh_of = meshes_of(scene.instances)
+        self.matrices = _matrices(scene.instances)
+        materials = field_of_each(scene.instances, "materials", ())
+        passable = [_passable(scene, m) for m in range(len(scene.materials))]
+        self.passable = np.array([any(passable[m] for m in mats if 0 <= m < len(passable)) for mats in materials])
+
+    def corners_2d(self, rows, keep):
+        """(R, 3, 2) world corners of rows, the plane's dominant axis dropped."""
+        out = np.empty((len(rows), 3, 3))
+        owner, tri = self.rows["owner"][rows], self.rows["tri"][rows]
+        for o in np.unique(owner):
+            at = owner == o
+            mesh = self.scene.meshes[self.mesh_of[o]]
+            local = np.asarray(mesh.positions, np.float64)[np.asarray(mesh.triangles, np.int64)[tri[at]]]
+            out[at] = _corners(local, self.matrices[o:o + 1])
+        return out[:, :, keep]
+
+
+def _passable(scene, index):
+    material = scene.materials[index]
+    return getattr(material, "volume", None) is not None or any(
+        lobe.kind in PASSABLE for lobe in getattr(material, "lobes", ()))
+
+
+def _overlapping_owners(groups, plane):
+    """(a, b) instance pairs, a < b, with faces of one plane group that
+    overlap in the plane."""
     order, starts = groups
     if len(order) == 0:
         return []
+    owner = plane.rows["owner"]
     owners = owner[order]
     shared = np.minimum.reduceat(owners, starts) != np.maximum.reduceat(owners, starts)
     ends = np.r_[starts[1:], len(order)]
@@ -165,34 +206,55 @@ def _overlapping_owners(groups, normal, lo, hi, owner, tol):
     for g0, g1 in zip(starts[shared], ends[shared]):
         rows = order[g0:g1]
         rows = rows[np.argsort(owner[rows], kind="stable")]
-        keep = [a for a in range(3) if a != int(np.argmax(np.abs(normal[rows[0]])))]
-        out += _pairs_in_plane(lo[rows][:, keep], hi[rows][:, keep], owner[rows], tol)
+        keep = [a for a in range(3) if a != int(np.argmax(np.abs(plane.rows["normal"][rows[0]])))]
+        cuts = np.flatnonzero(np.diff(owner[rows])) + 1
+        spans = np.split(rows, cuts)
+        for i, a in enumerate(spans):
+            for b in spans[i + 1:]:
+                if _faces_overlap(plane, a, b, keep):
+                    out.append((int(owner[a[0]]), int(owner[b[0]])))
     return out
 
 
-def _pairs_in_plane(lo, hi, owner, tol):
-    """Owner pairs with some two faces' 2D bounds overlapping by > tol."""
-    cuts = np.flatnonzero(np.diff(owner)) + 1
-    spans = list(zip(np.r_[0, cuts], np.r_[cuts, len(owner)]))
-    out = []
-    for i, (a0, a1) in enumerate(spans):
-        for b0, b1 in spans[i + 1:]:
-            if _boxes_overlap(lo[a0:a1], hi[a0:a1], lo[b0:b1], hi[b0:b1], tol):
-                out.append((int(owner[a0]), int(owner[b0])))
-    return out
+def _faces_overlap(plane, a, b, keep, limit=4_000_000):
+    """Whether a face of rows a overlaps one of rows b: bounds first, then
+    the triangles themselves (separating axes); opposite-facing pairs only
+    when rays get inside one of the two objects.  Past 100 limit pairs, the
+    two objects' bounds in the plane decide."""
+    r = plane.rows
+    if plane.passable[r["owner"][a[0]]] or plane.passable[r["owner"][b[0]]]:
+        return _some_overlap(plane, a, b, keep, limit)
+    up_a, up_b = r["facing"][a] == 1, r["facing"][b] == 1
+    return (_some_overlap(plane, a[up_a], b[up_b], keep, limit)
+            or _some_overlap(plane, a[~up_a], b[~up_b], keep, limit))
 
 
-def _boxes_overlap(lo_a, hi_a, lo_b, hi_b, tol, limit=4_000_000):
-    """Whether a face of A and a face of B overlap (bounds): every pair when
-    there are few, else the two objects' whole bounds in the plane."""
-    if len(lo_a) * len(lo_b) > limit:
-        lo_a, hi_a = lo_a.min(axis=0, keepdims=True), hi_a.max(axis=0, keepdims=True)
-        lo_b, hi_b = lo_b.min(axis=0, keepdims=True), hi_b.max(axis=0, keepdims=True)
-    small, large = ((lo_a, hi_a), (lo_b, hi_b)) if len(lo_a) <= len(lo_b) else ((lo_b, hi_b), (lo_a, hi_a))
-    step = max(limit // max(len(large[0]), 1), 1)
-    for s in range(0, len(small[0]), step):
-        lo_s, hi_s = small[0][s:s + step, None], small[1][s:s + step, None]
-        hit = ((lo_s < large[1][None] - tol) & (large[0][None] < hi_s - tol)).all(axis=2)
-        if hit.any():
+def _some_overlap(plane, a, b, keep, limit):
+    if len(a) == 0 or len(b) == 0:
+        return False
+    lo, hi, tol = plane.rows["lo"][:, keep], plane.rows["hi"][:, keep], plane.tol
+    if len(a) * len(b) > 100 * limit:
+        return bool(((lo[a].min(axis=0) < hi[b].max(axis=0) - tol) & (lo[b].min(axis=0) < hi[a].max(axis=0) - tol)).all())
+    small, large = (a, b) if len(a) <= len(b) else (b, a)
+    step = max(limit // len(large), 1)
+    for s in range(0, len(small), step):
+        part = small[s:s + step]
+        hit = ((lo[part, None] < hi[None, large] - tol) & (lo[None, large] < hi[part, None] - tol)).all(axis=2)
+        i, j = np.nonzero(hit)
+        if len(i) and _triangles_overlap(plane.corners_2d(part[i], keep), plane.corners_2d(large[j], keep), tol).any():
             return True
     return False
+
+
+def _triangles_overlap(p, q, tol):
+    """(R,) whether 2D triangles p[k] and q[k] (R, 3, 2) share more than a
+    band tol wide: no edge normal of either separates them."""
+    apart = np.zeros(len(p), bool)
+    for tri in (p, q):
+        for i in range(3):
+            edge = tri[:, (i + 1) % 3] - tri[:, i]
+            axis = np.stack([-edge[:, 1], edge[:, 0]], axis=1)
+            axis /= np.maximum(np.linalg.norm(axis, axis=1), 1e-300)[:, None]
+            sp, sq = np.einsum("rcj,rj->rc", p, axis), np.einsum("rcj,rj->rc", q, axis)
+            apart |= (sp.max(axis=1) <= sq.min(axis=1) + tol) | (sq.max(axis=1) <= sp.min(axis=1) + tol)
+    return ~apart

@@ -1,14 +1,15 @@
 """Coincident faces between objects (engine.coplanar): found where two
 objects' faces share a plane and overlap, not where they only touch, lie
-apart or sit off the plane; the same under a tilt and for instance batches;
-cheap for 2 M triangles."""
+apart, sit off the plane or only their bounds overlap; opposite faces only
+when rays get inside one object (glass, a volume); the same under a tilt and
+for instance batches; cheap for 2 M triangles."""
 import time
 
 import numpy as np
 
 from engine.coplanar import coincident_pairs
 from engine.instance_batch import InstanceBatch
-from engine.scene import Instance, Mesh, Scene
+from engine.scene import Instance, Lobe, Material, Mesh, Scene, Volume
 from engine.testscenes import box, quad
 
 
@@ -34,10 +35,17 @@ def floor(size=12.0):
     return quad([[-h, -h, 0], [h, -h, 0], [h, h, 0], [-h, h, 0]])
 
 
-def scene_of(meshes, placements, names):
-    """placements: (mesh index, matrix) per instance."""
-    instances = [Instance(m, matrix=matrix, name=name) for (m, matrix), name in zip(placements, names)]
-    return Scene(meshes=meshes, instances=instances)
+# Materials: 0 opaque, 1 glass, 2 a volume only.
+MATERIALS = [Material("opaque"), Material("glass", (Lobe("glass"),)), Material("fog", (), volume=Volume())]
+
+
+def scene_of(meshes, placements, names, materials=None):
+    """placements: (mesh index, matrix) per instance; materials: one index
+    per instance (default glass: rays get inside)."""
+    materials = materials or [1] * len(placements)
+    instances = [Instance(m, matrix=matrix, name=name, materials=[k])
+                 for (m, matrix), name, k in zip(placements, names, materials)]
+    return Scene(meshes=meshes, instances=instances, materials=MATERIALS)
 
 
 def test_a_box_resting_on_a_floor_is_named():
@@ -45,6 +53,30 @@ def test_a_box_resting_on_a_floor_is_named():
                      ["Floor", "Glass", "Raised"])
     pairs, left_out = coincident_pairs(scene)
     assert pairs == [("Floor", "Glass")] and left_out == 0
+
+
+def test_opposite_faces_of_opaque_objects_are_not_but_same_facing_ones_are():
+    """A closed opaque box on an opaque floor: no ray reaches the faces
+    under it.  A fog box or a glass one: rays inside meet both.  A decal (a
+    quad facing the floor's way on it) is seen from outside: named."""
+    decal = quad([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    names = ["Floor", "Box", "Fog", "Decal"]
+    placements = [(0, np.eye(4)), (1, moved(0, 0, 0.5)), (1, moved(3, 0, 0.5)), (2, moved(-3, 0, 0))]
+    pairs, _ = coincident_pairs(scene_of([floor(), box(), decal], placements, names, [0, 0, 2, 0]))
+    assert pairs == [("Floor", "Fog"), ("Floor", "Decal")]
+
+
+def test_bounds_that_overlap_with_faces_that_do_not():
+    """Two boxes on the floor, one turned 45 degrees, the other beside its
+    corner diagonally: their bottoms' bounds overlap, the bottoms do not."""
+    turn = np.eye(4)
+    c, s = np.cos(np.pi / 4), np.sin(np.pi / 4)
+    turn[:2, :2] = [[c, -s], [s, c]]
+    turn[:3, 3] = 0, 0, 0.5
+    scene = scene_of([box()], [(0, turn), (0, moved(0.9, 0.9, 0.5))], ["Turned", "Beside"])
+    assert coincident_pairs(scene)[0] == []
+    closer = scene_of([box()], [(0, turn), (0, moved(0.75, 0.75, 0.5))], ["Turned", "Beside"])
+    assert coincident_pairs(closer)[0] == [("Turned", "Beside")]
 
 
 def test_touching_apart_and_parallel_faces_are_not():
@@ -70,16 +102,17 @@ def test_found_under_a_tilt_with_opposite_normals():
 
 
 def test_instance_batches_and_the_budget():
-    templates = [Instance(1, name="Crate")]
+    templates = [Instance(1, name="Crate", materials=[1])]
     matrices = np.array([moved(x, 0, 0.5) for x in (-3.0, 0.0, 3.0)] + [moved(0, 3, 0.7)])
     batch = InstanceBatch(templates, np.zeros(4, np.int64), matrices, np.zeros(4))
-    scene = Scene(meshes=[floor(), box()], instances=batch)
+    scene = Scene(meshes=[floor(), box()], instances=batch, materials=MATERIALS)
     # A batch has no Floor: the crates touch nothing coplanar but each other's planes apart.
     assert coincident_pairs(scene) == ([], 0)
-    both = InstanceBatch([Instance(0, name="Floor"), Instance(1, name="Crate")], np.array([0, 1, 1, 1, 1]),
+    both = InstanceBatch([Instance(0, name="Floor", materials=[0]), Instance(1, name="Crate", materials=[1])],
+                         np.array([0, 1, 1, 1, 1]),
                          np.concatenate([[np.eye(4)], matrices]), np.zeros(5))
-    assert coincident_pairs(Scene(meshes=[floor(), box()], instances=both)) == ([("Floor", "Crate")], 0)
-    pairs, left_out = coincident_pairs(Scene(meshes=[floor(), box()], instances=both), budget=2 + 12)
+    assert coincident_pairs(Scene(meshes=[floor(), box()], instances=both, materials=MATERIALS)) == ([("Floor", "Crate")], 0)
+    pairs, left_out = coincident_pairs(Scene(meshes=[floor(), box()], instances=both, materials=MATERIALS), budget=2 + 12)
     assert pairs == [("Floor", "Crate")] and left_out == 3 * 12
 
 
