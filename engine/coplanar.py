@@ -15,8 +15,9 @@ within REL_TOL of the scene's size (sorted runs), and two faces of the two
 objects overlapping in the plane by more than that tolerance (bounds, then
 separating axes).  Faces facing opposite ways (a box's bottom on a floor)
 count only when one object lets rays inside (a volume or a PASSABLE lobe):
-a closed opaque box hides both from every ray.  Pure NumPy, about one sort
-of the scene's triangles (docs/benchmarks.md).
+a closed opaque box hides both from every ray.  Only instances whose bounds
+meet are compared, and of a big mesh only the triangles near the others'
+bounds.  Pure NumPy (cost: docs/real_scenes.md, coincident_faces).
 """
 import numpy as np
 
@@ -28,6 +29,8 @@ NORMAL_TOL = 1e-5
 # and per batch of copies of one mesh.
 BUDGET = 8_000_000
 CHUNK = 1 << 17
+# Meshes this big are filtered to the triangles near other instances first.
+FILTER_MIN = 4096
 QUANTA = int(round(1.0 / NORMAL_TOL)) + 1   # a quantized component lies in [-QUANTA, QUANTA]
 # Lobes that let a ray inside an object (or through its face).
 PASSABLE = ("glass", "refraction", "translucent", "transparent", "ray_portal")
@@ -42,13 +45,18 @@ def coincident_pairs(scene, budget=BUDGET):
     facing opposite ways (a box's bottom on a floor) only count when one of
     the two objects lets rays inside (PASSABLE): closed opaque objects hide
     them from every ray."""
-    rows, left_out = _plane_rows(scene, budget)
+    instances = scene.instances
+    if len(instances) < 2:
+        return [], 0
+    mesh_of, matrices = meshes_of(instances), _matrices(instances)
+    boxes = _instance_bounds(scene, mesh_of, matrices)
+    tol = REL_TOL * max(float((boxes[:, 1].max(axis=0) - boxes[:, 0].min(axis=0)).max()), 1e-30)
+    rows, left_out = _plane_rows(scene, mesh_of, matrices, boxes, tol, budget)
     if rows is None:
         return [], left_out
-    tol = REL_TOL * max(float((rows["hi"].max(axis=0) - rows["lo"].min(axis=0)).max()), 1e-30)
     groups = _plane_groups(rows["normal"], rows["offset"], rows["owner"], tol)
     plane = _Plane(scene, rows, tol)
-    names = field_of_each(scene.instances, "name", "object")
+    names = field_of_each(instances, "name", "object")
     pairs = []
     for a, b in _overlapping_owners(groups, plane):
         pair = (names[a], names[b])
@@ -57,37 +65,104 @@ def coincident_pairs(scene, budget=BUDGET):
     return pairs, left_out
 
 
-def _plane_rows(scene, budget):
-    """Per world triangle: canonical unit normal, plane offset, 3D bounds
-    (float32 but the offset, to keep 2 M triangles small) and instance index."""
-    instances = scene.instances
-    if len(instances) == 0:
-        return None, 0
-    mesh_of = meshes_of(instances)
-    matrices = _matrices(instances)
+def _instance_bounds(scene, mesh_of, matrices):
+    """(N, 2, 3) world bounds of each instance (its mesh's box transformed)."""
+    local = np.zeros((len(scene.meshes) + 1, 8, 3))
+    for m, mesh in enumerate(scene.meshes):
+        p = np.asarray(mesh.positions, np.float64).reshape(-1, 3)
+        if len(p):
+            lo, hi = p.min(axis=0), p.max(axis=0)
+            local[m] = [[(lo, hi)[k >> a & 1][a] for a in range(3)] for k in range(8)]
+    corners = np.einsum("nij,ncj->nci", matrices[:, :3, :3], local[mesh_of]) + matrices[:, None, :3, 3]
+    return np.stack([corners.min(axis=1), corners.max(axis=1)], axis=1)
+
+
+def _partners(boxes, tol, most=4096):
+    """Per instance, the instances whose bounds overlap its own (an array);
+    None for every instance past ``most`` instances (all are checked)."""
+    if len(boxes) > most:
+        return None
+    lo, hi = boxes[:, 0], boxes[:, 1]
+    meet = ((lo[:, None] <= hi[None] + tol) & (lo[None] <= hi[:, None] + tol)).all(axis=2)
+    np.fill_diagonal(meet, False)
+    return [np.flatnonzero(row) for row in meet]
+
+
+def _plane_rows(scene, mesh_of, matrices, boxes, tol, budget):
+    """Per world triangle that may meet another instance's (near its
+    partners' bounds): canonical unit normal, plane offset, 3D bounds
+    (float32 but the offset, to keep 2 M triangles small), instance and
+    triangle index, facing."""
+    partners = _partners(boxes, tol)
     parts, used, left_out = [], 0, 0
     for m in np.unique(mesh_of):
         which = np.flatnonzero(mesh_of == m)
+        if partners is not None:
+            which = which[[len(partners[i]) > 0 for i in which]]
         mesh = scene.meshes[m]
         positions, triangles = np.asarray(mesh.positions, np.float64), np.asarray(mesh.triangles, np.int64)
         t = len(triangles)
-        if t == 0:
+        if t == 0 or len(which) == 0:
             continue
         room = max((budget - used) // t, 0)
         left_out += (len(which) - min(room, len(which))) * t
         which = which[:room]
+        used += len(which) * t
+        if partners is not None and t >= FILTER_MIN:
+            parts += _near_rows(positions, triangles, matrices, which, [boxes[partners[i]] for i in which], tol)
+            continue
         # Chunks of at most CHUNK triangles: small temporaries, reused (fresh
         # 100 MB arrays cost more in page faults than the arithmetic).
         step = max(CHUNK // t, 1)
         for start in range(0, len(which), step):
             copies = which[start:start + step]
             for first in range(0, t, CHUNK):
-                local = positions[triangles[first:first + CHUNK]]
-                parts.append(_rows_of(local, matrices[copies], copies, first))
-        used += len(which) * t
+                index = np.arange(first, min(first + CHUNK, t))
+                parts.append(_rows_of(positions[triangles[index]], matrices[copies], copies, index))
     if not parts:
         return None, left_out
     return {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}, left_out
+
+
+def _near_rows(positions, triangles, matrices, which, partner_boxes, tol):
+    """Rows of a big mesh's copies ``which``: only the triangles whose
+    bounds meet one of the copy's partners' bounds (tested in the mesh's own
+    space, before any triangle is transformed), chunk by chunk."""
+    out = []
+    for first in range(0, len(triangles), CHUNK):
+        index = np.arange(first, min(first + CHUNK, len(triangles)))
+        corners = positions[triangles[index]]
+        lo = np.minimum(np.minimum(corners[:, 0], corners[:, 1]), corners[:, 2])
+        hi = np.maximum(np.maximum(corners[:, 0], corners[:, 1]), corners[:, 2])
+        for i, world in zip(which, partner_boxes):
+            near = _near(lo, hi, matrices[i], world, tol)
+            if near.any():
+                out.append(_rows_of(corners[near], matrices[i:i + 1], [i], index[near]))
+    return out
+
+
+def _near(lo, hi, matrix, world_boxes, tol, most=64):
+    """(T,) whether local triangle bounds meet any of the world boxes (P, 2, 3)
+    taken into the local space (their boxes there, widened by tol); past
+    ``most`` boxes, their union."""
+    try:
+        inverse = np.linalg.inv(matrix)
+    except np.linalg.LinAlgError:
+        return np.ones(len(lo), bool)
+    if len(world_boxes) > most:
+        world_boxes = np.stack([world_boxes[:, 0].min(axis=0), world_boxes[:, 1].max(axis=0)])[None]
+    k = np.arange(8)
+    corners = np.stack([world_boxes[:, (k >> a) & 1, a] for a in range(3)], axis=2)   # (P, 8, 3)
+    local = corners @ inverse[:3, :3].T + inverse[:3, 3]
+    widen = tol * np.abs(inverse[:3, :3]).sum(axis=1).max()
+    box_lo, box_hi = local.min(axis=1) - widen, local.max(axis=1) + widen
+    near = np.zeros(len(lo), bool)
+    for b_lo, b_hi in zip(box_lo, box_hi):
+        meet = (lo[:, 0] <= b_hi[0]) & (b_lo[0] <= hi[:, 0])   # axis by axis: .all(axis=1) was slower
+        for a in (1, 2):
+            meet &= (lo[:, a] <= b_hi[a]) & (b_lo[a] <= hi[:, a])
+        near |= meet
+    return near
 
 
 def _matrices(instances):
@@ -96,9 +171,9 @@ def _matrices(instances):
     return np.array([np.asarray(inst.matrix, np.float64) for inst in instances]).reshape(-1, 4, 4)
 
 
-def _rows_of(local, matrices, owners, first):
+def _rows_of(local, matrices, owners, index):
     """_plane_rows' columns for the copies ``matrices`` (K, 4, 4) of one
-    mesh's triangles first.. (``local``, object space)."""
+    mesh's triangles ``index`` (``local``: their corners, object space)."""
     world = _corners(local, matrices)
     v0, v1, v2 = world[:, 0], world[:, 1], world[:, 2]
     n = _cross(v1 - v0, v2 - v0)
@@ -108,7 +183,7 @@ def _rows_of(local, matrices, owners, first):
     facing = np.where(n @ SIGN_REFERENCE < 0, -1, 1).astype(np.int8)
     n *= facing[:, None]
     v0, v1, v2 = v0[keep], v1[keep], v2[keep]
-    tri = np.tile(np.arange(first, first + len(local), dtype=np.int32), len(matrices))[keep]
+    tri = np.tile(np.asarray(index, np.int32), len(matrices))[keep]
     return dict(normal=n.astype(np.float32), offset=n[:, 0] * v0[:, 0] + n[:, 1] * v0[:, 1] + n[:, 2] * v0[:, 2],
                 lo=np.minimum(np.minimum(v0, v1), v2).astype(np.float32),
                 hi=np.maximum(np.maximum(v0, v1), v2).astype(np.float32),
