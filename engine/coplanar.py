@@ -10,7 +10,8 @@ plane, where the other face's distance is 0 and rejected; Ember lifts its
 origin off the plane).  The renderers cannot agree there, so the exporter
 names such pairs (``coincident_pairs``).
 
-The test: unit normals equal within NORMAL_TOL (quantized), plane offsets
+The test: unit normals equal within NORMAL_TOL (grouped by NORMAL_CELL cells,
+much coarser, so float noise rarely splits a plane's faces), plane offsets
 within REL_TOL of the scene's size (sorted runs), and two faces of the two
 objects overlapping in the plane by more than that tolerance (bounds, then
 separating axes).  Faces facing opposite ways (a box's bottom on a floor)
@@ -25,13 +26,14 @@ from .instance_batch import InstanceBatch, field_of_each, meshes_of
 
 REL_TOL = 1e-6
 NORMAL_TOL = 1e-5
+NORMAL_CELL = 1e-3
 # World triangles checked at most (instances beyond are left out, named);
 # and per batch of copies of one mesh.
 BUDGET = 8_000_000
 CHUNK = 1 << 17
 # Meshes this big are filtered to the triangles near other instances first.
 FILTER_MIN = 4096
-QUANTA = int(round(1.0 / NORMAL_TOL)) + 1   # a quantized component lies in [-QUANTA, QUANTA]
+QUANTA = int(round(1.0 / NORMAL_CELL)) + 1   # a quantized component lies in [-QUANTA, QUANTA]
 # Lobes that let a ray inside an object (or through its face).
 PASSABLE = ("glass", "refraction", "translucent", "transparent", "ray_portal")
 # Sign reference for the normals: no common plane is perpendicular to it, so
@@ -221,7 +223,7 @@ def _plane_groups(normal, offset, owner, tol):
     with anything: one cheap sort of a packed key leaves them out), sorted
     by normal then offset; a group is a run of one normal whose offsets step
     by at most tol."""
-    q = np.round(normal / NORMAL_TOL).astype(np.int64) + QUANTA
+    q = np.round(normal / NORMAL_CELL).astype(np.int64) + QUANTA
     packed = (q[:, 0] * (2 * QUANTA + 1) + q[:, 1]) * (2 * QUANTA + 1) + q[:, 2]
     by_normal = np.argsort(packed)
     keys = packed[by_normal]
@@ -316,9 +318,19 @@ def _some_overlap(plane, a, b, keep, limit):
         part = small[s:s + step]
         hit = ((lo[part, None] < hi[None, large] - tol) & (lo[None, large] < hi[part, None] - tol)).all(axis=2)
         i, j = np.nonzero(hit)
+        i, j = _same_plane(plane, part[i], large[j], i, j)
         if len(i) and _triangles_overlap(plane.corners_2d(part[i], keep), plane.corners_2d(large[j], keep), tol).any():
             return True
     return False
+
+
+def _same_plane(plane, rows_a, rows_b, i, j):
+    """The candidate pairs whose two faces' normals agree within NORMAL_TOL
+    and offsets within the tolerance (a group's cell is coarser)."""
+    normal, offset = plane.rows["normal"], plane.rows["offset"]
+    close = (np.abs(normal[rows_a] - normal[rows_b]).max(axis=1) <= NORMAL_TOL) & (
+        np.abs(offset[rows_a] - offset[rows_b]) <= plane.tol)
+    return i[close], j[close]
 
 
 def _triangles_overlap(p, q, tol):

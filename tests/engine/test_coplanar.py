@@ -101,6 +101,30 @@ def test_found_under_a_tilt_with_opposite_normals():
     assert coincident_pairs(lifted)[0] == []
 
 
+def random_turn(rng):
+    q = rng.normal(size=4)
+    w, x, y, z = q / np.linalg.norm(q)
+    m = np.eye(4)
+    m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                 [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                 [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    m[:3, 3] = rng.uniform(-20, 20, size=3)
+    return m
+
+
+def test_found_under_any_rotation():
+    """40 random rotations and offsets of a box on a floor: found in each
+    (the faces' float normals and offsets differ in their last bits)."""
+    rng = np.random.default_rng(3)
+    missed = []
+    for k in range(40):
+        m = random_turn(rng)
+        scene = scene_of([floor(), box()], [(0, m), (1, m @ moved(0.2, 0.1, 0.5))], ["Floor", "Box"])
+        if coincident_pairs(scene)[0] != [("Floor", "Box")]:
+            missed.append(k)
+    assert not missed, f"rotations {missed} missed"
+
+
 def test_instance_batches_and_the_budget():
     templates = [Instance(1, name="Crate", materials=[1])]
     matrices = np.array([moved(x, 0, 0.5) for x in (-3.0, 0.0, 3.0)] + [moved(0, 3, 0.7)])
