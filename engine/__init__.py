@@ -11,6 +11,7 @@ engine's modules, not numba (compiled on the first render) nor embreex
 the module of that name is ``importlib.import_module("engine.render")``.
 """
 from . import bake
+from .coplanar import coincident_pairs
 from .environment import bake as bake_environment
 from .environment import lookup as environment_lookup
 from .kernels import cache_complete as kernel_cache_complete
@@ -48,8 +49,8 @@ __all__ = [
     "Displacement",
     "TEXTURE_TYPES", "MIX_BLENDS", "MATH_OPERATIONS", "FALLOFFS",
     "RenderSettings", "SceneError", "Cancelled",
-    # validation (engine.validate)
-    "validate_scene", "validate_settings", "validate_camera",
+    # validation (engine.validate); faces of objects that coincide (engine.coplanar)
+    "validate_scene", "validate_settings", "validate_camera", "coincident_pairs",
     # rendering (engine.render, engine.passes)
     "render", "prepare", "RenderResult", "PassConfig", "murmur3_32",
     # texture baking (engine.bake)

@@ -33,6 +33,7 @@ import numpy as np
 
 from . import kernels
 from .nodes.context import ShadingContext
+from .projection import direction_to_equirect, direction_to_mirrorball, to_uv
 from .sampling import Distribution2D, uniform_cone
 from .textures import Compiler
 from .vec import column, frame, luminance, to_world
@@ -44,36 +45,6 @@ TWO_PI_SQ = 2.0 * np.pi * np.pi
 MAX_TABLE_WIDTH = 2048
 # Cycles' background strategy weights with sun guiding: map 1, sun 4.
 SUN_SHARE = 0.8
-
-
-def direction_to_equirect(e):
-    """(u, v) in [0, 1] of lookup vectors e (N, 3), any length > 0."""
-    u = (np.pi - np.arctan2(e[:, 1], e[:, 0])) / (2.0 * np.pi)
-    length = np.sqrt(np.einsum("ij,ij->i", e, e))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cos_t = np.clip(e[:, 2] / length, -1.0, 1.0)
-    v = 1.0 - np.arccos(np.where(length > 0, cos_t, 1.0)) / np.pi
-    return u, v
-
-
-def direction_to_mirrorball(e):
-    """(u, v) in [0, 1] of lookup vectors e (N, 3) on the image of a mirror
-    ball photographed from -Y (Cycles' direction_to_mirrorball after
-    safe_normalize): the centre reflects -Y, the rim +Y; a zero vector
-    reads the centre, as in Cycles."""
-    length = np.sqrt(np.einsum("ij,ij->i", e, e))
-    d = e / np.where(length > 0, length, 1.0)[:, None]
-    y = d[:, 1] - 1.0
-    div = 2.0 * np.sqrt(np.maximum(-0.5 * y, 0.0))
-    scale = np.where(div > 0, 1.0 / np.where(div > 0, div, 1.0), 1.0)
-    return 0.5 * (d[:, 0] * scale + 1.0), 0.5 * (d[:, 2] * scale + 1.0)
-
-
-def to_uv(e, projection):
-    """Image (u, v) of lookup vectors for the node's projection."""
-    if projection == "MIRROR_BALL":
-        return direction_to_mirrorball(e)
-    return direction_to_equirect(e)
 
 
 def equirect_to_direction(u, v):

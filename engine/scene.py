@@ -369,13 +369,20 @@ class TextureImage:
 class ImageTexture:
     """Image Texture node.  uv: None = the hit's UV map.  output 'Color' or
     'Alpha'.  unassociate: divide colour by alpha (Cycles does when the
-    node's Alpha output is linked)."""
+    node's Alpha output is linked).
+
+    projection 'EQUIRECTANGULAR' or 'MIRROR_BALL' (ENV_PROJECTIONS): the
+    Environment Texture node on a surface (Cycles' svm_node_tex_environment):
+    uv is then its Vector, None = the world position (the node's socket is
+    LINK_POSITION), normalized and projected as a world direction; the
+    extension is REPEAT and tiles are not read, as Cycles' node does."""
     image: TextureImage
     interpolation: str = "Linear"
     extension: str = "REPEAT"
     output: str = "Color"
     unassociate: bool = False
     uv: Optional[object] = None
+    projection: str = "FLAT"
 
 
 MIX_BLENDS = ("MIX", "ADD", "MULTIPLY", "SUBTRACT", "SCREEN", "OVERLAY", "DIVIDE",

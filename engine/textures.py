@@ -23,6 +23,7 @@ from .nodes import REGISTRY, ShadingContext, as_context
 from .nodes.color_math import EXTRA_BLENDS
 from .nodes.context import _bary_of_offsets
 from .nodes.rays import make_orthonormals
+from .projection import to_uv
 from .scene import (TEXTURE_TYPES, Bump, ImageTexture, Math, MixColor, NodeOutput, NormalMap)
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
@@ -176,10 +177,18 @@ def _tiled_lookup(node, tiles):
     return lookup
 
 
+def _extension(node):
+    """The node's extension; the Environment Texture's is always REPEAT
+    (Cycles' EnvironmentTextureNode::image_params)."""
+    return node.extension if node.projection == "FLAT" else "REPEAT"
+
+
 def _image_lookup(node, image, texels):
     """RGBA at uv as the Image Texture node outputs it (colour linear)."""
+    extension = _extension(node)
+
     def lookup(uv):
-        rgba = sample_texels(texels, uv, node.interpolation, node.extension)
+        rgba = sample_texels(texels, uv, node.interpolation, extension)
         if node.unassociate:
             a = rgba[:, 3:]
             scale = np.where((a != 0) & (a != 1), 1.0 / np.where(a != 0, a, 1.0), 1.0)
@@ -259,15 +268,33 @@ class Compiler:
 
     def _image(self, node):
         image = node.image
-        if image.tiles:
+        if image.tiles and node.projection == "FLAT":
             sampler = _tiled_lookup(node, [(n, tile, self.texels_of(tile)) for n, tile in image.tiles])
         else:
             sampler = _image_lookup(node, image, self.texels_of(image))
         lookup = _last_call(sampler)
-        coords = (lambda ctx: ctx.uv) if node.uv is None else self._uv(node.uv)
+        if node.projection != "FLAT":
+            coords = self._environment_uv(node)
+        else:
+            coords = (lambda ctx: ctx.uv) if node.uv is None else self._uv(node.uv)
         if node.output == "Alpha":
             return (lambda ctx: lookup(coords(ctx))[:, 3]), "float"
         return (lambda ctx: lookup(coords(ctx))[:, :3]), "color"
+
+    def _environment_uv(self, node):
+        """The Environment Texture's image UV: its Vector (the world
+        position when unlinked) as a direction, equirectangular or mirror
+        ball (svm_node_tex_environment)."""
+        vector = (lambda ctx: ctx.p) if node.uv is None else self.color(node.uv)
+
+        def coords(ctx):
+            e = np.asarray(vector(ctx), dtype=np.float64)
+            uv = np.stack(to_uv(e, node.projection), axis=1)
+            if node.projection == "EQUIRECTANGULAR":
+                # direction_to_equirectangular_range: a zero vector is (0, 0).
+                uv[~np.any(e != 0.0, axis=1)] = 0.0
+            return uv
+        return coords
 
     def _uv(self, expr):
         """A vector input: its first two components are the UV."""
@@ -508,7 +535,7 @@ def _image_range(node):
     adds 0); decoding sRGB after is monotone.  Dividing by filtered alpha
     (unassociate) is not bounded here.  A UDIM image: the hull of its
     tiles' and of the missing-tile magenta."""
-    if not node.image.tiles:
+    if not node.image.tiles or node.projection != "FLAT":
         return _single_image_range(node, node.image)
     ranges = [_single_image_range(node, tile) for _, tile in node.image.tiles] + [(0.0, 1.0)]
     return min(r[0] for r in ranges), max(r[1] for r in ranges)
@@ -516,7 +543,7 @@ def _image_range(node):
 
 def _single_image_range(node, image):
     texels = prepare_texels(image)
-    zero = (0.0,) if node.extension == "CLIP" else ()
+    zero = (0.0,) if _extension(node) == "CLIP" else ()
     if node.output == "Alpha":
         return _hull(texels[..., 3], *zero)
     if node.unassociate and (texels[..., 3] != 1).any():

@@ -503,6 +503,7 @@ def validate_texture(expr, what):
         _choice(expr.interpolation, _scene.INTERPOLATIONS, what, "interpolation")
         _choice(expr.extension, _scene.EXTENSIONS, what, "extension")
         _choice(expr.output, ("Color", "Alpha"), what, "image output")
+        _choice(expr.projection, ("FLAT",) + ENV_PROJECTIONS, what, "image projection")
         if expr.uv is not None:
             validate_texture(expr.uv, f"{what} vector")
     elif isinstance(expr, _scene.MixColor):

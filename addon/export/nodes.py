@@ -1,14 +1,15 @@
 """Input and texture nodes -> constants or engine texture expressions.
 
 ``SocketReader.read(socket)`` follows a linked input through RGB, Value,
-Image Texture (with UV Map / Texture Coordinate UV vectors), Mix (colour and
-float) / legacy MixRGB, and Math nodes.  The result is a constant (float or
-RGB tuple) or an ``engine.scene`` texture expression.  A node it cannot
-translate gives None: the caller uses the socket's own constant and names the
-input in its warning.  ``scale``, ``add``, ``mix``, ``clamp01``, ``math``,
-``multiply`` and ``one_minus`` combine constants and expressions alike, so
-closure weighting works on both; ``may_exceed`` / ``may_be_below`` decide
-from an expression's range whether a lobe can be present.
+Image Texture (with UV Map / Texture Coordinate UV vectors), Environment
+Texture (its Vector a direction), Mix (colour and float) / legacy MixRGB,
+and Math nodes.  The result is a constant (float or RGB tuple) or an
+``engine.scene`` texture expression.  A node it cannot translate gives None:
+the caller uses the socket's own constant and names the input in its
+warning.  ``scale``, ``add``, ``mix``, ``clamp01``, ``math``, ``multiply``
+and ``one_minus`` combine constants and expressions alike, so closure
+weighting works on both; ``may_exceed`` / ``may_be_below`` decide from an
+expression's range whether a lobe can be present.
 """
 import bpy
 
@@ -393,6 +394,38 @@ class SocketReader:
                                   'Alpha' if out.name == 'Alpha' else 'Color', unassociate,
                                   self._vector(node))
 
+    def _node_tex_environment(self, node, out):
+        """The Environment Texture on a surface: its Vector (unlinked: the
+        world position, Cycles' LINK_POSITION) as a direction, projected
+        equirectangular or mirror ball; REPEAT, and the Color stays
+        associated even with Alpha linked (svm_node_tex_environment has no
+        unassociate flag)."""
+        renderer = backend.engine()
+        image = self._image(node)
+        if image is None:
+            return (1.0, 1.0, 1.0) if out.name == 'Alpha' else (1.0, 0.0, 1.0)
+        if image.tiles:
+            self._note(f"'{node.name}' tiled image read as its first tile")
+            image = renderer.TextureImage(image.pixels, image.name, image.srgb_filter, image.alpha_mode, image.data)
+        interpolation = node.interpolation
+        if interpolation in CUBIC:
+            self._note(f"'{node.name}' {interpolation} interpolation rendered as Linear")
+            interpolation = 'Linear'
+        return renderer.ImageTexture(image, interpolation, 'REPEAT', 'Alpha' if out.name == 'Alpha' else 'Color',
+                                     False, self._environment_vector(node), projection=node.projection)
+
+    def _environment_vector(self, node):
+        """None (the world position) when unlinked, else the vector read;
+        the hidden texture mapping applied to either."""
+        socket = node.inputs['Vector']
+        source, _ = self.linked_node(socket)
+        if source is None:
+            return _texture_mapping(node, _POSITION, None)
+        vector = self.read(socket)
+        if vector is None:
+            return None
+        return _texture_mapping(node, None, vector) or vector
+
     def _vector(self, node):
         """None (the active UV map) when unlinked or fed by the UV output of
         a Texture Coordinate node; else the vector expression (UV Map by
@@ -511,6 +544,12 @@ def _tiled_image(bpy_image):
     first = tiles[0][1]
     return renderer.TextureImage(first.pixels, bpy_image.name, first.srgb_filter, first.alpha_mode, first.data,
                                  tuple(tiles)), warnings
+
+
+class _POSITION:
+    """Stands for a registry entry whose default coordinates are the world
+    position (for _texture_mapping)."""
+    coords = 'position'
 
 
 def _blender_version():

@@ -55,6 +55,37 @@ def scene_camera(depsgraph, camera_override=None):
 
 def export_scene(depsgraph, camera_override=None, should_stop=None, engine=None, is_preview=False,
                  require_camera=True, cache=None):
+    """_export_scene's Export; final renders (not previews) also name the
+    objects whose faces coincide (coincident_notes)."""
+    exported = _export_scene(depsgraph, camera_override, should_stop, engine, is_preview, require_camera, cache)
+    if not is_preview:
+        start = time.perf_counter()
+        exported.warnings += coincident_notes(exported.scene)
+        exported.seconds += time.perf_counter() - start
+    return exported
+
+
+# Object pairs named in the coincident-faces warning; the rest are counted.
+NAMED_PAIRS = 3
+
+
+def coincident_notes(scene):
+    """One warning naming objects whose faces lie in one plane and overlap
+    (engine.coplanar): which of the two a ray meets there is left to
+    rounding and BVH order, in Cycles as in Ember, so the two may differ."""
+    pairs, left_out = backend.engine().coincident_pairs(scene)
+    if not pairs:
+        return []
+    named = ", ".join(f"'{a}' and '{b}'" for a, b in pairs[:NAMED_PAIRS])
+    more = f" (and {len(pairs) - NAMED_PAIRS} more pairs)" if len(pairs) > NAMED_PAIRS else ""
+    unchecked = f"; {left_out} instanced triangles were not checked" if left_out else ""
+    return [f"Coincident faces: {named}{more} have faces in one plane that overlap; which one a ray meets "
+            f"there is left to rounding, so Ember and Cycles may render them differently (move one off the "
+            f"plane){unchecked}"]
+
+
+def _export_scene(depsgraph, camera_override=None, should_stop=None, engine=None, is_preview=False,
+                  require_camera=True, cache=None):
     """Everything the renderer needs, read from an evaluated depsgraph.
     ``should_stop()`` is asked between objects and between the arrays of a
     mesh; once true, ExportCancelled is raised.  Given the RenderEngine

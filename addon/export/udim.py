@@ -66,6 +66,8 @@ def _image_textures(value, seen, out):
 def _uv_map_name(node):
     """'' for the active UV map, the UV Map node's map, or None: a vector
     Cycles does not cull for."""
+    if getattr(node, 'projection', 'FLAT') != 'FLAT':
+        return None   # an Environment Texture: no UVs, and its tiles are not read
     if node.uv is None:
         return ''
     call = getattr(node.uv, 'call', None)

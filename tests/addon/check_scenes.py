@@ -482,9 +482,10 @@ def fog_spot(folder=None):
 def coincident_faces(folder=None):
     """What scenes often do and Ember and Cycles resolve differently: a
     fog box's bottom face and a glass cube's lying exactly in the floor's
-    plane.  Cycles renders the floor under both as if absent (black under
-    the fog, dark under the cube); Ember finds the floor (lit in the fog,
-    lit through the glass): see docs/real_scenes.md."""
+    plane.  Here Cycles renders the floor under both as if absent (black
+    under the fog, dark under the cube) and Ember finds it; which face a
+    ray meets there is rounding and BVH order in both (Cycles flips with
+    the floor's size), so the export names the pairs: docs/real_scenes.md."""
     scene = fog_spot()
     fog = bpy.data.objects['fog']
     fog.location.z, fog.scale.z = 1.5, 3.0
