@@ -17,7 +17,7 @@ from sampling_lib import make_light_set
 
 from test_light_sampling import many_lights
 
-N = 200_000
+N = 100_000
 
 
 def spot_and_point():
@@ -94,7 +94,7 @@ def test_segment_selection_follows_its_pmf():
     ls = make_light_set(many_lights(120) + spot_and_point() + [S.SunLight((0.2, 0.1, -1.0), (1, 1, 1), 0.05)],
                         strategy="tree")[0]
     rng = np.random.default_rng(3)
-    o, d, t = segments(rng, 8)
+    o, d, t = segments(rng, 5)
     level = ember_stats.family_level(__name__ + ".chi2", len(o))
     em = np.arange(ls.count)
     for i in range(len(o)):
