@@ -24,6 +24,12 @@ light module imports the tree.
 
 ``select`` and ``pmf`` evaluate the same products in the same order, so the
 selection probability MIS uses is exactly the one NEE sampled with.
+
+``select_segment`` and ``pmf_segment`` pick for a ray segment in a volume
+rather than a point (Cycles' light_tree_sample<true>): a node's importance
+is its light integrated along the whole segment (``_segment_importance``),
+so a spot whose cone misses the segment's start but crosses the rest of it
+keeps its probability.
 """
 import numpy as np
 
@@ -128,11 +134,12 @@ class LightTree:
                 self.phi, self.left, self.right)
 
     # -- sampling ---------------------------------------------------------------
-    def select(self, u, p, n, lobe=None):
+    def select(self, u, p, n, lobe=None, segment=False):
         """Emitter index and its selection probability for each shading point
-        (lobe: (N, LOBE_COLUMNS) glossy-lobe terms, None: none)."""
+        (lobe: (N, LOBE_COLUMNS) glossy-lobe terms, None: none).  segment:
+        p and n are ray segments (``select_segment``)."""
         lobe = _lobes(lobe, len(u))
-        n = _sided(n)
+        n = n if segment else _sided(n)
         m = len(u)
         emitter = np.zeros(m, np.int64)
         prob = np.ones(m)
@@ -149,19 +156,31 @@ class LightTree:
                 u = np.where(tree, (u - self.p_infinite) / (1.0 - self.p_infinite), u)
         rows = np.nonzero(tree)[0]
         if len(rows) == m:   # no infinite light picked: the whole arrays, no row copies
-            emitter, prob = self._descend_rows(u, p, n, lobe)
+            emitter, prob = self._descend_rows(u, p, n, lobe, segment)
         elif len(rows):
-            emitter[rows], prob[rows] = self._descend_rows(u[rows], _rows(p, rows), _rows(n, rows), _rows(lobe, rows))
+            emitter[rows], prob[rows] = self._descend_rows(u[rows], _rows(p, rows), _rows(n, rows), _rows(lobe, rows),
+                                                           segment)
         return emitter, prob
 
-    def _descend_rows(self, u, p, n, lobe):
+    def select_segment(self, u, o, d, t):
+        """``select`` for ray segments o + s d, 0 <= s <= t (t may be inf)
+        in a volume: each node weighed by its light along the whole
+        segment."""
+        return self.select(u, o, _segments(d, t), segment=True)
+
+    def pmf_segment(self, emitter, o, d, t):
+        """Probability that ``select_segment`` picks ``emitter``."""
+        return self.pmf(emitter, o, _segments(d, t), segment=True)
+
+    def _descend_rows(self, u, p, n, lobe, segment=False):
         """``select``'s tree part at every row given: (emitter, probability)."""
         p, n, lobe = (np.ascontiguousarray(a, dtype=np.float64) for a in (p, n, lobe))
         picked = np.empty(len(u), np.int64)
         prob = np.full(len(u), 1.0 - self.p_infinite)
         _descend(np.ascontiguousarray(u, dtype=np.float64), p, n, lobe, *self._tree_arrays(), self.leaf_emitter,
-                 picked, prob)
-        prob *= self._leaf_visible(picked, p, n)
+                 segment, picked, prob)
+        if not segment:   # no normal at a segment: nothing is culled
+            prob *= self._leaf_visible(picked, p, n)
         return picked, prob
 
     def select_many(self, u, p, n, lobe=None):
@@ -190,17 +209,18 @@ class LightTree:
         if self.has_tree and tree.any():
             prob[tree] = 1.0 - self.p_infinite
             _descend_many(np.ascontiguousarray(uu), np.ascontiguousarray(tree), _rows(p, np.arange(m)),
-                          _rows(n, np.arange(m)), _rows(lobe, np.arange(m)), *self._tree_arrays(), self.leaf_emitter, emitter, prob)
+                          _rows(n, np.arange(m)), _rows(lobe, np.arange(m)), *self._tree_arrays(), self.leaf_emitter,
+                          False, emitter, prob)
             for j in range(k):
                 rows = np.flatnonzero(tree[:, j])
                 prob[rows, j] *= self._leaf_visible(emitter[rows, j], p[rows], n[rows])
         return emitter, prob
 
-    def pmf(self, emitter, p, n, lobe=None):
+    def pmf(self, emitter, p, n, lobe=None, segment=False):
         """Probability that ``select`` picks ``emitter`` at p (same products)."""
         emitter = np.asarray(emitter, np.int64)
         lobe = _lobes(lobe, len(emitter))
-        n = _sided(n)
+        n = n if segment else _sided(n)
         prob = np.ones(len(emitter))
         inf = np.zeros(len(emitter), bool)
         if len(self.infinite):
@@ -208,18 +228,19 @@ class LightTree:
             prob[inf] = self.p_infinite / len(self.infinite)
         rows = np.nonzero(~inf)[0]
         if len(rows) == len(emitter):   # no infinite light: the whole arrays, no row copies
-            return self._pmf_rows(emitter, p, n, lobe)
+            return self._pmf_rows(emitter, p, n, lobe, segment)
         if len(rows):
-            prob[rows] = self._pmf_rows(emitter[rows], _rows(p, rows), _rows(n, rows), _rows(lobe, rows))
+            prob[rows] = self._pmf_rows(emitter[rows], _rows(p, rows), _rows(n, rows), _rows(lobe, rows), segment)
         return prob
 
-    def _pmf_rows(self, emitter, p, n, lobe):
+    def _pmf_rows(self, emitter, p, n, lobe, segment=False):
         """``pmf`` of tree emitters at every row given."""
         emitter = np.ascontiguousarray(emitter)
         p, n, lobe = (np.ascontiguousarray(a, dtype=np.float64) for a in (p, n, lobe))
         prob = np.full(len(emitter), 1.0 - self.p_infinite)
-        _path_pmf(emitter, p, n, lobe, *self._tree_arrays(), self.path_node, self.path_left, self.path_len, prob)
-        return prob * self._leaf_visible(emitter, p, n)
+        _path_pmf(emitter, p, n, lobe, *self._tree_arrays(), self.path_node, self.path_left, self.path_len, segment,
+                  prob)
+        return prob if segment else prob * self._leaf_visible(emitter, p, n)
 
     def _leaf_visible(self, emitter, p, n):
         """1, or 0 where the tree's emitter cannot light p from above its
@@ -245,6 +266,14 @@ def _sided(n):
     return np.concatenate([n, np.zeros((len(n), 1))], axis=1)
 
 
+def _segments(d, t):
+    """Ray segments as the tree reads them in place of normals, (N, 4): the
+    unit direction and the length (inf: no end)."""
+    out = np.empty((len(d), 4))
+    out[:, :3], out[:, 3] = d, t
+    return out
+
+
 def _lobes(lobe, m):
     return np.zeros((m, LOBE_COLUMNS)) if lobe is None else lobe
 
@@ -253,10 +282,11 @@ def _rows(a, rows):
     return np.ascontiguousarray(a[rows] if len(rows) < len(a) else a, dtype=np.float64)
 
 
-def _p_left_numpy(node, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right):
-    """Probability of descending into the left child of each ``node``."""
-    il = _node_importance(left[node], p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
-    ir = _node_importance(right[node], p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
+def _p_left_numpy(node, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, segment):
+    """Probability of descending into the left child of each ``node``
+    (segment: p and n are ray segments, ``_segments``)."""
+    il = _node_importance(left[node], p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, segment)
+    ir = _node_importance(right[node], p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, segment)
     il = il * _node_lobe(left[node], p, lobe, center, radius)
     ir = ir * _node_lobe(right[node], p, lobe, center, radius)
     total = il + ir
@@ -265,8 +295,12 @@ def _p_left_numpy(node, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, 
         return np.where(total > 0, il / total, 0.5)
 
 
-def _node_importance(node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi):
+def _node_importance(node, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, segment=False):
     c, wn = center[node], w[node]
+    if segment:
+        return _segment_importance(p[:, 0], p[:, 1], p[:, 2], n[:, 0], n[:, 1], n[:, 2], n[:, 3],
+                                   c[:, 0], c[:, 1], c[:, 2], radius[node], wn[:, 0], wn[:, 1], wn[:, 2],
+                                   two_sided[node], sin_o[node], cos_o[node], cos_e[node], phi[node])
     return _importance(p[:, 0], p[:, 1], p[:, 2], n[:, 0], n[:, 1], n[:, 2], n[:, 3],
                        c[:, 0], c[:, 1], c[:, 2], radius[node], wn[:, 0], wn[:, 1], wn[:, 2],
                        two_sided[node], sin_o[node], cos_o[node], cos_e[node], phi[node])
@@ -276,7 +310,7 @@ _U_MAX = np.nextafter(1.0, 0.0)
 
 
 def _descend_numpy(u, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf,
-                   emitter, prob):
+                   segment, emitter, prob):
     """From the root to a leaf per row, picking a child by importance; the
     product of the choices' probabilities multiplies ``prob``."""
     arrays = (center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right)
@@ -289,7 +323,7 @@ def _descend_numpy(u, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, co
         rows, node, uu = rows[interior], node[interior], uu[interior]
         if len(rows) == 0:
             break
-        pl = _p_left_numpy(node, p[rows], n[rows], lobe[rows], *arrays)
+        pl = _p_left_numpy(node, p[rows], n[rows], lobe[rows], *arrays, segment)
         go_left = uu < pl
         prob[rows] *= np.where(go_left, pl, 1.0 - pl)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -299,7 +333,7 @@ def _descend_numpy(u, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, co
 
 
 def _path_pmf_numpy(emitter, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right,
-                    path_node, path_left, path_len, prob):
+                    path_node, path_left, path_len, segment, prob):
     """The product ``_descend`` forms for each row's emitter, along its path."""
     arrays = (center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right)
     rows = np.arange(len(emitter))
@@ -308,7 +342,7 @@ def _path_pmf_numpy(emitter, p, n, lobe, center, radius, w, two_sided, sin_o, co
         if len(rows) == 0:
             break
         e = emitter[rows]
-        pl = _p_left_numpy(path_node[e, k], p[rows], n[rows], lobe[rows], *arrays)
+        pl = _p_left_numpy(path_node[e, k], p[rows], n[rows], lobe[rows], *arrays, segment)
         prob[rows] *= np.where(path_left[e, k], pl, 1.0 - pl)
 
 
@@ -362,6 +396,73 @@ def _cos_sub(sin_a, cos_a, sin_b, cos_b):
 def _sin_sub(sin_a, cos_a, sin_b, cos_b):
     """sin(max(0, a - b))."""
     return where(cos_a > cos_b, 0.0, sin_a * cos_b - cos_a * sin_b)
+
+
+# -- importance along a ray segment in a volume (select_segment) -------------
+
+@kernel(19)
+def _segment_importance(ox, oy, oz, dx, dy, dz, t, cx, cy, cz, r, wx, wy, wz, two_sided, sin_o, cos_o, cos_e, phi):
+    """A node's importance for the ray segment o + s d, 0 <= s <= t, as
+    Cycles' light_tree_node_importance<in_volume_segment>: phi cos(theta')
+    (theta_b - theta_a) / h, the integral of 1 / distance^2 along the
+    segment (h the line's distance from the node's centre, theta_b -
+    theta_a the angle the segment subtends there).  theta' is taken
+    conservatively for the whole segment: the segment's direction from the
+    centre nearest the emission axis (Cycles' compute_v), widened by the
+    angle the bounding sphere subtends at the segment's point closest to
+    the centre (the largest along it), so a node that lights any point of
+    the segment gets importance > 0.  No incidence cosine (a phase
+    function has no normal)."""
+    tx, ty, tz = cx - ox, cy - oy, cz - oz
+    tc = tx * dx + ty * dy + tz * dz   # the line's closest approach to the centre
+    hx, hy, hz = tx - dx * tc, ty - dy * tc, tz - dz * tc
+    h = np.maximum(np.maximum(np.sqrt(hx * hx + hy * hy + hz * hz), 0.5 * r), 1e-12)
+    theta_d = np.arctan2(t - tc, h) + np.arctan2(tc, h)
+    # The sphere's angle at the segment's point closest to the centre.
+    s = np.minimum(np.maximum(tc, 0.0), t)
+    qx, qy, qz = tx - dx * s, ty - dy * s, tz - dz * s
+    q2 = qx * qx + qy * qy + qz * qz
+    inside = q2 <= r * r
+    cos_b = where(inside, -1.0, np.sqrt(np.maximum(0.0, 1.0 - r * r / np.maximum(q2, 1e-300))))
+    sin_b = _sin(cos_b)
+    # From the centre to the segment's ends (a far end stands in for inf).
+    te = np.minimum(t, 1e12)
+    ax, ay, az = -tx, -ty, -tz
+    bx, by, bz = dx * te - tx, dy * te - ty, dz * te - tz
+    cos_w = _nearest_cos(ax, ay, az, bx, by, bz, wx, wy, wz)
+    cos_w = where(two_sided > 0.0, np.maximum(cos_w, _nearest_cos(ax, ay, az, bx, by, bz, -wx, -wy, -wz)), cos_w)
+    sin_w = _sin(cos_w)
+    cos_x = _cos_sub(sin_w, cos_w, sin_o, cos_o)
+    sin_x = _sin_sub(sin_w, cos_w, sin_o, cos_o)
+    cos_p = _cos_sub(sin_x, cos_x, sin_b, cos_b)
+    imp = where(cos_p > cos_e, phi * cos_p * theta_d / h, 0.0)
+    return np.maximum(imp, 0.0)
+
+
+@helper
+def _nearest_cos(ax, ay, az, bx, by, bz, wx, wy, wz):
+    """The largest cosine between w and a direction from the origin to a
+    point of the segment from a to b: on the arc of directions from a to b,
+    the projection of w onto the arc's plane where it falls inside the arc,
+    else the nearer end (Cycles' compute_v)."""
+    la = np.sqrt(ax * ax + ay * ay + az * az)
+    lb = np.sqrt(bx * bx + by * by + bz * bz)
+    ia = where(la > 0.0, 1.0 / np.maximum(la, 1e-300), 0.0)
+    ib = where(lb > 0.0, 1.0 / np.maximum(lb, 1e-300), 0.0)
+    v0x, v0y, v0z = ax * ia, ay * ia, az * ia
+    v1x, v1y, v1z = bx * ib, by * ib, bz * ib
+    c01 = v0x * v1x + v0y * v1y + v0z * v1z
+    ux, uy, uz = v1x - c01 * v0x, v1y - c01 * v0y, v1z - c01 * v0z   # the arc's tangent at v0
+    lu = np.sqrt(ux * ux + uy * uy + uz * uz)
+    iu = where(lu > 1e-12, 1.0 / np.maximum(lu, 1e-300), 0.0)
+    a0 = wx * v0x + wy * v0y + wz * v0z
+    a1 = (wx * ux + wy * uy + wz * uz) * iu
+    length = np.sqrt(a0 * a0 + a1 * a1)
+    cos_phi = where(length > 0.0, a0 / np.maximum(length, 1e-300), 1.0)
+    on_arc = (lu > 1e-12) & (a1 >= 0.0) & (cos_phi >= c01)
+    ends = np.maximum(a0, wx * v1x + wy * v1y + wz * v1z)
+    # An end at the centre itself: every direction is as near.
+    return where((la > 0.0) & (lb > 0.0), where(on_arc, length, ends), 1.0)
 
 
 @kernel(18)
@@ -434,8 +535,15 @@ def _node_lobe(node, p, lobe, center, radius):
 _importance_one = helper(_importance.fn)
 
 
+_segment_one = helper(_segment_importance.fn)
+
+
 @helper
-def _importance_at(i, k, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi):
+def _importance_at(i, k, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, segment):
+    if segment:
+        return _segment_one(p[i, 0], p[i, 1], p[i, 2], n[i, 0], n[i, 1], n[i, 2], n[i, 3],
+                            center[k, 0], center[k, 1], center[k, 2], radius[k], w[k, 0], w[k, 1], w[k, 2],
+                            two_sided[k], sin_o[k], cos_o[k], cos_e[k], phi[k])
     return _importance_one(p[i, 0], p[i, 1], p[i, 2], n[i, 0], n[i, 1], n[i, 2], n[i, 3],
                            center[k, 0], center[k, 1], center[k, 2], radius[k], w[k, 0], w[k, 1], w[k, 2],
                            two_sided[k], sin_o[k], cos_o[k], cos_e[k], phi[k])
@@ -453,13 +561,13 @@ def _lobe_at(i, k, p, lobe, center, radius):
 
 
 @helper
-def _p_left_one(i, node, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right):
+def _p_left_one(i, node, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, segment):
     # One call site for both children: numba inlines the importance once
     # (two sites cost ~10 s more compile time).  0 + il + ir == il + ir exactly.
     il, total = 0.0, 0.0
     for side in range(2):
         child = left[node] if side == 0 else right[node]
-        imp = _importance_at(i, child, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
+        imp = _importance_at(i, child, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, segment)
         imp *= _lobe_at(i, child, p, lobe, center, radius)
         if side == 0:
             il = imp
@@ -473,13 +581,15 @@ _TREE_SIGNATURE = ("float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:
                    "float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], int64[::1], int64[::1]")
 
 
-@loop_kernel(f"void(float64[::1], {_TREE_SIGNATURE}, int64[::1], int64[::1], float64[::1])", _descend_numpy)
-def _descend(u, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf, emitter, prob):
+@loop_kernel(f"void(float64[::1], {_TREE_SIGNATURE}, int64[::1], boolean, int64[::1], float64[::1])", _descend_numpy)
+def _descend(u, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf, segment, emitter,
+             prob):
     for i in range(len(u)):
         node = 0
         uu = u[i]
         while leaf[node] < 0:
-            pl = _p_left_one(i, node, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right)
+            pl = _p_left_one(i, node, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right,
+                             segment)
             if uu < pl:
                 prob[i] *= pl
                 v = uu / pl
@@ -494,20 +604,20 @@ def _descend(u, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, p
         emitter[i] = leaf[node]
 
 
-@loop_kernel(f"void(int64[::1], {_TREE_SIGNATURE}, int64[:, ::1], boolean[:, ::1], int64[::1], float64[::1])",
-             _path_pmf_numpy)
+@loop_kernel(f"void(int64[::1], {_TREE_SIGNATURE}, int64[:, ::1], boolean[:, ::1], int64[::1], boolean, "
+             "float64[::1])", _path_pmf_numpy)
 def _path_pmf(emitter, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right,
-              path_node, path_left, path_len, prob):
+              path_node, path_left, path_len, segment, prob):
     for i in range(len(emitter)):
         e = emitter[i]
         for k in range(path_len[e]):
             pl = _p_left_one(i, path_node[e, k], p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi,
-                             left, right)
+                             left, right, segment)
             prob[i] *= pl if path_left[e, k] else 1.0 - pl
 
 
 def _descend_many_numpy(u, use, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf,
-                        emitter, prob):
+                        segment, emitter, prob):
     """``_descend`` of each column of u (N, M) where ``use``."""
     for k in range(u.shape[1]):
         rows = np.flatnonzero(use[:, k])
@@ -515,17 +625,17 @@ def _descend_many_numpy(u, use, p, n, lobe, center, radius, w, two_sided, sin_o,
             continue
         e, pr = np.empty(len(rows), np.int64), prob[rows, k].copy()
         _descend_numpy(u[rows, k], p[rows], n[rows], lobe[rows], center, radius, w, two_sided, sin_o, cos_o, cos_e, phi,
-                       left, right, leaf, e, pr)
+                       left, right, leaf, segment, e, pr)
         emitter[rows, k], prob[rows, k] = e, pr
 
 
 _CACHED_LEVELS = 64
 
 
-@loop_kernel(f"void(float64[:, ::1], boolean[:, ::1], {_TREE_SIGNATURE}, int64[::1], int64[:, ::1], "
+@loop_kernel(f"void(float64[:, ::1], boolean[:, ::1], {_TREE_SIGNATURE}, int64[::1], boolean, int64[:, ::1], "
              "float64[:, ::1])", _descend_many_numpy)
 def _descend_many(u, use, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, left, right, leaf,
-                  emitter, prob):
+                  segment, emitter, prob):
     cache_node = np.empty(_CACHED_LEVELS, np.int64)
     cache_pl = np.empty(_CACHED_LEVELS)
     for i in range(u.shape[0]):
@@ -543,7 +653,7 @@ def _descend_many(u, use, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o
                 else:
                     same = False
                     pl = _p_left_one(i, node, p, n, lobe, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi,
-                                     left, right)
+                                     left, right, segment)
                     if level < _CACHED_LEVELS:
                         cache_node[level], cache_pl[level] = node, pl
                 if uu < pl:
@@ -597,5 +707,5 @@ def _leaf_rows(emitter, p, n, leaf_node, center, radius, w, two_sided, sin_o, co
                           rect[e, 3], rect[e, 4], rect[e, 5], rect[e, 6], rect[e, 7], rect[e, 8], w[k, 0], w[k, 1],
                           w[k, 2])
         else:
-            v = _importance_at(i, k, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi)
+            v = _importance_at(i, k, p, n, center, radius, w, two_sided, sin_o, cos_o, cos_e, phi, False)
         out[i] = 1.0 if v > 0.0 else 0.0

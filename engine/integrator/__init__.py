@@ -67,7 +67,8 @@ def trace_batch(ctx, pix, sample, tile):
                   start_stack(ctx.media, n), np.zeros(n, np.int16), np.full(n, -1, np.int64), np.zeros((n, 3)),
                   np.full(n, -1, np.int32), np.zeros(n, np.int8), time, np.zeros(n, bool),
                   np.full(n, -1, np.int64), np.zeros((n, 5)), np.zeros(n, np.int16), np.zeros(n, bool), spread,
-                  np.zeros((n, volume_guide.COLUMNS if getattr(tile, "guide", None) is not None else 0)))
+                  np.zeros((n, volume_guide.COLUMNS if getattr(tile, "guide", None) is not None else 0)),
+                  np.full(n, -1.0))
     obs = pass_events.observer(ctx, tile)
     obs.start(paths)
     # Every step raises a live path's bounce or its transparent bounce

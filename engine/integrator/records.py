@@ -98,6 +98,11 @@ class Paths:
     # Volume scattering probability guiding (volume_guide.py): (N, COLUMNS)
     # where the film guides camera rays in media, else (N, 0).
     guide: np.ndarray
+    # The previous vertex took its direct light from its volume segment's
+    # light selection (LightSet.select_segment): the segment's length
+    # (prev_p its start, prev_n[:, :3] its direction), for the selection pdf
+    # in MIS; negative: the vertex's own selection at prev_p.
+    prev_seg: np.ndarray
 
     def __len__(self):
         return len(self.pix)

@@ -118,13 +118,14 @@ def mis_hit(ctx, paths, i, emitter, pdf_light):
         return np.ones(len(i))
     if s.strategy == "light":
         return prev_delta.astype(np.float64)
+    seg = paths.prev_seg[i]   # after a volume vertex lit by its segment's light selection
     if s.light_selection == "ris":
-        p_sel = ctx.lights.selection_pdf(emitter, paths.prev_p[i], paths.prev_n[i])
+        p_sel = ctx.lights.selection_pdf(emitter, paths.prev_p[i], paths.prev_n[i], segment=seg)
         p_light = np.where(paths.prev_every[i], resampled_mis_pmf(p_sel), p_sel) * pdf_light
         return np.where(prev_delta, 1.0, power_heuristic(paths.prev_pdf[i], p_light))
     every = paths.prev_every[i] if ctx.lights.every_at_glossy else None
     lobe = paths.prev_lobe[i] if ctx.lights.lobe_term else None
-    p_light = ctx.lights.selection_pdf(emitter, paths.prev_p[i], paths.prev_n[i], every, lobe) * pdf_light
+    p_light = ctx.lights.selection_pdf(emitter, paths.prev_p[i], paths.prev_n[i], every, lobe, seg) * pdf_light
     return np.where(prev_delta, 1.0, power_heuristic(paths.prev_pdf[i], p_light))
 
 
@@ -855,6 +856,7 @@ def remember_vertex(ctx, paths, v, through, every, ray, depth):
     hit = v.hit
     paths.prev_p = unless(through, paths.prev_p, hit.p)
     paths.prev_n = unless(through, paths.prev_n, tree_normals(v))
+    paths.prev_seg = unless(through, paths.prev_seg, np.full(len(through), -1.0))
     if ctx.links is not None:
         paths.prev_inst = unless(through, paths.prev_inst, instance_of(ctx, hit.prim).astype(np.int32))
     if every is not None:

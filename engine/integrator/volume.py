@@ -101,8 +101,11 @@ def _camera_guide(paths, on, inside, flight, sigma_s, u_channel, u_distance, vie
 
 def _direct_setup(ctx, on, ss, t_end, may, u_distance, depth):
     """Segments in scattering media that may scatter get a direct-light
-    point of their own, as Cycles 5.0's: a light is sampled from the ray's
-    start (its emitter is the one the point samples), and the stack's
+    point of their own, as Cycles 5.0's: a light is picked for the whole
+    segment (LightSet.select_segment, Cycles' light_tree_sample<true>: a
+    spot whose cone misses the ray's start but crosses the segment keeps
+    its probability) and a point of it sampled from the ray's start (its
+    emitter is the one the direct-light point samples), and the stack's
     Volume > Sampling (equiangular.stack_method) says how the point is
     found: a distance, equiangular towards the sampled light point, or one
     of the two with probability 1/2 each (MIS).  Distant lights and worlds
@@ -126,7 +129,7 @@ def _direct_setup(ctx, on, ss, t_end, may, u_distance, depth):
     method = method[cand]
     o = on.o[cand]
     ul = ctx.sampler.get(on.pseed[cand], on.sample[cand], vertex_set(depth, LIGHT))
-    e, p_sel = ctx.lights.select(ul[:, 0], o, np.zeros_like(o))
+    e, p_sel = ctx.lights.select_segment(ul[:, 0], o, on.d[cand], t_end[cand])
     path = points_path(ctx, on, on.o)
     ls = ctx.lights.sample(e, o, ul[:, 1], ul[:, 2], ul[:, 3], time=_time(on, cand),
                            path=None if path is None else (path[0][cand], path[1][cand]))
@@ -281,13 +284,14 @@ def after_flights(ctx, paths, ended, flight, depth, tile, obs=NO_PASSES):
         before = at.L.copy()
         phase = ctx.media.vertex_phase(g, flight.phase_medium[k])
         p = at.o + at.d * t[:, None]
-        # The emitter picked at the segment's start (the point was sampled
-        # for it), divided by the probability it had; its MIS weight against
-        # phase sampling takes the probability selection has at p, as an
-        # emitter met by the phase-sampled ray does.
+        # The emitter picked for the segment (the point was sampled for it),
+        # divided by the probability it had; its MIS weight against phase
+        # sampling takes that same probability, as an emitter met by the
+        # phase-sampled ray of the segment's scattering vertex does
+        # (volume_vertex's ``segment``; Cycles' light_tree_pdf after
+        # PATH_RAY_VOLUME_SCATTER).
         u = ctx.sampler.get(at.pseed, at.sample, vertex_set(depth, LIGHT))
-        p_mis = ctx.lights.selection_pdf(e, p, np.zeros_like(p))
-        _light_sample(ctx, at, p, phase, e, p_sel, u[:, 1:], p_mis, obs)
+        _light_sample(ctx, at, p, phase, e, p_sel, u[:, 1:], obs)
         paths.L[rows] += at.L - before
         if paths.guide.shape[1]:   # direct light at camera rays' volume points: the guide's L_s
             cam = paths.bounce[rows] == 0
@@ -308,8 +312,9 @@ def after_flights(ctx, paths, ended, flight, depth, tile, obs=NO_PASSES):
     held[rows] = True
     moved = paths.take(rows)
     p = moved.o + moved.d * flight.t[sc, None]
+    segment = (moved.o, moved.d, flight.t_end[sc])   # the segment whose light selection lit nee_scale 0 rows
     volume_vertex(ctx, moved, p, ctx.media.vertex_phase(flight.g[sc], flight.phase_medium[sc]), depth,
-                  flight.nee_scale[sc], obs)
+                  flight.nee_scale[sc], obs, segment)
     alive = row_any_positive(moved.beta)
     if not alive.all():   # no throughput left: their light so far goes to the film
         finish(ctx, moved, tile, ~alive)
@@ -331,11 +336,13 @@ class _Points:
         return self.n
 
 
-def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None, obs=NO_PASSES):
+def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None, obs=NO_PASSES, segment=None):
     """Light sampling at scattering points p (phase functions ``phase``,
     MediumTable.vertex_phase; its contributions times ``nee_scale``, None:
     1) and the phase-function sample of the next ray; moves the paths in
-    place."""
+    place.  ``segment``: (start, direction, length) of the rays' segments,
+    whose light selection (``_direct_setup``) lit the rows of nee_scale 0:
+    the next ray's MIS takes that selection's probability there."""
     n = len(paths.pix)
     obs.volume_vertex(paths)
     if nee_scale is None:
@@ -355,6 +362,9 @@ def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None, obs=NO_PASSES):
     paths.self_prim = np.full(n, -1, np.int64)
     paths.tmax = np.full(n, np.inf)
     paths.prev_n = np.zeros((n, 4))   # no normal (the tree's n, stages.tree_normals)
+    paths.prev_seg = np.full(n, -1.0)
+    if segment is not None and nee_scale is not None:
+        _remember_segments(paths, np.flatnonzero(nee_scale == 0), *segment)
     paths.prev_pdf = pdf
     paths.prev_delta = np.zeros(n, bool)
     paths.mis_skip = np.zeros(n, bool)
@@ -368,6 +378,15 @@ def volume_vertex(ctx, paths, p, phase, depth, nee_scale=None, obs=NO_PASSES):
         # rays see what indirect rays see; VIS_VOLUME tells the Light Path
         # node they left a volume scatter event.
         paths.ray = np.full(n, VIS_INDIRECT | VIS_VOLUME, np.uint8)
+
+
+def _remember_segments(paths, rows, o, d, t):
+    """The rows' previous vertex, for MIS, is their segment (o, d, t):
+    Paths.prev_seg."""
+    paths.prev_p = paths.prev_p.copy()
+    paths.prev_p[rows] = o[rows]
+    paths.prev_n[rows, :3] = d[rows]
+    paths.prev_seg[rows] = t[rows]
 
 
 def phase_rows(phase, rows):
@@ -395,15 +414,15 @@ def _time(paths, rows):
     return None if time is None else time[rows]
 
 
-def _light_sample(ctx, paths, p, phase, e, p_sel, u, p_mis=None, obs=NO_PASSES):
+def _light_sample(ctx, paths, p, phase, e, p_sel, u, obs=NO_PASSES):
     """One light sample per scattering point, MIS-weighted against phase
-    sampling (power heuristic; with the selection probability ``p_mis``
-    where given, else p_sel), its shadow ray attenuated by the media."""
+    sampling (power heuristic, with the selection probability p_sel), its
+    shadow ray attenuated by the media."""
     ls = ctx.lights.sample(e, p, u[:, 0], u[:, 1], u[:, 2], time=path_time(paths), path=points_path(ctx, paths, p))
     f = media.phase_eval(dot(paths.d, ls.wi), phase)
     p_light = p_sel * ls.pdf
     if ctx.settings.strategy == "mis":
-        w = np.where(ls.delta, 1.0, power_heuristic((p_sel if p_mis is None else p_mis) * ls.pdf, f))
+        w = np.where(ls.delta, 1.0, power_heuristic(p_sel * ls.pdf, f))
     else:
         w = np.ones(len(f))
     ok = (ls.pdf > 0) & (p_sel > 0)

@@ -151,6 +151,14 @@ class LightSet:
             return self.tree.select(u, p, normals(n, len(u)), lobe)
         return self.dist.sample(u)
 
+    def select_segment(self, u, o, d, t):
+        """``select`` for ray segments o + s d, 0 <= s <= t in volumes (the
+        tree weighs lights along the whole segment, Cycles'
+        light_tree_sample<true>; other selections do not look at it)."""
+        if self.tree is not None:
+            return self.tree.select_segment(u, o, d, t)
+        return self.dist.sample(u)
+
     def select_many(self, u, p=None, n=None):
         """``select`` of each column of u (N, M), rows ascending: emitters
         and probabilities (N, M)."""
@@ -159,11 +167,22 @@ class LightSet:
         picks = [self.dist.sample(u[:, k]) for k in range(u.shape[1])]
         return np.stack([e for e, _ in picks], axis=1), np.stack([q for _, q in picks], axis=1)
 
-    def selection_pdf(self, emitter, p=None, n=None, every=None, lobe=None):
+    def selection_pdf(self, emitter, p=None, n=None, every=None, lobe=None, segment=None):
         """Probability that ``select`` at p (normal n, lobe terms) picks
-        ``emitter``; 1 where ``every`` (per row: NEE sampled every light there)."""
+        ``emitter``; 1 where ``every`` (per row: NEE sampled every light there).
+        ``segment``: per row, the length of the volume segment whose light
+        ``select_segment`` picked (p its start, n[:, :3] its direction), or
+        negative where ``select`` picked at p (None: every row)."""
         if self.strategy == "all":
             return np.ones(len(emitter))
+        if segment is not None and self.tree is not None and np.any(segment >= 0):
+            seg = segment >= 0
+            out = np.empty(len(emitter))
+            s, rest = np.flatnonzero(seg), np.flatnonzero(~seg)
+            out[s] = self.tree.pmf_segment(emitter[s], p[s], n[s, :3], segment[s])
+            if len(rest):
+                out[rest] = self.selection_pdf(emitter[rest], p[rest], n[rest], _rows(every, rest), _rows(lobe, rest))
+            return out
         if every is not None and every.any():
             out = np.ones(len(emitter))
             some = np.flatnonzero(~every)

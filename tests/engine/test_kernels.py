@@ -147,6 +147,29 @@ def test_light_tree_importance_agrees(jit):
     assert_agree(*both_ways(_importance, *args))
 
 
+def test_light_tree_segment_importance_agrees(jit):
+    """A node's importance along a ray segment (lighttree._segment_importance),
+    compiled and NumPy: random segments, some of no end, some through the
+    node's centre, some of length 0."""
+    from engine.lighttree import _segment_importance
+    rng = np.random.default_rng(16)
+    n = 20000
+    o = [mixed(rng, n, 2.0) for _ in range(3)]
+    d = rng.normal(size=(3, n))
+    d /= np.linalg.norm(d, axis=0)
+    t = rng.random(n) * 6.0
+    t[:500], t[500:600] = np.inf, 0.0
+    c = [mixed(rng, n, 2.0) for _ in range(3)]
+    for k in range(3):
+        c[k][600:700] = o[k][600:700] + d[k][600:700] * 0.5 * t[600:700]   # the centre on the segment
+    w = rng.normal(size=(3, n))
+    w /= np.linalg.norm(w, axis=0)
+    cos_o, cos_e = np.cos(rng.random(n) * np.pi), np.cos(rng.random(n) * np.pi / 2)
+    args = [*o, *d, t, *c, np.abs(mixed(rng, n)), *w, (rng.random(n) < 0.5).astype(float),
+            np.sqrt(1.0 - cos_o ** 2), cos_o, cos_e, np.abs(mixed(rng, n))]
+    assert_agree(*both_ways(_segment_importance, *args))
+
+
 def test_area_light_visibility_agrees(jit):
     """Cycles' area-light test at vertices without transmission
     (lighttree._rect_visible), compiled and NumPy, over random lights
@@ -326,6 +349,17 @@ def test_light_tree_descent_agrees(jit):
     assert_agree(*both_ways(tree.pmf, emitter, p, sided))
     assert_agree(*both_ways(tree.select_many, strata, p, sided))
     np.testing.assert_allclose(tree.pmf(plain[0], p, nn, lobe), plain[1], rtol=64 * np.finfo(float).eps, atol=0)
+    # Ray segments in volumes (select_segment): the same agreements.
+    t = rng.random(n) * 8.0
+    t[:1000] = np.inf
+    dd = nn.copy()
+    dd[:500] = 1.0 / np.sqrt(3.0)   # the rows without a normal: any unit direction
+    seg_plain, seg_compiled = both_ways(tree.select_segment, u, p, dd, t)
+    assert_agree(seg_plain, seg_compiled)
+    assert_agree(*both_ways(tree.pmf_segment, emitter, p, dd, t))
+    # The compiled descent's probability is the compiled path pmf of its pick.
+    np.testing.assert_allclose(tree.pmf_segment(seg_compiled[0], p, dd, t), seg_compiled[1],
+                               rtol=64 * np.finfo(float).eps, atol=0)
 
 
 def test_hit_geometry_agrees(jit):
