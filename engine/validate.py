@@ -425,7 +425,13 @@ def validate_curves(strands, index, n_materials):
         raise SceneError(f"{what}: the UV map {uv!r} is none of its attributes")
 
 
+CURVE_SHAPES = ("THICK", "RIBBONS")
+
+
 def validate_scene(scene):
+    shape = getattr(scene, "curve_shape", "THICK")
+    if shape not in CURVE_SHAPES:
+        raise SceneError(f"curve_shape must be one of {CURVE_SHAPES}, got {shape!r}")
     for i, strands in enumerate(getattr(scene, "curves", ()) or ()):
         validate_curves(strands, i, len(scene.materials))
     for i, cloud in enumerate(getattr(scene, "points", ()) or ()):

@@ -1,0 +1,61 @@
+"""Cycles parity of ribbon curves (Render > Curves > Shape = Rounded Ribbons,
+the factory default): engine/points.py ribbon_hits, Embree's
+RTC_GEOMETRY_TYPE_FLAT_CATMULL_ROM_CURVE (engine/motion.py).  Cycles traces
+each strand as a flat band 2 r wide facing the ray, without end caps, and
+shades it with a rounded normal (sin = Embree's v across the band), which
+the hair BSDFs' h = -v follows.
+
+The scenes are test_curves_parity's 400 wavy strands of 6 points (a
+tapering radius attribute) on a diffuse floor under an area light, seen
+from above, as ribbons: ``ribbons_diffuse`` with the Diffuse BSDF (two
+bounces), ``ribbons_hair`` with test_hair_parity's Principled Hair Chiang
+(four bounces).  Against live Cycles (8 seeds of 128 spp, rendered by the
+test): the image, 2 x 2 regions and 16 x 16-pixel blocks.
+
+Before ribbons (3D curves for every shape): 1.7 % darker than Cycles on the
+diffuse scene (docs/testing.md, test_curves_parity)."""
+import bpy
+import numpy as np
+
+from ember_testlib import ReferenceCheck, empty_factory_scene, live_cycles_reference, render_for_reference
+from test_curves_parity import strands
+from test_hair_parity import hair_material
+
+SPP = 256
+CYCLES_SEEDS, CYCLES_SPP = 8, 128
+BLOCK = 16
+
+
+def ribbons_diffuse(scene):
+    bounces = strands(scene)
+    scene.cycles_curves.shape = 'RIBBONS'
+    return bounces
+
+
+def ribbons_hair(scene):
+    strands(scene)
+    scene.cycles_curves.shape = 'RIBBONS'
+    data = bpy.data.objects['strands'].data
+    data.materials.clear()
+    data.materials.append(hair_material())
+    return 4
+
+
+def against_cycles(build, name, tmp_path, taps):
+    """Ember's render of the scene ``build`` makes against live Cycles (a ReferenceCheck)."""
+    scene = empty_factory_scene()
+    bounces = build(scene)
+    ref, ref_var, header = live_cycles_reference(scene, tmp_path, name, CYCLES_SEEDS, CYCLES_SPP, bounces)
+    image, var = render_for_reference(scene, tmp_path, name, taps, SPP, 2, bounces)
+    from addon import engine as ember_engine
+    warnings = ember_engine.RENDER_LOG[-1]['warnings']
+    assert not [w for w in warnings if 'Curves' in w], warnings   # ribbons are no longer named
+    return ReferenceCheck(name, image[..., :3].astype(np.float64), var, SPP, ref, ref_var, header, BLOCK)
+
+
+def test_diffuse_ribbons_parity_with_cycles(tmp_path, tapped_engine):
+    against_cycles(ribbons_diffuse, 'ribbons_diffuse', tmp_path, tapped_engine).assert_agrees(0.005, 0.03)
+
+
+def test_principled_hair_ribbons_parity_with_cycles(tmp_path, tapped_engine):
+    against_cycles(ribbons_hair, 'ribbons_hair', tmp_path, tapped_engine).assert_agrees(0.005, 0.03)
