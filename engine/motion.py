@@ -296,9 +296,6 @@ class MotionAccel(Accel):
 
     OFFSET = 4 * OFFSET_SCALE   # Embree's float32 interpolation against ours in float64
 
-    # Tessellation of curves (Cycles: its curve subdivisions + 1, default 2 + 1;
-    # ribbons are cut into as many flat pieces: engine/points.RIBBON_RATE)
-    CURVE_RATE = 3
 
     def __init__(self, triangles, motion=None, spheres=None, strands=None):
         self.triangles = triangles
@@ -333,12 +330,12 @@ class MotionAccel(Accel):
                     curve_type = embree_c.RTC_GEOMETRY_TYPE_FLAT_CATMULL_ROM_CURVE
                 k = _still_slots(strands)
                 if len(k):
-                    curves = (strands.cvs, strands.start[k], strands.rows[k], self.CURVE_RATE, curve_type)
+                    curves = (strands.cvs, strands.start[k], strands.rows[k], strands.rate, curve_type)
                 self.self_key = strands.curve   # rays leaving a strand pass all of it
             moving = ([(embree_c.RTC_GEOMETRY_TYPE_SPHERE_POINT, m.steps, None, m.rows, None,
                         m.decomposition.astype(np.float32)) for m in _moving_sets(spheres)]
                       + [(curve_type, m.steps, m.index, m.rows,
-                          self.CURVE_RATE, m.decomposition.astype(np.float32)) for m in _moving_sets(strands)])
+                          strands.rate, m.decomposition.astype(np.float32)) for m in _moving_sets(strands)])
             self.scene = embree_c.TriangleScene(parts, instances, points, curves, moving)
 
     def intersect(self, origins, directions, tmax, time=None):

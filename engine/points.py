@@ -150,12 +150,13 @@ class Strands(_Rows):
     padded world-space control points and radii Embree holds, ``start``
     each row's first control point there (4 consecutive ones make a
     segment).  ``ribbon``: flat strands facing each ray (Cycles' ribbons,
-    Embree's RTC_GEOMETRY_TYPE_FLAT_CATMULL_ROM_CURVE) instead of round ones."""
+    Embree's RTC_GEOMETRY_TYPE_FLAT_CATMULL_ROM_CURVE) instead of round ones;
+    ``rate``: Embree's tessellation rate (``curve_rate``)."""
 
-    def __init__(self, rows, cvs, start, n_rows, curve=None, normals=None, ribbon=False):
+    def __init__(self, rows, cvs, start, n_rows, curve=None, normals=None, ribbon=False, rate=5):
         super().__init__(rows, n_rows)
         self.cvs, self.start = cvs, start
-        self.ribbon = bool(ribbon)
+        self.ribbon, self.rate = bool(ribbon), int(rate)
         # (V, 3) world-space curve normals beside cvs (zero where a set has none)
         self.normals = normals
         self.is_curve = self.mask
@@ -188,9 +189,9 @@ def segment_padded_starts(offsets):
     return segment_starts(offsets)[1]
 
 
-def strands_of(tris, owners, ribbons=False):
+def strands_of(tris, owners, ribbons=False, rate=5):
     """Strands of the flattened segment rows (None without curves);
-    ``ribbons``: Render > Curves > Shape is Ribbons."""
+    ``ribbons``: Render > Curves > Shape is Ribbons; ``rate``: curve_rate."""
     if not owners:
         return None
     owner = tris.shading.instance
@@ -217,7 +218,7 @@ def strands_of(tris, owners, ribbons=False):
         base += len(padded)
         curve_base += len(first)
     strands = Strands(np.concatenate(rows), np.concatenate(cvs), np.concatenate(starts), len(tris),
-                      np.concatenate(curves), np.concatenate(normals), ribbon=ribbons)
+                      np.concatenate(curves), np.concatenate(normals), ribbon=ribbons, rate=rate)
     primitive_motion.attach_curves(strands, tris, owners, padded_index, segment_padded_starts)
     return strands
 
@@ -287,10 +288,15 @@ def curve_hits(strands, o, d, t, prim, u, time=None):
 
 
 # -- ribbons (Render > Curves > Shape = Ribbons) -------------------------------
-# Embree's flat Catmull-Rom curves: each segment cut into RIBBON_RATE pieces
-# (Cycles' tessellation rate, its curve subdivisions + 1), each a quad facing
-# the ray, 2 r wide across the curve's projection (curve_intersector_ribbon.h).
-RIBBON_RATE = 3
+# Embree's flat Catmull-Rom curves: each segment cut into ``curve_rate`` pieces
+# (Embree's tessellation rate), each a quad facing the ray, 2 r wide across
+# the curve's projection (curve_intersector_ribbon.h).
+
+def curve_rate(subdivisions=2):
+    """Embree's tessellation rate of Cycles' curves for Render > Curves >
+    Curve Subdivisions s: its curve_subdivisions() = clamp(2^s, 1, 16), plus
+    1 (bvh/embree.cpp), which Embree clamps to 16; 5 at the default s = 2."""
+    return min(min(1 << min(max(int(subdivisions), 0), 8), 16) + 1, 16)
 
 
 def _cross2(a, b):
@@ -306,7 +312,7 @@ def _ray_plane(d):
     return x, np.cross(d, x)
 
 
-def ribbon_v(cv, o, d, u, rate=RIBBON_RATE):
+def ribbon_v(cv, o, d, u, rate=5):
     """Embree's hit v in [-1, 1] across a ribbon (Cycles' sd->v, what its
     ribbon normal and the hair BSDFs' h = -v read) of rays (o, d) meeting
     segments ``cv`` (n, 4, 4) at curve parameter u: the ray's place in the
@@ -367,7 +373,7 @@ def ribbon_hits(strands, o, d, t, prim, u, time=None):
     uc = np.clip(u, 0.0, 1.0)
     radius = np.maximum(np.einsum("nk,nk->n", _catmull_rom(uc), cv[:, :, 3]), 0.0)
     tangent = np.einsum("nk,nkj->nj", _catmull_rom_derivative(uc), cv[:, :, :3])
-    n = ribbon_normal(tangent, d, ribbon_v(cv, o, d, u))
+    n = ribbon_normal(tangent, d, ribbon_v(cv, o, d, u, strands.rate))
     return o + d * t[:, None], n, np.zeros(len(t), bool), radius
 
 

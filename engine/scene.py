@@ -838,3 +838,6 @@ class Scene:
     # curve_shape): 'THICK' (3D curves, round) or 'RIBBONS' (flat strands
     # facing each ray, no end caps: engine/points.py ribbon_hits).
     curve_shape: str = "THICK"
+    # Render > Curves > Curve Subdivisions (Embree cuts each segment into
+    # 2^s + 1 pieces: engine/points.py curve_rate).
+    curve_subdivisions: int = 2

@@ -131,11 +131,11 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None, camera
         camera, camera_warnings = _camera(depsgraph, camera_override, renderer)
     else:
         camera, camera_warnings = renderer.Camera(), []
-    shape, shape_warnings = _curve_shape(scene, curves)
+    shape, subdivisions, shape_warnings = _curve_shape(scene, curves)
     result = renderer.Scene(
         meshes=meshes, instances=instances, points=points, curves=curves, materials=materials.materials,
         lights=lights, world=world, camera=camera, cycles_version=tuple(bpy.app.version), light_links=links,
-        curve_shape=shape)
+        curve_shape=shape, curve_subdivisions=subdivisions)
     udim.cull_tiles(result)
     warnings = (materials.warnings + warnings + light_warnings + camera_warnings + shape_warnings
                 + _catcher_notes(result))
@@ -147,18 +147,15 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None, camera
 
 
 def _curve_shape(scene, curves):
-    """(the engine's curve_shape, warnings) of Render > Curves: Rounded
-    Ribbons and 3D Curves as Cycles; Linear 3D Curves as 3D curves (warned),
-    and a subdivision count other than Cycles' default 2 is not read (warned)."""
+    """(the engine's curve_shape, curve_subdivisions, warnings) of Render >
+    Curves: Rounded Ribbons and 3D Curves as Cycles; Linear 3D Curves as 3D
+    curves (warned)."""
     settings = getattr(scene, 'cycles_curves', None)
     shape = getattr(settings, 'shape', 'THICK')
     warnings = []
     if curves and shape not in ('THICK', 'RIBBONS'):
         warnings.append(f"Curves are rendered as 3D curves; Ember has no {shape.lower()} (Render > Curves > Shape)")
-    if curves and getattr(settings, 'subdivisions', 2) != 2:
-        warnings.append(f"Curves are tessellated as with Curve Subdivisions 2, not {settings.subdivisions} "
-                        f"(Render > Curves)")
-    return ('RIBBONS' if shape == 'RIBBONS' else 'THICK'), warnings
+    return ('RIBBONS' if shape == 'RIBBONS' else 'THICK'), max(int(getattr(settings, 'subdivisions', 2)), 0), warnings
 
 
 def _camera(depsgraph, camera_override, renderer):

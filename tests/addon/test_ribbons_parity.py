@@ -41,16 +41,16 @@ def ribbons_hair(scene):
     return 4
 
 
-def against_cycles(build, name, tmp_path, taps):
+def against_cycles(build, name, tmp_path, taps, spp=SPP, cycles_spp=CYCLES_SPP):
     """Ember's render of the scene ``build`` makes against live Cycles (a ReferenceCheck)."""
     scene = empty_factory_scene()
     bounces = build(scene)
-    ref, ref_var, header = live_cycles_reference(scene, tmp_path, name, CYCLES_SEEDS, CYCLES_SPP, bounces)
-    image, var = render_for_reference(scene, tmp_path, name, taps, SPP, 2, bounces)
+    ref, ref_var, header = live_cycles_reference(scene, tmp_path, name, CYCLES_SEEDS, cycles_spp, bounces)
+    image, var = render_for_reference(scene, tmp_path, name, taps, spp, 2, bounces)
     from addon import engine as ember_engine
     warnings = ember_engine.RENDER_LOG[-1]['warnings']
     assert not [w for w in warnings if 'Curves' in w], warnings   # ribbons are no longer named
-    return ReferenceCheck(name, image[..., :3].astype(np.float64), var, SPP, ref, ref_var, header, BLOCK)
+    return ReferenceCheck(name, image[..., :3].astype(np.float64), var, spp, ref, ref_var, header, BLOCK)
 
 
 def test_diffuse_ribbons_parity_with_cycles(tmp_path, tapped_engine):
@@ -58,4 +58,4 @@ def test_diffuse_ribbons_parity_with_cycles(tmp_path, tapped_engine):
 
 
 def test_principled_hair_ribbons_parity_with_cycles(tmp_path, tapped_engine):
-    against_cycles(ribbons_hair, 'ribbons_hair', tmp_path, tapped_engine).assert_agrees(0.005, 0.03)
+    against_cycles(ribbons_hair, 'ribbons_hair', tmp_path, tapped_engine, 384, 256).assert_agrees(0.005, 0.03)
