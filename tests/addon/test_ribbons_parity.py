@@ -10,14 +10,16 @@ tapering radius attribute) on a diffuse floor under an area light, seen
 from above, as ribbons: ``ribbons_diffuse`` with the Diffuse BSDF (two
 bounces), ``ribbons_hair`` with test_hair_parity's Principled Hair Chiang
 (four bounces).  Against live Cycles (8 seeds of 128 spp, rendered by the
-test): the image, 2 x 2 regions and 16 x 16-pixel blocks.
+test): the image, 2 x 2 regions and 16 x 16-pixel blocks.  The export of
+Render > Curves (Shape, Curve Subdivisions) is checked on its own.
 
 Before ribbons (3D curves for every shape): 1.7 % darker than Cycles on the
 diffuse scene (docs/testing.md, test_curves_parity)."""
 import bpy
 import numpy as np
 
-from ember_testlib import ReferenceCheck, empty_factory_scene, live_cycles_reference, render_for_reference
+from ember_testlib import (ReferenceCheck, empty_factory_scene, live_cycles_reference, record_engine_scenes,
+                           render_for_reference)
 from test_curves_parity import strands
 from test_hair_parity import hair_material
 
@@ -61,3 +63,19 @@ def test_principled_hair_ribbons_parity_with_cycles(tmp_path, tapped_engine):
     # Cycles' hair is noisier: at 8 x 128 spp the image mean resolves 0.51 %
     # (8 x 256 would resolve 0.48 % at 2.5 times the time).
     against_cycles(ribbons_hair, 'ribbons_hair', tmp_path, tapped_engine).assert_agrees(0.0055, 0.03)
+
+
+def test_curve_settings_are_exported(tmp_path, tapped_engine, monkeypatch):
+    """Render > Curves reaches the engine: Shape (Rounded Ribbons, 3D Curves;
+    Linear 3D Curves as 3D curves, named) and Curve Subdivisions."""
+    from addon import engine as ember_engine
+    seen = record_engine_scenes(monkeypatch)
+    scene = empty_factory_scene()
+    bounces = strands(scene, curves=40)
+    for shape, subdivisions, expect in (('RIBBONS', 3, 'RIBBONS'), ('THICK', 2, 'THICK'), ('THICK_LINEAR', 1, 'THICK')):
+        scene.cycles_curves.shape, scene.cycles_curves.subdivisions = shape, subdivisions
+        image, _ = render_for_reference(scene, tmp_path, shape, tapped_engine, 2, 2, bounces)
+        assert np.isfinite(image).all()
+        assert (seen[-1].curve_shape, seen[-1].curve_subdivisions) == (expect, subdivisions)
+        named = [w for w in ember_engine.RENDER_LOG[-1]['warnings'] if 'Curves are rendered as 3D curves' in w]
+        assert bool(named) == (shape == 'THICK_LINEAR'), ember_engine.RENDER_LOG[-1]['warnings']
