@@ -73,6 +73,7 @@ def expand_curves(scene):
     sets = list(getattr(scene, "curves", ()) or ())
     if not sets:
         return scene, []
+    ribbons = getattr(scene, "curve_shape", "THICK") == "RIBBONS"
     meshes, instances, added = list(scene.meshes), scene.instances, []
     owners = []
     for strands in sets:
@@ -83,7 +84,7 @@ def expand_curves(scene):
         texspace, orco = curve_attributes.generated(strands)
         mesh = Mesh(corners.reshape(-1, 3), np.arange(3 * len(corners)).reshape(-1, 3), uvs=uvs,
                     name=strands.name, uv_maps=uv_maps or None,
-                    attributes=curve_attributes.corner_attributes(strands), texspace=texspace, orco=orco)
+                    attributes=curve_attributes.corner_attributes(strands, ribbons), texspace=texspace, orco=orco)
         owners.append((len(instances) + len(added), strands))
         added.append(_placed(strands, len(meshes)))
         meshes.append(mesh)

@@ -10,8 +10,11 @@ tapering radius attribute) on a diffuse floor under an area light, seen
 from above, as ribbons: ``ribbons_diffuse`` with the Diffuse BSDF (two
 bounces), ``ribbons_hair`` with test_hair_parity's Principled Hair Chiang
 (four bounces).  Against live Cycles (8 seeds of 128 spp, rendered by the
-test): the image, 2 x 2 regions and 16 x 16-pixel blocks.  The export of
-Render > Curves (Shape, Curve Subdivisions) is checked on its own.
+test): the image, 2 x 2 regions and 16 x 16-pixel blocks.  ``true_normals``:
+the strands alone emitting the Geometry node's True Normal (Cycles' Ng on a
+ribbon is the view direction; Ember's rounded normal there was 14.3 %
+darker, t -73).  The export of Render > Curves (Shape, Curve Subdivisions)
+is checked on its own.
 
 Before ribbons (3D curves for every shape): 1.7 % darker than Cycles on the
 diffuse scene (docs/testing.md, test_curves_parity)."""
@@ -43,6 +46,24 @@ def ribbons_hair(scene):
     return 4
 
 
+def true_normals(scene):
+    """The strands alone (no floor, no light, a black world) emitting their
+    Geometry True Normal x 0.5 + 0.5: Cycles' Ng on ribbons is the view
+    direction (Ember's shading frame keeps the rounded normal there)."""
+    from test_curve_shading_parity import _affine, emission_material
+    strands(scene)
+    scene.cycles_curves.shape = 'RIBBONS'
+    for name in ('floor', 'area'):
+        bpy.data.objects.remove(bpy.data.objects[name])
+    scene.world.node_tree.nodes['Background'].inputs['Color'].default_value = (0, 0, 0, 1)
+    data = bpy.data.objects['strands'].data
+    data.materials.clear()
+    def colour(nodes, links):
+        return _affine(nodes, links, nodes.new('ShaderNodeNewGeometry').outputs['True Normal'], 0.5)
+    data.materials.append(emission_material("true_normal", colour))
+    return 1
+
+
 def against_cycles(build, name, tmp_path, taps, spp=SPP, cycles_spp=CYCLES_SPP):
     """Ember's render of the scene ``build`` makes against live Cycles (a ReferenceCheck)."""
     scene = empty_factory_scene()
@@ -63,6 +84,10 @@ def test_principled_hair_ribbons_parity_with_cycles(tmp_path, tapped_engine):
     # Cycles' hair is noisier: at 8 x 128 spp the image mean resolves 0.51 %
     # (8 x 256 would resolve 0.48 % at 2.5 times the time).
     against_cycles(ribbons_hair, 'ribbons_hair', tmp_path, tapped_engine).assert_agrees(0.0055, 0.03)
+
+
+def test_ribbon_true_normal_parity_with_cycles(tmp_path, tapped_engine):
+    against_cycles(true_normals, 'ribbon_true_normal', tmp_path, tapped_engine).assert_agrees(0.005, 0.03)
 
 
 def test_curve_settings_are_exported(tmp_path, tapped_engine, monkeypatch):
