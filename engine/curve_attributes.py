@@ -17,7 +17,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from .nodes.context import (CURVE_INTERCEPT, CURVE_LENGTH, CURVE_RANDOM, CURVE_THICKNESS, IS_STRAND,
+from .nodes.context import (CURVE_INTERCEPT, CURVE_LENGTH, CURVE_RANDOM, CURVE_THICKNESS, IS_RIBBON, IS_STRAND,
                             POSITION_TEXSPACE)
 from .nodes.hashing import hash_uint, to_float
 
@@ -103,9 +103,10 @@ def world_scale(matrix):
     return abs(np.linalg.det(m[:3, :3])) ** (1.0 / 3.0)
 
 
-def corner_attributes(strands):
+def corner_attributes(strands, ribbons=False):
     """The stand-in mesh's attributes of a curve set: the user's point and
-    curve attributes by name, and the Curves Info node's reserved ones."""
+    curve attributes by name, and the Curves Info node's reserved ones
+    (``ribbons``: the set is traced as ribbons, IS_RIBBON)."""
     seg = SegmentCorners(strands)
     n_curves = len(seg.offsets) - 1
     # (intercept, length) computed once for both makers that need them
@@ -118,6 +119,7 @@ def corner_attributes(strands):
 
     makers = {
         IS_STRAND: lambda: np.ones((len(seg.key), 3, 1)),
+        IS_RIBBON: lambda: np.full((len(seg.key), 3, 1), 1.0 if ribbons else 0.0),
         CURVE_INTERCEPT: lambda: seg.of_points(shape_data()[0]),
         CURVE_LENGTH: lambda: seg.of_curves(shape_data()[1]),
         CURVE_RANDOM: lambda: seg.of_curves(curve_randoms(n_curves, getattr(strands, "first_curve", 0))),

@@ -35,6 +35,7 @@ RTC_GEOMETRY_TYPE_TRIANGLE = 0
 RTC_GEOMETRY_TYPE_INSTANCE = 121
 RTC_GEOMETRY_TYPE_SPHERE_POINT = 50
 RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE = 58
+RTC_GEOMETRY_TYPE_FLAT_CATMULL_ROM_CURVE = 59   # Cycles' ribbons
 RTC_FORMAT_UINT = 0x5001
 RTC_FORMAT_FLOAT4 = 0x9004
 RTC_BUFFER_TYPE_INDEX = 0
@@ -121,8 +122,9 @@ class TriangleScene:
     (centres and radii (N, 4), prims) for one RTC_GEOMETRY_TYPE_SPHERE_POINT
     geometry, or None.  ``curves``: (control points and radii (V, 4), the
     first control point of each segment (S,), prims (S,), tessellation
-    rate) for one RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE geometry (as
-    Cycles' 3D curves), or None.  ``moving``: moving points or curves, a
+    rate[, geometry type]) for one RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE
+    geometry (as Cycles' 3D curves; or the type given:
+    RTC_GEOMETRY_TYPE_FLAT_CATMULL_ROM_CURVE for its ribbons), or None.  ``moving``: moving points or curves, a
     list of (kind, control points (S, K, 4) object space per time step,
     each segment's first control point (P,) or None for points, prims (P,),
     tessellation rate or None, transforms (S'', 16)): each one geometry
@@ -166,11 +168,11 @@ class TriangleScene:
             buffers = [(RTC_BUFFER_TYPE_VERTEX, RTC_FORMAT_FLOAT4, 16, np.ascontiguousarray(xyzr, np.float32))]
             first = self._primitives(RTC_GEOMETRY_TYPE_SPHERE_POINT, buffers, prims, None, offsets, order, first)
         if curves is not None:    # control points (x, y, z, r) and each segment's first one
-            xyzr, starts, prims, rate = curves
+            xyzr, starts, prims, rate, *kind = curves
             buffers = [(RTC_BUFFER_TYPE_VERTEX, RTC_FORMAT_FLOAT4, 16, np.ascontiguousarray(xyzr, np.float32)),
                        (RTC_BUFFER_TYPE_INDEX, RTC_FORMAT_UINT, 4, np.ascontiguousarray(starts, np.uint32))]
-            first = self._primitives(RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE, buffers, prims, rate, offsets, order,
-                                     first)
+            first = self._primitives(kind[0] if kind else RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE, buffers, prims,
+                                     rate, offsets, order, first)
         for kind, steps, starts, prims, rate, transforms in moving:
             child = lib.rtcNewScene(self.device)
             self.children.append(child)

@@ -296,8 +296,6 @@ class MotionAccel(Accel):
 
     OFFSET = 4 * OFFSET_SCALE   # Embree's float32 interpolation against ours in float64
 
-    # Tessellation of round curves (Cycles: its curve subdivisions + 1, default 2 + 1)
-    CURVE_RATE = 3
 
     def __init__(self, triangles, motion=None, spheres=None, strands=None):
         self.triangles = triangles
@@ -326,15 +324,18 @@ class MotionAccel(Accel):
                     points = (np.concatenate([spheres.centres[k], spheres.radii[k, None]], axis=1), spheres.rows[k])
             instances = motion.embree_instances() if motion is not None else []
             curves = None
+            curve_type = embree_c.RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE
             if strands is not None and len(strands):
+                if strands.ribbon:   # Cycles' ribbons: flat curves facing each ray
+                    curve_type = embree_c.RTC_GEOMETRY_TYPE_FLAT_CATMULL_ROM_CURVE
                 k = _still_slots(strands)
                 if len(k):
-                    curves = (strands.cvs, strands.start[k], strands.rows[k], self.CURVE_RATE)
+                    curves = (strands.cvs, strands.start[k], strands.rows[k], strands.rate, curve_type)
                 self.self_key = strands.curve   # rays leaving a strand pass all of it
             moving = ([(embree_c.RTC_GEOMETRY_TYPE_SPHERE_POINT, m.steps, None, m.rows, None,
                         m.decomposition.astype(np.float32)) for m in _moving_sets(spheres)]
-                      + [(embree_c.RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE, m.steps, m.index, m.rows,
-                          self.CURVE_RATE, m.decomposition.astype(np.float32)) for m in _moving_sets(strands)])
+                      + [(curve_type, m.steps, m.index, m.rows,
+                          strands.rate, m.decomposition.astype(np.float32)) for m in _moving_sets(strands)])
             self.scene = embree_c.TriangleScene(parts, instances, points, curves, moving)
 
     def intersect(self, origins, directions, tmax, time=None):

@@ -73,6 +73,7 @@ def expand_curves(scene):
     sets = list(getattr(scene, "curves", ()) or ())
     if not sets:
         return scene, []
+    ribbons = getattr(scene, "curve_shape", "THICK") == "RIBBONS"
     meshes, instances, added = list(scene.meshes), scene.instances, []
     owners = []
     for strands in sets:
@@ -83,7 +84,7 @@ def expand_curves(scene):
         texspace, orco = curve_attributes.generated(strands)
         mesh = Mesh(corners.reshape(-1, 3), np.arange(3 * len(corners)).reshape(-1, 3), uvs=uvs,
                     name=strands.name, uv_maps=uv_maps or None,
-                    attributes=curve_attributes.corner_attributes(strands), texspace=texspace, orco=orco)
+                    attributes=curve_attributes.corner_attributes(strands, ribbons), texspace=texspace, orco=orco)
         owners.append((len(instances) + len(added), strands))
         added.append(_placed(strands, len(meshes)))
         meshes.append(mesh)
@@ -149,11 +150,14 @@ class Strands(_Rows):
     """Rows ``rows`` of Triangles are curve segments: ``cvs`` (V, 4) the
     padded world-space control points and radii Embree holds, ``start``
     each row's first control point there (4 consecutive ones make a
-    segment)."""
+    segment).  ``ribbon``: flat strands facing each ray (Cycles' ribbons,
+    Embree's RTC_GEOMETRY_TYPE_FLAT_CATMULL_ROM_CURVE) instead of round ones;
+    ``rate``: Embree's tessellation rate (``curve_rate``)."""
 
-    def __init__(self, rows, cvs, start, n_rows, curve=None, normals=None):
+    def __init__(self, rows, cvs, start, n_rows, curve=None, normals=None, ribbon=False, rate=5):
         super().__init__(rows, n_rows)
         self.cvs, self.start = cvs, start
+        self.ribbon, self.rate = bool(ribbon), int(rate)
         # (V, 3) world-space curve normals beside cvs (zero where a set has none)
         self.normals = normals
         self.is_curve = self.mask
@@ -186,8 +190,9 @@ def segment_padded_starts(offsets):
     return segment_starts(offsets)[1]
 
 
-def strands_of(tris, owners):
-    """Strands of the flattened segment rows (None without curves)."""
+def strands_of(tris, owners, ribbons=False, rate=5):
+    """Strands of the flattened segment rows (None without curves);
+    ``ribbons``: Render > Curves > Shape is Ribbons; ``rate``: curve_rate."""
     if not owners:
         return None
     owner = tris.shading.instance
@@ -214,7 +219,7 @@ def strands_of(tris, owners):
         base += len(padded)
         curve_base += len(first)
     strands = Strands(np.concatenate(rows), np.concatenate(cvs), np.concatenate(starts), len(tris),
-                      np.concatenate(curves), np.concatenate(normals))
+                      np.concatenate(curves), np.concatenate(normals), ribbon=ribbons, rate=rate)
     primitive_motion.attach_curves(strands, tris, owners, padded_index, segment_padded_starts)
     return strands
 
@@ -266,7 +271,10 @@ def curve_hits(strands, o, d, t, prim, u, time=None):
     """(p, ng, back, radius) of rays (o, d) meeting segment rows ``prim`` at
     Embree's distance t and curve parameter u (at each ray's time): the
     point moved onto the round curve's surface around its centre C(u)
-    (radius r(u)), the normal from C(u) to it, facing the ray."""
+    (radius r(u)), the normal from C(u) to it, facing the ray.  On ribbons
+    ``ribbon_hits``."""
+    if strands.ribbon:
+        return ribbon_hits(strands, o, d, t, prim, u, time)
     cv = strands.rows_at(prim, time)                                     # (n, 4, 4)
     w = _catmull_rom(np.clip(u, 0.0, 1.0))
     centre = np.einsum("nk,nkj->nj", w, cv[:, :, :3])
@@ -278,6 +286,96 @@ def curve_hits(strands, o, d, t, prim, u, time=None):
     p = centre + n * radius[:, None]
     back = np.einsum("ij,ij->i", d, n) > 0
     return p, np.where(back[:, None], -n, n), back, radius
+
+
+# -- ribbons (Render > Curves > Shape = Ribbons) -------------------------------
+# Embree's flat Catmull-Rom curves: each segment cut into ``curve_rate`` pieces
+# (Embree's tessellation rate), each a quad facing the ray, 2 r wide across
+# the curve's projection (curve_intersector_ribbon.h).
+
+def curve_rate(subdivisions=2):
+    """Embree's tessellation rate of Cycles' curves for Render > Curves >
+    Curve Subdivisions s: its curve_subdivisions() = clamp(2^s, 1, 16), plus
+    1 (bvh/embree.cpp), which Embree clamps to 16; 5 at the default s = 2."""
+    return min(min(1 << min(max(int(subdivisions), 0), 8), 16) + 1, 16)
+
+
+def _cross2(a, b):
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def _ray_plane(d):
+    """(x, y) (n, 3) unit axes across unit rays d, right-handed with d (as
+    Embree's ray space: x cross y = d)."""
+    pick = np.where((np.abs(d[:, 0]) < 0.6)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    x = np.cross(d, pick)
+    x /= np.linalg.norm(x, axis=1)[:, None]
+    return x, np.cross(d, x)
+
+
+def ribbon_v(cv, o, d, u, rate=5):
+    """Embree's hit v in [-1, 1] across a ribbon (Cycles' sd->v, what its
+    ribbon normal and the hair BSDFs' h = -v read) of rays (o, d) meeting
+    segments ``cv`` (n, 4, 4) at curve parameter u: the ray's place in the
+    tessellated piece's quad, in the plane across the ray, by the quad's two
+    triangles as quad_intersector.h splits it (v = -1 on the side of the
+    projected tangent turned clockwise)."""
+    unit = d / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
+    x, y = _ray_plane(unit)
+    rel = cv[:, :, :3] - o[:, None, :]
+    flat = np.stack([np.einsum("nkj,nj->nk", rel, x), np.einsum("nkj,nj->nk", rel, y)], axis=2)   # (n, 4, 2)
+    piece = np.clip(np.floor(np.clip(u, 0.0, 1.0) * rate), 0, rate - 1)
+    edges = []
+    for s in (piece / rate, (piece + 1) / rate):
+        w = _catmull_rom(s)
+        p = np.einsum("nk,nkj->nj", w, flat)
+        r = np.einsum("nk,nk->n", w, cv[:, :, 3])
+        dp = np.einsum("nk,nkj->nj", _catmull_rom_derivative(s), flat)
+        edges.append((p, r, dp))
+    (p0, r0, dp0), (p1, r1, dp1) = edges
+    sides = []
+    for p, r, dp in edges:   # a vanishing tangent: the piece's chord (Embree's eps rule)
+        dp = np.where((np.abs(dp).max(axis=1) < 4.8e-7 * (np.abs(flat).max(axis=(1, 2)) + 1e-30))[:, None], p1 - p0, dp)
+        n = np.stack([dp[:, 1], -dp[:, 0]], axis=1)
+        n /= np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+        sides.append((p + r[:, None] * n, p - r[:, None] * n))
+    (lp0, up0), (lp1, up1) = sides
+    first = _cross2(up0, lp1 - up0) <= 0   # which triangle of (lp0, lp1, up1, up0) the ray meets
+    a, b, c = (np.where(first[:, None], q, q2) for q, q2 in ((lp0, up1), (lp1, up0), (up0, lp1)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = _cross2(b, a) / _cross2(a - b, c - a)
+    v = np.where(first, v, 1.0 - v)
+    return np.clip(np.nan_to_num(2.0 * v - 1.0), -1.0, 1.0)
+
+
+def ribbon_normal(tangent, d, v):
+    """Cycles' ribbon shading normal (curve_shader_setup): rounded across the
+    flat strand as if it were a thick curve, sin = v along the bitangent
+    cross(T, -d); it faces the ray (the direction back along it where T
+    runs along the ray)."""
+    t = tangent / np.maximum(np.linalg.norm(tangent, axis=1), 1e-300)[:, None]
+    b = np.cross(t, -d)
+    length = np.linalg.norm(b, axis=1)
+    ok = length > 1e-12
+    b = b / np.where(ok, length, 1.0)[:, None]
+    cos = np.sqrt(np.maximum(1.0 - v * v, 0.0))
+    n = v[:, None] * b - cos[:, None] * np.cross(t, b)
+    n /= np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+    back = -d / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
+    return np.where(ok[:, None], n, back)
+
+
+def ribbon_hits(strands, o, d, t, prim, u, time=None):
+    """(p, n, back, radius) of rays meeting ribbon segments: the point where
+    Embree's ray met the flat strand (Cycles keeps it, unmoved), the rounded
+    ribbon normal (``ribbon_normal``; Cycles' Ng is the view direction, which
+    faces it), never a back face, and the radius r(u)."""
+    cv = strands.rows_at(prim, time)
+    uc = np.clip(u, 0.0, 1.0)
+    radius = np.maximum(np.einsum("nk,nk->n", _catmull_rom(uc), cv[:, :, 3]), 0.0)
+    tangent = np.einsum("nk,nkj->nj", _catmull_rom_derivative(uc), cv[:, :, :3])
+    n = ribbon_normal(tangent, d, ribbon_v(cv, o, d, u, strands.rate))
+    return o + d * t[:, None], n, np.zeros(len(t), bool), radius
 
 
 def curve_rows(strands, prim):

@@ -444,7 +444,16 @@ def validate_curves(strands, index, n_materials):
         raise SceneError(f"{what}: the UV map {uv!r} is none of its attributes")
 
 
+CURVE_SHAPES = ("THICK", "RIBBONS")
+
+
 def validate_scene(scene):
+    shape = getattr(scene, "curve_shape", "THICK")
+    if shape not in CURVE_SHAPES:
+        raise SceneError(f"curve_shape must be one of {CURVE_SHAPES}, got {shape!r}")
+    subdivisions = getattr(scene, "curve_subdivisions", 2)
+    if isinstance(subdivisions, bool) or not isinstance(subdivisions, (int, np.integer)) or subdivisions < 0:
+        raise SceneError(f"curve_subdivisions must be a whole number >= 0, got {subdivisions!r}")
     for i, strands in enumerate(getattr(scene, "curves", ()) or ()):
         validate_curves(strands, i, len(scene.materials))
     for i, cloud in enumerate(getattr(scene, "points", ()) or ()):

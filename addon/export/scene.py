@@ -162,19 +162,31 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None, camera
         camera, camera_warnings = _camera(depsgraph, camera_override, renderer)
     else:
         camera, camera_warnings = renderer.Camera(), []
+    shape, subdivisions, shape_warnings = _curve_shape(scene, curves)
     result = renderer.Scene(
         meshes=meshes, instances=instances, points=points, curves=curves, materials=materials.materials,
-        lights=lights, world=world, camera=camera, cycles_version=tuple(bpy.app.version), light_links=links)
+        lights=lights, world=world, camera=camera, cycles_version=tuple(bpy.app.version), light_links=links,
+        curve_shape=shape, curve_subdivisions=subdivisions)
     udim.cull_tiles(result)
-    warnings = materials.warnings + warnings + light_warnings + camera_warnings + _catcher_notes(result)
-    shape = getattr(getattr(scene, 'cycles_curves', None), 'shape', 'THICK')
-    if curves and shape != 'THICK':
-        warnings.append(f"Curves are rendered as 3D curves; Ember has no {shape.lower()} (Render > Curves > Shape)")
+    warnings = (materials.warnings + warnings + light_warnings + camera_warnings + shape_warnings
+                + _catcher_notes(result))
     if world_warning:
         warnings.append(world_warning)
     sizes = np.array([len(mesh.triangles) for mesh in meshes] + [0], np.int64)
     triangles = int(sizes[renderer.instance_meshes(instances)].sum()) if len(instances) else 0
     return Export(result, warnings, time.perf_counter() - start, triangles)
+
+
+def _curve_shape(scene, curves):
+    """(the engine's curve_shape, curve_subdivisions, warnings) of Render >
+    Curves: Rounded Ribbons and 3D Curves as Cycles; Linear 3D Curves as 3D
+    curves (warned)."""
+    settings = getattr(scene, 'cycles_curves', None)
+    shape = getattr(settings, 'shape', 'THICK')
+    warnings = []
+    if curves and shape not in ('THICK', 'RIBBONS'):
+        warnings.append(f"Curves are rendered as 3D curves; Ember has no {shape.lower()} (Render > Curves > Shape)")
+    return ('RIBBONS' if shape == 'RIBBONS' else 'THICK'), max(int(getattr(settings, 'subdivisions', 2)), 0), warnings
 
 
 def _camera(depsgraph, camera_override, renderer):

@@ -35,6 +35,8 @@ CURVE_THICKNESS = "\x00curve_thickness"
 CURVE_LENGTH = "\x00curve_length"
 CURVE_RANDOM = "\x00curve_random"
 IS_STRAND = "\x00is_strand"
+# 1 on ribbon segments (Scene.curve_shape RIBBONS): Cycles' Ng there is the view direction.
+IS_RIBBON = "\x00is_ribbon"
 # A Mesh.texspace meaning "Generated is the object-space position" (Cycles'
 # fallback where a geometry has no generated attribute: Curves objects).
 POSITION_TEXSPACE = "object position"

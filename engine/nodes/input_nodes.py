@@ -3,7 +3,7 @@ Fresnel / Layer Weight, and Mapping (kernel/svm/tex_coord.h, geometry.h,
 fresnel.h, attribute.h, light_path.h, mapping_util.h)."""
 import numpy as np
 
-from .context import (CURVE_INTERCEPT, CURVE_LENGTH, CURVE_RANDOM, CURVE_THICKNESS, IS_STRAND, PATH_COLUMNS,
+from .context import (CURVE_INTERCEPT, CURVE_LENGTH, CURVE_RANDOM, CURVE_THICKNESS, IS_RIBBON, IS_STRAND, PATH_COLUMNS,
                       POINTINESS, RANDOM_PER_ISLAND)
 from .registry import node, one_of, wanted
 
@@ -115,8 +115,10 @@ def uv_map(ctx, i, p):
 def geometry(ctx, i, p):
     """Cycles' geometry.h; Pointiness and Random Per Island are the mesh
     attributes engine.mesh_attributes computes at export (0 on geometry
-    without them, as Cycles' missing attribute); Tangent is primitive_tangent."""
-    out = {"Position": ctx.p, "Normal": ctx.ns, "True Normal": ctx.ng, "Incoming": ctx.wo,
+    without them, as Cycles' missing attribute); Tangent is primitive_tangent.
+    On ribbons the True Normal is the view direction (Cycles' sd->Ng = sd->wi)."""
+    ribbon = _derived(ctx, IS_RIBBON)[:, None] > 0.5
+    out = {"Position": ctx.p, "Normal": ctx.ns, "True Normal": np.where(ribbon, ctx.wo, ctx.ng), "Incoming": ctx.wo,
            "Parametric": _parametric(ctx), "Backfacing": ctx.back.astype(np.float64),
            "Pointiness": _derived(ctx, POINTINESS), "Random Per Island": _derived(ctx, RANDOM_PER_ISLAND)}
     if wanted(p, "Tangent"):

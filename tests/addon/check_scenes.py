@@ -565,7 +565,7 @@ def hair(folder=None):
 
 def hair_3d_curves(folder=None):
     """``hair`` with Render > Curves > Shape at 3D Curves (the factory
-    file's is Ribbons, which Ember renders as 3D curves and names)."""
+    file's is Ribbons)."""
     scene = hair()
     scene.cycles_curves.shape = 'THICK'
     return scene

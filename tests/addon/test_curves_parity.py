@@ -6,8 +6,8 @@ converged Cycles reference (tools/cycles_references.py curves_strands).
 The strands are diffuse (test_hair_parity.py: the Principled Hair BSDF).
 
 The scene sets Render > Curves > Shape to 3D curves: the factory default is
-ribbons (flat, camera-facing, no end caps), which Ember does not have (the
-export warns); against ribbons Ember was 1.7 % darker (its round strands
+ribbons (flat, camera-facing, no end caps: test_ribbons_parity.py), against
+which Ember's round strands were 1.7 % darker before it had ribbons (they
 covered 3.6 % more of a white world).
 
 It was 0.36 % +- 0.06 % darker than Cycles (t -6): rays leaving a strand
