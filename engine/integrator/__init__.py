@@ -93,6 +93,8 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES, first=None):
         subsurface.arrive(paths, found)                          # walks' exit points: no tracing
     if depth == 0:
         stages.camera_aovs(ctx, paths, found, tile)
+    if ctx.media is not None and first is None:
+        volume.enter_media(ctx, paths, found, obs)                # boundaries met outside media: crossed
     # A bake's given first hit has no segment to fly through: Cycles' init_from_bake goes straight
     # to shading the texel (no intersect or volume kernel for the P + N -> P stand-in ray).
     flight = None if ctx.media is None or first is not None else volume.free_flights(ctx, paths, found, depth, tile)
