@@ -507,12 +507,10 @@ def enter_media(ctx, paths, found, obs=NO_PASSES):
     and ``found`` on in place.  Left to the full step where a boundary may
     do more than pass (extra passes, holdouts, shadow catchers, subsurface
     walks, bakes) or a light comes before it."""
-    if (obs.active or ctx.holdout is not None or ctx.catcher is not None or ctx.subsurface
-            or ctx.bake is not None or not ctx.media.boundary.any()):
+    quiet = _quiet_boundaries(ctx, obs)
+    if quiet is None:
         return
-    quiet = ctx.media.boundary[:len(ctx.materials.emission)] & ~row_any_positive(ctx.materials.emission)
-    quiet[list(ctx.materials.textures.emission)] = False
-    for _ in range(BOUNDARY_STEPS):   # (emission at a boundary is the full step's: surface_emission)
+    for _ in range(BOUNDARY_STEPS):
         hit_prim = found.prim >= 0
         mat = np.take(ctx.triangles.material, np.where(hit_prim, found.prim, 0))
         rows = np.flatnonzero(hit_prim & ~found.light & quiet[mat] & (paths.stack < 0).all(axis=1))
@@ -527,6 +525,38 @@ def enter_media(ctx, paths, found, obs=NO_PASSES):
             setattr(paths, name, a)
         for name in found.__dataclass_fields__:   # intersect's own arrays: written in place
             getattr(found, name)[rows] = getattr(again, name)
+
+
+def split_boundaries(ctx, paths, found, go_on, obs=NO_PASSES):
+    """The paths going on (``go_on``) that are at a volume boundary, taken
+    and crossed before the bounce's compaction (which then leaves them
+    out), so the other paths are copied once, not once there and again by
+    ``pass_boundaries``.  Returns (those paths crossed, their mask) or
+    (None, None) when none or where the full step decides
+    (``_quiet_boundaries``)."""
+    quiet = _quiet_boundaries(ctx, obs)
+    if quiet is None:
+        return None, None
+    at = go_on & quiet[np.take(ctx.triangles.material, np.where(go_on, found.prim, 0))]
+    if not at.any():
+        return None, None
+    rows = np.flatnonzero(at)
+    moved = paths.take(rows)
+    _cross_boundary(ctx, moved, _boundary_hit(ctx, moved, found.take(rows)))
+    return moved, at
+
+
+def _quiet_boundaries(ctx, obs):
+    """Per material, the volume boundaries a path may cross with no
+    shading at all (no emission there: surface_emission's), or None where
+    the full step is kept for every boundary: extra passes, holdouts,
+    shadow catchers, subsurface walks, bakes."""
+    if (obs.active or ctx.holdout is not None or ctx.catcher is not None or ctx.subsurface
+            or ctx.bake is not None or not ctx.media.boundary.any()):
+        return None
+    quiet = ctx.media.boundary[:len(ctx.materials.emission)] & ~row_any_positive(ctx.materials.emission)
+    quiet[list(ctx.materials.textures.emission)] = False
+    return quiet
 
 
 def _boundary_hit(ctx, paths, found):
