@@ -94,6 +94,8 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES, first=None):
         subsurface.arrive(paths, found)                          # walks' exit points: no tracing
     if depth == 0:
         stages.camera_aovs(ctx, paths, found, tile)
+    if ctx.media is not None and first is None:
+        volume.enter_media(ctx, paths, found, obs)                # boundaries met outside media: crossed
     # A bake's given first hit has no segment to fly through: Cycles' init_from_bake goes straight
     # to shading the texel (no intersect or volume kernel for the P + N -> P stand-in ray).
     flight = None if ctx.media is None or first is not None else volume.free_flights(ctx, paths, found, depth, tile)
@@ -102,27 +104,33 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES, first=None):
     if flight is not None:                                       # volume vertices: NEE, phase sample
         ended, scattered, held = volume.after_flights(ctx, paths, ended, flight, depth, tile, obs)
     stages.escaped(ctx, paths, np.flatnonzero((found.prim < 0) & ~ended), tile, obs)
-    paths, surface = _compact(ctx, paths, found.surface, (found.prim >= 0) & ~ended, tile, held)
+    go_on = (found.prim >= 0) & ~ended
+    crossed = None
+    if ctx.media is not None and first is None:                 # volume boundaries: crossed, no vertex
+        crossed, at = volume.split_boundaries(ctx, paths, found, go_on, obs)
+        if crossed is not None:
+            go_on, held = go_on & ~at, at if held is None else held | at
+    paths, surface = _compact(ctx, paths, found.surface, go_on, tile, held)
     if len(paths.pix) == 0:
-        return _join(paths, scattered)
+        return _join(paths, scattered, crossed)
     hit = stages.interaction(ctx, paths, *surface)               # Hit
     if ctx.holdout is not None:                                  # camera rays at holdouts
         paths, hit = _holdouts(ctx, paths, hit, tile)
         if len(paths.pix) == 0:
-            return _join(paths, scattered)
+            return _join(paths, scattered, crossed)
     if ctx.catcher is not None:                                  # shadow catchers: split paths
         paths, hit = catcher.split(ctx, paths, hit, tile)
     stages.surface_emission(ctx, paths, hit, depth, obs)
     passed = None
-    if ctx.media is not None and first is None:                 # volume boundaries: crossed, no vertex
+    if ctx.media is not None and first is None:                 # the other boundaries, after their emission
         paths, hit, passed = volume.pass_boundaries(ctx, paths, hit, obs)
         if paths is None:
-            return _join(passed, scattered)
+            return _join(passed, scattered, crossed)
     paths, hit, carried = _past_last_vertex(ctx, paths, hit, tile)
     if carried is not None and ctx.subsurface:
         carried.exit_prim[:] = -1
     if len(paths.pix) == 0:
-        return _join(paths, carried, scattered, passed)
+        return _join(paths, carried, scattered, passed, crossed)
     v = stages.shade(ctx, paths, hit, depth)                     # Vertex
     obs.vertex(paths, v, depth)
     every = stages.sampling_every_light(ctx, v)
@@ -142,7 +150,7 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES, first=None):
     held = through | subsurface.walking(paths) if ctx.subsurface else through
     stages.remember_vertex(ctx, paths, v, held, every, ray, depth)
     paths = _end(ctx, paths, alive, tile)
-    return _join(paths, carried, scattered, passed)
+    return _join(paths, carried, scattered, passed, crossed)
 
 
 def _join(paths, *others):

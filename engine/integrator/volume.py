@@ -15,6 +15,8 @@ PATH_RAY_TERMINATE_AFTER_TRANSPARENT): volume_bounces 0 is single
 scattering, lit by next-event estimation at the scattering point and by
 the phase-sampled ray finding a light.
 """
+from types import SimpleNamespace
+
 import numpy as np
 
 from .. import media
@@ -26,10 +28,11 @@ from ..accel import shadow_rays
 from ..sampler import BSDF, LIGHT, MEDIUM, emitter_set, vertex_set
 from ..sampling import power_heuristic
 from ..vec import dot, row_any_positive
-from . import transparency, visibility, volume_guide
+from . import stages, transparency, visibility, volume_guide
 from .records import RowView
 from .stages import finish, nee_rounds, points_path, spread_from
 from ..geometry import VIS_VOLUME
+from ..hits import hit_geometry
 from .visibility import VIS_INDIRECT
 
 
@@ -512,6 +515,78 @@ def pass_boundaries(ctx, paths, hit, obs=NO_PASSES):
     moved = paths.take(rows)
     _cross_boundary(ctx, moved, hit.take(rows))
     return paths.take(rest), hit.take(rest), moved
+
+
+def enter_media(ctx, paths, found, obs=NO_PASSES):
+    """Rays outside every medium whose closest hit is a volume boundary
+    cross it here and are traced on at once, up to BOUNDARY_STEPS times:
+    no free flight is owed for a segment in no medium, so the crossing
+    (as ``pass_boundaries``) needs no wavefront step of its own (camera
+    rays entering a fog box, rays from a floor below it).  Moves the paths
+    and ``found`` on in place.  Left to the full step where a boundary may
+    do more than pass (extra passes, holdouts, shadow catchers, subsurface
+    walks, bakes) or a light comes before it."""
+    quiet = _quiet_boundaries(ctx, obs)
+    if quiet is None:
+        return
+    for _ in range(BOUNDARY_STEPS):
+        hit_prim = found.prim >= 0
+        mat = np.take(ctx.triangles.material, np.where(hit_prim, found.prim, 0))
+        rows = np.flatnonzero(hit_prim & ~found.light & quiet[mat] & (paths.stack < 0).all(axis=1))
+        if len(rows) == 0:
+            return
+        at = RowView(paths, rows, len(paths.pix))
+        _cross_boundary(ctx, at, _boundary_hit(ctx, at, found.take(rows)))
+        again = stages.intersect(ctx, at)
+        for name in ("o", "tmax", "tbounce", "stack") + (("self_prim",) if ctx.strands is not None else ()):
+            a = getattr(paths, name).copy()   # a copy: a camera ray's o is also its mis_o
+            a[rows] = getattr(at, name)
+            setattr(paths, name, a)
+        for name in found.__dataclass_fields__:   # intersect's own arrays: written in place
+            getattr(found, name)[rows] = getattr(again, name)
+
+
+def split_boundaries(ctx, paths, found, go_on, obs=NO_PASSES):
+    """The paths going on (``go_on``) that are at a volume boundary, taken
+    and crossed before the bounce's compaction (which then leaves them
+    out), so the other paths are copied once, not once there and again by
+    ``pass_boundaries``.  Returns (those paths crossed, their mask) or
+    (None, None) when none or where the full step decides
+    (``_quiet_boundaries``)."""
+    quiet = _quiet_boundaries(ctx, obs)
+    if quiet is None:
+        return None, None
+    at = go_on & quiet[np.take(ctx.triangles.material, np.where(go_on, found.prim, 0))]
+    if not at.any():
+        return None, None
+    rows = np.flatnonzero(at)
+    moved = paths.take(rows)
+    _cross_boundary(ctx, moved, _boundary_hit(ctx, moved, found.take(rows)))
+    return moved, at
+
+
+def _quiet_boundaries(ctx, obs):
+    """Per material, the volume boundaries a path may cross with no
+    shading at all (no emission there: surface_emission's), or None where
+    the full step is kept for every boundary: extra passes, holdouts,
+    shadow catchers, subsurface walks, bakes."""
+    if (obs.active or ctx.holdout is not None or ctx.catcher is not None or ctx.subsurface
+            or ctx.bake is not None or not ctx.media.boundary.any()):
+        return None
+    quiet = ctx.media.boundary[:len(ctx.materials.emission)] & ~row_any_positive(ctx.materials.emission)
+    quiet[list(ctx.materials.textures.emission)] = False
+    return quiet
+
+
+def _boundary_hit(ctx, paths, found):
+    """What crossing a boundary reads of its Hit (point, normal, offset,
+    material, side): without motion, points or curves the triangles'
+    geometry alone, not the whole ``stages.interaction``."""
+    if ctx.motion is not None or ctx.spheres is not None or ctx.strands is not None:
+        return stages.interaction(ctx, paths, *found.surface)
+    p, ng, _, back = hit_geometry(ctx.triangles, paths.o, paths.d, found.t, found.prim, found.bu, found.bv)
+    return SimpleNamespace(p=p, ng=ng, eps=ctx.accel.offset_scale(p), prim=found.prim,
+                           mat=np.take(ctx.triangles.material, found.prim), back=back)
 
 
 def _cross_boundary(ctx, paths, hit):

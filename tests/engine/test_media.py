@@ -159,6 +159,57 @@ def test_absorbing_slab_is_beer_lambert():
                                rtol=offset_rtol(sa, 1))
 
 
+def test_boundaries_cross_as_a_full_step(monkeypatch):
+    """Rays in no medium that meet a volume boundary cross it inside their
+    intersect step (volume.enter_media): the paths' rays, stacks and bounce
+    counts and the next hits are exactly the full step's (interaction,
+    pass_boundaries, then the next step's intersect).  Camera rays into a
+    slab and floor rays back up into it, under a sun; the rays leaving it
+    are crossed before the compaction (volume.split_boundaries), again
+    exactly as pass_boundaries."""
+    from engine.integrator import stages, volume
+    enter, checked, wrong = volume.enter_media, [], []
+
+    def check(ctx, paths, found, obs=volume.NO_PASSES):
+        before, hits = paths.take(np.arange(len(paths.pix))), found.take(np.arange(len(paths.pix)))
+        enter(ctx, paths, found, obs)
+        rows = np.flatnonzero((before.stack < 0).all(axis=1) & (paths.stack >= 0).any(axis=1))
+        if len(rows) == 0:
+            return
+        ref = before.take(rows)
+        volume.pass_boundaries(ctx, ref, stages.interaction(ctx, ref, *hits.take(rows).surface))
+        again, now = stages.intersect(ctx, ref), paths.take(rows)
+        checked.append(len(rows))
+        wrong.extend(name for name in ("o", "d", "tmax", "tbounce", "stack", "mis_o", "beta")
+                     if not np.array_equal(getattr(now, name), getattr(ref, name)))
+        wrong.extend("hit " + name for name in again.__dataclass_fields__
+                     if not np.array_equal(getattr(found, name)[rows], getattr(again, name)))
+        rest = np.setdiff1d(np.arange(len(paths.pix)), rows)
+        if not np.array_equal(paths.o[rest], before.o[rest]):
+            wrong.append("others moved")
+
+    split, split_rows = volume.split_boundaries, []
+
+    def check_split(ctx, paths, found, go_on, obs=volume.NO_PASSES):
+        moved, at = split(ctx, paths, found, go_on, obs)
+        if moved is not None:   # the rows at boundaries the compaction leaves out, crossed as pass_boundaries does
+            rows = np.flatnonzero(at)
+            ref = paths.take(rows)
+            volume.pass_boundaries(ctx, ref, stages.interaction(ctx, ref, *found.take(rows).surface))
+            split_rows.append(len(rows))
+            wrong.extend("split " + name for name in ("o", "d", "tmax", "tbounce", "stack", "beta")
+                         if not np.array_equal(getattr(moved, name), getattr(ref, name)))
+        return moved, at
+
+    monkeypatch.setattr(volume, "enter_media", check)
+    monkeypatch.setattr(volume, "split_boundaries", check_split)
+    sun = SunLight((0.6, 0.0, -0.8), (3.0, 3.0, 3.0), angle=0.0)
+    scene = slab_scene(Volume(absorption=(0.4, 1.0, 2.5), scattering=(0.5, 0.5, 0.5)), light=sun, world=(0, 0, 0))
+    render(scene, RenderSettings(samples=4, samples_per_pass=4, max_bounces=3, volume_bounces=1))
+    print(f"rays crossed per check: {checked}; leaving the slab: {split_rows}")
+    assert len(checked) >= 2 and sum(checked) > 16 * 16 * 4 and sum(split_rows) > 16 * 16 * 4 and not wrong, wrong
+
+
 def test_shadow_rays_are_attenuated_through_a_slab():
     """A diffuse floor under a sun seen and lit through an absorbing slab:
     rho E cos / pi x T(camera path) x T(sun path, thickness / cos)."""
