@@ -38,7 +38,8 @@ MUTANT_SPP = 128        # the mutation only needs to see 1 %
 
 def ember_render(refs, name, spp, seed, light_scale=1.0):
     """The reference scene rendered by Ember (the add-on's export, one pass):
-    image and per-pixel variance of its mean."""
+    image and per-pixel variance of its mean (the channel sum's last:
+    ember_stats.sum_variance)."""
     from addon import backend
     from addon.export import scene as scene_export
     scene = refs.open_reference_scene(bpy, name)
@@ -48,11 +49,11 @@ def ember_render(refs, name, spp, seed, light_scale=1.0):
     for light in bpy.data.lights:
         light.energy *= light_scale
     exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
-    settings = dataclasses.replace(scene_export.render_settings(scene), samples_per_pass=spp)
+    settings = dataclasses.replace(scene_export.render_settings(scene), samples_per_pass=spp, sum_variance=True)
     result = backend.engine().render(exported.scene, settings)
     image = result.image[..., :3].astype(np.float64)
     assert image.shape == (height, width, 3) and np.isfinite(image).all()
-    return image, result.variance.astype(np.float64), scene, bounces
+    return image, result.variance_with_sum.astype(np.float64), scene, bounces
 
 
 def compare(name, image, var, spp, ref, ref_var, header):

@@ -22,6 +22,8 @@ import bpy
 import numpy as np
 import pytest
 
+import ember_stats as stats
+
 from ember_testlib import (ReferenceCheck, check_against_reference, empty_factory_scene, live_cycles_reference,
                            render_for_reference)
 from test_curves_parity import strands
@@ -123,15 +125,13 @@ def test_hair_bsdf_reflection_parity_with_live_cycles(tmp_path, tapped_engine):
 
 
 def channel_sum(image, var):
-    """(H, W, 1): a pixel's R + G + B and a bound on the variance of that
-    sum.  The channels of a pixel come from the same paths, so their errors
-    are correlated (here almost fully: white light on near-grey surfaces);
-    ember_stats' image and region means add the channel variances as if they
-    were independent, which on this scene makes their standard errors about
-    half the scatter measured between independent seed sets.  The square of
-    the summed channel standard errors bounds the sum's variance
-    (Cauchy-Schwarz) and matches that scatter."""
-    return image[..., :3].sum(axis=2, keepdims=True), np.sqrt(var[..., :3]).sum(axis=2, keepdims=True) ** 2
+    """(H, W, 1): a pixel's R + G + B and the measured variance of that sum
+    (the last channel of ``var``: Ember's film and the scatter of Cycles'
+    seeds, ember_stats.sum_variance).  The channels of a pixel come from the
+    same paths, so their errors are correlated (here almost fully: white
+    light on near-grey surfaces); the blocks are tested on the sum too."""
+    rgb = image[..., :3]
+    return rgb.sum(axis=2, keepdims=True), stats.sum_variance(rgb, var)[..., None]
 
 
 def test_hair_bsdf_labels_parity_with_live_cycles(tmp_path, tapped_engine):

@@ -365,7 +365,7 @@ def _blocks(img):
 def compare(case, level):
     """Ember's bake of ``case`` against its reference: (z of the blocks,
     z of the image mean, image and median block power, relative)."""
-    from ember_stats import detectable
+    from ember_stats import detectable, sum_variance
     kind, pass_filter = CASES[case][:2]
     scene, plane, image = bake_scene(case)
     ref, ref_var = load_reference(case, scene)
@@ -377,7 +377,10 @@ def compare(case, level):
         vb = vb + (ROUNDING[case] * b) ** 2
     z = (a - b) / np.sqrt(va + vb)
     mean_a, mean_b = ember.mean(), ref.mean()
-    se_mean = float(np.sqrt(var.sum() + ref_var.sum()) / ember.size)
+    # A mean over channels: the variance of each texel's R + G + B, bounded
+    # (ember_stats.sum_variance; neither the bake nor the stored references
+    # keep the sum's own variance), not the channel variances summed.
+    se_mean = float(np.sqrt(sum_variance(ember, var).sum() + sum_variance(ref, ref_var).sum()) / ember.size)
     z_mean = (mean_a - mean_b) / se_mean
     image_power = detectable(se_mean, level) / mean_b
     block_power = float(np.median(detectable(np.sqrt(va + vb), level) / np.maximum(b, 1e-12)))

@@ -74,7 +74,7 @@ def test_ember_renders_real_pixels(name, tmp_path, tapped_engine):
     # where this test only asked for a quadrant mean above 1e-3.
     scene, bounces = reference_scene(name)
     ref, ref_var, header = load_reference(REFERENCE_NAMES[name], scene, bounces)
-    var = tapped_engine[-1].result.variance.astype(np.float64)
+    var = tapped_engine[-1].result.variance_with_sum.astype(np.float64)
     tests, level = stats.region_mean_tests_var(
         rgb.astype(np.float64), var, EMBER_SPP - 1, ref, ref_var, int(header['seeds']) - 1,
         name=f"{name} quadrants against Cycles", float32_sums_b=int(header['samples']))
