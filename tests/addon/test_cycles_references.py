@@ -30,7 +30,9 @@ HELD = 0.003            # |relative bias| the image mean must resolve (issue 8: 
 BLOCK_HELD = 0.02       # the median block must resolve 2 % (issue 12)
 EMBER = {
     # name: (samples per pixel, seed, block side in pixels); power printed by the test
-    'cornell': (384, 11, 16),
+    # 1024: the 0.3 % asked of the image mean with the channels' covariance in
+    # its variance (384 resolved 0.46 %; 0.28 % with the channel variances summed).
+    'cornell': (1024, 11, 16),
     'glossy_world': (64, 12, 8),
 }
 MUTANT_SPP = 128        # the mutation only needs to see 1 %
