@@ -28,6 +28,7 @@ SciPy is missing).  See docs/testing.md.
   ``sum_variance`` reads it, or bounds it where it was not measured.
 """
 import math
+import os
 
 import numpy as np
 
@@ -451,10 +452,16 @@ def _rounding_var(pixels, sums=1):
 
 
 def report_mean_tests(title, tests, level):
-    """Print the tests and their power; returns those that fail."""
-    print(f"\n{title} (per-test level {level:.1e}):")
-    for test in tests:
-        print(f"  {test}; detects {detectable(test.relative_se, level, test.dof):.2%} with probability 1/2")
+    """Print the tests and their power (and append them to the file
+    $EMBER_STATS_LOG if set: a record of a run under pytest-xdist, which
+    swallows prints); returns those that fail."""
+    lines = [f"{title} (per-test level {level:.1e}):"]
+    lines += [f"  {test}; detects {detectable(test.relative_se, level, test.dof):.2%} with probability 1/2"
+              for test in tests]
+    print("\n" + "\n".join(lines))
+    if os.environ.get("EMBER_STATS_LOG"):
+        with open(os.environ["EMBER_STATS_LOG"], "a") as log:
+            log.write("\n".join(lines) + "\n")
     return [test for test in tests if test.p < level]
 
 
