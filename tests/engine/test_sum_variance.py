@@ -75,6 +75,9 @@ def test_z_of_region_sums_has_unit_variance():
     truth = width * (COLOUR + 0.1).sum()
     level = stats.family_level(__name__ + ".unit_variance", 2)
     measured = image.sum(axis=(1, 2)) - truth
+    # mean z^2 has standard error sqrt(2 / rows) (normal approximation of chi-square(rows) / rows)
+    print(f"the mean z^2 detects a variance off by a factor 1 +- "
+          f"{stats.detectable(np.sqrt(2.0 / rows), level):.3f} with probability 1/2")
     for label, var, should_pass in (
             ("film sum variance", film.sum_variance().astype(np.float64).sum(axis=1), True),
             ("channel variances summed", film.variance().astype(np.float64).sum(axis=(1, 2)), False)):
