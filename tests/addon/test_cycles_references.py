@@ -104,3 +104,26 @@ def test_mutation_light_power_099_is_caught(refs):
     ref, ref_var, header = load_reference('cornell')
     tests, level, failures = compare('cornell, light x 0.99', image, var, MUTANT_SPP, ref, ref_var, header)
     assert tests[0] in failures and tests[0].relative < 0, f"a 1 % darker light went unnoticed: {tests[0]}"
+
+
+def test_references_carry_the_channel_sum_variance(tmp_path, monkeypatch):
+    """tools/cycles_references.py writes var.sum, the seeds' scatter of
+    R + G + B (correlated channels: not the three variances summed), and
+    load_reference hands it on as the variance's fourth channel, which
+    ember_stats reads as the sum's (no render: synthetic seeds)."""
+    import ember_testlib
+    tool = references_tool()
+    monkeypatch.setattr(tool, 'reference_path', lambda name: str(tmp_path / f'cycles_{name}.exr'))
+    monkeypatch.setattr(ember_testlib, 'references_tool', lambda: tool)
+    rng = np.random.default_rng(3)
+    grey = rng.exponential(1.0, (tool.SEEDS, 6, 5, 1))
+    seeds = grey * np.array([0.8, 0.5, 0.2]) + rng.uniform(0.0, 0.1, (tool.SEEDS, 6, 5, 3))
+    attributes = {'ember:' + k: v for k, v in dict(tool.expected_header('cornell'), width=5, height=6).items()}
+    tool.write_reference(tool.reference_path('cornell'), seeds.mean(axis=0), ember_testlib.seed_variance(seeds),
+                         attributes)
+    mean, var, header = load_reference('cornell')
+    assert var.shape == (6, 5, 4) and header['seeds'] == str(tool.SEEDS)
+    expected = seeds.sum(axis=3).var(axis=0, ddof=1) / tool.SEEDS
+    np.testing.assert_allclose(stats.sum_variance(mean, var), expected, rtol=1e-6)
+    np.testing.assert_allclose(var[..., :3], seeds.var(axis=0, ddof=1) / tool.SEEDS, rtol=1e-6)
+    assert (expected > 1.5 * var[..., :3].sum(axis=2)).all(), "correlated channels: more than the sum of three"
