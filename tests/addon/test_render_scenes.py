@@ -18,7 +18,8 @@ from ember_testlib import (check_against_reference, load_reference, open_scene, 
 EMBER_SPP = 64        # one sample per pass -> 64 passes (test_ember_renders_real_pixels)
 PARITY = {
     # name: (Ember samples, block side in pixels, image and block power asserted)
-    'instances_lights': (384, 16, (0.005, 0.02)),
+    # 640: 384 resolved 0.57 % of the image, not 0.5 % (the channel sum's variance).
+    'instances_lights': (640, 16, (0.005, 0.02)),
     # Veach's plates reflect four small, very bright lights, and the lights
     # themselves are in view: ten pixels on the lights' rims hold 90 % of the
     # image's variance in both renderers (the pixel filter's samples), so the
