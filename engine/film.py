@@ -11,6 +11,12 @@ Adaptive sampling reads a second estimate of each pixel built from half of
 its samples (Cycles' "aux" buffer, class-A samples); it is kept only when
 adaptive sampling is on.  First-hit AOVs (depth, normal, albedo) are kept
 only when asked for.
+
+The M2 of each pixel's channel sum R + G + B is kept only when asked for
+(``sum_variance``: the tests' region totals).  The channels of one path are
+strongly correlated (a grey path adds the same to all three), so the
+variance of a sum over channels is not the sum of the channel variances: up
+to three times more.  It is a second accumulator, not a derived number.
 """
 import threading
 
@@ -28,7 +34,7 @@ STATE_VERSION = 1
 class Tile:
     """float64 sums for the pixels [lo, hi), filled by one batch."""
 
-    def __init__(self, lo, hi, aovs=tuple(AOV_CHANNELS), aux=False, passes=(), guide=None):
+    def __init__(self, lo, hi, aovs=tuple(AOV_CHANNELS), aux=False, passes=(), guide=None, sum_variance=False):
         self.lo, self.hi = lo, hi
         # Volume scattering probability guiding (integrator/volume_guide.py):
         # the film's filtered view this batch reads, and the sums it adds.
@@ -38,6 +44,7 @@ class Tile:
         n = hi - lo
         self.rgb = np.zeros((n, 3))
         self.rgb2 = np.zeros((n, 3))
+        self.sum2 = np.zeros(n) if sum_variance else None   # squares of R + G + B
         self.alpha = np.zeros(n)
         self.holdout = np.zeros(n)
         self.count = np.zeros(n)
@@ -85,6 +92,9 @@ class Tile:
         self._pending = []
         self.rgb += self._bin3(pix, L)
         self.rgb2 += self._bin3(pix, L * L)
+        if self.sum2 is not None:
+            total = L.sum(axis=1)
+            self.sum2 += np.bincount(pix, weights=total * total, minlength=self.hi - self.lo)
 
     # -- shadow catchers (engine/integrator/catcher.py) ------------------------
 
@@ -133,7 +143,7 @@ class Film:
     """Per-pixel sample statistics of a whole frame (row 0 at the top)."""
 
     def __init__(self, width, height, aovs=tuple(AOV_CHANNELS), adaptive=False, passes=(), crypto_levels=6,
-                 guide=False):
+                 guide=False, sum_variance=False):
         unknown = set(aovs) - set(AOV_CHANNELS)
         if unknown:
             raise ValueError(f"unknown AOVs {sorted(unknown)}; known: {sorted(AOV_CHANNELS)}")
@@ -144,6 +154,8 @@ class Film:
         self.count = np.zeros(n, np.float32)
         self.mean = np.zeros((n, 3), np.float32)
         self.m2 = np.zeros((n, 3), np.float32)
+        # M2 of R + G + B per pixel, only when asked (the module docstring).
+        self.m2_sum = np.zeros(n, np.float32) if sum_variance else None
         self.alpha = np.zeros(n, np.float32)   # sum of coverage
         self.holdout = np.zeros(n, np.float32)   # sum of holdout transparency
         self.catcher = None                      # shadow catcher sums (Tile.add_catcher)
@@ -161,7 +173,8 @@ class Film:
     # -- accumulation ------------------------------------------------------
 
     def new_tile(self, lo, hi):
-        return Tile(lo, hi, tuple(self.aovs), self.aux is not None, self.passes, self.guide)
+        return Tile(lo, hi, tuple(self.aovs), self.aux is not None, self.passes, self.guide,
+                    self.m2_sum is not None)
 
     def merge(self, tile):
         tile.flush()
@@ -170,8 +183,11 @@ class Film:
         with np.errstate(divide="ignore", invalid="ignore"):
             mean_b = np.where(nb[:, None] > 0, tile.rgb / nb[:, None], 0.0)
         m2_b = np.maximum(tile.rgb2 - tile.rgb * mean_b, 0.0)
+        m2_sum_b = None
+        if self.m2_sum is not None:
+            m2_sum_b = np.maximum(tile.sum2 - tile.rgb.sum(axis=1) * mean_b.sum(axis=1), 0.0)
         with self._lock:
-            self._combine(s, nb, mean_b, m2_b)
+            self._combine(s, nb, mean_b, m2_b, m2_sum_b)
             self.alpha[s] += tile.alpha
             self.holdout[s] += tile.holdout
             if tile.catcher is not None:
@@ -189,8 +205,10 @@ class Film:
             if self.guide is not None and tile.guide_sums is not None:
                 self.guide.merge(tile.lo, tile.guide_sums)
 
-    def _combine(self, s, nb, mean_b, m2_b):
-        """Chan et al.'s pairwise update of (count, mean, M2)."""
+    def _combine(self, s, nb, mean_b, m2_b, m2_sum_b=None):
+        """Chan et al.'s pairwise update of (count, mean, M2), and of the
+        channel sum's M2 where it is kept (dropped when the other side has
+        none: it is then unknown)."""
         na = self.count[s].astype(np.float64)
         n = na + nb
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -199,6 +217,11 @@ class Film:
         delta = mean_b - mean_a
         self.mean[s] = mean_a + delta * fb
         self.m2[s] += m2_b + delta * delta * (na[:, None] * fb)
+        if self.m2_sum is not None and m2_sum_b is None:
+            self.m2_sum = None
+        elif self.m2_sum is not None:
+            delta_sum = delta.sum(axis=1)
+            self.m2_sum[s] += m2_sum_b + delta_sum * delta_sum * (na * fb[:, 0])
         self.count[s] = n
 
     # -- read-out ----------------------------------------------------------
@@ -267,6 +290,17 @@ class Film:
         np.minimum(var, np.finfo(np.float32).max, out=var)
         return var.astype(np.float32).reshape(self.height, self.width, 3)
 
+    def sum_variance(self):
+        """(H, W) float32 variance of each pixel's mean of R + G + B (as
+        ``variance``), or None when the film does not keep it."""
+        if self.m2_sum is None:
+            return None
+        c = self.count.astype(np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            var = np.where(c > 1, self.m2_sum / (c * (c - 1.0)), 0.0)
+        np.minimum(var, np.finfo(np.float32).max, out=var)
+        return var.astype(np.float32).reshape(self.height, self.width)
+
     def aov(self, name):
         acc = self.aovs.get(name)
         if acc is None:
@@ -311,6 +345,8 @@ class Film:
             out["aov_" + name] = acc
         if self.aux is not None:
             out["aux"] = self.aux
+        if self.m2_sum is not None:
+            out["m2_sum"] = self.m2_sum
         return out
 
     @classmethod
@@ -318,7 +354,8 @@ class Film:
         if int(state["version"]) != STATE_VERSION:
             raise ValueError(f"film state version {int(state['version'])}, expected {STATE_VERSION}")
         aovs = tuple(k[4:] for k in state if k.startswith("aov_"))
-        film = cls(int(state["width"]), int(state["height"]), aovs, "aux" in state)
+        film = cls(int(state["width"]), int(state["height"]), aovs, "aux" in state,
+                   sum_variance="m2_sum" in state)
         film.merge_state(state)
         return film
 
@@ -329,7 +366,8 @@ class Film:
         n = self.width * self.height
         with self._lock:
             self._combine(slice(0, n), np.asarray(state["count"], np.float64),
-                          np.asarray(state["mean"], np.float64), np.asarray(state["m2"], np.float64))
+                          np.asarray(state["mean"], np.float64), np.asarray(state["m2"], np.float64),
+                          np.asarray(state["m2_sum"], np.float64) if "m2_sum" in state else None)
             self.alpha += state["alpha"]
             if "holdout" in state:     # shards written before holdouts have none
                 self.holdout += state["holdout"]

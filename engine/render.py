@@ -72,6 +72,21 @@ class RenderResult:
         return self.film.variance()
 
     @property
+    def sum_variance(self):
+        """(H, W) variance of each pixel's mean of R + G + B (the channels'
+        covariances included), or None unless RenderSettings.sum_variance."""
+        return self.film.sum_variance()
+
+    @property
+    def variance_with_sum(self):
+        """(H, W, 4): ``variance`` and, last, ``sum_variance`` (the form
+        tests/ember_stats.py reads: one more channel than the image's RGB)."""
+        total = self.film.sum_variance()
+        if total is None:
+            raise ValueError("the render kept no sum variance: RenderSettings(sum_variance=True)")
+        return np.concatenate([self.film.variance(), total[..., None]], axis=2)
+
+    @property
     def sample_count(self):
         """(H, W) samples each pixel received (fewer where adaptive sampling stopped)."""
         return self.film.sample_count()
@@ -375,7 +390,7 @@ def _render(scene, settings, progress, bake=None):
     cam = ctx.camera
     adaptive = _Adaptive(settings, cam.width * cam.height)
     film = Film(cam.width, cam.height, settings.aovs, adaptive.params is not None, settings.passes,
-                ctx.pass_config.crypto_levels, guide=_guides(ctx, settings))
+                ctx.pass_config.crypto_levels, guide=_guides(ctx, settings), sum_variance=settings.sum_variance)
     threads = settings.threads or os.cpu_count() or 1
     stats = {"samples": 0, "samples_total": settings.samples, "kernels": kernel_mode,
              "compile_wait_seconds": compile_wait, "prepare_seconds": time.perf_counter() - t_start - compile_wait,

@@ -801,6 +801,10 @@ class RenderSettings:
     adaptive_min_samples: int = 0
     # First-hit AOVs the film keeps (memory: only what is asked for).
     aovs: tuple = ("depth", "normal", "albedo")
+    # Keep the M2 of each pixel's R + G + B too (RenderResult.sum_variance:
+    # the variance of sums over channels, which are correlated; tests ask
+    # for it, 4 bytes a pixel).  Images and passes are the same either way.
+    sum_variance: bool = False
     # Extra passes by name (engine/passes.py ALL_PASSES; none by default, and
     # none costs nothing) and their settings (a passes.PassConfig or None).
     passes: tuple = ()

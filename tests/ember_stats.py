@@ -19,8 +19,16 @@ SciPy is missing).  See docs/testing.md.
   whole image and over regions, for (a) two sets of independent batches,
   (b) one render with per-pixel variances and a reference with per-pixel
   variances (converged Cycles references, tests/data).
+* Sums over channels: a pixel's R, G and B come from the same paths and are
+  strongly correlated (a grey path adds the same to all three), so the
+  variance of R + G + B is not the sum of the channel variances (up to 3x
+  more).  A variance array with one channel more than its image carries the
+  measured variance of the channel sum last (Ember's film with
+  RenderSettings.sum_variance, the scatter of Cycles' seeds);
+  ``sum_variance`` reads it, or bounds it where it was not measured.
 """
 import math
+import os
 
 import numpy as np
 
@@ -255,9 +263,32 @@ def block_means(images, block):
     return cropped.reshape(n, h // block, block, w // block, block, c).mean(axis=(2, 4))
 
 
+def channel_variances(image, var):
+    """The per-channel variances of ``var`` (without the sum's channel)."""
+    return var[..., :image.shape[-1]]
+
+
+def sum_variance(image, var):
+    """(H, W) variance of each pixel's sum over its channels.  Measured when
+    ``var`` has one channel more than ``image`` (its last); else bounded by
+    Cauchy-Schwarz, (sum of the channel standard deviations)^2, exact for
+    fully correlated channels and conservative otherwise (loses power).  The
+    plain sum of the channel variances would be too small."""
+    channels = image.shape[-1]
+    var = np.asarray(var, float)
+    if var.shape[-1] == channels + 1:
+        return var[..., channels]
+    if var.shape[-1] != channels:
+        raise ValueError(f"variance has {var.shape[-1]} channels for an image of {channels}: "
+                         f"expected {channels} (per channel) or {channels + 1} (and the channel sum)")
+    return np.sqrt(np.maximum(var, 0.0)).sum(axis=-1) ** 2
+
+
 def block_means_var(img, var, block):
     """One image (H, W, C) with per-pixel variances of its mean -> block
-    means and the variances of the block means (pixels independent)."""
+    means and the variances of the block means (pixels independent; a
+    channel sum's variance in ``var`` is left out)."""
+    var = channel_variances(img, var)
     h, w = img.shape[:2]
     h2, w2 = h // block * block, w // block * block
     a = img[:h2, :w2].reshape(h2 // block, block, w2 // block, block, -1)
@@ -342,8 +373,8 @@ def failing_blocks_var(image_a, var_a, dof_a, image_b, var_b, dof_b, block, name
     their means differ (Welch's t), with the float32 rounding floor of
     ``region_mean_tests_var``.  Returns (failures, details); details holds
     the median block's detectable relative bias."""
-    ma, va = block_means_var(image_a, var_a, block)
-    mb, vb = block_means_var(image_b, var_b, block)
+    ma, va = block_means_var(image_a, channel_variances(image_a, var_a), block)
+    mb, vb = block_means_var(image_b, channel_variances(image_b, var_b), block)
     va = va + (np.abs(ma) * 2.0 ** -24) ** 2 / 3.0
     vb = vb + (np.abs(mb) * max(float32_sums_b, 1) * 2.0 ** -24) ** 2 / 3.0
     t, dof = _welch_t(ma, va, dof_a, mb, vb, dof_b)
@@ -361,8 +392,9 @@ class MeanTest:
     """Relative difference of two estimates of one total (a region's sum over
     pixels and channels), its standard error, t, dof and p."""
 
-    def __init__(self, name, mean_a, var_a, dof_a, mean_b, var_b, dof_b):
+    def __init__(self, name, mean_a, var_a, dof_a, mean_b, var_b, dof_b, note=''):
         t, dof = _welch_t(mean_a, var_a, dof_a, mean_b, var_b, dof_b)
+        self.note = note
         self.name, self.t, self.dof = name, float(t), float(dof)
         self.p = t_two_sided_p(self.t, self.dof)
         self.relative = (mean_a - mean_b) / mean_b if mean_b else 0.0
@@ -370,7 +402,7 @@ class MeanTest:
 
     def __repr__(self):
         return (f"{self.name}: relative difference {self.relative:+.3%} +- {self.relative_se:.3%} "
-                f"(t={self.t:.2f}, dof={self.dof:.0f}, p={self.p:.2g})")
+                f"(t={self.t:.2f}, dof={self.dof:.0f}, p={self.p:.2g}){self.note}")
 
 
 def region_mean_tests(batches_a, batches_b, name='region means', splits=2):
@@ -390,13 +422,22 @@ def region_mean_tests(batches_a, batches_b, name='region means', splits=2):
 def region_mean_tests_var(image_a, var_a, dof_a, image_b, var_b, dof_b, name='region means', splits=2,
                           float32_sums_b=1):
     """As ``region_mean_tests`` for two images (H, W, C) with per-pixel
-    variances of their means (pixels independent).  ``float32_sums_b``: image
-    b's pixels are float32 sums of that many samples (Cycles' film)."""
+    variances of their means (pixels independent; the channels' covariance
+    through ``sum_variance``: measured when var_* carry the sum's channel,
+    else bounded).  ``float32_sums_b``: image b's pixels are float32 sums of
+    that many samples (Cycles' film)."""
     tests = []
+    sum_var_a, sum_var_b = sum_variance(image_a, var_a), sum_variance(image_b, var_b)
+    channels_a, channels_b = channel_variances(image_a, var_a), channel_variances(image_b, var_b)
+    how = '/'.join('measured' if v.shape[-1] > i.shape[-1] or i.shape[-1] == 1 else 'bound'
+                   for i, v in ((image_a, var_a), (image_b, var_b)))
     for label, mask in regions(*image_a.shape[:2], splits):
         sa, sb = image_a[mask].sum(), image_b[mask].sum()
-        tests.append(MeanTest(label, sa, var_a[mask].sum() + _rounding_var(image_a[mask], 1), dof_a,
-                              sb, var_b[mask].sum() + _rounding_var(image_b[mask], float32_sums_b), dof_b))
+        va, vb = sum_var_a[mask].sum(), sum_var_b[mask].sum()
+        independent = channels_a[mask].sum() + channels_b[mask].sum()
+        note = f"; var of sums {how} {(va + vb) / independent:.2f}x the channels'" if independent > 0 else ''
+        tests.append(MeanTest(label, sa, va + _rounding_var(image_a[mask], 1), dof_a,
+                              sb, vb + _rounding_var(image_b[mask], float32_sums_b), dof_b, note))
     return tests, family_level(name, len(tests))
 
 
@@ -411,10 +452,16 @@ def _rounding_var(pixels, sums=1):
 
 
 def report_mean_tests(title, tests, level):
-    """Print the tests and their power; returns those that fail."""
-    print(f"\n{title} (per-test level {level:.1e}):")
-    for test in tests:
-        print(f"  {test}; detects {detectable(test.relative_se, level, test.dof):.2%} with probability 1/2")
+    """Print the tests and their power (and append them to the file
+    $EMBER_STATS_LOG if set: a record of a run under pytest-xdist, which
+    swallows prints); returns those that fail."""
+    lines = [f"{title} (per-test level {level:.1e}):"]
+    lines += [f"  {test}; detects {detectable(test.relative_se, level, test.dof):.2%} with probability 1/2"
+              for test in tests]
+    print("\n" + "\n".join(lines))
+    if os.environ.get("EMBER_STATS_LOG"):
+        with open(os.environ["EMBER_STATS_LOG"], "a") as log:
+            log.write("\n".join(lines) + "\n")
     return [test for test in tests if test.p < level]
 
 

@@ -5,10 +5,12 @@
 
 Each reference is the mean of ``SEEDS`` independent Cycles renders (CPU, no
 denoising, nothing clamped, the test's bounces and pixel filter) at the
-test's small resolution, written to tests/data/cycles_<name>.exr with six
-float channels: R, G, B (the mean) and var.R, var.G, var.B (the variance of
-that mean per pixel, from the scatter of the seeds), so a test can account
-for Cycles' residual noise.  The EXR header records the Blender/Cycles
+test's small resolution, written to tests/data/cycles_<name>.exr with seven
+float channels: R, G, B (the mean), var.R, var.G, var.B (the variance of
+that mean per pixel, from the scatter of the seeds) and var.sum (that of
+R + G + B: the channels are correlated, so it is not the sum of the three;
+references written before it have six channels and the tests bound it), so
+a test can account for Cycles' residual noise.  The EXR header records the Blender/Cycles
 version, the samples, seeds, bounces, filter, a key of the other Cycles
 settings (tests/addon/ember_testlib.cycles_settings_key: the code of
 setup_cycles), resolution and a fingerprint of the Blender scene
@@ -179,7 +181,7 @@ def metadata(name, scene, bounces):
 
 def render(name, folder):
     import numpy as np
-    from ember_testlib import render_array, setup_cycles
+    from ember_testlib import render_array, seed_variance, setup_cycles
     samples = REFERENCES[name][2]
     scene, bounces = build(name, folder)
     attributes = metadata(name, scene, bounces)     # before Cycles' settings: the scene as the test sees it
@@ -189,20 +191,20 @@ def render(name, folder):
         images.append(render_array(scene, folder, f'{name}_{seed}')[..., :3].astype(np.float64))
     images = np.array(images)
     mean = images.mean(axis=0)
-    var_mean = images.var(axis=0, ddof=1) / SEEDS
+    var_mean = seed_variance(images)     # per channel, and the channel sum's last
     write_reference(reference_path(name), mean, var_mean, attributes)
     total = abs(mean.sum())
     print(f"{name}: {scene.render.resolution_x}x{scene.render.resolution_y}, {SEEDS} x {samples} spp, "
           f"mean {mean.mean(axis=(0, 1))}, relative se of the image mean "
-          f"{math.sqrt(var_mean.sum()) / total if total else 0.0:.2e}", flush=True)
+          f"{math.sqrt(var_mean[..., 3].sum()) / total if total else 0.0:.2e}", flush=True)
 
 
 def write_reference(path, mean, var_mean, attributes):
     import numpy as np
     import OpenImageIO as oiio
     h, w, _ = mean.shape
-    spec = oiio.ImageSpec(w, h, 6, oiio.FLOAT)
-    spec.channelnames = ('R', 'G', 'B', 'var.R', 'var.G', 'var.B')
+    spec = oiio.ImageSpec(w, h, 7, oiio.FLOAT)
+    spec.channelnames = ('R', 'G', 'B', 'var.R', 'var.G', 'var.B', 'var.sum')
     spec.attribute('compression', 'zip')
     for key, value in attributes.items():
         spec.attribute(key, str(value))

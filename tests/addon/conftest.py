@@ -80,6 +80,8 @@ def tapped_engine(monkeypatch, needs_engine):
         taps.append(tap)
         if taps.samples_per_pass:
             settings = dataclasses.replace(settings, samples_per_pass=taps.samples_per_pass)
+        # The variance of channel sums too (result.variance_with_sum): images unchanged.
+        settings = dataclasses.replace(settings, sum_variance=True)
         tap.result = real(scene, settings, tap)
         return tap.result
     monkeypatch.setattr(backend.engine(), 'render', render)

@@ -510,7 +510,9 @@ def scene_fingerprint(scene):
 def load_reference(name, scene=None, bounces=None):
     """Mean, variance of the mean and header of tests/data/cycles_<name>.exr,
     checked against the tool's settings and (given the scene the test built
-    and its bounces) the scene's resolution, bounces and fingerprint."""
+    and its bounces) the scene's resolution, bounces and fingerprint.  The
+    variance has the channel sum's last (ember_stats.sum_variance) where the
+    file holds it (var.sum, references written since it was added)."""
     import OpenImageIO as oiio
     refs = references_tool()
     path = refs.reference_path(name)
@@ -529,14 +531,15 @@ def load_reference(name, scene=None, bounces=None):
     assert not stale, (f"{path} was rendered from another scene or with other settings (file, now): {stale}; "
                        f"re-run tools/cycles_references.py {name}")
     height, width = int(header['height']), int(header['width'])
-    assert pixels.shape == (height, width, 6), pixels.shape
+    assert pixels.shape in ((height, width, 6), (height, width, 7)), pixels.shape
     return pixels[..., :3], pixels[..., 3:], header
 
 
 def render_for_reference(scene, tmp_path, name, taps, spp, seed, bounces, configure=None):
     """Ember's render through Blender (one pass) and the variance of each
-    pixel's mean (tapped_engine keeps the engine's result); ``configure``
-    (scene.ember -> None) changes settings after setup_ember."""
+    pixel's mean, its channel sum's last (tapped_engine keeps the engine's
+    result and asks for it); ``configure`` (scene.ember -> None) changes
+    settings after setup_ember."""
     setup_ember(scene, spp, seed=seed, max_bounces=bounces)
     if configure is not None:
         configure(scene.ember)
@@ -546,14 +549,15 @@ def render_for_reference(scene, tmp_path, name, taps, spp, seed, bounces, config
     log = ember_engine.RENDER_LOG[-1]
     assert log['error'] is None, log['error']
     assert np.isfinite(image).all()
-    var = taps[-1].result.variance.astype(np.float64)
+    var = taps[-1].result.variance_with_sum.astype(np.float64)
     return image, var
 
 
 def live_cycles_reference(scene, tmp_path, name, seeds, spp, bounces, configure=None):
     """A Cycles reference rendered now (for settings no stored reference has):
     the mean of ``seeds`` renders, the variance of that mean per pixel from
-    their scatter, and the header ReferenceCheck reads; ``configure``
+    their scatter (the channel sum's last: ember_stats.sum_variance), and
+    the header ReferenceCheck reads; ``configure``
     (scene.cycles -> None) changes settings after setup_cycles."""
     images = []
     for seed in range(seeds):
@@ -562,7 +566,15 @@ def live_cycles_reference(scene, tmp_path, name, seeds, spp, bounces, configure=
             configure(scene.cycles)
         images.append(render_array(scene, tmp_path, f"cycles_{name}_{seed}")[..., :3])
     images = np.array(images, np.float64)
-    return images.mean(axis=0), images.var(axis=0, ddof=1) / seeds, {'seeds': seeds, 'samples': spp}
+    return images.mean(axis=0), seed_variance(images), {'seeds': seeds, 'samples': spp}
+
+
+def seed_variance(images):
+    """(H, W, C + 1) variance of the mean of independent (N, H, W, C) renders
+    per pixel and channel, and last of their channel sum (from the scatter:
+    the channels' covariance included)."""
+    with_sum = np.concatenate([images, images.sum(axis=3, keepdims=True)], axis=3)
+    return with_sum.var(axis=0, ddof=1) / len(images)
 
 
 class ReferenceCheck:
@@ -598,8 +610,8 @@ class ReferenceCheck:
         times its samples over Ember's): the power a render at Ember's sample
         count is owed, derived from the reference instead of set by hand."""
         import ember_stats as stats
-        image_se = math.sqrt((1.0 + ratio) * float(ref_var.sum())) / abs(float(ref.sum()))
-        means, var = stats.block_means_var(ref, ref_var, block)
+        image_se = math.sqrt((1.0 + ratio) * float(stats.sum_variance(ref, ref_var).sum())) / abs(float(ref.sum()))
+        means, var = stats.block_means_var(ref, stats.channel_variances(ref, ref_var), block)
         return (stats.detectable(image_se, self.level, dof),
                 stats.median_block_detects(stats.t_threshold(self.details['level'], dof), means, (1.0 + ratio) * var))
 

@@ -215,19 +215,21 @@ def view(scene, height, width, rows):
     scene.cycles_curves.shape = 'THICK'
 
 
-def against_cycles(build, name, tmp_path, taps, splits=2):
-    """Ember's render of the scene ``build`` makes against live Cycles (a ReferenceCheck)."""
+def against_cycles(build, name, tmp_path, taps, splits=2, spp=SPP):
+    """Ember's render of the scene ``build`` makes (``spp`` samples) against
+    live Cycles (a ReferenceCheck)."""
     scene = empty_factory_scene()
     bounces = build(scene)
     ref, ref_var, header = live_cycles_reference(scene, tmp_path, name, CYCLES_SEEDS, CYCLES_SPP, bounces)
-    image, var = render_for_reference(scene, tmp_path, name, taps, SPP, 2, bounces)
-    return ReferenceCheck(name, image[..., :3].astype(np.float64), var, SPP, ref, ref_var, header, BLOCK, splits)
+    image, var = render_for_reference(scene, tmp_path, name, taps, spp, 2, bounces)
+    return ReferenceCheck(name, image[..., :3].astype(np.float64), var, spp, ref, ref_var, header, BLOCK, splits)
 
 
 def test_curve_shading_parity_with_cycles(tmp_path, tapped_engine):
     """Curves Info, curve attributes, Geometry Tangent and particle UVs /
     colours against Cycles: the image, each column and 16 x 16 blocks."""
-    against_cycles(shading, 'curve_shading', tmp_path, tapped_engine, splits=4).assert_agrees(0.005, 0.03)
+    # 768 Ember spp: with the channels' covariance in the variance 256 resolved 0.72 %, not 0.5 %.
+    against_cycles(shading, 'curve_shading', tmp_path, tapped_engine, splits=4, spp=768).assert_agrees(0.005, 0.03)
 
 
 def test_curves_without_attributes_and_nan_attributes_render_finite(tmp_path, tapped_engine, monkeypatch):
@@ -288,4 +290,5 @@ def test_principled_hair_random_parity_with_cycles(tmp_path, tapped_engine):
     """Random Color and Random Roughness per strand against Cycles: the
     image, 2 x 2 regions (the columns) and 16 x 16 blocks.  Without the
     randomization Ember was 1.5 % darker (t -18; the unlinked column -3.4 %)."""
-    against_cycles(random_hair, 'random_hair', tmp_path, tapped_engine).assert_agrees(0.005, 0.03)
+    # 1024 Ember spp: with the channels' covariance in the variance 256 resolved 0.79 %, not 0.5 %.
+    against_cycles(random_hair, 'random_hair', tmp_path, tapped_engine, spp=1024).assert_agrees(0.005, 0.03)

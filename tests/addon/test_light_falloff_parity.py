@@ -10,7 +10,7 @@ from parity_scenes import light, material, plane, top_camera
 from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference
 
 BLOCK = 8
-SPP = 512
+SPP = 768   # 512 resolved 0.53 % of the image, not 0.5 % (the channel sum's variance)
 
 
 def _falloff(obj, output, strength, smooth=0.0):

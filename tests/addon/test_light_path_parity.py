@@ -28,6 +28,8 @@ SIZE = (48, 32)
 BLOCK = 8
 BOUNCES = 3
 EMBER_SPP = 512
+# consistent: 512 resolved 3.44 % of the image, not 3 % (the channel sum's variance)
+SAMPLES = {'consistent': 1024}
 CYCLES_SEEDS, CYCLES_SPP = 8, 128
 SCENES = {'consistent': ('Is Camera Ray', 'Is Shadow Ray', 'Ray Depth', 'Transparent Depth'),
           'diffuse': ('Is Diffuse Ray',)}
@@ -86,7 +88,8 @@ def test_light_path_outputs_match_cycles(tmp_path, tapped_engine, name):
     scene = empty_factory_scene()
     scene_of_lamps(scene, SCENES[name])
     ref, ref_var, header = live_cycles_reference(scene, tmp_path, name, CYCLES_SEEDS, CYCLES_SPP, BOUNCES)
-    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, EMBER_SPP, 5, BOUNCES)
-    check = ReferenceCheck(f'light_path_{name}', image[..., :3].astype(np.float64), var, EMBER_SPP, ref, ref_var,
+    spp = SAMPLES.get(name, EMBER_SPP)
+    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, spp, 5, BOUNCES)
+    check = ReferenceCheck(f'light_path_{name}', image[..., :3].astype(np.float64), var, spp, ref, ref_var,
                            header, BLOCK)
     check.assert_agrees(0.03, 0.15)

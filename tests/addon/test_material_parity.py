@@ -26,6 +26,9 @@ import pytest
 from ember_testlib import built_reference_scene, check_against_reference, render_for_reference
 
 EMBER_SPP = 256
+# 256 resolved 0.84 % (glass) and 0.69 % (principled) of the image, not 0.5 %,
+# with the channel sum's variance.
+SAMPLES = {'glass': 1024, 'principled': 768}
 BLOCK = 12
 WIDTH, HEIGHT = 48, 36
 IMAGE_POWER, BLOCK_POWER = 0.005, 0.02   # issue 12's targets, asserted except in WEAK (docs/testing.md)
@@ -226,11 +229,12 @@ def reference_scene(name, folder=None):
 @pytest.mark.parametrize("name", sorted(SCENES))
 def test_material_parity_with_cycles(name, tmp_path, tapped_engine):
     scene, bounces = reference_scene(name)
-    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, EMBER_SPP, 1, bounces)
+    spp = SAMPLES.get(name, EMBER_SPP)
+    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, spp, 1, bounces)
     from addon import engine as ember_engine
     log = ember_engine.RENDER_LOG[-1]
     assert not [w for w in log.get('warnings', ()) if 'Material' in w], log.get('warnings')
-    check = check_against_reference('material_' + name, scene, bounces, image, var, EMBER_SPP, BLOCK)
+    check = check_against_reference('material_' + name, scene, bounces, image, var, spp, BLOCK)
     if name == 'furnace':
         print(f"furnace: Ember multiscatter half {image[:, :WIDTH // 2, :3].mean():.4f}, single-scatter half "
               f"{image[:, WIDTH // 2:, :3].mean():.4f}")

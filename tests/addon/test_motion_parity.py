@@ -319,7 +319,8 @@ def test_moving_emitter_parity(tmp_path, tapped_engine):
     """Parity of a moving emissive mesh lighting a floor (light sampling at
     the path's time, MIS with BSDF rays)."""
     scene, bounces = reference_scene('moving_emitter')
-    spp = 4 * SPP   # (a small light whose light varies much over the shutter: noisier than the others)
+    spp = 10 * SPP   # 4 x resolved 1.35 % of the image, not 1 % (the channel sum's variance)
+    # (a small light whose light varies much over the shutter: noisier than the others)
     image, var = render_for_reference(scene, tmp_path, 'moving_emitter', tapped_engine, spp, 2, bounces)
     check_against_reference('motion_moving_emitter', scene, bounces, image, var, spp, BLOCK).assert_agrees(0.01, 0.05)
 

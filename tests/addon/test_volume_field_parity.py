@@ -22,7 +22,7 @@ import pytest
 from ember_testlib import built_reference_scene, check_against_reference, render_for_reference
 from test_volume_parity import _camera, _floor, _material, _object, _volume_settings, _world
 
-SPP = {'smoke_in_fog': 128}
+SPP = {'smoke_in_fog': 256}   # 128 resolved 3.10 % of the image, not 2.5 % (the channel sum's variance)
 BLOCK = 6
 WIDTH, HEIGHT = 24, 18
 # What each scene resolves at its samples (the suite's time budget): asserted.

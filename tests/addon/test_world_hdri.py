@@ -244,7 +244,7 @@ def test_environment_sampling_agrees_with_bsdf_sampling(factory_scene, tmp_path,
 
 
 # 320: at 256 the median block resolved 2.0% once the family budget grew to 250 (its t threshold 1% higher)
-HDRI_SPP, HDRI_BLOCK = 320, 10
+HDRI_SPP, HDRI_BLOCK = 512, 10   # 320 resolved 0.57 % of the image, not 0.5 % (the channel sum's variance)
 BACKGROUND_SPP = 128
 IMAGE_POWER, BLOCK_POWER = 0.005, 0.02   # issue 12's targets, asserted (docs/testing.md)
 

@@ -123,6 +123,22 @@ def test_region_means_with_pixel_variances():
     assert tests[0].p < level, tests[0]
 
 
+def test_sum_variance_measured_or_bounded():
+    """A variance with one channel more than its image carries the channel
+    sum's (read as is); without it the sum's is bounded by Cauchy-Schwarz,
+    never the channel variances summed; any other shape is refused."""
+    image = np.ones((2, 2, 3))
+    var = np.tile([1.0, 4.0, 9.0], (2, 2, 1))
+    assert np.array_equal(stats.sum_variance(image, var), np.full((2, 2), 36.0))
+    measured = np.concatenate([var, np.full((2, 2, 1), 20.0)], axis=2)
+    assert np.array_equal(stats.sum_variance(image, measured), np.full((2, 2), 20.0))
+    assert np.array_equal(stats.channel_variances(image, measured), var)
+    with pytest.raises(ValueError, match="channels"):
+        stats.sum_variance(image, var[..., :2])
+    tests, _ = stats.region_mean_tests_var(image, measured, 7, image, measured, 7)
+    assert tests[0].relative_se == pytest.approx(math.sqrt(2 * 4 * 20.0) / 12, rel=1e-9)
+
+
 def test_block_means():
     images = np.arange(2 * 4 * 4 * 1, dtype=float).reshape(2, 4, 4, 1)
     blocks = stats.block_means(images, 2)
