@@ -202,7 +202,7 @@ def _area_hit_numpy(o, d, j, c, n, du, dv, ex, ey, len_u, len_v, area, rect, ell
         pdf_out[ok] = np.where(use, 1.0 / np.maximum(s, 1e-300), pdf_out[ok])
 
 
-@loop_kernel("void(float64[:, ::1], float64[:, ::1], int64, float64[:, ::1], float64[:, ::1], float64[:, ::1], "
+@loop_kernel("void(float64[:, :], float64[:, :], int64, float64[:, ::1], float64[:, ::1], float64[:, ::1], "
              "float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], float64[::1], "
              "boolean[::1], boolean[::1], float64, float64[::1], float64[::1], boolean[::1])", _area_hit_numpy)
 def _area_hit_rows(o, d, j, c, n, du, dv, ex, ey, len_u, len_v, area, rect, ellipse, min_spherical,
@@ -286,7 +286,7 @@ def _area_sample_numpy(j, p, u1, u2, c, ex, ey, n, len_u, len_v, area, rect, ell
     t_out[:], pdf_out[:] = t, pdf
 
 
-@loop_kernel("void(int64[::1], float64[:, ::1], float64[::1], float64[::1], float64[:, ::1], float64[:, ::1], "
+@loop_kernel("void(int64[:], float64[:, :], float64[:], float64[:], float64[:, ::1], float64[:, ::1], "
              "float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], float64[::1], boolean[::1], "
              "boolean[::1], float64, float64[:, ::1], float64[::1], float64[::1])", _area_sample_numpy)
 def _area_sample_rows(j, p, u1, u2, c, ex, ey, n, len_u, len_v, area, rect, ellipse, min_spherical,

@@ -161,7 +161,8 @@ def test_area_light_rows_agree(jit):
     p[:100] = table.c[0] + [0.1, 0.05, 0.0]              # in the rectangle's plane
     p[100:200] = table.c[1] + 30.0 * table.n[1]          # far from the tiny square
     j[:100], j[100:200] = 0, 1
-    u1, u2 = rng.random(n), rng.random(n)
+    u = rng.random((n, 3))
+    u1, u2 = u[:, 0], u[:, 1]                            # strided, as the sampler's columns
     u1[200:210] = u2[200:210] = 0.5                      # the disk's centre
 
     def run(j=j, p=p, u1=u1, u2=u2):
@@ -186,7 +187,7 @@ def test_area_light_rows_agree(jit):
 def test_area_light_hits_agree(jit):
     """Rays meeting an area light (engine/lights/area.py _area_hit_rows): the
     compiled loop against its NumPy form for a rectangle (solid-angle and
-    area pdfs), a tiny sheared-free square, a disk and an ellipse, with rays
+    area pdfs), a tiny square, a disk and an ellipse, with rays
     from behind, grazing, parallel to the plane and through the edges."""
     from engine.lights import AreaLights, _area_hit_rows
     from engine.lights.common import MIN_SPHERICAL
