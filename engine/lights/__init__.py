@@ -2,7 +2,7 @@
 registry.py; ``LightSet`` combines them.  Importing the package registers
 every type.  The names below are those other modules and tests import."""
 from . import area, mesh, point, sun, world  # noqa: F401  (registration, in any order)
-from .area import AREA, AreaLights, _area_light_sample
+from .area import AREA, AreaLights, _area_hit_rows, _area_light_sample, _area_sample_rows
 from .common import (MAX_MAGNITUDE, MAX_SPHERICAL, MIN_SPHERICAL, Falloff, LightSample, selection_power,
                      smoothstep)
 from .lightset import AUTO_ALL_LIGHTS, LightSet, resolve_selection

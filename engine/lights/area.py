@@ -5,11 +5,12 @@ the rest by area."""
 import numpy as np
 
 from ..geometry import visibility_bits
-from ..kernels import helper, kernel, where
+from ..kernels import helper, kernel, loop_kernel, where
 from ..lightbounds import Bounds
 from ..lightproxy import box_corners, proxy_margin
 from ..sampling import concentric_disk, rectangle_frame, rectangle_solid_angle, spherical_rectangle_warp
 from ..scene import AREA_SHAPES, AreaLight, Scene, SceneError
+from ..vec import column, rows3
 from . import common
 from .common import Falloff, check_falloff, check_rgb, check_size, selection_power, uniform_index, unit
 from .registry import RAY, LightDef, LightExample, LightTable, register
@@ -138,19 +139,14 @@ class AreaLights(LightTable):
         return hit_t, index, Le, pdf
 
     def sample(self, out, idx, j, p, u1, u2, u3, n=None):
+        m = len(p)
+        wi, t, pdf = np.empty((m, 3)), np.empty(m), np.empty(m)
+        # One compiled pass per batch: the shape's point, the warp, direction and pdf
+        # (the elementwise kernel's NumPy passes and gathers cost as much as its arithmetic).
+        _area_sample_rows(column(j, m, np.int64), rows3(p)[0], column(u1, m, np.float64),
+                          column(u2, m, np.float64), self.c, self.ex, self.ey, self.n, self.len_u, self.len_v,
+                          self.area, self.rect, self.ellipse, common.MIN_SPHERICAL, wi, t, pdf)
         j = uniform_index(j)
-        x, y = u1 - 0.5, u2 - 0.5
-        e = self.ellipse[j]
-        if np.any(e):
-            e = np.broadcast_to(e, x.shape)
-            dx, dy = concentric_disk(u1[e], u2[e])
-            x[e], y[e] = 0.5 * dx, 0.5 * dy
-        c, ex, ey, n = self.c[j], self.ex[j], self.ey[j], self.n[j]
-        wx, wy, wz, t, pdf = _area_light_sample(
-            p[:, 0], p[:, 1], p[:, 2], c[..., 0], c[..., 1], c[..., 2], ex[..., 0], ex[..., 1], ex[..., 2],
-            ey[..., 0], ey[..., 1], ey[..., 2], self.len_u[j], self.len_v[j], n[..., 0], n[..., 1], n[..., 2],
-            self.area[j], self.rect[j].astype(np.float64), x, y, u1, u2, common.MIN_SPHERICAL)
-        wi = np.stack([wx, wy, wz], axis=1)
         Le = self.L[j]
         if self.shaders is not None:
             Le = Le * self._shader(j, p + wi * t[:, None], -wi, t, path_rows(out.path, idx))
@@ -165,41 +161,78 @@ class AreaLights(LightTable):
         n = np.broadcast_to(self.n[j], q.shape)
         return self.shaders.factor(j, q, n, wo, uv, dist, path)
 
-    def _solid_angle_pdf(self, j, o):
-        """Which rays from o NEE samples by solid angle, and that pdf."""
-        c, ex, ey = self.c[j], self.ex[j], self.ey[j]
-        s, min_nz2 = rectangle_solid_angle(o[:, 0], o[:, 1], o[:, 2], *c, *ex, *ey, self.len_u[j], self.len_v[j])
-        use = (s >= common.MIN_SPHERICAL) & (min_nz2 < 1.0 - 1e-8)
-        return use, 1.0 / np.maximum(s, 1e-300)
-
     def intersect(self, j, o, d, path=None):
         n = len(o)
-        t = np.full(n, np.inf)
-        pdf = np.zeros(n)
-        normal = self.n[j]
-        denom = d @ normal
-        front = denom < -1e-12  # emits along its normal: seen from the front only
-        with np.errstate(divide="ignore", invalid="ignore"):
-            th = ((self.c[j] - o) @ normal) / denom
-        q = o + d * th[:, None] - self.c[j]
-        a = q @ self.du[j]
-        b = q @ self.dv[j]
-        if self.ellipse[j]:
-            inside = 4.0 * (a * a + b * b) <= 1.0
-        else:
-            inside = (np.abs(a) <= 0.5) & (np.abs(b) <= 0.5)
-        ok = front & (th > 0) & inside & (self.area[j] > 0)
-        t[ok] = th[ok]
-        pdf[ok] = th[ok] ** 2 / (-denom[ok] * self.area[j])
+        o, d = rows3(o, d)
+        t, pdf, ok = np.empty(n), np.empty(n), np.empty(n, bool)
+        # One compiled pass: the plane, the shape, the area pdf and on rectangles NEE's
+        # solid-angle pdf (the pdf NEE has for this point: the same choice of strategy).
+        _area_hit_rows(o, d, int(j), self.c, self.n, self.du, self.dv, self.ex, self.ey, self.len_u, self.len_v,
+                       self.area, self.rect, self.ellipse, common.MIN_SPHERICAL, t, pdf, ok)
         Le = np.tile(self.L[j], (n, 1))
         if self.shaders is not None and ok.any():
             rows = np.flatnonzero(ok)
-            Le[rows] *= self._shader(j, o[rows] + d[rows] * th[rows, None], -d[rows], th[rows], path_rows(path, rows))
-        if self.rect[j] and ok.any():
-            # The pdf NEE has for this point: the same choice of strategy.
-            sph, solid_angle_pdf = self._solid_angle_pdf(j, o[ok])
-            pdf[ok] = np.where(sph, solid_angle_pdf, pdf[ok])
+            Le[rows] *= self._shader(j, o[rows] + d[rows] * t[rows, None], -d[rows], t[rows], path_rows(path, rows))
         return t, Le, pdf
+
+
+def _area_hit_numpy(o, d, j, c, n, du, dv, ex, ey, len_u, len_v, area, rect, ellipse, min_spherical,
+                    t_out, pdf_out, ok_out):
+    normal = n[j]
+    denom = d @ normal
+    front = denom < -1e-12  # emits along its normal: seen from the front only
+    with np.errstate(divide="ignore", invalid="ignore"):
+        th = ((c[j] - o) @ normal) / denom
+    q = o + d * th[:, None] - c[j]
+    a = q @ du[j]
+    b = q @ dv[j]
+    if ellipse[j]:
+        inside = 4.0 * (a * a + b * b) <= 1.0
+    else:
+        inside = (np.abs(a) <= 0.5) & (np.abs(b) <= 0.5)
+    ok = front & (th > 0) & inside & (area[j] > 0)
+    t_out[:], pdf_out[:], ok_out[:] = np.inf, 0.0, ok
+    t_out[ok] = th[ok]
+    pdf_out[ok] = th[ok] ** 2 / (-denom[ok] * area[j])
+    if rect[j] and ok.any():
+        with np.errstate(all="ignore"):
+            s, min_nz2 = rectangle_solid_angle.fn(o[ok, 0], o[ok, 1], o[ok, 2], *c[j], *ex[j], *ey[j],
+                                                  len_u[j], len_v[j])
+        use = (s >= min_spherical) & (min_nz2 < 1.0 - 1e-8)
+        pdf_out[ok] = np.where(use, 1.0 / np.maximum(s, 1e-300), pdf_out[ok])
+
+
+@loop_kernel("void(float64[:, :], float64[:, :], int64, float64[:, ::1], float64[:, ::1], float64[:, ::1], "
+             "float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], float64[::1], "
+             "boolean[::1], boolean[::1], float64, float64[::1], float64[::1], boolean[::1])", _area_hit_numpy)
+def _area_hit_rows(o, d, j, c, n, du, dv, ex, ey, len_u, len_v, area, rect, ellipse, min_spherical,
+                   t_out, pdf_out, ok_out):
+    """Rays (o, d) meeting area light j from its front: distance (inf:
+    missed), the pdf NEE has for the point (solid angle on rectangles seen
+    under enough of it, else area) and whether it was hit, as the NumPy
+    form computes them."""
+    nx, ny, nz, cx, cy, cz = n[j, 0], n[j, 1], n[j, 2], c[j, 0], c[j, 1], c[j, 2]
+    for i in range(len(o)):
+        ox, oy, oz, dx, dy, dz = o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2]
+        denom = (dx * nx + dy * ny) + dz * nz
+        th = (((cx - ox) * nx + (cy - oy) * ny) + (cz - oz) * nz) / denom
+        qx, qy, qz = (ox + dx * th) - cx, (oy + dy * th) - cy, (oz + dz * th) - cz
+        a = (qx * du[j, 0] + qy * du[j, 1]) + qz * du[j, 2]
+        b = (qx * dv[j, 0] + qy * dv[j, 1]) + qz * dv[j, 2]
+        if ellipse[j]:
+            inside = 4.0 * (a * a + b * b) <= 1.0
+        else:
+            inside = abs(a) <= 0.5 and abs(b) <= 0.5
+        ok = denom < -1e-12 and th > 0 and inside and area[j] > 0
+        t, pdf = np.inf, 0.0
+        if ok:
+            t, pdf = th, th * th / (-denom * area[j])
+            if rect[j]:
+                s, min_nz2 = _solid_angle_one(ox, oy, oz, cx, cy, cz, ex[j, 0], ex[j, 1], ex[j, 2],
+                                              ey[j, 0], ey[j, 1], ey[j, 2], len_u[j], len_v[j])
+                if s >= min_spherical and min_nz2 < 1.0 - 1e-8:
+                    pdf = 1.0 / max(s, 1e-300)
+        t_out[i], pdf_out[i], ok_out[i] = t, pdf, ok
 
 
 @kernel(24, 5)
@@ -232,6 +265,54 @@ def _area_light_sample(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, len
 
 
 _rectangle_warp = helper(spherical_rectangle_warp.fn)
+_area_one = helper(_area_light_sample.fn)
+_solid_angle_one = helper(rectangle_solid_angle.fn)
+
+
+def _area_sample_numpy(j, p, u1, u2, c, ex, ey, n, len_u, len_v, area, rect, ellipse, min_spherical,
+                       wi_out, t_out, pdf_out):
+    x, y = u1 - 0.5, u2 - 0.5
+    e = ellipse[j]
+    if np.any(e):
+        dx, dy = concentric_disk(u1[e], u2[e])
+        x[e], y[e] = 0.5 * dx, 0.5 * dy
+    c, ex, ey, n = c[j], ex[j], ey[j], n[j]
+    with np.errstate(all="ignore"):
+        wx, wy, wz, t, pdf = _area_light_sample.fn(
+            p[:, 0], p[:, 1], p[:, 2], c[:, 0], c[:, 1], c[:, 2], ex[:, 0], ex[:, 1], ex[:, 2],
+            ey[:, 0], ey[:, 1], ey[:, 2], len_u[j], len_v[j], n[:, 0], n[:, 1], n[:, 2],
+            area[j], rect[j].astype(np.float64), x, y, u1, u2, min_spherical)
+    wi_out[:, 0], wi_out[:, 1], wi_out[:, 2] = wx, wy, wz
+    t_out[:], pdf_out[:] = t, pdf
+
+
+@loop_kernel("void(int64[:], float64[:, :], float64[:], float64[:], float64[:, ::1], float64[:, ::1], "
+             "float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], float64[::1], boolean[::1], "
+             "boolean[::1], float64, float64[:, ::1], float64[::1], float64[::1])", _area_sample_numpy)
+def _area_sample_rows(j, p, u1, u2, c, ex, ey, n, len_u, len_v, area, rect, ellipse, min_spherical,
+                      wi_out, t_out, pdf_out):
+    """A point on each row's area light j seen from p: the shape's point
+    (disks and ellipses by the concentric map), then _area_light_sample's
+    direction, distance and pdf, row by row as its NumPy form computes them."""
+    for i in range(len(j)):
+        k = j[i]
+        a, b = u1[i], u2[i]
+        x, y = a - 0.5, b - 0.5
+        if ellipse[k]:
+            a2, b2 = 2.0 * a - 1.0, 2.0 * b - 1.0
+            if a2 == 0 and b2 == 0:
+                r, phi = b2, 0.0
+            elif abs(a2) > abs(b2):
+                r, phi = a2, (np.pi / 4) * (b2 / a2)
+            else:
+                r, phi = b2, np.pi / 2 - (np.pi / 4) * (a2 / b2)
+            x, y = 0.5 * (r * np.cos(phi)), 0.5 * (r * np.sin(phi))
+        wx, wy, wz, t, pdf = _area_one(p[i, 0], p[i, 1], p[i, 2], c[k, 0], c[k, 1], c[k, 2],
+                                       ex[k, 0], ex[k, 1], ex[k, 2], ey[k, 0], ey[k, 1], ey[k, 2],
+                                       len_u[k], len_v[k], n[k, 0], n[k, 1], n[k, 2], area[k],
+                                       1.0 if rect[k] else 0.0, x, y, a, b, min_spherical)
+        wi_out[i, 0], wi_out[i, 1], wi_out[i, 2] = wx, wy, wz
+        t_out[i], pdf_out[i] = t, pdf
 
 
 def dot_rows(a, b):

@@ -132,6 +132,93 @@ def test_area_light_sample_agrees(jit):
     assert_agree(solid_angle[0], warp[2:])
 
 
+def test_area_light_rows_agree(jit):
+    """The area lights' sampling loop (engine/lights/area.py _area_sample_rows):
+    compiled against its NumPy form for rectangles (solid angle and area
+    sampled), squares, disks, ellipses and a light of no area, one light per
+    row, shading points behind, in and far from the lights' planes; and, on
+    one rectangle, bit for bit the elementwise kernel it runs per row."""
+    from engine.lights import AreaLights, _area_light_sample, _area_sample_rows
+    from engine.lights.common import MIN_SPHERICAL
+    from engine.scene import AreaLight
+
+    def at(x, y, z, rx=0.0):
+        m = np.eye(4)
+        m[:3, 3] = x, y, z
+        c, s = np.cos(rx), np.sin(rx)
+        m[1:3, 1:3] = [[c, -s], [s, c]]
+        return m
+    lights = [AreaLight(at(0, 0, 2), (10.0, 10.0, 10.0), "RECTANGLE", 1.0, 0.6),
+              AreaLight(at(1, 0, 1, 0.7), (5.0, 5.0, 5.0), "SQUARE", 0.01),
+              AreaLight(at(0, 1, 1), (3.0, 3.0, 3.0), "DISK", 0.8),
+              AreaLight(at(0, -1, 1, -0.4), (3.0, 2.0, 1.0), "ELLIPSE", 1.2, 0.5),
+              AreaLight(at(2, 2, 2), (1.0, 1.0, 1.0), "RECTANGLE", 0.0, 1.0)]
+    table = AreaLights(lights)
+    rng = np.random.default_rng(33)
+    n = 20000
+    j = rng.integers(0, len(lights), n)
+    p = rng.normal(size=(n, 3)) * 2.0
+    p[:100] = table.c[0] + [0.1, 0.05, 0.0]              # in the rectangle's plane
+    p[100:200] = table.c[1] + 30.0 * table.n[1]          # far from the tiny square
+    j[:100], j[100:200] = 0, 1
+    u = rng.random((n, 3))
+    u1, u2 = u[:, 0], u[:, 1]                            # strided, as the sampler's columns
+    u1[200:210] = u2[200:210] = 0.5                      # the disk's centre
+
+    def run(j=j, p=p, u1=u1, u2=u2):
+        m = len(j)
+        outs = (np.empty((m, 3)), np.empty(m), np.empty(m))
+        _area_sample_rows(j, p, u1, u2, table.c, table.ex, table.ey, table.n, table.len_u, table.len_v,
+                          table.area, table.rect, table.ellipse, MIN_SPHERICAL, *outs)
+        return outs
+    plain, compiled = both_ways(run)
+    assert_agree(plain, compiled)
+    assert (plain[2][j == 4] == 0).all() and (plain[2][j == 2] > 0).any()
+    one = j == 0
+    rows = run(j[one].copy(), p[one].copy(), u1[one].copy(), u2[one].copy())
+    c, ex, ey, nl = table.c[0], table.ex[0], table.ey[0], table.n[0]
+    q = p[one]
+    kernel = _area_light_sample(q[:, 0], q[:, 1], q[:, 2], *c, *ex, *ey, table.len_u[0], table.len_v[0], *nl,
+                                table.area[0], 1.0, u1[one] - 0.5, u2[one] - 0.5, u1[one], u2[one], MIN_SPHERICAL)
+    assert np.array_equal(rows[0], np.stack(kernel[:3], axis=1), equal_nan=True)
+    assert np.array_equal(rows[1], kernel[3], equal_nan=True) and np.array_equal(rows[2], kernel[4], equal_nan=True)
+
+
+def test_area_light_hits_agree(jit):
+    """Rays meeting an area light (engine/lights/area.py _area_hit_rows): the
+    compiled loop against its NumPy form for a rectangle (solid-angle and
+    area pdfs), a tiny square, a disk and an ellipse, with rays
+    from behind, grazing, parallel to the plane and through the edges."""
+    from engine.lights import AreaLights, _area_hit_rows
+    from engine.lights.common import MIN_SPHERICAL
+    from engine.scene import AreaLight
+    m = np.eye(4)
+    m[:3, 3] = 0.2, -0.1, 2.0
+    lights = [AreaLight(m, (10.0, 10.0, 10.0), shape, sx, sy)
+              for shape, sx, sy in (("RECTANGLE", 1.0, 0.6), ("SQUARE", 0.01, 0.01), ("DISK", 0.8, 0.8),
+                                    ("ELLIPSE", 1.2, 0.5))]
+    table = AreaLights(lights)
+    rng = np.random.default_rng(34)
+    n = 20000
+    o = rng.normal(size=(n, 3))
+    o[:200, 2] = 40.0                                    # far: the area pdf on the rectangle
+    target = table.c[0] + rng.uniform(-0.7, 0.7, (n, 3)) * [1.0, 1.0, 0.0]
+    d = target - o
+    d[200:300, 2] = 0.0                                  # parallel to the plane
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    d[300:400] *= -1.0                                   # away from the light
+    for j in range(len(lights)):
+        def run():
+            outs = (np.empty(n), np.empty(n), np.empty(n, bool))
+            _area_hit_rows(o, d, j, table.c, table.n, table.du, table.dv, table.ex, table.ey, table.len_u,
+                           table.len_v, table.area, table.rect, table.ellipse, MIN_SPHERICAL, *outs)
+            return outs
+        plain, compiled = both_ways(run)
+        assert_agree(plain, compiled, f"light {j}")
+        assert plain[2].any() and not plain[2][200:400].any()
+        assert np.array_equal(plain[2], np.isfinite(plain[0]))
+
+
 def test_light_tree_importance_agrees(jit):
     from engine.lighttree import _importance
     rng = np.random.default_rng(6)
