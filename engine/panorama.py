@@ -14,6 +14,8 @@ the rays' footprints use.
 """
 import numpy as np
 
+from .projection import direction_to_mirrorball
+
 TYPES = ("EQUIRECTANGULAR", "EQUIANGULAR_CUBEMAP_FACE", "MIRRORBALL", "FISHEYE_EQUIDISTANT",
          "FISHEYE_EQUISOLID", "FISHEYE_LENS_POLYNOMIAL", "CENTRAL_CYLINDRICAL")
 
@@ -155,7 +157,6 @@ class Panorama:
 
     @staticmethod
     def _to_mirrorball(d):
-        from .environment import direction_to_mirrorball
         return direction_to_mirrorball(d)
 
     # -- frames ---------------------------------------------------------------
