@@ -24,7 +24,7 @@ render-engine: setup
 TEST_WORKERS ?= 2
 test: setup
 	sh tools/setup_test_env.sh
-	$(PY) -m pytest tests -q -rfEs -p no:cacheprovider --durations=10 -n $(TEST_WORKERS) --dist loadgroup
+	$(PY) -m pytest tests -q -rfEs -p no:cacheprovider --durations=30 -n $(TEST_WORKERS) --dist loadgroup
 
 test-engine: setup
 	$(PY) -m pytest tests/engine -q
