@@ -26,17 +26,42 @@ def legacy_addon(tmp_path_factory):
 
 def pytest_configure(config):
     config.ember_worker_families = []
-    config.addinivalue_line("markers", "xdist_group(name): pytest-xdist runs a group on one worker")
+
+
+def group_of(nodeid):
+    """The worker group of a test: every test of Debian's 3.4 binary shares
+    one worker (the session's legacy install compiles its kernels once, some
+    four minutes), every other test file runs whole on one worker (its module
+    fixtures, references and renders, are built once)."""
+    path, _, name = nodeid.partition('::')
+    return 'blender34' if 'blender_34' in name else path
 
 
 def pytest_collection_modifyitems(config, items):
-    """Under pytest-xdist (``-n 2 --dist loadgroup``) each test file runs
-    whole on one worker, so its module fixtures (references, renders) are
-    built once; every test of Debian's 3.4 binary shares one worker, so the
-    session's legacy install compiles its kernels once."""
+    """The 3.4 group is found by name, so a test that takes the legacy
+    install must say so in its name."""
     for item in items:
-        group = 'blender34' if 'legacy_addon' in item.fixturenames else item.nodeid.split('::')[0]
-        item.add_marker(pytest.mark.xdist_group(group))
+        uses_legacy = 'legacy_addon' in getattr(item, 'fixturenames', ())
+        assert uses_legacy <= (group_of(item.nodeid) == 'blender34'), (
+            f"{item.nodeid} uses legacy_addon: put 'blender_34' in its name (tests/conftest.py group_of)")
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """pytest-xdist (``-n 2 --dist loadgroup``) with our groups.  xdist 3.8
+    names a test's xdist_group by suffixing its node id, which pytest 9.2's
+    node ids no longer take (every test was scheduled alone, so module
+    fixtures were built on both workers): its scope scheduler with
+    ``group_of`` as the scope instead."""
+    if config.getvalue('dist') not in ('loadgroup', 'loadscope'):
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class Groups(LoadScopeScheduling):
+        def _split_scope(self, nodeid):
+            return group_of(nodeid)
+
+    return Groups(config, log)
 
 
 @pytest.hookimpl(optionalhook=True)

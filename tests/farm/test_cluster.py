@@ -97,9 +97,19 @@ def test_resume_after_interrupted_client_submits_only_missing(cluster, animated_
         first.wait()
     # Renders already running finish on their workers (the scheduler drops
     # the rest with the client): wait for them, then see what is missing.
-    while glob.glob(str(tmp_path / '.farm' / 'running' / '*')) and time.monotonic() < deadline:
+    # A task's scratch folder (.farm/tmp) outlives its running marker until
+    # its frames are moved into place, and a task a worker had already taken
+    # may start just after the kill: wait until neither exists and the
+    # finished frames stay the same for two seconds.
+    done, quiet_since = None, time.monotonic()
+    while time.monotonic() < deadline:
+        busy = glob.glob(str(tmp_path / '.farm' / 'running' / '*')) + glob.glob(str(tmp_path / '.farm' / 'tmp' / '*'))
+        now_done = sorted(glob.glob(str(tmp_path / 'frame_*.exr')))
+        if busy or now_done != done:
+            done, quiet_since = now_done, time.monotonic()
+        elif time.monotonic() - quiet_since > 2.0:
+            break
         time.sleep(0.05)
-    done = sorted(glob.glob(str(tmp_path / 'frame_*.exr')))
     assert 1 <= len(done) < 4, done
     missing = [f for f in range(1, 5) if plan.frame_path(str(tmp_path), f) not in done]
     second = subprocess.run(cmd + ['--resume'], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
