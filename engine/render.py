@@ -273,6 +273,10 @@ def warnings_for(ctx):
 # paths' work from about this many paths on (tools/bench_engine.py: 4K-path
 # batches cost 1.9x the CPU per path of 64K ones, 16K 1.2x).
 MIN_BATCH_PATHS = 1 << 15
+# A batch's fixed cost in paths' worth of work: 6-13 ms of interpreter work
+# a batch against ~3 us a path (tools/bench_small.py, Cornell and Principled
+# through the add-on, 2026-12-07).  The cuts before a barrier weigh it.
+FIXED_PATHS = 1 << 12
 # Automatic passes (samples_per_pass = 0): one sample first (a first image
 # soon), then doubling, up to about this many paths per pass (1-3 s on two
 # cores): few progress updates, yet a live progressive image.  The schedule
@@ -283,35 +287,41 @@ PASS_PATHS = 1 << 20
 
 def _batches(pixels, spp, settings, threads, barrier=False):
     """Pixel lists for one pass: at most max_paths / threads paths each
-    (memory).  Passes overlap (a thread that ends one batch takes the next,
-    of this pass or the next), so only a pass before a barrier (an adaptive
-    check, the end) needs cutting for balance: there two batches per thread
-    where that leaves at least MIN_BATCH_PATHS paths each, at least one per
-    thread, and the last ``threads`` batches cut in TAIL_SPLIT, so the
-    threads run out of work at nearly the same time.  Other passes keep
-    batches as large as memory allows: a batch's fixed cost (~12 ms of
-    Python per batch on the Cornell box) is most of a small pass's time.
+    (memory), cut evenly.  Passes overlap (a thread that ends one batch
+    takes the next, of this pass or the next), so only a pass before a
+    barrier (an adaptive check, a guide rebuild, the end) needs cutting for
+    balance: there two batches per thread where that leaves at least
+    MIN_BATCH_PATHS paths each, one per thread where each keeps FIXED_PATHS
+    (a smaller pass runs whole: a second batch's fixed cost, serialised by
+    the GIL, would outweigh the half it saves), and the last ``threads``
+    batches cut into pieces (_tail_pieces), so the threads run out of work
+    at nearly the same time.  Other passes keep batches as large as memory
+    allows: a batch's fixed cost is most of a small pass's time.
     ``pixels`` is a sorted index array (all pixels, or the unconverged ones).
     How pixels are grouped never changes the image: each pixel's samples of
     a pass are binned in one batch and merged in pass order."""
-    per_thread = max(1024, settings.max_paths // threads)
-    n = len(pixels)
+    n, paths = len(pixels), len(pixels) * spp
+    largest = max(1, max(1024, settings.max_paths // threads) // spp)   # pixels a batch may hold
+    count = -(-n // largest)
     if barrier:
-        balanced = max(MIN_BATCH_PATHS, -(-n * spp // (2 * threads)))
-        size = max(1, min(min(per_thread, balanced) // spp, -(-n // threads)))
-    else:
-        size = max(1, per_thread // spp)
+        count = max(count, min(2 * threads, paths // MIN_BATCH_PATHS), min(threads, paths // FIXED_PATHS))
+    size = max(1, -(-n // max(1, min(count, n))))   # even batches: no sliver at the end
     starts = list(range(0, n, size))
     if barrier and len(starts) > threads:
         tail = starts[-threads]
-        starts = starts[:-threads] + list(range(tail, n, max(1, size // TAIL_SPLIT)))
+        starts = starts[:-threads] + list(range(tail, n, _tail_pieces(n - tail, size, spp)))
     return [pixels[lo:hi] for lo, hi in zip(starts, starts[1:] + [n])]
 
 
-# Pieces each of the last batches before a barrier is cut into: the threads'
-# idle time there falls from up to a batch to up to a piece, for a little
-# more per-batch overhead on those few paths.
-TAIL_SPLIT = 4
+def _tail_pieces(n, size, spp):
+    """Pixels per piece of the last batches before a barrier (``n`` pixels
+    in batches of ``size``).  Cutting a batch of B paths into k pieces costs
+    (k - 1) fixed costs and leaves a thread idle for about half a piece at
+    the barrier, B / (2k) paths: the sum is least at k = sqrt(B / (2
+    FIXED_PATHS)) (4 pieces of a 128k-path batch, 2 of a 32k one, 1 below
+    18k)."""
+    pieces = max(1, round((size * spp / (2 * FIXED_PATHS)) ** 0.5))
+    return -(-n // -(-n // max(1, size // pieces)))   # even pieces
 
 
 def _pass_samples(settings, done, pixels, adaptive_params):

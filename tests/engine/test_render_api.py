@@ -4,7 +4,7 @@ import importlib
 
 import numpy as np
 
-from engine.render import PASS_PATHS, _batches, _pass_samples, adaptive_parameters, render
+from engine.render import FIXED_PATHS, PASS_PATHS, _batches, _tail_pieces, _pass_samples, adaptive_parameters, render
 from engine.scene import Instance, Lobe, Material, PointLight, RenderSettings, Scene, SpotLight, SunLight, World
 from engine.testscenes import cornell_box, quad
 
@@ -95,10 +95,13 @@ def test_time_limit_stops_early():
 
 def test_batches_bound_paths_in_flight():
     s = RenderSettings(max_paths=1 << 16)
-    for npix, spp in ((3840 * 2160, 1), (512 * 512, 16), (7, 3), (256 * 256, 1), (64 * 64, 2)):
-        # Before a barrier (the end, an adaptive check): balanced, at least one batch per thread.
+    for npix, spp in ((3840 * 2160, 1), (512 * 512, 16), (7, 3), (256 * 256, 1), (64 * 64, 2), (64 * 64, 1), (160 * 90, 16)):
+        # Before a barrier (the end, an adaptive check, a guide rebuild): balanced.
         tail = _batches(np.arange(npix), spp, s, threads=2, barrier=True)
-        assert len(tail) >= min(2, npix)
+        # One batch per thread where each keeps FIXED_PATHS paths; a smaller pass runs whole.
+        assert len(tail) >= min(2, npix * spp // FIXED_PATHS, npix)
+        if npix * spp < 2 * FIXED_PATHS:
+            assert len(tail) == 1
         np.testing.assert_array_equal(np.concatenate(tail), np.arange(npix))
         assert max(len(b) for b in tail) * spp <= max(s.max_paths // 2, spp)
         # Load balance: two batches per thread when each keeps MIN_BATCH_PATHS paths.
@@ -110,9 +113,23 @@ def test_batches_bound_paths_in_flight():
         np.testing.assert_array_equal(np.concatenate(batches), np.arange(npix))
         assert max(len(b) for b in batches) * spp <= max(s.max_paths // 2, spp)
         assert len(batches) == -(-npix // max(1, (s.max_paths // 2) // spp))
+        sizes = [len(b) for b in batches]
+        assert max(sizes) - min(sizes) <= len(batches)   # cut evenly: no sliver at the end
         # The last batches before a barrier are cut smaller.
         if len(tail) > 2 and npix * spp > s.max_paths:
             assert max(len(b) for b in tail[-2:]) * 2 <= max(len(b) for b in batches)
+
+
+
+def test_tail_pieces_weigh_the_fixed_cost():
+    """The last batches before a barrier are cut into sqrt(B / (2 FIXED_PATHS))
+    pieces (B: a batch's paths): a piece's fixed cost against the idle time
+    it saves."""
+    assert FIXED_PATHS == 4096
+    assert _tail_pieces(2 * 4096, 4096, 32) == 1024   # 128k-path batches: 4 pieces
+    assert _tail_pieces(2 * 1024, 1024, 32) == 512    # 32k: 2
+    assert _tail_pieces(2 * 512, 512, 32) == 512      # 16k: whole
+    assert _tail_pieces(1000, 600, 32) == 250         # 2 pieces of 300: 4 even ones over 1000
 
 
 def test_transparent_film_alpha():
