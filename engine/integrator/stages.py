@@ -258,7 +258,7 @@ def interaction(ctx, paths, t, prim, bu, bv):
         on = np.flatnonzero(ctx.strands.is_curve[prim])
         if len(on):
             p[on], ng[on], back[on], radius = curve_hits(ctx.strands, paths.o[on], d[on], t[on], prim[on], bu[on],
-                                                            _rows(ray_time, on))
+                                                            _rows(ray_time, on), bv[on])
             ns[on] = ng[on]
             curve_eps = (on, radius)
             fibre = np.zeros_like(p)
