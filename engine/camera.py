@@ -199,6 +199,14 @@ class CameraModel:
     def forward(self):
         return -self.rot[:, 2]
 
+    def z_depth(self, p):
+        """The Depth pass at world points ``p`` (Cycles' camera_z_depth):
+        along the view axis for perspective and orthographic cameras, the
+        distance from the camera for panoramic ones."""
+        if self.pano is not None:
+            return np.linalg.norm(p - self.pos, axis=-1)
+        return (p - self.pos) @ self.forward
+
     def generate(self, pixel, u_fx, u_fy, u_l1, u_l2, time=None):
         """Rays for window pixel indices (row-major, row 0 at the top), from
         the camera where it is at each ray's shutter ``time`` when it moves.

@@ -171,8 +171,15 @@ def _start(ctx, paths, tile):
     if paths.aux.shape[1]:
         paths.aux[:, PENDING] = 1.0
         paths.aux[:, FEATURE_TP] = 1.0
-    if tile.extra.first:
-        pix = ctx.centres.claim(np.unique(paths.pix))
+    centre_passes(ctx, paths.pix, tile)
+
+
+def centre_passes(ctx, pix, tile):
+    """The FIRST passes of the pixels ``pix`` that have none yet; the
+    render calls it before it drops the samples beyond a fisheye's rim,
+    as Cycles' sample 0 sits at the pixel centre wherever the others fall."""
+    if listening(tile) and tile.extra.first:
+        pix = ctx.centres.claim(np.unique(pix))
         if len(pix):
             _centre_rays(ctx, pix, tile)
 
@@ -185,11 +192,12 @@ def _centre_rays(ctx, pix, tile):
     half = np.full(len(pix), 0.5)
     o, d, tmax = ctx.camera.generate(pix, half, half, half, half)
     t, prim, _, _ = ctx.accel.intersect(o, d, tmax)
-    hit = (prim >= 0) & (t < tmax)
+    # Beyond a fisheye's rim Cycles traces nothing: the pixel keeps the background's values.
+    hit = (prim >= 0) & (t < tmax) & ~ctx.camera.outside(pix, half, half)
     p = o + d * np.where(hit, t, 0.0)[:, None]
     safe = np.where(hit, prim, 0)
     rank = np.full(len(pix), -1.0)
-    depth = np.where(hit, (p - ctx.camera.pos) @ ctx.camera.forward, 1e10)
+    depth = np.where(hit, ctx.camera.z_depth(p), 1e10)
     tile.add_pass("Depth", pix, depth, rank)
     tile.add_pass("Position", pix, np.where(hit[:, None], p, 0.0), rank)
     if tile.wants("Object Index"):

@@ -267,14 +267,14 @@ def curve_tangents(strands, prim, u, time=None):
     return np.einsum("nk,nkj->nj", _catmull_rom_derivative(np.clip(u, 0.0, 1.0)), cv[:, :, :3])
 
 
-def curve_hits(strands, o, d, t, prim, u, time=None):
+def curve_hits(strands, o, d, t, prim, u, time=None, v=None):
     """(p, ng, back, radius) of rays (o, d) meeting segment rows ``prim`` at
     Embree's distance t and curve parameter u (at each ray's time): the
     point moved onto the round curve's surface around its centre C(u)
     (radius r(u)), the normal from C(u) to it, facing the ray.  On ribbons
-    ``ribbon_hits``."""
+    ``ribbon_hits`` (``v``: Embree's hit v there, rebuilt when not given)."""
     if strands.ribbon:
-        return ribbon_hits(strands, o, d, t, prim, u, time)
+        return ribbon_hits(strands, o, d, t, prim, u, time, v)
     cv = strands.rows_at(prim, time)                                     # (n, 4, 4)
     w = _catmull_rom(np.clip(u, 0.0, 1.0))
     centre = np.einsum("nk,nkj->nj", w, cv[:, :, :3])
@@ -365,16 +365,19 @@ def ribbon_normal(tangent, d, v):
     return np.where(ok[:, None], n, back)
 
 
-def ribbon_hits(strands, o, d, t, prim, u, time=None):
+def ribbon_hits(strands, o, d, t, prim, u, time=None, v=None):
     """(p, n, back, radius) of rays meeting ribbon segments: the point where
     Embree's ray met the flat strand (Cycles keeps it, unmoved), the rounded
     ribbon normal (``ribbon_normal``; Cycles' Ng is the view direction, which
-    faces it), never a back face, and the radius r(u)."""
+    faces it), never a back face, and the radius r(u).  ``v``: Embree's
+    hit v (Cycles' sd->v); rebuilt by ``ribbon_v`` when not given."""
     cv = strands.rows_at(prim, time)
     uc = np.clip(u, 0.0, 1.0)
     radius = np.maximum(np.einsum("nk,nk->n", _catmull_rom(uc), cv[:, :, 3]), 0.0)
     tangent = np.einsum("nk,nkj->nj", _catmull_rom_derivative(uc), cv[:, :, :3])
-    n = ribbon_normal(tangent, d, ribbon_v(cv, o, d, u, strands.rate))
+    if v is None:
+        v = ribbon_v(cv, o, d, u, strands.rate)
+    n = ribbon_normal(tangent, d, v)
     return o + d * t[:, None], n, np.zeros(len(t), bool), radius
 
 

@@ -635,6 +635,7 @@ def _beyond_the_rim(ctx, tile, pix, sample):
     opaque, transparent film or not); the others are returned to trace."""
     if ctx.bake is not None or getattr(ctx.camera, "pano", None) is None:
         return pix, sample
+    pass_events.centre_passes(ctx, pix, tile)   # pixels whose every sample falls beyond the rim too
     u = ctx.sampler.get(ctx.sampler.pixel_seeds(pix), sample, CAMERA)
     out = ctx.camera.outside(pix, u[:, 0], u[:, 1])
     if out.any():

@@ -288,6 +288,20 @@ def upper_bound(a, v, lo, hi):
 
 
 @helper
+def disk_point(u1, u2):
+    """``concentric_disk``'s point (x, y) on the unit disk for one sample in compiled loops."""
+    a = 2.0 * u1 - 1.0
+    b = 2.0 * u2 - 1.0
+    if a == 0 and b == 0:
+        r, phi = b, 0.0
+    elif abs(a) > abs(b):
+        r, phi = a, (np.pi / 4) * (b / a)
+    else:
+        r, phi = b, np.pi / 2 - (np.pi / 4) * (a / b)
+    return r * np.cos(phi), r * np.sin(phi)
+
+
+@helper
 def cone_point(u1, u2, one_minus_cos_max):
     """``uniform_cone``'s direction (x, y, cos) for one sample in compiled loops."""
     omc = u1 * one_minus_cos_max

@@ -92,9 +92,14 @@ def camera_aovs(ctx, paths, found, tile):
     kept = getattr(tile, "aovs", None)
     depth = normal = albedo = None
     if kept is None or "depth" in kept:
-        # Z depth along the view axis, counted from the camera (rays start at clip start).
-        cos = np.maximum(dot(paths.d, np.broadcast_to(ctx.camera.forward, paths.d.shape)), 0.0)
-        depth = np.where(hit_surf, t * cos + ctx.camera.cam.clip_start, 0.0)
+        if getattr(ctx.camera, "pano", None) is not None:
+            # A panorama's depth is the distance from the camera (Cycles' camera_z_depth).
+            p = paths.o + paths.d * np.where(hit_surf, t, 0.0)[:, None]
+            depth = np.where(hit_surf, ctx.camera.z_depth(p), 0.0)
+        else:
+            # Z depth along the view axis, counted from the camera (rays start at clip start).
+            cos = np.maximum(dot(paths.d, np.broadcast_to(ctx.camera.forward, paths.d.shape)), 0.0)
+            depth = np.where(hit_surf, t * cos + ctx.camera.cam.clip_start, 0.0)
     hs = np.nonzero(hit_surf)[0]
     if kept is None or "normal" in kept:
         normal = np.zeros((len(paths.pix), 3))
@@ -253,7 +258,7 @@ def interaction(ctx, paths, t, prim, bu, bv):
         on = np.flatnonzero(ctx.strands.is_curve[prim])
         if len(on):
             p[on], ng[on], back[on], radius = curve_hits(ctx.strands, paths.o[on], d[on], t[on], prim[on], bu[on],
-                                                            _rows(ray_time, on))
+                                                            _rows(ray_time, on), bv[on])
             ns[on] = ng[on]
             curve_eps = (on, radius)
             fibre = np.zeros_like(p)

@@ -8,7 +8,7 @@ from ..geometry import visibility_bits
 from ..kernels import helper, kernel, loop_kernel, where
 from ..lightbounds import Bounds
 from ..lightproxy import box_corners, proxy_margin
-from ..sampling import concentric_disk, rectangle_frame, rectangle_solid_angle, spherical_rectangle_warp
+from ..sampling import concentric_disk, disk_point, rectangle_frame, rectangle_solid_angle, spherical_rectangle_warp
 from ..scene import AREA_SHAPES, AreaLight, Scene, SceneError
 from ..vec import column, rows3
 from . import common
@@ -299,14 +299,8 @@ def _area_sample_rows(j, p, u1, u2, c, ex, ey, n, len_u, len_v, area, rect, elli
         a, b = u1[i], u2[i]
         x, y = a - 0.5, b - 0.5
         if ellipse[k]:
-            a2, b2 = 2.0 * a - 1.0, 2.0 * b - 1.0
-            if a2 == 0 and b2 == 0:
-                r, phi = b2, 0.0
-            elif abs(a2) > abs(b2):
-                r, phi = a2, (np.pi / 4) * (b2 / a2)
-            else:
-                r, phi = b2, np.pi / 2 - (np.pi / 4) * (a2 / b2)
-            x, y = 0.5 * (r * np.cos(phi)), 0.5 * (r * np.sin(phi))
+            dx, dy = disk_point(a, b)
+            x, y = 0.5 * dx, 0.5 * dy
         wx, wy, wz, t, pdf = _area_one(p[i, 0], p[i, 1], p[i, 2], c[k, 0], c[k, 1], c[k, 2],
                                        ex[k, 0], ex[k, 1], ex[k, 2], ey[k, 0], ey[k, 1], ey[k, 2],
                                        len_u[k], len_v[k], n[k, 0], n[k, 1], n[k, 2], area[k],

@@ -9,7 +9,7 @@ from ..geometry import visibility_bits
 from ..kernels import helper, loop_kernel
 from ..lightbounds import Bounds
 from ..lightproxy import box_corners, proxy_margin
-from ..sampling import (TWO_PI, concentric_disk, cone_point, sin_sq_to_one_minus_cos, uniform_cone,
+from ..sampling import (TWO_PI, concentric_disk, cone_point, disk_point, sin_sq_to_one_minus_cos, uniform_cone,
                         uniform_cone_pdf)
 from ..scene import PointLight, Scene, SceneError, SpotLight
 from ..vec import column, dot, frame, frame_of, rows3, to_world
@@ -249,15 +249,7 @@ def _point_sample(j, p, u1, u2, pos, radius, sphere, L, spot, sdir, cos_half, sm
                 w2 = (lx * s2 + ly * t2) + cos_t * a2
                 t = dist * cos_t - np.sqrt(max(0.0, r * r - d2 * (1.0 - cos_t * cos_t)))
         elif not sphere[k] and not delta:
-            a = 2.0 * u1[i] - 1.0
-            b = 2.0 * u2[i] - 1.0
-            if a == 0 and b == 0:
-                rr, phi = b, 0.0
-            elif abs(a) > abs(b):
-                rr, phi = a, (np.pi / 4) * (b / a)
-            else:
-                rr, phi = b, np.pi / 2 - (np.pi / 4) * (a / b)
-            x, y = rr * np.cos(phi), rr * np.sin(phi)
+            x, y = disk_point(u1[i], u2[i])
             s0, s1, s2, t0, t1, t2 = frame_of(n0, n1, n2)
             v0 = (pos[k, 0] + (x * s0 + y * t0) * r) - p[i, 0]
             v1 = (pos[k, 1] + (x * s1 + y * t1) * r) - p[i, 1]

@@ -248,3 +248,40 @@ def test_export_of_panoramic_settings(registered_addon, needs_engine):
         exported = scene_export.export_scene(bpy.context.evaluated_depsgraph_get())
         assert exported.scene.camera.kind == 'PERSP'
         assert [w for w in exported.warnings if 'custom cameras are not supported' in w], exported.warnings
+
+
+@pytest.mark.parametrize("kind", list(PANORAMAS))
+def test_panoramic_depth_pass_matches_cycles(kind, registered_addon, needs_engine, tmp_path):
+    """The Depth pass of each panorama type against Cycles' pixel by pixel:
+    both write it from the ray through the pixel's centre (Cycles' sample
+    0), as the hit's distance from the camera (camera_z_depth; along the
+    view axis it was up to 3x short at the equirectangular frame's sides);
+    the open top and beyond a fisheye's rim 1e10 (nothing hit, nothing written),
+    and a pixel whose every sample falls beyond the rim still has its
+    centre's depth.  Cycles' centre sits 0.00056 px right and up of the
+    exact one (fitted to the depth's gradient, the same in every type: its
+    filter table), up to 3.5e-4 of the depth at a slanted wall (1.4e-3 at
+    the mirror ball's rim): each pixel is held to 1e-3 of its depth, 5e-3
+    where its footprint straddles a rim."""
+    require_type(kind)
+    scene = panoramic_scene(kind)
+    bpy.context.view_layer.use_pass_z = True
+    multilayer_output(scene)
+    depth = {}
+    for engine, setup in (('EMBER', setup_ember), ('CYCLES', setup_cycles)):
+        setup(scene, 1, 0, 0)
+        scene.render.filepath = os.path.join(str(tmp_path), f"{engine}.exr")
+        bpy.ops.render.render(write_still=True)
+        depth[engine] = read_multilayer_exr(scene.render.filepath)['Depth'][..., 0].astype(np.float64)
+    ember, cycles = depth['EMBER'], depth['CYCLES']
+    hit = cycles < 1e9
+    # the room is 12 m wide about a camera near its centre: walls at 6 m or more, objects nearer
+    assert hit.mean() > 0.2 and cycles[hit].min() < 4.0 and cycles[hit].max() > 6.0
+    # 1e-3 as test_passes_parity; 5e-3 where the pixel straddles a rim (the projection is steepest there)
+    coverage = rim_coverage(scene) if kind.startswith('FISHEYE') or kind == 'MIRRORBALL' else np.ones(hit.shape)
+    tolerance = np.where((coverage > 0.0) & (coverage < 1.0), 5e-3, 1e-3)
+    close = np.abs(ember - cycles) <= tolerance * (1.0 + np.abs(cycles))
+    print(f"\npanorama {kind} Depth: {close.mean():.4f} of {close.size} pixels agree "
+          f"(largest relative difference {np.max(np.abs(ember - cycles) / (1.0 + np.abs(cycles))):.2e})")
+    assert close.all(), f"{int((~close).sum())} pixels differ, at {np.argwhere(~close)[:8].tolist()}"
+
