@@ -310,6 +310,17 @@ def ratio_se(ember, cycles):
     return float(e.mean() / c.mean() * np.sqrt(rel))
 
 
+def median_ratio_se(ember, cycles, draws=2000):
+    """Bootstrap spread of median(Ember's MSE) / median(Cycles') over the
+    seeds (resampled with replacement, a fixed generator): half its 16-84 %
+    range (a standard deviation would follow the rare draws of the tail)."""
+    rng = np.random.default_rng(0)
+    e, c = np.asarray(ember), np.asarray(cycles)
+    ratios = [np.median(rng.choice(e, len(e))) / np.median(rng.choice(c, len(c))) for _ in range(draws)]
+    lo, hi = np.percentile(ratios, [16, 84])
+    return float(0.5 * (hi - lo))
+
+
 def summarise_adaptive(name, ember_runs, cycles_runs, ref_spp, cfg):
     """log MSE linear in log time per engine; Ember's line solved at Cycles' last MSE."""
     v_ref = cycles_variance(cycles_runs, ref_spp)
@@ -397,12 +408,14 @@ def report(rows, adaptive_rows, cfg, quick, adaptive_note, jit_note, seeds=1):
              f"{', '.join(map(str, cfg['cycles']))} spp, reference Cycles {cfg['reference']} spp. "
              f"Times are the wall time of `bpy.ops.render.render()` (export/sync included). {jit_note}.",
              "", f"Adaptive sampling off ({seeds} render{'s' if seeds > 1 else ''} of each engine at the "
-             f"largest count, their mean MSE; +- the variance ratio's standard error over those seeds):",
+             f"largest count, their mean MSE, unless listed below; +- the variance ratio's standard error over "
+             f"those seeds):",
              "", table(rows, False)]
     medians = [f"{r['scene']} ({r['median_of']} seeds)" for r in rows if r.get('median_of')]
     if medians:
-        lines += ["", "Median MSE over the seeds instead of the mean (rare bright samples decide a render's "
-                  "mean there; tools/bench_cycles.py MEDIAN_SCENES): " + ', '.join(medians) + "."]
+        lines += ["", "Median MSE over the seeds instead of the mean, +- half a bootstrap 68 % range (rare bright "
+                  "samples decide a render's mean there; tools/bench_cycles.py MEDIAN_SCENES): "
+                  + ', '.join(medians) + "."]
     if adaptive_rows:
         lines += ["", "Adaptive sampling on for both (Cycles' defaults: threshold 0.01, min samples auto):",
                   "", table(adaptive_rows, True)]
@@ -444,6 +457,7 @@ def main(argv=None):
             rows.append(summarise(name, ember, cycles, ref_spp, cfg))
             rows[-1]['median_of'] = seeds if median and seeds > 1 else None
             if rows[-1]['median_of']:
+                rows[-1]['var_ratio_se'] = median_ratio_se(ember[-1]['mse_seeds'], cycles[-1]['mse_seeds'])
                 mean_ratio = ember[-1]['mse_mean'] / max(cycles[-1]['mse_mean'], 1e-30)
                 print(f"  {name}: MSE ratio at the largest count, median {ember[-1]['mse'] / cycles[-1]['mse']:.2f}x, "
                       f"mean {mean_ratio:.2f}x over {seeds} seeds", flush=True)
