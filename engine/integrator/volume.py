@@ -142,7 +142,7 @@ def _direct_setup(ctx, on, ss, t_end, may, u_distance, depth):
     finite = np.isfinite(ls.dist[ok])
     method = np.where(finite, method, equiangular.DISTANCE)
     P = o[ok] + ls.wi[ok] * np.where(finite, ls.dist[ok], 0.0)[:, None]
-    t0, t1 = _lit_segment(ctx, on.o[cand], on.d[cand], e, t_end[cand])
+    t0, t1 = _lit_segment(ctx, on.o, on.d, cand, e, t_end[cand])
     mis = method == equiangular.MIS
     xi = u_distance[cand]
     equi = (method == equiangular.EQUIANGULAR) | (mis & (xi >= 0.5))
@@ -176,19 +176,15 @@ def _tracked_points(ctx, on, direct, u):
     direct[9] = (h, t, p_e, p_d)
 
 
-def _lit_segment(ctx, o, d, e, t_end):
-    """(t0, t1) of the rays' part the emitters e can light: a spot's cone
-    (Cycles' volume_valid_direct_ray_segment), else the whole segment."""
-    t0, t1 = np.zeros(len(o)), np.array(t_end, np.float64, copy=True)
+def _lit_segment(ctx, o, d, rows, e, t_end):
+    """(t0, t1) of the rays o[rows], d[rows] (up to t_end, per row) the
+    emitters e can light: a spot's cone (Cycles'
+    volume_valid_direct_ray_segment), else the whole segment; one compiled
+    loop over the rows (equiangular.lit_segments)."""
     cones = _spot_cones(ctx.lights)
     if cones is None:
-        return t0, t1
-    lit, apex, axis, cos_half = cones
-    rows = np.flatnonzero(lit[e])
-    if len(rows):
-        k = e[rows]
-        t0[rows], t1[rows] = equiangular.cone_segment(o[rows], d[rows], apex[k], axis[k], cos_half[k], t_end[rows])
-    return t0, t1
+        return np.zeros(len(rows)), np.array(t_end, np.float64, copy=True)
+    return equiangular.lit_segments(o, d, rows, e, *cones, t_end)
 
 
 _CONES = weakref.WeakKeyDictionary()
