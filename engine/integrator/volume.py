@@ -15,6 +15,7 @@ PATH_RAY_TERMINATE_AFTER_TRANSPARENT): volume_bounces 0 is single
 scattering, lit by next-event estimation at the scattering point and by
 the phase-sampled ray finding a light.
 """
+import weakref
 from types import SimpleNamespace
 
 import numpy as np
@@ -141,7 +142,7 @@ def _direct_setup(ctx, on, ss, t_end, may, u_distance, depth):
     finite = np.isfinite(ls.dist[ok])
     method = np.where(finite, method, equiangular.DISTANCE)
     P = o[ok] + ls.wi[ok] * np.where(finite, ls.dist[ok], 0.0)[:, None]
-    t0, t1 = _lit_segment(ctx, on.o[cand], on.d[cand], e, t_end[cand])
+    t0, t1 = _lit_segment(ctx, on.o, on.d, cand, e, t_end[cand])
     mis = method == equiangular.MIS
     xi = u_distance[cand]
     equi = (method == equiangular.EQUIANGULAR) | (mis & (xi >= 0.5))
@@ -175,27 +176,46 @@ def _tracked_points(ctx, on, direct, u):
     direct[9] = (h, t, p_e, p_d)
 
 
-def _lit_segment(ctx, o, d, e, t_end):
-    """(t0, t1) of the rays' part the emitters e can light: a spot's cone
-    (Cycles' volume_valid_direct_ray_segment), else the whole segment."""
-    t0, t1 = np.zeros(len(o)), np.array(t_end, np.float64, copy=True)
-    for g in ctx.lights.groups:
+def _lit_segment(ctx, o, d, rows, e, t_end):
+    """(t0, t1) of the rays o[rows], d[rows] (up to t_end, per row) the
+    emitters e can light: a spot's cone (Cycles'
+    volume_valid_direct_ray_segment), else the whole segment; one compiled
+    loop over the rows (equiangular.lit_segments)."""
+    cones = _spot_cones(ctx.lights)
+    if cones is None:
+        return np.zeros(len(rows)), np.array(t_end, np.float64, copy=True)
+    return equiangular.lit_segments(o, d, rows, e, *cones, t_end)
+
+
+_CONES = weakref.WeakKeyDictionary()
+
+
+def _spot_cones(lights):
+    """Per emitter of ``lights``: (whether its lit part is a cone: spots of
+    cone up to 180 degrees wide, apex, axis, cos of the half angle), or
+    None without such spots; built once per light set (gathering them per
+    segment from the light groups cost 5 % of a fog batch).  The spot's
+    attenuation is taken towards the sampled point of its sphere or disk:
+    the cone tangent to the sphere (apex moved back r / sin(half angle))
+    holds every point it lights."""
+    if lights in _CONES:
+        return _CONES[lights]
+    n = lights.count
+    lit, apex, axis, cos_half = np.zeros(n, bool), np.zeros((n, 3)), np.zeros((n, 3)), np.ones(n)
+    for g in lights.groups:
         table = g.table
         if not isinstance(table, PointLights) or not table.spot.any():
             continue
-        j = ctx.lights.local[e]
-        rows = np.flatnonzero((ctx.lights.kind[e] == g.definition.kind) & table.spot[np.minimum(j, table.count - 1)])
-        rows = rows[table.cos_half[j[rows]] >= 0.0]   # cones up to 180 degrees wide
-        if len(rows):
-            jr = j[rows]
-            # The spot's attenuation is taken towards the sampled point of
-            # its sphere or disk: the cone tangent to the sphere (apex moved
-            # back r / sin(half angle)) holds every point it lights.
-            sin_half = np.sqrt(np.maximum(1.0 - table.cos_half[jr] ** 2, 1e-12))
-            apex = table.pos[jr] - table.dir[jr] * (table.radius[jr] / sin_half)[:, None]
-            t0[rows], t1[rows] = equiangular.cone_segment(o[rows], d[rows], apex, table.dir[jr],
-                                                          table.cos_half[jr], t_end[rows])
-    return t0, t1
+        rows = np.flatnonzero(lights.kind == g.definition.kind)
+        j = lights.local[rows]
+        spot = table.spot[j] & (table.cos_half[j] >= 0.0)
+        rows, j = rows[spot], j[spot]
+        sin_half = np.sqrt(np.maximum(1.0 - table.cos_half[j] ** 2, 1e-12))
+        lit[rows] = True
+        apex[rows] = table.pos[j] - table.dir[j] * (table.radius[j] / sin_half)[:, None]
+        axis[rows], cos_half[rows] = table.dir[j], table.cos_half[j]
+    _CONES[lights] = out = (lit, apex, axis, cos_half) if lit.any() else None
+    return out
 
 
 def _direct_points(ctx, on, flight, direct, u, depth, sigma_s, g):
@@ -228,26 +248,28 @@ def _direct_points(ctx, on, flight, direct, u, depth, sigma_s, g):
     if tracked is not None:   # heterogeneous rows: sampled before their flight
         h = tracked[0]
         t[h], p_e[h], p_d[h] = tracked[1], tracked[2], tracked[3]
-    p = np.where(equi, p_e, p_d)
-    good = (p > 0) & np.isfinite(t) & (t1 > t0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        w = np.where(mis, 2.0 * power_heuristic(p, np.where(equi, p_d, p_e)), 1.0)
+    ss = sigma_s[rows]
+    # One compiled loop for the homogeneous weights (direct_points.point_weights).
+    good, factor = direct_points.point_weights(t, p_e, p_d, equi, mis, t0, t1, st, ss)
     keep = np.flatnonzero(good)
     if len(keep) == 0:
         return
-    ss = sigma_s[rows[keep]]
+    factor = factor[keep]
     gk = g[rows[keep]]
-    T = np.exp(-st[keep] * t[keep, None])
     hk = np.flatnonzero(het[keep])
     if len(hk):   # the textured media's scattering and g at the point, the tracker's transmittance to it
-        r = rows[keep[hk]]
-        x = on.o[r] + on.d[r] * t[keep[hk], None]
+        kh = keep[hk]
+        r = rows[kh]
+        x = on.o[r] + on.d[r] * t[kh, None]
         _, s_at, _, gw_at = ctx.media.local(on.stack[r], x, on.d[r])
-        gk[hk] = _mean_g(ss[hk], gk[hk], s_at, gw_at)
-        ss[hk] += s_at
+        gk[hk] = _mean_g(ss[kh], gk[hk], s_at, gw_at)
+        p = np.where(equi[kh], p_e[kh], p_d[kh])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            w = np.where(mis[kh], 2.0 * power_heuristic(p, np.where(equi[kh], p_d[kh], p_e[kh])), 1.0)
         rng = tracking_rng(ctx, on.pseed[r], on.sample[r], depth, 4)
-        T[hk] = tracking.field_transmittance(ctx.media, on.stack[r], on.o[r], on.d[r], t[keep[hk]], rng)
-    flight.direct = (rows[keep], t[keep], ss * T * (w[keep] / p[keep])[:, None], emitter[keep], p_sel[keep], gk)
+        T = tracking.field_transmittance(ctx.media, on.stack[r], on.o[r], on.d[r], t[kh], rng)
+        factor[hk] = (ss[kh] + s_at) * T * (w / p)[:, None]
+    flight.direct = (rows[keep], t[keep], factor, emitter[keep], p_sel[keep], gk)
 
 
 def _mean_g(ss, g, s_at, gw_at):

@@ -112,3 +112,53 @@ def _points_rows(o, d, P, t0, t1, xi, uc, pc, st, equi, skip, t, p_e, p_d):
                 each = (1.0 / (length if length > 0 else 1.0)) if np.isfinite(length) else 0.0
             out += pc[i, c] * (each if np.isfinite(each) else 0.0)
         p_d[i] = out if ti >= a0 and ti <= b0 and b0 > a0 else 0.0
+
+
+def point_weights(t, p_e, p_d, equi, mis, t0, t1, st, ss):
+    """(good, factor) of sampled direct-light points: good where the point's
+    pdf p (p_e where ``equi``, else p_d) is positive, t finite and the lit
+    part not empty; factor (N, 3) = ss exp(-st t) w / p, w = 2 x the power
+    heuristic of p against the other pdf under MIS (Cycles'
+    volume_direct_scatter_mis), else 1; 0 where not good."""
+    n = len(t)
+    good, factor = np.empty(n, bool), np.empty((n, 3))
+    f64 = np.float64
+    _weights_rows(*(np.ascontiguousarray(a, f64) for a in (t, p_e, p_d)), np.ascontiguousarray(equi, bool),
+                  np.ascontiguousarray(mis, bool), *(np.ascontiguousarray(a, f64) for a in (t0, t1, st, ss)),
+                  good, factor)
+    return good, factor
+
+
+def _weights_numpy(t, p_e, p_d, equi, mis, t0, t1, st, ss, good, factor):
+    p = np.where(equi, p_e, p_d)
+    q = np.where(equi, p_d, p_e)
+    good[:] = (p > 0) & np.isfinite(t) & (t1 > t0)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        a2 = p * p
+        h = a2 / (a2 + q * q)
+        h = np.where(np.isfinite(h), h, np.where(np.isinf(p) & np.isfinite(q), 1.0, 0.0))   # sampling.power_heuristic
+        w = np.where(mis, 2.0 * h, 1.0)
+        f = ss * np.exp(-st * t[:, None]) * (w / np.where(good, p, 1.0))[:, None]
+    factor[:] = np.where(good[:, None], f, 0.0)
+
+
+@kernels.loop_kernel("void(float64[::1], float64[::1], float64[::1], boolean[::1], boolean[::1], float64[::1], "
+                     "float64[::1], float64[:, ::1], float64[:, ::1], boolean[::1], float64[:, ::1])", _weights_numpy)
+def _weights_rows(t, p_e, p_d, equi, mis, t0, t1, st, ss, good, factor):
+    for i in range(t.shape[0]):
+        p, q = (p_e[i], p_d[i]) if equi[i] else (p_d[i], p_e[i])
+        ok = p > 0 and np.isfinite(t[i]) and t1[i] > t0[i]
+        good[i] = ok
+        if not ok:
+            factor[i, 0], factor[i, 1], factor[i, 2] = 0.0, 0.0, 0.0
+            continue
+        w = 1.0
+        if mis[i]:
+            a2 = p * p
+            h = a2 / (a2 + q * q)
+            if not np.isfinite(h):
+                h = 1.0 if np.isinf(p) and np.isfinite(q) else 0.0
+            w = 2.0 * h
+        s = w / p
+        for c in range(3):
+            factor[i, c] = ss[i, c] * np.exp(-st[i, c] * t[i]) * s

@@ -104,45 +104,86 @@ def _cone_segment_numpy(o, d, apex, axis, cos_half, t_end, t0, t1):
 
 
 
+@kernels.helper
+def _cone_row(o0, o1, o2, d0, d1, d2, x0, x1, x2, a0, a1, a2, cos_half, t_end):
+    """(t0, t1) of one ray (o, d) up to t_end in the cone of apex x, axis a:
+    ``_cone_segment_numpy``'s arithmetic for one row."""
+    big = 1.7976931348623157e308   # np.finfo(np.float64).max
+    v0, v1, v2 = o0 - x0, o1 - x1, o2 - x2
+    da = d0 * a0 + d1 * a1 + d2 * a2
+    va = v0 * a0 + v1 * a1 + v2 * a2
+    dv = d0 * v0 + d1 * v1 + d2 * v2
+    vv = v0 * v0 + v1 * v1 + v2 * v2
+    c2 = cos_half * cos_half
+    A, B, C = da * da - c2, 2.0 * (da * va - c2 * dv), va * va - c2 * vv
+    disc = B * B - 4.0 * A * C
+    sq = np.sqrt(max(disc, 0.0))
+    if abs(A) < 1e-12:
+        r1 = -C / B if B != 0 else np.nan
+        r2 = np.nan
+    else:
+        r1, r2 = (-B - sq) / (2.0 * A), (-B + sq) / (2.0 * A)
+    if not disc >= -1e-9 * (B * B + abs(4.0 * A * C)):   # a tangent ray's double root, within rounding
+        r1, r2 = np.nan, np.nan
+    end = t_end if np.isfinite(t_end) else np.inf
+    # np.nan_to_num, then clipped to [0, end]: both cuts lie between 0 and end.
+    c1 = min(max(0.0 if np.isnan(r1) else min(max(r1, -big), big), 0.0), end)
+    c2 = min(max(0.0 if np.isnan(r2) else min(max(r2, -big), big), 0.0), end)
+    lo, hi = np.inf, -np.inf
+    for k in range(3):   # the pieces (0, c), (c, c'), (c', end), c <= c'
+        a = 0.0 if k == 0 else (min(c1, c2) if k == 1 else max(c1, c2))
+        b = min(c1, c2) if k == 0 else (max(c1, c2) if k == 1 else end)
+        mid = 0.5 * (a + b) if np.isfinite(b) else a + 1.0 + abs(a)
+        y0, y1, y2 = v0 + d0 * mid, v1 + d1 * mid, v2 + d2 * mid
+        ya = y0 * a0 + y1 * a1 + y2 * a2
+        if b > a and ya >= cos_half * np.sqrt(y0 * y0 + y1 * y1 + y2 * y2):
+            lo, hi = min(lo, a), max(hi, b)
+    if hi > lo:
+        return lo, hi
+    return 0.0, 0.0
+
+
 @kernels.loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], "
                      "float64[::1], float64[::1], float64[::1])", _cone_segment_numpy)
 def _cone_segment_rows(o, d, apex, axis, cos_half, t_end, t0, t1):
-    big = 1.7976931348623157e308   # np.finfo(np.float64).max
-    cuts = np.empty(4)
     for i in range(o.shape[0]):
-        v0, v1, v2 = o[i, 0] - apex[i, 0], o[i, 1] - apex[i, 1], o[i, 2] - apex[i, 2]
-        da = d[i, 0] * axis[i, 0] + d[i, 1] * axis[i, 1] + d[i, 2] * axis[i, 2]
-        va = v0 * axis[i, 0] + v1 * axis[i, 1] + v2 * axis[i, 2]
-        dv = d[i, 0] * v0 + d[i, 1] * v1 + d[i, 2] * v2
-        vv = v0 * v0 + v1 * v1 + v2 * v2
-        c2 = cos_half[i] * cos_half[i]
-        A, B, C = da * da - c2, 2.0 * (da * va - c2 * dv), va * va - c2 * vv
-        disc = B * B - 4.0 * A * C
-        sq = np.sqrt(max(disc, 0.0))
-        if abs(A) < 1e-12:
-            r1 = -C / B if B != 0 else np.nan
-            r2 = np.nan
-        else:
-            r1, r2 = (-B - sq) / (2.0 * A), (-B + sq) / (2.0 * A)
-        if not disc >= -1e-9 * (B * B + abs(4.0 * A * C)):   # a tangent ray's double root, within rounding
-            r1, r2 = np.nan, np.nan
-        end = t_end[i] if np.isfinite(t_end[i]) else np.inf
-        # np.nan_to_num, then clipped to [0, end]: both cuts lie between 0 and end.
-        c1 = min(max(0.0 if np.isnan(r1) else min(max(r1, -big), big), 0.0), end)
-        c2 = min(max(0.0 if np.isnan(r2) else min(max(r2, -big), big), 0.0), end)
-        cuts[0], cuts[1], cuts[2], cuts[3] = 0.0, min(c1, c2), max(c1, c2), end
-        lo, hi = np.inf, -np.inf
-        for k in range(3):
-            a, b = cuts[k], cuts[k + 1]
-            mid = 0.5 * (a + b) if np.isfinite(b) else a + 1.0 + abs(a)
-            x0, x1, x2 = v0 + d[i, 0] * mid, v1 + d[i, 1] * mid, v2 + d[i, 2] * mid
-            xa = x0 * axis[i, 0] + x1 * axis[i, 1] + x2 * axis[i, 2]
-            if b > a and xa >= cos_half[i] * np.sqrt(x0 * x0 + x1 * x1 + x2 * x2):
-                lo, hi = min(lo, a), max(hi, b)
-        if hi > lo:
-            t0[i], t1[i] = lo, hi
-        else:
-            t0[i], t1[i] = 0.0, 0.0
+        t0[i], t1[i] = _cone_row(o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], apex[i, 0], apex[i, 1],
+                                 apex[i, 2], axis[i, 0], axis[i, 1], axis[i, 2], cos_half[i], t_end[i])
+
+
+def lit_segments(o, d, rows, e, lit, apex, axis, cos_half, t_end):
+    """(t0, t1) per row i of the rays o[rows[i]], d[rows[i]] up to t_end[i]:
+    the cone (apex, axis, cos_half)[e[i]] where lit[e[i]], else (0, t_end)
+    (``cone_segment`` without gathering the rows' rays and cones first)."""
+    n = len(rows)
+    t0, t1 = np.empty(n), np.empty(n)
+    f64 = np.float64
+    _lit_rows(np.ascontiguousarray(o, f64), np.ascontiguousarray(d, f64), np.ascontiguousarray(rows, np.int64),
+              np.ascontiguousarray(e, np.int64), np.ascontiguousarray(lit, bool),
+              *(np.ascontiguousarray(a, f64) for a in (apex, axis, cos_half, t_end)), t0, t1)
+    return t0, t1
+
+
+def _lit_numpy(o, d, rows, e, lit, apex, axis, cos_half, t_end, t0, t1):
+    t0[:], t1[:] = 0.0, t_end
+    c = np.flatnonzero(lit[e])
+    if len(c):
+        k, r = e[c], rows[c]
+        a, b = np.empty(len(c)), np.empty(len(c))
+        _cone_segment_numpy(o[r], d[r], apex[k], axis[k], cos_half[k], t_end[c], a, b)
+        t0[c], t1[c] = a, b
+
+
+@kernels.loop_kernel("void(float64[:, ::1], float64[:, ::1], int64[::1], int64[::1], boolean[::1], float64[:, ::1], "
+                     "float64[:, ::1], float64[::1], float64[::1], float64[::1], float64[::1])", _lit_numpy)
+def _lit_rows(o, d, rows, e, lit, apex, axis, cos_half, t_end, t0, t1):
+    for i in range(rows.shape[0]):
+        k, r = e[i], rows[i]
+        if not lit[k]:
+            t0[i], t1[i] = 0.0, t_end[i]
+            continue
+        t0[i], t1[i] = _cone_row(o[r, 0], o[r, 1], o[r, 2], d[r, 0], d[r, 1], d[r, 2], apex[k, 0], apex[k, 1],
+                                 apex[k, 2], axis[k, 0], axis[k, 1], axis[k, 2], cos_half[k], t_end[i])
 
 
 def stack_method(methods, stack):

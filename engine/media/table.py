@@ -227,21 +227,68 @@ class MediumTable:
         """Rows ``rows`` of ``stack`` cross a surface of material ``mat``
         (per row) from its front (back False: enter its medium) or its back
         (leave it).  In place; a full stack drops the entry (STACK_SIZE
-        nested media)."""
-        use = self.has[mat]
-        if not use.any():
+        nested media).  One compiled loop (``_cross_rows``): the NumPy form
+        took a dozen gathers per crossing, 5 % of a fog batch."""
+        if len(rows) == 0 or stack.shape[1] == 0:
             return
-        rows, mat, back = rows[use], mat[use], np.asarray(back)[use]
-        sub = stack[rows]
-        present = sub == mat[:, None]
-        leave = back
-        sub[leave] = np.where(present[leave], -1, sub[leave])
-        enter = ~back & ~present.any(axis=1)
-        empty = sub < 0
-        slot = np.argmax(empty, axis=1)
-        put = np.flatnonzero(enter & empty.any(axis=1))
-        sub[put, slot[put]] = mat[put]
-        stack[rows] = sub
+        rows = _loop_column(rows, len(rows), np.int64)
+        mat, back = _loop_column(mat, len(rows), np.int64), _loop_column(back, len(rows), bool)
+        if stack.dtype == np.int32 and stack.flags.c_contiguous and stack.flags.writeable:
+            _cross_rows(stack, rows, mat, back, self.has)
+            return
+        work = np.array(stack, np.int32)   # a copy: the stack may be strided, int64 or read-only
+        _cross_rows(work, rows, mat, back, self.has)
+        stack[...] = work
+
+
+def _loop_column(a, n, dtype):
+    """``a`` (a scalar or n values) as a writeable contiguous column (what
+    a compiled loop's signature takes; broadcasts are read-only)."""
+    a = np.asarray(a)
+    if a.shape != (n,):
+        return np.full(n, a, dtype)
+    a = np.ascontiguousarray(a, dtype)
+    return a if a.flags.writeable else a.copy()
+
+
+def _cross_numpy(stack, rows, mat, back, has):
+    """The reference form of ``_cross_rows`` (rows unique)."""
+    use = has[mat]
+    if not use.any():
+        return
+    rows, mat, back = rows[use], mat[use], back[use]
+    sub = stack[rows]
+    present = sub == mat[:, None]
+    leave = back
+    sub[leave] = np.where(present[leave], -1, sub[leave])
+    enter = ~back & ~present.any(axis=1)
+    empty = sub < 0
+    slot = np.argmax(empty, axis=1)
+    put = np.flatnonzero(enter & empty.any(axis=1))
+    sub[put, slot[put]] = mat[put]
+    stack[rows] = sub
+
+
+@kernels.loop_kernel("void(int32[:, ::1], int64[::1], int64[::1], boolean[::1], boolean[::1])", _cross_numpy)
+def _cross_rows(stack, rows, mat, back, has):
+    for i in range(rows.shape[0]):
+        m = mat[i]
+        if not has[m]:
+            continue
+        r = rows[i]
+        if back[i]:   # leave: every slot holding the medium
+            for k in range(stack.shape[1]):
+                if stack[r, k] == m:
+                    stack[r, k] = -1
+            continue
+        present, slot = False, -1
+        for k in range(stack.shape[1]):
+            if stack[r, k] == m:
+                present = True
+            elif stack[r, k] < 0 and slot < 0:
+                slot = k
+        if not present and slot >= 0:
+            stack[r, slot] = m
 
 
 def _used_slots(stack):

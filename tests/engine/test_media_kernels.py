@@ -273,3 +273,154 @@ def test_tracker_collisions_agree(jit, mode):
     sub = Reference(ref[:6])
     sub.spread = ref.spread[:6]
     _agree_where(sub, got[:6], same)
+
+
+def _cross_inputs(rng, n, m):
+    """Stacks with full, empty and duplicate entries; crossings in and out
+    of media present, absent and without a medium (``has`` False)."""
+    stack = _stacks(rng, n, m)
+    stack[n // 10: n // 5] = rng.integers(0, m, (n // 5 - n // 10, media.STACK_SIZE))   # full stacks
+    rows = rng.permutation(n)[: n // 2].astype(np.int64)
+    mat = rng.integers(0, m + 1, len(rows)).astype(np.int64)
+    back = rng.random(len(rows)) < 0.5
+    has = np.ones(m + 2, bool)
+    has[[1, m + 1]] = False
+    return stack, rows, mat, back, has
+
+
+def test_cross_agrees(jit):
+    """MediumTable.cross's compiled loop against its NumPy form: the same
+    stacks exactly (integers), for entering, leaving, full stacks and
+    materials without a medium."""
+    from engine.media.table import _cross_numpy, _cross_rows
+    rng = np.random.default_rng(21)
+    stack, rows, mat, back, has = _cross_inputs(rng, 5000, 6)
+    ref, got = stack.copy(), stack.copy()
+    _cross_numpy(ref, rows, mat, back, has)
+    _cross_rows(got, rows, mat, back, has)
+    np.testing.assert_array_equal(ref, got)
+    assert (ref[rows] != stack[rows]).any(axis=1).mean() > 0.25   # many crossings changed their stack
+    entered = rows[~back & has[mat]]
+    m_in = mat[~back & has[mat]]
+    not_full = (stack[entered] < 0).any(axis=1)
+    assert (got[entered[not_full]] == m_in[not_full, None]).any(axis=1).all()
+    left = rows[back & has[mat]]
+    assert not (got[left] == mat[back & has[mat]][:, None]).any(axis=1).any()
+
+
+def test_cross_on_a_strided_stack_writes_back():
+    """A stack that is not a C-contiguous int32 array (a column slice's
+    copy target, an int64 stack) is still updated in place."""
+    table = _table(np.random.default_rng(3))
+    stack = np.full((4, media.STACK_SIZE), -1, np.int64)
+    stack[1, 0] = 2
+    table.cross(stack, np.array([0, 1]), np.array([3, 2]), np.array([False, True]))
+    assert stack[0, 0] == 3 and (stack[1] == -1).all()
+
+
+def test_lit_segments_are_each_spots_cone():
+    """volume._lit_segment (the per-emitter cone table, built once per
+    light set) against each row's spot cone computed from the light's own
+    fields: spots' tangent cones (one nearly 180 degrees wide, one of
+    radius 0), the whole segment for a point light and a sun."""
+    from engine.integrator import volume
+    from engine.render import prepare
+    from engine.scene import PointLight, SpotLight, SunLight
+    from engine.testscenes import box
+    from engine.scene import Camera, Instance, Lobe, Material, RenderSettings, Scene, World
+    from engine.testscenes import look_at
+    lights = [PointLight((0.3, 0.0, 0.5), (5.0, 5.0, 5.0), radius=0.1),
+              SpotLight((0.0, 0.0, 1.2), (60.0, 60.0, 60.0), radius=0.1, direction=(0.0, 0.2, -1.0),
+                        spot_size=1.1, spot_blend=0.2),
+              SunLight((0.0, 0.3, -1.0), (1.0, 1.0, 1.0)),
+              SpotLight((0.5, 0.5, 0.5), (9.0, 9.0, 9.0), radius=0.05, direction=(1.0, 0.0, 0.0),
+                        spot_size=3.1, spot_blend=0.1),
+              SpotLight((-0.4, 0.2, 0.9), (9.0, 9.0, 9.0), radius=0.0, direction=(0.3, 0.0, -1.0),
+                        spot_size=0.6, spot_blend=0.1)]
+    fog = Material("fog", (Lobe("transparent", (1.0, 1.0, 1.0)),), volume=Volume(scattering=(0.5, 0.5, 0.5)))
+    scene = Scene([box((3.0, 3.0, 3.0))], [Instance(0, materials=[0])], [fog], lights, World((0.0, 0.0, 0.0)),
+                  Camera(look_at((0, -6, 0.3), (0, 0, 0.1)), lens=40, resolution=(8, 8)))
+    ctx = prepare(scene, RenderSettings(samples=1, seed=1))
+    rng = np.random.default_rng(4)
+    n = 3000
+    o, d = _rays(rng, n, 1.0)
+    e = rng.integers(0, ctx.lights.count, n)
+    t_end = np.where(rng.random(n) < 0.2, np.inf, rng.uniform(0.1, 5.0, n))
+    rows = rng.permutation(n)
+    t0, t1 = volume._lit_segment(ctx, o, d, rows, e[rows], t_end[rows])
+    t0[rows], t1[rows] = t0.copy(), t1.copy()   # back in the rays' order
+    want0, want1 = np.zeros(n), t_end.copy()
+    cones = 0
+    for g in ctx.lights.groups:
+        table = g.table
+        for j in range(table.count):
+            rows = np.flatnonzero(e == g.base + j)
+            if not getattr(table, "spot", np.zeros(table.count, bool))[j] or table.cos_half[j] < 0 or not len(rows):
+                continue
+            cones += 1
+            sin_half = np.sqrt(1.0 - table.cos_half[j] ** 2)
+            apex = table.pos[j] - table.dir[j] * table.radius[j] / sin_half
+            want0[rows], want1[rows] = equiangular.cone_segment(
+                o[rows], d[rows], np.tile(apex, (len(rows), 1)), np.tile(table.dir[j], (len(rows), 1)),
+                np.full(len(rows), table.cos_half[j]), t_end[rows])
+    assert cones == 3
+    np.testing.assert_array_equal(t0, want0)
+    np.testing.assert_array_equal(t1, want1)
+    assert (t1 < t_end).mean() > 0.1   # the cones cut many segments
+
+
+def test_point_weights_agree(jit):
+    """direct.point_weights' compiled loop against its NumPy form within
+    rounding, with zero, infinite and NaN pdfs, endless and empty lit parts."""
+    from engine.media.direct import _weights_rows
+    rng = np.random.default_rng(31)
+    n = 6000
+    t = rng.uniform(0.0, 5.0, n)
+    t[rng.random(n) < 0.03] = np.inf
+    p_e, p_d = rng.random(n) * 3.0, rng.random(n) * 3.0
+    for p in (p_e, p_d):
+        pick = rng.random(n) < 0.1
+        p[pick] = rng.choice((0.0, np.inf, np.nan, 1e-300, 1e300), pick.sum())
+    equi, mis = rng.random(n) < 0.5, rng.random(n) < 0.6
+    t0 = rng.uniform(0.0, 1.0, n)
+    t1 = t0 + np.where(rng.random(n) < 0.1, 0.0, rng.uniform(0.0, 4.0, n))
+    st, ss = rng.random((n, 3)) * 2.0, rng.random((n, 3))
+    st[rng.random((n, 3)) < 0.05] = 0.0
+
+    def run(*args):
+        good, factor = np.empty(n, bool), np.empty((n, 3))
+        _weights_rows(*args, good, factor)
+        return good.astype(float), factor
+    ref, got = both_ways(run, t, p_e, p_d, equi, mis, t0, t1, st, ss)
+    np.testing.assert_array_equal(ref[0], got[0])
+    assert 0.5 < got[0].mean() < 0.95
+    assert np.isfinite(got[1]).all()
+    _agree_where(ref, got, np.ones(n, bool))
+
+
+def test_lit_rows_agree(jit):
+    """equiangular._lit_rows (each row's cone read through its emitter, the
+    ray through its row index) against its NumPy form within rounding:
+    cones of 0-90 degrees, endless segments, rays from inside and along
+    the axis, emitters without a cone."""
+    from engine.media.equiangular import _lit_rows
+    rng = np.random.default_rng(41)
+    n, m = 4000, 6
+    o, d = _rays(rng, n, 1.5)
+    d[:50] = [0.0, 0.0, -1.0]                            # along the axis
+    rows = rng.integers(0, n, 3000)
+    e = rng.integers(0, m, len(rows))
+    lit = np.array([True, True, False, True, True, False])
+    apex = rng.normal(0.0, 1.0, (m, 3))
+    axis = np.tile([0.0, 0.0, -1.0], (m, 1))
+    cos_half = np.array([0.95, 0.6, 0.5, 0.0, 0.999, 0.3])
+    t_end = np.where(rng.random(len(rows)) < 0.2, np.inf, rng.uniform(0.1, 6.0, len(rows)))
+
+    def run(*args):
+        t0, t1 = np.empty(len(rows)), np.empty(len(rows))
+        _lit_rows(*args, t0, t1)
+        return t0, t1
+    ref, got = both_ways(run, o, d, rows, e, lit, apex, axis, cos_half, t_end)
+    _agree_where(ref, got, np.ones(len(rows), bool))
+    assert (got[1][~lit[e]] == t_end[~lit[e]]).all()
+    assert ((got[1] > got[0]) & lit[e]).mean() > 0.1
