@@ -37,6 +37,7 @@ def group_of(nodeid):
     return 'blender34' if 'blender_34' in name else path
 
 
+@pytest.hookimpl(trylast=True)
 def pytest_collection_modifyitems(config, items):
     """The 3.4 group is found by name, so a test that takes the legacy
     install must say so in its name."""

@@ -31,7 +31,7 @@ def references34(blender34, tmp_path_factory):
     return render_locally(blender34[0], tmp_path_factory.mktemp('local34'), '1..2')
 
 
-def test_frames_from_blender_binary_equal_bpy_module(cluster, blender34, references34, tmp_path):
+def test_frames_from_blender_34_binary_equal_bpy_module(cluster, blender34, references34, tmp_path):
     blend, env = blender34
     _, dask_client = cluster
     job = make_job(blend, tmp_path / 'farm', frames=[1, 2], chunk=2, blender=BLENDER, extra_env=env)
@@ -40,7 +40,7 @@ def test_frames_from_blender_binary_equal_bpy_module(cluster, blender34, referen
         assert_same_image(read_exr(plan.frame_path(job.out_dir, frame)), references34[frame], f"frame {frame}")
 
 
-def test_failing_render_fails_its_task_with_the_log(cluster, blender34, tmp_path):
+def test_failing_render_in_blender_34_fails_its_task_with_the_log(cluster, blender34, tmp_path):
     """A shard whose render cannot start (bad sample range): the task fails
     with Blender's output; nothing is written."""
     blend, env = blender34
@@ -54,7 +54,7 @@ def test_failing_render_fails_its_task_with_the_log(cluster, blender34, tmp_path
     assert farm_client.pending(job, resume=True) == plan.tasks(job)
 
 
-def test_split_frame_from_blender_binary_equals_bpy_module(cluster, blender34, references34, tmp_path):
+def test_split_frame_from_blender_34_binary_equals_bpy_module(cluster, blender34, references34, tmp_path):
     """The add-on's shard hook inside the real binary: two shards of frame 2
     merged equal the frame rendered whole by the bpy module."""
     from engine.film import Film
