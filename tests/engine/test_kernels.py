@@ -1085,3 +1085,18 @@ def test_bump_kernels_agree(jit):
     strength, distance = rng.random(n) * 1.5 - 0.25, mixed(rng, n, 0.1)
     assert_agree(*both_ways(set_bump_rows, *normal.T, *dx.T, *dy.T, *heights.T, strength, distance, w),
                  "set_bump_rows")
+
+
+def test_color_ramp_loop_agrees(jit):
+    """The Color Ramp's compiled lookup (converter_nodes._ramp_loop) against
+    ramp_lookup, its NumPy reference, on factors inside, outside and at the
+    ends of [0, 1], NaN and infinities, interpolated and constant."""
+    from engine.nodes.converter_nodes import RAMP_SIZE, ramp_lookup, ramp_rows
+    rng = np.random.default_rng(12)
+    table = rng.random((RAMP_SIZE, 4))
+    f = np.concatenate([rng.random(3000) * 1.4 - 0.2, [0.0, 1.0, -0.0, 0.5, np.nan, np.inf, -np.inf, 1e300]])
+    f[:200] = np.arange(200) / 256.0           # exactly on table entries: t = 0
+    for interpolate in (True, False):
+        want = ramp_lookup(table, f, interpolate)
+        np.testing.assert_allclose(ramp_rows(table, f, interpolate), want, rtol=1e-15, atol=0)
+        np.testing.assert_allclose(ramp_rows(table, f[::2], interpolate), want[::2], rtol=1e-15, atol=0)
