@@ -19,10 +19,10 @@ import dataclasses
 
 import numpy as np
 
+from .kernels import helper, kernel, where
 from .nodes import REGISTRY, ShadingContext, as_context
 from .nodes.color_math import EXTRA_BLENDS
 from .nodes.context import _bary_of_offsets
-from .nodes.rays import make_orthonormals
 from .projection import to_uv
 from .scene import (TEXTURE_TYPES, Bump, ImageTexture, Math, MixColor, NodeOutput, NormalMap)
 
@@ -942,9 +942,8 @@ def footprint_bump(height, ctx, base, triangles, params, undisplaced=False, spac
     (use_object_space) on the height dot(D, N)."""
     strength, distance, invert, width = params
     width = np.broadcast_to(np.asarray(width, np.float64), (len(ctx),))
-    a, b = make_orthonormals(ctx.ng)
-    dx, dy = a * ctx.dp[:, None], b * ctx.dp[:, None]
-    values = height(ctx.shifted_copies([None, dx * width[:, None], dy * width[:, None]]))
+    dx, dy, offsets, moves = _footprint_steps(ctx, width)
+    values = height(ctx.shifted_copies([None, *offsets], moves=moves))
     heights = np.asarray(values, np.float64).reshape(-1, 3)
     if undisplaced:
         dx, dy = _undisplaced_differentials(dx, dy, triangles, ctx)
@@ -962,25 +961,96 @@ def footprint_bump(height, ctx, base, triangles, params, undisplaced=False, spac
     return ctx.to_world_normal(out_o)
 
 
+def _footprint_steps(ctx, width):
+    """(dx, dy, [w dx, w dy], barycentric moves of the three copies or None)
+    from one elementwise kernel (the frame, the steps and their moves
+    within each triangle in one pass: a dozen NumPy passes before)."""
+    tris = ctx.tris
+    on_triangles = ctx.bary is not None and tris is not None
+    ng = ctx.ng
+    if on_triangles:
+        e1, e2 = tris.e1[ctx.prim], tris.e2[ctx.prim]
+    else:
+        e1 = e2 = np.zeros((len(ctx), 3))
+    out = bump_steps(ng[:, 0], ng[:, 1], ng[:, 2], ctx.dp, width, *e1.T, *e2.T)
+    dx, dy, ox, oy = (np.stack(out[k:k + 3], axis=1) for k in (0, 3, 6, 9))
+    moves = None
+    if on_triangles:
+        moves = [np.zeros((len(ctx), 2)), np.stack(out[12:14], axis=1), np.stack(out[14:16], axis=1)]
+    return dx, dy, [ox, oy], moves
+
+
+@kernel(11, 16)
+def bump_steps(nx, ny, nz, dp, w, ax1, ay1, az1, ax2, ay2, az2):
+    """The footprint bump's steps at a point with geometric normal n, ray
+    footprint dp, filter width w on a triangle of edges e1, e2: dx = dp a,
+    dy = dp b (a, b = make_orthonormals(n), engine.nodes.rays), the copies'
+    offsets w dx, w dy, and their barycentric moves (context._bary_of_offsets:
+    the offset projected on the triangle's plane, zero on a degenerate one)."""
+    diagonal = (nx == ny) & (nx == nz)
+    tx = nz - ny
+    ty = where(diagonal, nx + nz, nx - nz)
+    tz = where(diagonal, -ny - nx, ny - nx)
+    length = np.sqrt(tx * tx + ty * ty + tz * tz)
+    length = where(length > 0, length, 1.0)
+    tx, ty, tz = tx / length, ty / length, tz / length
+    bx, by, bz = ny * tz - nz * ty, nz * tx - nx * tz, nx * ty - ny * tx
+    dxx, dxy, dxz, dyx, dyy, dyz = tx * dp, ty * dp, tz * dp, bx * dp, by * dp, bz * dp
+    oxx, oxy, oxz, oyx, oyy, oyz = dxx * w, dxy * w, dxz * w, dyx * w, dyy * w, dyz * w
+    d00 = ax1 * ax1 + ay1 * ay1 + az1 * az1
+    d01 = ax1 * ax2 + ay1 * ay2 + az1 * az2
+    d11 = ax2 * ax2 + ay2 * ay2 + az2 * az2
+    det = d00 * d11 - d01 * d01
+    inv = where(np.abs(det) > 1e-300, 1.0 / where(det != 0, det, 1.0), 0.0)
+    ux, vx = _bary_move(oxx, oxy, oxz, ax1, ay1, az1, ax2, ay2, az2, d00, d01, d11, inv)
+    uy, vy = _bary_move(oyx, oyy, oyz, ax1, ay1, az1, ax2, ay2, az2, d00, d01, d11, inv)
+    return dxx, dxy, dxz, dyx, dyy, dyz, oxx, oxy, oxz, oyx, oyy, oyz, ux, vx, uy, vy
+
+
+@helper
+def _bary_move(ox, oy, oz, ax1, ay1, az1, ax2, ay2, az2, d00, d01, d11, inv):
+    d20 = ox * ax1 + oy * ay1 + oz * az1
+    d21 = ox * ax2 + oy * ay2 + oz * az2
+    return (d11 * d20 - d01 * d21) * inv, (d00 * d21 - d01 * d20) * inv
+
+
 def set_bump(normal, dx, dy, heights, strength, distance, invert, width):
     """Cycles' svm_node_set_bump (5.0) on rows: heights (N, 3) at the
-    centre, the x and the y copy; normalize(w |det| n - d sign(det) g) with
-    g = (h_x - h_c) (dy x n) + (h_y - h_c) (n x dx), det = dx . (dy x n),
-    then mixed with n by the strength.  A zero result (no footprint, a
+    centre, the x and the y copy (the elementwise kernel set_bump_rows)."""
+    d = -np.asarray(distance, np.float64) if invert else distance
+    out = set_bump_rows(*normal.T, *dx.T, *dy.T, *np.asarray(heights, np.float64).T, strength, d, width)
+    return np.stack(out, axis=1)
+
+
+@kernel(15, 3)
+def set_bump_rows(nx, ny, nz, dxx, dxy, dxz, dyx, dyy, dyz, hc, hx, hy, strength, distance, width):
+    """normalize(w |det| n - d sign(det) g) with g = (h_x - h_c) (dy x n)
+    + (h_y - h_c) (n x dx), det = dx . (dy x n), then mixed with n by the
+    strength and made unit (textures._unit).  |det| goes as dP^2: normalized
+    at any scale (Cycles' safe_normalize); a zero result (no footprint, a
     zero width) keeps n."""
-    rx, ry = np.cross(dy, normal), np.cross(normal, dx)
-    det = np.einsum("ij,ij->i", dx, rx)
-    grad = (heights[:, 1] - heights[:, 0])[:, None] * rx + (heights[:, 2] - heights[:, 0])[:, None] * ry
-    d = -distance if invert else distance
-    d = np.broadcast_to(np.asarray(d, np.float64), det.shape)
-    w = np.broadcast_to(width, det.shape)
-    out = (w * np.abs(det))[:, None] * normal - (d * np.sign(det))[:, None] * grad
-    # |det| goes as dP^2: normalized at any scale (Cycles' safe_normalize), zero keeps n.
-    length = np.linalg.norm(out, axis=1, keepdims=True)
-    ok = np.isfinite(length) & (length > 0)
-    out = np.where(ok, out / np.where(ok, length, 1.0), normal)
-    s = np.maximum(np.broadcast_to(np.asarray(strength, np.float64), det.shape), 0.0)[:, None]
-    return _unit(s * out + (1.0 - s) * normal, normal)
+    rxx, rxy, rxz = dyy * nz - dyz * ny, dyz * nx - dyx * nz, dyx * ny - dyy * nx
+    ryx, ryy, ryz = ny * dxz - nz * dxy, nz * dxx - nx * dxz, nx * dxy - ny * dxx
+    det = dxx * rxx + dxy * rxy + dxz * rxz
+    gx, gy = hx - hc, hy - hc
+    along, across = width * np.abs(det), distance * np.sign(det)
+    ox = along * nx - across * (gx * rxx + gy * ryx)
+    oy = along * ny - across * (gx * rxy + gy * ryy)
+    oz = along * nz - across * (gx * rxz + gy * ryz)
+    ox, oy, oz = _unit_or(ox, oy, oz, nx, ny, nz, 0.0)
+    s = np.maximum(strength, 0.0)
+    return _unit_or(s * ox + (1.0 - s) * nx, s * oy + (1.0 - s) * ny, s * oz + (1.0 - s) * nz,
+                    nx, ny, nz, 1e-12)
+
+
+@helper
+def _unit_or(x, y, z, fx, fy, fz, floor):
+    """(x, y, z) made unit, or (fx, fy, fz) where its length is not finite
+    or not above floor."""
+    length = np.sqrt(x * x + y * y + z * z)
+    ok = np.isfinite(length) & (length > floor)
+    scale = where(ok, length, 1.0)
+    return where(ok, x / scale, fx), where(ok, y / scale, fy), where(ok, z / scale, fz)
 
 
 def _undisplaced_differentials(dx, dy, triangles, ctx):

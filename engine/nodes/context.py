@@ -351,12 +351,14 @@ class ShadingContext:
         direction, ray kind, ...) are picked on first read."""
         return self.shifted_copies([x for step in steps for x in (step, -step)], negated_pairs=True)
 
-    def shifted_copies(self, offsets, negated_pairs=False):
+    def shifted_copies(self, offsets, negated_pairs=False, moves=None):
         """The points moved by each world offset (N, 3) of ``offsets`` (None:
         not moved), as one context of len(offsets) N points, a point's copies
         consecutive; Cycles' bump evaluates its height at P, P + dPdx and
         P + dPdy in one pass this way.  ``negated_pairs``: offsets come as
-        (s, -s) pairs, whose barycentric moves are computed once each."""
+        (s, -s) pairs, whose barycentric moves are computed once each.
+        ``moves``: the offsets' barycentric moves (N, 2) when the caller
+        has them already (textures.bump_steps)."""
         n, k = self.n, len(offsets)
         rows = np.repeat(np.arange(n), k)
         zero = np.zeros((n, 3))
@@ -371,10 +373,10 @@ class ShadingContext:
         out.rays = None if self.rays is None else self.rays.take(rows)
         out._cache = {}
         if self.bary is not None and self.tris is not None:
-            if negated_pairs:
+            if moves is None and negated_pairs:
                 moves = _bary_of_offsets(self.tris, self.prim, offsets[::2])
                 moves = [x for d in moves for x in (d, -d)]
-            else:
+            elif moves is None:
                 moves = _bary_of_offsets(self.tris, self.prim, offsets)
             out.bary = self.bary[rows] + np.stack(moves, axis=1).reshape(k * n, 2)
         else:

@@ -110,3 +110,42 @@ def test_camera_rays_start_with_the_pixel_spread_at_the_near_clip():
     ortho = CameraModel(Camera(kind="ORTHO", ortho_scale=4.0, resolution=(8, 8)), PixelFilter("BOX", 1.0))
     dp, dd = ortho.origin_spread(np.array([[0.0, 0.0, -1.0]]))
     np.testing.assert_allclose([dp[0], dd[0]], [0.5, 0.0])
+
+
+def _set_bump_arrays(normal, dx, dy, heights, strength, d, w):
+    """svm_node_set_bump in whole-array NumPy (the form set_bump_rows replaced)."""
+    rx, ry = np.cross(dy, normal), np.cross(normal, dx)
+    det = np.einsum("ij,ij->i", dx, rx)
+    grad = (heights[:, 1] - heights[:, 0])[:, None] * rx + (heights[:, 2] - heights[:, 0])[:, None] * ry
+    out = (w * np.abs(det))[:, None] * normal - (d * np.sign(det))[:, None] * grad
+    out = out / np.linalg.norm(out, axis=1, keepdims=True)
+    out = strength[:, None] * out + (1.0 - strength[:, None]) * normal
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def test_bump_kernels_match_the_array_formulas():
+    """textures.bump_steps gives make_orthonormals(Ng) times dP, the steps
+    times the width and context._bary_of_offsets' moves; set_bump the
+    whole-array svm_node_set_bump, within rounding (whichever form runs)."""
+    from engine.nodes.context import _bary_of_offsets
+    from engine.textures import bump_steps, set_bump
+    rng = np.random.default_rng(5)
+    n = 500
+    ng = rng.normal(size=(n, 3))
+    ng /= np.linalg.norm(ng, axis=1)[:, None]
+    dp, w = rng.random(n) * 1e-2, rng.random(n) * 0.2
+    tris = SimpleNamespace(e1=rng.normal(size=(n, 3)), e2=rng.normal(size=(n, 3)))
+    out = bump_steps(*ng.T, dp, w, *tris.e1.T, *tris.e2.T)
+    a, b = make_orthonormals(ng)
+    dx, dy = a * dp[:, None], b * dp[:, None]
+    np.testing.assert_allclose(np.column_stack(out[:6]), np.column_stack([dx, dy]), rtol=1e-12, atol=1e-18)
+    steps = [dx * w[:, None], dy * w[:, None]]
+    np.testing.assert_allclose(np.column_stack(out[6:12]), np.column_stack(steps), rtol=1e-12, atol=1e-18)
+    moves = _bary_of_offsets(tris, np.arange(n), steps)
+    np.testing.assert_allclose(np.column_stack(out[12:]), np.column_stack(moves), rtol=1e-9, atol=1e-15)
+    heights = rng.normal(size=(n, 3)) * 1e-3
+    strength, d = rng.random(n), rng.random(n) * 0.5
+    for invert in (False, True):
+        want = _set_bump_arrays(ng, dx, dy, heights, strength, -d if invert else d, w)
+        np.testing.assert_allclose(set_bump(ng, dx, dy, heights, strength, d, invert, w), want,
+                                   rtol=1e-9, atol=1e-12)

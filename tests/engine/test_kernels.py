@@ -1062,3 +1062,41 @@ def test_cache_lock_is_per_engine_copy(tmp_path, monkeypatch):
         monkeypatch.setattr(kernels, "_ENGINE_DIR", "/elsewhere/ember/engine")
         with kernels.cache_lock(str(tmp_path), give_up=lambda: True) as other_copy:
             assert other_copy
+
+
+def test_bump_kernels_agree(jit):
+    """The footprint bump's steps and svm_node_set_bump (engine/textures.py
+    bump_steps, set_bump_rows): compiled against NumPy on random and odd
+    rows (the diagonal normal, degenerate triangles, zero, infinite and NaN
+    footprints and heights)."""
+    from engine.textures import bump_steps, set_bump_rows
+    rng = np.random.default_rng(31)
+    n = 4000
+    normal = rng.normal(size=(n, 3))
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    normal[:3] = ((1, 1, 1), (0, 0, 1), (0, 0, 0))
+    normal[0] /= np.sqrt(3.0)
+    edges = rng.normal(size=(n, 6))
+    edges[3, 3:] = edges[3, :3]                                  # a degenerate triangle
+    dp, w = np.abs(mixed(rng, n, 1e-3)), np.abs(mixed(rng, n, 0.1))
+    assert_agree(*both_ways(bump_steps, *normal.T, dp, w, *edges.T), "bump_steps")
+    dx, dy = rng.normal(size=(n, 3)) * 1e-3, rng.normal(size=(n, 3)) * 1e-3
+    heights = np.column_stack([mixed(rng, n), mixed(rng, n), mixed(rng, n)])
+    strength, distance = rng.random(n) * 1.5 - 0.25, mixed(rng, n, 0.1)
+    assert_agree(*both_ways(set_bump_rows, *normal.T, *dx.T, *dy.T, *heights.T, strength, distance, w),
+                 "set_bump_rows")
+
+
+def test_color_ramp_loop_agrees(jit):
+    """The Color Ramp's compiled lookup (converter_nodes._ramp_loop) against
+    ramp_lookup, its NumPy reference, on factors inside, outside and at the
+    ends of [0, 1], NaN and infinities, interpolated and constant."""
+    from engine.nodes.converter_nodes import RAMP_SIZE, ramp_lookup, ramp_rows
+    rng = np.random.default_rng(12)
+    table = rng.random((RAMP_SIZE, 4))
+    f = np.concatenate([rng.random(3000) * 1.4 - 0.2, [0.0, 1.0, -0.0, 0.5, np.nan, np.inf, -np.inf, 1e300]])
+    f[:200] = np.arange(200) / 256.0           # exactly on table entries: t = 0
+    for interpolate in (True, False):
+        want = ramp_lookup(table, f, interpolate)
+        np.testing.assert_allclose(ramp_rows(table, f, interpolate), want, rtol=1e-15, atol=0)
+        np.testing.assert_allclose(ramp_rows(table, f[::2], interpolate), want[::2], rtol=1e-15, atol=0)
