@@ -20,7 +20,7 @@ import bpy
 import numpy as np
 
 sys.path[:0] = [os.path.dirname(os.path.abspath(__file__)), os.path.dirname(os.path.dirname(os.path.abspath(__file__)))]
-from parity_scenes import smooth_sphere  # noqa: E402
+from parity_scenes import particle_hair, smooth_sphere  # noqa: E402
 
 
 def _material(name, **inputs):
@@ -549,15 +549,7 @@ def hair(folder=None):
     obj = bpy.context.active_object
     obj.data.materials.append(skin)
     obj.data.materials.append(mat)
-    psys = obj.modifiers.new('hair', 'PARTICLE_SYSTEM').particle_system
-    psys.seed = 1
-    settings = psys.settings
-    settings.type = 'HAIR'
-    settings.count = 3000
-    settings.hair_length = 0.4
-    settings.radius_scale = 0.02
-    settings.root_radius, settings.tip_radius = 1.0, 0.3
-    settings.material = 2
+    particle_hair(obj, 3000)
     _light('AREA', (1.0, -1.5, 2.5), 150.0, size=1.0)
     _camera((0, -3.0, 1.2), (0, 0, 0.6))
     return scene

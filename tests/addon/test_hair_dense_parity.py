@@ -33,7 +33,7 @@ import pytest
 
 from ember_testlib import (ReferenceCheck, empty_factory_scene, live_cycles_reference, render_for_reference,
                            small_resolution)
-from parity_scenes import light, material, plane
+from parity_scenes import light, material, particle_hair, plane
 from test_hair_parity import hair_material
 
 SIZE = (40, 30)
@@ -55,16 +55,7 @@ def hair_ball(scene, distribution='RAND'):
     obj = bpy.context.active_object
     obj.data.materials.append(material('scalp', 'diffuse', (0.6, 0.5, 0.45)))
     obj.data.materials.append(hair)
-    psys = obj.modifiers.new('hair', 'PARTICLE_SYSTEM').particle_system
-    psys.seed = 1
-    settings = psys.settings
-    settings.type = 'HAIR'
-    settings.count = 1500
-    settings.hair_length = 0.4
-    settings.radius_scale = 0.02
-    settings.root_radius, settings.tip_radius = 1.0, 0.3
-    settings.material = 2
-    settings.distribution = distribution
+    particle_hair(obj, 1500, distribution=distribution)
     light('AREA', (1.0, -1.5, 2.5), 150.0, size=1.0)
     cam = scene.camera
     cam.location = (0.0, -2.2, 1.0)
