@@ -7,6 +7,15 @@ from ember_testlib import small_resolution
 WIDTH, HEIGHT = 32, 24   # the light and transparency parity frames
 
 
+def empty_material(name):
+    """A node material holding only its output: (material, tree, output)."""
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    tree = mat.node_tree
+    tree.nodes.clear()
+    return mat, tree, tree.nodes.new('ShaderNodeOutputMaterial')
+
+
 def material(name, kind, color=(0.8, 0.8, 0.8), strength=1.0, roughness=0.3):
     mat = bpy.data.materials.new(name)
     mat.use_nodes = True

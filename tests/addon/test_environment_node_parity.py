@@ -19,6 +19,7 @@ import bpy
 import numpy as np
 
 from ember_testlib import ReferenceCheck, live_cycles_reference, render_for_reference, small_resolution
+from parity_scenes import empty_material
 
 EMBER_SPP, CYCLES_SEEDS, CYCLES_SPP, BLOCK = 64, 4, 32, 8
 IMAGE_SIZE = (32, 16)
@@ -36,11 +37,7 @@ def env_image():
 def env_material(name, image, projection='EQUIRECTANGULAR', interpolation='Linear', vector=None):
     """Emission of an Environment Texture; ``vector(tree)`` -> the output
     socket linked to its Vector (None: unlinked)."""
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    tree = mat.node_tree
-    tree.nodes.clear()
-    out = tree.nodes.new('ShaderNodeOutputMaterial')
+    mat, tree, out = empty_material(name)
     emission = tree.nodes.new('ShaderNodeEmission')
     env = tree.nodes.new('ShaderNodeTexEnvironment')
     env.image, env.projection, env.interpolation = image, projection, interpolation

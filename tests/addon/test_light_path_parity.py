@@ -20,7 +20,7 @@ import bpy
 import numpy as np
 import pytest
 
-from parity_scenes import material, mesh_object, plane
+from parity_scenes import empty_material, material, mesh_object, plane
 from ember_testlib import (ReferenceCheck, empty_factory_scene, live_cycles_reference, render_for_reference,
                            small_resolution)
 
@@ -36,17 +36,14 @@ SCENES = {'consistent': ('Is Camera Ray', 'Is Shadow Ray', 'Ray Depth', 'Transpa
 
 
 def gated_lamp(name, output, location, strength=20.0):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
+    mat, nt, out = empty_material(name)
     emission = nt.nodes.new('ShaderNodeEmission')
     gain = nt.nodes.new('ShaderNodeMath')
     gain.operation = 'MULTIPLY'
     gain.inputs[1].default_value = strength
     nt.links.new(nt.nodes.new('ShaderNodeLightPath').outputs[output], gain.inputs[0])
     nt.links.new(gain.outputs[0], emission.inputs['Strength'])
-    nt.links.new(emission.outputs[0], nt.nodes.new('ShaderNodeOutputMaterial').inputs['Surface'])
+    nt.links.new(emission.outputs[0], out.inputs['Surface'])
     x, y, z = location
     h = 0.3
     return mesh_object(name, [(x - h, y - h, z), (x + h, y - h, z), (x + h, y + h, z), (x - h, y + h, z)],
