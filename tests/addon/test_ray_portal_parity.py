@@ -25,7 +25,7 @@ import bpy
 import numpy as np
 import pytest
 
-from parity_scenes import light, material, mesh_object, plane
+from parity_scenes import empty_material, light, material, mesh_object, plane
 from ember_testlib import (ReferenceCheck, empty_factory_scene, live_cycles_reference, render_for_reference,
                            small_resolution)
 
@@ -39,17 +39,9 @@ CYCLES_SEEDS, CYCLES_SPP = 8, 128
 SAMPLES = {'straight': (1024, 384)}
 
 
-def _tree(name):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    tree = mat.node_tree
-    tree.nodes.clear()
-    return mat, tree, tree.nodes.new('ShaderNodeOutputMaterial')
-
-
 def gated_diffuse(name, output, low, high):
     """A diffuse material of colour mix(low, high, Light Path ``output``)."""
-    mat, tree, out = _tree(name)
+    mat, tree, out = empty_material(name)
     mix = tree.nodes.new('ShaderNodeMix')
     mix.data_type = 'RGBA'
     mix.clamp_factor = True
@@ -65,7 +57,7 @@ def gated_diffuse(name, output, low, high):
 def portal_material(name, color, teleport=None):
     """A Ray Portal BSDF; ``teleport`` (dz): Position = the hit + (0, 0, dz)
     and Direction = the incoming ray reflected about the normal."""
-    mat, tree, out = _tree(name)
+    mat, tree, out = empty_material(name)
     portal = tree.nodes.new('ShaderNodeBsdfRayPortal')
     portal.inputs['Color'].default_value = (*color, 1.0)
     if teleport is not None:
