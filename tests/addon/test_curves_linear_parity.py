@@ -12,7 +12,10 @@ Against live Cycles (8 seeds of 128 spp, rendered by the test): the image,
 2 x 2 regions and 16 x 16-pixel blocks: +0.003 % +- 0.088 % (t 0.04), max
 block |t| 1.1.  Before (Linear 3D Curves rendered as 3D curves, Catmull-Rom
 through the same keys, warned) Ember was -1.04 % +- 0.09 % (t -11.8; max
-block |t| 8.4) against this reference: the image test resolves 0.42 %."""
+block |t| 8.4) against this reference: the image test resolves 0.42 %.
+``sliding_zigzag``: the strands sliding 3 units in the shutter (motion
+blur), -0.09 % +- 0.09 % (t -1.0), max block |t| 2.0; a sharp render is 12
+of 18 blocks beyond (max |t| 42): the test sees the blur."""
 import bpy
 import numpy as np
 
@@ -64,3 +67,43 @@ def test_linear_curves_parity_with_cycles(tmp_path, tapped_engine):
     assert not [w for w in warnings if 'Curves' in w], warnings   # linear curves are no longer named
     check = ReferenceCheck('linear_curves', image[..., :3].astype(np.float64), var, SPP, ref, ref_var, header, BLOCK)
     check.assert_agrees(0.005, 0.03)
+
+
+def sliding_zigzag(scene, blur=True):
+    """The zig-zag linear strands sliding 3 units along x in a shutter of 1
+    frame (object transform motion: Embree's time-stepped instance of the
+    round linear curves)."""
+    from test_curve_motion_parity import _blur
+    from test_motion_parity import _linear_keys
+    bounces = zigzag(scene)
+    _linear_keys(bpy.data.objects['strands'], 'location', [(-3.0, 0.0, 0.0), (3.0, 0.0, 0.0)])
+    _blur(scene, blur)
+    return bounces
+
+
+def _sharp_blocks_beyond(name, image, var, ref, ref_var, level, spp):
+    """How many blocks of a sharp Ember render differ from the blurred
+    reference at ``level`` (the blur test's power), printed."""
+    import ember_stats as stats
+    a, va = stats.block_means_var(image[..., :3].astype(np.float64), var, BLOCK)
+    b, vb = stats.block_means_var(ref, ref_var, BLOCK)
+    t = np.abs(a - b) / np.sqrt(va + vb)
+    limit = stats.t_threshold(level, spp - 1)
+    print(f"{name}: a sharp render against the blurred reference: max block |t| {t.max():.1f} "
+          f"(limit {limit:.1f}), {(t > limit).sum()} of {t.size} blocks beyond")
+    return int((t > limit).sum())
+
+
+def test_moving_linear_curves_parity_with_cycles(tmp_path, tapped_engine):
+    scene = empty_factory_scene()
+    bounces = sliding_zigzag(scene)
+    ref, ref_var, header = live_cycles_reference(scene, tmp_path, 'sliding', CYCLES_SEEDS, CYCLES_SPP, bounces)
+    image, var = render_for_reference(scene, tmp_path, 'sliding', tapped_engine, SPP, 2, bounces)
+    check = ReferenceCheck('sliding_linear_curves', image[..., :3].astype(np.float64), var, SPP, ref, ref_var,
+                           header, BLOCK)
+    check.assert_agrees(0.005, 0.03)
+    still = empty_factory_scene()
+    sliding_zigzag(still, blur=False)
+    sharp, sharp_var = render_for_reference(still, tmp_path, 'sliding_still', tapped_engine, SPP // 2, 2, bounces)
+    assert _sharp_blocks_beyond('sliding_linear_curves', sharp, sharp_var, ref, ref_var, check.details['level'],
+                                SPP // 2), "the test cannot tell the linear curves' motion blur from none"
