@@ -15,9 +15,14 @@ through the same keys, warned) Ember was -1.04 % +- 0.09 % (t -11.8; max
 block |t| 8.4) against this reference: the image test resolves 0.42 %.
 ``sliding_zigzag``: the strands sliding 3 units in the shutter (motion
 blur), -0.09 % +- 0.09 % (t -1.0), max block |t| 2.0; a sharp render is 12
-of 18 blocks beyond (max |t| 42): the test sees the blur."""
+of 18 blocks beyond (max |t| 42): the test sees the blur.
+``emitting_zigzag``: the strands alone emitting the Geometry Normal, the
+Tangent or the Curves Info Thickness (768 / 8 x 384 spp): 0.000 %, -0.000 %,
+-0.005 % (+- 0.10 %), max block |t| <= 0.64; as Catmull-Rom +3.4 %, +2.1 %,
++3.8 % (t 20 to 35)."""
 import bpy
 import numpy as np
+import pytest
 
 from ember_testlib import (ReferenceCheck, empty_factory_scene, live_cycles_reference, render_for_reference,
                            small_resolution)
@@ -107,3 +112,52 @@ def test_moving_linear_curves_parity_with_cycles(tmp_path, tapped_engine):
     sharp, sharp_var = render_for_reference(still, tmp_path, 'sliding_still', tapped_engine, SPP // 2, 2, bounces)
     assert _sharp_blocks_beyond('sliding_linear_curves', sharp, sharp_var, ref, ref_var, check.details['level'],
                                 SPP // 2), "the test cannot tell the linear curves' motion blur from none"
+
+
+def _frame_output(name):
+    """(nodes, links) -> the socket a strand emits: the Geometry node's
+    Normal or Tangent (x 0.5 + 0.5), or the Curves Info Thickness x 12
+    (linear in u on these curves: Cycles' curve_thickness)."""
+    from test_curve_shading_parity import _affine
+
+    def build(nodes, links):
+        if name == 'Thickness':
+            scale = nodes.new('ShaderNodeMath')
+            scale.operation = 'MULTIPLY'
+            links.new(nodes.new('ShaderNodeHairInfo').outputs['Thickness'], scale.inputs[0])
+            scale.inputs[1].default_value = 12.0
+            return scale.outputs[0]
+        return _affine(nodes, links, nodes.new('ShaderNodeNewGeometry').outputs[name], 0.5)
+    return build
+
+
+def emitting_zigzag(scene, output):
+    """The zig-zag strands alone (no floor, no light, a black world)
+    emitting ``output`` (_frame_output)."""
+    from test_curve_shading_parity import emission_material
+    zigzag(scene)
+    for name in ('floor', 'area'):
+        bpy.data.objects.remove(bpy.data.objects[name])
+    scene.world.node_tree.nodes['Background'].inputs['Color'].default_value = (0, 0, 0, 1)
+    data = bpy.data.objects['strands'].data
+    data.materials.clear()
+    data.materials.append(emission_material(output.lower(), _frame_output(output)))
+    return 1
+
+
+@pytest.mark.parametrize("output", ['Normal', 'Tangent', 'Thickness'])
+def test_linear_curve_shading_frame_parity_with_cycles(output, tmp_path, tapped_engine):
+    """The hit's normal (from the segment's axis), tangent (its chord) and
+    thickness (linear in u) as Cycles shades them on linear curves (with
+    Catmull-Rom curves through the same keys Ember was +3.4 % (t 32), +2.1 %
+    (t 20), +3.8 % (t 35) at 640 / 8 x 320 spp)."""
+    scene = empty_factory_scene()
+    bounces = emitting_zigzag(scene, output)
+    name = 'linear_' + output.lower()
+    # 256 / 8 x 128 spp resolved 0.79-0.82 % (the strands' edges are most of
+    # the noise), 2.5x 0.49-0.51 %: 3x the samples.
+    spp, cycles_spp = 768, 384
+    ref, ref_var, header = live_cycles_reference(scene, tmp_path, name, CYCLES_SEEDS, cycles_spp, bounces)
+    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, spp, 2, bounces)
+    check = ReferenceCheck(name, image[..., :3].astype(np.float64), var, spp, ref, ref_var, header, BLOCK)
+    check.assert_agrees(0.005, 0.03)
