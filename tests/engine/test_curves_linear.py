@@ -10,6 +10,8 @@ cones between the keys as they are, capped by spheres.
   along the last segment's axis meets the tip at t = distance - r with the
   normal along the axis.
 * The radius and the tangent along a segment are linear in u (the chord).
+* Hostile: zero-length strands and segments, radius 0 render finite.
+Motion blur: tests/engine/test_primitive_motion.py (THICK_LINEAR cases).
 """
 from dataclasses import replace
 
@@ -18,7 +20,7 @@ import pytest
 
 from engine import embree_c
 from engine.points import curve_hits, curve_tangents
-from engine.render import prepare
+from engine.render import prepare, render
 from engine.scene import Camera, HairCurves, Instance, Material, PointLight, RenderSettings, Scene
 from engine.testscenes import look_at, quad
 
@@ -107,3 +109,18 @@ def test_the_radius_is_linear_along_a_segment():
     _, _, _, radius = curve_hits(ctx.strands, o, d, t, prim, u)
     assert np.allclose(radius, 0.04 - 0.02 * u, atol=1e-9)
     assert np.abs(t - (2.0 - (0.04 - 0.02 * s))).max() < 2e-3
+
+
+def test_zero_length_and_zero_radius_linear_strands_render_finite():
+    """Strands whose keys all sit at the root (zero-length segments), of
+    radius 0, and with one repeated key in the middle render finite."""
+    z = np.linspace(0.0, 1.0, 4)
+    strands = [np.c_[np.full(4, 0.4 * i), np.zeros(4), z] for i in range(4)]
+    strands[1][:] = strands[1][0]          # every key at the root
+    strands[3][2] = strands[3][1]          # a repeated key: one zero-length segment
+    radii = np.full(16, 0.05)
+    radii[8:12] = 0.0                      # strand 2: radius 0
+    curves = HairCurves(np.concatenate(strands), radii, np.arange(0, 17, 4), materials=[0])
+    scene = replace(_scene(), curves=[curves])
+    result = render(scene, RenderSettings(samples=8, samples_per_pass=8, max_bounces=2))
+    assert np.isfinite(result.image).all() and result.image.max() > 0
