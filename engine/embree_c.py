@@ -34,6 +34,7 @@ from . import embree_upload, kernels
 RTC_GEOMETRY_TYPE_TRIANGLE = 0
 RTC_GEOMETRY_TYPE_INSTANCE = 121
 RTC_GEOMETRY_TYPE_SPHERE_POINT = 50
+RTC_GEOMETRY_TYPE_ROUND_LINEAR_CURVE = 16     # Cycles' linear 3D curves
 RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE = 58
 RTC_GEOMETRY_TYPE_FLAT_CATMULL_ROM_CURVE = 59   # Cycles' ribbons
 RTC_FORMAT_UINT = 0x5001
@@ -124,7 +125,9 @@ class TriangleScene:
     first control point of each segment (S,), prims (S,), tessellation
     rate[, geometry type]) for one RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE
     geometry (as Cycles' 3D curves; or the type given:
-    RTC_GEOMETRY_TYPE_FLAT_CATMULL_ROM_CURVE for its ribbons), or None.  ``moving``: moving points or curves, a
+    RTC_GEOMETRY_TYPE_FLAT_CATMULL_ROM_CURVE for its ribbons,
+    RTC_GEOMETRY_TYPE_ROUND_LINEAR_CURVE for its linear curves: each start
+    is then the segment's first key, rate None), or None.  ``moving``: moving points or curves, a
     list of (kind, control points (S, K, 4) object space per time step,
     each segment's first control point (P,) or None for points, prims (P,),
     tessellation rate or None, transforms (S'', 16)): each one geometry

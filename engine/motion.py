@@ -324,18 +324,16 @@ class MotionAccel(Accel):
                     points = (np.concatenate([spheres.centres[k], spheres.radii[k, None]], axis=1), spheres.rows[k])
             instances = motion.embree_instances() if motion is not None else []
             curves = None
-            curve_type = embree_c.RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE
+            curve_type, shift, rate = _curve_geometry(strands)
             if strands is not None and len(strands):
-                if strands.ribbon:   # Cycles' ribbons: flat curves facing each ray
-                    curve_type = embree_c.RTC_GEOMETRY_TYPE_FLAT_CATMULL_ROM_CURVE
                 k = _still_slots(strands)
                 if len(k):
-                    curves = (strands.cvs, strands.start[k], strands.rows[k], strands.rate, curve_type)
+                    curves = (strands.cvs, strands.start[k] + shift, strands.rows[k], rate, curve_type)
                 self.self_key = strands.curve   # rays leaving a strand pass all of it
             moving = ([(embree_c.RTC_GEOMETRY_TYPE_SPHERE_POINT, m.steps, None, m.rows, None,
                         m.decomposition.astype(np.float32)) for m in _moving_sets(spheres)]
-                      + [(curve_type, m.steps, m.index, m.rows,
-                          strands.rate, m.decomposition.astype(np.float32)) for m in _moving_sets(strands)])
+                      + [(curve_type, m.steps, m.index + shift, m.rows,
+                          rate, m.decomposition.astype(np.float32)) for m in _moving_sets(strands)])
             self.scene = embree_c.TriangleScene(parts, instances, points, curves, moving)
 
     def intersect(self, origins, directions, tmax, time=None):
@@ -359,6 +357,20 @@ class MotionAccel(Accel):
     @classmethod
     def offset_scale(cls, p):
         return cls.OFFSET * (1.0 + np.max(np.abs(p), axis=1))
+
+
+def _curve_geometry(strands):
+    """(Embree curve type, shift of each segment's start, tessellation rate)
+    of a points.Strands: round Catmull-Rom curves (Cycles' 3D curves), flat
+    ones (its ribbons), or round linear ones (its linear 3D curves) over the
+    same padded control points, each segment from its first key (start + 1;
+    the padding keeps consecutive segments of one curve consecutive, so
+    Embree joins them and caps only the curve's ends); no rate there."""
+    if strands is not None and strands.ribbon:
+        return embree_c.RTC_GEOMETRY_TYPE_FLAT_CATMULL_ROM_CURVE, 0, strands.rate
+    if strands is not None and strands.linear:
+        return embree_c.RTC_GEOMETRY_TYPE_ROUND_LINEAR_CURVE, 1, None
+    return embree_c.RTC_GEOMETRY_TYPE_ROUND_CATMULL_ROM_CURVE, 0, getattr(strands, "rate", None)
 
 
 def _moving_sets(holder):

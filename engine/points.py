@@ -152,12 +152,16 @@ class Strands(_Rows):
     each row's first control point there (4 consecutive ones make a
     segment).  ``ribbon``: flat strands facing each ray (Cycles' ribbons,
     Embree's RTC_GEOMETRY_TYPE_FLAT_CATMULL_ROM_CURVE) instead of round ones;
-    ``rate``: Embree's tessellation rate (``curve_rate``)."""
+    ``linear``: round linear segments between the keys as they are (Cycles'
+    Linear 3D Curves, Embree's RTC_GEOMETRY_TYPE_ROUND_LINEAR_CURVE: cones
+    with end spheres; a segment is the middle two of its 4 padded control
+    points); ``rate``: Embree's tessellation rate (``curve_rate``)."""
 
-    def __init__(self, rows, cvs, start, n_rows, curve=None, normals=None, ribbon=False, rate=5):
+    def __init__(self, rows, cvs, start, n_rows, curve=None, normals=None, ribbon=False, rate=5, linear=False):
         super().__init__(rows, n_rows)
         self.cvs, self.start = cvs, start
         self.ribbon, self.rate = bool(ribbon), int(rate)
+        self.linear = bool(linear) and not self.ribbon
         # (V, 3) world-space curve normals beside cvs (zero where a set has none)
         self.normals = normals
         self.is_curve = self.mask
@@ -190,9 +194,10 @@ def segment_padded_starts(offsets):
     return segment_starts(offsets)[1]
 
 
-def strands_of(tris, owners, ribbons=False, rate=5):
+def strands_of(tris, owners, ribbons=False, rate=5, linear=False):
     """Strands of the flattened segment rows (None without curves);
-    ``ribbons``: Render > Curves > Shape is Ribbons; ``rate``: curve_rate."""
+    ``ribbons``: Render > Curves > Shape is Ribbons, ``linear``: Linear 3D
+    Curves; ``rate``: curve_rate."""
     if not owners:
         return None
     owner = tris.shading.instance
@@ -219,7 +224,7 @@ def strands_of(tris, owners, ribbons=False, rate=5):
         base += len(padded)
         curve_base += len(first)
     strands = Strands(np.concatenate(rows), np.concatenate(cvs), np.concatenate(starts), len(tris),
-                      np.concatenate(curves), np.concatenate(normals), ribbon=ribbons, rate=rate)
+                      np.concatenate(curves), np.concatenate(normals), ribbon=ribbons, rate=rate, linear=linear)
     primitive_motion.attach_curves(strands, tris, owners, padded_index, segment_padded_starts)
     return strands
 
@@ -260,23 +265,46 @@ def _catmull_rom_derivative(t):
     return 0.5 * np.stack([-3 * t2 + 4 * t - 1, 9 * t2 - 10 * t, -9 * t2 + 8 * t + 1, 3 * t2 - 2 * t], axis=1)
 
 
+def _linear(t):
+    """The round linear segment's basis over its 4 padded control points:
+    the middle two mixed by t (the outer two are the neighbours)."""
+    zero = np.zeros_like(t)
+    return np.stack([zero, 1.0 - t, t, zero], axis=1)
+
+
+def _linear_derivative(t):
+    """d/dt of _linear: the chord P2 - P1."""
+    zero = np.zeros_like(t)
+    return np.stack([zero, zero - 1.0, zero + 1.0, zero], axis=1)
+
+
+def _basis(strands, t):
+    return _linear(t) if strands.linear else _catmull_rom(t)
+
+
+def _basis_derivative(strands, t):
+    return _linear_derivative(t) if strands.linear else _catmull_rom_derivative(t)
+
+
 def curve_tangents(strands, prim, u, time=None):
     """The strands' tangents dC/du (unnormalized) at segment rows ``prim``,
-    parameter u, at each ray's time."""
+    parameter u, at each ray's time (the chord on linear curves)."""
     cv = strands.rows_at(prim, time)
-    return np.einsum("nk,nkj->nj", _catmull_rom_derivative(np.clip(u, 0.0, 1.0)), cv[:, :, :3])
+    return np.einsum("nk,nkj->nj", _basis_derivative(strands, np.clip(u, 0.0, 1.0)), cv[:, :, :3])
 
 
 def curve_hits(strands, o, d, t, prim, u, time=None, v=None):
     """(p, ng, back, radius) of rays (o, d) meeting segment rows ``prim`` at
     Embree's distance t and curve parameter u (at each ray's time): the
     point moved onto the round curve's surface around its centre C(u)
-    (radius r(u)), the normal from C(u) to it, facing the ray.  On ribbons
-    ``ribbon_hits`` (``v``: Embree's hit v there, rebuilt when not given)."""
+    (radius r(u)), the normal from C(u) to it, facing the ray (C and r
+    linear in u on linear curves, whose end spheres Embree reports at u = 0
+    or 1: the same rule gives their normals).  On ribbons ``ribbon_hits``
+    (``v``: Embree's hit v there, rebuilt when not given)."""
     if strands.ribbon:
         return ribbon_hits(strands, o, d, t, prim, u, time, v)
     cv = strands.rows_at(prim, time)                                     # (n, 4, 4)
-    w = _catmull_rom(np.clip(u, 0.0, 1.0))
+    w = _basis(strands, np.clip(u, 0.0, 1.0))
     centre = np.einsum("nk,nkj->nj", w, cv[:, :, :3])
     radius = np.maximum(np.einsum("nk,nk->n", w, cv[:, :, 3]), 0.0)
     p = o + d * t[:, None]

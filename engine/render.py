@@ -110,7 +110,8 @@ def _prepare(scene, settings, bake):
     scene, curve_owners = points.expand_curves(scene)
     tris = flatten(scene, with_instance=bool(settings.passes), threads=settings.threads)
     spheres = points.spheres_of(tris, scene, point_owners, point_radii, list(getattr(source, "points", ()) or ()))
-    strands = points.strands_of(tris, curve_owners, ribbons=getattr(scene, "curve_shape", "THICK") == "RIBBONS",
+    shape = getattr(scene, "curve_shape", "THICK")
+    strands = points.strands_of(tris, curve_owners, ribbons=shape == "RIBBONS", linear=shape == "THICK_LINEAR",
                                 rate=points.curve_rate(getattr(scene, "curve_subdivisions", 2)))
     motion = MotionGeometry(scene, tris) if has_motion(source) else None
     unlit = points.unlit_rows(len(tris), spheres, strands)

@@ -202,7 +202,7 @@ def _curve_fields():
 
 HairCurves = make_dataclass("HairCurves", _curve_fields())
 HairCurves.__module__ = __name__
-HairCurves.__doc__ = """Strands (Blender's Curves objects): Catmull-Rom curves, Cycles' 3D curves or ribbons (Scene.curve_shape).
+HairCurves.__doc__ = """Strands (Blender's Curves objects): Catmull-Rom curves, Cycles' 3D curves or ribbons, or its linear 3D curves (Scene.curve_shape).
 
     points: (N, 3) object-space control points; radii: (N,) per point (the
     radius attribute); offsets: (C + 1,) first point of each curve and the
@@ -858,8 +858,10 @@ class Scene:
     # Hair curves (Catmull-Rom strands).
     curves: Sequence[HairCurves] = ()
     # Render > Curves > Shape, for every curve set (Cycles' scene-wide
-    # curve_shape): 'THICK' (3D curves, round) or 'RIBBONS' (flat strands
-    # facing each ray, no end caps: engine/points.py ribbon_hits).
+    # curve_shape): 'THICK' (3D curves, round), 'RIBBONS' (flat strands
+    # facing each ray, no end caps: engine/points.py ribbon_hits) or
+    # 'THICK_LINEAR' (linear 3D curves: round cones between the keys as they
+    # are, with spheres at the joints and ends).
     curve_shape: str = "THICK"
     # Render > Curves > Curve Subdivisions (Embree cuts each segment into
     # 2^s + 1 pieces: engine/points.py curve_rate).

@@ -444,7 +444,7 @@ def validate_curves(strands, index, n_materials):
         raise SceneError(f"{what}: the UV map {uv!r} is none of its attributes")
 
 
-CURVE_SHAPES = ("THICK", "RIBBONS")
+CURVE_SHAPES = ("THICK", "RIBBONS", "THICK_LINEAR")
 
 
 def validate_scene(scene):

@@ -179,14 +179,18 @@ def _export(depsgraph, camera_override=None, should_stop=None, keys=None, camera
 
 def _curve_shape(scene, curves):
     """(the engine's curve_shape, curve_subdivisions, warnings) of Render >
-    Curves: Rounded Ribbons and 3D Curves as Cycles; Linear 3D Curves as 3D
-    curves (warned)."""
+    Curves: Rounded Ribbons, 3D Curves and Linear 3D Curves as Cycles; any
+    other shape as 3D curves (warned)."""
     settings = getattr(scene, 'cycles_curves', None)
     shape = getattr(settings, 'shape', 'THICK')
     warnings = []
-    if curves and shape not in ('THICK', 'RIBBONS'):
-        warnings.append(f"Curves are rendered as 3D curves; Ember has no {shape.lower()} (Render > Curves > Shape)")
-    return ('RIBBONS' if shape == 'RIBBONS' else 'THICK'), max(int(getattr(settings, 'subdivisions', 2)), 0), warnings
+    if curves and shape not in SHAPES:
+        warnings.append(f"Curves are rendered as 3D curves; Ember has no {str(shape).lower()} (Render > Curves > Shape)")
+    return (shape if shape in SHAPES else 'THICK'), max(int(getattr(settings, 'subdivisions', 2)), 0), warnings
+
+
+# Render > Curves > Shape values the engine traces as Cycles does.
+SHAPES = ('THICK', 'RIBBONS', 'THICK_LINEAR')
 
 
 def _camera(depsgraph, camera_override, renderer):

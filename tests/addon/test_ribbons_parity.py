@@ -97,16 +97,17 @@ def test_ribbon_true_normal_parity_with_cycles(tmp_path, tapped_engine):
 
 
 def test_curve_settings_are_exported(tmp_path, tapped_engine, monkeypatch):
-    """Render > Curves reaches the engine: Shape (Rounded Ribbons, 3D Curves;
-    Linear 3D Curves as 3D curves, named) and Curve Subdivisions."""
+    """Render > Curves reaches the engine: Shape (Rounded Ribbons, 3D Curves,
+    Linear 3D Curves: none of them named in a warning) and Curve Subdivisions."""
     from addon import engine as ember_engine
     seen = record_engine_scenes(monkeypatch)
     scene = empty_factory_scene()
     bounces = strands(scene, curves=40)
-    for shape, subdivisions, expect in (('RIBBONS', 3, 'RIBBONS'), ('THICK', 2, 'THICK'), ('THICK_LINEAR', 1, 'THICK')):
+    for shape, subdivisions, expect in (('RIBBONS', 3, 'RIBBONS'), ('THICK', 2, 'THICK'),
+                                        ('THICK_LINEAR', 1, 'THICK_LINEAR')):
         scene.cycles_curves.shape, scene.cycles_curves.subdivisions = shape, subdivisions
         image, _ = render_for_reference(scene, tmp_path, shape, tapped_engine, 2, 2, bounces)
         assert np.isfinite(image).all()
         assert (seen[-1].curve_shape, seen[-1].curve_subdivisions) == (expect, subdivisions)
         named = [w for w in ember_engine.RENDER_LOG[-1]['warnings'] if 'Curves are rendered as 3D curves' in w]
-        assert bool(named) == (shape == 'THICK_LINEAR'), ember_engine.RENDER_LOG[-1]['warnings']
+        assert not named, ember_engine.RENDER_LOG[-1]['warnings']

@@ -12,6 +12,8 @@ instances of time-stepped SPHERE_POINT / ROUND_CATMULL_ROM_CURVE geometries.
   named errors; a moving cloud of zero-radius points and one whose steps
   span 10 units render finite pixels.
 """
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -101,16 +103,20 @@ def _vertical_strand(x=0.0, radius=0.1, **kw):
     return HairCurves(points, np.full(5, radius), np.array([0, 5]), materials=[0], **kw)
 
 
-@pytest.mark.parametrize("how", ["transform", "deformation"])
-def test_a_moving_strand_is_hit_where_it_is_at_the_ray_time(how):
+@pytest.mark.parametrize("how, shape", [("transform", "THICK"), ("deformation", "THICK"),
+                                        ("transform", "THICK_LINEAR"), ("deformation", "THICK_LINEAR")])
+def test_a_moving_strand_is_hit_where_it_is_at_the_ray_time(how, shape):
     """Rays along y at height z = 0 sweep x; the strand's axis at time t is
-    x = -0.5 + t (sliding), or x = (-0.5 + t) at z = 0 (every point moved)."""
+    x = -0.5 + t (sliding), or x = (-0.5 + t) at z = 0 (every point moved);
+    as Catmull-Rom curves and as linear ones (Embree's round linear curves
+    with time steps)."""
     if how == "transform":
         strand = _vertical_strand(motion=_translations([-0.5, 0.0, 0.5]))
     else:
         base = _vertical_strand().points
         strand = _vertical_strand(motion_positions=np.stack([base + [dx, 0, 0] for dx in (-0.5, 0.0, 0.5)]))
-    ctx = prepare(_scene(curves=[strand]), RenderSettings(samples=1))
+    ctx = prepare(replace(_scene(curves=[strand]), curve_shape=shape), RenderSettings(samples=1))
+    assert ctx.strands.linear == (shape == "THICK_LINEAR")
     rng = np.random.default_rng(8)
     n = 4000
     time = rng.uniform(0, 1, n)
