@@ -158,3 +158,18 @@ def particle_hair(obj, count, hair_material_index=2, distribution=None, seed=1):
     if distribution is not None:
         settings.distribution = distribution
     return psys
+
+
+def hair_curves(scene, points, radii, keys, curves, color=(0.7, 0.45, 0.2)):
+    """A Curves object of ``curves`` strands of ``keys`` points each
+    (``points`` (curves, keys, 3), ``radii`` per point), diffuse ``color``."""
+    import numpy as np
+    data = bpy.data.hair_curves.new("strands")
+    data.add_curves([keys] * curves)
+    data.attributes['position'].data.foreach_set('vector', np.asarray(points, np.float32).reshape(-1))
+    radius = data.attributes.new('radius', 'FLOAT', 'POINT')
+    radius.data.foreach_set('value', np.asarray(radii, np.float32))
+    data.materials.append(material("hair", 'diffuse', color=color))
+    obj = bpy.data.objects.new("strands", data)
+    scene.collection.objects.link(obj)
+    return obj

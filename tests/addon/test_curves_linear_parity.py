@@ -26,7 +26,7 @@ import pytest
 
 from ember_testlib import (ReferenceCheck, empty_factory_scene, live_cycles_reference, render_for_reference,
                            small_resolution)
-from parity_scenes import light, material, plane, top_camera
+from parity_scenes import hair_curves, light, material, plane, top_camera
 
 SPP = 256
 CYCLES_SEEDS, CYCLES_SPP = 8, 128
@@ -48,14 +48,7 @@ def zigzag(scene, shape='THICK_LINEAR'):
     rise = np.array([0.0, 0.2, 0.4, 0.6])
     points = base[:, None, :] + sign[None, :, None] * side[:, None, :] + rise[None, :, None] * [0.0, 0.0, 1.0]
     radii = np.tile(np.linspace(0.035, 0.012, KEYS), CURVES)
-    data = bpy.data.hair_curves.new("strands")
-    data.add_curves([KEYS] * CURVES)
-    data.attributes['position'].data.foreach_set('vector', points.reshape(-1).astype(np.float32))
-    radius = data.attributes.new('radius', 'FLOAT', 'POINT')
-    radius.data.foreach_set('value', radii.astype(np.float32))
-    data.materials.append(material("hair", 'diffuse', color=(0.7, 0.45, 0.2)))
-    obj = bpy.data.objects.new("strands", data)
-    scene.collection.objects.link(obj)
+    hair_curves(scene, points, radii, KEYS, CURVES)
     top_camera(scene, 5.0)
     small_resolution(scene, 48, 32)
     scene.cycles_curves.shape = shape

@@ -17,7 +17,7 @@ region means and 16 x 16-pixel blocks are tested."""
 import bpy
 import numpy as np
 
-from parity_scenes import light, material, plane, top_camera
+from parity_scenes import hair_curves, light, material, plane, top_camera
 from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
 
 SPP = 256
@@ -36,14 +36,7 @@ def strands(scene, curves=CURVES, zero_length=0):
     points = base[:, None, :] + wave
     points[:zero_length] = base[:zero_length, None, :]          # zero-length strands: every point at the root
     radii = np.tile(np.linspace(0.03, 0.008, POINTS), curves)
-    data = bpy.data.hair_curves.new("strands")
-    data.add_curves([POINTS] * curves)
-    data.attributes['position'].data.foreach_set('vector', points.reshape(-1).astype(np.float32))
-    radius = data.attributes.new('radius', 'FLOAT', 'POINT')
-    radius.data.foreach_set('value', radii.astype(np.float32))
-    data.materials.append(material("hair", 'diffuse', color=(0.7, 0.45, 0.2)))
-    obj = bpy.data.objects.new("strands", data)
-    scene.collection.objects.link(obj)
+    hair_curves(scene, points, radii, POINTS, curves)
     top_camera(scene, 5.0)
     small_resolution(scene, 48, 32)
     scene.cycles_curves.shape = 'THICK'   # 3D curves (the factory default is ribbons)
