@@ -65,15 +65,13 @@ def cone_segment(o, d, apex, axis, cos_half, t_end):
     empty interval has t1 <= t0.  A convex cone meets a line in one
     interval: the roots of the cone's quadratic split the ray, and the
     pieces whose middles are inside make it."""
-    n = len(o)
-    t0, t1 = np.empty(n), np.empty(n)
-    f64 = np.float64
-    _cone_segment_rows(*(np.ascontiguousarray(a, f64) for a in (o, d, apex, axis, cos_half, t_end)), t0, t1)
-    return t0, t1
+    rows = np.arange(len(o))
+    return lit_segments(o, d, rows, rows, np.ones(len(o), bool), apex, axis, cos_half, t_end)
 
 
 def _cone_segment_numpy(o, d, apex, axis, cos_half, t_end, t0, t1):
-    """The reference form of ``_cone_segment_rows``."""
+    """The arithmetic of ``_cone_row`` over arrays (the reference form of
+    ``_lit_rows``' cones)."""
     v = o - apex
     da, va = np.einsum("ij,ij->i", d, axis), np.einsum("ij,ij->i", v, axis)
     dv, vv = np.einsum("ij,ij->i", d, v), np.einsum("ij,ij->i", v, v)
@@ -143,18 +141,10 @@ def _cone_row(o0, o1, o2, d0, d1, d2, x0, x1, x2, a0, a1, a2, cos_half, t_end):
     return 0.0, 0.0
 
 
-@kernels.loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], "
-                     "float64[::1], float64[::1], float64[::1])", _cone_segment_numpy)
-def _cone_segment_rows(o, d, apex, axis, cos_half, t_end, t0, t1):
-    for i in range(o.shape[0]):
-        t0[i], t1[i] = _cone_row(o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], apex[i, 0], apex[i, 1],
-                                 apex[i, 2], axis[i, 0], axis[i, 1], axis[i, 2], cos_half[i], t_end[i])
-
-
 def lit_segments(o, d, rows, e, lit, apex, axis, cos_half, t_end):
     """(t0, t1) per row i of the rays o[rows[i]], d[rows[i]] up to t_end[i]:
     the cone (apex, axis, cos_half)[e[i]] where lit[e[i]], else (0, t_end)
-    (``cone_segment`` without gathering the rows' rays and cones first)."""
+    (what ``cone_segment`` runs, without gathering the rows' rays and cones first)."""
     n = len(rows)
     t0, t1 = np.empty(n), np.empty(n)
     f64 = np.float64

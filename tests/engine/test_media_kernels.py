@@ -1,5 +1,5 @@
 """The compiled media loops (engine/media/table.py ``_stack_media_rows``,
-flight.py ``_flight_rows``, equiangular.py ``_cone_segment_rows``) against
+flight.py ``_flight_rows``, equiangular.py ``_lit_rows``) against
 their NumPy reference forms: within rounding on random and hostile inputs
 (empty stacks, zero and 1e30 coefficients, endless segments), and the
 compiled free flight's estimates against the reference's with independent
