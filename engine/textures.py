@@ -23,6 +23,7 @@ from .kernels import helper, kernel, where
 from .nodes import REGISTRY, ShadingContext, as_context
 from .nodes.color_math import EXTRA_BLENDS
 from .nodes.context import _bary_of_offsets
+from .nodes.rays import orthonormal_a
 from .projection import to_uv
 from .scene import (TEXTURE_TYPES, Bump, ImageTexture, Math, MixColor, NodeOutput, NormalMap)
 
@@ -984,16 +985,10 @@ def _footprint_steps(ctx, width):
 def bump_steps(nx, ny, nz, dp, w, ax1, ay1, az1, ax2, ay2, az2):
     """The footprint bump's steps at a point with geometric normal n, ray
     footprint dp, filter width w on a triangle of edges e1, e2: dx = dp a,
-    dy = dp b (a, b = make_orthonormals(n), engine.nodes.rays), the copies'
+    dy = dp b (a, b = make_orthonormals(n): engine.nodes.rays.orthonormal_a), the copies'
     offsets w dx, w dy, and their barycentric moves (context._bary_of_offsets:
     the offset projected on the triangle's plane, zero on a degenerate one)."""
-    diagonal = (nx == ny) & (nx == nz)
-    tx = nz - ny
-    ty = where(diagonal, nx + nz, nx - nz)
-    tz = where(diagonal, -ny - nx, ny - nx)
-    length = np.sqrt(tx * tx + ty * ty + tz * tz)
-    length = where(length > 0, length, 1.0)
-    tx, ty, tz = tx / length, ty / length, tz / length
+    tx, ty, tz = orthonormal_a(nx, ny, nz)
     bx, by, bz = ny * tz - nz * ty, nz * tx - nx * tz, nx * ty - ny * tx
     dxx, dxy, dxz, dyx, dyy, dyz = tx * dp, ty * dp, tz * dp, bx * dp, by * dp, bz * dp
     oxx, oxy, oxz, oyx, oyy, oyz = dxx * w, dxy * w, dxz * w, dyx * w, dyy * w, dyz * w

@@ -22,6 +22,7 @@ import weakref
 import numpy as np
 
 from ..accel import Accel
+from ..kernels import helper, where
 
 VIS_SHADOW = 16
 # Dimension sets: disjoint from the integrator's (1 + 4 step + k, small)
@@ -234,15 +235,24 @@ def local_accel(accel, triangles, instance):
 # shared geometry helpers
 
 def make_orthonormals(n):
-    """Cycles' make_orthonormals: a = normalize((1, 1, 1) x n) (or
-    (-1, 1, 1) x n when n is along the diagonal), b = n x a."""
-    diagonal = (n[:, 0] == n[:, 1]) & (n[:, 0] == n[:, 2])
-    a = np.where(diagonal[:, None],
-                 np.stack([n[:, 2] - n[:, 1], n[:, 0] + n[:, 2], -n[:, 1] - n[:, 0]], axis=1),
-                 np.stack([n[:, 2] - n[:, 1], n[:, 0] - n[:, 2], n[:, 1] - n[:, 0]], axis=1))
-    length = np.linalg.norm(a, axis=1, keepdims=True)
-    a = a / np.where(length > 0, length, 1.0)
+    """Cycles' make_orthonormals on rows n: (a, b), a = ``orthonormal_a``,
+    b = n x a."""
+    a = np.stack(orthonormal_a(n[:, 0], n[:, 1], n[:, 2]), axis=1)
     return a, np.cross(n, a)
+
+
+@helper
+def orthonormal_a(nx, ny, nz):
+    """make_orthonormals' a = normalize((1, 1, 1) x n) (or (-1, 1, 1) x n
+    when n is along the diagonal), per component: for arrays and inside
+    compiled kernels (textures.bump_steps)."""
+    diagonal = (nx == ny) & (nx == nz)
+    ax = nz - ny
+    ay = where(diagonal, nx + nz, nx - nz)
+    az = where(diagonal, -ny - nx, ny - nx)
+    length = np.sqrt(ax * ax + ay * ay + az * az)
+    length = where(length > 0, length, 1.0)
+    return ax / length, ay / length, az / length
 
 
 def concentric_disk(u1, u2):
