@@ -1,4 +1,5 @@
-"""Point and spot lights: a sphere of radius r (sampled by its cone), with
+"""Point and spot lights: a sphere of radius r (sampled by its cone; from
+inside, the uniform sphere to its far side, as Cycles 5.0 for volumes), with
 soft falloff a disk of radius r facing the shading point (Cycles), or with
 r = 0 a delta light of intensity P / (4 pi).  Radiance P / (pi * 4 pi r^2);
 a spot multiplies it by smoothstep((cos - cos_half) / ((1 - cos_half) *
@@ -162,7 +163,7 @@ class PointLights(LightTable):
         hit_t, index, pdf = np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros(n)
         tmin = np.zeros(n) if tmin is None else np.array(np.broadcast_to(tmin, (n,)), np.float64)
         _nearest_point(np.ascontiguousarray(o, np.float64), np.ascontiguousarray(d, np.float64), t, tmin,
-                       np.ascontiguousarray(ray_bits, np.uint8), self.pos, self.radius, self.sphere, self.spot,
+                       np.ascontiguousarray(ray_bits, np.uint8), self.pos, self.radius, self.sphere,
                        np.ascontiguousarray(light_bits, np.uint8), hit_t, index, pdf)
         Le = np.zeros((n, 3))
         rows = np.flatnonzero(index >= 0)
@@ -302,12 +303,13 @@ def _inside_direction(u1, u2):
     return np.stack([sin_z * np.cos(phi), sin_z * np.sin(phi), z], axis=1), np.full(len(z), INSIDE_PDF)
 
 
-def _point_hit(o, d, c, r, sphere, spot=False):
+def _point_hit(o, d, c, r, sphere):
     """Distance (inf = miss) and solid-angle pdf of rays (o, d) meeting a
     point light of radius r > 0 at c: its sphere (sampled by its cone; from
-    inside, its far side, which a spot shows only to rays towards its
-    centre, Cycles' one-sided spot_light_intersect), or with soft falloff
-    its disk facing the ray's origin."""
+    inside, its far side), or with soft falloff its disk facing the ray's
+    origin.  A spot's far side too: Cycles' one-sided spot_light_intersect
+    hides it from rays leaving the centre, which NEE's uniform sphere
+    there does not, so its MIS render would miss that light."""
     n = len(o)
     t = np.full(n, np.inf)
     pdf = np.zeros(n)
@@ -317,7 +319,7 @@ def _point_hit(o, d, c, r, sphere, spot=False):
         b = dot(oc, d)
         disc = b * b - (d2 - r * r)
         inside = d2 <= r * r
-        ok = (disc >= 0) & (~inside | (not spot) | (b < 0))
+        ok = disc >= 0
         th = np.where(inside, -b + np.sqrt(np.maximum(disc, 0.0)), -b - np.sqrt(np.maximum(disc, 0.0)))
         ok &= th > 0
         t[ok] = th[ok]
@@ -336,12 +338,12 @@ def _point_hit(o, d, c, r, sphere, spot=False):
     return t, pdf
 
 
-def _nearest_point_numpy(o, d, t, tmin, ray_bits, pos, radius, sphere, spot, light_bits, hit_t, index, pdf):
+def _nearest_point_numpy(o, d, t, tmin, ray_bits, pos, radius, sphere, light_bits, hit_t, index, pdf):
     for j in range(len(radius)):
         sees = (ray_bits & light_bits[j]) != 0
         if radius[j] <= 0 or not sees.any():
             continue
-        th, pw = _point_hit(o, d, pos[j], radius[j], sphere[j], spot[j])
+        th, pw = _point_hit(o, d, pos[j], radius[j], sphere[j])
         closer = (th < t) & (th > tmin) & sees
         t[closer] = hit_t[closer] = th[closer]
         index[closer] = j
@@ -355,9 +357,8 @@ def _dot3(ax, ay, az, bx, by, bz):
 
 
 @loop_kernel("void(float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], uint8[::1], float64[:, ::1], "
-             "float64[::1], boolean[::1], boolean[::1], uint8[::1], float64[::1], int64[::1], float64[::1])",
-             _nearest_point_numpy)
-def _nearest_point(o, d, t, tmin, ray_bits, pos, radius, sphere, spot, light_bits, hit_t, index, pdf):
+             "float64[::1], boolean[::1], uint8[::1], float64[::1], int64[::1], float64[::1])", _nearest_point_numpy)
+def _nearest_point(o, d, t, tmin, ray_bits, pos, radius, sphere, light_bits, hit_t, index, pdf):
     """The nearest point or spot light past tmin and before t per ray (a
     light already passed on the ray's straight line, before a transparent
     surface, is not met again)."""
@@ -372,9 +373,9 @@ def _nearest_point(o, d, t, tmin, ray_bits, pos, radius, sphere, spot, light_bit
             if sphere[j]:
                 b = _dot3(ox, oy, oz, dx, dy, dz)
                 disc = b * b - (d2 - r * r)
-                if d2 <= r * r:   # inside: the far side (a spot's towards its centre only)
+                if d2 <= r * r:   # inside: the far side
                     th = -b + np.sqrt(np.maximum(disc, 0.0))
-                    if not ((not spot[j] or b < 0) and th > 0 and th > tmin[i] and th < t[i]):
+                    if not (th > 0 and th > tmin[i] and th < t[i]):
                         continue
                     pw = INSIDE_PDF
                 else:

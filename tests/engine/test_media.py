@@ -371,11 +371,16 @@ def test_light_tree_depth_in_volume_light_samples():
     assert abs(z) < z_threshold(level), (b / a, z)
 
 
-def lamp_in_fog(size=(12, 12), radius=1.0):
+def lamp_in_fog(size=(12, 12), radius=1.0, spot=False):
     """A fog cube holding a sphere lamp (soft falloff off) of radius 1:
-    about a seventh of the fog lies inside the lamp."""
-    from engine.scene import PointLight
-    light = PointLight((0.0, 0.0, 0.0), (60.0, 60.0, 60.0), radius=radius, soft_falloff=False)
+    about a seventh of the fog lies inside the lamp; ``spot``: a spot
+    lamp pointing down (its light inside its sphere is not attenuated)."""
+    from engine.scene import PointLight, SpotLight
+    if spot:
+        light = SpotLight((0.0, 0.0, 0.0), (60.0, 60.0, 60.0), radius=radius, soft_falloff=False,
+                          direction=(0.0, 0.0, -1.0), spot_size=1.0, spot_blend=0.2)
+    else:
+        light = PointLight((0.0, 0.0, 0.0), (60.0, 60.0, 60.0), radius=radius, soft_falloff=False)
     fog = Material("fog", PASS, volume=Volume(scattering=(0.5, 0.5, 0.5)))
     return Scene([box((3.0, 3.0, 3.0))], [Instance(0, materials=[0])], [fog], [light], World((0.0, 0.0, 0.0)),
                  Camera(look_at((0, -6, 0.3), (0, 0, 0.1)), lens=40, resolution=size))
@@ -406,15 +411,17 @@ def test_points_inside_a_sphere_light_see_it_as_cycles():
     assert np.allclose(Le, ls.Le)
 
 
-def test_lamp_in_fog_strategies_agree():
+@pytest.mark.parametrize("spot", [False, True], ids=["point", "spot"])
+def test_lamp_in_fog_strategies_agree(spot):
     """Light sampling alone, phase sampling alone and their MIS agree block
     by block and over the image on fog partly inside a sphere lamp, where
     scatter points inside it sample the uniform sphere and their rays hit
-    its far side."""
+    its far side (a spot's too, unlike Cycles' one-sided spot hits: with
+    them phase sampling alone measured 2.3x darker than light sampling)."""
     results = {}
     for seed, strategy in enumerate(("light", "bsdf", "mis"), start=41):
         spp = 1024 if strategy == "bsdf" else 256
-        results[strategy] = render(lamp_in_fog(), RenderSettings(samples=spp, samples_per_pass=spp, seed=seed,
+        results[strategy] = render(lamp_in_fog(spot=spot), RenderSettings(samples=spp, samples_per_pass=spp, seed=seed,
                                                                  strategy=strategy, max_bounces=3,
                                                                  volume_bounces=1))
         assert np.isfinite(results[strategy].image).all()
@@ -423,7 +430,7 @@ def test_lamp_in_fog_strategies_agree():
     ref = blocks["mis"][0]
     keep = ref > 0.02 * ref.max()
     pairs = (("light", "bsdf"), ("light", "mis"), ("bsdf", "mis"))
-    zc = family_z(__name__ + ".lamp_in_fog", (keep.sum() + 3) * len(pairs))
+    zc = family_z(__name__ + f".lamp_in_fog_{spot}", (keep.sum() + 3) * len(pairs))
     worst = 0.0
     for a, b in pairs:
         z = z_scores(*blocks[a], *blocks[b])[keep]
@@ -431,7 +438,7 @@ def test_lamp_in_fog_strategies_agree():
         se = np.sqrt(sum(results[k].variance[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (a, b)))
         zm = (ma - mb) / se
         worst = max(worst, np.abs(z).max(), np.abs(zm).max())
-        print(f"lamp in fog, {a} vs {b}: {keep.sum()} block-channels, max |z| {np.abs(z).max():.2f} "
+        print(f"lamp in fog (spot {spot}), {a} vs {b}: {keep.sum()} block-channels, max |z| {np.abs(z).max():.2f} "
               f"(limit {zc:.2f}); image |z| {np.abs(zm).max():.2f}, detects {(zc * se / mb).max():.2%}")
     assert keep.sum() >= 20
     assert worst < zc
