@@ -164,8 +164,6 @@ def test_area_light_rows_agree(jit):
     u = rng.random((n, 3))
     u1, u2 = u[:, 0], u[:, 1]                            # strided, as the sampler's columns
     u1[200:210] = u2[200:210] = 0.5                      # the disk's centre
-    p[210:260] = group.pos[4] + (0.0, 0.0, 0.05)         # inside the spot's sphere, above its cone
-    j[210:260] = 4
 
     def run(j=j, p=p, u1=u1, u2=u2):
         m = len(j)
