@@ -1,4 +1,5 @@
-"""Point and spot lights: a sphere of radius r (sampled by its cone), with
+"""Point and spot lights: a sphere of radius r (sampled by its cone; from
+inside, the uniform sphere to its far side, as Cycles 5.0 for volumes), with
 soft falloff a disk of radius r facing the shading point (Cycles), or with
 r = 0 a delta light of intensity P / (4 pi).  Radiance P / (pi * 4 pi r^2);
 a spot multiplies it by smoothstep((cos - cos_half) / ((1 - cos_half) *
@@ -21,6 +22,11 @@ from .shader import LightShaders, checker_of, path_rows, spread_directions
 POINT = 0
 # Half-angle of emission beyond a spot cone: its light ends at the cone edge.
 SPOT_MARGIN = 1e-3
+# Solid-angle pdf of a light sample (and of a hit) from inside a sphere
+# light: Cycles 5.0 samples the uniform sphere there for points with
+# transmission (media); Ember does so at every inside point (its cosine
+# hemisphere about N for opaque surfaces differs in noise only).
+INSIDE_PDF = 1.0 / (4.0 * np.pi)
 
 
 class PointLights(LightTable):
@@ -163,7 +169,10 @@ class PointLights(LightTable):
         rows = np.flatnonzero(index >= 0)
         if len(rows):
             j = index[rows]
-            Le[rows] = self.L[j] * self._spot_factor(j, -d[rows])[:, None]
+            # No spot attenuation from inside a sphere (Cycles: d_sq > r_sq only).
+            oc = o[rows] - self.pos[j]
+            inside = self.sphere[j] & (dot(oc, oc) <= self.radius[j] ** 2)
+            Le[rows] = self.L[j] * np.where(inside, 1.0, self._spot_factor(j, -d[rows]))[:, None]
             if self.shaders is not None:
                 Le[rows] *= self._shader(j, o[rows] + d[rows] * hit_t[rows, None], -d[rows], hit_t[rows],
                                          path_rows(path, rows))
@@ -203,12 +212,19 @@ def _point_sample_numpy(j, p, u1, u2, pos, radius, sphere, L, spot, sdir, cos_ha
         wi[dsk] = v / np.maximum(t[dsk], 1e-30)[:, None]
         cos_l = np.abs(dot(light_n[dsk], -wi[dsk]))
         pdf[dsk] = t[dsk] ** 2 / (np.pi * r[dsk] ** 2 * np.maximum(cos_l, 1e-30))
-    pdf[inside] = 0.0
-    # Spot attenuation towards the point (vec.dot's order on unit-stride rows).
+    s = np.nonzero(inside)[0]
+    if len(s):
+        # Cycles 5.0 inside a sphere (points in media, SD_BSDF_HAS_TRANSMISSION):
+        # the uniform sphere, t to the far side by the law of cosines.
+        wi[s], pdf[s] = _inside_direction(u1[s], u2[s])
+        cos_t = dot(wi[s], -light_n[s])
+        t[s] = dist[s] * cos_t + np.sqrt(np.maximum(0.0, r[s] ** 2 - d2[s] * (1.0 - cos_t ** 2)))
+    # Spot attenuation towards the point (vec.dot's order on unit-stride rows);
+    # none inside the sphere (Cycles: d_sq > r_sq only).
     with np.errstate(invalid="ignore"):
         x = (dot(-wi, sdir[j]) - cos_half[j]) * smooth[j]   # inf * 0 at a hard edge
     x = np.where(np.isnan(x), 0.0, x)
-    Le *= np.where(spot[j], smoothstep(x), 1.0)[:, None]
+    Le *= np.where(spot[j] & ~inside, smoothstep(x), 1.0)[:, None]
     wi_out[:], t_out[:], le_out[:], pdf_out[:], delta_out[:] = wi, t, Le, pdf, delta
 
 
@@ -235,8 +251,13 @@ def _point_sample(j, p, u1, u2, pos, radius, sphere, L, spot, sdir, cos_half, sm
         scale = max(d2, 1e-30) if delta else 1.0
         le0, le1, le2 = L[k, 0] / scale, L[k, 1] / scale, L[k, 2] / scale
         if sphere[k] and not delta:
-            if d2 <= r * r:
-                pdf = 0.0                                     # inside the sphere
+            if d2 <= r * r:                                   # inside: the uniform sphere
+                cos_z = 1.0 - 2.0 * u1[i]
+                sin_z = np.sqrt(max(0.0, 1.0 - cos_z * cos_z))
+                w0, w1, w2 = sin_z * np.cos(TWO_PI * u2[i]), sin_z * np.sin(TWO_PI * u2[i]), cos_z
+                pdf = INSIDE_PDF
+                cos_t = (w0 * -n0 + w2 * -n2) + w1 * -n1
+                t = dist * cos_t + np.sqrt(max(0.0, r * r - d2 * (1.0 - cos_t * cos_t)))
             else:
                 x = r * r / d2
                 omc = 0.5 * x + 0.125 * x * x if x < 0.0004 else 1.0 - np.sqrt(max(0.0, 1.0 - x))
@@ -260,7 +281,7 @@ def _point_sample(j, p, u1, u2, pos, radius, sphere, L, spot, sdir, cos_half, sm
             cos_l = abs((n0 * -w0 + n2 * -w2) + n1 * -w1)
             pdf = t * t / (np.pi * (r * r) * max(cos_l, 1e-30))
         fac = 1.0
-        if spot[k]:
+        if spot[k] and not (sphere[k] and not delta and d2 <= r * r):
             cos = (-w0 * sdir[k, 0] + -w2 * sdir[k, 2]) + -w1 * sdir[k, 1]
             x = (cos - cos_half[k]) * smooth[k]
             if x != x:
@@ -274,10 +295,21 @@ def _point_sample(j, p, u1, u2, pos, radius, sphere, L, spot, sdir, cos_half, sm
         delta_out[i] = delta
 
 
+def _inside_direction(u1, u2):
+    """Cycles' sample_uniform_sphere in world axes, and its pdf."""
+    z = 1.0 - 2.0 * u1
+    sin_z = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    phi = TWO_PI * u2
+    return np.stack([sin_z * np.cos(phi), sin_z * np.sin(phi), z], axis=1), np.full(len(z), INSIDE_PDF)
+
+
 def _point_hit(o, d, c, r, sphere):
     """Distance (inf = miss) and solid-angle pdf of rays (o, d) meeting a
-    point light of radius r > 0 at c: its sphere (sampled by its cone), or
-    with soft falloff its disk facing the ray's origin."""
+    point light of radius r > 0 at c: its sphere (sampled by its cone; from
+    inside, its far side), or with soft falloff its disk facing the ray's
+    origin.  A spot's far side too: Cycles' one-sided spot_light_intersect
+    hides it from rays leaving the centre, which NEE's uniform sphere
+    there does not, so its MIS render would miss that light."""
     n = len(o)
     t = np.full(n, np.inf)
     pdf = np.zeros(n)
@@ -286,11 +318,14 @@ def _point_hit(o, d, c, r, sphere):
     if sphere:
         b = dot(oc, d)
         disc = b * b - (d2 - r * r)
-        ok = (disc >= 0) & (d2 > r * r)
-        th = -b - np.sqrt(np.maximum(disc, 0.0))
+        inside = d2 <= r * r
+        ok = disc >= 0
+        th = np.where(inside, -b + np.sqrt(np.maximum(disc, 0.0)), -b - np.sqrt(np.maximum(disc, 0.0)))
         ok &= th > 0
         t[ok] = th[ok]
-        pdf[ok] = uniform_cone_pdf(sin_sq_to_one_minus_cos(r * r / d2[ok]))
+        out = ok & ~inside
+        pdf[out] = uniform_cone_pdf(sin_sq_to_one_minus_cos(r * r / d2[out]))
+        pdf[ok & inside] = INSIDE_PDF
     else:
         light_n = oc / np.sqrt(np.maximum(d2, 1e-30))[:, None]
         denom = dot(d, light_n)
@@ -338,12 +373,18 @@ def _nearest_point(o, d, t, tmin, ray_bits, pos, radius, sphere, light_bits, hit
             if sphere[j]:
                 b = _dot3(ox, oy, oz, dx, dy, dz)
                 disc = b * b - (d2 - r * r)
-                th = -b - np.sqrt(np.maximum(disc, 0.0))
-                if not (disc >= 0 and d2 > r * r and th > tmin[i] and th < t[i]):
-                    continue
-                x = r * r / d2
-                omc = 0.5 * x + 0.125 * x * x if x < 0.0004 else 1.0 - np.sqrt(np.maximum(0.0, 1.0 - x))
-                pw = 1.0 / (2.0 * np.pi * omc)
+                if d2 <= r * r:   # inside: the far side
+                    th = -b + np.sqrt(np.maximum(disc, 0.0))
+                    if not (th > 0 and th > tmin[i] and th < t[i]):
+                        continue
+                    pw = INSIDE_PDF
+                else:
+                    th = -b - np.sqrt(np.maximum(disc, 0.0))
+                    if not (disc >= 0 and th > 0 and th > tmin[i] and th < t[i]):
+                        continue
+                    x = r * r / d2
+                    omc = 0.5 * x + 0.125 * x * x if x < 0.0004 else 1.0 - np.sqrt(np.maximum(0.0, 1.0 - x))
+                    pw = 1.0 / (2.0 * np.pi * omc)
             else:
                 inv = np.sqrt(np.maximum(d2, 1e-30))
                 nx, ny, nz = ox / inv, oy / inv, oz / inv

@@ -289,3 +289,61 @@ def test_fog_volume_passes_match_cycles(registered_addon, tmp_path):
         if mean.p < level:
             failed.append(mean)
     assert not failed, failed
+
+
+# ----------------------------------------------------------------------------
+# A sphere lamp (soft falloff off) inside fog: scatter points inside the lamp
+
+LAMP_SEEDS, LAMP_SPP = 6, 64
+LAMP_WIDTH, LAMP_HEIGHT = 24, 18
+
+
+def scene_lamp_in_fog(scene):
+    """A fog cube holding a point lamp of radius 0.6, Soft Falloff off (a
+    sphere light): a tenth of the fog lies inside the lamp, where Cycles 5.0
+    samples the uniform sphere and its rays hit the lamp's far side."""
+    fog = _material("Fog", volume=lambda t: _node(t, 'ShaderNodeVolumePrincipled', Color=(0.8, 0.8, 0.8),
+                                                  Density=0.5, Anisotropy=0.0))
+    _object(bpy.ops.mesh.primitive_cube_add, fog, size=2.4, location=(0.0, 0.0, 0.0))
+    lamp = bpy.data.lights.new("Lamp", 'POINT')
+    lamp.energy = 60.0
+    lamp.shadow_soft_size = 0.6
+    lamp.use_soft_falloff = False
+    obj = bpy.data.objects.new("Lamp", lamp)
+    obj.location = (0.1, 0.0, 0.05)
+    scene.collection.objects.link(obj)
+    _world(scene, DARK_WORLD)
+    _camera(scene, (0.0, -5.0, 0.4), (0.0, 0.0, 0.0))
+    _volume_settings(scene, volume_bounces=1)
+    return 4
+
+
+@pytest.mark.parametrize("cycles_mis", [
+    False,
+    pytest.param(True, marks=pytest.mark.xfail(strict=True, reason=(
+        "Cycles 5.0's own MIS render of this scene (Volume bounces 1) is 4.3 % +- 0.3 % darker than Ember's "
+        "(t = 15); Cycles with the lamp's Multiple Importance off (NEE only) is 4.5 % +- 0.4 % brighter than "
+        "its MIS render and agrees with Ember (-0.2 % +- 0.4 %), whose light, phase and MIS strategies agree "
+        "(tests/engine/test_media.py): a bias of Cycles' MIS here (1.2 % +- 0.3 % with Soft Falloff on)")))])
+def test_sphere_lamp_in_fog_matches_cycles(registered_addon, tmp_path, cycles_mis):
+    """The lamp-in-fog scene by both engines at a few seeds: the image's
+    and its quadrants' totals by Welch's t over the seeds (one family,
+    power printed).  Cycles renders the lamp with Multiple Importance off
+    (NEE only: its MIS render is biased here, see the xfail); Ember as
+    always (its strategies agree).  Before Ember sampled the lamp from
+    inside, the points there got none of its light."""
+    import numpy as np
+
+    import ember_stats as stats
+    from ember_testlib import render_seeds
+    scene, bounces = built_reference_scene(scene_lamp_in_fog, LAMP_WIDTH, LAMP_HEIGHT)
+    bpy.data.objects["Lamp"].data.cycles.use_multiple_importance_sampling = cycles_mis
+    images = render_seeds(scene, tmp_path, "lamp_in_fog", LAMP_SEEDS, LAMP_SPP, 60, bounces)
+    tests, level = stats.region_mean_tests(images['EMBER'][..., :3], images['CYCLES'][..., :3],
+                                           f"sphere lamp in fog region means, Cycles MIS {cycles_mis}")
+    for test in tests:
+        print(f"\nlamp in fog (Cycles MIS {cycles_mis}), {test}; detects "
+              f"{stats.detectable(test.relative_se, level, test.dof):.2%}")
+    assert images['CYCLES'][..., :3].mean() > 0
+    failed = [test for test in tests if test.p < level]
+    assert not failed, failed

@@ -489,9 +489,13 @@ def test_nearest_point_light_agrees(jit):
     radius = np.abs(rng.normal(size=lights)) * 0.5
     radius[:2] = 0.0
     sphere = rng.random(lights) < 0.5
+    sphere[5:7] = True
     light_bits = rng.integers(0, 16, lights).astype(np.uint8)
+    light_bits[5:7] = 15
+    radius[5:7] = 0.8
     o = rng.normal(size=(n, 3)) * 3.0
     o[:100] = pos[5]                                   # inside a light
+    o[100:200] = pos[6] + 0.3 * radius[6]
     target = pos[rng.integers(0, lights, n)] + rng.normal(size=(n, 3)) * 0.3
     d = target - o
     d /= np.maximum(np.linalg.norm(d, axis=1), 1e-30)[:, None]
@@ -506,6 +510,14 @@ def test_nearest_point_light_agrees(jit):
     plain, compiled = both_ways(run, np.zeros(n))
     assert_agree(plain, compiled)
     assert (plain[2] >= 0).sum() > n // 4
+    # From inside: the far side at pdf 1 / (4 pi) (Cycles 5.0's uniform sphere).
+    inner = np.flatnonzero((plain[2][:200] == np.repeat([5, 6], 100)) & np.isinf(tmax[:200]))
+    assert len(inner) > 50
+    far = o[inner] + d[inner] * plain[1][inner, None] - pos[plain[2][inner]]
+    assert np.allclose(np.linalg.norm(far, axis=1), radius[plain[2][inner]])
+    assert np.allclose(plain[3][inner], 1.0 / (4.0 * np.pi))
+    away = np.einsum("ij,ij->i", d[100:200], o[100:200] - pos[6]) >= 0   # leaving the centre: hit too
+    assert (plain[2][100:200][away] == 6).any() and (plain[2][100:200][~away] == 6).any()
     past, compiled = both_ways(run, tmin)
     assert_agree(past, compiled)
     hit = past[2] >= 0
@@ -791,6 +803,8 @@ def test_point_light_sample_agrees(jit):
     j[:100], j[100:200] = 0, 1
     u1, u2 = rng.random(n), rng.random(n)
     u1[200:210] = u2[200:210] = 0.5                      # the disk's centre
+    p[210:260] = group.pos[4] + (0.0, 0.0, 0.05)         # inside the spot's sphere, above its cone
+    j[210:260] = 4
 
     def run():
         from engine.lights import _point_sample
@@ -800,7 +814,11 @@ def test_point_light_sample_agrees(jit):
         return outs
     plain, compiled = both_ways(run)
     assert_agree(plain, compiled)
-    assert (plain[3][:100] == 0).all() and (plain[3][200:] > 0).any()
+    # Inside: the uniform sphere, a point on the sphere's far side, no spot attenuation.
+    assert np.allclose(plain[3][:100], 1.0 / (4.0 * np.pi)) and (plain[3][200:] > 0).any()
+    far = p[:100] + plain[0][:100] * plain[1][:100, None] - group.pos[0]
+    assert np.allclose(np.linalg.norm(far, axis=1), 0.5)
+    assert np.allclose(plain[2][210:260], group.L[4]) and np.allclose(plain[3][210:260], 1.0 / (4.0 * np.pi))
 
 
 def test_single_lobe_sample_agrees(jit):
