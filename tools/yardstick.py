@@ -7,9 +7,11 @@ Unlike ``tools/bench_cycles.py`` (which models Ember's time at equal RMSE
 from its variance per sample, as if that were constant over sample counts),
 nothing here is extrapolated:
 
-1. Cycles runs both its light-tree settings (on, off) at its sample count,
-   ``--seeds`` renders each; the setting with the better efficiency
-   (1 / (MSE x time)) is Cycles' for the scene and is recorded.  Its mean MSE
+1. Cycles runs both its light-tree settings (on, off), and with
+   ``--cycles-guiding both`` each of them with its path guiding on and off
+   (CPU, OpenPGL: the issue asks for it wherever Ember guides), at its
+   sample count, ``--seeds`` renders each; the setting with the best
+   efficiency (1 / (MSE x time)) is Cycles' for the scene and is recorded.  Its mean MSE
    is the target; its mean wall time the time to beat.
 2. Ember's sample count reaching that MSE is found by bisection on samples
    (geometric, a few seeds per step), then rendered with ``--seeds`` seeds:
@@ -48,17 +50,20 @@ def parse_args(argv):
     p.add_argument('--scenes', help="comma-separated subset of tools/bench_scenes.py's scenes")
     p.add_argument('--seeds', type=int, default=5, help="renders per engine at the final counts (>= 5)")
     p.add_argument('--bounces', type=int, default=8)
+    p.add_argument('--cycles-guiding', choices=('off', 'both'), default='both',
+                   help="also try Cycles with its path guiding on (default both)")
     p.add_argument('--docs', action='store_true', help="write the table into docs/benchmarks.md")
     return p.parse_args(argv)
 
 
 def render_once(name, engine, samples, seed, cfg, folder, ref, tree=None):
-    """(MSE against the reference, wall seconds) of one render."""
+    """(MSE against the reference, wall seconds) of one render.  ``tree``:
+    Cycles' setting, (light tree, path guiding) or None for its defaults."""
     import bench_scenes
     scene = bench_scenes.SCENES[name][1]()
     bc.configure(scene, engine, samples, seed, cfg, adaptive=False)
-    if engine == 'CYCLES' and tree is not None and hasattr(scene.cycles, 'use_light_tree'):
-        scene.cycles.use_light_tree = tree
+    if engine == 'CYCLES' and tree is not None:
+        configure_cycles(scene, *tree)
     image, wall, _, _ = bc.render(scene, folder)
     if not np.isfinite(image).all():
         raise RuntimeError(f"{name}: {engine} rendered non-finite pixels")
@@ -72,21 +77,49 @@ def renders(name, engine, samples, seeds, cfg, folder, ref, tree=None, first_see
     return mse, wall
 
 
-def cycles_best(name, cfg, folder, ref, seeds, ref_noise):
-    """Cycles' better light-tree setting by efficiency; returns a dict."""
+def configure_cycles(scene, tree, guiding):
+    """Cycles' light tree and path guiding (surface and volume, its
+    defaults otherwise) where this Cycles has them; None leaves a default."""
+    cycles = scene.cycles
+    if tree is not None and hasattr(cycles, 'use_light_tree'):
+        cycles.use_light_tree = tree
+    if guiding is not None and hasattr(cycles, 'use_guiding'):
+        cycles.use_guiding = guiding
+        cycles.use_surface_guiding = guiding
+        cycles.use_volume_guiding = guiding
+
+
+def cycles_settings(guiding):
+    """The (light tree, path guiding) pairs to try in this Cycles."""
     import bpy
-    settings = (True, False) if hasattr(bpy.context.scene.cycles, 'use_light_tree') else (None,)
+    import _cycles
+    cycles = bpy.context.scene.cycles
+    trees = (True, False) if hasattr(cycles, 'use_light_tree') else (None,)
+    guided = guiding == 'both' and hasattr(cycles, 'use_guiding') and getattr(_cycles, 'with_path_guiding', False)
+    return [(tree, g) for tree in trees for g in ((False, True) if guided else (None,))]
+
+
+def setting_name(setting):
+    tree, guiding = setting
+    words = {True: 'on', False: 'off', None: '-'}
+    name = f"tree {words[tree]}"
+    return name if guiding is None else f"{name}, guiding {words[guiding]}"
+
+
+def cycles_best(name, cfg, folder, ref, seeds, ref_noise, guiding='both'):
+    """Cycles' best (light tree, path guiding) setting by efficiency; returns
+    a dict (its MSE and wall times, the setting, its gain over the next best)."""
     results = {}
-    for tree in settings:
-        render_once(name, 'CYCLES', 4, 1, cfg, folder, ref, tree)           # warm
-        mse, wall = renders(name, 'CYCLES', cfg['cycles_spp'], seeds, cfg, folder, ref, tree)
+    for setting in cycles_settings(guiding):
+        render_once(name, 'CYCLES', 4, 1, cfg, folder, ref, setting)           # warm
+        mse, wall = renders(name, 'CYCLES', cfg['cycles_spp'], seeds, cfg, folder, ref, setting)
         err = np.maximum(mse - ref_noise, 1e-30)
-        results[tree] = dict(mse=err, wall=wall, efficiency=1.0 / (err.mean() * wall.mean()))
-        print(f"  cycles light tree {tree}: {wall.mean():.2f} s, RMSE {math.sqrt(err.mean()):.5f} "
+        results[setting] = dict(mse=err, wall=wall, efficiency=1.0 / (err.mean() * wall.mean()))
+        print(f"  cycles {setting_name(setting)}: {wall.mean():.2f} s, RMSE {math.sqrt(err.mean()):.5f} "
               f"(seeds {err.min() ** 0.5:.5f}-{err.max() ** 0.5:.5f})", flush=True)
-    best = max(results, key=lambda t: results[t]['efficiency'])
-    other = [t for t in results if t != best]
-    gain = results[best]['efficiency'] / results[other[0]]['efficiency'] if other else 1.0
+    ranked = sorted(results, key=lambda t: results[t]['efficiency'], reverse=True)
+    best = ranked[0]
+    gain = results[best]['efficiency'] / results[ranked[1]]['efficiency'] if len(ranked) > 1 else 1.0
     return dict(results[best], tree=best, gain=gain)
 
 
@@ -136,13 +169,13 @@ def ember_final(name, cfg, folder, ref, target, ref_noise, lo, hi, seeds):
     return dict(samples=samples, time=time_at, mse=m1, wall=w1, low=(n0, m0, w0))
 
 
-def measure_scene(name, cfg, folder, seeds):
+def measure_scene(name, cfg, folder, seeds, guiding='both'):
     ref, ref_spp = bc.reference(name, dict(cfg, bounces=cfg['bounces']), folder)
     # The reference's own noise: Cycles' variance per sample / ref_spp,
     # estimated from a Cycles render (as bench_cycles' cycles_variance).
     mse_probe, _ = render_once(name, 'CYCLES', cfg['cycles_spp'], 7, cfg, folder, ref)
     ref_noise = mse_probe / (1.0 + cfg['cycles_spp'] / ref_spp) * (cfg['cycles_spp'] / ref_spp)
-    cycles = cycles_best(name, cfg, folder, ref, seeds, ref_noise)
+    cycles = cycles_best(name, cfg, folder, ref, seeds, ref_noise, guiding)
     target = float(cycles['mse'].mean())
     lo, hi, _ = ember_bisect(name, cfg, folder, ref, target, ref_noise)
     ember = ember_final(name, cfg, folder, ref, target, ref_noise, lo, hi, seeds)
@@ -156,13 +189,12 @@ def measure_scene(name, cfg, folder, seeds):
 
 def table(rows, cfg):
     import bench_scenes
-    lines = ["| scene | Cycles' light tree (efficiency gain over the other) | Cycles: spp, s | "
+    lines = ["| scene | Cycles' best setting (efficiency gain over the next) | Cycles: spp, s | "
              "Ember: spp to Cycles' RMSE, s | Ember time / Cycles time | spread over seeds: time ratio range, "
              "MSE sd / mean Ember (Cycles) |", "|---|---|---|---|---|---|"]
     for r in rows:
         c, e = r['cycles'], r['ember']
-        tree = {True: 'on', False: 'off', None: '-'}[c['tree']]
-        lines.append(f"| {bench_scenes.SCENES[r['scene']][0]} | {tree} ({c['gain']:.2f}x) | "
+        lines.append(f"| {bench_scenes.SCENES[r['scene']][0]} | {setting_name(c['tree'])} ({c['gain']:.2f}x) | "
                      f"{cfg['cycles_spp']}, {c['wall'].mean():.2f} | {e['samples']:.0f}, {e['time']:.2f} | "
                      f"**{r['ratio']:.2f}x** | {r['ratio_range'][0]:.2f}-{r['ratio_range'][1]:.2f}x, "
                      f"{r['mse_spread'][0]:.2f} ({r['mse_spread'][1]:.2f}) |")
@@ -189,7 +221,7 @@ def main(argv=None):
     with tempfile.TemporaryDirectory(prefix='ember-yardstick-') as folder:
         for name in names:
             print(f"{name}:", flush=True)
-            rows.append(measure_scene(name, cfg, folder, args.seeds))
+            rows.append(measure_scene(name, cfg, folder, args.seeds, args.cycles_guiding))
     import bpy
     head = (f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} with bpy {bpy.app.version_string} "
             f"({note}): {cfg['size']}x{cfg['size']}, {cfg['bounces']} bounces, adaptive sampling off, "
