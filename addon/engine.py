@@ -29,6 +29,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
     bl_idname = 'EMBER'
     bl_label = "Ember"
     bl_use_preview = True
+    bl_use_spherical_stereo = True   # engine/stereo.py, as Cycles
     bl_use_postprocess = True
     # Keep Blender's shader nodes: Ember reads Cycles/EEVEE material trees.
     bl_use_shading_nodes_custom = False
@@ -125,12 +126,30 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             return
         if not self.is_preview:
             render_passes.add_result_passes(self, depsgraph.view_layer)
-        writer = output.ResultWriter(self, width, height, depsgraph.view_layer.name)
+        views = output.result_views(self, width, height, depsgraph.view_layer.name)
+        camera_object = scene_export.scene_camera(depsgraph, self.camera_override) if any(views) else None
+        for view in views:
+            scene_for_view = exported.scene
+            if camera_object is not None:   # stereo / multiview: each view its own camera, as Cycles
+                self.active_view_set(view)
+                scene_for_view = dataclasses.replace(exported.scene, camera=camera_export.view_camera(
+                    self, camera_object, exported.scene.camera, view))
+            self._render_view(depsgraph, scene_for_view, settings, render, info, width, height, view,
+                              report=view == views[-1])
+            if info.get('cancelled'):
+                return
+
+    def _render_view(self, depsgraph, scene_data, settings, render, info, width, height, view, report=True):
+        """Render one view (the only one without multiview) into its result;
+        ``report``: this view's warnings go to the user (the last view's,
+        so a stereo render names each once)."""
+        scene = depsgraph.scene
+        writer = output.ResultWriter(self, width, height, depsgraph.view_layer.name, view)
         progress = output.Progress(self, writer, settings.samples, info)
         try:
-            backend.engine().validate_scene(exported.scene)
+            backend.engine().validate_scene(scene_data)
             try:
-                result = render(exported.scene, settings, progress)
+                result = render(scene_data, settings, progress)
             except backend.engine().Cancelled:  # Esc before the first pass
                 info['cancelled'] = True
                 return
@@ -148,7 +167,7 @@ class EmberRenderEngine(bpy.types.RenderEngine):
             writer.finish()
         info.update(samples=getattr(result, 'samples', progress.samples_done),
                     cancelled=progress.cancelled, stats=dict(getattr(result, 'stats', {}) or {}))
-        for warning in getattr(result, 'warnings', None) or ():
+        for warning in getattr(result, 'warnings', None) or () if report else ():
             info['warnings'].append(warning)
             if not self.is_preview:
                 self.report({'WARNING'}, "Ember: " + warning)

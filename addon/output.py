@@ -78,14 +78,27 @@ def set_pass(render_pass, flat):
         render_pass.rect.foreach_set(flat.reshape(-1, render_pass.channels))
 
 
-class ResultWriter:
-    """Owns one render result (one view layer, the border window) while rendering."""
+def result_views(engine, width, height, layer_name):
+    """The names of the render result's views: [''] without multiview,
+    ['left', 'right'] in stereo, the enabled views' names otherwise (read
+    from a 1x1 result discarded after, as Cycles' BlenderSession::render)."""
+    result = engine.begin_result(0, 0, 1, 1, layer=layer_name)
+    try:
+        names = [view.name for view in result.views]
+    finally:
+        engine.end_result(result, cancel=True, do_merge_results=False)
+    return names if any(names) else ['']
 
-    def __init__(self, engine, width, height, layer_name):
+
+class ResultWriter:
+    """Owns one render result (one view layer, the border window, one view
+    or the only one) while rendering."""
+
+    def __init__(self, engine, width, height, layer_name, view=''):
         self.engine = engine
         self.width = width
         self.height = height
-        self.result = engine.begin_result(0, 0, width, height, layer=layer_name)
+        self.result = engine.begin_result(0, 0, width, height, layer=layer_name, view=view)
         self.layer = self.result.layers[0]
         self.nonfinite = 0
 

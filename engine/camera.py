@@ -10,7 +10,9 @@ import numpy as np
 
 from . import kernels
 from .motion import decompose, transform_at
+from . import stereo
 from .panorama import Panorama
+from .stereo import Stereo
 from .sampling import concentric_disk, upper_bound
 from .shutter import Shutter
 from .vec import column
@@ -194,6 +196,10 @@ class CameraModel:
         self.shutter = Shutter(cam)
         self.zoom = _zoom_steps(cam)
         self.pano = Panorama(cam) if cam.kind == "PANO" else None
+        offset = float(getattr(cam, "stereo_offset", 0.0))
+        # Spherical stereo (Cycles: panoramic and perspective cameras only).
+        self.stereo = (Stereo(offset, float(cam.stereo_convergence), tuple(cam.stereo_pole_merge))
+                       if offset != 0.0 and cam.kind != "ORTHO" else None)
 
     @property
     def forward(self):
@@ -234,8 +240,11 @@ class CameraModel:
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         # Clip distances are along the view axis, as in Cycles.
         inv_z = 1.0 / np.maximum(-d[:, 2], 1e-12)
-        o = o + d * (self.cam.clip_start * inv_z)[:, None]
         tmax = (self.cam.clip_end - self.cam.clip_start) * inv_z
+        if self.stereo is not None:   # Cycles: in world space, before the near clip
+            o, d = stereo.transform(self.stereo, *self._to_world(o, d, time))
+            return o + d * (self.cam.clip_start * inv_z)[:, None], d, tmax
+        o = o + d * (self.cam.clip_start * inv_z)[:, None]
         return self._to_world(o, d, time) + (tmax,)
 
     def _raster(self, pixel, u_fx, u_fy):
@@ -269,6 +278,8 @@ class CameraModel:
         if self.aperture > 0:
             lx, ly = concentric_disk(u_l1, u_l2)
             o, p = self.pano.aperture(p, lx * self.aperture, ly * self.aperture, self.cam.focus_distance)
+        if self.stereo is not None:   # Cycles: in the panorama's camera space (z up)
+            o, p = stereo.transform(self.stereo, o, p / np.linalg.norm(p, axis=1, keepdims=True))
         o, d = self.pano.to_local(o), self.pano.to_local(p)
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         return o + d * self.cam.clip_start, d

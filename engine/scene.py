@@ -724,6 +724,12 @@ class Camera:
     fisheye_polynomial: Tuple[float, ...] = (-1.17351e-05, -0.0199887, -3.3525e-06, 3.0993e-06, -2.61e-08)
     # The central cylinder: longitude min, max, height min, max, radius.
     cylinder: Tuple[float, ...] = (-np.pi, np.pi, -1.0, 1.0, 1.0)
+    # Spherical stereo (engine/stereo.py): the eye's signed half interocular
+    # distance (0: none), the convergence distance (inf: parallel) and the
+    # pole merge's altitudes (radians; (0, 0): none).
+    stereo_offset: float = 0.0
+    stereo_convergence: float = np.inf
+    stereo_pole_merge: Tuple[float, float] = (0.0, 0.0)
 
 
 # ----------------------------------------------------------------------------

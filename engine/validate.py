@@ -299,6 +299,19 @@ def validate_camera(cam):
         raise SceneError(f"camera: unknown sensor fit {cam.sensor_fit!r}")
     if not 0 <= cam.clip_start < cam.clip_end:
         raise SceneError(f"camera: clip start {cam.clip_start} must be below clip end {cam.clip_end}")
+    _validate_stereo(cam)
+
+
+def _validate_stereo(cam):
+    offset = float(getattr(cam, "stereo_offset", 0.0))
+    if not np.isfinite(offset):
+        raise SceneError(f"camera: the stereo interocular distance must be finite, got {2 * offset}")
+    convergence = float(getattr(cam, "stereo_convergence", np.inf))
+    if np.isnan(convergence) or convergence <= 0:
+        raise SceneError(f"camera: the stereo convergence distance must be > 0, got {convergence}")
+    merge = np.asarray(getattr(cam, "stereo_pole_merge", (0.0, 0.0)), np.float64)
+    if merge.shape != (2,) or not np.isfinite(merge).all():
+        raise SceneError(f"camera: the stereo pole merge angles must be 2 finite numbers, got {merge!r}")
 
 
 def _validate_panorama(cam):

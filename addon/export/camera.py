@@ -117,3 +117,35 @@ def panorama(data):
         fisheye_polynomial=tuple(number[f"fisheye_polynomial_k{i}"] for i in range(5)),
         cylinder=tuple(number["central_cylindrical_" + name]
                        for name in ("range_u_min", "range_u_max", "range_v_min", "range_v_max", "radius")))
+
+
+def view_camera(engine, cam_obj, camera, view):
+    """The engine camera of one multiview view (left, right or a named
+    view), as Cycles' sync_camera per view: Blender's camera matrix and
+    shift for the active view (off-axis, toe-in or parallel stereo), or,
+    with Spherical Stereo on (panoramic and perspective cameras), the
+    centre's matrix and an offset per ray (engine/stereo.py).  Camera
+    motion steps take the view's offset in the camera's own frame."""
+    import dataclasses
+    spherical = bool(engine.use_spherical_stereo(cam_obj))
+    changes = dict(shift_x=float(engine.camera_shift_x(cam_obj, use_spherical_stereo=spherical)))
+    centre = np.asarray(camera.matrix, np.float64)
+    seen = _without_scale(engine.camera_model_matrix(cam_obj, use_spherical_stereo=spherical))
+    local = np.linalg.inv(centre) @ seen
+    if not np.allclose(local, np.eye(4), atol=1e-12):
+        changes['matrix'] = seen
+        for name in ('motion', 'vector_motion'):
+            steps = getattr(camera, name, None)
+            if steps is not None:
+                changes[name] = np.asarray(steps, np.float64) @ local
+    if spherical:
+        stereo = cam_obj.data.stereo
+        half = 0.5 * float(stereo.interocular_distance)
+        # Cycles' stereo_eye: only the views named left and right are eyes.
+        offset = {'left': -half, 'right': half}.get(view, 0.0)
+        parallel = stereo.convergence_mode == 'PARALLEL'
+        merge = ((float(stereo.pole_merge_angle_from), float(stereo.pole_merge_angle_to))
+                 if stereo.use_pole_merge else (0.0, 0.0))
+        changes.update(stereo_offset=offset, stereo_pole_merge=merge,
+                       stereo_convergence=float('inf') if parallel else float(stereo.convergence_distance))
+    return dataclasses.replace(camera, **changes)
