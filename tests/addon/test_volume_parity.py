@@ -107,6 +107,17 @@ def _volume_settings(scene, volume_bounces=0):
 # ----------------------------------------------------------------------------
 # Scenes
 
+def _lamp(scene, name, kind, location, rotation=(0.0, 0.0, 0.0), **settings):
+    """A light object of ``kind`` with the light's ``settings``."""
+    light = bpy.data.lights.new(name, kind)
+    for key, value in settings.items():
+        setattr(light, key, value)
+    obj = bpy.data.objects.new(name, light)
+    obj.location, obj.rotation_euler = location, rotation
+    scene.collection.objects.link(obj)
+    return obj
+
+
 def scene_coloured_glass(scene):
     _floor((0.7, 0.7, 0.7))
     glass = _material("ColouredGlass",
@@ -116,11 +127,7 @@ def scene_coloured_glass(scene):
     smoke = _material("Smoke", volume=lambda t: _node(t, 'ShaderNodeVolumeAbsorption', Color=(0.9, 0.5, 0.3),
                                                       Density=1.2))
     _object(bpy.ops.mesh.primitive_ico_sphere_add, smoke, radius=0.5, subdivisions=3, location=(0.7, 0.2, 0.52))
-    light = bpy.data.lights.new("Area", 'AREA')
-    light.energy, light.size = 80.0, 1.5
-    obj = bpy.data.objects.new("Area", light)
-    obj.location = (0.5, -1.5, 3.5)
-    scene.collection.objects.link(obj)
+    _lamp(scene, "Area", 'AREA', (0.5, -1.5, 3.5), energy=80.0, size=1.5)
     _world(scene, DARK_WORLD)
     _camera(scene, (0.0, -3.0, 1.9), (0.05, 0.0, 0.45))
     _volume_settings(scene)
@@ -132,15 +139,8 @@ def scene_fog(scene):
     fog = _material("Fog", volume=lambda t: _node(t, 'ShaderNodeVolumePrincipled', Color=(0.85, 0.8, 0.7),
                                                   Density=0.6, Anisotropy=0.3))
     _object(bpy.ops.mesh.primitive_cube_add, fog, size=2.0, location=(0.0, 0.0, 1.1))   # clear of the floor
-    spot = bpy.data.lights.new("Spot", 'SPOT')
-    spot.energy = 800.0
-    spot.spot_size = 0.6
-    spot.spot_blend = 0.2
-    spot.shadow_soft_size = 0.1
-    obj = bpy.data.objects.new("Spot", spot)
-    obj.location = (0.3, 0.2, 3.5)
-    obj.rotation_euler = (0.15, 0.0, 0.0)
-    scene.collection.objects.link(obj)
+    _lamp(scene, "Spot", 'SPOT', (0.3, 0.2, 3.5), (0.15, 0.0, 0.0), energy=800.0, spot_size=0.6, spot_blend=0.2,
+          shadow_soft_size=0.1)
     _world(scene, DARK_WORLD)
     _camera(scene, (0.0, -5.0, 1.6), (0.0, 0.0, 0.9))
     _volume_settings(scene, volume_bounces=0)
@@ -305,13 +305,7 @@ def scene_lamp_in_fog(scene):
     fog = _material("Fog", volume=lambda t: _node(t, 'ShaderNodeVolumePrincipled', Color=(0.8, 0.8, 0.8),
                                                   Density=0.5, Anisotropy=0.0))
     _object(bpy.ops.mesh.primitive_cube_add, fog, size=2.4, location=(0.0, 0.0, 0.0))
-    lamp = bpy.data.lights.new("Lamp", 'POINT')
-    lamp.energy = 60.0
-    lamp.shadow_soft_size = 0.6
-    lamp.use_soft_falloff = False
-    obj = bpy.data.objects.new("Lamp", lamp)
-    obj.location = (0.1, 0.0, 0.05)
-    scene.collection.objects.link(obj)
+    _lamp(scene, "Lamp", 'POINT', (0.1, 0.0, 0.05), energy=60.0, shadow_soft_size=0.6, use_soft_falloff=False)
     _world(scene, DARK_WORLD)
     _camera(scene, (0.0, -5.0, 0.4), (0.0, 0.0, 0.0))
     _volume_settings(scene, volume_bounces=1)

@@ -265,39 +265,44 @@ def lit_medium(size=(16, 16)):
                  World((0.0, 0.0, 0.0)), cam)
 
 
-def test_volume_strategies_agree():
-    """Light sampling alone, phase sampling alone and their MIS agree block
-    by block and over the whole image on a medium with up to three
-    scatterings under an area light; MIS has a lower variance than phase
-    sampling alone."""
+def strategies_agree(build, family, label, first_seed, spp, **settings):
+    """Light sampling alone, phase sampling alone (8x the samples) and their
+    MIS on ``build()``: every pair agrees by block (2x2) and over the image
+    (per channel) at the family level; returns the three results."""
     results = {}
-    for seed, strategy in enumerate(("light", "bsdf", "mis"), start=21):
-        spp = 1024 if strategy == "bsdf" else 128
-        results[strategy] = render(lit_medium(), RenderSettings(samples=spp, samples_per_pass=spp, seed=seed,
-                                                                strategy=strategy, max_bounces=4,
-                                                                volume_bounces=2))
+    for seed, strategy in enumerate(("light", "bsdf", "mis"), start=first_seed):
+        n = 8 * spp if strategy == "bsdf" else spp
+        results[strategy] = render(build(), RenderSettings(samples=n, samples_per_pass=n, seed=seed,
+                                                           strategy=strategy, **settings))
         assert np.isfinite(results[strategy].image).all()
     blocks = {k: block_means_var(r.image[..., :3].astype(np.float64), r.variance.astype(np.float64), 2)
               for k, r in results.items()}
     ref = blocks["mis"][0]
     keep = ref > 0.02 * ref.max()
     pairs = (("light", "bsdf"), ("light", "mis"), ("bsdf", "mis"))
-    zc = family_z(__name__ + ".strategies", (keep.sum() + 3) * len(pairs))
+    zc = family_z(__name__ + "." + family, (keep.sum() + 3) * len(pairs))
     worst = 0.0
     for a, b in pairs:
         z = z_scores(*blocks[a], *blocks[b])[keep]
-        worst = max(worst, np.abs(z).max())
         rel_se = np.sqrt(blocks[a][1][keep] + blocks[b][1][keep]) / blocks[b][0][keep]
-        ra, rb = results[a], results[b]
-        ma, mb = (r.image[..., :3].astype(np.float64).sum(axis=(0, 1)) for r in (ra, rb))
-        se = np.sqrt(sum(r.variance[..., :3].astype(np.float64).sum(axis=(0, 1)) for r in (ra, rb)))
+        ma, mb = (results[k].image[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (a, b))
+        se = np.sqrt(sum(results[k].variance[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (a, b)))
         zm = (ma - mb) / se
-        worst = max(worst, np.abs(zm).max())
-        print(f"{a} vs {b}: {keep.sum()} block-channels, max |z| {np.abs(z).max():.2f} (limit {zc:.2f}), "
-              f"median block detects {zc * np.median(rel_se):.1%}; image means {ma / 256} / {mb / 256}, "
-              f"|z| {np.abs(zm).max():.2f}, detects {(zc * se / mb).max():.2%}")
+        worst = max(worst, np.abs(z).max(), np.abs(zm).max())
+        print(f"{label}, {a} vs {b}: {keep.sum()} block-channels, max |z| {np.abs(z).max():.2f} (limit {zc:.2f}), "
+              f"median block detects {zc * np.median(rel_se):.1%}; image |z| {np.abs(zm).max():.2f}, "
+              f"detects {(zc * se / mb).max():.2%}")
     assert keep.sum() >= 20
     assert worst < zc
+    return results
+
+
+def test_volume_strategies_agree():
+    """Light sampling alone, phase sampling alone and their MIS agree block
+    by block and over the whole image on a medium with up to three
+    scatterings under an area light; MIS has a lower variance than phase
+    sampling alone."""
+    results = strategies_agree(lit_medium, "strategies", "volume", 21, 128, max_bounces=4, volume_bounces=2)
     var = {k: float(r.variance[..., :3].astype(np.float64).sum()) * r.samples for k, r in results.items()}
     assert var["mis"] < var["bsdf"], var
 
@@ -418,27 +423,5 @@ def test_lamp_in_fog_strategies_agree(spot):
     scatter points inside it sample the uniform sphere and their rays hit
     its far side (a spot's too, unlike Cycles' one-sided spot hits: with
     them phase sampling alone measured 2.3x darker than light sampling)."""
-    results = {}
-    for seed, strategy in enumerate(("light", "bsdf", "mis"), start=41):
-        spp = 1024 if strategy == "bsdf" else 256
-        results[strategy] = render(lamp_in_fog(spot=spot), RenderSettings(samples=spp, samples_per_pass=spp, seed=seed,
-                                                                 strategy=strategy, max_bounces=3,
-                                                                 volume_bounces=1))
-        assert np.isfinite(results[strategy].image).all()
-    blocks = {k: block_means_var(r.image[..., :3].astype(np.float64), r.variance.astype(np.float64), 2)
-              for k, r in results.items()}
-    ref = blocks["mis"][0]
-    keep = ref > 0.02 * ref.max()
-    pairs = (("light", "bsdf"), ("light", "mis"), ("bsdf", "mis"))
-    zc = family_z(__name__ + f".lamp_in_fog_{spot}", (keep.sum() + 3) * len(pairs))
-    worst = 0.0
-    for a, b in pairs:
-        z = z_scores(*blocks[a], *blocks[b])[keep]
-        ma, mb = (results[k].image[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (a, b))
-        se = np.sqrt(sum(results[k].variance[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (a, b)))
-        zm = (ma - mb) / se
-        worst = max(worst, np.abs(z).max(), np.abs(zm).max())
-        print(f"lamp in fog (spot {spot}), {a} vs {b}: {keep.sum()} block-channels, max |z| {np.abs(z).max():.2f} "
-              f"(limit {zc:.2f}); image |z| {np.abs(zm).max():.2f}, detects {(zc * se / mb).max():.2%}")
-    assert keep.sum() >= 20
-    assert worst < zc
+    strategies_agree(lambda: lamp_in_fog(spot=spot), f"lamp_in_fog_{spot}", f"lamp in fog (spot {spot})", 41, 256,
+                     max_bounces=3, volume_bounces=1)
