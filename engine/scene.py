@@ -795,7 +795,7 @@ class RenderSettings:
     # Path guiding of the BSDF sample at surface vertices (Mueller et al.
     # 2017, integrator/path_guide.py), learned from the render's own passes
     # over its first path_guiding_training_samples samples (Cycles'
-    # Training Samples); unbiased, deterministic per seed, each sample range
+    # Training Samples, 0: all); unbiased, deterministic per seed, each sample range
     # of a farm learning its own.  Off by default (docs/benchmarks.md, "Path
     # guiding": it pays in interiors lit indirectly, not in direct light).
     path_guiding: bool = False

@@ -53,7 +53,7 @@ BINS = RES * RES
 LEVELS = 5                 # log2(RES)
 RHO = 0.01                 # Mueller's quadtree subdivision threshold
 ALPHA = 0.5                # probability of sampling the guide at a guided vertex
-SPLIT_RECORDS = 12000      # Mueller's spatial threshold c (times sqrt(spp))
+SPLIT_RECORDS = 4000       # spatial threshold c (times sqrt(spp)); Mueller: 12000 at 1280 x 720
 MAX_DEPTH = 24             # spatial tree levels (8 halvings per axis)
 MAX_LEAVES = 4096          # spatial leaves (memory: 2 x 8 KB each, film-side histograms 8 KB)
 MIN_RECORDS = 64           # records a leaf needs before it guides
@@ -372,7 +372,8 @@ class PathGuide:
 
     def __init__(self, lo, inv_size, training_samples):
         self.lo, self.inv_size = lo, inv_size
-        self.training = int(training_samples)
+        # Training samples (0: every sample, Cycles' meaning).
+        self.training = int(training_samples) if training_samples > 0 else 2 ** 62
         self.tree = SpatialTree.root()
         self._reset()
         self.view = None           # the Guide of the next passes (None: not learned yet)
