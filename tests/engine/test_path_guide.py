@@ -152,7 +152,7 @@ def test_records_sum_alike_in_any_grouping_and_drop_bad_ones():
         results.append((guide.sums.copy(), guide.counts.copy()))
     np.testing.assert_array_equal(results[0][0], results[1][0])
     np.testing.assert_array_equal(results[0][1], results[1][1])
-    good = np.isfinite(value) & (value > 0)
+    good = np.isfinite(value) & (value >= 0)
     assert results[0][1].sum() == good.sum()
 
 
@@ -289,14 +289,17 @@ def test_sample_ranges_learning_their_own_guides_merge(room):
 
 def test_hostile_input_stays_finite():
     """No triangles at all, one degenerate triangle (zero-area bounds), one
-    sample, and a guide whose records were all NaN or inf: finite pixels;
-    a guide with no records guides nothing."""
+    sample, and records that were NaN, inf or negative (dropped) or of no
+    light (counted): finite pixels; a guide that learnt no light guides nothing."""
     guide = pg.PathGuide(np.zeros(3), np.ones(3), 8)
     rec = pg.Records(guide.tree, guide.lo, guide.inv_size)
     rec.add(np.arange(10), np.array([np.nan, np.inf, -np.inf, -1.0, 0.0] * 2))
-    assert rec.summed() is None
+    cells, sums, counts = rec.summed()
+    assert list(cells) == [4, 9] and not sums.any() and list(counts) == [1, 1]   # the zeros count, no light
+    guide.merge((cells, sums, counts))
     guide.update(4)
-    assert guide.view is None
+    assert guide.view is not None and not guide.view.guided.any()
+    assert np.all(guide.view.leaf_of(np.zeros((3, 3))) == -1)
     room = lit_room((6, 6))
     empty = Scene([], [], [], room.lights, World((0.2, 0.2, 0.2)), room.camera)
     point = Scene([quad([[0, 1, 1]] * 4)], [Instance(0, materials=[0], name="dot")], room.materials[:1],
