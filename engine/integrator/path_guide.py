@@ -591,33 +591,30 @@ def mix(v, chosen, u1, u2, wi_l, weight, pdf, delta, eval_pdf):
     (visibility.ray_kind draws the bounce's kind by it)."""
     from ..microfacet import COS_EPS
     g = v.guide
-    bsdf_pdf = np.array(pdf, copy=True)
-    p_guide = np.zeros(len(pdf))
+    on = g.leaf >= 0
     rows = np.flatnonzero(chosen)
-    f_cos = None
+    p_guide = np.zeros(len(pdf))
+    bsdf_pdf = pdf.copy()   # pdf itself becomes p_mix below
     if len(rows):
         wi_w, p_guide[rows] = g.view.sample(g.leaf[rows], u1[rows], u2[rows])
         wi_l[rows] = to_local(wi_w, v.tt[rows], v.bb[rows], v.hit.ns[rows])
         # The BSDF at every row (cheaper than taking the lobes' rows), kept where guided.
         f, pb = eval_pdf(v.lobes, v.wo_l, wi_l, v.selection, v.weights)
-        bsdf_pdf[rows], delta[rows] = pb[rows], False
-        f_cos = f[rows] * np.abs(wi_l[rows, 2])[:, None]
-    other = np.flatnonzero((g.leaf >= 0) & ~chosen)
+        bsdf_pdf = np.where(chosen, pb, pdf)
+        delta[rows] = False
+    other = np.flatnonzero(on & ~chosen)
     if len(other):
         wo_w = to_world(wi_l[other], v.tt[other], v.bb[other], v.hit.ns[other])
         p_guide[other] = g.view.pdf(g.leaf[other], wo_w)
-    on = np.flatnonzero(g.leaf >= 0)
-    p_mix = mixed_pdf(p_guide[on], bsdf_pdf[on], g.alpha[on])
-    ok = p_mix > 0
-    scale = np.zeros(len(on))
-    scale[ok] = 1.0 / p_mix[ok]
-    if len(other):   # f cos / p_bsdf from the BSDF's sample: times p_bsdf / p_mix
-        pos = np.searchsorted(on, other)
-        weight[other] *= (bsdf_pdf[other] * scale[pos])[:, None]
-    if f_cos is not None:
-        pos = np.searchsorted(on, rows)
+    # Whole-row arithmetic (cheaper than gathering the guided rows).
+    a = np.where(on, g.alpha, 0.0)
+    p_mix = a * p_guide + (1.0 - a) * bsdf_pdf
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.where(p_mix > 0, 1.0 / p_mix, 0.0)
+    weight *= np.where(on & ~chosen, bsdf_pdf * scale, 1.0)[:, None]   # f cos / p_bsdf times p_bsdf / p_mix
+    if len(rows):
         up = v.wo_l[rows, 2] > COS_EPS
-        weight[rows] = np.where(up[:, None], f_cos * scale[pos][:, None], 0.0)
-    pdf[on] = p_mix
+        cos = np.abs(wi_l[rows, 2])
+        weight[rows] = f[rows] * np.where(up, cos * scale[rows], 0.0)[:, None]
+    pdf[:] = np.where(on, p_mix, pdf)
     return bsdf_pdf
-
