@@ -23,7 +23,7 @@ from engine import kernels
 from engine.film import Film
 from engine.integrator import path_guide as pg
 from engine.render import render
-from engine.scene import Camera, Instance, Lobe, Material, RenderSettings, Scene, SunLight, World
+from engine.scene import Camera, Instance, Lobe, Material, RenderSettings, Scene, SceneError, SunLight, World
 from engine.testscenes import cornell_box, look_at, quad
 
 
@@ -276,12 +276,15 @@ def guided_pair(scene, seed, **settings):
 
 @pytest.fixture(scope="module")
 def room():
-    return guided_pair(lit_room(), 41, samples=256, max_bounces=4, path_guiding_training_samples=64)
+    # Two diffuse bounces of four: a guided sample's kind (drawn by the BSDF's own pdf) sets the limit.
+    return guided_pair(lit_room(), 41, samples=256, max_bounces=4, diffuse_bounces=2,
+                       path_guiding_training_samples=64)
 
 
 def test_guided_and_unguided_agree(room):
     """The guide changes the variance only: the room (light that bounced,
-    a glossy floor) and the Cornell box (its area light met by BSDF rays,
+    a diffuse + glossy floor, two diffuse bounces: the guided samples'
+    kinds count) and the Cornell box (its area light met by BSDF rays,
     weighed by MIS against the guide-BSDF mixture) agree guided and
     unguided block by block and over the whole image (one family)."""
     box = guided_pair(cornell_box(16, 16), 51, samples=192, max_bounces=4)
@@ -312,7 +315,7 @@ def test_sample_ranges_learning_their_own_guides_merge(room):
     passes learnt, merge into the counts of one render and an image that
     agrees with the unguided one (block and image z-tests)."""
     scene = lit_room()
-    settings = dict(max_bounces=4, path_guiding=True, path_guiding_training_samples=64, seed=43)
+    settings = dict(max_bounces=4, diffuse_bounces=2, path_guiding=True, path_guiding_training_samples=64, seed=43)
     first = render(scene, RenderSettings(samples=96, **settings))
     rest = render(scene, RenderSettings(samples=160, sample_start=96, **settings))
     merged = Film.from_state(first.film.state())
@@ -345,6 +348,8 @@ def test_hostile_input_stays_finite():
     empty = Scene([], [], [], room.lights, World((0.2, 0.2, 0.2)), room.camera)
     point = Scene([quad([[0, 1, 1]] * 4)], [Instance(0, materials=[0], name="dot")], room.materials[:1],
                   room.lights, World((0.2, 0.2, 0.2)), room.camera)
+    with pytest.raises(SceneError, match="path_guiding_training_samples"):
+        render(room, RenderSettings(samples=1, path_guiding=True, path_guiding_training_samples=-1))
     for scene in (empty, point, room):
         for samples in (1, 8):
             r = render(scene, RenderSettings(samples=samples, max_bounces=3, seed=2, path_guiding=True))
