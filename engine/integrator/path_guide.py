@@ -555,7 +555,11 @@ def record_slots(paths, v, rows, tile):
     leaf = rec.tree.leaf_of(unit_cube(v.hit.p[rows], rec.lo, rec.inv_size))
     pg[rows, col] = (leaf.astype(np.int64) * BINS + cells(paths.d[rows])).astype(np.float64)
     pg[rows, col + 1] = L
-    pg[rows, col + 2] = paths.beta[rows].mean(axis=1) * paths.prev_pdf[rows]
+    # Radiance times the cosine at the vertex (the product the BSDF's own
+    # sampling leaves out), over the throughput and pdf: Mueller's record.
+    cos = np.abs(np.einsum("ij,ij->i", paths.d[rows], v.hit.ns[rows]))
+    with np.errstate(divide="ignore"):
+        pg[rows, col + 2] = paths.beta[rows].mean(axis=1) * paths.prev_pdf[rows] / cos
     pg[rows, 0] = count + 1
 
 
