@@ -34,8 +34,14 @@ STATE_VERSION = 1
 class Tile:
     """float64 sums for the pixels [lo, hi), filled by one batch."""
 
-    def __init__(self, lo, hi, aovs=tuple(AOV_CHANNELS), aux=False, passes=(), guide=None, sum_variance=False):
+    def __init__(self, lo, hi, aovs=tuple(AOV_CHANNELS), aux=False, passes=(), guide=None, sum_variance=False,
+                 path_guide=None, first=0):
         self.lo, self.hi = lo, hi
+        # Path guiding (integrator/path_guide.py): the guide this batch
+        # samples (None: none yet) and, while it trains, the records it makes.
+        self.path_guide = None if path_guide is None else path_guide.view
+        self.path_records = None if path_guide is None else path_guide.records_for(first)
+        self.path_sums = []
         # Volume scattering probability guiding (integrator/volume_guide.py):
         # the film's filtered view this batch reads, and the sums it adds.
         self.guide = None if guide is None else guide.view
@@ -81,6 +87,8 @@ class Tile:
         return np.bincount(idx, weights=values.ravel(), minlength=n).reshape(-1, 3)
 
     def flush(self):
+        if self.path_records is not None and self.path_records.parts:
+            self.path_sums.append(self.path_records.summed())
         if not self._pending:
             return
         pix = np.concatenate([p for p, _, _ in self._pending]) - self.lo
@@ -143,7 +151,7 @@ class Film:
     """Per-pixel sample statistics of a whole frame (row 0 at the top)."""
 
     def __init__(self, width, height, aovs=tuple(AOV_CHANNELS), adaptive=False, passes=(), crypto_levels=6,
-                 guide=False, sum_variance=False):
+                 guide=False, sum_variance=False, path_guide=None):
         unknown = set(aovs) - set(AOV_CHANNELS)
         if unknown:
             raise ValueError(f"unknown AOVs {sorted(unknown)}; known: {sorted(AOV_CHANNELS)}")
@@ -168,13 +176,16 @@ class Film:
         if guide:
             from .integrator.volume_guide import Guide
             self.guide = Guide(width, height)
+        # Path guiding learned over the passes (integrator/path_guide.PathGuide).
+        self.path_guide = path_guide
         self._lock = threading.Lock()
 
     # -- accumulation ------------------------------------------------------
 
-    def new_tile(self, lo, hi):
+    def new_tile(self, lo, hi, first=0):
+        """A tile for pixels [lo, hi), of a pass from sample ``first``."""
         return Tile(lo, hi, tuple(self.aovs), self.aux is not None, self.passes, self.guide,
-                    self.m2_sum is not None)
+                    self.m2_sum is not None, self.path_guide, first)
 
     def merge(self, tile):
         tile.flush()
@@ -204,6 +215,9 @@ class Film:
                 self.extra.merge(tile.extra, tile.lo)
             if self.guide is not None and tile.guide_sums is not None:
                 self.guide.merge(tile.lo, tile.guide_sums)
+            if self.path_guide is not None:
+                for part in tile.path_sums:
+                    self.path_guide.merge(part)
 
     def _combine(self, s, nb, mean_b, m2_b, m2_sum_b=None):
         """Chan et al.'s pairwise update of (count, mean, M2), and of the

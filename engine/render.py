@@ -31,7 +31,7 @@ from .film import Film
 from .geometry import flatten, material_table
 from .integrator.catcher import catcher_triangles
 from .integrator.linking import LightLinks
-from .integrator import Context, subsurface, trace_batch
+from .integrator import Context, path_guide, subsurface, trace_batch
 from .lights import LightSet
 from .sampler import CAMERA, Sampler
 from .scene import Cancelled, RenderSettings, SceneError
@@ -393,6 +393,15 @@ def _guides(ctx, settings):
     return ctx.media is not None and ctx.bake is None and settings.volume_guiding
 
 
+def _path_guide(ctx, settings):
+    """The film's path guide (integrator/path_guide.py) when guiding is on
+    (not for a bake, nor with subsurface scattering), else None."""
+    if not settings.path_guiding or ctx.bake is not None or ctx.subsurface:
+        return None
+    lo, inv_size = path_guide.bounds_of(ctx.triangles)
+    return path_guide.PathGuide(lo, inv_size, settings.path_guiding_training_samples)
+
+
 def _render(scene, settings, progress, bake=None):
     t_start = time.perf_counter()
     kernel_mode = _choose_kernels(settings, progress)
@@ -401,7 +410,8 @@ def _render(scene, settings, progress, bake=None):
     cam = ctx.camera
     adaptive = _Adaptive(settings, cam.width * cam.height)
     film = Film(cam.width, cam.height, settings.aovs, adaptive.params is not None, settings.passes,
-                ctx.pass_config.crypto_levels, guide=_guides(ctx, settings), sum_variance=settings.sum_variance)
+                ctx.pass_config.crypto_levels, guide=_guides(ctx, settings), sum_variance=settings.sum_variance,
+                path_guide=_path_guide(ctx, settings))
     threads = settings.threads or os.cpu_count() or 1
     stats = {"samples": 0, "samples_total": settings.samples, "kernels": kernel_mode,
              "compile_wait_seconds": compile_wait, "prepare_seconds": time.perf_counter() - t_start - compile_wait,
@@ -471,10 +481,21 @@ class _Plan:
     def __init__(self, settings, adaptive, threads, film=None):
         self.settings, self.adaptive, self.threads = settings, adaptive, threads
         self.film = film
-        self.guide = None if film is None else film.guide   # integrator/volume_guide.py
-        self.guided = 0   # samples in the film when the guide was last rebuilt (0: never)
+        # Guides rebuilt from the samples so far at pass barriers: the volume
+        # guide (integrator/volume_guide.py) and the path guide while it
+        # trains (integrator/path_guide.py).
+        self.guide = None if film is None else film.guide
+        self.path_guide = None if film is None else film.path_guide
+        self.guided = 0   # samples in the film when the guides were last rebuilt (0: never)
+        self.rebuilt_at = 0
         self.done = self.planned = self.checked = 0
         self.batches = collections.deque()  # (pass, pixels) not submitted yet
+
+    def _guiding(self):
+        """Whether a guide still learns: the volume guide always, the path
+        guide until the records of its training samples are in."""
+        learning = self.path_guide is not None and self.guided < self.path_guide.training
+        return self.guide is not None or learning
 
     def next_batch(self):
         if not self.batches and not self._plan_pass():
@@ -487,18 +508,22 @@ class _Plan:
             return False
         if self.planned > self.done and adaptive.checks_at(self.planned, self.checked):
             return False  # wait for the film to reach the check
-        if self.guide is not None and self.planned >= 2 * self.guided:
-            # Volume guiding reads the samples so far, rebuilt when they have
+        if self._guiding() and self.planned >= 2 * self.guided:
+            # Guides read the samples so far, rebuilt when they have
             # doubled (1, 2, 4, ... as the automatic passes): that pass waits
             # for the last to merge, so every batch reads the guide of the
             # same samples whatever the timing.
             if self.planned > self.done:
                 return False
-            self.guide.update(self.film.count)
+            if self.guide is not None:
+                self.guide.update(self.film.count)
+            if self.path_guide is not None:   # from the samples since the last rebuild
+                self.path_guide.update(self.planned - self.rebuilt_at)
             self.guided = max(self.planned, 1)
+            self.rebuilt_at = self.planned
         spp = _pass_samples(settings, self.planned, len(adaptive.active), adaptive.params)
         end = self.planned + spp
-        rebuild = self.guide is not None and end >= 2 * self.guided   # the next pass waits for this one
+        rebuild = self._guiding() and end >= 2 * self.guided   # the next pass waits for this one
         barrier = end >= settings.samples or adaptive.checks_at(end, self.checked) or rebuild
         batches = _batches(adaptive.active, spp, settings, self.threads, barrier)
         run = _Pass(spp, settings.sample_start + self.planned, len(adaptive.active), len(batches))
@@ -563,8 +588,8 @@ class _GatedFilm:
     def __getattr__(self, name):
         return getattr(self._film, name)
 
-    def new_tile(self, lo, hi):
-        return _GatedTile(self._film.new_tile(lo, hi), self)
+    def new_tile(self, lo, hi, first=0):
+        return _GatedTile(self._film.new_tile(lo, hi, first), self)
 
     def close(self):
         with self._lock:
@@ -620,7 +645,7 @@ def _stop_requested(progress):
 
 def _run_batch(ctx, film, pixels, spp, first):
     """Samples [first, first + spp) of each pixel in ``pixels`` (sorted)."""
-    tile = film.new_tile(int(pixels[0]), int(pixels[-1]) + 1)
+    tile = film.new_tile(int(pixels[0]), int(pixels[-1]) + 1, int(first) - ctx.settings.sample_start)
     pix = np.repeat(pixels, spp)
     sample = np.tile(np.arange(first, first + spp, dtype=np.uint32), len(pixels))
     pix, sample = _beyond_the_rim(ctx, tile, pix, sample)

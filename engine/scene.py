@@ -798,6 +798,14 @@ class RenderSettings:
     # of disjoint sample ranges merges to the same estimate statistically,
     # not to the float of one render (each range builds its own guide).
     volume_guiding: bool = True
+    # Path guiding of the BSDF sample at surface vertices (Mueller et al.
+    # 2017, integrator/path_guide.py), learned from the render's own passes
+    # over its first path_guiding_training_samples samples (Cycles'
+    # Training Samples, 0: all); unbiased, deterministic per seed, each sample range
+    # of a farm learning its own.  Off by default (docs/benchmarks.md, "Path
+    # guiding": it pays in interiors lit indirectly, not in direct light).
+    path_guiding: bool = False
+    path_guiding_training_samples: int = 128
     # 'sobol' (shuffled Owen-scrambled Sobol, Cycles' default) or 'random'.
     sampling_pattern: str = "sobol"
     # Adaptive sampling as Cycles: a pixel stops once its error estimate

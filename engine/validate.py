@@ -359,6 +359,8 @@ def validate_settings(s):
         raise SceneError("settings: sample indices must lie in [0, 2^32)")
     if s.sampling_pattern not in ("sobol", "random"):
         raise SceneError(f"settings: unknown sampling pattern {s.sampling_pattern!r}")
+    if getattr(s, "path_guiding_training_samples", 0) < 0:
+        raise SceneError("settings: path_guiding_training_samples must be >= 0 (0: train over every sample)")
     if not (s.adaptive_threshold >= 0.0) or s.adaptive_min_samples < 0:
         raise SceneError("settings: adaptive threshold and min samples must be >= 0")
     unknown = set(s.aovs) - {"depth", "normal", "albedo"}

@@ -21,6 +21,8 @@ that of those pixels' paths, not the image's).
 In a scene with a volume the camera rays are guided as in a render (the
 guide rebuilt between passes 1, 1, 2, 4, ... samples); --guide off / both
 compares without it, --size renders a smaller image of the same scene.
+--path-guiding on / both guides the BSDF samples at surface vertices
+(trained over --training samples, rebuilt as the renderer does).
 
 This measures Ember's own spread, the reference's noise and any bias left
 out; tools/variance_regions.py compares with Cycles through Blender (slow:
@@ -55,6 +57,10 @@ def parse_args(argv):
     parser.add_argument('--size', type=int, default=0, help="render at size x size pixels instead of the pickle's")
     parser.add_argument('--guide', choices=('on', 'off', 'both'), default='on',
                         help="volume scattering probability guiding (scenes with a volume); both: A/B, alternated")
+    parser.add_argument('--path-guiding', choices=('on', 'off', 'both'), default='off',
+                        help="path guiding at surface vertices (engine/integrator/path_guide.py), trained over "
+                             "--training samples; both: A/B, alternated seed by seed")
+    parser.add_argument('--training', type=int, default=128, help="path guiding's training samples")
     return parser.parse_args(argv)
 
 
@@ -80,30 +86,38 @@ def pass_starts(samples, passes, guided):
     return starts + [samples]
 
 
-def render_seeds(ctx, pixels, samples, seeds, first_seed, guided=False):
-    """Pixel means (seeds, len(pixels), 3) and the thread CPU seconds spent tracing."""
+def render_seeds(ctx, pixels, samples, seeds, first_seed, guided=False, path_guiding=(False,), training=128):
+    """Pixel means {path guiding: (seeds, len(pixels), 3)} and the thread CPU
+    seconds spent tracing; with several path-guiding modes each seed renders
+    them in turn (A/B alternated: the machine's load weighs them alike)."""
     from engine.film import Film
-    from engine.integrator import trace_batch
+    from engine.integrator import path_guide, trace_batch
     from engine.sampler import Sampler
     width, height = ctx.camera.width, ctx.camera.height
-    means = np.empty((seeds, len(pixels), 3))
-    cpu = 0.0
+    means = {g: np.empty((seeds, len(pixels), 3)) for g in path_guiding}
+    cpu = dict.fromkeys(path_guiding, 0.0)
     # Batches of about BATCH paths, whole sample passes each (the renderer's own batch size).
     passes = max(1, BATCH // len(pixels))
-    starts = pass_starts(samples, passes, guided)
+    starts = pass_starts(samples, passes, guided or any(path_guiding))
     for k in range(seeds):
         seeded = dataclasses.replace(ctx, sampler=Sampler(first_seed + k, ctx.settings.sampling_pattern))
-        film = Film(width, height, (), guide=guided)
-        for start, end in zip(starts, starts[1:]):
-            sample = np.arange(start, end, dtype=np.uint32)
-            if film.guide is not None:
-                film.guide.update(film.count)
-            tile = film.new_tile(int(pixels.min()), int(pixels.max()) + 1)
-            t0 = time.thread_time()
-            trace_batch(seeded, np.tile(pixels, len(sample)), np.repeat(sample, len(pixels)), tile)
-            cpu += time.thread_time() - t0
-            film.merge(tile)
-        means[k] = film.mean[pixels]
+        for g in path_guiding:
+            guide = path_guide.PathGuide(*path_guide.bounds_of(ctx.triangles), training) if g else None
+            film = Film(width, height, (), guide=guided, path_guide=guide)
+            guided_at = rebuilt = 0   # as engine/render.py: rebuilt when the samples have doubled
+            for start, end in zip(starts, starts[1:]):
+                sample = np.arange(start, end, dtype=np.uint32)
+                if film.guide is not None:
+                    film.guide.update(film.count)
+                if guide is not None and start >= 2 * guided_at and guided_at < training:
+                    guide.update(start - rebuilt)
+                    guided_at, rebuilt = max(start, 1), start
+                tile = film.new_tile(int(pixels.min()), int(pixels.max()) + 1, start)
+                t0 = time.thread_time()
+                trace_batch(seeded, np.tile(pixels, len(sample)), np.repeat(sample, len(pixels)), tile)
+                cpu[g] += time.thread_time() - t0
+                film.merge(tile)
+            means[g][k] = film.mean[pixels]
     return means, cpu
 
 
@@ -143,16 +157,20 @@ def main(argv=None):
                   else np.arange(image_pixels))
         modes = {'on': [True], 'off': [False], 'both': [False, True]}[args.guide]
         guided = [g and ctx.media is not None and ctx.bake is None for g in modes]
+        pg_modes = {'on': (True,), 'off': (False,), 'both': (False, True)}[args.path_guiding]
         for g in guided:
             with single_threaded_blas():
-                means, cpu = render_seeds(ctx, pixels, args.samples, args.seeds, args.first_seed, g)
-            v, error = summary(means, args.samples, image_pixels)
-            per_64k = cpu / (args.seeds * args.samples * len(pixels)) * 65536
-            label = chosen.light_selection + (f":{stages.RIS_CANDIDATES}" if chosen.light_selection == "ris" else "")
-            label += ", volume guiding" if g else ""
-            print(f"{args.scene} ({label}, {args.samples} spp, {args.seeds} seeds, "
-                  f"{len(pixels)} px): variance per sample {v:.4f} +- {error:.4f}, "
-                  f"{per_64k:.3f} CPU-s per 64k paths, product {v * per_64k:.4f}", flush=True)
+                means, cpu = render_seeds(ctx, pixels, args.samples, args.seeds, args.first_seed, g, pg_modes,
+                                          args.training)
+            for p in pg_modes:
+                v, error = summary(means[p], args.samples, image_pixels)
+                per_64k = cpu[p] / (args.seeds * args.samples * len(pixels)) * 65536
+                label = chosen.light_selection + (f":{stages.RIS_CANDIDATES}" if chosen.light_selection == "ris" else "")
+                label += ", volume guiding" if g else ""
+                label += f", path guiding ({args.training} training samples)" if p else ""
+                print(f"{args.scene} ({label}, {args.samples} spp, {args.seeds} seeds, "
+                      f"{len(pixels)} px): variance per sample {v:.4f} +- {error:.4f}, "
+                      f"{per_64k:.3f} CPU-s per 64k paths, product {v * per_64k:.4f}", flush=True)
     return 0
 
 

@@ -266,7 +266,18 @@ def render_settings(scene, is_preview=False):
         aovs=("normal", "albedo") if settings.use_denoising and not is_preview else (),
         use_jit=getattr(settings, 'use_jit', True),
         persistent=persistent_data(scene, is_preview),
+        **path_guiding(scene, is_preview),
     )
+
+
+def path_guiding(scene, is_preview=False):
+    """Path guiding from Cycles' own settings (Render > Sampling > Path
+    Guiding: Guiding with Surface Guiding on, Training Samples, 0 = all):
+    engine/integrator/path_guide.py.  Not in previews (too few samples to learn from)."""
+    cycles = getattr(scene, 'cycles', None)
+    on = bool(getattr(cycles, 'use_guiding', False)) and bool(getattr(cycles, 'use_surface_guiding', True))
+    return {'path_guiding': on and not is_preview,
+            'path_guiding_training_samples': int(getattr(cycles, 'guiding_training_samples', 128))}
 
 
 def persistent_data(scene, is_preview=False):

@@ -29,7 +29,7 @@ from ..media import start_stack
 from ..nee import add_rows as _add_rows
 from ..sampler import CAMERA, TIME
 from ..vec import dot
-from . import catcher, stages, subsurface, transparency, volume, volume_guide
+from . import catcher, path_guide, stages, subsurface, transparency, volume, volume_guide
 from .context import Context
 from .records import Hit, LightSample, Paths, RayHits, ShadowBatch, Vertex, rows_of
 from .stages import every_light as _every_light, interaction as _interaction
@@ -68,7 +68,7 @@ def trace_batch(ctx, pix, sample, tile):
                   np.full(n, -1, np.int32), np.zeros(n, np.int8), time, np.zeros(n, bool),
                   np.full(n, -1, np.int64), np.zeros((n, 5)), np.zeros(n, np.int16), np.zeros(n, bool), spread,
                   np.zeros((n, volume_guide.COLUMNS if getattr(tile, "guide", None) is not None else 0)),
-                  np.full(n, -1.0))
+                  np.full(n, -1.0), path_guide.start_columns(n, tile))
     obs = pass_events.observer(ctx, tile)
     obs.start(paths)
     # Every step raises a live path's bounce or its transparent bounce
@@ -132,6 +132,7 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES, first=None):
     if len(paths.pix) == 0:
         return _join(paths, carried, scattered, passed, crossed)
     v = stages.shade(ctx, paths, hit, depth)                     # Vertex
+    v.guide = stages.guide_at(ctx, v, tile)                      # path guiding there, if any
     obs.vertex(paths, v, depth)
     every = stages.sampling_every_light(ctx, v)
     trace = stages.trace_shadows if ctx.media is None else volume.trace_surface_shadows
@@ -141,6 +142,8 @@ def _bounce(ctx, paths, depth, tile, obs=pass_events.NO_PASSES, first=None):
         obs.light_sample(paths, batch)
     ray = paths.ray
     alive, through = stages.scatter(ctx, paths, v, depth)       # BSDF sample, throughput, roulette
+    if v.guide is not None:                                      # guided vertices: training records
+        path_guide.record_slots(paths, v, np.flatnonzero(v.guide.eligible & alive), tile)
     if ctx.subsurface:                                           # BSSRDF: the random walk to the exit
         alive = subsurface.walk(ctx, paths, v, alive, depth)
     if ctx.media is not None:                                    # refracted or passed through: the volume stack

@@ -103,6 +103,9 @@ class Paths:
     # (prev_p its start, prev_n[:, :3] its direction), for the selection pdf
     # in MIS; negative: the vertex's own selection at prev_p.
     prev_seg: np.ndarray
+    # Path guiding (path_guide.py): the last guided vertices' records,
+    # (N, path_guide.COLUMNS) where the tile trains the guide, else (N, 0).
+    guide_path: np.ndarray
 
     def __len__(self):
         return len(self.pix)
@@ -210,6 +213,10 @@ class Vertex:
     # (N, 4) stages.tree_normals, made on first use: light selection, the
     # candidates' selection and the next bounce's MIS all read it.
     tree_n: object = None
+    # Path guiding at these vertices (path_guide.GuideAt; None: none) and,
+    # once scatter sampled, the BSDF's own pdf of each row's direction.
+    guide: object = None
+    bsdf_pdf: object = None
 
     def __len__(self):
         return len(self.wo_l)
@@ -231,7 +238,8 @@ class Vertex:
         return Vertex(RowView(self.hit, rows, n), self.tt[rows], self.bb[rows], self.wo_l[rows],
                       take_arrays(self.lobes, rows, n), self.weights[rows], self.selection[rows],
                       rows if self.path_rows is None else self.path_rows[rows],
-                      tree_n=None if self.tree_n is None else self.tree_n[rows])
+                      tree_n=None if self.tree_n is None else self.tree_n[rows],
+                      guide=None if self.guide is None else self.guide.take(rows))
 
 
 @dataclass

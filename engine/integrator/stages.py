@@ -24,7 +24,7 @@ from ..lights.shader import emission_path, path_rows
 from ..sampler import BSDF, LIGHT, candidate_set, emitter_set, vertex_set
 from ..sampling import power_heuristic
 from ..vec import dot, frame, row_any_positive, row_max, to_local
-from . import catcher, portal, subsurface, transparency, visibility
+from . import catcher, path_guide, portal, subsurface, transparency, visibility
 from .linking import instance_of
 from .records import Hit, LightSample, RayHits, ShadowBatch, Vertex, RowView, rows_of
 from ..geometry import VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION
@@ -739,6 +739,8 @@ def unshadowed(ctx, paths, v, e, p_sel, u, p_mis=None, ls=None):
                                time=path_time(paths))
     wi_l = v.local(ls.wi)
     f, pdf_b = bsdf.eval_pdf(v.lobes, v.wo_l, wi_l, *v.lobes_wo)
+    if v.guide is not None:   # guided vertices: MIS against the guide-BSDF mixture
+        pdf_b = path_guide.nee_pdf(v, ls.wi, pdf_b)
     if ctx.bake is not None:   # a Glossy / Transmission bake counts one side of glass lobes
         f = ctx.bake.glass_f(v, wi_l, f, paths.bounce == 0)
     if ctx.light_excludes:
@@ -816,8 +818,12 @@ def scatter(ctx, paths, v, depth):
     else:
         bent = np.zeros(len(u), bool)
         v.sampled_labels = np.empty(len(u), np.int8)   # the Hair BSDF's samples' kinds (visibility.ray_kind)
-        wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u[:, 0], u[:, 1], u[:, 2], *v.lobes_wo, bent=bent,
+        guided = v.guide is not None and v.guide.view is not None
+        chosen, u_lobe = path_guide.split_choice(v.guide, u[:, 0]) if guided else (None, u[:, 0])
+        wi_l, weight, pdf, delta = bsdf.sample(v.lobes, v.wo_l, u_lobe, u[:, 1], u[:, 2], *v.lobes_wo, bent=bent,
                                                labels=v.sampled_labels)
+        if guided:   # one-sample MIS of the guide and the BSDF (path_guide.py)
+            v.bsdf_pdf = path_guide.mix(v, chosen, u[:, 1], u[:, 2], wi_l, weight, pdf, delta, bsdf.eval_pdf)
     if depth == 0 and ctx.bake is not None:
         weight = ctx.bake.glass_weight(v, wi_l, weight, delta, np.ones(len(wi_l), bool))
     wi = v.world(wi_l)
@@ -851,6 +857,16 @@ def scatter(ctx, paths, v, depth):
     if gone is not None:   # Ray Portal samples: the ray moves to the portal's exit
         portal.move(ctx, paths, v, *gone, through)
     return ok, through
+
+
+def guide_at(ctx, v, tile):
+    """Path guiding at vertices ``v`` (path_guide.GuideAt), or None: not
+    with subsurface scattering in the scene, nor in a bake."""
+    view = getattr(tile, "path_guide", None)
+    recording = getattr(tile, "path_records", None) is not None
+    if (view is None and not recording) or ctx.subsurface or ctx.bake is not None:
+        return None
+    return path_guide.at_vertices(view, recording, v, bsdf.kind_in, bsdf.NONE)
 
 
 def remember_vertex(ctx, paths, v, through, every, ray, depth):
@@ -913,6 +929,9 @@ def finish(ctx, paths, tile, keep=None):
     if clamp > 0:
         m = row_max(L)
         L = L * np.where(m > clamp, clamp / np.maximum(m, 1e-30), 1.0)[:, None]
+    if paths.guide_path.shape[1]:   # the path guide's records (path_guide.py)
+        pg = paths.guide_path if keep is None else np.take(paths.guide_path, rows_of(keep), axis=0)
+        path_guide.finish_slots(getattr(tile, "path_records", None), pg, L)
     if paths.guide.shape[1]:   # the volume guide's sums (volume_guide.py)
         tile.add_guide(pix, paths.guide if keep is None else np.take(paths.guide, rows_of(keep), axis=0), L)
     if ctx.catcher is not None:

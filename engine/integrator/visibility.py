@@ -154,8 +154,11 @@ def ray_kind(ctx, v, paths, depth):
         only_d = lobes_where(lobes, ~diffuse, mixed)
         sel = bsdf.selection(lobes_where(lobes, np.zeros_like(diffuse), mixed), v.wo_l[mixed])
         _, pdf_d = bsdf.eval_pdf(only_d, v.wo_l[mixed], wi_l, sel)
+        # The BSDF's own pdf of the direction (a guided vertex's MIS pdf is the
+        # guide mixture's): Cycles' guided samples pick their closure by it.
+        pdf = paths.prev_pdf[mixed] if v.bsdf_pdf is None else v.bsdf_pdf[mixed]
         with np.errstate(divide="ignore", invalid="ignore"):
-            p_d = np.where(paths.prev_pdf[mixed] > 0, pdf_d / paths.prev_pdf[mixed], 0.0)
+            p_d = np.where(pdf > 0, pdf_d / pdf, 0.0)
         u = ctx.sampler.get(paths.pseed[mixed], paths.sample[mixed], vertex_set(depth, KIND))[:, 0]
         kind[mixed] = np.where(u < p_d, VIS_DIFFUSE, VIS_GLOSSY)
     kind[dot(paths.d, hit.ng) < 0] = VIS_TRANSMISSION

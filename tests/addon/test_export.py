@@ -69,6 +69,19 @@ def test_render_settings_follow_scene(factory_scene):
     assert scene_export.render_settings(factory_scene, is_preview=True).samples == ember.preview_samples
 
 
+def test_path_guiding_follows_cycles_settings(factory_scene):
+    """Cycles' own Path Guiding settings: Guiding and Surface Guiding turn
+    it on (not in previews), Training Samples carries over (0: all)."""
+    cycles = factory_scene.cycles
+    assert scene_export.render_settings(factory_scene).path_guiding is False   # Cycles' default: off
+    cycles.use_guiding, cycles.use_surface_guiding, cycles.guiding_training_samples = True, True, 32
+    settings = scene_export.render_settings(factory_scene)
+    assert settings.path_guiding is True and settings.path_guiding_training_samples == 32
+    assert scene_export.render_settings(factory_scene, is_preview=True).path_guiding is False
+    cycles.use_surface_guiding = False
+    assert scene_export.render_settings(factory_scene).path_guiding is False
+
+
 # ----------------------------------------------------------------------------
 # meshes
 

@@ -1,0 +1,626 @@
+"""Path guiding of the BSDF sample at surface vertices (Mueller, Gross and
+Novak 2017, "Practical Path Guiding for Efficient Light-Transport
+Simulation"), learned over the render's own passes.
+
+The guide is a spatial binary tree over the scene's bounds (each level
+halves its node at the midpoint, axes x, y, z in turn) whose leaves each
+hold a directional quadtree over the equal-area cylindrical map of the
+sphere, (x, y) = ((cos theta + 1) / 2, phi / 2 pi) with theta, phi in world
+space: a constant pdf on the square is a constant pdf on the sphere,
+p(w) = p_square / 4 pi.  The quadtree is Mueller's: a node is split while
+its share of the leaf's energy exceeds RHO, down to RES x RES cells; a
+quadtree leaf spreads its energy evenly over its area.  It is stored
+expanded to its RES x RES finest cells (density and CDF per spatial leaf),
+so the pdf is one look-up and sampling one binary search.
+
+At a vertex whose lobes all reflect smoothly (no delta, transmission,
+transparent, subsurface, hair or portal lobe, no second bump normal: the
+``eligible`` rows) and whose spatial leaf has learned a distribution, the
+direction comes from the guide with probability ALPHA, else from the BSDF
+(u[:, 0] < ALPHA picks, then is rescaled for the lobe choice), and the
+sample counts with the mixture pdf ALPHA p_guide + (1 - ALPHA) p_bsdf
+(one-sample MIS).  Light samples there weigh the BSDF side of their MIS by
+the same mixture, and BSDF rays that meet a light carry it as their pdf:
+unbiased whatever the guide holds.  A guided direction's kind (diffuse or
+glossy, for ray visibility and passes) is drawn as Cycles' guided samples
+take theirs (surface_shader_bsdf_guided_sample_closure_mis: the closure
+picked in proportion to its unguided pdf there): visibility.ray_kind with
+the BSDF's own pdf, not the mixture.
+
+Training: each path keeps its last SLOTS guided vertices (Paths.guide_path:
+the recording cell, the path's radiance then and its throughput after the
+bounce times the mixture pdf); when a slot is reused or the path ends, the
+radiance gathered since, over that throughput, is the incident radiance
+along the sampled direction divided by its pdf (Mueller's record), here
+times the cosine at the vertex (the guide then leans to the product the
+BSDF's own sampling leaves out: measured 4-5 % less variance), added to
+its spatial leaf's RES x RES cell.  Records are summed as fixed-point
+integers (FIXED), so the sums, and the guide built from them, are the same
+bit for bit however the passes are cut into batches and in whatever order
+tiles merge.  The guide of a pass is built from the records of the passes
+since the previous rebuild only (rebuilt when the samples have doubled, as
+engine/render.py does for the volume guide); the spatial tree is refined
+then, each leaf halved while its records exceed SPLIT_RECORDS sqrt(spp of
+that iteration), and training stops at ``path_guiding_training_samples``.
+A sample range of a farm builds its own guide from its own passes.
+"""
+import numpy as np
+
+from ..kernels import LoopKernel, helper
+from ..lobes import registry as lobe_registry
+from ..vec import to_local, to_world
+
+RES = 32                   # finest quadtree cells per side of the square
+BINS = RES * RES
+LEVELS = 5                 # log2(RES)
+RHO = 0.01                 # Mueller's quadtree subdivision threshold
+ALPHA = 0.3                # probability of sampling the guide at a diffuse vertex (0.5: variance +25 % at 64 px)
+MIN_ALPHA = 0.02           # below this (narrow glossy lobes) the BSDF alone samples
+SPLIT_RECORDS = 4000       # spatial threshold c (times sqrt(spp)); Mueller: 12000 at 1280 x 720
+MAX_DEPTH = 24             # spatial tree levels (8 halvings per axis)
+MAX_LEAVES = 4096          # spatial leaves (memory: 2 x 8 KB each, film-side histograms 8 KB)
+MIN_RECORDS = 64           # records a leaf needs before it guides
+FIXED = 2.0 ** 16          # fixed-point scale of the records' sums
+VMAX = 2.0 ** 20           # largest record (radiance over pdf) summed
+SLOTS = 3                  # guided vertices a path remembers
+COLUMNS = 1 + 3 * SLOTS    # Paths.guide_path: vertices written, then (cell, L, scale) per slot
+FOUR_PI = 4.0 * np.pi
+
+
+# ----------------------------------------------------------------------------
+# compiled loops and their NumPy reference forms
+
+def _leaf_loop(unit, child, out):
+    for i in range(unit.shape[0]):
+        x, y, z = unit[i, 0], unit[i, 1], unit[i, 2]
+        node = 0
+        depth = 0
+        while child[node] >= 0:
+            a = depth % 3
+            c = x if a == 0 else (y if a == 1 else z)
+            c = 2.0 * c
+            step = 0
+            if c >= 1.0:
+                c -= 1.0
+                step = 1
+            if a == 0:
+                x = c
+            elif a == 1:
+                y = c
+            else:
+                z = c
+            node = child[node] + step
+            depth += 1
+        out[i] = -1 - child[node]
+
+
+def _leaf_numpy(unit, child, out):
+    p = np.array(unit, dtype=np.float64, copy=True)
+    node = np.zeros(len(p), np.int64)
+    depth = 0
+    while True:
+        inner = child[node] >= 0
+        if not inner.any():
+            break
+        a = depth % 3
+        c = 2.0 * p[:, a]
+        step = c >= 1.0
+        p[:, a] = np.where(inner, np.where(step, c - 1.0, c), p[:, a])
+        node = np.where(inner, child[node] + step, node)
+        depth += 1
+    out[:] = -1 - child[node]
+
+
+_leaf_kernel = LoopKernel(_leaf_loop, "void(float64[:, ::1], int32[::1], int32[::1])", _leaf_numpy)
+
+
+def _sample_loop(leaf, u1, u2, cdf, density, wi, pdf):
+    for i in range(leaf.shape[0]):
+        l = leaf[i]
+        if l < 0:
+            wi[i, 0] = 0.0
+            wi[i, 1] = 0.0
+            wi[i, 2] = 1.0
+            pdf[i] = 0.0
+            continue
+        u = u1[i]
+        lo = 0
+        hi = BINS - 1
+        while lo < hi:   # the first cell whose CDF exceeds u
+            mid = (lo + hi) // 2
+            if cdf[l, mid] > u:
+                hi = mid
+            else:
+                lo = mid + 1
+        while lo > 0 and density[l, lo] <= 0.0:   # never a cell of no mass (u at a rounded end)
+            lo -= 1
+        before = cdf[l, lo - 1] if lo > 0 else 0.0
+        mass = cdf[l, lo] - before
+        f = (u - before) / mass if mass > 0.0 else 0.5
+        f = min(max(f, 0.0), 1.0 - 1e-12)
+        ix = lo // RES
+        iy = lo - ix * RES
+        x = (ix + u2[i]) / RES
+        y = (iy + f) / RES
+        cz = min(max(2.0 * x - 1.0, -1.0), 1.0)
+        r = np.sqrt(max(0.0, 1.0 - cz * cz))
+        phi = 2.0 * np.pi * y
+        wi[i, 0] = r * np.cos(phi)
+        wi[i, 1] = r * np.sin(phi)
+        wi[i, 2] = cz
+        pdf[i] = density[l, lo] / FOUR_PI
+
+
+def _sample_numpy(leaf, u1, u2, cdf, density, wi, pdf):
+    n = len(leaf)
+    ok = leaf >= 0
+    l = np.where(ok, leaf, 0)
+    cell = np.empty(n, np.int64)
+    for s in range(0, n, 4096):   # (rows, BINS) comparisons a chunk at a time
+        e = slice(s, s + 4096)
+        cell[e] = np.minimum((cdf[l[e]] <= u1[e, None]).sum(axis=1), BINS - 1)
+    for _ in range(BINS):   # back over cells of no mass (rare: a rounded end)
+        empty = (cell > 0) & (density[l, cell] <= 0.0)
+        if not empty.any():
+            break
+        cell = np.where(empty, cell - 1, cell)
+    before = np.where(cell > 0, cdf[l, np.maximum(cell - 1, 0)], 0.0)
+    mass = cdf[l, cell] - before
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f = np.where(mass > 0, (u1 - before) / np.where(mass > 0, mass, 1.0), 0.5)
+    f = np.clip(f, 0.0, 1.0 - 1e-12)
+    ix, iy = cell // RES, cell % RES
+    cz = np.clip(2.0 * (ix + u2) / RES - 1.0, -1.0, 1.0)
+    r = np.sqrt(np.maximum(0.0, 1.0 - cz * cz))
+    phi = 2.0 * np.pi * (iy + f) / RES
+    wi[:] = np.where(ok[:, None], np.stack([r * np.cos(phi), r * np.sin(phi), cz], axis=1), [0.0, 0.0, 1.0])
+    pdf[:] = np.where(ok, density[l, cell] / FOUR_PI, 0.0)
+
+
+_sample_kernel = LoopKernel(_sample_loop, "void(int32[::1], float64[::1], float64[::1], float64[:, ::1], "
+                                          "float64[:, ::1], float64[:, ::1], float64[::1])", _sample_numpy)
+
+
+def _pdf_loop(leaf, wi, density, pdf):
+    for i in range(leaf.shape[0]):
+        l = leaf[i]
+        if l < 0:
+            pdf[i] = 0.0
+            continue
+        pdf[i] = density[l, _cell(wi[i, 0], wi[i, 1], wi[i, 2])] / FOUR_PI
+
+
+@helper
+def _cell(x, y, z):
+    """The finest cell of direction (x, y, z) (unit) in the cylindrical map."""
+    ix = int(np.floor((z + 1.0) * 0.5 * RES))
+    ix = min(max(ix, 0), RES - 1)
+    phi = np.arctan2(y, x)
+    if phi < 0.0:
+        phi += 2.0 * np.pi
+    iy = int(np.floor(phi / (2.0 * np.pi) * RES))
+    iy = min(max(iy, 0), RES - 1)
+    return ix * RES + iy
+
+
+def cells(wi):
+    """The finest cell of each direction (n, 3) (unit): NumPy form of _cell."""
+    with np.errstate(invalid="ignore"):
+        ix = np.clip(np.floor((wi[:, 2] + 1.0) * 0.5 * RES), 0, RES - 1)
+        phi = np.arctan2(wi[:, 1], wi[:, 0])
+        phi = np.where(phi < 0.0, phi + 2.0 * np.pi, phi)
+        iy = np.clip(np.floor(phi / (2.0 * np.pi) * RES), 0, RES - 1)
+    ix = np.where(np.isfinite(ix), ix, 0).astype(np.int64)
+    iy = np.where(np.isfinite(iy), iy, 0).astype(np.int64)
+    return ix * RES + iy
+
+
+def _pdf_numpy(leaf, wi, density, pdf):
+    ok = leaf >= 0
+    pdf[:] = np.where(ok, density[np.where(ok, leaf, 0), cells(wi)] / FOUR_PI, 0.0)
+
+
+_pdf_kernel = LoopKernel(_pdf_loop, "void(int32[::1], float64[:, ::1], float64[:, ::1], float64[::1])", _pdf_numpy)
+
+
+# ----------------------------------------------------------------------------
+# the spatial tree and the directional distributions
+
+
+class SpatialTree:
+    """Binary tree over the unit cube: ``child[node]`` is its first child
+    (the second follows it) or -1 - leaf for a leaf; ``depth[node]`` its level."""
+
+    def __init__(self, child, depth):
+        self.child = np.ascontiguousarray(child, np.int32)
+        self.depth = np.ascontiguousarray(depth, np.int32)
+        self.leaves = int((self.child < 0).sum())
+
+    @classmethod
+    def root(cls):
+        return cls([-1], [0])
+
+    def leaf_of(self, unit):
+        out = np.empty(len(unit), np.int32)
+        if len(unit):
+            _leaf_kernel(np.ascontiguousarray(unit, np.float64), self.child, out)
+        return out
+
+    def refine(self, counts, threshold):
+        """The tree with each leaf halved (recursively, its records assumed
+        to split evenly) while it holds more than ``threshold`` records, to
+        MAX_DEPTH levels and MAX_LEAVES leaves; leaves numbered in node order."""
+        child, depth = [0], [0]   # the new tree, built breadth-first
+        origin = {0: 0}           # new node -> the old node it copies
+        records = {}              # new split node -> records expected there
+        leaves = 0
+        i = 0
+        while i < len(child):
+            old = origin.get(i)
+            if old is not None and self.child[old] >= 0:   # an old inner node: its children follow
+                child[i] = len(child)
+                for k in range(2):
+                    origin[len(child)] = int(self.child[old]) + k
+                    child.append(0)
+                    depth.append(depth[i] + 1)
+                i += 1
+                continue
+            n = records[i] if old is None else float(counts[-1 - self.child[old]])
+            # Each split adds one leaf: the nodes not yet made leaves bound the count.
+            if n > threshold and depth[i] < MAX_DEPTH and leaves + (len(child) - i) < MAX_LEAVES:
+                child[i] = len(child)
+                for _ in range(2):
+                    records[len(child)] = n / 2.0
+                    child.append(0)
+                    depth.append(depth[i] + 1)
+            else:
+                child[i] = -1 - leaves
+                leaves += 1
+            i += 1
+        return SpatialTree(child, depth)
+
+
+def densities(energy):
+    """(L, BINS) pdf on the unit square of each leaf's quadtree (Mueller's:
+    a node split while its energy share exceeds RHO, down to RES x RES),
+    from its (L, BINS) cell energies; rows of no energy are 0."""
+    n = len(energy)
+    e = energy.reshape(n, RES, RES)
+    total = e.sum(axis=(1, 2))
+    inv = np.where(total > 0, 1.0 / np.where(total > 0, total, 1.0), 0.0)
+    pyramid = [e]   # level LEVELS (finest) first
+    for _ in range(LEVELS):
+        f = pyramid[-1]
+        s = f.shape[1] // 2
+        pyramid.append(f.reshape(n, s, 2, s, 2).sum(axis=(2, 4)))
+    pyramid = pyramid[::-1]   # level 0 (the root) first
+    out = np.zeros((n, RES, RES))
+    split = np.ones((n, 1, 1), bool)   # the root is always split
+    for level in range(1, LEVELS + 1):
+        exists = np.repeat(np.repeat(split, 2, axis=1), 2, axis=2)
+        share = pyramid[level] * inv[:, None, None]
+        split = exists & (share > RHO) if level < LEVELS else np.zeros_like(exists)
+        leaf = exists & ~split
+        area = 4.0 ** -level
+        value = np.where(leaf, share / area, 0.0)
+        scale = RES >> level
+        out += np.repeat(np.repeat(value, scale, axis=1), scale, axis=2)
+    return out.reshape(n, BINS)
+
+
+class Guide:
+    """What a pass samples: the spatial tree, each leaf's density (pdf on
+    the unit square per finest cell) and CDF (over cells, in cell order),
+    and which leaves guide; positions map to the unit cube by lo, inv_size."""
+
+    def __init__(self, tree, density, guided, lo, inv_size):
+        self.tree, self.lo, self.inv_size = tree, lo, inv_size
+        self.density = np.ascontiguousarray(density)
+        cdf = np.cumsum(self.density / BINS, axis=1)
+        cdf[:, -1] = np.where(guided, 1.0, cdf[:, -1])
+        self.cdf = np.ascontiguousarray(cdf)
+        self.guided = guided
+
+    def leaf_of(self, p):
+        """Each point's leaf, -1 where its leaf has learned nothing."""
+        leaf = self.tree.leaf_of(unit_cube(p, self.lo, self.inv_size))
+        return np.where(self.guided[leaf], leaf, -1).astype(np.int32)
+
+    def sample(self, leaf, u1, u2):
+        """(directions (n, 3) in world space, their pdf per steradian)."""
+        n = len(leaf)
+        wi, pdf = np.empty((n, 3)), np.empty(n)
+        if n:
+            _sample_kernel(np.ascontiguousarray(leaf, np.int32), _c(u1), _c(u2), self.cdf, self.density, wi, pdf)
+        return wi, pdf
+
+    def pdf(self, leaf, wi):
+        """The guide's pdf per steradian of world directions wi at leaves ``leaf``."""
+        out = np.empty(len(leaf))
+        if len(leaf):
+            _pdf_kernel(np.ascontiguousarray(leaf, np.int32), np.ascontiguousarray(wi, np.float64), self.density, out)
+        return out
+
+
+def _c(a):
+    return np.ascontiguousarray(a, np.float64)
+
+
+def unit_cube(p, lo, inv_size):
+    """Points mapped into [0, 1)^3 by the bounds (outside or NaN: clamped)."""
+    u = (np.asarray(p, np.float64) - lo) * inv_size
+    u = np.where(np.isfinite(u), u, 0.0)
+    return np.ascontiguousarray(np.clip(u, 0.0, 1.0 - 1e-12))
+
+
+def bounds_of(triangles):
+    """(lo, 1 / size) of the cube around the triangles (a unit cube when
+    there are none; flat or point-like bounds get a size of their own)."""
+    if triangles is None or not len(getattr(triangles, "p0", ())):
+        return np.zeros(3), np.ones(3)
+    p = np.concatenate([triangles.p0, triangles.p0 + triangles.e1, triangles.p0 + triangles.e2])
+    p = p[np.isfinite(p).all(axis=1)]
+    if not len(p):
+        return np.zeros(3), np.ones(3)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    size = float((hi - lo).max())
+    size = max(size, 1e-6 * (1.0 + float(np.abs(lo).max())), 1e-12) * (1.0 + 1e-6)
+    centre = 0.5 * (lo + hi)
+    return centre - 0.5 * size, np.full(3, 1.0 / size)
+
+
+class PathGuide:
+    """The film's guiding state: the spatial tree records go to, their
+    fixed-point sums and counts, the Guide passes sample, the schedule."""
+
+    def __init__(self, lo, inv_size, training_samples):
+        self.lo, self.inv_size = lo, inv_size
+        # Training samples (0: every sample, Cycles' meaning).
+        self.training = int(training_samples) if training_samples > 0 else 2 ** 62
+        self.tree = SpatialTree.root()
+        self._reset()
+        self.view = None           # the Guide of the next passes (None: not learned yet)
+
+    def _reset(self):
+        self.sums = np.zeros((self.tree.leaves, BINS), np.int64)
+        self.counts = np.zeros(self.tree.leaves, np.int64)
+
+    def records_for(self, first_sample):
+        """A tile's Records for a pass from sample ``first_sample`` (None once
+        training is over: no records)."""
+        if first_sample >= self.training:
+            return None
+        return Records(self.tree, self.lo, self.inv_size)
+
+    def merge(self, records):
+        """A tile's summed records (cells, sums, counts): integers, any order."""
+        if records is None:
+            return
+        cells_, sums, counts = records
+        flat = self.sums.reshape(-1)
+        flat[cells_] += sums   # cells unique within a tile
+        np.add.at(self.counts, cells_ // BINS, counts)
+
+    def update(self, samples):
+        """Rebuild the guide from the records since the last rebuild
+        (``samples``: samples per pixel they came from) and refine the
+        tree the next records go to."""
+        if samples <= 0 or not self.counts.any():
+            return
+        energy = self.sums.astype(np.float64) / FIXED
+        guided = (self.counts >= MIN_RECORDS) & (energy.sum(axis=1) > 0)
+        self.view = Guide(self.tree, densities(energy), guided, self.lo, self.inv_size)
+        self.tree = self.tree.refine(self.counts, SPLIT_RECORDS * np.sqrt(max(samples, 1)))
+        self._reset()
+
+
+class Records:
+    """A tile's records before summing: recording cells and values."""
+
+    def __init__(self, tree, lo, inv_size):
+        self.tree, self.lo, self.inv_size = tree, lo, inv_size
+        self.parts = []
+
+    def add(self, cell, value):
+        # Records of no light count too (the spatial tree splits by how
+        # many paths pass, as Mueller's); NaN, inf and negative ones are dropped.
+        ok = (cell >= 0) & np.isfinite(value) & (value >= 0)
+        if ok.any():
+            self.parts.append((cell[ok].astype(np.int64), value[ok]))
+
+    def summed(self):
+        """(unique cells, int64 sums, int64 counts), or None: records
+        rounded to fixed point before adding, so any grouping sums alike."""
+        if not self.parts:
+            return None
+        cell = np.concatenate([c for c, _ in self.parts])
+        q = np.rint(np.minimum(np.concatenate([v for _, v in self.parts]), VMAX) * FIXED).astype(np.int64)
+        order = np.argsort(cell, kind="stable")
+        cell, q = cell[order], q[order]
+        start = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]])
+        counts = np.diff(np.r_[start, len(cell)]).astype(np.int64)
+        self.parts = []
+        return cell[start], np.add.reduceat(q, start), counts
+
+
+# ----------------------------------------------------------------------------
+# the integrator's side
+
+_ELIGIBLE = {}
+
+
+def eligible_kinds():
+    """Lobe ids a guided vertex may hold: smooth reflection only (memoized per registry size)."""
+    key = len(lobe_registry.REGISTRY)
+    if key not in _ELIGIBLE:
+        _ELIGIBLE[key] = tuple(sorted(d.id for d in lobe_registry.REGISTRY.values()
+                                      if d.flags == lobe_registry.REFLECTION and d.eval is not None))
+    return _ELIGIBLE[key]
+
+
+class GuideAt:
+    """The guide at a batch of vertices: its Guide (None: none yet), each
+    vertex's leaf (-1: not guided, the BSDF alone samples there), its guide
+    probability and which vertices may be guided (they train the guide)."""
+
+    def __init__(self, view, leaf, alpha, eligible):
+        self.view, self.leaf, self.alpha, self.eligible = view, leaf, alpha, eligible
+
+    def take(self, rows):
+        return GuideAt(self.view, self.leaf[rows], self.alpha[rows], self.eligible[rows])
+
+    @property
+    def rows(self):
+        return np.flatnonzero(self.leaf >= 0)
+
+
+def guide_probability(kind, lobe_alpha, selection, kind_in=np.isin):
+    """Each vertex's probability of sampling the guide: ALPHA times the
+    selection-weighted roughness of its lobes (diffuse lobes 1, glossy ones
+    their roughness sqrt(alpha)), as Cycles' roughness-scaled guiding
+    probability: a narrow lobe is better sampled by itself."""
+    diffuse = kind_in(kind, lobe_registry.kinds_of_class("diffuse"))
+    rough = np.where(diffuse, 1.0, np.minimum(np.sqrt(np.maximum(lobe_alpha, 0.0)), 1.0))
+    return ALPHA * np.clip((selection * rough).sum(axis=1), 0.0, 1.0)
+
+
+def at_vertices(view, recording, v, kind_in, none_kind):
+    """The GuideAt of vertices ``v`` (None when nothing is guided or
+    recorded there)."""
+    if (view is None and not recording) or len(v) == 0:
+        return None
+    lobes = v.lobes
+    ok = kind_in(lobes.kind, eligible_kinds() + (none_kind,)).all(axis=1) & (v.selection > 0).any(axis=1)
+    if lobes.diffuse_split is not None:
+        ok &= ~lobes.diffuse_split
+    if not ok.any():
+        return None
+    leaf = np.full(len(v), -1, np.int32)
+    alpha = np.zeros(len(v))
+    if view is not None:
+        rows = np.flatnonzero(ok)
+        alpha[rows] = guide_probability(lobes.kind[rows], lobes.alpha[rows], v.selection[rows], kind_in)
+        rows = rows[alpha[rows] >= MIN_ALPHA]
+        leaf[rows] = view.leaf_of(v.hit.p[rows])
+    if not recording and not (leaf >= 0).any():
+        return None
+    return GuideAt(view, leaf, alpha, ok)
+
+
+def mixed_pdf(p_guide, p_bsdf, alpha):
+    return alpha * p_guide + (1.0 - alpha) * p_bsdf
+
+
+def split_choice(guide, u0):
+    """(which rows sample the guide, u0 rescaled for the BSDF's lobe choice)."""
+    on = guide.leaf >= 0
+    a = np.where(on, guide.alpha, 0.0)
+    chosen = on & (u0 < a)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.where(on, np.where(chosen, u0 / np.where(on, a, 1.0), (u0 - a) / np.where(on, 1.0 - a, 1.0)), u0)
+    return chosen, np.minimum(u, np.nextafter(1.0, 0.0))
+
+
+def nee_pdf(v, wi, pdf_b):
+    """The BSDF-side pdf light samples' MIS weighs at vertices ``v``: the
+    mixture where guided."""
+    g = v.guide
+    if g is None:
+        return pdf_b
+    rows = g.rows
+    if not len(rows):
+        return pdf_b
+    out = np.array(pdf_b, dtype=np.float64, copy=True)
+    out[rows] = mixed_pdf(g.view.pdf(g.leaf[rows], wi[rows]), out[rows], g.alpha[rows])
+    return out
+
+
+def record_slots(paths, v, rows, tile):
+    """Guided vertices ``rows`` that go on remember a slot (the oldest one
+    of the path's given to the tile first)."""
+    rec = getattr(tile, "path_records", None)
+    pg = paths.guide_path
+    if rec is None or not pg.shape[1] or not len(rows):
+        return
+    count = pg[rows, 0].astype(np.int64)
+    slot = count % SLOTS
+    col = 1 + 3 * slot
+    L = paths.L[rows].mean(axis=1)
+    old = pg[rows, col]
+    full = old >= 0
+    if full.any():
+        r = rows[full]
+        c = col[full]
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            value = (L[full] - pg[r, c + 1]) / pg[r, c + 2]
+        rec.add(old[full].astype(np.int64), value)
+    leaf = rec.tree.leaf_of(unit_cube(v.hit.p[rows], rec.lo, rec.inv_size))
+    pg[rows, col] = (leaf.astype(np.int64) * BINS + cells(paths.d[rows])).astype(np.float64)
+    pg[rows, col + 1] = L
+    # Radiance times the cosine at the vertex (the product the BSDF's own
+    # sampling leaves out), over the throughput and pdf: Mueller's record.
+    cos = np.abs(np.einsum("ij,ij->i", paths.d[rows], v.hit.ns[rows]))
+    with np.errstate(divide="ignore"):
+        pg[rows, col + 2] = paths.beta[rows].mean(axis=1) * paths.prev_pdf[rows] / cos
+    pg[rows, 0] = count + 1
+
+
+def finish_slots(rec, pg, L):
+    """Paths ending (their Paths.guide_path rows and radiance): every slot's record."""
+    if rec is None or not pg.shape[1] or not len(pg):
+        return
+    Lm = L.mean(axis=1)
+    for s in range(SLOTS):
+        c = 1 + 3 * s
+        full = pg[:, c] >= 0
+        if full.any():
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                value = (Lm[full] - pg[full, c + 1]) / pg[full, c + 2]
+            rec.add(pg[full, c].astype(np.int64), value)
+
+
+def start_columns(n, tile):
+    """Paths.guide_path for n new paths: COLUMNS per path where the tile
+    records, else none."""
+    if getattr(tile, "path_records", None) is None:
+        return np.zeros((n, 0))
+    out = np.full((n, COLUMNS), -1.0)
+    out[:, 0] = 0.0
+    return out
+
+
+def mix(v, chosen, u1, u2, wi_l, weight, pdf, delta, eval_pdf):
+    """One-sample MIS of the guide and the BSDF at vertices ``v`` (in
+    place): rows ``chosen`` take the guide's direction (u1, u2) with the
+    BSDF's value there; every guided row's weight and pdf become f cos /
+    p_mix and p_mix.  Returns the BSDF's own pdf of each row's direction
+    (visibility.ray_kind draws the bounce's kind by it)."""
+    from ..microfacet import COS_EPS
+    g = v.guide
+    on = g.leaf >= 0
+    rows = np.flatnonzero(chosen)
+    p_guide = np.zeros(len(pdf))
+    bsdf_pdf = pdf.copy()   # pdf itself becomes p_mix below
+    if len(rows):
+        wi_w, p_guide[rows] = g.view.sample(g.leaf[rows], u1[rows], u2[rows])
+        wi_l[rows] = to_local(wi_w, v.tt[rows], v.bb[rows], v.hit.ns[rows])
+        # The BSDF at every row (cheaper than taking the lobes' rows), kept where guided.
+        f, pb = eval_pdf(v.lobes, v.wo_l, wi_l, v.selection, v.weights)
+        bsdf_pdf = np.where(chosen, pb, pdf)
+        delta[rows] = False
+    other = np.flatnonzero(on & ~chosen)
+    if len(other):
+        wo_w = to_world(wi_l[other], v.tt[other], v.bb[other], v.hit.ns[other])
+        p_guide[other] = g.view.pdf(g.leaf[other], wo_w)
+    # Whole-row arithmetic (cheaper than gathering the guided rows).
+    a = np.where(on, g.alpha, 0.0)
+    p_mix = a * p_guide + (1.0 - a) * bsdf_pdf
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.where(p_mix > 0, 1.0 / p_mix, 0.0)
+    weight *= np.where(on & ~chosen, bsdf_pdf * scale, 1.0)[:, None]   # f cos / p_bsdf times p_bsdf / p_mix
+    if len(rows):
+        up = v.wo_l[rows, 2] > COS_EPS
+        cos = np.abs(wi_l[rows, 2])
+        weight[rows] = f[rows] * np.where(up, cos * scale[rows], 0.0)[:, None]
+    pdf[:] = np.where(on, p_mix, pdf)
+    return bsdf_pdf
