@@ -28,7 +28,10 @@ case) each cell's majorant bounds every voxel lookup inside it.
 Evaluated coefficients are made renderable as Cycles' closures do: NaN is 0,
 negative densities are 0 (fmaxf(density, 0)), and values past SIGMA_MAX
 (1/m) are SIGMA_MAX; each kind of repair is named in a warning with the
-material.
+material.  Emission may be negative (as in Cycles: a blackbody below about
+1500 K in blue, a negative Emission colour), only its NaN and magnitudes
+past SIGMA_MAX repaired.  A textured Henyey-Greenstein g is clamped to
+[-1, 1], NaN read as 0 (named).
 """
 import numpy as np
 
@@ -39,6 +42,7 @@ from ..textures import Compiler, is_texture
 from .voxels import Voxels
 
 FIELDS = ("absorption", "scattering", "emission")
+EMISSION = 2    # FIELDS' index of the emission (signed)
 GRID = 16
 LATTICE = 2
 MARGIN = 1.25
@@ -52,7 +56,10 @@ STEP = 3
 
 
 def is_heterogeneous(volume):
-    return volume is not None and any(is_texture(getattr(volume, f)) for f in FIELDS)
+    """A medium with a textured coefficient or a textured anisotropy (its
+    g varies per point: the trackers evaluate it where paths scatter)."""
+    return volume is not None and (any(is_texture(getattr(volume, f)) for f in FIELDS)
+                                   or is_texture(getattr(volume, "anisotropy", 0.0)))
 
 
 class Field:
@@ -62,7 +69,9 @@ class Field:
         self.material, self.name = material, name
         self.voxels = voxels
         self.fns = [_scaled(compiler.color(getattr(volume, f)), density) for f in FIELDS]
-        self.g = float(volume.anisotropy)
+        g = getattr(volume, "anisotropy", 0.0)
+        self.g_fn = compiler.compile(g)[0] if is_texture(g) else None
+        self.g = 0.0 if self.g_fn is not None else float(g)
         m = np.asarray(matrix, np.float64).reshape(4, 4)
         self.matrix = m
         self.inverse = np.linalg.inv(m) if np.isfinite(m).all() and abs(np.linalg.det(m[:3, :3])) > 1e-300 \
@@ -75,7 +84,7 @@ class Field:
         self.pad = pad
         self.cell = (self.hi - self.lo) / GRID
         self.tri, self.tris = int(tri), tris
-        self.repaired = {"NaN": 0, "negative": 0, "too large": 0}
+        self.repaired = {"NaN": 0, "negative": 0, "too large": 0, "NaN anisotropy": 0}
         self.evaluated = 0     # points evaluated (statistics)
         self.grid = np.ascontiguousarray(self._majorants(), np.float64)
 
@@ -98,28 +107,54 @@ class Field:
         """(sigma_a, sigma_s, emission) (N, 3) at world points p (``inside``
         False: the grid's lattice, partly outside the mesh, where a negative
         value is no user error)."""
+        return self.evaluate_phase(p, d, q, inside)[:3]
+
+    def evaluate_phase(self, p, d, q=None, inside=True):
+        """(sigma_a, sigma_s, emission (N, 3), g (N,)) at world points p:
+        the coefficients (``evaluate``) and the Henyey-Greenstein g there
+        (a textured one clamped to [-1, 1] as Cycles' closure setup, NaN
+        read as 0 and counted), one shading context for both."""
         ctx = self.context(p, d, q)
         self.evaluated += len(p)
-        return tuple(self._renderable(fn(ctx), inside) for fn in self.fns)
+        out = tuple(self._renderable(fn(ctx), inside, k == EMISSION) for k, fn in enumerate(self.fns))
+        if self.g_fn is None:
+            return out + (np.full(len(p), self.g),)
+        return out + (self._anisotropy(self.g_fn(ctx), len(p)),)
 
-    def _renderable(self, v, inside=True):
+    def _anisotropy(self, g, n):
+        g = np.array(np.broadcast_to(np.asarray(g, np.float64), (n,)))
+        nan = np.isnan(g)
+        if nan.any():
+            self.repaired["NaN anisotropy"] += int(nan.sum())
+            g[nan] = 0.0
+        return np.clip(g, -1.0, 1.0)
+
+    def _renderable(self, v, inside=True, signed=False):
+        """``signed``: the emission, which may be negative as in Cycles (a
+        Principled Volume's blackbody below about 1500 K, a negative
+        Emission colour): only NaN and magnitudes past SIGMA_MAX repaired."""
         v = np.array(np.broadcast_to(v, (len(v), 3)), np.float64)
         nan = np.isnan(v)
-        neg = v < 0
-        big = v > SIGMA_MAX
+        neg = np.zeros(v.shape, bool) if signed else v < 0
+        big = np.abs(v) > SIGMA_MAX if signed else v > SIGMA_MAX
         if nan.any() or neg.any() or big.any():
             self.repaired["NaN"] += int(nan.sum())
             self.repaired["negative"] += int(neg.sum()) if inside else 0
             self.repaired["too large"] += int(big.sum())
-            v = np.where(nan | neg, 0.0, np.minimum(v, SIGMA_MAX))
+            v = np.where(nan | neg, 0.0, np.clip(v, -SIGMA_MAX, SIGMA_MAX))
         return v
 
     def warning(self):
-        bad = [f"{k} ({n} values)" for k, n in self.repaired.items() if n]
-        if not bad:
+        bad = [f"{k} ({n} values)" for k, n in self.repaired.items() if n and k != "NaN anisotropy"]
+        parts = []
+        if bad:
+            parts.append("textured volume coefficients " + ", ".join(bad)
+                         + f" read as 0 (NaN, negative) or {SIGMA_MAX:g}/m (too large)")
+        if self.repaired.get("NaN anisotropy"):
+            parts.append(f"NaN anisotropy ({self.repaired['NaN anisotropy']} values) read as 0")
+        if not parts:
             return None
-        return (f"material {self.name!r}: textured volume coefficients " + ", ".join(bad)
-                + f" read as 0 (NaN, negative) or {SIGMA_MAX:g}/m (too large)")
+        return f"material {self.name!r}: " + "; ".join(parts)
 
     # -- the majorant grid ----------------------------------------------------
     def _majorants(self):
@@ -137,11 +172,11 @@ class Field:
         # Negative values inside the mesh's bounds (not on the padded edge)
         # are the texture's own: counted.
         core = np.all((q > self.lo + 0.5 * self.pad) & (q < self.hi - 0.5 * self.pad), axis=1)
-        self.repaired["negative"] += int(sum(np.count_nonzero(core[:, None] & (r < 0)) for r in raw))
-        sa, ss, em = (self._renderable(r, inside=False) for r in raw)
-        self.emits = bool(np.any(em > 0))
+        self.repaired["negative"] += int(sum(np.count_nonzero(core[:, None] & (r < 0)) for r in raw[:EMISSION]))
+        sa, ss, em = (self._renderable(r, False, j == EMISSION) for j, r in enumerate(raw))
+        self.emits = bool(np.any(em != 0))
         v = _cell_max((sa + ss).max(axis=1).reshape(k, k, k))
-        e = _cell_max(em.max(axis=1).reshape(k, k, k))
+        e = _cell_max(np.abs(em).max(axis=1).reshape(k, k, k))
         top = float(v.max())
         self.max = top
         # The floor: a collision rate in cells that looked empty, at most

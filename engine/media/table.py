@@ -172,11 +172,11 @@ class MediumTable:
         sa, ss, em, gw = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
         for k, j, rows in self._field_rows(stack):
             f = self.fields[j]
-            a, s, e = f.evaluate(p[rows], d[rows])
+            a, s, e, g = f.evaluate_phase(p[rows], d[rows])
             sa[rows] += a
             ss[rows] += s
             em[rows] += e
-            gw[rows] += s.mean(axis=1) * f.g
+            gw[rows] += s.mean(axis=1) * g
         return sa, ss, em, gw
 
     def majorant(self, stack, p, d):
