@@ -246,9 +246,7 @@ def _validate_lobe_extras(lobe, k, what, n_lobes):
 def validate_world(world):
     _rgb(world.color, "world colour")
     vol = getattr(world, "volume", None)
-    if vol is not None:
-        if any(is_texture(getattr(vol, f)) for f in ("absorption", "scattering", "emission")):
-            raise SceneError("world volume: textured coefficients are not supported (constants only)")
+    if vol is not None:   # textured: a field over the scene (media/field.py WorldField)
         validate_volume(vol, "world")
     tex = world.texture
     if tex is None:

@@ -114,10 +114,8 @@ CONSTANT_VALUE_INPUTS = PRINCIPLED_UNSUPPORTED + ('Anisotropy',)
 class NodeTranslator:
     """Translates one material's node tree, remembering what it could not."""
 
-    def __init__(self, material_name, constant_volumes=False):
+    def __init__(self, material_name):
         self.material_name = material_name
-        # Read every volume input as a constant (the world's volume).
-        self.constant_volumes = constant_volumes
         self.unsupported = []   # node labels, in order of discovery
         self.textured = []      # "node.input" names read as constants
         self.approximated = []  # Principled BSDF features not rendered yet
@@ -537,9 +535,8 @@ class NodeTranslator:
 
     def volume(self, socket):
         """The medium a Volume socket evaluates to (its inputs constants or
-        texture expressions; an untranslatable link, a Mix Shader's Fac and
-        every input of the world's volume are read as their own values, with
-        a warning)."""
+        texture expressions; an untranslatable link and a Mix Shader's Fac
+        are read as their own values, with a warning)."""
         node, out = self._linked_node(socket)
         if node is None or node.type == 'GROUP_DEFAULT':
             return VolumeClosure()
@@ -581,8 +578,6 @@ class NodeTranslator:
         socket = node.inputs.get(name)
         if socket is None:
             return default
-        if self.constant_volumes:
-            return self._volume_const(node, name, default, color)
         if not socket.is_linked:
             return self._const(node, name, nodes.constant(socket), color)
         value = self.reader.read(socket)

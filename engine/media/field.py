@@ -50,6 +50,8 @@ FLOOR = 1e-3
 FLOOR_DEPTH = 100.0
 EMISSIVE_RATE = 16.0
 SIGMA_MAX = 1e8
+# The world medium beyond its grid's box: absorbing at once (1/m).
+OPAQUE = SIGMA_MAX
 # A majorant holds along the ray for STEP cells along each axis (the
 # segment's bounding box spans at most STEP + 1 cells per axis).
 STEP = 3
@@ -76,7 +78,7 @@ class Field:
         self.matrix = m
         self.inverse = np.linalg.inv(m) if np.isfinite(m).all() and abs(np.linalg.det(m[:3, :3])) > 1e-300 \
             else np.eye(4)
-        self.loc, self.factor = texture_space(mesh)
+        self.loc, self.factor = self._texture_space(mesh)
         pos = np.asarray(mesh.positions, np.float64).reshape(-1, 3)
         lo, hi = pos.min(axis=0), pos.max(axis=0)
         pad = 1e-4 * (hi - lo).max() + 1e-9
@@ -87,6 +89,10 @@ class Field:
         self.repaired = {"NaN": 0, "negative": 0, "too large": 0, "NaN anisotropy": 0}
         self.evaluated = 0     # points evaluated (statistics)
         self.grid = np.ascontiguousarray(self._majorants(), np.float64)
+
+    @staticmethod
+    def _texture_space(mesh):
+        return texture_space(mesh)
 
     # -- coefficients at points -----------------------------------------------
     def context(self, p, d, q=None):
@@ -176,6 +182,7 @@ class Field:
         sa, ss, em = (self._renderable(r, False, j == EMISSION) for j, r in enumerate(raw))
         self.emits = bool(np.any(em != 0))
         v = _cell_max((sa + ss).max(axis=1).reshape(k, k, k))
+        self.grid_raw = v
         e = _cell_max(np.abs(em).max(axis=1).reshape(k, k, k))
         top = float(v.max())
         self.max = top
@@ -282,6 +289,74 @@ def _majorant_rows(q, dq, lo, hi, cell, grid, mu, dist):
             dist[i] = near
 
 
+class WorldField(Field):
+    """The world's textured medium (Cycles' background volume, object
+    none): Object and Generated coordinates are the point itself (what
+    Cycles 5.0 gives there, measured: a noise over Object, Generated,
+    Position or its default coordinates renders alike).  Its majorant grid
+    spans ``bounds`` (the scene's geometry, camera and lights, padded);
+    beyond them the medium is opaque (rays leaving the box are infinite:
+    Cycles' exp(-sigma_t x FLT_MAX) extinguishes them where any density is
+    left along the way: its background and distant lights are black
+    through world fog, measured) unless the density on the box's faces is
+    0 everywhere, when it is empty there."""
+
+    def __init__(self, material, volume, bounds, tris, compiler):
+        lo, hi = (np.asarray(b, np.float64) for b in bounds)
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        box = type("Box", (), {"positions": corners, "texspace": None})()
+        self.beyond = 0.0     # the box's own lattice is evaluated without it
+        super().__init__(material, "world", volume, np.eye(4), box, 0, tris, compiler)
+        self.beyond = OPAQUE if self._faces_extinguish() else 0.0
+
+    @staticmethod
+    def _texture_space(mesh):
+        """Generated = Object = P: (q - loc) x factor + 0.5 with loc 0.5, factor 1."""
+        return np.full(3, 0.5), np.ones(3)
+
+    def _faces_extinguish(self):
+        g = self.grid_raw
+        return bool(max(g[0].max(), g[-1].max(), g[:, 0].max(), g[:, -1].max(), g[:, :, 0].max(),
+                        g[:, :, -1].max()) > 0)
+
+    def evaluate_phase(self, p, d, q=None, inside=True):
+        out = super().evaluate_phase(p, d, q, inside)
+        if self.beyond > 0:
+            q = self.to_object(p) if q is None else q
+            out[0][~np.all((q >= self.lo) & (q < self.hi), axis=1)] = self.beyond
+        return out
+
+    def majorant(self, p, d):
+        mu, dist = super().majorant(p, d)
+        if self.beyond > 0:
+            q = self.to_object(p)
+            out = ~np.all((q >= self.lo) & (q < self.hi), axis=1)
+            mu[out], dist[out] = self.beyond, np.inf
+        return mu, dist
+
+
+def scene_bounds(scene, tris):
+    """(lo, hi) of the scene's triangles, camera and positioned lights,
+    padded by a tenth of the diagonal and the camera's orthographic scale
+    (rays start across it)."""
+    pts = [np.asarray(scene.camera.matrix, np.float64)[:3, 3][None, :]]
+    if tris is not None and len(tris):
+        pts += [tris.p0, tris.p0 + tris.e1, tris.p0 + tris.e2]
+    for light in scene.lights:
+        where = getattr(light, "position", None)
+        if where is None and getattr(light, "matrix", None) is not None and not hasattr(light, "direction"):
+            where = np.asarray(light.matrix, np.float64)[:3, 3]
+        if where is not None:
+            pts.append(np.asarray(where, np.float64).reshape(1, 3))
+    pts = np.concatenate(pts)
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = 0.1 * float(np.linalg.norm(hi - lo)) + 1e-3
+    if scene.camera.kind == "ORTHO":
+        pad += float(scene.camera.ortho_scale)
+    return lo - pad, hi + pad
+
+
 def _scaled(fn, factor):
     """fn times the object's volume density factor (1: fn itself)."""
     factor = float(factor) if np.isfinite(factor) and factor > 0 else 1.0
@@ -330,6 +405,9 @@ def build_fields(table, materials, scene, tris):
                                 scene.meshes[instance.mesh], rows[first[j]], tris, compiler, voxels[i],
                                 getattr(instance, "volume_density", 1.0)))
         tri_medium[rows] = table.first_field + inverse
+    world = getattr(table, "world_volume", None)
+    if is_heterogeneous(world):
+        fields.append(WorldField(table.world, world, scene_bounds(scene, tris), tris, compiler))
     return fields, tri_medium
 
 
