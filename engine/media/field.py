@@ -336,12 +336,23 @@ class WorldField(Field):
 
 
 def scene_bounds(scene, tris):
-    """(lo, hi) of the scene's triangles, camera and positioned lights,
+    """(lo, hi) of the scene's triangles, points, curves, camera and positioned lights,
     padded by a tenth of the diagonal and the camera's orthographic scale
     (rays start across it)."""
     pts = [np.asarray(scene.camera.matrix, np.float64)[:3, 3][None, :]]
     if tris is not None and len(tris):
         pts += [tris.p0, tris.p0 + tris.e1, tris.p0 + tris.e2]
+    # Point clouds and curves (their object-space points placed, grown by their largest radius).
+    groups = ((getattr(scene, "points", ()) or (), "positions"), (getattr(scene, "curves", ()) or (), "points"))
+    for group, name in groups:
+        for item in group:
+            local = np.asarray(getattr(item, name), np.float64).reshape(-1, 3)
+            if not len(local):
+                continue
+            m = np.asarray(getattr(item, "matrix", np.eye(4)), np.float64).reshape(4, 4)
+            r = float(np.max(np.abs(np.asarray(item.radii, np.float64)), initial=0.0)) * (1.0 + np.abs(m[:3, :3]).sum())
+            placed = local @ m[:3, :3].T + m[:3, 3]
+            pts += [placed - r, placed + r]
     for light in scene.lights:
         where = getattr(light, "position", None)
         if where is None and getattr(light, "matrix", None) is not None and not hasattr(light, "direction"):

@@ -73,3 +73,19 @@ def test_world_density_gone_at_the_bounds_leaves_the_background():
     clear = [0, 1, 2, 9, 10, 11]     # background, and the card at |x| in (0.75, 1)
     np.testing.assert_allclose(img[:, clear], 1.0, rtol=1e-6)
     assert img[5:7, 5:7].max() < 0.5    # through the ball's middle: exp(-2 x ~1)
+
+
+def test_world_field_bounds_hold_points_curves_camera_and_lights():
+    """The world field's box (beyond it the medium is opaque) holds every
+    point cloud, curve, light position and the camera, padded."""
+    from engine.media.field import scene_bounds
+    from engine.scene import PointCloud, PointLight
+    m = np.eye(4)
+    m[:3, 3] = (30.0, 0.0, 0.0)
+    cloud = PointCloud(positions=np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]]), radii=np.array([0.5, 0.2]),
+                       matrix=m, materials=[0])
+    scene = world_scene((0.1, 0.1, 0.1))
+    scene.points = [cloud]
+    scene.lights = [PointLight(position=(0.0, -20.0, 1.0), power=(1.0, 1.0, 1.0))]
+    lo, hi = scene_bounds(scene, None)
+    assert np.all(lo < [-1.5, -20.0, -1.0]) and np.all(hi > [31.5, 2.0, 6.5]), (lo, hi)
