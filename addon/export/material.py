@@ -8,8 +8,8 @@ Film, emission dimmed by sheen and coat), Mix Shader and Add Shader; anisotropic
 take the material's tangent (the Tangent input, Cycles' radial tangent
 about the object's Z when unlinked); in
 the Volume output, Volume Absorption, Volume Scatter, Principled Volume,
-Emission, Add and Mix Shader (a medium whose inputs may be textures evaluated
-at points inside it, engine/media/field.py; a Mix Shader's Fac is a constant).  A
+Emission, Add and Mix Shader (a medium whose inputs, a Mix Shader's Fac too,
+may be textures evaluated at points inside it, engine/media/field.py).  A
 node Ember cannot translate becomes a grey diffuse (or a diffuse of the
 node's Color input) and is named in one warning per material.  Inputs may be
 driven by textures (nodes.SocketReader): lobe colours, roughness, IOR and
@@ -535,8 +535,8 @@ class NodeTranslator:
 
     def volume(self, socket):
         """The medium a Volume socket evaluates to (its inputs constants or
-        texture expressions; an untranslatable link and a Mix Shader's Fac
-        are read as their own values, with a warning)."""
+        texture expressions; an untranslatable link is read as the socket's
+        own value, with a warning)."""
         node, out = self._linked_node(socket)
         if node is None or node.type == 'GROUP_DEFAULT':
             return VolumeClosure()
@@ -715,8 +715,10 @@ class NodeTranslator:
         return self._volume_sum(self.volume(node.inputs[0]), self.volume(node.inputs[1]), node)
 
     def _volume_mix_shader(self, node):
-        fac = min(max(self._volume_const(node, 'Fac', 0.5), 0.0), 1.0)
-        return self._volume_sum(self.volume(node.inputs[1]).scaled(1.0 - fac),
+        """Cycles' svm_node_mix_closure: the two closures weighted by
+        1 - saturate(Fac) and saturate(Fac), per point where Fac is textured."""
+        fac = nodes.clamp01(self._volume_input(node, 'Fac', 0.5))
+        return self._volume_sum(self.volume(node.inputs[1]).scaled(_one_minus(fac)),
                                 self.volume(node.inputs[2]).scaled(fac), node)
 
     def _volume_note(self, node, what):
@@ -773,7 +775,7 @@ class VolumeClosure:
     scattering: tuple = BLACK
     emission: tuple = BLACK
     g_weight: object = 0.0       # sum of w x g over the closures (w: _mean_weight of each)
-    g_total: float = 0.0         # sum of w
+    g_total: object = 0.0        # sum of w (an expression where a Mix Shader's Fac is textured)
     phases: tuple = ()           # the distinct g of the scattering closures
     # A Volume Scatter's other phase function: (phase, alpha, backscatter,
     # ior, diameter), None for Henyey-Greenstein.
@@ -785,14 +787,23 @@ class VolumeClosure:
         return dataclasses.replace(self, g_weight=nodes.multiply(w, g), g_total=w, phases=(g,))
 
     def scaled(self, w):
+        """The closures weighted by w (a constant or a float expression)."""
+        if nodes.is_expr(w):
+            used = nodes.may_exceed(w, 0.0)
+            scatters = nodes.is_expr(self.g_total) or self.g_total > 0
+            return VolumeClosure(_weighted(self.absorption, w), _weighted(self.scattering, w),
+                                 _weighted(self.emission, w),
+                                 nodes.math('MULTIPLY', self.g_weight, w) if scatters else 0.0,
+                                 nodes.math('MULTIPLY', self.g_total, w) if scatters else 0.0,
+                                 self.phases if used else (), self.phase_spec if used else None)
         return VolumeClosure(_scale3(self.absorption, w), _scale3(self.scattering, w), _scale3(self.emission, w),
-                             nodes.multiply(self.g_weight, w), self.g_total * w,
+                             nodes.multiply(self.g_weight, w), nodes.multiply(self.g_total, w),
                              self.phases if w > 0 else (), self.phase_spec if w > 0 else None)
 
     def plus(self, other):
         return VolumeClosure(_add3(self.absorption, other.absorption), _add3(self.scattering, other.scattering),
                              _add3(self.emission, other.emission), _plus(self.g_weight, other.g_weight),
-                             self.g_total + other.g_total, _distinct(self.phases + other.phases),
+                             _plus(self.g_total, other.g_total), _distinct(self.phases + other.phases),
                              self.phase_spec if self.phase_spec is not None else other.phase_spec)
 
     def phases_differ(self, other):
@@ -800,12 +811,22 @@ class VolumeClosure:
 
     def anisotropy(self):
         """The medium's g: the weighted mean of its closures' (an expression
-        where one is textured: the engine clamps it per point)."""
+        where one is textured: the engine clamps it per point; a textured
+        weight divides per point, 0 where it is 0)."""
+        if nodes.is_expr(self.g_total):
+            return nodes.math('DIVIDE', self.g_weight, self.g_total)
         if self.g_total <= 0:
             return 0.0
         if nodes.is_expr(self.g_weight):
             return nodes.multiply(self.g_weight, 1.0 / self.g_total)
         return min(max(self.g_weight / self.g_total, -1.0), 1.0)
+
+
+def _weighted(c, w):
+    """A coefficient times a float expression (none stays none)."""
+    if not nodes.is_expr(c) and all(float(x) == 0.0 for x in c):
+        return BLACK
+    return _times(c, w)
 
 
 def _clamp_g(g):

@@ -14,6 +14,9 @@ Scenes (24 x 18 pixels, Cycles' null scattering, Volume bounces 0):
 * anisotropy: a scattering cube whose Anisotropy is -0.6 + 1.4 x a
   gradient along Generated x (-0.6 to 0.8), lit by a sun from behind it:
   single scattering with the phase function's g per point;
+* mixed: a Mix Shader whose Fac is a gradient along Generated x between a
+  Volume Absorption and a forward-scattering Volume Scatter, in a grey
+  world under a sun (Cycles' svm_node_mix_closure weights per point);
 * world_fog: the world's Principled Volume with Density 0.5 x a noise at
   the point (Cycles' world coordinates: Object = Generated = Position, the
   noise's default), a point light above a cube casting a shadow cone
@@ -34,7 +37,7 @@ from test_volume_parity import _camera, _material, _object, _volume_settings, _w
 
 WIDTH, HEIGHT, BLOCK = 24, 18, 6
 CYCLES_SEEDS, CYCLES_SPP = 4, 64
-SPP = {'fire': 64, 'tinted_fog': 32, 'anisotropy': 256, 'world_fog': 128}
+SPP = {'fire': 64, 'tinted_fog': 32, 'anisotropy': 256, 'world_fog': 128, 'mixed': 128}
 # The anisotropy cube is tracked (its g is a texture) and its sun light is
 # found by NEE through ratio tracking: 4x the noise of the constant-g cube
 # (measured at 256 spp: the image mean detects 8.3 %, the median block 24 %;
@@ -43,7 +46,8 @@ SPP = {'fire': 64, 'tinted_fog': 32, 'anisotropy': 256, 'world_fog': 128}
 # 3.35 %, median block 39.8 %; with the blackbody fit clamped at 0, as the
 # Blackbody node, its cool side's blue blocks differed at t = 92).
 # The world fog (tracked everywhere) measured at 128 spp: 6.3 %, 15.4 %.
-POWER = {'fire': (0.035, 0.42), 'tinted_fog': (0.011, 0.02), 'anisotropy': (0.09, 0.26), 'world_fog': (0.07, 0.17)}
+POWER = {'fire': (0.035, 0.42), 'tinted_fog': (0.011, 0.02), 'anisotropy': (0.09, 0.26), 'world_fog': (0.07, 0.17),
+         'mixed': (0.012, 0.035)}   # mixed measured at 128 spp: 1.07 %, 3.0 %
 
 
 def _gradient(tree, axis):
@@ -90,6 +94,24 @@ def anisotropy_volume(tree):
     node = _principled(tree, Color=(0.9, 0.9, 0.9), Density=1.2, Anisotropy=0.0)
     tree.links.new(_affine(tree, _gradient(tree, 'X'), 1.4, -0.6), node.inputs['Anisotropy'])
     return node.outputs[0]
+
+
+def mixed_volume(tree):
+    """A Mix Shader whose Fac is a gradient along Generated x: Volume
+    Absorption on the left, a forward-scattering Volume Scatter on the right."""
+    scatter = tree.nodes.new('ShaderNodeVolumeScatter')
+    scatter.inputs['Color'].default_value = (0.9, 0.9, 0.9, 1.0)
+    scatter.inputs['Density'].default_value = 2.0
+    scatter.inputs['Anisotropy'].default_value = 0.5
+    absorb = tree.nodes.new('ShaderNodeVolumeAbsorption')
+    absorb.inputs['Color'].default_value = (0.2, 0.5, 0.8, 1.0)
+    absorb.inputs['Density'].default_value = 2.0
+    mix = tree.nodes.new('ShaderNodeMixShader')
+    mix.name = 'Mix'
+    tree.links.new(_gradient(tree, 'X'), mix.inputs['Fac'])
+    tree.links.new(absorb.outputs[0], mix.inputs[1])
+    tree.links.new(scatter.outputs[0], mix.inputs[2])
+    return mix.outputs[0]
 
 
 def _sun(scene, rotation, strength):
@@ -153,16 +175,17 @@ SCENES = {
     # and from the side: forward scattering (g > 0, +x) is brighter there.
     'anisotropy': _scene(anisotropy_volume, (0.0, 0.0, 0.0), ((-1.35, 0.0, 0.35), 6.0)),
     'world_fog': world_fog,
+    'mixed': _scene(mixed_volume, (0.3, 0.3, 0.3), ((-1.2, 0.0, 0.6), 4.0)),
 }
 # The input each scene textures (unlinked for the constant-read check).
 INPUT = {'fire': 'Temperature', 'tinted_fog': 'Absorption Color', 'anisotropy': 'Anisotropy',
-         'world_fog': 'Density'}
+         'world_fog': 'Density', 'mixed': 'Fac'}
 
 
 def _unlink(name):
     """Unlink the scene's textured input: Ember's old reading (its socket's value)."""
     tree = (bpy.context.scene.world if name == 'world_fog' else bpy.data.materials["Medium"]).node_tree
-    node = next(n for n in tree.nodes if n.type == 'PRINCIPLED_VOLUME')
+    node = next(n for n in tree.nodes if n.type == ('MIX_SHADER' if name == 'mixed' else 'PRINCIPLED_VOLUME'))
     for link in list(node.inputs[INPUT[name]].links):
         tree.links.remove(link)
 
