@@ -201,9 +201,14 @@ def validate_volume(vol, what):
         if np.any(arr < 0):
             raise SceneError(f"{what}: volume {name} must be >= 0, got {tuple(arr)}")
     g = vol.anisotropy
-    if not (np.isfinite(g) and -1.0 <= g <= 1.0):
-        raise SceneError(f"{what}: volume anisotropy must lie in [-1, 1], got {g}")
     phase = getattr(vol, "phase", "HENYEY_GREENSTEIN")
+    if is_texture(g):   # per point (media/field.py clamps it), Henyey-Greenstein only
+        validate_texture(g, f"{what} volume anisotropy")
+        if phase != "HENYEY_GREENSTEIN":
+            raise SceneError(f"{what}: a textured volume anisotropy needs the Henyey-Greenstein phase function, "
+                             f"not {phase!r}")
+    elif not (np.isfinite(g) and -1.0 <= g <= 1.0):
+        raise SceneError(f"{what}: volume anisotropy must lie in [-1, 1], got {g}")
     if phase not in _scene.PHASE_FUNCTIONS:
         raise SceneError(f"{what}: unknown volume phase function {phase!r} (expected one of "
                          f"{_scene.PHASE_FUNCTIONS})")
@@ -241,9 +246,7 @@ def _validate_lobe_extras(lobe, k, what, n_lobes):
 def validate_world(world):
     _rgb(world.color, "world colour")
     vol = getattr(world, "volume", None)
-    if vol is not None:
-        if any(is_texture(getattr(vol, f)) for f in ("absorption", "scattering", "emission")):
-            raise SceneError("world volume: textured coefficients are not supported (constants only)")
+    if vol is not None:   # textured: a field over the scene (media/field.py WorldField)
         validate_volume(vol, "world")
     tex = world.texture
     if tex is None:

@@ -8,7 +8,8 @@ Film, emission dimmed by sheen and coat), Mix Shader and Add Shader; anisotropic
 take the material's tangent (the Tangent input, Cycles' radial tangent
 about the object's Z when unlinked); in
 the Volume output, Volume Absorption, Volume Scatter, Principled Volume,
-Emission, Add and Mix Shader with constant inputs (a homogeneous medium).  A
+Emission, Add and Mix Shader (a medium whose inputs, a Mix Shader's Fac too,
+may be textures evaluated at points inside it, engine/media/field.py).  A
 node Ember cannot translate becomes a grey diffuse (or a diffuse of the
 node's Color input) and is named in one warning per material.  Inputs may be
 driven by textures (nodes.SocketReader): lobe colours, roughness, IOR and
@@ -113,10 +114,8 @@ CONSTANT_VALUE_INPUTS = PRINCIPLED_UNSUPPORTED + ('Anisotropy',)
 class NodeTranslator:
     """Translates one material's node tree, remembering what it could not."""
 
-    def __init__(self, material_name, constant_volumes=False):
+    def __init__(self, material_name):
         self.material_name = material_name
-        # Read every volume input as a constant (the world's volume).
-        self.constant_volumes = constant_volumes
         self.unsupported = []   # node labels, in order of discovery
         self.textured = []      # "node.input" names read as constants
         self.approximated = []  # Principled BSDF features not rendered yet
@@ -535,8 +534,9 @@ class NodeTranslator:
     # -- volumes ---------------------------------------------------------------
 
     def volume(self, socket):
-        """The homogeneous medium a Volume socket evaluates to (constant
-        inputs only: a linked input is read as its own value, with a warning)."""
+        """The medium a Volume socket evaluates to (its inputs constants or
+        texture expressions; an untranslatable link is read as the socket's
+        own value, with a warning)."""
         node, out = self._linked_node(socket)
         if node is None or node.type == 'GROUP_DEFAULT':
             return VolumeClosure()
@@ -578,8 +578,6 @@ class NodeTranslator:
         socket = node.inputs.get(name)
         if socket is None:
             return default
-        if self.constant_volumes:
-            return self._volume_const(node, name, default, color)
         if not socket.is_linked:
             return self._const(node, name, nodes.constant(socket), color)
         value = self.reader.read(socket)
@@ -616,7 +614,10 @@ class NodeTranslator:
         color = self._volume_input(node, 'Color', GREY, color=True)
         d = self._density(node)
         phase = getattr(node, 'phase', 'HENYEY_GREENSTEIN')
-        g = self._volume_const(node, 'Anisotropy', 0.0)
+        # Henyey-Greenstein's g may vary per point (the medium's field
+        # evaluates it); the other phase functions take constants.
+        g = (self._volume_input(node, 'Anisotropy', 0.0) if phase == 'HENYEY_GREENSTEIN'
+             else self._volume_const(node, 'Anisotropy', 0.0))
         out = VolumeClosure(scattering=_times(_positive(color), d)).with_phase(g)
         if phase != 'HENYEY_GREENSTEIN':
             spec = (phase, self._volume_const(node, 'Alpha', 0.5), self._volume_const(node, 'Backscatter', 0.1),
@@ -637,23 +638,24 @@ class NodeTranslator:
         if fluid_grids:
             d = self._by_attribute(node, 'Density Attribute', d)
             color = self._by_attribute(node, 'Color Attribute', color, color=True)
-        g = self._volume_const(node, 'Anisotropy', 0.0)
-        ac = self._volume_const(node, 'Absorption Color', (0.0, 0.0, 0.0), color=True)
+        g = self._volume_input(node, 'Anisotropy', 0.0)
+        ac = self._volume_input(node, 'Absorption Color', (0.0, 0.0, 0.0), color=True)
         strength = self._volume_input(node, 'Emission Strength', 0.0)
         ec = self._volume_input(node, 'Emission Color', (1.0, 1.0, 1.0), color=True)
-        blackbody = self._volume_const(node, 'Blackbody Intensity', 0.0)
+        blackbody = self._volume_input(node, 'Blackbody Intensity', 0.0)
         out = VolumeClosure()
         if nodes.may_exceed(d, 0.0):
-            tint = tuple(max(1.0 - math.sqrt(max(a, 0.0)), 0.0) for a in ac)
+            tint = _absorption_tint(ac)
             out = VolumeClosure(absorption=_times(_times(_positive(_one_minus_color(color)), tint), d),
                                 scattering=_times(_positive(color), d)).with_phase(g)
-        if nodes.may_exceed(strength, 0.0):
+        if nodes.may_exceed(strength, CUTOFF):
+            # Cycles emits where Strength > CUTOFF (per point where textured).
+            strength = nodes.math('MULTIPLY', strength, _above(strength, CUTOFF)) if nodes.is_expr(strength) \
+                else strength
             out = out.plus(VolumeClosure(emission=_times(ec, strength)))
-        if blackbody > 0.0:
+        if nodes.may_exceed(blackbody, CUTOFF):
             temperature = self._attribute_name(node, 'Temperature Attribute') if fluid_grids else ''
-            emission = (self._blackbody_of_attribute(node, blackbody, temperature) if temperature
-                        else self._blackbody(node, blackbody))
-            out = out.plus(VolumeClosure(emission=emission))
+            out = out.plus(VolumeClosure(emission=self._blackbody(node, blackbody, temperature)))
         return out
 
     def _attribute_name(self, node, name):
@@ -671,32 +673,38 @@ class NodeTranslator:
             return _times(value, self._attribute(name, 'Color'))
         return nodes.at_least(nodes.math('MULTIPLY', value, self._attribute(name, 'Fac')), 0.0)
 
-    def _blackbody(self, node, intensity):
+    def _blackbody(self, node, intensity, attribute=''):
         """Cycles' Principled Volume blackbody emission: tint x sigma x
-        mix(1, T^4, intensity) x the blackbody colour of T (Stefan-Boltzmann,
-        sigma = 5.670373e-8 1e-6 / pi), constant inputs."""
-        t = max(self._volume_const(node, 'Temperature', 1000.0), 0.0)
-        tint = self._volume_const(node, 'Blackbody Tint', (1.0, 1.0, 1.0), color=True)
-        renderer = backend.engine()
-        entry = renderer.NODE_REGISTRY['ShaderNodeBlackbody']
-        rgb = entry.evaluate(renderer.ShadingContext(1), {'Temperature': np.array([t])}, {})['Color'][0]
+        mix(1, T^4, intensity) x the blackbody colour of T (the fit
+        unclamped where textured, negative in blue below about 1500 K as
+        Cycles'; a constant's clamped at 0), T = max(T, 0)
+        (times max(the attribute, 0): a domain's temperature grid), none
+        where the intensity or sigma x mix(...) is at most CUTOFF (Stefan-
+        Boltzmann, sigma = 5.670373e-8 1e-6 / pi).  Temperature, intensity
+        and tint may be textured: an expression evaluated per point."""
+        t = self._volume_input(node, 'Temperature', 1000.0)
+        tint = self._volume_input(node, 'Blackbody Tint', (1.0, 1.0, 1.0), color=True)
+        if attribute:
+            t = nodes.math('MULTIPLY', nodes.at_least(self._attribute(attribute, 'Fac'), 0.0), t)
         sigma = 5.670373e-8 * 1e-6 / math.pi
-        power = sigma * ((1.0 - intensity) + intensity * t ** 4)
-        return tuple(min(float(c) * power * float(x), VOLUME_LIMIT) for c, x in zip(tint, rgb))
-
-    def _blackbody_of_attribute(self, node, intensity, name):
-        """Blackbody emission of Temperature x max(the attribute, 0) (a
-        domain's temperature grid): tint x sigma x mix(1, T^4, intensity) x
-        the blackbody colour of T, evaluated per point."""
-        t = max(self._volume_const(node, 'Temperature', 1000.0), 0.0)
-        tint = self._volume_const(node, 'Blackbody Tint', (1.0, 1.0, 1.0), color=True)
+        if not any(nodes.is_expr(x) for x in (t, intensity, tint)):
+            t = max(t, 0.0)
+            power = sigma * ((1.0 - intensity) + intensity * min(t, 1e75) ** 4)
+            if power <= CUTOFF:
+                return BLACK
+            rgb = _blackbody_rgb(t)
+            return tuple(min(float(c) * power * float(x), VOLUME_LIMIT) for c, x in zip(tint, rgb))
         renderer = backend.engine()
-        temperature = nodes.math('MULTIPLY', nodes.at_least(self._attribute(name, 'Fac'), 0.0), t)
-        rgb = renderer.NodeOutput(renderer.NodeCall('ShaderNodeBlackbody', {'Temperature': temperature}), 'Color')
-        sigma = 5.670373e-8 * 1e-6 / math.pi
-        power = nodes.math('ADD', nodes.math('MULTIPLY', nodes.math('POWER', temperature, 4.0), sigma * intensity),
-                           sigma * (1.0 - intensity))
-        return _times(_times(rgb, power), tint)
+        t = nodes.at_least(t, 0.0)
+        rgb = (_blackbody_rgb(t) if not nodes.is_expr(t)
+               else renderer.NodeOutput(renderer.NodeCall('ShaderNodeBlackbody', {'Temperature': t},
+                                                          {'_unclamped': True}), 'Color'))
+        t4 = nodes.math('MULTIPLY', nodes.math('MULTIPLY', t, t), nodes.math('MULTIPLY', t, t))
+        power = nodes.math('ADD', nodes.math('MULTIPLY', t4, nodes.math('MULTIPLY', intensity, sigma)),
+                           nodes.math('MULTIPLY', nodes.math('SUBTRACT', 1.0, intensity), sigma))
+        # Cycles' two cut-offs, per point: 1 where both pass, else 0.
+        gate = nodes.math('MULTIPLY', _above(power, CUTOFF), _above(intensity, CUTOFF))
+        return _times(_times(rgb, nodes.math('MULTIPLY', power, gate)), tint)
 
     def _volume_emission(self, node):
         strength = self._volume_input(node, 'Strength', 1.0)
@@ -707,8 +715,10 @@ class NodeTranslator:
         return self._volume_sum(self.volume(node.inputs[0]), self.volume(node.inputs[1]), node)
 
     def _volume_mix_shader(self, node):
-        fac = min(max(self._volume_const(node, 'Fac', 0.5), 0.0), 1.0)
-        return self._volume_sum(self.volume(node.inputs[1]).scaled(1.0 - fac),
+        """Cycles' svm_node_mix_closure: the two closures weighted by
+        1 - saturate(Fac) and saturate(Fac), per point where Fac is textured."""
+        fac = nodes.clamp01(self._volume_input(node, 'Fac', 0.5))
+        return self._volume_sum(self.volume(node.inputs[1]).scaled(_one_minus(fac)),
                                 self.volume(node.inputs[2]).scaled(fac), node)
 
     def _volume_note(self, node, what):
@@ -759,36 +769,86 @@ VOLUME_LIMIT = 1e30
 @dataclass
 class VolumeClosure:
     """What a Volume socket evaluates to: the summed coefficients of its
-    volume closures (constants) and the scattering-weighted anisotropy."""
+    volume closures (constants or texture expressions) and their
+    scattering-weighted anisotropy (g constants or expressions)."""
     absorption: tuple = BLACK
     scattering: tuple = BLACK
     emission: tuple = BLACK
-    g_weight: float = 0.0        # sum of mean(scattering) x g over the closures
+    g_weight: object = 0.0       # sum of w x g over the closures (w: _mean_weight of each)
+    g_total: object = 0.0        # sum of w (an expression where a Mix Shader's Fac is textured)
     phases: tuple = ()           # the distinct g of the scattering closures
     # A Volume Scatter's other phase function: (phase, alpha, backscatter,
     # ior, diameter), None for Henyey-Greenstein.
     phase_spec: tuple = None
 
     def with_phase(self, g):
-        g = min(max(float(g), -1.0), 1.0)
-        return dataclasses.replace(self, g_weight=_mean_weight(self.scattering) * g, phases=(g,))
+        w = _mean_weight(self.scattering)
+        g = _clamp_g(g)
+        return dataclasses.replace(self, g_weight=nodes.multiply(w, g), g_total=w, phases=(g,))
 
     def scaled(self, w):
+        """The closures weighted by w (a constant or a float expression)."""
+        if nodes.is_expr(w):
+            used = nodes.may_exceed(w, 0.0)
+            scatters = nodes.is_expr(self.g_total) or self.g_total > 0
+            return VolumeClosure(_weighted(self.absorption, w), _weighted(self.scattering, w),
+                                 _weighted(self.emission, w),
+                                 nodes.math('MULTIPLY', self.g_weight, w) if scatters else 0.0,
+                                 nodes.math('MULTIPLY', self.g_total, w) if scatters else 0.0,
+                                 self.phases if used else (), self.phase_spec if used else None)
         return VolumeClosure(_scale3(self.absorption, w), _scale3(self.scattering, w), _scale3(self.emission, w),
-                             self.g_weight * w, self.phases if w > 0 else (), self.phase_spec if w > 0 else None)
+                             nodes.multiply(self.g_weight, w), nodes.multiply(self.g_total, w),
+                             self.phases if w > 0 else (), self.phase_spec if w > 0 else None)
 
     def plus(self, other):
         return VolumeClosure(_add3(self.absorption, other.absorption), _add3(self.scattering, other.scattering),
-                             _add3(self.emission, other.emission), self.g_weight + other.g_weight,
-                             tuple(sorted(set(self.phases) | set(other.phases))),
+                             _add3(self.emission, other.emission), _plus(self.g_weight, other.g_weight),
+                             _plus(self.g_total, other.g_total), _distinct(self.phases + other.phases),
                              self.phase_spec if self.phase_spec is not None else other.phase_spec)
 
     def phases_differ(self, other):
-        return len(set(self.phases) | set(other.phases)) > 1
+        return len(_distinct(self.phases + other.phases)) > 1
 
     def anisotropy(self):
-        total = _mean_weight(self.scattering)
-        return min(max(self.g_weight / total, -1.0), 1.0) if total > 0 else 0.0
+        """The medium's g: the weighted mean of its closures' (an expression
+        where one is textured: the engine clamps it per point; a textured
+        weight divides per point, 0 where it is 0)."""
+        if nodes.is_expr(self.g_total):
+            return nodes.math('DIVIDE', self.g_weight, self.g_total)
+        if self.g_total <= 0:
+            return 0.0
+        if nodes.is_expr(self.g_weight):
+            return nodes.multiply(self.g_weight, 1.0 / self.g_total)
+        return min(max(self.g_weight / self.g_total, -1.0), 1.0)
+
+
+def _weighted(c, w):
+    """A coefficient times a float expression (none stays none)."""
+    if not nodes.is_expr(c) and all(float(x) == 0.0 for x in c):
+        return BLACK
+    return _times(c, w)
+
+
+def _clamp_g(g):
+    if nodes.is_expr(g):
+        return g     # clamped to [-1, 1] where the engine evaluates it
+    return min(max(float(g), -1.0), 1.0)
+
+
+def _plus(a, b):
+    if nodes.is_expr(a) or nodes.is_expr(b):
+        return nodes.math('ADD', a, b)
+    return a + b
+
+
+def _distinct(phases):
+    """The distinct g among constants and expressions (an expression is
+    itself: two links to one socket are one)."""
+    out = []
+    for g in phases:
+        if not any(g is h or (not nodes.is_expr(g) and not nodes.is_expr(h) and g == h) for h in out):
+            out.append(g)
+    return tuple(out)
 
 
 def _valid_phase(spec):
@@ -837,6 +897,33 @@ def _one_minus_color(color):
     if nodes.is_expr(color):
         return backend.engine().MixColor('SUBTRACT', 1.0, (1.0, 1.0, 1.0), color, clamp_factor=False)
     return tuple(1.0 - c for c in color)
+
+
+def _absorption_tint(ac):
+    """Cycles' Principled Volume absorption tint max(1 - max(sqrt(Absorption
+    Color), 0), 0) per channel (a negative colour's square root, NaN there,
+    is 0); an expression is evaluated per point (a Gamma of 0.5 is the
+    square root where the colour is positive, the colour itself elsewhere)."""
+    if not nodes.is_expr(ac):
+        return tuple(max(1.0 - math.sqrt(max(a, 0.0)), 0.0) for a in ac)
+    renderer = backend.engine()
+    root = renderer.NodeOutput(renderer.NodeCall('ShaderNodeGamma', {'Color': ac, 'Gamma': 0.5}), 'Color')
+    return _positive(_one_minus_color(_positive(root)))
+
+
+def _above(value, level):
+    """1 where value > level, else 0 (a constant or an expression)."""
+    if not nodes.is_expr(value):
+        return 1.0 if float(value) > level else 0.0
+    return nodes.math('GREATER_THAN', value, level)
+
+
+def _blackbody_rgb(t):
+    """The Blackbody node's colour of a constant temperature."""
+    renderer = backend.engine()
+    entry = renderer.NODE_REGISTRY['ShaderNodeBlackbody']
+    return tuple(float(c) for c in
+                 entry.evaluate(renderer.ShadingContext(1), {'Temperature': np.array([float(t)])}, {})['Color'][0])
 
 
 def _f0_from_ior(ior):

@@ -16,8 +16,8 @@ magenta.  Other trees of registered nodes (procedural textures, the Sky
 Texture) are baked into an equirectangular map for sampling; worlds with a
 sky are shaded per direction and its sun disc sampled by its cone (Cycles'
 sun guiding).  Anything else is read as the Background's constant colour and
-reported.  The World Output's Volume becomes a homogeneous medium filling
-space (constant inputs).
+reported.  The World Output's Volume becomes a medium filling space (its
+inputs constants or textures evaluated per point).
 """
 import numpy as np
 
@@ -81,15 +81,16 @@ def world_from_blender(world):
 
 
 def _volume(world, notes):
-    """The World Output's Volume: a homogeneous medium everywhere (the
-    material exporter's volume translation with constant inputs; a texture
-    on one is read as the socket's value, named)."""
+    """The World Output's Volume: a medium everywhere (the material
+    exporter's volume translation; textured inputs are evaluated per point,
+    engine/media/field.py WorldField, at Object = Generated = the point, as
+    Cycles' background volume)."""
     tree = world.node_tree if compat.uses_nodes(world) else None
     output = None if tree is None else _output_node(tree)
     socket = None if output is None else output.inputs.get('Volume')
     if socket is None or not socket.is_linked:
         return None
-    translator = material.NodeTranslator(world.name, constant_volumes=True)
+    translator = material.NodeTranslator(world.name)
     v = translator.volume(socket)
     warning = translator.warning()
     if warning:

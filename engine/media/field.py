@@ -28,7 +28,10 @@ case) each cell's majorant bounds every voxel lookup inside it.
 Evaluated coefficients are made renderable as Cycles' closures do: NaN is 0,
 negative densities are 0 (fmaxf(density, 0)), and values past SIGMA_MAX
 (1/m) are SIGMA_MAX; each kind of repair is named in a warning with the
-material.
+material.  Emission may be negative (as in Cycles: a blackbody below about
+1500 K in blue, a negative Emission colour), only its NaN and magnitudes
+past SIGMA_MAX repaired.  A textured Henyey-Greenstein g is clamped to
+[-1, 1], NaN read as 0 (named).
 """
 import numpy as np
 
@@ -39,6 +42,7 @@ from ..textures import Compiler, is_texture
 from .voxels import Voxels
 
 FIELDS = ("absorption", "scattering", "emission")
+EMISSION = 2    # FIELDS' index of the emission (signed)
 GRID = 16
 LATTICE = 2
 MARGIN = 1.25
@@ -46,13 +50,18 @@ FLOOR = 1e-3
 FLOOR_DEPTH = 100.0
 EMISSIVE_RATE = 16.0
 SIGMA_MAX = 1e8
+# The world medium beyond its grid's box: absorbing at once (1/m).
+OPAQUE = SIGMA_MAX
 # A majorant holds along the ray for STEP cells along each axis (the
 # segment's bounding box spans at most STEP + 1 cells per axis).
 STEP = 3
 
 
 def is_heterogeneous(volume):
-    return volume is not None and any(is_texture(getattr(volume, f)) for f in FIELDS)
+    """A medium with a textured coefficient or a textured anisotropy (its
+    g varies per point: the trackers evaluate it where paths scatter)."""
+    return volume is not None and (any(is_texture(getattr(volume, f)) for f in FIELDS)
+                                   or is_texture(getattr(volume, "anisotropy", 0.0)))
 
 
 class Field:
@@ -62,12 +71,14 @@ class Field:
         self.material, self.name = material, name
         self.voxels = voxels
         self.fns = [_scaled(compiler.color(getattr(volume, f)), density) for f in FIELDS]
-        self.g = float(volume.anisotropy)
+        g = getattr(volume, "anisotropy", 0.0)
+        self.g_fn = compiler.compile(g)[0] if is_texture(g) else None
+        self.g = 0.0 if self.g_fn is not None else float(g)
         m = np.asarray(matrix, np.float64).reshape(4, 4)
         self.matrix = m
         self.inverse = np.linalg.inv(m) if np.isfinite(m).all() and abs(np.linalg.det(m[:3, :3])) > 1e-300 \
             else np.eye(4)
-        self.loc, self.factor = texture_space(mesh)
+        self.loc, self.factor = self._texture_space(mesh)
         pos = np.asarray(mesh.positions, np.float64).reshape(-1, 3)
         lo, hi = pos.min(axis=0), pos.max(axis=0)
         pad = 1e-4 * (hi - lo).max() + 1e-9
@@ -75,9 +86,13 @@ class Field:
         self.pad = pad
         self.cell = (self.hi - self.lo) / GRID
         self.tri, self.tris = int(tri), tris
-        self.repaired = {"NaN": 0, "negative": 0, "too large": 0}
+        self.repaired = {"NaN": 0, "negative": 0, "too large": 0, "NaN anisotropy": 0}
         self.evaluated = 0     # points evaluated (statistics)
         self.grid = np.ascontiguousarray(self._majorants(), np.float64)
+
+    @staticmethod
+    def _texture_space(mesh):
+        return texture_space(mesh)
 
     # -- coefficients at points -----------------------------------------------
     def context(self, p, d, q=None):
@@ -98,28 +113,54 @@ class Field:
         """(sigma_a, sigma_s, emission) (N, 3) at world points p (``inside``
         False: the grid's lattice, partly outside the mesh, where a negative
         value is no user error)."""
+        return self.evaluate_phase(p, d, q, inside)[:3]
+
+    def evaluate_phase(self, p, d, q=None, inside=True):
+        """(sigma_a, sigma_s, emission (N, 3), g (N,)) at world points p:
+        the coefficients (``evaluate``) and the Henyey-Greenstein g there
+        (a textured one clamped to [-1, 1] as Cycles' closure setup, NaN
+        read as 0 and counted), one shading context for both."""
         ctx = self.context(p, d, q)
         self.evaluated += len(p)
-        return tuple(self._renderable(fn(ctx), inside) for fn in self.fns)
+        out = tuple(self._renderable(fn(ctx), inside, k == EMISSION) for k, fn in enumerate(self.fns))
+        if self.g_fn is None:
+            return out + (np.full(len(p), self.g),)
+        return out + (self._anisotropy(self.g_fn(ctx), len(p)),)
 
-    def _renderable(self, v, inside=True):
+    def _anisotropy(self, g, n):
+        g = np.array(np.broadcast_to(np.asarray(g, np.float64), (n,)))
+        nan = np.isnan(g)
+        if nan.any():
+            self.repaired["NaN anisotropy"] += int(nan.sum())
+            g[nan] = 0.0
+        return np.clip(g, -1.0, 1.0)
+
+    def _renderable(self, v, inside=True, signed=False):
+        """``signed``: the emission, which may be negative as in Cycles (a
+        Principled Volume's blackbody below about 1500 K, a negative
+        Emission colour): only NaN and magnitudes past SIGMA_MAX repaired."""
         v = np.array(np.broadcast_to(v, (len(v), 3)), np.float64)
         nan = np.isnan(v)
-        neg = v < 0
-        big = v > SIGMA_MAX
+        neg = np.zeros(v.shape, bool) if signed else v < 0
+        big = np.abs(v) > SIGMA_MAX if signed else v > SIGMA_MAX
         if nan.any() or neg.any() or big.any():
             self.repaired["NaN"] += int(nan.sum())
             self.repaired["negative"] += int(neg.sum()) if inside else 0
             self.repaired["too large"] += int(big.sum())
-            v = np.where(nan | neg, 0.0, np.minimum(v, SIGMA_MAX))
+            v = np.where(nan | neg, 0.0, np.clip(v, -SIGMA_MAX, SIGMA_MAX))
         return v
 
     def warning(self):
-        bad = [f"{k} ({n} values)" for k, n in self.repaired.items() if n]
-        if not bad:
+        bad = [f"{k} ({n} values)" for k, n in self.repaired.items() if n and k != "NaN anisotropy"]
+        parts = []
+        if bad:
+            parts.append("textured volume coefficients " + ", ".join(bad)
+                         + f" read as 0 (NaN, negative) or {SIGMA_MAX:g}/m (too large)")
+        if self.repaired.get("NaN anisotropy"):
+            parts.append(f"NaN anisotropy ({self.repaired['NaN anisotropy']} values) read as 0")
+        if not parts:
             return None
-        return (f"material {self.name!r}: textured volume coefficients " + ", ".join(bad)
-                + f" read as 0 (NaN, negative) or {SIGMA_MAX:g}/m (too large)")
+        return f"material {self.name!r}: " + "; ".join(parts)
 
     # -- the majorant grid ----------------------------------------------------
     def _majorants(self):
@@ -137,11 +178,12 @@ class Field:
         # Negative values inside the mesh's bounds (not on the padded edge)
         # are the texture's own: counted.
         core = np.all((q > self.lo + 0.5 * self.pad) & (q < self.hi - 0.5 * self.pad), axis=1)
-        self.repaired["negative"] += int(sum(np.count_nonzero(core[:, None] & (r < 0)) for r in raw))
-        sa, ss, em = (self._renderable(r, inside=False) for r in raw)
-        self.emits = bool(np.any(em > 0))
+        self.repaired["negative"] += int(sum(np.count_nonzero(core[:, None] & (r < 0)) for r in raw[:EMISSION]))
+        sa, ss, em = (self._renderable(r, False, j == EMISSION) for j, r in enumerate(raw))
+        self.emits = bool(np.any(em != 0))
         v = _cell_max((sa + ss).max(axis=1).reshape(k, k, k))
-        e = _cell_max(em.max(axis=1).reshape(k, k, k))
+        self.grid_raw = v
+        e = _cell_max(np.abs(em).max(axis=1).reshape(k, k, k))
         top = float(v.max())
         self.max = top
         # The floor: a collision rate in cells that looked empty, at most
@@ -247,6 +289,85 @@ def _majorant_rows(q, dq, lo, hi, cell, grid, mu, dist):
             dist[i] = near
 
 
+class WorldField(Field):
+    """The world's textured medium (Cycles' background volume, object
+    none): Object and Generated coordinates are the point itself (what
+    Cycles 5.0 gives there, measured: a noise over Object, Generated,
+    Position or its default coordinates renders alike).  Its majorant grid
+    spans ``bounds`` (the scene's geometry, camera and lights, padded);
+    beyond them the medium is opaque (rays leaving the box are infinite:
+    Cycles' exp(-sigma_t x FLT_MAX) extinguishes them where any density is
+    left along the way: its background and distant lights are black
+    through world fog, measured) unless the density on the box's faces is
+    0 everywhere, when it is empty there."""
+
+    def __init__(self, material, volume, bounds, tris, compiler):
+        lo, hi = (np.asarray(b, np.float64) for b in bounds)
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        box = type("Box", (), {"positions": corners, "texspace": None})()
+        self.beyond = 0.0     # the box's own lattice is evaluated without it
+        super().__init__(material, "world", volume, np.eye(4), box, 0, tris, compiler)
+        self.beyond = OPAQUE if self._faces_extinguish() else 0.0
+
+    @staticmethod
+    def _texture_space(mesh):
+        """Generated = Object = P: (q - loc) x factor + 0.5 with loc 0.5, factor 1."""
+        return np.full(3, 0.5), np.ones(3)
+
+    def _faces_extinguish(self):
+        g = self.grid_raw
+        return bool(max(g[0].max(), g[-1].max(), g[:, 0].max(), g[:, -1].max(), g[:, :, 0].max(),
+                        g[:, :, -1].max()) > 0)
+
+    def evaluate_phase(self, p, d, q=None, inside=True):
+        out = super().evaluate_phase(p, d, q, inside)
+        if self.beyond > 0:
+            q = self.to_object(p) if q is None else q
+            out[0][~np.all((q >= self.lo) & (q < self.hi), axis=1)] = self.beyond
+        return out
+
+    def majorant(self, p, d):
+        mu, dist = super().majorant(p, d)
+        if self.beyond > 0:
+            q = self.to_object(p)
+            out = ~np.all((q >= self.lo) & (q < self.hi), axis=1)
+            mu[out], dist[out] = self.beyond, np.inf
+        return mu, dist
+
+
+def scene_bounds(scene, tris):
+    """(lo, hi) of the scene's triangles, points, curves, camera and positioned lights,
+    padded by a tenth of the diagonal and the camera's orthographic scale
+    (rays start across it)."""
+    pts = [np.asarray(scene.camera.matrix, np.float64)[:3, 3][None, :]]
+    if tris is not None and len(tris):
+        pts += [tris.p0, tris.p0 + tris.e1, tris.p0 + tris.e2]
+    # Point clouds and curves (their object-space points placed, grown by their largest radius).
+    groups = ((getattr(scene, "points", ()) or (), "positions"), (getattr(scene, "curves", ()) or (), "points"))
+    for group, name in groups:
+        for item in group:
+            local = np.asarray(getattr(item, name), np.float64).reshape(-1, 3)
+            if not len(local):
+                continue
+            m = np.asarray(getattr(item, "matrix", np.eye(4)), np.float64).reshape(4, 4)
+            r = float(np.max(np.abs(np.asarray(item.radii, np.float64)), initial=0.0)) * (1.0 + np.abs(m[:3, :3]).sum())
+            placed = local @ m[:3, :3].T + m[:3, 3]
+            pts += [placed - r, placed + r]
+    for light in scene.lights:
+        where = getattr(light, "position", None)
+        if where is None and getattr(light, "matrix", None) is not None and not hasattr(light, "direction"):
+            where = np.asarray(light.matrix, np.float64)[:3, 3]
+        if where is not None:
+            pts.append(np.asarray(where, np.float64).reshape(1, 3))
+    pts = np.concatenate(pts)
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = 0.1 * float(np.linalg.norm(hi - lo)) + 1e-3
+    if scene.camera.kind == "ORTHO":
+        pad += float(scene.camera.ortho_scale)
+    return lo - pad, hi + pad
+
+
 def _scaled(fn, factor):
     """fn times the object's volume density factor (1: fn itself)."""
     factor = float(factor) if np.isfinite(factor) and factor > 0 else 1.0
@@ -295,6 +416,9 @@ def build_fields(table, materials, scene, tris):
                                 scene.meshes[instance.mesh], rows[first[j]], tris, compiler, voxels[i],
                                 getattr(instance, "volume_density", 1.0)))
         tri_medium[rows] = table.first_field + inverse
+    world = getattr(table, "world_volume", None)
+    if is_heterogeneous(world):
+        fields.append(WorldField(table.world, world, scene_bounds(scene, tris), tris, compiler))
     return fields, tri_medium
 
 

@@ -234,7 +234,10 @@ def mixture_of(volume):
     """A medium's phase function as (k1, a1, b1, k2, a2, b2, w): lobe 1
     (kind, parameters) weighted 1 - w, lobe 2 weighted w."""
     phase = getattr(volume, "phase", "HENYEY_GREENSTEIN")
-    g = float(getattr(volume, "anisotropy", 0.0))
+    g = getattr(volume, "anisotropy", 0.0)
+    # A textured g (Henyey-Greenstein only) is the field's, per point: the
+    # medium's mixture is then plain HG, which takes each scattering's g.
+    g = float(g) if isinstance(g, (int, float, np.floating, np.integer)) else 0.0
     if phase == "RAYLEIGH":
         return (RAYLEIGH, 0.0, 0.0, RAYLEIGH, 0.0, 0.0, 0.0)
     if phase == "DRAINE":

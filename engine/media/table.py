@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import instance_batch, kernels
 from . import equiangular
-from .field import build_fields, is_heterogeneous
+from .field import WorldField, build_fields, is_heterogeneous
 from .phase import HG, mixture_of
 
 STACK_SIZE = 4
@@ -67,7 +67,8 @@ class MediumTable:
         # bounce (Cycles' volume_bounds_bounce); set by ``of``.
         self.boundary = np.zeros(m + 1, bool)
         self.camera = np.full(STACK_SIZE, -1, np.int32)   # the stack camera rays start with
-        self.world = -1     # the world volume's medium id (-1: none)
+        self.world = -1     # the world volume's medium id (-1: none; a textured one's is its field's)
+        self.world_volume = None
         self.warnings = []
 
     @classmethod
@@ -86,6 +87,7 @@ class MediumTable:
         if world is not None:
             table.world = len(materials)
             table.camera[0] = table.world
+        table.world_volume = world
         return table
 
     def attach(self, materials, scene, tris):
@@ -106,6 +108,10 @@ class MediumTable:
         self.sampling = np.concatenate([self.sampling[:m], self.sampling[[f.material for f in self.fields]],
                                         self.sampling[m:]])
         self.names = self.names[:m] + [f.name for f in self.fields] + self.names[m:]
+        if isinstance(self.fields[-1], WorldField):
+            # A textured world medium is its field, in every camera stack.
+            self.camera[self.camera == self.world] = m + h - 1
+            self.world = m + h - 1
 
     def phase_medium(self, stack):
         """(N,) the medium whose phase function a scattering in ``stack``
@@ -172,11 +178,11 @@ class MediumTable:
         sa, ss, em, gw = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
         for k, j, rows in self._field_rows(stack):
             f = self.fields[j]
-            a, s, e = f.evaluate(p[rows], d[rows])
+            a, s, e, g = f.evaluate_phase(p[rows], d[rows])
             sa[rows] += a
             ss[rows] += s
             em[rows] += e
-            gw[rows] += s.mean(axis=1) * f.g
+            gw[rows] += s.mean(axis=1) * g
         return sa, ss, em, gw
 
     def majorant(self, stack, p, d):

@@ -402,8 +402,12 @@ def blackbody_rec709(t):
 @node("ShaderNodeBlackbody", inputs=(("Temperature", "float"),), outputs=(("Color", "color"),),
       cases=[{"Temperature": t} for t in (650.0, 1000.0, 1500.0, 2700.0, 4500.0, 6500.0, 9000.0, 15000.0)])
 def blackbody(ctx, i, p):
-    """Rec.709 is Blender's default working space, so rec709_to_rgb is the identity."""
-    return {"Color": np.maximum(blackbody_rec709(i["Temperature"]), 0.0)}
+    """Rec.709 is Blender's default working space, so rec709_to_rgb is the identity.
+    ``_unclamped`` (the exporter's Principled Volume blackbody): the fit as
+    it is, negative below about 1500 K in blue, as svm_node_principled_volume
+    takes it (the Blackbody node clamps it at 0)."""
+    rgb = blackbody_rec709(i["Temperature"])
+    return {"Color": rgb if p.get("_unclamped") else np.maximum(rgb, 0.0)}
 
 
 CIE_COLOR_MATCH = np.array([
