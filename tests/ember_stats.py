@@ -33,7 +33,7 @@ import os
 import numpy as np
 
 SUITE_ALPHA = 0.01       # probability that a correct engine fails anywhere in the suite
-FAMILIES = 520           # upper bound on the statistical families the suite runs
+FAMILIES = 560           # upper bound on the statistical families the suite runs
 FAMILY_ALPHA = SUITE_ALPHA / FAMILIES
 _families_used = []
 
