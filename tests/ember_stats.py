@@ -469,3 +469,16 @@ def family_z(name, tests=1):
     """|z| threshold of one family of ``tests`` normal tests under the suite
     budget (counts the family)."""
     return z_threshold(family_level(name, tests))
+
+
+def guided_pair_z(results, block):
+    """(|z| of the kept block-channels, |z| of the whole-image channel means,
+    the median block's and the image's relative se), guided (results[True]) vs not (results[False])."""
+    blocks = {k: block_means_var(r.image[..., :3].astype(np.float64), r.variance[..., :3].astype(np.float64), block)
+              for k, r in results.items()}
+    keep = blocks[False][0] > 0.02 * blocks[False][0].max()
+    z = np.abs(z_scores(*blocks[True], *blocks[False])[keep])
+    ma, mb = (results[k].image[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (True, False))
+    se = np.sqrt(sum(r.variance[..., :3].astype(np.float64).sum(axis=(0, 1)) for r in results.values()))
+    rel = np.sqrt(blocks[True][1][keep] + blocks[False][1][keep]) / blocks[False][0][keep]
+    return z, np.abs(ma - mb) / se, float(np.median(rel)), float((se / mb).max())

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from chi2 import chi2_test
-from ember_stats import block_means_var, family_z, z_scores
+from ember_stats import family_z, guided_pair_z as pair_z
 from engine import kernels
 from engine.film import Film
 from engine.integrator import path_guide as pg
@@ -248,19 +248,6 @@ def lit_room(size=(20, 20), k=0.6):
     sun = SunLight((0.15, 0.1, -1.0), (8.0, 8.0, 8.0))
     cam = Camera(look_at((0.0, -0.9, 1.0), (0.0, 1.0, 1.2)), lens=20.0, resolution=size, clip_start=0.01)
     return Scene(meshes, instances, [white, glossy], [sun], World((0.0, 0.0, 0.0)), cam)
-
-
-def pair_z(results, block):
-    """(|z| of the kept block-channels, |z| of the whole-image channel means,
-    the median block's and the image's relative se), guided vs not."""
-    blocks = {k: block_means_var(r.image[..., :3].astype(np.float64), r.variance[..., :3].astype(np.float64), block)
-              for k, r in results.items()}
-    keep = blocks[False][0] > 0.02 * blocks[False][0].max()
-    z = np.abs(z_scores(*blocks[True], *blocks[False])[keep])
-    ma, mb = (results[k].image[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (True, False))
-    se = np.sqrt(sum(r.variance[..., :3].astype(np.float64).sum(axis=(0, 1)) for r in results.values()))
-    rel = np.sqrt(blocks[True][1][keep] + blocks[False][1][keep]) / blocks[False][0][keep]
-    return z, np.abs(ma - mb) / se, float(np.median(rel)), float((se / mb).max())
 
 
 def guided_pair(scene, seed, **settings):

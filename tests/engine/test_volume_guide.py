@@ -14,7 +14,7 @@ engine/integrator/volume_guide.py).
 import numpy as np
 import pytest
 
-from ember_stats import block_means_var, family_z, z_scores
+from ember_stats import family_z, guided_pair_z as pair_z
 from engine.integrator import volume_guide
 from engine.media.flight import _homogeneous_flight
 from engine.render import render
@@ -152,19 +152,6 @@ def guided_pair(scene, seed, **settings):
 @pytest.fixture(scope="module")
 def slab():
     return guided_pair(sun_slab(), 71, samples=256, max_bounces=2)
-
-
-def pair_z(results, block):
-    """(|z| of the kept block-channels, |z| of the whole-image channel
-    means, the median block's and the image's relative se) guided vs not."""
-    blocks = {k: block_means_var(r.image[..., :3].astype(np.float64), r.variance.astype(np.float64), block)
-              for k, r in results.items()}
-    keep = blocks[False][0] > 0.02 * blocks[False][0].max()
-    z = np.abs(z_scores(*blocks[True], *blocks[False])[keep])
-    ma, mb = (results[k].image[..., :3].astype(np.float64).sum(axis=(0, 1)) for k in (True, False))
-    se = np.sqrt(sum(r.variance[..., :3].astype(np.float64).sum(axis=(0, 1)) for r in results.values()))
-    rel = np.sqrt(blocks[True][1][keep] + blocks[False][1][keep]) / blocks[False][0][keep]
-    return z, np.abs(ma - mb) / se, float(np.median(rel)), float((se / mb).max())
 
 
 def test_guided_and_unguided_agree(slab):
