@@ -457,3 +457,15 @@ def uv_tangents(tris):
     t = np.where(ok[:, None], dpdu / np.where(ok, length, 1.0)[:, None], fallback)
     sign = np.where(np.einsum("ij,ij->i", np.cross(tris.ng, t), dpdv) < 0, -1.0, 1.0)
     return t, sign
+
+
+def corner_bounds(tris):
+    """(lo, hi) of the finite corners of triangles (p0, e1, e2 arrays), or
+    None when there are none (min / max per corner: no (3T, 3) copy)."""
+    los, his = [], []
+    for corner in (tris.p0, tris.p0 + tris.e1, tris.p0 + tris.e2):
+        corner = corner[np.isfinite(corner).all(axis=1)]
+        if len(corner):
+            los.append(corner.min(axis=0))
+            his.append(corner.max(axis=0))
+    return (np.min(los, axis=0), np.max(his, axis=0)) if los else None

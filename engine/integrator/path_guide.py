@@ -46,6 +46,7 @@ A sample range of a farm builds its own guide from its own passes.
 """
 import numpy as np
 
+from ..geometry import corner_bounds
 from ..kernels import LoopKernel, helper
 from ..lobes import registry as lobe_registry
 from ..vec import to_local, to_world
@@ -356,13 +357,10 @@ def unit_cube(p, lo, inv_size):
 def bounds_of(triangles):
     """(lo, 1 / size) of the cube around the triangles (a unit cube when
     there are none; flat or point-like bounds get a size of their own)."""
-    if triangles is None or not len(getattr(triangles, "p0", ())):
+    bounds = None if triangles is None or not len(getattr(triangles, "p0", ())) else corner_bounds(triangles)
+    if bounds is None:
         return np.zeros(3), np.ones(3)
-    p = np.concatenate([triangles.p0, triangles.p0 + triangles.e1, triangles.p0 + triangles.e2])
-    p = p[np.isfinite(p).all(axis=1)]
-    if not len(p):
-        return np.zeros(3), np.ones(3)
-    lo, hi = p.min(axis=0), p.max(axis=0)
+    lo, hi = bounds
     size = float((hi - lo).max())
     size = max(size, 1e-6 * (1.0 + float(np.abs(lo).max())), 1e-12) * (1.0 + 1e-6)
     centre = 0.5 * (lo + hi)

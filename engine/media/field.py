@@ -36,6 +36,7 @@ past SIGMA_MAX repaired.  A textured Henyey-Greenstein g is clamped to
 import numpy as np
 
 from .. import kernels
+from ..geometry import corner_bounds
 from ..nodes import ShadingContext
 from ..nodes.context import texture_space
 from ..textures import Compiler, is_texture
@@ -340,8 +341,9 @@ def scene_bounds(scene, tris):
     padded by a tenth of the diagonal and the camera's orthographic scale
     (rays start across it)."""
     pts = [np.asarray(scene.camera.matrix, np.float64)[:3, 3][None, :]]
-    if tris is not None and len(tris):
-        pts += [tris.p0, tris.p0 + tris.e1, tris.p0 + tris.e2]
+    corners = corner_bounds(tris) if tris is not None and len(tris) else None
+    if corners is not None:
+        pts += [corners[0][None, :], corners[1][None, :]]
     # Point clouds and curves (their object-space points placed, grown by their largest radius).
     groups = ((getattr(scene, "points", ()) or (), "positions"), (getattr(scene, "curves", ()) or (), "points"))
     for group, name in groups:
