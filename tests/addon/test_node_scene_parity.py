@@ -20,7 +20,7 @@ EMBER_SPP = 192   # 128 resolved 0.53 % of the nodes image, not 0.5 % (the chann
 BLOCK = 7           # 6 x 4 blocks (the last two rows only in the image and region tests)
 WIDTH, HEIGHT = 42, 30
 BOUNCES = 2
-WORLD_SPP, WORLD_BLOCK = 128, 6
+WORLD_SPP, WORLD_BLOCK = 144, 6
 IMAGE_POWER, BLOCK_POWER = 0.005, 0.02   # issue 12's targets, asserted
 
 
