@@ -340,13 +340,16 @@ def _undeformed_corners(obj, mesh, depsgraph=None, warn=None):
     modifiers = _enabled_modifiers(obj, render)
     key = getattr(original, 'shape_keys', None)
     deformed = key is not None or any(m.type in DEFORM_ONLY | ORCO_SKIPS for m in modifiers)
-    if deformed and getattr(original, 'texco_mesh', None) is not None:
-        _tell(warn, obj, "its Texture Mesh is not read (Cycles takes the undeformed vertices from it)")
-        return None
+    texture_mesh = getattr(original, 'texco_mesh', None) if deformed else None
     if all(m.type in DEFORM_ONLY for m in modifiers):
         if len(original.vertices) != len(mesh.positions):
             return None
-        positions = _get(original.vertices, 'co', len(original.vertices), 3, np.float32)
+        positions = (_get(original.vertices, 'co', len(original.vertices), 3, np.float32) if texture_mesh is None
+                     else _texture_mesh_positions(texture_mesh, len(original.vertices)))
+    elif texture_mesh is not None:
+        _tell(warn, obj, "its Texture Mesh under constructive modifiers is not read (Cycles takes the undeformed "
+                         "vertices from it)")
+        return None
     else:
         if not deformed or depsgraph is None or not getattr(obj, 'is_evaluated', False) or not needs_generated(obj):
             return None   # (without Generated in a material, the second evaluation is not worth it)
@@ -360,6 +363,16 @@ def _undeformed_corners(obj, mesh, depsgraph=None, warn=None):
     if np.array_equal(positions, mesh.positions):
         return None
     return positions[mesh.triangles]
+
+
+def _texture_mesh_positions(texture_mesh, count):
+    """Blender's orco from a Texture Mesh (BKE_mesh_orco_verts_get): its
+    first ``count`` vertices, zeros for any it lacks."""
+    have = min(len(texture_mesh.vertices), count)
+    positions = np.zeros((count, 3), np.float32)
+    if have:
+        positions[:have] = _get(texture_mesh.vertices, 'co', len(texture_mesh.vertices), 3, np.float32)[:have]
+    return positions
 
 
 def _tell(warn, obj, reason):

@@ -188,7 +188,8 @@ def _top_ortho_scene():
 def test_generated_coordinates_of_deformed_meshes_match_cycles(registered_addon, tmp_path):
     """Generated coordinates come from the undeformed mesh (Blender's orco),
     as Cycles reads them: a grid bent by a Simple Deform modifier, one
-    moved by a shape key, and one whose texture space is set by hand."""
+    moved by a shape key, one whose texture space is set by hand, and one
+    twisted with a Texture Mesh (whose vertices are then the orco)."""
     scene = _top_ortho_scene()
     small_resolution(scene, WIDTH, HEIGHT)
     mat, tree, emission = emission_material("generated")
@@ -209,6 +210,12 @@ def test_generated_coordinates_of_deformed_meshes_match_cycles(registered_addon,
     spaced.data.texspace_location, spaced.data.texspace_size = (0.3, -0.2, 0.1), (2.8, 2.5, 0.6)   # Generated stays in [0, 1]: Ember clips negative emission
     wave = spaced.modifiers.new("wave", 'WAVE')
     wave.height = 0.3
+    # A Texture Mesh under a deform-only stack: Blender's orco is its vertices (BKE_mesh_orco_verts_get).
+    textured = _link("texture mesh", v, f, mat, (-4.5, -3.0, 0.0), (0.0, 0.0, -0.1))
+    textured.data.texco_mesh = bpy.data.meshes.new("texture space")
+    textured.data.texco_mesh.from_pydata([(x * 0.85 + 0.1 * y, y * 0.9, z) for x, y, z in v], [], f)
+    twist = textured.modifiers.new("twist", 'SIMPLE_DEFORM')
+    twist.deform_method, twist.angle, twist.deform_axis = 'TWIST', 0.9, 'Y'
     exported, ember, material, cycles = emission_against_cycles(scene, tmp_path)
     keep = _interior(material)
     assert keep.sum() > 400, int(keep.sum())
@@ -413,7 +420,8 @@ def test_orco_evaluation_leaves_the_depsgraph_and_objects_alone(registered_addon
 def test_unreachable_generated_coordinates_are_named(registered_addon):
     """Where the second evaluation cannot give Blender's orco, a warning
     names the object and the reason: absolute shape keys (zeroing values
-    does not take them out) and a Texture Mesh (Cycles reads its vertices)."""
+    does not take them out) and a Texture Mesh under a constructive modifier
+    (Cycles reads its vertices there, through the modifier)."""
     from addon.export.scene import export_scene
     bpy.ops.wm.read_factory_settings(use_empty=True)
     cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
