@@ -23,7 +23,7 @@ import bpy
 import numpy as np
 
 from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
-from test_lobe_parity import _material, _sphere
+from test_lobe_parity import _material, _sphere, lit_stage
 from parity_scenes import plane
 
 EMBER_SPP = 256
@@ -50,21 +50,7 @@ def films(scene):
         'Base Color': (0.6, 0.1, 0.08), 'Roughness': 0.2, 'IOR': 1.5,
         'Thin Film Thickness': 600.0, 'Thin Film IOR': 1.4, 'distribution': 'MULTI_GGX'})
     _sphere(coated, (-0.6, -0.75, 0.42))
-    light = bpy.data.lights.new("Area", 'AREA')
-    light.energy = 120.0
-    light.size = 2.0
-    obj = bpy.data.objects.new("Area", light)
-    obj.location = (0.4, 1.4, 3.2)
-    bpy.context.scene.collection.objects.link(obj)
-    world = bpy.data.worlds.new("W")
-    world.use_nodes = True
-    world.node_tree.nodes['Background'].inputs['Color'].default_value = (0.25, 0.25, 0.25, 1.0)
-    scene.world = world
-    cam = scene.camera
-    cam.location = (0.0, -4.2, 2.6)
-    from mathutils import Vector
-    cam.rotation_euler = Vector((0.0, 3.9, -2.3)).to_track_quat('-Z', 'Y').to_euler()
-    cam.data.lens = 42
+    lit_stage(scene, 120.0, (0.4, 1.4, 3.2), 0.25, (0.0, -4.2, 2.6), (0.0, 3.9, -2.3), 42)
     small_resolution(scene, WIDTH, HEIGHT)
     return BOUNCES
 
@@ -87,21 +73,7 @@ def conductors(scene):
         'Thin Film Thickness': 350.0, 'Thin Film IOR': 1.45, 'fresnel_type': 'PHYSICAL_CONDUCTOR',
         'distribution': 'MULTI_GGX'})
     _sphere(copper, (0.0, -0.75, 0.42))
-    light = bpy.data.lights.new("Area", 'AREA')
-    light.energy = 120.0
-    light.size = 2.0
-    obj = bpy.data.objects.new("Area", light)
-    obj.location = (0.4, 1.4, 3.2)
-    bpy.context.scene.collection.objects.link(obj)
-    world = bpy.data.worlds.new("W")
-    world.use_nodes = True
-    world.node_tree.nodes['Background'].inputs['Color'].default_value = (0.35, 0.35, 0.35, 1.0)
-    scene.world = world
-    cam = scene.camera
-    cam.location = (0.0, -4.2, 2.6)
-    from mathutils import Vector
-    cam.rotation_euler = Vector((0.0, 3.9, -2.3)).to_track_quat('-Z', 'Y').to_euler()
-    cam.data.lens = 42
+    lit_stage(scene, 120.0, (0.4, 1.4, 3.2), 0.35, (0.0, -4.2, 2.6), (0.0, 3.9, -2.3), 42)
     small_resolution(scene, WIDTH, HEIGHT)
     return BOUNCES
 
