@@ -45,7 +45,7 @@ from . import thinfilm
 from .kernels import LoopKernel
 # The lobe codes live in lobe_ids (shared with bsdf_loops); bsdf.NONE etc. stay the public names.
 from .lobe_ids import GLOSSY_ANISOTROPIC  # noqa: E402
-from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FRESNEL_IDS, GLASS, GLOSSY,  # noqa: F401
+from .lobe_ids import (DIFFUSE, F_CONDUCTOR, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FRESNEL_IDS, GLASS, GLOSSY,  # noqa: F401
                        KIND_IDS, MIN_ALPHA, MIRROR, NONE, RAY_PORTAL, REFRACTION, SHEEN, TRANSLUCENT, TRANSPARENT)
 from .lobes.ggx import fresnel as _fresnel, fresnel_of as _fresnel_of, ggx_pdf, schlick  # noqa: F401
 from .lobes.ggx import eval_glossy_f as _eval_glossy, ggx_reflect_rows as _ggx_reflect  # noqa: F401
@@ -218,6 +218,9 @@ def _glossy_fss(lobes, k, rows):
     b = mf.f82_b(f0, lobes.edge_tint[rows, k])
     fss = np.where((code == F_DIELECTRIC)[:, None], diel, fss)
     fss = np.where((code == F_F82)[:, None], mf.f82_fss(f0, b), fss)
+    m = np.flatnonzero(code == F_CONDUCTOR)   # n in f0, k in edge_tint
+    if len(m):
+        fss[m] = mf.conductor_fss(f0[m], lobes.edge_tint[rows, k][m])
     return np.where((code == F_SCHLICK)[:, None], f0 + (1.0 - f0) / 21.0, fss)
 
 
@@ -396,6 +399,10 @@ def closure_albedos(lobes, wo):
         if len(metal):
             s = mf.lookup(t["ggx_gen_schlick_s"], rough[metal], mu[metal], np.full(len(metal), 0.5))
             est[metal] = f0[metal] + (1.0 - f0[metal]) * s[:, None]
+        # A physical conductor has no table in Cycles: its Fresnel at the view angle.
+        cond = np.nonzero(glossy & (code == F_CONDUCTOR) & (kind != GLASS))[0]
+        if len(cond):
+            est[cond] = mf.conductor(mu[cond], f0[cond], lobes.edge_tint[cond, k])
         eta = _eta(lobes, k)
         diel = np.nonzero(glossy & ((code == F_DIELECTRIC) | (kind == GLASS)))[0]
         if len(diel):
@@ -409,7 +416,7 @@ def closure_albedos(lobes, wo):
         film = np.flatnonzero(glossy & _has_film(lobes, slice(None), k))
         glass_film = film[kind[film] == GLASS]
         other = film[kind[film] != GLASS]
-        for c in (F_F82, F_DIELECTRIC):
+        for c in (F_F82, F_DIELECTRIC, F_CONDUCTOR):
             m = other[code[other] == c]
             if len(m):
                 est[m] = _film_fresnel(c, lobes, m, k, mu[m])

@@ -19,7 +19,7 @@ import numpy as np
 
 from .kernels import clip
 from .lobes import EXTRA_PARAMS, FILM_CUTOFF, PARAMS
-from .lobe_ids import (DIFFUSE, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, GLOSSY_ANISOTROPIC, MIN_ALPHA,
+from .lobe_ids import (DIFFUSE, F_CONDUCTOR, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, GLASS, GLOSSY, GLOSSY_ANISOTROPIC, MIN_ALPHA,
                        MIRROR, NONE, OREN_NAYAR, REFRACTION, SHEEN, SUBSURFACE_BURLEY, SUBSURFACE_RANDOM_WALK,
                        SUBSURFACE_SKIN, TRANSLUCENT, TRANSPARENT, RAY_PORTAL, HAIR_CHIANG, HAIR_REFLECTION, HAIR_TRANSMISSION,
                        HAIR_HUANG)
@@ -229,8 +229,41 @@ def _add_specular_film(f_0, f_1, f_2, w, code, ior, color, f0, tint, thickness, 
 
 
 @helper
+def _conductor(cos, n, k):
+    """One channel of microfacet.conductor: the unpolarized Fresnel of a
+    conductor n + i k at cos (n, k below 0 read as 0)."""
+    c = clip(cos, 0.0, 1.0)
+    n, k = max(n, 0.0), max(k, 0.0)
+    c2 = c * c
+    s2 = 1.0 - c2
+    n2, k2 = n * n, k * k
+    t0 = n2 - k2 - s2
+    a2b2 = np.sqrt(t0 * t0 + 4.0 * n2 * k2)
+    a = np.sqrt(max(0.5 * (a2b2 + t0), 0.0))
+    t1 = a2b2 + c2
+    t2 = 2.0 * a * c
+    rs = (t1 - t2) / (t1 + t2) if t1 + t2 > 0 else 1.0
+    t3 = c2 * a2b2 + s2 * s2
+    t4 = t2 * s2
+    rp = rs * (t3 - t4) / (t3 + t4) if t3 + t4 > 0 else 1.0
+    return clip(0.5 * (rp + rs), 0.0, 1.0)
+
+
+@helper
+def _conductor_fss(n, k):
+    """One channel of microfacet.conductor_fss (Cycles' fresnel_conductor_Fss)."""
+    f0 = _conductor(1.0, n, k)
+    f82 = _conductor(1.0 / 7.0, n, k)
+    b = F82_SCALE * ((f0 + (1.0 - f0) * F82_F5) - f82)
+    return clip(f0 + (1.0 - f0) / 21.0 - b / 126.0, 0.0, 1.0)
+
+
+@helper
 def _fresnel(code, color, f0, tint, s, cos):
-    """One channel of bsdf._fresnel given _fresnel_s's s."""
+    """One channel of bsdf._fresnel given _fresnel_s's s (a conductor's n
+    in f0, its k in tint)."""
+    if code == F_CONDUCTOR:
+        return _conductor(cos, f0, tint)
     if code == F_SCHLICK:
         return color + (1.0 - color) * pow5(s)
     if code == F_F82:
@@ -305,8 +338,9 @@ def _film_f82(cos, f0, b):
 
 @helper
 def _film_conductor(cosi, eta1, eta2, k2, f82):
-    """thinfilm.fresnel_conductor_polarized with F82 reflectances: R (s and
-    p alike) and the phasors of s and p (re, im)."""
+    """thinfilm.fresnel_conductor_polarized: R_s, R_p (the F82 model's for
+    both with f82 >= 0, the exact ones with f82 < 0) and the phasors of s
+    and p (re, im)."""
     eta1_sq, eta2_sq, k2_sq = eta1 * eta1, eta2 * eta2, k2 * k2
     two_eta2_k2 = 2.0 * eta2 * k2
     t1 = eta2_sq - k2_sq - eta1_sq * (1.0 - cosi * cosi)
@@ -314,13 +348,19 @@ def _film_conductor(cosi, eta1, eta2, k2, f82):
     u_sq = max(0.5 * (t2 + t1), 0.0)
     v_sq = max(0.5 * (t2 - t1), 0.0)
     u, v = np.sqrt(u_sq), np.sqrt(v_sq)
-    n = eta2 / eta1
-    k_sq = (k2 / eta1) ** 2
-    f0 = ((n - 1.0) ** 2 + k_sq) / ((n + 1.0) ** 2 + k_sq)
-    f = 6.0 / 7.0
-    f5 = (f * f) * (f * f) * f
-    b = (7.0 / (f5 * f)) * ((f0 + (1.0 - f0) * f5) - f82)
-    r = _film_f82(cosi, f0, b)
+    if f82 >= 0.0:
+        n = eta2 / eta1
+        k_sq = (k2 / eta1) ** 2
+        f0 = ((n - 1.0) ** 2 + k_sq) / ((n + 1.0) ** 2 + k_sq)
+        f = 6.0 / 7.0
+        f5 = (f * f) * (f * f) * f
+        b = (7.0 / (f5 * f)) * ((f0 + (1.0 - f0) * f5) - f82)
+        r_s = r_p = _film_f82(cosi, f0, b)
+    else:
+        r_s = _ratio((eta1 * cosi - u) ** 2 + v_sq, (eta1 * cosi + u) ** 2 + v_sq)
+        t3 = (eta2_sq - k2_sq) * cosi
+        t4 = two_eta2_k2 * cosi
+        r_p = _ratio((t3 - eta1 * u) ** 2 + (t4 - eta1 * v) ** 2, (t3 + eta1 * u) ** 2 + (t4 + eta1 * v) ** 2)
     re_s = -u_sq - v_sq + (eta1 * cosi) ** 2
     im_s = -2.0 * eta1 * cosi * v
     mag_s = np.sqrt(re_s * re_s + im_s * im_s)
@@ -335,7 +375,13 @@ def _film_conductor(cosi, eta1, eta2, k2, f82):
         re_p, im_p = 1.0, 0.0
     else:
         re_p, im_p = re_p / mag_p, im_p / mag_p
-    return r, re_s, im_s, re_p, im_p
+    return r_s, r_p, re_s, im_s, re_p, im_p
+
+
+@helper
+def _ratio(a, b):
+    """thinfilm._safe_divide for one value."""
+    return a / b if b != 0.0 else 0.0
 
 
 @helper
@@ -368,8 +414,7 @@ def _film_channel(cmf, channel, thickness, film_ior, sub_n, sub_k, cos1, conduct
     if r12s == 1.0 and r12p == 1.0:
         return 1.0
     if conductive:
-        r23, re_s, im_s, re_p, im_p = _film_conductor(-cos2, film_ior, sub_n, sub_k, f82)
-        r23s = r23p = r23
+        r23s, r23p, re_s, im_s, re_p, im_p = _film_conductor(-cos2, film_ior, sub_n, sub_k, f82)
     else:
         r23s, r23p, _, c23s, c23p = _film_dielectric(-cos2, sub_n / film_ior)
         if r23s == 1.0 and r23p == 1.0:
@@ -404,6 +449,10 @@ def _film_rgb(cmf, code, cos, ior, f0, tint, thickness, film_ior):
     an F82 metal or over a dielectric of IOR ``ior`` scaled towards f0 /
     F0(ior) (f0, tint: the lobe's RGB rows)."""
     cos = clip(cos, -1.0, 1.0)
+    if code == F_CONDUCTOR:   # its own n (f0), k (tint): exact Fresnel under the film
+        return (_film_channel(cmf, 0, thickness, film_ior, max(f0[0], 0.0), max(tint[0], 0.0), cos, True, -1.0),
+                _film_channel(cmf, 1, thickness, film_ior, max(f0[1], 0.0), max(tint[1], 0.0), cos, True, -1.0),
+                _film_channel(cmf, 2, thickness, film_ior, max(f0[2], 0.0), max(tint[2], 0.0), cos, True, -1.0))
     if code == F_F82:
         return (_film_metal(cmf, 0, cos, f0[0], tint[0], thickness, film_ior),
                 _film_metal(cmf, 1, cos, f0[1], tint[1], thickness, film_ior),
@@ -429,8 +478,8 @@ def _film_scale(f, f0, f0_real):
 
 @helper
 def _has_film(code, thickness):
-    """The F82 and dielectric Fresnel modes take a film thicker than the cutoff."""
-    return thickness > FILM_CUTOFF and (code == F_F82 or code == F_DIELECTRIC)
+    """The F82, conductor and dielectric Fresnel modes take a film thicker than the cutoff."""
+    return thickness > FILM_CUTOFF and (code == F_F82 or code == F_DIELECTRIC or code == F_CONDUCTOR)
 
 
 @helper
@@ -453,6 +502,8 @@ def _glossy_fss(code, color, f0, tint, ior):
         return f0 + (1.0 - f0) / 21.0
     if code == F_F82:
         return f0 + (1.0 - f0) / 21.0 - _f82_b(f0, tint) / 126.0
+    if code == F_CONDUCTOR:
+        return _conductor_fss(f0, tint)
     if code == F_DIELECTRIC:
         ior = max(ior, 1e-5)
         f0_real = _f0_from_ior(ior)
@@ -604,6 +655,10 @@ def selection_loop(lobes, tables, wo, w, out):
                 r0, r1, r2 = _film_rgb(cmf, code, cos_o, max(ior[i, k], 1e-5), f0[i, k], edge[i, k],
                                        thickness[i, k], film_ior[i, k])
                 guess = _luminance(r0, r1, r2)
+            elif kind[i, k] == GLOSSY and code == F_CONDUCTOR:   # exact Fresnel at the view angle
+                guess = _luminance(_conductor(cos_o, f0[i, k, 0], edge[i, k, 0]),
+                                   _conductor(cos_o, f0[i, k, 1], edge[i, k, 1]),
+                                   _conductor(cos_o, f0[i, k, 2], edge[i, k, 2]))
             elif kind[i, k] == GLOSSY and code != F_SCHLICK and code != F_NONE:
                 f0l = _luminance(f0[i, k, 0], f0[i, k, 1], f0[i, k, 2])
                 guess = f0l + (1.0 - f0l) * pow5(1.0 - cos_o)

@@ -11,7 +11,7 @@ from .lobes.hair import HAIR_CHIANG  # noqa: F401
 from .lobes.hair_bsdf import HAIR_REFLECTION, HAIR_TRANSMISSION  # noqa: F401
 from .lobes.hair_huang import HAIR_HUANG  # noqa: F401
 from .lobes.oren_nayar import OREN_NAYAR  # noqa: F401
-from .lobes.registry import F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FRESNEL_IDS, MIN_ALPHA  # noqa: F401
+from .lobes.registry import F_CONDUCTOR, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FRESNEL_IDS, MIN_ALPHA  # noqa: F401
 from .lobes.ray_portal import RAY_PORTAL  # noqa: F401
 from .lobes.sheen import SHEEN  # noqa: F401
 from .lobes.subsurface import SUBSURFACE_BURLEY, SUBSURFACE_RANDOM_WALK, SUBSURFACE_SKIN  # noqa: F401

@@ -186,6 +186,37 @@ def f82_fss(f0, b):
     return f0 + (1.0 - f0) / 21.0 - b / 126.0
 
 
+def conductor(cos, n, k):
+    """(..., 3) unpolarized Fresnel reflectance of a conductor n + i k (each
+    (..., 3)) at cos (...,) from a medium of IOR 1: Cycles' fresnel_conductor."""
+    c = np.clip(np.asarray(cos, np.float64), 0.0, 1.0)[..., None]
+    c2 = c * c
+    s2 = 1.0 - c2
+    n2, k2 = n * n, k * k
+    t0 = n2 - k2 - s2
+    a2b2 = np.sqrt(t0 * t0 + 4.0 * n2 * k2)
+    a = np.sqrt(np.maximum(0.5 * (a2b2 + t0), 0.0))
+    t1 = a2b2 + c2
+    t2 = 2.0 * a * c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rs = np.where(t1 + t2 > 0, (t1 - t2) / (t1 + t2), 1.0)
+        t3 = c2 * a2b2 + s2 * s2
+        t4 = t2 * s2
+        rp = np.where(t3 + t4 > 0, rs * (t3 - t4) / (t3 + t4), 1.0)
+    return np.clip(0.5 * (rp + rs), 0.0, 1.0)
+
+
+def conductor_fss(n, k):
+    """Cycles' fresnel_conductor_Fss: the F82 model fitted at cos 1 and 1/7,
+    its closed-form average, saturated."""
+    f0 = conductor(np.ones(np.shape(n)[:-1]), n, k)
+    f82 = conductor(np.full(np.shape(n)[:-1], 1.0 / 7.0), n, k)
+    f = 6.0 / 7.0
+    f5 = f ** 5
+    b = (7.0 / (f5 * f)) * ((f0 + (1.0 - f0) * f5) - f82)
+    return np.clip(f82_fss(f0, b), 0.0, 1.0)
+
+
 # ----------------------------------------------------------------------------
 # Tables
 

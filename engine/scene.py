@@ -244,7 +244,7 @@ Lobe.__module__, Lobe.__doc__ = __name__, _lobe_doc()
 
 LOBE_KINDS = _lobes.kinds()
 PHASE_FUNCTIONS = ("HENYEY_GREENSTEIN", "RAYLEIGH", "DRAINE", "FOURNIER_FORAND", "MIE")
-FRESNEL_MODES = ("none", "schlick", "f82", "dielectric")
+FRESNEL_MODES = tuple(_lobes.registry.FRESNEL_IDS)   # ("none", "schlick", "f82", "dielectric", "conductor")
 
 
 @dataclass

@@ -206,6 +206,16 @@ def principled_dielectric(cos, ior, f0, thickness, film_ior, dtype=np.float32):
     return np.where(scale[..., None], scaled, f).astype(dtype)
 
 
+def conductor(cos, n, k, thickness, film_ior, dtype=np.float32):
+    """(n, 3) reflectance of a physical conductor n + i k (each (n, 3))
+    under a film: the conductor Airy sum with its exact polarized Fresnel
+    (microfacet_fresnel's CONDUCTOR branch, F82 nullptr)."""
+    cos, thickness, film_ior = (np.asarray(a, dtype) for a in (cos, thickness, film_ior))
+    n, k = np.maximum(np.asarray(n, dtype), 0.0), np.maximum(np.asarray(k, dtype), 0.0)
+    return np.stack([fresnel_iridescence(c, 1.0, thickness, film_ior, n[..., c], k[..., c], cos, conductive=True,
+                                         dtype=dtype)[0] for c in range(3)], axis=-1)
+
+
 def f82_conductor(cos, f0, b, thickness, film_ior, dtype=np.float32):
     """(n, 3) reflectance of an F82-tint metal under a film: n and k from F0
     and the value at 82 degrees (Gulbrandsen), then the conductor Airy sum

@@ -277,21 +277,21 @@ class NodeTranslator:
     def _node_bsdf_metallic(self, node):
         """Cycles' Metallic BSDF (4.3+): F82 Tint (Base Color as F0, Edge Tint
         as F82 tint), or a Physical Conductor (IOR n and Extinction k per
-        channel) rendered through the F82 model fitted at 0 and 82 degrees
-        (exact there), with a warning; Principled anisotropy mapping."""
+        channel: the exact conductor Fresnel, Cycles' MicrofacetFresnel::
+        CONDUCTOR, its film over n + i k); Principled anisotropy mapping."""
         roughness = _clamp01(self.value(node, 'Roughness', 0.5))
         if getattr(node, 'fresnel_type', 'F82') == 'PHYSICAL_CONDUCTOR':
-            n = _constant_color(self, node, 'IOR', (0.2, 0.9, 1.1))
-            k = _constant_color(self, node, 'Extinction', (3.9, 2.45, 2.14))
-            f0, tint = _conductor_f82(n, k)
-            self._approximate(node, "Physical Conductor as its F82 fit")
+            # The conductor lobe holds n in f0 and k in edge_tint (engine/lobes/registry.py).
+            fresnel = 'conductor'
+            f0 = _conductor_part(_constant_color(self, node, 'IOR', (0.2, 0.9, 1.1)))
+            tint = _conductor_part(_constant_color(self, node, 'Extinction', (3.9, 2.45, 2.14)))
         else:
+            fresnel = 'f82'
             f0 = _clamp_color(self.color(node, 'Base Color', (0.617, 0.577, 0.540)))
             tint = _clamp_color(self.color(node, 'Edge Tint', (0.695, 0.726, 0.770)))
         anisotropy = _clamp01(self._finite_value(node, 'Anisotropy', self.value(node, 'Anisotropy', 0.0), 0.0))
         rotation = self._finite_value(node, 'Rotation', self.value(node, 'Rotation', 0.0), 0.0)
-        # A Physical Conductor's film lies over its F82 fit's n, k (named above).
-        lobe = dict(color=(1.0, 1.0, 1.0), roughness=roughness, fresnel='f82', f0=f0, edge_tint=tint,
+        lobe = dict(color=(1.0, 1.0, 1.0), roughness=roughness, fresnel=fresnel, f0=f0, edge_tint=tint,
                     multiscatter=getattr(node, 'distribution', 'MULTI_GGX') == 'MULTI_GGX', **self._thin_film(node))
         if getattr(node, 'distribution', 'MULTI_GGX') not in ('GGX', 'MULTI_GGX'):
             self._approximate(node, f"{node.distribution.title()} as GGX")
@@ -1041,6 +1041,12 @@ def _same_tangent(a, b):
                       and not a.call.inputs and not b.call.inputs)
 
 
+def _conductor_part(value):
+    """A conductor's n or k per channel in [0, 1e6]: past 1e6 its Fresnel is 1
+    to float precision, and the squares of 1e200 would overflow."""
+    return tuple(min(max(c, 0.0), 1e6) for c in value)
+
+
 def _constant_color(translator, node, name, default):
     """A colour input as a constant (linked: its own value, named), NaN as 0."""
     socket = node.inputs.get(name)
@@ -1050,33 +1056,6 @@ def _constant_color(translator, node, name, default):
         translator._note_texture(node, name)
     value = tuple(float(c) for c in tuple(socket.default_value)[:3])
     return tuple(translator._finite_value(node, name, c, 0.0) for c in value)
-
-
-def _conductor_fresnel(n, k, cos):
-    """Unpolarized Fresnel reflectance of a conductor n + ik at cos."""
-    c2 = cos * cos
-    s2 = 1.0 - c2
-    a = n * n - k * k - s2
-    b = math.sqrt(a * a + 4.0 * n * n * k * k)
-    t = math.sqrt(max(0.5 * (b + a), 0.0))
-    rs = (b + c2 - 2.0 * t * cos) / max(b + c2 + 2.0 * t * cos, 1e-30)
-    rp = rs * (b * c2 + s2 * s2 - 2.0 * t * cos * s2) / max(b * c2 + s2 * s2 + 2.0 * t * cos * s2, 1e-30)
-    return 0.5 * (rs + rp)
-
-
-def _conductor_f82(n, k):
-    """(F0, F82 tint) of the F82-tint model through a conductor's Fresnel at
-    0 and 82 degrees (cos 1/7): tint = F(1/7) / Schlick(F0, 1/7), as Cycles'
-    F82 tint defines F82 = tint x Schlick."""
-    f0, tint = [], []
-    for nc, kc in zip(n, k):
-        nc, kc = max(nc, 0.0), max(kc, 0.0)
-        r0 = _conductor_fresnel(nc, kc, 1.0)
-        r82 = _conductor_fresnel(nc, kc, 1.0 / 7.0)
-        schlick = r0 + (1.0 - r0) * (6.0 / 7.0) ** 5
-        f0.append(min(max(r0, 0.0), 1.0))
-        tint.append(min(max(r82 / schlick, 0.0), 1.0) if schlick > 0 else 1.0)
-    return tuple(f0), tuple(tint)
 
 
 def _max0(color):

@@ -102,4 +102,6 @@ register(LobeDef(GLOSSY_ANISOTROPIC, "glossy_anisotropic", "glossy", REFLECTION,
                         dict(color=(1, 1, 1), roughness=0.4, anisotropy=1.0, fresnel="dielectric", ior=1.5),
                         dict(color=(0.9, 0.9, 0.9), roughness=0.35, anisotropy=1.05, rotation=0.15),
                         dict(color=(0.8, 0.8, 0.8), roughness=0.5, anisotropy=0.6, rotation=0.4,
-                             multiscatter=True)]))
+                             multiscatter=True),
+                        dict(color=(1, 1, 1), roughness=0.3, anisotropy=0.7, fresnel="conductor",
+                             f0=(0.18, 0.42, 1.37), edge_tint=(3.42, 2.35, 1.77), multiscatter=True)]))

@@ -7,7 +7,7 @@ import numpy as np
 from .. import microfacet as mf
 from .. import thinfilm
 from ..microfacet import ggx_reflect, ggx_sample_vndf
-from .registry import (DELTA, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FILM_CUTOFF, NONE, REFLECTION, LobeDef,
+from .registry import (DELTA, F_CONDUCTOR, F_DIELECTRIC, F_F82, F_NONE, F_SCHLICK, FILM_CUTOFF, NONE, REFLECTION, LobeDef,
                        register)
 
 MIRROR = 1
@@ -31,7 +31,7 @@ def fresnel(lobes, rows, k, cos):
         return fresnel_of(int(code[0]), lobes, rows, k, cos)   # one kind: no masked copies
     rows = np.arange(len(lobes))[rows]
     out = np.ones((len(code), 3))
-    for kind in (F_SCHLICK, F_F82, F_DIELECTRIC):
+    for kind in (F_SCHLICK, F_F82, F_DIELECTRIC, F_CONDUCTOR):
         m = np.flatnonzero(code == kind)
         if len(m):
             out[m] = fresnel_of(kind, lobes, rows[m], k, cos[m])
@@ -49,6 +49,8 @@ def fresnel_of(code, lobes, rows, k, cos):
         f0 = lobes.f0[rows, k]
         s, _ = mf.schlick_s(cos, np.maximum(lobes.ior[rows, k], 1e-5))
         out = f0 + (1.0 - f0) * s[:, None]
+    elif code == F_CONDUCTOR:   # n in f0, k in edge_tint
+        out = mf.conductor(cos, lobes.f0[rows, k], lobes.edge_tint[rows, k])
     else:
         return np.ones((len(cos), 3))
     rows = np.arange(len(lobes))[rows]
@@ -66,7 +68,7 @@ def has_film(lobes, rows, k):
 def film_fresnel(code, lobes, rows, k, cos, eta=None, film_ior=None):
     """(n, 3) reflectance of a thin film over the lobe's Fresnel at cos
     (F82: the film over Gulbrandsen's n, k of F0 and the value at 82
-    degrees; dielectric: the film over the IOR ``eta`` (default the lobe's),
+    degrees; conductor: the film over its own n, k, exact Fresnel; dielectric: the film over the IOR ``eta`` (default the lobe's),
     each channel scaled towards f0 / F0(eta)), in float64."""
     thickness = lobes.thin_film_thickness[rows, k]
     if film_ior is None:
@@ -74,7 +76,10 @@ def film_fresnel(code, lobes, rows, k, cos, eta=None, film_ior=None):
     f0 = np.clip(lobes.f0[rows, k], 0.0, 1.0)
     cos = np.clip(cos, -1.0, 1.0)
     with np.errstate(all="ignore"):
-        if code == F_F82:
+        if code == F_CONDUCTOR:
+            out = thinfilm.conductor(cos, lobes.f0[rows, k], lobes.edge_tint[rows, k], thickness, film_ior,
+                                     dtype=np.float64)
+        elif code == F_F82:
             b = mf.f82_b(f0, lobes.edge_tint[rows, k])
             out = thinfilm.f82_conductor(cos, f0, b, thickness, film_ior, dtype=np.float64)
         else:
@@ -133,7 +138,10 @@ def albedo_guess_glossy(lobes, k, mu):
     est = f0 + (1.0 - f0) * mf.pow5(1.0 - mu)
     code = lobes.fresnel[:, k]
     est = np.where((code != F_NONE) & (code != F_SCHLICK), est, 1.0)
-    for c in (F_F82, F_DIELECTRIC):
+    m = np.flatnonzero(code == F_CONDUCTOR)   # its exact Fresnel at the view angle (f0 holds n)
+    if len(m):
+        est[m] = luminance(mf.conductor(mu[m], lobes.f0[m, k], lobes.edge_tint[m, k]))
+    for c in (F_F82, F_DIELECTRIC, F_CONDUCTOR):
         m = np.flatnonzero((code == c) & has_film(lobes, slice(None), k))
         if len(m):
             est[m] = luminance(film_fresnel(c, lobes, m, k, mu[m]))
@@ -146,7 +154,11 @@ register(LobeDef(MIRROR, "mirror", "glossy", REFLECTION | DELTA, sample_mirror, 
                  cases=[dict(color=(0.9, 0.8, 0.7)), dict(color=(1, 1, 1), fresnel="f82", f0=(0.9, 0.6, 0.3),
                                                            edge_tint=(0.9, 0.9, 0.5)),
                         dict(color=(1, 1, 1), fresnel="f82", f0=(0.9, 0.6, 0.3), edge_tint=(0.9, 0.9, 0.5),
-                             thin_film_thickness=350.0, thin_film_ior=1.5)]))
+                             thin_film_thickness=350.0, thin_film_ior=1.5),
+                        # a physical conductor (gold's n, k), bare and under a film
+                        dict(color=(1, 1, 1), fresnel="conductor", f0=(0.18, 0.42, 1.37), edge_tint=(3.42, 2.35, 1.77)),
+                        dict(color=(1, 1, 1), fresnel="conductor", f0=(0.18, 0.42, 1.37), edge_tint=(3.42, 2.35, 1.77),
+                             thin_film_thickness=300.0, thin_film_ior=1.4)]))
 register(LobeDef(GLOSSY, "glossy", "glossy", REFLECTION, sample_glossy, eval_glossy, "upper",
                  albedo_guess=albedo_guess_glossy, params=("roughness", "multiscatter") + _FRESNEL,
                  doc="GGX microfacet reflection, alpha = roughness^2 (Walter et al. 2007, VNDF sampling)",
@@ -161,4 +173,11 @@ register(LobeDef(GLOSSY, "glossy", "glossy", REFLECTION, sample_glossy, eval_glo
                         dict(color=(1, 1, 1), roughness=0.25, fresnel="f82", f0=(0.9, 0.6, 0.3),
                              edge_tint=(0.9, 0.9, 0.5), thin_film_thickness=450.0, thin_film_ior=1.5),
                         dict(color=(1, 1, 1), roughness=0.3, fresnel="dielectric", ior=1.5,
-                             thin_film_thickness=500.0, thin_film_ior=1.33, multiscatter=True)]))
+                             thin_film_thickness=500.0, thin_film_ior=1.33, multiscatter=True),
+                        # physical conductors: a dielectric-like n (k 0, where the F82 fit is worst) and
+                        # copper's n, k under a film, with multiscatter (Fss from the fit, as Cycles)
+                        dict(color=(1, 1, 1), roughness=0.35, fresnel="conductor", f0=(1.5, 1.5, 1.5),
+                             edge_tint=(0.0, 0.0, 0.0)),
+                        dict(color=(1, 1, 1), roughness=0.3, fresnel="conductor", f0=(0.27, 0.68, 1.32),
+                             edge_tint=(3.61, 2.62, 2.29), thin_film_thickness=420.0, thin_film_ior=1.5,
+                             multiscatter=True)]))

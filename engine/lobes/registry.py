@@ -56,8 +56,9 @@ OWN_WEIGHT = 64
 MIN_ALPHA = 1e-3
 
 RGB = Tuple[float, float, float]
-F_NONE, F_SCHLICK, F_F82, F_DIELECTRIC = range(4)
-FRESNEL_IDS = {"none": F_NONE, "schlick": F_SCHLICK, "f82": F_F82, "dielectric": F_DIELECTRIC}
+F_NONE, F_SCHLICK, F_F82, F_DIELECTRIC, F_CONDUCTOR = range(5)
+FRESNEL_IDS = {"none": F_NONE, "schlick": F_SCHLICK, "f82": F_F82, "dielectric": F_DIELECTRIC,
+               "conductor": F_CONDUCTOR}
 
 
 # ----------------------------------------------------------------------------
@@ -113,14 +114,16 @@ PARAMS = (
           "glossy and mirror: 'none' (Glossy BSDF: colour times the microfacet term), 'schlick' (legacy: colour "
           "is F0), 'f82' (Principled metal: F82-tint with F0 = f0 and edge_tint), 'dielectric' (the Principled "
           "BSDF's Fresnel: mix(f0, 1, s) with s the real Fresnel curve of ior remapped to [0, 1]; f0 None = F0 "
-          "of ior).  Glass and refraction always use the dielectric Fresnel of ior.",
+          "of ior), 'conductor' (the Metallic BSDF's Physical Conductor: the exact Fresnel of n + i k, with n in "
+          "f0 and k in edge_tint).  Glass and refraction always use the dielectric Fresnel of ior.",
           to_table=lambda lobe: FRESNEL_IDS.get(getattr(lobe, "fresnel", "none"), F_NONE),
           fill=lambda lobes: np.where(lobes.schlick, F_SCHLICK, F_NONE).astype(np.int8)),
     Param("ior", float, 1.5, np.float64, (), "index of refraction (relative to the outside; inverted "
           "automatically when a ray arrives from the back face of a glass or refraction lobe).", to_table=_ior),
     Param("f0", Optional[RGB], None, np.float64, (3,), "RGB reflectance at normal incidence ('f82', "
-          "'dielectric', glass).", to_table=_f0_table, fill=lambda lobes: np.array(lobes.color, dtype=np.float64)),
-    Param("edge_tint", RGB, (1.0, 1.0, 1.0), np.float64, (3,), "RGB F82 tint ('f82')."),
+          "'dielectric', glass); the conductor's n ('conductor').", to_table=_f0_table, fill=lambda lobes: np.array(lobes.color, dtype=np.float64)),
+    Param("edge_tint", RGB, (1.0, 1.0, 1.0), np.float64, (3,), "RGB F82 tint ('f82'); the conductor's "
+          "extinction k ('conductor')."),
     Param("transmission_tint", RGB, (1.0, 1.0, 1.0), np.float64, (3,),
           "RGB factor on the refracted part only (glass).",
           to_table=lambda lobe: np.maximum(getattr(lobe, "transmission_tint", (1.0, 1.0, 1.0)), 0.0)),
@@ -177,7 +180,7 @@ PARAMS = (
           "radius; the near field model where the fibre is wider (set per camera ray by the integrator; 1: far "
           "field)."),
     Param("thin_film_thickness", float, 0.0, np.float64, (), "thin-film iridescence over the lobe's Fresnel "
-          "(glossy 'dielectric' and 'f82', mirror, glass): the film's thickness in nm; at most 0.1 (Cycles' "
+          "(glossy 'dielectric', 'f82' and 'conductor', mirror, glass): the film's thickness in nm; at most 0.1 (Cycles' "
           "THINFILM_THICKNESS_CUTOFF) is no film (engine/thinfilm.py).",
           to_table=lambda lobe: film_thickness(getattr(lobe, "thin_film_thickness", 0.0))),
     Param("portal_position", RGB, (NAN,) * 3, np.float64, (3,), "ray_portal: the world position the path goes "

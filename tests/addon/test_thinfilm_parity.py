@@ -23,7 +23,7 @@ import bpy
 import numpy as np
 
 from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
-from test_lobe_parity import _material, _sphere
+from test_lobe_parity import _material, _sphere, lit_stage
 from parity_scenes import plane
 
 EMBER_SPP = 256
@@ -50,26 +50,35 @@ def films(scene):
         'Base Color': (0.6, 0.1, 0.08), 'Roughness': 0.2, 'IOR': 1.5,
         'Thin Film Thickness': 600.0, 'Thin Film IOR': 1.4, 'distribution': 'MULTI_GGX'})
     _sphere(coated, (-0.6, -0.75, 0.42))
-    light = bpy.data.lights.new("Area", 'AREA')
-    light.energy = 120.0
-    light.size = 2.0
-    obj = bpy.data.objects.new("Area", light)
-    obj.location = (0.4, 1.4, 3.2)
-    bpy.context.scene.collection.objects.link(obj)
-    world = bpy.data.worlds.new("W")
-    world.use_nodes = True
-    world.node_tree.nodes['Background'].inputs['Color'].default_value = (0.25, 0.25, 0.25, 1.0)
-    scene.world = world
-    cam = scene.camera
-    cam.location = (0.0, -4.2, 2.6)
-    from mathutils import Vector
-    cam.rotation_euler = Vector((0.0, 3.9, -2.3)).to_track_quat('-Z', 'Y').to_euler()
-    cam.data.lens = 42
+    lit_stage(scene, 120.0, (0.4, 1.4, 3.2), 0.25, (0.0, -4.2, 2.6), (0.0, 3.9, -2.3), 42)
     small_resolution(scene, WIDTH, HEIGHT)
     return BOUNCES
 
 
-SCENES = {'films': films}
+def conductors(scene):
+    """Physical Conductors (the Metallic BSDF's exact complex-IOR Fresnel):
+    gold's n, k bare, a k = 0 conductor (n 1.5: where the F82 fit misses
+    the exact curve by up to 26 %), and copper's n, k under a 350 nm film."""
+    plane("Floor", _material("Floor", 'ShaderNodeBsdfDiffuse', Color=(0.5, 0.5, 0.5)), half=6.0)
+    gold = _material("Gold", 'ShaderNodeBsdfMetallic', **{
+        'IOR': (0.18, 0.42, 1.37), 'Extinction': (3.42, 2.35, 1.77), 'Roughness': 0.3,
+        'fresnel_type': 'PHYSICAL_CONDUCTOR', 'distribution': 'MULTI_GGX'})
+    _sphere(gold, (-1.1, 0.45, 0.5), radius=0.5)
+    clear = _material("KZero", 'ShaderNodeBsdfMetallic', **{
+        'IOR': (1.5, 1.5, 1.5), 'Extinction': (0.0, 0.0, 0.0), 'Roughness': 0.2,
+        'fresnel_type': 'PHYSICAL_CONDUCTOR', 'distribution': 'GGX'})
+    _sphere(clear, (1.1, 0.45, 0.5), radius=0.5)
+    copper = _material("FilmedCopper", 'ShaderNodeBsdfMetallic', **{
+        'IOR': (0.27, 0.68, 1.32), 'Extinction': (3.61, 2.62, 2.29), 'Roughness': 0.25,
+        'Thin Film Thickness': 350.0, 'Thin Film IOR': 1.45, 'fresnel_type': 'PHYSICAL_CONDUCTOR',
+        'distribution': 'MULTI_GGX'})
+    _sphere(copper, (0.0, -0.75, 0.42))
+    lit_stage(scene, 120.0, (0.4, 1.4, 3.2), 0.35, (0.0, -4.2, 2.6), (0.0, 3.9, -2.3), 42)
+    small_resolution(scene, WIDTH, HEIGHT)
+    return BOUNCES
+
+
+SCENES = {'films': films, 'conductors': conductors}
 
 
 def reference_scene(name, folder=None):
@@ -87,6 +96,18 @@ def test_thin_film_parity_with_cycles(tmp_path, tapped_engine):
     warnings = " ".join(ember_engine.RENDER_LOG[-1]['warnings'])
     assert "Thin Film" not in warnings, warnings
     check = check_against_reference('thinfilm_films', scene, bounces, image, var, EMBER_SPP, BLOCK)
+    check.assert_agrees(0.006, 0.03)
+
+
+def test_physical_conductor_parity_with_cycles(tmp_path, tapped_engine):
+    """Physical Conductors render with their exact Fresnel as Cycles' CONDUCTOR
+    mode (bare, k = 0, under a film), no approximation named."""
+    from addon import engine as ember_engine
+    scene, bounces = reference_scene('conductors')
+    image, var = render_for_reference(scene, tmp_path, 'conductors', tapped_engine, EMBER_SPP, 17, bounces)
+    warnings = " ".join(ember_engine.RENDER_LOG[-1]['warnings'])
+    assert "Conductor" not in warnings and "F82" not in warnings, warnings
+    check = check_against_reference('thinfilm_conductors', scene, bounces, image, var, EMBER_SPP, BLOCK)
     check.assert_agrees(0.006, 0.03)
 
 
