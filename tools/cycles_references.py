@@ -70,6 +70,8 @@ for _scene in ('smoke_in_fog',):
 REFERENCES['lobes_lobes'] = ('test_lobe_parity', 'lobes', 1024)
 REFERENCES['thinfilm_films'] = ('test_thinfilm_parity', 'films', 1024)
 REFERENCES['thinfilm_conductors'] = ('test_thinfilm_parity', 'conductors', 1024)
+for _scene in ('round', 'elliptical'):
+    REFERENCES['hair_huang_' + _scene] = ('test_hair_huang_parity', _scene, 1024)
 for _scene in ('spheres', 'backlit'):
     REFERENCES['subsurface_' + _scene] = ('test_subsurface_parity', _scene, 1024)
 REFERENCES['motion_objects'] = ('test_motion_parity', 'objects', 2048)

@@ -4,8 +4,9 @@ on test_curves_parity's Curves object (400 wavy strands of 6 points, radius
 0.03 tapering to 0.008, 3D curves, a diffuse floor under an area light, seen
 from above; four bounces) at 64 x 48, Melanin 0.6 (redness 0.3), Roughness
 0.3, IOR 1.55, Offset 2 degrees, Aspect Ratio 1 (round) and 0.85
-(elliptical, the major axis along Blender's curve normals), against live
-Cycles seeds (no stored reference: 8 x 256 spp, about a minute each).  At
+(elliptical, the major axis along Blender's curve normals), against converged
+Cycles references (tools/cycles_references.py hair_huang_*, 8 x 1024 spp:
+rendered live in each run before, a minute each).  At
 this size a pixel is about as wide as the roots: camera rays meet both
 Cycles' near field (a fibre wider than half a pixel) and its far field.
 
@@ -17,13 +18,11 @@ import bpy
 import numpy as np
 import pytest
 
-from ember_testlib import (ReferenceCheck, empty_factory_scene, live_cycles_reference, render_for_reference,
-                           small_resolution)
+from ember_testlib import check_against_reference, empty_factory_scene, render_for_reference, small_resolution
 from test_curves_parity import strands
 from test_hair_parity import hair_material
 
 SPP = 256
-SEEDS, CYCLES_SPP = 8, 256
 BLOCK = 16
 
 
@@ -47,15 +46,20 @@ def huang_strands(scene, aspect, curves=400):
     return 4
 
 
-@pytest.mark.parametrize("aspect", [1.0, 0.85])
-def test_huang_parity_with_live_cycles(tmp_path, tapped_engine, aspect):
+ASPECTS = {'round': 1.0, 'elliptical': 0.85}
+
+
+def reference_scene(name, folder=None):
+    """The scene ``name`` and its bounces (as tools/cycles_references.py renders it)."""
     scene = empty_factory_scene()
-    bounces = huang_strands(scene, aspect)
-    name = f"huang_{int(aspect * 100)}"
-    ref, ref_var, header = live_cycles_reference(scene, tmp_path, name, SEEDS, CYCLES_SPP, bounces)
-    image, var = render_for_reference(scene, tmp_path, name, tapped_engine, SPP, 2, bounces)
-    check = ReferenceCheck(name, image[..., :3].astype(np.float64), var, SPP, ref, ref_var, header, BLOCK)
-    check.assert_agrees(0.01, 0.03)
+    return scene, huang_strands(scene, ASPECTS[name])
+
+
+@pytest.mark.parametrize("shape", list(ASPECTS))
+def test_huang_parity_with_cycles(tmp_path, tapped_engine, shape):
+    scene, bounces = reference_scene(shape)
+    image, var = render_for_reference(scene, tmp_path, shape, tapped_engine, SPP, 2, bounces)
+    check_against_reference(f"hair_huang_{shape}", scene, bounces, image, var, SPP, BLOCK).assert_agrees(0.01, 0.03)
 
 
 def test_huang_export(factory_scene):
