@@ -49,14 +49,23 @@ import numpy as np
 from ..geometry import corner_bounds
 from ..kernels import LoopKernel, helper
 from ..lobes import registry as lobe_registry
+from ..rows import take_arrays
 from ..vec import to_local, to_world
 
 RES = 32                   # finest quadtree cells per side of the square
 BINS = RES * RES
 LEVELS = 5                 # log2(RES)
 RHO = 0.01                 # Mueller's quadtree subdivision threshold
-ALPHA = 0.3                # probability of sampling the guide at a diffuse vertex (0.5: variance +25 % at 64 px)
+ALPHA = 0.3                # guide fraction of a leaf that has learned none yet (0.5: variance +25 % at 64 px)
 MIN_ALPHA = 0.02           # below this (narrow glossy lobes) the BSDF alone samples
+# Guide fractions a leaf may learn (FRACTIONS[k] times the vertex's roughness):
+# the one of least estimated second moment of the bounce's estimator.
+FRACTIONS = np.array([0.0, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.65, 0.8])
+K = len(FRACTIONS)
+MIN_MOMENTS = 256          # guided records a leaf needs before it learns its fraction
+GUIDE_COST = 0.05          # a guided leaf's second moment counts this much more (its CPU)
+YMAX = 2.0 ** 8            # largest normalized contribution whose square is summed
+RMIN = 2.0 ** -8           # smallest q_k / q_old summed
 SPLIT_RECORDS = 4000       # spatial threshold c (times sqrt(spp)); Mueller: 12000 at 1280 x 720
 MAX_DEPTH = 24             # spatial tree levels (8 halvings per axis)
 MAX_LEAVES = 4096          # spatial leaves (memory: 2 x 8 KB each, film-side histograms 8 KB)
@@ -64,7 +73,8 @@ MIN_RECORDS = 64           # records a leaf needs before it guides
 FIXED = 2.0 ** 16          # fixed-point scale of the records' sums
 VMAX = 2.0 ** 20           # largest record (radiance over pdf) summed
 SLOTS = 3                  # guided vertices a path remembers
-COLUMNS = 1 + 3 * SLOTS    # Paths.guide_path: vertices written, then (cell, L, scale) per slot
+SLOT = 6                   # per slot: cell, L, scale, f x norm (-1: no moment), x, old fraction
+COLUMNS = 1 + SLOT * SLOTS  # Paths.guide_path: vertices written, then SLOT columns per slot
 FOUR_PI = 4.0 * np.pi
 
 
@@ -224,6 +234,101 @@ def _pdf_numpy(leaf, wi, density, pdf):
 _pdf_kernel = LoopKernel(_pdf_loop, "void(int32[::1], float64[:, ::1], float64[:, ::1], float64[::1])", _pdf_numpy)
 
 
+@helper
+def _leaf_at(child, x, y, z):
+    """The leaf (-1 - child code) holding unit-cube point (x, y, z): _leaf_loop's walk."""
+    node = 0
+    depth = 0
+    while child[node] >= 0:
+        a = depth % 3
+        c = x if a == 0 else (y if a == 1 else z)
+        c = 2.0 * c
+        step = 0
+        if c >= 1.0:
+            c -= 1.0
+            step = 1
+        if a == 0:
+            x = c
+        elif a == 1:
+            y = c
+        else:
+            z = c
+        node = child[node] + step
+        depth += 1
+    return -1 - child[node]
+
+
+@helper
+def _unit(p, lo, inv):
+    """unit_cube of one coordinate: NaN and infinities at 0, clamped into [0, 1)."""
+    u = (p - lo) * inv
+    if not np.isfinite(u):
+        u = 0.0
+    return min(max(u, 0.0), 1.0 - 1e-12)
+
+
+def _vertex_loop(kind, lobe_alpha, selection, split, table, p, lo, inv, child, fraction, training,
+                 leaf, alpha, rough):
+    """Per vertex in one pass: may it be guided (every lobe's table entry
+    non-zero, a lobe selected, no second bump normal), its roughness
+    (guide_probability's, without ALPHA; -1: not eligible), its leaf (-1:
+    the BSDF alone samples) and guide probability fraction[leaf] x roughness."""
+    for i in range(kind.shape[0]):
+        ok = split[i] == 0
+        chosen = False
+        r = 0.0
+        for j in range(kind.shape[1]):
+            t = table[np.int64(kind[i, j]) + 128]
+            s = selection[i, j]
+            if t == 0:
+                ok = False
+            if s > 0.0:
+                chosen = True
+            if t == 1:
+                r += s
+            else:
+                r += s * min(np.sqrt(max(lobe_alpha[i, j], 0.0)), 1.0)
+        r = min(max(r, 0.0), 1.0)
+        ok = ok and chosen
+        rough[i] = r if ok else -1.0
+        leaf[i] = -1
+        alpha[i] = 0.0
+        if not ok or ALPHA * r < MIN_ALPHA:   # a narrow lobe: better sampled by itself
+            continue
+        lf = _leaf_at(child, _unit(p[i, 0], lo[0], inv[0]), _unit(p[i, 1], lo[1], inv[1]),
+                      _unit(p[i, 2], lo[2], inv[2]))
+        f = fraction[lf]
+        if f < 0.0:
+            continue   # the leaf learned no light
+        a = f * r
+        if training == 0 and a < MIN_ALPHA:
+            continue   # after training: a leaf of little guiding is not guided (its CPU)
+        leaf[i] = lf
+        alpha[i] = a
+
+
+def _vertex_numpy(kind, lobe_alpha, selection, split, table, p, lo, inv, child, fraction, training,
+                  leaf, alpha, rough):
+    t = table[kind.astype(np.int64) + 128]
+    r = np.where(t == 1, selection, selection * np.minimum(np.sqrt(np.maximum(lobe_alpha, 0.0)), 1.0))
+    r = np.clip(r.sum(axis=1), 0.0, 1.0)
+    ok = (split == 0) & (t != 0).all(axis=1) & (selection > 0).any(axis=1)
+    rough[:] = np.where(ok, r, -1.0)
+    lf = np.empty(len(p), np.int32)
+    _leaf_numpy(unit_cube(p, lo, inv), child, lf)
+    f = fraction[lf]
+    a = f * r
+    on = ok & (ALPHA * r >= MIN_ALPHA) & (f >= 0.0) & ((training != 0) | (a >= MIN_ALPHA))
+    leaf[:] = np.where(on, lf, -1)
+    alpha[:] = np.where(on, a, 0.0)
+
+
+_vertex_kernel = LoopKernel(_vertex_loop, "void(int8[:, ::1], float64[:, ::1], float64[:, ::1], uint8[::1], "
+                                          "int8[::1], float64[:, ::1], float64[::1], float64[::1], int32[::1], "
+                                          "float64[::1], int64, int32[::1], float64[::1], float64[::1])",
+                            _vertex_numpy)
+
+
 # ----------------------------------------------------------------------------
 # the spatial tree and the directional distributions
 
@@ -314,13 +419,18 @@ class Guide:
     the unit square per finest cell) and CDF (over cells, in cell order),
     and which leaves guide; positions map to the unit cube by lo, inv_size."""
 
-    def __init__(self, tree, density, guided, lo, inv_size):
+    def __init__(self, tree, density, guided, lo, inv_size, fraction=None, norm=None):
         self.tree, self.lo, self.inv_size = tree, lo, inv_size
         self.density = np.ascontiguousarray(density)
         cdf = np.cumsum(self.density / BINS, axis=1)
         cdf[:, -1] = np.where(guided, 1.0, cdf[:, -1])
         self.cdf = np.ascontiguousarray(cdf)
         self.guided = guided
+        # Each leaf's guide fraction (learned, else ALPHA; -1: not guided)
+        # and 1 / its mean record (scales the second moments it learns from).
+        f = np.full(len(guided), ALPHA) if fraction is None else np.asarray(fraction, np.float64)
+        self.fraction = np.ascontiguousarray(np.where(guided, f, -1.0))
+        self.norm = np.ones(len(guided)) if norm is None else np.asarray(norm, np.float64)
 
     def leaf_of(self, p):
         """Each point's leaf, -1 where its leaf has learned nothing."""
@@ -382,6 +492,10 @@ class PathGuide:
     def _reset(self):
         self.sums = np.zeros((self.tree.leaves, BINS), np.int64)
         self.counts = np.zeros(self.tree.leaves, np.int64)
+        # Per leaf, the estimated second moments of the bounce's estimator
+        # with each of FRACTIONS (fixed point) and how many records they hold.
+        self.moments = np.zeros((self.tree.leaves, K), np.int64)
+        self.moment_counts = np.zeros(self.tree.leaves, np.int64)
 
     def records_for(self, first_sample):
         """A tile's Records for a pass from sample ``first_sample`` (None once
@@ -394,10 +508,14 @@ class PathGuide:
         """A tile's summed records (cells, sums, counts): integers, any order."""
         if records is None:
             return
-        cells_, sums, counts = records
+        cells_, sums, counts, *moments = records
         flat = self.sums.reshape(-1)
         flat[cells_] += sums   # cells unique within a tile
         np.add.at(self.counts, cells_ // BINS, counts)
+        if moments:   # (unique leaves, (n, K) sums, counts)
+            leaves, m, mc = moments
+            self.moments[leaves] += m
+            self.moment_counts[leaves] += mc
 
     def update(self, samples):
         """Rebuild the guide from the records since the last rebuild
@@ -406,10 +524,36 @@ class PathGuide:
         if samples <= 0 or not self.counts.any():
             return
         energy = self.sums.astype(np.float64) / FIXED
-        guided = (self.counts >= MIN_RECORDS) & (energy.sum(axis=1) > 0)
-        self.view = Guide(self.tree, densities(energy), guided, self.lo, self.inv_size)
+        total = energy.sum(axis=1)
+        guided = (self.counts >= MIN_RECORDS) & (total > 0)
+        norm = np.where(guided, self.counts / np.where(guided, total, 1.0), 1.0)
+        self.view = Guide(self.tree, densities(energy), guided, self.lo, self.inv_size, self.fractions(), norm)
         self.tree = self.tree.refine(self.counts, SPLIT_RECORDS * np.sqrt(max(samples, 1)))
         self._reset()
+
+
+    def fractions(self):
+        """Each leaf's guide fraction: the one of FRACTIONS of least second
+        moment (a guided one's raised by GUIDE_COST) where the leaf holds
+        MIN_MOMENTS guided records, else ALPHA.  From integer sums, so the
+        same whatever the batching."""
+        out = np.full(self.tree.leaves, ALPHA)
+        ok = self.moment_counts >= MIN_MOMENTS
+        if ok.any():
+            cost = self.moments[ok].astype(np.float64) * np.where(FRACTIONS > 0, 1.0 + GUIDE_COST, 1.0)
+            out[ok] = FRACTIONS[np.argmin(cost, axis=1)]   # ties: the smallest fraction
+        return out
+
+
+def second_moments(y, x, old):
+    """(n, K) fixed-point estimates of each record's second moment with
+    each of FRACTIONS: y = F / q_old (the bounce's contribution, normalized
+    by its leaf), x = r (p_guide - p_bsdf) / q_old, old = the fraction that
+    sampled it.  E_q_old[y^2 q_old / q_k] = the integral of F^2 / q_k, and
+    q_k / q_old = 1 + (a_k - a_old) x."""
+    y = np.minimum(y, YMAX)
+    ratio = np.maximum(1.0 + (FRACTIONS[None, :] - old[:, None]) * x[:, None], RMIN)
+    return np.rint((y * y)[:, None] / ratio * FIXED).astype(np.int64)
 
 
 class Records:
@@ -418,19 +562,32 @@ class Records:
     def __init__(self, tree, lo, inv_size):
         self.tree, self.lo, self.inv_size = tree, lo, inv_size
         self.parts = []
+        self.moment_parts = []
 
-    def add(self, cell, value):
+    def add(self, cell, value, f=None, x=None, old=None):
+        """Records (cell, L cos / p); where f (the BSDF's value there times
+        the leaf's norm; < 0: none) is given, their second moments too."""
         # Records of no light count too (the spatial tree splits by how
         # many paths pass, as Mueller's); NaN, inf and negative ones are dropped.
         ok = (cell >= 0) & np.isfinite(value) & (value >= 0)
         if ok.any():
             self.parts.append((cell[ok].astype(np.int64), value[ok]))
+        if f is None:
+            return
+        with np.errstate(invalid="ignore", over="ignore"):
+            y = value * f
+            m = ok & (f >= 0) & np.isfinite(y) & np.isfinite(x) & np.isfinite(old)
+        if m.any():
+            self.moment_parts.append((cell[m].astype(np.int64) // BINS, second_moments(y[m], x[m], old[m])))
 
     def summed(self):
         """(unique cells, int64 sums, int64 counts), or None: records
-        rounded to fixed point before adding, so any grouping sums alike."""
+        rounded to fixed point before adding, so any grouping sums alike;
+        followed by (unique leaves, (n, K) int64 moment sums, counts) when
+        there are second moments."""
         if not self.parts:
             return None
+        moments = self._moments()
         cell = np.concatenate([c for c, _ in self.parts])
         q = np.rint(np.minimum(np.concatenate([v for _, v in self.parts]), VMAX) * FIXED).astype(np.int64)
         order = np.argsort(cell, kind="stable")
@@ -438,7 +595,18 @@ class Records:
         start = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]])
         counts = np.diff(np.r_[start, len(cell)]).astype(np.int64)
         self.parts = []
-        return cell[start], np.add.reduceat(q, start), counts
+        return (cell[start], np.add.reduceat(q, start), counts) + moments
+
+    def _moments(self):
+        if not self.moment_parts:
+            return ()
+        leaf = np.concatenate([l for l, _ in self.moment_parts])
+        m = np.concatenate([q for _, q in self.moment_parts])
+        self.moment_parts = []
+        order = np.argsort(leaf, kind="stable")
+        leaf, m = leaf[order], m[order]
+        start = np.flatnonzero(np.r_[True, leaf[1:] != leaf[:-1]])
+        return leaf[start], np.add.reduceat(m, start, axis=0), np.diff(np.r_[start, len(leaf)]).astype(np.int64)
 
 
 # ----------------------------------------------------------------------------
@@ -456,16 +624,42 @@ def eligible_kinds():
     return _ELIGIBLE[key]
 
 
+_TABLES = {}
+
+
+def kind_table(none_kind):
+    """int8 table over lobe id + 128 for _vertex_loop: 0 a lobe no guided
+    vertex may hold, 1 an eligible diffuse lobe (roughness 1), 2 another
+    eligible lobe or none (memoized per registry size)."""
+    key = (len(lobe_registry.REGISTRY), none_kind)
+    if key not in _TABLES:
+        table = np.zeros(256, np.int8)
+        diffuse = set(lobe_registry.kinds_of_class("diffuse"))
+        for k in eligible_kinds() + (none_kind,):
+            table[k + 128] = 1 if k in diffuse else 2
+        _TABLES[key] = table
+    return _TABLES[key]
+
+
 class GuideAt:
     """The guide at a batch of vertices: its Guide (None: none yet), each
     vertex's leaf (-1: not guided, the BSDF alone samples there), its guide
-    probability and which vertices may be guided (they train the guide)."""
+    probability and which vertices may be guided (they train the guide);
+    ``rough`` their roughness (the guide probability over the leaf's
+    fraction) and, once mix ran while learning, ``x`` and ``f`` per row
+    (second_moments' x, the BSDF's value; f < 0: not guided)."""
 
-    def __init__(self, view, leaf, alpha, eligible):
+    def __init__(self, view, leaf, alpha, eligible, rough=None, learning=False):
         self.view, self.leaf, self.alpha, self.eligible = view, leaf, alpha, eligible
+        self.rough, self.learning = rough, learning
+        self.x = self.f = None
 
     def take(self, rows):
-        return GuideAt(self.view, self.leaf[rows], self.alpha[rows], self.eligible[rows])
+        g = GuideAt(self.view, self.leaf[rows], self.alpha[rows], self.eligible[rows],
+                    None if self.rough is None else self.rough[rows], self.learning)
+        if self.x is not None:
+            g.x, g.f = self.x[rows], self.f[rows]
+        return g
 
     @property
     def rows(self):
@@ -473,36 +667,50 @@ class GuideAt:
 
 
 def guide_probability(kind, lobe_alpha, selection, kind_in=np.isin):
-    """Each vertex's probability of sampling the guide: ALPHA times the
-    selection-weighted roughness of its lobes (diffuse lobes 1, glossy ones
-    their roughness sqrt(alpha)), as Cycles' roughness-scaled guiding
-    probability: a narrow lobe is better sampled by itself."""
+    """Each vertex's probability of sampling the guide at a leaf that has
+    learned no fraction: ALPHA times the selection-weighted roughness of
+    its lobes (diffuse lobes 1, glossy ones their roughness sqrt(alpha)),
+    as Cycles' roughness-scaled guiding probability: a narrow lobe is
+    better sampled by itself.  (_vertex_loop computes it per vertex.)"""
     diffuse = kind_in(kind, lobe_registry.kinds_of_class("diffuse"))
     rough = np.where(diffuse, 1.0, np.minimum(np.sqrt(np.maximum(lobe_alpha, 0.0)), 1.0))
     return ALPHA * np.clip((selection * rough).sum(axis=1), 0.0, 1.0)
 
 
+_NO_VIEW = (np.array([-1], np.int32), np.array([-1.0]), np.zeros(3), np.ones(3))
+
+
+def vertex_guide(view, training, lobes, selection, p, none_kind):
+    """(leaf, guide probability, roughness; -1: not eligible) of each
+    vertex, by the compiled _vertex_loop (one pass)."""
+    n = len(p)
+    leaf, alpha, rough = np.empty(n, np.int32), np.empty(n), np.empty(n)
+    child, fraction, lo, inv = _NO_VIEW if view is None else (view.tree.child, view.fraction, view.lo,
+                                                               view.inv_size)
+    split = np.zeros(n, np.uint8) if lobes.diffuse_split is None else lobes.diffuse_split.astype(np.uint8)
+    _vertex_kernel(np.ascontiguousarray(lobes.kind, np.int8), _c2(lobes.alpha), _c2(selection), split,
+                   kind_table(none_kind), _c2(p), _c(lo), _c(inv), child, fraction, int(bool(training)),
+                   leaf, alpha, rough)
+    return leaf, alpha, rough
+
+
+def _c2(a):
+    return np.ascontiguousarray(a, np.float64)
+
+
 def at_vertices(view, recording, v, kind_in, none_kind):
     """The GuideAt of vertices ``v`` (None when nothing is guided or
-    recorded there)."""
+    recorded there).  While recording, leaves that learned a fraction of 0
+    stay guided (with probability 0: their records still learn)."""
     if (view is None and not recording) or len(v) == 0:
         return None
-    lobes = v.lobes
-    ok = kind_in(lobes.kind, eligible_kinds() + (none_kind,)).all(axis=1) & (v.selection > 0).any(axis=1)
-    if lobes.diffuse_split is not None:
-        ok &= ~lobes.diffuse_split
-    if not ok.any():
+    leaf, alpha, rough = vertex_guide(view, recording, v.lobes, v.selection, v.hit.p, none_kind)
+    eligible = rough >= 0.0
+    if not eligible.any():
         return None
-    leaf = np.full(len(v), -1, np.int32)
-    alpha = np.zeros(len(v))
-    if view is not None:
-        rows = np.flatnonzero(ok)
-        alpha[rows] = guide_probability(lobes.kind[rows], lobes.alpha[rows], v.selection[rows], kind_in)
-        rows = rows[alpha[rows] >= MIN_ALPHA]
-        leaf[rows] = view.leaf_of(v.hit.p[rows])
     if not recording and not (leaf >= 0).any():
         return None
-    return GuideAt(view, leaf, alpha, ok)
+    return GuideAt(view, leaf, alpha, eligible, rough, recording)
 
 
 def mixed_pdf(p_guide, p_bsdf, alpha):
@@ -542,7 +750,7 @@ def record_slots(paths, v, rows, tile):
         return
     count = pg[rows, 0].astype(np.int64)
     slot = count % SLOTS
-    col = 1 + 3 * slot
+    col = 1 + SLOT * slot
     L = paths.L[rows].mean(axis=1)
     old = pg[rows, col]
     full = old >= 0
@@ -551,7 +759,7 @@ def record_slots(paths, v, rows, tile):
         c = col[full]
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             value = (L[full] - pg[r, c + 1]) / pg[r, c + 2]
-        rec.add(old[full].astype(np.int64), value)
+        rec.add(old[full].astype(np.int64), value, pg[r, c + 3], pg[r, c + 4], pg[r, c + 5])
     leaf = rec.tree.leaf_of(unit_cube(v.hit.p[rows], rec.lo, rec.inv_size))
     pg[rows, col] = (leaf.astype(np.int64) * BINS + cells(paths.d[rows])).astype(np.float64)
     pg[rows, col + 1] = L
@@ -561,6 +769,16 @@ def record_slots(paths, v, rows, tile):
     with np.errstate(divide="ignore"):
         pg[rows, col + 2] = paths.beta[rows].mean(axis=1) * paths.prev_pdf[rows] / cos
     pg[rows, 0] = count + 1
+    g = v.guide
+    if g.f is None:   # no guide sampled here: no second moments
+        pg[rows, col + 3] = -1.0
+        return
+    lf = g.leaf[rows]
+    on = lf >= 0
+    lf = np.where(on, lf, 0)
+    pg[rows, col + 3] = np.where(on & (g.f[rows] >= 0), g.f[rows] * g.view.norm[lf], -1.0)
+    pg[rows, col + 4] = g.x[rows]
+    pg[rows, col + 5] = np.where(on, g.view.fraction[lf], 0.0)
 
 
 def finish_slots(rec, pg, L):
@@ -569,12 +787,12 @@ def finish_slots(rec, pg, L):
         return
     Lm = L.mean(axis=1)
     for s in range(SLOTS):
-        c = 1 + 3 * s
+        c = 1 + SLOT * s
         full = pg[:, c] >= 0
         if full.any():
             with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
                 value = (Lm[full] - pg[full, c + 1]) / pg[full, c + 2]
-            rec.add(pg[full, c].astype(np.int64), value)
+            rec.add(pg[full, c].astype(np.int64), value, pg[full, c + 3], pg[full, c + 4], pg[full, c + 5])
 
 
 def start_columns(n, tile):
@@ -592,7 +810,8 @@ def mix(v, chosen, u1, u2, wi_l, weight, pdf, delta, eval_pdf):
     place): rows ``chosen`` take the guide's direction (u1, u2) with the
     BSDF's value there; every guided row's weight and pdf become f cos /
     p_mix and p_mix.  Returns the BSDF's own pdf of each row's direction
-    (visibility.ray_kind draws the bounce's kind by it)."""
+    (visibility.ray_kind draws the bounce's kind by it).  While learning,
+    sets v.guide.x and v.guide.f (second_moments' inputs)."""
     from ..microfacet import COS_EPS
     g = v.guide
     on = g.leaf >= 0
@@ -602,9 +821,7 @@ def mix(v, chosen, u1, u2, wi_l, weight, pdf, delta, eval_pdf):
     if len(rows):
         wi_w, p_guide[rows] = g.view.sample(g.leaf[rows], u1[rows], u2[rows])
         wi_l[rows] = to_local(wi_w, v.tt[rows], v.bb[rows], v.hit.ns[rows])
-        # The BSDF at every row (cheaper than taking the lobes' rows), kept where guided.
-        f, pb = eval_pdf(v.lobes, v.wo_l, wi_l, v.selection, v.weights)
-        bsdf_pdf = np.where(chosen, pb, pdf)
+        f, bsdf_pdf[rows] = _eval_rows(v, rows, wi_l, eval_pdf)
         delta[rows] = False
     other = np.flatnonzero(on & ~chosen)
     if len(other):
@@ -619,6 +836,26 @@ def mix(v, chosen, u1, u2, wi_l, weight, pdf, delta, eval_pdf):
     if len(rows):
         up = v.wo_l[rows, 2] > COS_EPS
         cos = np.abs(wi_l[rows, 2])
-        weight[rows] = f[rows] * np.where(up, cos * scale[rows], 0.0)[:, None]
+        weight[rows] = f * np.where(up, cos * scale[rows], 0.0)[:, None]
     pdf[:] = np.where(on, p_mix, pdf)
+    if g.learning and g.rough is not None:
+        # What the record's second moments need: x = r (p_guide - p_bsdf) / p_mix
+        # and the BSDF's value (channel mean) f = weight p_mix / cos.
+        cos = np.abs(wi_l[:, 2])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g.x = np.where(on, g.rough * (p_guide - bsdf_pdf) * scale, 0.0)
+            g.f = np.where(on, np.where(cos > 0, weight.mean(axis=1) * p_mix / np.where(cos > 0, cos, 1.0), 0.0),
+                           -1.0)
     return bsdf_pdf
+
+
+def _eval_rows(v, rows, wi_l, eval_pdf):
+    """(f, pdf) of the BSDF at vertices ``rows`` towards wi_l[rows]: over
+    those rows' lobes when they are few (a guide fraction learned small),
+    else over every row (cheaper than taking most rows' lobes)."""
+    n = len(wi_l)
+    if 4 * len(rows) < n:
+        lobes = take_arrays(v.lobes, rows, n)
+        return eval_pdf(lobes, v.wo_l[rows], wi_l[rows], v.selection[rows], v.weights[rows])
+    f, pb = eval_pdf(v.lobes, v.wo_l, wi_l, v.selection, v.weights)
+    return f[rows], pb[rows]
