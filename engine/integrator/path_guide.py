@@ -16,12 +16,30 @@ so the pdf is one look-up and sampling one binary search.
 At a vertex whose lobes all reflect smoothly (no delta, transmission,
 transparent, subsurface, hair or portal lobe, no second bump normal: the
 ``eligible`` rows) and whose spatial leaf has learned a distribution, the
-direction comes from the guide with probability ALPHA, else from the BSDF
-(u[:, 0] < ALPHA picks, then is rescaled for the lobe choice), and the
-sample counts with the mixture pdf ALPHA p_guide + (1 - ALPHA) p_bsdf
-(one-sample MIS).  Light samples there weigh the BSDF side of their MIS by
-the same mixture, and BSDF rays that meet a light carry it as their pdf:
-unbiased whatever the guide holds.  A guided direction's kind (diffuse or
+direction comes from the guide with probability alpha = the leaf's guide
+fraction times the lobes' roughness (u[:, 0] < alpha picks, then is
+rescaled for the lobe choice), else from the BSDF, and the sample counts
+with the mixture pdf alpha p_guide + (1 - alpha) p_bsdf (one-sample MIS).
+Light samples there weigh the BSDF side of their MIS by the same mixture,
+and BSDF rays that meet a light carry it as their pdf: unbiased whatever
+the guide and the fraction hold.  The look-up (eligibility, roughness,
+leaf, alpha: _vertex_loop) and the mixture (_split_loop, _directions_loop,
+the BSDF at the chosen rows, _weights_loop; NEE's _nee_loop) are compiled
+passes, each with its NumPy form.
+
+The guide fraction is learned per spatial leaf (in the spirit of Mueller
+2019's learned BSDF-sampling fraction, not by its per-sample Adam steps,
+which depend on the order of the samples): each guided record also adds,
+for every candidate a_k of FRACTIONS, an estimate of the second moment
+of what the path gathered past the vertex had the mixture used a_k,
+y^2 q_old / q_k (y that radiance, so vertices weigh by their throughput
+as the pixel's variance does), in fixed point per leaf; at the rebuild
+each leaf takes the a_k of least moment (guided ones raised by
+GUIDE_COST, their CPU), ALPHA where it has too few records.  Where the
+BSDF and NEE already sample the light well (the Cornell box) the fraction
+falls to 0: those leaves are not guided once training ends (while it
+lasts, their records keep learning with probability 0).
+A guided direction's kind (diffuse or
 glossy, for ray visibility and passes) is drawn as Cycles' guided samples
 take theirs (surface_shader_bsdf_guided_sample_closure_mis: the closure
 picked in proportion to its unguided pdf there): visibility.ray_kind with
@@ -42,7 +60,8 @@ since the previous rebuild only (rebuilt when the samples have doubled, as
 engine/render.py does for the volume guide); the spatial tree is refined
 then, each leaf halved while its records exceed SPLIT_RECORDS sqrt(spp of
 that iteration), and training stops at ``path_guiding_training_samples``.
-A sample range of a farm builds its own guide from its own passes.
+A sample range of a farm builds its own guide (and fractions) from its
+own passes.
 """
 import numpy as np
 
@@ -125,6 +144,33 @@ def _leaf_numpy(unit, child, out):
 _leaf_kernel = LoopKernel(_leaf_loop, "void(float64[:, ::1], int32[::1], int32[::1])", _leaf_numpy)
 
 
+@helper
+def _sample_one(l, u, u2, cdf, density):
+    """A direction (x, y, z) of leaf l's distribution by (u, u2), and its pdf."""
+    lo = 0
+    hi = BINS - 1
+    while lo < hi:   # the first cell whose CDF exceeds u
+        mid = (lo + hi) // 2
+        if cdf[l, mid] > u:
+            hi = mid
+        else:
+            lo = mid + 1
+    while lo > 0 and density[l, lo] <= 0.0:   # never a cell of no mass (u at a rounded end)
+        lo -= 1
+    before = cdf[l, lo - 1] if lo > 0 else 0.0
+    mass = cdf[l, lo] - before
+    f = (u - before) / mass if mass > 0.0 else 0.5
+    f = min(max(f, 0.0), 1.0 - 1e-12)
+    ix = lo // RES
+    iy = lo - ix * RES
+    x = (ix + u2) / RES
+    y = (iy + f) / RES
+    cz = min(max(2.0 * x - 1.0, -1.0), 1.0)
+    r = np.sqrt(max(0.0, 1.0 - cz * cz))
+    phi = 2.0 * np.pi * y
+    return r * np.cos(phi), r * np.sin(phi), cz, density[l, lo] / FOUR_PI
+
+
 def _sample_loop(leaf, u1, u2, cdf, density, wi, pdf):
     for i in range(leaf.shape[0]):
         l = leaf[i]
@@ -134,32 +180,11 @@ def _sample_loop(leaf, u1, u2, cdf, density, wi, pdf):
             wi[i, 2] = 1.0
             pdf[i] = 0.0
             continue
-        u = u1[i]
-        lo = 0
-        hi = BINS - 1
-        while lo < hi:   # the first cell whose CDF exceeds u
-            mid = (lo + hi) // 2
-            if cdf[l, mid] > u:
-                hi = mid
-            else:
-                lo = mid + 1
-        while lo > 0 and density[l, lo] <= 0.0:   # never a cell of no mass (u at a rounded end)
-            lo -= 1
-        before = cdf[l, lo - 1] if lo > 0 else 0.0
-        mass = cdf[l, lo] - before
-        f = (u - before) / mass if mass > 0.0 else 0.5
-        f = min(max(f, 0.0), 1.0 - 1e-12)
-        ix = lo // RES
-        iy = lo - ix * RES
-        x = (ix + u2[i]) / RES
-        y = (iy + f) / RES
-        cz = min(max(2.0 * x - 1.0, -1.0), 1.0)
-        r = np.sqrt(max(0.0, 1.0 - cz * cz))
-        phi = 2.0 * np.pi * y
-        wi[i, 0] = r * np.cos(phi)
-        wi[i, 1] = r * np.sin(phi)
-        wi[i, 2] = cz
-        pdf[i] = density[l, lo] / FOUR_PI
+        x, y, z, p = _sample_one(l, u1[i], u2[i], cdf, density)
+        wi[i, 0] = x
+        wi[i, 1] = y
+        wi[i, 2] = z
+        pdf[i] = p
 
 
 def _sample_numpy(leaf, u1, u2, cdf, density, wi, pdf):
@@ -327,6 +352,154 @@ _vertex_kernel = LoopKernel(_vertex_loop, "void(int8[:, ::1], float64[:, ::1], f
                                           "int8[::1], float64[:, ::1], float64[::1], float64[::1], int32[::1], "
                                           "float64[::1], int64, int32[::1], float64[::1], float64[::1])",
                             _vertex_numpy)
+
+
+
+# The mixture at a batch of vertices, in compiled passes that skip the rows
+# of no guide leaf (few once leaves learned a fraction of 0).
+
+ONE_MINUS = float(np.nextafter(1.0, 0.0))
+
+
+def _split_loop(leaf, alpha, u0, chosen, u):
+    """Guided rows (leaf >= 0) sample the guide where u0 < alpha; u0 rescaled for the BSDF's lobe choice."""
+    for i in range(leaf.shape[0]):
+        a = alpha[i] if leaf[i] >= 0 else 0.0
+        v = u0[i]
+        if leaf[i] >= 0 and v < a:
+            chosen[i] = 1
+            v = v / a
+        else:
+            chosen[i] = 0
+            if leaf[i] >= 0:
+                v = (v - a) / (1.0 - a)
+        u[i] = min(v, ONE_MINUS)
+
+
+def _split_numpy(leaf, alpha, u0, chosen, u):
+    on = leaf >= 0
+    a = np.where(on, alpha, 0.0)
+    c = on & (u0 < a)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = np.where(on, np.where(c, u0 / np.where(on, a, 1.0), (u0 - a) / np.where(on, 1.0 - a, 1.0)), u0)
+    chosen[:] = c
+    u[:] = np.minimum(v, ONE_MINUS)
+
+
+_split_kernel = LoopKernel(_split_loop, "void(int32[::1], float64[::1], float64[::1], uint8[::1], float64[::1])",
+                           _split_numpy)
+
+
+def _directions_loop(leaf, chosen, u1, u2, tt, bb, ns, cdf, density, wi_l, p_guide):
+    """Rows of a guide leaf: chosen ones take the guide's direction (into
+    wi_l, in the shading frame tt, bb, ns), every one the guide's pdf of its
+    direction; other rows a pdf of 0."""
+    for i in range(leaf.shape[0]):
+        l = leaf[i]
+        if l < 0:
+            p_guide[i] = 0.0
+            continue
+        if chosen[i]:
+            x, y, z, p = _sample_one(l, u1[i], u2[i], cdf, density)
+            wi_l[i, 0] = x * tt[i, 0] + y * tt[i, 1] + z * tt[i, 2]
+            wi_l[i, 1] = x * bb[i, 0] + y * bb[i, 1] + z * bb[i, 2]
+            wi_l[i, 2] = x * ns[i, 0] + y * ns[i, 1] + z * ns[i, 2]
+            p_guide[i] = p
+        else:
+            a, b, c = wi_l[i, 0], wi_l[i, 1], wi_l[i, 2]
+            x = a * tt[i, 0] + b * bb[i, 0] + c * ns[i, 0]
+            y = a * tt[i, 1] + b * bb[i, 1] + c * ns[i, 1]
+            z = a * tt[i, 2] + b * bb[i, 2] + c * ns[i, 2]
+            p_guide[i] = density[l, _cell(x, y, z)] / FOUR_PI
+
+
+def _directions_numpy(leaf, chosen, u1, u2, tt, bb, ns, cdf, density, wi_l, p_guide):
+    p_guide[:] = 0.0
+    on = leaf >= 0
+    rows = np.flatnonzero(on & (chosen != 0))
+    if len(rows):
+        w, p = np.empty((len(rows), 3)), np.empty(len(rows))
+        _sample_numpy(leaf[rows], u1[rows], u2[rows], cdf, density, w, p)
+        wi_l[rows] = np.stack([(w * f[rows]).sum(axis=1) for f in (tt, bb, ns)], axis=1)
+        p_guide[rows] = p
+    other = np.flatnonzero(on & (chosen == 0))
+    if len(other):
+        wl = wi_l[other]
+        world = wl[:, 0:1] * tt[other] + wl[:, 1:2] * bb[other] + wl[:, 2:3] * ns[other]
+        q = np.empty(len(other))
+        _pdf_numpy(leaf[other], world, density, q)
+        p_guide[other] = q
+
+
+_directions_kernel = LoopKernel(_directions_loop, "void(int32[::1], uint8[::1], float64[::1], float64[::1], "
+                                                  "float64[:, ::1], float64[:, ::1], float64[:, ::1], "
+                                                  "float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1])",
+                                _directions_numpy)
+
+
+def _weights_loop(leaf, chosen, alpha, rough, wo_z, p_guide, bsdf_pdf, f, wi_l, cos_eps, learning, weight, pdf, x):
+    """Rows of a guide leaf: p_mix = a p_guide + (1 - a) p_bsdf as pdf,
+    f cos / p_mix as weight (chosen rows: from the BSDF's f there; the
+    others: their f cos / p_bsdf times p_bsdf / p_mix), and while learning
+    x = rough (p_guide - p_bsdf) / p_mix (second_moments)."""
+    for i in range(leaf.shape[0]):
+        if leaf[i] < 0:
+            x[i] = 0.0
+            continue
+        a = alpha[i]
+        pb = bsdf_pdf[i]
+        pm = a * p_guide[i] + (1.0 - a) * pb
+        s = 1.0 / pm if pm > 0.0 else 0.0
+        if chosen[i]:
+            k = abs(wi_l[i, 2]) * s if wo_z[i] > cos_eps else 0.0
+            for c in range(3):
+                weight[i, c] = f[i, c] * k
+        else:
+            k = pb * s
+            for c in range(3):
+                weight[i, c] *= k
+        pdf[i] = pm
+        x[i] = rough[i] * (p_guide[i] - pb) * s if learning else 0.0
+
+
+def _weights_numpy(leaf, chosen, alpha, rough, wo_z, p_guide, bsdf_pdf, f, wi_l, cos_eps, learning, weight, pdf, x):
+    on = leaf >= 0
+    c = on & (chosen != 0)
+    a = np.where(on, alpha, 0.0)
+    pm = a * p_guide + (1.0 - a) * bsdf_pdf
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(pm > 0, 1.0 / np.where(pm > 0, pm, 1.0), 0.0)
+    k = np.where(wo_z > cos_eps, np.abs(wi_l[:, 2]) * s, 0.0)
+    weight[:] = np.where(c[:, None], f * k[:, None], weight * np.where(on, bsdf_pdf * s, 1.0)[:, None])
+    pdf[:] = np.where(on, pm, pdf)
+    x[:] = np.where(on & bool(learning), rough * (p_guide - bsdf_pdf) * s, 0.0)
+
+
+_weights_kernel = LoopKernel(_weights_loop, "void(int32[::1], uint8[::1], float64[::1], float64[::1], float64[::1], "
+                                            "float64[::1], float64[::1], float64[:, ::1], float64[:, ::1], float64, "
+                                            "int64, float64[:, ::1], float64[::1], float64[::1])", _weights_numpy)
+
+
+def _nee_loop(leaf, alpha, wi, density, pdf_b, out):
+    """The BSDF-side MIS pdf of light samples wi: the mixture at rows of a guide leaf."""
+    for i in range(leaf.shape[0]):
+        l = leaf[i]
+        if l < 0:
+            out[i] = pdf_b[i]
+        else:
+            a = alpha[i]
+            out[i] = a * density[l, _cell(wi[i, 0], wi[i, 1], wi[i, 2])] / FOUR_PI + (1.0 - a) * pdf_b[i]
+
+
+def _nee_numpy(leaf, alpha, wi, density, pdf_b, out):
+    p = np.empty(len(leaf))
+    _pdf_numpy(leaf, wi, density, p)
+    out[:] = np.where(leaf >= 0, alpha * p + (1.0 - alpha) * pdf_b, pdf_b)
+
+
+_nee_kernel = LoopKernel(_nee_loop, "void(int32[::1], float64[::1], float64[:, ::1], float64[:, ::1], float64[::1], "
+                                    "float64[::1])", _nee_numpy)
+
 
 
 # ----------------------------------------------------------------------------
@@ -564,19 +737,18 @@ class Records:
         self.parts = []
         self.moment_parts = []
 
-    def add(self, cell, value, f=None, x=None, old=None):
-        """Records (cell, L cos / p); where f (the BSDF's value there times
-        the leaf's norm; < 0: none) is given, their second moments too."""
+    def add(self, cell, value, y=None, x=None, old=None):
+        """Records (cell, L cos / p); where y (the radiance the path gathered
+        past the vertex, times its leaf's norm; < 0: none) is given, their
+        second moments too (second_moments)."""
         # Records of no light count too (the spatial tree splits by how
         # many paths pass, as Mueller's); NaN, inf and negative ones are dropped.
         ok = (cell >= 0) & np.isfinite(value) & (value >= 0)
         if ok.any():
             self.parts.append((cell[ok].astype(np.int64), value[ok]))
-        if f is None:
+        if y is None:
             return
-        with np.errstate(invalid="ignore", over="ignore"):
-            y = value * f
-            m = ok & (f >= 0) & np.isfinite(y) & np.isfinite(x) & np.isfinite(old)
+        m = ok & (y >= 0) & np.isfinite(y) & np.isfinite(x) & np.isfinite(old)
         if m.any():
             self.moment_parts.append((cell[m].astype(np.int64) // BINS, second_moments(y[m], x[m], old[m])))
 
@@ -646,19 +818,18 @@ class GuideAt:
     vertex's leaf (-1: not guided, the BSDF alone samples there), its guide
     probability and which vertices may be guided (they train the guide);
     ``rough`` their roughness (the guide probability over the leaf's
-    fraction) and, once mix ran while learning, ``x`` and ``f`` per row
-    (second_moments' x, the BSDF's value; f < 0: not guided)."""
+    fraction) and, once mix ran while learning, ``x`` per row (second_moments')."""
 
     def __init__(self, view, leaf, alpha, eligible, rough=None, learning=False):
         self.view, self.leaf, self.alpha, self.eligible = view, leaf, alpha, eligible
         self.rough, self.learning = rough, learning
-        self.x = self.f = None
+        self.x = None
 
     def take(self, rows):
         g = GuideAt(self.view, self.leaf[rows], self.alpha[rows], self.eligible[rows],
                     None if self.rough is None else self.rough[rows], self.learning)
         if self.x is not None:
-            g.x, g.f = self.x[rows], self.f[rows]
+            g.x = self.x[rows]
         return g
 
     @property
@@ -713,31 +884,22 @@ def at_vertices(view, recording, v, kind_in, none_kind):
     return GuideAt(view, leaf, alpha, eligible, rough, recording)
 
 
-def mixed_pdf(p_guide, p_bsdf, alpha):
-    return alpha * p_guide + (1.0 - alpha) * p_bsdf
-
-
 def split_choice(guide, u0):
     """(which rows sample the guide, u0 rescaled for the BSDF's lobe choice)."""
-    on = guide.leaf >= 0
-    a = np.where(on, guide.alpha, 0.0)
-    chosen = on & (u0 < a)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = np.where(on, np.where(chosen, u0 / np.where(on, a, 1.0), (u0 - a) / np.where(on, 1.0 - a, 1.0)), u0)
-    return chosen, np.minimum(u, np.nextafter(1.0, 0.0))
+    n = len(u0)
+    chosen, u = np.empty(n, np.uint8), np.empty(n)
+    _split_kernel(np.ascontiguousarray(guide.leaf, np.int32), _c(guide.alpha), _c(u0), chosen, u)
+    return chosen.view(bool), u
 
 
 def nee_pdf(v, wi, pdf_b):
     """The BSDF-side pdf light samples' MIS weighs at vertices ``v``: the
     mixture where guided."""
     g = v.guide
-    if g is None:
+    if g is None or g.view is None:
         return pdf_b
-    rows = g.rows
-    if not len(rows):
-        return pdf_b
-    out = np.array(pdf_b, dtype=np.float64, copy=True)
-    out[rows] = mixed_pdf(g.view.pdf(g.leaf[rows], wi[rows]), out[rows], g.alpha[rows])
+    out = np.empty(len(pdf_b))
+    _nee_kernel(np.ascontiguousarray(g.leaf, np.int32), _c(g.alpha), _c2(wi), g.view.density, _c(pdf_b), out)
     return out
 
 
@@ -759,7 +921,8 @@ def record_slots(paths, v, rows, tile):
         c = col[full]
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             value = (L[full] - pg[r, c + 1]) / pg[r, c + 2]
-        rec.add(old[full].astype(np.int64), value, pg[r, c + 3], pg[r, c + 4], pg[r, c + 5])
+            y = np.where(pg[r, c + 3] >= 0, (L[full] - pg[r, c + 1]) * pg[r, c + 3], -1.0)
+        rec.add(old[full].astype(np.int64), value, y, pg[r, c + 4], pg[r, c + 5])
     leaf = rec.tree.leaf_of(unit_cube(v.hit.p[rows], rec.lo, rec.inv_size))
     pg[rows, col] = (leaf.astype(np.int64) * BINS + cells(paths.d[rows])).astype(np.float64)
     pg[rows, col + 1] = L
@@ -770,13 +933,13 @@ def record_slots(paths, v, rows, tile):
         pg[rows, col + 2] = paths.beta[rows].mean(axis=1) * paths.prev_pdf[rows] / cos
     pg[rows, 0] = count + 1
     g = v.guide
-    if g.f is None:   # no guide sampled here: no second moments
+    if g.x is None:   # no guide sampled here: no second moments
         pg[rows, col + 3] = -1.0
         return
     lf = g.leaf[rows]
     on = lf >= 0
     lf = np.where(on, lf, 0)
-    pg[rows, col + 3] = np.where(on & (g.f[rows] >= 0), g.f[rows] * g.view.norm[lf], -1.0)
+    pg[rows, col + 3] = np.where(on, g.view.norm[lf], -1.0)
     pg[rows, col + 4] = g.x[rows]
     pg[rows, col + 5] = np.where(on, g.view.fraction[lf], 0.0)
 
@@ -792,7 +955,8 @@ def finish_slots(rec, pg, L):
         if full.any():
             with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
                 value = (Lm[full] - pg[full, c + 1]) / pg[full, c + 2]
-            rec.add(pg[full, c].astype(np.int64), value, pg[full, c + 3], pg[full, c + 4], pg[full, c + 5])
+                y = np.where(pg[full, c + 3] >= 0, (Lm[full] - pg[full, c + 1]) * pg[full, c + 3], -1.0)
+            rec.add(pg[full, c].astype(np.int64), value, y, pg[full, c + 4], pg[full, c + 5])
 
 
 def start_columns(n, tile):
@@ -811,41 +975,34 @@ def mix(v, chosen, u1, u2, wi_l, weight, pdf, delta, eval_pdf):
     BSDF's value there; every guided row's weight and pdf become f cos /
     p_mix and p_mix.  Returns the BSDF's own pdf of each row's direction
     (visibility.ray_kind draws the bounce's kind by it).  While learning,
-    sets v.guide.x and v.guide.f (second_moments' inputs)."""
+    sets v.guide.x (second_moments' input).  Two compiled passes around
+    the BSDF's evaluation at the chosen rows."""
     from ..microfacet import COS_EPS
     g = v.guide
-    on = g.leaf >= 0
+    n = len(pdf)
+    leaf = np.ascontiguousarray(g.leaf, np.int32)
+    pick = np.ascontiguousarray(chosen).view(np.uint8)
+    tt, bb, ns = _c2(v.tt), _c2(v.bb), _c2(v.hit.ns)
+    wl = _c2(wi_l)
+    p_guide = np.empty(n)
+    _directions_kernel(leaf, pick, _c(u1), _c(u2), tt, bb, ns, g.view.cdf, g.view.density, wl, p_guide)
     rows = np.flatnonzero(chosen)
-    p_guide = np.zeros(len(pdf))
-    bsdf_pdf = pdf.copy()   # pdf itself becomes p_mix below
+    bsdf_pdf = np.array(pdf, dtype=np.float64, copy=True)   # pdf itself becomes p_mix below
+    f = np.zeros((n, 3))
     if len(rows):
-        wi_w, p_guide[rows] = g.view.sample(g.leaf[rows], u1[rows], u2[rows])
-        wi_l[rows] = to_local(wi_w, v.tt[rows], v.bb[rows], v.hit.ns[rows])
-        f, bsdf_pdf[rows] = _eval_rows(v, rows, wi_l, eval_pdf)
+        f[rows], bsdf_pdf[rows] = _eval_rows(v, rows, wl, eval_pdf)
         delta[rows] = False
-    other = np.flatnonzero(on & ~chosen)
-    if len(other):
-        wo_w = to_world(wi_l[other], v.tt[other], v.bb[other], v.hit.ns[other])
-        p_guide[other] = g.view.pdf(g.leaf[other], wo_w)
-    # Whole-row arithmetic (cheaper than gathering the guided rows).
-    a = np.where(on, g.alpha, 0.0)
-    p_mix = a * p_guide + (1.0 - a) * bsdf_pdf
-    with np.errstate(divide="ignore", invalid="ignore"):
-        scale = np.where(p_mix > 0, 1.0 / p_mix, 0.0)
-    weight *= np.where(on & ~chosen, bsdf_pdf * scale, 1.0)[:, None]   # f cos / p_bsdf times p_bsdf / p_mix
-    if len(rows):
-        up = v.wo_l[rows, 2] > COS_EPS
-        cos = np.abs(wi_l[rows, 2])
-        weight[rows] = f * np.where(up, cos * scale[rows], 0.0)[:, None]
-    pdf[:] = np.where(on, p_mix, pdf)
-    if g.learning and g.rough is not None:
-        # What the record's second moments need: x = r (p_guide - p_bsdf) / p_mix
-        # and the BSDF's value (channel mean) f = weight p_mix / cos.
-        cos = np.abs(wi_l[:, 2])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            g.x = np.where(on, g.rough * (p_guide - bsdf_pdf) * scale, 0.0)
-            g.f = np.where(on, np.where(cos > 0, weight.mean(axis=1) * p_mix / np.where(cos > 0, cos, 1.0), 0.0),
-                           -1.0)
+    learning = g.learning and g.rough is not None
+    rough = _c(g.rough) if learning else np.zeros(n)
+    w, p = _c2(weight), _c(pdf)
+    g.x = np.empty(n)
+    _weights_kernel(leaf, pick, _c(g.alpha), rough, _c(v.wo_l[:, 2]), p_guide, bsdf_pdf, f, wl, float(COS_EPS),
+                    int(learning), w, p, g.x)
+    if not learning:
+        g.x = None
+    for a, b in ((wi_l, wl), (weight, w), (pdf, p)):
+        if a is not b:
+            a[...] = b
     return bsdf_pdf
 
 

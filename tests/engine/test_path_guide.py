@@ -445,7 +445,7 @@ def test_mixture_is_unbiased_whatever_the_learned_fraction(fraction):
     up = wi[:, 2] > 1e-3
     _, pdf_b = bsdf.eval_pdf(lobes, wo, wi, sel, w)
     np.testing.assert_allclose(pg.nee_pdf(v, wi, pdf_b)[up], pdf[up], rtol=1e-9)
-    assert np.all(np.isfinite(v.guide.x)) and np.all(v.guide.f >= 0)   # what the records learn from
+    assert np.all(np.isfinite(v.guide.x))   # what the records learn from
 
 
 def moment_samples(rng, n, old, target):
@@ -480,7 +480,7 @@ def test_second_moments_estimate_each_fraction_and_pick_the_least():
         assert z.max() < zc
         guide = pg.PathGuide(np.zeros(3), np.ones(3), 16)
         rec = pg.Records(guide.tree, guide.lo, guide.inv_size)
-        rec.add(np.zeros(n, np.int64), y, np.ones(n), x, np.full(n, 0.3))
+        rec.add(np.zeros(n, np.int64), y, y, x, np.full(n, 0.3))
         guide.merge(rec.summed())
         picked = guide.fractions()[0]
         if name == "follows the BSDF":
@@ -511,10 +511,53 @@ def test_second_moment_sums_are_the_same_in_any_grouping():
         guide._reset()
         for part in np.array_split(rng.permutation(n), groups)[::-1]:
             rec = pg.Records(guide.tree, guide.lo, guide.inv_size)
-            rec.add(cell[part], value[part], f[part], x[part], np.full(len(part), 0.2))
+            rec.add(cell[part], value[part], np.where(f[part] >= 0, y[part], -1.0), x[part], np.full(len(part), 0.2))
             guide.merge(rec.summed())
         results.append((guide.moments.copy(), guide.moment_counts.copy(), guide.fractions()))
     for a, b in zip(*results):
         np.testing.assert_array_equal(a, b)
     good = np.isfinite(value) & (f >= 0) & np.isfinite(x)
     assert results[0][1].sum() == good.sum()
+
+
+def test_mixture_loops_agree_with_their_numpy_forms():
+    """The mixture's compiled passes (guide choice, directions and pdfs,
+    weights, NEE's pdf) against their NumPy forms, within rounding; rows of
+    no leaf untouched."""
+    kernels.configure(True)
+    assert kernels.wait(900)
+    rng = np.random.default_rng(41)
+    n, leaves = 20_000, 4
+    density = pg.densities(peaked_energy(rng, leaves))
+    guide = pg.Guide(pg.SpatialTree.root().refine(np.array([1000]), 300.0), density, np.ones(leaves, bool),
+                     np.zeros(3), np.ones(3))
+    leaf = rng.integers(-1, leaves, n).astype(np.int32)
+    alpha = rng.uniform(0.0, 0.8, n)
+    u0, u1, u2 = rng.random(n), rng.random(n), rng.random(n)
+    q, _ = np.linalg.qr(rng.normal(size=(n, 3, 3)))
+    tt, bb, ns = (np.ascontiguousarray(q[:, :, k]) for k in range(3))
+    wl0 = rng.normal(size=(n, 3))
+    wl0 /= np.linalg.norm(wl0, axis=1)[:, None]
+    runs = []
+    for fn in ("compiled", "numpy_fn"):
+        split, dirs = getattr(pg._split_kernel, fn), getattr(pg._directions_kernel, fn)
+        weights, nee = getattr(pg._weights_kernel, fn), getattr(pg._nee_kernel, fn)
+        chosen, u = np.empty(n, np.uint8), np.empty(n)
+        split(leaf, alpha, u0, chosen, u)
+        wl, p_guide = wl0.copy(), np.empty(n)
+        dirs(leaf, chosen, u1, u2, tt, bb, ns, guide.cdf, guide.density, wl, p_guide)
+        bsdf_pdf, f = rng.random(n) if not runs else runs[0][-1], np.full((n, 3), 0.3)
+        weight, pdf, x = np.full((n, 3), 0.7), bsdf_pdf.copy(), np.empty(n)
+        weights(leaf, chosen, alpha, np.full(n, 0.9), wl[:, 2].copy(), p_guide, bsdf_pdf, f, wl, 1e-7, 1,
+                weight, pdf, x)
+        out = np.empty(n)
+        nee(leaf, alpha, np.ascontiguousarray(wl0), guide.density, bsdf_pdf, out)
+        runs.append((chosen, u, wl, p_guide, weight, pdf, x, out, bsdf_pdf))
+    a, b = runs
+    np.testing.assert_array_equal(a[0], b[0])
+    assert a[0][leaf < 0].sum() == 0 and 0.2 < a[0][leaf >= 0].mean() < 0.6
+    for got, want in zip(a[1:8], b[1:8]):
+        np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
+    off = leaf < 0
+    np.testing.assert_array_equal(a[2][off], wl0[off])
+    assert np.all(a[4][off] == 0.7) and np.all(a[7][off] == a[8][off])
