@@ -903,60 +903,149 @@ def nee_pdf(v, wi, pdf_b):
     return out
 
 
+def _slots_loop(rows, pg, L, d, ns, beta, prev_pdf, p, child, lo, inv, leaf, x, norm, fraction, out):
+    """Guided vertices ``rows`` that go on take the path's next slot of
+    ``pg`` (Paths.guide_path): a slot in use first gives its record (cell,
+    L cos / p, y, x, old fraction) to ``out``; returns how many it gave."""
+    m = 0
+    for k in range(rows.shape[0]):
+        i = rows[k]
+        count = np.int64(pg[i, 0])
+        col = 1 + SLOT * (count % SLOTS)
+        Lm = (L[i, 0] + L[i, 1] + L[i, 2]) / 3.0
+        if pg[i, col] >= 0.0:
+            dl = Lm - pg[i, col + 1]
+            out[m, 0] = pg[i, col]
+            out[m, 1] = dl / pg[i, col + 2]
+            out[m, 2] = dl * pg[i, col + 3] if pg[i, col + 3] >= 0.0 else -1.0
+            out[m, 3] = pg[i, col + 4]
+            out[m, 4] = pg[i, col + 5]
+            m += 1
+        lf = _leaf_at(child, _unit(p[i, 0], lo[0], inv[0]), _unit(p[i, 1], lo[1], inv[1]),
+                      _unit(p[i, 2], lo[2], inv[2]))
+        dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+        cell = _cell(dx, dy, dz) if np.isfinite(dx) and np.isfinite(dy) and np.isfinite(dz) else 0
+        pg[i, col] = lf * BINS + cell
+        pg[i, col + 1] = Lm
+        # Radiance times the cosine at the vertex (the product the BSDF's own
+        # sampling leaves out), over the throughput and pdf: Mueller's record.
+        c = abs(dx * ns[i, 0] + dy * ns[i, 1] + dz * ns[i, 2])
+        pg[i, col + 2] = (beta[i, 0] + beta[i, 1] + beta[i, 2]) / 3.0 * prev_pdf[i] / c
+        pg[i, 0] = count + 1
+        g = leaf[i]
+        pg[i, col + 3] = norm[g] if g >= 0 else -1.0   # no guide here: no second moments
+        pg[i, col + 4] = x[i] if g >= 0 else 0.0
+        pg[i, col + 5] = fraction[g] if g >= 0 else 0.0
+    return m
+
+
+def _slots_numpy(rows, pg, L, d, ns, beta, prev_pdf, p, child, lo, inv, leaf, x, norm, fraction, out):
+    count = pg[rows, 0].astype(np.int64)
+    col = 1 + SLOT * (count % SLOTS)
+    Lm = L[rows].sum(axis=1) / 3.0
+    full = pg[rows, col] >= 0
+    r, c = rows[full], col[full]
+    m = len(r)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        dl = Lm[full] - pg[r, c + 1]
+        out[:m, 0] = pg[r, c]
+        out[:m, 1] = dl / pg[r, c + 2]
+        out[:m, 2] = np.where(pg[r, c + 3] >= 0, dl * pg[r, c + 3], -1.0)
+    out[:m, 3] = pg[r, c + 4]
+    out[:m, 4] = pg[r, c + 5]
+    lf = np.empty(len(rows), np.int32)
+    _leaf_numpy(unit_cube(p[rows], lo, inv), child, lf)
+    pg[rows, col] = lf.astype(np.int64) * BINS + cells(d[rows])
+    pg[rows, col + 1] = Lm
+    cos = np.abs((d[rows] * ns[rows]).sum(axis=1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pg[rows, col + 2] = beta[rows].sum(axis=1) / 3.0 * prev_pdf[rows] / cos
+    pg[rows, 0] = count + 1
+    g = leaf[rows]
+    on = g >= 0
+    g = np.where(on, g, 0)
+    pg[rows, col + 3] = np.where(on, norm[g], -1.0)
+    pg[rows, col + 4] = np.where(on, x[rows], 0.0)
+    pg[rows, col + 5] = np.where(on, fraction[g], 0.0)
+    return m
+
+
+_slots_kernel = LoopKernel(_slots_loop, "int64(int64[::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], "
+                                        "float64[:, ::1], float64[:, ::1], float64[::1], float64[:, ::1], int32[::1], "
+                                        "float64[::1], float64[::1], int32[::1], float64[::1], float64[::1], "
+                                        "float64[::1], float64[:, ::1])", _slots_numpy)
+
+
+def _finish_loop(pg, Lm, out):
+    """Every slot in use of ending paths' ``pg`` rows: its record (as _slots_loop's) into ``out``."""
+    m = 0
+    for i in range(pg.shape[0]):
+        for s in range(SLOTS):
+            c = 1 + SLOT * s
+            if pg[i, c] >= 0.0:
+                dl = Lm[i] - pg[i, c + 1]
+                out[m, 0] = pg[i, c]
+                out[m, 1] = dl / pg[i, c + 2]
+                out[m, 2] = dl * pg[i, c + 3] if pg[i, c + 3] >= 0.0 else -1.0
+                out[m, 3] = pg[i, c + 4]
+                out[m, 4] = pg[i, c + 5]
+                m += 1
+    return m
+
+
+def _finish_numpy(pg, Lm, out):
+    slots = pg[:, 1:].reshape(len(pg), SLOTS, SLOT)
+    i, s = np.nonzero(slots[:, :, 0] >= 0)   # row by row, slot by slot: the loop's order
+    q = slots[i, s]
+    m = len(i)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        dl = Lm[i] - q[:, 1]
+        out[:m, 0] = q[:, 0]
+        out[:m, 1] = dl / q[:, 2]
+        out[:m, 2] = np.where(q[:, 3] >= 0, dl * q[:, 3], -1.0)
+    out[:m, 3] = q[:, 4]
+    out[:m, 4] = q[:, 5]
+    return m
+
+
+_finish_kernel = LoopKernel(_finish_loop, "int64(float64[:, ::1], float64[::1], float64[:, ::1])", _finish_numpy)
+
+
+def _give(rec, out, m):
+    if m:
+        rec.add(out[:m, 0].astype(np.int64), out[:m, 1], out[:m, 2], out[:m, 3], out[:m, 4])
+
+
 def record_slots(paths, v, rows, tile):
     """Guided vertices ``rows`` that go on remember a slot (the oldest one
-    of the path's given to the tile first)."""
+    of the path's given to the tile first): one compiled pass."""
     rec = getattr(tile, "path_records", None)
     pg = paths.guide_path
     if rec is None or not pg.shape[1] or not len(rows):
         return
-    count = pg[rows, 0].astype(np.int64)
-    slot = count % SLOTS
-    col = 1 + SLOT * slot
-    L = paths.L[rows].mean(axis=1)
-    old = pg[rows, col]
-    full = old >= 0
-    if full.any():
-        r = rows[full]
-        c = col[full]
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            value = (L[full] - pg[r, c + 1]) / pg[r, c + 2]
-            y = np.where(pg[r, c + 3] >= 0, (L[full] - pg[r, c + 1]) * pg[r, c + 3], -1.0)
-        rec.add(old[full].astype(np.int64), value, y, pg[r, c + 4], pg[r, c + 5])
-    leaf = rec.tree.leaf_of(unit_cube(v.hit.p[rows], rec.lo, rec.inv_size))
-    pg[rows, col] = (leaf.astype(np.int64) * BINS + cells(paths.d[rows])).astype(np.float64)
-    pg[rows, col + 1] = L
-    # Radiance times the cosine at the vertex (the product the BSDF's own
-    # sampling leaves out), over the throughput and pdf: Mueller's record.
-    cos = np.abs(np.einsum("ij,ij->i", paths.d[rows], v.hit.ns[rows]))
-    with np.errstate(divide="ignore"):
-        pg[rows, col + 2] = paths.beta[rows].mean(axis=1) * paths.prev_pdf[rows] / cos
-    pg[rows, 0] = count + 1
     g = v.guide
-    if g.x is None:   # no guide sampled here: no second moments
-        pg[rows, col + 3] = -1.0
-        return
-    lf = g.leaf[rows]
-    on = lf >= 0
-    lf = np.where(on, lf, 0)
-    pg[rows, col + 3] = np.where(on, g.view.norm[lf], -1.0)
-    pg[rows, col + 4] = g.x[rows]
-    pg[rows, col + 5] = np.where(on, g.view.fraction[lf], 0.0)
+    n = len(pg)
+    if g.x is None or g.view is None:   # no guide sampled here: no second moments
+        leaf, x, norm, fraction = np.full(n, -1, np.int32), np.zeros(n), np.ones(1), np.zeros(1)
+    else:
+        leaf, x, norm, fraction = np.ascontiguousarray(g.leaf, np.int32), _c(g.x), g.view.norm, g.view.fraction
+    table = np.ascontiguousarray(pg, np.float64)
+    out = np.empty((len(rows), 5))
+    m = _slots_kernel(np.ascontiguousarray(rows, np.int64), table, _c2(paths.L), _c2(paths.d), _c2(v.hit.ns),
+                      _c2(paths.beta), _c(paths.prev_pdf), _c2(v.hit.p), rec.tree.child, _c(rec.lo),
+                      _c(rec.inv_size), leaf, x, _c(norm), _c(fraction), out)
+    if table is not pg:
+        pg[...] = table
+    _give(rec, out, m)
 
 
 def finish_slots(rec, pg, L):
     """Paths ending (their Paths.guide_path rows and radiance): every slot's record."""
     if rec is None or not pg.shape[1] or not len(pg):
         return
-    Lm = L.mean(axis=1)
-    for s in range(SLOTS):
-        c = 1 + SLOT * s
-        full = pg[:, c] >= 0
-        if full.any():
-            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-                value = (Lm[full] - pg[full, c + 1]) / pg[full, c + 2]
-                y = np.where(pg[full, c + 3] >= 0, (Lm[full] - pg[full, c + 1]) * pg[full, c + 3], -1.0)
-            rec.add(pg[full, c].astype(np.int64), value, y, pg[full, c + 4], pg[full, c + 5])
+    out = np.empty((len(pg) * SLOTS, 5))
+    m = _finish_kernel(np.ascontiguousarray(pg, np.float64), _c(L.mean(axis=1)), out)
+    _give(rec, out, m)
 
 
 def start_columns(n, tile):

@@ -561,3 +561,49 @@ def test_mixture_loops_agree_with_their_numpy_forms():
     off = leaf < 0
     np.testing.assert_array_equal(a[2][off], wl0[off])
     assert np.all(a[4][off] == 0.7) and np.all(a[7][off] == a[8][off])
+
+
+def test_record_loops_agree_with_their_numpy_forms():
+    """The records' compiled passes (a vertex taking its path's next slot,
+    ending paths giving every slot's record) against their NumPy forms:
+    the same records in the same order and the same slots, within rounding."""
+    kernels.configure(True)
+    assert kernels.wait(900)
+    rng = np.random.default_rng(43)
+    n = 5000
+    tree = pg.SpatialTree.root().refine(np.array([1000]), 300.0)
+    table = np.full((n, pg.COLUMNS), -1.0)
+    table[:, 0] = rng.integers(0, 7, n)
+    used = rng.random((n, pg.SLOTS)) < 0.6
+    for s in range(pg.SLOTS):
+        c = 1 + pg.SLOT * s
+        k = np.flatnonzero(used[:, s])
+        table[k, c] = rng.integers(0, tree.leaves * pg.BINS, len(k))
+        table[k, c + 1] = rng.random(len(k))
+        table[k, c + 2] = rng.uniform(0.1, 2.0, len(k))
+        table[k, c + 3] = np.where(rng.random(len(k)) < 0.3, -1.0, rng.uniform(0.5, 2.0, len(k)))
+        table[k, c + 4] = rng.normal(0.0, 1.0, len(k))
+        table[k, c + 5] = rng.choice(pg.FRACTIONS, len(k))
+    rows = np.sort(rng.choice(n, 3000, replace=False)).astype(np.int64)
+    L, beta = rng.random((n, 3)) * 3.0, rng.random((n, 3))
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    ns = rng.normal(size=(n, 3))
+    ns /= np.linalg.norm(ns, axis=1)[:, None]
+    p = rng.random((n, 3))
+    leaf = rng.integers(-1, 4, n).astype(np.int32)
+    x, prev_pdf = rng.normal(0.0, 1.0, n), rng.uniform(0.1, 1.0, n)
+    norm, fraction = rng.uniform(0.5, 2.0, 4), rng.choice(pg.FRACTIONS, 4)
+    runs = []
+    for fn in ("compiled", "numpy_fn"):
+        t, out = table.copy(), np.empty((len(rows), 5))
+        m = getattr(pg._slots_kernel, fn)(rows, t, L, d, ns, beta, prev_pdf, p, tree.child, np.zeros(3), np.ones(3),
+                                          leaf, x, norm, fraction, out)
+        done = np.empty((n * pg.SLOTS, 5))
+        k = getattr(pg._finish_kernel, fn)(t, L.mean(axis=1), done)
+        runs.append((m, out[:m], t, k, done[:k]))
+    a, b = runs
+    assert a[0] == b[0] == used[rows, table[rows, 0].astype(int) % pg.SLOTS].sum() and a[3] == b[3]
+    for got, want in ((a[1], b[1]), (a[2], b[2]), (a[4], b[4])):
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
+    assert np.all(a[2][rows, 0] == table[rows, 0] + 1)
