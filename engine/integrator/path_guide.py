@@ -38,10 +38,11 @@ each leaf takes the a_k of least moment (guided ones raised by
 GUIDE_COST, their CPU), ALPHA where it has too few records.  Where the
 BSDF and NEE already sample the light well (the Cornell box) the fraction
 falls to 0: those leaves are not guided once training ends (while it
-lasts, their records keep learning with probability 0).
-A guided direction's kind (diffuse or
-glossy, for ray visibility and passes) is drawn as Cycles' guided samples
-take theirs (surface_shader_bsdf_guided_sample_closure_mis: the closure
+lasts, their records keep learning with probability 0), and training
+ends early (STOP_SHARE) when most guided records chose 0.
+
+A guided direction's kind (diffuse or glossy, for ray visibility and
+passes) is drawn as Cycles' guided samples take theirs (surface_shader_bsdf_guided_sample_closure_mis: the closure
 picked in proportion to its unguided pdf there): visibility.ray_kind with
 the BSDF's own pdf, not the mixture.
 
@@ -85,6 +86,12 @@ MIN_MOMENTS = 256          # guided records a leaf needs before it learns its fr
 GUIDE_COST = 0.05          # a guided leaf's second moment counts this much more (its CPU)
 YMAX = 2.0 ** 8            # largest normalized contribution whose square is summed
 RMIN = 2.0 ** -8           # smallest q_k / q_old summed
+# Training stops early (the guide then stays as learned) when, at a rebuild
+# once STOP_AFTER samples have trained, fewer than STOP_SHARE of the guided
+# records lie in leaves that learned a fraction above 0: most vertices do
+# best with the BSDF alone (direct light NEE samples well).
+STOP_AFTER = 4
+STOP_SHARE = 0.5
 SPLIT_RECORDS = 4000       # spatial threshold c (times sqrt(spp)); Mueller: 12000 at 1280 x 720
 MAX_DEPTH = 24             # spatial tree levels (8 halvings per axis)
 MAX_LEAVES = 4096          # spatial leaves (memory: 2 x 8 KB each, film-side histograms 8 KB)
@@ -661,6 +668,8 @@ class PathGuide:
         self.tree = SpatialTree.root()
         self._reset()
         self.view = None           # the Guide of the next passes (None: not learned yet)
+        self.trained = 0           # samples whose records the guide was built from
+        self.stopped = False       # training ended early (STOP_SHARE)
 
     def _reset(self):
         self.sums = np.zeros((self.tree.leaves, BINS), np.int64)
@@ -694,13 +703,22 @@ class PathGuide:
         """Rebuild the guide from the records since the last rebuild
         (``samples``: samples per pixel they came from) and refine the
         tree the next records go to."""
-        if samples <= 0 or not self.counts.any():
+        if samples <= 0:
+            return
+        self.trained += samples
+        if not self.counts.any():
             return
         energy = self.sums.astype(np.float64) / FIXED
         total = energy.sum(axis=1)
         guided = (self.counts >= MIN_RECORDS) & (total > 0)
         norm = np.where(guided, self.counts / np.where(guided, total, 1.0), 1.0)
-        self.view = Guide(self.tree, densities(energy), guided, self.lo, self.inv_size, self.fractions(), norm)
+        fraction = self.fractions()
+        self.view = Guide(self.tree, densities(energy), guided, self.lo, self.inv_size, fraction, norm)
+        learnt = self.moment_counts.sum()
+        if self.trained >= STOP_AFTER and learnt >= MIN_MOMENTS:
+            if self.moment_counts[fraction > 0].sum() < STOP_SHARE * learnt:
+                self.training = self.trained   # no more records (records_for) nor rebuilds
+                self.stopped = True
         self.tree = self.tree.refine(self.counts, SPLIT_RECORDS * np.sqrt(max(samples, 1)))
         self._reset()
 

@@ -607,3 +607,33 @@ def test_record_loops_agree_with_their_numpy_forms():
     for got, want in ((a[1], b[1]), (a[2], b[2]), (a[4], b[4])):
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
     assert np.all(a[2][rows, 0] == table[rows, 0] + 1)
+
+
+def test_training_stops_early_where_most_records_learn_no_guiding():
+    """Two leaves, one whose records do best with the BSDF alone (F = 1),
+    one with the guide (F = 3u^2): training goes on while the guided
+    leaf holds most records and stops (no more records, the guide kept as
+    learned) once STOP_AFTER samples trained and it holds fewer than
+    STOP_SHARE; not before STOP_AFTER samples."""
+    rng = np.random.default_rng(47)
+
+    def guide_after(shares, samples):
+        guide = pg.PathGuide(np.zeros(3), np.ones(3), 64)
+        for spp in samples:
+            guide.tree = pg.SpatialTree([1, -1, -2], [0, 1, 1])   # two leaves (no refinement)
+            guide._reset()
+            rec = pg.Records(guide.tree, guide.lo, guide.inv_size)
+            for leaf, (target, n) in enumerate(zip((lambda u: np.ones_like(u), lambda u: 3.0 * u * u), shares)):
+                y, x = moment_samples(rng, n, 0.3, target)
+                rec.add(leaf * pg.BINS + rng.integers(0, pg.BINS, n), y, y, x, np.full(n, 0.3))
+            guide.merge(rec.summed())
+            guide.update(spp)
+        return guide
+
+    going = guide_after((20_000, 30_000), (1, 1, 2, 4))
+    assert not going.stopped and going.records_for(8) is not None
+    stopped = guide_after((40_000, 10_000), (1, 1, 2, 4))
+    assert stopped.stopped and stopped.training == 8 and stopped.records_for(8) is None
+    assert stopped.view is not None and list(stopped.view.fraction) == [0.0, pg.FRACTIONS[-1]]
+    early = guide_after((40_000, 10_000), (1, 1))
+    assert not early.stopped and early.trained == 2 < pg.STOP_AFTER
