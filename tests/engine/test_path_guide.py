@@ -14,6 +14,8 @@
   batch size; disjoint sample ranges, each learning its own guide, merge
   into an unbiased image; hostile input stays finite.
 """
+import contextlib
+
 import numpy as np
 import pytest
 
@@ -250,14 +252,34 @@ def lit_room(size=(20, 20), k=0.6):
     return Scene(meshes, instances, [white, glossy], [sun], World((0.0, 0.0, 0.0)), cam)
 
 
-def guided_pair(scene, seed, **settings):
+@contextlib.contextmanager
+def guiding_throughout(fixed=False):
+    """No early stop (STOP_SHARE 0): these small renders' guides would
+    stop after 8 samples, and the tests below check the mixture over all
+    of a render's samples; ``fixed``: every leaf's fraction ALPHA (the
+    Cornell box learns 0 everywhere, which would leave its light's MIS
+    against the mixture untested)."""
+    saved = pg.STOP_SHARE, pg.PathGuide.fractions
+    pg.STOP_SHARE = 0.0
+    if fixed:
+        pg.PathGuide.fractions = lambda self: np.full(self.tree.leaves, pg.ALPHA)
+    try:
+        yield
+    finally:
+        pg.STOP_SHARE, pg.PathGuide.fractions = saved
+
+
+def guided_pair(scene, seed, fixed=False, **settings):
     out = {}
     for guide in (False, True):
-        out[guide] = render(scene, RenderSettings(seed=seed + guide, path_guiding=guide, **settings))
+        with guiding_throughout(fixed):
+            out[guide] = render(scene, RenderSettings(seed=seed + guide, path_guiding=guide, **settings))
         assert np.isfinite(out[guide].image).all()
+        assert not guide or not out[guide].film.path_guide.stopped
     assert out[True].film.path_guide is not None and out[False].film.path_guide is None
     view = out[True].film.path_guide.view
     assert view is not None and view.guided.any()
+    print(f"guided leaves' fractions {sorted(set(view.fraction[view.guided].round(2)))}")
     return out
 
 
@@ -274,7 +296,7 @@ def test_guided_and_unguided_agree(room):
     kinds count) and the Cornell box (its area light met by BSDF rays,
     weighed by MIS against the guide-BSDF mixture) agree guided and
     unguided block by block and over the whole image (one family)."""
-    box = guided_pair(cornell_box(16, 16), 51, samples=192, max_bounces=4)
+    box = guided_pair(cornell_box(16, 16), 51, fixed=True, samples=192, max_bounces=4)
     tests = {name: pair_z(r, block) for name, r, block in (("room", room, 4), ("cornell", box, 2))}
     zc = family_z(__name__ + ".agree", sum(len(t[0]) + 3 for t in tests.values()))
     for name, (z, zm, block_rel, image_rel) in tests.items():
@@ -305,8 +327,9 @@ def test_sample_ranges_learning_their_own_guides_merge(room):
     agrees with the unguided one (block and image z-tests)."""
     scene = lit_room()
     settings = dict(max_bounces=4, diffuse_bounces=2, path_guiding=True, path_guiding_training_samples=64, seed=43)
-    first = render(scene, RenderSettings(samples=96, **settings))
-    rest = render(scene, RenderSettings(samples=160, sample_start=96, **settings))
+    with guiding_throughout():
+        first = render(scene, RenderSettings(samples=96, **settings))
+        rest = render(scene, RenderSettings(samples=160, sample_start=96, **settings))
     merged = Film.from_state(first.film.state())
     merged.merge_state(rest.film.state())
     np.testing.assert_array_equal(merged.count, np.full(merged.count.shape, 256))
@@ -613,8 +636,9 @@ def test_training_stops_early_where_most_records_learn_no_guiding():
     """Two leaves, one whose records do best with the BSDF alone (F = 1),
     one with the guide (F = 3u^2): training goes on while the guided
     leaf holds most records and stops (no more records, the guide kept as
-    learned) once STOP_AFTER samples trained and it holds fewer than
-    STOP_SHARE; not before STOP_AFTER samples."""
+    learned, for inspection, but no longer sampled) once STOP_AFTER
+    samples trained and it holds fewer than STOP_SHARE; not before
+    STOP_AFTER samples."""
     rng = np.random.default_rng(47)
 
     def guide_after(shares, samples):
@@ -635,5 +659,6 @@ def test_training_stops_early_where_most_records_learn_no_guiding():
     stopped = guide_after((40_000, 10_000), (1, 1, 2, 4))
     assert stopped.stopped and stopped.training == 8 and stopped.records_for(8) is None
     assert stopped.view is not None and list(stopped.view.fraction) == [0.0, pg.FRACTIONS[-1]]
+    assert stopped.sampled is None and going.sampled is going.view   # stopped: the BSDF alone samples
     early = guide_after((40_000, 10_000), (1, 1))
     assert not early.stopped and early.trained == 2 < pg.STOP_AFTER
