@@ -39,7 +39,7 @@ class Tile:
         self.lo, self.hi = lo, hi
         # Path guiding (integrator/path_guide.py): the guide this batch
         # samples (None: none yet) and, while it trains, the records it makes.
-        self.path_guide = None if path_guide is None else path_guide.view
+        self.path_guide = None if path_guide is None else path_guide.sampled
         self.path_records = None if path_guide is None else path_guide.records_for(first)
         self.path_sums = []
         # Volume scattering probability guiding (integrator/volume_guide.py):

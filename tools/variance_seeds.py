@@ -169,8 +169,8 @@ def main(argv=None):
                 label += ", volume guiding" if g else ""
                 label += f", path guiding ({args.training} training samples)" if p else ""
                 print(f"{args.scene} ({label}, {args.samples} spp, {args.seeds} seeds, "
-                      f"{len(pixels)} px): variance per sample {v:.4f} +- {error:.4f}, "
-                      f"{per_64k:.3f} CPU-s per 64k paths, product {v * per_64k:.4f}", flush=True)
+                      f"{len(pixels)} px): variance per sample {v:.5g} +- {error:.2g}, "
+                      f"{per_64k:.3f} CPU-s per 64k paths, product {v * per_64k:.5g}", flush=True)
     return 0
 
 

@@ -14,6 +14,8 @@
   batch size; disjoint sample ranges, each learning its own guide, merge
   into an unbiased image; hostile input stays finite.
 """
+import contextlib
+
 import numpy as np
 import pytest
 
@@ -250,14 +252,34 @@ def lit_room(size=(20, 20), k=0.6):
     return Scene(meshes, instances, [white, glossy], [sun], World((0.0, 0.0, 0.0)), cam)
 
 
-def guided_pair(scene, seed, **settings):
+@contextlib.contextmanager
+def guiding_throughout(fixed=False):
+    """No early stop (STOP_SHARE 0): these small renders' guides would
+    stop after 8 samples, and the tests below check the mixture over all
+    of a render's samples; ``fixed``: every leaf's fraction ALPHA (the
+    Cornell box learns 0 everywhere, which would leave its light's MIS
+    against the mixture untested)."""
+    saved = pg.STOP_SHARE, pg.PathGuide.fractions
+    pg.STOP_SHARE = 0.0
+    if fixed:
+        pg.PathGuide.fractions = lambda self: np.full(self.tree.leaves, pg.ALPHA)
+    try:
+        yield
+    finally:
+        pg.STOP_SHARE, pg.PathGuide.fractions = saved
+
+
+def guided_pair(scene, seed, fixed=False, **settings):
     out = {}
     for guide in (False, True):
-        out[guide] = render(scene, RenderSettings(seed=seed + guide, path_guiding=guide, **settings))
+        with guiding_throughout(fixed):
+            out[guide] = render(scene, RenderSettings(seed=seed + guide, path_guiding=guide, **settings))
         assert np.isfinite(out[guide].image).all()
+        assert not guide or not out[guide].film.path_guide.stopped
     assert out[True].film.path_guide is not None and out[False].film.path_guide is None
     view = out[True].film.path_guide.view
     assert view is not None and view.guided.any()
+    print(f"guided leaves' fractions {sorted(set(view.fraction[view.guided].round(2)))}")
     return out
 
 
@@ -274,7 +296,7 @@ def test_guided_and_unguided_agree(room):
     kinds count) and the Cornell box (its area light met by BSDF rays,
     weighed by MIS against the guide-BSDF mixture) agree guided and
     unguided block by block and over the whole image (one family)."""
-    box = guided_pair(cornell_box(16, 16), 51, samples=192, max_bounces=4)
+    box = guided_pair(cornell_box(16, 16), 51, fixed=True, samples=192, max_bounces=4)
     tests = {name: pair_z(r, block) for name, r, block in (("room", room, 4), ("cornell", box, 2))}
     zc = family_z(__name__ + ".agree", sum(len(t[0]) + 3 for t in tests.values()))
     for name, (z, zm, block_rel, image_rel) in tests.items():
@@ -294,6 +316,8 @@ def test_same_seed_same_guide_and_image_whatever_the_batching():
     a, b = (r.film.path_guide for r in runs)
     np.testing.assert_array_equal(a.view.density, b.view.density)
     np.testing.assert_array_equal(a.view.tree.child, b.view.tree.child)
+    np.testing.assert_array_equal(a.view.fraction, b.view.fraction)   # learned from integer sums
+    np.testing.assert_array_equal(a.moments, b.moments)
     np.testing.assert_allclose(runs[0].image, runs[1].image, rtol=2e-6, atol=1e-7)
 
 
@@ -303,8 +327,9 @@ def test_sample_ranges_learning_their_own_guides_merge(room):
     agrees with the unguided one (block and image z-tests)."""
     scene = lit_room()
     settings = dict(max_bounces=4, diffuse_bounces=2, path_guiding=True, path_guiding_training_samples=64, seed=43)
-    first = render(scene, RenderSettings(samples=96, **settings))
-    rest = render(scene, RenderSettings(samples=160, sample_start=96, **settings))
+    with guiding_throughout():
+        first = render(scene, RenderSettings(samples=96, **settings))
+        rest = render(scene, RenderSettings(samples=160, sample_start=96, **settings))
     merged = Film.from_state(first.film.state())
     merged.merge_state(rest.film.state())
     np.testing.assert_array_equal(merged.count, np.full(merged.count.shape, 256))
@@ -341,3 +366,299 @@ def test_hostile_input_stays_finite():
         for samples in (1, 8):
             r = render(scene, RenderSettings(samples=samples, max_bounces=3, seed=2, path_guiding=True))
             assert np.isfinite(r.image).all()
+
+
+def random_vertices(rng, n):
+    """Lobe kinds (eligible, none, and a transmitting one), roughnesses and
+    selections of n vertices of up to three lobes."""
+    from engine.lobes import registry
+    eligible = list(pg.eligible_kinds())
+    bad = sorted(registry.transmitting())[0]
+    kinds = np.array(eligible + [-1, bad], np.int8)
+    kind = kinds[rng.choice(len(kinds), (n, 3), p=[0.8 / len(eligible)] * len(eligible) + [0.15, 0.05])]
+    lobe_alpha = rng.choice([0.0, 1e-4, 0.04, 0.25, 1.0], (n, 3))
+    selection = rng.random((n, 3)) * (kind != -1)
+    selection[rng.random(n) < 0.05] = 0.0
+    return kind, lobe_alpha, selection
+
+
+def test_vertex_kernel_agrees_with_its_numpy_form_and_the_guide_probability():
+    """The one-pass vertex look-up (eligibility, roughness, leaf, guide
+    probability): compiled = NumPy within rounding (leaves exactly), its
+    probability ALPHA x roughness = guide_probability at unlearned leaves,
+    a learned fraction scales it, a fraction of 0 stays guided only while
+    training, unlearned leaves (-1) never."""
+    from engine import bsdf
+    kernels.configure(True)
+    assert kernels.wait(900)
+    rng = np.random.default_rng(23)
+    n = 20_000
+    kind, lobe_alpha, selection = random_vertices(rng, n)
+    split = (rng.random(n) < 0.03).astype(np.uint8)
+    p = rng.normal(0.0, 0.6, (n, 3))
+    p[:3] = [np.nan, np.inf, -np.inf]
+    tree = pg.SpatialTree.root().refine(np.array([10_000]), 700.0)
+    fraction = rng.choice(pg.FRACTIONS, tree.leaves)
+    fraction[[0, 5]] = [-1.0, 0.0]
+    fraction[1] = pg.ALPHA
+    table = pg.kind_table(bsdf.NONE)
+    lo, inv = np.full(3, -1.0), np.full(3, 0.5)
+    for training in (0, 1):
+        out = [(np.empty(n, np.int32), np.empty(n), np.empty(n)) for _ in range(2)]
+        for fn, o in zip((pg._vertex_kernel.compiled, pg._vertex_kernel.numpy_fn), out):
+            fn(kind, lobe_alpha, selection, split, table, p, lo, inv, tree.child, fraction, training, *o)
+        np.testing.assert_array_equal(out[0][0], out[1][0])
+        np.testing.assert_allclose(out[0][1], out[1][1], rtol=1e-12, atol=0)
+        np.testing.assert_allclose(out[0][2], out[1][2], rtol=1e-12, atol=0)
+        leaf, alpha, rough = out[0]
+        ok = rough >= 0
+        want = bsdf.kind_in(kind, pg.eligible_kinds() + (bsdf.NONE,)).all(axis=1) & (selection > 0).any(axis=1)
+        np.testing.assert_array_equal(ok, want & (split == 0))
+        np.testing.assert_allclose(pg.ALPHA * rough[ok], pg.guide_probability(kind[ok], lobe_alpha[ok], selection[ok],
+                                                                              bsdf.kind_in), rtol=1e-12)
+        lf = tree.leaf_of(pg.unit_cube(p, lo, inv))
+        on = leaf >= 0
+        np.testing.assert_array_equal(leaf[on], lf[on])
+        np.testing.assert_allclose(alpha[on], fraction[lf[on]] * rough[on], rtol=1e-12)
+        assert not on[lf == 0].any()                          # a leaf that learned no light
+        assert on[lf == 5].any() == bool(training)            # a fraction of 0: only while training
+        assert on[(lf == 1) & ok & (pg.ALPHA * rough >= pg.MIN_ALPHA)].all()
+        assert not on[ok & (pg.ALPHA * rough < pg.MIN_ALPHA)].any()   # narrow lobes: the BSDF alone
+
+
+@pytest.mark.parametrize("fraction", [0.0, 0.05, 0.8])
+def test_mixture_is_unbiased_whatever_the_learned_fraction(fraction):
+    """E[f cos / p_mix] = the BSDF's albedo with the guide probability a
+    leaf may learn (0, a small and the largest of FRACTIONS, times the
+    vertex's roughness), and NEE weighs by the same p_mix."""
+    from types import SimpleNamespace
+    from analytic import directional_albedo
+    from engine import bsdf
+    material = Material("mix", (Lobe("diffuse", (0.8, 0.6, 0.4), weight=0.6),
+                                Lobe("glossy", (0.9, 0.9, 0.9), roughness=0.5, weight=0.4)))
+    rng = np.random.default_rng(29)
+    n, mu = 200_000, 0.5
+    lobes = bsdf.MaterialTable([material]).gather(np.zeros(n, int))
+    wo = np.tile([np.sqrt(1 - mu * mu), 0.0, mu], (n, 1))
+    w = bsdf.weights(lobes, wo)
+    sel = bsdf.selection(lobes, wo, w)
+    density = pg.densities(peaked_energy(rng, 1))[0]
+    view = pg.Guide(pg.SpatialTree.root(), density[None], np.array([True]), np.zeros(3), np.ones(3),
+                    np.array([fraction]))
+    eye = np.tile(np.eye(3), (n, 1, 1))
+    hit = SimpleNamespace(ns=eye[:, 2], p=np.full((n, 3), 0.5))
+    class Vertices(SimpleNamespace):
+        def __len__(self):
+            return len(self.wo_l)
+    v = Vertices(lobes=lobes, wo_l=wo, selection=sel, weights=w, tt=eye[:, 0], bb=eye[:, 1], hit=hit)
+    v.guide = pg.at_vertices(view, True, v, bsdf.kind_in, bsdf.NONE)
+    assert np.all(v.guide.leaf == 0)
+    np.testing.assert_allclose(v.guide.alpha, fraction * v.guide.rough, rtol=1e-12)
+    u = rng.random((n, 3))
+    chosen, u_lobe = pg.split_choice(v.guide, u[:, 0])
+    wi, weight, pdf, delta = bsdf.sample(lobes, wo, u_lobe, u[:, 1], u[:, 2], sel, w)
+    pg.mix(v, chosen, u[:, 1], u[:, 2], wi, weight, pdf, delta, bsdf.eval_pdf)
+    want = directional_albedo(material, mu)
+    mean = weight.mean(axis=0)
+    se = weight.std(axis=0) / np.sqrt(n)
+    zc = family_z(__name__ + f".fraction{fraction}", 3)
+    print(f"fraction {fraction}: E[f cos / p_mix] {mean} vs albedo {want}: |z| {np.abs((mean - want) / se).max():.2f} "
+          f"(limit {zc:.2f}), detects {(zc * se / want).max():.2%}")
+    assert np.all(np.abs(mean - want) < zc * se)
+    up = wi[:, 2] > 1e-3
+    _, pdf_b = bsdf.eval_pdf(lobes, wo, wi, sel, w)
+    np.testing.assert_allclose(pg.nee_pdf(v, wi, pdf_b)[up], pdf[up], rtol=1e-9)
+    assert np.all(np.isfinite(v.guide.x))   # what the records learn from
+
+
+def moment_samples(rng, n, old, target):
+    """One-dimensional stand-in of a guided bounce on [0, 1): BSDF pdf 1,
+    guide pdf 2u, F = target(u); samples of the mixture of fraction ``old``:
+    (y = F / q_old, x = (p_g - p_b) / q_old)."""
+    u = np.where(rng.random(n) < old, np.sqrt(rng.random(n)), rng.random(n))
+    pg_, pb = 2.0 * u, np.ones(n)
+    q = old * pg_ + (1.0 - old) * pb
+    return target(u) / q, (pg_ - pb) / q
+
+
+def test_second_moments_estimate_each_fraction_and_pick_the_least():
+    """From samples of one fraction, second_moments estimates the integral
+    of F^2 / q_k for every fraction of FRACTIONS (z-test against a 100k-point
+    midpoint rule, power printed); PathGuide.fractions picks the fraction of
+    least moment: 0 where F follows the BSDF (the guide only adds variance,
+    NEE's case), a large one where F follows the guide."""
+    rng = np.random.default_rng(31)
+    n = 400_000
+    grid = (np.arange(100_000) + 0.5) / 100_000
+    cases = {"follows the guide": lambda u: 3.0 * u * u, "follows the BSDF": lambda u: np.ones_like(u)}
+    zc = family_z(__name__ + ".moments", len(cases) * pg.K)
+    for name, target in cases.items():
+        y, x = moment_samples(rng, n, 0.3, target)
+        m = pg.second_moments(y, x, np.full(n, 0.3)) / pg.FIXED
+        exact = np.array([(target(grid) ** 2 / (a * 2.0 * grid + 1.0 - a)).mean() for a in pg.FRACTIONS])
+        mean, se = m.mean(axis=0), m.std(axis=0) / np.sqrt(n)
+        z = np.abs(mean - exact) / se
+        print(f"F {name}: max |z| {z.max():.2f} (limit {zc:.2f}), detects {(zc * se / exact).max():.2%}; "
+              f"least at fraction {pg.FRACTIONS[np.argmin(exact)]}")
+        assert z.max() < zc
+        guide = pg.PathGuide(np.zeros(3), np.ones(3), 16)
+        rec = pg.Records(guide.tree, guide.lo, guide.inv_size)
+        rec.add(np.zeros(n, np.int64), y, y, x, np.full(n, 0.3))
+        guide.merge(rec.summed())
+        picked = guide.fractions()[0]
+        if name == "follows the BSDF":
+            assert picked == 0.0
+        else:
+            assert picked >= 0.5   # within the estimate's error of the exact least moment, a guided one
+            assert exact[list(pg.FRACTIONS).index(picked)] <= 1.02 * exact.min()
+
+
+def test_second_moment_sums_are_the_same_in_any_grouping():
+    """The moments' fixed-point sums, and the fractions chosen from them,
+    are the same integers however records are grouped into tiles and in
+    whatever order the tiles merge; bad ones (NaN, inf, negative, no
+    moment) are dropped."""
+    rng = np.random.default_rng(37)
+    n = 30_000
+    cell = rng.integers(0, 3 * pg.BINS, n)
+    y, x = moment_samples(rng, n, 0.2, lambda u: 3.0 * u * u)
+    f = rng.uniform(0.1, 2.0, n)
+    value = y / f
+    f[::53] = -1.0
+    value[::97] = np.nan
+    x[::89] = np.inf
+    results = []
+    for groups in (1, 7):
+        guide = pg.PathGuide(np.zeros(3), np.ones(3), 128)
+        guide.tree = pg.SpatialTree([1, 3, -3, -1, -2], [0, 1, 1, 2, 2])
+        guide._reset()
+        for part in np.array_split(rng.permutation(n), groups)[::-1]:
+            rec = pg.Records(guide.tree, guide.lo, guide.inv_size)
+            rec.add(cell[part], value[part], np.where(f[part] >= 0, y[part], -1.0), x[part], np.full(len(part), 0.2))
+            guide.merge(rec.summed())
+        results.append((guide.moments.copy(), guide.moment_counts.copy(), guide.fractions()))
+    for a, b in zip(*results):
+        np.testing.assert_array_equal(a, b)
+    good = np.isfinite(value) & (f >= 0) & np.isfinite(x)
+    assert results[0][1].sum() == good.sum()
+
+
+def test_mixture_loops_agree_with_their_numpy_forms():
+    """The mixture's compiled passes (guide choice, directions and pdfs,
+    weights, NEE's pdf) against their NumPy forms, within rounding; rows of
+    no leaf untouched."""
+    kernels.configure(True)
+    assert kernels.wait(900)
+    rng = np.random.default_rng(41)
+    n, leaves = 20_000, 4
+    density = pg.densities(peaked_energy(rng, leaves))
+    guide = pg.Guide(pg.SpatialTree.root().refine(np.array([1000]), 300.0), density, np.ones(leaves, bool),
+                     np.zeros(3), np.ones(3))
+    leaf = rng.integers(-1, leaves, n).astype(np.int32)
+    alpha = rng.uniform(0.0, 0.8, n)
+    u0, u1, u2 = rng.random(n), rng.random(n), rng.random(n)
+    q, _ = np.linalg.qr(rng.normal(size=(n, 3, 3)))
+    tt, bb, ns = (np.ascontiguousarray(q[:, :, k]) for k in range(3))
+    wl0 = rng.normal(size=(n, 3))
+    wl0 /= np.linalg.norm(wl0, axis=1)[:, None]
+    runs = []
+    for fn in ("compiled", "numpy_fn"):
+        split, dirs = getattr(pg._split_kernel, fn), getattr(pg._directions_kernel, fn)
+        weights, nee = getattr(pg._weights_kernel, fn), getattr(pg._nee_kernel, fn)
+        chosen, u = np.empty(n, np.uint8), np.empty(n)
+        split(leaf, alpha, u0, chosen, u)
+        wl, p_guide = wl0.copy(), np.empty(n)
+        dirs(leaf, chosen, u1, u2, tt, bb, ns, guide.cdf, guide.density, wl, p_guide)
+        bsdf_pdf, f = rng.random(n) if not runs else runs[0][-1], np.full((n, 3), 0.3)
+        weight, pdf, x = np.full((n, 3), 0.7), bsdf_pdf.copy(), np.empty(n)
+        weights(leaf, chosen, alpha, np.full(n, 0.9), wl[:, 2].copy(), p_guide, bsdf_pdf, f, wl, 1e-7, 1,
+                weight, pdf, x)
+        out = np.empty(n)
+        nee(leaf, alpha, np.ascontiguousarray(wl0), guide.density, bsdf_pdf, out)
+        runs.append((chosen, u, wl, p_guide, weight, pdf, x, out, bsdf_pdf))
+    a, b = runs
+    np.testing.assert_array_equal(a[0], b[0])
+    assert a[0][leaf < 0].sum() == 0 and 0.2 < a[0][leaf >= 0].mean() < 0.6
+    for got, want in zip(a[1:8], b[1:8]):
+        np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
+    off = leaf < 0
+    np.testing.assert_array_equal(a[2][off], wl0[off])
+    assert np.all(a[4][off] == 0.7) and np.all(a[7][off] == a[8][off])
+
+
+def test_record_loops_agree_with_their_numpy_forms():
+    """The records' compiled passes (a vertex taking its path's next slot,
+    ending paths giving every slot's record) against their NumPy forms:
+    the same records in the same order and the same slots, within rounding."""
+    kernels.configure(True)
+    assert kernels.wait(900)
+    rng = np.random.default_rng(43)
+    n = 5000
+    tree = pg.SpatialTree.root().refine(np.array([1000]), 300.0)
+    table = np.full((n, pg.COLUMNS), -1.0)
+    table[:, 0] = rng.integers(0, 7, n)
+    used = rng.random((n, pg.SLOTS)) < 0.6
+    for s in range(pg.SLOTS):
+        c = 1 + pg.SLOT * s
+        k = np.flatnonzero(used[:, s])
+        table[k, c] = rng.integers(0, tree.leaves * pg.BINS, len(k))
+        table[k, c + 1] = rng.random(len(k))
+        table[k, c + 2] = rng.uniform(0.1, 2.0, len(k))
+        table[k, c + 3] = np.where(rng.random(len(k)) < 0.3, -1.0, rng.uniform(0.5, 2.0, len(k)))
+        table[k, c + 4] = rng.normal(0.0, 1.0, len(k))
+        table[k, c + 5] = rng.choice(pg.FRACTIONS, len(k))
+    rows = np.sort(rng.choice(n, 3000, replace=False)).astype(np.int64)
+    L, beta = rng.random((n, 3)) * 3.0, rng.random((n, 3))
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    ns = rng.normal(size=(n, 3))
+    ns /= np.linalg.norm(ns, axis=1)[:, None]
+    p = rng.random((n, 3))
+    leaf = rng.integers(-1, 4, n).astype(np.int32)
+    x, prev_pdf = rng.normal(0.0, 1.0, n), rng.uniform(0.1, 1.0, n)
+    norm, fraction = rng.uniform(0.5, 2.0, 4), rng.choice(pg.FRACTIONS, 4)
+    runs = []
+    for fn in ("compiled", "numpy_fn"):
+        t, out = table.copy(), np.empty((len(rows), 5))
+        m = getattr(pg._slots_kernel, fn)(rows, t, L, d, ns, beta, prev_pdf, p, tree.child, np.zeros(3), np.ones(3),
+                                          leaf, x, norm, fraction, out)
+        done = np.empty((n * pg.SLOTS, 5))
+        k = getattr(pg._finish_kernel, fn)(t, L.mean(axis=1), done)
+        runs.append((m, out[:m], t, k, done[:k]))
+    a, b = runs
+    assert a[0] == b[0] == used[rows, table[rows, 0].astype(int) % pg.SLOTS].sum() and a[3] == b[3]
+    for got, want in ((a[1], b[1]), (a[2], b[2]), (a[4], b[4])):
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
+    assert np.all(a[2][rows, 0] == table[rows, 0] + 1)
+
+
+def test_training_stops_early_where_most_records_learn_no_guiding():
+    """Two leaves, one whose records do best with the BSDF alone (F = 1),
+    one with the guide (F = 3u^2): training goes on while the guided
+    leaf holds most records and stops (no more records, the guide kept as
+    learned, for inspection, but no longer sampled) once STOP_AFTER
+    samples trained and it holds fewer than STOP_SHARE; not before
+    STOP_AFTER samples."""
+    rng = np.random.default_rng(47)
+
+    def guide_after(shares, samples):
+        guide = pg.PathGuide(np.zeros(3), np.ones(3), 64)
+        for spp in samples:
+            guide.tree = pg.SpatialTree([1, -1, -2], [0, 1, 1])   # two leaves (no refinement)
+            guide._reset()
+            rec = pg.Records(guide.tree, guide.lo, guide.inv_size)
+            for leaf, (target, n) in enumerate(zip((lambda u: np.ones_like(u), lambda u: 3.0 * u * u), shares)):
+                y, x = moment_samples(rng, n, 0.3, target)
+                rec.add(leaf * pg.BINS + rng.integers(0, pg.BINS, n), y, y, x, np.full(n, 0.3))
+            guide.merge(rec.summed())
+            guide.update(spp)
+        return guide
+
+    going = guide_after((20_000, 30_000), (1, 1, 2, 4))
+    assert not going.stopped and going.records_for(8) is not None
+    stopped = guide_after((40_000, 10_000), (1, 1, 2, 4))
+    assert stopped.stopped and stopped.training == 8 and stopped.records_for(8) is None
+    assert stopped.view is not None and list(stopped.view.fraction) == [0.0, pg.FRACTIONS[-1]]
+    assert stopped.sampled is None and going.sampled is going.view   # stopped: the BSDF alone samples
+    early = guide_after((40_000, 10_000), (1, 1))
+    assert not early.stopped and early.trained == 2 < pg.STOP_AFTER
