@@ -110,26 +110,7 @@ FOUR_PI = 4.0 * np.pi
 
 def _leaf_loop(unit, child, out):
     for i in range(unit.shape[0]):
-        x, y, z = unit[i, 0], unit[i, 1], unit[i, 2]
-        node = 0
-        depth = 0
-        while child[node] >= 0:
-            a = depth % 3
-            c = x if a == 0 else (y if a == 1 else z)
-            c = 2.0 * c
-            step = 0
-            if c >= 1.0:
-                c -= 1.0
-                step = 1
-            if a == 0:
-                x = c
-            elif a == 1:
-                y = c
-            else:
-                z = c
-            node = child[node] + step
-            depth += 1
-        out[i] = -1 - child[node]
+        out[i] = _leaf_at(child, unit[i, 0], unit[i, 1], unit[i, 2])
 
 
 def _leaf_numpy(unit, child, out):
@@ -268,8 +249,25 @@ _pdf_kernel = LoopKernel(_pdf_loop, "void(int32[::1], float64[:, ::1], float64[:
 
 
 @helper
+def _record(pg, i, c, lm, out, m):
+    """Row m of out gets path i's record of the slot at column c (the
+    radiance lm - L then, over the throughput; its moment and cell), if
+    that slot holds one; returns the next free row."""
+    if pg[i, c] < 0.0:
+        return m
+    dl = lm - pg[i, c + 1]
+    out[m, 0] = pg[i, c]
+    out[m, 1] = dl / pg[i, c + 2]
+    out[m, 2] = dl * pg[i, c + 3] if pg[i, c + 3] >= 0.0 else -1.0
+    out[m, 3] = pg[i, c + 4]
+    out[m, 4] = pg[i, c + 5]
+    return m + 1
+
+
+@helper
 def _leaf_at(child, x, y, z):
-    """The leaf (-1 - child code) holding unit-cube point (x, y, z): _leaf_loop's walk."""
+    """The leaf (-1 - child code) holding unit-cube point (x, y, z): the
+    tree's walk, halving the cell along x, y, z in turn."""
     node = 0
     depth = 0
     while child[node] >= 0:
@@ -939,14 +937,7 @@ def _slots_loop(rows, pg, L, d, ns, beta, prev_pdf, p, child, lo, inv, leaf, x, 
         count = np.int64(pg[i, 0])
         col = 1 + SLOT * (count % SLOTS)
         Lm = (L[i, 0] + L[i, 1] + L[i, 2]) / 3.0
-        if pg[i, col] >= 0.0:
-            dl = Lm - pg[i, col + 1]
-            out[m, 0] = pg[i, col]
-            out[m, 1] = dl / pg[i, col + 2]
-            out[m, 2] = dl * pg[i, col + 3] if pg[i, col + 3] >= 0.0 else -1.0
-            out[m, 3] = pg[i, col + 4]
-            out[m, 4] = pg[i, col + 5]
-            m += 1
+        m = _record(pg, i, col, Lm, out, m)
         lf = _leaf_at(child, _unit(p[i, 0], lo[0], inv[0]), _unit(p[i, 1], lo[1], inv[1]),
                       _unit(p[i, 2], lo[2], inv[2]))
         dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
@@ -1007,15 +998,7 @@ def _finish_loop(pg, Lm, out):
     m = 0
     for i in range(pg.shape[0]):
         for s in range(SLOTS):
-            c = 1 + SLOT * s
-            if pg[i, c] >= 0.0:
-                dl = Lm[i] - pg[i, c + 1]
-                out[m, 0] = pg[i, c]
-                out[m, 1] = dl / pg[i, c + 2]
-                out[m, 2] = dl * pg[i, c + 3] if pg[i, c + 3] >= 0.0 else -1.0
-                out[m, 3] = pg[i, c + 4]
-                out[m, 4] = pg[i, c + 5]
-                m += 1
+            m = _record(pg, i, 1 + SLOT * s, Lm[i], out, m)
     return m
 
 

@@ -130,6 +130,18 @@ def test_compiled_loops_agree_with_their_numpy_forms():
     assert np.all(q[0][leaf < 0] == 0.0) and np.all(q[0][leaf >= 0] > 0.0)
 
 
+def _mixed_lobes(n, mu):
+    """A diffuse + glossy material at n points seen at cos mu: (material,
+    lobes, wo, weights, selection)."""
+    from engine import bsdf
+    material = Material("mix", (Lobe("diffuse", (0.8, 0.6, 0.4), weight=0.6),
+                                Lobe("glossy", (0.9, 0.9, 0.9), roughness=0.5, weight=0.4)))
+    lobes = bsdf.MaterialTable([material]).gather(np.zeros(n, int))
+    wo = np.tile([np.sqrt(1 - mu * mu), 0.0, mu], (n, 1))
+    w = bsdf.weights(lobes, wo)
+    return material, lobes, wo, w, bsdf.selection(lobes, wo, w)
+
+
 def test_mixture_keeps_the_bsdf_integral_and_nee_weighs_by_the_same_pdf():
     """At a diffuse + glossy vertex under a peaked guide: E[f cos / p_mix]
     over the one-sample mixture is the BSDF's directional albedo (z-test,
@@ -138,15 +150,9 @@ def test_mixture_keeps_the_bsdf_integral_and_nee_weighs_by_the_same_pdf():
     from types import SimpleNamespace
     from analytic import directional_albedo
     from engine import bsdf
-    from engine.scene import Material
-    material = Material("mix", (Lobe("diffuse", (0.8, 0.6, 0.4), weight=0.6),
-                                Lobe("glossy", (0.9, 0.9, 0.9), roughness=0.5, weight=0.4)))
     rng = np.random.default_rng(17)
     n, mu = 400_000, 0.6
-    lobes = bsdf.MaterialTable([material]).gather(np.zeros(n, int))
-    wo = np.tile([np.sqrt(1 - mu * mu), 0.0, mu], (n, 1))
-    w = bsdf.weights(lobes, wo)
-    sel = bsdf.selection(lobes, wo, w)
+    material, lobes, wo, w, sel = _mixed_lobes(n, mu)
     view = one_leaf_guide(pg.densities(peaked_energy(rng, 1))[0])
     alpha = pg.guide_probability(lobes.kind, lobes.alpha, sel, bsdf.kind_in)
     assert 0.0 < alpha.min() and alpha.max() < pg.ALPHA   # the glossy lobe lowers it
@@ -434,14 +440,9 @@ def test_mixture_is_unbiased_whatever_the_learned_fraction(fraction):
     from types import SimpleNamespace
     from analytic import directional_albedo
     from engine import bsdf
-    material = Material("mix", (Lobe("diffuse", (0.8, 0.6, 0.4), weight=0.6),
-                                Lobe("glossy", (0.9, 0.9, 0.9), roughness=0.5, weight=0.4)))
     rng = np.random.default_rng(29)
     n, mu = 200_000, 0.5
-    lobes = bsdf.MaterialTable([material]).gather(np.zeros(n, int))
-    wo = np.tile([np.sqrt(1 - mu * mu), 0.0, mu], (n, 1))
-    w = bsdf.weights(lobes, wo)
-    sel = bsdf.selection(lobes, wo, w)
+    material, lobes, wo, w, sel = _mixed_lobes(n, mu)
     density = pg.densities(peaked_energy(rng, 1))[0]
     view = pg.Guide(pg.SpatialTree.root(), density[None], np.array([True]), np.zeros(3), np.ones(3),
                     np.array([fraction]))
