@@ -148,7 +148,6 @@ def test_mixture_keeps_the_bsdf_integral_and_nee_weighs_by_the_same_pdf():
     power printed), and the pdf light samples weigh with in a direction
     (nee_pdf over the BSDF's eval) is the p_mix a BSDF ray carries there."""
     from types import SimpleNamespace
-    from analytic import directional_albedo
     from engine import bsdf
     rng = np.random.default_rng(17)
     n, mu = 400_000, 0.6
@@ -159,22 +158,33 @@ def test_mixture_keeps_the_bsdf_integral_and_nee_weighs_by_the_same_pdf():
     eye = np.tile(np.eye(3), (n, 1, 1))
     v = SimpleNamespace(guide=pg.GuideAt(view, np.zeros(n, np.int32), alpha, np.ones(n, bool)), lobes=lobes,
                         wo_l=wo, selection=sel, weights=w, tt=eye[:, 0], bb=eye[:, 1], hit=SimpleNamespace(ns=eye[:, 2]))
+    chosen, wi, pdf_b, up = _mixture_against_albedo(v, material, mu, rng, n, ".mixture", "")
+    assert abs(chosen.mean() - alpha.mean()) < 0.01
+    assert np.all(pg.nee_pdf(v, wi, pdf_b)[up] != pdf_b[up])   # the guide's share is in it
+
+
+def _mixture_against_albedo(v, material, mu, rng, n, family, label):
+    """Sample the mixture at vertices ``v`` and hold E[f cos / p_mix] to the
+    BSDF's albedo (a z-test, power printed) and NEE's pdf to the p_mix a BSDF
+    ray carries; returns (chosen, wi, the BSDF's own pdf, rows above)."""
+    from analytic import directional_albedo
+    from engine import bsdf
+    lobes, wo, sel, w = v.lobes, v.wo_l, v.selection, v.weights
     u = rng.random((n, 3))
     chosen, u_lobe = pg.split_choice(v.guide, u[:, 0])
-    assert abs(chosen.mean() - alpha.mean()) < 0.01
     wi, weight, pdf, delta = bsdf.sample(lobes, wo, u_lobe, u[:, 1], u[:, 2], sel, w)
     pg.mix(v, chosen, u[:, 1], u[:, 2], wi, weight, pdf, delta, bsdf.eval_pdf)
     want = directional_albedo(material, mu)
     mean = weight.mean(axis=0)
     se = weight.std(axis=0) / np.sqrt(n)
-    zc = family_z(__name__ + ".mixture", 3)
-    print(f"E[f cos / p_mix] {mean} vs albedo {want}: |z| {np.abs((mean - want) / se).max():.2f} (limit {zc:.2f}), "
-          f"detects {(zc * se / want).max():.2%}")
+    zc = family_z(__name__ + family, 3)
+    print(f"{label}E[f cos / p_mix] {mean} vs albedo {want}: |z| {np.abs((mean - want) / se).max():.2f} "
+          f"(limit {zc:.2f}), detects {(zc * se / want).max():.2%}")
     assert np.all(np.abs(mean - want) < zc * se)
     up = wi[:, 2] > 1e-3
     _, pdf_b = bsdf.eval_pdf(lobes, wo, wi, sel, w)
     np.testing.assert_allclose(pg.nee_pdf(v, wi, pdf_b)[up], pdf[up], rtol=1e-9)
-    assert np.all(pg.nee_pdf(v, wi, pdf_b)[up] != pdf_b[up])   # the guide's share is in it
+    return chosen, wi, pdf_b, up
 
 
 def test_records_sum_alike_in_any_grouping_and_drop_bad_ones():
@@ -438,7 +448,6 @@ def test_mixture_is_unbiased_whatever_the_learned_fraction(fraction):
     leaf may learn (0, a small and the largest of FRACTIONS, times the
     vertex's roughness), and NEE weighs by the same p_mix."""
     from types import SimpleNamespace
-    from analytic import directional_albedo
     from engine import bsdf
     rng = np.random.default_rng(29)
     n, mu = 200_000, 0.5
@@ -455,20 +464,7 @@ def test_mixture_is_unbiased_whatever_the_learned_fraction(fraction):
     v.guide = pg.at_vertices(view, True, v, bsdf.kind_in, bsdf.NONE)
     assert np.all(v.guide.leaf == 0)
     np.testing.assert_allclose(v.guide.alpha, fraction * v.guide.rough, rtol=1e-12)
-    u = rng.random((n, 3))
-    chosen, u_lobe = pg.split_choice(v.guide, u[:, 0])
-    wi, weight, pdf, delta = bsdf.sample(lobes, wo, u_lobe, u[:, 1], u[:, 2], sel, w)
-    pg.mix(v, chosen, u[:, 1], u[:, 2], wi, weight, pdf, delta, bsdf.eval_pdf)
-    want = directional_albedo(material, mu)
-    mean = weight.mean(axis=0)
-    se = weight.std(axis=0) / np.sqrt(n)
-    zc = family_z(__name__ + f".fraction{fraction}", 3)
-    print(f"fraction {fraction}: E[f cos / p_mix] {mean} vs albedo {want}: |z| {np.abs((mean - want) / se).max():.2f} "
-          f"(limit {zc:.2f}), detects {(zc * se / want).max():.2%}")
-    assert np.all(np.abs(mean - want) < zc * se)
-    up = wi[:, 2] > 1e-3
-    _, pdf_b = bsdf.eval_pdf(lobes, wo, wi, sel, w)
-    np.testing.assert_allclose(pg.nee_pdf(v, wi, pdf_b)[up], pdf[up], rtol=1e-9)
+    _mixture_against_albedo(v, material, mu, rng, n, f".fraction{fraction}", f"fraction {fraction}: ")
     assert np.all(np.isfinite(v.guide.x))   # what the records learn from
 
 
