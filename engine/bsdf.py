@@ -160,6 +160,7 @@ class MaterialTable:
                 for name, value in _lobe_extras(lobe).items():
                     getattr(self, name)[i, j] = value
         self.emissive = np.any(self.emission > 0, axis=1)
+        self._zero_fields = frozenset(j for j, name in enumerate(_GATHERED) if not getattr(self, name).any())
         self.names = [m.name for m in materials]
         # material -> the lobes whose albedo dims its emission (Principled sheen, coat)
         self.emission_layers = {i: tuple(int(k) for k in getattr(m, "emission_layers", ()))
@@ -190,8 +191,15 @@ class MaterialTable:
         coordinates ``uv`` ((N, 2)): constants gathered, then the textured
         parameters of the rays' materials evaluated at their UVs."""
         tables = tuple(getattr(self, name) for name in _GATHERED)
-        out = tuple(np.empty((len(mat),) + a.shape[1:], a.dtype) for a in tables)
-        _gather_kernel(_c(mat, np.int64), *_gather_groups(tables, out))
+        # A field that is zero in every material (hair, portal, film ... fields
+        # of a scene without them, some 60 % of a row's bytes) is not copied:
+        # np.zeros of a large array costs nothing until touched, a gather
+        # reads and writes every byte.  Its column-less view keeps the
+        # kernel's signature.
+        zero = self._zero_fields
+        out = tuple((np.zeros if j in zero else np.empty)((len(mat),) + a.shape[1:], a.dtype)
+                    for j, a in enumerate(tables))
+        _gather_kernel(_c(mat, np.int64), *_gather_groups(tables, out, zero))
         lobes = Lobes(*out)
         if self.textures.any:
             self.textures.apply(mat, uv, lobes, MIN_ALPHA)
@@ -534,9 +542,17 @@ def bump_shadowing(smooth_n, model, wi):
     normal on opposite sides of Ns for every closure evaluated and for
     diffuse ones sampled; its softening, and all of the older term, scale
     diffuse lobes only."""
-    s = smooth_n
-    if s is None:
+    if smooth_n is None:
         return None, None
+    n = len(smooth_n)
+    term, keep = np.empty(n), np.empty(n, np.bool_)
+    model = np.asarray(model)
+    model = _c(model, np.int8) if model.shape == (n,) else np.full(n, model, np.int8)
+    _bump_shadowing_kernel(_c(smooth_n, np.float64), model, _c(wi, np.float64), term, keep)
+    return term, keep
+
+
+def _bump_shadowing_numpy(s, model, wi, term_out, keep_out):
     cos_si = s[:, 0] * wi[:, 0] + s[:, 1] * wi[:, 1] + s[:, 2] * wi[:, 2]
     cos_sn, cos_ni = s[:, 2], wi[:, 2]
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
@@ -551,7 +567,33 @@ def bump_shadowing(smooth_n, model, wi):
     ggx = np.where((cd >= 1.0) | (ci >= 1.0), 1.0, np.where(ci < 1e-6, 0.0, g1))
     ggx = np.where(wrong, 0.0, ggx)
     use_ggx = model == BUMP_GGX
-    return np.where(use_ggx, ggx, chiang), ~(use_ggx & wrong)
+    term_out[:], keep_out[:] = np.where(use_ggx, ggx, chiang), ~(use_ggx & wrong)
+
+
+def _bump_shadowing_rows(s, model, wi, term, keep):
+    """bump_shadowing per row (its NumPy form: _bump_shadowing_numpy)."""
+    for i in range(len(s)):
+        cos_sn, cos_ni = s[i, 2], wi[i, 2]
+        cos_si = (s[i, 0] * wi[i, 0] + s[i, 1] * wi[i, 1]) + s[i, 2] * wi[i, 2]
+        wrong = cos_si * cos_sn * cos_ni < 0.0
+        if model[i] == BUMP_GGX:
+            ci, cd = abs(cos_si), abs(cos_sn)
+            if wrong:
+                g1 = 0.0
+            elif cd >= 1.0 or ci >= 1.0:
+                g1 = 1.0
+            elif ci < 1e-6:
+                g1 = 0.0
+            else:
+                alpha2 = min(max(0.125 * (1.0 / (cd * cd) - 1.0), 0.0), 1.0)
+                tan2_i = max(1.0 / (ci * ci) - 1.0, 0.0)
+                g1 = 1.0 / (1.0 + 0.5 * (np.sqrt(1.0 + alpha2 * tan2_i) - 1.0))
+            term[i], keep[i] = g1, not wrong
+        else:
+            den = cos_ni * cos_sn
+            g = cos_si / den if den != 0 else 0.0
+            term[i] = 1.0 if g >= 1.0 else (0.0 if g < 0.0 else -g * g * g + g * g + g)
+            keep[i] = True
 
 
 def eval_pdf(lobes, wo, wi, sel=None, w=None, sampled=False):
@@ -681,20 +723,22 @@ def _gather_numpy(mat, *groups):
             np.take(a, mat, axis=0, out=o)
 
 
-def _gather_groups(tables, out):
+def _gather_groups(tables, out, skip=frozenset()):
     """gather_loop's arguments: (tables, outputs) of each dtype of
-    loops.GATHER_DTYPES, as 2D views."""
+    loops.GATHER_DTYPES, as 2D views; those of the fields ``skip`` (indices)
+    without columns, so the loop copies nothing of them."""
     groups = []
     for dtype in loops.GATHER_DTYPES:
         pick = [j for j, a in enumerate(tables) if a.dtype == dtype]
-        groups += [tuple(_flat2d(tables[j]) for j in pick), tuple(_flat2d(out[j]) for j in pick)]
+        groups += [tuple(_flat2d(tables[j], j in skip) for j in pick), tuple(_flat2d(out[j], j in skip) for j in pick)]
     return groups
 
 
-def _flat2d(a):
+def _flat2d(a, empty=False):
     # math.prod, not np.prod: this runs some 50 times a bounce, and np.prod
     # of a shape tuple costs several microseconds of interpreter each time.
-    return a.reshape(a.shape[0], math.prod(a.shape[1:]))
+    flat = a.reshape(a.shape[0], math.prod(a.shape[1:]))
+    return flat[:, :0] if empty else flat
 
 
 class _Loop(LoopKernel):
@@ -711,6 +755,8 @@ _LOBES, _TABLES = loops.LOBES_SIGNATURE, loops.TABLES_SIGNATURE
 # MaterialTable's per-lobe arrays in Lobes' field order, and their types.
 _GATHERED = ("kind", "color", "alpha", "schlick") + tuple(name for name, _, _ in EXTRA_FIELDS)
 _gather_kernel = _Loop(loops.gather_loop, loops.GATHER_SIGNATURE, _gather_numpy)
+_bump_shadowing_kernel = LoopKernel(_bump_shadowing_rows, "void(float64[:, ::1], int8[::1], float64[:, ::1], "
+                                    "float64[::1], bool_[::1])", _bump_shadowing_numpy)
 _weights_kernel = _Loop(loops.weights_loop, f"void({_LOBES}, {_TABLES}, float64[:, ::1], float64[:, :, ::1])",
                         _weights_twin)
 _selection_kernel = _Loop(loops.selection_loop,

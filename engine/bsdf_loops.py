@@ -2140,6 +2140,8 @@ def gather_loop(mat, floats, float_out, ints, int_out, flags, flag_out):
 @helper
 def _take_rows(mat, table, out):
     width = table.shape[1]
+    if width == 0:
+        return
     for i in range(len(mat)):
         m = mat[i]
         for c in range(width):

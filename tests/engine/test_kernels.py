@@ -607,6 +607,43 @@ def test_frame_and_rotations_agree(jit):
         assert_agree(*both_ways(Accel.offset_origin, None, wide[:, 1::2], normals, v, e))
 
 
+def test_bump_terms_agree(jit):
+    """Bump Map Correction's compiled loops (engine/bump_correction.py:
+    ``corrected``, the glossy lobes' lifted normal; ``rotations``, the
+    bent-normal frames) and bsdf.bump_shadowing (both of Cycles' terms)
+    against their NumPy forms, on random normals, unmoved rows (bent equal
+    to smooth), views below the bent normal, grazing and zero cosines, NaN."""
+    from engine import bsdf, bump_correction, vec
+    rng = np.random.default_rng(41)
+    n = 6000
+
+    def unit(m):
+        v = rng.normal(size=(m, 3))
+        return v / np.linalg.norm(v, axis=1)[:, None]
+    ng, wo, bent = unit(n), unit(n), unit(n)
+    wo = np.where((vec.dot(wo, ng) < 0)[:, None], -wo, wo)       # the view above Ng, as the integrator's
+    smooth = np.array(bent)
+    smooth[: n // 2] = vec.normalize(ng[: n // 2] + 0.3 * unit(n // 2))   # half the rows moved
+    bent[10:20] = -wo[10:20]                                      # bent normal facing away from the view
+    bent[20] = np.nan
+    assert_agree(*both_ways(bump_correction.corrected, ng, wo, bent, smooth), "corrected")
+    tt, bb = vec.frame(smooth)
+    plain, compiled = both_ways(bump_correction.rotations, tt, bb, smooth, bent)
+    np.testing.assert_array_equal(plain[1], compiled[1])
+    assert_agree(plain[:1], compiled[:1], "rotations")
+    wi = unit(n)
+    wi[:50, 2] = 0.0                                              # light in the shading plane
+    wi[50:60] = smooth[50:60]                                     # along the smooth normal
+    local_smooth = unit(n)
+    local_smooth[:, 2] = np.abs(local_smooth[:, 2])
+    local_smooth[60:70] = (0.0, 0.0, 1.0)                         # an unmoved normal: cos_sn = 1
+    local_smooth[70] = np.nan
+    for model in (bsdf.BUMP_CHIANG, bsdf.BUMP_GGX):
+        plain, compiled = both_ways(bsdf.bump_shadowing, local_smooth, np.full(n, model, np.int8), wi)
+        np.testing.assert_array_equal(plain[1], compiled[1])
+        assert_agree(plain[:1], compiled[:1], f"bump_shadowing model {model}")
+
+
 def test_one_process_at_a_time_fills_the_cache(tmp_path):
     """Two processes compiling into one numba cache crashed the second (a
     segfault loading a gufunc the first was writing): ``cache_lock`` lets
