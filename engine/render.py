@@ -19,6 +19,7 @@ from concurrent.futures import TimeoutError as FuturesTimeout
 import numpy as np
 
 from . import accel as accel_module
+from . import allocator
 from .accel import Accel
 from .motion import MotionAccel, MotionGeometry, has_motion
 from . import vector_pass
@@ -101,6 +102,7 @@ def prepare(scene, settings, bake=None):
 
 
 def _prepare(scene, settings, bake):
+    allocator.tune()   # once per process: the batches' arrays reuse freed heap pages
     kernels.configure(getattr(settings, "use_jit", True))   # flatten has a kernel too
     validate_scene(scene)
     validate_settings(settings)
