@@ -167,7 +167,7 @@ class Film:
         self.alpha = np.zeros(n, np.float32)   # sum of coverage
         self.holdout = np.zeros(n, np.float32)   # sum of holdout transparency
         self.catcher = None                      # shadow catcher sums (Tile.add_catcher)
-        self.combined_alpha = np.ones(n)         # Combined's alpha at the last image()
+        self.combined_alpha = np.ones(n, np.float32)   # Combined's alpha at the last image()
         self.aovs = {name: np.zeros((n, AOV_CHANNELS[name]), np.float32) for name in aovs}
         # Adaptive sampling: sum of the class-A samples' radiance.
         self.aux = np.zeros((n, 3), np.float32) if adaptive else None

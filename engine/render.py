@@ -365,10 +365,14 @@ class _Adaptive:
     def __init__(self, settings, npix):
         self.params = adaptive_parameters(settings)
         self.active = np.arange(npix)
+        # Only a check before the last sample can stop a pixel: a render of
+        # at most min samples keeps the adaptive pass schedule but needs no
+        # check, nor the film's class-A sums (12 bytes a pixel).
+        self.stops = self.params is not None and settings.samples > self.params[1]
 
     def checks_at(self, done, last_checked):
         """Whether a convergence check runs once ``done`` samples are in."""
-        if self.params is None:
+        if not self.stops:
             return False
         _, min_samples, step = self.params
         return done >= min_samples and done // step != last_checked // step
@@ -411,7 +415,7 @@ def _render(scene, settings, progress, bake=None):
     ctx = prepare_interruptibly(scene, settings, progress, bake=bake)
     cam = ctx.camera
     adaptive = _Adaptive(settings, cam.width * cam.height)
-    film = Film(cam.width, cam.height, settings.aovs, adaptive.params is not None, settings.passes,
+    film = Film(cam.width, cam.height, settings.aovs, adaptive.stops, settings.passes,
                 ctx.pass_config.crypto_levels, guide=_guides(ctx, settings), sum_variance=settings.sum_variance,
                 path_guide=_path_guide(ctx, settings))
     threads = settings.threads or os.cpu_count() or 1
