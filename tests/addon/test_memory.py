@@ -31,3 +31,17 @@ def test_animation_rss_does_not_grow(needs_engine):
           f"{rss[skip] / 2**20:.0f} after frame {skip + 1}, {rss[-1] / 2**20:.0f} after the last "
           f"(growth {growth:+.1f} MiB)")
     assert growth < GROWTH_LIMIT_MIB
+
+
+FILM_BYTES_PER_PIXEL = 40   # the budget that keeps a 7680x4320 1-spp render under 4 GiB (3720 MiB)
+
+
+def test_film_of_a_one_sample_render(needs_engine):
+    """The film of a 1-spp render with the add-on's defaults (adaptive
+    sampling on): 40 bytes a pixel.  At 56 (adaptive sums kept where no check
+    can stop a pixel, a float64 alpha) the 8K render peaked at 4721 MiB."""
+    m = bench_memory.measure(256, 256, samples=1)
+    assert m['error'] is None, m['error']
+    per_pixel = m['film'] / (m['width'] * m['height'])
+    print(f"\nfilm of a 1-spp render: {per_pixel:.1f} bytes a pixel")
+    assert per_pixel <= FILM_BYTES_PER_PIXEL
