@@ -62,7 +62,7 @@ from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect, ggx_sample_vndf
 from .sampling import cosine_hemisphere
 from .rows import take_arrays
 from .textures import MaterialTextures
-from .vec import count, subset
+from .vec import column, contiguous, count, subset
 
 
 _KIND_TABLES = {}
@@ -546,9 +546,7 @@ def bump_shadowing(smooth_n, model, wi):
         return None, None
     n = len(smooth_n)
     term, keep = np.empty(n), np.empty(n, np.bool_)
-    model = np.asarray(model)
-    model = _c(model, np.int8) if model.shape == (n,) else np.full(n, model, np.int8)
-    _bump_shadowing_kernel(_c(smooth_n, np.float64), model, _c(wi, np.float64), term, keep)
+    _bump_shadowing_kernel(_c(smooth_n), _c(column(model, n, np.int8), np.int8), _c(wi), term, keep)
     return term, keep
 
 
@@ -673,14 +671,7 @@ def _eval_pdf_numpy(lobes, wo, wi, sel, w, diffuse_term, keep, sampled):
 _NO_TERM, _NO_KEEP = np.empty(0), np.empty(0, bool)
 
 
-def _c(a, dtype=np.float64):
-    """C-contiguous and writable (numba's signatures take no read-only
-    arrays): a copy only where the array is not so already.  The checks
-    first: most arrays already are, and this runs some 150 times a bounce."""
-    if type(a) is np.ndarray and a.ndim and a.dtype == dtype and a.flags.c_contiguous and a.flags.writeable:
-        return a
-    a = np.ascontiguousarray(a, dtype)
-    return a if a.flags.writeable else a.copy()
+_c = contiguous   # the loops' array arguments
 
 
 def _lobe_arrays(lobes):

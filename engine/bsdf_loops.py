@@ -23,7 +23,7 @@ from .lobe_ids import (DIFFUSE, F_CONDUCTOR, F_DIELECTRIC, F_F82, F_NONE, F_SCHL
                        MIRROR, NONE, OREN_NAYAR, REFRACTION, SHEEN, SUBSURFACE_BURLEY, SUBSURFACE_RANDOM_WALK,
                        SUBSURFACE_SKIN, TRANSLUCENT, TRANSPARENT, RAY_PORTAL, HAIR_CHIANG, HAIR_REFLECTION, HAIR_TRANSMISSION,
                        HAIR_HUANG)
-from .microfacet import COS_EPS, ggx_d, ggx_lambda, ggx_reflect_terms, pow5
+from .microfacet import COS_EPS, F82_F5, F82_SCALE, ggx_d, ggx_lambda, ggx_reflect_terms, pow5
 
 _NUMBA_TYPES = {np.dtype(np.int8): "int8", np.dtype(np.float64): "float64", np.dtype(np.bool_): "boolean"}
 
@@ -98,10 +98,6 @@ FLT_MIN = 1.1754943508222875e-38
 # BSDF's range), the aspect's square at least MIN_ASPECT_SQ.
 MAX_ANISOTROPY = 1.0 / 0.9
 MIN_ASPECT_SQ = 1e-8
-# mf.f82_b's constants, computed as it does (Python's float pow).
-F82_F5 = (6.0 / 7.0) ** 5
-F82_SCALE = 7.0 / (F82_F5 * (6.0 / 7.0))
-
 
 # ----------------------------------------------------------------------------
 # Cycles' lookup_table_read_{1,2,3}D for one point (mf.lookup, same order)
@@ -352,9 +348,7 @@ def _film_conductor(cosi, eta1, eta2, k2, f82):
         n = eta2 / eta1
         k_sq = (k2 / eta1) ** 2
         f0 = ((n - 1.0) ** 2 + k_sq) / ((n + 1.0) ** 2 + k_sq)
-        f = 6.0 / 7.0
-        f5 = (f * f) * (f * f) * f
-        b = (7.0 / (f5 * f)) * ((f0 + (1.0 - f0) * f5) - f82)
+        b = F82_SCALE * ((f0 + (1.0 - f0) * F82_F5) - f82)
         r_s = r_p = _film_f82(cosi, f0, b)
     else:
         r_s = _ratio((eta1 * cosi - u) ** 2 + v_sq, (eta1 * cosi + u) ** 2 + v_sq)

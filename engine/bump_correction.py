@@ -26,7 +26,7 @@ import numpy as np
 from . import kernels
 from .lobe_ids import DIFFUSE, OREN_NAYAR, SHEEN
 from .microfacet import COS_EPS
-from .vec import dot, frame, frame_of
+from .vec import contiguous, dot, frame, frame_of
 
 BENT_KINDS = (DIFFUSE, OREN_NAYAR, SHEEN)   # the closures Cycles leaves the bent normal
 
@@ -99,15 +99,11 @@ def _corrected_rows(ng, wo, bent, smooth, out):
         out[i, 0], out[i, 1], out[i, 2] = nx * x0 + nz * g0, nx * x1 + nz * g1, nx * x2 + nz * g2
 
 
-def _rows3(a):
-    return np.ascontiguousarray(a, dtype=np.float64)
-
-
 def corrected(ng, wo, bent, smooth):
     """The glossy normal of each row: bent lifted where the normal map or
     bump moved it (bent != smooth), bent elsewhere."""
     out = np.empty(np.shape(bent))
-    _corrected_rows(_rows3(ng), _rows3(wo), _rows3(bent), _rows3(smooth), out)
+    _corrected_rows(contiguous(ng), contiguous(wo), contiguous(bent), contiguous(smooth), out)
     return out
 
 
@@ -146,7 +142,7 @@ def rotations(tt, bb, ns, bent):
     if not split.any():
         return None, None
     rot = np.empty((len(split), 3, 3))
-    _rotation_rows(_rows3(tt), _rows3(bb), _rows3(ns), _rows3(bent), split, rot)
+    _rotation_rows(contiguous(tt), contiguous(bb), contiguous(ns), contiguous(bent), split, rot)
     return rot, split
 
 

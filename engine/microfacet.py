@@ -160,12 +160,15 @@ def schlick_s(cos, ior):
     return s, cos_t
 
 
+# The F82 model's constants: Schlick's weight at cos 1/7 (82 degrees) and the B term's scale.
+F82_F5 = (6.0 / 7.0) ** 5
+F82_SCALE = 7.0 / (F82_F5 * (6.0 / 7.0))
+
+
 def f82_b(f0, tint):
     """B term of Cycles' F82-tint metal Fresnel (Kutz et al.)."""
-    f = 6.0 / 7.0
-    f5 = f ** 5
-    schlick = f0 + (1.0 - f0) * f5
-    return schlick * (7.0 / (f5 * f)) * (1.0 - tint)
+    schlick = f0 + (1.0 - f0) * F82_F5
+    return schlick * F82_SCALE * (1.0 - tint)
 
 
 @helper
@@ -211,9 +214,7 @@ def conductor_fss(n, k):
     its closed-form average, saturated."""
     f0 = conductor(np.ones(np.shape(n)[:-1]), n, k)
     f82 = conductor(np.full(np.shape(n)[:-1], 1.0 / 7.0), n, k)
-    f = 6.0 / 7.0
-    f5 = f ** 5
-    b = (7.0 / (f5 * f)) * ((f0 + (1.0 - f0) * f5) - f82)
+    b = F82_SCALE * ((f0 + (1.0 - f0) * F82_F5) - f82)
     return np.clip(f82_fss(f0, b), 0.0, 1.0)
 
 

@@ -122,6 +122,16 @@ def rows3(*arrays):
     return None
 
 
+def contiguous(a, dtype=np.float64):
+    """C-contiguous and writable (numba's signatures take no read-only
+    arrays): a copy only where the array is not so already.  The checks
+    first: most arrays already are, and this runs some 150 times a bounce."""
+    if type(a) is np.ndarray and a.ndim and a.dtype == dtype and a.flags.c_contiguous and a.flags.writeable:
+        return a
+    a = np.ascontiguousarray(a, dtype)
+    return a if a.flags.writeable else a.copy()
+
+
 def column(a, n, dtype):
     """``a`` as a writable (n,) array of ``dtype`` (a scalar repeated)."""
     a = np.asarray(a, dtype)
